@@ -1,0 +1,78 @@
+"""The add-on session: per-scene results that must stay out of ID properties.
+
+Big arrays (voxel caches, later octrees and probes) live here, in a module-level
+Python object keyed by scene name, never in ``Scene``/``Object`` ID properties
+(they would be saved into the .blend and copied on undo). The session is
+cleared when a file is loaded and when the add-on is unregistered.
+
+Only the main thread reads or writes the session.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import bpy
+
+# Report levels used by operators, in the order a panel would show them.
+REPORT_LEVELS = ("ERROR", "WARNING", "INFO")
+
+
+@dataclass
+class SceneSession:
+    """What the add-on remembers about one scene between operator runs.
+
+    snapshot_summary : counts describing the last snapshot (objects, meshes,
+        triangles, ...), or None before the first run.
+    caches : the last ``build_scene_caches`` result (voxel caches per mesh and
+        cascade, stats, timings), or None.
+    timings : seconds per stage of the last run, snapshot included.
+    last_report : (level, message) lines the last operator run reported, level in
+        ``REPORT_LEVELS``; kept so tests and the panel can read them in background mode.
+    """
+
+    snapshot_summary: dict[str, int] | None = None
+    caches: Any = None
+    timings: dict[str, float] = field(default_factory=dict)
+    last_report: list[tuple[str, str]] = field(default_factory=list)
+
+
+_sessions: dict[str, SceneSession] = {}
+
+
+def scene_session(scene_name: str) -> SceneSession:
+    """The session of the scene named ``scene_name`` (``Scene.name_full``), created on first use."""
+    session = _sessions.get(scene_name)
+    if session is None:
+        session = _sessions[scene_name] = SceneSession()
+    return session
+
+
+def peek_session(scene_name: str) -> SceneSession | None:
+    """The session of a scene if one exists, without creating it (for drawing code)."""
+    return _sessions.get(scene_name)
+
+
+def clear_sessions() -> None:
+    """Forget every scene's results (file load, unregister)."""
+    _sessions.clear()
+
+
+@bpy.app.handlers.persistent
+def _clear_on_load(*_args) -> None:
+    # Results belong to the file they were computed from.
+    clear_sessions()
+
+
+classes = ()
+
+
+def register() -> None:
+    if _clear_on_load not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(_clear_on_load)
+
+
+def unregister() -> None:
+    if _clear_on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(_clear_on_load)
+    clear_sessions()

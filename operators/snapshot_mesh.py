@@ -1,0 +1,85 @@
+"""Read an evaluated Blender mesh into flat numpy arrays (main thread).
+
+Everything goes through ``foreach_get`` into preallocated flat arrays; no
+per-vertex Python loops.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def read_positions(mesh) -> np.ndarray:
+    """Vertex positions of ``mesh`` (a ``bpy.types.Mesh``).
+
+    Returns (V, 3) float32, object space. Non-finite values are passed through.
+    """
+    positions = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+    mesh.vertices.foreach_get("co", positions)
+    return positions.reshape(-1, 3)
+
+
+def read_triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Blender's loop triangulation of ``mesh``.
+
+    Returns
+    -------
+    triangles : (T, 3) int32 vertex indices.
+    corners : (T, 3) int32 loop (face corner) indices, to look up per-corner data.
+    slot_indices : (T,) int32 material slot index of each triangle.
+    """
+    mesh.calc_loop_triangles()
+    tris = mesh.loop_triangles
+    count = len(tris)
+    triangles = np.empty(count * 3, dtype=np.int32)
+    corners = np.empty(count * 3, dtype=np.int32)
+    slot_indices = np.empty(count, dtype=np.int32)
+    tris.foreach_get("vertices", triangles)
+    tris.foreach_get("loops", corners)
+    tris.foreach_get("material_index", slot_indices)
+    return triangles.reshape(-1, 3), corners.reshape(-1, 3), slot_indices
+
+
+def read_corner_uvs(mesh, corners: np.ndarray) -> np.ndarray | None:
+    """UVs of the active UV map at the given corners.
+
+    corners : (T, 3) int32 loop indices (from ``read_triangles``).
+    Returns (T, 3, 2) float32, or None when the mesh has no UV map.
+    """
+    layer = mesh.uv_layers.active
+    if layer is None:
+        return None
+    uv = np.empty(len(mesh.loops) * 2, dtype=np.float32)
+    layer.data.foreach_get("uv", uv)
+    return uv.reshape(-1, 2)[corners]
+
+
+def read_point_float(mesh, name: str) -> np.ndarray:
+    """A float POINT attribute of ``mesh`` as (V,) float32."""
+    values = np.empty(len(mesh.vertices), dtype=np.float32)
+    mesh.attributes[name].data.foreach_get("value", values)
+    return values
+
+
+def material_lookup(slot_materials: list, material_index_of) -> np.ndarray:
+    """Map material slot indices to indices into the snapshot's material list.
+
+    slot_materials : the object's slot materials (``bpy.types.Material`` or None).
+    material_index_of : callable(Material) -> int, the global index (adds it if new).
+    Returns (S,) int32, -1 for an empty slot.
+    """
+    return np.array(
+        [-1 if mat is None else material_index_of(mat) for mat in slot_materials],
+        dtype=np.int32,
+    )
+
+
+def triangle_materials(slot_indices: np.ndarray, lookup: np.ndarray) -> np.ndarray:
+    """Global material index per triangle.
+
+    slot_indices : (T,) int32 slot index per triangle; lookup : (S,) int32 from
+    ``material_lookup``. Out-of-range slot indices use the last slot, as Blender does.
+    Returns (T,) int32, -1 where there is no material.
+    """
+    if lookup.size == 0:
+        return np.full(slot_indices.shape, -1, dtype=np.int32)
+    return lookup[np.clip(slot_indices, 0, lookup.size - 1)]

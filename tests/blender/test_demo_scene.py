@@ -1,0 +1,103 @@
+"""The demo scene and add-on registration."""
+from __future__ import annotations
+
+import importlib
+
+import bpy
+import numpy as np
+import pytest
+
+
+def _evaluated_positions(obj):
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    mesh = obj.evaluated_get(depsgraph).data
+    out = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.vertices.foreach_get("co", out)
+    return out.reshape(-1, 3)
+
+
+def test_demo_scene_contents(voxgi):
+    assert bpy.ops.voxgi.add_demo_scene() == {"FINISHED"}
+    scene = bpy.context.scene
+    objects = bpy.data.collections["VoxGI Demo"].objects
+    assert {o.name for o in objects} == {
+        "Cornell Box", "Ceiling Light", "Skinned Tube", "Tube Rig", "Rotating Sphere", "Camera"}
+    box = objects["Cornell Box"]
+    corners = np.array([v.co[:] for v in box.data.vertices])
+    np.testing.assert_allclose(corners.max(axis=0) - corners.min(axis=0), (2.0, 2.0, 2.0))
+    assert len(box.data.polygons) == 5  # open front
+    assert objects["Ceiling Light"].data.energy == pytest.approx(100.0)
+
+    tube = objects["Skinned Tube"]
+    assert [b.name for b in objects["Tube Rig"].data.bones] == ["Tube.0", "Tube.1", "Tube.2"]
+    assert len(tube.vertex_groups) == 3
+    rest = np.array([v.co[:] for v in tube.data.vertices])
+    assert not np.allclose(_evaluated_positions(tube), rest, atol=1e-3)  # the pose bends it
+
+    sphere = objects["Rotating Sphere"]
+    scene.frame_set(30)
+    angle = sphere.matrix_world.to_euler().z
+    scene.frame_set(1)
+    assert abs(angle) > 0.1
+
+    assert scene.camera is objects["Camera"]
+    # The box centre projects inside the camera frame.
+    from bpy_extras.object_utils import world_to_camera_view
+    from mathutils import Vector
+
+    ndc = world_to_camera_view(scene, scene.camera, Vector((0.0, 0.0, 1.0)))
+    assert 0.3 < ndc.x < 0.7 and 0.3 < ndc.y < 0.7 and ndc.z > 0
+
+
+def test_unregister_removes_settings_and_operators(voxgi):
+    voxgi.unregister()
+    try:
+        assert not hasattr(bpy.types.Scene, "voxgi")
+        assert not hasattr(bpy.types, "VOXGI_OT_voxelize")
+        assert not hasattr(bpy.types, "VOXGI_PT_main")
+        session = importlib.import_module("voxgi.operators.session")
+        assert session._clear_on_load not in bpy.app.handlers.load_post
+    finally:
+        voxgi.register()
+    assert hasattr(bpy.types.Scene, "voxgi")
+    assert hasattr(bpy.types, "VOXGI_OT_voxelize")
+
+
+def test_panel_is_in_the_sidebar(voxgi):
+    # Drawing needs a window; background mode can only check where it is registered.
+    panel = bpy.types.VOXGI_PT_main
+    assert (panel.bl_space_type, panel.bl_region_type, panel.bl_category) == ("VIEW_3D", "UI", "VoxGI")
+
+
+class _Layout:
+    """Records what a panel draws; every container call returns itself."""
+
+    def __init__(self):
+        self.labels, self.operators, self.props = [], [], []
+
+    def box(self, **_kwargs):
+        return self
+
+    row = column = box
+
+    def label(self, text="", icon="NONE"):
+        self.labels.append(text)
+
+    def operator(self, idname, **_kwargs):
+        self.operators.append(idname)
+
+    def prop(self, _data, name, **_kwargs):
+        self.props.append(name)
+
+
+def test_panel_draws_settings_and_results(voxgi):
+    bpy.ops.voxgi.add_demo_scene()
+    bpy.ops.voxgi.voxelize()
+    layout = _Layout()
+    panel = type("PanelStub", (), {"layout": layout})()
+    bpy.types.VOXGI_PT_main.draw(panel, bpy.context)
+    assert layout.props == ["base_span", "cascade_count", "grid_resolution"]
+    assert layout.operators == ["voxgi.voxelize", "voxgi.add_demo_scene"]
+    cascades = bpy.context.scene.voxgi.cascade_count
+    assert sum(text.startswith("Cascade ") for text in layout.labels) == cascades
+    assert "Stage timings" in layout.labels and "snapshot" in layout.labels

@@ -1,0 +1,69 @@
+"""The VoxGI sidebar panel of the 3D view (N panel, tab 'VoxGI')."""
+from __future__ import annotations
+
+import bpy
+
+from ..operators.session import peek_session
+from ..operators.voxelize_report import MEGABYTE
+
+
+class VOXGI_PT_main(bpy.types.Panel):
+    """Settings, the Voxelize button and the last run's statistics."""
+
+    bl_idname = "VOXGI_PT_main"
+    bl_label = "VoxGI"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "VoxGI"
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None and hasattr(context.scene, "voxgi")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        settings = context.scene.voxgi
+        column = layout.column()
+        column.prop(settings, "base_span")
+        column.prop(settings, "cascade_count")
+        column.prop(settings, "grid_resolution")
+        row = layout.row(align=True)
+        row.operator("voxgi.voxelize", icon="MESH_GRID")
+        row.operator("voxgi.add_demo_scene", text="", icon="SCENE_DATA")
+        _draw_results(layout, peek_session(context.scene.name_full))
+
+
+def _draw_results(layout, session) -> None:
+    if session is None or session.caches is None:
+        if session is not None:
+            for level, message in session.last_report:
+                if level == "ERROR":
+                    layout.label(text=message, icon="ERROR")
+        return
+    result = session.caches
+    box = layout.box()
+    box.label(text="Voxel caches", icon="MESH_GRID")
+    for stats in result.cascade_stats:
+        row = box.row()
+        row.label(text=f"Cascade {stats.cascade} ({stats.span:g} m)")
+        row.label(text=f"{stats.voxel_count:,} voxels")
+        row.label(text=f"{stats.nbytes / MEGABYTE:.2f} MB")
+    row = box.row()
+    row.label(text="Total")
+    row.label(text=f"{result.total_voxels:,} voxels")
+    row.label(text=f"{result.total_bytes / MEGABYTE:.2f} MB")
+    warnings = sum(1 for level, _ in session.last_report if level == "WARNING")
+    if warnings:
+        box.label(text=f"{warnings} warning(s): see the Info editor", icon="ERROR")
+    if session.timings:
+        box = layout.box()
+        box.label(text="Stage timings", icon="TIME")
+        for name, seconds in session.timings.items():
+            row = box.row()
+            row.label(text=name)
+            row.label(text=f"{seconds * 1000:.1f} ms")
+
+
+classes = (VOXGI_PT_main,)

@@ -1,0 +1,177 @@
+"""The scene snapshot: the engine's only input.
+
+A frozen, bpy-free description of a Blender scene, taken on the main thread by
+``operators/scene_snapshot.py`` with ``foreach_get``. Everything is plain numpy or
+Python scalars so the worker thread and plain pytest can use it.
+
+Spaces and units
+----------------
+* Mesh positions are in **object space** (metres before the object transform).
+* Matrices are 4x4, column-vector convention (``world = M @ [x, y, z, 1]``), float64,
+  exactly as ``Object.matrix_world`` gives them.
+* Colours are linear scene-referred RGB, float32.
+* Light power follows Blender/Cycles: watts for point/spot/area lights, W/m² (strength)
+  for sun lights.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+OBJECT_KINDS = ("static", "rigid", "skinned")
+LIGHT_TYPES = ("SUN", "POINT", "SPOT", "AREA")
+
+
+@dataclass(frozen=True)
+class SkinData:
+    """Per-vertex skinning of a mesh (rest pose).
+
+    weights : (V, 4) float32, each row sums to 1 (or 0 for a vertex no deform bone moves).
+    bone_indices : (V, 4) uint8, indices into ``ArmatureData.bone_names``.
+    armature : name of the ``ArmatureData`` the indices refer to.
+    """
+
+    weights: np.ndarray
+    bone_indices: np.ndarray
+    armature: str
+
+
+@dataclass(frozen=True)
+class MeshData:
+    """A triangulated mesh in object space.
+
+    positions : (V, 3) float32, object space.
+    triangles : (T, 3) int32 vertex indices (Blender loop triangles).
+    triangle_materials : (T,) int32 index into ``SceneSnapshot.materials`` (-1 = none).
+    uvs : (T, 3, 2) float32 UV of each triangle corner, or None when the mesh has no UV map.
+    skin : rest-pose skinning, or None for a mesh that no armature deforms.
+    """
+
+    name: str
+    positions: np.ndarray
+    triangles: np.ndarray
+    triangle_materials: np.ndarray
+    uvs: np.ndarray | None = None
+    skin: SkinData | None = None
+
+
+@dataclass(frozen=True)
+class MaterialData:
+    """What the engine needs of a material (Principled BSDF inputs).
+
+    base_color : (3,) float32 linear RGB (the input's value, or the mean of its linked image).
+    emission : (3,) float32 linear RGB, colour × strength.
+    """
+
+    name: str
+    base_color: np.ndarray
+    roughness: float = 0.5
+    metallic: float = 0.0
+    specular: float = 0.5
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
+
+
+@dataclass(frozen=True)
+class ArmatureData:
+    """An armature object with its deform bones.
+
+    bone_names : bone names, index = bone index used by ``SkinData.bone_indices``.
+    parents : (B,) int32 parent bone index, -1 for a root.
+    rest_matrices : (B, 4, 4) float64 bone rest matrices in armature space (``Bone.matrix_local``).
+    pose_matrices : (B, 4, 4) float64 posed matrices in armature space (``PoseBone.matrix``).
+    world_matrix : (4, 4) float64 the armature object's world matrix.
+    """
+
+    name: str
+    bone_names: tuple[str, ...]
+    parents: np.ndarray
+    rest_matrices: np.ndarray
+    pose_matrices: np.ndarray
+    world_matrix: np.ndarray
+
+
+@dataclass(frozen=True)
+class ObjectData:
+    """A visible mesh object instance.
+
+    mesh : key into ``SceneSnapshot.meshes`` (linked duplicates share one key).
+    world_matrix : (4, 4) float64.
+    kind : 'static' (never moves), 'rigid' (animated or constrained transform) or 'skinned'.
+    armature : name of the deforming ``ArmatureData`` for skinned objects, else None.
+    """
+
+    name: str
+    mesh: str
+    world_matrix: np.ndarray
+    kind: str = "static"
+    armature: str | None = None
+
+
+@dataclass(frozen=True)
+class LightData:
+    """A light. ``power`` is watts (point/spot/area) or W/m² strength (sun).
+
+    world_matrix : (4, 4) float64; lights shine along their local -Z.
+    color : (3,) float32 linear RGB.
+    radius : soft-shadow radius in metres (point/spot); angle : sun disc angle in radians.
+    spot_size, spot_blend : as in Blender (radians, 0..1).
+    size, size_y : area light extent in metres; shape : 'SQUARE', 'RECTANGLE', 'DISK', 'ELLIPSE'.
+    """
+
+    name: str
+    type: str
+    color: np.ndarray
+    power: float
+    world_matrix: np.ndarray
+    radius: float = 0.0
+    angle: float = 0.0
+    spot_size: float = 0.0
+    spot_blend: float = 0.0
+    size: float = 0.0
+    size_y: float = 0.0
+    shape: str = "SQUARE"
+
+
+@dataclass(frozen=True)
+class CameraData:
+    """The scene camera.
+
+    world_matrix : (4, 4) float64; the camera looks along its local -Z.
+    projection_matrix : (4, 4) float64 OpenGL-style, for ``resolution``.
+    resolution : (width, height) in pixels after the render percentage.
+    """
+
+    name: str
+    world_matrix: np.ndarray
+    projection_matrix: np.ndarray
+    resolution: tuple[int, int]
+    type: str = "PERSP"
+    angle_x: float = 0.0
+    angle_y: float = 0.0
+    ortho_scale: float = 0.0
+    clip_start: float = 0.1
+    clip_end: float = 100.0
+
+
+@dataclass(frozen=True)
+class WorldData:
+    """Uniform world background: linear RGB colour and strength (Background node)."""
+
+    color: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
+    strength: float = 0.0
+
+
+@dataclass(frozen=True)
+class SceneSnapshot:
+    """Everything the engine reads of a scene at one frame."""
+
+    meshes: dict[str, MeshData]
+    materials: list[MaterialData]
+    objects: list[ObjectData]
+    armatures: dict[str, ArmatureData] = field(default_factory=dict)
+    lights: list[LightData] = field(default_factory=list)
+    camera: CameraData | None = None
+    world: WorldData = field(default_factory=WorldData)
+    frame: int = 1
+    warnings: tuple[str, ...] = ()
