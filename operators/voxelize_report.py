@@ -20,15 +20,17 @@ def cascade_lines(result) -> list[tuple[str, str]]:
 
 
 def warning_lines(snapshot_warnings, result) -> list[tuple[str, str]]:
-    """WARNING lines: snapshot problems, engine warnings, dropped triangles, skipped meshes."""
-    lines = [("WARNING", w) for w in snapshot_warnings]
-    lines += [("WARNING", w) for w in result.warnings]
-    lines += [
-        ("WARNING", f"Mesh '{mesh}': dropped {count} degenerate (zero-area) or non-finite triangles")
-        for mesh, count in result.dropped_triangles.items() if count
-    ]
-    lines += [("WARNING", str(skip)) for skip in result.skipped]
-    return lines
+    """WARNING lines, each once: snapshot and engine warnings, dropped triangles, skipped meshes.
+
+    The engine may already carry the snapshot's warnings and describe dropped triangles in
+    ``result.warnings``; a dropped-triangle line is only added for a mesh no warning names.
+    """
+    messages = list(dict.fromkeys([*snapshot_warnings, *result.warnings]))
+    for mesh, count in result.dropped_triangles.items():
+        if count and not any(f"'{mesh}'" in m and "dropped" in m for m in messages):
+            messages.append(f"Mesh '{mesh}': dropped {count} degenerate (zero-area) or non-finite triangles")
+    messages += [str(skip) for skip in result.skipped]
+    return [("WARNING", m) for m in messages]
 
 
 def timing_line(timings: dict[str, float]) -> tuple[str, str]:

@@ -15,14 +15,26 @@ import numpy as np
 
 _UNIT_AXES = np.eye(3)
 
+# A triangle whose |normal| (twice its area) is below this fraction of its longest edge squared
+# is a segment or point for the overlap test: its plane is rounding noise and the plane axis is
+# skipped (the edge axes then decide exactly). ``mesh_checks`` drops such triangles as zero-area.
+DEGENERATE_RATIO = 2e-12
 
-def triangle_overlaps_cells(triangle: np.ndarray, cells: np.ndarray) -> np.ndarray:
+
+def plane_is_meaningful(normal_length: np.ndarray, longest_edge_sq: np.ndarray) -> np.ndarray:
+    """True where a triangle's plane normal is not rounding noise (see DEGENERATE_RATIO)."""
+    return normal_length > DEGENERATE_RATIO * longest_edge_sq
+
+
+def triangle_overlaps_cells(triangle: np.ndarray, cells: np.ndarray, half: float = 0.5) -> np.ndarray:
     """Which closed unit cells a triangle touches.
 
     Parameters
     ----------
     triangle : (3, 3) float64, the three vertices in grid units.
     cells : (M, 3) integer cell indices.
+    half : half edge of the tested box around each cell centre (0.5 = the cell itself; tests
+        use 0.5 ± δ to tell rounding ties from real differences).
 
     Returns
     -------
@@ -31,7 +43,6 @@ def triangle_overlaps_cells(triangle: np.ndarray, cells: np.ndarray) -> np.ndarr
     tri = np.asarray(triangle, dtype=np.float64)
     centres = np.asarray(cells, dtype=np.float64) + 0.5
     v = tri[None, :, :] - centres[:, None, :]  # (M, 3 vertices, 3 coords), box at the origin
-    half = 0.5
     overlap = np.ones(len(centres), dtype=bool)
 
     # 1) the three box face normals: the triangle's AABB against the box.
@@ -40,8 +51,9 @@ def triangle_overlaps_cells(triangle: np.ndarray, cells: np.ndarray) -> np.ndarr
     # 2) the triangle's plane.
     edges = np.array([tri[1] - tri[0], tri[2] - tri[1], tri[0] - tri[2]])
     normal = np.cross(edges[0], edges[1])
-    radius = half * np.abs(normal).sum()
-    overlap &= np.abs(v[:, 0, :] @ normal) <= radius
+    if plane_is_meaningful(np.linalg.norm(normal), (edges**2).sum(axis=1).max()):
+        radius = half * np.abs(normal).sum()
+        overlap &= np.abs(v[:, 0, :] @ normal) <= radius
 
     # 3) the nine cross products of box axes and triangle edges.
     for unit in _UNIT_AXES:

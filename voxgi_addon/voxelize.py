@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .triangle_box import plane_is_meaningful
+
 LATTICE_OFFSET = 2.0**-16
 MAX_DENSE_KEYS = 1 << 26  # above this many cells, dedupe by sorting instead of a bitmap
 _BLOCK_ELEMENTS = 1 << 15  # candidate cells evaluated per numpy block (stays in cache)
@@ -99,7 +101,11 @@ def _separating_intervals(tri: np.ndarray, lo: np.ndarray):
     pmax = np.maximum(np.maximum(proj[0], proj[1]), proj[2])
     pmin[:, 0] = pmax[:, 0] = proj[0][:, 0]  # the plane axis uses vertex 0, like the reference
     radius = 0.5 * (np.abs(ax) + np.abs(ay) + np.abs(az))
-    return ax, ay, az, pmin - radius, pmax + radius
+    low, high = pmin - radius, pmax + radius
+    longest_sq = np.maximum(np.maximum((e[0]**2).sum(1), (e[1]**2).sum(1)), (e[2]**2).sum(1))
+    flat = ~plane_is_meaningful(np.linalg.norm(n, axis=1), longest_sq)
+    low[flat, 0], high[flat, 0] = -1e300, 1e300  # a segment/point: the edge axes decide
+    return ax, ay, az, low, high
 
 
 def _test_block(ax, ay, az, low, high, shape):

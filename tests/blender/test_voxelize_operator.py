@@ -64,7 +64,9 @@ def test_zero_area_and_nan_triangles_are_dropped_and_counted(voxgi, session):
     assert bpy.ops.voxgi.voxelize() == {"FINISHED"}
 
     dropped = [m for m in _report(session, "WARNING") if "dropped" in m]
-    assert dropped == ["Mesh 'Broken': dropped 2 degenerate (zero-area) or non-finite triangles"]
+    assert len(dropped) == 1 and "'Broken'" in dropped[0] and "dropped 2" in dropped[0]
+    state = session.scene_session(bpy.context.scene.name_full)
+    assert state.caches.dropped_triangles == {"Broken": 2}
 
 
 def test_non_uniform_scale_is_a_warning(voxgi, session):
@@ -85,3 +87,12 @@ def test_settings_defaults_and_limits(voxgi):
     assert props["base_span"].subtype == "DISTANCE" and props["base_span"].unit == "LENGTH"
     for name in ("base_span", "cascade_count", "grid_resolution"):
         assert props[name].description
+
+
+def test_mesh_too_large_for_a_span_is_skipped_with_a_warning(voxgi, session):
+    scenes.quad_object("Big Quad", size=2.0)
+    bpy.context.scene.voxgi.base_span = 0.0015  # 2 m / 1.5 mm > 1024 voxels per axis
+    bpy.context.scene.voxgi.cascade_count = 1
+    assert bpy.ops.voxgi.voxelize() == {"FINISHED"}
+    skipped = [m for m in _report(session, "WARNING") if "skipped" in m]
+    assert len(skipped) == 1 and "Big Quad" in skipped[0] and "0.0015" in skipped[0]
