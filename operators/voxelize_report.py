@@ -37,3 +37,37 @@ def timing_line(timings: dict[str, float]) -> tuple[str, str]:
     """One INFO line with the seconds spent per stage."""
     stages = ", ".join(f"{name} {seconds:.3f} s" for name, seconds in timings.items())
     return ("INFO", f"Timings: {stages}")
+
+
+# Plain-text tables (the demo's console output; a panel may reuse the rows).
+TIMING_STAGES = ("snapshot", "check", "voxelize", "attributes", "pack")
+
+
+def format_table(header: tuple[str, ...], rows: list[tuple[str, ...]]) -> list[str]:
+    """Right-aligned text columns under a header and a rule; the first column is left-aligned."""
+    widths = [max(len(str(r[i])) for r in (header, *rows)) for i in range(len(header))]
+
+    def line(cells):
+        return "  ".join(str(c).ljust(w) if i == 0 else str(c).rjust(w)
+                         for i, (c, w) in enumerate(zip(cells, widths)))
+
+    return [line(header), "  ".join("-" * w for w in widths), *(line(r) for r in rows)]
+
+
+def cascade_table(result) -> list[str]:
+    """One row per cascade (span in m, voxel count, MB), then the total."""
+    rows = [(str(s.cascade), f"{s.span:g}", f"{s.voxel_count:,}", f"{s.nbytes / MEGABYTE:.2f}")
+            for s in result.cascade_stats]
+    rows.append(("total", "", f"{result.total_voxels:,}", f"{result.total_bytes / MEGABYTE:.2f}"))
+    return format_table(("cascade", "span (m)", "voxels", "MB"), rows)
+
+
+def timing_table(timings: dict[str, float], total: float | None = None) -> list[str]:
+    """Milliseconds per stage (``TIMING_STAGES`` first, 0 when absent, then any others).
+
+    total : wall-clock seconds of the whole run; defaults to the sum of the stages.
+    """
+    names = [*TIMING_STAGES, *(n for n in timings if n not in TIMING_STAGES)]
+    rows = [(n, f"{timings.get(n, 0.0) * 1000:.1f}") for n in names]
+    rows.append(("total", f"{(sum(timings.values()) if total is None else total) * 1000:.1f}"))
+    return format_table(("stage", "ms"), rows)

@@ -11,8 +11,8 @@ def uv_sphere(rings=12, segments=24, radius=1.0, centre=(0.0, 0.0, 0.0)):
     idx = np.arange((rings + 1) * segments).reshape(rings + 1, segments)
     a, b = idx[:-1], np.roll(idx[:-1], -1, 1)
     c, d = idx[1:], np.roll(idx[1:], -1, 1)
-    tris = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
-                           np.stack([b, d, c], -1).reshape(-1, 3)])
+    tris = np.concatenate([np.stack([a, c, b], -1).reshape(-1, 3),  # counter-clockwise
+                           np.stack([b, c, d], -1).reshape(-1, 3)])  # seen from outside
     return pos.reshape(-1, 3) + np.asarray(centre), tris
 
 
