@@ -8,7 +8,10 @@ voxelization reported an error, 2 bad arguments (missing file, not a .blend).
 from __future__ import annotations
 
 import argparse
+import contextlib
+import ctypes
 import importlib
+import os
 import pathlib
 import sys
 import tempfile
@@ -47,6 +50,22 @@ def import_addon(tmp: str):
     return package
 
 
+@contextlib.contextmanager
+def quiet_stdout():
+    """Silence fd 1 (Blender echoes operator reports there); our tables print afterwards."""
+    libc = ctypes.CDLL(None)
+    sys.stdout.flush()
+    saved = os.dup(1)
+    with open(os.devnull, "w") as devnull:
+        os.dup2(devnull.fileno(), 1)
+    try:
+        yield
+    finally:
+        libc.fflush(None)
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
 def run(args: argparse.Namespace, tmp: str) -> int:
     import bpy
 
@@ -68,23 +87,28 @@ def run(args: argparse.Namespace, tmp: str) -> int:
         source = str(args.blend)
     scene = bpy.context.scene
     settings = scene.voxgi
-    try:
-        if args.span is not None:
-            settings.base_span = args.span
-        if args.cascades is not None:
-            settings.cascade_count = args.cascades
-    except (TypeError, ValueError) as error:
-        print(f"demo: bad setting: {error}", file=sys.stderr)
-        return 2
+    for flag, name, value in (("--span", "base_span", args.span), ("--cascades", "cascade_count", args.cascades)):
+        if value is None:
+            continue
+        prop = settings.bl_rna.properties[name]
+        if not prop.hard_min <= value <= prop.hard_max:  # Blender would clamp silently
+            print(f"demo: {flag} {value:g} is outside [{prop.hard_min:g}, {prop.hard_max:g}]", file=sys.stderr)
+            return 2
+        setattr(settings, name, value)
 
     start = time.perf_counter()
-    status = bpy.ops.voxgi.voxelize()
+    with quiet_stdout():  # errors are printed below from the session's report
+        try:
+            status = bpy.ops.voxgi.voxelize()
+        except RuntimeError:  # bpy.ops raises when the operator reports an ERROR
+            status = {"CANCELLED"}
     total = time.perf_counter() - start
     session = scene_session(scene.name_full)
     summary = session.snapshot_summary or {}
     print(f"\nVoxGI demo — {source}, scene '{scene.name}', frame {scene.frame_current}")
     print(f"base span {settings.base_span:g} m, {settings.cascade_count} cascades; "
           f"{summary.get('objects', 0)} objects, {summary.get('triangles', 0):,} triangles\n")
+    sys.stdout.flush()
     if status != {"FINISHED"} or session.caches is None:
         for level, message in session.last_report:
             print(f"{level}: {message}", file=sys.stderr)
