@@ -102,10 +102,25 @@ def _separating_intervals(tri: np.ndarray, lo: np.ndarray):
     pmin[:, 0] = pmax[:, 0] = proj[0][:, 0]  # the plane axis uses vertex 0, like the reference
     radius = 0.5 * (np.abs(ax) + np.abs(ay) + np.abs(az))
     low, high = pmin - radius, pmax + radius
-    longest_sq = np.maximum(np.maximum((e[0]**2).sum(1), (e[1]**2).sum(1)), (e[2]**2).sum(1))
-    flat = ~plane_is_meaningful(np.linalg.norm(n, axis=1), longest_sq)
+    sq = [ej[:, 0] ** 2 + ej[:, 1] ** 2 + ej[:, 2] ** 2 for ej in e]
+    longest_sq = np.maximum(np.maximum(sq[0], sq[1]), sq[2])
+    normal_len = np.sqrt(n[:, 0] ** 2 + n[:, 1] ** 2 + n[:, 2] ** 2)
+    flat = ~plane_is_meaningful(normal_len, longest_sq)
     low[flat, 0], high[flat, 0] = -1e300, 1e300  # a segment/point: the edge axes decide
     return ax, ay, az, low, high
+
+
+def _axes_to_test(shape) -> range | list[int]:
+    """SAT axes that can still separate a candidate block of this shape.
+
+    A triangle one cell thick along axis u lies inside that slab, so it overlaps a candidate
+    iff its projection across u overlaps the cell's square: only the three axes u × edge_j
+    can separate (2D SAT). Otherwise the plane and all nine edge axes are needed.
+    """
+    thin = [u for u in range(3) if shape[u] == 1]
+    if thin:
+        return [1 + 3 * thin[0] + j for j in range(3)]
+    return range(10)
 
 
 def _test_block(ax, ay, az, low, high, shape):
@@ -116,94 +131,112 @@ def _test_block(ax, ay, az, low, high, shape):
     """
     ox, oy, oz = (np.arange(n, dtype=np.float64) for n in shape)
     full = (len(ax),) + tuple(int(n) for n in shape)
-    mask = np.ones(full, dtype=bool)
+    mask = np.empty(full, dtype=bool)
     dist = np.empty(full)
     passed = np.empty(full, dtype=bool)
     mid = 0.5 * (low + high)
     half = 0.5 * (high - low)
-    for k in range(10):
+    for n, k in enumerate(_axes_to_test(shape)):
         yz = (ay[:, k, None] * oy)[:, :, None] + (az[:, k, None] * oz)[:, None, :]
         x = ax[:, k, None] * ox - mid[:, k, None]
         np.add(x[:, :, None, None], yz[:, None, :, :], out=dist)
         np.abs(dist, out=dist)
-        np.less_equal(dist, half[:, k, None, None, None], out=passed)
-        mask &= passed
+        np.less_equal(dist, half[:, k, None, None, None], out=mask if n == 0 else passed)
+        if n:
+            mask &= passed
     return mask
 
 
-def _column_contacts(lo, ext, column):
+class _KeySpace:
+    """Linear keys of the cells in the box [lo, lo + dims): key = ((x·dy) + y)·dz + z."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray):
+        self.lo = lo
+        self.dims = hi - lo + 1
+        self.strides = np.array([self.dims[1] * self.dims[2], self.dims[2], 1], dtype=np.int64)
+
+    def keys(self, cells: np.ndarray) -> np.ndarray:
+        return (cells - self.lo) @ self.strides
+
+    def cells(self, keys: np.ndarray) -> np.ndarray:
+        x, rem = np.divmod(keys, self.strides[0])
+        y, z = np.divmod(rem, self.strides[1])
+        return np.stack([x, y, z], axis=1) + self.lo
+
+
+def _column_contacts(lo, ext, column, space):
     """Contacts of triangles one cell thick in two axes: all their candidates are touched."""
     counts = ext[column].prod(axis=1)
     tri_idx = np.repeat(column, counts)
     starts = np.repeat(np.cumsum(counts) - counts, counts)
     step = np.arange(len(tri_idx)) - starts  # 0..count-1 along the one long axis
-    long_axis = np.repeat(np.argmax(ext[column], axis=1), counts)
-    cells = lo[tri_idx]
-    cells[np.arange(len(tri_idx)), long_axis] += step
-    return tri_idx, cells
+    stride = space.strides[np.argmax(ext[column], axis=1)]
+    return tri_idx, space.keys(lo[column]).repeat(counts) + step * stride.repeat(counts)
 
 
-def _contacts(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """All (triangle, cell) contacts. tri (T, 3, 3) grid units → (P,) int64 tri, (P, 3) cells."""
+def _tested_contacts(tri, lo, ext, rest, space):
+    """Contacts of the other triangles, tested block by block per candidate shape."""
+    e = ext[rest]
+    m = int(e.max()) + 1
+    shape_key = (e[:, 0] * m + e[:, 1]) * m + e[:, 2]
+    order = np.argsort(shape_key, kind="stable")
+    rest, e, shape_key = rest[order], e[order], shape_key[order]  # grouped by shape
+    ax, ay, az, low, high = _separating_intervals(tri[rest], lo[rest])
+    base = space.keys(lo[rest])
+    starts = np.flatnonzero(np.r_[True, shape_key[1:] != shape_key[:-1]])
+    ends = np.r_[starts[1:], len(rest)]
+    tris_out, keys_out = [], []
+    for s0, s1 in zip(starts, ends):
+        shape = e[s0]
+        size = int(shape.prod())
+        # key offset of each candidate of this shape, in the block's flattened (i, j, k) order
+        grid = np.indices(shape).reshape(3, -1).T
+        local = grid @ space.strides
+        per_block = max(1, _BLOCK_ELEMENTS // size)
+        for b in range(s0, s1, per_block):
+            sel = slice(b, min(b + per_block, s1))
+            mask = _test_block(ax[sel], ay[sel], az[sel], low[sel], high[sel], shape)
+            t, c = np.divmod(np.flatnonzero(mask), size)
+            t += b
+            tris_out.append(rest[t])
+            keys_out.append(base[t] + local[c])
+    return tris_out, keys_out
+
+
+def _contacts(tri: np.ndarray):
+    """All (triangle, cell) contacts of (T, 3, 3) grid-unit triangles.
+
+    Returns tri_idx (P,) int64, keys (P,) int64 and the _KeySpace the keys live in.
+    """
     lo, hi = candidate_ranges(tri)
+    space = _KeySpace(lo.min(axis=0), hi.max(axis=0))
     ext = hi - lo + 1
     thin_axes = (ext == 1).sum(axis=1)
-    tris_out, cells_out = [], []
-
+    tris_out, keys_out = [], []
     column = np.flatnonzero(thin_axes >= 2)
     if len(column):
-        t, c = _column_contacts(lo, ext, column)
+        t, k = _column_contacts(lo, ext, column, space)
         tris_out.append(t)
-        cells_out.append(c)
-
+        keys_out.append(k)
     rest = np.flatnonzero(thin_axes < 2)
     if len(rest):
-        ax, ay, az, low, high = _separating_intervals(tri[rest], lo[rest])
-        e = ext[rest]
-        m = int(e.max()) + 1
-        shape_key = (e[:, 0] * m + e[:, 1]) * m + e[:, 2]
-        order = np.argsort(shape_key, kind="stable")
-        keys_sorted = shape_key[order]
-        starts = np.flatnonzero(np.r_[True, keys_sorted[1:] != keys_sorted[:-1]])
-        ends = np.r_[starts[1:], len(order)]
-        for s0, s1 in zip(starts, ends):
-            shape = e[order[s0]]
-            per_block = max(1, _BLOCK_ELEMENTS // int(shape.prod()))
-            for b in range(s0, s1, per_block):
-                sel = order[b:min(b + per_block, s1)]
-                mask = _test_block(ax[sel], ay[sel], az[sel], low[sel], high[sel], shape)
-                t, i, j, k = np.nonzero(mask)
-                idx = rest[sel]
-                tris_out.append(idx[t])
-                cells_out.append(lo[idx[t]] + np.stack([i, j, k], axis=1))
-    if not tris_out:
-        return np.zeros(0, np.int64), np.zeros((0, 3), np.int64)
-    return np.concatenate(tris_out), np.concatenate(cells_out)
+        t, k = _tested_contacts(tri, lo, ext, rest, space)
+        tris_out += t
+        keys_out += k
+    return np.concatenate(tris_out), np.concatenate(keys_out), space
 
 
-def _dedupe(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unique cells (sorted x, y, z) and, per input row, its row in the unique array."""
-    if len(cells) == 0:
-        return np.zeros((0, 3), np.int32), np.zeros(0, np.int32)
-    lo = cells.min(axis=0)
-    dims = cells.max(axis=0) - lo + 1
-    rel = cells - lo
-    keys = (rel[:, 0] * dims[1] + rel[:, 1]) * dims[2] + rel[:, 2]
-    total = int(dims.prod())
+def _dedupe(keys: np.ndarray, total: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted unique keys and, per input key, its row in them (int32)."""
     if total <= MAX_DENSE_KEYS:
         present = np.zeros(total, dtype=bool)
         present[keys] = True
         unique_keys = np.flatnonzero(present)
         lookup = np.empty(total, dtype=np.int32)
         lookup[unique_keys] = np.arange(len(unique_keys), dtype=np.int32)
-        inverse = lookup[keys]
-    else:
-        unique_keys, inverse = np.unique(keys, return_inverse=True)
-        inverse = inverse.astype(np.int32)
-    x, rem = np.divmod(unique_keys, dims[1] * dims[2])
-    y, z = np.divmod(rem, dims[2])
-    unique = (np.stack([x, y, z], axis=1) + lo).astype(np.int32)
-    return unique, inverse
+        return unique_keys, lookup[keys]
+    unique_keys, inverse = np.unique(keys, return_inverse=True)
+    return unique_keys, inverse.astype(np.int32)
 
 
 def voxelize_triangles(positions: np.ndarray, triangles: np.ndarray, span: float) -> VoxelizedSurface:
@@ -222,7 +255,11 @@ def voxelize_triangles(positions: np.ndarray, triangles: np.ndarray, span: float
     if not span > 0 or not np.isfinite(span):
         raise ValueError(f"voxel span must be a positive finite number, got {span!r}")
     tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if len(tris) == 0:
+        empty = np.zeros(0, np.int32)
+        return VoxelizedSurface(np.zeros((0, 3), np.int32), empty, empty, float(span))
     tri_grid = to_grid_units(positions, span)[tris]
-    tri_idx, cells = _contacts(tri_grid)
-    unique, inverse = _dedupe(cells)
-    return VoxelizedSurface(unique, tri_idx.astype(np.int32), inverse, float(span))
+    tri_idx, keys, space = _contacts(tri_grid)
+    unique_keys, inverse = _dedupe(keys, int(space.dims.prod()))
+    cells = space.cells(unique_keys).astype(np.int32)
+    return VoxelizedSurface(cells, tri_idx.astype(np.int32), inverse, float(span))
