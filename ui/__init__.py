@@ -1,8 +1,7 @@
 """Blender UI: scene settings and the sidebar panel."""
 from __future__ import annotations
 
-import bpy
-
+from ..registration import register_modules, unregister_modules
 from . import panel, properties
 
 # Registered in this order (settings before the panel that draws them), unregistered in reverse.
@@ -12,16 +11,8 @@ classes = tuple(cls for module in modules for cls in module.classes)
 
 
 def register() -> None:
-    for module in modules:
-        for cls in module.classes:
-            bpy.utils.register_class(cls)
-        if hasattr(module, "register"):
-            module.register()
+    register_modules(modules)
 
 
 def unregister() -> None:
-    for module in reversed(modules):
-        if hasattr(module, "unregister"):
-            module.unregister()
-        for cls in reversed(module.classes):
-            bpy.utils.unregister_class(cls)
+    unregister_modules(modules)

@@ -1,0 +1,24 @@
+"""Loud, ordered registration shared by ``operators/`` and ``ui/``.
+
+Each module lists its ``classes``; modules register in order (classes, then the module's own
+``register()`` if any) and unregister in reverse.
+"""
+from __future__ import annotations
+
+import bpy
+
+
+def register_modules(modules) -> None:
+    for module in modules:
+        for cls in module.classes:
+            bpy.utils.register_class(cls)
+        if hasattr(module, "register"):
+            module.register()
+
+
+def unregister_modules(modules) -> None:
+    for module in reversed(modules):
+        if hasattr(module, "unregister"):
+            module.unregister()
+        for cls in reversed(module.classes):
+            bpy.utils.unregister_class(cls)
