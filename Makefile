@@ -20,7 +20,7 @@ demo: $(STAMP)
 	$(PY) tools/demo.py $(if $(BLEND),--blend "$(BLEND)")
 
 test: $(STAMP)
-	$(PY) -m pytest tests -q
+	$(PY) -m pytest -c tests/pytest.ini tests -q
 
 build: $(STAMP)
 	$(PY) tools/build_extension.py --output-dir dist
