@@ -2,10 +2,10 @@
 from __future__ import annotations
 
 from ..registration import register_modules, unregister_modules
-from . import demo_scene, session, voxelize
+from . import demo_scene, engine_jobs, session, voxelize
 
-# Registered in this order, unregistered in reverse.
-modules = (session, voxelize, demo_scene)
+# Registered in this order, unregistered in reverse (jobs stop before the session is cleared).
+modules = (session, engine_jobs, voxelize, demo_scene)
 
 classes = tuple(cls for module in modules for cls in module.classes)
 

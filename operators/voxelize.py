@@ -1,18 +1,22 @@
 """``voxgi.voxelize``: snapshot the scene and build the per-mesh voxel caches.
 
 The operator reads the scene (main thread) into a ``SceneSnapshot`` and hands only
-that to the engine's ``build_scene_caches``; the engine never sees bpy. For now the
-engine runs synchronously; a background worker will take over later, with the same
-snapshot/engine split. Results go to the add-on session, not to ID properties.
+that to the engine's ``build_scene_caches``, which runs on the engine worker thread
+(``engine_jobs``); the engine never sees bpy. The outcome is applied on the main thread:
+results and report lines go to the add-on session, not to ID properties. Interactively
+the operator returns right after submitting; in background mode it waits for the job
+and reports its lines like any synchronous operator.
 """
 from __future__ import annotations
 
 import time
+import traceback
 
 import bpy
 
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.mesh_caches import build_scene_caches
+from . import engine_jobs
 from .scene_snapshot import snapshot_summary, take_snapshot
 from .session import scene_session
 from .voxelize_report import cascade_lines, timing_line, warning_lines
@@ -21,6 +25,8 @@ NO_MESH_MESSAGE = (
     "Nothing to voxelize: the view layer has no visible mesh object with faces "
     "(add one, or unhide it)"
 )
+CANCELLED_MESSAGE = "Voxelization cancelled; previous caches kept"
+JOB_LABEL = "Voxelizing"
 
 
 class VOXGI_OT_voxelize(bpy.types.Operator):
@@ -38,45 +44,78 @@ class VOXGI_OT_voxelize(bpy.types.Operator):
         return True
 
     def execute(self, context):
-        scene = context.scene
-        session = scene_session(scene.name_full)
-        session.last_report = lines = []
-        try:
-            result, snapshot, timings = self._run(context)
-        except VoxGIError as error:
-            # Results of an earlier run no longer describe this scene.
-            session.caches = session.snapshot_summary = None
-            session.timings = {}
-            lines.append(("ERROR", str(error)))
-            return self._finish(lines, {"CANCELLED"})
-        session.snapshot_summary = snapshot_summary(snapshot)
-        session.caches = result
-        session.timings = timings
-        lines += cascade_lines(result)
-        lines += warning_lines(snapshot.warnings, result)
-        lines.append(timing_line(timings))
-        return self._finish(lines, {"FINISHED"})
-
-    @staticmethod
-    def _run(context):
-        """Snapshot then engine. Returns (result, snapshot, timings); raises VoxGIError."""
+        scene_name = context.scene.name_full
         settings = context.scene.voxgi
-        start = time.perf_counter()
-        snapshot = take_snapshot(context, context.evaluated_depsgraph_get())
-        snapshot_seconds = time.perf_counter() - start
-        if not snapshot.objects:
-            details = "; ".join(snapshot.warnings)
-            raise VoxGIError(NO_MESH_MESSAGE + (f". {details}" if details else ""))
-        result = build_scene_caches(
-            snapshot, base_span=settings.base_span, cascade_count=settings.cascade_count
+        base_span, cascade_count = settings.base_span, settings.cascade_count
+        try:
+            snapshot, snapshot_seconds = _snapshot(context)
+        except VoxGIError as error:
+            engine_jobs.cancel(scene_name, discard=True)  # it would describe another scene
+            _apply_error(scene_name, error)
+            return self._finish(scene_session(scene_name).last_report, {"CANCELLED"})
+
+        def job(cancel):  # worker thread: engine code on the snapshot only
+            return build_scene_caches(snapshot, base_span=base_span,
+                                      cascade_count=cascade_count, cancel=cancel)
+
+        submitted = engine_jobs.submit(
+            scene_name, job, label=JOB_LABEL,
+            on_done=lambda result: _apply_result(scene_name, snapshot, snapshot_seconds, result),
+            on_cancel=lambda: _apply_cancel(scene_name),
+            on_error=lambda error: _apply_error(scene_name, error),
         )
-        timings = {"snapshot": snapshot_seconds, **result.timings}
-        return result, snapshot, timings
+        if submitted.state == "running":  # interactive: the timer applies it later
+            count = len(snapshot.meshes)
+            self.report({"INFO"}, f"Voxelizing {count} mesh{'es' if count != 1 else ''} "
+                                  "in the background…")
+            return {"FINISHED"}
+        status = {"FINISHED"} if submitted.state == "done" else {"CANCELLED"}
+        return self._finish(scene_session(scene_name).last_report, status)
 
     def _finish(self, lines, status):
         for level, message in lines:
             self.report({level}, message)
         return status
+
+
+def _snapshot(context):
+    """(snapshot, seconds) of the context's scene; VoxGIError when it has nothing to voxelize."""
+    start = time.perf_counter()
+    snapshot = take_snapshot(context, context.evaluated_depsgraph_get())
+    seconds = time.perf_counter() - start
+    if not snapshot.objects:
+        details = "; ".join(snapshot.warnings)
+        raise VoxGIError(NO_MESH_MESSAGE + (f". {details}" if details else ""))
+    return snapshot, seconds
+
+
+# Outcomes, applied on the main thread (by engine_jobs.drain).
+
+def _apply_result(scene_name, snapshot, snapshot_seconds, result) -> None:
+    session = scene_session(scene_name)
+    timings = {"snapshot": snapshot_seconds, **result.timings}
+    session.snapshot_summary = snapshot_summary(snapshot)
+    session.caches = result
+    session.timings = timings
+    session.last_report = [*cascade_lines(result), *warning_lines(snapshot.warnings, result),
+                           timing_line(timings)]
+
+
+def _apply_cancel(scene_name) -> None:
+    scene_session(scene_name).last_report = [("INFO", CANCELLED_MESSAGE)]
+
+
+def _apply_error(scene_name, error) -> None:
+    session = scene_session(scene_name)
+    if isinstance(error, VoxGIError):
+        # Results of an earlier run no longer describe this scene.
+        session.caches = session.snapshot_summary = None
+        session.timings = {}
+        session.last_report = [("ERROR", str(error))]
+    else:  # a bug: keep the previous caches, say so, and leave the trace in the console
+        traceback.print_exception(error)
+        session.last_report = [("ERROR", f"Voxelization failed: {type(error).__name__}: {error} "
+                                         "(see the system console)")]
 
 
 classes = (VOXGI_OT_voxelize,)

@@ -39,6 +39,20 @@ def timing_line(timings: dict[str, float]) -> tuple[str, str]:
     return ("INFO", f"Timings: {stages}")
 
 
+# Prefixes of the INFO lines above, which the panel already shows as tables.
+TABLE_LINE_PREFIXES = ("Cascade ", "Total: ", "Timings: ")
+
+
+def panel_lines(report, limit: int = 6) -> tuple[list[tuple[str, str]], int]:
+    """The report lines a panel shows as text (not the ones it draws as tables), at most
+    ``limit`` of them, errors first; returns (lines, number left out)."""
+    lines = [(lvl, m) for lvl, m in report
+             if not (lvl == "INFO" and m.startswith(TABLE_LINE_PREFIXES))]
+    order = {"ERROR": 0, "WARNING": 1}
+    lines.sort(key=lambda line: order.get(line[0], 2))  # stable: report order within a level
+    return lines[:limit], max(0, len(lines) - limit)
+
+
 # Plain-text tables (the demo's console output; a panel may reuse the rows).
 TIMING_STAGES = ("snapshot", "check", "voxelize", "attributes", "pack")
 

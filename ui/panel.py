@@ -3,12 +3,15 @@ from __future__ import annotations
 
 import bpy
 
+from ..operators import engine_jobs
 from ..operators.session import peek_session
-from ..operators.voxelize_report import MEGABYTE
+from ..operators.voxelize_report import MEGABYTE, panel_lines
+
+LEVEL_ICONS = {"ERROR": "CANCEL", "WARNING": "ERROR", "INFO": "INFO"}
 
 
 class VOXGI_PT_main(bpy.types.Panel):
-    """Settings, the Voxelize button and the last run's statistics."""
+    """Settings, the Voxelize button, the running job and the last run's statistics."""
 
     bl_idname = "VOXGI_PT_main"
     bl_label = "VoxGI"
@@ -32,32 +35,45 @@ class VOXGI_PT_main(bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("voxgi.voxelize", icon="MESH_GRID")
         row.operator("voxgi.add_demo_scene", text="", icon="SCENE_DATA")
+        _draw_job(layout, engine_jobs.running_job(context.scene.name_full))
         _draw_results(layout, peek_session(context.scene.name_full))
 
 
+def _draw_job(layout, job) -> None:
+    """The running background job: what, for how long, and its Cancel button."""
+    if job is None:
+        return
+    row = layout.box().row()
+    text = "Cancelling" if job.cancel_requested else job.label
+    row.label(text=f"{text}… {job.elapsed:.1f} s", icon="SORTTIME")
+    row.operator("voxgi.cancel_job", text="Cancel", icon="CANCEL")
+
+
 def _draw_results(layout, session) -> None:
-    if session is None or session.caches is None:
-        if session is not None:
-            for level, message in session.last_report:
-                if level == "ERROR":
-                    layout.label(text=message, icon="ERROR")
+    if session is None:
         return
     result = session.caches
-    box = layout.box()
-    box.label(text="Voxel caches", icon="MESH_GRID")
-    for stats in result.cascade_stats:
+    if result is not None:
+        box = layout.box()
+        box.label(text="Voxel caches", icon="MESH_GRID")
+        for stats in result.cascade_stats:
+            row = box.row()
+            row.label(text=f"Cascade {stats.cascade} ({stats.span:g} m)")
+            row.label(text=f"{stats.voxel_count:,} voxels")
+            row.label(text=f"{stats.nbytes / MEGABYTE:.2f} MB")
         row = box.row()
-        row.label(text=f"Cascade {stats.cascade} ({stats.span:g} m)")
-        row.label(text=f"{stats.voxel_count:,} voxels")
-        row.label(text=f"{stats.nbytes / MEGABYTE:.2f} MB")
-    row = box.row()
-    row.label(text="Total")
-    row.label(text=f"{result.total_voxels:,} voxels")
-    row.label(text=f"{result.total_bytes / MEGABYTE:.2f} MB")
-    warnings = sum(1 for level, _ in session.last_report if level == "WARNING")
-    if warnings:
-        box.label(text=f"{warnings} warning(s): see the Info editor", icon="ERROR")
-    if session.timings:
+        row.label(text="Total")
+        row.label(text=f"{result.total_voxels:,} voxels")
+        row.label(text=f"{result.total_bytes / MEGABYTE:.2f} MB")
+    # Background runs cannot reach the Info editor: the last run's messages are shown here.
+    lines, left_out = panel_lines(session.last_report)
+    if lines:
+        column = layout.column(align=True)
+        for level, message in lines:
+            column.label(text=message, icon=LEVEL_ICONS.get(level, "INFO"))
+        if left_out:
+            column.label(text=f"… and {left_out} more")
+    if result is not None and session.timings:
         box = layout.box()
         box.label(text="Stage timings", icon="TIME")
         for name, seconds in session.timings.items():

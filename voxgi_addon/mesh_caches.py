@@ -126,8 +126,12 @@ def _triangle_materials(snapshot: SceneSnapshot, mesh: MeshData):
     return albedo[idx], spec[idx]
 
 
-def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, result, timer):
-    """Voxelize one mesh at every cascade span into ``result.caches[key]``."""
+def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, result, timer,
+                      cancel=None):
+    """Voxelize one mesh at every cascade span into ``result.caches[key]``.
+
+    cancel : optional callable returning True to stop; raises VoxGICancelled between cascades.
+    """
     t0 = time.perf_counter()
     check = filter_triangles(key, positions, mesh.triangles)
     if check.dropped:
@@ -148,6 +152,8 @@ def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, 
     skin = mesh.skin
     finer = False
     for cascade in range(cascade_count):
+        if cancel is not None and cancel():
+            raise VoxGICancelled("voxelization cancelled; no caches were kept")
         span = base_span * 2**cascade
         lo, dims = lattice_bounds(np.asarray(positions)[used], span)
         if (dims > MAX_CELLS_PER_AXIS).any():
@@ -173,7 +179,8 @@ def build_scene_caches(snapshot: SceneSnapshot, base_span: float, cascade_count:
                        cancel=None) -> CacheBuildResult:
     """Voxelize every mesh of a snapshot at ``cascade_count`` spans (``base_span · 2**i``).
 
-    cancel : optional callable returning True to stop; raises VoxGICancelled between meshes.
+    cancel : optional callable returning True to stop; raises VoxGICancelled between meshes
+        and between the cascades of a mesh.
     Raises VoxGIError for unusable input (no mesh objects, bad settings).
     """
     if not (np.isfinite(base_span) and base_span > 0):
@@ -188,7 +195,8 @@ def build_scene_caches(snapshot: SceneSnapshot, base_span: float, cascade_count:
     for key, (positions, mesh) in sources.items():
         if cancel is not None and cancel():
             raise VoxGICancelled("voxelization cancelled; no caches were kept")
-        build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, result, timer)
+        build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, result, timer,
+                          cancel)
     for cascade in range(cascade_count):
         present = [c[cascade] for c in result.caches.values() if c[cascade] is not None]
         result.cascade_stats.append(CascadeStats(
