@@ -114,8 +114,11 @@ def is_rounding_tie(tri_grid, cell, delta=1e-9):
 @settings(max_examples=300, deadline=None)
 @given(tris=st.lists(triangles(), min_size=1, max_size=4), span=st.sampled_from([0.25, 0.3, 0.5]))
 def test_hypothesis_triangles_match_brute_force(tris, span):
-    """Identical sets, except cells the triangle touches only to within float rounding
-    (seen with zero-area triangles, which the pipeline drops before voxelizing)."""
+    """Identical sets, except cells a triangle touches only to within float rounding: the
+    lattice offset breaks ties of faces on lattice planes, but an edge of slope ±1 through a
+    lattice corner (e.g. from (1, -0.5) to (1.5, 0) at span 0.3) still just touches it, and the
+    two formulations may round that contact either way. Random float meshes must match exactly
+    (test_random_small_meshes_match_brute_force)."""
     positions = np.concatenate(tris)
     faces = np.arange(len(positions)).reshape(-1, 3)
     got = cell_set(voxelize_triangles(positions, faces, span).cells)
@@ -123,6 +126,3 @@ def test_hypothesis_triangles_match_brute_force(tris, span):
     grid = to_grid_units(positions, span)[faces]
     for cell in got ^ want:
         assert any(is_rounding_tie(t, cell) for t in grid), f"cell {cell} differs by more than rounding"
-    solid = [t for t in grid if np.linalg.norm(np.cross(t[1] - t[0], t[2] - t[0])) > 1e-6]
-    if len(solid) == len(grid):
-        assert got == want
