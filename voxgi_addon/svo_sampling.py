@@ -1,0 +1,211 @@
+"""Storage of one ``VoxelOctree`` level and node-centred sampling over it (numpy, vectorised).
+
+``DenseLevel`` (full 3D arrays) and ``SparseLevel`` (Morton-sorted node arrays) hold the node
+attributes. Each also keeps a premultiplied sampling table ``table`` (4, M+1) float32 —
+channels r·α, g·α, b·α, α of its M stored nodes plus a final column of zeros standing for
+"absent" — and turns integer node coordinates into columns ("rows") of that table:
+
+* dense level (2^ℓ nodes per axis): row = (x·s + y)·s + z, the flat index of ``array[x, y, z]``;
+* sparse level with an index map (an int32 map over the cube of nodes the level can hold):
+  one gather in that map;
+* sparse level without one, and ``lookup`` always: ``np.searchsorted`` on the Morton keys.
+
+The 8 trilinear corners of a point are built per axis and combined by broadcasting, so a
+chunk of m points costs O(m) coordinate work plus 8m gathers per channel. Corner arrays are
+(8, m), corner-major in octant order ``z<<2 | y<<1 | x``; the table is channel-major, so every
+inner numpy loop runs over m.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from .morton import morton_encode, spread_bits
+
+CHUNK_POINTS = 1 << 15  # points per vectorised chunk: keeps the (8, m) temporaries in cache
+_INVALID_KEY_BIT = np.uint64(1 << 63)  # never set in a Morton key of 21-bit coordinates
+
+
+@dataclass(eq=False)
+class DenseLevel:
+    """Level ℓ stored as full arrays, s = 2^ℓ per axis, indexed [x, y, z].
+
+    radiance, normal, albedo : (s, s, s, 3) float32; occlusion : (s, s, s) float32 (0 = absent);
+    count : (s, s, s) int32; child_base : (s, s, s) int64 (−1 if absent) and child_mask :
+    (s, s, s) uint8 only on the last dense level when sparse levels follow, else None;
+    table : (4, s³ + 1) float32 premultiplied sampling channels (r·α, g·α, b·α, α), last row 0.
+    """
+
+    kind: ClassVar[str] = "dense"
+    level: int
+    radiance: np.ndarray
+    occlusion: np.ndarray
+    normal: np.ndarray
+    albedo: np.ndarray
+    count: np.ndarray
+    child_base: np.ndarray | None
+    child_mask: np.ndarray | None
+    table: np.ndarray = field(repr=False)
+
+    @property
+    def node_count(self) -> int:
+        return int(np.count_nonzero(self.occlusion))
+
+    def rows(self, nodes: np.ndarray) -> np.ndarray:
+        """(N, 3) int64 node coordinates → (N,) rows of ``table`` (s³ = absent or outside)."""
+        s = 1 << self.level
+        inside = np.all((nodes >= 0) & (nodes < s), axis=1)
+        rows = np.where(inside, (nodes[:, 0] * s + nodes[:, 1]) * s + nodes[:, 2], s ** 3)
+        present = self.table[3, np.minimum(rows, s ** 3)] > 0
+        return np.where(present, rows, s ** 3)
+
+    def corner_rows(self, lower: np.ndarray) -> np.ndarray:
+        """(m, 3) int64 lower trilinear corners → (8, m) rows of ``table`` (s³ = absent)."""
+        return grid_rows(lower, (0, 0, 0), 1 << self.level)
+
+
+@dataclass(eq=False)
+class SparseLevel:
+    """Level ℓ stored as M present nodes sorted by Morton key.
+
+    keys : (M,) uint64 sorted; radiance, normal, albedo : (M, 3) float32; occlusion : (M,)
+    float32 (> 0); count : (M,) int32; child_base : (M,) int64 row in the next level of the
+    first present child (where it would be when there is none); child_mask : (M,) uint8.
+    window_origin : (3,) int64, window_size W: the cube of nodes this level can hold (all of
+    level ℓ ≤ log2(res), else the window of cascade n−1−(ℓ−log2(res))). index_map : (W³ + 1,)
+    int32 row per window cell in [x, y, z] order (M = absent, last entry M) or None when the
+    window is over budget. table : (4, M + 1) float32 premultiplied sampling channels, row M 0.
+    """
+
+    kind: ClassVar[str] = "sparse"
+    level: int
+    keys: np.ndarray
+    radiance: np.ndarray
+    occlusion: np.ndarray
+    normal: np.ndarray
+    albedo: np.ndarray
+    count: np.ndarray
+    child_base: np.ndarray
+    child_mask: np.ndarray
+    window_origin: np.ndarray
+    window_size: int
+    index_map: np.ndarray | None = field(repr=False)
+    table: np.ndarray = field(repr=False)
+
+    @property
+    def node_count(self) -> int:
+        return len(self.keys)
+
+    def rows(self, nodes: np.ndarray) -> np.ndarray:
+        """(N, 3) int64 node coordinates → (N,) rows by searchsorted on ``keys`` (M = absent)."""
+        return coordinate_rows(nodes, self.level, self.keys)
+
+    def corner_rows(self, lower: np.ndarray) -> np.ndarray:
+        """(m, 3) int64 lower trilinear corners → (8, m) rows of ``table`` (M = absent)."""
+        if self.index_map is None:
+            return keyed_rows(lower, self.level, self.keys)
+        return self.index_map[grid_rows(lower, self.window_origin, self.window_size)]
+
+
+def _axis_offsets(c0: np.ndarray, lo: int, size: int, stride: int, big: int) -> np.ndarray:
+    """(m,) int64 lower corner → (2, m) int64 ``(c − lo)·stride`` for c0, c0+1; ``big`` outside."""
+    rel = c0[None, :] - lo + np.array([[0], [1]], dtype=np.int64)
+    return np.where((rel >= 0) & (rel < size), rel * stride, big)
+
+
+def _combine_corners(px: np.ndarray, py: np.ndarray, pz: np.ndarray, op) -> np.ndarray:
+    """Per-axis (2, m) parts → (8, m), corner-major in octant order z<<2 | y<<1 | x."""
+    out = op(pz[:, None, None, :], py[None, :, None, :])
+    return op(out, px[None, None, :, :]).reshape(8, px.shape[1])
+
+
+def grid_rows(lower: np.ndarray, lo, size: int) -> np.ndarray:
+    """Rows of a row-major [x, y, z] grid of ``size``³ cells whose cell 0 is node ``lo`` (3,).
+
+    lower : (m, 3) int64 lower trilinear corners. Returns (8, m) int64 in [0, size³];
+    ``size³`` marks a corner outside the grid.
+    """
+    n = size ** 3
+    parts = [_axis_offsets(lower[:, a], int(lo[a]), size, size ** (2 - a), n) for a in range(3)]
+    return np.minimum(_combine_corners(*parts, np.add), n)
+
+
+def keyed_rows(lower: np.ndarray, level: int, keys: np.ndarray) -> np.ndarray:
+    """Rows of the 8 corners in a sparse level found by searchsorted on its sorted ``keys``.
+
+    lower : (m, 3) int64; keys : (M,) uint64 sorted. Returns (8, m) int64 in [0, M], M = absent.
+    """
+    side = 1 << level
+    parts = []
+    for axis in range(3):
+        c = lower[None, :, axis] + np.array([[0], [1]], dtype=np.int64)
+        part = spread_bits(np.clip(c, 0, side - 1)) << np.uint64(axis)
+        part[(c < 0) | (c >= side)] = _INVALID_KEY_BIT
+        parts.append(part)
+    return rows_of_keys(keys, _combine_corners(*parts, np.bitwise_or))
+
+
+def rows_of_keys(keys: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Any-shape uint64 ``query`` → int64 rows into sorted ``keys`` (len(keys) where absent)."""
+    m = len(keys)
+    if m == 0:
+        return np.zeros(np.shape(query), np.int64)
+    pos = np.searchsorted(keys, query)
+    return np.where(keys[np.minimum(pos, m - 1)] == query, pos, m)
+
+
+def coordinate_rows(nodes: np.ndarray, level: int, keys: np.ndarray) -> np.ndarray:
+    """(N, 3) int64 node coordinates of a sparse level → (N,) rows (len(keys) where absent)."""
+    side = 1 << level
+    inside = np.all((nodes >= 0) & (nodes < side), axis=1)
+    query = np.full(len(nodes), _INVALID_KEY_BIT, dtype=np.uint64)
+    query[inside] = morton_encode(nodes[inside])
+    return rows_of_keys(keys, query)
+
+
+def trilinear(level, points: np.ndarray, root_origin: np.ndarray, node_size: float) -> np.ndarray:
+    """Trilinear interpolation of ``level.table`` over node centres.
+
+    level : a ``DenseLevel`` or ``SparseLevel``; points : (m, 3) float64 world positions.
+    Returns (4, m) float32: premultiplied radiance r, g, b and occlusion; absent nodes are 0.
+    """
+    u = (points - root_origin) / node_size - 0.5
+    lower = np.floor(u)
+    f = (u - lower).T.astype(np.float32)
+    lower = lower.astype(np.int64)
+    weights = _combine_corners(*[np.stack([1 - f[a], f[a]]) for a in range(3)], np.multiply)
+    rows = level.corner_rows(lower)
+    # Channel-major table and corner-major arrays keep every inner loop m long.
+    return np.stack([np.einsum("km,km->m", weights, np.take(channel, rows))
+                     for channel in level.table])
+
+
+def sample_levels(levels, points: np.ndarray, level: np.ndarray, root_origin: np.ndarray,
+                  root_size: float) -> np.ndarray:
+    """Trilinear within levels floor(level) and floor(level)+1, linear between them.
+
+    levels : per-level objects 0..depth; points : (N, 3) float64; level : (N,) float, clipped
+    to [0, depth]. Returns (4, N) float32: premultiplied radiance r, g, b and occlusion.
+    """
+    depth = len(levels) - 1
+    lev = np.clip(np.asarray(level, dtype=np.float64), 0, depth)
+    lev = np.broadcast_to(lev, (len(points),))
+    lo = np.floor(lev).astype(np.int64)
+    t = (lev - lo).astype(np.float32)
+    hi = np.minimum(lo + 1, depth)
+    out = np.zeros((4, len(points)), dtype=np.float32)
+    used = np.bincount(lo, minlength=depth + 1) + np.bincount(hi[t > 0], minlength=depth + 1)
+    for ell in np.flatnonzero(used):
+        at_lo = lo == ell
+        sel = np.flatnonzero(at_lo | ((hi == ell) & (t > 0)))
+        w = np.where(at_lo[sel], 1 - t[sel], t[sel])
+        node_size = root_size / (1 << int(ell))
+        everyone = len(sel) == len(points)  # one level for all points: slices, no scatter
+        for start in range(0, len(sel), CHUNK_POINTS):
+            chunk = slice(start, start + CHUNK_POINTS)
+            idx = chunk if everyone else sel[chunk]
+            part = trilinear(levels[ell], points[idx], root_origin, node_size)
+            out[:, idx] += w[chunk] * part
+    return out
