@@ -37,7 +37,7 @@ class ConeSettings:
     falloff : λ of 1/(1+λ·d) applied to occlusion (AO) and light (GI); d in metres.
     max_distance : how far diffuse/glossy cones travel, metres.
     ao_distance : AO radius in metres (Cycles' World › Ambient Occlusion distance).
-    start_offset : how far from the surface a cone starts, in finest-voxel sizes.
+    start_offset : how far from the surface a cone starts, in sizes of the finest voxels there.
     opacity_scale : multiplies sampled occlusion (clamped to 1). Surface voxels make a plane
         crossing a node fill half its children, so the octree's "present children / 8" reads
         0.5 for a wall at every level; a scale of 2 makes such a wall opaque, as it is to the
@@ -94,26 +94,41 @@ def diffuse_cone_set(count: int, half_angle: float) -> tuple[np.ndarray, np.ndar
 
 
 def march_cones(volume: ConeVolume, origins, dirs, half_angle, max_distance, *, falloff=0.0,
-                sample_factor=1.0, start_offset=2.0, opacity_scale=1.0, want_light=True):
+                sample_factor=1.0, start_offset=2.0, opacity_scale=1.0, want_light=True,
+                surface_normals=None, start_height=None):
     """March N cones front to back.
 
     origins, dirs : (N, 3) world points (already off the surface) and unit axes.
     half_angle : radians (scalar or (N,)); max_distance : metres (scalar or (N,)).
+    surface_normals, start_height : when given, a sample never reads nodes wider than 2/3 of
+        its height above the surface it started from (height = start_height + d·(dir·n)), so
+        grazing cones do not read the surface's own voxels (self-occlusion, self-colour).
     Returns radiance (N, 3) float64 (premultiplied, composited) and occlusion α (N,) in [0, 1].
     """
     n = len(origins)
     leaf = volume.node_size(volume.depth)
+    local = local_voxel_size(volume, origins)  # cones start no thinner than the voxels there
     tan_half = np.broadcast_to(np.tan(half_angle), (n,)).astype(np.float64)
     max_d = np.broadcast_to(np.asarray(max_distance, np.float64), (n,))
     radiance = np.zeros((n, 3))
     alpha = np.zeros(n)
-    d = np.full(n, start_offset * leaf)
+    d = start_offset * local
+    if surface_normals is not None:
+        rise = (dirs * surface_normals).sum(axis=1)
+        base = np.broadcast_to(np.asarray(start_height, np.float64), (n,))
     active = np.flatnonzero(d < max_d)
     while len(active):
         da = d[active]
-        diameter = np.maximum(2.0 * tan_half[active] * da, leaf)
+        diameter = 2.0 * tan_half[active] * da
+        if surface_normals is not None:
+            widest = (2.0 / 3.0) * np.maximum(base[active] + da * rise[active], 1e-9)
+            diameter = np.minimum(diameter, widest)
+        diameter = np.maximum(diameter, local[active])
         p = origins[active] + dirs[active] * da[:, None]
         level = volume.depth - np.log2(diameter / leaf)
+        if surface_normals is not None:
+            # Both levels blended must respect the bound, so round the coarsest allowed up.
+            level = np.maximum(level, np.ceil(volume.depth - np.log2(widest / leaf) - 1e-9))
         level = np.clip(level, 0.0, volume.finest_level_at(p).astype(np.float64))
         c_s, a_s = volume.sample(p, level)
         if opacity_scale != 1.0:  # scale α and the premultiplied radiance alike
@@ -134,9 +149,15 @@ def march_cones(volume: ConeVolume, origins, dirs, half_angle, max_distance, *, 
     return radiance, np.clip(alpha, 0.0, 1.0)
 
 
+def local_voxel_size(volume: ConeVolume, points) -> np.ndarray:
+    """(N,) size in metres of the finest voxels at each point (its finest cascade's span)."""
+    finest = np.maximum(volume.finest_level_at(points), 0)
+    return volume.node_size(volume.depth) * np.exp2(volume.depth - finest)
+
+
 def offset_origins(points, normals, volume: ConeVolume, start_offset):
-    """Lift surface points off their own voxels along the normal (finest-voxel units)."""
-    return points + normals * (start_offset * volume.node_size(volume.depth))
+    """Lift surface points off their own voxels along the normal (in local voxel sizes)."""
+    return points + normals * (start_offset * local_voxel_size(volume, points))[:, None]
 
 
 def trace_diffuse_and_ao(volume: ConeVolume, points, normals, settings: ConeSettings):
@@ -149,17 +170,19 @@ def trace_diffuse_and_ao(volume: ConeVolume, points, normals, settings: ConeSett
     local, weights = diffuse_cone_set(settings.diffuse_cones, half)
     t, s = _tangent_frame(normals)
     origins = offset_origins(points, normals, volume, settings.start_offset)
+    height = settings.start_offset * local_voxel_size(volume, points)
     diffuse = np.zeros((n, 3))
     visible = np.zeros(n)
     for (lx, ly, lz), w in zip(local, weights):
         axis = t * lx + s * ly + normals * lz
         light, _ = march_cones(volume, origins, axis, half, settings.max_distance,
                                falloff=settings.falloff, sample_factor=settings.sample_factor,
-                               start_offset=0.0, opacity_scale=settings.opacity_scale)
+                               start_offset=0.0, opacity_scale=settings.opacity_scale,
+                               surface_normals=normals, start_height=height)
         _, occ = march_cones(volume, origins, axis, half, settings.ao_distance,
                              falloff=settings.ao_falloff, sample_factor=settings.sample_factor,
                              start_offset=0.0, opacity_scale=settings.opacity_scale,
-                             want_light=False)
+                             want_light=False, surface_normals=normals, start_height=height)
         diffuse += w * light
         visible += w * (1.0 - occ)
     ao = 1.0 - np.clip(settings.ao_intensity * (1.0 - visible), 0.0, 1.0)
