@@ -35,6 +35,8 @@ class SceneSession:
     caches: Any = None
     timings: dict[str, float] = field(default_factory=dict)
     last_report: list[tuple[str, str]] = field(default_factory=list)
+    gi_state: Any = None  # voxgi_addon.gi_update.GIState of the last update
+    gi_timings: dict[str, float] = field(default_factory=dict)
 
 
 _sessions: dict[str, SceneSession] = {}

@@ -36,6 +36,82 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
         default="64",
     )
 
+    view_ahead: bpy.props.FloatProperty(
+        name="View Ahead",
+        description="Centre the cascades this far in front of the camera, as a fraction of the "
+                    "finest cascade's half size (0 = on the camera as in the thesis; 1 = the "
+                    "finest cascade starts at the camera and covers twice the depth of view)",
+        default=1.0, min=0.0, max=1.0,
+    )
+    dense_depth: bpy.props.IntProperty(
+        name="Dense Levels",
+        description="Octree levels stored as dense 3D arrays (mips); deeper levels are sparse",
+        default=6, min=1, max=9,
+    )
+    cone_angle: bpy.props.FloatProperty(
+        name="Cone Angle",
+        description="Half-angle of the diffuse and ambient-occlusion cones, in degrees",
+        default=30.0, min=1.0, max=80.0,
+    )
+    diffuse_cones: bpy.props.IntProperty(
+        name="Diffuse Cones",
+        description="Cones traced around the normal for diffuse light and AO (cosine weighted)",
+        default=6, min=1, max=16,
+    )
+    sample_factor: bpy.props.FloatProperty(
+        name="Sample Factor",
+        description="Distance between cone samples as a multiple of the cone diameter there",
+        default=1.0, min=0.25, max=4.0,
+    )
+    falloff: bpy.props.FloatProperty(
+        name="Falloff",
+        description="λ of the 1/(1+λ·distance) falloff applied to traced light, per metre",
+        default=0.0, min=0.0, soft_max=2.0,
+    )
+    max_distance: bpy.props.FloatProperty(
+        name="Max Distance",
+        description="How far diffuse and glossy cones travel, in metres",
+        subtype="DISTANCE", unit="LENGTH", default=100.0, min=0.01,
+    )
+    ao_distance: bpy.props.FloatProperty(
+        name="AO Distance",
+        description="Ambient occlusion radius in metres (like World › Ambient Occlusion distance)",
+        subtype="DISTANCE", unit="LENGTH", default=1.0, min=0.01,
+    )
+    gi_intensity: bpy.props.FloatProperty(
+        name="GI Intensity",
+        description="Multiplier of the traced indirect light (1 = physically based, as Cycles)",
+        default=1.0, min=0.0, soft_max=8.0,
+    )
+    ao_intensity: bpy.props.FloatProperty(
+        name="AO Intensity",
+        description="Multiplier of ambient occlusion darkening (1 = as Cycles' AO pass)",
+        default=1.0, min=0.0, soft_max=4.0,
+    )
+    light_samples: bpy.props.IntProperty(
+        name="Light Samples",
+        description="Shadow rays per pixel for lights with a size (area, soft point, sun angle)",
+        default=16, min=1, max=256,
+    )
+
+
+
+def cone_settings(settings: VoxGISceneSettings):
+    """The engine's ConeSettings from the scene settings."""
+    from ..voxgi_addon.conetrace import ConeSettings
+
+    return ConeSettings(cone_angle=settings.cone_angle, diffuse_cones=settings.diffuse_cones,
+                        sample_factor=settings.sample_factor, falloff=settings.falloff,
+                        max_distance=settings.max_distance, ao_distance=settings.ao_distance,
+                        gi_intensity=settings.gi_intensity, ao_intensity=settings.ao_intensity)
+
+
+def gi_settings(settings: VoxGISceneSettings):
+    """The engine's GISettings from the scene settings."""
+    from ..voxgi_addon.gi_update import GISettings
+
+    return GISettings(resolution=grid_resolution(settings), dense_depth=settings.dense_depth,
+                      view_ahead=settings.view_ahead)
 
 def grid_resolution(settings: VoxGISceneSettings) -> int:
     """The per-cascade grid resolution of ``settings`` in voxels per axis."""

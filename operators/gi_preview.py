@@ -1,0 +1,149 @@
+"""``voxgi.update`` and ``voxgi.render_preview``: the per-update GI job and the EXR preview.
+
+update : snapshot (main thread) → cascades, direct light, octree on the worker, reusing the
+session's voxel caches (voxelizing first if there are none).
+render_preview : update, then render the scene camera's passes (Cycles' names and meanings)
+into one multilayer OpenEXR file; prints per-stage timings. Runs to completion (it is a render).
+"""
+from __future__ import annotations
+
+import os
+import time
+
+import bpy
+
+from ..voxgi_addon.errors import VoxGIError
+from ..voxgi_addon.exr import write_exr
+from ..voxgi_addon.gi_update import update_gi
+from ..voxgi_addon.mesh_caches import build_scene_caches
+from ..voxgi_addon.preview import render_passes
+from ..ui.properties import cone_settings, gi_settings
+from . import engine_jobs
+from .scene_snapshot import take_snapshot
+from .session import scene_session
+
+
+def _snapshot(context):
+    start = time.perf_counter()
+    snapshot = take_snapshot(context, context.evaluated_depsgraph_get())
+    if not snapshot.objects:
+        raise VoxGIError("Nothing to light: the view layer has no visible mesh object with faces")
+    return snapshot, time.perf_counter() - start
+
+
+def _caches_for(context, snapshot):
+    """The session's caches, voxelizing now when there are none or the spans changed."""
+    settings = context.scene.voxgi
+    session = scene_session(context.scene.name_full)
+    caches = session.caches
+    spans_match = caches is not None and len(caches.cascade_stats) == settings.cascade_count and \
+        abs(caches.cascade_stats[0].span - settings.base_span) < 1e-9
+    missing = caches is not None and any(o.name not in caches.bindings for o in snapshot.objects)
+    if not spans_match or missing:
+        caches = build_scene_caches(snapshot, settings.base_span, settings.cascade_count)
+        session.caches = caches
+    return caches
+
+
+def timing_text(timings: dict[str, float]) -> str:
+    return ", ".join(f"{name} {seconds * 1000:.1f} ms" for name, seconds in timings.items())
+
+
+class VOXGI_OT_update(bpy.types.Operator):
+    """Transform the voxel caches into camera-anchored cascades, inject direct light and rebuild the octree for the current frame"""
+
+    bl_idname = "voxgi.update"
+    bl_label = "Update GI"
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        if context.scene is None or not hasattr(context.scene, "voxgi"):
+            cls.poll_message_set("No scene with VoxGI settings")
+            return False
+        return True
+
+    def execute(self, context):
+        scene_name = context.scene.name_full
+        try:
+            snapshot, snap_seconds = _snapshot(context)
+            caches = _caches_for(context, snapshot)
+        except VoxGIError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        settings = gi_settings(context.scene.voxgi)
+
+        def job(cancel):  # worker thread: engine code only
+            return update_gi(snapshot, caches, settings, cancel=cancel)
+
+        def done(state):
+            session = scene_session(scene_name)
+            session.gi_state = state
+            session.gi_timings = {"snapshot": snap_seconds, **state.timings}
+            counts = ", ".join(f"{n:,}" for n in state.voxel_counts)
+            session.last_report = [("INFO", f"GI updated: cascade voxels {counts}"),
+                                   ("INFO", timing_text(session.gi_timings)),
+                                   *[("WARNING", w) for w in state.warnings]]
+
+        def failed(error):
+            scene_session(scene_name).last_report = [("ERROR", str(error))]
+
+        submitted = engine_jobs.submit(scene_name, job, label="Updating GI", on_done=done,
+                                       on_error=failed)
+        if submitted.state == "running":
+            self.report({"INFO"}, "Updating GI in the background…")
+            return {"FINISHED"}
+        for level, message in scene_session(scene_name).last_report:
+            self.report({level}, message)
+        return {"FINISHED"} if submitted.state == "done" else {"CANCELLED"}
+
+
+class VOXGI_OT_render_preview(bpy.types.Operator):
+    """Render the GI preview of the scene camera to a multilayer OpenEXR file with Cycles-named passes"""
+
+    bl_idname = "voxgi.render_preview"
+    bl_label = "Render GI Preview"
+    bl_options = {"REGISTER"}
+
+    filepath: bpy.props.StringProperty(name="File Path", description="Output .exr file",
+                                       subtype="FILE_PATH", default="//voxgi_preview.exr")
+    resolution_x: bpy.props.IntProperty(name="Width", description="Image width in pixels; "
+                                        "0 = the scene's", default=0, min=0, max=8192)
+    resolution_y: bpy.props.IntProperty(name="Height", description="Image height in pixels; "
+                                        "0 = the scene's", default=0, min=0, max=8192)
+
+    def execute(self, context):
+        scene = context.scene
+        render = scene.render
+        width = self.resolution_x or render.resolution_x * render.resolution_percentage // 100
+        height = self.resolution_y or render.resolution_y * render.resolution_percentage // 100
+        path = bpy.path.abspath(self.filepath)
+        try:
+            if scene.camera is None:
+                raise VoxGIError("the scene has no camera to render the preview from")
+            start = time.perf_counter()
+            snapshot, snap_seconds = _snapshot(context)
+            caches = _caches_for(context, snapshot)
+            state = update_gi(snapshot, caches, gi_settings(scene.voxgi))
+            passes, render_timings = render_passes(snapshot, state, width, height,
+                                                   cone_settings(scene.voxgi),
+                                                   light_samples=scene.voxgi.light_samples)
+            os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
+            t0 = time.perf_counter()
+            write_exr(path, passes)
+            timings = {"snapshot": snap_seconds, **state.timings, **render_timings,
+                       "write exr": time.perf_counter() - t0, "total": time.perf_counter() - start}
+        except (VoxGIError, OSError) as error:
+            self.report({"ERROR"}, f"GI preview failed: {error}")
+            return {"CANCELLED"}
+        session = scene_session(scene.name_full)
+        session.gi_state = state
+        session.gi_timings = timings
+        message = f"GI preview {width}×{height} written to {path}"
+        print(f"VoxGI: {message}\nVoxGI timings: {timing_text(timings)}")
+        session.last_report = [("INFO", message), ("INFO", timing_text(timings))]
+        self.report({"INFO"}, message)
+        return {"FINISHED"}
+
+
+classes = (VOXGI_OT_update, VOXGI_OT_render_preview)
