@@ -51,12 +51,12 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
     cone_angle: bpy.props.FloatProperty(
         name="Cone Angle",
         description="Half-angle of the diffuse and ambient-occlusion cones, in degrees",
-        default=30.0, min=1.0, max=80.0,
+        default=20.0, min=1.0, max=80.0,
     )
     diffuse_cones: bpy.props.IntProperty(
         name="Diffuse Cones",
         description="Cones traced around the normal for diffuse light and AO (cosine weighted)",
-        default=6, min=1, max=16,
+        default=16, min=1, max=64,
     )
     sample_factor: bpy.props.FloatProperty(
         name="Sample Factor",
