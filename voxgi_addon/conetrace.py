@@ -55,7 +55,7 @@ class ConeSettings:
     ao_falloff: float = 0.0
     max_distance: float = 100.0
     ao_distance: float = 1.0
-    start_offset: float = 2.0
+    start_offset: float = 1.5
     opacity_scale: float = 1.0
     gi_intensity: float = 1.0
     ao_intensity: float = 1.0
