@@ -27,6 +27,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--blend", type=pathlib.Path, help="open this .blend instead of the demo scene")
     parser.add_argument("--span", type=float, help="base voxel span in metres (Scene.voxgi.base_span)")
     parser.add_argument("--cascades", type=int, help="number of cascades (Scene.voxgi.cascade_count)")
+    parser.add_argument("--out", type=pathlib.Path, default=REPO_ROOT / "out",
+                        help="where preview.exr and the PNG strips go (default: out/)")
+    parser.add_argument("--size", type=int, nargs=2, default=(160, 120), metavar=("W", "H"),
+                        help="preview size in pixels (default 160 120)")
+    parser.add_argument("--cycles-samples", type=int, default=256,
+                        help="Cycles samples of the reference strip (0 = no Cycles)")
     return parser.parse_args(argv)
 
 
@@ -117,6 +123,37 @@ def run(args: argparse.Namespace, tmp: str) -> int:
     print("\n".join(report.timing_table(session.timings, total)), end="\n\n")
     warnings = [m for level, m in session.last_report if level == "WARNING"]
     print("\n".join(f"warning: {m}" for m in warnings) if warnings else "no warnings, nothing skipped")
+    return gi_section(scene, args)
+
+
+def gi_section(scene, args) -> int:
+    """Render the GI preview (and Cycles' one-bounce reference) and print errors and timings."""
+    sys.path.insert(0, str(REPO_ROOT / "tools"))
+    import gi_compare
+    from voxgi.operators.session import scene_session
+
+    if scene.camera is None:
+        print("\nno scene camera: GI preview skipped")
+        return 0
+    width, height = args.size
+    print(f"\nGI preview {width}×{height} → {args.out / 'preview.exr'}")
+    with quiet_stdout():
+        ours, seconds = gi_compare.render_preview(scene, args.out / "preview.exr", width, height)
+    gi_compare.write_strip(args.out / "preview_strip.png", ours)
+    timings = scene_session(scene.name_full).gi_timings
+    print("\n".join(f"  {name:<18} {ms * 1000:8.1f} ms" for name, ms in timings.items()))
+    if args.cycles_samples <= 0:
+        return 0
+    with quiet_stdout():
+        cycles, cycles_seconds = gi_compare.render_cycles(scene, width, height, args.cycles_samples,
+                                                          scene.voxgi.ao_distance)
+    gi_compare.write_strip(args.out / "cycles_strip.png", cycles)
+    errors = gi_compare.pass_errors(ours, cycles)
+    print(f"\nstrips: {args.out / 'preview_strip.png'} and {args.out / 'cycles_strip.png'} "
+          f"({', '.join(gi_compare.STRIP_PASSES)})")
+    print(f"preview {seconds:.2f} s vs Cycles {args.cycles_samples} spp, one diffuse bounce "
+          f"{cycles_seconds:.2f} s; relative L1 error vs Cycles:")
+    print("\n".join(f"  {name:<18} {value:.3f}" for name, value in errors.items()))
     return 0
 
 
