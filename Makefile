@@ -25,7 +25,7 @@ test: $(STAMP)
 build: $(STAMP)
 	$(PY) tools/build_extension.py --output-dir dist
 
-bench:
+bench: $(STAMP)
 	bash tools/bench_setup.sh
 	.venv-bench/bin/python tools/bench.py $(BENCH_ARGS)
 

@@ -24,6 +24,7 @@ if str(TOOLS) not in sys.path:
 # name -> (module in tools/, one-line description)
 SECTIONS = {
     "voxelize": ("bench_voxelize", "surface voxelization vs trimesh and Open3D"),
+    "gi": ("bench_gi", "per-update time, preview time and Cycles time/error (runs in .venv)"),
 }
 
 
