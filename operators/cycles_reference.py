@@ -63,6 +63,29 @@ def _temporarily(settings):
             setattr(owner, attribute, value)
 
 
+_IMAGE_FORMAT = ("media_type", "file_format", "color_mode", "color_depth", "exr_codec", "use_exr_interleave")
+
+
+@contextlib.contextmanager
+def _multilayer_exr_output(image_settings):
+    """Output 32-bit float, ZIP multilayer EXR; restore the format afterwards.
+
+    Restored in the order set, not reversed: assigning ``media_type`` resets ``file_format``,
+    which in turn limits the valid depths and codecs.
+    """
+    saved = [(name, getattr(image_settings, name)) for name in _IMAGE_FORMAT]
+    try:
+        image_settings.media_type = "MULTI_LAYER_IMAGE"
+        image_settings.file_format = "OPEN_EXR_MULTILAYER"
+        image_settings.color_depth = "32"
+        image_settings.exr_codec = "ZIP"
+        yield
+    finally:
+        for name, value in saved:
+            with contextlib.suppress(TypeError, ValueError, AttributeError):
+                setattr(image_settings, name, value)
+
+
 @contextlib.contextmanager
 def _ao_world(scene, ao_distance):
     """The scene's world (a temporary empty one when it has none and an AO distance is asked)."""
@@ -81,7 +104,7 @@ def _ao_world(scene, ao_distance):
 
 def _render_settings(scene, view_layer, width, height, samples, diffuse_bounces, glossy_bounces,
                      seed, filter_width, path):
-    render, cycles, image = scene.render, scene.cycles, scene.render.image_settings
+    render, cycles = scene.render, scene.cycles
     settings = [
         (render, "engine", "CYCLES"),
         (render, "resolution_x", int(width)),
@@ -95,11 +118,6 @@ def _render_settings(scene, view_layer, width, height, samples, diffuse_bounces,
         (render, "use_sequencer", False),
         (render, "filepath", path),
         (render, "use_file_extension", True),
-        # media_type first: it resets file_format.
-        (image, "media_type", "MULTI_LAYER_IMAGE"),
-        (image, "file_format", "OPEN_EXR_MULTILAYER"),
-        (image, "color_depth", "32"),
-        (image, "exr_codec", "ZIP"),
         (cycles, "device", "CPU"),
         (cycles, "samples", int(samples)),
         (cycles, "use_adaptive_sampling", False),
@@ -156,7 +174,7 @@ def render_cycles_passes(scene, width: int, height: int, samples: int, diffuse_b
         with _ao_world(scene, ao_distance) as world:
             if ao_distance is not None:
                 settings.append((world.light_settings, "distance", float(ao_distance)))
-            with _temporarily(settings):
+            with _multilayer_exr_output(scene.render.image_settings), _temporarily(settings):
                 start = time.perf_counter()
                 bpy.ops.render.render(write_still=True, scene=scene.name, layer=view_layer.name)
                 _last_seconds = time.perf_counter() - start

@@ -2,13 +2,14 @@
 
 ``diffuse_direct`` returns what Cycles' ``Diffuse Direct`` pass holds for a white Lambertian
 surface: irradiance / π (no albedo), summed over lights, × light colour. The light models were
-fitted to Cycles 5.0 renders (see BLENDER_NOTES.md "Cycles' radiometry"):
+checked against Cycles 5.0 renders of a white plane (agreement 0.1–0.3 %; BLENDER_NOTES.md
+"Cycles' radiometry" has the basic cases):
 
 * SUN, strength S (W/m²): S/π · cosθ. A sun with an angle casts soft shadows: shadow rays
   sample the cone of directions of its disc.
 * POINT, power P (W), radius r: P/(4π) · cosθ / (d² + r²) / π. The r² term is Cycles' default
-  "soft falloff" (checked to 0.3 % for r/d = 0.25…0.5); shadow rays sample the disc of radius r
-  that faces the shading point.
+  "Soft Falloff" (with it off Cycles gives the plain P/(4π d²); the snapshot does not record the
+  option); shadow rays sample the disc of radius r that faces the shading point.
 * SPOT: the point light times smoothstep(x), x = (cos φ − cos(size/2)) / ((1 − cos(size/2))·blend)
   clamped to [0, 1] (a hard edge for blend = 0); no cosine falloff inside the cone.
 * AREA (SQUARE, RECTANGLE, DISK, ELLIPSE; ``size`` × ``size_y`` in the light's X/Y, diameters for
@@ -80,24 +81,27 @@ def _occluded(occluder, origins, directions, max_t) -> np.ndarray:
     return raycast.occluded(occluder, origins, directions, max_t)
 
 
-def _shadow_fraction(tris, origins, targets, weights=None) -> np.ndarray:
-    """Unoccluded share per point: origins (N, 3), targets (N, K, 3) points to reach (or (N, K, 3)
-    directions scaled to length ≥ 1e30 for a light at infinity); weights (N, K) or equal."""
-    n, k, _ = targets.shape
-    o = np.repeat(origins, k, axis=0)
-    ray = targets.reshape(-1, 3) - o
-    length = np.linalg.norm(ray, axis=1)
-    safe = np.maximum(length, 1e-30)
-    max_t = np.where(length > 1e29, np.inf, length)
-    if hasattr(tris, "occluded"):  # any other occluder, e.g. voxel_shadows.CascadeOccupancy
-        blocked = tris.occluded(o, ray / safe[:, None], max_t).reshape(n, k)
-    else:
-        blocked = _occluded(tris, o, ray / safe[:, None], max_t).reshape(n, k)
+def _visible_share(occluder, origins, directions, lengths, weights=None) -> np.ndarray:
+    """(N,) unoccluded share of K shadow rays per point.
+
+    origins : (N, 3); directions : (N, K, 3) unit; lengths : (N, K) (inf towards a sun);
+    weights : (N, K) importance of each ray, or None for equal weights.
+    """
+    n, k, _ = directions.shape
+    blocked = _occluded(occluder, np.repeat(origins, k, axis=0), directions.reshape(-1, 3),
+                        lengths.reshape(-1)).reshape(n, k)
     if weights is None:
         return 1.0 - blocked.mean(axis=1)
     total = weights.sum(axis=1)
     lit = (weights * ~blocked).sum(axis=1)
     return np.divide(lit, total, out=np.zeros(n), where=total > 0)
+
+
+def _visible_share_of_points(occluder, origins, targets, weights=None) -> np.ndarray:
+    """``_visible_share`` of rays from origins (N, 3) to target points (N, K, 3)."""
+    ray = targets - origins[:, None]
+    length = np.linalg.norm(ray, axis=2)
+    return _visible_share(occluder, origins, ray / np.maximum(length, 1e-30)[..., None], length, weights)
 
 
 def _sun(light, p, n, tris, samples, rng):
@@ -110,13 +114,13 @@ def _sun(light, p, n, tris, samples, rng):
         half = 0.5 * float(light.angle)
         if half > 0:
             disk = concentric_disk(stratified_square(len(lit), samples, rng)) * math.tan(half)
-            t, b = _perpendicular_basis(np.tile(to_light, (1, 1)))
-            dirs = to_light + disk[..., :1] * t[0] + disk[..., 1:] * b[0]
+            t, b = _perpendicular_basis(to_light[None])
+            dirs = to_light + disk[..., :1] * t[0] + disk[..., 1:] * b[0]  # (N, K, 3) in the cone
         else:
             dirs = np.tile(to_light, (len(lit), 1, 1))
         dirs = dirs / np.linalg.norm(dirs, axis=-1, keepdims=True)
         origins = p[lit] + _NORMAL_OFFSET * n[lit]
-        value[lit] *= _shadow_fraction(tris, origins, origins[:, None] + 1e30 * dirs)
+        value[lit] *= _visible_share(tris, origins, dirs, np.full(dirs.shape[:2], np.inf))
     return value
 
 
@@ -149,7 +153,7 @@ def _point(light, p, n, tris, samples, rng):
         else:
             targets = np.broadcast_to(centre, (len(lit), 1, 3))
         origins = p[lit] + _NORMAL_OFFSET * n[lit]
-        value[lit] *= _shadow_fraction(tris, origins, targets)
+        value[lit] *= _visible_share_of_points(tris, origins, targets)
     return value
 
 
@@ -215,7 +219,7 @@ def _area(light, p, n, tris, samples, rng):
     lit = np.flatnonzero(unshadowed > 0)
     if len(lit) and tris is not None:
         origins = p[lit] + _NORMAL_OFFSET * n[lit]
-        unshadowed[lit] *= _shadow_fraction(tris, origins, targets[lit], f[lit])
+        unshadowed[lit] *= _visible_share_of_points(tris, origins, targets[lit], f[lit])
     value[in_front] = radiance * unshadowed
     return value
 

@@ -27,7 +27,7 @@ __all__ = [
 ]
 
 SHADOW_EPSILON = 1e-4  # metres: shadow rays ignore hits this close to either end
-_RAY_CHUNK = 1 << 15  # rays traced together (bounds the (ray, triangle) pair arrays)
+_RAY_CHUNK = 1 << 13  # rays traced together: bounds the pair arrays, keeps them in cache
 _CELLS_PER_TRIANGLE = 4.0
 _MAX_CELLS_PER_AXIS = 128
 _DET_EPSILON = 1e-12
@@ -118,8 +118,9 @@ class TriangleGrid:
     origin : (3,) float64 world position of the lattice (cell c spans
         ``origin + (c - LATTICE_OFFSET + [0, 1]) · span``, as ``voxelize`` defines cells).
     span : cell edge in metres. dims : (3,) int64 cells per axis.
-    cell_start : (X·Y·Z + 1,) int64, triangles of linear cell k are
-        ``cell_triangles[cell_start[k]:cell_start[k + 1]]`` (k = x·Y·Z + y·Z + z).
+    cell_start : (X·Y·Z + 2,) int64, triangles of linear cell k are
+        ``cell_triangles[cell_start[k]:cell_start[k + 1]]`` (k = x·Y·Z + y·Z + z; k = X·Y·Z is
+        an always-empty sentinel cell).
     corners : (10, T) float64 rows: first corner xyz, edge 1 xyz, edge 2 xyz and |e1|·|e2| (the
         scale of the Möller–Trumbore determinant) of each triangle.
     """
@@ -148,7 +149,7 @@ def build_grid(tris: SceneTriangles) -> TriangleGrid:
     scale = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
     corners = np.ascontiguousarray(np.concatenate([positions[:, 0].T, e1.T, e2.T, scale[None]]))
     if count == 0:
-        return TriangleGrid(origin, span, dims, np.zeros(int(dims.prod()) + 1, np.int64),
+        return TriangleGrid(origin, span, dims, np.zeros(int(dims.prod()) + 2, np.int64),
                             np.zeros(0, np.int32), corners)
     surface = voxelize_triangles(
         (positions - origin).reshape(-1, 3), np.arange(3 * count).reshape(count, 3), span
@@ -156,7 +157,7 @@ def build_grid(tris: SceneTriangles) -> TriangleGrid:
     cells = surface.cells.astype(np.int64)[surface.cell_of_pair]
     keys = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
     order = np.argsort(keys, kind="stable")
-    counts = np.bincount(keys, minlength=int(dims.prod()))
+    counts = np.bincount(keys, minlength=int(dims.prod()) + 1)  # + the empty sentinel cell
     cell_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     return TriangleGrid(origin, span, dims, cell_start, surface.triangle_of_pair[order], corners)
 
@@ -211,8 +212,10 @@ def _pairs(grid: TriangleGrid, keys: np.ndarray):
     return slot, grid.cell_triangles[np.repeat(start, count) + offset]
 
 
-# Rows of the per-ray float state (structure of arrays, one column per live ray).
-_O, _D, _NEXT, _DELTA, _LO, _HI, _FOUND = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), 12, 13, 14
+# Rows of the per-ray float state (structure of arrays, one column per live ray); the rows a
+# (ray, triangle) pair needs come first so that one gather of ``_PAIR_ROWS`` rows serves them.
+_O, _D, _LO, _HI, _FOUND, _NEXT, _DELTA = slice(0, 3), slice(3, 6), 6, 7, 8, 9, 12
+_PAIR_ROWS = 9
 
 
 def _start_state(grid: TriangleGrid, o, d, t_min, t_max):
@@ -236,8 +239,8 @@ def _start_state(grid: TriangleGrid, o, d, t_min, t_max):
     state[_O], state[_D] = o.T, d.T
     with np.errstate(divide="ignore", invalid="ignore"):
         boundary = base + (cell + (step > 0)) * span
-        state[_NEXT] = np.where(step != 0, (boundary - o) * inv, np.inf).T
-        state[_DELTA] = np.where(step != 0, span * np.abs(inv), np.inf).T
+        state[_NEXT:_NEXT + 3] = np.where(step != 0, (boundary - o) * inv, np.inf).T
+        state[_DELTA:_DELTA + 3] = np.where(step != 0, span * np.abs(inv), np.inf).T
     state[_LO], state[_HI], state[_FOUND] = t_min[ray], t_leave[ray], np.inf
     return ray, state, np.ascontiguousarray(cell.T), np.ascontiguousarray(step.T)
 
@@ -249,11 +252,13 @@ def _trace_chunk(grid: TriangleGrid, o, d, t_min, t_max, any_hit: bool):
     best_u, best_v = np.zeros(n), np.zeros(n)
     ray, state, cell, step = _start_state(grid, o, d, t_min, t_max)
     dims = grid.dims
+    empty_cell = int(dims.prod())  # the sentinel cell of finished rays: no triangles
+    finished = np.zeros(len(ray), dtype=bool)
     while len(ray):
-        keys = (cell[0] * dims[1] + cell[1]) * dims[2] + cell[2]
+        keys = np.where(finished, empty_cell, (cell[0] * dims[1] + cell[1]) * dims[2] + cell[2])
         slot, tri = _pairs(grid, keys)
         if slot is not None:
-            pair_state = state[:, slot]
+            pair_state = state[:_PAIR_ROWS, slot]
             t, u, v = _intersect(grid.corners[:, tri], pair_state[_O], pair_state[_D])
             good = (t > pair_state[_LO]) & (t < np.minimum(pair_state[_FOUND], pair_state[_HI]))
             if good.any():
@@ -264,19 +269,25 @@ def _trace_chunk(grid: TriangleGrid, o, d, t_min, t_max, any_hit: bool):
                 target = ray[slot[win]]
                 best_t[target], best_tri[target] = t[win], tri[win]
                 best_u[target], best_v[target] = u[win], v[win]
-        live = np.arange(len(ray))
-        axis = np.argmin(state[_NEXT], axis=0)
-        t_exit = state[6 + axis, live]
+        # Step every ray into the neighbour across its nearest cell wall (3D DDA).
+        n0, n1, n2 = state[_NEXT], state[_NEXT + 1], state[_NEXT + 2]
+        axis = np.where(n0 <= n1, np.where(n0 <= n2, 0, 2), np.where(n1 <= n2, 1, 2))
+        t_exit = np.minimum(np.minimum(n0, n1), n2)
         done = (state[_FOUND] <= t_exit) | (t_exit >= state[_HI])
         if any_hit:
             done |= np.isfinite(state[_FOUND])
+        live = np.arange(len(ray))
         moved = cell[axis, live] + step[axis, live]
         cell[axis, live] = moved
-        state[6 + axis, live] = t_exit + state[9 + axis, live]
+        state[_NEXT + axis, live] = t_exit + state[_DELTA + axis, live]
         done |= (moved < 0) | (moved >= dims[axis])
-        if done.any():
+        if done.sum() > len(ray) // 8:  # drop finished rays now and then, not at every step
             keep = np.flatnonzero(~done)
             ray, state, cell, step = ray[keep], state[:, keep], cell[:, keep], step[:, keep]
+            finished = np.zeros(len(ray), dtype=bool)
+        else:
+            finished = done
+            state[_HI, done] = -np.inf  # stays done
     return best_t, best_tri, best_u, best_v
 
 
@@ -338,8 +349,10 @@ class PrimaryHits:
 
     hit : (H, W) bool geometry coverage.
     position : (H, W, 3) float64 world-space hit point.
-    normal : (H, W, 3) float64 unit face normal turned towards the camera (as Cycles flips
-        back faces).
+    normal : (H, W, 3) float64 unit shading normal: interpolated ``corner_normals`` where the
+        triangles carry them, else the face normal; turned to the camera side of the face (Cycles
+        flips both normals of a back-facing hit).
+    face_normal : (H, W, 3) float64 unit geometric normal, turned the same way.
     direction : (H, W, 3) float64 unit camera-ray direction (the view vector is its negative).
     depth : (H, W) float64 distance from the near plane along the ray (inf = background).
     triangle, material, object : (H, W) int32 indices into ``SceneTriangles``, the snapshot's
@@ -349,6 +362,7 @@ class PrimaryHits:
     hit: np.ndarray
     position: np.ndarray
     normal: np.ndarray
+    face_normal: np.ndarray
     direction: np.ndarray
     depth: np.ndarray
     triangle: np.ndarray
@@ -363,13 +377,19 @@ def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | No
     width = int(width or camera.resolution[0])
     height = int(height or camera.resolution[1])
     origins, directions = camera_rays(camera, width, height)
-    t, tri, _, _ = closest_hits(tris, origins, directions, 0.0, camera_ray_lengths(camera, directions))
+    t, tri, u, v = closest_hits(tris, origins, directions, 0.0, camera_ray_lengths(camera, directions))
     hit = tri >= 0
     index = np.where(hit, tri, 0)
     position = np.where(hit[:, None], origins + directions * np.where(hit, t, 0.0)[:, None], 0.0)
-    normal = np.asarray(tris.normals, dtype=np.float64)[index] if len(tris) else np.zeros((len(t), 3))
-    facing = np.einsum("ij,ij->i", normal, directions) > 0
-    normal = np.where(facing[:, None], -normal, normal) * hit[:, None]
+    face = np.asarray(tris.normals, dtype=np.float64)[index] if len(tris) else np.zeros((len(t), 3))
+    shading = face
+    if tris.corner_normals is not None and len(tris):
+        corners = np.asarray(tris.corner_normals, dtype=np.float64)[index]
+        smooth = ((1.0 - u - v)[:, None] * corners[:, 0] + u[:, None] * corners[:, 1]
+                  + v[:, None] * corners[:, 2])
+        length = np.linalg.norm(smooth, axis=1, keepdims=True)
+        shading = np.where(length > 1e-12, smooth / np.maximum(length, 1e-12), face)
+    sign = np.where(np.einsum("ij,ij->i", face, directions) > 0, -1.0, 1.0)[:, None] * hit[:, None]
 
     def per_pixel(values):
         out = np.where(hit, np.asarray(values)[index] if len(tris) else -1, -1)
@@ -378,7 +398,8 @@ def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | No
     return PrimaryHits(
         hit=hit.reshape(height, width),
         position=position.reshape(height, width, 3),
-        normal=normal.reshape(height, width, 3),
+        normal=(shading * sign).reshape(height, width, 3),
+        face_normal=(face * sign).reshape(height, width, 3),
         direction=directions.reshape(height, width, 3),
         depth=t.reshape(height, width),
         triangle=per_pixel(np.arange(len(tris))),

@@ -1,9 +1,12 @@
 """The scene's triangles in world space, for exact ray casting (primary visibility, shadows).
 
 Static and rigid objects are placed with their world matrix; skinned objects with linear blend
-skinning of their rest-pose vertices (the snapshot stores skinned meshes in the rest pose):
+skinning (``skinning.py``) of their rest-pose vertices (the snapshot stores skinned meshes in
+the rest pose):
 ``world = Σ_b w_b · (arm_world · pose_b · rest_b⁻¹ · arm_world⁻¹ · object_world) · p``, which is
 what Blender's Armature modifier does. A vertex whose weights are all zero follows the object.
+Shading normals come from an optional ``corner_normals`` (T, 3, 3) object-space array on
+``MeshData`` (Blender's ``Mesh.corner_normals`` per loop triangle), transformed like normals.
 """
 from __future__ import annotations
 
@@ -11,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .skinning import skin_points
+from .skinning import blend_matrices, skin_matrices, transform_normals, transform_points
 from .snapshot import MeshData, ObjectData, SceneSnapshot
 
 __all__ = ["SceneTriangles", "world_triangles", "object_vertices_world"]
@@ -25,12 +28,15 @@ class SceneTriangles:
     normals : (T, 3) float64 unit face normals (right-hand winding; zero for degenerate triangles).
     materials : (T,) int32 index into ``SceneSnapshot.materials`` (-1 = none).
     objects : (T,) int32 index into ``SceneSnapshot.objects``.
+    corner_normals : (T, 3, 3) float64 unit shading normals at each corner (smooth shading), or
+        None when no mesh of the snapshot carries them (then shading uses the face normals).
     """
 
     positions: np.ndarray
     normals: np.ndarray
     materials: np.ndarray
     objects: np.ndarray
+    corner_normals: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.positions)
@@ -44,14 +50,32 @@ class SceneTriangles:
         return flat.min(axis=0), flat.max(axis=0)
 
 
-def object_vertices_world(obj: ObjectData, mesh: MeshData, snapshot: SceneSnapshot) -> np.ndarray:
-    """(V, 3) float64 world positions of ``mesh``'s vertices as placed (and posed) by ``obj``."""
-    p = np.asarray(mesh.positions, dtype=np.float64)
+def _vertex_matrices(obj: ObjectData, mesh: MeshData, snapshot: SceneSnapshot) -> np.ndarray:
+    """(4, 4) world matrix of a rigid object, or (V, 4, 4) blended bone matrices of a skinned one."""
     world_matrix = np.asarray(obj.world_matrix, dtype=np.float64)
     armature = snapshot.armatures.get(obj.armature) if obj.armature is not None else None
     if obj.kind != "skinned" or mesh.skin is None or armature is None or len(armature.bone_names) == 0:
-        return p @ world_matrix[:3, :3].T + world_matrix[:3, 3]
-    return skin_points(armature, world_matrix, p, mesh.skin.weights, mesh.skin.bone_indices)
+        return world_matrix
+    bones = skin_matrices(armature, world_matrix)
+    return blend_matrices(bones, mesh.skin.weights, mesh.skin.bone_indices, fallback=world_matrix)
+
+
+def object_vertices_world(obj: ObjectData, mesh: MeshData, snapshot: SceneSnapshot) -> np.ndarray:
+    """(V, 3) float64 world positions of ``mesh``'s vertices as placed (and posed) by ``obj``."""
+    return transform_points(_vertex_matrices(obj, mesh, snapshot), np.asarray(mesh.positions, np.float64))
+
+
+def _corner_normals_world(obj, mesh, snapshot, triangles) -> np.ndarray | None:
+    """(T, 3, 3) world shading normals from the mesh's object-space ``corner_normals`` (T, 3, 3),
+    an optional snapshot field; None when the mesh has none."""
+    corners = getattr(mesh, "corner_normals", None)
+    if corners is None:
+        return None
+    matrices = _vertex_matrices(obj, mesh, snapshot)
+    if matrices.ndim == 3:
+        matrices = matrices[triangles.reshape(-1)]
+    flat = np.asarray(corners, dtype=np.float64).reshape(-1, 3)
+    return transform_normals(matrices, flat).reshape(-1, 3, 3)
 
 
 def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
@@ -60,15 +84,16 @@ def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
     Objects whose mesh is missing from the snapshot are skipped. Triangles keep the order of
     ``snapshot.objects`` then of each mesh's triangles.
     """
-    positions, materials, objects = [], [], []
+    positions, materials, objects, corner_normals = [], [], [], []
     for index, obj in enumerate(snapshot.objects):
         mesh = snapshot.meshes.get(obj.mesh)
         if mesh is None or len(mesh.triangles) == 0:
             continue
-        vertices = object_vertices_world(obj, mesh, snapshot)
-        positions.append(vertices[np.asarray(mesh.triangles, dtype=np.int64)])
+        triangles = np.asarray(mesh.triangles, dtype=np.int64)
+        positions.append(object_vertices_world(obj, mesh, snapshot)[triangles])
         materials.append(np.asarray(mesh.triangle_materials, dtype=np.int32))
-        objects.append(np.full(len(mesh.triangles), index, dtype=np.int32))
+        objects.append(np.full(len(triangles), index, dtype=np.int32))
+        corner_normals.append(_corner_normals_world(obj, mesh, snapshot, triangles))
     if not positions:
         empty = np.zeros(0, np.int32)
         return SceneTriangles(np.zeros((0, 3, 3)), np.zeros((0, 3)), empty, empty.copy())
@@ -76,4 +101,8 @@ def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     length = np.linalg.norm(normal, axis=1, keepdims=True)
     normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
-    return SceneTriangles(tri, normal, np.concatenate(materials), np.concatenate(objects))
+    shading = None
+    if any(c is not None for c in corner_normals):  # meshes without them shade flat
+        flat = np.split(np.repeat(normal[:, None], 3, axis=1), np.cumsum([len(p) for p in positions])[:-1])
+        shading = np.concatenate([c if c is not None else f for c, f in zip(corner_normals, flat)])
+    return SceneTriangles(tri, normal, np.concatenate(materials), np.concatenate(objects), shading)

@@ -99,3 +99,138 @@ def expected_top4(weights, bone_count):
         total = sum(kept.values())
         out.append({i: w / total for i, w in kept.items()})
     return out
+
+
+# --------------------------------------------------------------------------- lighting test scenes
+
+def _black_world(scene):
+    """A black world: Cycles' Diffuse Direct then holds the scene's lights only."""
+    world = bpy.data.worlds.new("Black World")
+    world.color = (0.0, 0.0, 0.0)
+    background = world.node_tree and next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
+    if background is not None:
+        background.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+        background.inputs["Strength"].default_value = 0.0
+    scene.world = world
+    return world
+
+
+def _box_faces(lo, hi):
+    """Vertices and outward quads of the axis-aligned box [lo, hi]."""
+    (x0, y0, z0), (x1, y1, z1) = lo, hi
+    vertices = [(x, y, z) for z in (z0, z1) for y in (y0, y1) for x in (x0, x1)]
+    faces = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    return vertices, faces
+
+
+def _block(name, size, location, angle, material, scene):
+    """A box of ``size`` (x, y, z) standing on z = location.z, turned ``angle`` radians about Z."""
+    sx, sy, sz = size
+    vertices, faces = _box_faces((-sx / 2, -sy / 2, 0.0), (sx / 2, sy / 2, sz))
+    obj = mesh_object(name, vertices, faces, scene=scene)
+    obj.data.materials.append(material)
+    obj.location = location
+    obj.rotation_euler = (0.0, 0.0, angle)
+    return obj
+
+
+def _light(scene, name, kind, location, **settings):
+    light = bpy.data.lights.new(name, kind)
+    for key, value in settings.items():
+        setattr(light, key, value)
+    obj = link(bpy.data.objects.new(name, light), scene)
+    obj.location = location
+    return obj
+
+
+TEST_BOX_LIGHTS = {
+    # kind: (location, settings) — lights shine down (local -Z) where it matters.
+    "POINT": ((0.0, 0.0, 1.5), dict(energy=80.0, shadow_soft_size=0.05)),
+    "AREA": ((0.0, 0.0, 1.95), dict(energy=120.0, size=0.6, shape="SQUARE")),
+}
+
+
+def build_test_cornell_box(scene, light="POINT"):
+    """A 2 m Cornell box lit by one known light, seen through its open front by the scene camera.
+
+    World space, Z up: the interior spans x, y in [-1, 1], z in [0, 2]; the front (-Y) is open.
+    Floor, ceiling and back wall are white (0.8), the left wall (x = -1) red, the right wall
+    (x = +1) green; a short and a tall white block cast shadows. ``light`` is 'POINT' (80 W at
+    (0, 0, 1.5), radius 5 cm) or 'AREA' (120 W, 0.6 m square at z = 1.95 facing down); see
+    ``TEST_BOX_LIGHTS``. The world is black, the camera (35 mm lens, 4:3) stands at
+    (0, -3.4, 1) looking along +Y. Returns the created objects by role.
+    """
+    white = principled("Test White", (0.8, 0.8, 0.8))
+    red = principled("Test Red", (0.8, 0.05, 0.05))
+    green = principled("Test Green", (0.05, 0.8, 0.05))
+    corners = [(x, y, z) for z in (0.0, 2.0) for y in (-1.0, 1.0) for x in (-1.0, 1.0)]
+    faces = [(0, 1, 3, 2), (4, 6, 7, 5), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]  # normals inwards
+    box = mesh_object("Test Box", corners, faces, scene=scene)
+    for material in (white, red, green):
+        box.data.materials.append(material)
+    box.data.polygons.foreach_set("material_index", np.array([0, 0, 0, 1, 2], dtype=np.int32))
+    box.data.update()
+    short = _block("Short Block", (0.6, 0.6, 0.6), (0.35, -0.3, 0.0), 0.3, white, scene)
+    tall = _block("Tall Block", (0.6, 0.6, 1.2), (-0.4, 0.4, 0.0), -0.3, white, scene)
+    location, settings = TEST_BOX_LIGHTS[light]
+    lamp = _light(scene, f"Test {light.title()} Light", light, location, **settings)
+    camera = link(bpy.data.objects.new("Test Camera", bpy.data.cameras.new("Test Camera")), scene)
+    camera.location = (0.0, -3.4, 1.0)
+    camera.rotation_euler = (np.pi / 2, 0.0, 0.0)
+    camera.data.lens = 35.0
+    scene.camera = camera
+    scene.render.resolution_x, scene.render.resolution_y = 96, 72
+    _black_world(scene)
+    return {"box": box, "short": short, "tall": tall, "light": lamp, "camera": camera}
+
+
+THIN_WALL_HALF_THICKNESS = 0.01  # metres: the wall at x = 0 spans x in [-0.01, 0.01]
+THIN_WALL_VIEW = 4.2  # metres of x the orthographic camera sees (128 x 64 pixels -> 4.2 x 2.1 m)
+
+
+def build_thin_wall_room(scene):
+    """A closed room split in two by a 2 cm wall, lit on one side only, seen from above.
+
+    The room is the closed box x in [-2, 2], y in [-1, 1], z in [0, 2] (white, normals inwards);
+    the wall is a closed slab x in [-0.01, 0.01] reaching through floor, ceiling and side walls,
+    so no ray passes from one half to the other. A 100 W point light hangs at (-1, 0, 1.5):
+    x < 0 is the lit side, x > 0 the dark side, which gets no light at all in Cycles.
+
+    The camera is orthographic, straight above at z = 3 looking down, with its near clipping
+    plane at z = 1.95: camera rays start below the ceiling (Cycles clips planes, and so do
+    ``raycast.camera_rays``), so one 2:1 image (128 x 64 by default) shows the floor of both
+    halves while the ceiling still bounces light. Pixel column i sees
+    x = -2.1 + (i + 0.5) · 4.2 / width; ``thin_wall_side_masks`` turns that into side masks.
+    Returns the created objects by role.
+    """
+    white = principled("Room White", (0.8, 0.8, 0.8))
+    vertices, faces = _box_faces((-2.0, -1.0, 0.0), (2.0, 1.0, 2.0))
+    room = mesh_object("Room", vertices, [tuple(reversed(f)) for f in faces], scene=scene)
+    room.data.materials.append(white)
+    h = THIN_WALL_HALF_THICKNESS
+    vertices, faces = _box_faces((-h, -1.001, -0.001), (h, 1.001, 2.001))
+    wall = mesh_object("Thin Wall", vertices, faces, scene=scene)
+    wall.data.materials.append(white)
+    lamp = _light(scene, "Room Light", "POINT", (-1.0, 0.0, 1.5), energy=100.0, shadow_soft_size=0.05)
+    camera_data = bpy.data.cameras.new("Room Camera")
+    camera_data.type = "ORTHO"
+    camera_data.ortho_scale = THIN_WALL_VIEW
+    camera_data.clip_start = 1.05
+    camera_data.clip_end = 10.0
+    camera = link(bpy.data.objects.new("Room Camera", camera_data), scene)
+    camera.location = (0.0, 0.0, 3.0)
+    scene.camera = camera
+    scene.render.resolution_x, scene.render.resolution_y = 128, 64
+    _black_world(scene)
+    return {"room": room, "wall": wall, "light": lamp, "camera": camera}
+
+
+def thin_wall_side_masks(width=128, height=64, margin=0.15):
+    """(lit, dark) (H, W) bool masks of ``build_thin_wall_room``'s image: floor pixels whose x is
+    more than ``margin`` metres from the wall on the lit (x < 0) or the dark (x > 0) side, and
+    more than ``margin`` inside the room's walls."""
+    x = -THIN_WALL_VIEW / 2 + (np.arange(width) + 0.5) * THIN_WALL_VIEW / width
+    y = THIN_WALL_VIEW / width * height / 2 - (np.arange(height) + 0.5) * THIN_WALL_VIEW / width
+    gx, gy = np.meshgrid(x, y)
+    inside = (np.abs(gx) < 2.0 - margin) & (np.abs(gy) < 1.0 - margin)
+    return inside & (gx < -margin), inside & (gx > margin)
