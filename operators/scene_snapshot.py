@@ -22,6 +22,7 @@ from .snapshot_environment import read_camera, read_light, read_world
 from .snapshot_materials import MaterialTable
 from .snapshot_mesh import (
     material_lookup,
+    read_corner_normals,
     read_corner_uvs,
     read_positions,
     read_triangles,
@@ -111,6 +112,7 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
             triangle_materials=triangle_materials(slots, lookup),
             uvs=read_corner_uvs(mesh, corners),
             skin=skin,
+            corner_normals=read_corner_normals(mesh, corners),
         )
     finally:
         obj_eval.to_mesh_clear()

@@ -53,6 +53,16 @@ def read_corner_uvs(mesh, corners: np.ndarray) -> np.ndarray | None:
     return uv.reshape(-1, 2)[corners]
 
 
+def read_corner_normals(mesh, corners: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) float32 object-space shading normals at each loop triangle corner.
+
+    corners : (T, 3) loop indices of the loop triangles (``read_triangles``).
+    """
+    normals = np.empty(len(mesh.loops) * 3, dtype=np.float32)
+    mesh.corner_normals.foreach_get("vector", normals)
+    return normals.reshape(-1, 3)[corners]
+
+
 def read_point_float(mesh, name: str) -> np.ndarray:
     """A float POINT attribute of ``mesh`` as (V,) float32."""
     values = np.empty(len(mesh.vertices), dtype=np.float32)

@@ -15,7 +15,7 @@ import numpy as np
 from .conetrace import ConeSettings, trace_diffuse_and_ao, trace_glossy
 from .direct_light import diffuse_direct
 from .errors import VoxGIError
-from .raycast import camera_ray_lengths, camera_rays, closest_hits
+from .raycast import primary_visibility
 from .scene_geometry import world_triangles
 
 PASS_NAMES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color",
@@ -54,16 +54,15 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     timings = {}
     t0 = time.perf_counter()
     tris = world_triangles(snapshot)
-    origins, dirs = camera_rays(snapshot.camera, width, height)
-    t, tri, _, _ = closest_hits(tris, origins, dirs, 0.0, camera_ray_lengths(snapshot.camera, dirs))
-    hit = np.flatnonzero(tri >= 0)
+    seen = primary_visibility(tris, snapshot.camera, width, height)
+    hit = np.flatnonzero(seen.hit.ravel())
+    p = seen.position.reshape(-1, 3)[hit]
+    n = seen.normal.reshape(-1, 3)[hit]  # shading normal, turned to the camera
+    dirs = seen.direction.reshape(-1, 3)
     timings["visibility"] = time.perf_counter() - t0
 
-    p = origins[hit] + dirs[hit] * t[hit, None]
-    n = tris.normals[tri[hit]]
-    n = np.where((n * dirs[hit]).sum(axis=1, keepdims=True) > 0, -n, n)  # face the camera
     albedo, rough, spec, emission = _material_table(snapshot)
-    mat = tris.materials[tri[hit]]
+    mat = seen.material.ravel()[hit]
     mat = np.where((mat >= 0) & (mat < len(snapshot.materials)), mat, len(snapshot.materials))
 
     t0 = time.perf_counter()

@@ -46,6 +46,8 @@ class MeshData:
     triangle_materials : (T,) int32 index into ``SceneSnapshot.materials`` (-1 = none).
     uvs : (T, 3, 2) float32 UV of each triangle corner, or None when the mesh has no UV map.
     skin : rest-pose skinning, or None for a mesh that no armature deforms.
+    corner_normals : (T, 3, 3) float32 object-space shading normal at each triangle corner
+        (Blender's ``Mesh.corner_normals``: smooth, flat or custom), or None (face normals).
     """
 
     name: str
@@ -54,6 +56,7 @@ class MeshData:
     triangle_materials: np.ndarray
     uvs: np.ndarray | None = None
     skin: SkinData | None = None
+    corner_normals: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
