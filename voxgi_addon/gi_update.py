@@ -20,7 +20,8 @@ from .voxel_shadows import CascadeOccupancy
 @dataclass(frozen=True)
 class GISettings:
     """resolution : cells per axis of every cascade (power of two); dense_depth : octree levels
-    kept as dense 3D arrays; light_samples : shadow rays per voxel for soft lights.
+    kept as dense 3D arrays; light_samples : shadow rays per voxel for soft lights (1: a
+    voxel is wider than most penumbrae, and per-pixel direct light is sampled separately).
     view_ahead : how far ahead of the camera the cascades are centred, as a fraction of the
     finest cascade's half-extent (0 = on the camera, as in the thesis). Half of a
     camera-centred grid lies behind the camera; 1.0 puts the finest cascade's back face at the
@@ -29,7 +30,7 @@ class GISettings:
 
     resolution: int = 64
     dense_depth: int = 6
-    light_samples: int = 4
+    light_samples: int = 1
     view_ahead: float = 1.0
 
 
