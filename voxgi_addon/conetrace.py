@@ -6,6 +6,10 @@ levels), and composites premultiplied radiance and occlusion:
 ``c += (1 − α)·c_s·f(d)``, ``α += (1 − α)·α_s·f(d)`` with the falloff ``f(d) = 1 / (1 + λ·d)``.
 
 The volume is anything with the ``ConeVolume`` methods (``svo.VoxelOctree`` in the product).
+Volumes that also have ``sample_directional`` (the octree) are sampled anisotropically by
+default (``ConeSettings.anisotropic``): each sample reads the node faces that face the cone,
+so a thin wall stays opaque at coarse levels and a node straddling it shows only its near side
+(Crassin et al. 2011; Gomes 2015 §4.15), which stops light leaking through thin walls.
 Outputs are in Cycles' pass units: diffuse indirect = indirect irradiance / π (light without
 albedo), AO = the cosine-weighted unoccluded fraction within the AO distance.
 """
@@ -27,6 +31,9 @@ class ConeVolume(Protocol):
 
     def sample(self, points: np.ndarray, level: np.ndarray) -> tuple[np.ndarray, np.ndarray]: ...
 
+    # Optional: sample_directional(points, level, dirs) -> (premultiplied radiance, occlusion),
+    # used when present and ``anisotropic`` is on.
+
 
 @dataclass(frozen=True)
 class ConeSettings:
@@ -43,9 +50,13 @@ class ConeSettings:
     ao_distance : AO radius in metres (Cycles' World › Ambient Occlusion distance).
     start_offset : how far from the surface a cone starts, in sizes of the finest voxels there.
     opacity_scale : multiplies sampled occlusion (clamped to 1). Surface voxels make a plane
-        crossing a node fill half its children, so the octree's "present children / 8" reads
-        0.5 for a wall at every level; a scale of 2 makes such a wall opaque, as it is to the
-        rays crossing it (otherwise cones leak through walls and lose half their light).
+        crossing a node fill half its children, so the octree's isotropic "present children / 8"
+        reads 0.5 for a wall at every level; a scale of 2 makes such a wall opaque, as it is to
+        the rays crossing it (otherwise cones leak through walls and lose half their light).
+        Anisotropic sampling already reads such a wall as opaque along its normal, so 1 is the
+        neutral value there.
+    anisotropic : sample the volume's directional faces (``sample_directional``) when it has
+        them; False, or a volume without them, uses the isotropic ``sample``.
     """
 
     cone_angle: float = 20.0
@@ -59,6 +70,7 @@ class ConeSettings:
     opacity_scale: float = 1.0
     gi_intensity: float = 1.0
     ao_intensity: float = 1.0
+    anisotropic: bool = True
 
     def __post_init__(self):
         if not 1.0 <= self.cone_angle <= 80.0:
@@ -108,7 +120,7 @@ def diffuse_cone_set(count: int, half_angle: float) -> tuple[np.ndarray, np.ndar
 
 def march_cones(volume: ConeVolume, origins, dirs, half_angle, max_distance, *, falloff=0.0,
                 sample_factor=1.0, start_offset=2.0, opacity_scale=1.0, want_light=True,
-                surface_normals=None, start_height=None):
+                surface_normals=None, start_height=None, anisotropic=True):
     """March N cones front to back.
 
     origins, dirs : (N, 3) world points (already off the surface) and unit axes.
@@ -116,6 +128,7 @@ def march_cones(volume: ConeVolume, origins, dirs, half_angle, max_distance, *, 
     surface_normals, start_height : when given, a sample never reads nodes wider than 2/3 of
         its height above the surface it started from (height = start_height + d·(dir·n)), so
         grazing cones do not read the surface's own voxels (self-occlusion, self-colour).
+    anisotropic : use ``volume.sample_directional`` (if the volume has it) with the cone axis.
     Returns radiance (N, 3) float64 (premultiplied, composited) and occlusion α (N,) in [0, 1].
     """
     n = len(origins)
@@ -130,6 +143,7 @@ def march_cones(volume: ConeVolume, origins, dirs, half_angle, max_distance, *, 
         rise = (dirs * surface_normals).sum(axis=1)
         base = np.broadcast_to(np.asarray(start_height, np.float64), (n,))
     active = np.flatnonzero(d < max_d)
+    directional = anisotropic and hasattr(volume, "sample_directional")
     while len(active):
         da = d[active]
         diameter = 2.0 * tan_half[active] * da
@@ -143,7 +157,10 @@ def march_cones(volume: ConeVolume, origins, dirs, half_angle, max_distance, *, 
             # Both levels blended must respect the bound, so round the coarsest allowed up.
             level = np.maximum(level, np.ceil(volume.depth - np.log2(widest / leaf) - 1e-9))
         level = np.clip(level, 0.0, volume.finest_level_at(p).astype(np.float64))
-        c_s, a_s = volume.sample(p, level)
+        if directional:
+            c_s, a_s = volume.sample_directional(p, level, dirs[active])
+        else:
+            c_s, a_s = volume.sample(p, level)
         if opacity_scale != 1.0:  # scale α and the premultiplied radiance alike
             scaled = np.minimum(a_s * opacity_scale, 1.0)
             c_s = c_s * (scaled / np.maximum(a_s, 1e-12))[:, None]
@@ -191,11 +208,13 @@ def trace_diffuse_and_ao(volume: ConeVolume, points, normals, settings: ConeSett
         light, _ = march_cones(volume, origins, axis, half, settings.max_distance,
                                falloff=settings.falloff, sample_factor=settings.sample_factor,
                                start_offset=0.0, opacity_scale=settings.opacity_scale,
-                               surface_normals=normals, start_height=height)
+                               surface_normals=normals, start_height=height,
+                               anisotropic=settings.anisotropic)
         _, occ = march_cones(volume, origins, axis, half, settings.ao_distance,
                              falloff=settings.ao_falloff, sample_factor=settings.sample_factor,
                              start_offset=0.0, opacity_scale=settings.opacity_scale,
-                             want_light=False, surface_normals=normals, start_height=height)
+                             want_light=False, surface_normals=normals, start_height=height,
+                             anisotropic=settings.anisotropic)
         diffuse += w * light
         visible += w * (1.0 - occ)
     ao = 1.0 - np.clip(settings.ao_intensity * (1.0 - visible), 0.0, 1.0)
@@ -215,7 +234,8 @@ def trace_glossy(volume: ConeVolume, points, normals, view_dirs, roughness, sett
     light, _ = march_cones(volume, origins, reflect, glossy_half_angle(roughness),
                            settings.max_distance, falloff=settings.falloff,
                            sample_factor=settings.sample_factor, start_offset=0.0,
-                           opacity_scale=settings.opacity_scale)
+                           opacity_scale=settings.opacity_scale,
+                           anisotropic=settings.anisotropic)
     return (settings.gi_intensity * light).astype(np.float32)
 
 
@@ -231,5 +251,6 @@ def trace_shadow(volume: ConeVolume, points, normals, light_positions, light_rad
     axis = to_light / np.maximum(dist, 1e-12)[:, None]
     half = np.arctan(np.maximum(light_radius, 1e-3) / np.maximum(dist, 1e-6))
     _, occ = march_cones(volume, origins, axis, half, dist, sample_factor=settings.sample_factor,
-                         start_offset=0.0, opacity_scale=settings.opacity_scale, want_light=False)
+                         start_offset=0.0, opacity_scale=settings.opacity_scale, want_light=False,
+                         anisotropic=settings.anisotropic)
     return (1.0 - occ).astype(np.float32)

@@ -16,6 +16,23 @@ Averaging rules, applied from the deepest level up:
   the surface crosses this node at this node's resolution, as any leaf does, so the node is
   as opaque as a leaf), count = own count + children's counts.
 
+Directional (anisotropic) values, kept beside the isotropic ones (Crassin et al. 2011, Gomes
+2015 §3.1/§4.15): per node and per face f of ``FACES`` (+x, −x, +y, −y, +z, −z: the side the
+viewer is on), the premultiplied r·α, g·α, b·α, α the node shows to a cone coming from that side:
+* a leaf: its premultiplied radiance and α = 1 on every face;
+* a parent: for face +x (a cone travelling −x), each of its 4 (y, z) columns composites its 2
+  children front to back, front = the x = 1 child, c = c_f + (1 − α_f)·c_b,
+  α = α_f + (1 − α_f)·α_b (absent child = 0), and the parent takes the mean of the 4 columns;
+  likewise for the other faces. A one-voxel wall across x thus stays opaque (α = 1) seen along
+  x at every level (isotropic occlusion reads 0.5 there), and a node straddling the wall shows
+  each side only what lies in front of the wall;
+* a parent that is also a coarser cascade's voxel: per face, ½·own + ½·the children's
+  composited colour, α = 1 (the isotropic ½ : ½ rule face by face).
+Known limits (thin-wall test, 2 cm wall in 7 cm voxels): cones crossing a wall obliquely read
+its edge-on faces with weight 1 − d_x², a one-node wall sampled one node apart composites to
+α ≥ 0.75 only, and a cone wider than its distance to the wall samples nodes on both sides.
+``one_sided_leaves`` (off by default) also hides the back of lit surface voxels.
+
 Storage: levels 0..dense_depth are ``DenseLevel`` 3D arrays indexed [x, y, z] (the mips);
 deeper levels are ``SparseLevel`` arrays sorted by Morton key (see ``morton``). Child links:
 ``child_mask`` bit o is set when child octant o = z<<2 | y<<1 | x is present, and the child is
@@ -32,9 +49,9 @@ import numpy as np
 
 from . import svo_sampling as sampling
 from .morton import morton_decode, morton_encode
-from .svo_sampling import DenseLevel, SparseLevel
+from .svo_sampling import FACES, DenseLevel, SparseLevel
 
-__all__ = ["VoxelOctree", "DenseLevel", "SparseLevel", "LevelStats", "build_octree"]
+__all__ = ["VoxelOctree", "DenseLevel", "SparseLevel", "LevelStats", "build_octree", "FACES"]
 
 # A sparse level also gets an int32 row map over its window of ≤ res³ nodes when the window
 # has at most this many cells (128³ → 8 MB), turning sample()'s searchsorted into one gather.
@@ -120,6 +137,32 @@ class VoxelOctree:
         out = sampling.sample_levels(self.levels, p, level, self.root_origin, self.root_size)
         return np.ascontiguousarray(out[:3].T), out[3]
 
+    def sample_directional(self, points: np.ndarray, level,
+                           dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Anisotropic sample for cones travelling along ``dirs`` (Crassin 2011, Gomes §4.15).
+
+        points : (N, 3) float64; level : (N,) float (or scalar) as in ``sample``; dirs : (N, 3)
+        unit cone directions. Per axis a, the face that faces the cone is read (d_a < 0, the
+        cone travelling −a, reads the face seen from +a, etc.) with node-centred trilinear
+        interpolation, and the three axes are weighted by d_a² (sum 1 for a unit direction, so
+        a direction-independent volume samples exactly as ``sample``). Levels are blended as in
+        ``sample``. Returns premultiplied radiance (N, 3) float32 and occlusion (N,) float32.
+        """
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        d = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+        if len(d) != len(p):
+            raise ValueError("need one direction per point")
+        out = sampling.sample_levels(self.levels, p, level, self.root_origin, self.root_size,
+                                     dirs=d)
+        return np.ascontiguousarray(out[:3].T), out[3]
+
+    def lookup_directional(self, level: int, nodes: np.ndarray) -> np.ndarray:
+        """(N, 3) int64 node coordinates → (N, 6, 4) float32 directional values: faces in
+        ``FACES`` order, channels r·α, g·α, b·α, α (premultiplied); absent nodes give zeros."""
+        lv = self.levels[level]
+        rows = lv.directional_columns(lv.rows(np.asarray(nodes, dtype=np.int64).reshape(-1, 3)))
+        return lv.directional[:, rows].T.reshape(-1, len(FACES), 4).astype(np.float32)
+
 
 @dataclass
 class _Nodes:
@@ -132,6 +175,9 @@ class _Nodes:
     occlusion: np.ndarray  # (M,) float32
     count: np.ndarray      # (M,) int32
     child_mask: np.ndarray  # (M,) uint8
+    # (M, 6, 4) premultiplied directional values (faces FACES, channels r·α, g·α, b·α, α);
+    # None = direction-independent (leaves): every face is the isotropic premultiplied value.
+    directional: np.ndarray | None = None
 
     ATTRS: ClassVar[tuple[str, ...]] = ("radiance", "albedo", "normal")
 
@@ -141,6 +187,38 @@ class _Nodes:
         return cls(np.zeros(0, np.uint64), z3, z3, z3, np.zeros(0, np.float32),
                    np.zeros(0, np.int32), np.zeros(0, np.uint8))
 
+    def premultiplied(self) -> np.ndarray:
+        """(M, 4) float32 isotropic r·α, g·α, b·α, α."""
+        return np.concatenate([self.radiance * self.occlusion[:, None],
+                               self.occlusion[:, None]], axis=1).astype(np.float32)
+
+    def face(self, f: int) -> np.ndarray:
+        """(M, 4) float32 premultiplied values seen from face ``f`` of FACES."""
+        return self.premultiplied() if self.directional is None else self.directional[:, f]
+
+    def all_faces(self) -> np.ndarray:
+        """(M, 6, 4) float32 directional values (leaves: the isotropic value on every face)."""
+        if self.directional is None:
+            return np.repeat(self.premultiplied()[:, None, :], len(FACES), axis=1)
+        return self.directional
+
+
+def _one_sided_faces(nodes: _Nodes) -> np.ndarray:
+    """(M, 6, 4) leaf faces of ``build_octree(one_sided_leaves=True)``.
+
+    A surface voxel emits into its normal's hemisphere only: face f (viewer direction v_f, a
+    unit axis) shows radiance × clip(1 + n·v_f, 0, 1) and α = 1. The back (n·v = −1) is black
+    but opaque; faces seen edge-on (n·v = 0) and from the front keep the full radiance, so a
+    surface viewed from its front side samples exactly as with isotropic leaves. A voxel whose
+    normal is short (opposite faces averaged into it) is attenuated little: it cannot tell.
+    """
+    faces = np.repeat(nodes.premultiplied()[:, None, :], len(FACES), axis=1)
+    for f in range(len(FACES)):
+        axis, s = divmod(f, 2)
+        n_dot_v = nodes.normal[:, axis] * (1.0 - 2.0 * s)
+        faces[:, f, :3] *= np.clip(1.0 + n_dot_v, 0.0, 1.0)[:, None]
+    return faces
+
 
 def _group_starts(sorted_keys: np.ndarray) -> np.ndarray:
     """Start index of each run of equal values in a sorted array."""
@@ -149,8 +227,10 @@ def _group_starts(sorted_keys: np.ndarray) -> np.ndarray:
     return np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
 
 
-def _leaf_nodes(cells, radiance, albedo, normal, count, offset: int) -> _Nodes:
-    """A cascade's voxels as leaves: occlusion 1; voxels sharing a node average by count."""
+def _leaf_nodes(cells, radiance, albedo, normal, count, offset: int,
+                one_sided: bool = False) -> _Nodes:
+    """A cascade's voxels as leaves: occlusion 1; voxels sharing a node average by count.
+    Directional faces: isotropic (None), or ``_one_sided_faces`` when ``one_sided``."""
     keys = morton_encode(np.asarray(cells, np.int64).reshape(-1, 3) + offset)
     if len(keys) == 0:
         return _Nodes.empty()
@@ -164,12 +244,16 @@ def _leaf_nodes(cells, radiance, albedo, normal, count, offset: int) -> _Nodes:
         attrs = [(np.add.reduceat(a * weight, starts, axis=0) / total).astype(np.float32)
                  for a in attrs]
     m = len(starts)
-    return _Nodes(keys[starts], *attrs, np.ones(m, np.float32),
-                  np.add.reduceat(count, starts).astype(np.int32), np.zeros(m, np.uint8))
+    leaves = _Nodes(keys[starts], *attrs, np.ones(m, np.float32),
+                    np.add.reduceat(count, starts).astype(np.int32), np.zeros(m, np.uint8))
+    if one_sided:
+        leaves.directional = _one_sided_faces(leaves)
+    return leaves
 
 
 def _parents(children: _Nodes) -> _Nodes:
-    """Average present children into their parents: mean attributes, occlusion k/8."""
+    """Average present children into their parents: mean attributes, occlusion k/8, and the
+    directional values of ``_directional_parents``."""
     if len(children.keys) == 0:
         return _Nodes.empty()
     parent_keys = children.keys >> np.uint64(3)
@@ -177,10 +261,38 @@ def _parents(children: _Nodes) -> _Nodes:
     k = np.diff(np.r_[starts, len(parent_keys)])
     attrs = [np.add.reduceat(getattr(children, a), starts, axis=0) / k[:, None].astype(np.float32)
              for a in _Nodes.ATTRS]
-    octant_bits = np.left_shift(1, (children.keys & np.uint64(7)).astype(np.uint8), dtype=np.uint8)
+    octants = (children.keys & np.uint64(7)).astype(np.uint8)
+    octant_bits = np.left_shift(1, octants, dtype=np.uint8)
+    groups = np.repeat(np.arange(len(starts)), k)
     return _Nodes(parent_keys[starts], *attrs, (k / 8).astype(np.float32),
                   np.add.reduceat(children.count, starts).astype(np.int32),
-                  np.bitwise_or.reduceat(octant_bits, starts))
+                  np.bitwise_or.reduceat(octant_bits, starts),
+                  _directional_parents(children, groups, octants, len(starts)))
+
+
+def _directional_parents(children: _Nodes, groups: np.ndarray, octants: np.ndarray,
+                         parents: int) -> np.ndarray:
+    """(P, 6, 4) directional values of the parents (Crassin et al. 2011; Gomes 2015 §4.15).
+
+    For face f = 2·axis + s (viewer on the +axis side for s = 0, the −axis side for s = 1),
+    each of the 4 columns of two children along ``axis`` is composited front to back with the
+    children's own face-f values, front = the child nearer the viewer (bit ``axis`` of the
+    octant = 1 − s): c = c_f + (1 − α_f)·c_b, α = α_f + (1 − α_f)·α_b, absent children 0; the
+    parent's value is the mean of the 4 columns. groups : (M,) parent index of each child;
+    octants : (M,) z<<2 | y<<1 | x. One face at a time keeps the scatter array at (P, 8, 4).
+    """
+    out = np.empty((parents, len(FACES), 4), np.float32)
+    for f in range(len(FACES)):
+        axis, s = divmod(f, 2)
+        full = np.zeros((parents, 8, 4), np.float32)
+        full[groups, octants] = children.face(f)
+        full = full.reshape(parents, 2, 2, 2, 4)  # [parent, z, y, x, channel]
+        along = 3 - axis  # x → 3, y → 2, z → 1
+        front = np.take(full, 1 - s, axis=along)
+        back = np.take(full, s, axis=along)
+        column = front + (1.0 - front[..., 3:4]) * back
+        out[:, f] = column.reshape(parents, 4, 4).mean(axis=1)
+    return out
 
 
 def _merge_own(own: _Nodes, parents: _Nodes) -> _Nodes:
@@ -207,7 +319,17 @@ def _merge_own(own: _Nodes, parents: _Nodes) -> _Nodes:
     count[i_own] += own.count  # i_own holds unique rows, so += is a plain add
     mask = np.zeros(m, np.uint8)
     mask[i_par] = parents.child_mask
-    return _Nodes(keys, *attrs, occlusion, count, mask)
+    # Directional: a parent alone keeps its faces; a voxel alone is a leaf (α = 1, its radiance
+    # on every face); both: each face's colour = ½·own + ½·children's composited colour on that
+    # face (un-premultiplied), α = 1 — the isotropic rule applied face by face.
+    directional = np.zeros((m, len(FACES), 4), np.float32)
+    directional[i_par] = parents.all_faces()
+    mine = own.all_faces()
+    children = directional[i_own]
+    colour = children[..., :3] / np.maximum(children[..., 3:4], 1e-30)
+    mixed = np.concatenate([0.5 * (colour + mine[..., :3]), np.ones_like(mine[..., 3:])], -1)
+    directional[i_own] = np.where(both[:, :, None], mixed, mine)
+    return _Nodes(keys, *attrs, occlusion, count, mask, directional)
 
 
 @dataclass(frozen=True)
@@ -265,6 +387,13 @@ def _table(nodes: _Nodes, rows: np.ndarray, size: int) -> np.ndarray:
     return table
 
 
+def _directional_table(nodes: _Nodes, rows: np.ndarray, size: int) -> np.ndarray:
+    """(24, size + 1) directional sampling channels, row 4·f + c = channel c of face f."""
+    table = np.zeros((4 * len(FACES), size + 1), sampling.DIRECTIONAL_DTYPE)
+    table[:, rows] = nodes.all_faces().reshape(len(nodes.keys), 4 * len(FACES)).T
+    return table
+
+
 def _dense_level(level: int, nodes: _Nodes, child_base: np.ndarray | None) -> DenseLevel:
     s = 1 << level
     c = morton_decode(nodes.keys)
@@ -283,8 +412,13 @@ def _dense_level(level: int, nodes: _Nodes, child_base: np.ndarray | None) -> De
         mask = np.zeros(s ** 3, np.uint8)
         mask[rows] = nodes.child_mask
         base, mask = base.reshape(s, s, s), mask.reshape(s, s, s)
+    m = len(nodes.keys)
+    index = np.full(s ** 3 + 1, m, np.int32)
+    index[rows] = np.arange(m, dtype=np.int32)
     return DenseLevel(level=level, child_base=base, child_mask=mask,
-                      table=_table(nodes, rows, s ** 3), **grids)
+                      table=_table(nodes, rows, s ** 3),
+                      directional=_directional_table(nodes, np.arange(m), m),
+                      directional_index=index, **grids)
 
 
 def _sparse_level(level: int, nodes: _Nodes, child_base: np.ndarray, frame: _Frame,
@@ -298,18 +432,22 @@ def _sparse_level(level: int, nodes: _Nodes, child_base: np.ndarray, frame: _Fra
         index_map[(rel[:, 0] * w + rel[:, 1]) * w + rel[:, 2]] = np.arange(m, dtype=np.int32)
     return SparseLevel(level, nodes.keys, nodes.radiance, nodes.occlusion, nodes.normal,
                        nodes.albedo, nodes.count, child_base, nodes.child_mask, w0, w,
-                       index_map, _table(nodes, np.arange(m), m))
+                       index_map, _table(nodes, np.arange(m), m),
+                       _directional_table(nodes, np.arange(m), m))
 
 
 def build_octree(cascades, radiance, dense_depth: int = 6, *,
-                 max_index_window: int = DEFAULT_MAX_INDEX_WINDOW) -> VoxelOctree:
+                 max_index_window: int = DEFAULT_MAX_INDEX_WINDOW,
+                 one_sided_leaves: bool = False) -> VoxelOctree:
     """Build the octree of one update from the cascades' voxels and their outgoing radiance.
 
     cascades : list of ``CascadeVoxels`` (grid.index/span/resolution/origin, cells (N, 3) int32
     in [0, res), albedo (N, 3), normal (N, 3), count (N,)); radiance : list of (N, 3) float32,
     aligned with ``cascades``. dense_depth : last dense level (clamped to the depth).
     max_index_window : largest window (cells) that gets an int32 index map for sample();
-    0 makes sample() use searchsorted on every sparse level. Raises ValueError when the grids
+    0 makes sample() use searchsorted on every sparse level. one_sided_leaves : leaves' directional
+    faces hide the radiance of their back side (``_one_sided_faces``) instead of showing the
+    same value on all 6 faces; the isotropic fields are unaffected. Raises ValueError when the grids
     do not nest as docs/gi_pipeline.md states or an array has the wrong length.
     """
     if len(radiance) != len(cascades):
@@ -323,7 +461,8 @@ def build_octree(cascades, radiance, dense_depth: int = 6, *,
         if n and (np.min(cv.cells) < 0 or np.max(cv.cells) >= frame.resolution):
             raise ValueError(f"cascade {cv.grid.index}: cells outside [0, resolution)")
         own[frame.levels[cv.grid.index]] = _leaf_nodes(
-            cv.cells, rad, cv.albedo, cv.normal, cv.count, frame.offsets[cv.grid.index])
+            cv.cells, rad, cv.albedo, cv.normal, cv.count, frame.offsets[cv.grid.index],
+            one_sided_leaves)
     depth, dense_depth = frame.depth, max(0, min(int(dense_depth), frame.depth))
     nodes = [None] * (depth + 1)
     nodes[depth] = own[depth]

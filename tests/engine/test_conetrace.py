@@ -79,3 +79,36 @@ def test_settings_reject_nonsense():
         ConeSettings(cone_angle=0.0)
     with pytest.raises(ValueError, match="positive"):
         ConeSettings(ao_distance=0.0)
+
+
+def test_anisotropic_octree_leaks_less_through_a_thin_wall_and_sees_planes_more_opaque():
+    """A glowing plane behind a one-voxel dark wall, seen from the other side. Isotropic
+    prefiltering reads the wall as half transparent at coarse levels (occlusion k/8); the
+    directional faces keep it opaque along x, so less light gets through. Not all of it is
+    stopped: samples one node apart composite a trilinearly blurred one-node wall to α ≥ 0.75
+    only, and oblique cones read the wall's edge-on faces with weight 1 − d_x²."""
+    from test_svo import make_grids, voxels
+    from voxgi_addon.svo import build_octree
+
+    rng = np.random.default_rng(5)
+    res = 32
+    grid = make_grids([0, 0, 0], 0.125, res, 1)[0]  # a 4 m cube centred at the origin
+    yz = np.argwhere(np.ones((res, res), bool))
+    glow = np.column_stack([np.full(len(yz), 8), yz])   # x in [-1, -0.875)
+    wall = np.column_stack([np.full(len(yz), 16), yz])  # x in [0, 0.125)
+    cv = voxels(grid, np.concatenate([glow, wall]), rng)
+    radiance = np.zeros((len(cv.cells), 3), np.float32)
+    radiance[: len(glow)] = 4.0
+    octree = build_octree([cv], [radiance], dense_depth=3)
+    points = np.array([[0.8, 0.1, -0.2], [1.2, -0.3, 0.4]])
+    normals = np.array([[-1.0, 0.0, 0.0]] * 2)  # facing the wall
+    assert ConeSettings().anisotropic
+    aniso, _ = trace_diffuse_and_ao(octree, points, normals, ConeSettings())
+    iso, _ = trace_diffuse_and_ao(octree, points, normals, ConeSettings(anisotropic=False))
+    assert (aniso < 0.65 * iso).all()  # measured 0.36–0.39 against 0.59–0.74
+    # Without the wall, the plane filling the hemisphere (exact answer 4.0) reads as more
+    # opaque through the directional faces: more of its light arrives.
+    open_ = build_octree([voxels(grid, glow, rng)], [radiance[: len(glow)]], dense_depth=3)
+    lit_a, _ = trace_diffuse_and_ao(open_, points, normals, ConeSettings())
+    lit_i, _ = trace_diffuse_and_ao(open_, points, normals, ConeSettings(anisotropic=False))
+    assert (lit_a > 1.1 * lit_i).all() and (lit_a < 4.0).all()

@@ -377,14 +377,16 @@ def test_stats_count_nodes_and_bytes():
             m, side = int(levels[s.level]["present"].sum()), 2 ** s.level
             assert s.nodes == m
             if s.kind == "dense":
-                # radiance, normal, albedo 3×f32, occlusion f32, count i32, table 4×f32 (+1 row)
+                # radiance, normal, albedo 3×f32, occlusion f32, count i32, table 4×f32 (+1 row),
+                # directional 24×f32 per present node (+1 column), its i32 index per table column
                 expected = side ** 3 * (36 + 4 + 4) + 16 * (side ** 3 + 1)
+                expected += 96 * (m + 1) + 4 * (side ** 3 + 1)
                 if s.level == octree.dense_depth:
                     expected += side ** 3 * (8 + 1)  # child_base i64 + child_mask u8
             else:
                 # key u64, 3 × 3 f32, occlusion f32, count i32, child_base i64, mask u8, table,
-                # window origin 3 × i64
-                expected = m * (8 + 36 + 4 + 4 + 8 + 1) + 16 * (m + 1) + 24
+                # window origin 3 × i64, directional 24×f32 (+1 column)
+                expected = m * (8 + 36 + 4 + 4 + 8 + 1) + 16 * (m + 1) + 24 + 96 * (m + 1)
                 if window is None:
                     expected += 4 * (octree.levels[s.level].window_size ** 3 + 1)
             assert s.bytes == expected, s
@@ -431,3 +433,173 @@ def test_duplicate_cells_average_weighted_by_count():
     assert present[0] and occlusion[0] == 1
     np.testing.assert_allclose(radiance[0], (rad[0] + 3 * rad[2]) / 4, rtol=1e-6)
     assert octree.levels[2].count[1, 2, 3] == 4 and octree.stats()[2].nodes == 2
+
+
+# ---- directional (anisotropic) tables ------------------------------------------------------
+
+FACE_VIEW = [(0, 1), (0, -1), (1, 1), (1, -1), (2, 1), (2, -1)]  # (axis, side the viewer is on)
+
+
+def brute_directional(cascades, radiance):
+    """Dense (s, s, s, 6, 4) premultiplied face values per level, straight from the cascades:
+    leaves (r, g, b, 1) on every face; parents composite each 2-child column along the face's
+    axis front to back (front = the child on the viewer's side) and average the 4 columns;
+    a node that is also a coarser voxel: ½·own + ½·children's colour per face, α = 1."""
+    n = len(cascades)
+    res = cascades[0].grid.resolution
+    log_res = int(round(np.log2(res)))
+    depth = log_res + n - 1
+    own = {}
+    for cv, rad in zip(cascades, radiance):
+        i = cv.grid.index
+        ell = log_res + n - 1 - i
+        s = 2 ** ell
+        c = cv.cells.astype(np.int64) + (res // 2) * (2 ** (n - 1 - i) - 1)
+        leaf = np.zeros((s, s, s, 6, 4))
+        leaf[c[:, 0], c[:, 1], c[:, 2], :, :3] = np.asarray(rad, float)[:, None, :]
+        leaf[c[:, 0], c[:, 1], c[:, 2], :, 3] = 1.0
+        present = np.zeros((s,) * 3, bool)
+        present[c[:, 0], c[:, 1], c[:, 2]] = True
+        own[ell] = (leaf, present)
+    levels = {depth: own[depth][0]}
+    for ell in range(depth - 1, -1, -1):
+        s = 2 ** ell
+        child = levels[ell + 1].reshape(s, 2, s, 2, s, 2, 6, 4)
+        out = np.zeros((s, s, s, 6, 4))
+        for f, (axis, side) in enumerate(FACE_VIEW):
+            pair = 1 + 2 * axis  # the 2-child axis of ``axis`` in the reshaped array
+            front = np.take(child[..., f, :], 1 if side > 0 else 0, axis=pair)
+            back = np.take(child[..., f, :], 0 if side > 0 else 1, axis=pair)
+            column = front + (1 - front[..., 3:]) * back  # remaining 2-axes are the 4 columns
+            out[..., f, :] = column.mean(axis=_other_pairs(pair))
+        if ell in own:
+            leaf, present = own[ell]
+            kids = out[present]
+            has_kids = kids[..., 3] > 0
+            colour = kids[..., :3] / np.maximum(kids[..., 3:], 1e-30)
+            mixed = np.concatenate([0.5 * (colour + leaf[present][..., :3]),
+                                    np.ones_like(kids[..., 3:])], axis=-1)
+            out[present] = np.where(has_kids[..., None], mixed, leaf[present])
+        levels[ell] = out
+    return levels
+
+
+def _other_pairs(pair):
+    """Axes of the reshaped (s, 2, s, 2, s, 2) block left after taking ``pair``: the 4 columns."""
+    return tuple(a - (a > pair) for a in (1, 3, 5) if a != pair)
+
+
+@pytest.mark.parametrize("seed, res, n, fill, dense_depth",
+                         [(31, 8, 3, 0.1, 2), (32, 8, 2, 0.3, 4), (33, 4, 3, 0.5, 0),
+                          (34, 16, 1, 0.05, 2)])
+def test_directional_tables_equal_brute_force_front_to_back(seed, res, n, fill, dense_depth):
+    cascades, radiance = random_scene(seed=seed, res=res, n=n, fill=fill)
+    want = brute_directional(cascades, radiance)
+    octree = build_octree(cascades, radiance, dense_depth)
+    for ell, faces in want.items():
+        nodes = all_nodes(2 ** ell)
+        got = octree.lookup_directional(ell, nodes)
+        np.testing.assert_allclose(got, faces[tuple(nodes.T)], rtol=1e-5, atol=1e-6,
+                                   err_msg=f"level {ell}")
+        # Only present nodes have non-zero faces, and every present node is seen from all 6.
+        _, _, present = octree.lookup(ell, nodes)
+        assert np.array_equal(present, (got[..., 3] > 0).all(axis=1))
+        assert (got[~present] == 0).all()
+
+
+def test_wall_across_x_is_opaque_along_x_and_half_covered_along_y_and_z():
+    rng = np.random.default_rng(35)
+    res = 16
+    grid = make_grids([0, 0, 0], 1.0, res, 1)[0]
+    yz = np.argwhere(np.ones((res, res), bool))
+    cells = np.column_stack([np.full(len(yz), 5), yz])  # one-voxel wall x = 5
+    cv = voxels(grid, cells, rng)
+    octree = build_octree([cv], [np.full((len(cells), 3), 2.0, np.float32)], dense_depth=2)
+    assert octree.depth == 4
+    along_y = {octree.depth: 1.0}
+    for ell in range(octree.depth, -1, -1):
+        s = 2 ** ell
+        nodes = np.argwhere(np.ones((s,) * 3, bool))
+        nodes = nodes[nodes[:, 0] == 5 >> (octree.depth - ell)]  # the nodes the wall crosses
+        faces = octree.lookup_directional(ell, nodes)
+        np.testing.assert_allclose(faces[:, :2, 3], 1.0, atol=1e-6)      # ±x: opaque
+        np.testing.assert_allclose(faces[:, :2, :3], 2.0, rtol=1e-6)     # and its colour
+        if ell < octree.depth:  # one half of the 2 × 2 columns holds the wall's children
+            along_y[ell] = 0.5 * (1 - (1 - along_y[ell + 1]) ** 2)
+        np.testing.assert_allclose(faces[:, 2:, 3], along_y[ell], atol=1e-6)
+        np.testing.assert_allclose(faces[:, 2:, :3], 2.0 * along_y[ell], rtol=1e-5)
+        _, occlusion, _ = octree.lookup(ell, nodes)  # the isotropic field is untouched
+        np.testing.assert_allclose(occlusion, 1.0 if ell == octree.depth else 0.5)
+    assert along_y[octree.depth - 1] == 0.5  # half covered just above the voxels
+
+
+def test_sample_directional_equals_sample_for_a_solid_block():
+    rng = np.random.default_rng(36)
+    res = 16
+    grid = make_grids([0, 0, 0], 1.0, res, 1)[0]
+    cells = np.argwhere(np.ones((8, 8, 8), bool)) + 4  # cells [4, 12)³: whole 4³ nodes
+    cv = voxels(grid, cells, rng)
+    octree = build_octree([cv], [np.tile([[0.3, 1.5, 0.7]], (len(cells), 1)).astype(np.float32)],
+                          dense_depth=2)
+    m = 2000
+    points = octree.root_origin + rng.uniform(-0.1, 1.1, (m, 3)) * octree.root_size
+    level = rng.uniform(octree.depth - 2, octree.depth + 0.5, m)  # nodes all full or empty
+    dirs = rng.normal(size=(m, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    dirs[:10] = np.eye(3)[rng.integers(0, 3, 10)] * rng.choice([-1, 1], (10, 1))  # axes
+    rad_iso, occ_iso = octree.sample(points, level)
+    rad_dir, occ_dir = octree.sample_directional(points, level, dirs)
+    assert occ_iso.max() > 0.99 and (occ_iso == 0).any()
+    np.testing.assert_allclose(rad_dir, rad_iso, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(occ_dir, occ_iso, rtol=1e-5, atol=1e-6)
+
+
+def test_sample_directional_blends_the_faces_facing_the_cone_by_squared_direction():
+    cascades, radiance = random_scene(seed=37, res=8, n=3, fill=0.15)
+    faces = brute_directional(cascades, radiance)
+    rng = np.random.default_rng(38)
+    m = 300
+    for window in (None, 0):
+        kwargs = {} if window is None else {"max_index_window": window}
+        octree = build_octree(cascades, radiance, dense_depth=2, **kwargs)
+        lo, size = octree.root_origin, octree.root_size
+        points = lo + rng.uniform(-0.1, 1.1, (m, 3)) * size
+        points[: m // 2] = lo + rng.uniform(0.3, 0.7, (m // 2, 3)) * size
+        level = rng.uniform(-0.5, octree.depth + 0.5, m)
+        dirs = rng.normal(size=(m, 3))
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        want = np.zeros((m, 4))
+        for axis in range(3):
+            for f, moving in ((2 * axis, dirs[:, axis] <= 0), (2 * axis + 1, dirs[:, axis] > 0)):
+                # A cone travelling −axis sees the face viewed from +axis, and vice versa.
+                as_levels = {ell: {"occlusion": v[..., f, 3],
+                                   "radiance": v[..., f, :3] / np.maximum(v[..., f, 3:], 1e-30)}
+                             for ell, v in faces.items()}
+                part = brute_trilinear(as_levels, points[moving], level[moving], lo, size)
+                want[moving] += dirs[moving, axis, None] ** 2 * part
+        got_rad, got_occ = octree.sample_directional(points, level, dirs)
+        assert got_rad.shape == (m, 3) and got_occ.dtype == np.float32
+        np.testing.assert_allclose(got_rad, want[:, :3], rtol=1e-4, atol=1e-5)
+        np.testing.assert_allclose(got_occ, want[:, 3], rtol=1e-4, atol=1e-5)
+    with pytest.raises(ValueError, match="direction"):
+        octree.sample_directional(points, level, dirs[:-1])
+
+
+def test_one_sided_leaves_hide_the_back_of_a_lit_wall_only():
+    rng = np.random.default_rng(39)
+    res = 8
+    grid = make_grids([0, 0, 0], 1.0, res, 1)[0]
+    yz = np.argwhere(np.ones((res, res), bool))
+    cv = voxels(grid, np.column_stack([np.full(len(yz), 2), yz]), rng)
+    cv.normal[:] = [-1, 0, 0]  # the wall's lit face looks towards −x
+    rad = [np.full((len(yz), 3), 1.5, np.float32)]
+    plain = build_octree([cv], rad, dense_depth=1)
+    sided = build_octree([cv], rad, dense_depth=1, one_sided_leaves=True)
+    for ell in range(sided.depth + 1):
+        nodes = np.argwhere(np.ones((2 ** ell,) * 3, bool))
+        a, b = plain.lookup_directional(ell, nodes), sided.lookup_directional(ell, nodes)
+        np.testing.assert_allclose(b[..., 3], a[..., 3])            # occlusion unchanged
+        np.testing.assert_allclose(b[:, 0, :3], 0.0)                # from +x: its black back
+        np.testing.assert_allclose(b[:, 1:, :3], a[:, 1:, :3], rtol=1e-6)  # front, edge-on
+        assert a[:, 0, :3].max() > 0
+    np.testing.assert_allclose(sided.lookup(2, [[2, 0, 0]])[0], plain.lookup(2, [[2, 0, 0]])[0])
