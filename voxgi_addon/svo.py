@@ -137,23 +137,25 @@ class VoxelOctree:
         out = sampling.sample_levels(self.levels, p, level, self.root_origin, self.root_size)
         return np.ascontiguousarray(out[:3].T), out[3]
 
-    def sample_directional(self, points: np.ndarray, level,
-                           dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def sample_directional(self, points: np.ndarray, level, dirs: np.ndarray,
+                           extinction: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Anisotropic sample for cones travelling along ``dirs`` (Crassin 2011, Gomes §4.15).
 
         points : (N, 3) float64; level : (N,) float (or scalar) as in ``sample``; dirs : (N, 3)
         unit cone directions. Per axis a, the face that faces the cone is read (d_a < 0, the
         cone travelling −a, reads the face seen from +a, etc.) with node-centred trilinear
         interpolation, and the three axes are weighted by d_a² (sum 1 for a unit direction, so
-        a direction-independent volume samples exactly as ``sample``). Levels are blended as in
-        ``sample``. Returns premultiplied radiance (N, 3) float32 and occlusion (N,) float32.
+        a direction-independent volume samples exactly as ``sample`` when ``extinction`` is
+        False). extinction : combine the axes' occlusion as 1 − Π (1 − α_a)^|d_a| (see
+        ``svo_sampling.trilinear_directional``). Levels are blended as in ``sample``.
+        Returns premultiplied radiance (N, 3) float32 and occlusion (N,) float32.
         """
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         d = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
         if len(d) != len(p):
             raise ValueError("need one direction per point")
         out = sampling.sample_levels(self.levels, p, level, self.root_origin, self.root_size,
-                                     dirs=d)
+                                     dirs=d, extinction=extinction)
         return np.ascontiguousarray(out[:3].T), out[3]
 
     def lookup_directional(self, level: int, nodes: np.ndarray) -> np.ndarray:

@@ -214,11 +214,14 @@ def trilinear(level, points: np.ndarray, root_origin: np.ndarray, node_size: flo
 
 
 def trilinear_directional(level, points: np.ndarray, dirs: np.ndarray, root_origin: np.ndarray,
-                          node_size: float) -> np.ndarray:
+                          node_size: float, extinction: bool = True) -> np.ndarray:
     """Σ over axes a of d_a² × trilinear interpolation of the face of ``level.directional``
     that faces a cone travelling along ``dirs`` (d_a < 0 reads face 2a, d_a > 0 face 2a + 1).
 
     points, dirs : (m, 3) float64 (dirs unit). Returns (4, m) float32 like ``trilinear``.
+    extinction : combine the axes' occlusion as extinction, α = 1 − Π_a (1 − α_a)^|d_a|, so a
+    face opaque along an axis stays opaque to every cone that crosses it at an angle (a thin
+    wall does not leak to slanted cones); False = the d²-weighted blend of α, as the colour.
     The corners and weights are shared by the 3 axes: 12 gathers of (8, m) instead of 4
     (measured ~3–5× the isotropic ``trilinear``; a row-major (M+1, 6, 4) table gathering 4
     channels per corner was slower in numpy).
@@ -229,23 +232,35 @@ def trilinear_directional(level, points: np.ndarray, dirs: np.ndarray, root_orig
     n = table.shape[1]
     flat = table.reshape(-1)
     d2 = (dirs * dirs).T.astype(np.float32)
-    out = np.zeros((4, len(points)), np.float32)
+    colour = np.zeros((3, len(points)), np.float32)
+    blended_alpha = np.zeros(len(points), np.float32)
+    transmit = np.ones(len(points), np.float64)
     cols = np.empty_like(rows)
     for axis in range(3):
         # Column of channel c of the face facing the cone: (4·face + c)·n + row.
         base = np.where(dirs[:, axis] > 0, (2 * axis + 1) * 4 * n, 2 * axis * 4 * n)
         np.add(rows, base[None, :], out=cols)
-        w_axis = weights * d2[axis]
         for c in range(4):
             if c:
                 cols += n
-            values = np.take(flat, cols).astype(np.float32, copy=False)
-            out[c] += np.einsum("km,km->m", w_axis, values)
+            values = np.einsum("km,km->m", weights, np.take(flat, cols).astype(np.float32, copy=False))
+            if c < 3:
+                colour[c] += d2[axis] * values
+            else:
+                blended_alpha += d2[axis] * values
+                # Per-axis extinction: τ_a = −ln(1 − α_a), α = 1 − exp(−Σ |d_a|·τ_a), so a face
+                # that is opaque along an axis stays opaque to every cone crossing it.
+                transmit *= np.power(np.clip(1.0 - values, 0.0, 1.0), np.abs(dirs[:, axis]))
+    alpha = (1.0 - transmit).astype(np.float32) if extinction else blended_alpha
+    out = np.empty((4, len(points)), np.float32)
+    out[:3] = colour * (alpha / np.maximum(blended_alpha, 1e-6))
+    out[3] = alpha
     return out
 
 
 def sample_levels(levels, points: np.ndarray, level: np.ndarray, root_origin: np.ndarray,
-                  root_size: float, dirs: np.ndarray | None = None) -> np.ndarray:
+                  root_size: float, dirs: np.ndarray | None = None,
+                  extinction: bool = True) -> np.ndarray:
     """Trilinear within levels floor(level) and floor(level)+1, linear between them.
 
     levels : per-level objects 0..depth; points : (N, 3) float64; level : (N,) float, clipped
@@ -274,6 +289,6 @@ def sample_levels(levels, points: np.ndarray, level: np.ndarray, root_origin: np
                 part = trilinear(levels[ell], points[idx], root_origin, node_size)
             else:
                 part = trilinear_directional(levels[ell], points[idx], dirs[idx], root_origin,
-                                             node_size)
+                                             node_size, extinction=extinction)
             out[:, idx] += w[chunk] * part
     return out

@@ -533,6 +533,25 @@ def test_wall_across_x_is_opaque_along_x_and_half_covered_along_y_and_z():
     assert along_y[octree.depth - 1] == 0.5  # half covered just above the voxels
 
 
+def test_extinction_keeps_a_wall_opaque_to_slanted_cones():
+    rng = np.random.default_rng(40)
+    res = 16
+    grid = make_grids([0, 0, 0], 1.0, res, 1)[0]
+    yz = np.argwhere(np.ones((res, res), bool))
+    cells = np.column_stack([np.full(len(yz), 5), yz])  # one-voxel wall x = 5
+    octree = build_octree([voxels(grid, cells, rng)], [np.full((len(cells), 3), 2.0, np.float32)],
+                          dense_depth=2)
+    # The centre of the level-(depth−1) node holding the wall: opaque along x, half along y/z.
+    centre = grid.origin + np.array([5.0, 9.0, 9.0]) * grid.span
+    slanted = np.array([[-np.cos(np.radians(50)), np.sin(np.radians(50)), 0.0]])
+    level = np.array([float(octree.depth - 1)])
+    rad, occ = octree.sample_directional(centre[None], level, slanted)
+    _, blended = octree.sample_directional(centre[None], level, slanted, extinction=False)
+    assert occ[0] == pytest.approx(1.0, abs=1e-5)  # opaque along x, so opaque at 50° too
+    assert blended[0] < 0.99  # the plain d² blend lets a slanted cone through
+    np.testing.assert_allclose(rad[0], 2.0, rtol=1e-4)  # colour per unit opacity is kept
+
+
 def test_sample_directional_equals_sample_for_a_solid_block():
     rng = np.random.default_rng(36)
     res = 16
@@ -548,7 +567,7 @@ def test_sample_directional_equals_sample_for_a_solid_block():
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     dirs[:10] = np.eye(3)[rng.integers(0, 3, 10)] * rng.choice([-1, 1], (10, 1))  # axes
     rad_iso, occ_iso = octree.sample(points, level)
-    rad_dir, occ_dir = octree.sample_directional(points, level, dirs)
+    rad_dir, occ_dir = octree.sample_directional(points, level, dirs, extinction=False)
     assert occ_iso.max() > 0.99 and (occ_iso == 0).any()
     np.testing.assert_allclose(rad_dir, rad_iso, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(occ_dir, occ_iso, rtol=1e-5, atol=1e-6)
@@ -577,7 +596,7 @@ def test_sample_directional_blends_the_faces_facing_the_cone_by_squared_directio
                              for ell, v in faces.items()}
                 part = brute_trilinear(as_levels, points[moving], level[moving], lo, size)
                 want[moving] += dirs[moving, axis, None] ** 2 * part
-        got_rad, got_occ = octree.sample_directional(points, level, dirs)
+        got_rad, got_occ = octree.sample_directional(points, level, dirs, extinction=False)
         assert got_rad.shape == (m, 3) and got_occ.dtype == np.float32
         np.testing.assert_allclose(got_rad, want[:, :3], rtol=1e-4, atol=1e-5)
         np.testing.assert_allclose(got_occ, want[:, 3], rtol=1e-4, atol=1e-5)
