@@ -49,6 +49,12 @@ def timing_text(timings: dict[str, float]) -> str:
     return ", ".join(f"{name} {seconds * 1000:.1f} ms" for name, seconds in timings.items())
 
 
+def octree_text(octree) -> str:
+    """Node count and MB per octree level, e.g. 'L6 dense 13,184 nodes 17.3 MB'."""
+    return "; ".join(f"L{s.level} {s.kind} {s.nodes:,} nodes {s.bytes / 2**20:.2f} MB"
+                     for s in octree.stats())
+
+
 class VOXGI_OT_update(bpy.types.Operator):
     """Transform the voxel caches into camera-anchored cascades, inject direct light and rebuild the octree for the current frame"""
 
@@ -82,6 +88,7 @@ class VOXGI_OT_update(bpy.types.Operator):
             session.gi_timings = {"snapshot": snap_seconds, **state.timings}
             counts = ", ".join(f"{n:,}" for n in state.voxel_counts)
             session.last_report = [("INFO", f"GI updated: cascade voxels {counts}"),
+                                   ("INFO", f"octree: {octree_text(state.octree)}"),
                                    ("INFO", timing_text(session.gi_timings)),
                                    *[("WARNING", w) for w in state.warnings]]
 
