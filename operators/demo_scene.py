@@ -8,6 +8,7 @@ towards -Y where the camera stands.
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from typing import NamedTuple
 
 import bmesh
@@ -99,7 +100,7 @@ def tube_ring_weights(heights: np.ndarray, bone_count: int, length: float) -> np
 
 
 class BoneSpec(NamedTuple):
-    """A bone to create: head/tail in armature space (metres), parent by name."""
+    """A bone to create: head/tail in armature space (metres), parent by name, roll in radians."""
 
     name: str
     head: tuple[float, float, float]
@@ -107,16 +108,19 @@ class BoneSpec(NamedTuple):
     parent: str | None = None
     deform: bool = True
     connect: bool = False
+    roll: float = 0.0
 
 
-def add_bones(scene, armature_obj, bones) -> None:
-    """Create ``bones`` (``BoneSpec``, parents before children) in ``armature_obj``.
+@contextmanager
+def armature_edit_mode(scene, armature_obj, view_layer=None):
+    """Edit mode on ``armature_obj`` for the duration of the block; yields its edit bones.
 
-    Bones only exist in edit mode: this enters it through a context override on the
-    scene's first view layer (background-safe), returns to object mode and restores
-    the active object.
+    Bones only exist in edit mode: this enters it through a context override on
+    ``view_layer`` (default: the scene's first; background-safe), returns to object mode
+    and restores the active object. Raises RuntimeError when Blender refuses the mode
+    (linked or hidden armature).
     """
-    view_layer = scene.view_layers[0]
+    view_layer = view_layer or scene.view_layers[0]
     previous = view_layer.objects.active
     view_layer.objects.active = armature_obj
     try:
@@ -124,15 +128,23 @@ def add_bones(scene, armature_obj, bones) -> None:
             scene=scene, view_layer=view_layer, active_object=armature_obj, object=armature_obj
         ):
             bpy.ops.object.mode_set(mode="EDIT")
-            edit_bones = armature_obj.data.edit_bones
-            for spec in bones:
-                bone = edit_bones.new(spec.name)
-                bone.head, bone.tail, bone.use_deform = spec.head, spec.tail, spec.deform
-                if spec.parent is not None:
-                    bone.parent, bone.use_connect = edit_bones[spec.parent], spec.connect
-            bpy.ops.object.mode_set(mode="OBJECT")
+            try:
+                yield armature_obj.data.edit_bones
+            finally:
+                bpy.ops.object.mode_set(mode="OBJECT")
     finally:
         view_layer.objects.active = previous
+
+
+def add_bones(scene, armature_obj, bones) -> None:
+    """Create ``bones`` (``BoneSpec``, parents before children) in ``armature_obj``."""
+    with armature_edit_mode(scene, armature_obj) as edit_bones:
+        for spec in bones:
+            bone = edit_bones.new(spec.name)
+            bone.head, bone.tail, bone.use_deform = spec.head, spec.tail, spec.deform
+            bone.roll = spec.roll
+            if spec.parent is not None:
+                bone.parent, bone.use_connect = edit_bones[spec.parent], spec.connect
 
 
 def _skinned_tube(scene, collection, material):

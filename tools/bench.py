@@ -24,6 +24,7 @@ if str(TOOLS) not in sys.path:
 # name -> (module in tools/, one-line description)
 SECTIONS = {
     "voxelize": ("bench_voxelize", "surface voxelization vs trimesh and Open3D"),
+    "gfg": ("bench_gfg", "GFG file write/read throughput vs numpy.save/numpy.load"),
     "gi": ("bench_gi", "per-update time, preview time and Cycles time/error (runs in .venv)"),
 }
 

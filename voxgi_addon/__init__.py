@@ -10,4 +10,5 @@ Modules, one concept each:
   voxel_packing     the thesis' packed words
   voxel_cache       VoxelCache
   mesh_caches       the scene voxelization job
+  gfg/              GFG-like asset files: spec, writer, reader, CLI (docs/gfg.md)
 """

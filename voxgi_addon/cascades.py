@@ -2,9 +2,23 @@
 
 Every update, each object's cached voxels (object space, built once by ``mesh_caches``) are
 transformed to world space — one matrix for static and rigid objects, per-voxel blended bone
-matrices for skinned ones — snapped to the cascade lattice by the cell holding the voxel's
-centre, culled outside the grid, and dropped where the finer cascade already holds that
-mesh. Voxels landing in one cell are merged. Nothing is re-voxelized.
+matrices for skinned ones — placed on the cascade lattice, culled outside the grid, and dropped
+where the finer cascade already holds that mesh. Voxels landing in one cell are merged. No mesh
+is re-voxelized.
+
+Placing a voxel (``transform_mode``):
+
+* ``'patch'`` (default; the thesis' "voxel fractions" future work): every cache voxel stores its
+  surface plane (normal + plane offset, ``voxel_packing``). The voxel becomes a small planar
+  patch — its plane clipped to its own object-space cube, shrunk by ``PATCH_SHRINK`` voxel — which
+  is transformed by the voxel's matrix and conservatively voxelized into the cascade lattice
+  with the exact ``voxelize_triangles``. The patch can touch up to a few cells; each touched cell
+  gets the voxel's attributes. Because the shrunk patch lies strictly inside its cube, a
+  rotation by multiples of 90° or a whole-voxel move (cache lattice onto grid lattice) lands
+  every patch inside exactly one cell: those transforms equal re-voxelization exactly, as in
+  centre mode. At other angles the result follows the transformed surface, not its voxel
+  centres (≥ 0.95 IoU against re-voxelizing at 45° in the tests, instead of ~0.6).
+* ``'centre'``: the cell holding the transformed voxel centre (Yalçıner 2016, Fig. 4.15).
 
 Grids follow ``docs/gi_pipeline.md``: cascade 0 is the finest, span_i = base_span·2^i, all
 share one centre snapped to the coarsest span, so cascade i−1 covers exactly the cells
@@ -21,12 +35,15 @@ from .errors import VoxGIError
 from .mesh_caches import CacheBuildResult
 from .skinning import blend_matrices, skin_matrices, transform_normals, transform_points
 from .snapshot import ObjectData, SceneSnapshot
+from .voxel_attributes import MAX_PATCH_VERTICES, PATCH_SHRINK, voxel_patches
 from .voxel_cache import VoxelCache
+from .voxelize import voxelize_triangles
 
 __all__ = ["CascadeGrid", "CascadeVoxels", "place_cascades", "build_cascades", "merge_voxels",
-           "transformed_cell_bounds"]
+           "transformed_cell_bounds", "voxel_patches", "TRANSFORM_MODES", "PATCH_SHRINK"]
 
 MAX_CASCADES = 8
+TRANSFORM_MODES = ("patch", "centre")
 _SPAN_TOLERANCE = 1e-9
 
 
@@ -77,7 +94,8 @@ class CascadeVoxels:
 
     grid : the cascade. cells : (N, 3) int32 unique cells, sorted by (x, y, z).
     albedo : (N, 3) float32 mean linear RGB. normal : (N, 3) float32 unit world normals.
-    specular : (N,) float32 mean. count : (N,) int32 cache voxels merged into the cell.
+    specular : (N,) float32 mean. count : (N,) int32 cache voxels merged into the cell (in
+        patch mode: whose patch touches the cell).
     mesh_has_finer : (N,) bool, True when every voxel merged into the cell came from a mesh
         that also has a cache at cascade i−1 (inside the finer cascade's region such voxels
         are dropped, so there it is always False).
@@ -230,6 +248,84 @@ def _object_voxels(cache: VoxelCache, transform: _ObjectTransform, grid: Cascade
     return cells[keep], attrs.albedo[keep], normal, attrs.specular[keep]
 
 
+def _patch_triangles(count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Fan triangles of polygons with ``count`` vertices (slots of 6 per voxel).
+
+    Returns triangles (T, 3) int64 vertex indices into the flattened (N·6) vertex array and
+    voxel (T,) int64. A polygon with fewer than 3 vertices becomes the point (slot 0) thrice,
+    so the caller must put the voxel centre there.
+    """
+    n = len(count)
+    base = np.arange(n, dtype=np.int64) * MAX_PATCH_VERTICES
+    k = np.arange(1, MAX_PATCH_VERTICES - 1)  # fan triangles (0, k, k+1)
+    use = (k[None, :] + 1 < count[:, None]) | ((k[None, :] == 1) & (count[:, None] < 3))
+    voxel, j = np.nonzero(use)
+    point = count[voxel] < 3
+    tri = np.stack([base[voxel], base[voxel] + np.where(point, 0, k[j]),
+                    base[voxel] + np.where(point, 0, k[j] + 1)], axis=1)
+    return tri, voxel
+
+
+def _max_scale(matrices: np.ndarray) -> float:
+    """Largest spectral norm of the linear parts of (M, 4, 4) matrices: bounds how far any
+    convex combination of them stretches a patch."""
+    return float(np.linalg.norm(matrices[:, :3, :3], ord=2, axis=(1, 2)).max())
+
+
+def _object_patch_voxels(cache: VoxelCache, transform: _ObjectTransform, grid: CascadeGrid,
+                         drop_finer: bool):
+    """Like ``_object_voxels`` but every voxel is its surface patch, voxelized in the grid.
+
+    Returns one row per (voxel, touched cell): cells (n, 3) int64, albedo, normal, specular.
+    """
+    res = grid.resolution
+    all_m = transform.all_matrices()
+    lo, hi = transformed_cell_bounds(cache, all_m, grid)
+    if (hi < -1).any() or (lo > res).any():
+        return None  # the whole object misses this cascade (patches reach ≤ 1 cell past a tie)
+    if drop_finer:
+        f0, f1 = _finer_region(grid)
+        if (lo >= f0 + 1).all() and (hi < f1 - 1).all():
+            return None
+    attrs = cache.attributes()
+    matrices = transform.per_voxel(cache, attrs)
+    object_centres = cache.centres()
+    centres = transform_points(matrices, object_centres)
+    # a patch stays within (√3/2)·span·scale of its centre: cull by the centre's cell first
+    margin = int(np.ceil(0.87 * _max_scale(all_m))) + 1
+    centre_cells = grid.cells_of(centres)
+    keep = ((centre_cells >= -margin) & (centre_cells < res + margin)).all(axis=1)
+    if drop_finer:
+        keep &= ~((centre_cells >= f0 + margin) & (centre_cells < f1 - margin)).all(axis=1)
+    idx = np.flatnonzero(keep)
+    if not len(idx):
+        return None
+    corners, count = cache.patches  # object space, relative to the centres; cached per cache
+    count = count[idx].astype(np.int64)
+    m = matrices if matrices.ndim == 2 else matrices[idx]
+    if m.ndim == 2:  # rotate the corners, move the centres
+        world = (corners[idx].reshape(-1, 3) @ m[:3, :3].T.astype(np.float32)).reshape(-1, 6, 3)
+        world = world + centres[idx, None, :]
+    else:
+        poly = corners[idx].astype(np.float64) + object_centres[idx, None, :]
+        world = np.einsum("nij,nkj->nki", m[:, :3, :3], poly) + m[:, None, :3, 3]
+    tri, tri_voxel = _patch_triangles(count)
+    surface = voxelize_triangles(world.reshape(-1, 3) - grid.origin, tri, grid.span)
+    # unique (voxel, cell) contacts: a voxel counts once per cell it touches
+    pair_voxel = tri_voxel[surface.triangle_of_pair]
+    pair_key = np.unique(pair_voxel * len(surface.cells) + surface.cell_of_pair)
+    pv, pc = np.divmod(pair_key, len(surface.cells))
+    cells = surface.cells[pc].astype(np.int64)
+    inside = grid.contains(cells)
+    if drop_finer:
+        inside &= ~((cells >= f0) & (cells < f1)).all(axis=1)
+    if not inside.any():
+        return None
+    pv, cells = pv[inside], cells[inside]
+    normal = transform_normals(m, attrs.normal[idx])[pv]
+    return cells, attrs.albedo[idx[pv]], normal, attrs.specular[idx[pv]]
+
+
 def merge_voxels(grid: CascadeGrid, cells, albedo, normal, specular, has_finer) -> CascadeVoxels:
     """Merge voxels sharing a cell: mean albedo/specular, renormalised mean normal, count.
 
@@ -282,7 +378,8 @@ def _cache_at(caches: CacheBuildResult, key: str, grid: CascadeGrid) -> tuple[Vo
 
 
 def build_cascades(caches: CacheBuildResult, snapshot: SceneSnapshot, grids: list[CascadeGrid],
-                   warnings: list[str] | None = None) -> list[CascadeVoxels]:
+                   warnings: list[str] | None = None,
+                   transform_mode: str = "patch") -> list[CascadeVoxels]:
     """World voxels of every cascade from the cached voxels (no re-voxelization).
 
     caches : the voxelization result (caches per mesh key and cascade, object bindings).
@@ -290,8 +387,14 @@ def build_cascades(caches: CacheBuildResult, snapshot: SceneSnapshot, grids: lis
         so moving objects, bones or the camera only needs a new snapshot.
     grids : from ``place_cascades`` (finest first); cache spans must match the grid spans.
     warnings : optional list that receives messages about objects that could not be placed.
+    transform_mode : ``'patch'`` (default) voxelizes each voxel's transformed surface patch;
+        ``'centre'`` snaps its transformed centre (see the module docstring). In patch mode
+        ``count`` is the number of cache voxels whose patch touches the cell.
     Returns one ``CascadeVoxels`` per grid. Raises VoxGIError when the caches do not fit.
     """
+    if transform_mode not in TRANSFORM_MODES:
+        raise VoxGIError(f"transform mode must be one of {TRANSFORM_MODES}, got {transform_mode!r}")
+    place = _object_patch_voxels if transform_mode == "patch" else _object_voxels
     _check_grids(grids)
     warnings = [] if warnings is None else warnings
     parts: list[list[tuple]] = [[] for _ in grids]
@@ -311,7 +414,7 @@ def build_cascades(caches: CacheBuildResult, snapshot: SceneSnapshot, grids: lis
             cache, has_finer = _cache_at(caches, binding.cache_key, grid)
             if cache is None or cache.voxel_count == 0:
                 continue
-            voxels = _object_voxels(cache, transform, grid, drop_finer=has_finer)
+            voxels = place(cache, transform, grid, drop_finer=has_finer)
             if voxels is not None:
                 parts[grid.index].append((*voxels, np.full(len(voxels[0]), has_finer)))
     out = []

@@ -2,16 +2,19 @@
 
 Struct-of-arrays of u32 words (see ``voxel_packing``). Cells are stored relative to
 ``origin_cell``, the first lattice cell of the mesh's AABB at this span, so a cache holds at
-most 1024 cells per axis. Object-space centre of a voxel: ``(origin_cell + cell + 0.5) * span``.
+most 1024 cells per axis. Object-space centre of a voxel: ``(origin_cell + cell + 0.5) * span``;
+the top byte of its normal word places the voxel's surface plane relative to that centre
+(``voxel_packing``).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from . import voxel_packing as vp
-from .voxel_attributes import VoxelAttributes
+from .voxel_attributes import PATCH_SHRINK, VoxelAttributes, voxel_patches
 
 
 @dataclass(frozen=True)
@@ -60,13 +63,28 @@ class VoxelCache:
         return (self.cells() + 0.5) * self.span
 
     def attributes(self) -> VoxelAttributes:
-        """Unpack to float attributes (normals renormalised)."""
+        """Unpack to float attributes (normals renormalised; ``plane_offset`` (N,) in metres)."""
         rgba = vp.unpack_unorm8x4(self.colors)
         n = vp.unpack_normals(self.normals)
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
         w = vp.unpack_weights(self.weights) if self.weights is not None else None
         i = vp.unpack_indices(self.bone_indices) if self.bone_indices is not None else None
-        return VoxelAttributes(rgba[:, :3], n, rgba[:, 3], w, i)
+        offset = vp.unpack_plane_offsets(self.normals) * np.float32(self.span)
+        return VoxelAttributes(rgba[:, :3], n, rgba[:, 3], w, i, offset)
+
+    @cached_property
+    def patches(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each voxel's surface patch: its plane clipped to its cube shrunk by PATCH_SHRINK.
+
+        Returns corners (N, 6, 3) float32 object-space metres relative to ``centres()`` and
+        count (N,) int8 (< 3: no usable patch, all corners 0 — place the voxel by its centre).
+        Computed on first use and kept (the cache is immutable): 73 bytes per voxel.
+        """
+        attrs = self.attributes()
+        corners, count = voxel_patches(attrs.normal, attrs.plane_offset,
+                                       (0.5 - PATCH_SHRINK) * self.span)
+        corners[count < 3] = 0.0
+        return corners.astype(np.float32), count.astype(np.int8)
 
 
 def pack_cache(key: str, cascade: int, span: float, origin_cell, dims, cells,
@@ -78,7 +96,8 @@ def pack_cache(key: str, cascade: int, span: float, origin_cell, dims, cells,
         key=key, cascade=cascade, span=float(span), origin_cell=origin,
         dims=np.asarray(dims, np.int64),
         positions=vp.pack_positions(np.asarray(cells, np.int64) - origin, int(finer_exists)),
-        normals=vp.pack_normals(attrs.normal),
+        normals=vp.pack_normals(attrs.normal, None if attrs.plane_offset is None else
+                                np.asarray(attrs.plane_offset, np.float64) / float(span)),
         colors=vp.pack_unorm8x4(rgba),
         weights=None if attrs.weights is None else vp.pack_weights(attrs.weights),
         bone_indices=None if attrs.bone_indices is None else vp.pack_indices(attrs.bone_indices),

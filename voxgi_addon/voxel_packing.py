@@ -2,7 +2,14 @@
 
 position word : x bits 0-9, y 10-19, z 20-29 (cells relative to the mesh AABB, so < 1024 per
                 axis), bits 30-31 a flag (1 = a finer cascade also holds this mesh).
-normal word   : SNORM8 x, y, z in bits 0-7, 8-15, 16-23; top byte free (0 in caches).
+normal word   : SNORM8 x, y, z in bits 0-7, 8-15, 16-23; bits 24-31 SNORM8 plane offset: the
+                signed distance along the normal from the voxel centre to the voxel's surface
+                plane, as a fraction of the normal's reach ½(|nx| + |ny| + |nz|) voxel spans
+                (of the stored, quantised normal) — the farthest that plane can be from the
+                centre and still touch the voxel cube: ½ for an axis normal, up to √3/2 (half
+                the diagonal). So every code is a plane through the voxel and the step is at
+                most √3/2 / 127 ≈ 0.0068 voxel. The code -128 (never produced by SNORM8
+                rounding) means "no plane": the surface only grazes the voxel (NaN unpacked).
 colour word   : UNORM8 R, G, B, A = albedo RGB and specular.
 weight word   : UNORM8 × 4 bone weights, quantised so the four bytes sum to exactly 255.
 index word    : u8 × 4 bone indices.
@@ -45,16 +52,52 @@ def _word_to_bytes(words: np.ndarray, count: int) -> np.ndarray:
     return np.stack([(w >> np.uint32(8 * i)) & np.uint32(255) for i in range(count)], axis=1).astype(np.uint8)
 
 
-def pack_normals(normals: np.ndarray) -> np.ndarray:
-    """(N, 3) float unit vectors → (N,) uint32, SNORM8 per component (round to nearest)."""
-    q = np.clip(np.rint(np.asarray(normals, np.float64) * 127.0), -127, 127).astype(np.int64)
-    return _bytes_to_word(q & 255)
+def _snorm8(values: np.ndarray) -> np.ndarray:
+    """Float in [-1, 1] → int64 in [-127, 127] (round to nearest, clamped, NaN → 0)."""
+    v = np.nan_to_num(np.asarray(values, np.float64), nan=0.0)
+    return np.clip(np.rint(v * 127.0), -127, 127).astype(np.int64)
+
+
+def plane_reach(normals: np.ndarray) -> np.ndarray:
+    """(N,) ½·|n|₁/|n|₂ of (N, 3) normals (any length): in voxel spans, the largest distance
+    from the voxel centre at which a plane with that normal still touches the voxel cube
+    (0 for a zero vector)."""
+    n = np.asarray(normals, np.float64)
+    length = np.linalg.norm(n, axis=1)
+    return np.divide(0.5 * np.abs(n).sum(axis=1), length, out=np.zeros(len(n)), where=length > 0)
+
+
+def pack_normals(normals: np.ndarray, plane_offsets: np.ndarray | None = None) -> np.ndarray:
+    """(N, 3) float unit vectors → (N,) uint32, SNORM8 per component (round to nearest).
+
+    plane_offsets : optional (N,) signed plane offsets in voxel spans, stored SNORM8 in the top
+    byte as a fraction of the quantised normal's ``plane_reach`` (clamped to it); NaN stores
+    the "no plane" code -128. Omitted: the top byte is 0 (the plane through the centre).
+    """
+    q = _snorm8(normals)
+    words = _bytes_to_word(q & 255)
+    if plane_offsets is not None:
+        d = np.asarray(plane_offsets, np.float64).reshape(-1)
+        reach = plane_reach(q)
+        frac = np.divide(np.nan_to_num(d), reach, out=np.zeros(len(d)), where=reach > 0)
+        top = np.where(np.isnan(d), -128, _snorm8(frac)) & 255
+        words |= top.astype(np.uint32) << np.uint32(24)
+    return words
 
 
 def unpack_normals(words: np.ndarray) -> np.ndarray:
     """(N,) uint32 → (N, 3) float32 in [-1, 1] (error ≤ 1/254 per component)."""
     b = _word_to_bytes(words, 3).view(np.int8).astype(np.float32)
     return np.maximum(b / 127.0, -1.0)
+
+
+def unpack_plane_offsets(words: np.ndarray) -> np.ndarray:
+    """(N,) uint32 normal words → (N,) float32 plane offsets in voxel spans (error ≤ 1/254 of
+    the normal's reach ≤ 0.0035 voxel), NaN for the "no plane" code."""
+    w = np.asarray(words, dtype=np.uint32)
+    top = (w >> np.uint32(24)).astype(np.uint8).view(np.int8)
+    reach = plane_reach(_word_to_bytes(w, 3).view(np.int8))
+    return np.where(top == -128, np.nan, top / 127.0 * reach).astype(np.float32)
 
 
 def pack_unorm8x4(values: np.ndarray) -> np.ndarray:
@@ -68,20 +111,21 @@ def unpack_unorm8x4(words: np.ndarray) -> np.ndarray:
     return _word_to_bytes(words, 4).astype(np.float32) / 255.0
 
 
-def quantize_weights(weights: np.ndarray) -> np.ndarray:
-    """(N, 4) weights (any scale) → (N, 4) uint8 summing to exactly 255 (or 0 for a zero row).
+def quantize_weights(weights: np.ndarray, levels: int = 255) -> np.ndarray:
+    """(N, 4) weights (any scale) → (N, 4) integers summing to exactly ``levels`` (or 0 for a
+    zero row): uint8 for the default 255, uint16 up to 65535.
 
     Largest-remainder rounding, so a normalised set of weights stays normalised once packed.
     """
     w = np.clip(np.nan_to_num(np.asarray(weights, np.float64)), 0.0, None)
     total = w.sum(axis=1, keepdims=True)
-    scaled = np.divide(w * 255.0, total, out=np.zeros_like(w), where=total > 0)
+    scaled = np.divide(w * float(levels), total, out=np.zeros_like(w), where=total > 0)
     floor = np.floor(scaled)
-    missing = (np.where(total[:, 0] > 0, 255, 0) - floor.sum(axis=1)).astype(np.int64)
+    missing = (np.where(total[:, 0] > 0, levels, 0) - floor.sum(axis=1)).astype(np.int64)
     order = np.argsort(-(scaled - floor), axis=1, kind="stable")
     ranks = np.argsort(order, axis=1)
     floor += ranks < missing[:, None]
-    return floor.astype(np.uint8)
+    return floor.astype(np.uint8 if levels <= 255 else np.uint16)
 
 
 def pack_weights(weights: np.ndarray) -> np.ndarray:

@@ -577,7 +577,8 @@ def test_unregister_gives_up_on_a_job_that_ignores_cancel(interactive, voxgi, mo
     try:
         start = time.perf_counter()
         voxgi.unregister()
-        assert time.perf_counter() - start < 2.0 and worker.is_alive() and worker.daemon
+        # It returned long before the stubborn job would let go (TIMEOUT), leaving it running.
+        assert time.perf_counter() - start < TIMEOUT / 3 and worker.is_alive() and worker.daemon
     finally:
         release.set()
         voxgi.register()

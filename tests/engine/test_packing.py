@@ -51,3 +51,32 @@ def test_weights_stay_normalised_and_close(w):
 def test_bone_indices_round_trip():
     idx = np.array([[0, 1, 2, 255], [7, 7, 0, 3]])
     assert (vp.unpack_indices(vp.pack_indices(idx)) == idx).all()
+
+
+@settings(max_examples=200, deadline=None)
+@given(arrays(np.float64, (64, 3), elements=st.floats(-1, 1)),
+       arrays(np.float64, (64,), elements=st.floats(-1, 1)))
+def test_plane_offsets_round_trip_within_one_127th_of_their_range(raw, frac):
+    """The top byte of the normal word: the plane offset in voxel spans, SNORM8 over the
+    quantised normal's reach ½|n|₁ (the farthest a plane with that normal still cuts the
+    voxel); unpacking it leaves the normal untouched."""
+    length = np.linalg.norm(raw, axis=1, keepdims=True)
+    n = np.where(length > 1e-3, raw / np.maximum(length, 1e-3), [0, 0, 1])
+    reach = vp.plane_reach(vp.unpack_normals(vp.pack_normals(n)))
+    offsets = frac * reach
+    words = vp.pack_normals(n, offsets)
+    back = vp.unpack_plane_offsets(words)
+    assert back.dtype == np.float32
+    assert np.abs(back - offsets).max() <= reach.max() / 127
+    np.testing.assert_array_equal(vp.unpack_normals(words), vp.unpack_normals(vp.pack_normals(n)))
+
+
+def test_plane_offset_range_and_the_no_plane_code():
+    n = np.array([[1, 0, 0], [0, -1, 0], [1, 1, 1], [1, 1, 1], [0, 0, 1]]) / np.sqrt([[1], [1], [3], [3], [1]])
+    reach = vp.plane_reach(n)
+    np.testing.assert_allclose(reach, [0.5, 0.5, np.sqrt(3) / 2, np.sqrt(3) / 2, 0.5])
+    words = vp.pack_normals(n, [0.25, 9.0, -9.0, np.nan, 0.0])  # beyond the reach: clamped
+    back = vp.unpack_plane_offsets(words)
+    np.testing.assert_allclose(back[:3], [0.25, 0.5, -np.sqrt(3) / 2], atol=0.5 * 0.5 / 127)
+    assert np.isnan(back[3]) and back[4] == 0 and (words[3] >> 24) == 0x80  # code -128
+    assert (vp.pack_normals(n) >> 24 == 0).all()  # no offsets given: the plane through the centre

@@ -1,0 +1,105 @@
+"""``python -m voxgi_addon.gfg info FILE`` / ``verify FILE``: inspect and check GFG files."""
+from __future__ import annotations
+
+import argparse
+import sys
+
+from . import data_types as dtypes
+from .container import kind_name
+from .errors import GFGError
+from .model import GFGScene
+from .reader import read_gfg, read_header, verify_checksums
+from .spec import Kind, Logic, NodeKind
+
+
+def _mesh_line(mesh) -> str:
+    parts = ", ".join(f"{Logic.NAMES[c.logic] if c.logic < len(Logic.NAMES) else c.logic} "
+                      f"{dtypes.name_of(c.data_type)}" for c in mesh.components)
+    index = "non-indexed" if mesh.indices is None else f"{len(mesh.indices)} indices ({mesh.indices.dtype.name})"
+    layout = "interleaved" if mesh.interleaved else "separate blocks"
+    skin = f", skeleton {mesh.skeleton}" if mesh.skeleton >= 0 else ""
+    return (f"'{mesh.name}': {mesh.vertex_count} vertices, {index}, {len(mesh.ranges)} material "
+            f"ranges{skin}; {parts} ({layout})")
+
+
+def _contents(scene: GFGScene) -> dict[bytes, list[str]]:
+    """One description per section of each known kind, in file order."""
+    kinds = [NodeKind.NAMES[n.kind] for n in scene.nodes]
+    counts = ", ".join(f"{kinds.count(k)} {k}" for k in NodeKind.NAMES if kinds.count(k))
+    posed = sum(n.pose is not None for n in scene.nodes)
+    voxels = scene.voxels
+    return {
+        Kind.STRINGS: ["strings"],
+        Kind.NODES: [f"{len(scene.nodes)} nodes ({counts or 'none'}), {posed} posed armatures"],
+        Kind.MATERIALS: [f"{len(scene.materials)} materials: "
+                         + ", ".join(f"'{m.name}'" for m in scene.materials)],
+        Kind.MESH: [_mesh_line(m) for m in scene.meshes],
+        Kind.SKELETON: [f"'{s.name}': {s.bone_count} bones" for s in scene.skeletons],
+        Kind.ANIMATION: [f"'{a.name}': {len(a.times)} keys × {a.rotations.shape[1]} bones, skeleton "
+                         f"{a.skeleton}{', hip translation' if a.hip_translations is not None else ''}"
+                         for a in scene.animations],
+        Kind.VOXEL_SET: [] if voxels is None else [
+            f"base span {voxels.base_span:g} m, {voxels.cascade_count} cascades, {len(voxels.keys)} "
+            f"meshes, {len(voxels.bindings)} bindings, {len(voxels.skipped)} skipped"],
+        Kind.VOXEL_CACHE: [] if voxels is None else [
+            f"'{c.key}' cascade {c.cascade} (span {c.span:g} m): {c.voxel_count} voxels"
+            f"{', skinned' if c.skinned else ''}" for c in voxels.caches],
+        Kind.PROBE_GRID: [f"{len(g.positions)} probes, {len(g.volume_cells)} volumes of "
+                          f"{'×'.join(str(int(d)) for d in g.dims)}" for g in scene.probe_grids],
+    }
+
+
+def info(path: str, out=print) -> int:
+    try:
+        _, header = read_header(path)
+    except GFGError as error:
+        out(f"{path}: {error}")
+        return 1
+    out(f"{path}: GFG {header.version[0]}.{header.version[1]}, {header.file_size} bytes, "
+        f"{len(header.sections)} sections")
+    problem = None
+    try:
+        contents = _contents(read_gfg(path, verify=False))
+    except GFGError as error:
+        contents, problem = {}, str(error)
+    seen: dict[bytes, int] = {}
+    out(f"{'#':>3}  kind  {'offset':>12}  {'size':>12}  crc32       contents")
+    for e in header.sections:
+        k = seen.get(e.kind, 0)
+        seen[e.kind] = k + 1
+        items = contents.get(e.kind)
+        text = items[k] if items and k < len(items) else ("(skipped: unknown kind)" if items is None and
+                                                          problem is None else "")
+        out(f"{e.index:>3}  {kind_name(e.kind):4}  {e.offset:>12}  {e.size:>12}  0x{e.crc:08X}  {text}")
+    if problem:
+        out(f"cannot describe the contents: {problem}")
+        return 1
+    return 0
+
+
+def verify(path: str, out=print) -> int:
+    try:
+        problems = verify_checksums(path)
+        if not problems:
+            read_gfg(path, verify=False)
+    except GFGError as error:
+        problems = [str(error)]
+    for p in problems:
+        out(f"{path}: {p}")
+    if not problems:
+        out(f"{path}: OK (header, every section checksum, count, offset and reference checked)")
+    return 1 if problems else 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m voxgi_addon.gfg", description=__doc__)
+    sub = ap.add_subparsers(dest="command", required=True)
+    sub.add_parser("info", help="print the sections, counts and sizes").add_argument("file")
+    sub.add_parser("verify", help="check every checksum and bound (exit 1 if any is wrong)") \
+        .add_argument("file")
+    args = ap.parse_args(argv)
+    return (info if args.command == "info" else verify)(args.file)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
