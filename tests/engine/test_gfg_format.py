@@ -221,6 +221,9 @@ def test_command_line_info_and_verify(scene, tmp_path):
     path.write_bytes(bytes(data))
     bad = _cli("verify", path)
     assert bad.returncode == 1 and "section 13 PRBG: crc" in bad.stdout
+    missing = _cli("info", tmp_path / "nope.gfg")
+    assert missing.returncode == 2 and "nope.gfg: cannot read: No such file" in missing.stderr
+    assert "Traceback" not in missing.stderr
 
 
 def test_additions_of_a_newer_minor_version_are_read_past(scene):

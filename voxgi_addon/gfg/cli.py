@@ -98,7 +98,11 @@ def main(argv=None) -> int:
     sub.add_parser("verify", help="check every checksum and bound (exit 1 if any is wrong)") \
         .add_argument("file")
     args = ap.parse_args(argv)
-    return (info if args.command == "info" else verify)(args.file)
+    try:
+        return (info if args.command == "info" else verify)(args.file)
+    except OSError as error:  # a missing or unreadable file: say so, no traceback
+        print(f"{args.file}: cannot read: {error.strerror or error}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
