@@ -35,7 +35,7 @@ from .errors import VoxGIError
 from .mesh_caches import CacheBuildResult
 from .skinning import blend_matrices, skin_matrices, transform_normals, transform_points
 from .snapshot import ObjectData, SceneSnapshot
-from .voxel_attributes import MAX_PATCH_VERTICES, PATCH_SHRINK, voxel_patches
+from .cube_clipping import MAX_PATCH_VERTICES, PATCH_SHRINK, voxel_patches
 from .voxel_cache import VoxelCache
 from .voxelize import voxelize_triangles
 

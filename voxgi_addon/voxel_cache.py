@@ -14,7 +14,8 @@ from functools import cached_property
 import numpy as np
 
 from . import voxel_packing as vp
-from .voxel_attributes import PATCH_SHRINK, VoxelAttributes, voxel_patches
+from .cube_clipping import PATCH_SHRINK, voxel_patches
+from .voxel_attributes import VoxelAttributes
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from voxgi_addon.mesh_caches import CacheBuildResult, build_scene_caches
 from voxgi_addon.skinning import blend_matrices, skin_matrices, skin_points
 from voxgi_addon.snapshot import ArmatureData
 from voxgi_addon.triangle_box import brute_force_cells
-from voxgi_addon.voxel_attributes import clip_to_cells, patch_areas, voxel_patches
+from voxgi_addon.cube_clipping import clip_to_cells, patch_areas, voxel_patches
 from voxgi_addon.voxelize import LATTICE_OFFSET, voxelize_triangles
 
 SPAN = 0.0625  # a power of two: whole-voxel moves are exact in floating point
