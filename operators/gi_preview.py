@@ -19,16 +19,9 @@ from ..voxgi_addon.mesh_caches import build_scene_caches
 from ..voxgi_addon.preview import render_passes
 from ..ui.properties import cone_settings, gi_settings
 from . import engine_jobs
-from .scene_snapshot import take_snapshot
+from .scene_poll import VoxGISceneOperator
 from .session import scene_session
-
-
-def _snapshot(context):
-    start = time.perf_counter()
-    snapshot = take_snapshot(context, context.evaluated_depsgraph_get())
-    if not snapshot.objects:
-        raise VoxGIError("Nothing to light: the view layer has no visible mesh object with faces")
-    return snapshot, time.perf_counter() - start
+from .voxelize import snapshot_or_error
 
 
 def _caches_for(context, snapshot):
@@ -55,24 +48,17 @@ def octree_text(octree) -> str:
                      for s in octree.stats())
 
 
-class VOXGI_OT_update(bpy.types.Operator):
+class VOXGI_OT_update(VoxGISceneOperator, bpy.types.Operator):
     """Transform the voxel caches into camera-anchored cascades, inject direct light and rebuild the octree for the current frame"""
 
     bl_idname = "voxgi.update"
     bl_label = "Update GI"
     bl_options = {"REGISTER"}
 
-    @classmethod
-    def poll(cls, context):
-        if context.scene is None or not hasattr(context.scene, "voxgi"):
-            cls.poll_message_set("No scene with VoxGI settings")
-            return False
-        return True
-
     def execute(self, context):
         scene_name = context.scene.name_full
         try:
-            snapshot, snap_seconds = _snapshot(context)
+            snapshot, snap_seconds = snapshot_or_error(context)
             caches = _caches_for(context, snapshot)
         except VoxGIError as error:
             self.report({"ERROR"}, str(error))
@@ -105,7 +91,7 @@ class VOXGI_OT_update(bpy.types.Operator):
         return {"FINISHED"} if submitted.state == "done" else {"CANCELLED"}
 
 
-class VOXGI_OT_render_preview(bpy.types.Operator):
+class VOXGI_OT_render_preview(VoxGISceneOperator, bpy.types.Operator):
     """Render the GI preview of the scene camera to a multilayer OpenEXR file with Cycles-named passes"""
 
     bl_idname = "voxgi.render_preview"
@@ -129,7 +115,7 @@ class VOXGI_OT_render_preview(bpy.types.Operator):
             if scene.camera is None:
                 raise VoxGIError("the scene has no camera to render the preview from")
             start = time.perf_counter()
-            snapshot, snap_seconds = _snapshot(context)
+            snapshot, snap_seconds = snapshot_or_error(context)
             caches = _caches_for(context, snapshot)
             state = update_gi(snapshot, caches, gi_settings(scene.voxgi))
             passes, render_timings = render_passes(snapshot, state, width, height,

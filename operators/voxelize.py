@@ -18,6 +18,7 @@ from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.mesh_caches import build_scene_caches
 from . import engine_jobs
 from .scene_snapshot import snapshot_summary, take_snapshot
+from .scene_poll import VoxGISceneOperator
 from .session import scene_session
 from .voxelize_report import cascade_lines, timing_line, warning_lines
 
@@ -29,26 +30,19 @@ CANCELLED_MESSAGE = "Voxelization cancelled; previous caches kept"
 JOB_LABEL = "Voxelizing"
 
 
-class VOXGI_OT_voxelize(bpy.types.Operator):
+class VOXGI_OT_voxelize(VoxGISceneOperator, bpy.types.Operator):
     """Voxelize every visible mesh at each cascade's span and keep the caches for this session"""
 
     bl_idname = "voxgi.voxelize"
     bl_label = "Voxelize"
     bl_options = {"REGISTER"}
 
-    @classmethod
-    def poll(cls, context):
-        if context.scene is None or not hasattr(context.scene, "voxgi"):
-            cls.poll_message_set("No scene with VoxGI settings")
-            return False
-        return True
-
     def execute(self, context):
         scene_name = context.scene.name_full
         settings = context.scene.voxgi
         base_span, cascade_count = settings.base_span, settings.cascade_count
         try:
-            snapshot, snapshot_seconds = _snapshot(context)
+            snapshot, snapshot_seconds = snapshot_or_error(context)
         except VoxGIError as error:
             engine_jobs.cancel(scene_name, discard=True)  # it would describe another scene
             _apply_error(scene_name, error)
@@ -78,7 +72,7 @@ class VOXGI_OT_voxelize(bpy.types.Operator):
         return status
 
 
-def _snapshot(context):
+def snapshot_or_error(context):
     """(snapshot, seconds) of the context's scene; VoxGIError when it has nothing to voxelize."""
     start = time.perf_counter()
     snapshot = take_snapshot(context, context.evaluated_depsgraph_get())
