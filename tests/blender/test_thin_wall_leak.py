@@ -1,0 +1,37 @@
+"""Light leaking through a thin wall (issue 3's closed-room test).
+
+The issue's target is that the dark side's Diffuse Indirect stays below 2% of the lit side's
+mean. Cone tracing at this voxel size (a 2 cm wall in 7 cm voxels) does not reach it yet: the
+anisotropic voxels with per-axis extinction measure about 7% (isotropic voxels: about 20%).
+This test holds the measured bound so the leak cannot silently grow back; the 2% target is
+tracked as open work in the issue.
+"""
+import numpy as np
+
+import bpy
+import scenes
+
+WIDTH, HEIGHT = 128, 64
+MEASURED_BOUND = 0.10
+
+
+def test_thin_wall_keeps_most_light_on_its_side(voxgi, tmp_path):
+    from voxgi.voxgi_addon.exr import read_exr
+
+    scene = bpy.context.scene
+    scenes.build_thin_wall_room(scene)
+    scene.voxgi.base_span = 0.07
+    scene.voxgi.grid_resolution = "64"
+    path = tmp_path / "room.exr"
+    assert bpy.ops.voxgi.render_preview(filepath=str(path), resolution_x=WIDTH,
+                                        resolution_y=HEIGHT) == {"FINISHED"}
+    channels = read_exr(path)
+    indirect = np.mean([channels[f"Diffuse Indirect.{c}"] for c in "RGB"], axis=0)
+    direct = np.mean([channels[f"Diffuse Direct.{c}"] for c in "RGB"], axis=0)
+    lit, dark = scenes.thin_wall_side_masks(WIDTH, HEIGHT)
+    assert direct[dark].max() == 0.0  # the wall blocks all direct light
+    lit_mean = indirect[lit].mean()
+    assert lit_mean > 0.1
+    ratio = indirect[dark].max() / lit_mean
+    print(f"thin wall: dark-side max / lit-side mean Diffuse Indirect = {ratio:.3f}")
+    assert ratio <= MEASURED_BOUND
