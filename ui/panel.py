@@ -82,4 +82,56 @@ def _draw_results(layout, session) -> None:
             row.label(text=f"{seconds * 1000:.1f} ms")
 
 
-classes = (VOXGI_PT_main,)
+class VOXGI_PT_gi(bpy.types.Panel):
+    """Cascades, cones, the Update / Render Preview buttons and the last update's statistics."""
+
+    bl_idname = "VOXGI_PT_gi"
+    bl_label = "Global Illumination"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "VoxGI"
+    bl_parent_id = "VOXGI_PT_main"
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None and hasattr(context.scene, "voxgi")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        settings = context.scene.voxgi
+        column = layout.column()
+        for name in ("view_ahead", "dense_depth", "cone_angle", "diffuse_cones", "sample_factor",
+                     "falloff", "max_distance", "ao_distance", "gi_intensity", "ao_intensity",
+                     "light_samples"):
+            column.prop(settings, name)
+        row = layout.row(align=True)
+        row.operator("voxgi.update", icon="FILE_REFRESH")
+        row.operator("voxgi.render_preview", icon="RENDER_STILL")
+        _draw_gi_state(layout, peek_session(context.scene.name_full))
+
+
+def _draw_gi_state(layout, session) -> None:
+    """Voxels per cascade, octree memory and stage timings of the last GI update."""
+    state = None if session is None else session.gi_state
+    if state is None:
+        return
+    box = layout.box()
+    box.label(text="Last update", icon="LIGHT")
+    for grid, count in zip(state.grids, state.voxel_counts):
+        row = box.row()
+        row.label(text=f"Cascade {grid.index} ({grid.span:g} m, {grid.resolution}³)")
+        row.label(text=f"{count:,} voxels")
+    stats = state.octree.stats()
+    row = box.row()
+    row.label(text=f"Octree: {len(stats)} levels")
+    row.label(text=f"{sum(s.nodes for s in stats):,} nodes")
+    row.label(text=f"{sum(s.bytes for s in stats) / MEGABYTE:.2f} MB")
+    for name, seconds in session.gi_timings.items():
+        row = box.row()
+        row.label(text=name)
+        row.label(text=f"{seconds * 1000:.1f} ms")
+
+
+classes = (VOXGI_PT_main, VOXGI_PT_gi)

@@ -101,3 +101,18 @@ def test_panel_draws_settings_and_results(voxgi):
     cascades = bpy.context.scene.voxgi.cascade_count
     assert sum(text.startswith("Cascade ") for text in layout.labels) == cascades
     assert "Stage timings" in layout.labels and "snapshot" in layout.labels
+
+
+def test_gi_panel_draws_cone_settings_buttons_and_the_last_update(voxgi):
+    bpy.ops.voxgi.add_demo_scene()
+    bpy.ops.voxgi.voxelize()
+    bpy.ops.voxgi.update()
+    layout = _Layout()
+    panel = type("PanelStub", (), {"layout": layout})()
+    bpy.types.VOXGI_PT_gi.draw(panel, bpy.context)
+    assert "cone_angle" in layout.props and "ao_distance" in layout.props
+    assert layout.operators == ["voxgi.update", "voxgi.render_preview"]
+    assert "Last update" in layout.labels
+    assert sum(text.startswith("Cascade ") for text in layout.labels) == 3
+    assert any(text.startswith("Octree: ") for text in layout.labels) and "svo" in layout.labels
+    assert bpy.types.VOXGI_PT_gi.bl_parent_id == "VOXGI_PT_main"
