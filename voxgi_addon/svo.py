@@ -31,7 +31,7 @@ viewer is on), the premultiplied r·α, g·α, b·α, α the node shows to a con
 Known limits (thin-wall test, 2 cm wall in 7 cm voxels): cones crossing a wall obliquely read
 its edge-on faces with weight 1 − d_x², a one-node wall sampled one node apart composites to
 α ≥ 0.75 only, and a cone wider than its distance to the wall samples nodes on both sides.
-``one_sided_leaves`` (off by default) also hides the back of lit surface voxels.
+``one_sided_leaves`` (off here; on in ``gi_update.GISettings``) hides the back of lit voxels.
 
 Storage: levels 0..dense_depth are ``DenseLevel`` 3D arrays indexed [x, y, z] (the mips);
 deeper levels are ``SparseLevel`` arrays sorted by Morton key (see ``morton``). Child links:
