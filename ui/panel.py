@@ -10,11 +10,9 @@ from ..operators.voxelize_report import MEGABYTE, panel_lines
 LEVEL_ICONS = {"ERROR": "CANCEL", "WARNING": "ERROR", "INFO": "INFO"}
 
 
-class VOXGI_PT_main(bpy.types.Panel):
-    """Settings, the Voxelize button, the running job and the last run's statistics."""
+class _SidebarPanel:
+    """Where VoxGI's panels live (3D view sidebar, tab 'VoxGI') and when they show."""
 
-    bl_idname = "VOXGI_PT_main"
-    bl_label = "VoxGI"
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = "VoxGI"
@@ -22,6 +20,13 @@ class VOXGI_PT_main(bpy.types.Panel):
     @classmethod
     def poll(cls, context):
         return context.scene is not None and hasattr(context.scene, "voxgi")
+
+
+class VOXGI_PT_main(_SidebarPanel, bpy.types.Panel):
+    """Settings, the Voxelize button, the running job and the last run's statistics."""
+
+    bl_idname = "VOXGI_PT_main"
+    bl_label = "VoxGI"
 
     def draw(self, context):
         layout = self.layout
@@ -82,19 +87,12 @@ def _draw_results(layout, session) -> None:
             row.label(text=f"{seconds * 1000:.1f} ms")
 
 
-class VOXGI_PT_gi(bpy.types.Panel):
+class VOXGI_PT_gi(_SidebarPanel, bpy.types.Panel):
     """Cascades, cones, the Update / Render Preview buttons and the last update's statistics."""
 
     bl_idname = "VOXGI_PT_gi"
     bl_label = "Global Illumination"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "VoxGI"
     bl_parent_id = "VOXGI_PT_main"
-
-    @classmethod
-    def poll(cls, context):
-        return context.scene is not None and hasattr(context.scene, "voxgi")
 
     def draw(self, context):
         layout = self.layout

@@ -6,35 +6,19 @@ docstring; it shares no code with ``svo`` (no Morton keys, no reduceat).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
 from voxgi_addon.morton import morton_decode, morton_encode
+from voxgi_addon.cascades import CascadeGrid, CascadeVoxels
 from voxgi_addon.svo import build_octree
 
 
-# ---- stand-ins for cascades.CascadeGrid / CascadeVoxels (same fields) ----------------------
-
-@dataclass
-class Grid:
-    index: int
-    span: float
-    resolution: int
-    origin: np.ndarray
-
-
-@dataclass
-class Voxels:
-    grid: Grid
-    cells: np.ndarray
-    albedo: np.ndarray
-    normal: np.ndarray
-    specular: np.ndarray
-    count: np.ndarray
-    mesh_has_finer: np.ndarray
+# The cascades' own types; make_grids below also builds the tiny grids (2³, 4³) that
+# place_cascades refuses, so the octree can be checked exhaustively.
+Grid, Voxels = CascadeGrid, CascadeVoxels
 
 
 def make_grids(camera, base_span: float, res: int, n: int) -> list[Grid]:

@@ -1,31 +1,22 @@
 """Shadow rays through cascade occupancy."""
-from dataclasses import dataclass
-
 import numpy as np
 
+from voxgi_addon.cascades import CascadeGrid, CascadeVoxels
 from voxgi_addon.voxel_shadows import CascadeOccupancy
 
 
-@dataclass
-class Grid:
-    index: int
-    span: float
-    resolution: int
-    origin: np.ndarray
-
-
-@dataclass
-class Voxels:
-    grid: Grid
-    cells: np.ndarray
+def voxels(grid, cells):
+    n = len(cells)
+    return CascadeVoxels(grid, np.asarray(cells, np.int32), np.zeros((n, 3)), np.tile([0, 0, 1.0], (n, 1)),
+                         np.zeros(n), np.ones(n, np.int32), np.zeros(n, bool))
 
 
 def two_cascades(wall_x_cells):
-    fine = Grid(0, 0.1, 16, np.array([-0.8, -0.8, -0.8]))
-    coarse = Grid(1, 0.2, 16, np.array([-1.6, -1.6, -1.6]))
+    fine = CascadeGrid(0, 0.1, 16, np.array([-0.8, -0.8, -0.8]))
+    coarse = CascadeGrid(1, 0.2, 16, np.array([-1.6, -1.6, -1.6]))
     yz = np.stack(np.meshgrid(np.arange(16), np.arange(16), indexing="ij"), -1).reshape(-1, 2)
     wall = np.column_stack([np.full(len(yz), wall_x_cells), yz])
-    return [Voxels(fine, wall), Voxels(coarse, np.zeros((0, 3), int))]
+    return [voxels(fine, wall), voxels(coarse, np.zeros((0, 3), int))]
 
 
 def test_a_wall_blocks_rays_that_cross_it_and_only_those():
