@@ -80,37 +80,51 @@ def lattice_bounds(positions: np.ndarray, span: float) -> tuple[np.ndarray, np.n
     return lo, hi - lo + 1
 
 
-def _separating_intervals(tri: np.ndarray, lo: np.ndarray):
-    """The 10 non-box SAT axes of each triangle and where its candidate cells must project.
+ALL_AXES = tuple(range(10))
 
-    tri : (T, 3, 3) grid units; lo : (T, 3) first candidate cell. Returns the axes as three
-    (T, 10) component arrays ax, ay, az and the intervals low, high (T, 10): candidate
-    ``lo + o`` passes axis k iff ``low[k] <= axis_k · o <= high[k]`` (the first cell's centre
-    is already subtracted). Axis 0 is the plane normal, 1-9 are unit_u × edge_j.
+
+def _separating_intervals(tri: np.ndarray, lo: np.ndarray, axes=ALL_AXES):
+    """Non-box SAT axes of each triangle and where its candidate cells must project.
+
+    tri : (T, 3, 3) grid units; lo : (T, 3) first candidate cell; axes : which of the 10 axes
+    (0 = the plane normal, 1 + 3u + j = unit_u × edge_j). Returns the axes as three (T, K)
+    component arrays ax, ay, az and the intervals low, high (T, K): candidate ``lo + o``
+    passes axis k iff ``low[k] <= axis_k · o <= high[k]`` (the first cell's centre is already
+    subtracted).
     """
     v = tri - (lo + 0.5)[:, None, :]  # vertices relative to the first candidate's centre
     e = [v[:, 1] - v[:, 0], v[:, 2] - v[:, 1], v[:, 0] - v[:, 2]]
-    n = np.cross(e[0], e[1])
     zero = np.zeros(len(tri))
-    # unit_x × e = (0, -ez, ey); unit_y × e = (ez, 0, -ex); unit_z × e = (-ey, ex, 0)
-    ax = np.stack([n[:, 0]] + [zero] * 3 + [ej[:, 2] for ej in e] + [-ej[:, 1] for ej in e], 1)
-    ay = np.stack([n[:, 1]] + [-ej[:, 2] for ej in e] + [zero] * 3 + [ej[:, 0] for ej in e], 1)
-    az = np.stack([n[:, 2]] + [ej[:, 1] for ej in e] + [-ej[:, 0] for ej in e] + [zero] * 3, 1)
+    n = np.cross(e[0], e[1]) if 0 in axes else None
+    components = []
+    for k in axes:
+        if k == 0:
+            components.append((n[:, 0], n[:, 1], n[:, 2]))
+            continue
+        u, ej = divmod(k - 1, 3)
+        edge = e[ej]
+        # unit_x × e = (0, -ez, ey); unit_y × e = (ez, 0, -ex); unit_z × e = (-ey, ex, 0)
+        components.append(((zero, -edge[:, 2], edge[:, 1]), (edge[:, 2], zero, -edge[:, 0]),
+                           (-edge[:, 1], edge[:, 0], zero))[u])
+    ax, ay, az = (np.stack([c[a] for c in components], 1) for a in range(3))
     proj = [ax * v[:, i, 0, None] + ay * v[:, i, 1, None] + az * v[:, i, 2, None] for i in range(3)]
     pmin = np.minimum(np.minimum(proj[0], proj[1]), proj[2])
     pmax = np.maximum(np.maximum(proj[0], proj[1]), proj[2])
-    pmin[:, 0] = pmax[:, 0] = proj[0][:, 0]  # the plane axis uses vertex 0, like the reference
     radius = 0.5 * (np.abs(ax) + np.abs(ay) + np.abs(az))
+    if 0 in axes:
+        k = list(axes).index(0)
+        pmin[:, k] = pmax[:, k] = proj[0][:, k]  # the plane axis uses vertex 0, like the reference
     low, high = pmin - radius, pmax + radius
-    sq = [ej[:, 0] ** 2 + ej[:, 1] ** 2 + ej[:, 2] ** 2 for ej in e]
-    longest_sq = np.maximum(np.maximum(sq[0], sq[1]), sq[2])
-    normal_len = np.sqrt(n[:, 0] ** 2 + n[:, 1] ** 2 + n[:, 2] ** 2)
-    flat = ~plane_is_meaningful(normal_len, longest_sq)
-    low[flat, 0], high[flat, 0] = -1e300, 1e300  # a segment/point: the edge axes decide
+    if 0 in axes:
+        sq = [ej[:, 0] ** 2 + ej[:, 1] ** 2 + ej[:, 2] ** 2 for ej in e]
+        longest_sq = np.maximum(np.maximum(sq[0], sq[1]), sq[2])
+        normal_len = np.sqrt(n[:, 0] ** 2 + n[:, 1] ** 2 + n[:, 2] ** 2)
+        flat = ~plane_is_meaningful(normal_len, longest_sq)
+        low[flat, k], high[flat, k] = -1e300, 1e300  # a segment/point: the edge axes decide
     return ax, ay, az, low, high
 
 
-def _axes_to_test(shape) -> range | list[int]:
+def _axes_to_test(shape) -> tuple[int, ...]:
     """SAT axes that can still separate a candidate block of this shape.
 
     A triangle one cell thick along axis u lies inside that slab, so it overlaps a candidate
@@ -119,13 +133,14 @@ def _axes_to_test(shape) -> range | list[int]:
     """
     thin = [u for u in range(3) if shape[u] == 1]
     if thin:
-        return [1 + 3 * thin[0] + j for j in range(3)]
-    return range(10)
+        return tuple(1 + 3 * thin[0] + j for j in range(3))
+    return ALL_AXES
 
 
 def _test_block(ax, ay, az, low, high, shape):
     """Exact test of a block of triangles sharing one candidate shape (ex, ey, ez).
 
+    ax, ay, az, low, high : (T, K) axes and intervals from ``_separating_intervals``.
     Returns mask (T, ex, ey, ez) bool of touched candidate cells. Each axis costs four
     full-size passes: ``|a·o - mid| <= half`` with the small per-axis terms broadcast.
     """
@@ -136,13 +151,13 @@ def _test_block(ax, ay, az, low, high, shape):
     passed = np.empty(full, dtype=bool)
     mid = 0.5 * (low + high)
     half = 0.5 * (high - low)
-    for n, k in enumerate(_axes_to_test(shape)):
+    for k in range(ax.shape[1]):
         yz = (ay[:, k, None] * oy)[:, :, None] + (az[:, k, None] * oz)[:, None, :]
         x = ax[:, k, None] * ox - mid[:, k, None]
         np.add(x[:, :, None, None], yz[:, None, :, :], out=dist)
         np.abs(dist, out=dist)
-        np.less_equal(dist, half[:, k, None, None, None], out=mask if n == 0 else passed)
-        if n:
+        np.less_equal(dist, half[:, k, None, None, None], out=mask if k == 0 else passed)
+        if k:
             mask &= passed
     return mask
 
@@ -175,13 +190,16 @@ def _column_contacts(lo, ext, column, space):
 
 
 def _tested_contacts(tri, lo, ext, rest, space):
-    """Contacts of the other triangles, tested block by block per candidate shape."""
+    """Contacts of the other triangles, tested block by block per candidate shape.
+
+    Triangles are sorted by shape; each run of one shape computes only the SAT axes that can
+    separate it (``_axes_to_test``), so slab-thin triangles pay for 3 axes instead of 10.
+    """
     e = ext[rest]
     m = int(e.max()) + 1
     shape_key = (e[:, 0] * m + e[:, 1]) * m + e[:, 2]
     order = np.argsort(shape_key, kind="stable")
     rest, e, shape_key = rest[order], e[order], shape_key[order]  # grouped by shape
-    ax, ay, az, low, high = _separating_intervals(tri[rest], lo[rest])
     base = space.keys(lo[rest])
     starts = np.flatnonzero(np.r_[True, shape_key[1:] != shape_key[:-1]])
     ends = np.r_[starts[1:], len(rest)]
@@ -189,15 +207,17 @@ def _tested_contacts(tri, lo, ext, rest, space):
     for s0, s1 in zip(starts, ends):
         shape = e[s0]
         size = int(shape.prod())
+        members = rest[s0:s1]
+        ax, ay, az, low, high = _separating_intervals(tri[members], lo[members], _axes_to_test(shape))
         # key offset of each candidate of this shape, in the block's flattened (i, j, k) order
         grid = np.indices(shape).reshape(3, -1).T
         local = grid @ space.strides
         per_block = max(1, _BLOCK_ELEMENTS // size)
-        for b in range(s0, s1, per_block):
-            sel = slice(b, min(b + per_block, s1))
+        for b in range(0, s1 - s0, per_block):
+            sel = slice(b, min(b + per_block, s1 - s0))
             mask = _test_block(ax[sel], ay[sel], az[sel], low[sel], high[sel], shape)
             t, c = np.divmod(np.flatnonzero(mask), size)
-            t += b
+            t += s0 + b
             tris_out.append(rest[t])
             keys_out.append(base[t] + local[c])
     return tris_out, keys_out
