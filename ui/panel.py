@@ -22,6 +22,15 @@ class _SidebarPanel:
         return context.scene is not None and hasattr(context.scene, "voxgi")
 
 
+def _settings_column(layout, context, names):
+    """Lay out the named ``Scene.voxgi`` settings in Blender's split style."""
+    layout.use_property_split = True
+    layout.use_property_decorate = False
+    column = layout.column()
+    for name in names:
+        column.prop(context.scene.voxgi, name)
+
+
 class VOXGI_PT_main(_SidebarPanel, bpy.types.Panel):
     """Settings, the Voxelize button, the running job and the last run's statistics."""
 
@@ -30,13 +39,7 @@ class VOXGI_PT_main(_SidebarPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        settings = context.scene.voxgi
-        column = layout.column()
-        column.prop(settings, "base_span")
-        column.prop(settings, "cascade_count")
-        column.prop(settings, "grid_resolution")
+        _settings_column(layout, context, ("base_span", "cascade_count", "grid_resolution"))
         row = layout.row(align=True)
         row.operator("voxgi.voxelize", icon="MESH_GRID")
         row.operator("voxgi.add_demo_scene", text="", icon="SCENE_DATA")
@@ -96,14 +99,9 @@ class VOXGI_PT_gi(_SidebarPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        settings = context.scene.voxgi
-        column = layout.column()
-        for name in ("view_ahead", "dense_depth", "cone_angle", "diffuse_cones", "sample_factor",
-                     "falloff", "max_distance", "ao_distance", "gi_intensity", "ao_intensity",
-                     "light_samples"):
-            column.prop(settings, name)
+        _settings_column(layout, context, (
+            "view_ahead", "dense_depth", "cone_angle", "diffuse_cones", "sample_factor", "falloff",
+            "max_distance", "ao_distance", "gi_intensity", "ao_intensity", "light_samples"))
         row = layout.row(align=True)
         row.operator("voxgi.update", icon="FILE_REFRESH")
         row.operator("voxgi.render_preview", icon="RENDER_STILL")

@@ -56,18 +56,28 @@ def random_scene(seed: int, res: int, n: int, fill: float, clustered: bool = Tru
 
 # ---- independent brute force -------------------------------------------------------------
 
-def brute_force(cascades, radiance):
-    """Dense arrays per level: dict(present, radiance, albedo, normal, occlusion, count)."""
+def octree_depth(cascades):
+    """log2(resolution) + cascades − 1: the level of the finest cascade's voxels."""
+    return int(round(np.log2(cascades[0].grid.resolution))) + len(cascades) - 1
+
+
+def leaf_nodes(cascades, radiance):
+    """Per cascade: (cascade, its radiance, octree level ℓ_i, nodes per axis, node coords)."""
     n = len(cascades)
     res = cascades[0].grid.resolution
     log_res = int(round(np.log2(res)))
-    depth = log_res + n - 1
-    own = {}
     for cv, rad in zip(cascades, radiance):
         i = cv.grid.index
         ell = log_res + n - 1 - i
-        s = 2 ** ell
         c = cv.cells.astype(np.int64) + (res // 2) * (2 ** (n - 1 - i) - 1)
+        yield cv, rad, ell, 2 ** ell, c
+
+
+def brute_force(cascades, radiance):
+    """Dense arrays per level: dict(present, radiance, albedo, normal, occlusion, count)."""
+    depth = octree_depth(cascades)
+    own = {}
+    for cv, rad, ell, s, c in leaf_nodes(cascades, radiance):
         arrays = {"present": np.zeros((s,) * 3, bool), "count": np.zeros((s,) * 3, np.int64)}
         for name, values in (("radiance", rad), ("albedo", cv.albedo), ("normal", cv.normal)):
             arrays[name] = np.zeros((s,) * 3 + (3,))
@@ -429,16 +439,9 @@ def brute_directional(cascades, radiance):
     leaves (r, g, b, 1) on every face; parents composite each 2-child column along the face's
     axis front to back (front = the child on the viewer's side) and average the 4 columns;
     a node that is also a coarser voxel: ½·own + ½·children's colour per face, α = 1."""
-    n = len(cascades)
-    res = cascades[0].grid.resolution
-    log_res = int(round(np.log2(res)))
-    depth = log_res + n - 1
+    depth = octree_depth(cascades)
     own = {}
-    for cv, rad in zip(cascades, radiance):
-        i = cv.grid.index
-        ell = log_res + n - 1 - i
-        s = 2 ** ell
-        c = cv.cells.astype(np.int64) + (res // 2) * (2 ** (n - 1 - i) - 1)
+    for cv, rad, ell, s, c in leaf_nodes(cascades, radiance):
         leaf = np.zeros((s, s, s, 6, 4))
         leaf[c[:, 0], c[:, 1], c[:, 2], :, :3] = np.asarray(rad, float)[:, None, :]
         leaf[c[:, 0], c[:, 1], c[:, 2], :, 3] = 1.0
