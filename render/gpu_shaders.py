@@ -1,0 +1,49 @@
+"""Compute shaders of the GPU tracer, built once per kernel and cached.
+
+Sources live in ``shaders/``: ``cone_common.glsl`` (the march, a port of
+``voxgi_addon/conetrace.py``) is prepended to each kernel; the parameter-table rows of
+``voxgi_addon/trace_params`` come in as defines. Needs a GPU context.
+"""
+from __future__ import annotations
+
+import pathlib
+
+import gpu
+
+from ..voxgi_addon.trace_params import MAX_CASCADES, MAX_LEVELS, ROWS
+
+SHADER_DIR = pathlib.Path(__file__).resolve().parent / "shaders"
+LOCAL_SIZE = 8  # 8×8 pixels per work group
+# Kernel name → G-buffer inputs it reads (2D RGBA32F samplers).
+KERNELS = {
+    "diffuse_ao": ("gbuffer_position", "gbuffer_normal"),
+    "glossy": ("gbuffer_position", "gbuffer_normal", "gbuffer_view"),
+    "probe": ("gbuffer_position", "gbuffer_normal", "gbuffer_view"),  # tests: raw samples
+}
+_cache: dict[str, object] = {}
+
+
+def kernel_source(kernel: str) -> str:
+    """The compute source of ``kernel``: the shared march, then the kernel's ``main``."""
+    common = (SHADER_DIR / "cone_common.glsl").read_text()
+    return common + (SHADER_DIR / f"{kernel}.glsl").read_text()
+
+
+def compute_shader(kernel: str):
+    """The cached ``GPUShader`` of ``kernel`` (see ``KERNELS``)."""
+    key = kernel
+    if key not in _cache:
+        info = gpu.types.GPUShaderCreateInfo()
+        info.local_group_size(LOCAL_SIZE, LOCAL_SIZE, 1)
+        for name, row in ROWS.items():
+            info.define(name, str(row))
+        info.define("MAX_LEVELS", str(MAX_LEVELS))
+        info.define("MAX_CASCADES", str(MAX_CASCADES))
+        info.sampler(0, "FLOAT_3D", "atlas")
+        info.sampler(1, "FLOAT_2D", "params")
+        for i, name in enumerate(KERNELS[kernel]):
+            info.sampler(2 + i, "FLOAT_2D", name)
+        info.image(0, "RGBA32F", "FLOAT_2D", "out_image", qualifiers={"WRITE"})
+        info.compute_source(kernel_source(kernel))
+        _cache[key] = gpu.shader.create_from_info(info)
+    return _cache[key]

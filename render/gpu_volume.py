@@ -1,0 +1,45 @@
+"""The octree atlas and the parameter table as GPU textures (issue 5 point 2).
+
+A ``GPUVolume`` holds the 3D RGBA16F atlas of every octree level (``voxgi_addon.volume_textures``)
+and the small RGBA32F parameter table (``voxgi_addon.trace_params``). ``update`` uploads the
+atlas only when its texels differ from the last upload (bpy's ``GPUTexture`` cannot update a
+sub-region, so the atlas is the unit of upload); ``uploaded_bytes`` tells what the last update
+sent. Needs a GPU context.
+"""
+from __future__ import annotations
+
+import numpy as np
+import gpu
+
+from ..voxgi_addon.trace_params import trace_params
+from ..voxgi_addon.volume_textures import volume_atlas
+
+ATLAS_FORMAT = "RGBA16F"
+
+
+def float_texture(array: np.ndarray, size, texture_format: str = "RGBA32F"):
+    """A GPUTexture of ``size`` (2D or 3D, x first) holding the C-ordered float array (…, 4)."""
+    flat = np.ascontiguousarray(array, dtype=np.float32).ravel()
+    return gpu.types.GPUTexture(size, format=texture_format,
+                                data=gpu.types.Buffer("FLOAT", flat.size, flat))
+
+
+class GPUVolume:
+    """Atlas texture and parameter table of the latest octree."""
+
+    def __init__(self):
+        self.atlas = None
+        self.params = None
+        self._texels = None          # texels of the atlas on the GPU
+        self.uploaded_bytes = 0      # atlas bytes sent by the last update (0 = unchanged)
+
+    def update(self, octree, cones) -> None:
+        atlas = volume_atlas(octree)
+        self.uploaded_bytes = 0
+        old = self._texels
+        if old is None or old.shape != atlas.texels.shape or not np.array_equal(old, atlas.texels):
+            self.atlas = float_texture(atlas.texels, atlas.texture_size, ATLAS_FORMAT)
+            self._texels = atlas.texels
+            self.uploaded_bytes = atlas.gpu_bytes
+        table = trace_params(octree, atlas, cones)
+        self.params = float_texture(table, (len(table), 1))

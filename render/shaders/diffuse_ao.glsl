@@ -1,0 +1,39 @@
+/* Diffuse indirect (rgb, light without albedo) and ambient occlusion (a) per pixel
+ * (conetrace.trace_diffuse_and_ao): the cone set around the normal, each cone marching light
+ * to max_distance and occlusion to ao_distance on the same samples. */
+void main()
+{
+  ivec2 px = ivec2(gl_GlobalInvocationID.xy);
+  load_params();
+  if (px.x >= imageSize(out_image).x || px.y >= imageSize(out_image).y) {
+    return;
+  }
+  vec4 position = texelFetch(gbuffer_position, px, 0);
+  if (position.w < 0.5) {
+    imageStore(out_image, px, vec4(0.0));
+    return;
+  }
+  vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
+  vec4 s0 = param(ROW_SETTINGS);
+  vec4 s1 = param(ROW_SETTINGS + 1);  /* max_distance, ao_distance, start_offset, tan(half angle) */
+  vec4 s2 = param(ROW_SETTINGS + 2);  /* anisotropic, cone count, gi_intensity, ao_intensity */
+  float height = s1.z * local_voxel_size(position.xyz);
+  vec3 origin = position.xyz + n * height;
+  float local = local_voxel_size(origin);
+  vec3 t, s;
+  tangent_frame(n, t, s);
+  vec3 diffuse = vec3(0.0);
+  float visible = 0.0;
+  for (int k = 0; k < int(s2.y); k++) {
+    vec4 cone = param(ROW_CONES + k);  /* local axis xyz, weight */
+    vec3 axis = t * cone.x + s * cone.y + n * cone.z;
+    vec3 radiance;
+    float alpha_light, alpha_occlusion;
+    march(origin, axis, s1.w, local, s1.x, s1.y, true, n, height,
+          radiance, alpha_light, alpha_occlusion);
+    diffuse += cone.w * radiance;
+    visible += cone.w * (1.0 - alpha_occlusion);
+  }
+  float ao = 1.0 - clamp(s2.w * (1.0 - visible), 0.0, 1.0);
+  imageStore(out_image, px, vec4(s2.z * diffuse, ao));
+}
