@@ -1,13 +1,14 @@
 """VoxGI: voxel cone-traced global illumination previews for Blender.
 
-Registration only: the Blender side lives in ``operators/`` and ``ui/``, the engine in
-``voxgi_addon/`` (which never imports bpy).
+Registration only: the Blender side lives in ``operators/``, ``ui/`` and ``render/`` (the
+VoxGI render engine and the GPU tracer), the engine in ``voxgi_addon/`` (which never imports
+bpy).
 """
 from __future__ import annotations
 
-from . import operators, ui
+from . import operators, render, ui
 
-_packages = (operators, ui)
+_packages = (operators, ui, render)
 
 
 def register() -> None:

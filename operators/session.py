@@ -37,6 +37,8 @@ class SceneSession:
     last_report: list[tuple[str, str]] = field(default_factory=list)
     gi_state: Any = None  # voxgi_addon.gi_update.GIState of the last update
     gi_timings: dict[str, float] = field(default_factory=dict)
+    gpu_volume: Any = None  # render.gpu_volume.GPUVolume: the octree atlas on the GPU
+    tracer_used: str = ""   # "GPU" or "numpy": who traced the last preview
 
 
 _sessions: dict[str, SceneSession] = {}

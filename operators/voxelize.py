@@ -72,10 +72,14 @@ class VOXGI_OT_voxelize(VoxGISceneOperator, bpy.types.Operator):
         return status
 
 
-def snapshot_or_error(context):
-    """(snapshot, seconds) of the context's scene; VoxGIError when it has nothing to voxelize."""
+def snapshot_or_error(context, depsgraph=None):
+    """(snapshot, seconds) of the context's scene (or of ``depsgraph``'s scene and view layer);
+    VoxGIError when it has nothing to voxelize."""
     start = time.perf_counter()
-    snapshot = take_snapshot(context, context.evaluated_depsgraph_get())
+    if depsgraph is None:
+        snapshot = take_snapshot(context, context.evaluated_depsgraph_get())
+    else:
+        snapshot = take_snapshot(depsgraph.scene_eval.original, depsgraph)
     seconds = time.perf_counter() - start
     if not snapshot.objects:
         details = "; ".join(snapshot.warnings)

@@ -1,9 +1,8 @@
-"""Cone tracing on the GPU: dispatch the compute kernels over a G-buffer, read the passes back.
+"""Cone tracing on the GPU: dispatch a compute kernel over a G-buffer, read results back.
 
-Inputs are what ``voxgi_addon.preview`` computes on the CPU side — a G-buffer of (H, W, 4)
-float32 arrays (position + hit flag, normal + roughness, view direction) — and a
-``GPUVolume`` uploaded for the current octree. Outputs are numpy arrays in the numpy tracer's
-units. Needs a GPU context (``gpu_context``).
+Inputs are a ``GPUVolume`` uploaded for the current octree and G-buffer textures
+(``gbuffer``: position + hit flag, normal + roughness, view direction + material); outputs are
+RGBA32F textures in the numpy tracer's units. Needs a GPU context.
 """
 from __future__ import annotations
 
@@ -13,7 +12,6 @@ import numpy as np
 import gpu
 
 from .gpu_shaders import KERNELS, LOCAL_SIZE, compute_shader
-from .gpu_volume import float_texture
 
 
 def read_texture(texture) -> np.ndarray:
@@ -36,19 +34,3 @@ def dispatch(kernel: str, volume, inputs: dict[str, object], width: int, height:
     shader.image("out_image", out)
     gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
     return out
-
-
-def trace_cones(volume, position: np.ndarray, normal: np.ndarray, view: np.ndarray):
-    """Diffuse indirect (H, W, 3), AO (H, W), glossy indirect (H, W, 3), all float32.
-
-    position : (H, W, 4) xyz + 1 where a surface was hit (0 = background);
-    normal : (H, W, 4) unit normal facing the camera + roughness; view : (H, W, 4) unit
-    camera → point direction in xyz.
-    """
-    height, width = position.shape[:2]
-    inputs = {name: float_texture(array, (width, height))
-              for name, array in (("gbuffer_position", position), ("gbuffer_normal", normal),
-                                  ("gbuffer_view", view))}
-    diffuse_ao = read_texture(dispatch("diffuse_ao", volume, inputs, width, height))
-    glossy = read_texture(dispatch("glossy", volume, inputs, width, height))
-    return diffuse_ao[..., :3], diffuse_ao[..., 3], glossy[..., :3]

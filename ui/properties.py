@@ -93,6 +93,14 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
         description="Shadow rays per pixel for lights with a size (area, soft point, sun angle)",
         default=16, min=1, max=256,
     )
+    tracer: bpy.props.EnumProperty(
+        name="Tracer",
+        description="Where the preview's cone tracing runs",
+        items=(("AUTO", "GPU if available", "GPU compute shaders when a GPU context can be had, "
+                "else the numpy tracer (reported)"),
+               ("NUMPY", "numpy (CPU)", "The numpy reference tracer: slower, always available")),
+        default="AUTO",
+    )
 
 
 

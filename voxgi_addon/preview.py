@@ -23,7 +23,7 @@ PASS_NAMES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color",
 SURFACE_EPSILON = 1e-4  # metres off the surface for shadow rays
 
 
-def _material_table(snapshot):
+def material_table(snapshot):
     """Per material index (+1 slot for 'none'): albedo (M+1, 3), roughness, specular colour,
     emission (M+1, 3)."""
     mats = snapshot.materials
@@ -40,17 +40,51 @@ def _material_table(snapshot):
     return albedo, rough, spec, emission
 
 
-def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettings,
-                  light_samples: int = 16):
-    """Render the passes at ``width`` × ``height``.
-
-    Returns (passes, timings): passes maps each name of PASS_NAMES to an (H, W, 3) float32
-    image (row 0 = top); timings maps stage names to seconds.
-    """
+def check_request(snapshot, width: int, height: int) -> None:
+    """Raise ``VoxGIError`` for a preview that cannot be rendered."""
     if snapshot.camera is None:
         raise VoxGIError("the scene has no camera to render the preview from")
     if width < 1 or height < 1 or width * height > 16_000_000:
         raise VoxGIError(f"preview resolution {width}×{height} is out of range")
+
+
+def material_indices(snapshot, material: np.ndarray) -> np.ndarray:
+    """Per-pixel material indices with 'none' / out-of-range mapped to the table's last slot."""
+    m = len(snapshot.materials)
+    return np.where((material >= 0) & (material < m), material, m)
+
+
+def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy):
+    """The PASS_NAMES images (H, W, 3) float32 (row 0 = top) from the per-hit-pixel terms.
+
+    hit : (H·W,) indices of the pixels that see a surface; mat : their material indices;
+    direct, indirect, glossy : (N, 3) light without albedo; ao : (N,).
+    """
+    albedo, _, spec, emission = material_table(snapshot)
+    values = {
+        "Diffuse Direct": direct,
+        "Diffuse Indirect": indirect,
+        "Diffuse Color": albedo[mat],
+        "Glossy Indirect": glossy,
+        "Ambient Occlusion": np.repeat(np.asarray(ao)[:, None], 3, axis=1),
+    }
+    values["Combined"] = (albedo[mat] * (direct + indirect) + emission[mat] + spec[mat] * glossy)
+    passes = {}
+    for name in PASS_NAMES:
+        image = np.zeros((height * width, 3), np.float32)
+        image[hit] = values[name]
+        passes[name] = image.reshape(height, width, 3)
+    return passes
+
+
+def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettings,
+                  light_samples: int = 16):
+    """Render the passes at ``width`` × ``height`` with the numpy tracer.
+
+    Returns (passes, timings): passes maps each name of PASS_NAMES to an (H, W, 3) float32
+    image (row 0 = top); timings maps stage names to seconds.
+    """
+    check_request(snapshot, width, height)
     timings = {}
     t0 = time.perf_counter()
     tris = world_triangles(snapshot)
@@ -61,9 +95,8 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     dirs = seen.direction.reshape(-1, 3)
     timings["visibility"] = time.perf_counter() - t0
 
-    albedo, rough, spec, emission = _material_table(snapshot)
-    mat = seen.material.ravel()[hit]
-    mat = np.where((mat >= 0) & (mat < len(snapshot.materials)), mat, len(snapshot.materials))
+    _, rough, _, _ = material_table(snapshot)
+    mat = material_indices(snapshot, seen.material.ravel()[hit])
 
     t0 = time.perf_counter()
     direct = diffuse_direct(p + n * SURFACE_EPSILON, n, snapshot.lights, tris, samples=light_samples)
@@ -74,18 +107,4 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     t0 = time.perf_counter()
     glossy = trace_glossy(gi_state.octree, p, n, dirs[hit], rough[mat], cones)
     timings["glossy cones"] = time.perf_counter() - t0
-
-    values = {
-        "Diffuse Direct": direct,
-        "Diffuse Indirect": indirect,
-        "Diffuse Color": albedo[mat],
-        "Glossy Indirect": glossy,
-        "Ambient Occlusion": np.repeat(ao[:, None], 3, axis=1),
-    }
-    values["Combined"] = (albedo[mat] * (direct + indirect) + emission[mat] + spec[mat] * glossy)
-    passes = {}
-    for name in PASS_NAMES:
-        image = np.zeros((height * width, 3), np.float32)
-        image[hit] = values[name]
-        passes[name] = image.reshape(height, width, 3)
-    return passes, timings
+    return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy), timings

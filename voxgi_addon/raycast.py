@@ -109,6 +109,29 @@ def camera_ray_lengths(camera: CameraData, directions: np.ndarray) -> np.ndarray
     return depth / np.maximum(cos, 1e-12)
 
 
+
+def view_projection(camera: CameraData, width: int, height: int) -> np.ndarray:
+    """(4, 4) float64 world → OpenGL clip matrix whose pixel centres are ``camera_rays``'
+    (NDC y up, so GL row 0 is the image's bottom row); depth spans the clipping range."""
+    cx, cy, hx, hy = _frustum(camera, width, height)
+    rotation, position = _camera_frame(camera)
+    view = np.eye(4)
+    view[:3, :3] = rotation.T
+    view[:3, 3] = -rotation.T @ position
+    near, far = float(camera.clip_start), float(camera.clip_end)
+    proj = np.zeros((4, 4))
+    if camera.type == "ORTHO":
+        proj[0] = (1.0 / hx, 0.0, 0.0, -cx / hx)
+        proj[1] = (0.0, 1.0 / hy, 0.0, -cy / hy)
+        proj[2] = (0.0, 0.0, -2.0 / (far - near), -(far + near) / (far - near))
+        proj[3] = (0.0, 0.0, 0.0, 1.0)
+    else:
+        proj[0] = (1.0 / hx, 0.0, cx / hx, 0.0)
+        proj[1] = (0.0, 1.0 / hy, cy / hy, 0.0)
+        proj[2] = (0.0, 0.0, -(far + near) / (far - near), -2.0 * far * near / (far - near))
+        proj[3] = (0.0, 0.0, -1.0, 0.0)
+    return proj @ view
+
 # --------------------------------------------------------------------------- grid
 
 @dataclass(frozen=True, eq=False)

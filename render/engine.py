@@ -1,0 +1,77 @@
+"""The "VoxGI" render engine (Render Properties › Render Engine), issue 5 point 1.
+
+F12 / ``bpy.ops.render.render()`` renders the GI preview of the scene camera into Cycles-named
+passes (registered with ``register_pass``, so they reach the compositor and multilayer EXR
+output): the scene is snapshotted, the session's voxel caches transformed (voxelizing first if
+needed), and the passes traced on the GPU (``gpu_preview``) inside the engine's GPU context,
+or with the numpy tracer when that fails (reported). ``bl_use_gpu_context`` gives the context
+even in background mode.
+"""
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from ..voxgi_addon.errors import VoxGIError
+from ..voxgi_addon.preview import PASS_NAMES
+from . import gpu_context
+
+# Our passes other than Combined → (Blender's view-layer toggle, channels).
+EXTRA_PASSES = {
+    "Diffuse Direct": "use_pass_diffuse_direct",
+    "Diffuse Indirect": "use_pass_diffuse_indirect",
+    "Diffuse Color": "use_pass_diffuse_color",
+    "Glossy Indirect": "use_pass_glossy_indirect",
+    "Ambient Occlusion": "use_pass_ambient_occlusion",
+}
+
+
+def enable_passes(view_layer) -> None:
+    """Turn on the view-layer toggles of our passes (so the compositor offers them)."""
+    for toggle in EXTRA_PASSES.values():
+        setattr(view_layer, toggle, True)
+
+
+def frame_size(scene) -> tuple[int, int]:
+    render = scene.render
+    return (max(1, render.resolution_x * render.resolution_percentage // 100),
+            max(1, render.resolution_y * render.resolution_percentage // 100))
+
+
+class VoxGIRenderEngine(bpy.types.RenderEngine):
+    bl_idname = "VOXGI"
+    bl_label = "VoxGI"
+    bl_use_gpu_context = True
+    bl_use_preview = False
+
+    def update_render_passes(self, scene=None, renderlayer=None):
+        for name in EXTRA_PASSES:
+            self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
+
+    def render(self, depsgraph):
+        scene = depsgraph.scene
+        if scene.name.startswith(gpu_context.BOOTSTRAP_SCENE):
+            return  # ensure_gpu_context only needs this call to happen
+        from ..operators.gi_preview import render_scene_passes
+        width, height = frame_size(scene)
+        try:
+            passes, report = render_scene_passes(bpy.context, scene, depsgraph, width, height)
+        except VoxGIError as error:
+            self.report({"ERROR"}, f"VoxGI render failed: {error}")
+            return
+        for level, line in report:
+            self.report({level}, line)
+        result = self.begin_result(0, 0, width, height)
+        layer = result.layers[0]
+        for name in PASS_NAMES:
+            render_pass = layer.passes.get(name)
+            if render_pass is None:
+                continue
+            image = np.flipud(passes[name])  # Blender's rows go bottom to top
+            if render_pass.channels == 4:
+                image = np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=2)
+            render_pass.rect = np.ascontiguousarray(image, np.float32).reshape(-1, render_pass.channels)
+        self.end_result(result)
+
+
+classes = (VoxGIRenderEngine,)

@@ -1,0 +1,114 @@
+"""Primary visibility on the GPU: rasterize the scene's triangles into a G-buffer (issue 5 point 3).
+
+The same per-pixel answers as ``voxgi_addon.raycast.primary_visibility`` (pixel-centre rays,
+shading normals turned to the camera by the face normal, the camera's clipping range), by
+rasterizing ``scene_geometry.world_triangles`` with ``raycast.view_projection`` into three
+RGBA32F textures that the cone-tracing kernels read directly. GPU images are stored bottom
+row first (OpenGL); ``read_gbuffer`` flips them to the passes' top-first order.
+"""
+from __future__ import annotations
+
+import numpy as np
+import gpu
+from gpu_extras.batch import batch_for_shader
+
+from ..voxgi_addon.raycast import _camera_frame, view_projection
+from .gpu_shaders import SHADER_DIR
+from .gpu_tracer import read_texture
+
+_shader = None
+
+
+def _gbuffer_shader():
+    global _shader
+    if _shader is None:
+        varying = gpu.types.GPUStageInterfaceInfo("voxgi_gbuffer")
+        varying.smooth("VEC3", "world_position")
+        varying.smooth("VEC3", "shading_normal")
+        varying.flat("VEC3", "flat_normal")
+        varying.flat("VEC2", "surface")
+        info = gpu.types.GPUShaderCreateInfo()
+        info.vertex_in(0, "VEC3", "position")
+        info.vertex_in(1, "VEC3", "normal")
+        info.vertex_in(2, "VEC3", "face_normal")
+        info.vertex_in(3, "VEC2", "material")
+        info.vertex_out(varying)
+        info.push_constant("MAT4", "view_projection")
+        info.push_constant("VEC3", "camera_position")
+        info.push_constant("VEC3", "camera_forward")
+        info.push_constant("FLOAT", "camera_ortho")
+        info.fragment_out(0, "VEC4", "out_position")
+        info.fragment_out(1, "VEC4", "out_normal")
+        info.fragment_out(2, "VEC4", "out_view")
+        info.vertex_source((SHADER_DIR / "gbuffer_vert.glsl").read_text())
+        info.fragment_source((SHADER_DIR / "gbuffer_frag.glsl").read_text())
+        _shader = gpu.shader.create_from_info(info)
+    return _shader
+
+
+class GBuffer:
+    """position, normal, view : RGBA32F textures (see module doc) of width × height."""
+
+    def __init__(self, width: int, height: int):
+        self.width, self.height = width, height
+        self.position = gpu.types.GPUTexture((width, height), format="RGBA32F")
+        self.normal = gpu.types.GPUTexture((width, height), format="RGBA32F")
+        self.view = gpu.types.GPUTexture((width, height), format="RGBA32F")
+        self.depth = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
+
+    @property
+    def inputs(self) -> dict[str, object]:
+        return {"gbuffer_position": self.position, "gbuffer_normal": self.normal,
+                "gbuffer_view": self.view}
+
+
+def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int) -> GBuffer:
+    """Draw ``tris`` (``SceneTriangles``) seen by ``camera`` into a new ``GBuffer``.
+
+    roughness : (M + 1,) per material index (last = no material), as ``preview`` tables it.
+    """
+    out = GBuffer(width, height)
+    framebuffer = gpu.types.GPUFrameBuffer(depth_slot=out.depth,
+                                           color_slots=(out.position, out.normal, out.view))
+    rotation, position = _camera_frame(camera)
+    matrix = view_projection(camera, width, height)
+    shader = _gbuffer_shader()
+    with framebuffer.bind():
+        framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+        if len(tris):
+            gpu.state.viewport_set(0, 0, width, height)
+            gpu.state.depth_test_set("LESS")
+            gpu.state.depth_mask_set(True)
+            gpu.state.face_culling_set("NONE")
+            material = np.asarray(tris.materials)
+            material = np.where((material >= 0) & (material < len(roughness) - 1), material,
+                                len(roughness) - 1)
+            corners = np.asarray(tris.positions, np.float32).reshape(-1, 3)
+            face = np.repeat(np.asarray(tris.normals, np.float32), 3, axis=0)
+            smooth = face if tris.corner_normals is None else \
+                np.asarray(tris.corner_normals, np.float32).reshape(-1, 3)
+            surface = np.repeat(np.stack([material, roughness[material]], axis=1)
+                                .astype(np.float32), 3, axis=0)
+            batch = batch_for_shader(shader, "TRIS", {"position": corners, "normal": smooth,
+                                                      "face_normal": face, "material": surface})
+            shader.bind()
+            shader.uniform_float("view_projection", matrix.T.ravel().tolist())
+            shader.uniform_float("camera_position", position.astype(np.float32))
+            shader.uniform_float("camera_forward", (-rotation[:, 2]).astype(np.float32))
+            shader.uniform_float("camera_ortho", 1.0 if camera.type == "ORTHO" else 0.0)
+            batch.draw(shader)
+            gpu.state.depth_test_set("NONE")
+            gpu.state.depth_mask_set(False)
+    return out
+
+
+def read_gbuffer(gbuffer: GBuffer) -> dict[str, np.ndarray]:
+    """The G-buffer as top-row-first numpy arrays: hit (H, W) bool, position, normal,
+    direction (H, W, 3) float32, roughness (H, W) float32, material (H, W) int32."""
+    position = np.flipud(read_texture(gbuffer.position))
+    normal = np.flipud(read_texture(gbuffer.normal))
+    view = np.flipud(read_texture(gbuffer.view))
+    hit = position[..., 3] > 0.5
+    return {"hit": hit, "position": position[..., :3], "normal": normal[..., :3],
+            "roughness": normal[..., 3], "direction": view[..., :3],
+            "material": np.where(hit, np.rint(view[..., 3]), -1).astype(np.int32)}

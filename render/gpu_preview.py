@@ -1,0 +1,59 @@
+"""The GI preview's passes with the GPU tracer: the same stages and outputs as
+``voxgi_addon.preview.render_passes`` (the numpy reference), with primary visibility
+rasterized (``gbuffer``) and the cone tracing done by compute shaders (``gpu_tracer``).
+
+Direct diffuse light keeps the reference's exact shadow rays (numpy, on the G-buffer's hit
+points), so ``Diffuse Direct`` is the reference's own. Needs a GPU context (``gpu_context``).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..voxgi_addon.direct_light import diffuse_direct
+from ..voxgi_addon.preview import (SURFACE_EPSILON, check_request, compose_passes,
+                                   material_indices, material_table)
+from ..voxgi_addon.scene_geometry import world_triangles
+from .gbuffer import rasterize, read_gbuffer
+from .gpu_tracer import dispatch, read_texture
+from .gpu_volume import GPUVolume
+
+
+def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_samples: int = 16,
+                      volume: GPUVolume | None = None):
+    """(passes, timings) like ``preview.render_passes``. ``volume`` : a ``GPUVolume`` kept
+    between calls so an unchanged octree is not uploaded again (a new one when None)."""
+    check_request(snapshot, width, height)
+    timings = {}
+    t0 = time.perf_counter()
+    volume = volume or GPUVolume()
+    volume.update(gi_state.octree, cones)
+    timings["upload"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    tris = world_triangles(snapshot)
+    _, rough, _, _ = material_table(snapshot)
+    gbuffer = rasterize(tris, snapshot.camera, rough, width, height)
+    seen = read_gbuffer(gbuffer)
+    hit = np.flatnonzero(seen["hit"].ravel())
+    p = seen["position"].reshape(-1, 3)[hit].astype(np.float64)
+    n = seen["normal"].reshape(-1, 3)[hit].astype(np.float64)
+    mat = material_indices(snapshot, seen["material"].ravel()[hit])
+    timings["visibility (GPU)"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    direct = diffuse_direct(p + n * SURFACE_EPSILON, n, snapshot.lights, tris, samples=light_samples)
+    timings["direct"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    diffuse_ao = np.flipud(read_texture(dispatch("diffuse_ao", volume, gbuffer.inputs, width, height)))
+    timings["diffuse+ao cones (GPU)"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    glossy = np.flipud(read_texture(dispatch("glossy", volume, gbuffer.inputs, width, height)))
+    timings["glossy cones (GPU)"] = time.perf_counter() - t0
+
+    flat_da = diffuse_ao.reshape(-1, 4)[hit]
+    passes = compose_passes(snapshot, width, height, hit, mat, direct, flat_da[:, :3],
+                            flat_da[:, 3], glossy.reshape(-1, 4)[hit, :3])
+    return passes, timings

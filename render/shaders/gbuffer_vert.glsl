@@ -1,0 +1,9 @@
+/* G-buffer pass: world-space triangles projected with the camera's view_projection. */
+void main()
+{
+  world_position = position;
+  shading_normal = normal;
+  flat_normal = face_normal;
+  surface = material;
+  gl_Position = view_projection * vec4(position, 1.0);
+}
