@@ -2,8 +2,9 @@
 ``voxgi_addon.preview.render_passes`` (the numpy reference), with primary visibility
 rasterized (``gbuffer``) and the cone tracing done by compute shaders (``gpu_tracer``).
 
-Direct diffuse light keeps the reference's exact shadow rays (numpy, on the G-buffer's hit
-points), so ``Diffuse Direct`` is the reference's own. Needs a GPU context (``gpu_context``).
+Direct diffuse light: with shadows "RAYS" the reference's exact shadow rays (numpy, on the
+G-buffer's hit points); with "CONES" the unshadowed light (numpy, cheap) times one soft-shadow
+cone per light traced on the GPU (``shaders/shadow.glsl``). Needs a GPU context.
 """
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import time
 
 import numpy as np
 
+from ..voxgi_addon.cone_shadows import cone_shadowed_direct, shadow_cone
 from ..voxgi_addon.direct_light import diffuse_direct
 from ..voxgi_addon.preview import (SURFACE_EPSILON, check_request, compose_passes,
                                    material_indices, material_table)
@@ -21,7 +23,7 @@ from .gpu_volume import GPUVolume
 
 
 def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_samples: int = 16,
-                      volume: GPUVolume | None = None):
+                      volume: GPUVolume | None = None, shadows: str = "RAYS"):
     """(passes, timings) like ``preview.render_passes``. ``volume`` : a ``GPUVolume`` kept
     between calls so an unchanged octree is not uploaded again (a new one when None)."""
     check_request(snapshot, width, height)
@@ -43,8 +45,19 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
     timings["visibility (GPU)"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    direct = diffuse_direct(p + n * SURFACE_EPSILON, n, snapshot.lights, tris, samples=light_samples)
-    timings["direct"] = time.perf_counter() - t0
+    if shadows == "CONES":
+        def visibility(light, lit):
+            target, size, is_sun = shadow_cone(light)
+            constants = {"light_position": (*target, float(is_sun)), "light_size": (size, 0, 0, 0)}
+            seen = read_texture(dispatch("shadow", volume, gbuffer.inputs, width, height, constants))
+            return np.flipud(seen)[..., 0].ravel()[hit[lit]]
+
+        direct = cone_shadowed_direct(None, p, n, snapshot.lights, cones, light_samples, visibility)
+        timings["direct (GPU shadow cones)"] = time.perf_counter() - t0
+    else:
+        direct = diffuse_direct(p + n * SURFACE_EPSILON, n, snapshot.lights, tris,
+                                samples=light_samples)
+        timings["direct"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     diffuse_ao = np.flipud(read_texture(dispatch("diffuse_ao", volume, gbuffer.inputs, width, height)))

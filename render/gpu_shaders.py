@@ -18,8 +18,11 @@ LOCAL_SIZE = 8  # 8×8 pixels per work group
 KERNELS = {
     "diffuse_ao": ("gbuffer_position", "gbuffer_normal"),
     "glossy": ("gbuffer_position", "gbuffer_normal", "gbuffer_view"),
+    "shadow": ("gbuffer_position", "gbuffer_normal"),
     "probe": ("gbuffer_position", "gbuffer_normal", "gbuffer_view"),  # tests: raw samples
 }
+# Kernel name → its VEC4 push constants.
+PUSH_CONSTANTS = {"shadow": ("light_position", "light_size")}
 _cache: dict[str, object] = {}
 
 
@@ -43,6 +46,8 @@ def compute_shader(kernel: str):
         info.sampler(1, "FLOAT_2D", "params")
         for i, name in enumerate(KERNELS[kernel]):
             info.sampler(2 + i, "FLOAT_2D", name)
+        for name in PUSH_CONSTANTS.get(kernel, ()):
+            info.push_constant("VEC4", name)
         info.image(0, "RGBA32F", "FLOAT_2D", "out_image", qualifiers={"WRITE"})
         info.compute_source(kernel_source(kernel))
         _cache[key] = gpu.shader.create_from_info(info)

@@ -22,8 +22,10 @@ def read_texture(texture) -> np.ndarray:
     return flat.reshape(texture.height, texture.width, 4).copy()
 
 
-def dispatch(kernel: str, volume, inputs: dict[str, object], width: int, height: int):
-    """Run ``kernel`` over a width × height image; returns its RGBA32F output texture."""
+def dispatch(kernel: str, volume, inputs: dict[str, object], width: int, height: int,
+             constants: dict[str, tuple] | None = None):
+    """Run ``kernel`` over a width × height image; returns its RGBA32F output texture.
+    constants : the kernel's VEC4 push constants by name (``gpu_shaders.PUSH_CONSTANTS``)."""
     shader = compute_shader(kernel)
     out = gpu.types.GPUTexture((width, height), format="RGBA32F")
     shader.bind()
@@ -31,6 +33,8 @@ def dispatch(kernel: str, volume, inputs: dict[str, object], width: int, height:
     shader.uniform_sampler("params", volume.params)
     for name in KERNELS[kernel]:
         shader.uniform_sampler(name, inputs[name])
+    for name, value in (constants or {}).items():
+        shader.uniform_float(name, tuple(float(v) for v in value))
     shader.image("out_image", out)
     gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
     return out

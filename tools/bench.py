@@ -26,6 +26,7 @@ SECTIONS = {
     "voxelize": ("bench_voxelize", "surface voxelization vs trimesh and Open3D"),
     "gfg": ("bench_gfg", "GFG file write/read throughput vs numpy.save/numpy.load"),
     "gi": ("bench_gi", "per-update time, preview time and Cycles time/error (runs in .venv)"),
+    "gpu": ("bench_gpu", "GPU tracer: filtered samples/s and preview times vs numpy and Cycles"),
 }
 
 

@@ -9,14 +9,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def run(quick: bool = False, out=print) -> str:
+def run(quick: bool = False, out=print, script: str = "bench_gi_blender.py") -> str:
     python = ROOT / ".venv" / "bin" / "python"
     if not python.exists():
         raise RuntimeError("the bpy venv .venv is missing: run `make venv` (make bench does)")
-    cmd = [str(python), str(ROOT / "tools" / "bench_gi_blender.py")] + (["--quick"] if quick else [])
+    cmd = [str(python), str(ROOT / "tools" / script)] + (["--quick"] if quick else [])
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     if done.returncode != 0:
-        raise RuntimeError(f"bench_gi_blender.py failed:\n{done.stderr[-2000:]}")
+        raise RuntimeError(f"{script} failed:\n{done.stderr[-2000:]}")
     table = "\n".join(line for line in done.stdout.splitlines()
                       if line.startswith(("|", "###")) or not line.strip())
     out(table.strip() + "\n")

@@ -93,6 +93,15 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
         description="Shadow rays per pixel for lights with a size (area, soft point, sun angle)",
         default=16, min=1, max=256,
     )
+    shadows: bpy.props.EnumProperty(
+        name="Shadows",
+        description="How the preview's direct light is shadowed",
+        items=(("RAYS", "Rays (exact)", "Shadow rays against the scene's triangles: exact, "
+                "slower (CPU)"),
+               ("CONES", "Cones (soft)", "One cone per light through the voxels: soft, fast "
+                "(traced on the GPU with the GPU tracer)")),
+        default="RAYS",
+    )
     tracer: bpy.props.EnumProperty(
         name="Tracer",
         description="Where the preview's cone tracing runs",

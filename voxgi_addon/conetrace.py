@@ -245,14 +245,19 @@ def trace_shadow(volume: ConeVolume, points, normals, light_positions, light_rad
                  settings: ConeSettings):
     """Soft-shadow visibility (N,) in [0, 1]: one cone to each point's light position.
 
-    The cone's half-angle covers the light's radius as seen from the point.
+    The cone's half-angle covers the light's radius as seen from the point, and it stops
+    short of the light by the larger of that radius and 2 voxels there, so the surface a light
+    is mounted on (an area light under a ceiling) does not shadow it.
     """
     origins = offset_origins(points, normals, volume, settings.start_offset)
     to_light = light_positions - origins
     dist = np.linalg.norm(to_light, axis=1)
     axis = to_light / np.maximum(dist, 1e-12)[:, None]
-    half = np.arctan(np.maximum(light_radius, 1e-3) / np.maximum(dist, 1e-6))
-    _, occ = march_cones(volume, origins, axis, half, dist, sample_factor=settings.sample_factor,
+    radius = np.maximum(light_radius, 1e-3)
+    half = np.arctan(radius / np.maximum(dist, 1e-6))
+    short = np.maximum(radius, 2.0 * local_voxel_size(volume, light_positions))
+    _, occ = march_cones(volume, origins, axis, half, np.maximum(dist - short, 0.0),
+                         sample_factor=settings.sample_factor,
                          start_offset=0.0, opacity_scale=settings.opacity_scale, want_light=False,
                          anisotropic=settings.anisotropic)
     return (1.0 - occ).astype(np.float32)

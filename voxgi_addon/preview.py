@@ -12,6 +12,7 @@ import time
 
 import numpy as np
 
+from .cone_shadows import cone_shadowed_direct
 from .conetrace import ConeSettings, trace_diffuse_and_ao, trace_glossy
 from .direct_light import diffuse_direct
 from .errors import VoxGIError
@@ -78,8 +79,11 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
 
 
 def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettings,
-                  light_samples: int = 16):
+                  light_samples: int = 16, shadows: str = "RAYS"):
     """Render the passes at ``width`` × ``height`` with the numpy tracer.
+
+    shadows : "RAYS" (exact shadow rays against the triangles) or "CONES" (one cone per light
+    through the octree, ``cone_shadows``).
 
     Returns (passes, timings): passes maps each name of PASS_NAMES to an (H, W, 3) float32
     image (row 0 = top); timings maps stage names to seconds.
@@ -99,7 +103,12 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     mat = material_indices(snapshot, seen.material.ravel()[hit])
 
     t0 = time.perf_counter()
-    direct = diffuse_direct(p + n * SURFACE_EPSILON, n, snapshot.lights, tris, samples=light_samples)
+    if shadows == "CONES":
+        direct = cone_shadowed_direct(gi_state.octree, p, n, snapshot.lights, cones,
+                                      samples=light_samples)
+    else:
+        direct = diffuse_direct(p + n * SURFACE_EPSILON, n, snapshot.lights, tris,
+                                samples=light_samples)
     timings["direct"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     indirect, ao = trace_diffuse_and_ao(gi_state.octree, p, n, cones)

@@ -120,15 +120,15 @@ vec4 scale_opacity(vec4 v, float scale)
 }
 
 /* March one cone front to back (conetrace.march_cones). Two occlusion channels share the
- * samples: the light channel (extinction alpha, to light_distance, with radiance) and the
- * occlusion channel (blended alpha, to occlusion_distance). A distance of 0 switches a
- * channel off. When clamp_surface, a sample never reads nodes wider than 2/3 of its height
- * above the surface (normal sn, start height base). */
+ * samples: the light channel (extinction alpha, to light_distance, with radiance and the
+ * settings' falloff) and the occlusion channel (blended alpha, to occlusion_distance, with
+ * occlusion_falloff). A distance of 0 switches a channel off. When clamp_surface, a sample
+ * never reads nodes wider than 2/3 of its height above the surface (normal sn, height base). */
 void march(vec3 origin, vec3 dir, float tan_half, float local, float light_distance,
-           float occlusion_distance, bool clamp_surface, vec3 sn, float base,
-           out vec3 radiance, out float alpha_light, out float alpha_occlusion)
+           float occlusion_distance, float occlusion_falloff, bool clamp_surface, vec3 sn,
+           float base, out vec3 radiance, out float alpha_light, out float alpha_occlusion)
 {
-  vec4 s0 = g_settings0;  /* sample_factor, falloff, ao_falloff, opacity_scale */
+  vec4 s0 = g_settings0;  /* sample_factor, falloff, -, opacity_scale */
   float depth = g_shape.x;
   float leaf = g_shape.w;
   bool anisotropic = g_anisotropic;
@@ -168,7 +168,7 @@ void march(vec3 origin, vec3 dir, float tan_half, float local, float light_dista
       alpha_light += weight * a_light;
     }
     if (on_occlusion) {
-      alpha_occlusion += (1.0 - alpha_occlusion) / (1.0 + s0.z * d) * a_occ;
+      alpha_occlusion += (1.0 - alpha_occlusion) / (1.0 + occlusion_falloff * d) * a_occ;
     }
     d += step_length;
     on_light = on_light && d < light_distance && alpha_light < 0.999;

@@ -29,7 +29,7 @@ void main()
     vec3 axis = t * cone.x + s * cone.y + n * cone.z;
     vec3 radiance;
     float alpha_light, alpha_occlusion;
-    march(origin, axis, s1.w, local, s1.x, s1.y, true, n, height,
+    march(origin, axis, s1.w, local, s1.x, s1.y, s0.z, true, n, height,
           radiance, alpha_light, alpha_occlusion);
     diffuse += cone.w * radiance;
     visible += cone.w * (1.0 - alpha_occlusion);

@@ -23,7 +23,7 @@ void main()
   float half_angle = clamp(atan(r * r * 1.5), radians(1.0), radians(60.0));
   vec3 radiance;
   float alpha_light, alpha_occlusion;
-  march(origin, reflected, tan(half_angle), local_voxel_size(origin), s1.x, 0.0, false, n, 0.0,
+  march(origin, reflected, tan(half_angle), local_voxel_size(origin), s1.x, 0.0, 0.0, false, n, 0.0,
         radiance, alpha_light, alpha_occlusion);
   imageStore(out_image, px, vec4(s2.z * radiance, 1.0));
 }

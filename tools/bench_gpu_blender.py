@@ -1,0 +1,139 @@
+"""GPU tracer benchmark rows (issue 5), run with the bpy venv:
+``.venv/bin/python tools/bench_gpu_blender.py [--quick]``.
+
+Filtered octree samples per second (the GLSL sampler vs ``VoxelOctree.sample_directional``),
+GI preview time with the GPU tracer at 160×120, 320×240 and 640×480 (and the numpy tracer at
+160×120) for the demo scene, beside Cycles' time and Diffuse Indirect error at 64 and 256 spp
+against a high-spp Cycles reference of the same view. Prints a markdown table of medians.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import pathlib
+import statistics
+import sys
+import tempfile
+import time
+
+REPO_ROOT = pathlib.Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO_ROOT / "tools"))
+
+
+def median_seconds(fn, repeats):
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args(argv)
+    tmp = tempfile.mkdtemp(prefix="voxgi-bench-gpu-")
+    (pathlib.Path(tmp) / "voxgi").symlink_to(REPO_ROOT, target_is_directory=True)
+    sys.path.insert(0, tmp)
+    import bpy
+    import numpy as np
+
+    voxgi = importlib.import_module("voxgi")
+    voxgi.register()
+    from voxgi.operators.demo_scene import build_demo_scene
+    from voxgi.operators.scene_snapshot import take_snapshot
+    from voxgi.render.gpu_context import ensure_gpu_context
+    from voxgi.render.gpu_preview import render_passes_gpu
+    from voxgi.render.gpu_tracer import dispatch, read_texture
+    from voxgi.render.gpu_volume import GPUVolume, float_texture
+    from voxgi.ui.properties import cone_settings, gi_settings
+    from voxgi.voxgi_addon.gi_update import update_gi
+    from voxgi.voxgi_addon.mesh_caches import build_scene_caches
+    from voxgi.voxgi_addon.morton import morton_decode
+    from voxgi.voxgi_addon.preview import render_passes
+    import gi_compare
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    build_demo_scene(scene)
+    ready, why = ensure_gpu_context()
+    if not ready:
+        raise SystemExit(f"no GPU context: {why}")
+    snapshot = take_snapshot(bpy.context, bpy.context.evaluated_depsgraph_get())
+    caches = build_scene_caches(snapshot, scene.voxgi.base_span, scene.voxgi.cascade_count)
+    state = update_gi(snapshot, caches, gi_settings(scene.voxgi))
+    cones = cone_settings(scene.voxgi)
+    octree = state.octree
+    repeats = 3 if args.quick else 5
+    rows = []
+
+    # Filtered samples: one anisotropic octree sample at a fractional level (2 levels × 3 faces).
+    side = 512
+    n = side * side
+    rng = np.random.default_rng(0)
+    keys = octree.levels[-1].keys
+    leaves = morton_decode(keys[rng.integers(0, len(keys), n)])
+    points = octree.root_origin + (leaves + rng.uniform(-4, 5, (n, 3))) * octree.node_size(octree.depth)
+    level = rng.uniform(0, octree.depth, n)
+    dirs = rng.normal(size=(n, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    volume = GPUVolume()
+    t0 = time.perf_counter()
+    volume.update(octree, cones)
+    upload = time.perf_counter() - t0
+    inputs = {"gbuffer_position": float_texture(np.c_[points, level].reshape(side, side, 4), (side, side)),
+              "gbuffer_normal": float_texture(np.c_[dirs, np.ones(n)].reshape(side, side, 4), (side, side)),
+              "gbuffer_view": float_texture(np.zeros((side, side, 4)), (side, side))}
+    read_texture(dispatch("probe", volume, inputs, side, side))  # compile
+    gpu_s = median_seconds(lambda: read_texture(dispatch("probe", volume, inputs, side, side)), repeats)
+    m = n // 8
+    numpy_s = median_seconds(lambda: octree.sample_directional(points[:m], level[:m], dirs[:m]), repeats) * 8
+    rows.append(("filtered octree samples/s, GPU (GLSL, llvmpipe)", gpu_s,
+                 f"{n / gpu_s / 1e6:.1f} M/s = {numpy_s / gpu_s:.0f}× numpy ({n / numpy_s / 1e6:.2f} M/s)"))
+    rows.append(("atlas upload (demo scene, 3×64³)", upload, f"{volume.uploaded_bytes / 2**20:.1f} MB RGBA16F"))
+
+    sizes = [(160, 120), (320, 240), (640, 480)]
+    results = {}
+    for w, h in sizes:
+        render_passes_gpu(snapshot, state, w, h, cones, volume=volume)  # warm: shaders, upload
+        timings = []
+
+        def once():
+            passes, t = render_passes_gpu(snapshot, state, w, h, cones, volume=volume)
+            results[(w, h)] = passes
+            timings.append(t)
+
+        seconds = median_seconds(once, 1 if (args.quick and w > 160) else repeats)
+        stages = timings[len(timings) // 2]
+        rows.append((f"GPU preview {w}×{h} (after the update)", seconds,
+                     f"direct (numpy shadow rays) {stages['direct'] * 1000:.0f} ms, cones "
+                     f"{(stages['diffuse+ao cones (GPU)'] + stages['glossy cones (GPU)']) * 1000:.0f} ms, "
+                     f"visibility {stages['visibility (GPU)'] * 1000:.0f} ms"))
+    numpy_preview = median_seconds(lambda: render_passes(snapshot, state, 160, 120, cones), 1 if args.quick else 3)
+    rows.append(("numpy preview 160×120 (after the update)", numpy_preview,
+                 f"GPU is {numpy_preview / rows[2][1]:.1f}× faster"))
+
+    w, h = sizes[0]
+    ref_spp = 512 if args.quick else 2048
+    reference, ref_seconds = gi_compare.render_cycles(scene, w, h, ref_spp, scene.voxgi.ao_distance)
+    ours = results[(w, h)]
+    mask = (ours["Diffuse Color"].sum(-1) > 0) & (reference["Diffuse Color"].sum(-1) > 0)
+    err = gi_compare.relative_l1(ours["Diffuse Indirect"], reference["Diffuse Indirect"], mask)
+    rows.append((f"GPU preview {w}×{h}: Diffuse Indirect error", rows[2][1], f"error {err:.3f}"))
+    for spp in (64, 256):
+        passes, seconds = gi_compare.render_cycles(scene, w, h, spp, scene.voxgi.ao_distance)
+        e = gi_compare.relative_l1(passes["Diffuse Indirect"], reference["Diffuse Indirect"], mask)
+        rows.append((f"Cycles {spp} spp {w}×{h}, one diffuse bounce", seconds, f"error {e:.3f}"))
+    print(f"### GPU tracer: demo scene ({len(snapshot.objects)} objects), 3×{octree.resolution}³, "
+          f"{cones.diffuse_cones} cones of {cones.cone_angle:g}°; errors: relative L1 of Diffuse "
+          f"Indirect over geometry pixels vs Cycles {ref_spp} spp ({ref_seconds:.1f} s); "
+          f"medians of {repeats}\n")
+    print("| what | median time | notes |\n|---|---:|---|")
+    for name, seconds, note in rows:
+        print(f"| {name} | {seconds * 1000:.1f} ms | {note} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
