@@ -110,6 +110,17 @@ def main(argv=None) -> int:
                      f"direct (numpy shadow rays) {stages['direct'] * 1000:.0f} ms, cones "
                      f"{(stages['diffuse+ao cones (GPU)'] + stages['glossy cones (GPU)']) * 1000:.0f} ms, "
                      f"visibility {stages['visibility (GPU)'] * 1000:.0f} ms"))
+    for w, h in sizes:
+        stages = {}
+
+        def cones_once():
+            stages.update(render_passes_gpu(snapshot, state, w, h, cones, volume=volume,
+                                            shadows="CONES")[1])
+
+        render_passes_gpu(snapshot, state, w, h, cones, volume=volume, shadows="CONES")
+        seconds = median_seconds(cones_once, 1 if (args.quick and w > 160) else repeats)
+        rows.append((f"GPU preview {w}×{h}, soft-shadow cones instead of rays", seconds,
+                     f"direct {stages['direct (GPU shadow cones)'] * 1000:.0f} ms"))
     numpy_preview = median_seconds(lambda: render_passes(snapshot, state, 160, 120, cones), 1 if args.quick else 3)
     rows.append(("numpy preview 160×120 (after the update)", numpy_preview,
                  f"GPU is {numpy_preview / rows[2][1]:.1f}× faster"))
