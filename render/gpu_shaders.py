@@ -10,6 +10,7 @@ import pathlib
 
 import gpu
 
+from ..voxgi_addon.svo_sampling import TAU_ALPHA_CAP
 from ..voxgi_addon.trace_params import MAX_CASCADES, MAX_LEVELS, ROWS
 
 SHADER_DIR = pathlib.Path(__file__).resolve().parent / "shaders"
@@ -42,6 +43,7 @@ def compute_shader(kernel: str):
             info.define(name, str(row))
         info.define("MAX_LEVELS", str(MAX_LEVELS))
         info.define("MAX_CASCADES", str(MAX_CASCADES))
+        info.define("TAU_ALPHA_CAP", repr(float(TAU_ALPHA_CAP)))
         info.sampler(0, "FLOAT_3D", "atlas")
         info.sampler(1, "FLOAT_2D", "params")
         for i, name in enumerate(KERNELS[kernel]):

@@ -28,9 +28,12 @@ viewer is on), the premultiplied r·α, g·α, b·α, α the node shows to a con
   each side only what lies in front of the wall;
 * a parent that is also a coarser cascade's voxel: per face, ½·own + ½·the children's
   composited colour, α = 1 (the isotropic ½ : ½ rule face by face).
-Known limits (thin-wall test, 2 cm wall in 7 cm voxels): cones crossing a wall obliquely read
-its edge-on faces with weight 1 − d_x², a one-node wall sampled one node apart composites to
-α ≥ 0.75 only, and a cone wider than its distance to the wall samples nodes on both sides.
+Known limits (thin-wall test, 2 cm wall in 7 cm voxels): a one-node wall sampled one node
+apart composites to α ≥ 0.75 only, and a cone wider than its distance to the wall samples
+nodes on both sides (the trilinear filter reaches a whole node past its point). The cone
+tracer answers these with ``ConeSettings.transmittance_exponent`` and ``radiance_detail``,
+and weighs the faces' colours by optical depth (``svo_sampling.trilinear_directional``), so
+edge-on faces behind a wall opaque along x no longer show with weight 1 − d_x².
 ``one_sided_leaves`` (off here; on in ``gi_update.GISettings``) hides the back of lit voxels.
 
 Storage: levels 0..dense_depth are ``DenseLevel`` 3D arrays indexed [x, y, z] (the mips);

@@ -10,7 +10,7 @@ is written down:
 * ``ROW_LEVELS + ℓ``: level ℓ's window origin xyz (nodes) and size W;
 * ``ROW_SLABS + ℓ``: level ℓ's slab start z0 in the atlas;
 * ``ROW_CASCADES + i``: cascade i's leaf level and node offset (``svo.VoxelOctree``);
-* ``ROW_SETTINGS`` .. +2: the cone settings (see ``settings_rows``);
+* ``ROW_SETTINGS`` .. +3: the cone settings (see ``settings_rows``);
 * ``ROW_CONES + k``: diffuse cone k's axis in the normal's frame xyz and weight.
 """
 from __future__ import annotations
@@ -30,7 +30,8 @@ ROW_SLABS = ROW_LEVELS + MAX_LEVELS
 ROW_CASCADES = ROW_SLABS + MAX_LEVELS
 MAX_CASCADES = 8
 ROW_SETTINGS = ROW_CASCADES + MAX_CASCADES
-ROW_CONES = ROW_SETTINGS + 3
+SETTINGS_ROWS = 4
+ROW_CONES = ROW_SETTINGS + SETTINGS_ROWS
 MAX_CONES = 128
 PARAM_ROWS = ROW_CONES + MAX_CONES
 
@@ -38,13 +39,15 @@ ROWS = {name: value for name, value in globals().items() if name.startswith("ROW
 
 
 def settings_rows(cones: ConeSettings) -> np.ndarray:
-    """(3, 4): sample_factor, falloff, ao_falloff, opacity_scale / max_distance, ao_distance,
-    start_offset, tan(cone half-angle) / anisotropic, cone count, gi_intensity, ao_intensity."""
+    """(SETTINGS_ROWS, 4): sample_factor, falloff, ao_falloff, opacity_scale / max_distance,
+    ao_distance, start_offset, tan(cone half-angle) / anisotropic, cone count, gi_intensity,
+    ao_intensity / radiance_detail, transmittance_exponent, 0, 0."""
     return np.array([
         [cones.sample_factor, cones.falloff, cones.ao_falloff, cones.opacity_scale],
         [cones.max_distance, cones.ao_distance, cones.start_offset,
          math.tan(math.radians(cones.cone_angle))],
         [float(cones.anisotropic), cones.diffuse_cones, cones.gi_intensity, cones.ao_intensity],
+        [cones.radiance_detail, cones.transmittance_exponent, 0.0, 0.0],
     ], np.float32)
 
 
@@ -67,7 +70,7 @@ def trace_params(octree, atlas, cones: ConeSettings) -> np.ndarray:
         out[ROW_SLABS + w.level] = (w.z0, 0, 0, 0)
     for i, (ell, off) in enumerate(zip(octree.cascade_levels, octree.cascade_offsets)):
         out[ROW_CASCADES + i] = (ell, off, 0, 0)
-    out[ROW_SETTINGS:ROW_SETTINGS + 3] = settings_rows(cones)
+    out[ROW_SETTINGS:ROW_SETTINGS + SETTINGS_ROWS] = settings_rows(cones)
     dirs, weights = diffuse_cone_set(cones.diffuse_cones, math.radians(cones.cone_angle))
     out[ROW_CONES:ROW_CONES + len(dirs), :3] = dirs
     out[ROW_CONES:ROW_CONES + len(dirs), 3] = weights

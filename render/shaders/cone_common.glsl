@@ -13,6 +13,7 @@ vec4 param(int row) { return texelFetch(params, ivec2(row, 0), 0); }
 vec4 g_root;
 vec4 g_shape;
 vec4 g_settings0;
+vec4 g_settings3;  /* radiance_detail, transmittance_exponent */
 bool g_anisotropic;
 vec4 g_atlas;
 vec4 g_levels[MAX_LEVELS];
@@ -24,6 +25,7 @@ void load_params()
   g_root = param(ROW_ROOT);
   g_shape = param(ROW_SHAPE);
   g_settings0 = param(ROW_SETTINGS);
+  g_settings3 = param(ROW_SETTINGS + 3);
   g_anisotropic = param(ROW_SETTINGS + 2).x > 0.5;
   g_atlas = param(ROW_ATLAS);
   for (int i = 0; i < MAX_LEVELS; i++) {
@@ -61,7 +63,8 @@ float local_voxel_size(vec3 p)
 }
 
 /* One level's sample for a cone along dir: premultiplied colour for the extinction alpha
- * (rgb), extinction alpha (.w) and the blended alpha (returned in blended). */
+ * (rgb), extinction alpha (.w) and the blended alpha (returned in blended). The colour weighs
+ * each face by its share |d_a|·τ_a of the optical depth (svo_sampling.trilinear_directional). */
 vec4 sample_level(int level, vec3 p, vec3 dir, bool anisotropic, out float blended)
 {
   vec4 win = g_levels[level];
@@ -77,19 +80,23 @@ vec4 sample_level(int level, vec3 p, vec3 dir, bool anisotropic, out float blend
     return v;
   }
   vec3 colour = vec3(0.0);
+  float optical_depth = 0.0;
   float blend = 0.0;
   float transmit = 1.0;
   for (int a = 0; a < 3; a++) {
     float face = float(2 * a + (dir[a] > 0.0 ? 1 : 0));
     vec4 v = textureLod(atlas, (t + vec3(face * pad, 0.0, 0.0)) * scale, 0.0);
-    float d2 = dir[a] * dir[a];
-    colour += d2 * v.rgb;
-    blend += d2 * v.w;
-    transmit *= pow(clamp(1.0 - v.w, 0.0, 1.0), abs(dir[a]));
+    float along = abs(dir[a]);
+    float tau = -log(1.0 - clamp(v.w, 0.0, TAU_ALPHA_CAP));
+    float tau_per_alpha = v.w > 1e-4 ? tau / v.w : 1.0 + 0.5 * max(v.w, 0.0);
+    colour += along * tau_per_alpha * v.rgb;
+    optical_depth += along * tau;
+    blend += dir[a] * dir[a] * v.w;
+    transmit *= pow(clamp(1.0 - v.w, 0.0, 1.0), along);
   }
   blended = blend;
   float alpha = 1.0 - transmit;
-  return vec4(colour * (alpha / max(blend, 1e-6)), alpha);
+  return vec4(colour * (alpha / max(optical_depth, 1e-12)), alpha);
 }
 
 /* Levels floor(level) and floor(level) + 1 blended linearly (svo_sampling.sample_levels). */
@@ -152,15 +159,26 @@ void march(vec3 origin, vec3 dir, float tan_half, float local, float light_dista
     if (clamp_surface) {
       level = max(level, ceil(depth - log2(widest / leaf) - 1e-5));
     }
-    level = min(max(level, 0.0), float(finest_level_at(p)));
+    float finest = float(finest_level_at(p));
+    level = min(max(level, 0.0), finest);
     level = clamp(level, 0.0, depth);
     float blended;
-    vec4 v = scale_opacity(sample_volume(level, p, dir, anisotropic, blended), s0.w);
+    vec4 v = sample_volume(level, p, dir, anisotropic, blended);
+    /* Light: the colour from radiance_detail levels finer where that level holds the
+     * occluders this one sees (conetrace.march_cones). */
+    float fine = min(level + g_settings3.x, finest);
+    if (on_light && v.w > 1e-6 && fine > level) {
+      float unused;
+      vec4 f = sample_volume(fine, p, dir, anisotropic, unused);
+      float m = min(f.w / v.w, 1.0);
+      v.rgb = m * (v.w / max(f.w, 1e-12)) * f.rgb + (1.0 - m) * v.rgb;
+    }
+    v = scale_opacity(v, s0.w);
     blended = min(blended * s0.w, 1.0);
     float step_length = diameter * s0.x;
     float node = leaf * exp2(depth - level);
     float exponent = step_length / node;
-    float a_light = 1.0 - pow(clamp(1.0 - v.w, 0.0, 1.0), exponent);
+    float a_light = 1.0 - pow(clamp(1.0 - v.w, 0.0, 1.0), exponent * g_settings3.y);
     float a_occ = 1.0 - pow(clamp(1.0 - blended, 0.0, 1.0), exponent);
     if (on_light) {
       float weight = (1.0 - alpha_light) / (1.0 + s0.y * d);
