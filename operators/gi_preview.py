@@ -68,7 +68,8 @@ def trace_passes(scene, snapshot, state, width, height):
                 session.gpu_volume = session.gpu_volume or GPUVolume()
                 passes, timings = render_passes_gpu(snapshot, state, width, height, cones,
                                                     settings.light_samples, session.gpu_volume,
-                                                    shadows=settings.shadows)
+                                                    shadows=settings.shadows,
+                                                    gi_stride=int(settings.gi_resolution))
                 session.tracer_used = "GPU"
                 return passes, timings, [("INFO", "VoxGI: cones traced on the GPU")]
             except VoxGIError:
@@ -77,7 +78,8 @@ def trace_passes(scene, snapshot, state, width, height):
                 session.gpu_volume = None
                 why = f"the GPU tracer failed: {error}"
     passes, timings = render_passes(snapshot, state, width, height, cones,
-                                    light_samples=settings.light_samples, shadows=settings.shadows)
+                                    light_samples=settings.light_samples, shadows=settings.shadows,
+                                    gi_stride=int(settings.gi_resolution))
     session.tracer_used = "numpy"
     return passes, timings, [("WARNING" if settings.tracer == "AUTO" else "INFO",
                               f"VoxGI: numpy tracer used ({why})")]

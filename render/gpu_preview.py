@@ -14,6 +14,7 @@ import numpy as np
 
 from ..voxgi_addon.cone_shadows import cone_shadowed_direct, shadow_cone
 from ..voxgi_addon.direct_light import diffuse_direct
+from ..voxgi_addon.gi_upsample import low_shape, sample_pixels, upsample
 from ..voxgi_addon.preview import (SURFACE_EPSILON, check_request, compose_passes,
                                    material_indices, material_table)
 from ..voxgi_addon.scene_geometry import world_triangles
@@ -23,10 +24,10 @@ from .gpu_volume import GPUVolume
 
 
 def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_samples: int = 16,
-                      volume: GPUVolume | None = None, shadows: str = "RAYS"):
+                      volume: GPUVolume | None = None, shadows: str = "RAYS", gi_stride: int = 1):
     """(passes, timings) like ``preview.render_passes``. ``volume`` : a ``GPUVolume`` kept
     between calls so an unchanged octree is not uploaded again (a new one when None)."""
-    check_request(snapshot, width, height)
+    check_request(snapshot, width, height, gi_stride)
     timings = {}
     t0 = time.perf_counter()
     volume = volume or GPUVolume()
@@ -60,7 +61,12 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
         timings["direct"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    diffuse_ao = np.flipud(read_texture(dispatch("diffuse_ao", volume, gbuffer.inputs, width, height)))
+    low_h, low_w = low_shape(height, width, gi_stride)
+    low = np.flipud(read_texture(dispatch("diffuse_ao", volume, gbuffer.inputs, low_w, low_h,
+                                          {"sampling": (gi_stride, width, height, 0)})))
+    rows, cols = sample_pixels(height, width, gi_stride)
+    diffuse_ao = upsample(low, seen["hit"][rows][:, cols], seen["hit"], seen["position"],
+                          seen["normal"], gi_stride)
     timings["diffuse+ao cones (GPU)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     glossy = np.flipud(read_texture(dispatch("glossy", volume, gbuffer.inputs, width, height)))

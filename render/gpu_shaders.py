@@ -23,7 +23,7 @@ KERNELS = {
     "probe": ("gbuffer_position", "gbuffer_normal", "gbuffer_view"),  # tests: raw samples
 }
 # Kernel name → its VEC4 push constants.
-PUSH_CONSTANTS = {"shadow": ("light_position", "light_size")}
+PUSH_CONSTANTS = {"shadow": ("light_position", "light_size"), "diffuse_ao": ("sampling",)}
 _cache: dict[str, object] = {}
 
 

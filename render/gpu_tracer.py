@@ -24,7 +24,7 @@ def read_texture(texture) -> np.ndarray:
 
 def dispatch(kernel: str, volume, inputs: dict[str, object], width: int, height: int,
              constants: dict[str, tuple] | None = None):
-    """Run ``kernel`` over a width × height image; returns its RGBA32F output texture.
+    """Run ``kernel`` over a width × height output image; returns that RGBA32F texture.
     constants : the kernel's VEC4 push constants by name (``gpu_shaders.PUSH_CONSTANTS``)."""
     shader = compute_shader(kernel)
     out = gpu.types.GPUTexture((width, height), format="RGBA32F")

@@ -102,7 +102,7 @@ class VOXGI_PT_gi(_SidebarPanel, bpy.types.Panel):
         _settings_column(layout, context, (
             "view_ahead", "dense_depth", "cone_angle", "diffuse_cones", "sample_factor", "falloff",
             "max_distance", "ao_distance", "gi_intensity", "ao_intensity", "light_samples",
-            "shadows", "tracer"))
+            "shadows", "gi_resolution", "tracer"))
         row = layout.row(align=True)
         row.operator("voxgi.update", icon="FILE_REFRESH")
         row.operator("voxgi.render_preview", icon="RENDER_STILL")

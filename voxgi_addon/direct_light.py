@@ -198,26 +198,33 @@ def _area(light, p, n, tris, samples, rng):
     if len(in_front) == 0:
         return value
     p, n = p[in_front], n[in_front]
-    unit = stratified_square(len(p), samples, rng) * 2.0 - 1.0
-    if light.shape in ("DISK", "ELLIPSE"):
-        unit = concentric_disk(0.5 * (unit + 1.0))
-    sx = float(light.size)
-    sy = float(light.size_y) if light.shape in ("RECTANGLE", "ELLIPSE") else sx
-    targets = centre + unit[..., :1] * (0.5 * sx * x) + unit[..., 1:] * (0.5 * sy * y)  # (N, K, 3)
-    w = targets - p[:, None]
-    r2 = np.einsum("nkc,nkc->nk", w, w)
-    cos_x = np.einsum("nkc,nc->nk", w, n)
-    cos_l = -(w @ emit)
-    f = np.maximum(cos_x, 0.0) * np.maximum(cos_l, 0.0) / np.maximum(r2, 1e-30) ** 2  # ∝ integrand
     # Unshadowed Diffuse Direct (= irradiance / π): exact above the horizon, else Monte Carlo.
     heights = np.einsum("nkc,nc->nk", outline[None] - p[:, None], n)
     full = (heights > 0).all(axis=1)
-    unshadowed = f.mean(axis=1) * area / math.pi
+    unshadowed = np.zeros(len(p))
     if full.any():
         unshadowed[full] = _polygon_irradiance(p[full], n[full], outline)
+    # Light samples: for the shadow rays, or (without occluders) only where the light
+    # straddles the horizon.
+    sampled = np.arange(len(p)) if tris is not None else np.flatnonzero(
+        ~full & (heights > 0).any(axis=1))
+    if len(sampled):
+        unit = stratified_square(len(sampled), samples, rng) * 2.0 - 1.0
+        if light.shape in ("DISK", "ELLIPSE"):
+            unit = concentric_disk(0.5 * (unit + 1.0))
+        sx = float(light.size)
+        sy = float(light.size_y) if light.shape in ("RECTANGLE", "ELLIPSE") else sx
+        targets = centre + unit[..., :1] * (0.5 * sx * x) + unit[..., 1:] * (0.5 * sy * y)
+        w = targets - p[sampled, None]
+        r2 = np.einsum("nkc,nkc->nk", w, w)
+        cos_x = np.einsum("nkc,nc->nk", w, n[sampled])
+        cos_l = -(w @ emit)
+        f = np.maximum(cos_x, 0.0) * np.maximum(cos_l, 0.0) / np.maximum(r2, 1e-30) ** 2
+        partial = ~full[sampled]
+        unshadowed[sampled[partial]] = f[partial].mean(axis=1) * area / math.pi
     unshadowed[(heights <= 0).all(axis=1)] = 0.0
     lit = np.flatnonzero(unshadowed > 0)
-    if len(lit) and tris is not None:
+    if len(lit) and tris is not None:  # here sampled = every point, so rows line up
         origins = p[lit] + _NORMAL_OFFSET * n[lit]
         unshadowed[lit] *= _visible_share_of_points(tris, origins, targets[lit], f[lit])
     value[in_front] = radiance * unshadowed

@@ -16,6 +16,7 @@ from .cone_shadows import cone_shadowed_direct
 from .conetrace import ConeSettings, trace_diffuse_and_ao, trace_glossy
 from .direct_light import diffuse_direct
 from .errors import VoxGIError
+from .gi_upsample import STRIDES, sample_pixels, upsample
 from .raycast import primary_visibility
 from .scene_geometry import world_triangles
 
@@ -41,8 +42,10 @@ def material_table(snapshot):
     return albedo, rough, spec, emission
 
 
-def check_request(snapshot, width: int, height: int) -> None:
+def check_request(snapshot, width: int, height: int, gi_stride: int = 1) -> None:
     """Raise ``VoxGIError`` for a preview that cannot be rendered."""
+    if gi_stride not in STRIDES:
+        raise VoxGIError(f"GI resolution stride must be one of {STRIDES}, got {gi_stride}")
     if snapshot.camera is None:
         raise VoxGIError("the scene has no camera to render the preview from")
     if width < 1 or height < 1 or width * height > 16_000_000:
@@ -78,9 +81,27 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
     return passes
 
 
+def _diffuse_and_ao(octree, seen, cones, stride, hit):
+    """(N, 3) diffuse indirect and (N,) AO at the ``hit`` pixels, traced every ``stride``."""
+    if stride == 1:
+        return trace_diffuse_and_ao(octree, seen.position.reshape(-1, 3)[hit],
+                                    seen.normal.reshape(-1, 3)[hit], cones)
+    rows, cols = sample_pixels(*seen.hit.shape, stride)
+    valid = seen.hit[rows][:, cols]
+    low = np.zeros(valid.shape + (4,), np.float32)
+    points = seen.position[rows][:, cols][valid]
+    indirect, ao = trace_diffuse_and_ao(octree, points, seen.normal[rows][:, cols][valid], cones)
+    low[valid] = np.concatenate([indirect, ao[:, None]], axis=1)
+    full = upsample(low, valid, seen.hit, seen.position, seen.normal, stride).reshape(-1, 4)[hit]
+    return full[:, :3], full[:, 3]
+
+
 def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettings,
-                  light_samples: int = 16, shadows: str = "RAYS"):
+                  light_samples: int = 16, shadows: str = "RAYS", gi_stride: int = 1):
     """Render the passes at ``width`` × ``height`` with the numpy tracer.
+
+    gi_stride : trace diffuse indirect light and AO at one pixel of every gi_stride ×
+    gi_stride block and upsample (``gi_upsample``); 1 = every pixel.
 
     shadows : "RAYS" (exact shadow rays against the triangles) or "CONES" (one cone per light
     through the octree, ``cone_shadows``).
@@ -88,7 +109,7 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     Returns (passes, timings): passes maps each name of PASS_NAMES to an (H, W, 3) float32
     image (row 0 = top); timings maps stage names to seconds.
     """
-    check_request(snapshot, width, height)
+    check_request(snapshot, width, height, gi_stride)
     timings = {}
     t0 = time.perf_counter()
     tris = world_triangles(snapshot)
@@ -111,7 +132,7 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
                                 samples=light_samples)
     timings["direct"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    indirect, ao = trace_diffuse_and_ao(gi_state.octree, p, n, cones)
+    indirect, ao = _diffuse_and_ao(gi_state.octree, seen, cones, gi_stride, hit)
     timings["diffuse+ao cones"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     glossy = trace_glossy(gi_state.octree, p, n, dirs[hit], rough[mat], cones)

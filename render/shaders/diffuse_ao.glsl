@@ -1,16 +1,24 @@
-/* Diffuse indirect (rgb, light without albedo) and ambient occlusion (a) per pixel
+/* Diffuse indirect (rgb, light without albedo) and ambient occlusion (a) per traced pixel
  * (conetrace.trace_diffuse_and_ao): the cone set around the normal, each cone marching light
- * to max_distance and occlusion to ao_distance on the same samples. */
+ * to max_distance and occlusion to ao_distance on the same samples.
+ * One invocation per low-resolution cell: sampling = (stride, full width, full height); the
+ * cell traces the G-buffer pixel gi_upsample.sample_pixels picks (rows counted from the top
+ * there, from the bottom here). */
 void main()
 {
-  ivec2 px = ivec2(gl_GlobalInvocationID.xy);
+  ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
   load_params();
-  if (px.x >= imageSize(out_image).x || px.y >= imageSize(out_image).y) {
+  ivec2 low = imageSize(out_image);
+  if (cell.x >= low.x || cell.y >= low.y) {
     return;
   }
+  int stride = int(sampling.x);
+  ivec2 full = ivec2(sampling.yz);
+  int top_row = min((low.y - 1 - cell.y) * stride + stride / 2, full.y - 1);
+  ivec2 px = ivec2(min(cell.x * stride + stride / 2, full.x - 1), full.y - 1 - top_row);
   vec4 position = texelFetch(gbuffer_position, px, 0);
   if (position.w < 0.5) {
-    imageStore(out_image, px, vec4(0.0));
+    imageStore(out_image, cell, vec4(0.0));
     return;
   }
   vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
@@ -35,5 +43,5 @@ void main()
     visible += cone.w * (1.0 - alpha_occlusion);
   }
   float ao = 1.0 - clamp(s2.w * (1.0 - visible), 0.0, 1.0);
-  imageStore(out_image, px, vec4(s2.z * diffuse, ao));
+  imageStore(out_image, cell, vec4(s2.z * diffuse, ao));
 }
