@@ -14,7 +14,7 @@ import numpy as np
 
 from ..voxgi_addon.cone_shadows import cone_shadowed_direct, shadow_cone
 from ..voxgi_addon.direct_light import diffuse_direct
-from ..voxgi_addon.gi_upsample import low_shape, sample_pixels, upsample
+from ..voxgi_addon.gi_upsample import low_shape
 from ..voxgi_addon.preview import (SURFACE_EPSILON, check_request, compose_passes,
                                    material_indices, material_table)
 from ..voxgi_addon.scene_geometry import world_triangles
@@ -62,14 +62,19 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
 
     t0 = time.perf_counter()
     low_h, low_w = low_shape(height, width, gi_stride)
-    low = np.flipud(read_texture(dispatch("diffuse_ao", volume, gbuffer.inputs, low_w, low_h,
-                                          {"sampling": (gi_stride, width, height, 0)})))
-    rows, cols = sample_pixels(height, width, gi_stride)
-    diffuse_ao = upsample(low, seen["hit"][rows][:, cols], seen["hit"], seen["position"],
-                          seen["normal"], gi_stride)
+    sampling = {"sampling": (gi_stride, width, height, 0)}
+
+    def traced(kernel):
+        low = dispatch(kernel, volume, gbuffer.inputs, low_w, low_h, sampling)
+        if gi_stride > 1:  # shaders/upsample.glsl, the port of gi_upsample.upsample
+            low = dispatch("upsample", volume, {**gbuffer.inputs, "low_image": low}, width,
+                           height, sampling)
+        return np.flipud(read_texture(low))
+
+    diffuse_ao = traced("diffuse_ao")
     timings["diffuse+ao cones (GPU)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    glossy = np.flipud(read_texture(dispatch("glossy", volume, gbuffer.inputs, width, height)))
+    glossy = traced("glossy")
     timings["glossy cones (GPU)"] = time.perf_counter() - t0
 
     flat_da = diffuse_ao.reshape(-1, 4)[hit]

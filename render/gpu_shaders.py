@@ -20,10 +20,12 @@ KERNELS = {
     "diffuse_ao": ("gbuffer_position", "gbuffer_normal"),
     "glossy": ("gbuffer_position", "gbuffer_normal", "gbuffer_view"),
     "shadow": ("gbuffer_position", "gbuffer_normal"),
+    "upsample": ("gbuffer_position", "gbuffer_normal", "low_image"),
     "probe": ("gbuffer_position", "gbuffer_normal", "gbuffer_view"),  # tests: raw samples
 }
 # Kernel name → its VEC4 push constants.
-PUSH_CONSTANTS = {"shadow": ("light_position", "light_size"), "diffuse_ao": ("sampling",)}
+PUSH_CONSTANTS = {"shadow": ("light_position", "light_size"), "diffuse_ao": ("sampling",),
+                  "glossy": ("sampling",), "upsample": ("sampling",)}
 _cache: dict[str, object] = {}
 
 

@@ -31,11 +31,15 @@ class GPUVolume:
         self.atlas = None
         self.params = None
         self._texels = None          # texels of the atlas on the GPU
+        self._octree = self._cones = None
         self.uploaded_bytes = 0      # atlas bytes sent by the last update (0 = unchanged)
 
     def update(self, octree, cones) -> None:
-        atlas = volume_atlas(octree)
         self.uploaded_bytes = 0
+        if octree is self._octree and cones == self._cones:
+            return  # the same update's octree: nothing to rebuild
+        self._octree, self._cones = octree, cones
+        atlas = volume_atlas(octree)
         old = self._texels
         if old is None or old.shape != atlas.texels.shape or not np.array_equal(old, atlas.texels):
             self.atlas = float_texture(atlas.texels, atlas.texture_size, ATLAS_FORMAT)

@@ -104,8 +104,8 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
     )
     gi_resolution: bpy.props.EnumProperty(
         name="GI Resolution",
-        description="Trace diffuse indirect light and AO at every pixel or at one pixel per "
-                    "block, upsampled along surfaces (faster, slightly softer)",
+        description="Trace the cones (diffuse indirect, AO, glossy) at every pixel or at one "
+                    "pixel per block, upsampled along surfaces (faster, slightly softer)",
         items=(("1", "Full", "Every pixel"), ("2", "Half", "One pixel per 2×2 block (4× fewer cones)"),
                ("4", "Quarter", "One pixel per 4×4 block (16× fewer cones)")),
         default="1",

@@ -1,8 +1,9 @@
-"""Diffuse indirect light and AO traced at a fraction of the pixels, then upsampled.
+"""Cone-traced terms (diffuse indirect, AO, glossy) traced at a fraction of the pixels, then
+upsampled.
 
 Diffuse indirect light is smooth across a surface (on the demo scene, blurring Cycles' own
 Diffuse Indirect over 4 pixels changes it by 2%), so the preview can trace its cones at one
-pixel of every ``stride`` × ``stride`` block and fill the others with a joint bilateral
+pixel of every ``stride`` × ``stride`` block (glossy too: a faster, blurrier reflection) and fill the others with a joint bilateral
 upsample that only mixes samples lying on the same surface: bilinear weights times a normal
 term max(n·n_k, 0)^8 times a plane term exp(−(|n·(p_k − p)| / (0.1·|p_k − p| + 1e-4))²).
 A pixel whose neighbours all fail those tests takes the nearest traced sample within two

@@ -81,27 +81,26 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
     return passes
 
 
-def _diffuse_and_ao(octree, seen, cones, stride, hit):
-    """(N, 3) diffuse indirect and (N,) AO at the ``hit`` pixels, traced every ``stride``."""
+def _traced(seen, stride, hit, trace, channels):
+    """(N, channels) of ``trace(pixels)`` at the ``hit`` pixels (flat indices), tracing every
+    pixel (stride 1) or one per stride × stride block and upsampling (``gi_upsample``)."""
     if stride == 1:
-        return trace_diffuse_and_ao(octree, seen.position.reshape(-1, 3)[hit],
-                                    seen.normal.reshape(-1, 3)[hit], cones)
-    rows, cols = sample_pixels(*seen.hit.shape, stride)
+        return trace(hit)
+    height, width = seen.hit.shape
+    rows, cols = sample_pixels(height, width, stride)
     valid = seen.hit[rows][:, cols]
-    low = np.zeros(valid.shape + (4,), np.float32)
-    points = seen.position[rows][:, cols][valid]
-    indirect, ao = trace_diffuse_and_ao(octree, points, seen.normal[rows][:, cols][valid], cones)
-    low[valid] = np.concatenate([indirect, ao[:, None]], axis=1)
-    full = upsample(low, valid, seen.hit, seen.position, seen.normal, stride).reshape(-1, 4)[hit]
-    return full[:, :3], full[:, 3]
+    low = np.zeros(valid.shape + (channels,), np.float32)
+    low[valid] = trace((rows[:, None] * width + cols[None, :])[valid])
+    full = upsample(low, valid, seen.hit, seen.position, seen.normal, stride)
+    return full.reshape(-1, channels)[hit]
 
 
 def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettings,
                   light_samples: int = 16, shadows: str = "RAYS", gi_stride: int = 1):
     """Render the passes at ``width`` × ``height`` with the numpy tracer.
 
-    gi_stride : trace diffuse indirect light and AO at one pixel of every gi_stride ×
-    gi_stride block and upsample (``gi_upsample``); 1 = every pixel.
+    gi_stride : trace the cones (diffuse indirect light, AO, glossy) at one pixel of every
+    gi_stride × gi_stride block and upsample (``gi_upsample``); 1 = every pixel.
 
     shadows : "RAYS" (exact shadow rays against the triangles) or "CONES" (one cone per light
     through the octree, ``cone_shadows``).
@@ -131,10 +130,23 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         direct = diffuse_direct(p + n * SURFACE_EPSILON, n, snapshot.lights, tris,
                                 samples=light_samples)
     timings["direct"] = time.perf_counter() - t0
+    positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
+    materials = material_indices(snapshot, seen.material.ravel())
+
+    def diffuse_and_ao(pixels):
+        indirect, ao = trace_diffuse_and_ao(gi_state.octree, positions[pixels], normals[pixels],
+                                            cones)
+        return np.concatenate([indirect, ao[:, None]], axis=1)
+
+    def glossy_cones(pixels):
+        return trace_glossy(gi_state.octree, positions[pixels], normals[pixels], dirs[pixels],
+                            rough[materials[pixels]], cones)
+
     t0 = time.perf_counter()
-    indirect, ao = _diffuse_and_ao(gi_state.octree, seen, cones, gi_stride, hit)
+    traced = _traced(seen, gi_stride, hit, diffuse_and_ao, 4)
+    indirect, ao = traced[:, :3], traced[:, 3]
     timings["diffuse+ao cones"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    glossy = trace_glossy(gi_state.octree, p, n, dirs[hit], rough[mat], cones)
+    glossy = _traced(seen, gi_stride, hit, glossy_cones, 3)
     timings["glossy cones"] = time.perf_counter() - t0
     return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy), timings

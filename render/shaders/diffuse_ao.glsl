@@ -14,8 +14,7 @@ void main()
   }
   int stride = int(sampling.x);
   ivec2 full = ivec2(sampling.yz);
-  int top_row = min((low.y - 1 - cell.y) * stride + stride / 2, full.y - 1);
-  ivec2 px = ivec2(min(cell.x * stride + stride / 2, full.x - 1), full.y - 1 - top_row);
+  ivec2 px = traced_pixel(low.y - 1 - cell.y, cell.x, stride, full);
   vec4 position = texelFetch(gbuffer_position, px, 0);
   if (position.w < 0.5) {
     imageStore(out_image, cell, vec4(0.0));

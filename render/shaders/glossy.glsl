@@ -1,15 +1,18 @@
-/* Glossy indirect (rgb) per pixel (conetrace.trace_glossy): one cone along the mirror
- * direction of the view ray, its half-angle from the roughness (gbuffer_normal.w). */
+/* Glossy indirect (rgb) per traced pixel (conetrace.trace_glossy): one cone along the mirror
+ * direction of the view ray, its half-angle from the roughness (gbuffer_normal.w). One
+ * invocation per low-resolution cell, as diffuse_ao.glsl (sampling = stride, full size). */
 void main()
 {
-  ivec2 px = ivec2(gl_GlobalInvocationID.xy);
+  ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
   load_params();
-  if (px.x >= imageSize(out_image).x || px.y >= imageSize(out_image).y) {
+  ivec2 low = imageSize(out_image);
+  if (cell.x >= low.x || cell.y >= low.y) {
     return;
   }
+  ivec2 px = traced_pixel(low.y - 1 - cell.y, cell.x, int(sampling.x), ivec2(sampling.yz));
   vec4 position = texelFetch(gbuffer_position, px, 0);
   if (position.w < 0.5) {
-    imageStore(out_image, px, vec4(0.0));
+    imageStore(out_image, cell, vec4(0.0));
     return;
   }
   vec4 normal = texelFetch(gbuffer_normal, px, 0);
@@ -25,5 +28,5 @@ void main()
   float alpha_light, alpha_occlusion;
   march(origin, reflected, tan(half_angle), local_voxel_size(origin), s1.x, 0.0, 0.0, false, n, 0.0,
         radiance, alpha_light, alpha_occlusion);
-  imageStore(out_image, px, vec4(s2.z * radiance, 1.0));
+  imageStore(out_image, cell, vec4(s2.z * radiance, 1.0));
 }

@@ -1,0 +1,65 @@
+/* Joint bilateral upsample of the reduced-resolution diffuse/AO image (gi_upsample.upsample,
+ * ported line for line): per full-resolution pixel, the 4 nearest traced cells weighted
+ * bilinearly × max(n·n_k, 0)^8 × exp(−(|n·(p_k − p)| / (0.1·|p_k − p| + 1e-4))²); a pixel with
+ * no usable neighbour takes the nearest traced cell within two cells.
+ * sampling = (stride, full width, full height); low_image rows count from the bottom. */
+void main()
+{
+  ivec2 px = ivec2(gl_GlobalInvocationID.xy);
+  ivec2 full = ivec2(sampling.yz);
+  if (px.x >= full.x || px.y >= full.y) {
+    return;
+  }
+  vec4 position = texelFetch(gbuffer_position, px, 0);
+  if (position.w < 0.5) {
+    imageStore(out_image, px, vec4(0.0));
+    return;
+  }
+  int stride = int(sampling.x);
+  ivec2 low = textureSize(low_image, 0);
+  vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
+  float u = float(px.x - stride / 2) / float(stride);
+  float v = float(full.y - 1 - px.y - stride / 2) / float(stride);
+  int i0 = clamp(int(floor(u)), 0, low.x - 1);
+  int j0 = clamp(int(floor(v)), 0, low.y - 1);
+  float fu = clamp(u - float(i0), 0.0, 1.0);
+  float fv = clamp(v - float(j0), 0.0, 1.0);
+  vec4 total = vec4(0.0);
+  float weight = 0.0;
+  for (int dj = 0; dj < 2; dj++) {
+    for (int di = 0; di < 2; di++) {
+      int j = min(j0 + dj, low.y - 1);
+      int i = min(i0 + di, low.x - 1);
+      ivec2 q = traced_pixel(j, i, stride, full);
+      vec4 pk = texelFetch(gbuffer_position, q, 0);
+      vec3 nk = texelFetch(gbuffer_normal, q, 0).xyz;
+      float w = (di == 1 ? fu : 1.0 - fu) * (dj == 1 ? fv : 1.0 - fv) * (pk.w > 0.5 ? 1.0 : 0.0);
+      vec3 offset = pk.xyz - position.xyz;
+      float facing = max(dot(n, nk), 0.0);
+      float facing2 = facing * facing;
+      float facing4 = facing2 * facing2;
+      float plane = abs(dot(n, offset));
+      float scale = 0.1 * length(offset) + 1e-4;
+      w *= facing4 * facing4 * exp(-(plane / scale) * (plane / scale));
+      total += w * texelFetch(low_image, ivec2(i, low.y - 1 - j), 0);
+      weight += w;
+    }
+  }
+  vec4 result = total / max(weight, 1e-30);
+  if (weight <= 1e-8) {
+    float best = 1e30;
+    result = vec4(0.0);
+    for (int dj = -2; dj < 4; dj++) {
+      for (int di = -2; di < 4; di++) {
+        int j = clamp(j0 + dj, 0, low.y - 1);
+        int i = clamp(i0 + di, 0, low.x - 1);
+        float d = (float(dj) - 0.5) * (float(dj) - 0.5) + (float(di) - 0.5) * (float(di) - 0.5);
+        if (texelFetch(gbuffer_position, traced_pixel(j, i, stride, full), 0).w > 0.5 && d < best) {
+          result = texelFetch(low_image, ivec2(i, low.y - 1 - j), 0);
+          best = d;
+        }
+      }
+    }
+  }
+  imageStore(out_image, px, result);
+}
