@@ -110,17 +110,21 @@ def main(argv=None) -> int:
                      f"direct (numpy shadow rays) {stages['direct'] * 1000:.0f} ms, cones "
                      f"{(stages['diffuse+ao cones (GPU)'] + stages['glossy cones (GPU)']) * 1000:.0f} ms, "
                      f"visibility {stages['visibility (GPU)'] * 1000:.0f} ms"))
-    for w, h in sizes:
-        stages = {}
+    for stride, label in ((1, "full"), (4, "quarter")):
+        for w, h in sizes:
+            stages = {}
 
-        def cones_once():
-            stages.update(render_passes_gpu(snapshot, state, w, h, cones, volume=volume,
-                                            shadows="CONES")[1])
+            def fast_once():
+                passes, t = render_passes_gpu(snapshot, state, w, h, cones, volume=volume,
+                                              shadows="CONES", gi_stride=stride)
+                stages.update(t)
+                results[(w, h, stride)] = passes
 
-        render_passes_gpu(snapshot, state, w, h, cones, volume=volume, shadows="CONES")
-        seconds = median_seconds(cones_once, 1 if (args.quick and w > 160) else repeats)
-        rows.append((f"GPU preview {w}×{h}, soft-shadow cones instead of rays", seconds,
-                     f"direct {stages['direct (GPU shadow cones)'] * 1000:.0f} ms"))
+            fast_once()
+            seconds = median_seconds(fast_once, 1 if (args.quick and w > 160) else repeats)
+            rows.append((f"GPU preview {w}×{h}, soft-shadow cones, GI resolution {label}", seconds,
+                         f"direct {stages['direct (GPU shadow cones)'] * 1000:.0f} ms, cones "
+                         f"{(stages['diffuse+ao cones (GPU)'] + stages['glossy cones (GPU)']) * 1000:.0f} ms"))
     numpy_preview = median_seconds(lambda: render_passes(snapshot, state, 160, 120, cones), 1 if args.quick else 3)
     rows.append(("numpy preview 160×120 (after the update)", numpy_preview,
                  f"GPU is {numpy_preview / rows[2][1]:.1f}× faster"))
@@ -130,8 +134,14 @@ def main(argv=None) -> int:
     reference, ref_seconds = gi_compare.render_cycles(scene, w, h, ref_spp, scene.voxgi.ao_distance)
     ours = results[(w, h)]
     mask = (ours["Diffuse Color"].sum(-1) > 0) & (reference["Diffuse Color"].sum(-1) > 0)
-    err = gi_compare.relative_l1(ours["Diffuse Indirect"], reference["Diffuse Indirect"], mask)
-    rows.append((f"GPU preview {w}×{h}: Diffuse Indirect error", rows[2][1], f"error {err:.3f}"))
+    for key, label in (((w, h), "exact shadow rays, full"), ((w, h, 1), "shadow cones, full"),
+                       ((w, h, 4), "shadow cones, quarter")):
+        err = gi_compare.relative_l1(results[key]["Diffuse Indirect"],
+                                     reference["Diffuse Indirect"], mask)
+        direct = gi_compare.relative_l1(results[key]["Diffuse Direct"],
+                                        reference["Diffuse Direct"], mask)
+        rows.append((f"GPU preview {w}×{h} ({label}): errors", 0.0,
+                     f"Diffuse Indirect {err:.3f}, Diffuse Direct {direct:.3f}"))
     for spp in (64, 256):
         passes, seconds = gi_compare.render_cycles(scene, w, h, spp, scene.voxgi.ao_distance)
         e = gi_compare.relative_l1(passes["Diffuse Indirect"], reference["Diffuse Indirect"], mask)
