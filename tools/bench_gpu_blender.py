@@ -152,7 +152,8 @@ def main(argv=None) -> int:
           f"medians of {repeats}\n")
     print("| what | median time | notes |\n|---|---:|---|")
     for name, seconds, note in rows:
-        print(f"| {name} | {seconds * 1000:.1f} ms | {note} |")
+        shown = f"{seconds * 1000:.1f} ms" if seconds else "—"
+        print(f"| {name} | {shown} | {note} |")
     return 0
 
 
