@@ -47,3 +47,8 @@ class GPUVolume:
             self.uploaded_bytes = atlas.gpu_bytes
         table = trace_params(octree, atlas, cones)
         self.params = float_texture(table, (len(table), 1))
+
+    @property
+    def resident_bytes(self) -> int:
+        """Bytes of the atlas on the GPU (half floats), 0 before the first upload."""
+        return 0 if self._texels is None else self._texels.size * 2

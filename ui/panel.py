@@ -125,6 +125,12 @@ def _draw_gi_state(layout, session) -> None:
     row.label(text=f"Octree: {len(stats)} levels")
     row.label(text=f"{sum(s.nodes for s in stats):,} nodes")
     row.label(text=f"{sum(s.bytes for s in stats) / MEGABYTE:.2f} MB")
+    if session.tracer_used:
+        volume = session.gpu_volume
+        row = box.row()
+        row.label(text=f"Last preview traced with: {session.tracer_used}")
+        if session.tracer_used == "GPU" and volume is not None:
+            row.label(text=f"atlas {volume.resident_bytes / MEGABYTE:.1f} MB on the GPU")
     for name, seconds in session.gi_timings.items():
         row = box.row()
         row.label(text=name)

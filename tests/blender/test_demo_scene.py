@@ -116,3 +116,15 @@ def test_gi_panel_draws_cone_settings_buttons_and_the_last_update(voxgi):
     assert sum(text.startswith("Cascade ") for text in layout.labels) == 3
     assert any(text.startswith("Octree: ") for text in layout.labels) and "svo" in layout.labels
     assert bpy.types.VOXGI_PT_gi.bl_parent_id == "VOXGI_PT_main"
+
+
+def test_gi_panel_says_which_tracer_drew_the_last_preview(voxgi, tmp_path):
+    bpy.ops.voxgi.add_demo_scene()
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=16,
+                                        resolution_y=12) == {"FINISHED"}
+    layout = _Layout()
+    panel = type("PanelStub", (), {"layout": layout})()
+    bpy.types.VOXGI_PT_gi.draw(panel, bpy.context)
+    assert {"shadows", "gi_resolution", "tracer"} <= set(layout.props)
+    assert "Last preview traced with: GPU" in layout.labels
+    assert any(text.startswith("atlas ") and text.endswith("MB on the GPU") for text in layout.labels)
