@@ -12,7 +12,7 @@ import numpy as np
 import gpu
 from gpu_extras.batch import batch_for_shader
 
-from ..voxgi_addon.raycast import _camera_frame, view_projection
+from ..voxgi_addon.raycast import camera_frame, view_projection
 from .gpu_shaders import SHADER_DIR
 from .gpu_tracer import read_texture
 
@@ -70,7 +70,7 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int) -> G
     out = GBuffer(width, height)
     framebuffer = gpu.types.GPUFrameBuffer(depth_slot=out.depth,
                                            color_slots=(out.position, out.normal, out.view))
-    rotation, position = _camera_frame(camera)
+    rotation, position = camera_frame(camera)
     matrix = view_projection(camera, width, height)
     shader = _gbuffer_shader()
     with framebuffer.bind():

@@ -12,10 +12,9 @@ import time
 
 import numpy as np
 
-from ..voxgi_addon.cone_shadows import cone_shadowed_direct, shadow_cone
-from ..voxgi_addon.direct_light import diffuse_direct
+from ..voxgi_addon.cone_shadows import shadow_cone
 from ..voxgi_addon.gi_upsample import low_shape
-from ..voxgi_addon.preview import (SURFACE_EPSILON, check_request, compose_passes,
+from ..voxgi_addon.preview import (check_request, compose_passes, direct_light,
                                    material_indices, material_table)
 from ..voxgi_addon.scene_geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
@@ -45,20 +44,16 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
     mat = material_indices(snapshot, seen["material"].ravel()[hit])
     timings["visibility (GPU)"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    if shadows == "CONES":
-        def visibility(light, lit):
-            target, size, is_sun = shadow_cone(light)
-            constants = {"light_position": (*target, float(is_sun)), "light_size": (size, 0, 0, 0)}
-            seen = read_texture(dispatch("shadow", volume, gbuffer.inputs, width, height, constants))
-            return np.flipud(seen)[..., 0].ravel()[hit[lit]]
+    def visibility(light, lit):  # shaders/shadow.glsl, one dispatch per light
+        target, size, is_sun = shadow_cone(light)
+        constants = {"light_position": (*target, float(is_sun)), "light_size": (size, 0, 0, 0)}
+        image = read_texture(dispatch("shadow", volume, gbuffer.inputs, width, height, constants))
+        return np.flipud(image)[..., 0].ravel()[hit[lit]]
 
-        direct = cone_shadowed_direct(None, p, n, snapshot.lights, cones, light_samples, visibility)
-        timings["direct (GPU shadow cones)"] = time.perf_counter() - t0
-    else:
-        direct = diffuse_direct(p + n * SURFACE_EPSILON, n, snapshot.lights, tris,
-                                samples=light_samples)
-        timings["direct"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    direct = direct_light(None, p, n, snapshot.lights, tris, cones, light_samples, shadows,
+                          visibility)
+    timings["direct"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     low_h, low_w = low_shape(height, width, gi_stride)

@@ -7,50 +7,28 @@ against a high-spp Cycles reference of the same view. Prints a markdown table.
 from __future__ import annotations
 
 import argparse
-import importlib
 import pathlib
-import statistics
 import sys
-import tempfile
 import time
 
-REPO_ROOT = pathlib.Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT / "tools"))
-
-
-def median_seconds(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from bench_blender import demo_snapshot, load_addon, median_seconds, print_table  # noqa: E402
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args(argv)
-    tmp = tempfile.mkdtemp(prefix="voxgi-bench-")
-    (pathlib.Path(tmp) / "voxgi").symlink_to(REPO_ROOT, target_is_directory=True)
-    sys.path.insert(0, tmp)
-    import bpy
+    load_addon()
     import numpy as np
 
-    voxgi = importlib.import_module("voxgi")
-    voxgi.register()
-    from voxgi.operators.demo_scene import build_demo_scene
-    from voxgi.operators.scene_snapshot import take_snapshot
     from voxgi.voxgi_addon.gi_update import GISettings, update_gi
     from voxgi.voxgi_addon.mesh_caches import build_scene_caches
     from voxgi.voxgi_addon.preview import render_passes
     from voxgi.ui.properties import cone_settings
     import gi_compare
 
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    build_demo_scene(scene)
-    snapshot = take_snapshot(bpy.context, bpy.context.evaluated_depsgraph_get())
+    scene, snapshot = demo_snapshot()
     span, cascades = scene.voxgi.base_span, scene.voxgi.cascade_count
     caches = build_scene_caches(snapshot, span, cascades)
     repeats = 3 if args.quick else 7
@@ -83,12 +61,9 @@ def main(argv=None) -> int:
         e = gi_compare.relative_l1(passes["Diffuse Indirect"], reference["Diffuse Indirect"], mask)
         rows.append((f"Cycles {spp} spp {w}×{h}, one diffuse bounce", seconds,
                      f"Diffuse Indirect error {e:.3f}"))
-    print(f"### GI: demo scene ({len(snapshot.objects)} objects), base span {span:g} m, "
-          f"{cascades} cascades; errors are relative L1 over geometry pixels against Cycles "
-          f"{ref_spp} spp ({ref_seconds:.1f} s); medians of {repeats}\n")
-    print("| what | median time | notes |\n|---|---:|---|")
-    for name, seconds, note in rows:
-        print(f"| {name} | {seconds * 1000:.1f} ms | {note} |")
+    print_table(f"### GI: demo scene ({len(snapshot.objects)} objects), base span {span:g} m, "
+                f"{cascades} cascades; errors are relative L1 over geometry pixels against "
+                f"Cycles {ref_spp} spp ({ref_seconds:.1f} s); medians of {repeats}", rows)
     return 0
 
 

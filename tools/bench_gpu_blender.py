@@ -9,40 +9,21 @@ against a high-spp Cycles reference of the same view. Prints a markdown table of
 from __future__ import annotations
 
 import argparse
-import importlib
 import pathlib
-import statistics
 import sys
-import tempfile
 import time
 
-REPO_ROOT = pathlib.Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO_ROOT / "tools"))
-
-
-def median_seconds(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from bench_blender import demo_snapshot, load_addon, median_seconds, print_table  # noqa: E402
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args(argv)
-    tmp = tempfile.mkdtemp(prefix="voxgi-bench-gpu-")
-    (pathlib.Path(tmp) / "voxgi").symlink_to(REPO_ROOT, target_is_directory=True)
-    sys.path.insert(0, tmp)
-    import bpy
+    load_addon()
     import numpy as np
 
-    voxgi = importlib.import_module("voxgi")
-    voxgi.register()
-    from voxgi.operators.demo_scene import build_demo_scene
-    from voxgi.operators.scene_snapshot import take_snapshot
     from voxgi.render.gpu_context import ensure_gpu_context
     from voxgi.render.gpu_preview import render_passes_gpu
     from voxgi.render.gpu_tracer import dispatch, read_texture
@@ -54,13 +35,10 @@ def main(argv=None) -> int:
     from voxgi.voxgi_addon.preview import render_passes
     import gi_compare
 
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    build_demo_scene(scene)
+    scene, snapshot = demo_snapshot()
     ready, why = ensure_gpu_context()
     if not ready:
         raise SystemExit(f"no GPU context: {why}")
-    snapshot = take_snapshot(bpy.context, bpy.context.evaluated_depsgraph_get())
     caches = build_scene_caches(snapshot, scene.voxgi.base_span, scene.voxgi.cascade_count)
     state = update_gi(snapshot, caches, gi_settings(scene.voxgi))
     cones = cone_settings(scene.voxgi)
@@ -123,7 +101,7 @@ def main(argv=None) -> int:
             fast_once()
             seconds = median_seconds(fast_once, 1 if (args.quick and w > 160) else repeats)
             rows.append((f"GPU preview {w}×{h}, soft-shadow cones, GI resolution {label}", seconds,
-                         f"direct {stages['direct (GPU shadow cones)'] * 1000:.0f} ms, cones "
+                         f"direct {stages['direct'] * 1000:.0f} ms, cones "
                          f"{(stages['diffuse+ao cones (GPU)'] + stages['glossy cones (GPU)']) * 1000:.0f} ms"))
     numpy_preview = median_seconds(lambda: render_passes(snapshot, state, 160, 120, cones), 1 if args.quick else 3)
     rows.append(("numpy preview 160×120 (after the update)", numpy_preview,
@@ -146,14 +124,10 @@ def main(argv=None) -> int:
         passes, seconds = gi_compare.render_cycles(scene, w, h, spp, scene.voxgi.ao_distance)
         e = gi_compare.relative_l1(passes["Diffuse Indirect"], reference["Diffuse Indirect"], mask)
         rows.append((f"Cycles {spp} spp {w}×{h}, one diffuse bounce", seconds, f"error {e:.3f}"))
-    print(f"### GPU tracer: demo scene ({len(snapshot.objects)} objects), 3×{octree.resolution}³, "
-          f"{cones.diffuse_cones} cones of {cones.cone_angle:g}°; errors: relative L1 of Diffuse "
-          f"Indirect over geometry pixels vs Cycles {ref_spp} spp ({ref_seconds:.1f} s); "
-          f"medians of {repeats}\n")
-    print("| what | median time | notes |\n|---|---:|---|")
-    for name, seconds, note in rows:
-        shown = f"{seconds * 1000:.1f} ms" if seconds else "—"
-        print(f"| {name} | {shown} | {note} |")
+    print_table(f"### GPU tracer: demo scene ({len(snapshot.objects)} objects), "
+                f"3×{octree.resolution}³, {cones.diffuse_cones} cones of {cones.cone_angle:g}°; "
+                f"errors: relative L1 over geometry pixels vs Cycles {ref_spp} spp "
+                f"({ref_seconds:.1f} s); medians of {repeats}", rows)
     return 0
 
 

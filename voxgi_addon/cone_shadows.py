@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from .conetrace import ConeSettings, offset_origins, trace_shadow
-from .direct_light import _area_outline, diffuse_direct, light_frame
+from .direct_light import area_outline, diffuse_direct, light_frame
 
 SHADOWED_TYPES = ("SUN", "POINT", "SPOT", "AREA")
 
@@ -26,7 +26,7 @@ def shadow_cone(light) -> tuple[np.ndarray, float, bool]:
     if light.type == "SUN":
         return -emit, math.tan(0.5 * float(light.angle)), True
     if light.type == "AREA":
-        _, area = _area_outline(light)
+        _, area = area_outline(light)
         return centre, math.sqrt(max(area, 0.0) / math.pi), False
     return centre, float(light.radius), False
 

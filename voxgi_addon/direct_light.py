@@ -157,7 +157,7 @@ def _point(light, p, n, tris, samples, rng):
     return value
 
 
-def _area_outline(light: LightData) -> tuple[np.ndarray, float]:
+def area_outline(light: LightData) -> tuple[np.ndarray, float]:
     """(K, 3) world-space corners of the emitter (counter-clockwise about local +Z) and its area."""
     centre, x, y, _ = light_frame(light)
     sx = float(light.size)
@@ -189,7 +189,7 @@ def _polygon_irradiance(p: np.ndarray, n: np.ndarray, outline: np.ndarray) -> np
 
 def _area(light, p, n, tris, samples, rng):
     centre, x, y, emit = light_frame(light)
-    outline, area = _area_outline(light)
+    outline, area = area_outline(light)
     if area <= 0:
         return np.zeros(len(p))
     radiance = light.power / (math.pi * area)

@@ -81,6 +81,17 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
     return passes
 
 
+def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
+                 visibility=None):
+    """(N, 3) Diffuse Direct at surface points: exact shadow rays against ``tris`` (shadows
+    "RAYS") or one soft-shadow cone per light through ``octree`` ("CONES"; ``visibility``
+    as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own)."""
+    if shadows == "CONES":
+        return cone_shadowed_direct(octree, points, normals, lights, cones, samples, visibility)
+    return diffuse_direct(points + normals * SURFACE_EPSILON, normals, lights, tris,
+                          samples=samples)
+
+
 def _traced(seen, stride, hit, trace, channels):
     """(N, channels) of ``trace(pixels)`` at the ``hit`` pixels (flat indices), tracing every
     pixel (stride 1) or one per stride × stride block and upsampling (``gi_upsample``)."""
@@ -120,18 +131,14 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     timings["visibility"] = time.perf_counter() - t0
 
     _, rough, _, _ = material_table(snapshot)
-    mat = material_indices(snapshot, seen.material.ravel()[hit])
+    materials = material_indices(snapshot, seen.material.ravel())
+    mat = materials[hit]
 
     t0 = time.perf_counter()
-    if shadows == "CONES":
-        direct = cone_shadowed_direct(gi_state.octree, p, n, snapshot.lights, cones,
-                                      samples=light_samples)
-    else:
-        direct = diffuse_direct(p + n * SURFACE_EPSILON, n, snapshot.lights, tris,
-                                samples=light_samples)
+    direct = direct_light(gi_state.octree, p, n, snapshot.lights, tris, cones, light_samples,
+                          shadows)
     timings["direct"] = time.perf_counter() - t0
     positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
-    materials = material_indices(snapshot, seen.material.ravel())
 
     def diffuse_and_ao(pixels):
         indirect, ao = trace_diffuse_and_ao(gi_state.octree, positions[pixels], normals[pixels],

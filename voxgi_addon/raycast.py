@@ -56,7 +56,7 @@ def _frustum(camera: CameraData, width: int, height: int) -> tuple[float, float,
     return cx, cy, hx, hy
 
 
-def _camera_frame(camera: CameraData) -> tuple[np.ndarray, np.ndarray]:
+def camera_frame(camera: CameraData) -> tuple[np.ndarray, np.ndarray]:
     """(3, 3) orthonormal camera → world rotation (columns x, y, z) and (3,) position."""
     m = np.asarray(camera.world_matrix, dtype=np.float64)
     rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
@@ -87,7 +87,7 @@ def camera_rays(camera: CameraData, width: int | None = None, height: int | None
     x = cx + hx * (2.0 * (np.arange(width) + 0.5) / width - 1.0)
     y = cy + hy * (1.0 - 2.0 * (np.arange(height) + 0.5) / height)
     gx, gy = np.meshgrid(x, y)  # (H, W), row 0 on top
-    rotation, position = _camera_frame(camera)
+    rotation, position = camera_frame(camera)
     near = float(camera.clip_start)
     if camera.type == "ORTHO":
         local_origins = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, -near)], axis=1)
@@ -101,7 +101,7 @@ def camera_rays(camera: CameraData, width: int | None = None, height: int | None
 
 def camera_ray_lengths(camera: CameraData, directions: np.ndarray) -> np.ndarray:
     """(N,) distance from the near to the far clipping plane along each camera ray."""
-    rotation, _ = _camera_frame(camera)
+    rotation, _ = camera_frame(camera)
     depth = float(camera.clip_end) - float(camera.clip_start)
     if camera.type == "ORTHO":
         return np.full(len(directions), depth)
@@ -114,7 +114,7 @@ def view_projection(camera: CameraData, width: int, height: int) -> np.ndarray:
     """(4, 4) float64 world → OpenGL clip matrix whose pixel centres are ``camera_rays``'
     (NDC y up, so GL row 0 is the image's bottom row); depth spans the clipping range."""
     cx, cy, hx, hy = _frustum(camera, width, height)
-    rotation, position = _camera_frame(camera)
+    rotation, position = camera_frame(camera)
     view = np.eye(4)
     view[:3, :3] = rotation.T
     view[:3, 3] = -rotation.T @ position
