@@ -7,7 +7,7 @@ STAMP := $(VENV)/.requirements.installed
 BLEND ?=
 BENCH_ARGS ?=
 
-.PHONY: demo test build bench clean venv
+.PHONY: demo test lint build bench clean venv
 
 $(STAMP): requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -22,12 +22,15 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -c tests/pytest.ini tests -q
 
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+
 build: $(STAMP)
 	$(PY) tools/build_extension.py --output-dir dist
 
 bench: $(STAMP)
-	bash tools/bench_setup.sh
-	.venv-bench/bin/python tools/bench.py $(BENCH_ARGS)
+	bash tools/bench/bench_setup.sh
+	.venv-bench/bin/python tools/bench/bench.py $(BENCH_ARGS)
 
 clean:
 	rm -rf dist out .pytest_cache

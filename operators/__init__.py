@@ -1,11 +1,10 @@
-"""Blender operators: the only code that reads the scene and runs engine jobs."""
+"""Blender operators, one verb each; the services they use live in ``blender/``."""
 from __future__ import annotations
 
 from ..registration import register_modules, unregister_modules
-from . import demo_scene, engine_jobs, gfg_export, gfg_import, gi_preview, session, voxelize
+from . import add_demo_scene, cancel_job, gfg_export, gfg_import, render_preview, update, voxelize
 
-# Registered in this order, unregistered in reverse (jobs stop before the session is cleared).
-modules = (session, engine_jobs, voxelize, gi_preview, demo_scene, gfg_export, gfg_import)
+modules = (voxelize, update, render_preview, cancel_job, add_demo_scene, gfg_export, gfg_import)
 
 classes = tuple(cls for module in modules for cls in module.classes)
 

@@ -13,9 +13,9 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
+from ..blender.gfg.scene_export import ExportOptions, export_scene
 from ..voxgi_addon.errors import VoxGIError
-from ..voxgi_addon.gfg import VertexTypes, write_gfg
-from .gfg_scene_export import ExportOptions, export_scene
+from ..voxgi_addon.files.gfg import VertexTypes, write_gfg
 
 POSITION_ITEMS = (
     ("FLOAT_3", "Float", "32-bit floats (exact)"),
@@ -48,7 +48,7 @@ LAYOUT_ITEMS = (
 
 
 class VOXGI_OT_export_gfg(bpy.types.Operator, ExportHelper):
-    """Export the scene as a GFG file: GPU-ready meshes, materials, armatures with animation, and VoxGI voxel caches and probes"""
+    """Export the scene as a GFG file: GPU-ready meshes, materials, armatures with animation, and VoxGI voxel caches and probes"""  # noqa: E501 - the tooltip is one line
 
     bl_idname = "export_scene.gfg"
     bl_label = "Export GFG"

@@ -12,9 +12,9 @@ import bpy
 from bpy.props import BoolProperty, StringProperty
 from bpy_extras.io_utils import ImportHelper
 
+from ..blender.gfg.scene_import import ImportOptions, import_scene
 from ..voxgi_addon.errors import VoxGIError
-from ..voxgi_addon.gfg import read_gfg
-from .gfg_scene_import import ImportOptions, import_scene
+from ..voxgi_addon.files.gfg import read_gfg
 
 
 class VOXGI_OT_import_gfg(bpy.types.Operator, ImportHelper):

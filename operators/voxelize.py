@@ -9,23 +9,18 @@ and reports its lines like any synchronous operator.
 """
 from __future__ import annotations
 
-import time
 import traceback
 
 import bpy
 
+from ..blender import jobs as engine_jobs
+from ..blender.operator_poll import VoxGISceneOperator
+from ..blender.reports import cascade_lines, timing_line, warning_lines
+from ..blender.session import scene_session
+from ..blender.snapshot import snapshot_or_error, snapshot_summary
 from ..voxgi_addon.errors import VoxGIError
-from ..voxgi_addon.mesh_caches import build_scene_caches
-from . import engine_jobs
-from .scene_snapshot import snapshot_summary, take_snapshot
-from .scene_poll import VoxGISceneOperator
-from .session import scene_session
-from .voxelize_report import cascade_lines, timing_line, warning_lines
+from ..voxgi_addon.voxelize.scene_caches import build_scene_caches
 
-NO_MESH_MESSAGE = (
-    "Nothing to voxelize: the view layer has no visible mesh object with faces "
-    "(add one, or unhide it)"
-)
 CANCELLED_MESSAGE = "Voxelization cancelled; previous caches kept"
 JOB_LABEL = "Voxelizing"
 
@@ -70,21 +65,6 @@ class VOXGI_OT_voxelize(VoxGISceneOperator, bpy.types.Operator):
         for level, message in lines:
             self.report({level}, message)
         return status
-
-
-def snapshot_or_error(context, depsgraph=None):
-    """(snapshot, seconds) of the context's scene (or of ``depsgraph``'s scene and view layer);
-    VoxGIError when it has nothing to voxelize."""
-    start = time.perf_counter()
-    if depsgraph is None:
-        snapshot = take_snapshot(context, context.evaluated_depsgraph_get())
-    else:
-        snapshot = take_snapshot(depsgraph.scene_eval.original, depsgraph)
-    seconds = time.perf_counter() - start
-    if not snapshot.objects:
-        details = "; ".join(snapshot.warnings)
-        raise VoxGIError(NO_MESH_MESSAGE + (f". {details}" if details else ""))
-    return snapshot, seconds
 
 
 # Outcomes, applied on the main thread (by engine_jobs.drain).

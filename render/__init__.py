@@ -3,7 +3,7 @@
 Data flows one way: the engine's numpy results (octree, cone settings) → ``gpu_volume``
 (atlas + parameter table textures) → ``gbuffer`` (rasterized primary visibility) →
 ``gpu_tracer`` (compute kernels in ``shaders/``) → ``gpu_preview`` (Cycles-named passes) →
-``engine`` (render result) / ``operators.gi_preview`` (EXR). ``gpu_context`` decides whether the
+``pipeline`` (shared by ``engine``, F12, and ``voxgi.render_preview``). ``gpu_context`` decides whether the
 GPU can be used and falls back to the numpy tracer otherwise.
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The "VoxGI" render engine (Render Properties › Render Engine), issue 5 point 1.
+"""The "VoxGI" render engine (Render Properties › Render Engine).
 
 F12 / ``bpy.ops.render.render()`` renders the GI preview of the scene camera into Cycles-named
 passes (registered with ``register_pass``, so they reach the compositor and multilayer EXR
@@ -13,8 +13,9 @@ import bpy
 import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
-from ..voxgi_addon.preview import PASS_NAMES
+from ..voxgi_addon.preview.passes import PASS_NAMES
 from . import gpu_context
+from .pipeline import render_scene_passes
 
 # Our passes other than Combined → (Blender's view-layer toggle, channels).
 EXTRA_PASSES = {
@@ -52,7 +53,6 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
         scene = depsgraph.scene
         if scene.name.startswith(gpu_context.BOOTSTRAP_SCENE):
             return  # ensure_gpu_context only needs this call to happen
-        from ..operators.gi_preview import render_scene_passes
         width, height = frame_size(scene)
         try:
             passes, report = render_scene_passes(bpy.context, scene, depsgraph, width, height)

@@ -8,11 +8,11 @@ row first (OpenGL); ``read_gbuffer`` flips them to the passes' top-first order.
 """
 from __future__ import annotations
 
-import numpy as np
 import gpu
+import numpy as np
 from gpu_extras.batch import batch_for_shader
 
-from ..voxgi_addon.raycast import camera_frame, view_projection
+from ..voxgi_addon.scene.camera import camera_frame, view_projection
 from .gpu_shaders import SHADER_DIR
 from .gpu_tracer import read_texture
 

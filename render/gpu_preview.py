@@ -12,11 +12,10 @@ import time
 
 import numpy as np
 
-from ..voxgi_addon.cone_shadows import shadow_cone
-from ..voxgi_addon.gi_upsample import low_shape
-from ..voxgi_addon.preview import (check_request, compose_passes, direct_light,
-                                   material_indices, material_table)
-from ..voxgi_addon.scene_geometry import world_triangles
+from ..voxgi_addon.gi.cone_shadows import shadow_cone
+from ..voxgi_addon.preview.passes import check_request, compose_passes, direct_light, material_indices, material_table
+from ..voxgi_addon.preview.upsample import low_shape
+from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
 from .gpu_tracer import dispatch, read_texture
 from .gpu_volume import GPUVolume

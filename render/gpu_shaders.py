@@ -10,8 +10,8 @@ import pathlib
 
 import gpu
 
-from ..voxgi_addon.svo_sampling import TAU_ALPHA_CAP
-from ..voxgi_addon.trace_params import MAX_CASCADES, MAX_LEVELS, ROWS
+from ..voxgi_addon.gi.svo_sampling import TAU_ALPHA_CAP
+from ..voxgi_addon.preview.trace_params import MAX_CASCADES, MAX_LEVELS, ROWS
 
 SHADER_DIR = pathlib.Path(__file__).resolve().parent / "shaders"
 LOCAL_SIZE = 8  # 8×8 pixels per work group

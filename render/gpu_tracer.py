@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import gpu
+import numpy as np
 
 from .gpu_shaders import KERNELS, LOCAL_SIZE, compute_shader
 

@@ -8,11 +8,11 @@ sent. Needs a GPU context.
 """
 from __future__ import annotations
 
-import numpy as np
 import gpu
+import numpy as np
 
-from ..voxgi_addon.trace_params import trace_params
-from ..voxgi_addon.volume_textures import volume_atlas
+from ..voxgi_addon.preview.trace_params import trace_params
+from ..voxgi_addon.preview.volume_textures import volume_atlas
 
 ATLAS_FORMAT = "RGBA16F"
 

@@ -76,9 +76,9 @@ def run(args: argparse.Namespace, tmp: str) -> int:
     import bpy
 
     import_addon(tmp)
+    from voxgi.blender.demo_scene import build_demo_scene
+    from voxgi.blender.session import scene_session
     from voxgi.operators import voxelize_report as report
-    from voxgi.operators.demo_scene import build_demo_scene
-    from voxgi.operators.session import scene_session
 
     if args.blend is None:
         bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -130,7 +130,8 @@ def gi_section(scene, args) -> int:
     """Render the GI preview (and Cycles' one-bounce reference) and print errors and timings."""
     sys.path.insert(0, str(REPO_ROOT / "tools"))
     import gi_compare
-    from voxgi.operators.session import scene_session
+
+    from voxgi.blender.session import scene_session
 
     if scene.camera is None:
         print("\nno scene camera: GI preview skipped")

@@ -17,7 +17,7 @@ ERROR_PASSES = ("Diffuse Direct", "Diffuse Indirect", "Ambient Occlusion", "Comb
 
 def read_passes(path) -> dict[str, np.ndarray]:
     """A multilayer EXR's ``<Pass>.R/G/B`` channels as (H, W, 3) arrays."""
-    from voxgi.voxgi_addon.exr import read_exr
+    from voxgi.voxgi_addon.files.exr import read_exr
 
     channels = read_exr(path)
     names = sorted({name.rsplit(".", 1)[0] for name in channels})
@@ -36,7 +36,7 @@ def pass_errors(ours, cycles) -> dict[str, float]:
 
 
 def write_strip(path, passes) -> None:
-    from voxgi.voxgi_addon.png import image_strip, to_srgb8, write_png
+    from voxgi.voxgi_addon.files.png import image_strip, to_srgb8, write_png
 
     write_png(path, image_strip([to_srgb8(passes[name]) for name in STRIP_PASSES], scale=2))
 
@@ -52,7 +52,7 @@ def render_preview(scene, path, width, height) -> tuple[dict, float]:
 
 
 def render_cycles(scene, width, height, samples, ao_distance) -> tuple[dict, float]:
-    from voxgi.operators.cycles_reference import render_cycles_passes
+    from cycles_passes import render_cycles_passes  # tools/ is the script's folder
 
     start = time.perf_counter()
     passes = render_cycles_passes(scene, width, height, samples, diffuse_bounces=1,

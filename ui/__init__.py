@@ -1,11 +1,10 @@
-"""Blender UI: scene settings and the sidebar panel."""
+"""Blender UI: the sidebar panels (settings live in ``blender/settings.py``)."""
 from __future__ import annotations
 
 from ..registration import register_modules, unregister_modules
-from . import panel, properties
+from . import panel
 
-# Registered in this order (settings before the panel that draws them), unregistered in reverse.
-modules = (properties, panel)
+modules = (panel,)
 
 classes = tuple(cls for module in modules for cls in module.classes)
 

@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import bpy
 
-from ..operators import engine_jobs
-from ..operators.session import peek_session
-from ..operators.voxelize_report import MEGABYTE, panel_lines
+from ..blender import jobs as engine_jobs
+from ..blender.reports import MEGABYTE, panel_lines
+from ..blender.session import peek_session
 
 LEVEL_ICONS = {"ERROR": "CANCEL", "WARNING": "ERROR", "INFO": "INFO"}
 

@@ -1,15 +1,13 @@
 """Blender-lane fixtures: the repository imported as the add-on package ``voxgi``.
 
-The add-on installs as ``bl_ext.user_default.voxgi``; here the repository root is
-made importable as ``voxgi`` through a symlink in a temporary directory, so the
-add-on's relative imports work exactly as they do when installed.
+The add-on installs as ``bl_ext.user_default.voxgi``; here the repository root is importable
+as ``voxgi`` (``tests/conftest.py``), so the add-on's relative imports work exactly as they do
+when installed.
 """
 from __future__ import annotations
 
 import importlib
 import pathlib
-import sys
-import tempfile
 
 import bpy
 import pytest
@@ -20,19 +18,13 @@ REPO_ROOT = pathlib.Path(__file__).resolve().parents[2]
 @pytest.fixture(scope="session")
 def voxgi():
     """The registered add-on package; unregistered after the session."""
-    with tempfile.TemporaryDirectory(prefix="voxgi-pkg-") as tmp:
-        (pathlib.Path(tmp) / "voxgi").symlink_to(REPO_ROOT, target_is_directory=True)
-        sys.path.insert(0, tmp)
-        try:
-            package = importlib.import_module("voxgi")
-            package.register()
-            try:
-                yield package
-            finally:
-                if hasattr(bpy.types.Scene, "voxgi"):
-                    package.unregister()
-        finally:
-            sys.path.remove(tmp)
+    package = importlib.import_module("voxgi")
+    package.register()
+    try:
+        yield package
+    finally:
+        if hasattr(bpy.types.Scene, "voxgi"):
+            package.unregister()
 
 
 @pytest.fixture(autouse=True)
@@ -48,10 +40,10 @@ def empty_file(voxgi):
 @pytest.fixture
 def session(voxgi):
     """The add-on's session module (reports and caches of the last operator run)."""
-    return importlib.import_module("voxgi.operators.session")
+    return importlib.import_module("voxgi.blender.session")
 
 
 @pytest.fixture
 def snapshot_module(voxgi):
-    """``voxgi.operators.scene_snapshot`` (``take_snapshot``)."""
-    return importlib.import_module("voxgi.operators.scene_snapshot")
+    """``voxgi.blender.snapshot.scene`` (``take_snapshot``)."""
+    return importlib.import_module("voxgi.blender.snapshot.scene")

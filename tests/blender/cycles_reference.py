@@ -1,23 +1,29 @@
 """Cycles ground truth and VoxGI's exact direct light for the Blender tests.
 
-The rendering harness itself lives in ``voxgi.operators.cycles_reference`` (no pytest, so
-``tools/`` can import it too); this module adds what the tests compare it with. Imports of the
+The rendering harness itself lives in ``tools/cycles_passes.py`` (not shipped in the extension;
+``tools/`` scripts use it too); this module adds what the tests compare it with. Imports of the
 add-on happen inside the functions: ``voxgi`` is importable once the session fixture ran.
 """
 from __future__ import annotations
+
+import pathlib
+import sys
 
 import bpy
 import numpy as np
 
 
 def _reference():
-    from voxgi.operators import cycles_reference
+    tools = str(pathlib.Path(__file__).resolve().parents[2] / "tools")
+    if tools not in sys.path:
+        sys.path.insert(0, tools)
+    import cycles_passes
 
-    return cycles_reference
+    return cycles_passes
 
 
 def render_cycles_passes(scene, width, height, samples, diffuse_bounces=1, ao_distance=None, seed=0, **options):
-    """See ``voxgi.operators.cycles_reference.render_cycles_passes``."""
+    """See ``tools/cycles_passes.py: render_cycles_passes``."""
     return _reference().render_cycles_passes(scene, width, height, samples, diffuse_bounces,
                                              ao_distance, seed, **options)
 
@@ -32,8 +38,8 @@ def coverage_agreement(ours, passes):
 
 def snapshot_triangles(scene):
     """(SceneSnapshot, SceneTriangles) of ``scene`` at its current frame."""
-    from voxgi.operators.scene_snapshot import take_snapshot
-    from voxgi.voxgi_addon.scene_geometry import world_triangles
+    from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.voxgi_addon.scene.geometry import world_triangles
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
     snapshot = take_snapshot(scene, depsgraph)
@@ -45,8 +51,8 @@ def exact_diffuse_direct(scene, width, height, samples=16, seed=0):
 
     Returns (Diffuse Direct (H, W, 3) float32 with 0 on the background, PrimaryHits).
     """
-    from voxgi.voxgi_addon.direct_light import diffuse_direct
-    from voxgi.voxgi_addon.raycast import primary_visibility
+    from voxgi.voxgi_addon.gi.direct_light import diffuse_direct
+    from voxgi.voxgi_addon.scene.raycast import primary_visibility
 
     snapshot, tris = snapshot_triangles(scene)
     primary = primary_visibility(tris, snapshot.camera, width, height)

@@ -5,22 +5,27 @@ import bpy
 import numpy as np
 
 
+def mesh_object(name, vertices, faces=(), edges=(), scene=None, data_name=None):
+    """A new mesh object from vertex (N, 3) and face index lists, linked into the scene."""
+    from voxgi.blender.scene_building import mesh_object as build
+
+    collection = (scene or bpy.context.scene).collection
+    return build(name, vertices, faces, edges=edges, collection=collection, data_name=data_name)
+
+
+def principled(name, color, roughness=0.5, metallic=0.0, specular=0.5,
+               emission=(0.0, 0.0, 0.0), emission_strength=0.0):
+    """A material with a Principled BSDF set to these values (linear RGB)."""
+    from voxgi.blender.scene_building import principled_material
+
+    return principled_material(name, color, roughness, metallic, specular, emission,
+                               emission_strength)
+
+
 def link(obj, scene=None):
     """Link ``obj`` into the scene's master collection and return it."""
     (scene or bpy.context.scene).collection.objects.link(obj)
     return obj
-
-
-def mesh_object(name, vertices, faces=(), edges=(), scene=None, data_name=None):
-    """A new mesh object from vertex (N, 3) and face index lists, linked into the scene."""
-    mesh = bpy.data.meshes.new(data_name or name)
-    mesh.from_pydata(
-        np.asarray(vertices, dtype=np.float64).reshape(-1, 3).tolist(),
-        [list(e) for e in edges],
-        [list(f) for f in faces],
-    )
-    mesh.update()
-    return link(bpy.data.objects.new(name, mesh), scene)
 
 
 def quad_object(name="Quad", size=1.0, scene=None):
@@ -29,23 +34,9 @@ def quad_object(name="Quad", size=1.0, scene=None):
     return mesh_object(name, [(-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)], [(0, 1, 2, 3)], scene=scene)
 
 
-def principled(name, color, roughness=0.5, metallic=0.0, specular=0.5,
-               emission=(0.0, 0.0, 0.0), emission_strength=0.0):
-    """A material with a Principled BSDF set to these values (linear RGB)."""
-    material = bpy.data.materials.new(name)
-    bsdf = next(n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
-    bsdf.inputs["Base Color"].default_value = (*color, 1.0)
-    bsdf.inputs["Roughness"].default_value = roughness
-    bsdf.inputs["Metallic"].default_value = metallic
-    bsdf.inputs["Specular IOR Level"].default_value = specular
-    bsdf.inputs["Emission Color"].default_value = (*emission, 1.0)
-    bsdf.inputs["Emission Strength"].default_value = emission_strength
-    return material
-
-
 def armature_object(name, bones, scene=None):
     """An armature object with ``bones``: (name, head, tail, parent name or None, deform) tuples."""
-    from voxgi.operators.demo_scene import BoneSpec, add_bones  # importable once the add-on is
+    from voxgi.blender.scene_building import BoneSpec, add_bones
 
     scene = scene or bpy.context.scene
     obj = link(bpy.data.objects.new(name, bpy.data.armatures.new(name)), scene)

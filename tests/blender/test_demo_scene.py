@@ -55,7 +55,7 @@ def test_unregister_removes_settings_and_operators(voxgi):
         assert not hasattr(bpy.types.Scene, "voxgi")
         assert not hasattr(bpy.types, "VOXGI_OT_voxelize")
         assert not hasattr(bpy.types, "VOXGI_PT_main")
-        session = importlib.import_module("voxgi.operators.session")
+        session = importlib.import_module("voxgi.blender.session")
         assert session._clear_on_load not in bpy.app.handlers.load_post
     finally:
         voxgi.register()

@@ -10,10 +10,13 @@ from __future__ import annotations
 import bpy
 import numpy as np
 import pytest
-
 import scenes
 from cycles_reference import (
-    coverage_agreement, exact_diffuse_direct, relative_l1, render_cycles_passes, snapshot_triangles,
+    coverage_agreement,
+    exact_diffuse_direct,
+    relative_l1,
+    render_cycles_passes,
+    snapshot_triangles,
 )
 
 WIDTH, HEIGHT, SAMPLES = 96, 72, 256
@@ -103,7 +106,7 @@ def test_camera_rays_match_blenders_projection(voxgi, kind, fit, size):
     scene.camera = camera
     scene.render.resolution_x, scene.render.resolution_y = size
     snapshot, _ = snapshot_triangles(scene)
-    from voxgi.voxgi_addon.raycast import camera_rays
+    from voxgi.voxgi_addon.scene.camera import camera_rays
 
     width, height = size
     origins, dirs = camera_rays(snapshot.camera, width, height)
@@ -132,7 +135,7 @@ def test_camera_rays_at_another_aspect_follow_blenders_auto_fit(voxgi, other):
     from bpy_extras.object_utils import world_to_camera_view
     from mathutils import Vector
 
-    from voxgi.voxgi_addon.raycast import camera_rays
+    from voxgi.voxgi_addon.scene.camera import camera_rays
 
     scene = bpy.context.scene
     camera = scenes.link(bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam")))

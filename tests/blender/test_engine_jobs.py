@@ -22,7 +22,6 @@ import bpy
 import mathutils
 import numpy as np
 import pytest
-
 import scenes
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[2]
@@ -34,7 +33,7 @@ EDITS = 150  # main-thread edit rounds of the stress test
 
 @pytest.fixture
 def jobs(voxgi):
-    return importlib.import_module("voxgi.operators.engine_jobs")
+    return importlib.import_module("voxgi.blender.jobs")
 
 
 @pytest.fixture
@@ -44,7 +43,7 @@ def voxelize_module(voxgi):
 
 @pytest.fixture
 def mesh_caches(voxgi):
-    return importlib.import_module("voxgi.voxgi_addon.mesh_caches")
+    return importlib.import_module("voxgi.voxgi_addon.voxelize.scene_caches")
 
 
 @pytest.fixture
@@ -233,7 +232,7 @@ def test_voxelizing_again_supersedes_the_running_voxelization(interactive, voxel
     scenes.quad_object("Quad")
     started, release = threading.Event(), threading.Event()
     real = mesh_caches.build_scene_caches
-    stale = real(importlib.import_module("voxgi.operators.scene_snapshot").take_snapshot(
+    stale = real(importlib.import_module("voxgi.blender.snapshot.scene").take_snapshot(
         bpy.context, bpy.context.evaluated_depsgraph_get()), 0.5, 1)
 
     def first_slow(snapshot, base_span, cascade_count, cancel=None):
@@ -426,7 +425,7 @@ def test_the_worker_never_touches_bpy(interactive, voxelize_module, mesh_caches,
     assert job.state == "done", job.error
     assert threads[0] is not threading.main_thread() and threads[0].daemon
     assert _blender_objects(snapshots[0]) == []
-    assert {"voxgi.voxgi_addon.mesh_caches", "voxgi.voxgi_addon.voxelize"} <= seen  # traced
+    assert {"voxgi.voxgi_addon.voxelize.scene_caches", "voxgi.voxgi_addon.voxelize.surface"} <= seen  # traced
     assert bad == []
 
 
@@ -447,7 +446,7 @@ def test_engine_modules_do_not_import_blender(voxgi):
                 level = len(name) - len(name.lstrip("."))
                 assert level <= depth, (path.name, name)  # nothing from the add-on above it
     loaded = {n: m for n, m in sys.modules.items() if n.startswith("voxgi.voxgi_addon")}
-    assert "voxgi.voxgi_addon.mesh_caches" in loaded
+    assert "voxgi.voxgi_addon.voxelize.scene_caches" in loaded
     for name, module in loaded.items():
         for attr, value in vars(module).items():
             if isinstance(value, types.ModuleType):

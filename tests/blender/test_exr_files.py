@@ -8,7 +8,7 @@ import pytest
 
 @pytest.fixture
 def exr(voxgi):
-    from voxgi.voxgi_addon import exr
+    from voxgi.voxgi_addon.files import exr
 
     return exr
 

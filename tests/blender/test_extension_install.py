@@ -21,7 +21,6 @@ import zipfile
 
 import numpy as np
 
-
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[2]
 RESULT_PREFIX = "VOXGI_RESULT "
 SPAN = 0.25
@@ -58,7 +57,7 @@ INSTALL_SCRIPT = textwrap.dedent(
     settings.base_span, settings.cascade_count = float(sys.argv[4]), int(sys.argv[5])
     assert bpy.ops.voxgi.voxelize() == {"FINISHED"}
 
-    session = importlib.import_module("bl_ext.user_default.voxgi.operators.session")
+    session = importlib.import_module("bl_ext.user_default.voxgi.blender.session")
     caches = session.scene_session(bpy.context.scene.name_full).caches
     print("VOXGI_RESULT " + json.dumps({
         "installed_at": str(installed_at),
@@ -124,11 +123,16 @@ def _subprocess_env(tmp_path):
 
 def test_built_zip_installs_and_voxelizes_like_the_engine(voxgi, tmp_path):
     zip_path = _build_zip(tmp_path / "dist")
-    names = zipfile.ZipFile(zip_path).namelist()
+    archive = zipfile.ZipFile(zip_path)
+    names = archive.namelist()
     assert "blender_manifest.toml" in names and "operators/voxelize.py" in names
     leaked = [n for n in names if n.split("/")[0] in {"tests", "tools", ".ci", "Makefile", "docs", ".venv"}
-              or n.startswith("requirements")]
+              or n.startswith("requirements") or n == "ruff.toml"]
     assert not leaked, f"development files in the extension zip: {leaked}"
+    # No test harness either: nothing that imports pytest or renders Cycles references.
+    harness = [n for n in names if n.endswith(".py") and any(
+        marker in archive.read(n) for marker in (b"import pytest", b"render_cycles_passes", b"cycles_passes"))]
+    assert not harness, f"test harness code in the extension zip: {harness}"
 
     shapes = {"Cube": (*_cube(2.0), (0.0, 0.0, 1.0)), "Sphere": (*_uv_sphere(), (3.0, 0.5, 0.7))}
     geometry = tmp_path / "geometry.json"
@@ -142,13 +146,13 @@ def test_built_zip_installs_and_voxelizes_like_the_engine(voxgi, tmp_path):
         [sys.executable, str(script), str(zip_path), str(geometry), env["BLENDER_USER_EXTENSIONS"],
          str(SPAN), str(CASCADES)],
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
-    lines = [l for l in proc.stdout.splitlines() if l.startswith(RESULT_PREFIX)]
+    lines = [line for line in proc.stdout.splitlines() if line.startswith(RESULT_PREFIX)]
     assert proc.returncode == 0 and len(lines) == 1, (
         f"installing/running the extension failed (exit {proc.returncode})\n"
         f"--- stdout ---\n{proc.stdout[-4000:]}\n--- stderr ---\n{proc.stderr[-4000:]}")
     result = json.loads(lines[0][len(RESULT_PREFIX):])
 
-    voxelize = importlib.import_module("voxgi.voxgi_addon.voxelize")
+    voxelize = importlib.import_module("voxgi.voxgi_addon.voxelize.surface")
     spans = [SPAN * 2**i for i in range(CASCADES)]
     expected = {f"{name} Mesh": [voxelize.voxelize_triangles(v, t, span).voxel_count for span in spans]
                 for name, (v, t, _) in shapes.items()}

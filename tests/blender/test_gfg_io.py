@@ -16,7 +16,6 @@ import bpy
 import mathutils
 import numpy as np
 import pytest
-
 from scenes import armature_object, assign_weights, mesh_object, principled
 
 FRAMES = (1, 4, 7, 10, 13, 17, 20)
@@ -97,9 +96,9 @@ def build_scene(tmp_path):
     _keyframe_rig(rig)
     scene.frame_set(1)
 
-    snapshot = importlib.import_module("voxgi.operators.scene_snapshot").take_snapshot(bpy.context)
-    caches = importlib.import_module("voxgi.voxgi_addon.mesh_caches").build_scene_caches(snapshot, 0.25, 2)
-    importlib.import_module("voxgi.operators.session").scene_session(scene.name_full).caches = caches
+    snapshot = importlib.import_module("voxgi.blender.snapshot.scene").take_snapshot(bpy.context)
+    caches = importlib.import_module("voxgi.voxgi_addon.voxelize.scene_caches").build_scene_caches(snapshot, 0.25, 2)
+    importlib.import_module("voxgi.blender.session").scene_session(scene.name_full).caches = caches
     return caches
 
 
@@ -129,7 +128,7 @@ def reset_to_empty_file(voxgi):
 
 
 def test_export_import_export_is_identical_and_plays_the_same_poses(voxgi, tmp_path):
-    gfg = importlib.import_module("voxgi.voxgi_addon.gfg")
+    gfg = importlib.import_module("voxgi.voxgi_addon.files.gfg")
     caches = build_scene(tmp_path)
     bone_matrices = {b.name: np.array(b.matrix_local, np.float32) for b in bpy.data.objects["Rig"].data.bones}
     rest, posed = evaluated_world_positions("Tube", FRAMES)
@@ -185,7 +184,7 @@ def test_export_import_export_is_identical_and_plays_the_same_poses(voxgi, tmp_p
             assert np.array_equal(keys[0::2], np.arange(1, 21, dtype=np.float32))
             assert np.array_equal(keys[1::2], animation.rotations[:, b, i])
     # Voxel caches: attached to the new session, equal to the original run's.
-    session = importlib.import_module("voxgi.operators.session").scene_session(bpy.context.scene.name_full)
+    session = importlib.import_module("voxgi.blender.session").scene_session(bpy.context.scene.name_full)
     assert list(session.caches.caches) == list(caches.caches)
     for key, per_cascade in caches.caches.items():
         for c, d in zip(per_cascade, session.caches.caches[key]):
@@ -204,7 +203,7 @@ def test_export_import_export_is_identical_and_plays_the_same_poses(voxgi, tmp_p
 
 
 def test_options_select_what_is_written_and_menus_are_registered(voxgi, tmp_path):
-    gfg = importlib.import_module("voxgi.voxgi_addon.gfg")
+    gfg = importlib.import_module("voxgi.voxgi_addon.files.gfg")
     build_scene(tmp_path)
     for obj in bpy.context.view_layer.objects:
         obj.select_set(obj.name == "Tube")

@@ -1,11 +1,10 @@
 """voxgi.update: cascades, light and octree for the current frame, reusing the caches."""
-import numpy as np
-
 import bpy
+import numpy as np
 
 
 def test_update_reuses_the_caches_when_objects_and_the_camera_move(voxgi, session):
-    from voxgi.operators.demo_scene import build_demo_scene
+    from voxgi.blender.demo_scene import build_demo_scene
 
     scene = bpy.context.scene
     build_demo_scene(scene)

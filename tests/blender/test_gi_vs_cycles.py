@@ -6,10 +6,9 @@ multilayer EXR — and read back; Cycles renders the same view at 1024 spp with 
 pixel filter so both images sample pixel centres. The GPU passes must equal the numpy
 tracer's within 2% relative L1 per pass, and both must stay within issue 3's bounds.
 """
+import bpy
 import numpy as np
 import pytest
-
-import bpy
 import scenes
 
 WIDTH, HEIGHT = 96, 72
@@ -27,7 +26,7 @@ def render_preview(tmp_path, scene, tracer="AUTO"):
     settings.base_span = 0.07
     settings.grid_resolution = "64"
     settings.ao_distance = 1.0
-    from voxgi.voxgi_addon.exr import read_exr
+    from voxgi.voxgi_addon.files.exr import read_exr
 
     path = tmp_path / f"preview_{tracer}.exr"
     assert bpy.ops.voxgi.render_preview(filepath=str(path), resolution_x=WIDTH,
@@ -45,8 +44,9 @@ def cornell(request, voxgi):
 
 
 def test_preview_matches_cycles_on_the_cornell_box(cornell, tmp_path):
-    from voxgi.operators.cycles_reference import render_cycles_passes
-    from voxgi.operators.session import scene_session
+    from cycles_reference import render_cycles_passes
+
+    from voxgi.blender.session import scene_session
 
     gpu = render_preview(tmp_path, cornell, "AUTO")
     assert scene_session(cornell.name_full).tracer_used == "GPU"

@@ -5,10 +5,9 @@ G-buffer against exact ray casting, and whole passes (the Cornell box comparison
 numpy tracer and Cycles is in test_gi_vs_cycles.py). F12 with the VoxGI engine writes Cycles'
 passes; without a GPU context the numpy tracer runs and says so.
 """
+import bpy
 import numpy as np
 import pytest
-
-import bpy
 import scenes
 
 WIDTH, HEIGHT = 64, 48
@@ -36,10 +35,10 @@ def gpu_ready():
 
 
 def cornell_state(scene):
-    from voxgi.operators.scene_snapshot import take_snapshot
-    from voxgi.ui.properties import gi_settings
-    from voxgi.voxgi_addon.gi_update import update_gi
-    from voxgi.voxgi_addon.mesh_caches import build_scene_caches
+    from voxgi.blender.settings import gi_settings
+    from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.voxgi_addon.gi.update import update_gi
+    from voxgi.voxgi_addon.voxelize.scene_caches import build_scene_caches
 
     snapshot = take_snapshot(bpy.context, bpy.context.evaluated_depsgraph_get())
     caches = build_scene_caches(snapshot, scene.voxgi.base_span, scene.voxgi.cascade_count)
@@ -47,7 +46,7 @@ def cornell_state(scene):
 
 
 def read_passes(path):
-    from voxgi.voxgi_addon.exr import read_exr
+    from voxgi.voxgi_addon.files.exr import read_exr
 
     channels = read_exr(path)
     prefix = "ViewLayer." if any(k.startswith("ViewLayer.") for k in channels) else ""
@@ -57,10 +56,10 @@ def read_passes(path):
 def test_shader_samples_equal_the_octree(voxgi):
     """The GLSL sampler (atlas fetch, anisotropic faces, extinction, level blending) against
     VoxelOctree.sample / sample_directional at random points, levels and directions."""
+    from voxgi.blender.settings import cone_settings
     from voxgi.render.gpu_tracer import dispatch, read_texture
     from voxgi.render.gpu_volume import GPUVolume, float_texture
-    from voxgi.ui.properties import cone_settings
-    from voxgi.voxgi_addon.morton import morton_decode
+    from voxgi.voxgi_addon.gi.morton import morton_decode
 
     scene = cornell()
     _, state = cornell_state(scene)
@@ -94,10 +93,10 @@ def test_shader_samples_equal_the_octree(voxgi):
 
 
 def test_gbuffer_equals_exact_primary_visibility(voxgi):
+    from voxgi.blender.snapshot.scene import take_snapshot
     from voxgi.render.gbuffer import rasterize, read_gbuffer
-    from voxgi.voxgi_addon.raycast import primary_visibility
-    from voxgi.voxgi_addon.scene_geometry import world_triangles
-    from voxgi.operators.scene_snapshot import take_snapshot
+    from voxgi.voxgi_addon.scene.geometry import world_triangles
+    from voxgi.voxgi_addon.scene.raycast import primary_visibility
 
     cornell()
     snapshot = take_snapshot(bpy.context, bpy.context.evaluated_depsgraph_get())
@@ -118,8 +117,8 @@ def test_gbuffer_equals_exact_primary_visibility(voxgi):
 
 
 def test_f12_writes_a_multilayer_exr_with_cycles_passes(voxgi, tmp_path):
+    from voxgi.blender.session import scene_session
     from voxgi.render.engine import enable_passes
-    from voxgi.operators.session import scene_session
 
     scene = cornell()
     scene.render.engine = "VOXGI"
@@ -143,7 +142,7 @@ def test_f12_writes_a_multilayer_exr_with_cycles_passes(voxgi, tmp_path):
 
 
 def test_forcing_the_fallback_gives_the_numpy_result_and_says_so(voxgi, tmp_path, monkeypatch):
-    from voxgi.operators.session import scene_session
+    from voxgi.blender.session import scene_session
 
     scene = cornell("POINT")
     scene.voxgi.tracer = "NUMPY"
@@ -164,7 +163,7 @@ def test_forcing_the_fallback_gives_the_numpy_result_and_says_so(voxgi, tmp_path
 
 
 def test_unchanged_octree_is_not_uploaded_again(voxgi, tmp_path):
-    from voxgi.operators.session import scene_session
+    from voxgi.blender.session import scene_session
 
     scene = cornell("POINT")
     path = str(tmp_path / "p.exr")
@@ -182,7 +181,7 @@ def test_unchanged_octree_is_not_uploaded_again(voxgi, tmp_path):
 def test_cone_shadows_on_the_gpu_equal_the_numpy_cones(voxgi, tmp_path, light):
     """shadows = CONES: one soft-shadow cone per light, traced by shadow.glsl on the GPU and by
     conetrace.trace_shadow in numpy; the boxes still cast visible shadows."""
-    from voxgi.operators.session import scene_session
+    from voxgi.blender.session import scene_session
 
     scene = cornell(light)
     scene.voxgi.shadows = "CONES"
@@ -214,7 +213,7 @@ def test_reduced_gi_resolution_matches_between_tracers_and_stays_accurate(voxgi,
     """GI Resolution 'Half' / 'Quarter': both tracers trace the same pixels and upsample alike,
     and the error against Cycles stays close to tracing every pixel's (diffuse indirect light
     is smooth; the upsampled image drops some of the full one's voxel banding)."""
-    from voxgi.operators.cycles_reference import render_cycles_passes
+    from cycles_reference import render_cycles_passes
 
     scene = cornell("AREA")
     images = {}

@@ -4,7 +4,6 @@ from __future__ import annotations
 import bpy
 import numpy as np
 import pytest
-
 import scenes
 
 
@@ -13,7 +12,7 @@ def _snapshot(snapshot_module):
 
 
 def _demo(voxgi):
-    from voxgi.operators.demo_scene import build_demo_scene
+    from voxgi.blender.demo_scene import build_demo_scene
 
     return build_demo_scene(bpy.context.scene)
 

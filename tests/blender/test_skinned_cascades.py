@@ -18,7 +18,7 @@ def _engine(name):
 @pytest.fixture
 def demo(voxgi, snapshot_module):
     """The demo scene, its snapshot and Blender's evaluated (posed) tube in world space."""
-    from voxgi.operators.demo_scene import build_demo_scene
+    from voxgi.blender.demo_scene import build_demo_scene
 
     built = build_demo_scene(bpy.context.scene)
     depsgraph = bpy.context.evaluated_depsgraph_get()

@@ -7,9 +7,8 @@ that weigh each face's colour by its share of the optical depth, read colour one
 than occlusion and attenuate what lies behind a sample with exponent 1.5
 (``conetrace.ConeSettings``).
 """
-import numpy as np
-
 import bpy
+import numpy as np
 import scenes
 
 WIDTH, HEIGHT = 128, 64
@@ -17,7 +16,7 @@ ISSUE_BOUND = 0.02
 
 
 def test_thin_wall_keeps_most_light_on_its_side(voxgi, tmp_path):
-    from voxgi.voxgi_addon.exr import read_exr
+    from voxgi.voxgi_addon.files.exr import read_exr
 
     scene = bpy.context.scene
     scenes.build_thin_wall_room(scene)

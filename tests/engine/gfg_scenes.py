@@ -1,17 +1,26 @@
 """Small GFG scenes with every section kind, for the format tests (plain numpy)."""
 import numpy as np
-
-from voxgi_addon.gfg import (
-    Animation, GFGScene, Material, Node, Pose, ProbeGrid, RawSection, Skeleton, VertexTypes,
-    VoxelSet, build_mesh, compose_world,
-)
-from voxgi_addon.gfg.data_types import code_of
-from voxgi_addon.gfg.model import Mesh, VertexComponent
-from voxgi_addon.gfg.spec import Logic, MaterialLogic, NodeKind, PrincipledSlot, Topology
-from voxgi_addon.mesh_caches import ObjectBinding, SkippedMesh
-from voxgi_addon.voxel_cache import VoxelCache
-
 from meshes import box, tube
+
+from voxgi.voxgi_addon.files.gfg import (
+    Animation,
+    GFGScene,
+    Material,
+    Node,
+    Pose,
+    ProbeGrid,
+    RawSection,
+    Skeleton,
+    VertexTypes,
+    VoxelSet,
+    build_mesh,
+    compose_world,
+)
+from voxgi.voxgi_addon.files.gfg.data_types import code_of
+from voxgi.voxgi_addon.files.gfg.model import Mesh, VertexComponent
+from voxgi.voxgi_addon.files.gfg.spec import Logic, MaterialLogic, NodeKind, PrincipledSlot, Topology
+from voxgi.voxgi_addon.voxelize.cache import VoxelCache
+from voxgi.voxgi_addon.voxelize.scene_caches import ObjectBinding, SkippedMesh
 
 
 def _corner_normals(positions, triangles):

@@ -1,7 +1,7 @@
 """Build small SceneSnapshots in plain numpy for engine tests."""
 import numpy as np
 
-from voxgi_addon.snapshot import MaterialData, MeshData, ObjectData, SceneSnapshot, SkinData
+from voxgi.voxgi_addon.scene.snapshot import MaterialData, MeshData, ObjectData, SceneSnapshot, SkinData
 
 
 def mesh(name, positions, triangles, material=0, skin=None):

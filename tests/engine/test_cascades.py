@@ -2,18 +2,24 @@
 voxel surface planes and patches, culling, finer-cascade dropping, merging and bad input."""
 import numpy as np
 import pytest
-
 from meshes import box, tube, uv_sphere
 from snapshots import MaterialData, ObjectData, SkinData, mesh, snapshot, translation
-from voxgi_addon.cascades import (CascadeGrid, _patch_triangles, build_cascades, merge_voxels,
-                                  place_cascades, transformed_cell_bounds)
-from voxgi_addon.errors import VoxGIError
-from voxgi_addon.mesh_caches import CacheBuildResult, build_scene_caches
-from voxgi_addon.skinning import blend_matrices, skin_matrices, skin_points
-from voxgi_addon.snapshot import ArmatureData
-from voxgi_addon.triangle_box import brute_force_cells
-from voxgi_addon.cube_clipping import clip_to_cells, patch_areas, voxel_patches
-from voxgi_addon.voxelize import LATTICE_OFFSET, voxelize_triangles
+
+from voxgi.voxgi_addon.errors import VoxGIError
+from voxgi.voxgi_addon.gi.cascades import (
+    CascadeGrid,
+    _patch_triangles,
+    build_cascades,
+    merge_voxels,
+    place_cascades,
+    transformed_cell_bounds,
+)
+from voxgi.voxgi_addon.scene.skinning import blend_matrices, skin_matrices, skin_points
+from voxgi.voxgi_addon.scene.snapshot import ArmatureData
+from voxgi.voxgi_addon.voxelize.cube_clipping import clip_to_cells, patch_areas, voxel_patches
+from voxgi.voxgi_addon.voxelize.scene_caches import build_scene_caches
+from voxgi.voxgi_addon.voxelize.surface import LATTICE_OFFSET, voxelize_triangles
+from voxgi.voxgi_addon.voxelize.triangle_box import brute_force_cells
 
 SPAN = 0.0625  # a power of two: whole-voxel moves are exact in floating point
 SPHERE = uv_sphere(rings=14, segments=28, radius=0.55, centre=(0.1234, -0.0567, 0.0891))

@@ -1,10 +1,15 @@
 """Cone tracing on analytic volumes: empty space, an enclosing glowing shell, a blocker."""
 import numpy as np
 import pytest
-
 from volumes import DenseMipVolume
-from voxgi_addon.conetrace import (ConeSettings, diffuse_cone_set, trace_diffuse_and_ao,
-                                   trace_glossy, trace_shadow)
+
+from voxgi.voxgi_addon.gi.conetrace import (
+    ConeSettings,
+    diffuse_cone_set,
+    trace_diffuse_and_ao,
+    trace_glossy,
+    trace_shadow,
+)
 
 R = 64
 SIZE = 8.0  # a 8 m cube centred at the origin, voxels of 0.125 m
@@ -95,7 +100,8 @@ def test_anisotropic_octree_leaks_less_through_a_thin_wall_and_sees_planes_more_
     stopped: samples one node apart composite a trilinearly blurred one-node wall to α ≥ 0.75
     only, and oblique cones read the wall's edge-on faces with weight 1 − d_x²."""
     from test_svo import make_grids, voxels
-    from voxgi_addon.svo import build_octree
+
+    from voxgi.voxgi_addon.gi.svo import build_octree
 
     rng = np.random.default_rng(5)
     res = 32

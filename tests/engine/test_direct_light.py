@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from voxgi_addon.direct_light import concentric_disk, diffuse_direct, stratified_square
-from voxgi_addon.scene_geometry import SceneTriangles
-from voxgi_addon.snapshot import LightData
+from voxgi.voxgi_addon.gi.direct_light import concentric_disk, diffuse_direct, stratified_square
+from voxgi.voxgi_addon.scene.geometry import SceneTriangles
+from voxgi.voxgi_addon.scene.snapshot import LightData
 
 WHITE = np.ones(3, np.float32)
 

@@ -10,7 +10,7 @@ import zlib
 import numpy as np
 import pytest
 
-from voxgi_addon.exr import exr_parts, read_exr, read_exr_passes, write_exr
+from voxgi.voxgi_addon.files.exr import exr_parts, read_exr, read_exr_passes, write_exr
 
 CODEC_ID = {"NONE": 0, "RLE": 1, "ZIPS": 2, "ZIP": 3}
 LINES = {"NONE": 1, "RLE": 1, "ZIPS": 1, "ZIP": 16}

@@ -8,16 +8,22 @@ import zlib
 
 import numpy as np
 import pytest
-
-from voxgi_addon.gfg import GFGError, RawSection, read_gfg, to_bytes, voxel_set_from_result, \
-    voxel_set_to_result, write_gfg
-from voxgi_addon.gfg.model import GFGScene
-from voxgi_addon.gfg.spec import SECTION_REQUIRED
-from voxgi_addon.mesh_caches import build_scene_caches
-
 from gfg_scenes import full_scene
 from meshes import box, tube
 from snapshots import SkinData, mesh, snapshot, translation
+
+from voxgi.voxgi_addon.files.gfg import (
+    GFGError,
+    RawSection,
+    read_gfg,
+    to_bytes,
+    voxel_set_from_result,
+    voxel_set_to_result,
+    write_gfg,
+)
+from voxgi.voxgi_addon.files.gfg.model import GFGScene
+from voxgi.voxgi_addon.files.gfg.spec import SECTION_REQUIRED
+from voxgi.voxgi_addon.voxelize.scene_caches import build_scene_caches
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[2]
 
@@ -181,7 +187,8 @@ def test_an_engine_voxelization_round_trips_through_a_voxel_set():
     tv, tt = tube(rings=5, segments=8, length=1.0)
     weights = np.zeros((len(tv), 4), np.float32)
     weights[:, 0] = 1.0
-    snap = snapshot([mesh("Box", v, t), mesh("Tube", tv, tt, skin=SkinData(weights, np.zeros((len(tv), 4), np.uint8), "Rig"))],
+    skin = SkinData(weights, np.zeros((len(tv), 4), np.uint8), "Rig")
+    snap = snapshot([mesh("Box", v, t), mesh("Tube", tv, tt, skin=skin)],
                     [("Box", "Box", translation(1.0)), ("Box.001", "Box", translation(-1.0, scale=(2, 2, 2))),
                      ("Tube", "Tube", np.eye(4), "skinned", "Rig")])
     result = build_scene_caches(snap, base_span=0.25, cascade_count=2)
@@ -202,7 +209,7 @@ def test_an_engine_voxelization_round_trips_through_a_voxel_set():
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "voxgi_addon.gfg", *map(str, args)], cwd=REPO_ROOT,
+    return subprocess.run([sys.executable, "-m", "voxgi_addon.files.gfg", *map(str, args)], cwd=REPO_ROOT,
                           capture_output=True, text=True, timeout=60)
 
 
@@ -230,8 +237,8 @@ def test_additions_of_a_newer_minor_version_are_read_past(scene):
     """Longer info structs and unknown array roles (what a 1.x writer may add) are ignored."""
     import io
 
-    from voxgi_addon.gfg.container import write_container
-    from voxgi_addon.gfg.writer import build_sections
+    from voxgi.voxgi_addon.files.gfg.container import write_container
+    from voxgi.voxgi_addon.files.gfg.writer import build_sections
 
     sections = build_sections(scene)
     for s in sections:

@@ -11,13 +11,12 @@ import zlib
 
 import numpy as np
 import pytest
+from gfg_scenes import full_scene
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from voxgi_addon.gfg import GFGError, GFGScene, Material, read_gfg, to_bytes
-from voxgi_addon.gfg.spec import ARRAY_DESC, KNOWN_KINDS, MATERIAL_RECORD, SECTION_ENTRY, SECTION_PRELUDE
-
-from gfg_scenes import full_scene
+from voxgi.voxgi_addon.files.gfg import GFGError, GFGScene, Material, read_gfg, to_bytes
+from voxgi.voxgi_addon.files.gfg.spec import ARRAY_DESC, KNOWN_KINDS, MATERIAL_RECORD, SECTION_ENTRY, SECTION_PRELUDE
 
 BASE = to_bytes(full_scene(voxels_per_cache=8))
 SIZE = len(BASE)
@@ -58,7 +57,8 @@ def _structural_words() -> list[int]:
         words += range(start, table + 32 * len(descs), 4)
         for d in descs:
             if int(d["data_type"]) == 1000:  # RECORD
-                words += range(start + int(d["offset"]), start + int(d["offset"]) + int(d["count"]) * int(d["element_size"]), 4)
+                first = start + int(d["offset"])
+                words += range(first, first + int(d["count"]) * int(d["element_size"]), 4)
     return words
 
 

@@ -1,16 +1,15 @@
 """GFG data-type codecs, single-indexed mesh building, canonical skin weights, node transforms."""
 import numpy as np
 import pytest
-
-from voxgi_addon.gfg import Node, VertexTypes, build_mesh, canonical_skin, compose_world, mesh_arrays
-from voxgi_addon.gfg import data_types as dt
-from voxgi_addon.gfg.mesh_build import NORMAL_TYPES, POSITION_TYPES, UV_TYPES
-from voxgi_addon.gfg.spec import Logic
-from voxgi_addon.gfg.transforms import euler_xyz_matrix
-from voxgi_addon.gfg.writer import to_bytes
-from voxgi_addon.gfg.model import GFGScene
-
 from meshes import box, uv_sphere
+
+from voxgi.voxgi_addon.files.gfg import Node, VertexTypes, build_mesh, canonical_skin, compose_world, mesh_arrays
+from voxgi.voxgi_addon.files.gfg import data_types as dt
+from voxgi.voxgi_addon.files.gfg.mesh_build import NORMAL_TYPES, POSITION_TYPES, UV_TYPES
+from voxgi.voxgi_addon.files.gfg.model import GFGScene
+from voxgi.voxgi_addon.files.gfg.spec import Logic
+from voxgi.voxgi_addon.files.gfg.transforms import euler_xyz_matrix
+from voxgi.voxgi_addon.files.gfg.writer import to_bytes
 
 SUPPORTED = sorted(c for c in range(83) if dt.data_type(c) is not None)
 
@@ -77,8 +76,9 @@ def test_corners_that_agree_share_a_vertex_and_slots_become_ranges():
     assert smooth.vertex_count == 8 and smooth.ranges[0].material == -1
 
 
-@pytest.mark.parametrize("types", [VertexTypes(), VertexTypes(*(k[-1] for k in (POSITION_TYPES, NORMAL_TYPES, UV_TYPES)),
-                                                              "FLOAT_4", "UINT16_4"),
+@pytest.mark.parametrize("types", [VertexTypes(),
+                                   VertexTypes(*(k[-1] for k in (POSITION_TYPES, NORMAL_TYPES, UV_TYPES)),
+                                               "FLOAT_4", "UINT16_4"),
                                    VertexTypes(normal="NORM_2_10_10_10", uv="HALF_2", weight="UNORM16_4")])
 def test_rebuilding_from_the_decoded_arrays_gives_identical_bytes(types):
     """What an importer gets from ``mesh_arrays``, exported again, is the same file."""

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from voxgi_addon.gi_upsample import sample_pixels, upsample
+from voxgi.voxgi_addon.preview.upsample import sample_pixels, upsample
 
 
 def two_walls(height=24, width=32):

@@ -1,12 +1,12 @@
 """The scene voxelization job: counts, reports and bad input."""
 import numpy as np
 import pytest
-
 from meshes import box, tube, uv_sphere
 from snapshots import MaterialData, ObjectData, SkinData, mesh, snapshot, translation
-from voxgi_addon.errors import VoxGICancelled, VoxGIError
-from voxgi_addon.mesh_caches import build_scene_caches
-from voxgi_addon.voxelize import voxelize_triangles
+
+from voxgi.voxgi_addon.errors import VoxGICancelled, VoxGIError
+from voxgi.voxgi_addon.voxelize.scene_caches import build_scene_caches
+from voxgi.voxgi_addon.voxelize.surface import voxelize_triangles
 
 
 def test_counts_per_cascade_match_the_voxelizer_and_flags_mark_finer_cascades():

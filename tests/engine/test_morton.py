@@ -1,10 +1,11 @@
 """3D Morton codes: exact round trip, bit layout, parent/octant relations."""
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from voxgi_addon.morton import MAX_COORD, morton_decode, morton_encode
+from voxgi.voxgi_addon.gi.morton import MAX_COORD, morton_decode, morton_encode
 
 
 @settings(max_examples=100, deadline=None)

@@ -1,9 +1,10 @@
 """Packed voxel words round-trip within their stated precision."""
 import numpy as np
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from voxgi_addon import voxel_packing as vp
+from voxgi.voxgi_addon.voxelize import packing as vp
 
 
 def test_positions_round_trip_exactly_with_flag():

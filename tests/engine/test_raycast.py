@@ -3,15 +3,15 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
-
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from meshes import box, uv_sphere
 from snapshots import SkinData, mesh, snapshot, translation
-from voxgi_addon.raycast import (
-    build_grid, camera_ray_lengths, camera_rays, closest_hits, occluded, primary_visibility,
-)
-from voxgi_addon.scene_geometry import SceneTriangles, world_triangles
-from voxgi_addon.snapshot import ArmatureData, CameraData, ObjectData
+
+from voxgi.voxgi_addon.scene.camera import camera_ray_lengths, camera_rays
+from voxgi.voxgi_addon.scene.geometry import SceneTriangles, world_triangles
+from voxgi.voxgi_addon.scene.raycast import build_grid, closest_hits, occluded, primary_visibility
+from voxgi.voxgi_addon.scene.snapshot import ArmatureData, CameraData, ObjectData
 
 
 def soup(positions):
@@ -245,7 +245,7 @@ def test_skinned_vertices_follow_blended_bones():
 
 from dataclasses import dataclass  # noqa: E402
 
-from voxgi_addon.snapshot import MeshData  # noqa: E402
+from voxgi.voxgi_addon.scene.snapshot import MeshData  # noqa: E402
 
 
 @dataclass(frozen=True)

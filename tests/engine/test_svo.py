@@ -6,15 +6,14 @@ docstring; it shares no code with ``svo`` (no Morton keys, no reduceat).
 """
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from voxgi_addon.morton import morton_decode, morton_encode
-from voxgi_addon.cascades import CascadeGrid, CascadeVoxels
-from voxgi_addon.svo import build_octree
-
+from voxgi.voxgi_addon.gi.cascades import CascadeGrid, CascadeVoxels
+from voxgi.voxgi_addon.gi.morton import morton_decode, morton_encode
+from voxgi.voxgi_addon.gi.svo import build_octree
 
 # The cascades' own types; make_grids below also builds the tiny grids (2³, 4³) that
 # place_cascades refuses, so the octree can be checked exhaustively.

@@ -8,15 +8,21 @@ import math
 
 import numpy as np
 import pytest
-
-from voxgi_addon import svo_sampling
-from voxgi_addon.conetrace import ConeSettings, diffuse_cone_set
-from voxgi_addon.svo import build_octree
-from voxgi_addon.trace_params import (ROW_CASCADES, ROW_CONES, ROW_LEVELS, ROW_ROOT, ROW_SHAPE,
-                                      ROW_SLABS, trace_params)
-from voxgi_addon.volume_textures import ISOTROPIC_BLOCK, sample_atlas, volume_atlas
-
 from test_svo import random_scene
+
+from voxgi.voxgi_addon.gi import svo_sampling
+from voxgi.voxgi_addon.gi.conetrace import ConeSettings, diffuse_cone_set
+from voxgi.voxgi_addon.gi.svo import build_octree
+from voxgi.voxgi_addon.preview.trace_params import (
+    ROW_CASCADES,
+    ROW_CONES,
+    ROW_LEVELS,
+    ROW_ROOT,
+    ROW_SHAPE,
+    ROW_SLABS,
+    trace_params,
+)
+from voxgi.voxgi_addon.preview.volume_textures import ISOTROPIC_BLOCK, sample_atlas, volume_atlas
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +40,7 @@ def _points_near_nodes(octree, level, rng, n=3000):
         s = 1 << level
         nodes = np.stack(np.unravel_index(pick, (s, s, s)), axis=1)
     else:
-        from voxgi_addon.morton import morton_decode
+        from voxgi.voxgi_addon.gi.morton import morton_decode
         nodes = morton_decode(lv.keys[pick])
     # Up to two nodes away: corners outside the window and absent neighbours are sampled too.
     return octree.root_origin + (nodes + rng.uniform(-2.0, 3.0, (n, 3))) * size

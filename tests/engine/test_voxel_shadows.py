@@ -1,8 +1,8 @@
 """Shadow rays through cascade occupancy."""
 import numpy as np
 
-from voxgi_addon.cascades import CascadeGrid, CascadeVoxels
-from voxgi_addon.voxel_shadows import CascadeOccupancy
+from voxgi.voxgi_addon.gi.cascades import CascadeGrid, CascadeVoxels
+from voxgi.voxgi_addon.gi.voxel_shadows import CascadeOccupancy
 
 
 def voxels(grid, cells):

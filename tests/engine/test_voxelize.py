@@ -1,11 +1,12 @@
 """The voxelizer produces exactly the cells its triangles touch (brute-force reference)."""
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
-
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from meshes import box, uv_sphere
-from voxgi_addon.triangle_box import brute_force_cells, triangle_overlaps_cells
-from voxgi_addon.voxelize import lattice_bounds, to_grid_units, voxelize_triangles
+
+from voxgi.voxgi_addon.voxelize.surface import lattice_bounds, to_grid_units, voxelize_triangles
+from voxgi.voxgi_addon.voxelize.triangle_box import brute_force_cells, triangle_overlaps_cells
 
 
 def cell_set(cells):

@@ -1,0 +1,29 @@
+"""The Blender side's services (bpy, main thread): everything operators, the render engine and
+the panels share, and nothing that registers an operator or a panel.
+
+  settings         ``Scene.voxgi`` (the PropertyGroup) and its conversion to engine settings
+  session          per-scene results kept out of ID properties
+  jobs             the engine worker thread, its queue and timer
+  snapshot/        reading the scene into the engine's ``SceneSnapshot``
+  reports          report lines and tables of results
+  operator_poll    the poll shared by scene operators
+  scene_building   bpy helpers that build materials, meshes and bones from data
+  demo_scene       the demo Cornell box
+  gfg/             GFG scene export and import (bpy ↔ ``voxgi_addon.files.gfg``)
+"""
+from __future__ import annotations
+
+from ..registration import register_modules, unregister_modules
+from . import jobs, session, settings
+
+# Registered in this order (settings first), unregistered in reverse (jobs stop before the
+# session is cleared).
+modules = (settings, session, jobs)
+
+
+def register() -> None:
+    register_modules(modules)
+
+
+def unregister() -> None:
+    unregister_modules(modules)

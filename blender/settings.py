@@ -1,0 +1,158 @@
+"""Scene settings of VoxGI: ``Scene.voxgi`` (a ``VoxGISceneSettings``)."""
+# No `from __future__ import annotations` here: bpy property annotations must stay objects.
+import bpy
+
+GRID_RESOLUTIONS = (32, 64, 128, 256, 512)
+
+
+class VoxGISceneSettings(bpy.types.PropertyGroup):
+    """Per-scene voxelization and cascade settings."""
+
+    base_span: bpy.props.FloatProperty(
+        name="Base Span",
+        description="Edge length of a voxel in the finest cascade, in metres; "
+                    "each coarser cascade doubles it",
+        subtype="DISTANCE",
+        unit="LENGTH",
+        default=0.1,
+        min=0.001,
+        soft_max=1.0,
+        precision=3,
+    )
+    cascade_count: bpy.props.IntProperty(
+        name="Cascades",
+        description="Number of nested camera-centred grids (cascades); cascade i has "
+                    "voxels of Base Span x 2^i metres",
+        subtype="NONE",
+        default=3,
+        min=1,
+        max=6,
+    )
+    grid_resolution: bpy.props.EnumProperty(
+        name="Grid Resolution",
+        description="Voxels along each axis of every cascade grid (a power of two); "
+                    "memory grows with its cube",
+        items=[(str(n), f"{n}\u00b3", f"{n} voxels per axis in each cascade") for n in GRID_RESOLUTIONS],
+        default="64",
+    )
+
+    view_ahead: bpy.props.FloatProperty(
+        name="View Ahead",
+        description="Centre the cascades this far in front of the camera, as a fraction of the "
+                    "finest cascade's half size (0 = on the camera as in the thesis; 1 = the "
+                    "finest cascade starts at the camera and covers twice the depth of view)",
+        default=1.0, min=0.0, max=1.0,
+    )
+    dense_depth: bpy.props.IntProperty(
+        name="Dense Levels",
+        description="Octree levels stored as dense 3D arrays (mips); deeper levels are sparse",
+        default=6, min=1, max=9,
+    )
+    cone_angle: bpy.props.FloatProperty(
+        name="Cone Angle",
+        description="Half-angle of the diffuse and ambient-occlusion cones, in degrees",
+        default=20.0, min=1.0, max=80.0,
+    )
+    diffuse_cones: bpy.props.IntProperty(
+        name="Diffuse Cones",
+        description="Cones traced around the normal for diffuse light and AO (cosine weighted)",
+        default=16, min=1, max=64,
+    )
+    sample_factor: bpy.props.FloatProperty(
+        name="Sample Factor",
+        description="Distance between cone samples as a multiple of the cone diameter there",
+        default=1.0, min=0.25, max=4.0,
+    )
+    falloff: bpy.props.FloatProperty(
+        name="Falloff",
+        description="λ of the 1/(1+λ·distance) falloff applied to traced light, per metre",
+        default=0.0, min=0.0, soft_max=2.0,
+    )
+    max_distance: bpy.props.FloatProperty(
+        name="Max Distance",
+        description="How far diffuse and glossy cones travel, in metres",
+        subtype="DISTANCE", unit="LENGTH", default=100.0, min=0.01,
+    )
+    ao_distance: bpy.props.FloatProperty(
+        name="AO Distance",
+        description="Ambient occlusion radius in metres (like World › Ambient Occlusion distance)",
+        subtype="DISTANCE", unit="LENGTH", default=1.0, min=0.01,
+    )
+    gi_intensity: bpy.props.FloatProperty(
+        name="GI Intensity",
+        description="Multiplier of the traced indirect light (1 = physically based, as Cycles)",
+        default=1.0, min=0.0, soft_max=8.0,
+    )
+    ao_intensity: bpy.props.FloatProperty(
+        name="AO Intensity",
+        description="Multiplier of ambient occlusion darkening (1 = as Cycles' AO pass)",
+        default=1.0, min=0.0, soft_max=4.0,
+    )
+    light_samples: bpy.props.IntProperty(
+        name="Light Samples",
+        description="Shadow rays per pixel for lights with a size (area, soft point, sun angle)",
+        default=16, min=1, max=256,
+    )
+    shadows: bpy.props.EnumProperty(
+        name="Shadows",
+        description="How the preview's direct light is shadowed",
+        items=(("RAYS", "Rays (exact)", "Shadow rays against the scene's triangles: exact, "
+                "slower (CPU)"),
+               ("CONES", "Cones (soft)", "One cone per light through the voxels: soft, fast "
+                "(traced on the GPU with the GPU tracer)")),
+        default="RAYS",
+    )
+    gi_resolution: bpy.props.EnumProperty(
+        name="GI Resolution",
+        description="Trace the cones (diffuse indirect, AO, glossy) at every pixel or at one "
+                    "pixel per block, upsampled along surfaces (faster, slightly softer)",
+        items=(("1", "Full", "Every pixel"), ("2", "Half", "One pixel per 2×2 block (4× fewer cones)"),
+               ("4", "Quarter", "One pixel per 4×4 block (16× fewer cones)")),
+        default="1",
+    )
+    tracer: bpy.props.EnumProperty(
+        name="Tracer",
+        description="Where the preview's cone tracing runs",
+        items=(("AUTO", "GPU if available", "GPU compute shaders when a GPU context can be had, "
+                "else the numpy tracer (reported)"),
+               ("NUMPY", "numpy (CPU)", "The numpy reference tracer: slower, always available")),
+        default="AUTO",
+    )
+
+
+
+def cone_settings(settings: VoxGISceneSettings):
+    """The engine's ConeSettings from the scene settings."""
+    from ..voxgi_addon.gi.conetrace import ConeSettings
+
+    return ConeSettings(cone_angle=settings.cone_angle, diffuse_cones=settings.diffuse_cones,
+                        sample_factor=settings.sample_factor, falloff=settings.falloff,
+                        max_distance=settings.max_distance, ao_distance=settings.ao_distance,
+                        gi_intensity=settings.gi_intensity, ao_intensity=settings.ao_intensity)
+
+
+def gi_settings(settings: VoxGISceneSettings):
+    """The engine's GISettings from the scene settings."""
+    from ..voxgi_addon.gi.update import GISettings
+
+    return GISettings(resolution=grid_resolution(settings), dense_depth=settings.dense_depth,
+                      view_ahead=settings.view_ahead)
+
+def grid_resolution(settings: VoxGISceneSettings) -> int:
+    """The per-cascade grid resolution of ``settings`` in voxels per axis."""
+    return int(settings.grid_resolution)
+
+
+classes = (VoxGISceneSettings,)
+
+
+def register() -> None:
+    bpy.types.Scene.voxgi = bpy.props.PointerProperty(
+        type=VoxGISceneSettings,
+        name="VoxGI",
+        description="VoxGI voxel global illumination settings of this scene",
+    )
+
+
+def unregister() -> None:
+    del bpy.types.Scene.voxgi

@@ -1,0 +1,99 @@
+"""Lights, camera and world of a scene as snapshot records (main thread).
+
+Matrices are read from evaluated objects (the current frame), 4x4 float64 row-major
+with column vectors, as ``Object.matrix_world`` gives them.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...voxgi_addon.scene.snapshot import LIGHT_TYPES, CameraData, LightData, WorldData
+
+
+def _matrix(matrix) -> np.ndarray:
+    return np.array(matrix, dtype=np.float64)
+
+
+def read_light(obj, obj_eval) -> LightData | None:
+    """``LightData`` of a light object, or None for a light type VoxGI ignores."""
+    light = obj_eval.data
+    if light.type not in LIGHT_TYPES:
+        return None
+    extra = {}
+    if light.type in ("POINT", "SPOT"):
+        extra["radius"] = float(light.shadow_soft_size)
+    if light.type == "SPOT":
+        extra.update(spot_size=float(light.spot_size), spot_blend=float(light.spot_blend))
+    if light.type == "SUN":
+        extra["angle"] = float(light.angle)
+    if light.type == "AREA":
+        extra.update(size=float(light.size), size_y=float(light.size_y), shape=str(light.shape))
+    return LightData(
+        name=obj.name_full,
+        type=light.type,
+        color=np.array(light.color[:3], dtype=np.float32),
+        power=float(light.energy),
+        world_matrix=_matrix(obj_eval.matrix_world),
+        **extra,
+    )
+
+
+def render_resolution(scene) -> tuple[int, int]:
+    """Output size in pixels after the render percentage, as Blender computes it."""
+    render = scene.render
+    pct = render.resolution_percentage
+    return (max(1, render.resolution_x * pct // 100), max(1, render.resolution_y * pct // 100))
+
+
+def read_camera(scene, depsgraph) -> CameraData | None:
+    """``CameraData`` of ``scene.camera`` (a camera object), else None."""
+    obj = scene.camera
+    if obj is None or obj.type != "CAMERA":
+        return None
+    obj_eval = obj.evaluated_get(depsgraph)
+    camera = obj_eval.data
+    width, height = render_resolution(scene)
+    projection = obj_eval.calc_matrix_camera(
+        depsgraph, x=width, y=height,
+        scale_x=scene.render.pixel_aspect_x, scale_y=scene.render.pixel_aspect_y,
+    )
+    return CameraData(
+        name=obj.name_full,
+        world_matrix=_matrix(obj_eval.matrix_world),
+        projection_matrix=_matrix(projection),
+        resolution=(width, height),
+        type=str(camera.type),
+        angle_x=float(camera.angle_x),
+        angle_y=float(camera.angle_y),
+        ortho_scale=float(camera.ortho_scale),
+        clip_start=float(camera.clip_start),
+        clip_end=float(camera.clip_end),
+    )
+
+
+def read_world(scene, warnings: list[str]) -> WorldData:
+    """Uniform background of the scene's world: the Background node feeding the output, else ``World.color``."""
+    world = scene.world
+    if world is None:
+        return WorldData()
+    tree = world.node_tree
+    background = None
+    if tree is not None:
+        output = tree.get_output_node("ALL")
+        surface = output.inputs.get("Surface") if output is not None else None
+        if surface is not None and surface.is_linked and surface.links[0].from_node.type == "BACKGROUND":
+            background = surface.links[0].from_node
+        else:
+            background = next((n for n in tree.nodes if n.type == "BACKGROUND"), None)
+    if background is None:
+        return WorldData(color=np.array(world.color[:3], dtype=np.float32), strength=1.0)
+    color = background.inputs["Color"]
+    if color.is_linked:
+        warnings.append(
+            f"World '{world.name}': the background colour comes from a '{color.links[0].from_node.name}' "
+            "node, which VoxGI cannot evaluate; using the Color value instead"
+        )
+    return WorldData(
+        color=np.array(color.default_value[:3], dtype=np.float32),
+        strength=float(background.inputs["Strength"].default_value),
+    )

@@ -1,0 +1,229 @@
+"""Take a ``SceneSnapshot`` of a Blender scene (main thread only).
+
+``take_snapshot`` is the only place the engine's input is read from ``bpy``. It reads
+visible mesh objects from the evaluated depsgraph (object space, Blender's loop
+triangulation), their materials, skinning, armatures, lights, camera and world, and
+leaves the user's scene exactly as it found it.
+
+Mesh keys: objects with no viewport-enabled modifier and no object-linked material
+slot share the key of their mesh datablock (``Mesh.name_full``), so linked duplicates
+share one ``MeshData`` and one cache; any other object gets its own key
+``"<object name> (modified)"`` because its evaluated mesh is its own.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+from ...voxgi_addon.scene.snapshot import MeshData, ObjectData, SceneSnapshot
+from .environment import read_camera, read_light, read_world
+from .materials import MaterialTable
+from .mesh import (
+    material_lookup,
+    read_corner_normals,
+    read_corner_uvs,
+    read_positions,
+    read_triangles,
+    triangle_materials,
+)
+from .skin import (
+    armature_modifiers,
+    deform_bone_names,
+    read_armature,
+    temporary_weight_attributes,
+    top_weights,
+    weight_layers,
+)
+
+
+@dataclass
+class _Entry:
+    """A visible mesh object on its way into the snapshot."""
+
+    obj: bpy.types.Object
+    key: str
+    kind: str
+    armature: bpy.types.Object | None = None
+    layers: list | None = None  # weight attributes of a skinned object
+
+
+def _is_animated(obj) -> bool:
+    data = obj.animation_data
+    return data is not None and (
+        data.action is not None or len(data.drivers) > 0 or len(data.nla_tracks) > 0
+    )
+
+
+def object_kind(obj) -> tuple[str, bpy.types.Object | None]:
+    """('skinned', armature) with an enabled Armature modifier, ('rigid', None) if it or a parent
+    is animated or constrained, else ('static', None)."""
+    deformers = armature_modifiers(obj)
+    if deformers:
+        return "skinned", deformers[0].object
+    node = obj
+    while node is not None:
+        if _is_animated(node) or len(node.constraints) > 0:
+            return "rigid", None
+        node = node.parent
+    return "static", None
+
+
+def _shares_mesh(obj) -> bool:
+    return not any(m.show_viewport for m in obj.modifiers) and not any(
+        slot.link == "OBJECT" for slot in obj.material_slots
+    )
+
+
+def _mesh_key(obj, used: dict[str, object]) -> str:
+    """The MeshData key of ``obj``; ``used`` maps keys to their source (mesh or object)."""
+    source = obj.data if _shares_mesh(obj) else obj
+    base = obj.data.name_full if source is obj.data else f"{obj.name_full} (modified)"
+    key, n = base, 1
+    while key in used and used[key] != source:
+        key, n = f"{base} [{n}]", n + 1
+    used[key] = source
+    return key
+
+
+def _slot_materials(obj_eval, mesh) -> list:
+    slots = [slot.material for slot in obj_eval.material_slots]
+    # Geometry Nodes may add materials beyond the object's slots.
+    return slots + list(mesh.materials[len(slots):])
+
+
+def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[str]) -> MeshData | None:
+    obj_eval = entry.obj.evaluated_get(depsgraph)
+    mesh = obj_eval.to_mesh()
+    try:
+        triangles, corners, slots = read_triangles(mesh)
+        if len(triangles) == 0:
+            warnings.append(f"Object '{entry.obj.name}' has no faces; it is left out")
+            return None
+        lookup = material_lookup(_slot_materials(obj_eval, mesh), table.index_of)
+        skin = None
+        if entry.kind == "skinned":
+            skin = top_weights(mesh, entry.layers, entry.armature.name_full)
+        return MeshData(
+            name=entry.key,
+            positions=read_positions(mesh),
+            triangles=triangles,
+            triangle_materials=triangle_materials(slots, lookup),
+            uvs=read_corner_uvs(mesh, corners),
+            skin=skin,
+            corner_normals=read_corner_normals(mesh, corners),
+        )
+    finally:
+        obj_eval.to_mesh_clear()
+
+
+def _visible_mesh_entries(view_layer, warnings: list[str]) -> list[_Entry]:
+    entries, used = [], {}
+    for obj in view_layer.objects:
+        if obj.type != "MESH" or not obj.visible_get(view_layer=view_layer):
+            continue
+        kind, armature = object_kind(obj)
+        if kind == "skinned" and obj.library is not None:
+            # Reading weights needs a temporary modifier, which linked data refuses.
+            warnings.append(
+                f"Object '{obj.name}' is linked from a library: VoxGI cannot read its skin weights, "
+                "so it is voxelized in its current pose and will not deform"
+            )
+            kind, armature = "rigid", None
+        entry = _Entry(obj, _mesh_key(obj, used), kind, armature)
+        if kind == "skinned":
+            if len(armature_modifiers(obj)) > 1:
+                warnings.append(f"Object '{obj.name}' has several Armature modifiers; only the first is used")
+            entry.layers = weight_layers(obj, deform_bone_names(armature))
+            if not entry.layers:
+                warnings.append(
+                    f"Object '{obj.name}' has no vertex group named after a deform bone of "
+                    f"'{armature.name}'; it will not deform"
+                )
+        entries.append(entry)
+    return entries
+
+
+def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
+    """Read the scene into a ``SceneSnapshot`` (main thread only).
+
+    context_or_scene : a ``bpy.types.Context`` or ``bpy.types.Scene``.
+    depsgraph : the evaluated depsgraph of the view layer to read; defaults to the
+        context's (``Context.evaluated_depsgraph_get()``).
+    Raises VoxGIError for input the engine cannot represent (e.g. > 256 deform bones).
+    The scene is restored exactly (temporary modifiers and node groups removed).
+    """
+    if isinstance(context_or_scene, bpy.types.Scene):
+        scene = context_or_scene
+    else:
+        scene = context_or_scene.scene
+    if depsgraph is None:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+    view_layer = depsgraph.view_layer
+    warnings: list[str] = []
+    table = MaterialTable(warnings)
+
+    entries = _visible_mesh_entries(view_layer, warnings)
+    skinned = {e.obj: e.layers for e in entries if e.kind == "skinned"}
+    meshes: dict[str, MeshData] = {}
+    read_keys: set[str] = set()
+    with temporary_weight_attributes(skinned, depsgraph):
+        for entry in entries:
+            if entry.key not in read_keys:  # linked duplicates are read once
+                read_keys.add(entry.key)
+                mesh = _read_mesh(entry, depsgraph, table, warnings)
+                if mesh is not None:
+                    meshes[entry.key] = mesh
+
+    # Matrices are read after the rest-pose evaluation has been undone.
+    objects = [
+        ObjectData(
+            name=e.obj.name_full,
+            mesh=e.key,
+            world_matrix=_world_matrix(e.obj, depsgraph),
+            kind=e.kind,
+            armature=e.armature.name_full if e.armature is not None else None,
+        )
+        for e in entries if e.key in meshes
+    ]
+    armatures = {}
+    for e in entries:
+        if e.armature is not None and e.key in meshes and e.armature.name_full not in armatures:
+            armatures[e.armature.name_full] = read_armature(e.armature, e.armature.evaluated_get(depsgraph))
+    lights = []
+    for obj in view_layer.objects:
+        if obj.type == "LIGHT" and obj.visible_get(view_layer=view_layer):
+            light = read_light(obj, obj.evaluated_get(depsgraph))
+            if light is not None:
+                lights.append(light)
+    return SceneSnapshot(
+        meshes=meshes,
+        materials=table.materials,
+        objects=objects,
+        armatures=armatures,
+        lights=lights,
+        camera=read_camera(scene, depsgraph),
+        world=read_world(scene, warnings),
+        frame=int(scene.frame_current),
+        warnings=tuple(warnings),
+    )
+
+
+def _world_matrix(obj, depsgraph) -> np.ndarray:
+    """(4, 4) float64 world matrix of the evaluated object."""
+    return np.array(obj.evaluated_get(depsgraph).matrix_world, dtype=np.float64)
+
+
+def snapshot_summary(snapshot: SceneSnapshot) -> dict[str, int]:
+    """Counts describing a snapshot, for the panel and reports."""
+    meshes = snapshot.meshes.values()
+    return {
+        "objects": len(snapshot.objects),
+        "meshes": len(snapshot.meshes),
+        "triangles": sum(len(m.triangles) for m in meshes),
+        "vertices": sum(len(m.positions) for m in meshes),
+        "materials": len(snapshot.materials),
+        "armatures": len(snapshot.armatures),
+        "lights": len(snapshot.lights),
+    }

@@ -1,0 +1,62 @@
+"""``voxgi.update``: transform the voxel caches into cascades, inject direct light, rebuild the
+octree, on the engine worker (snapshot on the main thread; the caches are reused, voxelizing
+first when there are none)."""
+from __future__ import annotations
+
+import bpy
+
+from ..blender import jobs as engine_jobs
+from ..blender.operator_poll import VoxGISceneOperator
+from ..blender.reports import octree_text, timing_text
+from ..blender.session import scene_session
+from ..blender.settings import gi_settings
+from ..blender.snapshot import snapshot_or_error
+from ..render.pipeline import caches_for
+from ..voxgi_addon.errors import VoxGIError
+from ..voxgi_addon.gi.update import update_gi
+
+
+class VOXGI_OT_update(VoxGISceneOperator, bpy.types.Operator):
+    """Transform the voxel caches into camera-anchored cascades, inject direct light and rebuild the octree for the current frame"""  # noqa: E501 - the tooltip is one line
+
+    bl_idname = "voxgi.update"
+    bl_label = "Update GI"
+    bl_options = {"REGISTER"}
+
+    def execute(self, context):
+        scene_name = context.scene.name_full
+        try:
+            snapshot, snap_seconds = snapshot_or_error(context)
+            caches = caches_for(context, snapshot)
+        except VoxGIError as error:
+            self.report({"ERROR"}, str(error))
+            return {"CANCELLED"}
+        settings = gi_settings(context.scene.voxgi)
+
+        def job(cancel):  # worker thread: engine code only
+            return update_gi(snapshot, caches, settings, cancel=cancel)
+
+        def done(state):
+            session = scene_session(scene_name)
+            session.gi_state = state
+            session.gi_timings = {"snapshot": snap_seconds, **state.timings}
+            counts = ", ".join(f"{n:,}" for n in state.voxel_counts)
+            session.last_report = [("INFO", f"GI updated: cascade voxels {counts}"),
+                                   ("INFO", f"octree: {octree_text(state.octree)}"),
+                                   ("INFO", timing_text(session.gi_timings)),
+                                   *[("WARNING", w) for w in state.warnings]]
+
+        def failed(error):
+            scene_session(scene_name).last_report = [("ERROR", str(error))]
+
+        submitted = engine_jobs.submit(scene_name, job, label="Updating GI", on_done=done,
+                                       on_error=failed)
+        if submitted.state == "running":
+            self.report({"INFO"}, "Updating GI in the background…")
+            return {"FINISHED"}
+        for level, message in scene_session(scene_name).last_report:
+            self.report({level}, message)
+        return {"FINISHED"} if submitted.state == "done" else {"CANCELLED"}
+
+
+classes = (VOXGI_OT_update,)

@@ -1,0 +1,22 @@
+"""Bench section "gi": runs tools/bench/bench_gi_blender.py with the bpy venv (.venv), since Cycles
+and the add-on's snapshot need Blender; ``make bench`` builds .venv first."""
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def run(quick: bool = False, out=print, script: str = "bench_gi_blender.py") -> str:
+    python = ROOT / ".venv" / "bin" / "python"
+    if not python.exists():
+        raise RuntimeError("the bpy venv .venv is missing: run `make venv` (make bench does)")
+    cmd = [str(python), str(ROOT / "tools" / "bench" / script)] + (["--quick"] if quick else [])
+    done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    if done.returncode != 0:
+        raise RuntimeError(f"{script} failed:\n{done.stderr[-2000:]}")
+    table = "\n".join(line for line in done.stdout.splitlines()
+                      if line.startswith(("|", "###")) or not line.strip())
+    out(table.strip() + "\n")
+    return table

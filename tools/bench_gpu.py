@@ -1,8 +1,0 @@
-"""Bench section "gpu": runs tools/bench_gpu_blender.py with the bpy venv (issue 5's table)."""
-from __future__ import annotations
-
-import bench_gi
-
-
-def run(quick: bool = False, out=print) -> str:
-    return bench_gi.run(quick, out, script="bench_gpu_blender.py")

@@ -1,0 +1,99 @@
+"""One GI update: cached voxels → cascades → direct light → octree (no re-voxelization).
+
+Runs on the worker thread on plain data (snapshot + caches); returns a ``GIState`` that the
+cone tracer and the preview read.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import VoxGICancelled, VoxGIError
+from .cascades import build_cascades, place_cascades
+from .light_injection import inject_direct_light
+from .svo import build_octree
+from .voxel_shadows import CascadeOccupancy
+
+
+@dataclass(frozen=True)
+class GISettings:
+    """resolution : cells per axis of every cascade (power of two); dense_depth : octree levels
+    kept as dense 3D arrays; light_samples : shadow rays per voxel for soft lights (1: a
+    voxel is wider than most penumbrae, and per-pixel direct light is sampled separately).
+    view_ahead : how far ahead of the camera the cascades are centred, as a fraction of the
+    finest cascade's half-extent (0 = on the camera, as in the thesis). Half of a
+    camera-centred grid lies behind the camera; 1.0 puts the finest cascade's back face at the
+    camera, so it covers twice the depth of view at the same cost. Grids still snap to whole
+    coarse voxels, so moving the camera does not make them flicker.
+    one_sided_leaves : a voxel's light leaves only through its front (its anisotropic faces
+    seen from behind are dark), so a wall lit on one side does not glow on the other:
+    thin-wall leak 0.086 → 0.043 of the lit side, Cornell box still 0.22/0.25 vs Cycles
+    (the cone tracer's ConeSettings take it on to 0.013, Cornell 0.23/0.23)."""
+
+    resolution: int = 64
+    dense_depth: int = 6
+    light_samples: int = 1
+    view_ahead: float = 1.0
+    one_sided_leaves: bool = True
+
+
+@dataclass
+class GIState:
+    grids: list
+    cascades: list
+    radiance: list
+    octree: object
+    timings: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+
+    @property
+    def voxel_counts(self) -> list[int]:
+        return [cv.voxel_count for cv in self.cascades]
+
+
+def anchor_position(snapshot, ahead: float = 0.0) -> tuple[np.ndarray, list[str]]:
+    """Where the cascades are centred: ``ahead`` metres in front of the camera, or the scene's
+    centre if there is no camera (with a warning)."""
+    if snapshot.camera is not None:
+        m = np.asarray(snapshot.camera.world_matrix, np.float64)
+        forward = -m[:3, 2] / max(np.linalg.norm(m[:3, 2]), 1e-12)  # cameras look along -Z
+        return m[:3, 3] + forward * ahead, []
+    centres = [np.asarray(o.world_matrix, np.float64)[:3, 3] for o in snapshot.objects]
+    if not centres:
+        raise VoxGIError("the scene has neither a camera nor objects to centre the cascades on")
+    return np.mean(centres, axis=0), ["the scene has no camera: cascades are centred on the objects"]
+
+
+def update_gi(snapshot, caches, settings: GISettings = GISettings(), cancel=None) -> GIState:
+    """Transform the caches into camera-anchored cascades, light them and build the octree.
+
+    caches : mesh_caches.CacheBuildResult from the last voxelization (its spans set the
+    cascades' spans). cancel : callable returning True to stop between stages.
+    """
+    if not caches.cascade_stats:
+        raise VoxGIError("there are no voxel caches yet: voxelize the scene first")
+    timings: dict[str, float] = {}
+
+    def stage(name, fn, *args, **kw):
+        if cancel is not None and cancel():
+            raise VoxGICancelled("GI update cancelled")
+        t0 = time.perf_counter()
+        value = fn(*args, **kw)
+        timings[name] = time.perf_counter() - t0
+        return value
+
+    base_span = caches.cascade_stats[0].span
+    ahead = settings.view_ahead * 0.5 * settings.resolution * base_span
+    position, warnings = anchor_position(snapshot, ahead)
+    grids = stage("cascades", place_cascades, position, base_span, settings.resolution,
+                  len(caches.cascade_stats))
+    cascades = stage("transform", build_cascades, caches, snapshot, grids, warnings)
+    occupancy = stage("occupancy", CascadeOccupancy, cascades)
+    radiance = stage("inject", inject_direct_light, cascades, snapshot, occupancy,
+                     settings.light_samples)
+    depth = int(np.log2(settings.resolution)) + len(grids) - 1
+    octree = stage("svo", build_octree, cascades, radiance, min(settings.dense_depth, depth),
+                   one_sided_leaves=settings.one_sided_leaves)
+    return GIState(grids, cascades, radiance, octree, timings, warnings)

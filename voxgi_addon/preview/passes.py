@@ -1,0 +1,159 @@
+"""The GI preview of the scene camera as Cycles-named passes.
+
+Primary visibility is exact (ray casting the scene's triangles); direct diffuse light is
+computed per pixel with shadow rays; the indirect terms are cone-traced through the octree.
+Pass meanings follow Cycles: ``Diffuse Direct`` / ``Diffuse Indirect`` are light without
+albedo, ``Diffuse Color`` is the albedo, ``Combined`` = albedo × (direct + indirect) + emission
++ glossy indirect × specular colour. Background pixels are 0 in every pass.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..errors import VoxGIError
+from ..gi.cone_shadows import cone_shadowed_direct
+from ..gi.conetrace import ConeSettings, trace_diffuse_and_ao, trace_glossy
+from ..gi.direct_light import diffuse_direct
+from ..scene.geometry import world_triangles
+from ..scene.raycast import primary_visibility
+from .upsample import STRIDES, sample_pixels, upsample
+
+PASS_NAMES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color",
+              "Glossy Indirect", "Ambient Occlusion")
+SURFACE_EPSILON = 1e-4  # metres off the surface for shadow rays
+
+
+def material_table(snapshot):
+    """Per material index (+1 slot for 'none'): albedo (M+1, 3), roughness, specular colour,
+    emission (M+1, 3)."""
+    mats = snapshot.materials
+    albedo = np.full((len(mats) + 1, 3), 0.8)
+    rough = np.full(len(mats) + 1, 0.5)
+    spec = np.full((len(mats) + 1, 3), 0.04)
+    emission = np.zeros((len(mats) + 1, 3))
+    for i, m in enumerate(mats):
+        base = np.clip(np.nan_to_num(np.asarray(m.base_color[:3], np.float64)), 0, 1)
+        albedo[i] = base * (1.0 - m.metallic)
+        rough[i] = m.roughness
+        spec[i] = 0.08 * m.specular * (1 - m.metallic) + base * m.metallic
+        emission[i] = m.emission
+    return albedo, rough, spec, emission
+
+
+def check_request(snapshot, width: int, height: int, gi_stride: int = 1) -> None:
+    """Raise ``VoxGIError`` for a preview that cannot be rendered."""
+    if gi_stride not in STRIDES:
+        raise VoxGIError(f"GI resolution stride must be one of {STRIDES}, got {gi_stride}")
+    if snapshot.camera is None:
+        raise VoxGIError("the scene has no camera to render the preview from")
+    if width < 1 or height < 1 or width * height > 16_000_000:
+        raise VoxGIError(f"preview resolution {width}×{height} is out of range")
+
+
+def material_indices(snapshot, material: np.ndarray) -> np.ndarray:
+    """Per-pixel material indices with 'none' / out-of-range mapped to the table's last slot."""
+    m = len(snapshot.materials)
+    return np.where((material >= 0) & (material < m), material, m)
+
+
+def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy):
+    """The PASS_NAMES images (H, W, 3) float32 (row 0 = top) from the per-hit-pixel terms.
+
+    hit : (H·W,) indices of the pixels that see a surface; mat : their material indices;
+    direct, indirect, glossy : (N, 3) light without albedo; ao : (N,).
+    """
+    albedo, _, spec, emission = material_table(snapshot)
+    values = {
+        "Diffuse Direct": direct,
+        "Diffuse Indirect": indirect,
+        "Diffuse Color": albedo[mat],
+        "Glossy Indirect": glossy,
+        "Ambient Occlusion": np.repeat(np.asarray(ao)[:, None], 3, axis=1),
+    }
+    values["Combined"] = (albedo[mat] * (direct + indirect) + emission[mat] + spec[mat] * glossy)
+    passes = {}
+    for name in PASS_NAMES:
+        image = np.zeros((height * width, 3), np.float32)
+        image[hit] = values[name]
+        passes[name] = image.reshape(height, width, 3)
+    return passes
+
+
+def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
+                 visibility=None):
+    """(N, 3) Diffuse Direct at surface points: exact shadow rays against ``tris`` (shadows
+    "RAYS") or one soft-shadow cone per light through ``octree`` ("CONES"; ``visibility``
+    as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own)."""
+    if shadows == "CONES":
+        return cone_shadowed_direct(octree, points, normals, lights, cones, samples, visibility)
+    return diffuse_direct(points + normals * SURFACE_EPSILON, normals, lights, tris,
+                          samples=samples)
+
+
+def _traced(seen, stride, hit, trace, channels):
+    """(N, channels) of ``trace(pixels)`` at the ``hit`` pixels (flat indices), tracing every
+    pixel (stride 1) or one per stride × stride block and upsampling (``gi_upsample``)."""
+    if stride == 1:
+        return trace(hit)
+    height, width = seen.hit.shape
+    rows, cols = sample_pixels(height, width, stride)
+    valid = seen.hit[rows][:, cols]
+    low = np.zeros(valid.shape + (channels,), np.float32)
+    low[valid] = trace((rows[:, None] * width + cols[None, :])[valid])
+    full = upsample(low, valid, seen.hit, seen.position, seen.normal, stride)
+    return full.reshape(-1, channels)[hit]
+
+
+def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettings,
+                  light_samples: int = 16, shadows: str = "RAYS", gi_stride: int = 1):
+    """Render the passes at ``width`` × ``height`` with the numpy tracer.
+
+    gi_stride : trace the cones (diffuse indirect light, AO, glossy) at one pixel of every
+    gi_stride × gi_stride block and upsample (``gi_upsample``); 1 = every pixel.
+
+    shadows : "RAYS" (exact shadow rays against the triangles) or "CONES" (one cone per light
+    through the octree, ``cone_shadows``).
+
+    Returns (passes, timings): passes maps each name of PASS_NAMES to an (H, W, 3) float32
+    image (row 0 = top); timings maps stage names to seconds.
+    """
+    check_request(snapshot, width, height, gi_stride)
+    timings = {}
+    t0 = time.perf_counter()
+    tris = world_triangles(snapshot)
+    seen = primary_visibility(tris, snapshot.camera, width, height)
+    hit = np.flatnonzero(seen.hit.ravel())
+    p = seen.position.reshape(-1, 3)[hit]
+    n = seen.normal.reshape(-1, 3)[hit]  # shading normal, turned to the camera
+    dirs = seen.direction.reshape(-1, 3)
+    timings["visibility"] = time.perf_counter() - t0
+
+    _, rough, _, _ = material_table(snapshot)
+    materials = material_indices(snapshot, seen.material.ravel())
+    mat = materials[hit]
+
+    t0 = time.perf_counter()
+    direct = direct_light(gi_state.octree, p, n, snapshot.lights, tris, cones, light_samples,
+                          shadows)
+    timings["direct"] = time.perf_counter() - t0
+    positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
+
+    def diffuse_and_ao(pixels):
+        indirect, ao = trace_diffuse_and_ao(gi_state.octree, positions[pixels], normals[pixels],
+                                            cones)
+        return np.concatenate([indirect, ao[:, None]], axis=1)
+
+    def glossy_cones(pixels):
+        return trace_glossy(gi_state.octree, positions[pixels], normals[pixels], dirs[pixels],
+                            rough[materials[pixels]], cones)
+
+    t0 = time.perf_counter()
+    traced = _traced(seen, gi_stride, hit, diffuse_and_ao, 4)
+    indirect, ao = traced[:, :3], traced[:, 3]
+    timings["diffuse+ao cones"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    glossy = _traced(seen, gi_stride, hit, glossy_cones, 3)
+    timings["glossy cones"] = time.perf_counter() - t0
+    return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy), timings

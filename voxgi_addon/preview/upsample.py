@@ -1,0 +1,95 @@
+"""Cone-traced terms (diffuse indirect, AO, glossy) traced at a fraction of the pixels, then
+upsampled.
+
+Diffuse indirect light is smooth across a surface (on the demo scene, blurring Cycles' own
+Diffuse Indirect over 4 pixels changes it by 2%), so the preview can trace its cones at one
+pixel of every ``stride`` × ``stride`` block (glossy too: a faster, blurrier reflection) and fill
+the others with a joint bilateral upsample that only mixes samples lying on the same surface:
+bilinear weights times a normal term max(n·n_k, 0)^8 times a plane term exp(−(|n·(p_k − p)| / (0.1·|p_k − p| + 1e-4))²).
+A pixel whose neighbours all fail those tests takes the nearest traced sample within two
+blocks. Both tracers (numpy and GPU) use ``sample_pixels`` and ``upsample``, so they agree.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+STRIDES = (1, 2, 4)
+NORMAL_POWER = 8
+PLANE_TOLERANCE = 0.1
+
+
+def low_shape(height: int, width: int, stride: int) -> tuple[int, int]:
+    return -(-height // stride), -(-width // stride)
+
+
+def sample_pixels(height: int, width: int, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rows (Hl,), cols (Wl,)) of the full-resolution pixels traced for each low-res cell
+    (row 0 = top): the centre of each stride × stride block, clamped to the image."""
+    hl, wl = low_shape(height, width, stride)
+    rows = np.minimum(np.arange(hl) * stride + stride // 2, height - 1)
+    cols = np.minimum(np.arange(wl) * stride + stride // 2, width - 1)
+    return rows, cols
+
+
+def upsample(values: np.ndarray, valid: np.ndarray, hit: np.ndarray, position: np.ndarray,
+             normal: np.ndarray, stride: int) -> np.ndarray:
+    """Full-resolution (H, W, C) float32 from low-res ``values`` (Hl, Wl, C).
+
+    valid : (Hl, Wl) bool, the low-res cells whose pixel hit a surface; hit : (H, W) bool;
+    position, normal : (H, W, 3) the G-buffer (row 0 = top). Background pixels get 0.
+    """
+    height, width = hit.shape
+    if stride == 1:
+        return np.where(hit[..., None], values, 0.0).astype(np.float32)
+    rows, cols = sample_pixels(height, width, stride)
+    hl, wl = len(rows), len(cols)
+    ys, xs = np.nonzero(hit)
+    p = position[ys, xs].astype(np.float32)
+    n = normal[ys, xs].astype(np.float32)
+    # The traced cells' G-buffer, flat: cell k = j·Wl + i.
+    cell_p = position[rows][:, cols].reshape(-1, 3).astype(np.float32)
+    cell_n = normal[rows][:, cols].reshape(-1, 3).astype(np.float32)
+    cell_v = values.reshape(-1, values.shape[2]).astype(np.float32)
+    cell_ok = valid.reshape(-1).astype(np.float32)
+    u = (xs - stride // 2) / stride
+    v = (ys - stride // 2) / stride
+    i0 = np.clip(np.floor(u).astype(np.int64), 0, wl - 1)
+    j0 = np.clip(np.floor(v).astype(np.int64), 0, hl - 1)
+    fu = np.clip(u - i0, 0.0, 1.0).astype(np.float32)
+    fv = np.clip(v - j0, 0.0, 1.0).astype(np.float32)
+    total = np.zeros((len(ys), values.shape[2]), np.float32)
+    weight = np.zeros(len(ys), np.float32)
+    for dj in (0, 1):
+        for di in (0, 1):
+            k = np.minimum(j0 + dj, hl - 1) * wl + np.minimum(i0 + di, wl - 1)
+            w = (fu if di else 1.0 - fu) * (fv if dj else 1.0 - fv) * cell_ok[k]
+            offset = cell_p[k] - p
+            facing = np.maximum(np.einsum("ij,ij->i", n, cell_n[k]), 0.0)
+            plane = np.abs(np.einsum("ij,ij->i", n, offset))
+            scale = PLANE_TOLERANCE * np.sqrt(np.einsum("ij,ij->i", offset, offset)) + 1e-4
+            w *= facing ** NORMAL_POWER * np.exp(-(plane / scale) ** 2)
+            total += w[:, None] * cell_v[k]
+            weight += w
+    out = total / np.maximum(weight, 1e-30)[:, None]
+    lonely = np.flatnonzero(weight <= 1e-8)
+    if len(lonely):
+        out[lonely] = _nearest_valid(values, valid, j0[lonely], i0[lonely])
+    image = np.zeros((height, width, values.shape[2]), np.float32)
+    image[ys, xs] = out
+    return image
+
+
+def _nearest_valid(values, valid, j0, i0, reach: int = 2) -> np.ndarray:
+    """Value of the nearest valid low-res cell within ``reach`` cells of (j0, i0) (0 if none)."""
+    hl, wl = valid.shape
+    best = np.full(len(j0), np.inf)
+    out = np.zeros((len(j0), values.shape[2]))
+    for dj in range(-reach, reach + 2):
+        for di in range(-reach, reach + 2):
+            j = np.clip(j0 + dj, 0, hl - 1)
+            i = np.clip(i0 + di, 0, wl - 1)
+            d = (dj - 0.5) ** 2 + (di - 0.5) ** 2
+            better = valid[j, i] & (d < best)
+            out[better] = values[j[better], i[better]]
+            best[better] = d
+    return out

@@ -1,0 +1,113 @@
+"""The camera model: pixel rays and projection of a snapshot camera (numpy only).
+
+* ``camera_rays`` — one ray per pixel centre of the scene camera, as Cycles shoots them
+  (row 0 = top of the image, origins on the near clipping plane).
+* ``camera_ray_lengths`` — distance along each ray from the near plane's origin to the eye.
+* ``view_projection`` — the (4, 4) world → clip matrix that rasterizes the same pixels.
+* ``camera_frame`` — the camera's orthonormal rotation and position.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .snapshot import CameraData
+
+__all__ = ["camera_frame", "camera_rays", "camera_ray_lengths", "view_projection"]
+
+
+def _frustum(camera: CameraData, width: int, height: int) -> tuple[float, float, float, float]:
+    """(centre x, centre y, half width, half height) of the image on the camera's z = -1 plane
+    (perspective) or in metres (orthographic), for a ``width`` × ``height`` image."""
+    p = np.asarray(camera.projection_matrix, dtype=np.float64)
+    hx, hy = 1.0 / p[0, 0], 1.0 / p[1, 1]
+    if camera.type == "ORTHO":
+        cx, cy = -p[0, 3] * hx, -p[1, 3] * hy
+    else:
+        cx, cy = p[0, 2] * hx, p[1, 2] * hy
+    w0, h0 = camera.resolution
+    if abs(w0 * height - h0 * width) > 1e-9 * w0 * height:
+        # Another aspect than the projection's: Blender's AUTO sensor fit keeps the field of
+        # view of the larger image dimension (the shift, in camera units, is unchanged).
+        larger = hx if w0 >= h0 else hy
+        if width >= height:
+            hx, hy = larger, larger * height / width
+        else:
+            hx, hy = larger * width / height, larger
+    return cx, cy, hx, hy
+
+
+def camera_frame(camera: CameraData) -> tuple[np.ndarray, np.ndarray]:
+    """(3, 3) orthonormal camera → world rotation (columns x, y, z) and (3,) position."""
+    m = np.asarray(camera.world_matrix, dtype=np.float64)
+    rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
+    return rotation, m[:3, 3].copy()
+
+
+def camera_rays(camera: CameraData, width: int | None = None, height: int | None = None):
+    """Rays through the pixel centres of a ``width`` × ``height`` image of ``camera``.
+
+    Parameters
+    ----------
+    camera : the scene camera (PERSP or ORTHO; PANO is refused).
+    width, height : image size in pixels; default ``camera.resolution``.
+
+    Returns
+    -------
+    origins : (H·W, 3) float64 world space, on the near clipping plane (as Cycles clips).
+    directions : (H·W, 3) float64 unit vectors.
+    Pixel (row j, column i) is ray ``j·W + i``; row 0 is the **top** of the image, and pixel
+    centres sit at (i + ½, j + ½) as in Cycles. A frame whose aspect differs from the camera's
+    resolution is fitted like Blender's AUTO sensor fit.
+    """
+    if camera.type not in ("PERSP", "ORTHO"):
+        raise ValueError(f"camera type {camera.type!r} is not supported (PERSP or ORTHO)")
+    width = int(width or camera.resolution[0])
+    height = int(height or camera.resolution[1])
+    cx, cy, hx, hy = _frustum(camera, width, height)
+    x = cx + hx * (2.0 * (np.arange(width) + 0.5) / width - 1.0)
+    y = cy + hy * (1.0 - 2.0 * (np.arange(height) + 0.5) / height)
+    gx, gy = np.meshgrid(x, y)  # (H, W), row 0 on top
+    rotation, position = camera_frame(camera)
+    near = float(camera.clip_start)
+    if camera.type == "ORTHO":
+        local_origins = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, -near)], axis=1)
+        local_dirs = np.tile([0.0, 0.0, -1.0], (gx.size, 1))
+    else:
+        local_dirs = np.stack([gx.ravel(), gy.ravel(), -np.ones(gx.size)], axis=1)
+        local_origins = local_dirs * near  # the point on the near plane z = -near
+        local_dirs /= np.linalg.norm(local_dirs, axis=1, keepdims=True)
+    return local_origins @ rotation.T + position, local_dirs @ rotation.T
+
+
+def camera_ray_lengths(camera: CameraData, directions: np.ndarray) -> np.ndarray:
+    """(N,) distance from the near to the far clipping plane along each camera ray."""
+    rotation, _ = camera_frame(camera)
+    depth = float(camera.clip_end) - float(camera.clip_start)
+    if camera.type == "ORTHO":
+        return np.full(len(directions), depth)
+    cos = -(np.asarray(directions, dtype=np.float64) @ rotation[:, 2])
+    return depth / np.maximum(cos, 1e-12)
+
+
+
+def view_projection(camera: CameraData, width: int, height: int) -> np.ndarray:
+    """(4, 4) float64 world → OpenGL clip matrix whose pixel centres are ``camera_rays``'
+    (NDC y up, so GL row 0 is the image's bottom row); depth spans the clipping range."""
+    cx, cy, hx, hy = _frustum(camera, width, height)
+    rotation, position = camera_frame(camera)
+    view = np.eye(4)
+    view[:3, :3] = rotation.T
+    view[:3, 3] = -rotation.T @ position
+    near, far = float(camera.clip_start), float(camera.clip_end)
+    proj = np.zeros((4, 4))
+    if camera.type == "ORTHO":
+        proj[0] = (1.0 / hx, 0.0, 0.0, -cx / hx)
+        proj[1] = (0.0, 1.0 / hy, 0.0, -cy / hy)
+        proj[2] = (0.0, 0.0, -2.0 / (far - near), -(far + near) / (far - near))
+        proj[3] = (0.0, 0.0, 0.0, 1.0)
+    else:
+        proj[0] = (1.0 / hx, 0.0, cx / hx, 0.0)
+        proj[1] = (0.0, 1.0 / hy, cy / hy, 0.0)
+        proj[2] = (0.0, 0.0, -(far + near) / (far - near), -2.0 * far * near / (far - near))
+        proj[3] = (0.0, 0.0, -1.0, 0.0)
+    return proj @ view

@@ -1,0 +1,331 @@
+"""Exact ray casting against the scene's world-space triangles (numpy only).
+
+* ``closest_hits`` — nearest hit per ray (Möller–Trumbore, double-sided, float64).
+* ``occluded`` — any hit closer than a per-ray distance (shadow rays).
+
+Rays are traced through a uniform grid (``TriangleGrid``, built once per ``SceneTriangles`` and
+cached): the grid is the project's exact conservative voxelization of the triangles, walked with
+a 3D DDA that is vectorised over rays — every step, each live ray tests the triangles of its
+current cell and stops once its best hit lies before the cell's exit. Results equal brute force.
+"""
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
+from .camera import camera_ray_lengths, camera_rays
+from .geometry import SceneTriangles
+from .snapshot import CameraData
+
+__all__ = [
+    "TriangleGrid", "build_grid", "closest_hits", "occluded", "SHADOW_EPSILON", "PrimaryHits",
+    "primary_visibility",
+]
+
+SHADOW_EPSILON = 1e-4  # metres: shadow rays ignore hits this close to either end
+_RAY_CHUNK = 1 << 13  # rays traced together: bounds the pair arrays, keeps them in cache
+_CELLS_PER_TRIANGLE = 4.0
+_MAX_CELLS_PER_AXIS = 128
+_DET_EPSILON = 1e-12
+
+
+# --------------------------------------------------------------------------- grid
+
+@dataclass(frozen=True, eq=False)
+class TriangleGrid:
+    """Uniform grid over a set of triangles (cells listed in CSR form).
+
+    origin : (3,) float64 world position of the lattice (cell c spans
+        ``origin + (c - LATTICE_OFFSET + [0, 1]) · span``, as ``voxelize`` defines cells).
+    span : cell edge in metres. dims : (3,) int64 cells per axis.
+    cell_start : (X·Y·Z + 2,) int64, triangles of linear cell k are
+        ``cell_triangles[cell_start[k]:cell_start[k + 1]]`` (k = x·Y·Z + y·Z + z; k = X·Y·Z is
+        an always-empty sentinel cell).
+    corners : (10, T) float64 rows: first corner xyz, edge 1 xyz, edge 2 xyz and |e1|·|e2| (the
+        scale of the Möller–Trumbore determinant) of each triangle.
+    """
+
+    origin: np.ndarray
+    span: float
+    dims: np.ndarray
+    cell_start: np.ndarray
+    cell_triangles: np.ndarray
+    corners: np.ndarray
+
+
+def build_grid(tris: SceneTriangles) -> TriangleGrid:
+    """A ``TriangleGrid`` with about ``_CELLS_PER_TRIANGLE`` cells per triangle."""
+    positions = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)
+    count = len(positions)
+    lo, hi = tris.bounds
+    extent = np.maximum(hi - lo, 1e-9)
+    target = float(np.clip(_CELLS_PER_TRIANGLE * count, 1.0, _MAX_CELLS_PER_AXIS**3))
+    span = float(np.cbrt(np.prod(extent) / target))
+    span = max(span, float(extent.max()) / _MAX_CELLS_PER_AXIS, 1e-6)
+    origin = lo - 0.5 * span
+    dims = np.floor((hi - origin) / span + LATTICE_OFFSET).astype(np.int64) + 2
+    e1 = positions[:, 1] - positions[:, 0]
+    e2 = positions[:, 2] - positions[:, 0]
+    scale = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+    corners = np.ascontiguousarray(np.concatenate([positions[:, 0].T, e1.T, e2.T, scale[None]]))
+    if count == 0:
+        return TriangleGrid(origin, span, dims, np.zeros(int(dims.prod()) + 2, np.int64),
+                            np.zeros(0, np.int32), corners)
+    surface = voxelize_triangles(
+        (positions - origin).reshape(-1, 3), np.arange(3 * count).reshape(count, 3), span
+    )
+    cells = surface.cells.astype(np.int64)[surface.cell_of_pair]
+    keys = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
+    order = np.argsort(keys, kind="stable")
+    counts = np.bincount(keys, minlength=int(dims.prod()) + 1)  # + the empty sentinel cell
+    cell_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    return TriangleGrid(origin, span, dims, cell_start, surface.triangle_of_pair[order], corners)
+
+
+_GRIDS: "weakref.WeakKeyDictionary[SceneTriangles, TriangleGrid]" = weakref.WeakKeyDictionary()
+
+
+def _grid_of(tris) -> TriangleGrid:
+    if isinstance(tris, TriangleGrid):
+        return tris
+    grid = _GRIDS.get(tris)
+    if grid is None:
+        grid = _GRIDS[tris] = build_grid(tris)
+    return grid
+
+
+# --------------------------------------------------------------------------- tracing
+
+def _intersect(corners: np.ndarray, o: np.ndarray, d: np.ndarray):
+    """Möller–Trumbore on pairs, structure-of-arrays.
+
+    corners : (10, P) rows v0 xyz, e1 xyz, e2 xyz, |e1|·|e2| of each pair's triangle.
+    o, d : (3, P) ray origin and direction of each pair.
+    Returns t, u, v (P,) float64; t is +inf where the ray misses the triangle.
+    """
+    v0x, v0y, v0z, e1x, e1y, e1z, e2x, e2y, e2z, scale = corners
+    ox, oy, oz = o
+    dx, dy, dz = d
+    px, py, pz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x
+    det = e1x * px + e1y * py + e1z * pz
+    sx, sy, sz = ox - v0x, oy - v0y, oz - v0z
+    qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
+    ok = np.abs(det) > _DET_EPSILON * scale * np.sqrt(dx * dx + dy * dy + dz * dz)
+    inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
+    u = (sx * px + sy * py + sz * pz) * inv
+    v = (dx * qx + dy * qy + dz * qz) * inv
+    t = (e2x * qx + e2y * qy + e2z * qz) * inv
+    hit = ok & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0)
+    return np.where(hit, t, np.inf), u, v
+
+
+def _pairs(grid: TriangleGrid, keys: np.ndarray):
+    """(ray slot, triangle) pairs of the rays whose current cells are ``keys``."""
+    start = grid.cell_start[keys]
+    count = grid.cell_start[keys + 1] - start
+    total = int(count.sum())
+    if total == 0:
+        return None, None
+    slot = np.repeat(np.arange(len(keys)), count)
+    first = np.cumsum(count) - count
+    offset = np.arange(total) - np.repeat(first, count)
+    return slot, grid.cell_triangles[np.repeat(start, count) + offset]
+
+
+# Rows of the per-ray float state (structure of arrays, one column per live ray); the rows a
+# (ray, triangle) pair needs come first so that one gather of ``_PAIR_ROWS`` rows serves them.
+_O, _D, _LO, _HI, _FOUND, _NEXT, _DELTA = slice(0, 3), slice(3, 6), 6, 7, 8, 9, 12
+_PAIR_ROWS = 9
+
+
+def _start_state(grid: TriangleGrid, o, d, t_min, t_max):
+    """Clip rays to the grid; returns (live ray indices, float state (15, L), cells (3, L), steps (3, L))."""
+    span = grid.span
+    base = grid.origin - LATTICE_OFFSET * span  # world position of the lattice corner
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / d
+        ta = (base - o) * inv
+        tb = (base + grid.dims * span - o) * inv
+    ta = np.where(np.isnan(ta), -np.inf, ta)
+    tb = np.where(np.isnan(tb), np.inf, tb)
+    t_enter = np.maximum(t_min, np.minimum(ta, tb).max(axis=1))
+    t_leave = np.minimum(t_max, np.maximum(ta, tb).min(axis=1))
+    ray = np.flatnonzero(t_enter <= t_leave)
+    o, d, inv = o[ray], d[ray], inv[ray]
+    g = (o + d * t_enter[ray, None] - base) / span
+    cell = np.clip(np.floor(g).astype(np.int64), 0, grid.dims - 1)
+    step = np.sign(d).astype(np.int64)
+    state = np.empty((15, len(ray)))
+    state[_O], state[_D] = o.T, d.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        boundary = base + (cell + (step > 0)) * span
+        state[_NEXT:_NEXT + 3] = np.where(step != 0, (boundary - o) * inv, np.inf).T
+        state[_DELTA:_DELTA + 3] = np.where(step != 0, span * np.abs(inv), np.inf).T
+    state[_LO], state[_HI], state[_FOUND] = t_min[ray], t_leave[ray], np.inf
+    return ray, state, np.ascontiguousarray(cell.T), np.ascontiguousarray(step.T)
+
+
+def _trace_chunk(grid: TriangleGrid, o, d, t_min, t_max, any_hit: bool):
+    """Trace one chunk of rays; returns best t (inf = none), triangle (-1), u, v."""
+    n = len(o)
+    best_t, best_tri = np.full(n, np.inf), np.full(n, -1, dtype=np.int64)
+    best_u, best_v = np.zeros(n), np.zeros(n)
+    ray, state, cell, step = _start_state(grid, o, d, t_min, t_max)
+    dims = grid.dims
+    empty_cell = int(dims.prod())  # the sentinel cell of finished rays: no triangles
+    finished = np.zeros(len(ray), dtype=bool)
+    while len(ray):
+        keys = np.where(finished, empty_cell, (cell[0] * dims[1] + cell[1]) * dims[2] + cell[2])
+        slot, tri = _pairs(grid, keys)
+        if slot is not None:
+            pair_state = state[:_PAIR_ROWS, slot]
+            t, u, v = _intersect(grid.corners[:, tri], pair_state[_O], pair_state[_D])
+            good = (t > pair_state[_LO]) & (t < np.minimum(pair_state[_FOUND], pair_state[_HI]))
+            if good.any():
+                slot, tri, t, u, v = slot[good], tri[good], t[good], u[good], v[good]
+                found = state[_FOUND]
+                np.minimum.at(found, slot, t)
+                win = t == found[slot]
+                target = ray[slot[win]]
+                best_t[target], best_tri[target] = t[win], tri[win]
+                best_u[target], best_v[target] = u[win], v[win]
+        # Step every ray into the neighbour across its nearest cell wall (3D DDA).
+        n0, n1, n2 = state[_NEXT], state[_NEXT + 1], state[_NEXT + 2]
+        axis = np.where(n0 <= n1, np.where(n0 <= n2, 0, 2), np.where(n1 <= n2, 1, 2))
+        t_exit = np.minimum(np.minimum(n0, n1), n2)
+        done = (state[_FOUND] <= t_exit) | (t_exit >= state[_HI])
+        if any_hit:
+            done |= np.isfinite(state[_FOUND])
+        live = np.arange(len(ray))
+        moved = cell[axis, live] + step[axis, live]
+        cell[axis, live] = moved
+        state[_NEXT + axis, live] = t_exit + state[_DELTA + axis, live]
+        done |= (moved < 0) | (moved >= dims[axis])
+        if done.sum() > len(ray) // 8:  # drop finished rays now and then, not at every step
+            keep = np.flatnonzero(~done)
+            ray, state, cell, step = ray[keep], state[:, keep], cell[:, keep], step[:, keep]
+            finished = np.zeros(len(ray), dtype=bool)
+        else:
+            finished = done
+            state[_HI, done] = -np.inf  # stays done
+    return best_t, best_tri, best_u, best_v
+
+
+def _trace(tris, origins, directions, t_min, t_max, any_hit):
+    grid = _grid_of(tris)
+    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    n = len(o)
+    t_min = np.broadcast_to(np.asarray(t_min, dtype=np.float64), (n,))
+    t_max = np.broadcast_to(np.asarray(t_max, dtype=np.float64), (n,))
+    out_t = np.full(n, np.inf)
+    out_tri = np.full(n, -1, dtype=np.int64)
+    out_u, out_v = np.zeros(n), np.zeros(n)
+    if grid.corners.shape[1] == 0:
+        return out_t, out_tri, out_u, out_v
+    for a in range(0, n, _RAY_CHUNK):
+        b = min(n, a + _RAY_CHUNK)
+        out_t[a:b], out_tri[a:b], out_u[a:b], out_v[a:b] = _trace_chunk(
+            grid, o[a:b], d[a:b], t_min[a:b], t_max[a:b], any_hit
+        )
+    return out_t, out_tri, out_u, out_v
+
+
+def closest_hits(tris, origins, directions, t_min=0.0, t_max=np.inf):
+    """Nearest triangle hit along each ray.
+
+    Parameters
+    ----------
+    tris : ``SceneTriangles`` (its grid is built on first use and cached) or a ``TriangleGrid``.
+    origins, directions : (N, 3) float world space; directions need not be unit (t is then in
+        units of their length).
+    t_min, t_max : scalar or (N,) bounds; hits with ``t_min < t < t_max`` count.
+
+    Returns
+    -------
+    t : (N,) float64 hit distance, +inf for a miss.
+    tri : (N,) int64 triangle index into ``tris``, -1 for a miss.
+    u, v : (N,) float64 barycentrics of the hit (point = v0 + u·e1 + v·e2), 0 for a miss.
+    """
+    return _trace(tris, origins, directions, t_min, t_max, any_hit=False)
+
+
+def occluded(tris, origins, directions, max_t, epsilon: float = SHADOW_EPSILON) -> np.ndarray:
+    """(N,) bool: does any triangle cross the ray with ``epsilon < t < max_t - epsilon``?
+
+    ``directions`` should be unit vectors so that ``epsilon`` is in metres; ``max_t`` is a scalar
+    or (N,) (``inf`` for a directional light).
+    """
+    max_t = np.asarray(max_t, dtype=np.float64) - epsilon
+    t, _, _, _ = _trace(tris, origins, directions, epsilon, max_t, any_hit=True)
+    return np.isfinite(t)
+
+
+# --------------------------------------------------------------------------- primary visibility
+
+@dataclass(frozen=True)
+class PrimaryHits:
+    """What the camera sees at each pixel centre (row 0 = top); background pixels are zero/-1.
+
+    hit : (H, W) bool geometry coverage.
+    position : (H, W, 3) float64 world-space hit point.
+    normal : (H, W, 3) float64 unit shading normal: interpolated ``corner_normals`` where the
+        triangles carry them, else the face normal; turned to the camera side of the face (Cycles
+        flips both normals of a back-facing hit).
+    face_normal : (H, W, 3) float64 unit geometric normal, turned the same way.
+    direction : (H, W, 3) float64 unit camera-ray direction (the view vector is its negative).
+    depth : (H, W) float64 distance from the near plane along the ray (inf = background).
+    triangle, material, object : (H, W) int32 indices into ``SceneTriangles``, the snapshot's
+        materials and objects (-1 = background or no material).
+    """
+
+    hit: np.ndarray
+    position: np.ndarray
+    normal: np.ndarray
+    face_normal: np.ndarray
+    direction: np.ndarray
+    depth: np.ndarray
+    triangle: np.ndarray
+    material: np.ndarray
+    object: np.ndarray
+
+
+def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | None = None,
+                       height: int | None = None) -> PrimaryHits:
+    """Exact primary visibility of a ``width`` × ``height`` image of ``camera`` (see ``camera_rays``);
+    rays stop at the far clipping plane."""
+    width = int(width or camera.resolution[0])
+    height = int(height or camera.resolution[1])
+    origins, directions = camera_rays(camera, width, height)
+    t, tri, u, v = closest_hits(tris, origins, directions, 0.0, camera_ray_lengths(camera, directions))
+    hit = tri >= 0
+    index = np.where(hit, tri, 0)
+    position = np.where(hit[:, None], origins + directions * np.where(hit, t, 0.0)[:, None], 0.0)
+    face = np.asarray(tris.normals, dtype=np.float64)[index] if len(tris) else np.zeros((len(t), 3))
+    shading = face
+    if tris.corner_normals is not None and len(tris):
+        corners = np.asarray(tris.corner_normals, dtype=np.float64)[index]
+        smooth = ((1.0 - u - v)[:, None] * corners[:, 0] + u[:, None] * corners[:, 1]
+                  + v[:, None] * corners[:, 2])
+        length = np.linalg.norm(smooth, axis=1, keepdims=True)
+        shading = np.where(length > 1e-12, smooth / np.maximum(length, 1e-12), face)
+    sign = np.where(np.einsum("ij,ij->i", face, directions) > 0, -1.0, 1.0)[:, None] * hit[:, None]
+
+    def per_pixel(values):
+        out = np.where(hit, np.asarray(values)[index] if len(tris) else -1, -1)
+        return out.astype(np.int32).reshape(height, width)
+
+    return PrimaryHits(
+        hit=hit.reshape(height, width),
+        position=position.reshape(height, width, 3),
+        normal=(shading * sign).reshape(height, width, 3),
+        face_normal=(face * sign).reshape(height, width, 3),
+        direction=directions.reshape(height, width, 3),
+        depth=t.reshape(height, width),
+        triangle=per_pixel(np.arange(len(tris))),
+        material=per_pixel(tris.materials),
+        object=per_pixel(tris.objects),
+    )

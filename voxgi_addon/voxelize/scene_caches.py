@@ -1,0 +1,205 @@
+"""Build every mesh's voxel caches for a scene snapshot: the voxelization job.
+
+One cache per (mesh key, cascade); cascade i uses ``base_span · 2**i``. Static and rigid
+objects with a non-unit scale get a cache of their scaled mesh (key ``mesh|scale``), shared
+by every object with that mesh and scale; the runtime then applies only their rigid part.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import VoxGICancelled, VoxGIError
+from ..scene.snapshot import MeshData, SceneSnapshot
+from . import object_scale
+from .attributes import average_attributes
+from .cache import VoxelCache, pack_cache
+from .mesh_checks import filter_triangles
+from .packing import MAX_CELLS_PER_AXIS
+from .surface import lattice_bounds, voxelize_triangles
+
+DEFAULT_ALBEDO = np.array([0.8, 0.8, 0.8], np.float32)
+
+
+@dataclass(frozen=True)
+class SkippedMesh:
+    """A mesh too large for 1024 cells per axis at one span."""
+
+    mesh: str
+    cascade: int
+    span: float
+    dims: tuple[int, int, int]
+
+    def __str__(self) -> str:
+        d = "×".join(str(v) for v in self.dims)
+        return (f"mesh '{self.mesh}' skipped at cascade {self.cascade} (span {self.span:g} m): "
+                f"needs {d} voxels, more than {MAX_CELLS_PER_AXIS} per axis")
+
+
+@dataclass(frozen=True)
+class CascadeStats:
+    cascade: int
+    span: float
+    voxel_count: int
+    nbytes: int
+
+
+@dataclass(frozen=True)
+class ObjectBinding:
+    """How an object uses a cache: ``world ≈ rigid_matrix @ cache object space``."""
+
+    cache_key: str
+    rigid_matrix: np.ndarray
+    kind: str
+
+
+@dataclass
+class CacheBuildResult:
+    caches: dict[str, list[VoxelCache | None]] = field(default_factory=dict)
+    bindings: dict[str, ObjectBinding] = field(default_factory=dict)
+    cascade_stats: list[CascadeStats] = field(default_factory=list)
+    skipped: list[SkippedMesh] = field(default_factory=list)
+    dropped_triangles: dict[str, int] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def total_voxels(self) -> int:
+        return sum(s.voxel_count for s in self.cascade_stats)
+
+    @property
+    def total_bytes(self) -> int:
+        return sum(s.nbytes for s in self.cascade_stats)
+
+
+class _Timer:
+    def __init__(self, timings):
+        self.timings = timings
+
+    def add(self, stage, start):
+        self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - start
+
+
+def _cache_sources(snapshot: SceneSnapshot, result: CacheBuildResult):
+    """Which (key → positions, mesh) to voxelize, baking non-unit scales; fills bindings."""
+    sources: dict[str, tuple[np.ndarray, MeshData]] = {}
+    for obj in snapshot.objects:
+        mesh = snapshot.meshes.get(obj.mesh)
+        if mesh is None:
+            raise VoxGIError(f"object '{obj.name}' refers to unknown mesh '{obj.mesh}'")
+        if not np.isfinite(obj.world_matrix).all():
+            result.warnings.append(f"object '{obj.name}': its matrix has NaN/inf values; skipped")
+            continue
+        rigid, stretch = object_scale.split_rigid(obj.world_matrix)
+        key, positions = obj.mesh, mesh.positions
+        if obj.kind == "skinned":
+            rigid = np.asarray(obj.world_matrix, np.float64)  # bones carry the deformation
+            if not object_scale.is_identity(stretch):
+                result.warnings.append(
+                    f"object '{obj.name}': skinned with a scaled object matrix; its voxels are "
+                    "resized by the skinning matrices, not baked")
+        elif not object_scale.is_identity(stretch):
+            if not object_scale.is_uniform(stretch):
+                result.warnings.append(
+                    f"object '{obj.name}' has non-uniform scale or shear: voxels cannot be "
+                    "transformed under it (Yalçıner 2016, 4.7), so the scale is baked into its "
+                    "cache and only its rotation and location are applied at runtime")
+            key = f"{obj.mesh}|scale:{object_scale.stretch_key(stretch)}"
+            positions = np.asarray(mesh.positions, np.float64) @ stretch.T
+        result.bindings[obj.name] = ObjectBinding(key, rigid, obj.kind)
+        sources.setdefault(key, (positions, mesh))
+    return sources
+
+
+def _triangle_materials(snapshot: SceneSnapshot, mesh: MeshData):
+    """Per-triangle albedo (T, 3) and specular (T,) = 1 - roughness (1 = mirror-like)."""
+    mats = snapshot.materials
+    albedo = np.tile(DEFAULT_ALBEDO, (len(mats) + 1, 1))
+    spec = np.full(len(mats) + 1, 0.5, np.float32)
+    for i, m in enumerate(mats):
+        albedo[i] = np.clip(np.nan_to_num(m.base_color[:3]), 0.0, 1.0)
+        spec[i] = 1.0 - float(np.clip(m.roughness, 0.0, 1.0))
+    idx = np.asarray(mesh.triangle_materials, np.int64)
+    idx = np.where((idx >= 0) & (idx < len(mats)), idx, len(mats))
+    return albedo[idx], spec[idx]
+
+
+def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, result, timer,
+                      cancel=None):
+    """Voxelize one mesh at every cascade span into ``result.caches[key]``.
+
+    cancel : optional callable returning True to stop; raises VoxGICancelled between cascades.
+    """
+    t0 = time.perf_counter()
+    check = filter_triangles(key, positions, mesh.triangles)
+    if check.dropped:
+        result.dropped_triangles[key] = check.dropped
+        result.warnings.append(
+            f"mesh '{key}': dropped {check.dropped} triangles "
+            f"({check.degenerate} zero-area, {check.non_finite} with NaN/inf vertices)")
+    tris = np.asarray(mesh.triangles, np.int64)[check.keep]
+    albedo, spec = _triangle_materials(snapshot, mesh)
+    albedo, spec = albedo[check.keep], spec[check.keep]
+    used = np.unique(tris)
+    timer.add("check", t0)
+    caches: list[VoxelCache | None] = []
+    if len(tris) == 0:
+        result.warnings.append(f"mesh '{key}' has no usable faces; it gets no voxels")
+        result.caches[key] = [None] * cascade_count
+        return
+    skin = mesh.skin
+    finer = False
+    for cascade in range(cascade_count):
+        if cancel is not None and cancel():
+            raise VoxGICancelled("voxelization cancelled; no caches were kept")
+        span = base_span * 2**cascade
+        lo, dims = lattice_bounds(np.asarray(positions)[used], span)
+        if (dims > MAX_CELLS_PER_AXIS).any():
+            result.skipped.append(SkippedMesh(key, cascade, span, tuple(int(d) for d in dims)))
+            caches.append(None)
+            continue
+        t0 = time.perf_counter()
+        surface = voxelize_triangles(positions, tris, span)
+        timer.add("voxelize", t0)
+        t0 = time.perf_counter()
+        attrs = average_attributes(surface, positions, tris, albedo, spec,
+                                   None if skin is None else skin.weights,
+                                   None if skin is None else skin.bone_indices)
+        timer.add("attributes", t0)
+        t0 = time.perf_counter()
+        caches.append(pack_cache(key, cascade, span, lo, dims, surface.cells, attrs, finer))
+        timer.add("pack", t0)
+        finer = True
+    result.caches[key] = caches
+
+
+def build_scene_caches(snapshot: SceneSnapshot, base_span: float, cascade_count: int,
+                       cancel=None) -> CacheBuildResult:
+    """Voxelize every mesh of a snapshot at ``cascade_count`` spans (``base_span · 2**i``).
+
+    cancel : optional callable returning True to stop; raises VoxGICancelled between meshes
+        and between the cascades of a mesh.
+    Raises VoxGIError for unusable input (no mesh objects, bad settings).
+    """
+    if not (np.isfinite(base_span) and base_span > 0):
+        raise VoxGIError(f"base voxel span must be a positive number of metres, got {base_span!r}")
+    if not 1 <= int(cascade_count) <= 8:
+        raise VoxGIError(f"cascade count must be between 1 and 8, got {cascade_count!r}")
+    if not snapshot.objects:
+        raise VoxGIError("the scene has no visible mesh objects to voxelize")
+    result = CacheBuildResult(warnings=list(snapshot.warnings))
+    timer = _Timer(result.timings)
+    sources = _cache_sources(snapshot, result)
+    for key, (positions, mesh) in sources.items():
+        if cancel is not None and cancel():
+            raise VoxGICancelled("voxelization cancelled; no caches were kept")
+        build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, result, timer,
+                          cancel)
+    for cascade in range(cascade_count):
+        present = [c[cascade] for c in result.caches.values() if c[cascade] is not None]
+        result.cascade_stats.append(CascadeStats(
+            cascade, base_span * 2**cascade,
+            sum(c.voxel_count for c in present), sum(c.nbytes for c in present)))
+    return result
