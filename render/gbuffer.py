@@ -1,4 +1,4 @@
-"""Primary visibility on the GPU: rasterize the scene's triangles into a G-buffer (issue 5 point 3).
+"""Primary visibility on the GPU: rasterize the scene's triangles into a G-buffer.
 
 The same per-pixel answers as ``voxgi_addon.raycast.primary_visibility`` (pixel-centre rays,
 shading normals turned to the camera by the face normal, the camera's clipping range), by

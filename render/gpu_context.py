@@ -2,10 +2,10 @@
 
 In Blender's UI the main thread always has a GPU context. In background mode (``blender -b``,
 ``import bpy``) the ``gpu`` module only works once a render engine with
-``bl_use_gpu_context`` has rendered (BLENDER_NOTES.md); ``ensure_gpu_context`` renders one
-empty 4 × 4 frame of a throwaway scene with the VoxGI engine to get there. Setting the
-environment variable ``VOXGI_NO_GPU`` (any non-empty value) makes the GPU unavailable, which is
-how the numpy fallback is forced.
+``bl_use_gpu_context`` has rendered (docs/blender_facts.md "The gpu module in background
+mode"); ``ensure_gpu_context`` renders one empty 4 × 4 frame of a throwaway scene with the
+VoxGI engine to get there. Setting the environment variable ``VOXGI_NO_GPU`` (any non-empty
+value) makes the GPU unavailable, which is how the numpy fallback is forced.
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The octree atlas and the parameter table as GPU textures (issue 5 point 2).
+"""The octree atlas and the parameter table as GPU textures (docs/gi_pipeline.md "The GPU tracer").
 
 A ``GPUVolume`` holds the 3D RGBA16F atlas of every octree level (``voxgi_addon.volume_textures``)
 and the small RGBA32F parameter table (``voxgi_addon.trace_params``). ``update`` uploads the

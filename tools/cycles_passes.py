@@ -11,7 +11,7 @@ Filter Glossy, no adaptive sampling, no denoising, a fixed seed, CPU device, tra
 (so ``Alpha`` is the geometry coverage and the background of every pass is 0). The AO pass
 uses the world's AO distance (``World.light_settings.distance``), set from ``ao_distance``.
 
-Passes come back with Cycles' names and meanings (see BLENDER_NOTES.md): ``Diffuse Direct``,
+Passes come back with Cycles' names and meanings (docs/blender_facts.md "Cycles' radiometry"): ``Diffuse Direct``,
 ``Diffuse Indirect`` (light without albedo), ``Diffuse Color``, ``Ambient Occlusion``,
 ``Glossy Indirect``, ``Combined`` (RGB, premultiplied) and ``Alpha`` (H, W). The multilayer EXR
 is written to a temporary file with ZIP compression and read back with ``voxgi_addon.exr``.

@@ -1,6 +1,6 @@
 """Exact primary visibility + direct diffuse light against Cycles' Diffuse Direct pass.
 
-Acceptance (issue 3): on the test Cornell box, relative L1 over geometry pixels ≤ 0.10 for a
+Acceptance: on the test Cornell box, relative L1 over geometry pixels ≤ 0.10 for a
 point and an area light (Cycles at 256 spp, 96×72, one bounce), and geometry coverage agreeing
 on ≥ 98 % of pixels. Also: the harness restores the scene, and the thin-wall room is built so
 that the dark side really gets no light in Cycles.

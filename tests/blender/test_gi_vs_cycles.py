@@ -4,7 +4,7 @@ box, traced by the GPU tracer and by the numpy reference.
 The preview is rendered the way users do it — ``bpy.ops.voxgi.render_preview`` writing a
 multilayer EXR — and read back; Cycles renders the same view at 1024 spp with a point-sample
 pixel filter so both images sample pixel centres. The GPU passes must equal the numpy
-tracer's within 2% relative L1 per pass, and both must stay within issue 3's bounds.
+tracer's within 2% relative L1 per pass, and both must stay within the bounds below.
 """
 import bpy
 import numpy as np

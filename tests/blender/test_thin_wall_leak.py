@@ -1,4 +1,4 @@
-"""Light leaking through a thin wall (issue 3's closed-room test).
+"""Light leaking through a thin wall (the closed-room test of docs/gi_pipeline.md).
 
 The issue's target: the dark side's Diffuse Indirect stays below 2% of the lit side's mean
 (a 2 cm wall in 7 cm voxels). Measured about 1.3% (GPU and numpy tracers): anisotropic voxels

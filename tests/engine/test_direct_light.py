@@ -1,6 +1,6 @@
 """Direct diffuse light in Cycles' units (irradiance / π) against closed forms and brute force.
 
-The closed forms are those measured against Cycles in BLENDER_NOTES.md ("Cycles' radiometry").
+The closed forms are those measured against Cycles in docs/blender_facts.md "Cycles' radiometry".
 """
 import math
 
@@ -66,7 +66,7 @@ def test_point_light_matches_the_inverse_square_cosine_law():
     expected = 100.0 / (4 * math.pi * d2) / math.pi * d[:, 2] / np.sqrt(d2)
     np.testing.assert_allclose(got[:, 0], expected, rtol=1e-5)
     assert got.dtype == np.float32 and got.shape == (len(p), 3)
-    # BLENDER_NOTES: 100 W at 2 m straight above reads 0.6333 (Cycles measured 0.6317)
+    # docs/blender_facts.md: 100 W at 2 m straight above reads 0.6333 (Cycles measured 0.6317)
     above = diffuse_direct([[0.3, -0.2, 0.0]], [[0, 0, 1.0]], [light], None)[0, 0]
     assert above == pytest.approx(0.6333, abs=1e-4)
 
@@ -118,7 +118,7 @@ def test_area_light_over_a_plane_is_exact(shape, sx, sy):
     x, y = p[:, 0], p[:, 1]
     expected = radiance * rectangle_factor(-sx / 2 - x, sx / 2 - x, -sy / 2 - y, sy / 2 - y, 1.0)
     np.testing.assert_allclose(got, expected, rtol=1e-5)
-    # BLENDER_NOTES' small-square limit P / (π d²) / π
+    # docs/blender_facts.md's small-square limit P / (π d²) / π
     tiny = LightData("a", "AREA", WHITE, 100.0, frame((0, 0, 2.0)), size=0.01, shape="SQUARE")
     below = diffuse_direct([[0, 0, 0.0]], [[0, 0, 1.0]], [tiny], None)[0, 0]
     assert below == pytest.approx(100.0 / (math.pi * 4.0) / math.pi, rel=1e-4)

@@ -1,4 +1,4 @@
-"""GI benchmark rows (issue 3), run with the bpy venv: ``.venv/bin/python tools/bench/bench_gi_blender.py``.
+"""GI benchmark rows, run with the bpy venv: ``.venv/bin/python tools/bench/bench_gi_blender.py``.
 
 Per-update time (cascades + SVO + injection) against re-voxelizing every object each frame,
 preview times, and Cycles at 16/64/256 spp with each one's time and Diffuse Indirect error

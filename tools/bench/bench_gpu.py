@@ -1,4 +1,4 @@
-"""Bench section "gpu": runs tools/bench/bench_gpu_blender.py with the bpy venv (issue 5's table)."""
+"""Bench section "gpu": runs tools/bench/bench_gpu_blender.py with the bpy venv."""
 from __future__ import annotations
 
 import bench_gi

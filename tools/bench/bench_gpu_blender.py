@@ -1,4 +1,4 @@
-"""GPU tracer benchmark rows (issue 5), run with the bpy venv:
+"""GPU tracer benchmark rows, run with the bpy venv:
 ``.venv/bin/python tools/bench/bench_gpu_blender.py [--quick]``.
 
 Filtered octree samples per second (the GLSL sampler vs ``VoxelOctree.sample_directional``),

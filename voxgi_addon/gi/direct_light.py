@@ -2,7 +2,7 @@
 
 ``diffuse_direct`` returns what Cycles' ``Diffuse Direct`` pass holds for a white Lambertian
 surface: irradiance / π (no albedo), summed over lights, × light colour. The light models were
-checked against Cycles 5.0 renders of a white plane (agreement 0.1–0.3 %; BLENDER_NOTES.md
+checked against Cycles 5.0 renders of a white plane (agreement 0.1–0.3 %; docs/blender_facts.md
 "Cycles' radiometry" has the basic cases):
 
 * SUN, strength S (W/m²): S/π · cosθ. A sun with an angle casts soft shadows: shadow rays

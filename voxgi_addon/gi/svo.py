@@ -1,4 +1,4 @@
-"""Sparse voxel octree over all cascades, rebuilt bottom-up every update (issue 3 point 2).
+"""Sparse voxel octree over all cascades, rebuilt bottom-up every update (docs/gi_pipeline.md).
 
 Geometry (docs/gi_pipeline.md): the root is the coarsest cascade's cube (``root_origin``,
 ``root_size`` = res·S); level ℓ has 2^ℓ nodes per axis of size root_size / 2^ℓ; cascade i's
