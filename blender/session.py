@@ -9,6 +9,7 @@ Only the main thread reads or writes the session.
 """
 from __future__ import annotations
 
+import atexit
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -74,9 +75,17 @@ classes = ()
 def register() -> None:
     if _clear_on_load not in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.append(_clear_on_load)
+    # As the bpy module, Blender never unregisters add-ons at exit, and this module outlives
+    # Python's shutdown (the handler above and registered classes reach it), so a session's
+    # GPUVolume textures would never be freed: "Not freed memory blocks" at exit. atexit runs
+    # last-registered first, so this runs before bpy's own exit handler frees the GPU
+    # (docs/gi_pipeline.md, "GPU resources at exit").
+    atexit.unregister(clear_sessions)
+    atexit.register(clear_sessions)
 
 
 def unregister() -> None:
+    atexit.unregister(clear_sessions)
     if _clear_on_load in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.remove(_clear_on_load)
     clear_sessions()

@@ -8,6 +8,9 @@ GPU can be used and falls back to the numpy tracer otherwise.
 """
 from __future__ import annotations
 
+import atexit
+import sys
+
 from ..registration import register_modules, unregister_modules
 from . import engine
 
@@ -16,9 +19,23 @@ modules = (engine,)
 classes = tuple(cls for module in modules for cls in module.classes)
 
 
+def release_gpu_resources() -> None:
+    """Free the compiled shaders kept between renders while Blender's GPU module is still up:
+    on unregister and, since the bpy module never unregisters add-ons, at exit before bpy's own
+    exit handler (docs/gi_pipeline.md, "GPU resources at exit")."""
+    for name in ("gbuffer", "gpu_shaders"):
+        module = sys.modules.get(f"{__name__}.{name}")  # not imported: nothing cached
+        if module is not None:
+            module.release()
+
+
 def register() -> None:
     register_modules(modules)
+    atexit.unregister(release_gpu_resources)
+    atexit.register(release_gpu_resources)
 
 
 def unregister() -> None:
+    atexit.unregister(release_gpu_resources)
     unregister_modules(modules)
+    release_gpu_resources()

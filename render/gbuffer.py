@@ -46,6 +46,12 @@ def _gbuffer_shader():
     return _shader
 
 
+def release() -> None:
+    """Drop the cached G-buffer shader (Blender frees a ``GPUShader`` with its last reference)."""
+    global _shader
+    _shader = None
+
+
 class GBuffer:
     """position, normal, view : RGBA32F textures (see module doc) of width × height."""
 

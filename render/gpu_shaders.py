@@ -56,3 +56,8 @@ def compute_shader(kernel: str):
         info.compute_source(kernel_source(kernel))
         _cache[key] = gpu.shader.create_from_info(info)
     return _cache[key]
+
+
+def release() -> None:
+    """Drop the cached shaders (Blender frees a ``GPUShader`` with its last reference)."""
+    _cache.clear()
