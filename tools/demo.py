@@ -76,9 +76,9 @@ def run(args: argparse.Namespace, tmp: str) -> int:
     import bpy
 
     import_addon(tmp)
+    from voxgi.blender import reports as report
     from voxgi.blender.demo_scene import build_demo_scene
     from voxgi.blender.session import scene_session
-    from voxgi.operators import voxelize_report as report
 
     if args.blend is None:
         bpy.ops.wm.read_factory_settings(use_empty=True)

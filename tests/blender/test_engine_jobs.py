@@ -401,8 +401,8 @@ def test_the_worker_never_touches_bpy(interactive, voxelize_module, mesh_caches,
         name = module_of(frame if event == "call" else arg)
         seen.add(name)
         owner = getattr(arg, "__self__", None) if event == "c_call" else None
-        if (name.split(".")[0] in BLENDER_MODULES or name.startswith(("voxgi.operators",
-                                                                       "voxgi.ui"))
+        if (name.split(".")[0] in BLENDER_MODULES or name.startswith(("voxgi.operators", "voxgi.ui",
+                                                                       "voxgi.blender", "voxgi.render"))
                 or isinstance(owner, (bpy.types.bpy_struct, bpy.types.bpy_prop_collection))):
             bad.append((event, name, getattr(arg, "__qualname__", None) or frame.f_code.co_name))
 

@@ -29,8 +29,8 @@ SCRIPT = textwrap.dedent(
     (tmp / "voxgi").symlink_to(repo, target_is_directory=True)
     sys.path.insert(0, str(tmp))
     importlib.import_module("voxgi").register()
-    from voxgi.operators.demo_scene import build_demo_scene
-    from voxgi.operators.session import scene_session
+    from voxgi.blender.demo_scene import build_demo_scene
+    from voxgi.blender.session import scene_session
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene

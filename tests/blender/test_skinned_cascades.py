@@ -65,7 +65,7 @@ def _within_one_cell(a, b):
 def test_skin_points_of_the_rest_shape_equal_blenders_posed_vertices(demo):
     snap, posed, _ = demo
     obj, mesh, rig = _tube(snap)
-    skinning = _engine("skinning")
+    skinning = _engine("scene.skinning")
     ours = skinning.skin_points(rig, obj.world_matrix, mesh.positions, mesh.skin.weights,
                                 mesh.skin.bone_indices)
     assert np.abs(posed - mesh.positions @ obj.world_matrix[:3, :3].T
@@ -77,14 +77,14 @@ def _tube_cascade(demo):
     """Cascade 0 voxels of the tube alone and the posed mesh voxelized in the same grid."""
     snap, posed, tris = demo
     obj, *_ = _tube(snap)
-    caches = _engine("mesh_caches").build_scene_caches(snap, SPAN, 3)
+    caches = _engine("voxelize.scene_caches").build_scene_caches(snap, SPAN, 3)
     tube_only = dataclasses.replace(caches, bindings={obj.name: caches.bindings[obj.name]})
-    cascades = _engine("cascades")
+    cascades = _engine("gi.cascades")
     grids = cascades.place_cascades(posed.mean(axis=0), SPAN, 64, 3)
     assert grids[0].contains(grids[0].cells_of(posed)).all()  # the whole tube is in cascade 0
     out = cascades.build_cascades(tube_only, snap, grids)
     assert all(cv.voxel_count == 0 for cv in out[1:])  # coarser cascades leave it to cascade 0
-    cells = _engine("voxelize").voxelize_triangles(posed - grids[0].origin, tris, SPAN).cells
+    cells = _engine("voxelize.surface").voxelize_triangles(posed - grids[0].origin, tris, SPAN).cells
     return out[0], cells
 
 
