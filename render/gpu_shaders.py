@@ -22,10 +22,11 @@ KERNELS = {
     "shadow": ("gbuffer_position", "gbuffer_normal"),
     "upsample": ("gbuffer_position", "gbuffer_normal", "low_image"),
     "probe": ("gbuffer_position", "gbuffer_normal", "gbuffer_view"),  # tests: raw samples
+    "denoise": ("gbuffer_position", "gbuffer_normal", "low_image"),
 }
 # Kernel name → its VEC4 push constants.
 PUSH_CONSTANTS = {"shadow": ("light_position", "light_size"), "diffuse_ao": ("sampling",),
-                  "glossy": ("sampling",), "upsample": ("sampling",)}
+                  "glossy": ("sampling",), "upsample": ("sampling",), "denoise": ("sampling",)}
 _cache: dict[str, object] = {}
 
 
