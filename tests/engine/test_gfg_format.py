@@ -101,7 +101,7 @@ def test_write_read_write_is_byte_identical_and_values_are_exact(scene, tmp_path
     assert write_gfg(path, scene) == len(data) == path.stat().st_size
     for source in (data, path):
         back = read_gfg(source)
-        assert back.version == (1, 0)
+        assert back.version == (1, 1)
         assert_scenes_equal(scene, back)
         assert to_bytes(back) == data
 
@@ -157,6 +157,46 @@ def test_version_endianness_and_checksums_are_enforced(scene):
         read_gfg(b"glTF" + data[4:])
     with pytest.raises(GFGError, match="truncated"):
         read_gfg(data[:-1])
+
+
+def as_format_1_0(data: bytes) -> bytearray:
+    """The same scene as the 1.0 writer wrote it: 1.1 changed no layout, only the version and the
+    rule that padding and reserved bytes are zero (docs/gfg.md, "Every byte is checked")."""
+    old = bytearray(data)
+    old[10:12] = struct.pack("<H", 0)
+    return _reseal_header(old)
+
+
+def test_files_of_the_previous_version_1_0_are_still_read(scene, tmp_path):
+    data = to_bytes(scene)
+    assert struct.unpack_from("<HH", data, 8) == (1, 1)
+    old = as_format_1_0(data)
+    back = read_gfg(bytes(old))
+    assert back.version == (1, 0)
+    assert_scenes_equal(scene, back)
+    # 1.0 did not promise zero padding, so its reader path does not check it; 1.1 refuses it.
+    strg_offset, strg_size = struct.unpack_from("<QQ", data, 64 + 8)
+    pad = strg_offset + strg_size  # the first padding byte after STRG
+    assert pad < struct.unpack_from("<Q", data, 96 + 8)[0]
+
+    def garbage(file: bytes) -> bytearray:
+        damaged = bytearray(file)
+        damaged[pad] = 0x77
+        damaged[64 + 28] = 0x01  # table entry 0: reserved
+        return _reseal_table(damaged)
+
+    assert read_gfg(bytes(garbage(old))).version == (1, 0)
+    new = garbage(data)
+    with pytest.raises(GFGError, match=r"section table entry 0: reserved: 0x1 is not 0"):
+        read_gfg(bytes(new))
+    new[64 + 28] = 0
+    with pytest.raises(GFGError, match=rf"padding after section 0 STRG: padding: byte at file offset {pad} "
+                                       r"is 0x77, not 0"):
+        read_gfg(bytes(_reseal_table(new)))
+    path = tmp_path / "old.gfg"
+    path.write_bytes(bytes(old))
+    ok = _cli("verify", path)
+    assert ok.returncode == 0 and "GFG 1.0" in ok.stdout and "padding is not checked" in ok.stdout
 
 
 def test_unknown_sections_are_skipped_unless_required(scene):
@@ -218,7 +258,7 @@ def test_command_line_info_and_verify(scene, tmp_path):
     write_gfg(path, scene)
     info = _cli("info", path)
     assert info.returncode == 0, info.stderr
-    assert "GFG 1.0" in info.stdout and "14 sections" in info.stdout
+    assert "GFG 1.1" in info.stdout and "14 sections" in info.stdout
     assert "'Box': 36 vertices, 36 indices (uint16), 3 material ranges" in info.stdout
     assert "'Skin' cascade 0 (span 0.25 m): 40 voxels, skinned" in info.stdout
     ok = _cli("verify", path)

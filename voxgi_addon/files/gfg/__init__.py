@@ -11,7 +11,7 @@ Modules:
   mesh_build     Blender-style per-corner arrays ↔ single-indexed GFG meshes
   transforms     node TRS → world matrices
   voxel_set      CacheBuildResult ↔ VoxelSet
-  cli            the ``info`` / ``verify`` command-line tools (``python -m voxgi_addon.gfg``)
+  cli            the ``info`` / ``verify`` command-line tools (``python -m voxgi_addon.files.gfg``)
 """
 from .errors import GFGError
 from .mesh_build import MeshArrays, VertexTypes, build_mesh, canonical_skin, mesh_arrays

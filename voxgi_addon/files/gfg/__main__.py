@@ -1,4 +1,4 @@
-"""``python -m voxgi_addon.gfg info FILE`` / ``python -m voxgi_addon.gfg verify FILE``."""
+"""``python -m voxgi_addon.files.gfg info FILE`` / ``python -m voxgi_addon.files.gfg verify FILE``."""
 import sys
 
 from .cli import main

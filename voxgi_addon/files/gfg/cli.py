@@ -1,4 +1,4 @@
-"""``python -m voxgi_addon.gfg info FILE`` / ``verify FILE``: inspect and check GFG files."""
+"""``python -m voxgi_addon.files.gfg info FILE`` / ``verify FILE``: inspect and check GFG files."""
 from __future__ import annotations
 
 import argparse
@@ -78,7 +78,9 @@ def info(path: str, out=print) -> int:
 
 
 def verify(path: str, out=print) -> int:
+    header = None
     try:
+        _, header = read_header(path)
         problems = verify_checksums(path)
         if not problems:
             read_gfg(path, verify=False)
@@ -87,15 +89,21 @@ def verify(path: str, out=print) -> int:
     for p in problems:
         out(f"{path}: {p}")
     if not problems:
-        out(f"{path}: OK (header, every section checksum, count, offset and reference checked)")
+        if header.zero_padding:
+            out(f"{path}: OK (every byte: header and section checksums, zero padding and reserved "
+                "fields, counts, offsets and references checked)")
+        else:
+            out(f"{path}: OK (GFG {header.version[0]}.{header.version[1]}: header and section checksums, "
+                "counts, offsets and references checked; this version's padding is not checked)")
     return 1 if problems else 0
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m voxgi_addon.gfg", description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m voxgi_addon.files.gfg", description=__doc__)
     sub = ap.add_subparsers(dest="command", required=True)
     sub.add_parser("info", help="print the sections, counts and sizes").add_argument("file")
-    sub.add_parser("verify", help="check every checksum and bound (exit 1 if any is wrong)") \
+    sub.add_parser("verify", help="check every checksum, padding byte and bound (exit 1 if any is "
+                   "wrong)") \
         .add_argument("file")
     args = ap.parse_args(argv)
     try:

@@ -5,6 +5,9 @@ with ``SectionBuilder``; readers get a validated ``SectionView`` whose arrays ma
 into the file's buffer. Every count, offset and size is checked against the section (and the
 section against the file) with Python integers before any array exists, so a corrupt file can
 neither index out of bounds nor make the reader allocate more than the file's own size.
+
+From format 1.1 the reader also checks that every padding and reserved byte is zero, so that
+together with the CRCs no byte of a file goes unverified (docs/gfg.md, "Every byte is checked").
 """
 from __future__ import annotations
 
@@ -26,6 +29,7 @@ from .spec import (
     SECTION_PRELUDE,
     VERSION_MAJOR,
     VERSION_MINOR,
+    ZERO_PADDING_SINCE,
 )
 
 
@@ -160,6 +164,7 @@ class SectionEntry:
     offset: int
     size: int
     crc: int
+    reserved: int = 0
 
 
 @dataclass(frozen=True)
@@ -168,9 +173,46 @@ class Header:
     file_size: int
     sections: tuple[SectionEntry, ...]
 
+    @property
+    def zero_padding(self) -> bool:
+        """Whether padding and reserved bytes must be zero (format 1.1 on; 1.0 did not say)."""
+        return self.version >= ZERO_PADDING_SINCE
 
-def _u8(view: memoryview) -> np.ndarray:
-    return np.frombuffer(view, np.uint8)
+
+def check_zero(buf: memoryview, start: int, end: int, where: str, field: str = "padding",
+               base: int = 0) -> None:
+    """Raise unless ``buf[start:end]`` is all zero; the message names the first non-zero byte's
+    file offset (``base`` + its offset in ``buf``)."""
+    if end <= start:
+        return
+    a = np.frombuffer(buf, np.uint8, end - start, start)
+    if a.any():
+        at = int(np.argmax(a != 0))
+        raise GFGError(where, field, f"byte at file offset {base + start + at} is 0x{int(a[at]):02X}, "
+                       "not 0 (padding and reserved bytes must be zero)")
+
+
+def _check_reserved(value, where: str, field: str) -> None:
+    if int(value):
+        raise GFGError(where, field, f"0x{int(value):X} is not 0 (reserved fields must be zero)")
+
+
+def _check_zero_bytes(buf: memoryview, h, table_end: int, entries: list[SectionEntry]) -> None:
+    """Format 1.1 rules for the bytes outside sections: reserved header and table fields are zero,
+    and so is every byte between the header, the table, the sections and the end of the file."""
+    _check_reserved(h["flags"], "header", "flags")
+    if int(h["alignment"]) != ALIGNMENT:
+        raise GFGError("header", "alignment", f"{int(h['alignment'])} is not {ALIGNMENT}")
+    for k, word in enumerate(h["reserved"]):
+        _check_reserved(word, "header", f"reserved[{k}]")
+    for e in entries:
+        _check_reserved(e.reserved, f"section table entry {e.index}", "reserved")
+    check_zero(buf, FILE_HEADER.itemsize, int(h["table_offset"]), "header", "padding before the table")
+    previous, after = table_end, "the section table"
+    for e in entries:
+        check_zero(buf, previous, e.offset, f"padding after {after}")
+        previous, after = e.offset + e.size, f"section {e.index} {kind_name(e.kind)}"
+    check_zero(buf, previous, len(buf), f"padding after {after}")
 
 
 def parse_header(buf: memoryview) -> Header:
@@ -221,9 +263,12 @@ def parse_header(buf: memoryview) -> Header:
             raise GFGError(where, "size", f"{size} bytes at {offset} run past the end of the "
                            f"{n}-byte file")
         entries.append(SectionEntry(i, bytes(e["kind"]), int(e["version"]), int(e["flags"]),
-                                    offset, size, int(e["crc"])))
+                                    offset, size, int(e["crc"]), int(e["reserved"])))
         previous_end = offset + size
-    return Header((major, minor), file_size, tuple(entries))
+    header = Header((major, minor), file_size, tuple(entries))
+    if header.zero_padding:
+        _check_zero_bytes(buf, h, table_end, entries)
+    return header
 
 
 def check_crc(buf: memoryview, entry: SectionEntry, where: str) -> None:
@@ -247,10 +292,15 @@ class ArrayDesc:
 
 
 class SectionView:
-    """A section whose prelude and array table have been validated against its size."""
+    """A section whose prelude and array table have been validated against its size.
 
-    def __init__(self, buf: memoryview, entry: SectionEntry):
+    ``zero_padding`` (format 1.1 on): the bytes between the info struct, the array table and
+    the arrays, and every reserved field of the array table, info struct and records, must be 0.
+    """
+
+    def __init__(self, buf: memoryview, entry: SectionEntry, zero_padding: bool = False):
         self.entry = entry
+        self.zero_padding = zero_padding
         self.where = f"section {entry.index} {kind_name(entry.kind)}"
         self.buf = buf[entry.offset:entry.offset + entry.size]
         size = entry.size
@@ -275,12 +325,23 @@ class SectionView:
             if a.offset + a.nbytes > size:
                 self.fail(field + " count", f"{a.count} elements of {a.element_size} bytes at "
                           f"{a.offset} run past the section's {size} bytes")
+            if zero_padding:
+                _check_reserved(d["reserved"], self.where, field + " reserved")
             arrays.append(a)
         ordered = sorted(arrays, key=lambda a: a.offset)
         for a, b in zip(ordered, ordered[1:]):
             if a.offset + a.nbytes > b.offset:
                 self.fail(f"array {b.position} (role {b.role}) offset", f"overlaps array {a.position}")
         self.arrays = arrays
+        if zero_padding:  # the gaps: info → array table → arrays → the section's end
+            gaps = [(SECTION_PRELUDE.itemsize + self.info_size, table_offset)]
+            end = table_end
+            for a in ordered:
+                gaps.append((end, a.offset))
+                end = a.offset + a.nbytes
+            gaps.append((end, size))
+            for start, stop in gaps:
+                check_zero(self.buf, start, stop, self.where, base=entry.offset)
 
     def fail(self, field: str, problem: str):
         raise GFGError(self.where, field, problem)
@@ -294,7 +355,10 @@ class SectionView:
         if self.info_size < dtype.itemsize:
             self.fail("info_size", f"{self.info_size} is shorter than the {dtype.itemsize} bytes of "
                       "this kind's info")
-        return np.frombuffer(self.buf, dtype, 1, SECTION_PRELUDE.itemsize)[0]
+        info = np.frombuffer(self.buf, dtype, 1, SECTION_PRELUDE.itemsize)[0]
+        if self.zero_padding and "reserved" in dtype.names:
+            _check_reserved(info["reserved"], self.where, "info.reserved")
+        return info
 
     def descs(self, role: int) -> list[ArrayDesc]:
         return [a for a in self.arrays if a.role == role]
@@ -332,7 +396,11 @@ class SectionView:
         if d.data_type == dtypes.RECORD:
             if d.element_size != record.itemsize:
                 self.fail(field + " element_size", f"{d.element_size} is not the record's {record.itemsize}")
-            return np.frombuffer(self.buf, record, d.count, d.offset)
+            records = np.frombuffer(self.buf, record, d.count, d.offset)
+            if self.zero_padding and "reserved" in record.names and records["reserved"].any():
+                k = int(np.argmax(records["reserved"] != 0))
+                _check_reserved(records["reserved"][k], self.where, f"{field} record {k} reserved")
+            return records
         dt = dtypes.data_type(d.data_type)
         if d.element_size != dt.size:
             self.fail(field + " element_size", f"{d.element_size} is not the {dt.size} bytes of {dt.name}")

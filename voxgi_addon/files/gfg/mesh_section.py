@@ -110,6 +110,8 @@ def decode_mesh(view: SectionView, strings: StringView, material_count: int,
     comps = view.array(Role.COMPONENTS, "COMPONENTS", (dtypes.RECORD,), int(info["component_count"]),
                        record=COMPONENT_RECORD)
     components = [_component(view, j, c, blocks, vertex_count) for j, c in enumerate(comps)]
+    if view.zero_padding:
+        _check_vertex_padding(view, comps, blocks, vertex_count)
     indices = _indices(view, index_size, index_count, vertex_count)
     ranges = _ranges(view, info, material_count, index_count if indices is not None else vertex_count)
     elements = index_count if indices is not None else vertex_count
@@ -146,6 +148,26 @@ def _component(view, j, c, blocks, vertex_count) -> VertexComponent:
         values = np.ndarray((vertex_count, dt.components), dt.base, view.buf, d.offset + offset,
                             (d.element_size, dt.base.itemsize))
     return VertexComponent(int(c["logic"]), code, values)
+
+
+def _check_vertex_padding(view, comps, blocks, vertex_count) -> None:
+    """The bytes of a vertex that no component covers (alignment to 4, stride padding) are 0."""
+    for k, d in enumerate(blocks):
+        covered = np.zeros(d.element_size, bool)
+        for c in comps:
+            if int(c["block"]) == k:
+                offset = int(c["offset"])
+                covered[offset:offset + dtypes.data_type(int(c["data_type"])).size] = True
+        if covered.all() or vertex_count == 0:
+            continue
+        vertices = np.ndarray((vertex_count, d.element_size), np.uint8, view.buf, d.offset)
+        padding = vertices[:, ~covered]
+        if padding.any():
+            v, b = divmod(int(np.argmax(padding != 0)), padding.shape[1])
+            at = int(np.flatnonzero(~covered)[b])
+            view.fail(f"array VERTEX_BLOCK {k}", f"vertex {v} byte {at} (file offset "
+                      f"{view.entry.offset + d.offset + v * d.element_size + at}) is padding but "
+                      f"0x{int(padding[v, b]):02X}, not 0")
 
 
 def _indices(view, index_size, index_count, vertex_count):

@@ -48,7 +48,7 @@ def _by_kind(buf, header: Header, verify: bool, scene: GFGScene) -> dict[bytes, 
                 raise GFGError(where, "flags", f"kind {entry.kind!r} is required but unknown to this reader")
             scene.skipped_sections.append(SkippedSection(entry.index, entry.kind, entry.size))
             continue
-        views[entry.kind].append(SectionView(buf, entry))
+        views[entry.kind].append(SectionView(buf, entry, header.zero_padding))
     for kind in SINGLETON_KINDS:
         if len(views[kind]) > 1:
             raise GFGError(f"section {views[kind][1].entry.index} {kind_name(kind)}", "kind",
@@ -60,7 +60,8 @@ def read_gfg(source, *, verify: bool = True) -> GFGScene:
     """Read a GFG file.
 
     source : path (memory-mapped), bytes, bytearray, memoryview or mmap.
-    verify : check every section's CRC-32 first (the header and table are always checked).
+    verify : check every section's CRC-32 first (the header and table are always checked, and
+        so, from format 1.1, is every padding and reserved byte).
     Returns a GFGScene whose arrays are read-only views into the source buffer.
     Raises GFGError for any malformed input.
     """

@@ -11,7 +11,11 @@ import numpy as np
 MAGIC = b"GFG "
 ENDIAN_TAG = 0x0A0B0C0D  # reads back as this value only when decoded little-endian
 VERSION_MAJOR = 1  # readers reject another major version
-VERSION_MINOR = 0  # minor versions only add (sections, roles, trailing info fields)
+VERSION_MINOR = 1  # minor versions only add (sections, roles, trailing info fields)
+# From 1.1 every padding and reserved byte must be zero and readers check it, so that with the
+# checksums every byte of a file is verified (docs/gfg.md, "Every byte is checked"). Files of
+# 1.0, which did not promise zero padding, are read by the 1.0 rules.
+ZERO_PADDING_SINCE = (1, 1)
 ALIGNMENT = 64  # sections start on 64-byte file offsets; arrays on 64-byte section offsets
 NONE = 0xFFFFFFFF  # "no reference" in u32 fields (material of an unassigned range, ...)
 
@@ -28,9 +32,9 @@ FILE_HEADER = np.dtype([
     ("table_offset", "<u8"),
     ("section_count", "<u4"),
     ("table_crc", "<u4"),
-    ("flags", "<u4"),
-    ("alignment", "<u4"),
-    ("reserved", "<u4", (3,)),
+    ("flags", "<u4"),  # none defined: 0 (checked from 1.1)
+    ("alignment", "<u4"),  # ALIGNMENT (checked from 1.1)
+    ("reserved", "<u4", (3,)),  # 0 (checked from 1.1)
     ("header_crc", "<u4"),  # crc32 of bytes [0, 60)
 ])
 assert FILE_HEADER.itemsize == 64
@@ -82,7 +86,7 @@ class Kind:
 KNOWN_KINDS = (Kind.STRINGS, Kind.NODES, Kind.MATERIALS, Kind.MESH, Kind.SKELETON,
                Kind.ANIMATION, Kind.VOXEL_SET, Kind.VOXEL_CACHE, Kind.PROBE_GRID)
 SINGLETON_KINDS = (Kind.STRINGS, Kind.NODES, Kind.MATERIALS, Kind.VOXEL_SET)
-SECTION_VERSION = 1  # every kind is at version 1 in format 1.0
+SECTION_VERSION = 1  # every kind is at version 1 in formats 1.0 and 1.1
 
 
 # ------------------------------------------------------------------ enums of the original GFG
