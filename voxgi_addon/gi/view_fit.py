@@ -203,9 +203,10 @@ def _mesh_sizes(snapshot) -> tuple[float, float]:
             continue
         positions = np.asarray(mesh.positions, np.float64)
         scale = float(np.linalg.norm(np.asarray(obj.world_matrix, np.float64)[:3, :3], axis=0).max())
-        if not np.isfinite(scale):
+        finite = positions[np.isfinite(positions).all(axis=1)]  # NaN vertices are dropped
+        if not np.isfinite(scale) or len(finite) == 0:
             continue
-        largest = max(largest, float((positions.max(axis=0) - positions.min(axis=0)).max()) * scale)
+        largest = max(largest, float((finite.max(axis=0) - finite.min(axis=0)).max()) * scale)
         tri = positions[np.asarray(mesh.triangles, np.int64)]
         a = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
         area += float(np.nansum(a)) * scale * scale
