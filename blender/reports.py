@@ -39,8 +39,52 @@ def timing_line(timings: dict[str, float]) -> tuple[str, str]:
     return ("INFO", f"Timings: {stages}")
 
 
+def _metres(v) -> str:
+    return f"{v:.3g}"
+
+
+def fit_text(state, fit=None, view_ahead: float = 1.0) -> str:
+    """How the cascades of ``state`` were placed: the view fit (Auto) or the camera (Manual)."""
+    grid = state.grids[0]
+    shape = f"{grid.resolution}³ × {len(state.grids)} cascades, base span {grid.span:g} m"
+    if fit is None:
+        return f"Voxel fit: Manual, {shape}, centred {view_ahead:g} × half the finest cascade " \
+               "ahead of the camera"
+    centre = ", ".join(_metres(c) for c in fit.centre)
+    return (f"Voxel fit: Auto, {shape}, centred on the view at ({centre}) m; voxel volume "
+            f"~{fit.memory_bytes / MEGABYTE:.0f} MB of a {fit.budget_bytes / MEGABYTE:.0f} MB "
+            f"budget, caches ~{fit.cache_bytes / MEGABYTE:.0f} MB")
+
+
+def cascade_cover_rows(state) -> list[tuple[str, str, str, str]]:
+    """Per cascade: (name with span and resolution, extent, share of the visible points whose
+    finest cascade it is, voxel count); a last row for the points outside every cascade."""
+    shares = state.view_shares
+    rows = []
+    for grid, count in zip(state.grids, state.voxel_counts):
+        lo, hi = grid.extent
+        extent = f"{_metres(grid.size)} m cube, " + " ".join(
+            f"{axis} {_metres(a)}..{_metres(b)}" for axis, a, b in zip("xyz", lo, hi))
+        share = "?" if shares is None else f"{shares[grid.index]:.1%} of the view"
+        rows.append((f"Cascade {grid.index} ({grid.span:g} m, {grid.resolution}³)", extent, share,
+                     f"{count:,} voxels"))
+    if shares is not None:
+        rows.append(("Outside every cascade", "", f"{shares[-1]:.1%} of the view", ""))
+    return rows
+
+
+def coverage_lines(state, fit=None, view_ahead: float = 1.0) -> list[tuple[str, str]]:
+    """INFO lines after an update or a preview: how the cascades were placed, then per cascade
+    its span, extent (metres), share of the visible points (the view probe's pixels) and
+    voxels (docs/gi_pipeline.md "View-fitted cascades")."""
+    lines = [("INFO", fit_text(state, fit, view_ahead))]
+    for name, extent, share, count in cascade_cover_rows(state):
+        lines.append(("INFO", ": ".join([name, ", ".join(p for p in (extent, share, count) if p)])))
+    return lines
+
+
 # Prefixes of the INFO lines above, which the panel already shows as tables.
-TABLE_LINE_PREFIXES = ("Cascade ", "Total: ", "Timings: ")
+TABLE_LINE_PREFIXES = ("Cascade ", "Total: ", "Timings: ", "Outside every cascade")
 
 
 def panel_lines(report, limit: int = 6) -> tuple[list[tuple[str, str]], int]:

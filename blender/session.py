@@ -25,8 +25,11 @@ class SceneSession:
 
     snapshot_summary : counts describing the last snapshot (objects, meshes,
         triangles, ...), or None before the first run.
-    caches : the last ``build_scene_caches`` result (voxel caches per mesh and
+    caches : the last ``build_scene_caches`` result in use (voxel caches per mesh and
         cascade, stats, timings), or None.
+    span_caches : the recent caches of other base spans, most recently used last (Auto mode
+        switches span as the view changes; caches of a span come back when the view does).
+    view_fit : the last ``view_fit.ViewFit`` (Auto mode), the next fit's hysteresis.
     timings : seconds per stage of the last run, snapshot included.
     last_report : (level, message) lines the last operator run reported, level in
         ``REPORT_LEVELS``; kept so tests and the panel can read them in background mode.
@@ -34,6 +37,8 @@ class SceneSession:
 
     snapshot_summary: dict[str, int] | None = None
     caches: Any = None
+    span_caches: list = field(default_factory=list)
+    view_fit: Any = None
     timings: dict[str, float] = field(default_factory=dict)
     last_report: list[tuple[str, str]] = field(default_factory=list)
     gi_state: Any = None  # voxgi_addon.gi_update.GIState of the last update

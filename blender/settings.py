@@ -8,9 +8,26 @@ GRID_RESOLUTIONS = (32, 64, 128, 256, 512)
 class VoxGISceneSettings(bpy.types.PropertyGroup):
     """Per-scene voxelization and cascade settings."""
 
+    span_mode: bpy.props.EnumProperty(
+        name="Voxel Fit",
+        description="How the voxel span and the cascades' centre are chosen",
+        items=(("AUTO", "Auto", "Fit the cascades to what the camera sees: the finest voxel span "
+                "(a power of two of a metre) and grid resolution the memory budget allows for "
+                "the visible geometry, centred on it rather than on the camera"),
+               ("MANUAL", "Manual", "Base Span, Grid Resolution and View Ahead as set: cascades "
+                "centred ahead of the camera (as in the thesis)")),
+        default="AUTO",
+    )
+    memory_budget: bpy.props.IntProperty(
+        name="Voxel Memory Budget (MB)",
+        description="Auto: megabytes (10^6 bytes) the cascades' voxel volume may take (GPU atlas "
+                    "plus octree, estimated); the largest grid resolution within it is used, and "
+                    "the voxel caches must fit it too. 256 MB gives 64³ grids",
+        default=256, min=8, soft_max=4096,
+    )
     base_span: bpy.props.FloatProperty(
         name="Base Span",
-        description="Edge length of a voxel in the finest cascade, in metres; "
+        description="Manual: edge length of a voxel in the finest cascade, in metres; "
                     "each coarser cascade doubles it",
         subtype="DISTANCE",
         unit="LENGTH",
@@ -21,8 +38,8 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
     )
     cascade_count: bpy.props.IntProperty(
         name="Cascades",
-        description="Number of nested camera-centred grids (cascades); cascade i has "
-                    "voxels of Base Span x 2^i metres",
+        description="Number of nested grids (cascades); cascade i has voxels of 2^i times "
+                    "the base span",
         subtype="NONE",
         default=3,
         min=1,
@@ -30,15 +47,15 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
     )
     grid_resolution: bpy.props.EnumProperty(
         name="Grid Resolution",
-        description="Voxels along each axis of every cascade grid (a power of two); "
-                    "memory grows with its cube",
+        description="Manual: voxels along each axis of every cascade grid (a power of two); "
+                    "memory grows with its cube (Auto picks it from the memory budget)",
         items=[(str(n), f"{n}\u00b3", f"{n} voxels per axis in each cascade") for n in GRID_RESOLUTIONS],
         default="64",
     )
 
     view_ahead: bpy.props.FloatProperty(
         name="View Ahead",
-        description="Centre the cascades this far in front of the camera, as a fraction of the "
+        description="Manual: centre the cascades this far in front of the camera, as a fraction of the "
                     "finest cascade's half size (0 = on the camera as in the thesis; 1 = the "
                     "finest cascade starts at the camera and covers twice the depth of view)",
         default=1.0, min=0.0, max=1.0,
@@ -137,6 +154,20 @@ def gi_settings(settings: VoxGISceneSettings):
 
     return GISettings(resolution=grid_resolution(settings), dense_depth=settings.dense_depth,
                       view_ahead=settings.view_ahead)
+
+
+def fit_settings(settings: VoxGISceneSettings):
+    """The engine's view-fit settings (Auto mode) from the scene settings."""
+    from ..voxgi_addon.gi.view_fit import FitSettings
+
+    return FitSettings(budget_bytes=int(settings.memory_budget) * 1_000_000,
+                       cascade_count=settings.cascade_count, dense_depth=settings.dense_depth)
+
+
+def is_auto(settings: VoxGISceneSettings) -> bool:
+    """True when the cascades are fitted to the view (``span_mode`` Auto)."""
+    return settings.span_mode == "AUTO"
+
 
 def grid_resolution(settings: VoxGISceneSettings) -> int:
     """The per-cascade grid resolution of ``settings`` in voxels per axis."""

@@ -1,23 +1,22 @@
 """``voxgi.update``: transform the voxel caches into cascades, inject direct light, rebuild the
-octree, on the engine worker (snapshot on the main thread; the caches are reused, voxelizing
-first when there are none)."""
+octree, on the engine worker (snapshot and, in Auto mode, the view fit on the main thread; the
+caches of the span are reused, voxelizing first when there are none)."""
 from __future__ import annotations
 
 import bpy
 
 from ..blender import jobs as engine_jobs
 from ..blender.operator_poll import VoxGISceneOperator
-from ..blender.reports import octree_text, timing_text
+from ..blender.reports import coverage_lines, octree_text, timing_text
 from ..blender.session import scene_session
-from ..blender.settings import gi_settings
 from ..blender.snapshot import snapshot_or_error
-from ..render.pipeline import caches_for
+from ..render.pipeline import gi_inputs, view_shares
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.update import update_gi
 
 
 class VOXGI_OT_update(VoxGISceneOperator, bpy.types.Operator):
-    """Transform the voxel caches into camera-anchored cascades, inject direct light and rebuild the octree for the current frame"""  # noqa: E501 - the tooltip is one line
+    """Transform the voxel caches into cascades fitted to the view (or anchored on the camera), inject direct light and rebuild the octree for the current frame"""  # noqa: E501 - the tooltip is one line
 
     bl_idname = "voxgi.update"
     bl_label = "Update GI"
@@ -25,16 +24,18 @@ class VOXGI_OT_update(VoxGISceneOperator, bpy.types.Operator):
 
     def execute(self, context):
         scene_name = context.scene.name_full
+        view_ahead = context.scene.voxgi.view_ahead
         try:
             snapshot, snap_seconds = snapshot_or_error(context)
-            caches = caches_for(context, snapshot)
+            caches, settings, anchor, fit = gi_inputs(context, snapshot)
         except VoxGIError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
-        settings = gi_settings(context.scene.voxgi)
 
         def job(cancel):  # worker thread: engine code only
-            return update_gi(snapshot, caches, settings, cancel=cancel)
+            state = update_gi(snapshot, caches, settings, cancel=cancel, anchor=anchor)
+            state.view_shares = view_shares(snapshot, state.grids, fit)
+            return state
 
         def done(state):
             session = scene_session(scene_name)
@@ -42,9 +43,11 @@ class VOXGI_OT_update(VoxGISceneOperator, bpy.types.Operator):
             session.gi_timings = {"snapshot": snap_seconds, **state.timings}
             counts = ", ".join(f"{n:,}" for n in state.voxel_counts)
             session.last_report = [("INFO", f"GI updated: cascade voxels {counts}"),
+                                   *coverage_lines(state, fit, view_ahead),
                                    ("INFO", f"octree: {octree_text(state.octree)}"),
                                    ("INFO", timing_text(session.gi_timings)),
-                                   *[("WARNING", w) for w in state.warnings]]
+                                   *[("WARNING", w) for w in (*(fit.warnings if fit else ()),
+                                                              *state.warnings)]]
 
         def failed(error):
             scene_session(scene_name).last_report = [("ERROR", str(error))]

@@ -18,6 +18,7 @@ from ..blender.operator_poll import VoxGISceneOperator
 from ..blender.reports import cascade_lines, timing_line, warning_lines
 from ..blender.session import scene_session
 from ..blender.snapshot import snapshot_or_error, snapshot_summary
+from ..render.pipeline import view_fit_for
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.voxelize.scene_caches import build_scene_caches
 
@@ -26,7 +27,7 @@ JOB_LABEL = "Voxelizing"
 
 
 class VOXGI_OT_voxelize(VoxGISceneOperator, bpy.types.Operator):
-    """Voxelize every visible mesh at each cascade's span and keep the caches for this session"""
+    """Voxelize every visible mesh at each cascade's span (Auto: the span fitted to the view) and keep the caches for this session"""  # noqa: E501 - the tooltip is one line
 
     bl_idname = "voxgi.voxelize"
     bl_label = "Voxelize"
@@ -38,6 +39,9 @@ class VOXGI_OT_voxelize(VoxGISceneOperator, bpy.types.Operator):
         base_span, cascade_count = settings.base_span, settings.cascade_count
         try:
             snapshot, snapshot_seconds = snapshot_or_error(context)
+            fit = view_fit_for(context.scene, snapshot)  # Auto: the span fitted to the view
+            if fit is not None:
+                base_span, cascade_count = fit.base_span, fit.cascade_count
         except VoxGIError as error:
             engine_jobs.cancel(scene_name, discard=True)  # it would describe another scene
             _apply_error(scene_name, error)
@@ -74,6 +78,7 @@ def _apply_result(scene_name, snapshot, snapshot_seconds, result) -> None:
     timings = {"snapshot": snapshot_seconds, **result.timings}
     session.snapshot_summary = snapshot_summary(snapshot)
     session.caches = result
+    session.span_caches = [result]  # caches of other spans may describe an older scene
     session.timings = timings
     session.last_report = [*cascade_lines(result), *warning_lines(snapshot.warnings, result),
                            timing_line(timings)]

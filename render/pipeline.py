@@ -1,38 +1,91 @@
 """The preview pipeline shared by F12 (``engine.py``) and ``voxgi.render_preview``.
 
-``render_scene_passes``: snapshot (main thread) → the session's voxel caches (voxelizing when
-there are none or the spans changed) → one GI update → the camera's Cycles-named passes, traced
-on the GPU when it can (``gpu_preview``) and with the numpy tracer otherwise, with a report line
-saying which and why.
+``render_scene_passes``: snapshot (main thread) → in Auto mode the view fit (span, resolution
+and centre of the cascades, docs/gi_pipeline.md "View-fitted cascades") → the session's voxel
+caches of that span (voxelizing when there are none) → one GI update → the camera's
+Cycles-named passes, traced on the GPU when it can (``gpu_preview``) and with the numpy tracer
+otherwise, with report lines saying which tracer and why, and what each cascade covers.
 """
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
-from ..blender.reports import timing_text
+from ..blender.reports import coverage_lines, timing_text
 from ..blender.session import scene_session
-from ..blender.settings import cone_settings, gi_settings
+from ..blender.settings import cone_settings, fit_settings, gi_settings, is_auto
 from ..blender.snapshot import snapshot_or_error
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.update import update_gi
+from ..voxgi_addon.gi.view_fit import cascade_shares, fit_view, probe_view
 from ..voxgi_addon.preview.passes import render_passes
 from ..voxgi_addon.voxelize.scene_caches import build_scene_caches
 from . import gpu_context
 
+MAX_SPAN_CACHES = 3  # base spans whose voxel caches the session keeps
 
-def caches_for(context, snapshot, scene=None):
-    """The session's caches, voxelizing now when there are none or the spans changed."""
+
+def view_fit_for(scene, snapshot):
+    """Auto mode: the view-fitted cascades (the session's last fit gives hysteresis), kept in
+    the session; Manual: None. Raises VoxGIError for a scene without triangles."""
+    session = scene_session(scene.name_full)
+    if not is_auto(scene.voxgi):
+        session.view_fit = None
+        return None
+    session.view_fit = fit_view(snapshot, fit_settings(scene.voxgi), previous=session.view_fit)
+    return session.view_fit
+
+
+def _spans_match(caches, base_span, count) -> bool:
+    return caches is not None and len(caches.cascade_stats) == count and \
+        abs(caches.cascade_stats[0].span - base_span) < 1e-9
+
+
+def caches_for(context, snapshot, scene=None, fit=None):
+    """The session's caches for the fitted span (``fit``) or the manual base span, reusing the
+    caches of that span when the session has them and voxelizing otherwise (or when objects
+    were added). Keeps up to ``MAX_SPAN_CACHES`` spans (docs/gi_pipeline.md "View-fitted
+    cascades")."""
     scene = scene or context.scene
     settings = scene.voxgi
     session = scene_session(scene.name_full)
-    caches = session.caches
-    spans_match = caches is not None and len(caches.cascade_stats) == settings.cascade_count and \
-        abs(caches.cascade_stats[0].span - settings.base_span) < 1e-9
+    base_span, count = (fit.base_span, fit.cascade_count) if fit is not None else \
+        (settings.base_span, settings.cascade_count)
+    known = [c for c in (*session.span_caches, session.caches) if c is not None]
+    caches = next((c for c in reversed(known) if _spans_match(c, base_span, count)), None)
     missing = caches is not None and any(o.name not in caches.bindings for o in snapshot.objects)
-    if not spans_match or missing:
-        caches = build_scene_caches(snapshot, settings.base_span, settings.cascade_count)
-        session.caches = caches
+    if caches is None or missing:
+        caches = build_scene_caches(snapshot, base_span, count)
+    kept = []
+    for c in known:  # other spans, each once (by identity), oldest first
+        if not _spans_match(c, base_span, count) and all(c is not k for k in kept):
+            kept.append(c)
+    session.span_caches = [*kept, caches][-MAX_SPAN_CACHES:]
+    session.caches = caches
     return caches
+
+
+def gi_inputs(context, snapshot, scene=None):
+    """(caches, GISettings, anchor, fit) of one GI update: in Auto mode the fitted span,
+    resolution and centre, in Manual the scene's settings and the camera anchor (None)."""
+    scene = scene or context.scene
+    fit = view_fit_for(scene, snapshot)
+    caches = caches_for(context, snapshot, scene, fit)
+    settings = gi_settings(scene.voxgi)
+    if fit is None:
+        return caches, settings, None, None
+    return caches, replace(settings, resolution=fit.resolution), fit.centre, fit
+
+
+def view_shares(snapshot, grids, fit=None):
+    """Share of the visible points per cascade (``view_fit.cascade_shares``) for the report:
+    the fit's probe in Auto mode, a probe of the view in Manual; None if it cannot be had.
+    Engine code only: safe on the worker thread."""
+    try:
+        probe = fit.probe if fit is not None else probe_view(snapshot)
+    except VoxGIError:
+        return None
+    return cascade_shares(probe, grids)
 
 
 def trace_passes(scene, snapshot, state, width, height):
@@ -75,12 +128,17 @@ def render_scene_passes(context, scene, depsgraph, width, height):
         raise VoxGIError("the scene has no camera to render the preview from")
     start = time.perf_counter()
     snapshot, snap_seconds = snapshot_or_error(context, depsgraph)
-    caches = caches_for(context, snapshot, scene)
-    state = update_gi(snapshot, caches, gi_settings(scene.voxgi))
+    t0 = time.perf_counter()
+    caches, settings, anchor, fit = gi_inputs(context, snapshot, scene)
+    fit_seconds = time.perf_counter() - t0
+    state = update_gi(snapshot, caches, settings, anchor=anchor)
+    state.view_shares = view_shares(snapshot, state.grids, fit)
     passes, render_timings, lines = trace_passes(scene, snapshot, state, width, height)
     session = scene_session(scene.name_full)
     session.gi_state = state
-    session.gi_timings = {"snapshot": snap_seconds, **state.timings, **render_timings,
-                          "total": time.perf_counter() - start}
+    session.gi_timings = {"snapshot": snap_seconds, "fit + caches": fit_seconds, **state.timings,
+                          **render_timings, "total": time.perf_counter() - start}
+    lines += coverage_lines(state, fit, scene.voxgi.view_ahead)
+    lines += [("WARNING", w) for w in (fit.warnings if fit is not None else ())]
     lines.append(("INFO", timing_text(session.gi_timings)))
     return passes, lines

@@ -4,7 +4,7 @@ from __future__ import annotations
 import bpy
 
 from ..blender import jobs as engine_jobs
-from ..blender.reports import MEGABYTE, panel_lines
+from ..blender.reports import MEGABYTE, cascade_cover_rows, panel_lines
 from ..blender.session import peek_session
 
 LEVEL_ICONS = {"ERROR": "CANCEL", "WARNING": "ERROR", "INFO": "INFO"}
@@ -39,7 +39,11 @@ class VOXGI_PT_main(_SidebarPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        _settings_column(layout, context, ("base_span", "cascade_count", "grid_resolution"))
+        if context.scene.voxgi.span_mode == "AUTO":
+            names = ("span_mode", "memory_budget", "cascade_count")
+        else:
+            names = ("span_mode", "base_span", "cascade_count", "grid_resolution")
+        _settings_column(layout, context, names)
         row = layout.row(align=True)
         row.operator("voxgi.voxelize", icon="MESH_GRID")
         row.operator("voxgi.add_demo_scene", text="", icon="SCENE_DATA")
@@ -99,8 +103,9 @@ class VOXGI_PT_gi(_SidebarPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
+        manual = ("view_ahead",) if context.scene.voxgi.span_mode == "MANUAL" else ()
         _settings_column(layout, context, (
-            "view_ahead", "dense_depth", "cone_angle", "diffuse_cones", "sample_factor", "falloff",
+            *manual, "dense_depth", "cone_angle", "diffuse_cones", "sample_factor", "falloff",
             "max_distance", "ao_distance", "gi_intensity", "ao_intensity", "light_samples",
             "shadows", "gi_resolution", "tracer"))
         row = layout.row(align=True)
@@ -116,10 +121,16 @@ def _draw_gi_state(layout, session) -> None:
         return
     box = layout.box()
     box.label(text="Last update", icon="LIGHT")
-    for grid, count in zip(state.grids, state.voxel_counts):
+    fit = session.view_fit
+    box.label(text="Auto: fitted to the view" if fit is not None else
+              "Manual: anchored ahead of the camera")
+    # Per cascade: span, extent, share of the visible points it is the finest cascade of.
+    for name, extent, share, count in cascade_cover_rows(state):
         row = box.row()
-        row.label(text=f"Cascade {grid.index} ({grid.span:g} m, {grid.resolution}³)")
-        row.label(text=f"{count:,} voxels")
+        row.label(text=name)
+        row.label(text=extent.split(",")[0])
+        row.label(text=share.replace(" of the view", " of view"))
+        row.label(text=count)
     stats = state.octree.stats()
     row = box.row()
     row.label(text=f"Octree: {len(stats)} levels")

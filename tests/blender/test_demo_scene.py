@@ -96,7 +96,7 @@ def test_panel_draws_settings_and_results(voxgi):
     layout = _Layout()
     panel = type("PanelStub", (), {"layout": layout})()
     bpy.types.VOXGI_PT_main.draw(panel, bpy.context)
-    assert layout.props == ["base_span", "cascade_count", "grid_resolution"]
+    assert layout.props == ["span_mode", "memory_budget", "cascade_count"]  # Auto, the default
     assert layout.operators == ["voxgi.voxelize", "voxgi.add_demo_scene"]
     cascades = bpy.context.scene.voxgi.cascade_count
     assert sum(text.startswith("Cascade ") for text in layout.labels) == cascades

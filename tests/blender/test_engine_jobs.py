@@ -288,6 +288,7 @@ def test_stress_worker_voxelizes_while_the_main_thread_edits_the_scene(
     gold = scenes.principled("Gold", (1.0, 0.8, 0.2), roughness=0.2)
     torus = torus_object("Torus", material=gold)
     settings = bpy.context.scene.voxgi
+    settings.span_mode = "MANUAL"  # the reference below voxelizes at this base span
     settings.base_span, settings.cascade_count = 0.04, 2
     before = snapshot_module.take_snapshot(bpy.context, bpy.context.evaluated_depsgraph_get())
     assert sum(len(m.triangles) for m in before.meshes.values()) > 4000
@@ -381,6 +382,7 @@ def test_the_worker_never_touches_bpy(interactive, voxelize_module, mesh_caches,
     scan below and the no-Blender-object check of the job's inputs cover those.)"""
     jobs = interactive
     bpy.ops.voxgi.add_demo_scene()
+    bpy.context.scene.voxgi.span_mode = "MANUAL"  # a coarse span keeps the traced run short
     bpy.context.scene.voxgi.base_span, bpy.context.scene.voxgi.cascade_count = 0.2, 2
     real = mesh_caches.build_scene_caches
     seen, bad, threads, snapshots = set(), [], [], []

@@ -54,6 +54,7 @@ INSTALL_SCRIPT = textwrap.dedent(
         obj.location = shape["location"]
         bpy.context.scene.collection.objects.link(obj)
     settings = bpy.context.scene.voxgi
+    settings.span_mode = "MANUAL"
     settings.base_span, settings.cascade_count = float(sys.argv[4]), int(sys.argv[5])
     assert bpy.ops.voxgi.voxelize() == {"FINISHED"}
 

@@ -76,6 +76,7 @@ def test_non_uniform_scale_is_a_warning(voxgi, session):
 
 def test_settings_defaults_and_limits(voxgi):
     settings = bpy.context.scene.voxgi
+    assert (settings.span_mode, settings.memory_budget) == ("AUTO", 256)
     assert settings.base_span == pytest.approx(0.1)
     assert (settings.cascade_count, settings.grid_resolution) == (3, "64")
     settings.cascade_count = 99
@@ -84,12 +85,13 @@ def test_settings_defaults_and_limits(voxgi):
     assert settings.base_span == pytest.approx(0.001)
     props = type(settings).bl_rna.properties
     assert props["base_span"].subtype == "DISTANCE" and props["base_span"].unit == "LENGTH"
-    for name in ("base_span", "cascade_count", "grid_resolution"):
+    for name in ("span_mode", "memory_budget", "base_span", "cascade_count", "grid_resolution"):
         assert props[name].description
 
 
 def test_mesh_too_large_for_a_span_is_skipped_with_a_warning(voxgi, session):
     scenes.quad_object("Big Quad", size=2.0)
+    bpy.context.scene.voxgi.span_mode = "MANUAL"
     bpy.context.scene.voxgi.base_span = 0.0015  # 2 m / 1.5 mm > 1024 voxels per axis
     bpy.context.scene.voxgi.cascade_count = 1
     assert bpy.ops.voxgi.voxelize() == {"FINISHED"}

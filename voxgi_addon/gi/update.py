@@ -47,6 +47,9 @@ class GIState:
     octree: object
     timings: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    # (len(grids) + 1,) share of the visible points whose finest cascade is i, the last entry
+    # outside all (view_fit.cascade_shares); set by the caller that probed the view, or None.
+    view_shares: object = None
 
     @property
     def voxel_counts(self) -> list[int]:
@@ -66,11 +69,14 @@ def anchor_position(snapshot, ahead: float = 0.0) -> tuple[np.ndarray, list[str]
     return np.mean(centres, axis=0), ["the scene has no camera: cascades are centred on the objects"]
 
 
-def update_gi(snapshot, caches, settings: GISettings = GISettings(), cancel=None) -> GIState:
+def update_gi(snapshot, caches, settings: GISettings = GISettings(), cancel=None,
+              anchor=None) -> GIState:
     """Transform the caches into camera-anchored cascades, light them and build the octree.
 
     caches : mesh_caches.CacheBuildResult from the last voxelization (its spans set the
     cascades' spans). cancel : callable returning True to stop between stages.
+    anchor : (3,) world centre of the cascades instead of the camera (``view_fit.ViewFit``'s
+    centre, docs/gi_pipeline.md "View-fitted cascades"); ``view_ahead`` is then unused.
     """
     if not caches.cascade_stats:
         raise VoxGIError("there are no voxel caches yet: voxelize the scene first")
@@ -85,8 +91,11 @@ def update_gi(snapshot, caches, settings: GISettings = GISettings(), cancel=None
         return value
 
     base_span = caches.cascade_stats[0].span
-    ahead = settings.view_ahead * 0.5 * settings.resolution * base_span
-    position, warnings = anchor_position(snapshot, ahead)
+    if anchor is None:
+        ahead = settings.view_ahead * 0.5 * settings.resolution * base_span
+        position, warnings = anchor_position(snapshot, ahead)
+    else:
+        position, warnings = np.asarray(anchor, np.float64), []
     grids = stage("cascades", place_cascades, position, base_span, settings.resolution,
                   len(caches.cascade_stats))
     cascades = stage("transform", build_cascades, caches, snapshot, grids, warnings)
