@@ -17,9 +17,10 @@ Needs a GPU context.
 from __future__ import annotations
 
 import math
+import time
 
-import numpy as np
 import gpu
+import numpy as np
 
 from ..voxgi_addon.bvh import DET_EPSILON, TEXTURE_WIDTH, build_bvh, pack_bvh
 from ..voxgi_addon.indirect import RAY_STREAM, SURFACE_EPSILON
@@ -94,10 +95,8 @@ class GPUBVH:
         return (_same(old.positions, tris.positions) and _same(old.materials, tris.materials)
                 and _same(old.corner_normals, tris.corner_normals))
 
-    def update(self, tris) -> "GPUBVH":
+    def update(self, tris) -> GPUBVH:
         """Upload the BVH of ``tris`` unless the uploaded one is of the same triangles."""
-        import time
-
         self.uploaded_bytes = 0
         if self._unchanged(tris):
             self._tris = tris
@@ -223,10 +222,8 @@ def trace_rays(bvh: GPUBVH, origins, directions, t_min=0.0, t_max=np.inf, any_hi
 def sample_patterns(width: int, height: int) -> np.ndarray:
     """(height · width, 4) of ``bvh_probe``'s mode 2 (texel k = row-major from the bottom)."""
     empty = float_texture(np.zeros((1, 1, 4)), (1, 1))
-    inputs = {"bvh_nodes": empty, "bvh_triangles": empty, "ray_origin": empty,
-              "ray_direction": empty}
-    # ray textures are read with texelFetch outside their size: give them the output's size
-    zeros = float_texture(np.zeros((height, width, 4)), (width, height))
-    inputs["ray_origin"] = inputs["ray_direction"] = zeros
+    rays = float_texture(np.zeros((height, width, 4)), (width, height))
+    inputs = {"bvh_nodes": empty, "bvh_triangles": empty, "ray_origin": rays,
+              "ray_direction": rays}
     return read_texture(dispatch_bvh("bvh_probe", inputs, width, height,
                                      {"mode": (2.0, 0, 0, 0)})).reshape(-1, 4)

@@ -14,7 +14,7 @@ import sys
 import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from bench_blender import demo_snapshot, load_addon, median_seconds, print_table  # noqa: E402
+from bench_blender import demo_snapshot, load_addon, median_seconds, print_table
 
 
 def main(argv=None) -> int:
@@ -23,9 +23,13 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     load_addon()
     import numpy as np
-
     from voxgi.render.gbuffer import rasterize, read_gbuffer
-    from voxgi.render.gpu_bvh import GPUBVH, direct_light_texture, indirect_texture, trace_rays
+    from voxgi.render.gpu_bvh import (
+        GPUBVH,
+        direct_light_texture,
+        indirect_texture,
+        trace_rays,
+    )
     from voxgi.render.gpu_context import ensure_gpu_context
     from voxgi.render.gpu_preview import render_passes_gpu
     from voxgi.render.gpu_tracer import read_texture
@@ -71,7 +75,8 @@ def main(argv=None) -> int:
     trace_rays(gpu_bvh, o[:64], d[:64])  # compile
     for label, any_hit, t_max in (("any hit (shadow rays, max 2 m)", True, 2.0),
                                   ("closest hit (unbounded)", False, np.inf)):
-        seconds = median_seconds(lambda: trace_rays(gpu_bvh, o, d, 0.0, t_max, any_hit=any_hit), repeats)
+        seconds = median_seconds(lambda t_max=t_max, any_hit=any_hit: trace_rays(
+            gpu_bvh, o, d, 0.0, t_max, any_hit=any_hit), repeats)
         rows.append((f"GPU {label}, {n:,} random rays", seconds,
                      f"{n / seconds / 1e6:.2f} M rays/s (upload + dispatch + read back)"))
 
@@ -96,16 +101,16 @@ def main(argv=None) -> int:
     ref = direct_light(None, p, nrm, snapshot.lights, tris, None, samples, "RAYS", sample_ids=ids)
     numpy_seconds = time.perf_counter() - t0
     error = float(np.abs(gpu - ref).sum() / np.abs(ref).sum())
-    rays_cast = len(ids) * sum(1 if (l.type == "POINT" and l.radius == 0) or (l.type == "SUN" and l.angle == 0)
-                               else samples for l in snapshot.lights)
+    hard = [(light.type == "POINT" and light.radius == 0) or (light.type == "SUN" and light.angle == 0)
+            for light in snapshot.lights]
+    rays_cast = len(ids) * sum(1 if is_hard else samples for is_hard in hard)
     rows.append((f"Diffuse Direct {w}×{h}, GPU shadow rays ({samples} per light with an extent)", seconds,
-                 f"numpy {numpy_seconds:.2f} s ({numpy_seconds / seconds:.0f}×); relative L1 vs numpy "
-                 f"{error:.5f}; ≤ {rays_cast / seconds / 1e6:.1f} M shadow rays/s"))
+                 (f"numpy {numpy_seconds:.2f} s ({numpy_seconds / seconds:.0f}×); relative L1 vs numpy "
+                 f"{error:.5f}; ≤ {rays_cast / seconds / 1e6:.1f} M shadow rays/s")))
     for rays in (4, 16):
-        out = []
-        seconds = median_seconds(lambda: out.append(read_texture(indirect_texture(
+        seconds = median_seconds(lambda rays=rays: read_texture(indirect_texture(
             gpu_bvh, gbuffer.inputs, snapshot.lights, albedo, emission, rays=rays,
-            ao_distance=scene.voxgi.ao_distance))), 1 if args.quick else 3)
+            ao_distance=scene.voxgi.ao_distance)), 1 if args.quick else 3)
         rows.append((f"AO + one-bounce indirect {w}×{h}, {rays} rays/pixel (GPU)", seconds,
                      f"{len(ids) * rays / seconds / 1e6:.2f} M paths/s (closest hit + shadow ray(s) per light)"))
 
@@ -121,8 +126,8 @@ def main(argv=None) -> int:
     seconds = median_seconds(preview, 1 if args.quick else 3)
     rows.append((f"GPU preview {w}×{h}, shadows RAYS (after the update)", seconds,
                  ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in stages.items())))
-    print_table(f"### Exact rays on the GPU (llvmpipe): demo scene, {len(snapshot.lights)} light(s); "
-                f"medians of {repeats}", rows)
+    print_table((f"### Exact rays on the GPU (llvmpipe): demo scene, {len(snapshot.lights)} light(s); "
+                 f"medians of {repeats}"), rows)
     return 0
 
 

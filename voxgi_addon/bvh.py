@@ -34,9 +34,22 @@ import numpy as np
 from .raycast import SHADOW_EPSILON
 from .scene_geometry import SceneTriangles
 
-__all__ = ["BVH", "BVHTextures", "build_bvh", "bvh_of", "pack_bvh", "traverse", "closest_hits",
-           "occluded", "BINS", "MAX_LEAF", "TEXTURE_WIDTH", "NODE_TEXELS", "TRIANGLE_TEXELS",
-           "DET_EPSILON"]
+__all__ = [
+    "BINS",
+    "BVH",
+    "DET_EPSILON",
+    "MAX_LEAF",
+    "NODE_TEXELS",
+    "TEXTURE_WIDTH",
+    "TRIANGLE_TEXELS",
+    "BVHTextures",
+    "build_bvh",
+    "bvh_of",
+    "closest_hits",
+    "occluded",
+    "pack_bvh",
+    "traverse",
+]
 
 BINS = 16               # SAH bins per split
 MAX_LEAF = 8            # most triangles in a leaf (the leaf code keeps 4 bits for the count)
@@ -90,7 +103,6 @@ def _split_level(order, tlo, thi, cen, start, count, bins=BINS):
     """Choose splits for a level's nodes with ``bins`` SAH bins. Returns (split (A,) bool,
     left count (A,)) and reorders ``order`` in place so that each split node's left part
     comes first."""
-    BINS = bins  # noqa: N806 (shadows the module default)
     a = len(start)
     pos, offsets = _ranges(start, count)
     tri = order[pos]
@@ -103,17 +115,17 @@ def _split_level(order, tlo, thi, cen, start, count, bins=BINS):
     rows = np.arange(a)
     e = ext[rows, axis]
     value = c[np.arange(len(tri)), axis[seg]] - cmin[seg, axis[seg]]
-    scale = np.divide(BINS, e, out=np.zeros_like(e), where=e > 0)
-    b = np.clip((value * scale[seg]).astype(np.int64), 0, BINS - 1)
-    key = seg * BINS + b
-    counts = np.bincount(key, minlength=a * BINS).reshape(a, BINS)
-    blo = np.full((3, a * BINS), np.inf, tlo.dtype)
-    bhi = np.full((3, a * BINS), -np.inf, thi.dtype)
+    scale = np.divide(bins, e, out=np.zeros_like(e), where=e > 0)
+    b = np.clip((value * scale[seg]).astype(np.int64), 0, bins - 1)
+    key = seg * bins + b
+    counts = np.bincount(key, minlength=a * bins).reshape(a, bins)
+    blo = np.full((3, a * bins), np.inf, tlo.dtype)
+    bhi = np.full((3, a * bins), -np.inf, thi.dtype)
     lo_t, hi_t = tlo[tri].T, thi[tri].T
     for k in range(3):  # ufunc.at is fast on contiguous 1D arrays of the values' dtype
         np.minimum.at(blo[k], key, np.ascontiguousarray(lo_t[k]))
         np.maximum.at(bhi[k], key, np.ascontiguousarray(hi_t[k]))
-    blo, bhi = blo.T.reshape(a, BINS, 3), bhi.T.reshape(a, BINS, 3)
+    blo, bhi = blo.T.reshape(a, bins, 3), bhi.T.reshape(a, bins, 3)
     left_n = np.cumsum(counts, axis=1)[:, :-1]
     right_n = count[:, None] - left_n
     left_area = _area(np.minimum.accumulate(blo, axis=1), np.maximum.accumulate(bhi, axis=1))[:, :-1]
@@ -130,7 +142,7 @@ def _split_level(order, tlo, thi, cen, start, count, bins=BINS):
                            (~sah | (count <= TRAVERSAL_COST + best_cost / parent)))
     split = ~leaf
     median = split & ~sah  # every centroid in one place: split the list in half
-    left = np.where(sah, left_n[rows, np.minimum(best, BINS - 2)], count // 2)
+    left = np.where(sah, left_n[rows, np.minimum(best, bins - 2)], count // 2)
     # Reorder the split nodes' triangles: left side first, stable within each side.
     side = np.where(median[seg], (np.arange(len(tri)) - offsets[seg]) >= count[seg] // 2,
                     b > best[seg])
@@ -225,7 +237,7 @@ def build_bvh(tris: SceneTriangles) -> BVH:
                order=order.astype(np.int32), depth=len(levels))
 
 
-_BVHS: "weakref.WeakKeyDictionary[SceneTriangles, BVH]" = weakref.WeakKeyDictionary()
+_BVHS: weakref.WeakKeyDictionary[SceneTriangles, BVH] = weakref.WeakKeyDictionary()
 
 
 def bvh_of(tris: SceneTriangles) -> BVH:

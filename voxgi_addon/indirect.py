@@ -31,7 +31,7 @@ from .direct_light import concentric_disk, diffuse_direct
 from .raycast import SHADOW_EPSILON, closest_hits
 from .sampling import hammersley, perpendicular_basis
 
-__all__ = ["cosine_directions", "indirect_and_ao", "RAY_STREAM", "SURFACE_EPSILON"]
+__all__ = ["RAY_STREAM", "SURFACE_EPSILON", "cosine_directions", "indirect_and_ao"]
 
 RAY_STREAM = 0x5EED   # hash stream of the diffuse rays' rotation
 SURFACE_EPSILON = 1e-4  # metres off the surface, as preview.SURFACE_EPSILON

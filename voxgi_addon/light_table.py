@@ -30,7 +30,7 @@ import numpy as np
 
 from .direct_light import area_outline, light_frame
 
-__all__ = ["light_table", "LIGHT_TEXELS", "LIGHT_TYPES", "MAX_OUTLINE"]
+__all__ = ["LIGHT_TEXELS", "LIGHT_TYPES", "MAX_OUTLINE", "light_table"]
 
 LIGHT_TYPES = {"SUN": 0, "POINT": 1, "SPOT": 2, "AREA": 3}
 MAX_OUTLINE = 64

@@ -22,8 +22,15 @@ import math
 
 import numpy as np
 
-__all__ = ["pcg_hash", "unit_float", "point_streams", "hashed_square", "radical_inverse",
-           "hammersley", "perpendicular_basis"]
+__all__ = [
+    "hammersley",
+    "hashed_square",
+    "pcg_hash",
+    "perpendicular_basis",
+    "point_streams",
+    "radical_inverse",
+    "unit_float",
+]
 
 _GOLDEN = np.uint32(0x9E3779B9)
 

@@ -1,12 +1,10 @@
 """Exact ray casting on the GPU (render/gpu_bvh.py, shaders/bvh_*.glsl) against the numpy
 references: raycast.py's hits, the hashed sample patterns, direct_light.diffuse_direct and
 indirect.indirect_and_ao; and the preview's direct light with shadows "RAYS" on the GPU."""
-import math
-
-import numpy as np
-import pytest
 
 import bpy
+import numpy as np
+import pytest
 import scenes
 
 
@@ -84,7 +82,12 @@ def test_gpu_hits_equal_the_grid_ray_caster_on_the_demo_scene(voxgi):
 
 def test_sample_patterns_are_bit_exact(voxgi):
     from voxgi.render.gpu_bvh import sample_patterns
-    from voxgi.voxgi_addon.sampling import hammersley, hashed_square, pcg_hash, unit_float
+    from voxgi.voxgi_addon.sampling import (
+        hammersley,
+        hashed_square,
+        pcg_hash,
+        unit_float,
+    )
 
     gpu_ready()
     w, h = 64, 32
@@ -175,11 +178,11 @@ def test_gpu_ao_and_indirect_equal_numpy(voxgi):
 
 def test_preview_direct_light_runs_on_the_gpu(voxgi):
     """shadows = RAYS: the GPU preview's Diffuse Direct equals the numpy preview's."""
+    from test_gpu_tracer import cornell, cornell_state
     from voxgi.render.gpu_bvh import shared_bvh
     from voxgi.render.gpu_preview import render_passes_gpu
     from voxgi.ui.properties import cone_settings
     from voxgi.voxgi_addon.preview import render_passes
-    from test_gpu_tracer import cornell, cornell_state
 
     scene = cornell("AREA")
     snapshot, state = cornell_state(scene)

@@ -4,13 +4,21 @@ import time
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
-
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from meshes import box, uv_sphere
 from snapshots import mesh, snapshot, translation
+
 from voxgi_addon import bvh as bvh_module
-from voxgi_addon.bvh import (MAX_LEAF, NODE_TEXELS, TEXTURE_WIDTH, TRIANGLE_TEXELS, build_bvh,
-                             pack_bvh, traverse)
+from voxgi_addon.bvh import (
+    MAX_LEAF,
+    NODE_TEXELS,
+    TEXTURE_WIDTH,
+    TRIANGLE_TEXELS,
+    build_bvh,
+    pack_bvh,
+    traverse,
+)
 from voxgi_addon.raycast import closest_hits, occluded
 from voxgi_addon.sampling import hammersley, hashed_square, pcg_hash, radical_inverse
 from voxgi_addon.scene_geometry import SceneTriangles, world_triangles

@@ -3,9 +3,9 @@ table, and exact AO + one-bounce diffuse indirect (voxgi_addon/indirect.py)."""
 import math
 
 import numpy as np
-
 from meshes import box
 from snapshots import mesh, snapshot
+
 from voxgi_addon.direct_light import diffuse_direct
 from voxgi_addon.indirect import cosine_directions, indirect_and_ao
 from voxgi_addon.light_table import LIGHT_TEXELS, light_table
