@@ -20,6 +20,9 @@ from bench_blender import demo_snapshot, load_addon, median_seconds, print_table
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--cycles", type=int, default=0, metavar="SPP",
+                    help="also compare the exact AO + one-bounce estimate at 160×120 with Cycles "
+                         "(one diffuse bounce, SPP samples)")
     args = ap.parse_args(argv)
     load_addon()
     import numpy as np
@@ -126,6 +129,34 @@ def main(argv=None) -> int:
     seconds = median_seconds(preview, 1 if args.quick else 3)
     rows.append((f"GPU preview {w}×{h}, shadows RAYS (after the update)", seconds,
                  ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in stages.items())))
+    if args.cycles:
+        import gi_compare
+
+        cw, ch = 160, 120
+        small = rasterize(tris, snapshot.camera, rough, cw, ch)
+        cycles, cycles_seconds = gi_compare.render_cycles(scene, cw, ch, args.cycles,
+                                                          scene.voxgi.ao_distance)
+        seen_small = read_gbuffer(small)
+        mask = seen_small["hit"] & (cycles["Diffuse Color"].sum(-1) > 0)
+        preview = render_passes_gpu(snapshot, state, cw, ch, cones, samples)[0]
+        for name, cycles_name in (("Diffuse Direct", "Diffuse Direct"),
+                                  ("Diffuse Indirect", "Diffuse Indirect"),
+                                  ("Ambient Occlusion", "Ambient Occlusion")):
+            error = gi_compare.relative_l1(preview[name], cycles[cycles_name], mask)
+            rows.append((f"GPU preview {cw}×{ch} {name} vs Cycles {args.cycles} spp", 0.0,
+                         f"relative L1 {error:.3f} (cones for indirect/AO)"))
+        for rays in (16, 64):
+            t0 = time.perf_counter()
+            out = np.flipud(read_texture(indirect_texture(
+                gpu_bvh, small.inputs, snapshot.lights, albedo, emission, rays=rays,
+                ao_distance=scene.voxgi.ao_distance)))
+            seconds = time.perf_counter() - t0
+            indirect = gi_compare.relative_l1(out[..., :3], cycles["Diffuse Indirect"], mask)
+            ao = gi_compare.relative_l1(np.repeat(out[..., 3:], 3, axis=-1),
+                                        cycles["Ambient Occlusion"], mask)
+            rows.append((f"exact AO + one bounce {cw}×{ch}, {rays} rays/pixel vs Cycles", seconds,
+                         (f"Diffuse Indirect {indirect:.3f}, AO {ao:.3f} relative L1 "
+                         f"(Cycles {cycles_seconds:.1f} s)")))
     print_table((f"### Exact rays on the GPU (llvmpipe): demo scene, {len(snapshot.lights)} light(s); "
                  f"medians of {repeats}"), rows)
     return 0
