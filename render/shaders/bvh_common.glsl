@@ -61,6 +61,7 @@ int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_
                    abs(d.z) > 1e-30 ? d.z : 1e-30);
   vec3 inv = 1.0 / safe;
   float dlen = length(d);
+  vec3 oinv = o * inv; /* slabs as lo·inv − o·inv: one multiply-add per axis */
   float best = tmax;
   int found = -1;
   uv = vec2(0.0);
@@ -68,8 +69,8 @@ int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_
   while (node >= 0) {
     vec4 lo = bvh_texel_nodes(2 * node);
     vec4 hi = bvh_texel_nodes(2 * node + 1);
-    vec3 t0 = (lo.xyz - o) * inv;
-    vec3 t1 = (hi.xyz - o) * inv;
+    vec3 t0 = lo.xyz * inv - oinv;
+    vec3 t1 = hi.xyz * inv - oinv;
     vec3 tn = min(t0, t1);
     vec3 tf = max(t0, t1);
     float enter = max(max(tn.x, tn.y), max(tn.z, tmin));
