@@ -1,6 +1,6 @@
 """Primary visibility on the GPU: rasterize the scene's triangles into a G-buffer.
 
-The same per-pixel answers as ``voxgi_addon.raycast.primary_visibility`` (pixel-centre rays,
+The same per-pixel answers as ``voxgi_addon.scene.raycast.primary_visibility`` (pixel-centre rays,
 shading normals turned to the camera by the face normal, the camera's clipping range), by
 rasterizing ``scene_geometry.world_triangles`` with ``raycast.view_projection`` into three
 RGBA32F textures that the cone-tracing kernels read directly. GPU images are stored bottom

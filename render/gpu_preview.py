@@ -2,9 +2,11 @@
 ``voxgi_addon.preview.render_passes`` (the numpy reference), with primary visibility
 rasterized (``gbuffer``) and the cone tracing done by compute shaders (``gpu_tracer``).
 
-Direct diffuse light: with shadows "RAYS" the reference's exact shadow rays (numpy, on the
-G-buffer's hit points); with "CONES" the unshadowed light (numpy, cheap) times one soft-shadow
-cone per light traced on the GPU (``shaders/shadow.glsl``). Needs a GPU context.
+Direct diffuse light: with shadows "RAYS" the reference's exact light models and shadow rays,
+traced through the scene's BVH on the GPU (``gpu_bvh``, ``shaders/bvh_direct.glsl``; the same
+samples as the numpy reference, see docs/gi_pipeline.md "Exact rays on the GPU"); with "CONES"
+the unshadowed light (numpy, cheap) times one soft-shadow cone per light traced on the GPU
+(``shaders/shadow.glsl``). Needs a GPU context.
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ from ..voxgi_addon.preview.passes import check_request, compose_passes, direct_l
 from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
+from .gpu_bvh import direct_light_texture, shared_bvh
 from .gpu_tracer import dispatch, read_texture
 from .gpu_volume import GPUVolume
 
@@ -50,9 +53,19 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
         return np.flipud(image)[..., 0].ravel()[hit[lit]]
 
     t0 = time.perf_counter()
-    direct = direct_light(None, p, n, snapshot.lights, tris, cones, light_samples, shadows,
-                          visibility)
-    timings["direct"] = time.perf_counter() - t0
+    if shadows == "RAYS":
+        bvh = shared_bvh().update(tris)  # rebuilt and uploaded only for changed triangles
+        if bvh.uploaded_bytes:
+            timings["BVH build + upload"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        image = read_texture(direct_light_texture(bvh, gbuffer.inputs, snapshot.lights,
+                                                  light_samples))
+        direct = np.flipud(image)[..., :3].reshape(-1, 3)[hit].astype(np.float64)
+        timings["direct"] = time.perf_counter() - t0
+    else:
+        direct = direct_light(None, p, n, snapshot.lights, tris, cones, light_samples, shadows,
+                              visibility)
+        timings["direct"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     low_h, low_w = low_shape(height, width, gi_stride)

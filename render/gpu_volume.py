@@ -1,7 +1,7 @@
 """The octree atlas and the parameter table as GPU textures (docs/gi_pipeline.md "The GPU tracer").
 
-A ``GPUVolume`` holds the 3D RGBA16F atlas of every octree level (``voxgi_addon.volume_textures``)
-and the small RGBA32F parameter table (``voxgi_addon.trace_params``). ``update`` uploads the
+A ``GPUVolume`` holds the 3D RGBA16F atlas of every octree level (``voxgi_addon.preview.volume_textures``)
+and the small RGBA32F parameter table (``voxgi_addon.preview.trace_params``). ``update`` uploads the
 atlas only when its texels differ from the last upload (bpy's ``GPUTexture`` cannot update a
 sub-region, so the atlas is the unit of upload); ``uploaded_bytes`` tells what the last update
 sent. Needs a GPU context.

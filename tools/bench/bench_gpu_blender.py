@@ -85,7 +85,7 @@ def main(argv=None) -> int:
         seconds = median_seconds(once, 1 if (args.quick and w > 160) else repeats)
         stages = timings[len(timings) // 2]
         rows.append((f"GPU preview {w}×{h} (after the update)", seconds,
-                     f"direct (numpy shadow rays) {stages['direct'] * 1000:.0f} ms, cones "
+                     f"direct (GPU shadow rays) {stages['direct'] * 1000:.0f} ms, cones "
                      f"{(stages['diffuse+ao cones (GPU)'] + stages['glossy cones (GPU)']) * 1000:.0f} ms, "
                      f"visibility {stages['visibility (GPU)'] * 1000:.0f} ms"))
     for stride, label in ((1, "full"), (4, "quarter")):

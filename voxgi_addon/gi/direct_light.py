@@ -30,6 +30,7 @@ import numpy as np
 
 from ..scene import raycast
 from ..scene.snapshot import LightData
+from .sampling import hashed_square
 
 __all__ = ["diffuse_direct", "light_frame", "stratified_square", "concentric_disk"]
 
@@ -104,7 +105,7 @@ def _visible_share_of_points(occluder, origins, targets, weights=None) -> np.nda
     return _visible_share(occluder, origins, ray / np.maximum(length, 1e-30)[..., None], length, weights)
 
 
-def _sun(light, p, n, tris, samples, rng):
+def _sun(light, p, n, tris, strata):
     _, _, _, emit = light_frame(light)
     to_light = -emit
     cos = n @ to_light
@@ -113,7 +114,7 @@ def _sun(light, p, n, tris, samples, rng):
     if len(lit) and tris is not None:
         half = 0.5 * float(light.angle)
         if half > 0:
-            disk = concentric_disk(stratified_square(len(lit), samples, rng)) * math.tan(half)
+            disk = concentric_disk(strata(lit)) * math.tan(half)
             t, b = _perpendicular_basis(to_light[None])
             dirs = to_light + disk[..., :1] * t[0] + disk[..., 1:] * b[0]  # (N, K, 3) in the cone
         else:
@@ -133,7 +134,7 @@ def _spot_factor(light: LightData, emit: np.ndarray, from_light: np.ndarray) -> 
     return x * x * (3.0 - 2.0 * x)
 
 
-def _point(light, p, n, tris, samples, rng):
+def _point(light, p, n, tris, strata):
     centre, _, _, emit = light_frame(light)
     delta = centre - p
     d2 = np.einsum("ij,ij->i", delta, delta)
@@ -148,7 +149,7 @@ def _point(light, p, n, tris, samples, rng):
     if len(lit) and tris is not None:
         if radius > 0:
             t, b = _perpendicular_basis(w[lit])
-            disk = concentric_disk(stratified_square(len(lit), samples, rng)) * radius
+            disk = concentric_disk(strata(lit)) * radius
             targets = centre + disk[..., :1] * t[:, None] + disk[..., 1:] * b[:, None]
         else:
             targets = np.broadcast_to(centre, (len(lit), 1, 3))
@@ -187,7 +188,7 @@ def _polygon_irradiance(p: np.ndarray, n: np.ndarray, outline: np.ndarray) -> np
     return np.abs((angle * np.einsum("nkc,nc->nk", gamma, n)).sum(axis=1)) / (2.0 * math.pi)
 
 
-def _area(light, p, n, tris, samples, rng):
+def _area(light, p, n, tris, strata):
     centre, x, y, emit = light_frame(light)
     outline, area = area_outline(light)
     if area <= 0:
@@ -209,7 +210,7 @@ def _area(light, p, n, tris, samples, rng):
     sampled = np.arange(len(p)) if tris is not None else np.flatnonzero(
         ~full & (heights > 0).any(axis=1))
     if len(sampled):
-        unit = stratified_square(len(sampled), samples, rng) * 2.0 - 1.0
+        unit = strata(in_front[sampled]) * 2.0 - 1.0
         if light.shape in ("DISK", "ELLIPSE"):
             unit = concentric_disk(0.5 * (unit + 1.0))
         sx = float(light.size)
@@ -234,7 +235,8 @@ def _area(light, p, n, tris, samples, rng):
 _BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area}
 
 
-def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0) -> np.ndarray:
+def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
+                   sample_ids=None) -> np.ndarray:
     """Cycles' ``Diffuse Direct`` (irradiance / π, no albedo) at surface points.
 
     Parameters
@@ -247,6 +249,10 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
     samples : shadow rays per point for lights with an extent (area, point/spot radius, sun
         angle), rounded up to a square number for stratification; hard lights use one ray.
     seed : seed of the sampling pattern (the result is deterministic).
+    sample_ids : optional (N,) integer id per point (e.g. its pixel index): the strata's jitter
+        is then hashed from (id, light index, seed) (``sampling.hashed_square``), the pattern
+        the GPU kernel ``render/shaders/bvh_direct.glsl`` draws, instead of drawn from numpy's
+        generator in point order.
 
     Returns
     -------
@@ -256,12 +262,19 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     out = np.zeros((len(p), 3), dtype=np.float64)
     rng = np.random.default_rng(seed)
-    for light in lights:
+    ids = None if sample_ids is None else np.asarray(sample_ids).reshape(-1)
+    for index, light in enumerate(lights):
         shade = _BY_TYPE.get(light.type)
         if shade is None or light.power == 0:
             continue
         color = np.asarray(light.color, dtype=np.float64)
         for a in range(0, len(p), _POINT_CHUNK):
             b = min(len(p), a + _POINT_CHUNK)
-            out[a:b] += shade(light, p[a:b], n[a:b], tris, samples, rng)[:, None] * color
+            if ids is None:
+                def strata(points_of_chunk):  # (count, K, 2) from the generator, in order
+                    return stratified_square(len(points_of_chunk), samples, rng)
+            else:
+                def strata(points_of_chunk, chunk_ids=ids[a:b], stream=index):
+                    return hashed_square(chunk_ids[points_of_chunk], stream, samples, seed)
+            out[a:b] += shade(light, p[a:b], n[a:b], tris, strata)[:, None] * color
     return out.astype(np.float32)

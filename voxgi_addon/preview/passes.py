@@ -82,14 +82,16 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
 
 
 def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
-                 visibility=None):
+                 visibility=None, sample_ids=None):
     """(N, 3) Diffuse Direct at surface points: exact shadow rays against ``tris`` (shadows
     "RAYS") or one soft-shadow cone per light through ``octree`` ("CONES"; ``visibility``
-    as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own)."""
+    as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own).
+    sample_ids : the points' pixel indices: shadow rays then use the hashed strata that the
+    GPU kernel ``render/shaders/bvh_direct.glsl`` draws (``direct_light.diffuse_direct``)."""
     if shadows == "CONES":
         return cone_shadowed_direct(octree, points, normals, lights, cones, samples, visibility)
     return diffuse_direct(points + normals * SURFACE_EPSILON, normals, lights, tris,
-                          samples=samples)
+                          samples=samples, sample_ids=sample_ids)
 
 
 def _traced(seen, stride, hit, trace, channels):
@@ -136,7 +138,7 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
 
     t0 = time.perf_counter()
     direct = direct_light(gi_state.octree, p, n, snapshot.lights, tris, cones, light_samples,
-                          shadows)
+                          shadows, sample_ids=hit)
     timings["direct"] = time.perf_counter() - t0
     positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
 

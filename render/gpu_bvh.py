@@ -1,0 +1,229 @@
+"""Exact ray casting on the GPU: the scene's BVH as textures and the kernels that trace it.
+
+``GPUBVH`` uploads ``voxgi_addon.scene.bvh``'s packed textures (nodes, triangles, shading normals) and
+keeps them while the triangles stay the same: ``update`` rebuilds only for another
+``SceneTriangles`` whose corners, materials or normals differ from the uploaded ones
+(``world_triangles`` makes a new object per preview, so identity alone would re-upload every
+time). Kernels (``shaders/``, each prefixed with ``bvh_common.glsl``):
+
+* ``bvh_probe`` — one ray per texel (closest hit, any hit) and the sample patterns (tests).
+* ``bvh_direct`` — Diffuse Direct over a G-buffer, every light of the snapshot, shadow rays
+  (``bvh_lights.glsl``, the port of ``direct_light.diffuse_direct``).
+* ``bvh_indirect`` — exact AO and the raw one-bounce diffuse-indirect estimate
+  (``voxgi_addon.gi.exact_indirect``).
+
+Needs a GPU context.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import gpu
+import numpy as np
+
+from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
+from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
+from ..voxgi_addon.scene.bvh import DET_EPSILON, TEXTURE_WIDTH, build_bvh, pack_bvh
+from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
+from .gpu_shaders import LOCAL_SIZE, SHADER_DIR
+from .gpu_tracer import read_texture
+from .gpu_volume import float_texture
+
+_BVH = ("bvh_nodes", "bvh_triangles")
+# Kernel → (GLSL files after bvh_common.glsl, 2D samplers, VEC4 push constants).
+KERNELS = {
+    "bvh_probe": (("bvh_probe",), _BVH + ("ray_origin", "ray_direction"), ("mode",)),
+    "bvh_direct": (("bvh_lights", "bvh_direct"), _BVH + ("lights", "gbuffer_position",
+                                                          "gbuffer_normal"), ("sampling",)),
+    "bvh_indirect": (("bvh_lights", "bvh_indirect"),
+                     _BVH + ("bvh_normals", "lights", "materials", "gbuffer_position",
+                             "gbuffer_normal"), ("sampling", "world")),
+}
+_shaders: dict[str, object] = {}
+
+
+def bvh_shader(kernel: str):
+    """The cached compute shader of ``kernel`` (see ``KERNELS``)."""
+    if kernel not in _shaders:
+        files, samplers, constants = KERNELS[kernel]
+        info = gpu.types.GPUShaderCreateInfo()
+        info.local_group_size(LOCAL_SIZE, LOCAL_SIZE, 1)
+        info.define("BVH_WIDTH_LOG2", str(int(math.log2(TEXTURE_WIDTH))))
+        info.define("SHADOW_EPSILON", repr(float(SHADOW_EPSILON)))
+        info.define("SURFACE_EPSILON", repr(float(SURFACE_EPSILON)))
+        info.define("DET_EPSILON", repr(float(DET_EPSILON)))
+        info.define("RAY_STREAM", f"{RAY_STREAM}u")
+        for slot, name in enumerate(samplers):
+            info.sampler(slot, "FLOAT_2D", name)
+        for name in constants:
+            info.push_constant("VEC4", name)
+        info.image(0, "RGBA32F", "FLOAT_2D", "out_image", qualifiers={"WRITE"})
+        source = "".join((SHADER_DIR / f"{name}.glsl").read_text()
+                         for name in ("bvh_common",) + files)
+        info.compute_source(source)
+        _shaders[kernel] = gpu.shader.create_from_info(info)
+    return _shaders[kernel]
+
+
+def _same(a, b) -> bool:
+    if a is None or b is None:
+        return a is b
+    return a.shape == b.shape and np.array_equal(a, b)
+
+
+class GPUBVH:
+    """The BVH textures of the latest ``SceneTriangles`` (see the module doc).
+
+    nodes, triangles, normals : RGBA32F GPUTextures (``voxgi_addon.scene.bvh.BVHTextures``).
+    uploaded_bytes : bytes the last ``update`` sent (0 = unchanged); build_seconds : the last
+    BVH build's time.
+    """
+
+    def __init__(self):
+        self.nodes = self.triangles = self.normals = None
+        self.uploaded_bytes = 0
+        self.build_seconds = 0.0
+        self._tris = None
+
+    def _unchanged(self, tris) -> bool:
+        old = self._tris
+        if old is None:
+            return False
+        if old is tris:
+            return True
+        return (_same(old.positions, tris.positions) and _same(old.materials, tris.materials)
+                and _same(old.corner_normals, tris.corner_normals))
+
+    def update(self, tris) -> GPUBVH:
+        """Upload the BVH of ``tris`` unless the uploaded one is of the same triangles."""
+        self.uploaded_bytes = 0
+        if self._unchanged(tris):
+            self._tris = tris
+            return self
+        t0 = time.perf_counter()
+        packed = pack_bvh(build_bvh(tris), tris)
+        self.build_seconds = time.perf_counter() - t0
+
+        def upload(texels):
+            return float_texture(texels, (texels.shape[1], texels.shape[0]))
+
+        self.nodes = upload(packed.nodes)
+        self.triangles = upload(packed.triangles)
+        self.normals = upload(packed.normals)
+        self.uploaded_bytes = packed.nbytes
+        self._tris = tris
+        return self
+
+    @property
+    def inputs(self) -> dict[str, object]:
+        return {"bvh_nodes": self.nodes, "bvh_triangles": self.triangles,
+                "bvh_normals": self.normals}
+
+
+_shared: GPUBVH | None = None
+
+
+def shared_bvh() -> GPUBVH:
+    """One ``GPUBVH`` for the previews of this session (the GPU context's lifetime)."""
+    global _shared
+    if _shared is None:
+        _shared = GPUBVH()
+    return _shared
+
+
+def dispatch_bvh(kernel: str, inputs: dict[str, object], width: int, height: int,
+                 constants: dict[str, tuple] | None = None):
+    """Run ``kernel`` over a width × height RGBA32F output texture and return it."""
+    shader = bvh_shader(kernel)
+    _, samplers, names = KERNELS[kernel]
+    out = gpu.types.GPUTexture((width, height), format="RGBA32F")
+    shader.bind()
+    for name in samplers:
+        shader.uniform_sampler(name, inputs[name])
+    for name in names:
+        value = (constants or {}).get(name, (0.0, 0.0, 0.0, 0.0))
+        shader.uniform_float(name, tuple(float(v) for v in value))
+    shader.image("out_image", out)
+    gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
+    return out
+
+
+def lights_texture(lights):
+    """The light table (``voxgi_addon.preview.light_table``) as a texture; one padding row of type -1
+    when no light shines."""
+    table = light_table(lights)
+    if len(table) == 0:
+        table = np.zeros((1, LIGHT_TEXELS, 4), np.float32)
+        table[0, 0, 0] = -1.0
+    return float_texture(table, (LIGHT_TEXELS, len(table)))
+
+
+def strata_side(samples: int) -> int:
+    """m of the m × m strata ``direct_light`` uses for ``samples`` shadow rays."""
+    return max(1, math.ceil(math.sqrt(samples)))
+
+
+def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0):
+    """Diffuse Direct over a G-buffer (``shaders/bvh_direct.glsl``), an RGBA32F texture of the
+    G-buffer's size (bottom row first), rgb in Cycles' units."""
+    position = gbuffer_inputs["gbuffer_position"]
+    inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights)}
+    return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
+                        {"sampling": (seed, strata_side(samples), 0, 0)})
+
+
+def materials_texture(albedo, emission):
+    """(M + 1) × 2 texture: row 0 albedo, row 1 emission (``preview.material_table``)."""
+    rows = np.zeros((2, len(albedo), 4), np.float32)
+    rows[0, :, :3], rows[1, :, :3] = albedo, emission
+    return float_texture(rows, (len(albedo), 2))
+
+
+def indirect_texture(bvh: GPUBVH, gbuffer_inputs, lights, albedo, emission, rays: int = 16,
+                     ao_distance: float = 1.0, seed: int = 0, world=(0.0, 0.0, 0.0),
+                     hit_samples: int = 1):
+    """(Diffuse Indirect rgb, AO) over a G-buffer (``shaders/bvh_indirect.glsl``), an RGBA32F
+    texture of the G-buffer's size (bottom row first)."""
+    position = gbuffer_inputs["gbuffer_position"]
+    inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights),
+              "materials": materials_texture(albedo, emission)}
+    return dispatch_bvh("bvh_indirect", inputs, position.width, position.height,
+                        {"sampling": (seed, rays, ao_distance, strata_side(hit_samples)),
+                         "world": (*world, 0.0)})
+
+
+def trace_rays(bvh: GPUBVH, origins, directions, t_min=0.0, t_max=np.inf, any_hit=False):
+    """Trace N rays on the GPU (``bvh_probe``). Closest hit: (t (inf = miss), triangle (-1),
+    u, v); any hit (shadow-ray convention, ``raycast.occluded`` with max_t = t_max): (N,) bool."""
+    o = np.asarray(origins, np.float32).reshape(-1, 3)
+    d = np.asarray(directions, np.float32).reshape(-1, 3)
+    n = len(o)
+    side = max(1, math.ceil(math.sqrt(n)))
+    rows = math.ceil(n / side)
+    t_min = np.broadcast_to(np.asarray(t_min, np.float64), (n,))
+    t_max = np.minimum(np.broadcast_to(np.asarray(t_max, np.float64), (n,)), 1e30)
+    ray_o = np.zeros((rows * side, 4), np.float32)
+    ray_d = np.zeros((rows * side, 4), np.float32)
+    ray_o[:n, :3], ray_o[:n, 3] = o, t_min
+    ray_d[:n, :3], ray_d[:n, 3] = d, t_max
+    inputs = {**bvh.inputs, "ray_origin": float_texture(ray_o, (side, rows)),
+              "ray_direction": float_texture(ray_d, (side, rows))}
+    out = read_texture(dispatch_bvh("bvh_probe", inputs, side, rows,
+                                    {"mode": (1.0 if any_hit else 0.0, 0, 0, 0)}))
+    out = out.reshape(-1, 4)[:n]
+    if any_hit:
+        return out[:, 0] > 0.5
+    hit = out[:, 1] >= 0
+    t = np.where(hit, out[:, 0], np.inf)
+    return t, np.where(hit, np.rint(out[:, 1]), -1).astype(np.int64), out[:, 2], out[:, 3]
+
+
+def sample_patterns(width: int, height: int) -> np.ndarray:
+    """(height · width, 4) of ``bvh_probe``'s mode 2 (texel k = row-major from the bottom)."""
+    empty = float_texture(np.zeros((1, 1, 4)), (1, 1))
+    rays = float_texture(np.zeros((height, width, 4)), (width, height))
+    inputs = {"bvh_nodes": empty, "bvh_triangles": empty, "ray_origin": rays,
+              "ray_direction": rays}
+    return read_texture(dispatch_bvh("bvh_probe", inputs, width, height,
+                                     {"mode": (2.0, 0, 0, 0)})).reshape(-1, 4)

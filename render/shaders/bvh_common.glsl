@@ -1,0 +1,202 @@
+/* Ray casting through the threaded BVH of voxgi_addon/bvh.py (see its module doc), a port of
+ * bvh.traverse; and the hashed sample patterns of voxgi_addon/sampling.py, bit for bit.
+ *
+ * Samplers (2D RGBA32F, texel k at (k mod BVH_WIDTH, k div BVH_WIDTH)):
+ *   bvh_nodes     : 2 texels per node, (lo.xyz, miss link), (hi.xyz, leaf code = first·16 + count
+ *                   or -1 for an interior node); depth-first order, node 0 the root.
+ *   bvh_triangles : 3 texels per triangle in leaf order, (v0.xyz, material), (e1.xyz, index into
+ *                   the SceneTriangles), (e2.xyz, |e1|·|e2|).
+ * Defines: BVH_WIDTH_LOG2, SHADOW_EPSILON (metres), DET_EPSILON (relative). Hits are
+ * double-sided Möller–Trumbore with raycast.py's determinant test; shadow rays count hits with
+ * SHADOW_EPSILON < t < tmax − SHADOW_EPSILON, as raycast.occluded. */
+
+#define BVH_WIDTH (1 << BVH_WIDTH_LOG2)
+#define BVH_FAR 1e30
+#define M_PI_F 3.14159265358979323846
+
+vec4 bvh_texel_nodes(int k)
+{
+  return texelFetch(bvh_nodes, ivec2(k & (BVH_WIDTH - 1), k >> BVH_WIDTH_LOG2), 0);
+}
+
+vec4 bvh_texel_triangles(int k)
+{
+  return texelFetch(bvh_triangles, ivec2(k & (BVH_WIDTH - 1), k >> BVH_WIDTH_LOG2), 0);
+}
+
+/* The ray (o, d, |d| = dlen) against packed triangle `slot`: t, (u, v), or false. */
+bool bvh_triangle(int slot, vec3 o, vec3 d, float dlen, out float t, out vec2 uv)
+{
+  vec4 a = bvh_texel_triangles(3 * slot);
+  vec4 e1 = bvh_texel_triangles(3 * slot + 1);
+  vec4 e2 = bvh_texel_triangles(3 * slot + 2);
+  vec3 pv = cross(d, e2.xyz);
+  float det = dot(e1.xyz, pv);
+  t = BVH_FAR;
+  uv = vec2(0.0);
+  if (!(abs(det) > DET_EPSILON * e2.w * dlen)) {
+    return false;
+  }
+  float inv = 1.0 / det;
+  vec3 s = o - a.xyz;
+  float u = dot(s, pv) * inv;
+  if (u < 0.0 || u > 1.0) {
+    return false;
+  }
+  vec3 q = cross(s, e1.xyz);
+  float v = dot(d, q) * inv;
+  if (v < 0.0 || u + v > 1.0) {
+    return false;
+  }
+  t = dot(e2.xyz, q) * inv;
+  uv = vec2(u, v);
+  return true;
+}
+
+/* Threaded traversal: the packed slot of the nearest hit with tmin < t < tmax (any hit when
+ * any_hit), or -1; t_hit and uv of that hit. */
+int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_hit, out vec2 uv)
+{
+  vec3 safe = vec3(abs(d.x) > 1e-30 ? d.x : 1e-30, abs(d.y) > 1e-30 ? d.y : 1e-30,
+                   abs(d.z) > 1e-30 ? d.z : 1e-30);
+  vec3 inv = 1.0 / safe;
+  float dlen = length(d);
+  vec3 oinv = o * inv; /* slabs as lo·inv − o·inv: one multiply-add per axis */
+  float best = tmax;
+  int found = -1;
+  uv = vec2(0.0);
+  int node = 0;
+  while (node >= 0) {
+    vec4 lo = bvh_texel_nodes(2 * node);
+    vec4 hi = bvh_texel_nodes(2 * node + 1);
+    vec3 t0 = lo.xyz * inv - oinv;
+    vec3 t1 = hi.xyz * inv - oinv;
+    vec3 tn = min(t0, t1);
+    vec3 tf = max(t0, t1);
+    float enter = max(max(tn.x, tn.y), max(tn.z, tmin));
+    float leave = min(min(tf.x, tf.y), min(tf.z, best));
+    if (enter <= leave) {
+      if (hi.w < 0.0) {
+        node += 1;
+        continue;
+      }
+      int code = int(hi.w);
+      int first = code >> 4;
+      int last = first + (code & 15);
+      for (int slot = first; slot < last; slot++) {
+        float t;
+        vec2 tuv;
+        if (bvh_triangle(slot, o, d, dlen, t, tuv) && t > tmin && t < best) {
+          best = t;
+          found = slot;
+          uv = tuv;
+          if (any_hit) {
+            t_hit = t;
+            return found;
+          }
+        }
+      }
+    }
+    node = int(lo.w);
+  }
+  t_hit = found >= 0 ? best : BVH_FAR;
+  return found;
+}
+
+/* Is anything in the way between SHADOW_EPSILON and tmax − SHADOW_EPSILON (d unit)? */
+bool bvh_any_hit(vec3 o, vec3 d, float tmax)
+{
+  float t;
+  vec2 uv;
+  return bvh_trace(o, d, SHADOW_EPSILON, tmax - SHADOW_EPSILON, true, t, uv) >= 0;
+}
+
+/* Nearest hit with tmin < t < tmax: true and its distance, SceneTriangles index, packed slot
+ * (for bvh_triangle_* lookups) and barycentrics (point = v0 + u·e1 + v·e2). */
+bool bvh_closest_hit(vec3 o, vec3 d, float tmin, float tmax, out float t, out int triangle,
+                     out int slot, out vec2 uv)
+{
+  slot = bvh_trace(o, d, tmin, tmax, false, t, uv);
+  triangle = slot >= 0 ? int(bvh_texel_triangles(3 * slot + 1).w) : -1;
+  return slot >= 0;
+}
+
+int bvh_triangle_material(int slot)
+{
+  return int(bvh_texel_triangles(3 * slot).w);
+}
+
+/* Unit face normal of packed triangle `slot` (right-hand winding, as SceneTriangles.normals). */
+vec3 bvh_triangle_face_normal(int slot)
+{
+  vec3 n = cross(bvh_texel_triangles(3 * slot + 1).xyz, bvh_texel_triangles(3 * slot + 2).xyz);
+  float len = length(n);
+  return len > 0.0 ? n / len : vec3(0.0);
+}
+
+/* ------------------------------------------------------------ voxgi_addon/sampling.py */
+
+uint pcg_hash(uint v)
+{
+  uint state = v * 747796405u + 2891336453u;
+  uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+  return (word >> 22u) ^ word;
+}
+
+float unit_float(uint h)
+{
+  return float(h >> 8u) * (1.0 / 16777216.0);
+}
+
+uint point_stream(uint id, uint stream, uint seed)
+{
+  return pcg_hash(pcg_hash(id + seed * 0x9E3779B9u) + stream);
+}
+
+/* Stratum k of m×m of a point's stream (sampling.hashed_square). */
+vec2 hashed_stratum(uint state, int k, int m)
+{
+  vec2 jitter = vec2(unit_float(pcg_hash(state + uint(2 * k))),
+                     unit_float(pcg_hash(state + uint(2 * k + 1))));
+  return (vec2(float(k / m), float(k % m)) + jitter) / float(m);
+}
+
+float radical_inverse(uint b)
+{
+  b = (b << 16u) | (b >> 16u);
+  b = ((b & 0x55555555u) << 1u) | ((b & 0xAAAAAAAAu) >> 1u);
+  b = ((b & 0x33333333u) << 2u) | ((b & 0xCCCCCCCCu) >> 2u);
+  b = ((b & 0x0F0F0F0Fu) << 4u) | ((b & 0xF0F0F0F0u) >> 4u);
+  b = ((b & 0x00FF00FFu) << 8u) | ((b & 0xFF00FF00u) >> 8u);
+  return float(b >> 8u) * (1.0 / 16777216.0);
+}
+
+/* Point j of `count` of the rotated Hammersley set of a point's stream (sampling.hammersley). */
+vec2 hammersley(uint state, int j, int count)
+{
+  vec2 rotation = vec2(unit_float(pcg_hash(state)), unit_float(pcg_hash(state + 1u)));
+  vec2 u = vec2((float(j) + 0.5) / float(count), radical_inverse(uint(j))) + rotation;
+  return u - floor(u);
+}
+
+/* Shirley–Chiu map of [0, 1)² to the unit disc (direct_light.concentric_disk). */
+vec2 concentric_disk(vec2 s)
+{
+  float a = 2.0 * s.x - 1.0;
+  float b = 2.0 * s.y - 1.0;
+  if (a == 0.0 && b == 0.0) {
+    return vec2(0.0);
+  }
+  bool first = abs(a) > abs(b);
+  float r = first ? a : b;
+  float phi = first ? (M_PI_F / 4.0) * b / a : M_PI_F / 2.0 - (M_PI_F / 4.0) * a / b;
+  return r * vec2(cos(phi), sin(phi));
+}
+
+/* Tangents of unit w (sampling.perpendicular_basis). */
+void perpendicular_basis(vec3 w, out vec3 t, out vec3 b)
+{
+  vec3 helper = abs(w.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
+  t = normalize(cross(w, helper));
+  b = cross(w, t);
+}

@@ -1,0 +1,103 @@
+"""Deterministic per-point sample patterns that numpy and GLSL compute bit for bit.
+
+The GPU kernels (``render/shaders/bvh_common.glsl``) cannot share numpy's random generator, so
+wherever the numpy reference and a kernel must draw *the same* samples (area-light strata,
+the diffuse rays of ``indirect``) both derive them from a 32-bit integer hash of a per-point id
+(the pixel index, row 0 on top), a stream number (the light index, or a ray purpose) and the
+sample index. Everything is uint32 arithmetic with wrap-around, and a hash becomes a float as
+``(h >> 8) · 2⁻²⁴`` — exact in float32 — so both sides get identical values in [0, 1).
+
+* ``pcg_hash`` — the PCG-RXS-M-XS permutation of Jarzynski & Olano (JCGT 2020).
+* ``hashed_square`` — the jittered strata of ``direct_light.stratified_square`` with hashed
+  jitter: (N, K, 2) in [0, 1)², K = ceil(√samples)², stratum k = (k // m, k % m).
+* ``hammersley`` — the N-point Hammersley set ((j + ½)/N, radical inverse of j) shifted per
+  point by a hashed Cranley–Patterson rotation: stratified in x, low discrepancy in 2D, and
+  independent between pixels.
+* ``perpendicular_basis`` — the tangent frame ``direct_light`` builds around a direction (the
+  GLSL port makes the same choice of helper axis).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "hammersley",
+    "hashed_square",
+    "pcg_hash",
+    "perpendicular_basis",
+    "point_streams",
+    "radical_inverse",
+    "unit_float",
+]
+
+_GOLDEN = np.uint32(0x9E3779B9)
+
+
+def pcg_hash(v: np.ndarray) -> np.ndarray:
+    """PCG-RXS-M-XS 32-bit permutation of uint32 values (any shape), uint32."""
+    v = np.asarray(v, dtype=np.uint32)
+    with np.errstate(over="ignore"):
+        state = v * np.uint32(747796405) + np.uint32(2891336453)
+        word = ((state >> ((state >> np.uint32(28)) + np.uint32(4))) ^ state) * np.uint32(277803737)
+    return (word >> np.uint32(22)) ^ word
+
+
+def unit_float(h: np.ndarray) -> np.ndarray:
+    """uint32 hashes → float64 in [0, 1) with 24 bits (exact in float32)."""
+    return (np.asarray(h, np.uint32) >> np.uint32(8)).astype(np.float64) * (1.0 / (1 << 24))
+
+
+def point_streams(ids: np.ndarray, stream: int, seed: int = 0) -> np.ndarray:
+    """(N,) uint32 per-point hash state of ``stream``: pcg(pcg(id + seed·φ) + stream)."""
+    ids = np.asarray(ids).astype(np.uint32)
+    with np.errstate(over="ignore"):
+        h = pcg_hash(ids + np.uint32(seed) * _GOLDEN)
+        return pcg_hash(h + np.uint32(stream))
+
+
+def _values(state: np.ndarray, count: int) -> np.ndarray:
+    """(N, count) floats in [0, 1): value i of a point is unit(pcg(state + i))."""
+    with np.errstate(over="ignore"):
+        return unit_float(pcg_hash(state[:, None] + np.arange(count, dtype=np.uint32)[None]))
+
+
+def hashed_square(ids, stream: int, samples: int, seed: int = 0) -> np.ndarray:
+    """(N, K, 2) jittered strata in [0, 1)², K = m², m = ceil(√samples); the jitter of stratum
+    k's coordinate c is value 2k + c of the point's stream (``point_streams``)."""
+    m = max(1, math.ceil(math.sqrt(samples)))
+    k = np.arange(m * m)
+    cells = np.stack([k // m, k % m], axis=1).astype(np.float64)
+    jitter = _values(point_streams(ids, stream, seed), 2 * m * m).reshape(-1, m * m, 2)
+    return (cells[None] + jitter) / m
+
+
+def radical_inverse(j: np.ndarray) -> np.ndarray:
+    """Van der Corput radical inverse in base 2 of uint32 j, as float64 in [0, 1) (32 bits)."""
+    b = np.asarray(j, dtype=np.uint32)
+    b = ((b << np.uint32(16)) | (b >> np.uint32(16))).astype(np.uint32)
+    b = (((b & np.uint32(0x55555555)) << np.uint32(1)) | ((b & np.uint32(0xAAAAAAAA)) >> np.uint32(1)))
+    b = (((b & np.uint32(0x33333333)) << np.uint32(2)) | ((b & np.uint32(0xCCCCCCCC)) >> np.uint32(2)))
+    b = (((b & np.uint32(0x0F0F0F0F)) << np.uint32(4)) | ((b & np.uint32(0xF0F0F0F0)) >> np.uint32(4)))
+    b = (((b & np.uint32(0x00FF00FF)) << np.uint32(8)) | ((b & np.uint32(0xFF00FF00)) >> np.uint32(8)))
+    return (b >> np.uint32(8)).astype(np.float64) * (1.0 / (1 << 24))
+
+
+def hammersley(ids, stream: int, count: int, seed: int = 0) -> np.ndarray:
+    """(N, count, 2) rotated Hammersley points in [0, 1)²: point j of a pixel is
+    ``frac(((j + ½)/count, φ₂(j)) + (r0, r1))`` with (r0, r1) values 0, 1 of its stream."""
+    rotation = _values(point_streams(ids, stream, seed), 2)  # (N, 2)
+    j = np.arange(count)
+    base = np.stack([(j + 0.5) / count, radical_inverse(j)], axis=1)  # (count, 2)
+    u = base[None] + rotation[:, None]
+    return u - np.floor(u)
+
+
+def perpendicular_basis(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors (N, 3) orthogonal to unit vectors w (N, 3) and to each other (the helper
+    axis is x unless |w.x| ≥ 0.9, then y — the GLSL port makes the same choice)."""
+    helper = np.where(np.abs(w[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t = np.cross(w, helper)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    return t, np.cross(w, t)

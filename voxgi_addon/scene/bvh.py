@@ -1,0 +1,397 @@
+"""A bounding volume hierarchy over the scene's triangles, laid out for stackless GPU traversal.
+
+``build_bvh`` builds a binary BVH with binned SAH splits (``BINS`` centroid bins on the axis of
+largest centroid extent), level by level: every node of a level is split in the same few numpy
+calls, so the build costs O(T log T) array work and no per-node Python (100k triangles in about
+0.3 s). Leaves hold at most ``MAX_LEAF`` triangles; a node whose centroids all coincide is split
+at its median.
+
+The nodes are stored in depth-first order (left child first) as a *threaded* BVH: an interior
+node's first child is the next node, and every node has a "miss" link to the node that follows
+its subtree in depth-first order (-1 past the end). Traversal is then a loop without a stack::
+
+    node = 0
+    while node >= 0:
+        if the ray meets node's box (within [t_min, best t]):
+            if interior: node += 1; continue
+            test the leaf's triangles
+        node = miss[node]
+
+``pack_bvh`` turns a BVH into RGBA32F texels for ``render/shaders/bvh_common.glsl`` (2D textures
+``TEXTURE_WIDTH`` texels wide, texel k at (k mod width, k div width); integers are stored as
+float values, exact below 2²⁴). ``traverse`` is the numpy statement of the GLSL traversal
+(vectorised over rays; tests compare it with brute force and with ``raycast``).
+
+Units: world space, metres, as ``SceneTriangles``.
+"""
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import SceneTriangles
+from .raycast import SHADOW_EPSILON
+
+__all__ = [
+    "BINS",
+    "BVH",
+    "DET_EPSILON",
+    "MAX_LEAF",
+    "NODE_TEXELS",
+    "TEXTURE_WIDTH",
+    "TRIANGLE_TEXELS",
+    "BVHTextures",
+    "build_bvh",
+    "bvh_of",
+    "closest_hits",
+    "occluded",
+    "pack_bvh",
+    "traverse",
+]
+
+BINS = 16               # SAH bins per split
+MAX_LEAF = 8            # most triangles in a leaf (the leaf code keeps 4 bits for the count)
+TRAVERSAL_COST = 1.0    # SAH cost of visiting a node, relative to one triangle test
+TEXTURE_WIDTH = 4096    # texels per row of the packed textures (a power of two)
+NODE_TEXELS = 2         # (lo.xyz, miss), (hi.xyz, leaf code)
+TRIANGLE_TEXELS = 3     # (v0.xyz, material), (e1.xyz, triangle index), (e2.xyz, |e1|·|e2|)
+DET_EPSILON = 1e-12     # as raycast's Möller–Trumbore: |det| > ε·|e1|·|e2|·|d| or no hit
+_LEAF_SHIFT = 16        # leaf code = first · 16 + count
+_MAX_TRIANGLES = (1 << 24) // _LEAF_SHIFT
+_BOX_PAD = 1e-5         # node boxes grow by this fraction of the scene's size (float32 safety)
+
+
+@dataclass(frozen=True, eq=False)
+class BVH:
+    """A threaded BVH (see the module doc), nodes in depth-first order.
+
+    lo, hi : (N, 3) float64 node bounds in metres, padded by ``_BOX_PAD`` × the scene's size.
+    miss : (N,) int32 the node after this one's subtree in depth-first order, -1 = none.
+    first, count : (N,) int32 a leaf's triangles are ``order[first:first + count]``; interior
+        nodes have count 0 (and first -1). An interior node's children are node + 1 and
+        ``miss[node + 1]``.
+    order : (T,) int32 indices into the ``SceneTriangles``, grouped by leaf.
+    depth : levels of the tree (1 for a single leaf).
+    """
+
+    lo: np.ndarray
+    hi: np.ndarray
+    miss: np.ndarray
+    first: np.ndarray
+    count: np.ndarray
+    order: np.ndarray
+    depth: int
+
+    def __len__(self) -> int:
+        return len(self.miss)
+
+
+def _area(lo, hi):
+    e = np.maximum(hi - lo, 0.0)
+    return e[..., 0] * e[..., 1] + e[..., 1] * e[..., 2] + e[..., 2] * e[..., 0]
+
+
+def _ranges(start, count):
+    """Concatenated aranges [start_i, start_i + count_i) and the offset of each in the result."""
+    offsets = np.cumsum(count) - count
+    return np.repeat(start - offsets, count) + np.arange(int(count.sum())), offsets
+
+
+def _split_level(order, tlo, thi, cen, start, count, bins=BINS):
+    """Choose splits for a level's nodes with ``bins`` SAH bins. Returns (split (A,) bool,
+    left count (A,)) and reorders ``order`` in place so that each split node's left part
+    comes first."""
+    a = len(start)
+    pos, offsets = _ranges(start, count)
+    tri = order[pos]
+    seg = np.repeat(np.arange(a), count)
+    c = cen[tri]
+    cmin = np.minimum.reduceat(c, offsets, axis=0)
+    cmax = np.maximum.reduceat(c, offsets, axis=0)
+    ext = cmax - cmin
+    axis = np.argmax(ext, axis=1)
+    rows = np.arange(a)
+    e = ext[rows, axis]
+    value = c[np.arange(len(tri)), axis[seg]] - cmin[seg, axis[seg]]
+    scale = np.divide(bins, e, out=np.zeros_like(e), where=e > 0)
+    b = np.clip((value * scale[seg]).astype(np.int64), 0, bins - 1)
+    key = seg * bins + b
+    counts = np.bincount(key, minlength=a * bins).reshape(a, bins)
+    blo = np.full((3, a * bins), np.inf, tlo.dtype)
+    bhi = np.full((3, a * bins), -np.inf, thi.dtype)
+    lo_t, hi_t = tlo[tri].T, thi[tri].T
+    for k in range(3):  # ufunc.at is fast on contiguous 1D arrays of the values' dtype
+        np.minimum.at(blo[k], key, np.ascontiguousarray(lo_t[k]))
+        np.maximum.at(bhi[k], key, np.ascontiguousarray(hi_t[k]))
+    blo, bhi = blo.T.reshape(a, bins, 3), bhi.T.reshape(a, bins, 3)
+    left_n = np.cumsum(counts, axis=1)[:, :-1]
+    right_n = count[:, None] - left_n
+    left_area = _area(np.minimum.accumulate(blo, axis=1), np.maximum.accumulate(bhi, axis=1))[:, :-1]
+    right_area = _area(np.minimum.accumulate(blo[:, ::-1], axis=1),
+                       np.maximum.accumulate(bhi[:, ::-1], axis=1))[:, ::-1][:, 1:]
+    with np.errstate(invalid="ignore"):
+        cost = np.where((left_n > 0) & (right_n > 0),
+                        left_area * left_n + right_area * right_n, np.inf)
+    best = np.argmin(cost, axis=1)
+    best_cost = cost[rows, best]
+    parent = np.maximum(_area(blo.min(axis=1), bhi.max(axis=1)), 1e-30)
+    sah = np.isfinite(best_cost)
+    leaf = (count <= 1) | ((count <= MAX_LEAF) &
+                           (~sah | (count <= TRAVERSAL_COST + best_cost / parent)))
+    split = ~leaf
+    median = split & ~sah  # every centroid in one place: split the list in half
+    left = np.where(sah, left_n[rows, np.minimum(best, bins - 2)], count // 2)
+    # Reorder the split nodes' triangles: left side first, stable within each side.
+    side = np.where(median[seg], (np.arange(len(tri)) - offsets[seg]) >= count[seg] // 2,
+                    b > best[seg])
+    moving = split[seg]
+    key2 = seg[moving] * 2 + side[moving]
+    order[pos[moving]] = tri[moving][np.argsort(key2, kind="stable")]
+    return split, left
+
+
+def build_bvh(tris: SceneTriangles) -> BVH:
+    """A threaded binned-SAH ``BVH`` over ``tris`` (see the module doc)."""
+    positions = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)
+    t = len(positions)
+    if t > _MAX_TRIANGLES:
+        raise ValueError(f"{t} triangles: the packed BVH holds at most {_MAX_TRIANGLES}")
+    tlo, thi = positions.min(axis=1), positions.max(axis=1)
+    # The split search works in float32 (half the memory traffic); bounds are float64.
+    blo32, bhi32 = tlo.astype(np.float32), thi.astype(np.float32)
+    cen = 0.5 * (blo32 + bhi32)
+    order = np.arange(t, dtype=np.int64)
+    # Nodes in creation (breadth-first) order.
+    starts, counts, lefts, levels = [np.zeros(1, np.int64)], [np.array([t], np.int64)], [], []
+    level_start = np.zeros(1, np.int64)
+    level_count = np.array([t], np.int64)
+    level_ids = np.zeros(1, np.int64)
+    next_id = 1
+    while len(level_ids):
+        levels.append(level_ids)
+        if t == 0:
+            lefts.append(np.full(1, -1, np.int64))
+            break
+        split = np.zeros(len(level_ids), bool)
+        left = np.zeros(len(level_ids), np.int64)
+        # Small nodes get fewer bins: the per-bin arrays, not the triangles, dominate deep levels.
+        groups = ((level_count > 4 * BINS, BINS),
+                  ((level_count > MAX_LEAF) & (level_count <= 4 * BINS), BINS // 2),
+                  ((level_count > 1) & (level_count <= MAX_LEAF), BINS // 4))
+        for group, bins in groups:
+            if group.any():
+                split[group], left[group] = _split_level(order, blo32, bhi32, cen, level_start[group],
+                                                         level_count[group], bins)
+        parents = np.flatnonzero(split)
+        child = np.full(len(level_ids), -1, np.int64)
+        child[parents] = next_id + 2 * np.arange(len(parents))
+        lefts.append(child)
+        s, c, n = level_start[parents], level_count[parents], left[parents]
+        level_start = np.stack([s, s + n], axis=1).ravel()
+        level_count = np.stack([n, c - n], axis=1).ravel()
+        level_ids = next_id + np.arange(2 * len(parents), dtype=np.int64)
+        next_id += len(level_ids)
+        starts.append(level_start)
+        counts.append(level_count)
+    start = np.concatenate(starts)
+    count = np.concatenate(counts)
+    left_child = np.concatenate(lefts)
+    total = len(start)
+    interior = left_child >= 0
+    # Subtree sizes bottom-up, then depth-first (pre-order) positions top-down.
+    size = np.ones(total, np.int64)
+    for ids in reversed(levels):
+        inner = ids[interior[ids]]
+        size[inner] = 1 + size[left_child[inner]] + size[left_child[inner] + 1]
+    pre = np.zeros(total, np.int64)
+    for ids in levels:
+        inner = ids[interior[ids]]
+        pre[left_child[inner]] = pre[inner] + 1
+        pre[left_child[inner] + 1] = pre[inner] + 1 + size[left_child[inner]]
+    miss = pre + size
+    miss[miss >= total] = -1
+    # Bounds: leaves from their triangle ranges, interior nodes from their children (bottom-up).
+    lo = np.zeros((total, 3))
+    hi = np.zeros((total, 3))
+    if t:
+        leaves = np.flatnonzero(~interior)
+        pos, offsets = _ranges(start[leaves], count[leaves])
+        lo[leaves] = np.minimum.reduceat(tlo[order[pos]], offsets, axis=0)
+        hi[leaves] = np.maximum.reduceat(thi[order[pos]], offsets, axis=0)
+        for ids in reversed(levels):
+            inner = ids[interior[ids]]
+            lo[inner] = np.minimum(lo[left_child[inner]], lo[left_child[inner] + 1])
+            hi[inner] = np.maximum(hi[left_child[inner]], hi[left_child[inner] + 1])
+        scene_lo, scene_hi = lo[0], hi[0]
+        pad = _BOX_PAD * (float(np.max(scene_hi - scene_lo))
+                          + float(np.abs(np.r_[scene_lo, scene_hi]).max())) + 1e-12
+        lo, hi = lo - pad, hi + pad
+    out = np.empty(total, np.int64)
+    out[pre] = np.arange(total)  # depth-first position → creation id
+    leaf = ~interior[out]
+    return BVH(lo=lo[out], hi=hi[out], miss=miss[out].astype(np.int32),
+               first=np.where(leaf, start[out], -1).astype(np.int32),
+               count=np.where(leaf, count[out], 0).astype(np.int32),
+               order=order.astype(np.int32), depth=len(levels))
+
+
+_BVHS: weakref.WeakKeyDictionary[SceneTriangles, BVH] = weakref.WeakKeyDictionary()
+
+
+def bvh_of(tris: SceneTriangles) -> BVH:
+    """``build_bvh(tris)``, cached per ``SceneTriangles`` object."""
+    bvh = _BVHS.get(tris)
+    if bvh is None:
+        bvh = _BVHS[tris] = build_bvh(tris)
+    return bvh
+
+
+# --------------------------------------------------------------------------- textures
+
+@dataclass(frozen=True, eq=False)
+class BVHTextures:
+    """RGBA32F texel arrays for ``bvh_common.glsl``, each (rows, TEXTURE_WIDTH, 4) float32.
+
+    nodes : 2 texels per node: (lo.xyz, miss link), (hi.xyz, leaf code) with leaf code =
+        first · 16 + count (first indexes the packed triangles) or -1 for an interior node.
+    triangles : 3 texels per triangle, in leaf order: (v0.xyz, material index), (e1.xyz,
+        index into the SceneTriangles), (e2.xyz, |e1|·|e2|) — v0 and the edges in metres.
+    normals : 3 texels per triangle, in leaf order: the shading normals at v0, v1, v2 (the
+        face normal where the triangles carry no corner normals), w = 0.
+    node_count, triangle_count : how many are packed (rows are zero-padded).
+    """
+
+    nodes: np.ndarray
+    triangles: np.ndarray
+    normals: np.ndarray
+    node_count: int
+    triangle_count: int
+
+    @property
+    def nbytes(self) -> int:
+        return self.nodes.nbytes + self.triangles.nbytes + self.normals.nbytes
+
+
+def _rows(texels: np.ndarray) -> np.ndarray:
+    """(K, 4) texels → (rows, TEXTURE_WIDTH, 4) float32, zero-padded (at least one row)."""
+    rows = max(1, -(-len(texels) // TEXTURE_WIDTH))
+    out = np.zeros((rows * TEXTURE_WIDTH, 4), np.float32)
+    out[:len(texels)] = texels
+    return out.reshape(rows, TEXTURE_WIDTH, 4)
+
+
+def pack_bvh(bvh: BVH, tris: SceneTriangles) -> BVHTextures:
+    """The texel arrays of ``bvh`` over ``tris`` (see ``BVHTextures``)."""
+    n = len(bvh)
+    nodes = np.zeros((n, 2, 4), np.float32)
+    nodes[:, 0, :3] = bvh.lo
+    nodes[:, 0, 3] = bvh.miss
+    nodes[:, 1, :3] = bvh.hi
+    nodes[:, 1, 3] = np.where(bvh.first >= 0, bvh.first.astype(np.int64) * _LEAF_SHIFT + bvh.count, -1)
+    order = bvh.order
+    p = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)[order]
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    t = len(order)
+    packed = np.zeros((t, 3, 4), np.float32)
+    packed[:, 0, :3], packed[:, 0, 3] = p[:, 0], np.asarray(tris.materials)[order]
+    packed[:, 1, :3], packed[:, 1, 3] = e1, order
+    packed[:, 2, :3] = e2
+    packed[:, 2, 3] = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+    normals = np.zeros((t, 3, 4), np.float32)
+    if tris.corner_normals is not None:
+        normals[..., :3] = np.asarray(tris.corner_normals)[order]
+    else:
+        normals[..., :3] = np.asarray(tris.normals)[order][:, None]
+    return BVHTextures(_rows(nodes.reshape(-1, 4)), _rows(packed.reshape(-1, 4)),
+                       _rows(normals.reshape(-1, 4)), n, t)
+
+
+# --------------------------------------------------------------------------- numpy traversal
+
+def _intersect(p, o, d):
+    """Double-sided Möller–Trumbore of rays o, d (P, 3) with triangles p (P, 3, 3) → t, u, v
+    (t = inf on a miss), with raycast's determinant test."""
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    pv = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, pv)
+    scale = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1) * np.linalg.norm(d, axis=1)
+    ok = np.abs(det) > DET_EPSILON * scale
+    inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
+    s = o - p[:, 0]
+    u = np.einsum("ij,ij->i", s, pv) * inv
+    q = np.cross(s, e1)
+    v = np.einsum("ij,ij->i", d, q) * inv
+    t = np.einsum("ij,ij->i", e2, q) * inv
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1)
+    return np.where(hit, t, np.inf), u, v
+
+
+def traverse(bvh: BVH, tris: SceneTriangles, origins, directions, t_min=0.0, t_max=np.inf,
+             any_hit: bool = False):
+    """The stackless traversal of ``bvh_common.glsl`` in numpy (float64), vectorised over rays.
+
+    origins, directions : (N, 3); t_min, t_max : scalar or (N,); hits with t_min < t < t_max
+    count. Returns t (N,) (inf = miss), tri (N,) int64 (-1), u, v (N,) as
+    ``raycast.closest_hits``; with ``any_hit`` a ray stops at its first hit (not the nearest).
+    """
+    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    n = len(o)
+    lo_t = np.broadcast_to(np.asarray(t_min, np.float64), (n,))
+    best = np.broadcast_to(np.asarray(t_max, np.float64), (n,)).copy()
+    tri = np.full(n, -1, np.int64)
+    bu, bv = np.zeros(n), np.zeros(n)
+    if len(bvh.order) == 0:
+        return np.full(n, np.inf), tri, bu, bv
+    positions = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)
+    with np.errstate(divide="ignore"):
+        inv = 1.0 / np.where(np.abs(d) > 1e-30, d, 1e-30)
+    node = np.zeros(n, np.int64)
+    live = np.arange(n)
+    while len(live):
+        k = node[live]
+        with np.errstate(invalid="ignore"):
+            t0 = (bvh.lo[k] - o[live]) * inv[live]
+            t1 = (bvh.hi[k] - o[live]) * inv[live]
+        enter = np.maximum(np.minimum(t0, t1).max(axis=1), lo_t[live])
+        leave = np.minimum(np.maximum(t0, t1).min(axis=1), best[live])
+        meets = enter <= leave
+        count = np.where(meets, bvh.count[k], 0)
+        inner = meets & (bvh.first[k] < 0)
+        if count.any():
+            ray = np.repeat(np.arange(len(live)), count)
+            slot = np.repeat(bvh.first[k], count) + np.arange(int(count.sum())) - \
+                np.repeat(np.cumsum(count) - count, count)
+            which = bvh.order[slot]
+            r = live[ray]
+            t, u, v = _intersect(positions[which], o[r], d[r])
+            # Leaf triangles in order, as the GLSL loop meets them (t < the running best).
+            for j in range(int(count.max())):
+                sel = np.flatnonzero((slot - np.repeat(bvh.first[k], count)) == j)
+                rj = r[sel]
+                good = (t[sel] > lo_t[rj]) & (t[sel] < best[rj])
+                if any_hit:
+                    good &= tri[rj] < 0
+                g = sel[good]
+                best[r[g]], tri[r[g]], bu[r[g]], bv[r[g]] = t[g], which[g], u[g], v[g]
+        node[live] = np.where(inner, k + 1, bvh.miss[k])
+        done = node[live] < 0
+        if any_hit:
+            done |= tri[live] >= 0
+        live = live[~done]
+    t = np.where(tri >= 0, best, np.inf)
+    return t, tri, np.where(tri >= 0, bu, 0.0), np.where(tri >= 0, bv, 0.0)
+
+
+def closest_hits(tris: SceneTriangles, origins, directions, t_min=0.0, t_max=np.inf):
+    """``raycast.closest_hits`` through the (cached) BVH of ``tris``."""
+    return traverse(bvh_of(tris), tris, origins, directions, t_min, t_max)
+
+
+def occluded(tris: SceneTriangles, origins, directions, max_t, epsilon: float = SHADOW_EPSILON):
+    """``raycast.occluded`` through the (cached) BVH: any hit with ε < t < max_t − ε."""
+    max_t = np.asarray(max_t, dtype=np.float64) - epsilon
+    t, _, _, _ = traverse(bvh_of(tris), tris, origins, directions, epsilon, max_t, any_hit=True)
+    return np.isfinite(t)
