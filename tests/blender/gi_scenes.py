@@ -327,6 +327,24 @@ def build_thin_wall_rooms(scene):
                            "camera": camera})
 
 
+def use_lambert_materials():
+    """Replace every material's Principled BSDF by a Diffuse BSDF of its base colour (roughness
+    0: Lambert). For checking units: with Principled's default dielectric layer Cycles'
+    diffuse weight is the base colour × (1 − the layer's albedo), and the light bounced off a
+    surface includes its glossy lobe; a Lambert surface reflects exactly base colour / π."""
+    for material in bpy.data.materials:
+        tree = material.node_tree
+        if tree is None:
+            continue
+        for bsdf in [n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"]:
+            diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+            diffuse.inputs["Color"].default_value = bsdf.inputs["Base Color"].default_value
+            diffuse.inputs["Roughness"].default_value = 0.0
+            for link in list(bsdf.outputs["BSDF"].links):
+                tree.links.new(diffuse.outputs["BSDF"], link.to_socket)
+            tree.nodes.remove(bsdf)
+
+
 SCENES = {
     "cornell_far": build_cornell_far,
     "columned_hall": build_columned_hall,
