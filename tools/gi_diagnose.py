@@ -1,7 +1,7 @@
 """Error budget of VoxGI's Diffuse Indirect: wrong geometry or wrong radiance?
 
-Usage: ``.venv/bin/python tools/gi_diagnose.py [--scenes NAME ...] [--pixels 300] [--rays 576]
-[--json tests/data/gi_refs/gi_diagnosis.json]``
+Usage: ``.venv/bin/python tools/gi_diagnose.py [--scenes NAME ...] [--pixels 300] [--rays 1024]
+[--lambert SPP] [--variants] [--json tests/data/gi_refs/gi_diagnosis.json]``
 
 For each scene of ``tests/blender/gi_scenes.py`` (references from ``tools/make_gi_references.py``)
 this renders the GI preview with default settings (``voxgi.render_preview``), keeps the
@@ -24,6 +24,11 @@ by exact hit distance in voxels of the finest cascade at the pixel (< 1, 1–2, 
 miss) to show where (ii) and (iii) lose their accuracy, and two hybrids are scored:
 ``exact<N + (ii)`` (exact radiance for hits nearer than N voxels, voxel radiance beyond) and
 ``exact<N + (iii)`` (exact rays up to N voxels, then a voxel march from there).
+
+``--lambert SPP`` also renders the scene with Lambert materials and compares (i) with it (units);
+``--variants`` re-traces the whole preview (numpy tracer) with the voxel radiance injected with
+lights evaluated at the voxel centres (``inject_at_centres``), and that × 0.93 (Cycles' diffuse
+weight of a default Principled BSDF), and scores them against Cycles.
 """
 from __future__ import annotations
 
@@ -227,7 +232,7 @@ def binned(values, bins):
 
 
 def diagnose(name, pixels, rays, seed=0, refs=REPO_ROOT / "tests" / "data" / "gi_refs",
-             lambert_samples=0):
+             lambert_samples=0, variants=False):
     import bpy
     import gi_scenes
     from voxgi.operators.scene_snapshot import take_snapshot
@@ -247,6 +252,8 @@ def diagnose(name, pixels, rays, seed=0, refs=REPO_ROOT / "tests" / "data" / "gi
     seen = primary_visibility(tris, snapshot.camera, w, h)
     both = seen.hit & (reference["Alpha"] > 0.5) & (preview["Diffuse Color"].sum(-1) > 0)
     preview_errors = {p: relative_l1(preview[p], reference[p], both) for p in PREVIEW_PASSES}
+    preview_errors["indirect mean / Cycles"] = float(preview["Diffuse Indirect"][both].sum()
+                                                     / reference["Diffuse Indirect"][both].sum())
 
     rng = np.random.default_rng(seed)
     flat = np.flatnonzero(both.ravel())
@@ -298,8 +305,9 @@ def diagnose(name, pixels, rays, seed=0, refs=REPO_ROOT / "tests" / "data" / "gi
     L_ii, L_ii_iso = voxels.radiance(which, cell, d)
     from voxgi.voxgi_addon.svo import build_octree
 
-    centred = build_octree(state.cascades, inject_at_centres(state, snapshot),
-                           state.octree.dense_depth, one_sided_leaves=True)
+    centred_radiance = inject_at_centres(state, snapshot)
+    centred = build_octree(state.cascades, centred_radiance, state.octree.dense_depth,
+                           one_sided_leaves=True)
     L_ii_c = VoxelScene(state, centred).radiance(which, cell, d)[0]
     no_voxel_share = float(((which < 0) & hit).sum() / max(hit.sum(), 1))
 
@@ -363,6 +371,30 @@ def diagnose(name, pixels, rays, seed=0, refs=REPO_ROOT / "tests" / "data" / "gi
     base = albedo_table[np.where((mat >= 0) & (mat < len(albedo_table) - 1), mat,
                                  len(albedo_table) - 1)]
     color_ratio = float(cycles_color.sum() / max(base.sum(), 1e-30))
+    preview_variants = {}
+    if variants:  # the whole preview again (numpy tracer) with other voxel radiance
+        from voxgi.voxgi_addon.conetrace import ConeSettings
+        from voxgi.voxgi_addon.gi_update import GIState
+        from voxgi.voxgi_addon.preview import render_passes
+
+        for label, scale in (("numpy tracer, as injected", None),
+                             ("lights at voxel centres", 1.0),
+                             ("lights at voxel centres, albedo x 0.93", 0.93)):
+            if scale is None:
+                octree = state.octree
+            else:
+                octree = build_octree(state.cascades, [r * scale for r in centred_radiance],
+                                      state.octree.dense_depth, one_sided_leaves=True)
+            variant = GIState(state.grids, state.cascades, state.radiance, octree)
+            t1 = time.perf_counter()
+            passes, _ = render_passes(snapshot, variant, w, h, ConeSettings(), light_samples=16)
+            preview_variants[label] = {
+                "Diffuse Indirect": relative_l1(passes["Diffuse Indirect"],
+                                                reference["Diffuse Indirect"], both),
+                "Combined": relative_l1(passes["Combined"], reference["Combined"], both),
+                "indirect mean / Cycles": float(passes["Diffuse Indirect"][both].sum()
+                                                / reference["Diffuse Indirect"][both].sum()),
+                "seconds": round(time.perf_counter() - t1, 1)}
     lambert = {}
     if lambert_samples:  # units check: the same scene with Lambert materials, Cycles vs (i)
         from make_gi_references import render
@@ -382,6 +414,7 @@ def diagnose(name, pixels, rays, seed=0, refs=REPO_ROOT / "tests" / "data" / "gi
                                                              / np.abs(lam_direct).sum())}
     return {
         "scene": name, "pixels": int(P), "rays": int(R), "tracer": tracer, "lambert": lambert,
+        "preview_variants": preview_variants,
         "preview_seconds": round(preview_seconds, 2),
         "voxel_span_at_pixels": {"median": float(np.median(span)), "min": float(span.min()),
                                  "max": float(span.max())},
@@ -414,6 +447,8 @@ def print_report(result):
         print(f"| ({label}) bias | " + " | ".join("—" if x is None else f"{x:+.0%}" for x in b["bias"]) + " |")
     print("hybrids: " + "; ".join(f"N={k}: " + ", ".join(f"{a} {b:.3f}" for a, b in v.items())
                                   for k, v in r["hybrids"].items()))
+    for label, v in r.get("preview_variants", {}).items():
+        print(f"preview variant '{label}': " + ", ".join(f"{k} {x:.3f}" for k, x in v.items()))
     if r["lambert"]:
         print("Lambert check: " + ", ".join(f"{k} {v:.4g}" for k, v in r["lambert"].items()))
     print(f"no voxel at exact hit: {r['no_voxel_at_exact_hit']:.3%}; Cycles Diffuse Color / base "
@@ -427,7 +462,9 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="*", default=list(gi_scenes.SCENES))
     parser.add_argument("--pixels", type=int, default=300)
-    parser.add_argument("--rays", type=int, default=576)
+    parser.add_argument("--rays", type=int, default=1024)
+    parser.add_argument("--variants", action="store_true",
+                        help="re-trace the preview with the injection variants (numpy tracer)")
     parser.add_argument("--json", type=pathlib.Path)
     parser.add_argument("--lambert", type=int, default=0, metavar="SPP",
                         help="also render the scene with Lambert materials at SPP samples and "
@@ -439,7 +476,7 @@ def main(argv=None):
         results = json.loads(args.json.read_text())
     for name in args.scenes:
         result = diagnose(name, args.pixels, args.rays, refs=args.refs,
-                          lambert_samples=args.lambert)
+                          lambert_samples=args.lambert, variants=args.variants)
         print_report(result)
         results[name] = result
         if args.json:
