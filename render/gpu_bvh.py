@@ -26,7 +26,7 @@ from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
 from ..voxgi_addon.scene.bvh import DET_EPSILON, TEXTURE_WIDTH, build_bvh, pack_bvh
 from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
-from .gpu_shaders import LOCAL_SIZE, SHADER_DIR
+from .gpu_shaders import LOCAL_SIZE, build_compute
 from .gpu_tracer import read_texture
 from .gpu_volume import float_texture
 
@@ -39,7 +39,12 @@ KERNELS = {
     "bvh_indirect": (("bvh_lights", "bvh_indirect"),
                      _BVH + ("bvh_normals", "lights", "materials", "gbuffer_position",
                              "gbuffer_normal"), ("sampling", "world")),
+    "bvh_gather": (("pixels", "bvh_lights", "bvh_gather"),
+                   _BVH + ("bvh_normals", "lights", "materials", "gbuffer_position",
+                           "gbuffer_normal"), ("sampling", "world", "grid")),
 }
+# Kernels with more than one output image (the others write ``out_image``).
+OUTPUTS = {"bvh_gather": ("out_image", "out_variance")}
 _shaders: dict[str, object] = {}
 
 
@@ -47,22 +52,12 @@ def bvh_shader(kernel: str):
     """The cached compute shader of ``kernel`` (see ``KERNELS``)."""
     if kernel not in _shaders:
         files, samplers, constants = KERNELS[kernel]
-        info = gpu.types.GPUShaderCreateInfo()
-        info.local_group_size(LOCAL_SIZE, LOCAL_SIZE, 1)
-        info.define("BVH_WIDTH_LOG2", str(int(math.log2(TEXTURE_WIDTH))))
-        info.define("SHADOW_EPSILON", repr(float(SHADOW_EPSILON)))
-        info.define("SURFACE_EPSILON", repr(float(SURFACE_EPSILON)))
-        info.define("DET_EPSILON", repr(float(DET_EPSILON)))
-        info.define("RAY_STREAM", f"{RAY_STREAM}u")
-        for slot, name in enumerate(samplers):
-            info.sampler(slot, "FLOAT_2D", name)
-        for name in constants:
-            info.push_constant("VEC4", name)
-        info.image(0, "RGBA32F", "FLOAT_2D", "out_image", qualifiers={"WRITE"})
-        source = "".join((SHADER_DIR / f"{name}.glsl").read_text()
-                         for name in ("bvh_common",) + files)
-        info.compute_source(source)
-        _shaders[kernel] = gpu.shader.create_from_info(info)
+        defines = {"BVH_WIDTH_LOG2": str(int(math.log2(TEXTURE_WIDTH))),
+                   "SHADOW_EPSILON": repr(float(SHADOW_EPSILON)),
+                   "SURFACE_EPSILON": repr(float(SURFACE_EPSILON)),
+                   "DET_EPSILON": repr(float(DET_EPSILON)), "RAY_STREAM": f"{RAY_STREAM}u"}
+        _shaders[kernel] = build_compute(("bvh_common",) + files, samplers, constants,
+                                         OUTPUTS.get(kernel, ("out_image",)), defines)
     return _shaders[kernel]
 
 
@@ -134,19 +129,22 @@ def shared_bvh() -> GPUBVH:
 
 def dispatch_bvh(kernel: str, inputs: dict[str, object], width: int, height: int,
                  constants: dict[str, tuple] | None = None):
-    """Run ``kernel`` over a width × height RGBA32F output texture and return it."""
+    """Run ``kernel`` over width × height RGBA32F output texture(s) and return it (a tuple for
+    the kernels of ``OUTPUTS``)."""
     shader = bvh_shader(kernel)
     _, samplers, names = KERNELS[kernel]
-    out = gpu.types.GPUTexture((width, height), format="RGBA32F")
+    outputs = OUTPUTS.get(kernel, ("out_image",))
+    images = [gpu.types.GPUTexture((width, height), format="RGBA32F") for _ in outputs]
     shader.bind()
     for name in samplers:
         shader.uniform_sampler(name, inputs[name])
     for name in names:
         value = (constants or {}).get(name, (0.0, 0.0, 0.0, 0.0))
         shader.uniform_float(name, tuple(float(v) for v in value))
-    shader.image("out_image", out)
+    for name, image in zip(outputs, images):
+        shader.image(name, image)
     gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
-    return out
+    return images[0] if len(images) == 1 else tuple(images)
 
 
 def lights_texture(lights):
@@ -227,3 +225,11 @@ def sample_patterns(width: int, height: int) -> np.ndarray:
               "ray_direction": rays}
     return read_texture(dispatch_bvh("bvh_probe", inputs, width, height,
                                      {"mode": (2.0, 0, 0, 0)})).reshape(-1, 4)
+
+
+def release() -> None:
+    """Drop the cached shaders and the shared BVH textures (docs/gi_pipeline.md, "GPU resources
+    at exit")."""
+    global _shared
+    _shaders.clear()
+    _shared = None

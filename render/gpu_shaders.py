@@ -22,18 +22,18 @@ KERNELS = {
     "shadow": ("gbuffer_position", "gbuffer_normal"),
     "upsample": ("gbuffer_position", "gbuffer_normal", "low_image"),
     "probe": ("gbuffer_position", "gbuffer_normal", "gbuffer_view"),  # tests: raw samples
-    "denoise": ("gbuffer_position", "gbuffer_normal", "low_image"),
 }
 # Kernel name → its VEC4 push constants.
 PUSH_CONSTANTS = {"shadow": ("light_position", "light_size"), "diffuse_ao": ("sampling",),
-                  "glossy": ("sampling",), "upsample": ("sampling",), "denoise": ("sampling",)}
+                  "glossy": ("sampling",), "upsample": ("sampling",)}
 _cache: dict[str, object] = {}
 
 
 def kernel_source(kernel: str) -> str:
-    """The compute source of ``kernel``: the shared march, then the kernel's ``main``."""
-    common = (SHADER_DIR / "cone_common.glsl").read_text()
-    return common + (SHADER_DIR / f"{kernel}.glsl").read_text()
+    """The compute source of ``kernel``: the pixel mapping, the shared march, then the kernel's
+    ``main``."""
+    return "".join((SHADER_DIR / f"{name}.glsl").read_text()
+                   for name in ("pixels", "cone_common", kernel))
 
 
 def compute_shader(kernel: str):
@@ -57,6 +57,25 @@ def compute_shader(kernel: str):
         info.compute_source(kernel_source(kernel))
         _cache[key] = gpu.shader.create_from_info(info)
     return _cache[key]
+
+
+def build_compute(files: tuple[str, ...], samplers: tuple[str, ...], constants: tuple[str, ...],
+                  outputs: tuple[str, ...] = ("out_image",), defines: dict[str, str] | None = None):
+    """A compute shader from ``shaders/<file>.glsl`` sources in order: 2D float ``samplers``,
+    VEC4 push ``constants``, write-only RGBA32F 2D images ``outputs``, ``defines``; work groups
+    of LOCAL_SIZE × LOCAL_SIZE."""
+    info = gpu.types.GPUShaderCreateInfo()
+    info.local_group_size(LOCAL_SIZE, LOCAL_SIZE, 1)
+    for name, value in (defines or {}).items():
+        info.define(name, value)
+    for slot, name in enumerate(samplers):
+        info.sampler(slot, "FLOAT_2D", name)
+    for name in constants:
+        info.push_constant("VEC4", name)
+    for slot, name in enumerate(outputs):
+        info.image(slot, "RGBA32F", "FLOAT_2D", name, qualifiers={"WRITE"})
+    info.compute_source("".join((SHADER_DIR / f"{name}.glsl").read_text() for name in files))
+    return gpu.shader.create_from_info(info)
 
 
 def release() -> None:

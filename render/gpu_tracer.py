@@ -39,39 +39,3 @@ def dispatch(kernel: str, volume, inputs: dict[str, object], width: int, height:
     gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
     return out
 
-
-def denoise(low, gbuffer_inputs: dict[str, object], stride: int, width: int, height: int,
-            iterations: int = 4, volume=None):
-    """The edge-aware à-trous filter (``shaders/denoise.glsl``, the port of
-    ``voxgi_addon.preview.denoise.atrous_filter``) over a reduced-resolution gather texture
-    ``low`` (RGBA32F: mean RGB, variance of the mean's luminance) whose cells are the pixels
-    ``traced_pixel`` picks in a ``width`` × ``height`` G-buffer; returns the filtered texture."""
-    volume = volume or _unused_volume()
-    for it in range(iterations):
-        sampling = {"sampling": (stride, width, height, 1 << it)}
-        low = dispatch("denoise", volume, {**gbuffer_inputs, "low_image": low}, low.width,
-                       low.height, sampling)
-    return low
-
-
-class _NoVolume:
-    """1-texel stand-ins for the atlas and parameter table of kernels that do not read them."""
-
-    def __init__(self):
-        zero = gpu.types.Buffer("FLOAT", 4, [0.0] * 4)
-        self.atlas = gpu.types.GPUTexture((1, 1, 1), format="RGBA16F", data=zero)
-        self.params = gpu.types.GPUTexture((1, 1), format="RGBA32F", data=zero)
-
-
-_no_volume: list[_NoVolume] = []
-
-
-def _unused_volume() -> _NoVolume:
-    if not _no_volume:
-        _no_volume.append(_NoVolume())
-    return _no_volume[0]
-
-
-def release() -> None:
-    """Drop the stand-in textures (docs/gi_pipeline.md, "GPU resources at exit")."""
-    _no_volume.clear()

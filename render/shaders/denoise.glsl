@@ -1,8 +1,9 @@
-/* One pass of the edge-aware à-trous filter (voxgi_addon/preview/denoise.py, ported line for
- * line) over the reduced-resolution gather: low_image holds (mean RGB, variance of the mean's
- * luminance); taps 2^i cells apart, B3-spline weights × same-surface terms (normal^32, plane)
- * × exp(−|Δluminance| / (4·√variance + 1e-6)). Variance is filtered with squared weights.
- * sampling = (stride, full width, full height, tap step); low_image rows count from the bottom. */
+/* One pass of the edge-aware à-trous filter (voxgi_addon/preview/denoise.py atrous_filter,
+ * ported line for line) over the reduced-resolution gather. low_image = (light rgb, AO),
+ * low_variance = (var of the light's luminance mean, var of the AO mean); taps 2^i cells apart,
+ * B3-spline weights × same-surface terms (normal^32, plane) × per signal
+ * exp(−|Δ| / (4·√variance + 1e-6)). Variances are filtered with squared weights.
+ * grid = (stride, full width, full height, tap step); low-resolution rows count from the bottom. */
 const float KERNEL[5] = float[5](1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0);
 const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
 
@@ -13,22 +14,24 @@ void main()
   if (cell.x >= low.x || cell.y >= low.y) {
     return;
   }
-  int stride = int(sampling.x);
-  ivec2 full = ivec2(sampling.yz);
-  int step = int(sampling.w);
+  int stride = int(grid.x);
+  ivec2 full = ivec2(grid.yz);
+  int step = int(grid.w);
   vec4 centre = texelFetch(low_image, cell, 0);
+  vec4 centre_var = texelFetch(low_variance, cell, 0);
   ivec2 px = traced_pixel(low.y - 1 - cell.y, cell.x, stride, full);
   vec4 position = texelFetch(gbuffer_position, px, 0);
   if (position.w < 0.5) {
     imageStore(out_image, cell, centre);
+    imageStore(out_variance, cell, centre_var);
     return;
   }
   vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
-  float lum = dot(centre.rgb, LUMINANCE);
-  float scale = 4.0 * sqrt(max(centre.a, 0.0)) + 1e-6;
-  vec3 total = vec3(0.0);
-  float total_var = 0.0;
-  float weight = 0.0;
+  vec2 signal = vec2(dot(centre.rgb, LUMINANCE), centre.a);
+  vec2 scale = 4.0 * sqrt(max(centre_var.xy, vec2(0.0))) + 1e-6;
+  vec4 total = vec4(0.0);
+  vec2 total_var = vec2(0.0);
+  vec2 weight = vec2(0.0);
   for (int a = 0; a < 5; a++) {
     for (int b = 0; b < 5; b++) {
       ivec2 q = cell + ivec2(b - 2, a - 2) * step;
@@ -42,21 +45,28 @@ void main()
       }
       vec3 nq = texelFetch(gbuffer_normal, qpx, 0).xyz;
       vec4 vq = texelFetch(low_image, q, 0);
+      vec2 varq = texelFetch(low_variance, q, 0).xy;
       vec3 offset = pq.xyz - position.xyz;
       float facing = pow(max(dot(n, nq), 0.0), 32.0);
       float plane = abs(dot(n, offset));
       float tol = 0.1 * length(offset) + 1e-4;
-      float w = KERNEL[a] * KERNEL[b] * facing * exp(-(plane / tol) * (plane / tol));
-      w *= exp(-abs(dot(vq.rgb, LUMINANCE) - lum) / scale);
-      total += w * vq.rgb;
-      total_var += w * w * vq.a;
+      float geometry = KERNEL[a] * KERNEL[b] * facing * exp(-(plane / tol) * (plane / tol));
+      vec2 w = geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);
+      total += vec4(w.x * vq.rgb, w.y * vq.a);
+      total_var += w * w * varq;
       weight += w;
     }
   }
-  if (weight > 0.0) {
-    imageStore(out_image, cell, vec4(total / weight, total_var / (weight * weight)));
+  vec4 result = centre;
+  vec2 result_var = centre_var.xy;
+  if (weight.x > 0.0) {
+    result.rgb = total.rgb / weight.x;
+    result_var.x = total_var.x / (weight.x * weight.x);
   }
-  else {
-    imageStore(out_image, cell, centre);
+  if (weight.y > 0.0) {
+    result.a = total.a / weight.y;
+    result_var.y = total_var.y / (weight.y * weight.y);
   }
+  imageStore(out_image, cell, result);
+  imageStore(out_variance, cell, vec4(result_var, 0.0, 0.0));
 }

@@ -17,10 +17,13 @@ def _floor_and_wall(h=48, w=64):
     return position, normal, wall
 
 
-def _noisy(clean, sigma, seed=1):
+def _noisy(clean, sigma, seed=1, ao=0.8):
+    """Light (grey noise of deviation sigma) plus a constant AO channel with variance 0."""
     rng = np.random.default_rng(seed)
     noise = rng.normal(0.0, sigma, clean.shape[:2])[..., None]
-    return clean + noise * np.ones(3), np.full(clean.shape[:2], sigma**2)
+    values = np.concatenate([clean + noise * np.ones(3), np.full(clean.shape[:2] + (1,), ao)], -1)
+    variance = np.stack([np.full(clean.shape[:2], sigma**2), np.zeros(clean.shape[:2])], -1)
+    return values, variance
 
 
 def test_noise_on_a_plane_is_averaged_away():
@@ -29,10 +32,11 @@ def test_noise_on_a_plane_is_averaged_away():
     noisy, variance = _noisy(clean, 0.1)
     valid = np.ones(wall.shape, bool)
     out, out_var = atrous_filter(noisy, variance, valid, position, normal)
-    before = np.abs(noisy - clean).mean()
-    after = np.abs(out - clean).mean()
+    before = np.abs(noisy[..., :3] - clean).mean()
+    after = np.abs(out[..., :3] - clean).mean()
     assert after < before / 4
-    assert out_var.mean() < variance.mean() / 10
+    assert out_var[..., 0].mean() < variance[..., 0].mean() / 10
+    assert np.allclose(out[..., 3], 0.8)
 
 
 def test_light_does_not_cross_from_floor_to_wall():
@@ -60,12 +64,26 @@ def test_a_light_edge_far_above_the_noise_survives_on_one_plane():
     assert abs(out[:, 22, 0].mean() - 0.8) < 0.05
 
 
+def test_ao_edges_are_kept_apart_from_the_light():
+    """AO has its own similarity test: a contact-shadow step in AO survives where the light is
+    flat, and noise in the light does not leak into AO."""
+    position, normal, wall = _floor_and_wall()
+    normal[...] = (0.0, 0.0, 1.0)
+    position[..., 2] = 0.0
+    position[..., 0] = np.arange(wall.shape[1]) * 0.01
+    values, variance = _noisy(np.full(wall.shape + (3,), 0.5), 0.05)
+    values[:, :20, 3] = 0.3
+    variance[..., 1] = 0.01**2
+    out, _ = atrous_filter(values, variance, np.ones(wall.shape, bool), position, normal)
+    assert abs(out[:, 17, 3].mean() - 0.3) < 0.03 and abs(out[:, 22, 3].mean() - 0.8) < 0.03
+
+
 def test_background_pixels_are_untouched_and_never_read():
     position, normal, wall = _floor_and_wall()
-    values = np.full(wall.shape + (3,), 0.3)
+    values = np.full(wall.shape + (4,), 0.3)
     valid = np.ones(wall.shape, bool)
     valid[:, :10] = False
     values[:, :10] = 1e6  # would dominate any average that read it
-    out, _ = atrous_filter(values, np.full(wall.shape, 0.01), valid, position, normal)
+    out, _ = atrous_filter(values, np.full(wall.shape + (2,), 0.01), valid, position, normal)
     assert np.all(out[:, :10] == 1e6)
     assert np.allclose(out[:, 10:], 0.3, atol=1e-5)

@@ -33,6 +33,7 @@ from .sampling import hammersley, perpendicular_basis
 
 __all__ = ["RAY_STREAM", "SURFACE_EPSILON", "cosine_directions", "indirect_and_ao"]
 
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 weights of R, G, B
 RAY_STREAM = 0x5EED   # hash stream of the diffuse rays' rotation
 SURFACE_EPSILON = 1e-4  # metres off the surface, as preview.SURFACE_EPSILON
 
@@ -63,8 +64,12 @@ def _hit_normals(tris, tri, u, v, d):
 
 def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission, rays: int = 16,
                     ao_distance: float = 1.0, seed: int = 0, world=(0.0, 0.0, 0.0),
-                    hit_samples: int = 1):
-    """(Diffuse Indirect (N, 3) float32, Ambient Occlusion (N,) float32) — see the module doc.
+                    hit_samples: int = 1, statistics: bool = False):
+    """(Diffuse Indirect (N, 3) float32, Ambient Occlusion (N,) float32) — see the module doc;
+    with ``statistics`` also (N, 2) float32: the variance of the indirect light's luminance mean
+    (unbiased sample variance / rays) and of the AO mean (from the share of unoccluded rays
+    pulled half a ray towards ½, (k + ½)/(rays + 1), so agreeing rays still give a variance),
+    the inputs of ``preview.denoise.atrous_filter``.
 
     points, normals : (N, 3) surface points and unit normals facing the viewer (metres).
     sample_ids : (N,) integer sample id per point (the pixel index, row 0 on top).
@@ -77,7 +82,8 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
     ids = np.asarray(sample_ids).reshape(-1).astype(np.uint32)
     count = len(p)
     if count == 0:
-        return np.zeros((0, 3), np.float32), np.zeros(0, np.float32)
+        empty = (np.zeros((0, 3), np.float32), np.zeros(0, np.float32))
+        return (*empty, np.zeros((0, 2), np.float32)) if statistics else empty
     dirs = cosine_directions(n, hammersley(ids, RAY_STREAM, rays, seed)).reshape(-1, 3)
     origins = np.repeat(p + SURFACE_EPSILON * n, rays, axis=0)
     t, tri, u, v = closest_hits(tris, origins, dirs, SHADOW_EPSILON, np.inf)
@@ -96,5 +102,12 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
                                 seed=seed + 1, sample_ids=hit_ids[hit])
         radiance[hit] = np.asarray(albedo, np.float64)[material] * direct + \
             np.asarray(emission, np.float64)[material]
-    indirect = radiance.reshape(count, rays, 3).mean(axis=1)
-    return indirect.astype(np.float32), unoccluded.astype(np.float32)
+    per_ray = radiance.reshape(count, rays, 3)
+    indirect = per_ray.mean(axis=1)
+    if not statistics:
+        return indirect.astype(np.float32), unoccluded.astype(np.float32)
+    luminance = per_ray @ LUMINANCE
+    lum_var = np.maximum((luminance ** 2).mean(axis=1) - (indirect @ LUMINANCE) ** 2, 0.0)
+    share = (unoccluded * rays + 0.5) / (rays + 1.0)
+    variance = np.stack([lum_var / max(rays - 1, 1), share * (1.0 - share) / rays], axis=1)
+    return indirect.astype(np.float32), unoccluded.astype(np.float32), variance.astype(np.float32)

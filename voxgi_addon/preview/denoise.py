@@ -12,7 +12,9 @@ tap weighted by
   noise (contact shadows, light gradients) survive while differences of the noise's size are
   averaged away.
 
-Variance is filtered with the squared weights (the variance of the weighted mean), so later
+Two signals are filtered side by side with the same geometry weights: the RGB light
+(luminance test on its luminance) and a scalar (ambient occlusion, its own test). Variance is
+filtered with the squared weights (the variance of the weighted mean), so later
 passes trust the already smoothed values more. Pixels that see no surface take no part.
 Deterministic: no randomness, fixed order of taps.
 """
@@ -20,11 +22,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..gi.exact_indirect import LUMINANCE
+
 KERNEL = np.array([1 / 16, 1 / 4, 3 / 8, 1 / 4, 1 / 16])
 NORMAL_POWER = 32
 PLANE_TOLERANCE = 0.1
 SIGMA_LUMINANCE = 4.0
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 _EPSILON = 1e-6
 
 
@@ -47,8 +50,9 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
 
     Parameters
     ----------
-    values : (H, W, C) float, the per-pixel means (C ≥ 3; luminance from the first three).
-    variance : (H, W) float ≥ 0, the variance of each mean's luminance.
+    values : (H, W, 4) float, per pixel the mean light (RGB) and a scalar signal (e.g. AO).
+    variance : (H, W, 2) float ≥ 0, the variance of the light's luminance mean and of the
+        scalar's mean.
     valid : (H, W) bool, pixels that see a surface (others are left as they are).
     position, normal : (H, W, 3) world-space G-buffer of those pixels (metres, unit normals).
     iterations : passes with tap spacing 1, 2, 4, …
@@ -64,7 +68,7 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
     n = np.asarray(normal, np.float64)
     for it in range(iterations):
         step = 1 << it
-        lum = v[..., :3] @ LUMINANCE
+        signal = np.stack([v[..., :3] @ LUMINANCE, v[..., 3]], axis=-1)
         scale = sigma_luminance * np.sqrt(np.maximum(var, 0.0)) + _EPSILON
         total = np.zeros_like(v)
         total_var = np.zeros_like(var)
@@ -72,22 +76,24 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
         for a, ky in enumerate(KERNEL):
             for b, kx in enumerate(KERNEL):
                 dy, dx = (a - 2) * step, (b - 2) * step
-                q_ok = _shifted(ok, dy, dx, False)
                 q_p = _shifted(p, dy, dx, 0.0)
-                q_n = _shifted(n, dy, dx, 0.0)
                 q_v = _shifted(v, dy, dx, 0.0)
-                q_var = _shifted(var, dy, dx, 0.0)
                 offset = q_p - p
-                facing = np.maximum(np.einsum("...i,...i->...", n, q_n), 0.0) ** NORMAL_POWER
+                facing = np.maximum(np.einsum("...i,...i->...", n, _shifted(n, dy, dx, 0.0)), 0.0)
                 plane = np.abs(np.einsum("...i,...i->...", n, offset))
                 tol = PLANE_TOLERANCE * np.sqrt(np.einsum("...i,...i->...", offset, offset)) + 1e-4
-                w = ky * kx * q_ok * facing * np.exp(-(plane / tol) ** 2)
-                w = w * np.exp(-np.abs(q_v[..., :3] @ LUMINANCE - lum) / scale)
-                total += w[..., None] * q_v
-                total_var += w * w * q_var
+                geometry = (ky * kx * _shifted(ok, dy, dx, False) * facing ** NORMAL_POWER
+                            * np.exp(-(plane / tol) ** 2))
+                q_signal = np.stack([q_v[..., :3] @ LUMINANCE, q_v[..., 3]], axis=-1)
+                w = geometry[..., None] * np.exp(-np.abs(q_signal - signal) / scale)  # (H, W, 2)
+                total[..., :3] += w[..., :1] * q_v[..., :3]
+                total[..., 3] += w[..., 1] * q_v[..., 3]
+                total_var += w * w * _shifted(var, dy, dx, 0.0)
                 weight += w
-        keep = ok & (weight > 0)
+        keep = ok[..., None] & (weight > 0)
         safe = np.where(keep, weight, 1.0)
-        v = np.where(keep[..., None], total / safe[..., None], v)
+        full_safe = np.concatenate([np.repeat(safe[..., :1], 3, axis=-1), safe[..., 1:]], axis=-1)
+        full_keep = np.concatenate([np.repeat(keep[..., :1], 3, axis=-1), keep[..., 1:]], axis=-1)
+        v = np.where(full_keep, total / full_safe, v)
         var = np.where(keep, total_var / (safe * safe), var)
     return v.astype(np.float32), var.astype(np.float32)

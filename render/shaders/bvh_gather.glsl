@@ -1,0 +1,89 @@
+/* The final gather of the Accurate integrator at reduced resolution: bvh_indirect.glsl's exact
+ * one-bounce estimate and AO, for the G-buffer pixel each low-resolution cell traces
+ * (pixels.glsl traced_pixel), plus the variance of both means for the à-trous filter
+ * (voxgi_addon/gi/exact_indirect.py indirect_and_ao(..., statistics=True) is the reference).
+ * out_image = (Diffuse Indirect rgb, AO); out_variance = (var of the indirect luminance mean,
+ * var of the AO mean, 0, 0). Push constants:
+ *   sampling = (seed, rays, ao_distance, strata side m of the hit's light samples)
+ *   world    = rgb radiance of a miss
+ *   grid     = (stride, full width, full height, 0)
+ * Sampler `materials`: (M + 1) × 2 texels, row 0 albedo, row 1 emission (last column: none). */
+
+vec4 bvh_texel_normals(int k)
+{
+  return texelFetch(bvh_normals, ivec2(k & (BVH_WIDTH - 1), k >> BVH_WIDTH_LOG2), 0);
+}
+
+void main()
+{
+  ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
+  ivec2 size = imageSize(out_image);
+  if (cell.x >= size.x || cell.y >= size.y) {
+    return;
+  }
+  int stride = int(grid.x);
+  ivec2 full = ivec2(grid.yz);
+  ivec2 px = traced_pixel(size.y - 1 - cell.y, cell.x, stride, full);
+  vec4 position = texelFetch(gbuffer_position, px, 0);
+  if (position.w < 0.5) {
+    imageStore(out_image, cell, vec4(0.0));
+    imageStore(out_variance, cell, vec4(0.0));
+    return;
+  }
+  vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
+  uint id = uint((full.y - 1 - px.y) * full.x + px.x);
+  uint seed = uint(sampling.x);
+  int rays = int(sampling.y);
+  int last_material = textureSize(materials, 0).x - 1;
+  vec3 origin = position.xyz + SURFACE_EPSILON * n;
+  uint state = point_stream(id, RAY_STREAM, seed);
+  vec3 t, b;
+  perpendicular_basis(n, t, b);
+  const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
+  vec3 sum = vec3(0.0);
+  float lum2 = 0.0;
+  float unoccluded = 0.0;
+  for (int j = 0; j < rays; j++) {
+    vec2 disk = concentric_disk(hammersley(state, j, rays));
+    float z = sqrt(max(0.0, 1.0 - dot(disk, disk)));
+    vec3 d = normalize(disk.x * t + disk.y * b + z * n);
+    float th;
+    int triangle, slot;
+    vec2 uv;
+    vec3 radiance = world.rgb;
+    if (!bvh_closest_hit(origin, d, SHADOW_EPSILON, BVH_FAR, th, triangle, slot, uv)) {
+      unoccluded += 1.0;
+    }
+    else {
+      unoccluded += th >= sampling.z ? 1.0 : 0.0;
+      vec3 x = origin + th * d;
+      vec3 face = bvh_triangle_face_normal(slot);
+      vec3 smooth_n = (1.0 - uv.x - uv.y) * bvh_texel_normals(3 * slot).xyz +
+                      uv.x * bvh_texel_normals(3 * slot + 1).xyz +
+                      uv.y * bvh_texel_normals(3 * slot + 2).xyz;
+      float len = length(smooth_n);
+      vec3 ns = len > 1e-12 ? smooth_n / len : face;
+      ns *= dot(face, d) > 0.0 ? -1.0 : 1.0;
+      int material = bvh_triangle_material(slot);
+      material = (material >= 0 && material < last_material) ? material : last_material;
+      vec3 albedo = texelFetch(materials, ivec2(material, 0), 0).rgb;
+      vec3 emission = texelFetch(materials, ivec2(material, 1), 0).rgb;
+      vec3 direct = diffuse_direct(x + ns * SURFACE_EPSILON, ns, id * uint(rays) + uint(j),
+                                   seed + 1u, int(sampling.w));
+      radiance = albedo * direct + emission;
+    }
+    sum += radiance;
+    float l = dot(radiance, LUMINANCE);
+    lum2 += l * l;
+  }
+  float count = float(rays);
+  vec3 mean = sum / count;
+  float lum_mean = dot(mean, LUMINANCE);
+  float lum_var = max(lum2 / count - lum_mean * lum_mean, 0.0) / max(count - 1.0, 1.0);
+  /* AO is a share of rays: its variance from a share pulled half a ray towards 1/2, so a
+   * cell whose rays all agree still admits neighbours within about one ray's worth. */
+  float share = (unoccluded + 0.5) / (count + 1.0);
+  float ao_var = share * (1.0 - share) / count;
+  imageStore(out_image, cell, vec4(mean, unoccluded / count));
+  imageStore(out_variance, cell, vec4(lum_var, ao_var, 0.0, 0.0));
+}
