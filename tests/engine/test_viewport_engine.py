@@ -118,7 +118,9 @@ def rec(id_type, name, t=False, g=False, s=False, object_type=""):
       rec("MATERIAL", "Red", s=True), rec("NODETREE", "Shader Nodetree")],
      MOVE | {"albedo"}, set(), {"CubeMesh"}),
     ([rec("OBJECT", "Camera", t=True, object_type="CAMERA")], set(), set(), set()),
-    ([rec("SCENE", "Scene", True, True), rec("COLLECTION", "Scene Collection", g=True)], MOVE, set(), set()),
+    ([rec("SCENE", "Scene", True, True), rec("COLLECTION", "Scene Collection", g=True),
+      rec("OBJECT", "Floor", s=True, object_type="MESH")], set(), set(), set()),
+    ([rec("SCENE", "Scene"), rec("VISIBILITY", "visible objects", g=True)], MOVE, set(), set()),
     ([rec("OBJECT", "New", t=True, g=True, object_type="MESH")], MOVE, set(), set()),
 ])
 def test_plan_is_the_cheapest_correct_work(records, stages, voxelize, albedo):

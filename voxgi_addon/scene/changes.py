@@ -13,10 +13,14 @@ light moved or edited, world edited    snapshot, inject, octree, trace (cascades
 mesh geometry edited                   snapshot, voxelize that mesh key only, transform, …
 material edited                        snapshot, albedo of the mesh keys using it, transform, …
 object added / removed / hidden        snapshot, transform, inject, octree, trace; new keys are
-                                       voxelized (``voxelize/incremental`` finds them)
+  (a VISIBILITY record)                voxelized (``voxelize/incremental`` finds them)
 view moved                             trace only (``view_plan``; plus the cascade stages when
                                        the view leaves the cascades' anchor cell)
 =====================================  ==========================================================
+
+Object records flagged for shading only and Collection records are ignored: Blender sends them
+for many things that change no voxel (a snapshot's own temporary modifier, for one); material
+slots and colours arrive as Mesh / Material records.
 
 "albedo" is carried out by re-voxelizing the mesh's attributes (``voxelize/incremental``:
 the key's fingerprint includes its triangles' albedo, so its caches are rebuilt); the plan
@@ -37,8 +41,10 @@ _LIGHT_STAGES = frozenset({"snapshot", "inject", "octree", "trace"})
 _MOVE_STAGES = frozenset({"snapshot"}) | _CASCADE_STAGES
 
 # ``UpdateRecord.id_type`` values the planner knows (Blender's ID type, lights folded to LIGHT).
+# VISIBILITY is not Blender's: the set of visible mesh objects differs from the last snapshot
+# (hiding an object reaches the depsgraph as a bare Scene update; blender/updates.py adds it).
 ID_TYPES = ("OBJECT", "MESH", "MATERIAL", "LIGHT", "ARMATURE", "WORLD", "SCENE", "COLLECTION",
-            "CAMERA", "NODETREE", "OTHER")
+            "CAMERA", "NODETREE", "VISIBILITY", "OTHER")
 
 
 @dataclass(frozen=True)
@@ -162,10 +168,6 @@ def plan_updates(records, index: SceneIndex | None) -> UpdatePlan:
                 elif r.transform or r.geometry:
                     add(_MOVE_STAGES, f"bones of '{r.name}' posed" if r.geometry
                         else f"object '{r.name}' moved")
-                elif r.shading and not material_changed:
-                    full = True
-                    albedo.add(entry.key)
-                    add(_MOVE_STAGES | {"albedo"}, f"materials of '{r.name}' changed")
             elif r.object_type == "LIGHT" and (r.transform or r.geometry or r.shading):
                 add(_LIGHT_STAGES, f"light '{r.name}' " + ("moved" if r.transform else "edited"))
             elif r.object_type == "ARMATURE" and (r.transform or r.geometry):
@@ -195,9 +197,9 @@ def plan_updates(records, index: SceneIndex | None) -> UpdatePlan:
                 add(_MOVE_STAGES, f"armature '{r.name}' posed")
         elif r.id_type == "WORLD":
             add(_LIGHT_STAGES, "world edited")
-        elif r.id_type == "COLLECTION" and r.geometry:
+        elif r.id_type == "VISIBILITY":
             full = rescan = True
-            add(_MOVE_STAGES, "objects added, removed or hidden")
+            add(_MOVE_STAGES, "objects added, removed, hidden or shown")
     albedo -= voxelize  # a key both edited and recoloured is voxelized once
     if not albedo:
         stages.discard("albedo")
