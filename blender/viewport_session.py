@@ -292,6 +292,18 @@ def peek_live_gi(scene_name: str) -> LiveGI | None:
     return _live.get(scene_name)
 
 
+def current_state(scene_name: str):
+    """The GI state the 3D view shows for a scene: the viewport's applied result, else the
+    last ``voxgi.update`` / F12 one, else None."""
+    live = _live.get(scene_name)
+    if live is not None and live.staged is not None:
+        return live.staged.state
+    from .session import peek_session
+
+    session = peek_session(scene_name)
+    return None if session is None else session.gi_state
+
+
 def clear() -> None:
     """Forget every scene's viewport results (file load, unregister)."""
     _live.clear()

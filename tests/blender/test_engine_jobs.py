@@ -612,7 +612,7 @@ def test_stress_viewport_job_while_the_main_thread_edits_the_scene(interactive, 
         superseded), the way a big scene would."""
         editing.wait(TIMEOUT)
         while True:
-            result = real(incremental.CacheStore(), snapshot, base_span, count, cancel, progress)
+            real(incremental.CacheStore(), snapshot, base_span, count, cancel, progress)
             runs.append(threading.current_thread())
             if edits_done.is_set() or cancel():
                 return real(store, snapshot, base_span, count, cancel, progress)
