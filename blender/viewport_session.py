@@ -112,7 +112,7 @@ class LiveGI:
         self.stats = LiveStats()
         self.progress = jobs.Progress()
         self.settings = None
-        self.rescan = False        # undo/redo happened: read everything next time
+        self.rescan = ""           # why everything must be read again next time ("" = no need)
         self.skin: dict[str, tuple[bytes, bytes]] = {}  # skinned objects' states (``update``)
 
     # ------------------------------------------------------------------ planning
@@ -127,7 +127,7 @@ class LiveGI:
         records = without_skin_echo(records, self.skin, depsgraph)
         key = settings_key(scene)
         if self.index is None or self.rescan:
-            plan = full_plan("undo / redo" if self.rescan else "first update")
+            plan = full_plan(self.rescan or "first update")
         elif key[0] != self.settings[0]:
             plan = full_plan("voxel settings changed")
         else:
@@ -136,7 +136,7 @@ class LiveGI:
                 plan = plan.merged(view_plan(True)).merged(
                     UpdatePlan(frozenset({"snapshot"}), triggers=("cascade settings changed",)))
         self.settings = key
-        self.rescan = False
+        self.rescan = ""
         if not plan.empty:
             self.schedule(plan, scene, depsgraph)
         return plan
@@ -318,7 +318,7 @@ def _clear_on_load(*_args) -> None:
 def _rescan_after_undo(*_args) -> None:
     # Undo restores data under the same names; fingerprints find out what really changed.
     for live in _live.values():
-        live.rescan = True
+        live.rescan = "undo / redo"
 
 
 HANDLERS = (("load_post", _clear_on_load), ("undo_post", _rescan_after_undo),
