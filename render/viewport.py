@@ -100,7 +100,7 @@ class ViewportRenderer:
                                             data=gpu.types.Buffer("FLOAT", flat.size, flat))
         self.trace_key = key
         self.traces += 1
-        self.timings = {"upload": upload, **timings, "trace": time.perf_counter() - t0}
+        self.timings = {"atlas upload": upload, **timings, "trace": time.perf_counter() - t0}
         return True
 
     # ------------------------------------------------------------------ drawing
