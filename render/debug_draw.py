@@ -11,6 +11,8 @@ instance texture and the bounds batch are rebuilt only when what they show chang
 """
 from __future__ import annotations
 
+import weakref
+
 import gpu
 import numpy as np
 from gpu_extras.batch import batch_for_shader
@@ -49,6 +51,7 @@ void main()
 """
 
 _shader = None
+_drawers: "weakref.WeakSet[DebugDrawer]" = weakref.WeakSet()
 
 
 def cube_shader():
@@ -105,6 +108,7 @@ class DebugDrawer:
         self.builds = 0           # how many times the instance texture was rebuilt
         self._cube = None
         self._state = None
+        _drawers.add(self)
 
     def free(self) -> None:
         self.instances = self.bounds_batch = self._cube = self._state = None
@@ -208,6 +212,9 @@ def eye_of(view_matrix, window_matrix) -> tuple[float, float, float, float]:
 
 
 def release() -> None:
-    """Drop the cached shader (docs/gi_pipeline.md "GPU resources at exit")."""
+    """Free every drawer's textures and batches and drop the cached shader (unregister, exit:
+    docs/gi_pipeline.md "GPU resources at exit")."""
     global _shader
+    for drawer in list(_drawers):
+        drawer.free()
     _shader = None
