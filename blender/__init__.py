@@ -2,8 +2,11 @@
 the panels share, and nothing that registers an operator or a panel.
 
   settings         ``Scene.voxgi`` (the PropertyGroup) and its conversion to engine settings
+  viewport_settings ``Scene.voxgi_viewport``: viewport resolution, pass shown, debug views
   session          per-scene results kept out of ID properties
-  jobs             the engine worker thread, its queue and timer
+  viewport_session live viewport GI: plans depsgraph updates, runs them on the worker
+  updates          depsgraph updates as records, transform-only snapshots
+  jobs             the engine worker thread, its queue, timer and progress
   snapshot/        reading the scene into the engine's ``SceneSnapshot``
   reports          report lines and tables of results
   operator_poll    the poll shared by scene operators
@@ -14,11 +17,11 @@ the panels share, and nothing that registers an operator or a panel.
 from __future__ import annotations
 
 from ..registration import register_modules, unregister_modules
-from . import jobs, session, settings
+from . import jobs, session, settings, viewport_session, viewport_settings
 
 # Registered in this order (settings first), unregistered in reverse (jobs stop before the
-# session is cleared).
-modules = (settings, session, jobs)
+# sessions are cleared).
+modules = (settings, viewport_settings, session, viewport_session, jobs)
 
 
 def register() -> None:

@@ -11,7 +11,11 @@ idle) or by calling ``drain()``; the job's callbacks (``on_done``, ``on_cancel``
 * ``cancel(scene_name)`` sets the job's cancel event; the job becomes 'cancelled' once the
   worker has let go of it (next ``drain``), and even a result it still returns is dropped.
 * In background mode (``bpy.app.background``: scripts, tests) ``submit`` waits for the job
-  and applies it before returning, so callers stay synchronous.
+  and applies it before returning, so callers stay synchronous; a job that takes longer than
+  a second prints a progress line at most once per second (``ProgressPrinter``).
+* A job may carry a ``Progress`` (fraction and text written by the worker, read by the main
+  thread): the sidebar shows it, and while jobs run interactively the timer drives the window
+  manager's progress bar and the status bar text.
 
 bpy facts this relies on (Blender 5.0, checked with the ``bpy`` module):
 * Without an event loop (the ``bpy`` module, ``blender --background``) timers registered with
@@ -44,6 +48,41 @@ def runs_synchronously() -> bool:
     return bool(bpy.app.background) if synchronous is None else synchronous
 
 
+class Progress:
+    """How far a job is: ``fraction`` in 0..1 and a short ``text``. The worker calls it; the
+    main thread reads the attributes (single assignments, safe across threads)."""
+
+    def __init__(self):
+        self.fraction = 0.0
+        self.text = ""
+
+    def __call__(self, fraction: float, text: str = "") -> None:
+        self.fraction = min(1.0, max(0.0, float(fraction)))
+        if text:
+            self.text = text
+
+
+class ProgressPrinter:
+    """Progress lines for background runs: none in the first ``interval`` seconds, then at
+    most one per ``interval``. ``clock`` is injectable for tests."""
+
+    def __init__(self, label: str, interval: float = 1.0, clock=time.perf_counter, out=print):
+        self.label, self.interval, self.clock, self.out = label, interval, clock, out
+        self.start = clock()
+        self.last = self.start
+
+    def tick(self, progress: "Progress | None") -> bool:
+        """Print a line if one is due; returns whether it printed."""
+        now = self.clock()
+        if now - self.last < self.interval:
+            return False
+        self.last = now
+        done = "" if progress is None else f" {progress.fraction * 100:.0f}%"
+        what = "" if progress is None or not progress.text else f" ({progress.text})"
+        self.out(f"VoxGI: {self.label}…{done}{what}, {now - self.start:.1f} s", flush=True)
+        return True
+
+
 class Job:
     """One submission. ``state`` and the callbacks belong to the main thread.
 
@@ -52,9 +91,11 @@ class Job:
     result : what ``fn`` returned ('done' only); error : the exception ('failed' only).
     """
 
-    def __init__(self, scene_name: str, fn, label: str, on_done, on_cancel, on_error):
+    def __init__(self, scene_name: str, fn, label: str, on_done, on_cancel, on_error,
+                 progress: Progress | None = None):
         self.scene_name = scene_name
         self.label = label
+        self.progress = progress
         self.fn: Callable[[Callable[[], bool]], Any] | None = fn
         self.on_done, self.on_cancel, self.on_error = on_done, on_cancel, on_error
         self.state = "running"
@@ -130,12 +171,12 @@ class JobRunner:
     def latest(self, scene_name: str) -> Job | None:
         return self._latest.get(scene_name)
 
-    def submit(self, scene_name, fn, label, on_done, on_cancel, on_error) -> Job:
+    def submit(self, scene_name, fn, label, on_done, on_cancel, on_error, progress=None) -> Job:
         old = self._latest.get(scene_name)
         if old is not None and old.state == "running":
             old.superseded = True
             old._cancel.set()
-        job = Job(scene_name, fn, label, on_done, on_cancel, on_error)
+        job = Job(scene_name, fn, label, on_done, on_cancel, on_error, progress)
         self._latest[scene_name] = job
         self._pending.append(job)
         if self.thread is None:
@@ -219,18 +260,22 @@ def _require_runner() -> JobRunner:
 def submit(scene_name: str, fn: Callable[[Callable[[], bool]], Any], *, label: str = "Job",
            on_done: Callable[[Any], None] | None = None,
            on_cancel: Callable[[], None] | None = None,
-           on_error: Callable[[BaseException], None] | None = None) -> Job:
+           on_error: Callable[[BaseException], None] | None = None,
+           progress: Progress | None = None) -> Job:
     """Run ``fn(cancel)`` on the worker for the scene named ``scene_name``; main thread only.
 
     ``fn`` must not touch bpy; ``cancel()`` returns True once the job should stop (raise
     ``VoxGICancelled`` or return; the result is discarded either way). The callbacks run
     on the main thread when the outcome is applied. A running job of the same scene is
-    superseded. When ``runs_synchronously()`` the job is finished and applied on return.
+    superseded. When ``runs_synchronously()`` the job is finished and applied on return (with
+    progress lines for long jobs, see ``ProgressPrinter``).
     """
     runner = _require_runner()
-    job = runner.submit(scene_name, fn, label, on_done, on_cancel, on_error)
+    job = runner.submit(scene_name, fn, label, on_done, on_cancel, on_error, progress)
     if runs_synchronously():
-        job.wait()
+        printer = ProgressPrinter(label)
+        while not job.wait(0.1):
+            printer.tick(progress)
         drain()
     else:
         _start_timer()
@@ -288,11 +333,14 @@ def drain() -> list[Job]:
         tag_sidebars()
     if not _runner.busy:
         _stop_timer()
+        if _progress_shown:
+            show_progress([])
     return applied
 
 
 def _tick() -> float | None:
-    """``bpy.app.timers`` callback: drain, refresh the panel, stop when idle."""
+    """``bpy.app.timers`` callback: drain, refresh the panel and the progress display, stop
+    when idle."""
     if _runner is None:
         return None
     try:
@@ -300,7 +348,44 @@ def _tick() -> float | None:
     except Exception:  # noqa: BLE001 - a timer that raises is dropped by Blender
         traceback.print_exc()
     tag_sidebars()
+    show_progress(_runner.pending)
     return TICK_SECONDS if _runner.busy else None
+
+
+_progress_shown = False
+
+
+def progress_text(job: Job) -> str:
+    """What the status bar and the sidebar say about a running job."""
+    progress = job.progress
+    if job.cancel_requested:
+        return f"VoxGI: cancelling {job.label.lower()}…"
+    done = "" if progress is None else f" {progress.fraction * 100:.0f}%"
+    what = "" if progress is None or not progress.text else f": {progress.text}"
+    return f"VoxGI: {job.label}{done}{what} (Esc to cancel)"
+
+
+def show_progress(pending: list[Job]) -> None:
+    """The window manager's progress bar and the status-bar text for the first running job
+    with a ``Progress``; both cleared once none runs. Interactive sessions only."""
+    global _progress_shown
+    jobs_with_progress = [j for j in pending if j.progress is not None and not j.superseded]
+    try:
+        for wm in bpy.data.window_managers:
+            if jobs_with_progress:
+                job = jobs_with_progress[0]
+                if not _progress_shown:
+                    wm.progress_begin(0.0, 1.0)
+                wm.progress_update(job.progress.fraction)
+            elif _progress_shown:
+                wm.progress_end()
+            for window in wm.windows:
+                if window.workspace is not None:
+                    window.workspace.status_text_set_internal(
+                        progress_text(jobs_with_progress[0]) if jobs_with_progress else None)
+    except (AttributeError, RuntimeError):  # no window (background) or a closing one
+        pass
+    _progress_shown = bool(jobs_with_progress)
 
 
 def timer_registered() -> bool:
@@ -351,6 +436,7 @@ def unregister() -> None:
     """Timers first, then cancel every job and join the worker (at most ``JOIN_TIMEOUT``)."""
     global _runner
     _stop_timer()
+    show_progress([])
     if _cancel_on_load in bpy.app.handlers.load_pre:
         bpy.app.handlers.load_pre.remove(_cancel_on_load)
     runner, _runner = _runner, None

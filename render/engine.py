@@ -5,7 +5,8 @@ passes (registered with ``register_pass``, so they reach the compositor and mult
 output): the scene is snapshotted, the session's voxel caches transformed (voxelizing first if
 needed), and the passes traced on the GPU (``gpu_preview``) inside the engine's GPU context,
 or with the numpy tracer when that fails (reported). ``bl_use_gpu_context`` gives the context
-even in background mode.
+even in background mode. In the 3D view's Rendered mode ``view_update`` / ``view_draw`` show
+live GI (``viewport.py``).
 """
 from __future__ import annotations
 
@@ -48,6 +49,16 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
     def update_render_passes(self, scene=None, renderlayer=None):
         for name in EXTRA_PASSES:
             self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
+
+    # The 3D view's Rendered mode (render/viewport.py): plan and run updates on the worker,
+    # trace and draw the view on the GPU.
+    def view_update(self, context, depsgraph):
+        from . import viewport
+        viewport.view_update(self, context, depsgraph)
+
+    def view_draw(self, context, depsgraph):
+        from . import viewport
+        viewport.view_draw(self, context, depsgraph)
 
     def render(self, depsgraph):
         scene = depsgraph.scene

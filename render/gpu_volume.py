@@ -34,12 +34,14 @@ class GPUVolume:
         self._octree = self._cones = None
         self.uploaded_bytes = 0      # atlas bytes sent by the last update (0 = unchanged)
 
-    def update(self, octree, cones) -> None:
+    def update(self, octree, cones, atlas=None) -> None:
+        """atlas : ``volume_atlas(octree)`` when the caller already has it (the viewport's
+        worker builds it off the main thread); built here when None."""
         self.uploaded_bytes = 0
         if octree is self._octree and cones == self._cones:
             return  # the same update's octree: nothing to rebuild
         self._octree, self._cones = octree, cones
-        atlas = volume_atlas(octree)
+        atlas = volume_atlas(octree) if atlas is None else atlas
         old = self._texels
         if old is None or old.shape != atlas.texels.shape or not np.array_equal(old, atlas.texels):
             self.atlas = float_texture(atlas.texels, atlas.texture_size, ATLAS_FORMAT)

@@ -1,10 +1,11 @@
-"""Blender UI: the sidebar panels (settings live in ``blender/settings.py``)."""
+"""Blender UI: the sidebar panels, Render Properties panels, the debug-view draw handler and
+the Esc key map (settings live in ``blender/settings.py`` and ``blender/viewport_settings.py``)."""
 from __future__ import annotations
 
 from ..registration import register_modules, unregister_modules
-from . import panel
+from . import debug_draw, panel, render_properties, viewport_panel
 
-modules = (panel,)
+modules = (panel, viewport_panel, render_properties, debug_draw)
 
 classes = tuple(cls for module in modules for cls in module.classes)
 

@@ -585,3 +585,97 @@ def test_unregister_gives_up_on_a_job_that_ignores_cancel(interactive, voxgi, mo
         voxgi.register()
     worker.join(TIMEOUT)
     assert not worker.is_alive() and job.state == "running"  # its outcome went nowhere
+
+
+def test_stress_viewport_job_while_the_main_thread_edits_the_scene(interactive, monkeypatch):
+    """The viewport's job (caches → cascades → injection → octree → atlas) on the worker while
+    the main thread edits the scene 200 times (move, add, delete objects, change materials)
+    and, every 50 edits, hands the updates to ``LiveGI.update`` as ``view_update`` would,
+    superseding the running job. Every job ends done or cancelled, nothing raises, and the
+    applied result equals a synchronous run on the same snapshot."""
+    jobs = interactive
+    viewport_session = importlib.import_module("voxgi.blender.viewport_session")
+    incremental = importlib.import_module("voxgi.voxgi_addon.voxelize.incremental")
+    staged_gi = importlib.import_module("voxgi.voxgi_addon.gi.incremental")
+    settings_module = importlib.import_module("voxgi.blender.settings")
+    records_from_depsgraph = importlib.import_module("voxgi.blender.updates").records_from_depsgraph
+    bpy.ops.voxgi.add_demo_scene()
+    gold = scenes.principled("Gold", (1.0, 0.8, 0.2), roughness=0.2)
+    torus = torus_object("Torus", material=gold)
+    scene = bpy.context.scene
+    scene.voxgi.base_span, scene.voxgi.cascade_count, scene.voxgi.grid_resolution = 0.08, 2, "32"
+    live = viewport_session.live_gi(scene_name())
+
+    real = incremental.refresh_caches
+    editing, edits_done, runs = threading.Event(), threading.Event(), []
+
+    def slow_refresh(store, snapshot, base_span, count, cancel=None, progress=None):
+        """Keeps the worker busy with real voxelizations until the edits are over (or it is
+        superseded), the way a big scene would."""
+        editing.wait(TIMEOUT)
+        while True:
+            real(incremental.CacheStore(), snapshot, base_span, count, cancel, progress)
+            runs.append(threading.current_thread())
+            if edits_done.is_set() or cancel():
+                return real(store, snapshot, base_span, count, cancel, progress)
+
+    monkeypatch.setattr(viewport_session, "refresh_caches", slow_refresh)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    collected = []
+
+    def handler(scene, depsgraph):
+        collected.extend(records_from_depsgraph(depsgraph, live.index))
+
+    live.update(scene, depsgraph)
+    submitted = [jobs.latest_job(scene_name())]
+    assert submitted[0].state == "running"
+    bpy.app.handlers.depsgraph_update_post.append(handler)
+    editing.set()
+    added = []
+    try:
+        for i in range(200):
+            added.append(scenes.quad_object(f"Added {i}", size=0.2 + 0.001 * i))
+            added[-1].location = (math.sin(i), math.cos(i), 0.01 * i)
+            torus.location.x += 0.01
+            torus.rotation_euler.z += 0.1
+            gold.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = \
+                (i / 200, 0.5, 1 - i / 200, 1.0)
+            torus.data.materials[0] = scenes.principled(f"Mat {i}", (0.1, 0.2, i / 200))
+            if i % 3 == 2:
+                doomed = added.pop(0)
+                mesh = doomed.data
+                bpy.data.objects.remove(doomed)
+                bpy.data.meshes.remove(mesh)
+            if i == 100:
+                bpy.data.objects.remove(bpy.data.objects["Rotating Sphere"])
+            bpy.context.view_layer.update()
+            if i % 50 == 49:  # what view_update would do: supersedes the running job
+                live.update(scene, depsgraph, collected[:])
+                collected.clear()
+                submitted.append(jobs.latest_job(scene_name()))
+            jobs.drain()
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(handler)
+        edits_done.set()
+    assert jobs.wait_idle(TIMEOUT * 4)
+
+    assert runs and all(t is not threading.main_thread() for t in runs)
+    assert len({id(j) for j in submitted}) >= 4
+    assert {j.state for j in submitted} <= {"done", "cancelled"}
+    assert submitted[-1].state == "done" and live.error == ""
+    assert all(j.state == "cancelled" for j in submitted[:-1] if j is not submitted[-1])
+    result = submitted[-1].result
+    # The synchronous run on the same snapshot (the job's, camera included).
+    settings = scene.voxgi
+    expected = real(incremental.CacheStore(), result.snapshot, settings.base_span,
+                    settings.cascade_count)
+    assert_same_caches(result.caches, expected.caches)
+    state = staged_gi.update_gi_stages(result.snapshot, expected.caches,
+                                       settings_module.gi_settings(settings), None,
+                                       {"transform"}).state
+    for mine, theirs in zip(result.staged.state.cascades, state.cascades, strict=True):
+        assert np.array_equal(mine.cells, theirs.cells)
+    for mine, theirs in zip(result.staged.state.radiance, state.radiance, strict=True):
+        np.testing.assert_allclose(mine, theirs, atol=1e-6)
+    assert live.staged is result.staged and live.snapshot is result.snapshot
+    assert len(result.snapshot.objects) == len(bpy.context.view_layer.objects) - 3  # - rig, light, camera

@@ -6,7 +6,8 @@ stdout when guarded allocations are left — in the PyPI bpy module too, without
 ``--debug-memory`` (docs/gi_pipeline.md, "GPU resources at exit"). So the run has to be its own
 process, ending normally (``os._exit`` would skip the report): a fresh ``python`` with bpy
 imports the repository as the add-on ``voxgi`` (as conftest.py does), voxelizes the demo
-scene, updates GI, writes the GPU preview and renders F12 with the VoxGI engine, all tiny.
+scene, updates GI, writes the GPU preview, renders F12 with the VoxGI engine, draws the live
+viewport and prepares a debug view, all tiny.
 """
 from __future__ import annotations
 
@@ -49,6 +50,23 @@ SCRIPT = textwrap.dedent(
     session.tracer_used = ""
     bpy.ops.render.render()
     assert session.tracer_used == "GPU", "F12 did not trace on the GPU"
+    # The live viewport and a debug view keep textures between redraws too.
+    import gpu
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render.viewport import ViewportRenderer, draw_view
+    from voxgi.ui.debug_draw import _drawers
+    from voxgi.render.debug_draw import DebugDrawer
+    live = live_gi(scene.name_full)
+    live.update(scene, bpy.context.evaluated_depsgraph_get())
+    camera = scene.camera
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    offscreen = gpu.types.GPUOffScreen(16, 12)
+    with offscreen.bind():
+        assert draw_view(ViewportRenderer(), scene, depsgraph, camera.matrix_world.inverted(),
+                         camera.calc_matrix_camera(depsgraph, x=16, y=12), 16, 12)
+    offscreen.free()
+    drawer = _drawers[scene.name_full] = DebugDrawer()
+    assert drawer.prepare(live.staged.state, "VOXELS", 0, 0, "ALBEDO") > 0
     print("{DONE}", flush=True)
     """
 )

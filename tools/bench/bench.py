@@ -27,6 +27,8 @@ SECTIONS = {
     "gfg": ("bench_gfg", "GFG file write/read throughput vs numpy.save/numpy.load"),
     "gi": ("bench_gi", "per-update time, preview time and Cycles time/error (runs in .venv)"),
     "gpu": ("bench_gpu", "GPU tracer: filtered samples/s and preview times vs numpy and Cycles"),
+    "viewport": ("bench_viewport", "live viewport GI: main-thread stall, move → GI latency, cancel, "
+                                   "debug-view draw of 1M voxels"),
 }
 
 

@@ -74,7 +74,9 @@ class CacheBuildResult:
         return sum(s.nbytes for s in self.cascade_stats)
 
 
-class _Timer:
+class StageTimer:
+    """Adds the seconds since ``start`` to ``timings[stage]``."""
+
     def __init__(self, timings):
         self.timings = timings
 
@@ -82,7 +84,7 @@ class _Timer:
         self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - start
 
 
-def _cache_sources(snapshot: SceneSnapshot, result: CacheBuildResult):
+def cache_sources(snapshot: SceneSnapshot, result: CacheBuildResult):
     """Which (key → positions, mesh) to voxelize, baking non-unit scales; fills bindings."""
     sources: dict[str, tuple[np.ndarray, MeshData]] = {}
     for obj in snapshot.objects:
@@ -113,7 +115,7 @@ def _cache_sources(snapshot: SceneSnapshot, result: CacheBuildResult):
     return sources
 
 
-def _triangle_materials(snapshot: SceneSnapshot, mesh: MeshData):
+def triangle_materials(snapshot: SceneSnapshot, mesh: MeshData):
     """Per-triangle albedo (T, 3) and specular (T,) = 1 - roughness (1 = mirror-like)."""
     mats = snapshot.materials
     albedo = np.tile(DEFAULT_ALBEDO, (len(mats) + 1, 1))
@@ -140,7 +142,7 @@ def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, 
             f"mesh '{key}': dropped {check.dropped} triangles "
             f"({check.degenerate} zero-area, {check.non_finite} with NaN/inf vertices)")
     tris = np.asarray(mesh.triangles, np.int64)[check.keep]
-    albedo, spec = _triangle_materials(snapshot, mesh)
+    albedo, spec = triangle_materials(snapshot, mesh)
     albedo, spec = albedo[check.keep], spec[check.keep]
     used = np.unique(tris)
     timer.add("check", t0)
@@ -190,16 +192,22 @@ def build_scene_caches(snapshot: SceneSnapshot, base_span: float, cascade_count:
     if not snapshot.objects:
         raise VoxGIError("the scene has no visible mesh objects to voxelize")
     result = CacheBuildResult(warnings=list(snapshot.warnings))
-    timer = _Timer(result.timings)
-    sources = _cache_sources(snapshot, result)
+    timer = StageTimer(result.timings)
+    sources = cache_sources(snapshot, result)
     for key, (positions, mesh) in sources.items():
         if cancel is not None and cancel():
             raise VoxGICancelled("voxelization cancelled; no caches were kept")
         build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, result, timer,
                           cancel)
+    add_cascade_stats(result, base_span, cascade_count)
+    return result
+
+
+def add_cascade_stats(result: CacheBuildResult, base_span: float, cascade_count: int) -> None:
+    """Fill ``result.cascade_stats`` (voxels and bytes per cascade) from its caches."""
+    result.cascade_stats = []
     for cascade in range(cascade_count):
         present = [c[cascade] for c in result.caches.values() if c[cascade] is not None]
         result.cascade_stats.append(CascadeStats(
             cascade, base_span * 2**cascade,
             sum(c.voxel_count for c in present), sum(c.nbytes for c in present)))
-    return result

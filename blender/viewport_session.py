@@ -1,0 +1,341 @@
+"""Live GI for the 3D view: one ``LiveGI`` per scene schedules the cheapest correct work for
+each batch of depsgraph updates and runs it on the engine worker (main thread only).
+
+The render engine's ``view_update`` hands its depsgraph to ``LiveGI.update``: the updates
+become records (``updates.py``), the planner (``voxgi_addon/scene/changes.py``) turns them
+into stages, and ``schedule`` takes the snapshot (the main thread's only CPU work: a full
+snapshot with ``foreach_get``, or matrices / poses / lights only for transform changes) and
+submits one job to the worker (``jobs.py``):
+
+    refresh_caches (voxelize only keys whose fingerprint changed; ``voxelize/incremental``)
+    → update_gi_stages (cascades, injection, octree; cascades reused for light-only changes)
+    → volume_atlas (the octree's GPU layout, so the main thread only uploads it)
+
+A newer change supersedes the queued or running job; its plan is merged into the newer one so
+no work is lost. Results are applied on the main thread (``jobs.drain``), become the scene's
+results for F12 and the panels too (``session.py``), and tag the 3D views for redraw;
+``view_draw`` traces and draws them (``render/viewport.py``). A cancelled or failing job leaves
+the previous results in use; the error is kept for the panel.
+
+Undo/redo and file loads: a file load clears every ``LiveGI``; after undo/redo the next update
+re-reads the whole scene, and cache fingerprints decide what is voxelized again
+(``voxelize/incremental``), so no stale cache survives an undo.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+import traceback
+from dataclasses import dataclass, field
+
+import bpy
+
+from ..voxgi_addon.errors import VoxGIError
+from ..voxgi_addon.gi.incremental import StagedGI, cascade_grids, grids_equal, update_gi_stages
+from ..voxgi_addon.preview.volume_textures import volume_atlas
+from ..voxgi_addon.scene.changes import (
+    SceneIndex,
+    StageCounter,
+    UpdatePlan,
+    full_plan,
+    plan_updates,
+    view_plan,
+)
+from ..voxgi_addon.voxelize.incremental import CacheStore, refresh_caches
+from . import jobs
+from .session import scene_session
+from .settings import gi_settings
+from .snapshot import snapshot_or_error, snapshot_summary
+from .updates import (
+    records_from_depsgraph,
+    scene_index,
+    skin_states,
+    transform_snapshot,
+    without_skin_echo,
+)
+
+JOB_LABEL = "Updating viewport GI"
+MEGABYTE = 1_000_000
+
+
+@dataclass
+class LiveResult:
+    """What one job produced (worker side), applied on the main thread."""
+
+    snapshot: object
+    caches: object
+    staged: StagedGI
+    atlas: object
+    voxelized: list[str]
+    reused: list[str]
+    timings: dict[str, float]
+
+
+@dataclass
+class LiveStats:
+    """The last applied update, for the panels: why, what ran, how long, how big."""
+
+    triggers: tuple[str, ...] = ()
+    stages: tuple[str, ...] = ()
+    voxelized: list[str] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+    cascades: list[tuple[int, float, int, float]] = field(default_factory=list)  # i, span, voxels, MB
+    octree_nodes: int = 0
+    octree_mb: float = 0.0
+    cache_mb: float = 0.0
+
+
+def settings_key(scene) -> tuple:
+    """(voxel settings, cascade settings) of the scene: a change of the first re-voxelizes
+    everything, of the second rebuilds the cascades (``LiveGI.update``)."""
+    s = scene.voxgi
+    return ((round(s.base_span, 9), s.cascade_count), (gi_settings(s),))
+
+
+class LiveGI:
+    """The viewport's results and scheduling for one scene (see the module doc)."""
+
+    def __init__(self, scene_name: str):
+        self.scene_name = scene_name
+        self.store = CacheStore()
+        self.snapshot = None       # the applied result's snapshot (camera = the view's)
+        self.staged: StagedGI | None = None
+        self.atlas = None
+        self.generation = 0        # bumped per applied result: view_draw traces again
+        self.index: SceneIndex | None = None  # of the last snapshot taken
+        self.latest_snapshot = None  # the last snapshot taken (maybe not applied yet)
+        self.planned = StageCounter()  # every plan scheduled
+        self.plans: list[UpdatePlan] = []  # the same, in order (tests, panel)
+        self.pending: UpdatePlan | None = None  # the plan of the running job
+        self.view_camera = None    # CameraData of the last drawn view (anchors the cascades)
+        self.error = ""
+        self.stats = LiveStats()
+        self.progress = jobs.Progress()
+        self.settings = None
+        self.rescan = ""           # why everything must be read again next time ("" = no need)
+        self.skin: dict[str, tuple[bytes, bytes]] = {}  # skinned objects' states (``update``)
+
+    # ------------------------------------------------------------------ planning
+
+    def update(self, scene, depsgraph, records=None) -> UpdatePlan:
+        """``view_update``: plan the depsgraph's updates (or ``records``) and schedule them."""
+        if records is None:
+            records = records_from_depsgraph(depsgraph, self.index)
+        # A full snapshot of a skinned mesh adds and removes a temporary modifier
+        # (snapshot/skin.py), which Blender reports as a geometry update of it: our own echo,
+        # told apart from edits and poses by the mesh's rest shape and pose fingerprints.
+        records = without_skin_echo(records, self.skin, depsgraph)
+        key = settings_key(scene)
+        if self.index is None or self.rescan:
+            plan = full_plan(self.rescan or "first update")
+        elif key[0] != self.settings[0]:
+            plan = full_plan("voxel settings changed")
+        else:
+            plan = plan_updates(records, self.index)
+            if key[1] != self.settings[1]:
+                plan = plan.merged(view_plan(True)).merged(
+                    UpdatePlan(frozenset({"snapshot"}), triggers=("cascade settings changed",)))
+        self.settings = key
+        self.rescan = ""
+        if not plan.empty:
+            self.schedule(plan, scene, depsgraph)
+        return plan
+
+    def view_changed(self, camera, scene=None, depsgraph=None) -> UpdatePlan:
+        """``view_draw`` with a new view: trace only, or rebuild the cascades when the view
+        left their anchor cell (the cascades follow the view in whole coarse voxels)."""
+        self.view_camera = camera
+        state = None if self.staged is None else self.staged.state
+        snapshot = self.snapshot or self.latest_snapshot
+        reanchored = False
+        if state is not None and snapshot is not None:
+            moved = dataclasses.replace(snapshot, camera=camera)
+            grids = cascade_grids(moved, self.staged.caches, gi_settings(_scene(self).voxgi))
+            reanchored = not grids_equal(grids, state.grids)
+        plan = view_plan(reanchored)
+        if reanchored and self.pending is None:
+            self.schedule(plan, scene or _scene(self), depsgraph)
+        else:
+            self._count(plan)
+        return plan
+
+    def _count(self, plan: UpdatePlan) -> None:
+        self.planned.count(plan)
+        self.plans.append(plan)
+
+    # ------------------------------------------------------------------ the job
+
+    def schedule(self, plan: UpdatePlan, scene, depsgraph=None) -> jobs.Job | None:
+        """Snapshot now (main thread) and submit the plan's work to the worker."""
+        self._count(plan)
+        if plan.stages == {"trace"}:
+            return None
+        running = jobs.running_job(self.scene_name)
+        if running is not None and self.pending is not None:
+            plan = self.pending.merged(plan)  # the superseded job's work still has to happen
+        depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+        snapshot = None
+        if not plan.full_snapshot and "snapshot" in plan.stages and self.latest_snapshot is not None:
+            snapshot = transform_snapshot(self.latest_snapshot, scene, depsgraph)
+        elif "snapshot" not in plan.stages and self.latest_snapshot is not None:
+            snapshot = self.latest_snapshot
+        try:
+            if snapshot is None:
+                snapshot, _ = snapshot_or_error(None, depsgraph)
+        except VoxGIError as error:
+            self.error = str(error)
+            return None
+        self.latest_snapshot = snapshot
+        self.skin = skin_states(snapshot, depsgraph)
+        self.index = scene_index(snapshot, depsgraph.view_layer)
+        if self.view_camera is not None:
+            snapshot = dataclasses.replace(snapshot, camera=self.view_camera)
+        settings = scene.voxgi
+        base_span, count, gi = settings.base_span, settings.cascade_count, gi_settings(settings)
+        store, previous, progress = self.store, self.staged, self.progress
+        stages = plan.stages
+        progress(0.0, "starting")
+
+        def job(cancel):  # worker thread: engine code on plain data only
+            t0 = time.perf_counter()
+            refreshed = refresh_caches(store, snapshot, base_span, count, cancel,
+                                       lambda f, text: progress(0.6 * f, text))
+            t1 = time.perf_counter()
+            staged = update_gi_stages(snapshot, refreshed.caches, gi, previous, stages, cancel,
+                                      lambda f, text: progress(0.6 + 0.3 * f, text))
+            t2 = time.perf_counter()
+            progress(0.9, "octree layout for the GPU")
+            atlas = volume_atlas(staged.state.octree)
+            t3 = time.perf_counter()
+            progress(1.0, "done")
+            timings = {"caches": t1 - t0, **{f"  {k}": v for k, v in refreshed.caches.timings.items()},
+                       "gi": t2 - t1, **{f"  {k}": v for k, v in staged.state.timings.items()},
+                       "atlas": t3 - t2}
+            return LiveResult(snapshot, refreshed.caches, staged, atlas, refreshed.voxelized,
+                              refreshed.reused, timings)
+
+        self.pending = plan
+        return jobs.submit(self.scene_name, job, label=JOB_LABEL,
+                           on_done=lambda result: self._apply(plan, result),
+                           on_cancel=self._cancelled, on_error=self._failed,
+                           progress=progress)
+
+    def _apply(self, plan: UpdatePlan, result: LiveResult) -> None:
+        self.pending = None
+        self.snapshot, self.staged, self.atlas = result.snapshot, result.staged, result.atlas
+        self.generation += 1
+        self.error = ""
+        state = result.staged.state
+        octree = state.octree.stats()
+        self.stats = LiveStats(
+            plan.triggers, result.staged.stages, result.voxelized, result.timings,
+            [(cv.grid.index, cv.grid.span, cv.voxel_count, _cascade_bytes(cv) / MEGABYTE)
+             for cv in state.cascades],
+            sum(s.nodes for s in octree), sum(s.bytes for s in octree) / MEGABYTE,
+            result.caches.total_bytes / MEGABYTE)
+        session = scene_session(self.scene_name)  # F12 and the other panels see them too
+        session.caches, session.gi_state = result.caches, state
+        session.snapshot_summary = snapshot_summary(result.snapshot)
+        session.gi_timings = {k: v for k, v in result.timings.items() if not k.startswith(" ")}
+        tag_3d_views()
+
+    def _cancelled(self) -> None:
+        self.pending = None
+        self.error = ""
+        tag_3d_views()
+
+    def _failed(self, error: BaseException) -> None:
+        self.pending = None
+        if not isinstance(error, VoxGIError):
+            traceback.print_exception(error)
+        self.error = f"{type(error).__name__}: {error}" if not isinstance(error, VoxGIError) \
+            else str(error)
+        tag_3d_views()
+
+    @property
+    def running(self) -> jobs.Job | None:
+        return jobs.running_job(self.scene_name)
+
+
+def _cascade_bytes(cascade_voxels) -> int:
+    return sum(getattr(cascade_voxels, name).nbytes for name in
+               ("cells", "albedo", "normal", "specular", "count", "mesh_has_finer"))
+
+
+def _scene(live: LiveGI):
+    return bpy.data.scenes.get(live.scene_name) or bpy.context.scene
+
+
+def tag_3d_views() -> None:
+    """Redraw every 3D view's main region and sidebar (new results or progress)."""
+    for wm in bpy.data.window_managers:
+        for window in wm.windows:
+            if window.screen is None:
+                continue
+            for area in window.screen.areas:
+                if area.type == "VIEW_3D":
+                    area.tag_redraw()
+
+
+_live: dict[str, LiveGI] = {}
+
+
+def live_gi(scene_name: str) -> LiveGI:
+    """The scene's ``LiveGI``, created on first use."""
+    live = _live.get(scene_name)
+    if live is None:
+        live = _live[scene_name] = LiveGI(scene_name)
+    return live
+
+
+def peek_live_gi(scene_name: str) -> LiveGI | None:
+    return _live.get(scene_name)
+
+
+def current_state(scene_name: str):
+    """The GI state the 3D view shows for a scene: the viewport's applied result, else the
+    last ``voxgi.update`` / F12 one, else None."""
+    live = _live.get(scene_name)
+    if live is not None and live.staged is not None:
+        return live.staged.state
+    from .session import peek_session
+
+    session = peek_session(scene_name)
+    return None if session is None else session.gi_state
+
+
+def clear() -> None:
+    """Forget every scene's viewport results (file load, unregister)."""
+    _live.clear()
+
+
+@bpy.app.handlers.persistent
+def _clear_on_load(*_args) -> None:
+    clear()
+
+
+@bpy.app.handlers.persistent
+def _rescan_after_undo(*_args) -> None:
+    # Undo restores data under the same names; fingerprints find out what really changed.
+    for live in _live.values():
+        live.rescan = "undo / redo"
+
+
+HANDLERS = (("load_post", _clear_on_load), ("undo_post", _rescan_after_undo),
+            ("redo_post", _rescan_after_undo))
+classes = ()
+
+
+def register() -> None:
+    for name, fn in HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        if fn not in handlers:
+            handlers.append(fn)
+
+
+def unregister() -> None:
+    for name, fn in HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        if fn in handlers:
+            handlers.remove(fn)
+    clear()

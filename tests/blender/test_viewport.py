@@ -1,0 +1,264 @@
+"""Live GI in the 3D view (render/viewport.py, blender/viewport_session.py).
+
+* The viewport path — ``draw_view``, what ``view_draw`` calls — driven with the scene camera's
+  view and projection matrices into a ``GPUOffScreen`` gives F12's image.
+* Real depsgraph updates (collected by a ``depsgraph_update_post`` handler, as the render
+  engine's ``view_update`` reads them) trigger exactly the expected stages: transforms never
+  re-voxelize, a mesh edit re-voxelizes that mesh only.
+"""
+from __future__ import annotations
+
+import bpy
+import gpu
+import numpy as np
+import pytest
+import scenes
+
+WIDTH, HEIGHT = 64, 48
+MOVE = {"snapshot", "transform", "inject", "octree", "trace"}
+LIGHT = {"snapshot", "inject", "octree", "trace"}
+
+
+def relative_l1(ours, reference):
+    return float(np.abs(ours - reference).sum() / max(np.abs(reference).sum(), 1e-12))
+
+
+def gpu_ready():
+    from voxgi.render.gpu_context import ensure_gpu_context
+
+    ready, why = ensure_gpu_context()
+    assert ready, f"no GPU context in background mode: {why}"
+
+
+def cornell(camera_type="PERSP"):
+    scene = bpy.context.scene
+    scenes.build_test_cornell_box(scene, light="POINT")
+    scene.voxgi.base_span = 0.07
+    scene.voxgi.grid_resolution = "64"
+    scene.voxgi.diffuse_cones = 8
+    scene.render.engine = "VOXGI"
+    scene.render.resolution_x, scene.render.resolution_y = WIDTH, HEIGHT
+    scene.render.resolution_percentage = 100
+    if camera_type == "ORTHO":
+        scene.camera.data.type = "ORTHO"
+        scene.camera.data.ortho_scale = 2.6
+    return scene
+
+
+def camera_matrices(scene, depsgraph):
+    camera = scene.camera.evaluated_get(depsgraph)
+    window = camera.calc_matrix_camera(depsgraph, x=WIDTH, y=HEIGHT,
+                                       scale_x=scene.render.pixel_aspect_x,
+                                       scale_y=scene.render.pixel_aspect_y)
+    return camera.matrix_world.inverted(), window
+
+
+def offscreen_view(renderer, scene, depsgraph, view, window, width=WIDTH, height=HEIGHT):
+    """``draw_view`` into a float offscreen; (H, W, 4) top row first."""
+    from voxgi.render.gpu_tracer import read_texture
+    from voxgi.render.viewport import draw_view
+
+    offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=(0.5, 0.5, 0.5, 1.0))  # grey: what a blank viewport would show
+            drawn = draw_view(renderer, scene, depsgraph, view, window, width, height)
+        return drawn, np.flipud(read_texture(offscreen.texture_color))
+    finally:
+        offscreen.free()
+
+
+def f12_combined(scene, tmp_path):
+    from voxgi.voxgi_addon.files.exr import read_exr
+
+    scene.render.image_settings.media_type = "MULTI_LAYER_IMAGE"
+    scene.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
+    scene.render.filepath = str(tmp_path / "f12.exr")
+    bpy.ops.render.render(write_still=True)
+    channels = read_exr(str(tmp_path / "f12.exr"))
+    prefix = "ViewLayer." if any(k.startswith("ViewLayer.") for k in channels) else ""
+    return np.stack([channels[f"{prefix}Combined.{c}"] for c in "RGB"], axis=-1)
+
+
+@pytest.mark.parametrize("camera_type", ["PERSP", "ORTHO"])
+def test_viewport_path_with_the_camera_view_equals_f12(voxgi, tmp_path, camera_type):
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render.viewport import ViewportRenderer
+
+    scene = cornell(camera_type)
+    scene.voxgi_viewport.resolution_fraction = 1.0
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    plan = live.update(scene, depsgraph)  # what view_update does first: everything
+    assert "voxelize" in plan.stages and live.staged is not None and live.error == ""
+    renderer = ViewportRenderer()
+    view, window = camera_matrices(scene, depsgraph)
+    drawn, image = offscreen_view(renderer, scene, depsgraph, view, window)
+    assert drawn and renderer.traces == 1
+    assert live.plans[-1].stages == {"trace"}  # the camera's view: cascades stay where they are
+
+    f12 = f12_combined(scene, tmp_path)
+    assert f12[..., 0].sum() > 0 and (f12.sum(-1) > 0).mean() > 0.5
+    error = relative_l1(image[..., :3], f12)
+    print(f"{camera_type}: viewport vs F12 Combined relative L1 {error:.4f}")
+    assert error <= 0.02
+    assert np.all(image[..., 3] == 1.0)  # opaque: the grey clear colour never shows
+
+    # Redrawing the same view draws the kept texture without tracing again.
+    drawn, again = offscreen_view(renderer, scene, depsgraph, view, window)
+    assert drawn and renderer.traces == 1 and np.array_equal(again, image)
+
+
+def test_viewport_keeps_the_last_image_while_newer_work_runs(voxgi, jobs_interactive):
+    """Interactively, a change only submits a job: until it is applied, the view draws the
+    last traced image (never blank or grey); then it traces the new results."""
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render.viewport import ViewportRenderer
+    from voxgi.voxgi_addon.scene.changes import UpdateRecord, plan_updates
+
+    jobs = jobs_interactive
+    scene = cornell()
+    scene.voxgi_viewport.resolution_fraction = 0.5
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    jobs.synchronous = True
+    live.update(scene, depsgraph)
+    jobs.synchronous = False
+    renderer = ViewportRenderer()
+    view, window = camera_matrices(scene, depsgraph)
+    _, first = offscreen_view(renderer, scene, depsgraph, view, window)
+    generation = live.generation
+
+    bpy.data.objects["Test Point Light"].location.x += 0.4
+    depsgraph.update()
+    moved = UpdateRecord("OBJECT", "Test Point Light", transform=True, object_type="LIGHT")
+    job = live.schedule(plan_updates([moved], live.index), scene, depsgraph)
+    assert job is not None and job.state == "running"
+    _, during = offscreen_view(renderer, scene, depsgraph, view, window)
+    assert np.array_equal(during, first) and renderer.traces == 1
+    assert job.wait(60) and jobs.drain() and job.state == "done"
+    assert live.generation == generation + 1
+    _, after = offscreen_view(renderer, scene, depsgraph, view, window)
+    assert renderer.traces == 2 and not np.array_equal(after, first)
+
+
+@pytest.fixture
+def jobs_interactive(voxgi, monkeypatch):
+    import importlib
+
+    jobs = importlib.import_module("voxgi.blender.jobs")
+    monkeypatch.setattr(jobs, "synchronous", False)
+    yield jobs
+    jobs.cancel_all()
+    assert jobs.wait_idle(60)
+
+
+class Recorder:
+    """Collects depsgraph updates as the engine reads them (``records_from_depsgraph``)."""
+
+    def __init__(self, live):
+        from voxgi.blender.updates import records_from_depsgraph
+
+        self.live, self.records, self.read = live, [], records_from_depsgraph
+
+    def __call__(self, scene, depsgraph):
+        self.records.extend(self.read(depsgraph, self.live.index))
+
+    def take(self):
+        records, self.records = self.records, []
+        return records
+
+
+def test_depsgraph_updates_trigger_exactly_the_expected_stages(voxgi):
+    """Move an object, pose a bone, move a light, edit a mesh's vertices, change a material
+    colour, orbit the view: the planned stages and the work the worker really did."""
+    from voxgi.blender.demo_scene import build_demo_scene
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.voxgi_addon.scene.view_camera import camera_from_view
+
+    scene = bpy.context.scene
+    build_demo_scene(scene)
+    scene.voxgi.base_span, scene.voxgi.cascade_count, scene.voxgi.grid_resolution = 0.1, 3, "32"
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    first = live.update(scene, depsgraph)
+    assert "voxelize" in first.stages and live.staged is not None, live.error
+    first_voxelized = live.stats.voxelized
+    assert len(first_voxelized) == 3  # the box, the sphere, the skinned tube
+    recorder = Recorder(live)
+    bpy.app.handlers.depsgraph_update_post.append(recorder)
+    try:
+        def step(edit):
+            recorder.take()
+            edit()
+            bpy.context.view_layer.update()
+            generation = live.generation
+            plan = live.update(scene, depsgraph, recorder.take())
+            ran = live.generation > generation
+            return plan, (live.stats if ran else None)
+
+        sphere = bpy.data.objects["Rotating Sphere"]
+        plan, stats = step(lambda: setattr(sphere, "location", sphere.location + type(sphere.location)((0.1, 0, 0))))
+        assert plan.stages == MOVE and plan.voxelize == set() and stats.voxelized == []
+        assert stats.stages == ("transform", "inject", "octree")
+
+        rig = next(o for o in scene.objects if o.type == "ARMATURE")
+        bone = rig.pose.bones[-1]
+        bone.rotation_mode = "XYZ"
+        plan, stats = step(lambda: setattr(bone, "rotation_euler", (0.4, 0.0, 0.0)))
+        assert plan.stages == MOVE and stats.voxelized == []
+
+        lamp = next(o for o in scene.objects if o.type == "LIGHT")
+        plan, stats = step(lambda: setattr(lamp, "location", lamp.location + type(lamp.location)((0, 0.1, 0))))
+        assert plan.stages == LIGHT and stats.voxelized == []
+        assert stats.stages == ("inject", "octree")  # the cascades were reused
+
+        mesh = sphere.data
+        co = np.empty(len(mesh.vertices) * 3, np.float32)
+        mesh.vertices.foreach_get("co", co)
+
+        def edit_vertices():
+            mesh.vertices.foreach_set("co", co * 1.1)
+            mesh.update()
+
+        plan, stats = step(edit_vertices)
+        key = next(o.mesh for o in live.snapshot.objects if o.name == sphere.name)
+        assert plan.stages == MOVE | {"voxelize"} and plan.voxelize == {key}
+        assert stats.voxelized == [key]  # one mesh, the others' caches kept
+
+        # The full snapshot above re-read the skinned tube (a temporary modifier): its echo
+        # schedules nothing.
+        echo, _ = step(lambda: None)
+        assert echo.empty, echo
+
+        material = sphere.material_slots[0].material
+        bsdf = next(n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+        plan, stats = step(lambda: bsdf.inputs["Base Color"].default_value.__setitem__(0, 0.05))
+        assert plan.stages == MOVE | {"albedo"} and plan.albedo == {key}
+        assert stats.voxelized == [key]  # the albedo refresh re-voxelizes that mesh
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(recorder)
+
+    # Orbit the view a little around the camera's target: trace only.
+    view = np.array(scene.camera.matrix_world.inverted())
+    window = np.array(scene.camera.calc_matrix_camera(depsgraph, x=64, y=48))
+    live.view_changed(camera_from_view(view, window, 64, 48))
+    turn = np.eye(4)
+    c, s = np.cos(0.02), np.sin(0.02)
+    turn[:2, :2] = ((c, -s), (s, c))
+    generation = live.generation
+    plan = live.view_changed(camera_from_view(view @ turn, window, 64, 48))
+    assert plan.stages == {"trace"} and live.generation == generation
+    # Far away, the cascades follow the view: rebuilt, never re-voxelized.
+    away = np.eye(4)
+    away[:3, 3] = (-8.0, 0.0, 0.0)
+    plan = live.view_changed(camera_from_view(view @ away, window, 64, 48))
+    assert plan.stages == {"transform", "inject", "octree", "trace"}
+    assert live.generation == generation + 1 and live.stats.voxelized == []
+
+    counts = live.planned.snapshot()
+    assert counts["voxelize"] == 2 and counts["albedo"] == 1  # first update + the vertex edit
+    assert live.planned.voxelized == [key] and live.planned.recoloured == [key]

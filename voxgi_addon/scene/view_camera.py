@@ -1,0 +1,61 @@
+"""A snapshot camera from a 3D view's matrices (numpy only).
+
+Blender's viewport describes what it shows with two 4 × 4 matrices: the view matrix
+(world → eye, ``RegionView3D.view_matrix``) and the window matrix (eye → OpenGL clip,
+``RegionView3D.window_matrix``); a camera's own pair is ``matrix_world.inverted()`` and
+``calc_matrix_camera``. ``camera_from_view`` turns either pair into the ``CameraData`` the
+tracers take, perspective or orthographic, free view or camera view (the camera view's zoom
+and offset are part of its window matrix). The clipping range is read back from the window
+matrix, so rays and rasterization cover exactly what the view shows.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .snapshot import CameraData
+
+__all__ = ["camera_from_view", "is_orthographic", "clip_range"]
+
+
+def is_orthographic(window_matrix) -> bool:
+    """True for an orthographic window matrix (its last row is (0, 0, 0, 1))."""
+    w = np.asarray(window_matrix, np.float64)
+    return abs(w[3, 3] - 1.0) < 1e-9 and abs(w[3, 2]) < 1e-9
+
+
+def clip_range(window_matrix) -> tuple[float, float]:
+    """(near, far) distances in front of the eye encoded by an OpenGL window matrix."""
+    w = np.asarray(window_matrix, np.float64)
+    a, b = w[2, 2], w[2, 3]
+    if is_orthographic(w):  # a = −2/(f−n), b = −(f+n)/(f−n)
+        return float((b + 1.0) / a), float((b - 1.0) / a)
+    return float(b / (a - 1.0)), float(b / (a + 1.0))  # a = −(f+n)/(f−n), b = −2fn/(f−n)
+
+
+def camera_from_view(view_matrix, window_matrix, width: int, height: int,
+                     name: str = "View") -> CameraData:
+    """The ``CameraData`` of a ``width`` × ``height`` image of a view.
+
+    view_matrix : (4, 4) world → eye (rigid; the eye looks along its −Z).
+    window_matrix : (4, 4) OpenGL projection for that image's aspect.
+    The camera's ``resolution`` is (width, height), so ``scene.camera.view_projection`` gives
+    back the window matrix (up to the clipping rows) and the rays go through its pixels.
+    """
+    view = np.asarray(view_matrix, np.float64).reshape(4, 4)
+    window = np.asarray(window_matrix, np.float64).reshape(4, 4)
+    if not (np.isfinite(view).all() and np.isfinite(window).all()):
+        raise ValueError("view and window matrices must be finite")
+    near, far = clip_range(window)
+    ortho = is_orthographic(window)
+    return CameraData(
+        name=name,
+        world_matrix=np.linalg.inv(view),
+        projection_matrix=window.copy(),
+        resolution=(int(width), int(height)),
+        type="ORTHO" if ortho else "PERSP",
+        angle_x=0.0 if ortho else float(2.0 * np.arctan(1.0 / window[0, 0])),
+        angle_y=0.0 if ortho else float(2.0 * np.arctan(1.0 / window[1, 1])),
+        ortho_scale=float(2.0 / min(window[0, 0], window[1, 1])) if ortho else 0.0,
+        clip_start=near,
+        clip_end=far,
+    )
