@@ -127,6 +127,22 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
                ("4", "Quarter", "One pixel per 4×4 block (16× fewer cones)")),
         default="1",
     )
+    quality: bpy.props.EnumProperty(
+        name="Quality",
+        description="How the preview's diffuse indirect light and AO are computed",
+        items=(("ACCURATE", "Accurate", "Exact rays through the scene's triangles from a gather "
+                "point per GI block, denoised along surfaces, with exact direct light: close "
+                "to Cycles"),
+               ("FAST", "Fast", "Cone tracing through the voxel octree (the thesis' method): "
+                "fastest, approximate")),
+        default="ACCURATE",
+    )
+    gi_rays: bpy.props.IntProperty(
+        name="GI Rays",
+        description="Exact rays per gather point for diffuse indirect light and AO (Accurate "
+                    "quality); more rays, less noise before denoising",
+        default=64, min=1, max=1024,
+    )
     tracer: bpy.props.EnumProperty(
         name="Tracer",
         description="Where the preview's cone tracing runs",
@@ -146,6 +162,17 @@ def cone_settings(settings: VoxGISceneSettings):
                         sample_factor=settings.sample_factor, falloff=settings.falloff,
                         max_distance=settings.max_distance, ao_distance=settings.ao_distance,
                         gi_intensity=settings.gi_intensity, ao_intensity=settings.ao_intensity)
+
+
+def trace_options(settings: VoxGISceneSettings) -> dict:
+    """Keyword arguments of both tracers (``preview.passes.render_passes``,
+    ``render.gpu_preview.render_passes_gpu``) from the scene settings."""
+    from ..voxgi_addon.preview.gather import GatherSettings
+
+    return {"light_samples": settings.light_samples, "shadows": settings.shadows,
+            "gi_stride": int(settings.gi_resolution), "quality": settings.quality,
+            "gather_settings": GatherSettings(rays=settings.gi_rays,
+                                              ao_distance=settings.ao_distance)}
 
 
 def gi_settings(settings: VoxGISceneSettings):

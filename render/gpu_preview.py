@@ -15,20 +15,28 @@ import time
 import numpy as np
 
 from ..voxgi_addon.gi.cone_shadows import shadow_cone
+from ..voxgi_addon.preview.gather import GatherSettings
 from ..voxgi_addon.preview.passes import check_request, compose_passes, direct_light, material_indices, material_table
 from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
 from .gpu_bvh import direct_light_texture, shared_bvh
+from .gpu_gather import gather_gi
 from .gpu_tracer import dispatch, read_texture
 from .gpu_volume import GPUVolume
 
 
 def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_samples: int = 16,
-                      volume: GPUVolume | None = None, shadows: str = "RAYS", gi_stride: int = 1):
+                      volume: GPUVolume | None = None, shadows: str = "RAYS", gi_stride: int = 1,
+                      quality: str = "ACCURATE", gather_settings: GatherSettings | None = None):
     """(passes, timings) like ``preview.render_passes``. ``volume`` : a ``GPUVolume`` kept
-    between calls so an unchanged octree is not uploaded again (a new one when None)."""
-    check_request(snapshot, width, height, gi_stride)
+    between calls so an unchanged octree is not uploaded again (a new one when None).
+    quality "ACCURATE": exact direct light and the exact-ray final gather (``gpu_gather``);
+    "FAST": cone tracing through the octree (shadows as ``shadows`` says)."""
+    check_request(snapshot, width, height, gi_stride, quality)
+    if quality == "ACCURATE":
+        shadows = "RAYS"
+    gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
     timings = {}
     t0 = time.perf_counter()
     volume = volume or GPUVolume()
@@ -78,8 +86,15 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
                            height, sampling)
         return np.flipud(read_texture(low))
 
-    diffuse_ao = traced("diffuse_ao")
-    timings["diffuse+ao cones (GPU)"] = time.perf_counter() - t0
+    if quality == "ACCURATE":
+        albedo, _, _, emission = material_table(snapshot)
+        texture = gather_gi(shared_bvh().update(tris), volume, gbuffer.inputs, snapshot.lights,
+                            albedo, emission, gather_settings, gi_stride, width, height)
+        diffuse_ao = np.flipud(read_texture(texture))
+        timings["diffuse+ao gather (GPU)"] = time.perf_counter() - t0
+    else:
+        diffuse_ao = traced("diffuse_ao")
+        timings["diffuse+ao cones (GPU)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     glossy = traced("glossy")
     timings["glossy cones (GPU)"] = time.perf_counter() - t0

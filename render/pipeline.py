@@ -13,7 +13,7 @@ from dataclasses import replace
 
 from ..blender.reports import coverage_lines, timing_text
 from ..blender.session import scene_session
-from ..blender.settings import cone_settings, fit_settings, gi_settings, is_auto
+from ..blender.settings import cone_settings, fit_settings, gi_settings, is_auto, trace_options
 from ..blender.snapshot import snapshot_or_error
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.update import update_gi
@@ -103,9 +103,8 @@ def trace_passes(scene, snapshot, state, width, height):
                 from .gpu_volume import GPUVolume
                 session.gpu_volume = session.gpu_volume or GPUVolume()
                 passes, timings = render_passes_gpu(snapshot, state, width, height, cones,
-                                                    settings.light_samples, session.gpu_volume,
-                                                    shadows=settings.shadows,
-                                                    gi_stride=int(settings.gi_resolution))
+                                                    volume=session.gpu_volume,
+                                                    **trace_options(settings))
                 session.tracer_used = "GPU"
                 return passes, timings, [("INFO", "VoxGI: cones traced on the GPU")]
             except VoxGIError:
@@ -114,8 +113,7 @@ def trace_passes(scene, snapshot, state, width, height):
                 session.gpu_volume = None
                 why = f"the GPU tracer failed: {error}"
     passes, timings = render_passes(snapshot, state, width, height, cones,
-                                    light_samples=settings.light_samples, shadows=settings.shadows,
-                                    gi_stride=int(settings.gi_resolution))
+                                    **trace_options(settings))
     session.tracer_used = "numpy"
     return passes, timings, [("WARNING" if settings.tracer == "AUTO" else "INFO",
                               f"VoxGI: numpy tracer used ({why})")]

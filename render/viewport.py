@@ -30,7 +30,7 @@ import gpu
 import numpy as np
 from gpu_extras.batch import batch_for_shader
 
-from ..blender.settings import cone_settings
+from ..blender.settings import cone_settings, trace_options
 from ..blender.viewport_session import live_gi
 from ..blender.viewport_settings import VIEWPORT_PASSES
 from ..voxgi_addon.scene.view_camera import camera_from_view
@@ -90,9 +90,7 @@ class ViewportRenderer:
         upload = time.perf_counter() - t0
         snapshot = dataclasses.replace(live.snapshot, camera=camera)
         passes, timings = render_passes_gpu(snapshot, live.staged.state, width, height, cones,
-                                            settings.light_samples, self.volume,
-                                            shadows=settings.shadows,
-                                            gi_stride=int(settings.gi_resolution))
+                                            volume=self.volume, **trace_options(settings))
         image = np.asarray(passes[pass_name], np.float32)
         rgba = np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=2)
         flat = np.ascontiguousarray(np.flipud(rgba)).ravel()  # GPU rows go bottom to top

@@ -18,6 +18,7 @@ from ..gi.conetrace import ConeSettings, trace_diffuse_and_ao, trace_glossy
 from ..gi.direct_light import diffuse_direct
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
+from .gather import GatherSettings, gather_gi
 from .upsample import STRIDES, sample_pixels, upsample
 
 PASS_NAMES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color",
@@ -42,8 +43,14 @@ def material_table(snapshot):
     return albedo, rough, spec, emission
 
 
-def check_request(snapshot, width: int, height: int, gi_stride: int = 1) -> None:
+QUALITIES = ("ACCURATE", "FAST")
+
+
+def check_request(snapshot, width: int, height: int, gi_stride: int = 1,
+                  quality: str = "ACCURATE") -> None:
     """Raise ``VoxGIError`` for a preview that cannot be rendered."""
+    if quality not in QUALITIES:
+        raise VoxGIError(f"quality must be one of {QUALITIES}, got {quality!r}")
     if gi_stride not in STRIDES:
         raise VoxGIError(f"GI resolution stride must be one of {STRIDES}, got {gi_stride}")
     if snapshot.camera is None:
@@ -109,8 +116,13 @@ def _traced(seen, stride, hit, trace, channels):
 
 
 def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettings,
-                  light_samples: int = 16, shadows: str = "RAYS", gi_stride: int = 1):
+                  light_samples: int = 16, shadows: str = "RAYS", gi_stride: int = 1,
+                  quality: str = "ACCURATE", gather_settings: GatherSettings | None = None):
     """Render the passes at ``width`` × ``height`` with the numpy tracer.
+
+    quality : "ACCURATE" — exact direct light and the exact-ray final gather for Diffuse Indirect
+    and AO (``gather``; ``gather_settings``, default: 64 rays, the cones' AO distance);
+    "FAST" — the thesis' cone tracing through the octree for both.
 
     gi_stride : trace the cones (diffuse indirect light, AO, glossy) at one pixel of every
     gi_stride × gi_stride block and upsample (``gi_upsample``); 1 = every pixel.
@@ -121,7 +133,10 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     Returns (passes, timings): passes maps each name of PASS_NAMES to an (H, W, 3) float32
     image (row 0 = top); timings maps stage names to seconds.
     """
-    check_request(snapshot, width, height, gi_stride)
+    check_request(snapshot, width, height, gi_stride, quality)
+    if quality == "ACCURATE":
+        shadows = "RAYS"
+    gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
     timings = {}
     t0 = time.perf_counter()
     tris = world_triangles(snapshot)
@@ -152,9 +167,15 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
                             rough[materials[pixels]], cones)
 
     t0 = time.perf_counter()
-    traced = _traced(seen, gi_stride, hit, diffuse_and_ao, 4)
+    if quality == "ACCURATE":
+        albedo, _, _, emission = material_table(snapshot)
+        traced = gather_gi(tris, snapshot.lights, albedo, emission, seen.hit, seen.position,
+                           seen.normal, gather_settings, gi_stride).reshape(-1, 4)[hit]
+        timings["diffuse+ao gather"] = time.perf_counter() - t0
+    else:
+        traced = _traced(seen, gi_stride, hit, diffuse_and_ao, 4)
+        timings["diffuse+ao cones"] = time.perf_counter() - t0
     indirect, ao = traced[:, :3], traced[:, 3]
-    timings["diffuse+ao cones"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     glossy = _traced(seen, gi_stride, hit, glossy_cones, 3)
     timings["glossy cones"] = time.perf_counter() - t0

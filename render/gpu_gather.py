@@ -1,0 +1,85 @@
+"""The Accurate integrator's final gather on the GPU: exact rays at reduced resolution, the
+edge-aware à-trous filter, and the joint-bilateral upsample.
+
+``gather_gi`` runs ``shaders/bvh_gather.glsl`` (exact one-bounce Diffuse Indirect and AO with
+their variances, one cell per stride × stride block), ``shaders/denoise.glsl`` ``iterations``
+times (taps 1, 2, 4, … cells apart) and, for strides above 1, ``shaders/upsample.glsl``. It is
+the GPU statement of ``voxgi_addon.preview.gather.gather_gi`` (numpy), which draws the same
+rays. Needs a GPU context.
+"""
+from __future__ import annotations
+
+import math
+
+import gpu
+
+from ..voxgi_addon.preview.upsample import low_shape
+from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, materials_texture, strata_side
+from .gpu_shaders import LOCAL_SIZE, build_compute
+from .gpu_tracer import dispatch
+
+_DENOISE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "low_image", "low_variance")
+_shaders: dict[str, object] = {}
+
+
+def _denoise_shader():
+    if "denoise" not in _shaders:
+        _shaders["denoise"] = build_compute(("pixels", "denoise"), _DENOISE_SAMPLERS, ("grid",),
+                                            ("out_image", "out_variance"))
+    return _shaders["denoise"]
+
+
+def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: int,
+            iterations: int = 4):
+    """``iterations`` passes of the à-trous filter over the low-resolution ``values`` (light rgb,
+    AO) and ``variance`` textures whose cells trace the pixels ``traced_pixel`` picks in the
+    ``width`` × ``height`` G-buffer; returns the filtered (values, variance) textures."""
+    shader = _denoise_shader()
+    for it in range(iterations):
+        out = [gpu.types.GPUTexture((values.width, values.height), format="RGBA32F")
+               for _ in range(2)]
+        shader.bind()
+        inputs = {**gbuffer_inputs, "low_image": values, "low_variance": variance}
+        for name in _DENOISE_SAMPLERS:
+            shader.uniform_sampler(name, inputs[name])
+        shader.uniform_float("grid", (float(stride), float(width), float(height), float(1 << it)))
+        shader.image("out_image", out[0])
+        shader.image("out_variance", out[1])
+        gpu.compute.dispatch(shader, math.ceil(values.width / LOCAL_SIZE),
+                             math.ceil(values.height / LOCAL_SIZE), 1)
+        values, variance = out
+    return values, variance
+
+
+def gather(bvh: GPUBVH, gbuffer_inputs, lights, albedo, emission, settings, stride: int,
+           width: int, height: int):
+    """The raw gather: (values, variance) RGBA32F textures of the low-resolution grid.
+    settings : ``voxgi_addon.preview.gather.GatherSettings``."""
+    low_h, low_w = low_shape(height, width, stride)
+    inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights),
+              "materials": materials_texture(albedo, emission)}
+    assert OUTPUTS["bvh_gather"] == ("out_image", "out_variance")
+    return dispatch_bvh("bvh_gather", inputs, low_w, low_h, {
+        "sampling": (settings.seed, settings.rays, settings.ao_distance,
+                     strata_side(settings.hit_samples)),
+        "world": (*settings.world, 0.0),
+        "grid": (stride, width, height, 0)})
+
+
+def gather_gi(bvh: GPUBVH, volume, gbuffer_inputs, lights, albedo, emission, settings,
+              stride: int, width: int, height: int):
+    """Full-resolution RGBA32F texture (Diffuse Indirect rgb, AO), bottom row first: gather,
+    filter, upsample. ``volume`` : any ``GPUVolume`` (the upsample kernel binds its textures)."""
+    values, variance = gather(bvh, gbuffer_inputs, lights, albedo, emission, settings, stride,
+                              width, height)
+    values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
+                        settings.denoise_iterations)
+    if stride > 1:
+        values = dispatch("upsample", volume, {**gbuffer_inputs, "low_image": values}, width,
+                          height, {"sampling": (stride, width, height, 0)})
+    return values
+
+
+def release() -> None:
+    """Drop the cached shaders (docs/gi_pipeline.md, "GPU resources at exit")."""
+    _shaders.clear()
