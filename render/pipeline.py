@@ -106,7 +106,8 @@ def trace_passes(scene, snapshot, state, width, height):
                                                     volume=session.gpu_volume,
                                                     **trace_options(settings))
                 session.tracer_used = "GPU"
-                return passes, timings, [("INFO", "VoxGI: cones traced on the GPU")]
+                how = ("exact rays" if settings.quality == "ACCURATE" else "cones")
+                return passes, timings, [("INFO", f"VoxGI: {how} traced on the GPU")]
             except VoxGIError:
                 raise
             except Exception as error:  # shader creation or dispatch failed: fall back

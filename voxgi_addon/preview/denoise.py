@@ -35,6 +35,8 @@ def _shifted(image: np.ndarray, dy: int, dx: int, fill) -> np.ndarray:
     """image[y + dy, x + dx] with ``fill`` outside (same shape as ``image``)."""
     out = np.full_like(image, fill)
     h, w = image.shape[:2]
+    if abs(dy) >= h or abs(dx) >= w:
+        return out
     ys = slice(max(0, -dy), min(h, h - dy))
     xs = slice(max(0, -dx), min(w, w - dx))
     ys_src = slice(max(0, dy), min(h, h + dy))
