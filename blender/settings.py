@@ -121,11 +121,14 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
     )
     gi_resolution: bpy.props.EnumProperty(
         name="GI Resolution",
-        description="Trace the cones (diffuse indirect, AO, glossy) at every pixel or at one "
-                    "pixel per block, upsampled along surfaces (faster, slightly softer)",
-        items=(("1", "Full", "Every pixel"), ("2", "Half", "One pixel per 2×2 block (4× fewer cones)"),
-               ("4", "Quarter", "One pixel per 4×4 block (16× fewer cones)")),
-        default="1",
+        description="Trace indirect light and AO at every pixel or at one pixel per block, "
+                    "upsampled along surfaces (faster, slightly softer)",
+        items=(("AUTO", "Auto", "One pixel per block so that about 160×120 points are traced, "
+                "whatever the image size (Full up to 240×180, Half up to 480×360, then "
+                "Quarter)"),
+               ("1", "Full", "Every pixel"), ("2", "Half", "One pixel per 2×2 block (4× fewer rays)"),
+               ("4", "Quarter", "One pixel per 4×4 block (16× fewer rays)")),
+        default="AUTO",
     )
     quality: bpy.props.EnumProperty(
         name="Quality",
@@ -164,13 +167,22 @@ def cone_settings(settings: VoxGISceneSettings):
                         gi_intensity=settings.gi_intensity, ao_intensity=settings.ao_intensity)
 
 
-def trace_options(settings: VoxGISceneSettings) -> dict:
+def gi_stride(settings: VoxGISceneSettings, width: int, height: int) -> int:
+    """The GI resolution stride for a ``width`` × ``height`` image (``auto_stride`` for Auto)."""
+    from ..voxgi_addon.preview.upsample import auto_stride
+
+    if settings.gi_resolution == "AUTO":
+        return auto_stride(width, height)
+    return int(settings.gi_resolution)
+
+
+def trace_options(settings: VoxGISceneSettings, width: int, height: int) -> dict:
     """Keyword arguments of both tracers (``preview.passes.render_passes``,
-    ``render.gpu_preview.render_passes_gpu``) from the scene settings."""
+    ``render.gpu_preview.render_passes_gpu``) for a ``width`` × ``height`` image."""
     from ..voxgi_addon.preview.gather import GatherSettings
 
     return {"light_samples": settings.light_samples, "shadows": settings.shadows,
-            "gi_stride": int(settings.gi_resolution), "quality": settings.quality,
+            "gi_stride": gi_stride(settings, width, height), "quality": settings.quality,
             "gather_settings": GatherSettings(rays=settings.gi_rays,
                                               ao_distance=settings.ao_distance)}
 

@@ -90,7 +90,8 @@ class ViewportRenderer:
         upload = time.perf_counter() - t0
         snapshot = dataclasses.replace(live.snapshot, camera=camera)
         passes, timings = render_passes_gpu(snapshot, live.staged.state, width, height, cones,
-                                            volume=self.volume, **trace_options(settings))
+                                            volume=self.volume,
+                                            **trace_options(settings, width, height))
         image = np.asarray(passes[pass_name], np.float32)
         rgba = np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=2)
         flat = np.ascontiguousarray(np.flipud(rgba)).ravel()  # GPU rows go bottom to top

@@ -103,11 +103,15 @@ class VOXGI_PT_gi(_SidebarPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        manual = ("view_ahead",) if context.scene.voxgi.span_mode == "MANUAL" else ()
+        settings = context.scene.voxgi
+        manual = ("view_ahead",) if settings.span_mode == "MANUAL" else ()
+        # Accurate traces exact rays: the cone settings and soft-shadow cones apply to Fast only
+        # (glossy reflections are cone-traced in both).
+        trace = (("gi_rays",) if settings.quality == "ACCURATE"
+                 else ("diffuse_cones", "falloff", "gi_intensity", "ao_intensity", "shadows"))
         _settings_column(layout, context, (
-            *manual, "dense_depth", "cone_angle", "diffuse_cones", "sample_factor", "falloff",
-            "max_distance", "ao_distance", "gi_intensity", "ao_intensity", "light_samples",
-            "shadows", "gi_resolution", "tracer"))
+            "quality", *trace, *manual, "dense_depth", "cone_angle", "sample_factor",
+            "max_distance", "ao_distance", "light_samples", "gi_resolution", "tracer"))
         row = layout.row(align=True)
         row.operator("voxgi.update", icon="FILE_REFRESH")
         row.operator("voxgi.render_preview", icon="RENDER_STILL")

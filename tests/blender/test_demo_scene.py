@@ -125,6 +125,11 @@ def test_gi_panel_says_which_tracer_drew_the_last_preview(voxgi, tmp_path):
     layout = _Layout()
     panel = type("PanelStub", (), {"layout": layout})()
     bpy.types.VOXGI_PT_gi.draw(panel, bpy.context)
-    assert {"shadows", "gi_resolution", "tracer"} <= set(layout.props)
+    assert {"quality", "gi_rays", "gi_resolution", "tracer"} <= set(layout.props)
+    assert "shadows" not in layout.props  # soft-shadow cones are a Fast-quality choice
     assert "Last preview traced with: GPU" in layout.labels
+    bpy.context.scene.voxgi.quality = "FAST"
+    fast = _Layout()
+    bpy.types.VOXGI_PT_gi.draw(type("PanelStub", (), {"layout": fast})(), bpy.context)
+    assert {"shadows", "diffuse_cones"} <= set(fast.props) and "gi_rays" not in fast.props
     assert any(text.startswith("atlas ") and text.endswith("MB on the GPU") for text in layout.labels)

@@ -52,3 +52,16 @@ def test_pixels_without_a_traced_neighbour_on_their_surface_take_the_nearest():
     valid[0, 0] = True  # a single traced cell
     out = upsample(value[rows][:, cols], valid, hit, position, normal, 4)
     assert np.allclose(out[:6, :6], value[rows[0], cols[0]])  # filled, not black
+
+
+def test_auto_stride_keeps_the_traced_points_near_160_by_120():
+    from voxgi.voxgi_addon.preview.upsample import AUTO_POINTS, auto_stride, low_shape
+
+    assert auto_stride(160, 120) == 1
+    assert auto_stride(320, 240) == 2
+    assert auto_stride(640, 480) == 4
+    assert auto_stride(4000, 3000) == 4  # Quarter is the coarsest
+    for w, h in ((200, 150), (481, 361), (1920, 1080)):
+        stride = auto_stride(w, h)
+        hl, wl = low_shape(h, w, stride)
+        assert hl * wl <= AUTO_POINTS or stride == 4

@@ -8,7 +8,12 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def run(quick: bool = False, out=print, script: str = "bench_gi_blender.py") -> str:
+def run(quick: bool = False, out=print, script: str | None = None) -> str:
+    """Section "gi": per-update times (bench_gi_blender.py), then the issue scenes against
+    Cycles 16/64/256 spp and the default preview times (bench_scenes_blender.py)."""
+    if script is None:
+        return "\n".join(run(quick, out, name)
+                         for name in ("bench_gi_blender.py", "bench_scenes_blender.py"))
     python = ROOT / ".venv" / "bin" / "python"
     if not python.exists():
         raise RuntimeError("the bpy venv .venv is missing: run `make venv` (make bench does)")

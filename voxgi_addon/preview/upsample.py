@@ -18,6 +18,18 @@ NORMAL_POWER = 8
 PLANE_TOLERANCE = 0.1
 
 
+AUTO_POINTS = 240 * 180  # most traced points the Auto GI resolution allows
+
+
+def auto_stride(width: int, height: int) -> int:
+    """The smallest stride of STRIDES that traces at most AUTO_POINTS pixels (Quarter beyond)."""
+    for stride in STRIDES:
+        hl, wl = low_shape(height, width, stride)
+        if hl * wl <= AUTO_POINTS:
+            return stride
+    return STRIDES[-1]
+
+
 def low_shape(height: int, width: int, stride: int) -> tuple[int, int]:
     return -(-height // stride), -(-width // stride)
 
