@@ -359,7 +359,8 @@ def glossy_reflectance(base, metallic, specular_ior_level, roughness, normal, vi
     surface or the roughness is a mirror's (Cycles does not evaluate those).
     """
     n, v, l_ = _unit(normal), _unit(view), _unit(light)
-    cos_ni = np.sum(n * v, axis=-1)
+    directions = np.broadcast_shapes(n.shape, v.shape, l_.shape)[:-1]
+    cos_ni = np.broadcast_to(np.sum(n * v, axis=-1), directions)
     cos_no = np.sum(n * l_, axis=-1)
     base, metallic, level, rough, mu = _params(base, metallic, specular_ior_level, roughness,
                                                cos_ni)
