@@ -13,7 +13,8 @@ uses the world's AO distance (``World.light_settings.distance``), set from ``ao_
 
 Passes come back with Cycles' names and meanings (docs/blender_facts.md "Cycles' radiometry"): ``Diffuse Direct``,
 ``Diffuse Indirect`` (light without albedo), ``Diffuse Color``, ``Ambient Occlusion``,
-``Glossy Indirect``, ``Combined`` (RGB, premultiplied) and ``Alpha`` (H, W). The multilayer EXR
+``Glossy Direct``, ``Glossy Indirect``, ``Glossy Color`` (Glossy Direct/Indirect are light without
+the glossy colour, like the diffuse ones), ``Combined`` (RGB, premultiplied) and ``Alpha`` (H, W). The multilayer EXR
 is written to a temporary file with ZIP compression and read back with ``voxgi_addon.exr``.
 Every setting touched is restored afterwards, also when the render fails.
 """
@@ -37,7 +38,9 @@ PASSES = {
     "Diffuse Indirect": "use_pass_diffuse_indirect",
     "Diffuse Color": "use_pass_diffuse_color",
     "Ambient Occlusion": "use_pass_ambient_occlusion",
+    "Glossy Direct": "use_pass_glossy_direct",
     "Glossy Indirect": "use_pass_glossy_indirect",
+    "Glossy Color": "use_pass_glossy_color",
     "Combined": "use_pass_combined",
 }
 

@@ -45,7 +45,7 @@ def test_direct_light_matches_cycles_on_the_cornell_box(voxgi, light):
 
     assert _settings(scene) == before, "the harness restores every render setting"
     assert set(passes) == {"Diffuse Direct", "Diffuse Indirect", "Diffuse Color", "Ambient Occlusion",
-                           "Glossy Indirect", "Combined", "Alpha"}
+                           "Glossy Direct", "Glossy Indirect", "Glossy Color", "Combined", "Alpha"}
     assert all(p.shape == (HEIGHT, WIDTH, 3) and p.dtype == np.float32
                for name, p in passes.items() if name != "Alpha")
 
