@@ -26,6 +26,7 @@ from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
 from ..voxgi_addon.scene.bvh import DET_EPSILON, TEXTURE_WIDTH, build_bvh, pack_bvh
 from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
+from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_shaders import LOCAL_SIZE, build_compute
 from .gpu_tracer import read_texture
 from .gpu_volume import float_texture
@@ -39,9 +40,9 @@ KERNELS = {
     "bvh_indirect": (("bvh_lights", "bvh_indirect"),
                      _BVH + ("bvh_normals", "lights", "materials", "gbuffer_position",
                              "gbuffer_normal"), ("sampling", "world")),
-    "bvh_gather": (("pixels", "bvh_lights", "bvh_gather"),
+    "bvh_gather": (("pixels", "principled", "bvh_lights", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "materials", "gbuffer_position",
-                           "gbuffer_normal"), ("sampling", "world", "grid")),
+                           "gbuffer_normal", "principled_lut"), ("sampling", "world", "grid")),
 }
 # Kernels with more than one output image (the others write ``out_image``).
 OUTPUTS = {"bvh_gather": ("out_image", "out_variance")}
@@ -56,6 +57,8 @@ def bvh_shader(kernel: str):
                    "SHADOW_EPSILON": repr(float(SHADOW_EPSILON)),
                    "SURFACE_EPSILON": repr(float(SURFACE_EPSILON)),
                    "DET_EPSILON": repr(float(DET_EPSILON)), "RAY_STREAM": f"{RAY_STREAM}u"}
+        if "principled" in files:
+            defines.update(PRINCIPLED_DEFINES)
         _shaders[kernel] = build_compute(("bvh_common",) + files, samplers, constants,
                                          OUTPUTS.get(kernel, ("out_image",)), defines)
     return _shaders[kernel]
@@ -147,10 +150,14 @@ def dispatch_bvh(kernel: str, inputs: dict[str, object], width: int, height: int
     return images[0] if len(images) == 1 else tuple(images)
 
 
-def lights_texture(lights):
-    """The light table (``voxgi_addon.preview.light_table``) as a texture; one padding row of type -1
-    when no light shines."""
+def lights_texture(lights, only: int | None = None):
+    """The light table (``voxgi_addon.preview.light_table``) as a texture; one padding row of
+    type -1 when no light shines. only : keep just the light of that index in ``lights`` (the
+    other rows become padding, so its samples keep their stream)."""
     table = light_table(lights)
+    if only is not None:
+        table = table.copy()
+        table[table[:, 0, 3] != only, 0, 0] = -1.0
     if len(table) == 0:
         table = np.zeros((1, LIGHT_TEXELS, 4), np.float32)
         table[0, 0, 0] = -1.0
@@ -162,11 +169,13 @@ def strata_side(samples: int) -> int:
     return max(1, math.ceil(math.sqrt(samples)))
 
 
-def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0):
+def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0,
+                         only: int | None = None):
     """Diffuse Direct over a G-buffer (``shaders/bvh_direct.glsl``), an RGBA32F texture of the
-    G-buffer's size (bottom row first), rgb in Cycles' units."""
+    G-buffer's size (bottom row first), rgb in Cycles' units; ``only`` : of that light alone
+    (``lights_texture``)."""
     position = gbuffer_inputs["gbuffer_position"]
-    inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights)}
+    inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights, only)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
                         {"sampling": (seed, strata_side(samples), 0, 0)})
 

@@ -12,11 +12,14 @@ from __future__ import annotations
 import math
 
 import gpu
+import numpy as np
 
 from ..voxgi_addon.preview.upsample import low_shape
-from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, materials_texture, strata_side
+from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, strata_side
+from .gpu_principled import lut_texture
 from .gpu_shaders import LOCAL_SIZE, build_compute
 from .gpu_tracer import dispatch
+from .gpu_volume import float_texture
 
 _DENOISE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "low_image", "low_variance")
 _shaders: dict[str, object] = {}
@@ -51,13 +54,24 @@ def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: i
     return values, variance
 
 
-def gather(bvh: GPUBVH, gbuffer_inputs, lights, albedo, emission, settings, stride: int,
+def principled_materials_texture(principled, emission):
+    """(M + 1) × 3 texture of the hits' materials: row 0 base colour, row 1 emission, row 2
+    (metallic, Specular IOR Level, roughness) (``preview.passes.principled_table``)."""
+    base, params = principled
+    rows = np.zeros((3, len(base), 4), np.float32)
+    rows[0, :, :3], rows[1, :, :3], rows[2, :, :3] = base, emission, params
+    return float_texture(rows, (len(base), 3))
+
+
+def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
            width: int, height: int):
     """The raw gather: (values, variance) RGBA32F textures of the low-resolution grid.
+    principled : (base, params) of ``preview.passes.principled_table``;
     settings : ``voxgi_addon.preview.gather.GatherSettings``."""
     low_h, low_w = low_shape(height, width, stride)
     inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights),
-              "materials": materials_texture(albedo, emission)}
+              "materials": principled_materials_texture(principled, emission),
+              "principled_lut": lut_texture()}
     assert OUTPUTS["bvh_gather"] == ("out_image", "out_variance")
     return dispatch_bvh("bvh_gather", inputs, low_w, low_h, {
         "sampling": (settings.seed, settings.rays, settings.ao_distance,
@@ -66,12 +80,12 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, albedo, emission, settings, stri
         "grid": (stride, width, height, 0)})
 
 
-def gather_gi(bvh: GPUBVH, volume, gbuffer_inputs, lights, albedo, emission, settings,
+def gather_gi(bvh: GPUBVH, volume, gbuffer_inputs, lights, principled, emission, settings,
               stride: int, width: int, height: int):
     """Full-resolution RGBA32F texture (Diffuse Indirect rgb, AO), bottom row first: gather,
     filter, upsample. ``volume`` : any ``GPUVolume`` (the upsample kernel binds its textures)."""
-    values, variance = gather(bvh, gbuffer_inputs, lights, albedo, emission, settings, stride,
-                              width, height)
+    values, variance = gather(bvh, gbuffer_inputs, lights, principled, emission, settings,
+                              stride, width, height)
     values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
                         settings.denoise_iterations)
     if stride > 1:

@@ -16,7 +16,15 @@ import numpy as np
 
 from ..voxgi_addon.gi.cone_shadows import shadow_cone
 from ..voxgi_addon.preview.gather import GatherSettings
-from ..voxgi_addon.preview.passes import check_request, compose_passes, direct_light, material_indices, material_table
+from ..voxgi_addon.preview.passes import (
+    check_request,
+    compose_passes,
+    direct_light,
+    glossy_direct_radiance,
+    material_indices,
+    material_table,
+    principled_table,
+)
 from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
@@ -66,9 +74,18 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
         if bvh.uploaded_bytes:
             timings["BVH build + upload"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        image = read_texture(direct_light_texture(bvh, gbuffer.inputs, snapshot.lights,
-                                                  light_samples))
-        direct = np.flipud(image)[..., :3].reshape(-1, 3)[hit].astype(np.float64)
+        if quality == "ACCURATE":  # light by light: each one's light feeds the glossy lobe
+            per_light = np.stack([
+                np.flipud(read_texture(direct_light_texture(
+                    bvh, gbuffer.inputs, snapshot.lights, light_samples, only=index))
+                )[..., :3].reshape(-1, 3)[hit].astype(np.float64)
+                for index in range(len(snapshot.lights))]) if snapshot.lights else \
+                np.zeros((0, len(hit), 3))
+            direct = per_light.sum(axis=0)
+        else:
+            image = read_texture(direct_light_texture(bvh, gbuffer.inputs, snapshot.lights,
+                                                      light_samples))
+            direct = np.flipud(image)[..., :3].reshape(-1, 3)[hit].astype(np.float64)
         timings["direct"] = time.perf_counter() - t0
     else:
         direct = direct_light(None, p, n, snapshot.lights, tris, cones, light_samples, shadows,
@@ -87,9 +104,10 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
         return np.flipud(read_texture(low))
 
     if quality == "ACCURATE":
-        albedo, _, _, emission = material_table(snapshot)
+        _, _, _, emission = material_table(snapshot)
         texture = gather_gi(shared_bvh().update(tris), volume, gbuffer.inputs, snapshot.lights,
-                            albedo, emission, gather_settings, gi_stride, width, height)
+                            principled_table(snapshot), emission, gather_settings, gi_stride,
+                            width, height)
         diffuse_ao = np.flipud(read_texture(texture))
         timings["diffuse+ao gather (GPU)"] = time.perf_counter() - t0
     else:
@@ -100,6 +118,9 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
     timings["glossy cones (GPU)"] = time.perf_counter() - t0
 
     flat_da = diffuse_ao.reshape(-1, 4)[hit]
-    passes = compose_passes(snapshot, width, height, hit, mat, direct, flat_da[:, :3],
-                            flat_da[:, 3], glossy.reshape(-1, 4)[hit, :3])
-    return passes, timings
+    terms = (direct, flat_da[:, :3], flat_da[:, 3], glossy.reshape(-1, 4)[hit, :3])
+    if quality != "ACCURATE":
+        return compose_passes(snapshot, width, height, hit, mat, *terms), timings
+    views = -seen["direction"].reshape(-1, 3)[hit].astype(np.float64)
+    shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_light)
+    return compose_passes(snapshot, width, height, hit, mat, *terms, n, views, shine), timings

@@ -7,7 +7,8 @@
  *   sampling = (seed, rays, ao_distance, strata side m of the hit's light samples)
  *   world    = rgb radiance of a miss
  *   grid     = (stride, full width, full height, 0)
- * Sampler `materials`: (M + 1) × 2 texels, row 0 albedo, row 1 emission (last column: none). */
+ * Sampler `materials`: (M + 1) × 3 texels, row 0 base colour, row 1 emission, row 2 (metallic,
+ * Specular IOR Level, roughness) (last column: none); `principled_lut`: principled.glsl's. */
 
 vec4 bvh_texel_normals(int k)
 {
@@ -66,11 +67,16 @@ void main()
       ns *= dot(face, d) > 0.0 ? -1.0 : 1.0;
       int material = bvh_triangle_material(slot);
       material = (material >= 0 && material < last_material) ? material : last_material;
-      vec3 albedo = texelFetch(materials, ivec2(material, 0), 0).rgb;
+      vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
       vec3 emission = texelFetch(materials, ivec2(material, 1), 0).rgb;
+      vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
+      /* The Principled diffuse weight seen from the receiver; the hit's glossy lobe is left
+       * out (docs/gi_pipeline.md "The Accurate integrator"). */
+      vec3 weight = principled_diffuse_weight(base, params.x, params.y, params.z,
+                                              clamp(-dot(ns, d), 0.0, 1.0));
       vec3 direct = diffuse_direct(x + ns * SURFACE_EPSILON, ns, id * uint(rays) + uint(j),
                                    seed + 1u, int(sampling.w));
-      radiance = albedo * direct + emission;
+      radiance = weight * direct + emission;
     }
     sum += radiance;
     float l = dot(radiance, LUMINANCE);

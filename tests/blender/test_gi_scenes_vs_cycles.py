@@ -21,10 +21,9 @@ REFS = pathlib.Path(__file__).resolve().parents[1] / "data" / "gi_refs"
 TARGETS = {"Diffuse Direct": 0.03, "Diffuse Indirect": 0.12, "Ambient Occlusion": 0.08}
 # scene → pass → bound held while the target is missed (see the module doc).
 GAPS = {
-    "columned_hall": {"Diffuse Indirect": 0.20},
-    "cornell_far": {"Combined": 0.08},
-    "skinned_figure": {"Combined": 0.08},
-    "thin_wall_rooms": {"Combined": 0.09},
+    "columned_hall": {"Diffuse Indirect": 0.20},   # measured 0.180
+    "skinned_figure": {"Combined": 0.03},          # measured 0.021; Cycles 64 spp 0.019
+    "thin_wall_rooms": {"Combined": 0.035},        # measured 0.024; Cycles 64 spp 0.012
 }
 
 

@@ -32,7 +32,7 @@ from ..scene import raycast
 from ..scene.snapshot import LightData
 from .sampling import hashed_square
 
-__all__ = ["diffuse_direct", "light_frame", "stratified_square", "concentric_disk"]
+__all__ = ["diffuse_direct", "light_directions", "light_frame", "stratified_square", "concentric_disk"]
 
 _NORMAL_OFFSET = 1e-5  # metres: shadow rays start this far off the surface, towards the light
 _POINT_CHUNK = 16384
@@ -236,7 +236,7 @@ _BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area}
 
 
 def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
-                   sample_ids=None) -> np.ndarray:
+                   sample_ids=None, per_light: bool = False) -> np.ndarray:
     """Cycles' ``Diffuse Direct`` (irradiance / π, no albedo) at surface points.
 
     Parameters
@@ -254,13 +254,15 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
         the GPU kernel ``render/shaders/bvh_direct.glsl`` draws, instead of drawn from numpy's
         generator in point order.
 
+    per_light : return each light's share separately (the same samples as the sum).
+
     Returns
     -------
-    (N, 3) float32 linear RGB.
+    (N, 3) float32 linear RGB; with ``per_light`` (L, N, 3), light by light.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
-    out = np.zeros((len(p), 3), dtype=np.float64)
+    out = np.zeros((len(lights), len(p), 3), dtype=np.float64)
     rng = np.random.default_rng(seed)
     ids = None if sample_ids is None else np.asarray(sample_ids).reshape(-1)
     for index, light in enumerate(lights):
@@ -276,5 +278,19 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
             else:
                 def strata(points_of_chunk, chunk_ids=ids[a:b], stream=index):
                     return hashed_square(chunk_ids[points_of_chunk], stream, samples, seed)
-            out[a:b] += shade(light, p[a:b], n[a:b], tris, strata)[:, None] * color
-    return out.astype(np.float32)
+            out[index, a:b] += shade(light, p[a:b], n[a:b], tris, strata)[:, None] * color
+    return (out if per_light else out.sum(axis=0)).astype(np.float32)
+
+
+def light_directions(lights, points) -> list[np.ndarray]:
+    """Per light, (N, 3) unit directions from ``points`` towards it (a sun: against its
+    direction of travel; others: towards its position)."""
+    out = []
+    for light in lights:
+        m = np.asarray(light.world_matrix, np.float64)
+        if light.type == "SUN":
+            d = np.broadcast_to(m[:3, 2] / np.linalg.norm(m[:3, 2]), points.shape)
+        else:
+            d = m[:3, 3] - points
+        out.append(d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12))
+    return out

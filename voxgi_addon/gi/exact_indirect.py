@@ -29,6 +29,7 @@ import numpy as np
 
 from ..scene.raycast import SHADOW_EPSILON, closest_hits
 from .direct_light import concentric_disk, diffuse_direct
+from .principled import diffuse_weight
 from .sampling import hammersley, perpendicular_basis
 
 __all__ = ["RAY_STREAM", "SURFACE_EPSILON", "cosine_directions", "indirect_and_ao"]
@@ -75,7 +76,12 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
     sample_ids : (N,) integer sample id per point (the pixel index, row 0 on top).
     tris : ``SceneTriangles``; lights : the snapshot's ``LightData`` list.
     albedo, emission : (M + 1, 3) per material index, the last row for triangles without one
-        (``preview.material_table``).
+        (``preview.material_table``). ``albedo`` may instead be the Principled pair (base
+        (M + 1, 3), (metallic, Specular IOR Level, roughness) (M + 1, 3)) of
+        ``preview.passes.principled_table``: a hit then reflects the diffuse weight Cycles gives
+        it seen from the receiver (``principled.diffuse_weight``). Its glossy lobe is left out:
+        adding the lobe's reflection of the lights took Diffuse Indirect further from Cycles'
+        (docs/gi_pipeline.md "The Accurate integrator").
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -94,14 +100,19 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
         x = origins[hit] + t[hit, None] * dirs[hit]
         ns = _hit_normals(tris, tri[hit], u[hit], v[hit], dirs[hit])
         material = np.asarray(tris.materials)[tri[hit]]
-        last = len(albedo) - 1
+        last = len(emission) - 1
         material = np.where((material >= 0) & (material < last), material, last)
         with np.errstate(over="ignore"):
             hit_ids = ids.repeat(rays) * np.uint32(rays) + np.tile(np.arange(rays, dtype=np.uint32), count)
         direct = diffuse_direct(x + ns * SURFACE_EPSILON, ns, lights, tris, samples=hit_samples,
                                 seed=seed + 1, sample_ids=hit_ids[hit])
-        radiance[hit] = np.asarray(albedo, np.float64)[material] * direct + \
-            np.asarray(emission, np.float64)[material]
+        if isinstance(albedo, tuple):  # Principled (base, (metallic, level, roughness))
+            base, params = (np.asarray(a, np.float64)[material] for a in albedo)
+            mu = np.clip(-np.einsum("ij,ij->i", ns, dirs[hit]), 0.0, 1.0)
+            weight = diffuse_weight(base, params[:, 0], params[:, 1], params[:, 2], mu)
+        else:
+            weight = np.asarray(albedo, np.float64)[material]
+        radiance[hit] = weight * direct + np.asarray(emission, np.float64)[material]
     per_ray = radiance.reshape(count, rays, 3)
     indirect = per_ray.mean(axis=1)
     if not statistics:

@@ -15,7 +15,8 @@ import numpy as np
 from ..errors import VoxGIError
 from ..gi.cone_shadows import cone_shadowed_direct
 from ..gi.conetrace import ConeSettings, trace_diffuse_and_ao, trace_glossy
-from ..gi.direct_light import diffuse_direct
+from ..gi.direct_light import diffuse_direct, light_directions
+from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
 from .gather import GatherSettings, gather_gi
@@ -46,6 +47,36 @@ def material_table(snapshot):
 QUALITIES = ("ACCURATE", "FAST")
 
 
+def principled_table(snapshot):
+    """Per material index (+1 slot for 'none'): base colour (M+1, 3) and (metallic, Specular
+    IOR Level, roughness) (M+1, 3) — the Principled BSDF parameters of ``gi.principled``."""
+    mats = snapshot.materials
+    base = np.full((len(mats) + 1, 3), 0.8)
+    params = np.tile([0.0, 0.5, 0.5], (len(mats) + 1, 1))
+    for i, m in enumerate(mats):
+        base[i] = np.clip(np.nan_to_num(np.asarray(m.base_color[:3], np.float64)), 0, 1)
+        params[i] = (np.clip(m.metallic, 0, 1), np.clip(m.specular, 0, 1),
+                     np.clip(m.roughness, 0, 1))
+    return base, params
+
+
+def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_direct):
+    """(N, 3) the glossy light the lights send to the viewer (Glossy Color × Glossy Direct):
+    each light's shadowed Diffuse Direct turned back into the irradiance it brings
+    (× π / cos) times the Principled glossy reflectance toward the viewer at the light's
+    centre direction (docs/gi_pipeline.md "Principled materials": lights as points for the
+    glossy lobe). views : (N, 3) unit directions from the points to the viewer."""
+    base, params = principled_table(snapshot)
+    total = np.zeros((len(points), 3))
+    for direction, direct in zip(light_directions(snapshot.lights, points), per_light_direct):
+        cos = np.einsum("ij,ij->i", normals, direction)
+        irradiance = np.where(cos[:, None] > 1e-4, direct * np.pi / np.maximum(cos, 1e-4)[:, None],
+                              0.0)
+        total += irradiance * glossy_reflectance(base[mat], params[mat, 0], params[mat, 1],
+                                                 params[mat, 2], normals, views, direction)
+    return total
+
+
 def check_request(snapshot, width: int, height: int, gi_stride: int = 1,
                   quality: str = "ACCURATE") -> None:
     """Raise ``VoxGIError`` for a preview that cannot be rendered."""
@@ -65,21 +96,35 @@ def material_indices(snapshot, material: np.ndarray) -> np.ndarray:
     return np.where((material >= 0) & (material < m), material, m)
 
 
-def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy):
+def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy,
+                   normals=None, views=None, glossy_direct=None):
     """The PASS_NAMES images (H, W, 3) float32 (row 0 = top) from the per-hit-pixel terms.
 
     hit : (H·W,) indices of the pixels that see a surface; mat : their material indices;
     direct, indirect, glossy : (N, 3) light without albedo; ao : (N,).
+    normals, views : (N, 3) shading normals and unit directions to the viewer: with them
+    ``Diffuse Color`` and the glossy colour are Cycles' Principled ones for that view
+    (``gi.principled``), else the base colour × (1 − metallic) and a constant specular colour.
+    glossy_direct : (N, 3) glossy light from the lights (already × the glossy colour), added to
+    Combined as Cycles' Glossy Color × Glossy Direct.
     """
     albedo, _, spec, emission = material_table(snapshot)
+    diffuse_colour, glossy_colour = albedo[mat], spec[mat]
+    if normals is not None:
+        base, params = principled_table(snapshot)
+        cos_view = np.clip(np.einsum("ij,ij->i", normals, views), 0.0, 1.0)
+        args = (base[mat], params[mat, 0], params[mat, 1], params[mat, 2], cos_view)
+        diffuse_colour, glossy_colour = diffuse_weight(*args), glossy_color(*args)
     values = {
         "Diffuse Direct": direct,
         "Diffuse Indirect": indirect,
-        "Diffuse Color": albedo[mat],
+        "Diffuse Color": diffuse_colour,
         "Glossy Indirect": glossy,
         "Ambient Occlusion": np.repeat(np.asarray(ao)[:, None], 3, axis=1),
     }
-    values["Combined"] = (albedo[mat] * (direct + indirect) + emission[mat] + spec[mat] * glossy)
+    values["Combined"] = (diffuse_colour * (direct + indirect) + emission[mat]
+                          + glossy_colour * glossy
+                          + (0.0 if glossy_direct is None else glossy_direct))
     passes = {}
     for name in PASS_NAMES:
         image = np.zeros((height * width, 3), np.float32)
@@ -89,7 +134,7 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
 
 
 def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
-                 visibility=None, sample_ids=None):
+                 visibility=None, sample_ids=None, per_light=False):
     """(N, 3) Diffuse Direct at surface points: exact shadow rays against ``tris`` (shadows
     "RAYS") or one soft-shadow cone per light through ``octree`` ("CONES"; ``visibility``
     as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own).
@@ -98,7 +143,7 @@ def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
     if shadows == "CONES":
         return cone_shadowed_direct(octree, points, normals, lights, cones, samples, visibility)
     return diffuse_direct(points + normals * SURFACE_EPSILON, normals, lights, tris,
-                          samples=samples, sample_ids=sample_ids)
+                          samples=samples, sample_ids=sample_ids, per_light=per_light)
 
 
 def _traced(seen, stride, hit, trace, channels):
@@ -152,8 +197,13 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     mat = materials[hit]
 
     t0 = time.perf_counter()
-    direct = direct_light(gi_state.octree, p, n, snapshot.lights, tris, cones, light_samples,
-                          shadows, sample_ids=hit)
+    if quality == "ACCURATE":  # light by light: each one's light feeds the glossy lobe
+        per_light = direct_light(None, p, n, snapshot.lights, tris, cones, light_samples,
+                                 shadows, sample_ids=hit, per_light=True)
+        direct = per_light.sum(axis=0)
+    else:
+        direct = direct_light(gi_state.octree, p, n, snapshot.lights, tris, cones, light_samples,
+                              shadows, sample_ids=hit)
     timings["direct"] = time.perf_counter() - t0
     positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
 
@@ -168,9 +218,10 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
 
     t0 = time.perf_counter()
     if quality == "ACCURATE":
-        albedo, _, _, emission = material_table(snapshot)
-        traced = gather_gi(tris, snapshot.lights, albedo, emission, seen.hit, seen.position,
-                           seen.normal, gather_settings, gi_stride).reshape(-1, 4)[hit]
+        _, _, _, emission = material_table(snapshot)
+        traced = gather_gi(tris, snapshot.lights, principled_table(snapshot), emission, seen.hit,
+                           seen.position, seen.normal, gather_settings,
+                           gi_stride).reshape(-1, 4)[hit]
         timings["diffuse+ao gather"] = time.perf_counter() - t0
     else:
         traced = _traced(seen, gi_stride, hit, diffuse_and_ao, 4)
@@ -179,4 +230,10 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     t0 = time.perf_counter()
     glossy = _traced(seen, gi_stride, hit, glossy_cones, 3)
     timings["glossy cones"] = time.perf_counter() - t0
-    return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy), timings
+    if quality != "ACCURATE":
+        return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao,
+                              glossy), timings
+    views = -dirs[hit]
+    shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_light)
+    return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy, n,
+                          views, shine), timings
