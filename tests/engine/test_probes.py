@@ -204,3 +204,85 @@ def test_masks_keep_the_light_on_its_side_of_a_thin_wall():
     print(f"thin wall, dark max / lit mean: masks {with_masks:.4f}, no masks {without:.4f}")
     assert with_masks < 0.02
     assert without > 0.005 and without > 5 * with_masks
+
+
+# --------------------------------------------------------------------------- files
+
+def _baked():
+    return bake_probe_grid(cornell_box(), ProbeSettings(resolution=3, directions=64)).grid
+
+
+def test_probe_grids_survive_gfg_and_the_compact_store_and_answer_the_same_queries():
+    from voxgi.voxgi_addon.files.gfg import GFGScene, read_gfg, to_bytes
+    from voxgi.voxgi_addon.probes.store import from_text, to_text
+
+    grid = _baked()
+    points = np.random.default_rng(1).uniform([-1, -1, 0], [1, 1, 2], (500, 3))
+    normals = sh.sample_directions(500, 3)
+    expected = query_irradiance(grid, points, normals)
+    back = read_gfg(to_bytes(GFGScene(probe_grids=[grid]))).probe_grids[0]
+    stored = from_text(to_text([grid]))[0]
+    for other in (back, stored):
+        for f in ("origin", "volume_size", "dims", "positions", "sh", "volume_cells", "volume_probes",
+                  "volume_masks", "sh_index", "mask_index", "validity", "flags"):
+            np.testing.assert_array_equal(np.asarray(getattr(other, f)), np.asarray(getattr(grid, f)))
+        np.testing.assert_array_equal(query_irradiance(other, points, normals), expected)
+    assert len(to_text([grid])) < 4 * 1024 + 2 * len(grid.positions) * 27 * 4
+
+
+def test_a_format_1_1_probe_section_is_still_read():
+    """GFG 1.1 wrote a 56-byte PRBG info (one cell size) and five arrays; 1.2 rebuilds the rest."""
+    import io
+    import struct
+    import zlib
+
+    from voxgi.voxgi_addon.files.gfg import GFGScene, read_gfg
+    from voxgi.voxgi_addon.files.gfg import data_types as dtypes
+    from voxgi.voxgi_addon.files.gfg.container import SectionBuilder, write_container
+    from voxgi.voxgi_addon.files.gfg.spec import PROBE_GRID_INFO_1_1, Kind, Role
+
+    grid = _baked()
+    grid.volume_size[:] = grid.volume_size[0]  # 1.1 grids had cubic volumes
+    p, v = len(grid.positions), len(grid.volume_cells)
+    info = np.array([(grid.origin, grid.volume_size[0], grid.dims, p, v, 9)], PROBE_GRID_INFO_1_1)
+    s = SectionBuilder(Kind.PROBE_GRID, info)
+    f3, u32, u64 = (dtypes.code_of(n) for n in ("FLOAT_3", "UINT32_1", "UINT64_1"))
+    s.add(Role.PROBE_POSITIONS, f3, np.asarray(grid.positions, "<f4"))
+    s.add(Role.PROBE_SH, f3, np.asarray(grid.sh, "<f4").reshape(-1, 3))
+    s.add(Role.VOLUME_CELLS, u32, np.asarray(grid.volume_cells, "<u4"))
+    s.add(Role.VOLUME_PROBES, u32, np.asarray(grid.volume_probes, "<u4").ravel())
+    s.add(Role.VOLUME_MASKS, u64, np.asarray(grid.volume_masks, "<u8").ravel())
+    stream = io.BytesIO()
+    write_container(stream, [s])
+    data = bytearray(stream.getvalue())
+    data[10:12] = struct.pack("<H", 1)  # format 1.1
+    struct.pack_into("<I", data, 60, zlib.crc32(bytes(data[:60])))
+    back = read_gfg(bytes(data))
+    assert back.version == (1, 1) and isinstance(back, GFGScene)
+    old = back.probe_grids[0]
+    np.testing.assert_array_equal(old.sh_index, grid.sh_index)
+    np.testing.assert_array_equal(old.mask_index, grid.mask_index)
+    np.testing.assert_array_equal(old.volume_size, grid.volume_size)
+    assert old.mask_threshold == 0.5 and not old.flags.any()
+
+
+def test_the_documented_numpy_loader_reads_the_probe_sections(tmp_path):
+    """The example in docs/gfg.md "PRBG", run as written, on a file with two grids."""
+    import pathlib
+    import re
+
+    from voxgi.voxgi_addon.files.gfg import GFGScene, write_gfg
+
+    doc = (pathlib.Path(__file__).resolve().parents[2] / "docs" / "gfg.md").read_text()
+    code = re.search(r"```python\n(import struct, numpy as np\n.*?)```", doc, re.S).group(1)
+    namespace = {}
+    exec(compile(code, "docs/gfg.md", "exec"), namespace)
+    grids = [_baked(), bake_probe_grid(cornell_box(), ProbeSettings(resolution=(2, 3, 4), directions=16)).grid]
+    path = tmp_path / "probes.gfg"
+    write_gfg(path, GFGScene(probe_grids=grids))
+    loaded = namespace["read_probe_grids"](str(path))
+    assert len(loaded) == 2
+    for got, grid in zip(loaded, grids):
+        for f in ("origin", "volume_size", "dims", "positions", "sh", "volume_cells", "volume_probes",
+                  "volume_masks", "sh_index", "mask_index"):
+            np.testing.assert_array_equal(got[f], np.asarray(getattr(grid, f)).astype(got[f].dtype))
