@@ -3,6 +3,7 @@ the panels share, and nothing that registers an operator or a panel.
 
   settings         ``Scene.voxgi`` (the PropertyGroup) and its conversion to engine settings
   session          per-scene results kept out of ID properties
+  probe_store      baked probe grids kept with the .blend (a Text datablock), bake progress
   jobs             the engine worker thread, its queue and timer
   snapshot/        reading the scene into the engine's ``SceneSnapshot``
   reports          report lines and tables of results

@@ -2,9 +2,19 @@
 from __future__ import annotations
 
 from ..registration import register_modules, unregister_modules
-from . import add_demo_scene, cancel_job, gfg_export, gfg_import, render_preview, update, voxelize
+from . import (
+    add_demo_scene,
+    bake_probes,
+    cancel_job,
+    gfg_export,
+    gfg_import,
+    render_preview,
+    update,
+    voxelize,
+)
 
-modules = (voxelize, update, render_preview, cancel_job, add_demo_scene, gfg_export, gfg_import)
+modules = (voxelize, update, render_preview, cancel_job, add_demo_scene, gfg_export, gfg_import,
+           bake_probes)
 
 classes = tuple(cls for module in modules for cls in module.classes)
 

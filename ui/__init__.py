@@ -2,9 +2,9 @@
 from __future__ import annotations
 
 from ..registration import register_modules, unregister_modules
-from . import panel
+from . import panel, probe_draw, probe_panel
 
-modules = (panel,)
+modules = (panel, probe_panel, probe_draw)
 
 classes = tuple(cls for module in modules for cls in module.classes)
 
