@@ -103,12 +103,14 @@ def _box(tris, box):
 
 def bake_probe_grid(snapshot, settings: ProbeSettings = ProbeSettings(), box=None,
                     tris: SceneTriangles | None = None, cancel=None, progress=None,
-                    name: str = "") -> BakeResult:
+                    name: str = "", sh_fn=None) -> BakeResult:
     """Place, validate, mask and bake one probe grid over ``box`` ((lo, hi) world corners; the
     scene's bounds, grown a little, when None).
 
     cancel : callable returning True to stop (raises ``VoxGICancelled``); progress : callable
-    taking the finished share in [0, 1].
+    taking the finished share in [0, 1]. sh_fn : ``sh_fn(positions (P, 3), directions (N, 3))``
+    → (P, 9, 3) replaces the exact radiance stage (the octree bakes, ``octree_bake`` and
+    ``render/gpu_probes.py``); placement, validity and masks stay exact.
     """
     if settings.directions < 9:
         raise VoxGIError(f"a probe needs at least 9 directions for SH L2, got {settings.directions}")
@@ -145,6 +147,9 @@ def bake_probe_grid(snapshot, settings: ProbeSettings = ProbeSettings(), box=Non
     t0 = time.perf_counter()
     p_count, n = len(positions), len(dirs)
     sh = np.zeros((p_count, 9, 3), np.float64)
+    if sh_fn is not None:
+        sh[:] = sh_fn(positions, dirs)
+        p_count = 0  # nothing left for the exact stage
     for a in range(0, p_count, _PROBE_CHUNK):
         b = min(p_count, a + _PROBE_CHUNK)
         origins = np.repeat(positions[a:b], n, axis=0)
