@@ -27,6 +27,7 @@ SECTIONS = {
     "gfg": ("bench_gfg", "GFG file write/read throughput vs numpy.save/numpy.load"),
     "gi": ("bench_gi", "per-update time, preview time and Cycles time/error (runs in .venv)"),
     "gpu": ("bench_gpu", "GPU tracer: filtered samples/s and preview times vs numpy and Cycles"),
+    "probes": ("bench_probes", "light-probe bake time/memory (numpy, GPU), queries, EEVEE, Cycles"),
 }
 
 

@@ -35,7 +35,8 @@ class ProbeSettings:
     seed : fixes the direction set and the light sampling. use_masks / mask_threshold : the
     occlusion masks and the front-facing share they require (eq. 3.1). validity_threshold :
     back-face share above which a probe is invalid; relocate : move invalid probes out
-    (else they are disabled). light_samples : shadow rays per hit for lights with an extent."""
+    (else they are disabled). light_samples : shadow rays per hit for lights with an extent
+    (one stratified ray is enough: the SH projection averages the probe's hundreds of hits)."""
 
     resolution: int | tuple[int, int, int] = 8
     directions: int = 256
@@ -44,7 +45,7 @@ class ProbeSettings:
     mask_threshold: float = 0.5
     validity_threshold: float = 0.25
     relocate: bool = True
-    light_samples: int = 4
+    light_samples: int = 1
 
 
 @dataclass
