@@ -264,6 +264,7 @@ def test_command_line_info_and_verify(scene, tmp_path):
     assert "GFG 1.2" in info.stdout and "14 sections" in info.stdout
     assert "'Box': 36 vertices, 36 indices (uint16), 3 material ranges" in info.stdout
     assert "'Skin' cascade 0 (span 0.25 m): 40 voxels, skinned" in info.stdout
+    assert "15 probes (" in info.stdout and "2 active volumes of 2×2×2 (0.5×0.5×0.75 m)" in info.stdout
     ok = _cli("verify", path)
     assert ok.returncode == 0 and "OK" in ok.stdout
     data = bytearray(path.read_bytes())

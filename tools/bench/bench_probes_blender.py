@@ -74,7 +74,7 @@ def _eevee_bake(scene, lo, hi, resolution, samples):
 
 def _cycles_error(scene, k, count):
     """Worst relative error of the 6 axis irradiances of ``count`` interior probes of a k-grid
-    against Cycles equirectangular renders (one bounce), as in tests/blender/test_probes.py.
+    against Cycles equirectangular renders (one bounce), as in tests/blender/test_probe_authoring.py.
     The world is made black for it: Cycles' Diffuse Direct holds the world's light, the bake's
     direct light does not (it sees the world colour only where its rays leave the scene)."""
     import bpy

@@ -206,3 +206,52 @@ def test_probes_drawn_offscreen_show_the_red_wall(voxgi):
     print(f"probe near the red wall drawn as RGB {r:.3f} {g:.3f} {b:.3f}")
     assert centre[..., 3].min() > 0.5  # the sphere covers the centre
     assert r > 1.3 * g and r > 1.3 * b
+
+
+def test_probes_go_through_gfg_export_and_import(voxgi, tmp_path):
+    from voxgi.blender import probe_store
+
+    scene = bpy.context.scene
+    scenes.build_test_cornell_box(scene)
+    grids = _bake(scene, probe_resolution=3, probe_directions=32)
+    path = tmp_path / "scene.gfg"
+    assert bpy.ops.export_scene.gfg(filepath=str(path)) == {"FINISHED"}
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    assert bpy.ops.import_scene.gfg(filepath=str(path)) == {"FINISHED"}
+    back = probe_store.load_grids(bpy.context.scene)
+    assert len(back) == 1
+    for f in ("positions", "sh", "volume_masks", "sh_index", "validity", "flags"):
+        np.testing.assert_array_equal(np.asarray(getattr(back[0], f)), np.asarray(getattr(grids[0], f)))
+    assert bpy.data.texts.get(probe_store.text_name(bpy.context.scene.name_full)) is not None
+
+
+def test_a_background_bake_reports_progress_and_can_be_cancelled(voxgi):
+    from voxgi.blender import jobs, probe_store
+    from voxgi.blender.session import scene_session
+    from voxgi.operators.bake_probes import CANCELLED_MESSAGE
+
+    scene = bpy.context.scene
+    scenes.build_test_cornell_box(scene)
+    first = _bake(scene, probe_resolution=2, probe_directions=16)
+    seen = []
+    jobs.synchronous = False
+    try:
+        scene.voxgi.probe_resolution = 24
+        scene.voxgi.probe_directions = 512
+        assert bpy.ops.voxgi.bake_probes() == {"FINISHED"}
+        job = jobs.running_job(scene.name_full)
+        assert job is not None and job.label == "Baking probes"
+        while not job.finished and not seen:
+            share = probe_store.progress(scene.name_full)
+            if share is not None:
+                seen.append(share)
+            job.wait(0.05)
+        assert bpy.ops.voxgi.cancel_job() == {"FINISHED"}
+        assert jobs.wait_idle(120)
+    finally:
+        jobs.synchronous = None
+    assert job.state == "cancelled"
+    assert seen and 0.0 <= seen[0] < 1.0
+    assert scene_session(scene.name_full).last_report == [("INFO", CANCELLED_MESSAGE)]
+    assert probe_store.load_grids(scene) is first  # the previous probes are kept
+    assert probe_store.progress(scene.name_full) is None
