@@ -6,6 +6,7 @@ the panels share, and nothing that registers an operator or a panel.
   session          per-scene results kept out of ID properties
   viewport_session live viewport GI: plans depsgraph updates, runs them on the worker
   updates          depsgraph updates as records, transform-only snapshots
+  probe_store      baked probe grids kept with the .blend (a Text datablock), bake progress
   jobs             the engine worker thread, its queue, timer and progress
   snapshot/        reading the scene into the engine's ``SceneSnapshot``
   reports          report lines and tables of results

@@ -155,6 +155,90 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
         default="AUTO",
     )
 
+    # Light probes (docs/probes.md): placement, bake, masks, validity, display.
+    indirect_source: bpy.props.EnumProperty(
+        name="Indirect Light",
+        description="Where the preview's and F12's Diffuse Indirect comes from",
+        items=(("CONES", "Cone Tracing", "Cones traced through the voxel octree every update"),
+               ("PROBES", "Light Probes", "The baked light probes (Bake Probes), interpolated "
+                "through their occlusion masks")),
+        default="CONES",
+    )
+    probe_resolution: bpy.props.IntProperty(
+        name="Probe Volumes",
+        description="k: the probe box is split into k × k × k volumes; volumes holding geometry "
+                    "get probes at their corners (at most (k+1)³)",
+        default=8, min=1, max=64,
+    )
+    probe_placement: bpy.props.EnumProperty(
+        name="Probe Boxes",
+        description="Which boxes get probe grids",
+        items=(("AUTO", "Volumes or Scene", "Each Light Probe Volume object's box (its resolution "
+                "sets the volumes per axis), or the scene's bounds when there is none"),
+               ("SCENE", "Scene Bounds", "One grid over the bounds of all geometry, k per axis")),
+        default="AUTO",
+    )
+    probe_directions: bpy.props.IntProperty(
+        name="Probe Rays",
+        description="Rays per probe for its radiance and validity (the same directions for "
+                    "every probe)", default=256, min=16, max=4096,
+    )
+    probe_seed: bpy.props.IntProperty(
+        name="Seed", description="Fixes the ray directions and light sampling of the bake",
+        default=0, min=0,
+    )
+    probe_masks: bpy.props.BoolProperty(
+        name="Occlusion Masks",
+        description="Per probe, the sub-volumes it may light (Bowald's 4×4×4 masks); off lets "
+                    "every probe light its whole volume", default=True,
+    )
+    probe_mask_threshold: bpy.props.FloatProperty(
+        name="Mask Threshold",
+        description="Share of a sub-volume's surface that must face the probe for its light to "
+                    "pass", default=0.5, min=0.0, max=1.0, subtype="FACTOR",
+    )
+    probe_validity: bpy.props.FloatProperty(
+        name="Validity Threshold",
+        description="Probes whose rays hit back faces more often than this are inside geometry: "
+                    "relocated or disabled", default=0.25, min=0.0, max=1.0, subtype="FACTOR",
+    )
+    probe_relocate: bpy.props.BoolProperty(
+        name="Relocate Invalid", description="Move invalid probes out of geometry (else disable "
+        "them)", default=True,
+    )
+    probe_bake_method: bpy.props.EnumProperty(
+        name="Bake With",
+        description="How probe radiance is found",
+        items=(("RAYS", "Exact Rays (CPU)", "Rays against the triangles, direct light with shadow "
+                "rays at each hit"),
+               ("VOXELS_GPU", "Voxel Octree (GPU)", "Narrow cones through the voxel octree's "
+                "injected light, on the GPU (numpy without one); needs Update")),
+        default="RAYS",
+    )
+    probe_display: bpy.props.BoolProperty(
+        name="Show Probes", description="Draw the baked probes and active volumes in the 3D view",
+        default=True,
+    )
+    probe_display_size: bpy.props.FloatProperty(
+        name="Probe Size", description="Radius of the drawn probe spheres", default=0.05,
+        min=0.001, soft_max=1.0, subtype="DISTANCE", unit="LENGTH",
+    )
+    probe_selected: bpy.props.IntProperty(
+        name="Inspect Probe", description="Draw the sub-volumes this probe may light (-1: none)",
+        default=-1, min=-1,
+    )
+
+
+def probe_settings(settings: VoxGISceneSettings, resolution=None):
+    """The engine's ProbeSettings from the scene settings (``resolution`` overrides k)."""
+    from ..voxgi_addon.probes.bake import ProbeSettings
+
+    return ProbeSettings(resolution=resolution or settings.probe_resolution,
+                         directions=settings.probe_directions, seed=settings.probe_seed,
+                         use_masks=settings.probe_masks,
+                         mask_threshold=settings.probe_mask_threshold,
+                         validity_threshold=settings.probe_validity,
+                         relocate=settings.probe_relocate)
 
 
 def cone_settings(settings: VoxGISceneSettings):

@@ -4,6 +4,7 @@ from __future__ import annotations
 from ..registration import register_modules, unregister_modules
 from . import (
     add_demo_scene,
+    bake_probes,
     cancel_job,
     gfg_export,
     gfg_import,
@@ -14,7 +15,7 @@ from . import (
 )
 
 modules = (voxelize, update, render_preview, cancel_job, add_demo_scene, gfg_export, gfg_import,
-           refresh_viewport)
+           refresh_viewport, bake_probes)
 
 classes = tuple(cls for module in modules for cls in module.classes)
 

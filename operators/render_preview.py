@@ -27,6 +27,12 @@ class VOXGI_OT_render_preview(VoxGISceneOperator, bpy.types.Operator):
                                         "0 = the scene's", default=0, min=0, max=8192)
     resolution_y: bpy.props.IntProperty(name="Height", description="Image height in pixels; "
                                         "0 = the scene's", default=0, min=0, max=8192)
+    indirect_source: bpy.props.EnumProperty(
+        name="Indirect Light", description="Where Diffuse Indirect comes from",
+        items=(("SCENE", "Scene Setting", "The scene's Indirect Light setting"),
+               ("CONES", "Cone Tracing", "Cones through the voxel octree"),
+               ("PROBES", "Light Probes", "The baked light probes")),
+        default="SCENE")
 
     def execute(self, context):
         scene = context.scene
@@ -35,7 +41,8 @@ class VOXGI_OT_render_preview(VoxGISceneOperator, bpy.types.Operator):
         height = self.resolution_y or render.resolution_y * render.resolution_percentage // 100
         path = bpy.path.abspath(self.filepath)
         try:
-            passes, lines = render_scene_passes(context, scene, None, width, height)
+            source = None if self.indirect_source == "SCENE" else self.indirect_source
+            passes, lines = render_scene_passes(context, scene, None, width, height, source)
             os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
             write_exr(path, passes)
         except (VoxGIError, OSError) as error:

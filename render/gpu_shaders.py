@@ -22,10 +22,13 @@ KERNELS = {
     "shadow": ("gbuffer_position", "gbuffer_normal"),
     "upsample": ("gbuffer_position", "gbuffer_normal", "low_image"),
     "probe": ("gbuffer_position", "gbuffer_normal", "gbuffer_view"),  # tests: raw samples
+    "probe_bake": ("probe_positions", "probe_dirs"),  # light probes (render/gpu_probes.py)
+    "probe_sh": ("probe_radiance", "probe_dirs"),
 }
 # Kernel name → its VEC4 push constants.
 PUSH_CONSTANTS = {"shadow": ("light_position", "light_size"), "diffuse_ao": ("sampling",),
-                  "glossy": ("sampling",), "upsample": ("sampling",)}
+                  "glossy": ("sampling",), "upsample": ("sampling",),
+                  "probe_bake": ("sampling", "world"), "probe_sh": ("sampling",)}
 _cache: dict[str, object] = {}
 
 

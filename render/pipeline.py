@@ -120,8 +120,9 @@ def trace_passes(scene, snapshot, state, width, height):
                               f"VoxGI: numpy tracer used ({why})")]
 
 
-def render_scene_passes(context, scene, depsgraph, width, height):
+def render_scene_passes(context, scene, depsgraph, width, height, indirect_source=None):
     """Snapshot, update and trace ``scene``'s camera view: (passes, report lines).
+    indirect_source : 'CONES' or 'PROBES' (None: the scene's ``indirect_source`` setting).
     Raises VoxGIError for scenes that cannot be rendered."""
     if scene.camera is None:
         raise VoxGIError("the scene has no camera to render the preview from")
@@ -133,6 +134,11 @@ def render_scene_passes(context, scene, depsgraph, width, height):
     state = update_gi(snapshot, caches, settings, anchor=anchor)
     state.view_shares = view_shares(snapshot, state.grids, fit)
     passes, render_timings, lines = trace_passes(scene, snapshot, state, width, height)
+    if (indirect_source or scene.voxgi.indirect_source) == "PROBES":
+        from .probe_preview import apply_probe_indirect
+        seconds, line = apply_probe_indirect(scene, snapshot, passes, width, height)
+        render_timings["probes"] = seconds
+        lines.append(line)
     session = scene_session(scene.name_full)
     session.gi_state = state
     session.gi_timings = {"snapshot": snap_seconds, "fit + caches": fit_seconds, **state.timings,

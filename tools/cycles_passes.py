@@ -146,7 +146,8 @@ def _render_settings(scene, view_layer, width, height, samples, diffuse_bounces,
 def render_cycles_passes(scene, width: int, height: int, samples: int, diffuse_bounces: int = 1,
                          ao_distance: float | None = None, seed: int = 0, *,
                          glossy_bounces: int = 1, filter_width: float | None = None,
-                         view_layer=None) -> dict[str, np.ndarray]:
+                         view_layer=None, extra_passes: dict[str, str] | None = None
+                         ) -> dict[str, np.ndarray]:
     """Render ``scene``'s camera with Cycles and return its passes.
 
     Parameters
@@ -161,6 +162,8 @@ def render_cycles_passes(scene, width: int, height: int, samples: int, diffuse_b
     filter_width : Blackman-Harris pixel filter width in pixels; None keeps the scene's
         (Cycles' default is 1.5). Use a tiny width (0.01) for point samples at pixel centres.
     view_layer : the view layer to render; default ``scene.view_layers[0]``.
+    extra_passes : more passes to return, name → the ViewLayer property enabling it (e.g.
+        ``{"Position": "use_pass_position"}``).
 
     Returns
     -------
@@ -174,6 +177,7 @@ def render_cycles_passes(scene, width: int, height: int, samples: int, diffuse_b
         path = os.path.join(tmp, "passes.exr")
         settings = _render_settings(scene, view_layer, width, height, samples, diffuse_bounces,
                                     glossy_bounces, seed, filter_width, path)
+        settings += [(view_layer, prop, True) for prop in (extra_passes or {}).values()]
         with _ao_world(scene, ao_distance) as world:
             if ao_distance is not None:
                 settings.append((world.light_settings, "distance", float(ao_distance)))
@@ -185,7 +189,7 @@ def render_cycles_passes(scene, width: int, height: int, samples: int, diffuse_b
             raise RuntimeError(f"Cycles did not write {path}")
         channels = read_exr(path)
     grouped = group_passes(channels)
-    passes = {name: grouped[name] for name in PASSES}
+    passes = {name: grouped[name] for name in [*PASSES, *(extra_passes or {})]}
     alpha = [plane for name, plane in channels.items() if name.endswith("Combined.A")]
     passes["Alpha"] = alpha[0] if alpha else (passes["Diffuse Color"].max(axis=2) > 0).astype(np.float32)
     return passes

@@ -3,9 +3,9 @@ the Esc key map (settings live in ``blender/settings.py`` and ``blender/viewport
 from __future__ import annotations
 
 from ..registration import register_modules, unregister_modules
-from . import debug_draw, panel, render_properties, viewport_panel
+from . import debug_draw, panel, probe_draw, probe_panel, render_properties, viewport_panel
 
-modules = (panel, viewport_panel, render_properties, debug_draw)
+modules = (panel, viewport_panel, probe_panel, render_properties, debug_draw, probe_draw)
 
 classes = tuple(cls for module in modules for cls in module.classes)
 

@@ -13,6 +13,8 @@ Subpackages are the pipeline's stages, in the order data flows through them:
               (Cycles' light models) and ``voxel_shadows`` → ``light_injection`` → ``morton``,
               ``svo``, ``svo_sampling`` (the octree) → ``conetrace``, ``cone_shadows`` (the
               reference tracer); ``update`` is one update end to end
+  probes/     light probes (Bowald 2016): ``sh``, ``placement`` → ``validity`` → ``masks`` →
+              ``bake`` (or ``octree_bake``) → ``query``; ``grid`` (the baked grid), ``store``
   preview/    the camera's passes: ``passes`` (Cycles-named passes), ``upsample``, and the GPU
               data layouts ``trace_params`` and ``volume_textures`` (plain numpy)
   files/      ``exr``, ``png`` and ``gfg/`` (GFG-like asset files, docs/gfg.md)

@@ -240,8 +240,10 @@ class _Exporter:
         session = peek_session(self.scene.name_full)
         if self.options.include_voxel_caches and session is not None and session.caches is not None:
             self.gfg.voxels = voxel_set_from_result(session.caches)
-        probes = getattr(session, "probes", None)
-        if self.options.include_probes and probes:
+        from ..probe_store import load_grids  # baked probes, from the session or the .blend
+
+        probes = load_grids(self.scene) if self.options.include_probes else []
+        if probes:
             self.gfg.probe_grids = list(probes)
 
 

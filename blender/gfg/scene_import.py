@@ -117,11 +117,9 @@ def import_scene(context, gfg: GFGScene, options: ImportOptions, directory: str,
             warnings.append(f"{len(missing)} voxel-cache bindings name objects not in this file "
                             f"(e.g. '{missing[0]}')")
     if options.attach_probes and gfg.probe_grids:
-        if hasattr(session, "probes"):
-            session.probes = [replace(g, **{f: np.array(v) for f, v in vars(g).items()
-                                            if isinstance(v, np.ndarray)}) for g in gfg.probe_grids]
-            summary.probe_grids = len(gfg.probe_grids)
-        else:
-            warnings.append(f"The file has {len(gfg.probe_grids)} probe grids; this version of VoxGI "
-                            "has no probes to attach them to")
+        from ..probe_store import save_grids  # kept with the .blend like baked ones
+
+        save_grids(scene, [replace(g, **{f: np.array(v) for f, v in vars(g).items()
+                                         if isinstance(v, np.ndarray)}) for g in gfg.probe_grids])
+        summary.probe_grids = len(gfg.probe_grids)
     return summary

@@ -47,11 +47,20 @@ def voxel_cache(key, cascade, count, rng, skinned=False):
 
 
 def probe_grid(rng):
-    return ProbeGrid(np.array([-1.0, -1.0, 0.0]), 0.5, np.array([2, 2, 2]),
-                     rng.normal(size=(6, 3)).astype(np.float32),
-                     rng.normal(size=(6, 9, 3)).astype(np.float32), np.array([0, 5], np.uint32),
-                     rng.integers(0, 6, (2, 8)).astype(np.uint32),
-                     rng.integers(0, 2**63, (2, 8), dtype=np.uint64))
+    """Two active volumes of a 2×2×2 grid (cells 0 and 7) sharing their middle corner probe."""
+    cells = np.array([0, 7], np.uint32)
+    xyz = np.array([[0, 0, 0], [1, 1, 1]])[:, None, :] + np.array(
+        [[c & 1, (c >> 1) & 1, (c >> 2) & 1] for c in range(8)])[None]
+    corners = xyz[..., 0] + 3 * (xyz[..., 1] + 3 * xyz[..., 2])
+    unique, probes = np.unique(corners, return_inverse=True)
+    p = len(unique)
+    return ProbeGrid(np.array([-1.0, -1.0, 0.0]), [0.5, 0.5, 0.75], np.array([2, 2, 2]),
+                     rng.normal(size=(p, 3)).astype(np.float32),
+                     rng.normal(size=(p, 9, 3)).astype(np.float32), cells,
+                     probes.reshape(2, 8).astype(np.uint32),
+                     rng.integers(0, 2**63, (2, 8), dtype=np.uint64),
+                     validity=rng.random(p).astype(np.float32),
+                     flags=rng.integers(0, 4, p).astype(np.uint32), mask_threshold=0.5)
 
 
 def full_scene(voxels_per_cache=40, seed=0) -> GFGScene:

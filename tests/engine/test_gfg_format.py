@@ -84,7 +84,8 @@ def assert_scenes_equal(x: GFGScene, y: GFGScene):
                 if getattr(c, f) is not None:
                     assert np.array_equal(getattr(c, f), getattr(d, f))
     for g, h in zip(x.probe_grids, y.probe_grids):
-        for f in ("origin", "dims", "positions", "sh", "volume_cells", "volume_probes", "volume_masks"):
+        for f in ("origin", "volume_size", "dims", "positions", "sh", "volume_cells", "volume_probes",
+                  "volume_masks", "sh_index", "mask_index", "validity", "flags"):
             exactly_equal(np.asarray(getattr(g, f), np.asarray(getattr(h, f)).dtype), getattr(h, f))
 
 
@@ -101,7 +102,7 @@ def test_write_read_write_is_byte_identical_and_values_are_exact(scene, tmp_path
     assert write_gfg(path, scene) == len(data) == path.stat().st_size
     for source in (data, path):
         back = read_gfg(source)
-        assert back.version == (1, 1)
+        assert back.version == (1, 2)
         assert_scenes_equal(scene, back)
         assert to_bytes(back) == data
 
@@ -149,10 +150,12 @@ def test_version_endianness_and_checksums_are_enforced(scene):
     with pytest.raises(GFGError, match="little-endian"):
         read_gfg(_reseal_header(big_endian))
     flipped = bytearray(data)
-    flipped[-3] ^= 0x10  # inside the last section (PRBG)
+    flipped[-3] ^= 0x10  # inside the last section (PRBG), in its last array (PROBE_FLAGS)
     with pytest.raises(GFGError, match=r"section 13 PRBG: crc"):
         read_gfg(bytes(flipped))
-    assert len(read_gfg(bytes(flipped), verify=False).probe_grids) == 1
+    # Without the checksums the probe flags' undefined bits still give it away.
+    with pytest.raises(GFGError, match=r"section 13 PRBG: array PROBE_FLAGS: probe \d+ has undefined"):
+        read_gfg(bytes(flipped), verify=False)
     with pytest.raises(GFGError, match="header: magic"):
         read_gfg(b"glTF" + data[4:])
     with pytest.raises(GFGError, match="truncated"):
@@ -169,7 +172,7 @@ def as_format_1_0(data: bytes) -> bytearray:
 
 def test_files_of_the_previous_version_1_0_are_still_read(scene, tmp_path):
     data = to_bytes(scene)
-    assert struct.unpack_from("<HH", data, 8) == (1, 1)
+    assert struct.unpack_from("<HH", data, 8) == (1, 2)
     old = as_format_1_0(data)
     back = read_gfg(bytes(old))
     assert back.version == (1, 0)
@@ -258,9 +261,10 @@ def test_command_line_info_and_verify(scene, tmp_path):
     write_gfg(path, scene)
     info = _cli("info", path)
     assert info.returncode == 0, info.stderr
-    assert "GFG 1.1" in info.stdout and "14 sections" in info.stdout
+    assert "GFG 1.2" in info.stdout and "14 sections" in info.stdout
     assert "'Box': 36 vertices, 36 indices (uint16), 3 material ranges" in info.stdout
     assert "'Skin' cascade 0 (span 0.25 m): 40 voxels, skinned" in info.stdout
+    assert "15 probes (" in info.stdout and "2 active volumes of 2×2×2 (0.5×0.5×0.75 m)" in info.stdout
     ok = _cli("verify", path)
     assert ok.returncode == 0 and "OK" in ok.stdout
     data = bytearray(path.read_bytes())

@@ -38,6 +38,7 @@ from voxgi.voxgi_addon.files.gfg.spec import (
     MATERIAL_RECORD,
     MATERIALS_INFO,
     NODE_RECORD,
+    PROBE_GRID_INFO,
     RANGE_RECORD,
     SECTION_ENTRY,
     SECTION_PRELUDE,
@@ -220,7 +221,11 @@ def test_reads_allocate_no_more_than_the_file_justifies(traced, fields, length):
 # labels every byte of BASE from the format's layout (parsed here with struct/numpy, not with
 # the reader), then each class is damaged on its own.
 
-INFO_STRUCTS = {Kind.STRINGS: STRINGS_INFO, Kind.MATERIALS: MATERIALS_INFO, Kind.VOXEL_CACHE: VOXEL_CACHE_INFO}
+INFO_STRUCTS = {Kind.STRINGS: STRINGS_INFO, Kind.MATERIALS: MATERIALS_INFO, Kind.VOXEL_CACHE: VOXEL_CACHE_INFO,
+                Kind.PROBE_GRID: PROBE_GRID_INFO}
+# PRBG arrays with classes of their own: the volume list and Bowald's index arrays restate each
+# other (any change is refused even with the checksums resealed), and the probe flags.
+PROBE_INDEX_ROLES = (Role.VOLUME_CELLS, Role.VOLUME_PROBES, Role.SH_INDEX, Role.MASK_INDEX)
 RECORD_STRUCTS = {(Kind.NODES, Role.NODES): NODE_RECORD, (Kind.MATERIALS, Role.TEXTURES): TEXTURE_RECORD,
                   (Kind.MESH, Role.RANGES): RANGE_RECORD, (Kind.VOXEL_SET, Role.BINDINGS): BINDING_RECORD,
                   (Kind.VOXEL_SET, Role.SKIPPED): SKIPPED_RECORD, (Kind.MESH, Role.COMPONENTS): COMPONENT_RECORD}
@@ -290,6 +295,10 @@ def byte_map(data: bytes) -> ByteMap:
                 m.struct(payload, at, RECORD_STRUCTS[kind, role], int(d["count"]))
             elif kind == Kind.MESH and role == Role.VERTEX_BLOCK:
                 blocks.append(d)
+            elif kind == Kind.PROBE_GRID and role in PROBE_INDEX_ROLES:
+                m.mark("PRBG index", slice(at, end))
+            elif kind == Kind.PROBE_GRID and role == Role.PROBE_FLAGS:
+                m.mark("PRBG flags", slice(at, end))
             else:
                 m.mark(payload, slice(at, end))
             if kind == Kind.MESH and role == Role.COMPONENTS:
@@ -320,7 +329,8 @@ def test_every_byte_of_the_file_belongs_to_exactly_one_class():
     sizes = {name: len(MAP.offsets(name)) for name in MAP.names}
     kinds = {bytes(e["kind"]).decode() for e in np.frombuffer(BASE, SECTION_ENTRY, 15, 64)}
     assert kinds == {k.decode() for k in KNOWN_KINDS} | {"FUTR"}
-    assert set(sizes) == {"header", "section table", *ZERO_CLASSES, *(f"{k} payload" for k in kinds)}
+    assert set(sizes) == {"header", "section table", *ZERO_CLASSES, *(f"{k} payload" for k in kinds),
+                          "PRBG index", "PRBG flags"}
     assert sum(sizes.values()) == SIZE and min(sizes.values()) > 0
     assert sizes["header"] == 64 - 20 and sizes["section table"] == 15 * 28  # reserved words apart
     assert 8 < sizes["padding"] < 64 * 16 and sizes["section padding"] > 100  # with stride padding
@@ -402,5 +412,22 @@ def test_the_command_line_reports_damaged_padding_in_one_line_without_a_tracebac
     run = subprocess.run([sys.executable, "-m", "voxgi_addon.files.gfg", "verify", str(path)], cwd=REPO_ROOT,
                          capture_output=True, text=True, timeout=60)
     assert run.returncode == 1 and run.stderr == "", run.stderr
-    assert run.stdout.splitlines() == [f"{path}: padding after section 12 VOXC: padding: byte at file "
+    assert run.stdout.splitlines() == [f"{path}: padding after section 13 PRBG: padding: byte at file "
                                        f"offset {at} is 0x5A, not 0 (padding and reserved bytes must be zero)"]
+
+
+@pytest.mark.parametrize("name", ["PRBG index", "PRBG flags"])
+def test_damaged_probe_indices_and_flags_are_refused_with_the_checksums_made_to_match(name):
+    """Bowald's index arrays restate the volume list, so any byte of either changed (every CRC
+    recomputed) is refused; so is any undefined bit of a probe's flags."""
+    rng = np.random.default_rng(200)
+    offsets = MAP.offsets(name)
+    for at in map(int, offsets):
+        data = bytearray(BASE)
+        if name == "PRBG flags":  # bits 0-1 of each word are defined: damage the others
+            data[at] ^= int(rng.integers(1, 256)) & (0xFC if (at - int(offsets[0])) % 4 == 0 else 0xFF) or 0x80
+        else:
+            data[at] ^= int(rng.integers(1, 256))
+        with pytest.raises(GFGError, match=r"section 13 PRBG: array (VOLUME|SH_INDEX|MASK_INDEX|PROBE_FLAGS)"):
+            read_gfg(bytes(reseal(data)))
+    assert len(offsets) >= 4 * 15  # 15 probes; the index arrays are longer

@@ -29,6 +29,7 @@ SECTIONS = {
     "gpu": ("bench_gpu", "GPU tracer: filtered samples/s and preview times vs numpy and Cycles"),
     "viewport": ("bench_viewport", "live viewport GI: main-thread stall, move → GI latency, cancel, "
                                    "debug-view draw of 1M voxels"),
+    "probes": ("bench_probes", "light-probe bake time/memory (numpy, GPU), queries, EEVEE, Cycles"),
 }
 
 

@@ -303,8 +303,9 @@ def group_passes(channels: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Group ``read_exr`` channels into passes: pass name → (H, W, 3) float32 (R, G, B).
 
     A view-layer prefix is dropped (``ViewLayer.Diffuse Direct.R`` → ``Diffuse Direct``); an A
-    channel is left out; passes without R/G/B channels (single-value passes such as ``Depth``)
-    are returned as (H, W, 1) from their first channel.
+    channel is left out; X/Y/Z passes (``Position``, ``Normal``) come as (H, W, 3) too; passes
+    without such channels (single-value passes such as ``Depth``) are returned as (H, W, 1) from
+    their first channel.
     """
     grouped: dict[str, dict[str, np.ndarray]] = {}
     for name, plane in channels.items():
@@ -315,6 +316,8 @@ def group_passes(channels: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     for name, planes in grouped.items():
         if all(c in planes for c in "RGB"):
             passes[name] = np.stack([planes["R"], planes["G"], planes["B"]], axis=-1)
+        elif all(c in planes for c in "XYZ"):
+            passes[name] = np.stack([planes["X"], planes["Y"], planes["Z"]], axis=-1)
         else:
             passes[name] = planes[sorted(planes)[0]][:, :, None]
     return passes

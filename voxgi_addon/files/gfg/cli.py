@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+import numpy as np
+
 from . import data_types as dtypes
 from .container import kind_name
 from .errors import GFGError
@@ -44,9 +46,21 @@ def _contents(scene: GFGScene) -> dict[bytes, list[str]]:
         Kind.VOXEL_CACHE: [] if voxels is None else [
             f"'{c.key}' cascade {c.cascade} (span {c.span:g} m): {c.voxel_count} voxels"
             f"{', skinned' if c.skinned else ''}" for c in voxels.caches],
-        Kind.PROBE_GRID: [f"{len(g.positions)} probes, {len(g.volume_cells)} volumes of "
-                          f"{'×'.join(str(int(d)) for d in g.dims)}" for g in scene.probe_grids],
+        Kind.PROBE_GRID: [_probe_line(g) for g in scene.probe_grids],
     }
+
+
+def _probe_line(g) -> str:
+    from ...probes.grid import memory_report
+
+    flags = np.asarray(g.flags)
+    memory = memory_report(g)
+    masks = f"masks at {g.mask_threshold:.0%}" if g.mask_threshold > 0 else "no masks"
+    return (f"{len(g.positions)} probes ({int((flags & 1).sum())} relocated, {int(((flags & 2) != 0).sum())} "
+            f"disabled), {len(g.volume_cells)} active volumes of {'×'.join(str(int(d)) for d in g.dims)} "
+            f"({'×'.join(f'{s:g}' for s in g.volume_size)} m), {masks}; SH index {memory['sh_index']} B, "
+            f"SH {memory['sh_coefficients']} B, occlusion index {memory['occlusion_index']} B, "
+            f"masks {memory['occlusion_masks']} B")
 
 
 def info(path: str, out=print) -> int:

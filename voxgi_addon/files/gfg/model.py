@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...probes.grid import ProbeGrid  # the baked grid is the file's model too
 from ...voxelize.cache import VoxelCache
 from ...voxelize.scene_caches import ObjectBinding, SkippedMesh
 from .spec import (
@@ -195,29 +196,6 @@ class VoxelSet:
     caches: list[VoxelCache]
     bindings: dict[str, ObjectBinding] = field(default_factory=dict)
     skipped: list[SkippedMesh] = field(default_factory=list)
-
-
-@dataclass
-class ProbeGrid:
-    """A light-probe grid (Bowald 2016): probes at the corners of occupied volumes.
-
-    origin : (3,) float64 world position of cell (0, 0, 0)'s min corner; cell_size : metres;
-    dims : (3,) int volumes per axis. positions : (P, 3) float32; sh : (P, 9, 3) float32
-    SH L2 RGB coefficients (l = 0; l = 1, m = -1..1; l = 2, m = -2..2).
-    volume_cells : (V,) uint32 linear cell ``x + dims_x·(y + dims_y·z)`` of each occupied volume;
-    volume_probes : (V, 8) uint32 corner probes (corner ``x | y<<1 | z<<2``);
-    volume_masks : (V, 8) uint64, bit ``sx + 4·(sy + 4·sz)`` set where that corner's probe may
-    light sub-volume (sx, sy, sz) of the 4×4×4 split.
-    """
-
-    origin: np.ndarray
-    cell_size: float
-    dims: np.ndarray
-    positions: np.ndarray
-    sh: np.ndarray
-    volume_cells: np.ndarray
-    volume_probes: np.ndarray
-    volume_masks: np.ndarray
 
 
 @dataclass

@@ -11,7 +11,7 @@ import numpy as np
 MAGIC = b"GFG "
 ENDIAN_TAG = 0x0A0B0C0D  # reads back as this value only when decoded little-endian
 VERSION_MAJOR = 1  # readers reject another major version
-VERSION_MINOR = 1  # minor versions only add (sections, roles, trailing info fields)
+VERSION_MINOR = 2  # minor versions only add (sections, roles, trailing info fields)
 # From 1.1 every padding and reserved byte must be zero and readers check it, so that with the
 # checksums every byte of a file is verified (docs/gfg.md, "Every byte is checked"). Files of
 # 1.0, which did not promise zero padding, are read by the 1.0 rules.
@@ -86,7 +86,7 @@ class Kind:
 KNOWN_KINDS = (Kind.STRINGS, Kind.NODES, Kind.MATERIALS, Kind.MESH, Kind.SKELETON,
                Kind.ANIMATION, Kind.VOXEL_SET, Kind.VOXEL_CACHE, Kind.PROBE_GRID)
 SINGLETON_KINDS = (Kind.STRINGS, Kind.NODES, Kind.MATERIALS, Kind.VOXEL_SET)
-SECTION_VERSION = 1  # every kind is at version 1 in formats 1.0 and 1.1
+SECTION_VERSION = 1  # every kind is at version 1 in formats 1.0 to 1.2
 
 
 # ------------------------------------------------------------------ enums of the original GFG
@@ -165,6 +165,7 @@ class Role:
     VOXEL_POSITIONS, VOXEL_NORMALS, VOXEL_COLORS, VOXEL_WEIGHTS, VOXEL_BONE_INDICES = 1, 2, 3, 4, 5
     # PRBG
     PROBE_POSITIONS, PROBE_SH, VOLUME_CELLS, VOLUME_PROBES, VOLUME_MASKS = 1, 2, 3, 4, 5
+    SH_INDEX, MASK_INDEX, PROBE_VALIDITY, PROBE_FLAGS = 6, 7, 8, 9  # from format 1.2
 
 
 # ------------------------------------------------------------------ info structs
@@ -192,10 +193,16 @@ VOXEL_CACHE_INFO = np.dtype([
     ("dims", "<u4", (3,)), ("voxel_count", "<u8"), ("flags", "<u4"), ("reserved", "<u4"),
 ])
 VOXEL_CACHE_SKINNED = 1
-PROBE_GRID_INFO = np.dtype([
+PROBE_GRID_INFO_1_1 = np.dtype([
     ("origin", "<f8", (3,)), ("cell_size", "<f8"), ("dims", "<u4", (3,)),
     ("probe_count", "<u4"), ("volume_count", "<u4"), ("sh_coefficients", "<u4"),
 ])
+# Format 1.2 appends the per-axis volume size and the masks' threshold (docs/gfg.md "PRBG").
+PROBE_GRID_INFO = np.dtype(PROBE_GRID_INFO_1_1.descr + [
+    ("volume_size", "<f8", (3,)), ("mask_threshold", "<f4"), ("reserved", "<u4"),
+])
+assert PROBE_GRID_INFO_1_1.itemsize == 56 and PROBE_GRID_INFO.itemsize == 88
+PROBE_FLAG_BITS = 0x3  # RELOCATED | DISABLED (voxgi_addon/probes/grid.py)
 SH_L2_COEFFICIENTS = 9
 
 # ------------------------------------------------------------------ record structs

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...probes.grid import CORNER_OFFSETS, NO_INDEX, index_arrays
 from ...scene.snapshot import OBJECT_KINDS
 from ...voxelize.cache import VoxelCache
 from ...voxelize.packing import MAX_CELLS_PER_AXIS
@@ -14,7 +15,9 @@ from .model import ProbeGrid, VoxelSet
 from .scene_sections import StringTable, StringView, check_index
 from .spec import (
     BINDING_RECORD,
+    PROBE_FLAG_BITS,
     PROBE_GRID_INFO,
+    PROBE_GRID_INFO_1_1,
     SH_L2_COEFFICIENTS,
     SKIPPED_RECORD,
     VOXEL_CACHE_INFO,
@@ -140,26 +143,56 @@ def decode_voxel_cache(view: SectionView, strings: StringView, voxels: VoxelSet 
 
 # ------------------------------------------------------------------ probe grids
 
+FLOAT1 = dtypes.code_of("FLOAT_1")
+MAX_GRID_CORNERS = 1 << 28  # (X+1)(Y+1)(Z+1) beyond this is not a probe grid anyone bakes
+
+
 def encode_probe_grid(grid: ProbeGrid) -> SectionBuilder:
+    """A PRBG section in the 1.2 layout (docs/gfg.md "PRBG")."""
     p, v = len(grid.positions), len(grid.volume_cells)
-    info = np.array([(grid.origin, grid.cell_size, grid.dims, p, v, SH_L2_COEFFICIENTS)],
-                    PROBE_GRID_INFO)
+    size = np.asarray(grid.volume_size, np.float64)
+    info = np.zeros(1, PROBE_GRID_INFO)
+    info[0] = (grid.origin, size[0], grid.dims, p, v, SH_L2_COEFFICIENTS, size,
+               grid.mask_threshold, 0)
     s = SectionBuilder(Kind.PROBE_GRID, info)
     s.add(Role.PROBE_POSITIONS, FLOAT3, np.asarray(grid.positions, "<f4").reshape(p, 3))
     s.add(Role.PROBE_SH, FLOAT3, np.asarray(grid.sh, "<f4").reshape(p * SH_L2_COEFFICIENTS, 3))
     s.add(Role.VOLUME_CELLS, U32, np.asarray(grid.volume_cells, "<u4").reshape(v))
     s.add(Role.VOLUME_PROBES, U32, np.asarray(grid.volume_probes, "<u4").reshape(v * 8))
     s.add(Role.VOLUME_MASKS, U64, np.asarray(grid.volume_masks, "<u8").reshape(v * 8))
+    s.add(Role.SH_INDEX, U32, np.asarray(grid.sh_index, "<u4").ravel())
+    s.add(Role.MASK_INDEX, U32, np.asarray(grid.mask_index, "<u4").ravel())
+    s.add(Role.PROBE_VALIDITY, FLOAT1, np.asarray(grid.validity, "<f4").reshape(p))
+    s.add(Role.PROBE_FLAGS, U32, np.asarray(grid.flags, "<u4").reshape(p))
     return s
 
 
+def _check_index(view: SectionView, name: str, stored, expected) -> None:
+    if not np.array_equal(stored, expected):
+        k = int(np.argmax(stored != expected))
+        view.fail(f"array {name}", f"entry {k} is {int(stored[k])}, the volumes say {int(expected[k])}")
+
+
 def decode_probe_grid(view: SectionView) -> ProbeGrid:
-    info = view.info(PROBE_GRID_INFO)
+    """A PRBG section of format 1.0–1.2 (1.0/1.1: cubic volumes, index arrays rebuilt)."""
+    newer = view.info_size >= PROBE_GRID_INFO.itemsize
+    info = view.info(PROBE_GRID_INFO if newer else PROBE_GRID_INFO_1_1)
     p, v = int(info["probe_count"]), int(info["volume_count"])
     if int(info["sh_coefficients"]) != SH_L2_COEFFICIENTS:
         view.fail("info.sh_coefficients", f"{int(info['sh_coefficients'])} is not 9 (SH L2)")
     dims = info["dims"].astype(np.int64)
-    cells = int(dims[0]) * int(dims[1]) * int(dims[2])
+    if (dims < 1).any() or int((dims + 1).prod()) > MAX_GRID_CORNERS:
+        view.fail("info.dims", f"{dims.tolist()} is not a probe grid's volume count")
+    cells = int(dims.prod())
+    size = np.asarray(info["volume_size"] if newer else [info["cell_size"]] * 3, np.float64)
+    if not (np.isfinite(size).all() and (size > 0).all()) or float(info["cell_size"]) != size[0]:
+        view.fail("info.volume_size", f"{size.tolist()} (cell size {float(info['cell_size'])}) is not "
+                  "a positive volume size whose x is the cell size")
+    if not np.isfinite(info["origin"]).all():
+        view.fail("info.origin", "is not finite")
+    threshold = float(info["mask_threshold"]) if newer else 0.5
+    if not 0.0 <= threshold <= 1.0:
+        view.fail("info.mask_threshold", f"{threshold} is not a share in [0, 1]")
     positions = view.array(Role.PROBE_POSITIONS, "PROBE_POSITIONS", (FLOAT3,), p)
     sh = view.array(Role.PROBE_SH, "PROBE_SH", (FLOAT3,), p * SH_L2_COEFFICIENTS)
     volume_cells = view.array(Role.VOLUME_CELLS, "VOLUME_CELLS", (U32,), v)
@@ -169,6 +202,37 @@ def decode_probe_grid(view: SectionView) -> ProbeGrid:
         view.fail("array VOLUME_CELLS", f"cell {int(volume_cells.max())} is outside the {cells} cells")
     if v and int(probes.max()) >= p:
         view.fail("array VOLUME_PROBES", f"probe {int(probes.max())} is not one of the {p} probes")
-    return ProbeGrid(info["origin"], float(info["cell_size"]), dims, positions,
-                     sh.reshape(p, SH_L2_COEFFICIENTS, 3), volume_cells, probes.reshape(v, 8),
-                     masks.reshape(v, 8))
+    optional = dict(sh_index=None, mask_index=None, validity=None, flags=None)
+    if newer:
+        if v > 1 and not (np.diff(volume_cells.astype(np.int64)) > 0).all():
+            view.fail("array VOLUME_CELLS", "cells are not strictly ascending")
+        sh_index = view.array(Role.SH_INDEX, "SH_INDEX", (U32,), int((dims + 1).prod()))
+        mask_index = view.array(Role.MASK_INDEX, "MASK_INDEX", (U32,), cells)
+        validity = view.array(Role.PROBE_VALIDITY, "PROBE_VALIDITY", (FLOAT1,), p)
+        flags = view.array(Role.PROBE_FLAGS, "PROBE_FLAGS", (U32,), p)
+        want_sh, want_mask = index_arrays(dims, volume_cells, probes.reshape(v, 8))
+        _check_index(view, "SH_INDEX", sh_index, want_sh)
+        _check_index(view, "MASK_INDEX", mask_index, want_mask)
+        # Shared corners name one probe: every volume's corner agrees with the SH index.
+        seen = want_sh[_corner_cells(dims, volume_cells)].ravel()
+        _check_index(view, "VOLUME_PROBES", probes.astype(np.int64), seen.astype(np.int64))
+        used = want_sh[want_sh != NO_INDEX]
+        if len(np.unique(used)) != len(used):
+            view.fail("array VOLUME_PROBES", "one probe sits at two grid corners")
+        if not (np.isfinite(validity) & (validity >= 0) & (validity <= 1)).all():
+            view.fail("array PROBE_VALIDITY", "a value is not a share in [0, 1]")
+        if (flags & ~np.uint32(PROBE_FLAG_BITS)).any():
+            k = int(np.argmax(flags & ~np.uint32(PROBE_FLAG_BITS)))
+            view.fail("array PROBE_FLAGS", f"probe {k} has undefined flag bits {int(flags[k]):#x}")
+        optional = dict(sh_index=sh_index, mask_index=mask_index, validity=validity, flags=flags)
+    return ProbeGrid(info["origin"], size, dims, positions, sh.reshape(p, SH_L2_COEFFICIENTS, 3),
+                     volume_cells, probes.reshape(v, 8), masks.reshape(v, 8),
+                     mask_threshold=threshold, **optional)
+
+
+def _corner_cells(dims, volume_cells) -> np.ndarray:
+    """(V, 8) linear grid corners of each volume (``probes.grid.CORNER_OFFSETS`` order)."""
+    c = np.asarray(volume_cells, np.int64)
+    xyz = np.stack([c % dims[0], (c // dims[0]) % dims[1], c // (dims[0] * dims[1])], axis=1)
+    xyz = xyz[:, None, :] + CORNER_OFFSETS[None]
+    return xyz[..., 0] + (dims[0] + 1) * (xyz[..., 1] + (dims[1] + 1) * xyz[..., 2])

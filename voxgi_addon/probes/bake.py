@@ -1,0 +1,175 @@
+"""Baking a probe grid end to end (docs/probes.md "Bake").
+
+``bake_probe_grid``: place the probes (``placement``), test and relocate them (``validity``),
+build the occlusion masks (``masks``), then give each probe the SH L2 projection (``sh``) of
+its incoming radiance along the bake's directions (``sh.sample_directions``, the same set for
+every probe, fixed by the seed). Radiance along a probe ray is one diffuse bounce of direct
+light, exactly as Cycles' ``Diffuse Indirect`` with one bounce sees it: the closest triangle hit
+(``scene.raycast``) shaded with Cycles' light models and shadow rays (``gi.direct_light``) ×
+albedo, plus emission; the world colour where the ray leaves the scene.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import VoxGICancelled, VoxGIError
+from ..gi.direct_light import diffuse_direct
+from ..scene.geometry import SceneTriangles, world_triangles
+from .grid import DISABLED, RELOCATED, ProbeGrid
+from .masks import ALL_SUBVOLUMES, occlusion_masks
+from .placement import place_probes, scene_box
+from .sh import project, sample_directions
+from .validity import relocate_probes
+
+__all__ = ["ProbeSettings", "BakeResult", "bake_probe_grid", "hit_radiance", "material_colours"]
+
+_PROBE_CHUNK = 32  # probes whose rays are shaded together (progress and cancel granularity)
+
+
+@dataclass(frozen=True)
+class ProbeSettings:
+    """resolution : volumes per axis (k, or (kx, ky, kz)). directions : rays per probe.
+    seed : fixes the direction set and the light sampling. use_masks / mask_threshold : the
+    occlusion masks and the front-facing share they require (eq. 3.1). validity_threshold :
+    back-face share above which a probe is invalid; relocate : move invalid probes out
+    (else they are disabled). light_samples : shadow rays per hit for lights with an extent
+    (one stratified ray is enough: the SH projection averages the probe's hundreds of hits)."""
+
+    resolution: int | tuple[int, int, int] = 8
+    directions: int = 256
+    seed: int = 0
+    use_masks: bool = True
+    mask_threshold: float = 0.5
+    validity_threshold: float = 0.25
+    relocate: bool = True
+    light_samples: int = 1
+
+
+@dataclass
+class BakeResult:
+    grid: ProbeGrid
+    timings: dict[str, float] = field(default_factory=dict)
+    relocated: int = 0
+    disabled: int = 0
+
+
+def material_colours(snapshot) -> tuple[np.ndarray, np.ndarray]:
+    """Albedo (M+1, 3) and emission (M+1, 3) per material index; the last row is 'none'."""
+    from ..preview.passes import material_table  # the preview's table, imported late (no cycle)
+
+    albedo, _, _, emission = material_table(snapshot)
+    return albedo, emission
+
+
+def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
+                 light_samples: int = 4, seed: int = 0) -> np.ndarray:
+    """(N, 3) radiance arriving along rays: one diffuse bounce of direct light at the hit, or the
+    world colour for a miss (tri = -1). Hits are shaded on the side the ray came from."""
+    dirs = np.asarray(dirs, np.float64).reshape(-1, 3)
+    world = np.asarray(snapshot.world.color, np.float64)[:3] * float(snapshot.world.strength)
+    out = np.tile(world, (len(dirs), 1))
+    hit = np.flatnonzero(tri >= 0)
+    if len(hit) == 0:
+        return out
+    k = tri[hit]
+    points = np.asarray(origins, np.float64).reshape(-1, 3)[hit] + dirs[hit] * t[hit, None]
+    normal = np.asarray(tris.normals, np.float64)[k]
+    if tris.corner_normals is not None:
+        c = np.asarray(tris.corner_normals, np.float64)[k]
+        uu, vv = u[hit, None], v[hit, None]
+        smooth = (1.0 - uu - vv) * c[:, 0] + uu * c[:, 1] + vv * c[:, 2]
+        length = np.linalg.norm(smooth, axis=1, keepdims=True)
+        normal = np.where(length > 1e-12, smooth / np.maximum(length, 1e-12), normal)
+    face = np.asarray(tris.normals, np.float64)[k]
+    sign = np.where(np.einsum("ij,ij->i", face, dirs[hit]) > 0, -1.0, 1.0)  # Cycles flips back faces
+    normal = normal * sign[:, None]
+    direct = diffuse_direct(points, normal, snapshot.lights, tris, samples=light_samples, seed=seed)
+    albedo, emission = material_colours(snapshot)
+    m = len(snapshot.materials)
+    mat = np.asarray(tris.materials, np.int64)[k]
+    mat = np.where((mat >= 0) & (mat < m), mat, m)
+    out[hit] = albedo[mat] * direct + emission[mat]
+    return out
+
+
+def _box(tris, box):
+    if box is None:
+        return scene_box(tris.positions)
+    lo, hi = (np.asarray(b, np.float64).reshape(3) for b in box)
+    return lo, hi
+
+
+def bake_probe_grid(snapshot, settings: ProbeSettings = ProbeSettings(), box=None,
+                    tris: SceneTriangles | None = None, cancel=None, progress=None,
+                    name: str = "", sh_fn=None) -> BakeResult:
+    """Place, validate, mask and bake one probe grid over ``box`` ((lo, hi) world corners; the
+    scene's bounds, grown a little, when None).
+
+    cancel : callable returning True to stop (raises ``VoxGICancelled``); progress : callable
+    taking the finished share in [0, 1]. sh_fn : ``sh_fn(positions (P, 3), directions (N, 3))``
+    → (P, 9, 3) replaces the exact radiance stage (the octree bakes, ``octree_bake`` and
+    ``render/gpu_probes.py``); placement, validity and masks stay exact.
+    """
+    if settings.directions < 9:
+        raise VoxGIError(f"a probe needs at least 9 directions for SH L2, got {settings.directions}")
+    timings: dict[str, float] = {}
+
+    def check():
+        if cancel is not None and cancel():
+            raise VoxGICancelled("probe bake cancelled")
+
+    t0 = time.perf_counter()
+    tris = tris if tris is not None else world_triangles(snapshot)
+    lo, hi = _box(tris, box)
+    layout = place_probes(tris.positions, tris.normals, lo, hi, settings.resolution)
+    timings["placement"] = time.perf_counter() - t0
+    check()
+
+    t0 = time.perf_counter()
+    dirs = sample_directions(settings.directions, settings.seed)
+    smallest = float(layout.volume_size.min())
+    positions, validity, flags, rays = relocate_probes(
+        tris, layout.positions, dirs, settings.validity_threshold, max_offset=0.5 * smallest,
+        step=0.05 * smallest, relocate=settings.relocate)
+    timings["validity"] = time.perf_counter() - t0
+    check()
+
+    t0 = time.perf_counter()
+    if settings.use_masks:
+        masks = occlusion_masks(layout, positions, settings.mask_threshold)
+    else:
+        masks = np.full((len(layout.volume_cells), 8), ALL_SUBVOLUMES, np.uint64)
+    timings["masks"] = time.perf_counter() - t0
+    check()
+
+    t0 = time.perf_counter()
+    p_count, n = len(positions), len(dirs)
+    sh = np.zeros((p_count, 9, 3), np.float64)
+    if sh_fn is not None:
+        sh[:] = sh_fn(positions, dirs)
+        p_count = 0  # nothing left for the exact stage
+    for a in range(0, p_count, _PROBE_CHUNK):
+        b = min(p_count, a + _PROBE_CHUNK)
+        origins = np.repeat(positions[a:b], n, axis=0)
+        radiance = hit_radiance(snapshot, tris, origins, np.tile(dirs, (b - a, 1)),
+                                rays.t[a:b].ravel(), rays.triangle[a:b].ravel(),
+                                rays.u[a:b].ravel(), rays.v[a:b].ravel(),
+                                settings.light_samples, settings.seed + a)
+        sh[a:b] = project(radiance.reshape(b - a, n, 3), dirs)
+        if progress is not None:
+            progress(b / p_count)
+        check()
+    timings["radiance"] = time.perf_counter() - t0
+
+    grid = ProbeGrid(origin=lo, volume_size=layout.volume_size, dims=layout.dims,
+                     positions=positions.astype(np.float32), sh=sh.astype(np.float32),
+                     volume_cells=layout.volume_cells.astype(np.uint32),
+                     volume_probes=layout.volume_probes.astype(np.uint32), volume_masks=masks,
+                     validity=validity, flags=flags,
+                     mask_threshold=float(settings.mask_threshold) if settings.use_masks else 0.0,
+                     name=name)
+    return BakeResult(grid, timings, int(((flags & RELOCATED) != 0).sum()),
+                      int(((flags & DISABLED) != 0).sum()))
