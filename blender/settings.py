@@ -140,6 +140,13 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
                 "fastest, approximate")),
         default="ACCURATE",
     )
+    glossy_indirect: bpy.props.BoolProperty(
+        name="Glossy Indirect",
+        description="Trace glossy reflections of the scene (cones through the voxels); off "
+                    "leaves the Glossy Indirect pass black, like Cycles with Max Bounces "
+                    "Glossy 0",
+        default=True,
+    )
     gi_rays: bpy.props.IntProperty(
         name="GI Rays",
         description="Exact rays per gather point for diffuse indirect light and AO (Accurate "
@@ -267,6 +274,7 @@ def trace_options(settings: VoxGISceneSettings, width: int, height: int) -> dict
 
     return {"light_samples": settings.light_samples, "shadows": settings.shadows,
             "gi_stride": gi_stride(settings, width, height), "quality": settings.quality,
+            "glossy_indirect": settings.glossy_indirect,
             "gather_settings": GatherSettings(rays=settings.gi_rays,
                                               ao_distance=settings.ao_distance)}
 

@@ -36,7 +36,8 @@ from .gpu_volume import GPUVolume
 
 def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_samples: int = 16,
                       volume: GPUVolume | None = None, shadows: str = "RAYS", gi_stride: int = 1,
-                      quality: str = "ACCURATE", gather_settings: GatherSettings | None = None):
+                      quality: str = "ACCURATE", gather_settings: GatherSettings | None = None,
+                      glossy_indirect: bool = True):
     """(passes, timings) like ``preview.render_passes``. ``volume`` : a ``GPUVolume`` kept
     between calls so an unchanged octree is not uploaded again (a new one when None).
     quality "ACCURATE": exact direct light and the exact-ray final gather (``gpu_gather``);
@@ -114,8 +115,11 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
         diffuse_ao = traced("diffuse_ao")
         timings["diffuse+ao cones (GPU)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    glossy = traced("glossy")
-    timings["glossy cones (GPU)"] = time.perf_counter() - t0
+    if glossy_indirect:
+        glossy = traced("glossy")
+        timings["glossy cones (GPU)"] = time.perf_counter() - t0
+    else:  # as Cycles with no glossy bounces
+        glossy = np.zeros((height, width, 4), np.float32)
 
     flat_da = diffuse_ao.reshape(-1, 4)[hit]
     terms = (direct, flat_da[:, :3], flat_da[:, 3], glossy.reshape(-1, 4)[hit, :3])

@@ -110,7 +110,7 @@ class VOXGI_PT_gi(_SidebarPanel, bpy.types.Panel):
         trace = (("gi_rays",) if settings.quality == "ACCURATE"
                  else ("diffuse_cones", "falloff", "gi_intensity", "ao_intensity", "shadows"))
         _settings_column(layout, context, (
-            "quality", *trace, *manual, "dense_depth", "cone_angle", "sample_factor",
+            "quality", *trace, "glossy_indirect", *manual, "dense_depth", "cone_angle", "sample_factor",
             "max_distance", "ao_distance", "light_samples", "gi_resolution", "tracer"))
         row = layout.row(align=True)
         row.operator("voxgi.update", icon="FILE_REFRESH")

@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import VoxGIError
 from ..gi.cone_shadows import cone_shadowed_direct
 from ..gi.conetrace import ConeSettings, trace_diffuse_and_ao, trace_glossy
-from ..gi.direct_light import diffuse_direct, light_directions
+from ..gi.direct_light import diffuse_direct, light_directions, light_frame
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
@@ -60,20 +60,55 @@ def principled_table(snapshot):
     return base, params
 
 
+AREA_GLOSSY_GRID = 4  # an area light's glossy reflection: sampled at 4 × 4 points on it
+
+
+def _glossy_points(light, points, normals):
+    """(K, N, 3) unit directions from ``points`` to K points of ``light`` and (K, N) weights
+    summing to 1: each point's share of the unshadowed irradiance. Suns and point lights are one
+    direction; an area light is AREA_GLOSSY_GRID² cell centres of its rectangle or ellipse."""
+    if light.type != "AREA":
+        return np.stack(light_directions([light], points)), np.ones((1, len(points)))
+    position, x_axis, y_axis, emits = light_frame(light)
+    size_y = light.size_y if light.shape in ("RECTANGLE", "ELLIPSE") else light.size
+    cells = (np.arange(AREA_GLOSSY_GRID) + 0.5) / AREA_GLOSSY_GRID - 0.5
+    u, v = (c.ravel() for c in np.meshgrid(cells, cells))
+    if light.shape in ("DISK", "ELLIPSE"):
+        inside = u * u + v * v <= 0.25
+        u, v = u[inside], v[inside]
+    on_light = position + (u * light.size)[:, None] * x_axis + (v * size_y)[:, None] * y_axis
+    offset = on_light[:, None, :] - points[None]  # (K, N, 3)
+    distance = np.maximum(np.linalg.norm(offset, axis=-1), 1e-9)
+    towards = offset / distance[..., None]
+    receiver = np.maximum(np.einsum("knj,nj->kn", towards, normals), 0.0)
+    weight = np.maximum(-(towards @ emits), 0.0) * receiver / distance ** 2  # irradiance share
+    return towards, weight / np.maximum(weight.sum(axis=0, keepdims=True), 1e-30)
+
+
 def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_direct):
-    """(N, 3) the glossy light the lights send to the viewer (Glossy Color × Glossy Direct):
-    each light's shadowed Diffuse Direct turned back into the irradiance it brings
-    (× π / cos) times the Principled glossy reflectance toward the viewer at the light's
-    centre direction (docs/gi_pipeline.md "Principled materials": lights as points for the
-    glossy lobe). views : (N, 3) unit directions from the points to the viewer."""
+    """(N, 3) the glossy light the lights send to the viewer (Glossy Color × Glossy Direct).
+
+    Each light's shadowed Diffuse Direct is turned back into the irradiance it brings (× π) and
+    spread over the light's directions (``_glossy_points``: one for suns and point lights, a
+    grid over an area light, weighted by their share of the irradiance), each reflected by the
+    Principled glossy lobe toward the viewer (``principled.glossy_reflectance`` / cos). The
+    light's shadowing is taken as uniform over it. views : (N, 3) unit directions from the
+    points to the viewer; per_light_direct : (L, N, 3) Diffuse Direct light by light.
+    """
     base, params = principled_table(snapshot)
+    shading = (base[mat], params[mat, 0], params[mat, 1], params[mat, 2])
     total = np.zeros((len(points), 3))
-    for direction, direct in zip(light_directions(snapshot.lights, points), per_light_direct):
-        cos = np.einsum("ij,ij->i", normals, direction)
-        irradiance = np.where(cos[:, None] > 1e-4, direct * np.pi / np.maximum(cos, 1e-4)[:, None],
-                              0.0)
-        total += irradiance * glossy_reflectance(base[mat], params[mat, 0], params[mat, 1],
-                                                 params[mat, 2], normals, views, direction)
+    for light, direct in zip(snapshot.lights, per_light_direct):
+        towards, share = _glossy_points(light, points, normals)
+        lobe = np.zeros((len(points), 3))
+        for direction, weight in zip(towards, share):
+            cos = np.einsum("ij,ij->i", normals, direction)
+            reflect = glossy_reflectance(*shading, normals, views, direction)
+            lobe += np.where(cos[:, None] > 1e-4,
+                             weight[:, None] * reflect / np.maximum(cos, 1e-4)[:, None], 0.0)
+        # E·f summed over the light, with E = π × Diffuse Direct / (share-weighted cos) ≈ the
+        # light's irradiance on the receiver's plane.
+        total += direct * np.pi * lobe
     return total
 
 
@@ -162,8 +197,12 @@ def _traced(seen, stride, hit, trace, channels):
 
 def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettings,
                   light_samples: int = 16, shadows: str = "RAYS", gi_stride: int = 1,
-                  quality: str = "ACCURATE", gather_settings: GatherSettings | None = None):
+                  quality: str = "ACCURATE", gather_settings: GatherSettings | None = None,
+                  glossy_indirect: bool = True):
     """Render the passes at ``width`` × ``height`` with the numpy tracer.
+
+    glossy_indirect : trace glossy reflections (cones); False leaves Glossy Indirect 0, as
+    Cycles does with no glossy bounces.
 
     quality : "ACCURATE" — exact direct light and the exact-ray final gather for Diffuse Indirect
     and AO (``gather``; ``gather_settings``, default: 64 rays, the cones' AO distance);
@@ -228,8 +267,11 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         timings["diffuse+ao cones"] = time.perf_counter() - t0
     indirect, ao = traced[:, :3], traced[:, 3]
     t0 = time.perf_counter()
-    glossy = _traced(seen, gi_stride, hit, glossy_cones, 3)
-    timings["glossy cones"] = time.perf_counter() - t0
+    if glossy_indirect:
+        glossy = _traced(seen, gi_stride, hit, glossy_cones, 3)
+        timings["glossy cones"] = time.perf_counter() - t0
+    else:
+        glossy = np.zeros((len(hit), 3))
     if quality != "ACCURATE":
         return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao,
                               glossy), timings
