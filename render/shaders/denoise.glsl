@@ -2,7 +2,8 @@
  * ported line for line) over the reduced-resolution gather. low_image = (light rgb, AO),
  * low_variance = (var of the light's luminance mean, var of the AO mean); taps 2^i cells apart,
  * B3-spline weights × same-surface terms (normal^32, plane) × per signal
- * exp(−|Δ| / (4·√variance + 1e-6)). Variances are filtered with squared weights.
+ * exp(−|Δ| / (4·√variance + 1e-6)), the variance prefiltered over 3 × 3 valid cells.
+ * Variances are filtered with squared weights.
  * grid = (stride, full width, full height, tap step); low-resolution rows count from the bottom. */
 const float KERNEL[5] = float[5](1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0);
 const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
@@ -28,7 +29,25 @@ void main()
   }
   vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
   vec2 signal = vec2(dot(centre.rgb, LUMINANCE), centre.a);
-  vec2 scale = 4.0 * sqrt(max(centre_var.xy, vec2(0.0))) + 1e-6;
+  /* The variance prefiltered over the valid 3 × 3 neighbours (denoise.py _blurred). */
+  vec2 blurred = vec2(0.0);
+  float blur_weight = 0.0;
+  for (int a = -1; a <= 1; a++) {
+    for (int b = -1; b <= 1; b++) {
+      ivec2 q = cell + ivec2(b, a);
+      if (q.x < 0 || q.y < 0 || q.x >= low.x || q.y >= low.y) {
+        continue;
+      }
+      if (texelFetch(gbuffer_position, traced_pixel(low.y - 1 - q.y, q.x, stride, full), 0).w < 0.5) {
+        continue;
+      }
+      float g = (a == 0 ? 0.5 : 0.25) * (b == 0 ? 0.5 : 0.25);
+      blurred += g * texelFetch(low_variance, q, 0).xy;
+      blur_weight += g;
+    }
+  }
+  blurred /= max(blur_weight, 1e-30);
+  vec2 scale = 4.0 * sqrt(max(blurred, vec2(0.0))) + 1e-6;
   vec4 total = vec4(0.0);
   vec2 total_var = vec2(0.0);
   vec2 weight = vec2(0.0);

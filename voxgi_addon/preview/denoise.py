@@ -8,7 +8,8 @@ tap weighted by
 
 * geometry: same surface only — normal term max(n·n_q, 0)^NORMAL_POWER times the plane term
   exp(−(|n·(p_q − p)| / (PLANE_TOLERANCE·|p_q − p| + 1e-4))²) (as ``upsample``);
-* luminance: exp(−|l_p − l_q| / (SIGMA_LUMINANCE·√var_p + ε)), so differences larger than the
+* luminance: exp(−|l_p − l_q| / (SIGMA_LUMINANCE·√var_p + ε)), var_p the 3 × 3 prefiltered
+  variance (SVGF), so differences larger than the
   noise (contact shadows, light gradients) survive while differences of the noise's size are
   averaged away.
 
@@ -45,6 +46,24 @@ def _shifted(image: np.ndarray, dy: int, dx: int, fill) -> np.ndarray:
     return out
 
 
+GAUSS_3 = np.array([0.25, 0.5, 0.25])
+
+
+def _blurred(variance: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """(H, W, 2) variance averaged over each valid pixel's valid 3 × 3 neighbours (Gaussian
+    weights), as SVGF prefilters it: one point's own estimate from a few rays is itself noisy —
+    a point whose rays all missed a small bright patch reports ~0 variance and would refuse its
+    neighbours."""
+    total = np.zeros_like(variance)
+    weight = np.zeros(variance.shape[:2])
+    for a, ky in enumerate(GAUSS_3):
+        for b, kx in enumerate(GAUSS_3):
+            q_ok = _shifted(ok, a - 1, b - 1, False) * ky * kx
+            total += q_ok[..., None] * _shifted(variance, a - 1, b - 1, 0.0)
+            weight += q_ok
+    return np.where(ok[..., None], total / np.maximum(weight, 1e-30)[..., None], variance)
+
+
 def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
                   position: np.ndarray, normal: np.ndarray, iterations: int = 4,
                   sigma_luminance: float = SIGMA_LUMINANCE) -> tuple[np.ndarray, np.ndarray]:
@@ -71,7 +90,7 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
     for it in range(iterations):
         step = 1 << it
         signal = np.stack([v[..., :3] @ LUMINANCE, v[..., 3]], axis=-1)
-        scale = sigma_luminance * np.sqrt(np.maximum(var, 0.0)) + _EPSILON
+        scale = sigma_luminance * np.sqrt(np.maximum(_blurred(var, ok), 0.0)) + _EPSILON
         total = np.zeros_like(v)
         total_var = np.zeros_like(var)
         weight = np.zeros(var.shape)
