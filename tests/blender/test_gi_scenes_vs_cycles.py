@@ -21,7 +21,7 @@ REFS = pathlib.Path(__file__).resolve().parents[1] / "data" / "gi_refs"
 TARGETS = {"Diffuse Direct": 0.03, "Diffuse Indirect": 0.12, "Ambient Occlusion": 0.08}
 # scene → pass → bound held while the target is missed (see the module doc).
 GAPS = {
-    "columned_hall": {"Diffuse Indirect": 0.20},   # measured 0.180
+    "columned_hall": {"Diffuse Indirect": 0.17},   # measured 0.148
     "thin_wall_rooms": {"Combined": 0.035},        # measured 0.029; Cycles 64 spp 0.012
 }
 
@@ -30,7 +30,7 @@ def relative_l1(ours, reference, mask):
     return float(np.abs(ours[mask] - reference[mask]).sum() / np.abs(reference[mask]).sum())
 
 
-def preview(name):
+def preview(name, tracer="AUTO", width=gi_scenes.WIDTH, height=gi_scenes.HEIGHT):
     from voxgi.blender.session import scene_session
     from voxgi.render.pipeline import render_scene_passes
 
@@ -38,9 +38,23 @@ def preview(name):
     gi_scenes.build(name, scene)
     # The references trace no glossy bounce (tools/make_gi_references.py): neither do we here.
     scene.voxgi.glossy_indirect = False
-    passes, _ = render_scene_passes(bpy.context, scene, None, gi_scenes.WIDTH, gi_scenes.HEIGHT)
-    assert scene_session(scene.name_full).tracer_used == "GPU"
+    scene.voxgi.tracer = tracer
+    passes, _ = render_scene_passes(bpy.context, scene, None, width, height)
+    assert scene_session(scene.name_full).tracer_used == ("GPU" if tracer == "AUTO" else "numpy")
     return {k: np.asarray(v, np.float64) for k, v in passes.items()}
+
+
+def test_numpy_and_gpu_agree_on_a_skinned_scene(voxgi):
+    """The numpy reference and the GPU path draw the same rays (skinning, sun + area light)."""
+    gpu = preview("skinned_figure", "AUTO", 80, 60)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    reference = preview("skinned_figure", "NUMPY", 80, 60)
+    everywhere = np.ones((60, 80), bool)
+    for name, image in reference.items():
+        if not np.abs(image).sum():  # Glossy Indirect: off in both
+            assert not np.abs(gpu[name]).sum(), name
+            continue
+        assert relative_l1(gpu[name], image, everywhere) <= 0.02, name
 
 
 @pytest.mark.parametrize("name", sorted(gi_scenes.SCENES))
