@@ -9,8 +9,8 @@ time). Kernels (``shaders/``, each prefixed with ``bvh_common.glsl``):
 * ``bvh_probe`` — one ray per texel (closest hit, any hit) and the sample patterns (tests).
 * ``bvh_direct`` — Diffuse Direct over a G-buffer, every light of the snapshot, shadow rays
   (``bvh_lights.glsl``, the port of ``direct_light.diffuse_direct``).
-* ``bvh_indirect`` — exact AO and the raw one-bounce diffuse-indirect estimate
-  (``voxgi_addon.gi.exact_indirect``).
+* ``bvh_gather`` — the Accurate final gather: exact AO and the one-bounce diffuse-indirect
+  estimate with their variances (``voxgi_addon.gi.exact_indirect``; run by ``gpu_gather``).
 
 Needs a GPU context.
 """
@@ -37,9 +37,6 @@ KERNELS = {
     "bvh_probe": (("bvh_probe",), _BVH + ("ray_origin", "ray_direction"), ("mode",)),
     "bvh_direct": (("bvh_lights", "bvh_direct"), _BVH + ("lights", "gbuffer_position",
                                                           "gbuffer_normal"), ("sampling",)),
-    "bvh_indirect": (("bvh_lights", "bvh_indirect"),
-                     _BVH + ("bvh_normals", "lights", "materials", "gbuffer_position",
-                             "gbuffer_normal"), ("sampling", "world")),
     "bvh_gather": (("pixels", "principled", "bvh_lights", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "materials", "gbuffer_position",
                            "gbuffer_normal", "principled_lut"), ("sampling", "world", "grid")),
@@ -178,26 +175,6 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
     inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights, only)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
                         {"sampling": (seed, strata_side(samples), 0, 0)})
-
-
-def materials_texture(albedo, emission):
-    """(M + 1) × 2 texture: row 0 albedo, row 1 emission (``preview.material_table``)."""
-    rows = np.zeros((2, len(albedo), 4), np.float32)
-    rows[0, :, :3], rows[1, :, :3] = albedo, emission
-    return float_texture(rows, (len(albedo), 2))
-
-
-def indirect_texture(bvh: GPUBVH, gbuffer_inputs, lights, albedo, emission, rays: int = 16,
-                     ao_distance: float = 1.0, seed: int = 0, world=(0.0, 0.0, 0.0),
-                     hit_samples: int = 1):
-    """(Diffuse Indirect rgb, AO) over a G-buffer (``shaders/bvh_indirect.glsl``), an RGBA32F
-    texture of the G-buffer's size (bottom row first)."""
-    position = gbuffer_inputs["gbuffer_position"]
-    inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights),
-              "materials": materials_texture(albedo, emission)}
-    return dispatch_bvh("bvh_indirect", inputs, position.width, position.height,
-                        {"sampling": (seed, rays, ao_distance, strata_side(hit_samples)),
-                         "world": (*world, 0.0)})
 
 
 def trace_rays(bvh: GPUBVH, origins, directions, t_min=0.0, t_max=np.inf, any_hit=False):

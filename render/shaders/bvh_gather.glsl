@@ -1,5 +1,5 @@
-/* The final gather of the Accurate integrator at reduced resolution: bvh_indirect.glsl's exact
- * one-bounce estimate and AO, for the G-buffer pixel each low-resolution cell traces
+/* The final gather of the Accurate integrator at reduced resolution: the exact one-bounce
+ * Diffuse Indirect estimate and AO, for the G-buffer pixel each low-resolution cell traces
  * (pixels.glsl traced_pixel), plus the variance of both means for the à-trous filter
  * (voxgi_addon/gi/exact_indirect.py indirect_and_ao(..., statistics=True) is the reference).
  * out_image = (Diffuse Indirect rgb, AO); out_variance = (var of the indirect luminance mean,

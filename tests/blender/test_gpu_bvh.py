@@ -145,32 +145,40 @@ def test_gpu_direct_light_equals_numpy(voxgi, light):
 
 
 def test_gpu_ao_and_indirect_equal_numpy(voxgi):
+    """The raw gather (shaders/bvh_gather.glsl, every pixel, before filtering): AO, Diffuse
+    Indirect and both variances equal gi.exact_indirect's on the same rays."""
     from voxgi.render.gbuffer import rasterize, read_gbuffer
-    from voxgi.render.gpu_bvh import GPUBVH, indirect_texture
+    from voxgi.render.gpu_bvh import GPUBVH
+    from voxgi.render.gpu_gather import gather
     from voxgi.render.gpu_tracer import read_texture
     from voxgi.voxgi_addon.gi.exact_indirect import indirect_and_ao
-    from voxgi.voxgi_addon.preview.passes import material_table
+    from voxgi.voxgi_addon.preview.gather import GatherSettings
+    from voxgi.voxgi_addon.preview.passes import material_table, principled_table
 
     scene = bpy.context.scene
     scenes.build_test_cornell_box(scene, light="AREA")
     snapshot, tris = snapshot_now()
     gpu_ready()
     w, h, rays = 40, 30, 8
-    albedo, rough, _, emission = material_table(snapshot)
+    _, rough, _, emission = material_table(snapshot)
+    principled = principled_table(snapshot)
     gbuffer = rasterize(tris, snapshot.camera, rough, w, h)
     seen = read_gbuffer(gbuffer)
-    bvh = GPUBVH().update(tris)
-    out = np.flipud(read_texture(indirect_texture(bvh, gbuffer.inputs, snapshot.lights, albedo,
-                                                  emission, rays=rays, ao_distance=1.0, seed=3)))
+    settings = GatherSettings(rays=rays, ao_distance=1.0, seed=3)
+    values, variance = gather(GPUBVH().update(tris), gbuffer.inputs, snapshot.lights, principled,
+                              emission, settings, 1, w, h)
+    out, out_var = np.flipud(read_texture(values)), np.flipud(read_texture(variance))
     hit = seen["hit"]
     ids = np.flatnonzero(hit.ravel())
-    indirect, ao = indirect_and_ao(seen["position"][hit], seen["normal"][hit], ids, tris,
-                                   snapshot.lights, albedo, emission, rays=rays, ao_distance=1.0,
-                                   seed=3)
+    indirect, ao, var = indirect_and_ao(seen["position"][hit], seen["normal"][hit], ids, tris,
+                                        snapshot.lights, principled, emission, rays=rays,
+                                        ao_distance=1.0, seed=3, statistics=True)
     ao_error = relative_l1(out[hit][:, 3], ao)
     indirect_error = relative_l1(out[hit][:, :3], indirect)
-    print(f"GPU vs numpy: AO {ao_error:.5f}, Diffuse Indirect {indirect_error:.5f}")
-    assert ao_error < 0.02 and indirect_error < 0.02
+    variance_error = relative_l1(out_var[hit][:, :2], var)
+    print(f"GPU vs numpy: AO {ao_error:.5f}, Diffuse Indirect {indirect_error:.5f}, "
+          f"variances {variance_error:.5f}")
+    assert ao_error < 0.02 and indirect_error < 0.02 and variance_error < 0.02
     assert 0.2 < ao.mean() < 0.95 and indirect.mean() > 0.01
     # Red and green walls bleed: the indirect light is not grey everywhere.
     assert np.abs(indirect[:, 0] - indirect[:, 1]).max() > 0.02

@@ -32,14 +32,15 @@ def main(argv=None) -> int:
     from voxgi.render.gpu_bvh import (
         GPUBVH,
         direct_light_texture,
-        indirect_texture,
         trace_rays,
     )
     from voxgi.render.gpu_context import ensure_gpu_context
+    from voxgi.render.gpu_gather import gather
     from voxgi.render.gpu_preview import render_passes_gpu
     from voxgi.render.gpu_tracer import read_texture
     from voxgi.voxgi_addon.gi.update import update_gi
-    from voxgi.voxgi_addon.preview.passes import direct_light, material_table
+    from voxgi.voxgi_addon.preview.gather import GatherSettings
+    from voxgi.voxgi_addon.preview.passes import direct_light, material_table, principled_table
     from voxgi.voxgi_addon.scene.bvh import build_bvh
     from voxgi.voxgi_addon.scene.geometry import SceneTriangles, world_triangles
     from voxgi.voxgi_addon.voxelize.scene_caches import build_scene_caches
@@ -85,7 +86,8 @@ def main(argv=None) -> int:
                      f"{n / seconds / 1e6:.2f} M rays/s (upload + dispatch + read back)"))
 
     w, h = 640, 480
-    albedo, rough, _, emission = material_table(snapshot)
+    _, rough, _, emission = material_table(snapshot)
+    principled = principled_table(snapshot)
     gbuffer = rasterize(tris, snapshot.camera, rough, w, h)
     seen = read_gbuffer(gbuffer)
     hit = seen["hit"]
@@ -112,9 +114,10 @@ def main(argv=None) -> int:
                  (f"numpy {numpy_seconds:.2f} s ({numpy_seconds / seconds:.0f}×); relative L1 vs numpy "
                  f"{error:.5f}; ≤ {rays_cast / seconds / 1e6:.1f} M shadow rays/s")))
     for rays in (4, 16):
-        seconds = median_seconds(lambda rays=rays: read_texture(indirect_texture(
-            gpu_bvh, gbuffer.inputs, snapshot.lights, albedo, emission, rays=rays,
-            ao_distance=scene.voxgi.ao_distance)), 1 if args.quick else 3)
+        settings = GatherSettings(rays=rays, ao_distance=scene.voxgi.ao_distance)
+        seconds = median_seconds(lambda settings=settings: read_texture(gather(
+            gpu_bvh, gbuffer.inputs, snapshot.lights, principled, emission, settings, 1, w,
+            h)[0]), 1 if args.quick else 3)
         rows.append((f"AO + one-bounce indirect {w}×{h}, {rays} rays/pixel (GPU)", seconds,
                      f"{len(ids) * rays / seconds / 1e6:.2f} M paths/s (closest hit + shadow ray(s) per light)"))
 
@@ -148,9 +151,9 @@ def main(argv=None) -> int:
                          f"relative L1 {error:.3f} (cones for indirect/AO)"))
         for rays in (16, 64):
             t0 = time.perf_counter()
-            out = np.flipud(read_texture(indirect_texture(
-                gpu_bvh, small.inputs, snapshot.lights, albedo, emission, rays=rays,
-                ao_distance=scene.voxgi.ao_distance)))
+            settings = GatherSettings(rays=rays, ao_distance=scene.voxgi.ao_distance)
+            out = np.flipud(read_texture(gather(gpu_bvh, small.inputs, snapshot.lights,
+                                                principled, emission, settings, 1, cw, ch)[0]))
             seconds = time.perf_counter() - t0
             indirect = gi_compare.relative_l1(out[..., :3], cycles["Diffuse Indirect"], mask)
             ao = gi_compare.relative_l1(np.repeat(out[..., 3:], 3, axis=-1),

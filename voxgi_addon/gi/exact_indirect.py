@@ -1,6 +1,6 @@
 """Exact ambient occlusion and a raw one-bounce diffuse-indirect estimator (numpy reference).
 
-The statement, in numpy on ``raycast``, of what ``render/shaders/bvh_indirect.glsl`` computes
+The statement, in numpy on ``raycast``, of what ``render/shaders/bvh_gather.glsl`` computes
 on the GPU through the BVH; both draw the same rays (``sampling``), so they agree up to float32
 rounding. Per surface point p with unit normal n (facing the viewer) and sample id (its pixel
 index, row 0 on top):
