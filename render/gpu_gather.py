@@ -16,6 +16,7 @@ import numpy as np
 
 from ..voxgi_addon.preview.upsample import low_shape
 from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, strata_side
+from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
 from .gpu_shaders import LOCAL_SIZE, build_compute
 from .gpu_tracer import dispatch
@@ -92,6 +93,33 @@ def gather_gi(bvh: GPUBVH, volume, gbuffer_inputs, lights, principled, emission,
         values = dispatch("upsample", volume, {**gbuffer_inputs, "low_image": values}, width,
                           height, {"sampling": (stride, width, height, 0)})
     return values
+
+
+_GLOSSY_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "direct_image",
+                    "lights", "materials", "principled_lut")
+
+
+def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: int, principled,
+                          emission):
+    """The glossy light light ``light_index`` sends to the viewer over the G-buffer
+    (``shaders/glossy_direct.glsl``, the port of ``preview.passes.glossy_direct_radiance``);
+    direct : that light's Diffuse Direct texture; an RGBA32F texture (bottom row first)."""
+    if "glossy" not in _shaders:
+        _shaders["glossy"] = build_compute(("principled", "glossy_direct"), _GLOSSY_SAMPLERS,
+                                           ("light",), ("out_image",), PRINCIPLED_DEFINES)
+    shader = _shaders["glossy"]
+    out = gpu.types.GPUTexture((direct.width, direct.height), format="RGBA32F")
+    inputs = {**gbuffer_inputs, "direct_image": direct, "lights": lights_texture_,
+              "materials": principled_materials_texture(principled, emission),
+              "principled_lut": lut_texture()}
+    shader.bind()
+    for name in _GLOSSY_SAMPLERS:
+        shader.uniform_sampler(name, inputs[name])
+    shader.uniform_float("light", (float(light_index), 0.0, 0.0, 0.0))
+    shader.image("out_image", out)
+    gpu.compute.dispatch(shader, math.ceil(direct.width / LOCAL_SIZE),
+                         math.ceil(direct.height / LOCAL_SIZE), 1)
+    return out
 
 
 def release() -> None:

@@ -20,7 +20,6 @@ from ..voxgi_addon.preview.passes import (
     check_request,
     compose_passes,
     direct_light,
-    glossy_direct_radiance,
     material_indices,
     material_table,
     principled_table,
@@ -28,8 +27,8 @@ from ..voxgi_addon.preview.passes import (
 from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
-from .gpu_bvh import direct_light_texture, shared_bvh
-from .gpu_gather import gather_gi
+from .gpu_bvh import direct_light_texture, lights_texture, shared_bvh
+from .gpu_gather import gather_gi, glossy_direct_texture
 from .gpu_tracer import dispatch, read_texture
 from .gpu_volume import GPUVolume
 
@@ -63,6 +62,9 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
     mat = material_indices(snapshot, seen["material"].ravel()[hit])
     timings["visibility (GPU)"] = time.perf_counter() - t0
 
+    def pixels(texture):  # (N, 3) float64 of the hit pixels, from a bottom-row-first texture
+        return np.flipud(read_texture(texture))[..., :3].reshape(-1, 3)[hit].astype(np.float64)
+
     def visibility(light, lit):  # shaders/shadow.glsl, one dispatch per light
         target, size, is_sun = shadow_cone(light)
         constants = {"light_position": (*target, float(is_sun)), "light_size": (size, 0, 0, 0)}
@@ -76,13 +78,17 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
             timings["BVH build + upload"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         if quality == "ACCURATE":  # light by light: each one's light feeds the glossy lobe
-            per_light = np.stack([
-                np.flipud(read_texture(direct_light_texture(
-                    bvh, gbuffer.inputs, snapshot.lights, light_samples, only=index))
-                )[..., :3].reshape(-1, 3)[hit].astype(np.float64)
-                for index in range(len(snapshot.lights))]) if snapshot.lights else \
-                np.zeros((0, len(hit), 3))
-            direct = per_light.sum(axis=0)
+            _, _, _, emission = material_table(snapshot)
+            principled = principled_table(snapshot)
+            table = lights_texture(snapshot.lights)
+            direct = np.zeros((len(hit), 3))
+            shine = np.zeros((len(hit), 3))
+            for index in range(len(snapshot.lights)):
+                texture = direct_light_texture(bvh, gbuffer.inputs, snapshot.lights,
+                                               light_samples, only=index)
+                direct += pixels(texture)
+                shine += pixels(glossy_direct_texture(gbuffer.inputs, texture, table, index,
+                                                      principled, emission))
         else:
             image = read_texture(direct_light_texture(bvh, gbuffer.inputs, snapshot.lights,
                                                       light_samples))
@@ -126,5 +132,4 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
     if quality != "ACCURATE":
         return compose_passes(snapshot, width, height, hit, mat, *terms), timings
     views = -seen["direction"].reshape(-1, 3)[hit].astype(np.float64)
-    shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_light)
     return compose_passes(snapshot, width, height, hit, mat, *terms, n, views, shine), timings
