@@ -23,6 +23,7 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
+from ..voxgi_addon.preview.gather import VIEW_BACKOFF
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
 from ..voxgi_addon.scene.bvh import DET_EPSILON, TEXTURE_WIDTH, build_bvh, pack_bvh
 from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
@@ -39,7 +40,8 @@ KERNELS = {
                                                           "gbuffer_normal"), ("sampling",)),
     "bvh_gather": (("pixels", "principled", "bvh_lights", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "materials", "gbuffer_position",
-                           "gbuffer_normal", "principled_lut"), ("sampling", "world", "grid")),
+                           "gbuffer_normal", "gbuffer_view", "principled_lut"),
+                   ("sampling", "world", "grid")),
 }
 # Kernels with more than one output image (the others write ``out_image``).
 OUTPUTS = {"bvh_gather": ("out_image", "out_variance")}
@@ -56,6 +58,8 @@ def bvh_shader(kernel: str):
                    "DET_EPSILON": repr(float(DET_EPSILON)), "RAY_STREAM": f"{RAY_STREAM}u"}
         if "principled" in files:
             defines.update(PRINCIPLED_DEFINES)
+        if kernel == "bvh_gather":
+            defines["VIEW_BACKOFF"] = repr(float(VIEW_BACKOFF))
         _shaders[kernel] = build_compute(("bvh_common",) + files, samplers, constants,
                                          OUTPUTS.get(kernel, ("out_image",)), defines)
     return _shaders[kernel]

@@ -77,7 +77,7 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
     return dispatch_bvh("bvh_gather", inputs, low_w, low_h, {
         "sampling": (settings.seed, settings.rays, settings.ao_distance,
                      strata_side(settings.hit_samples)),
-        "world": (*settings.world, 0.0),
+        "world": (*settings.world, float(settings.hit_glossy)),
         "grid": (stride, width, height, 0)})
 
 

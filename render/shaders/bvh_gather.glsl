@@ -5,7 +5,7 @@
  * out_image = (Diffuse Indirect rgb, AO); out_variance = (var of the indirect luminance mean,
  * var of the AO mean, 0, 0). Push constants:
  *   sampling = (seed, rays, ao_distance, strata side m of the hit's light samples)
- *   world    = rgb radiance of a miss
+ *   world    = rgb radiance of a miss, w: 1 = the hit's glossy lobe reflects the lights too
  *   grid     = (stride, full width, full height, 0)
  * Sampler `materials`: (M + 1) × 3 texels, row 0 base colour, row 1 emission, row 2 (metallic,
  * Specular IOR Level, roughness) (last column: none); `principled_lut`: principled.glsl's. */
@@ -32,6 +32,8 @@ void main()
     return;
   }
   vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
+  /* A step back along the camera ray (preview/gather.py VIEW_BACKOFF). */
+  position.xyz -= VIEW_BACKOFF * texelFetch(gbuffer_view, px, 0).xyz;
   uint id = uint((full.y - 1 - px.y) * full.x + px.x);
   uint seed = uint(sampling.x);
   int rays = int(sampling.y);
@@ -52,7 +54,7 @@ void main()
     int triangle, slot;
     vec2 uv;
     vec3 radiance = world.rgb;
-    if (!bvh_closest_hit(origin, d, SHADOW_EPSILON, BVH_FAR, th, triangle, slot, uv)) {
+    if (!bvh_closest_hit(origin, d, 0.0, BVH_FAR, th, triangle, slot, uv)) {
       unoccluded += 1.0;
     }
     else {
@@ -70,13 +72,26 @@ void main()
       vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
       vec3 emission = texelFetch(materials, ivec2(material, 1), 0).rgb;
       vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
-      /* The Principled diffuse weight seen from the receiver; the hit's glossy lobe is left
-       * out (docs/gi_pipeline.md "The Accurate integrator"). */
+      /* The Principled diffuse weight seen from the receiver (docs/gi_pipeline.md "The
+       * Accurate integrator"). */
       vec3 weight = principled_diffuse_weight(base, params.x, params.y, params.z,
                                               clamp(-dot(ns, d), 0.0, 1.0));
-      vec3 direct = diffuse_direct(x + ns * SURFACE_EPSILON, ns, id * uint(rays) + uint(j),
-                                   seed + 1u, int(sampling.w));
-      radiance = weight * direct + emission;
+      vec3 lit_at = x + ns * SURFACE_EPSILON;
+      uint hit_id = id * uint(rays) + uint(j);
+      radiance = emission;
+      for (int light = 0; light < textureSize(lights, 0).y; light++) {
+        vec3 direct = light_direct(light, lit_at, ns, hit_id, seed + 1u, int(sampling.w));
+        radiance += weight * direct;
+        /* With glossy bounces (world.w = 1) the hit's glossy lobe reflects each light toward
+         * the receiver too (light at its centre direction). */
+        vec3 towards = light_towards(light, x);
+        float c = dot(ns, towards);
+        if (world.w > 0.5 && c > 1e-4 && dot(direct, vec3(1.0)) > 0.0) {
+          radiance += direct * (3.14159265358979323846 / c) *
+                      principled_glossy_reflectance(base, params.x, params.y, params.z, ns, -d,
+                                                    towards);
+        }
+      }
     }
     sum += radiance;
     float l = dot(radiance, LUMINANCE);

@@ -139,6 +139,39 @@ float area_light(int light, vec4 head, vec3 p, vec3 n, uint state, int m)
   return f_sum > 0.0 ? area.y * unshadowed * f_lit / f_sum : 0.0;
 }
 
+/* Diffuse Direct of light `light` alone at p (0 for a padding row), with the samples
+ * diffuse_direct draws for it. */
+vec3 light_direct(int light, vec3 p, vec3 n, uint id, uint seed, int m)
+{
+  vec4 head = light_texel(light, 0);
+  int kind = int(head.x);
+  if (kind < 0) {
+    return vec3(0.0);
+  }
+  uint state = point_stream(id, uint(head.w), seed);
+  float value;
+  if (kind == 0) {
+    value = sun_light(light, p, n, state, m);
+  }
+  else if (kind == 3) {
+    value = area_light(light, head, p, n, state, m);
+  }
+  else {
+    value = point_light(light, kind, p, n, state, m);
+  }
+  return value * light_texel(light, 1).rgb;
+}
+
+/* Unit direction from p to light `light`'s centre (a sun: against its travel), as
+ * direct_light.light_directions. */
+vec3 light_towards(int light, vec3 p)
+{
+  if (int(light_texel(light, 0).x) == 0) {
+    return -light_texel(light, 5).xyz;
+  }
+  return normalize(light_texel(light, 2).xyz - p);
+}
+
 /* Diffuse Direct of all lights at p (normal n facing the viewer), `id` the point's sample id
  * and `m` × `m` strata per light with an extent. */
 vec3 diffuse_direct(vec3 p, vec3 n, uint id, uint seed, int m)
@@ -146,23 +179,7 @@ vec3 diffuse_direct(vec3 p, vec3 n, uint id, uint seed, int m)
   vec3 sum = vec3(0.0);
   int count = textureSize(lights, 0).y;
   for (int light = 0; light < count; light++) {
-    vec4 head = light_texel(light, 0);
-    int kind = int(head.x);
-    if (kind < 0) {
-      continue;
-    }
-    uint state = point_stream(id, uint(head.w), seed);
-    float value;
-    if (kind == 0) {
-      value = sun_light(light, p, n, state, m);
-    }
-    else if (kind == 3) {
-      value = area_light(light, head, p, n, state, m);
-    }
-    else {
-      value = point_light(light, kind, p, n, state, m);
-    }
-    sum += value * light_texel(light, 1).rgb;
+    sum += light_direct(light, p, n, id, seed, m);
   }
   return sum;
 }

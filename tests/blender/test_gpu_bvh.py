@@ -172,7 +172,8 @@ def test_gpu_ao_and_indirect_equal_numpy(voxgi):
     ids = np.flatnonzero(hit.ravel())
     indirect, ao, var = indirect_and_ao(seen["position"][hit], seen["normal"][hit], ids, tris,
                                         snapshot.lights, principled, emission, rays=rays,
-                                        ao_distance=1.0, seed=3, statistics=True)
+                                        ao_distance=1.0, seed=3, statistics=True,
+                                        hit_glossy=settings.hit_glossy)
     ao_error = relative_l1(out[hit][:, 3], ao)
     indirect_error = relative_l1(out[hit][:, :3], indirect)
     variance_error = relative_l1(out_var[hit][:, :2], var)

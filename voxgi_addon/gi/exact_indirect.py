@@ -27,9 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene.raycast import SHADOW_EPSILON, closest_hits
-from .direct_light import concentric_disk, diffuse_direct
-from .principled import diffuse_weight
+from ..scene.raycast import closest_hits
+from .direct_light import concentric_disk, diffuse_direct, light_directions
+from .principled import diffuse_weight, glossy_reflectance
 from .sampling import hammersley, perpendicular_basis
 
 __all__ = ["RAY_STREAM", "SURFACE_EPSILON", "cosine_directions", "indirect_and_ao"]
@@ -65,7 +65,7 @@ def _hit_normals(tris, tri, u, v, d):
 
 def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission, rays: int = 16,
                     ao_distance: float = 1.0, seed: int = 0, world=(0.0, 0.0, 0.0),
-                    hit_samples: int = 1, statistics: bool = False):
+                    hit_samples: int = 1, statistics: bool = False, hit_glossy: bool = False):
     """(Diffuse Indirect (N, 3) float32, Ambient Occlusion (N,) float32) — see the module doc;
     with ``statistics`` also (N, 2) float32: the variance of the indirect light's luminance mean
     (unbiased sample variance / rays) and of the AO mean (from the share of unoccluded rays
@@ -79,9 +79,9 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
         (``preview.material_table``). ``albedo`` may instead be the Principled pair (base
         (M + 1, 3), (metallic, Specular IOR Level, roughness) (M + 1, 3)) of
         ``preview.passes.principled_table``: a hit then reflects the diffuse weight Cycles gives
-        it seen from the receiver (``principled.diffuse_weight``). Its glossy lobe is left out:
-        adding the lobe's reflection of the lights took Diffuse Indirect further from Cycles'
-        (docs/gi_pipeline.md "The Accurate integrator").
+        it seen from the receiver (``principled.diffuse_weight``) and, with ``hit_glossy``, its
+        glossy lobe's reflection of each light toward the receiver (the light at its centre
+        direction): the path diffuse → glossy that Cycles keeps only with glossy bounces.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -92,7 +92,7 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
         return (*empty, np.zeros((0, 2), np.float32)) if statistics else empty
     dirs = cosine_directions(n, hammersley(ids, RAY_STREAM, rays, seed)).reshape(-1, 3)
     origins = np.repeat(p + SURFACE_EPSILON * n, rays, axis=0)
-    t, tri, u, v = closest_hits(tris, origins, dirs, SHADOW_EPSILON, np.inf)
+    t, tri, u, v = closest_hits(tris, origins, dirs, 0.0, np.inf)
     unoccluded = (t >= ao_distance).reshape(count, rays).mean(axis=1)
     radiance = np.tile(np.asarray(world, dtype=np.float64), (count * rays, 1))
     hit = np.flatnonzero(tri >= 0)
@@ -104,15 +104,21 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
         material = np.where((material >= 0) & (material < last), material, last)
         with np.errstate(over="ignore"):
             hit_ids = ids.repeat(rays) * np.uint32(rays) + np.tile(np.arange(rays, dtype=np.uint32), count)
-        direct = diffuse_direct(x + ns * SURFACE_EPSILON, ns, lights, tris, samples=hit_samples,
-                                seed=seed + 1, sample_ids=hit_ids[hit])
+        lit = diffuse_direct(x + ns * SURFACE_EPSILON, ns, lights, tris, samples=hit_samples,
+                             seed=seed + 1, sample_ids=hit_ids[hit], per_light=True)
+        radiance[hit] = np.asarray(emission, np.float64)[material]
         if isinstance(albedo, tuple):  # Principled (base, (metallic, level, roughness))
             base, params = (np.asarray(a, np.float64)[material] for a in albedo)
+            shading = (base, params[:, 0], params[:, 1], params[:, 2])
             mu = np.clip(-np.einsum("ij,ij->i", ns, dirs[hit]), 0.0, 1.0)
-            weight = diffuse_weight(base, params[:, 0], params[:, 1], params[:, 2], mu)
+            radiance[hit] += diffuse_weight(*shading, mu) * lit.sum(axis=0)
+            for direct, towards in zip(lit if hit_glossy else (), light_directions(lights, x)):
+                cos = np.einsum("ij,ij->i", ns, towards)
+                shine = direct * (np.pi / np.maximum(cos, 1e-4))[:, None] * \
+                    glossy_reflectance(*shading, ns, -dirs[hit], towards)
+                radiance[hit] += np.where(cos[:, None] > 1e-4, shine, 0.0)
         else:
-            weight = np.asarray(albedo, np.float64)[material]
-        radiance[hit] = weight * direct + np.asarray(emission, np.float64)[material]
+            radiance[hit] += np.asarray(albedo, np.float64)[material] * lit.sum(axis=0)
     per_ray = radiance.reshape(count, rays, 3)
     indirect = per_ray.mean(axis=1)
     if not statistics:

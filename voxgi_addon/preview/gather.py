@@ -28,30 +28,41 @@ from .upsample import sample_pixels, upsample
 @dataclass(frozen=True)
 class GatherSettings:
     """rays : exact rays per gather point; ao_distance : metres (Cycles' AO distance);
+    hit_glossy : a bounce hit's glossy lobe reflects the lights toward the receiver (the light
+    path diffuse → glossy; Cycles drops it with no glossy bounces);
     hit_samples : shadow rays per light at each bounce hit; denoise_iterations : à-trous passes
     (taps 1, 2, 4, … cells apart); seed : the sequences' seed; world : RGB radiance of a miss
     (0 gives Cycles' pass split, where the world seen from a receiver is direct light)."""
 
     rays: int = 64
     ao_distance: float = 1.0
+    hit_glossy: bool = True
     hit_samples: int = 1
     denoise_iterations: int = 4
     seed: int = 0
     world: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
 
+VIEW_BACKOFF = 2e-4  # metres: gather points step back along the camera ray (see gather_gi)
+
+
 def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: GatherSettings,
-              stride: int) -> np.ndarray:
+              stride: int, direction=None) -> np.ndarray:
     """(H, W, 4) float32: Diffuse Indirect (RGB, Cycles' units) and AO per pixel, 0 where the
     pixel sees no surface.
 
     hit : (H, W) bool; position, normal : (H, W, 3) the G-buffer (row 0 = top; normals facing
     the viewer). albedo, emission : (M + 1, 3) per material (``passes.material_table``).
+    direction : (H, W, 3) the camera rays' unit directions: each gather point steps back along
+    its ray by VIEW_BACKOFF, so a point seen on a crease (a ceiling within a hair of a wall, or
+    just behind it after float32 rasterization) starts its rays inside the room, not in the wall.
     """
     height, width = hit.shape
     rows, cols = sample_pixels(height, width, stride)
     valid = hit[rows][:, cols]
     cell_p = position[rows][:, cols]
+    if direction is not None:
+        cell_p = cell_p - VIEW_BACKOFF * direction[rows][:, cols]
     cell_n = normal[rows][:, cols]
     ids = (rows[:, None] * width + cols[None, :])[valid]
     values = np.zeros(valid.shape + (4,), np.float32)
@@ -59,7 +70,7 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     indirect, ao, var = indirect_and_ao(
         cell_p[valid], cell_n[valid], ids, tris, lights, albedo, emission, rays=settings.rays,
         ao_distance=settings.ao_distance, seed=settings.seed, world=settings.world,
-        hit_samples=settings.hit_samples, statistics=True)
+        hit_samples=settings.hit_samples, statistics=True, hit_glossy=settings.hit_glossy)
     values[valid] = np.concatenate([indirect, ao[:, None]], axis=1)
     variance[valid] = var
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,

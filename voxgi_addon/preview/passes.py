@@ -259,8 +259,8 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     if quality == "ACCURATE":
         _, _, _, emission = material_table(snapshot)
         traced = gather_gi(tris, snapshot.lights, principled_table(snapshot), emission, seen.hit,
-                           seen.position, seen.normal, gather_settings,
-                           gi_stride).reshape(-1, 4)[hit]
+                           seen.position, seen.normal, gather_settings, gi_stride,
+                           seen.direction).reshape(-1, 4)[hit]
         timings["diffuse+ao gather"] = time.perf_counter() - t0
     else:
         traced = _traced(seen, gi_stride, hit, diffuse_and_ao, 4)
