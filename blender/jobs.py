@@ -35,6 +35,7 @@ from typing import Any, Callable
 import bpy
 
 from ..voxgi_addon.errors import VoxGICancelled
+from .redraw import tag_sidebars
 
 STATES = ("running", "done", "cancelled", "failed")
 TICK_SECONDS = 0.2  # timer interval while a job runs (also the panel's elapsed-time refresh)
@@ -401,19 +402,6 @@ def _start_timer() -> None:
 def _stop_timer() -> None:
     if timer_registered():
         bpy.app.timers.unregister(_tick)
-
-
-def tag_sidebars() -> None:
-    """Redraw the sidebar (N panel) of every 3D view."""
-    for wm in bpy.data.window_managers:
-        for window in wm.windows:
-            if window.screen is None:
-                continue
-            for area in window.screen.areas:
-                if area.type == "VIEW_3D":
-                    for region in area.regions:
-                        if region.type == "UI":
-                            region.tag_redraw()
 
 
 @bpy.app.handlers.persistent

@@ -43,6 +43,7 @@ from ..voxgi_addon.scene.changes import (
 )
 from ..voxgi_addon.voxelize.incremental import CacheStore, refresh_caches
 from . import jobs
+from .redraw import tag_3d_views
 from .session import scene_session
 from .settings import gi_settings
 from .snapshot import snapshot_or_error, snapshot_summary
@@ -264,17 +265,6 @@ def _cascade_bytes(cascade_voxels) -> int:
 
 def _scene(live: LiveGI):
     return bpy.data.scenes.get(live.scene_name) or bpy.context.scene
-
-
-def tag_3d_views() -> None:
-    """Redraw every 3D view's main region and sidebar (new results or progress)."""
-    for wm in bpy.data.window_managers:
-        for window in wm.windows:
-            if window.screen is None:
-                continue
-            for area in window.screen.areas:
-                if area.type == "VIEW_3D":
-                    area.tag_redraw()
 
 
 _live: dict[str, LiveGI] = {}

@@ -7,6 +7,8 @@ shows, and the debug views drawn over any shading mode.
 # No `from __future__ import annotations` here: bpy property annotations must stay objects.
 import bpy
 
+from .redraw import tag_3d_views
+
 # Enum identifier → the Cycles-named pass the viewport draws.
 VIEWPORT_PASSES = {
     "COMBINED": "Combined",
@@ -17,17 +19,6 @@ VIEWPORT_PASSES = {
 }
 DEBUG_VIEWS = ("NONE", "VOXELS", "OCTREE")
 DEBUG_COLOURS = ("ALBEDO", "NORMAL", "OCCLUSION", "LIGHT")
-
-
-def tag_3d_views(_self=None, _context=None) -> None:
-    """Redraw every 3D view (a setting of what they show changed)."""
-    for wm in bpy.data.window_managers:
-        for window in wm.windows:
-            if window.screen is None:
-                continue
-            for area in window.screen.areas:
-                if area.type == "VIEW_3D":
-                    area.tag_redraw()
 
 
 class VoxGIViewportSettings(bpy.types.PropertyGroup):

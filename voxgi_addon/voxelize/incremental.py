@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import VoxGICancelled, VoxGIError
+from ..errors import VoxGICancelled
 from ..scene.snapshot import SceneSnapshot
 from .scene_caches import (
     CacheBuildResult,
@@ -31,6 +31,7 @@ from .scene_caches import (
     add_cascade_stats,
     build_mesh_caches,
     cache_sources,
+    check_build_request,
     triangle_materials,
 )
 
@@ -127,12 +128,7 @@ def refresh_caches(store: CacheStore, snapshot: SceneSnapshot, base_span: float,
     cancel : callable → True to stop (VoxGICancelled between meshes and cascades; the store
     keeps whatever finished). progress : callable(fraction 0..1, text) or None.
     """
-    if not (np.isfinite(base_span) and base_span > 0):
-        raise VoxGIError(f"base voxel span must be a positive number of metres, got {base_span!r}")
-    if not 1 <= int(cascade_count) <= 8:
-        raise VoxGIError(f"cascade count must be between 1 and 8, got {cascade_count!r}")
-    if not snapshot.objects:
-        raise VoxGIError("the scene has no visible mesh objects to voxelize")
+    check_build_request(snapshot, base_span, cascade_count)
     result = CacheBuildResult(warnings=list(snapshot.warnings))
     timer = StageTimer(result.timings)
     sources = cache_sources(snapshot, result)

@@ -177,6 +177,16 @@ def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, 
     result.caches[key] = caches
 
 
+def check_build_request(snapshot, base_span: float, cascade_count: int) -> None:
+    """Raise VoxGIError for settings or a snapshot that cannot be voxelized."""
+    if not (np.isfinite(base_span) and base_span > 0):
+        raise VoxGIError(f"base voxel span must be a positive number of metres, got {base_span!r}")
+    if not 1 <= int(cascade_count) <= 8:
+        raise VoxGIError(f"cascade count must be between 1 and 8, got {cascade_count!r}")
+    if not snapshot.objects:
+        raise VoxGIError("the scene has no visible mesh objects to voxelize")
+
+
 def build_scene_caches(snapshot: SceneSnapshot, base_span: float, cascade_count: int,
                        cancel=None) -> CacheBuildResult:
     """Voxelize every mesh of a snapshot at ``cascade_count`` spans (``base_span · 2**i``).
@@ -185,12 +195,7 @@ def build_scene_caches(snapshot: SceneSnapshot, base_span: float, cascade_count:
         and between the cascades of a mesh.
     Raises VoxGIError for unusable input (no mesh objects, bad settings).
     """
-    if not (np.isfinite(base_span) and base_span > 0):
-        raise VoxGIError(f"base voxel span must be a positive number of metres, got {base_span!r}")
-    if not 1 <= int(cascade_count) <= 8:
-        raise VoxGIError(f"cascade count must be between 1 and 8, got {cascade_count!r}")
-    if not snapshot.objects:
-        raise VoxGIError("the scene has no visible mesh objects to voxelize")
+    check_build_request(snapshot, base_span, cascade_count)
     result = CacheBuildResult(warnings=list(snapshot.warnings))
     timer = StageTimer(result.timings)
     sources = cache_sources(snapshot, result)
