@@ -112,7 +112,9 @@ def run(args: argparse.Namespace, tmp: str) -> int:
     session = scene_session(scene.name_full)
     summary = session.snapshot_summary or {}
     print(f"\nVoxGI demo — {source}, scene '{scene.name}', frame {scene.frame_current}")
-    print(f"base span {settings.base_span:g} m, {settings.cascade_count} cascades; "
+    spans = ("fitted to the view (Auto)" if settings.span_mode == "AUTO"
+             else f"base span {settings.base_span:g} m")
+    print(f"voxel spans {spans}, {settings.cascade_count} cascades; "
           f"{summary.get('objects', 0)} objects, {summary.get('triangles', 0):,} triangles\n")
     sys.stdout.flush()
     if status != {"FINISHED"} or session.caches is None:
