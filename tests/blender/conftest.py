@@ -47,3 +47,18 @@ def session(voxgi):
 def snapshot_module(voxgi):
     """``voxgi.blender.snapshot.scene`` (``take_snapshot``)."""
     return importlib.import_module("voxgi.blender.snapshot.scene")
+
+
+@pytest.fixture
+def jobs(voxgi):
+    """The add-on's engine-job runner (``voxgi.blender.jobs``)."""
+    return importlib.import_module("voxgi.blender.jobs")
+
+
+@pytest.fixture
+def interactive(jobs, monkeypatch):
+    """Jobs run as in a UI session; anything left running is cancelled and joined after."""
+    monkeypatch.setattr(jobs, "synchronous", False)
+    yield jobs
+    jobs.cancel_all()
+    assert jobs.wait_idle(60.0), "a job did not stop after being cancelled"

@@ -32,11 +32,6 @@ EDITS = 150  # main-thread edit rounds of the stress test
 
 
 @pytest.fixture
-def jobs(voxgi):
-    return importlib.import_module("voxgi.blender.jobs")
-
-
-@pytest.fixture
 def voxelize_module(voxgi):
     return importlib.import_module("voxgi.operators.voxelize")
 
@@ -49,15 +44,6 @@ def mesh_caches(voxgi):
 @pytest.fixture
 def errors(voxgi):
     return importlib.import_module("voxgi.voxgi_addon.errors")
-
-
-@pytest.fixture
-def interactive(jobs, monkeypatch):
-    """Jobs run as in a UI session; anything left running is cancelled and joined after."""
-    monkeypatch.setattr(jobs, "synchronous", False)
-    yield jobs
-    jobs.cancel_all()
-    assert jobs.wait_idle(TIMEOUT), "a job did not stop after being cancelled"
 
 
 def scene_name():

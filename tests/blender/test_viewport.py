@@ -111,14 +111,14 @@ def test_viewport_path_with_the_camera_view_equals_f12(voxgi, tmp_path, camera_t
     assert drawn and renderer.traces == 1 and np.array_equal(again, image)
 
 
-def test_viewport_keeps_the_last_image_while_newer_work_runs(voxgi, jobs_interactive):
+def test_viewport_keeps_the_last_image_while_newer_work_runs(voxgi, interactive):
     """Interactively, a change only submits a job: until it is applied, the view draws the
     last traced image (never blank or grey); then it traces the new results."""
     from voxgi.blender.viewport_session import live_gi
     from voxgi.render.viewport import ViewportRenderer
     from voxgi.voxgi_addon.scene.changes import UpdateRecord, plan_updates
 
-    jobs = jobs_interactive
+    jobs = interactive
     scene = cornell()
     scene.voxgi_viewport.resolution_fraction = 0.5
     gpu_ready()
@@ -143,17 +143,6 @@ def test_viewport_keeps_the_last_image_while_newer_work_runs(voxgi, jobs_interac
     assert live.generation == generation + 1
     _, after = offscreen_view(renderer, scene, depsgraph, view, window)
     assert renderer.traces == 2 and not np.array_equal(after, first)
-
-
-@pytest.fixture
-def jobs_interactive(voxgi, monkeypatch):
-    import importlib
-
-    jobs = importlib.import_module("voxgi.blender.jobs")
-    monkeypatch.setattr(jobs, "synchronous", False)
-    yield jobs
-    jobs.cancel_all()
-    assert jobs.wait_idle(60)
 
 
 class Recorder:

@@ -23,19 +23,6 @@ def viewport_session(voxgi):
     return importlib.import_module("voxgi.blender.viewport_session")
 
 
-@pytest.fixture
-def jobs(voxgi):
-    return importlib.import_module("voxgi.blender.jobs")
-
-
-@pytest.fixture
-def interactive(jobs, monkeypatch):
-    monkeypatch.setattr(jobs, "synchronous", False)
-    yield jobs
-    jobs.cancel_all()
-    assert jobs.wait_idle(TIMEOUT)
-
-
 def two_boxes():
     scene = bpy.context.scene
     h = 0.5
