@@ -276,7 +276,6 @@ def trace_options(settings: VoxGISceneSettings, width: int, height: int) -> dict
             "gi_stride": gi_stride(settings, width, height), "quality": settings.quality,
             "glossy_indirect": settings.glossy_indirect,
             "gather_settings": GatherSettings(rays=settings.gi_rays,
-                                              hit_glossy=settings.glossy_indirect,
                                               ao_distance=settings.ao_distance)}
 
 

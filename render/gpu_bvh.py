@@ -40,8 +40,9 @@ KERNELS = {
                                                           "gbuffer_normal"), ("sampling",)),
     "bvh_gather": (("pixels", "principled", "bvh_lights", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "materials", "gbuffer_position",
-                           "gbuffer_normal", "gbuffer_view", "principled_lut"),
-                   ("sampling", "world", "grid")),
+                           "gbuffer_normal", "gbuffer_view", "principled_lut", "partial_image",
+                           "partial_variance"),
+                   ("sampling", "world", "grid", "chunk")),
 }
 # Kernels with more than one output image (the others write ``out_image``).
 OUTPUTS = {"bvh_gather": ("out_image", "out_variance")}

@@ -64,21 +64,43 @@ def principled_materials_texture(principled, emission):
     return float_texture(rows, (len(base), 3))
 
 
+# Ray traversals (a bounce ray or a shadow ray) one gather invocation may make per dispatch.
+# llvmpipe ends an invocation's loops after 65535 iterations in all (docs/blender_facts.md
+# "llvmpipe's loop limit"); 32 traversals leave each one about 2000 loop iterations (BVH nodes
+# and leaf triangles), several times what the test scenes' rays take (about 110).
+TRAVERSALS_PER_DISPATCH = 32
+
+
+def rays_per_dispatch(light_count: int, hit_samples: int = 1) -> int:
+    """Bounce rays per gather dispatch: each ray traverses the BVH once and, at its hit, once
+    per light and shadow sample (``TRAVERSALS_PER_DISPATCH``)."""
+    per_ray = 1 + max(light_count, 1) * strata_side(hit_samples) ** 2
+    return max(1, TRAVERSALS_PER_DISPATCH // per_ray)
+
+
 def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
            width: int, height: int):
-    """The raw gather: (values, variance) RGBA32F textures of the low-resolution grid.
+    """The raw gather: (values, variance) RGBA32F textures of the low-resolution grid, the
+    rays split over dispatches of ``rays_per_dispatch``.
     principled : (base, params) of ``preview.passes.principled_table``;
     settings : ``voxgi_addon.preview.gather.GatherSettings``."""
     low_h, low_w = low_shape(height, width, stride)
+    placeholder = gpu.types.GPUTexture((1, 1), format="RGBA32F")
+    partial = (placeholder, placeholder)
     inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights),
               "materials": principled_materials_texture(principled, emission),
               "principled_lut": lut_texture()}
     assert OUTPUTS["bvh_gather"] == ("out_image", "out_variance")
-    return dispatch_bvh("bvh_gather", inputs, low_w, low_h, {
-        "sampling": (settings.seed, settings.rays, settings.ao_distance,
-                     strata_side(settings.hit_samples)),
-        "world": (*settings.world, float(settings.hit_glossy)),
-        "grid": (stride, width, height, 0)})
+    step = rays_per_dispatch(len(lights), settings.hit_samples)
+    for first in range(0, max(settings.rays, 1), step):
+        partial = dispatch_bvh("bvh_gather", {
+            **inputs, "partial_image": partial[0], "partial_variance": partial[1]}, low_w, low_h, {
+            "sampling": (settings.seed, settings.rays, settings.ao_distance,
+                         strata_side(settings.hit_samples)),
+            "world": (*settings.world, float(settings.hit_glossy)),
+            "grid": (stride, width, height, 0),
+            "chunk": (first, step, float(first > 0), float(first + step >= settings.rays))})
+    return partial
 
 
 def gather_gi(bvh: GPUBVH, volume, gbuffer_inputs, lights, principled, emission, settings,

@@ -77,22 +77,20 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
         if bvh.uploaded_bytes:
             timings["BVH build + upload"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        if quality == "ACCURATE":  # light by light: each one's light feeds the glossy lobe
-            _, _, _, emission = material_table(snapshot)
-            principled = principled_table(snapshot)
-            table = lights_texture(snapshot.lights)
-            direct = np.zeros((len(hit), 3))
-            shine = np.zeros((len(hit), 3))
-            for index in range(len(snapshot.lights)):
-                texture = direct_light_texture(bvh, gbuffer.inputs, snapshot.lights,
-                                               light_samples, only=index)
-                direct += pixels(texture)
+        # Light by light: each one's light feeds the glossy lobe (Accurate), and one dispatch
+        # stays within llvmpipe's loop limit (docs/blender_facts.md "llvmpipe's loop limit").
+        _, _, _, emission = material_table(snapshot)
+        principled = principled_table(snapshot)
+        table = lights_texture(snapshot.lights)
+        direct = np.zeros((len(hit), 3))
+        shine = np.zeros((len(hit), 3))
+        for index in range(len(snapshot.lights)):
+            texture = direct_light_texture(bvh, gbuffer.inputs, snapshot.lights, light_samples,
+                                           only=index)
+            direct += pixels(texture)
+            if quality == "ACCURATE":
                 shine += pixels(glossy_direct_texture(gbuffer.inputs, texture, table, index,
                                                       principled, emission))
-        else:
-            image = read_texture(direct_light_texture(bvh, gbuffer.inputs, snapshot.lights,
-                                                      light_samples))
-            direct = np.flipud(image)[..., :3].reshape(-1, 3)[hit].astype(np.float64)
         timings["direct"] = time.perf_counter() - t0
     else:
         direct = direct_light(None, p, n, snapshot.lights, tris, cones, light_samples, shadows,

@@ -3,11 +3,13 @@
 Usage: ``.venv/bin/python tools/make_gi_references.py [--scenes NAME ...] [--samples 2048]
 [--out tests/data/gi_refs] [--png DIR]``
 
-Per scene: Cycles at ``--samples`` spp (2048), one diffuse bounce, no glossy bounce, 160 × 120,
+Per scene: Cycles at ``--samples`` spp (2048), one bounce (one diffuse, one glossy, at most one
+in total: why both, docs/gi_pipeline.md "What one bounce means in Cycles"), 160 × 120,
 a point-sample pixel filter (so pixels are pixel centres, like VoxGI's rays), black world,
 AO distance 1 m (``Scene.voxgi.ao_distance``'s default). Stored in ``<out>/<scene>.npz``
 (compressed) as float16 (H, W, 3) arrays named after the passes — ``Diffuse Direct``,
-``Diffuse Indirect``, ``Diffuse Color``, ``Ambient Occlusion``, ``Combined`` — plus ``Alpha``
+``Diffuse Indirect``, ``Diffuse Color``, ``Ambient Occlusion``, ``Glossy Indirect``,
+``Glossy Color``, ``Combined`` — plus ``Alpha``
 (H, W). ``<out>/cycles_spp.json`` gets, per scene, the reference's render time and the relative
 L1 (over Alpha > ½ pixels) and render time of 16, 64 and 256 spp renders with another seed
 against it. ``--png DIR`` also writes an sRGB strip (Combined, Direct, Indirect) per scene.
@@ -24,7 +26,8 @@ import tempfile
 import numpy as np
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parent.parent
-STORED = ("Diffuse Direct", "Diffuse Indirect", "Diffuse Color", "Ambient Occlusion", "Combined")
+STORED = ("Diffuse Direct", "Diffuse Indirect", "Diffuse Color", "Ambient Occlusion", "Glossy Indirect",
+          "Glossy Color", "Combined")
 CHECK_SAMPLES = (16, 64, 256)
 AO_DISTANCE = 1.0
 
@@ -58,7 +61,7 @@ def render(scene, samples, seed):
 
     passes = render_cycles_passes(scene, gi_scenes.WIDTH, gi_scenes.HEIGHT, samples,
                                   diffuse_bounces=1, ao_distance=AO_DISTANCE, seed=seed,
-                                  glossy_bounces=0, filter_width=0.01)
+                                  glossy_bounces=1, filter_width=0.01)
     return passes, last_render_seconds()
 
 

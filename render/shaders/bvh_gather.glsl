@@ -7,7 +7,12 @@
  *   sampling = (seed, rays, ao_distance, strata side m of the hit's light samples)
  *   world    = rgb radiance of a miss, w: 1 = the hit's glossy lobe reflects the lights too
  *   grid     = (stride, full width, full height, 0)
- * Sampler `materials`: (M + 1) × 3 texels, row 0 base colour, row 1 emission, row 2 (metallic,
+ *   chunk    = (first ray, rays of this dispatch, 1 = add to partial_*, 1 = last dispatch)
+ * The rays of a point are split over several dispatches (render/gpu_gather.py
+ * rays_per_dispatch): llvmpipe stops every loop of an invocation after 65535 iterations in all
+ * (docs/blender_facts.md "llvmpipe's loop limit"), which silently dropped rays past about the
+ * 600th. Dispatches before the last write raw sums (rgb, unoccluded rays) and (Σ luminance², 0,
+ * 0, 0); the last one writes the outputs above.  * Sampler `materials`: (M + 1) × 3 texels, row 0 base colour, row 1 emission, row 2 (metallic,
  * Specular IOR Level, roughness) (last column: none); `principled_lut`: principled.glsl's. */
 
 vec4 bvh_texel_normals(int k)
@@ -46,7 +51,15 @@ void main()
   vec3 sum = vec3(0.0);
   float lum2 = 0.0;
   float unoccluded = 0.0;
-  for (int j = 0; j < rays; j++) {
+  if (chunk.z > 0.5) {
+    vec4 partial = texelFetch(partial_image, cell, 0);
+    sum = partial.rgb;
+    unoccluded = partial.a;
+    lum2 = texelFetch(partial_variance, cell, 0).x;
+  }
+  int first_ray = int(chunk.x);
+  int end_ray = min(rays, first_ray + int(chunk.y));
+  for (int j = first_ray; j < end_ray; j++) {
     vec2 disk = concentric_disk(hammersley(state, j, rays));
     float z = sqrt(max(0.0, 1.0 - dot(disk, disk)));
     vec3 d = normalize(disk.x * t + disk.y * b + z * n);
@@ -96,6 +109,11 @@ void main()
     sum += radiance;
     float l = dot(radiance, LUMINANCE);
     lum2 += l * l;
+  }
+  if (chunk.w < 0.5) {
+    imageStore(out_image, cell, vec4(sum, unoccluded));
+    imageStore(out_variance, cell, vec4(lum2, 0.0, 0.0, 0.0));
+    return;
   }
   float count = float(rays);
   vec3 mean = sum / count;

@@ -70,7 +70,7 @@ void main()
       float plane = abs(dot(n, offset));
       float tol = 0.1 * length(offset) + 1e-4;
       float geometry = KERNEL[a] * KERNEL[b] * facing * exp(-(plane / tol) * (plane / tol));
-      vec2 w = geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);
+      vec2 w = geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / (4.0 * sqrt(max(blurred + varq, vec2(0.0))) + 1e-6));
       total += vec4(w.x * vq.rgb, w.y * vq.a);
       total_var += w * w * varq;
       weight += w;

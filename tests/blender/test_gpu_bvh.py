@@ -207,3 +207,22 @@ def test_preview_direct_light_runs_on_the_gpu(voxgi):
     error = relative_l1(gpu_passes["Diffuse Direct"], numpy_passes["Diffuse Direct"])
     print(f"preview Diffuse Direct, GPU vs numpy: {error:.5f}")
     assert error < 0.01
+
+
+def test_every_gather_ray_counts_however_many_there_are(voxgi):
+    """llvmpipe ends an invocation's loops after 65535 iterations in all; one dispatch tracing
+    all of a point's rays silently dropped those past about the 600th, so 1024 GI rays gave half
+    the AO of 64. The rays are now split over dispatches (gpu_gather.rays_per_dispatch)."""
+    import gi_scenes
+    from voxgi.render.gpu_gather import rays_per_dispatch
+    from voxgi.render.pipeline import render_scene_passes
+
+    assert rays_per_dispatch(1) == 16 and rays_per_dispatch(40) == 1
+    scene = bpy.context.scene
+    gi_scenes.build("thin_wall_rooms", scene)
+    means = {}
+    for rays in (64, 1024):
+        scene.voxgi.gi_rays = rays
+        passes, _ = render_scene_passes(bpy.context, scene, None, 24, 18)
+        means[rays] = float(np.asarray(passes["Ambient Occlusion"])[..., 0].mean())
+    assert means[1024] == pytest.approx(means[64], rel=0.03), means
