@@ -95,8 +95,8 @@ void main()
       for (int light = 0; light < textureSize(lights, 0).y; light++) {
         vec3 direct = light_direct(light, lit_at, ns, hit_id, seed + 1u, int(sampling.w));
         radiance += weight * direct;
-        /* With glossy bounces (world.w = 1) the hit's glossy lobe reflects each light toward
-         * the receiver too (light at its centre direction). */
+        /* world.w = 1 (GatherSettings.hit_glossy, the default): the hit's glossy lobe
+         * reflects each light toward the receiver too (light at its centre direction). */
         vec3 towards = light_towards(light, x);
         float c = dot(ns, towards);
         if (world.w > 0.5 && c > 1e-4 && dot(direct, vec3(1.0)) > 0.0) {

@@ -2,7 +2,8 @@
  * ported line for line) over the reduced-resolution gather. low_image = (light rgb, AO),
  * low_variance = (var of the light's luminance mean, var of the AO mean); taps 2^i cells apart,
  * B3-spline weights × same-surface terms (normal^32, plane) × per signal
- * exp(−|Δ| / (4·√variance + 1e-6)), the variance prefiltered over 3 × 3 valid cells.
+ * exp(−|Δ| / (4·√(var_p + var_q) + 1e-6)), var_p the centre's variance prefiltered over 3 × 3
+ * valid cells, var_q the tap's own (why both: denoise.py).
  * Variances are filtered with squared weights.
  * grid = (stride, full width, full height, tap step); low-resolution rows count from the bottom. */
 const float KERNEL[5] = float[5](1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0);
@@ -47,7 +48,6 @@ void main()
     }
   }
   blurred /= max(blur_weight, 1e-30);
-  vec2 scale = 4.0 * sqrt(max(blurred, vec2(0.0))) + 1e-6;
   vec4 total = vec4(0.0);
   vec2 total_var = vec2(0.0);
   vec2 weight = vec2(0.0);
@@ -70,7 +70,8 @@ void main()
       float plane = abs(dot(n, offset));
       float tol = 0.1 * length(offset) + 1e-4;
       float geometry = KERNEL[a] * KERNEL[b] * facing * exp(-(plane / tol) * (plane / tol));
-      vec2 w = geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / (4.0 * sqrt(max(blurred + varq, vec2(0.0))) + 1e-6));
+      vec2 scale = 4.0 * sqrt(max(blurred + varq, vec2(0.0))) + 1e-6;
+      vec2 w = geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);
       total += vec4(w.x * vq.rgb, w.y * vq.a);
       total_var += w * w * varq;
       weight += w;

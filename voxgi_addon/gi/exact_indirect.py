@@ -81,7 +81,8 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
         ``preview.passes.principled_table``: a hit then reflects the diffuse weight Cycles gives
         it seen from the receiver (``principled.diffuse_weight``) and, with ``hit_glossy``, its
         glossy lobe's reflection of each light toward the receiver (the light at its centre
-        direction): the path diffuse → glossy that Cycles keeps only with glossy bounces.
+        direction): the path diffuse → glossy, which Cycles' light sampling at the hit keeps
+        whatever the glossy bounce limit.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)

@@ -8,10 +8,14 @@ tap weighted by
 
 * geometry: same surface only — normal term max(n·n_q, 0)^NORMAL_POWER times the plane term
   exp(−(|n·(p_q − p)| / (PLANE_TOLERANCE·|p_q − p| + 1e-4))²) (as ``upsample``);
-* luminance: exp(−|l_p − l_q| / (SIGMA_LUMINANCE·√var_p + ε)), var_p the 3 × 3 prefiltered
-  variance (SVGF), so differences larger than the
-  noise (contact shadows, light gradients) survive while differences of the noise's size are
-  averaged away.
+* luminance: exp(−|l_p − l_q| / (SIGMA_LUMINANCE·√(var_p + var_q) + ε)), var_p the 3 × 3
+  prefiltered variance of p (SVGF) and var_q the tap's own, so differences larger than the
+  noise of both (contact shadows, light gradients) survive while differences of the noise's
+  size are averaged away. SVGF tests against var_p alone; on one frame of few rays that loses
+  light: a point whose rays missed a small bright source (variance ~0) refuses the neighbours
+  that found it, which keep their spike only for themselves, so the filtered mean drops — by
+  4× for a wall lit by a spot's glossy reflection off a metal floor. With var_q a noisy
+  neighbour is taken as noise by everyone.
 
 Two signals are filtered side by side with the same geometry weights: the RGB light
 (luminance test on its luminance) and a scalar (ambient occlusion, its own test). Variance is
@@ -90,7 +94,7 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
     for it in range(iterations):
         step = 1 << it
         signal = np.stack([v[..., :3] @ LUMINANCE, v[..., 3]], axis=-1)
-        scale = sigma_luminance * np.sqrt(np.maximum(_blurred(var, ok), 0.0)) + _EPSILON
+        blurred = _blurred(var, ok)
         total = np.zeros_like(v)
         total_var = np.zeros_like(var)
         weight = np.zeros(var.shape)
@@ -106,10 +110,12 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
                 geometry = (ky * kx * _shifted(ok, dy, dx, False) * facing ** NORMAL_POWER
                             * np.exp(-(plane / tol) ** 2))
                 q_signal = np.stack([q_v[..., :3] @ LUMINANCE, q_v[..., 3]], axis=-1)
+                q_var = _shifted(var, dy, dx, 0.0)
+                scale = sigma_luminance * np.sqrt(np.maximum(blurred + q_var, 0.0)) + _EPSILON
                 w = geometry[..., None] * np.exp(-np.abs(q_signal - signal) / scale)  # (H, W, 2)
                 total[..., :3] += w[..., :1] * q_v[..., :3]
                 total[..., 3] += w[..., 1] * q_v[..., 3]
-                total_var += w * w * _shifted(var, dy, dx, 0.0)
+                total_var += w * w * q_var
                 weight += w
         keep = ok[..., None] & (weight > 0)
         safe = np.where(keep, weight, 1.0)

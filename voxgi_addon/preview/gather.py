@@ -29,7 +29,8 @@ from .upsample import sample_pixels, upsample
 class GatherSettings:
     """rays : exact rays per gather point; ao_distance : metres (Cycles' AO distance);
     hit_glossy : a bounce hit's glossy lobe reflects the lights toward the receiver (the light
-    path diffuse → glossy; Cycles drops it with no glossy bounces);
+    path diffuse → glossy; Cycles keeps it even with no glossy bounce: its light sampling at a
+    hit evaluates every closure, docs/gi_pipeline.md "What one bounce means in Cycles");
     hit_samples : shadow rays per light at each bounce hit; denoise_iterations : à-trous passes
     (taps 1, 2, 4, … cells apart); seed : the sequences' seed; world : RGB radiance of a miss
     (0 gives Cycles' pass split, where the world seen from a receiver is direct light)."""
