@@ -214,6 +214,7 @@ def test_every_gather_ray_counts_however_many_there_are(voxgi):
     all of a point's rays silently dropped those past about the 600th, so 1024 GI rays gave half
     the AO of 64. The rays are now split over dispatches (gpu_gather.rays_per_dispatch)."""
     import gi_scenes
+
     from voxgi.render.gpu_gather import rays_per_dispatch
     from voxgi.render.pipeline import render_scene_passes
 

@@ -74,7 +74,7 @@ def main(argv=None) -> int:
             rows.append((f"VoxGI {quality.title()} (GPU)", seconds, passes))
         for spp in spps:
             seconds, passes = timed(lambda: render_cycles_passes(
-                scene, w, h, spp, diffuse_bounces=1, ao_distance=1.0, glossy_bounces=0,
+                scene, w, h, spp, diffuse_bounces=1, ao_distance=1.0, glossy_bounces=1,
                 filter_width=0.01), 1)
             rows.append((f"Cycles {spp} spp", seconds, passes))
         for label, seconds, passes in rows:
