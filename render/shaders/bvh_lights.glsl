@@ -20,13 +20,6 @@ float visible_to(vec3 origin, vec3 target)
   return bvh_any_hit(origin, ray / max(len, 1e-30), len) ? 0.0 : 1.0;
 }
 
-/* Adaptive shadow rays (direct_light.probe_strata): strata with even row and column are traced
- * first (pass 0) when m ≥ 4; in pass 1 the others take the probes' answer when all agreed. */
-bool probe_stratum(int k, int m)
-{
-  return m < 4 || ((k / m) % 2 == 0 && (k % m) % 2 == 0);
-}
-
 float sun_light(int light, vec3 p, vec3 n, uint state, int m)
 {
   vec3 to_light = -light_texel(light, 5).xyz;
@@ -42,22 +35,10 @@ float sun_light(int light, vec3 p, vec3 n, uint state, int m)
   vec3 t, b;
   perpendicular_basis(to_light, t, b);
   float visible = 0.0;
-  int probes = 0;
-  int probes_lit = 0;
-  for (int pass = 0; pass < 2; pass++) {
-    bool decided = pass == 1 && (probes_lit == 0 || probes_lit == probes);
-    for (int k = 0; k < m * m; k++) {
-      if (probe_stratum(k, m) != (pass == 0)) {
-        continue;
-      }
-      vec2 disk = concentric_disk(hashed_stratum(state, k, m)) * tan_half;
-      vec3 dir = normalize(to_light + disk.x * t + disk.y * b);
-      float v = decided ? (probes_lit > 0 ? 1.0 : 0.0) :
-                          (bvh_any_hit(origin, dir, BVH_FAR) ? 0.0 : 1.0);
-      probes += pass == 0 ? 1 : 0;
-      probes_lit += pass == 0 ? int(v) : 0;
-      visible += v;
-    }
+  for (int k = 0; k < m * m; k++) {
+    vec2 disk = concentric_disk(hashed_stratum(state, k, m)) * tan_half;
+    vec3 dir = normalize(to_light + disk.x * t + disk.y * b);
+    visible += bvh_any_hit(origin, dir, BVH_FAR) ? 0.0 : 1.0;
   }
   return value * visible / float(m * m);
 }
@@ -94,21 +75,9 @@ float point_light(int light, int kind, vec3 p, vec3 n, uint state, int m)
   vec3 t, b;
   perpendicular_basis(w, t, b);
   float visible = 0.0;
-  int probes = 0;
-  int probes_lit = 0;
-  for (int pass = 0; pass < 2; pass++) {
-    bool decided = pass == 1 && (probes_lit == 0 || probes_lit == probes);
-    for (int k = 0; k < m * m; k++) {
-      if (probe_stratum(k, m) != (pass == 0)) {
-        continue;
-      }
-      vec2 disk = concentric_disk(hashed_stratum(state, k, m)) * radius;
-      float v = decided ? (probes_lit > 0 ? 1.0 : 0.0) :
-                          visible_to(origin, centre.xyz + disk.x * t + disk.y * b);
-      probes += pass == 0 ? 1 : 0;
-      probes_lit += pass == 0 ? int(v) : 0;
-      visible += v;
-    }
+  for (int k = 0; k < m * m; k++) {
+    vec2 disk = concentric_disk(hashed_stratum(state, k, m)) * radius;
+    visible += visible_to(origin, centre.xyz + disk.x * t + disk.y * b);
   }
   return value * visible / float(m * m);
 }
@@ -153,31 +122,16 @@ float area_light(int light, vec4 head, vec3 p, vec3 n, uint state, int m)
   vec3 origin = p + NORMAL_OFFSET * n;
   float f_sum = 0.0;
   float f_lit = 0.0;
-  int probes = 0;
-  int probes_lit = 0;
-  for (int pass = 0; pass < 2; pass++) {
-    bool decided = pass == 1 && (probes_lit == 0 || probes_lit == probes);
-    for (int k = 0; k < m * m; k++) {
-      if (probe_stratum(k, m) != (pass == 0)) {
-        continue;
-      }
-      vec2 s = hashed_stratum(state, k, m);
-      vec2 unit = head.y > 0.5 ? concentric_disk(s) : s * 2.0 - 1.0;
-      vec3 target = centre + unit.x * ex + unit.y * ey;
-      vec3 w = target - p;
-      float r2 = dot(w, w);
-      float f = max(dot(w, n), 0.0) * max(-dot(w, emit), 0.0) /
-                (max(r2, 1e-30) * max(r2, 1e-30));
-      f_sum += f;
-      if (pass == 0) { /* probes are traced whatever their weight: they decide for the rest */
-        float v = visible_to(origin, target);
-        probes += 1;
-        probes_lit += int(v);
-        f_lit += f * v;
-      }
-      else if (f > 0.0) {
-        f_lit += f * (decided ? (probes_lit > 0 ? 1.0 : 0.0) : visible_to(origin, target));
-      }
+  for (int k = 0; k < m * m; k++) {
+    vec2 s = hashed_stratum(state, k, m);
+    vec2 unit = head.y > 0.5 ? concentric_disk(s) : s * 2.0 - 1.0;
+    vec3 target = centre + unit.x * ex + unit.y * ey;
+    vec3 w = target - p;
+    float r2 = dot(w, w);
+    float f = max(dot(w, n), 0.0) * max(-dot(w, emit), 0.0) / (max(r2, 1e-30) * max(r2, 1e-30));
+    f_sum += f;
+    if (f > 0.0) {
+      f_lit += f * visible_to(origin, target);
     }
   }
   float unshadowed = full ? polygon_irradiance(light, count, p, n)

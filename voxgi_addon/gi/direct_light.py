@@ -20,13 +20,6 @@ checked against Cycles 5.0 renders of a white plane (agreement 0.1–0.3 %; docs
   on the light, weighted by their share of the irradiance (a ratio estimator: no noise where
   the light is fully visible).
 
-Shadow rays are adaptive (``probe_strata``): with 16 or more samples per light, the rays of
-every second stratum in both directions (a quarter of them) are traced first; where they all
-agree — the point sees the whole light or none of it, most of an image — the other strata take
-that answer, and only where they disagree (penumbrae) are the rest traced. The unshadowed
-light still sums every sample. An occluder that falls between all the probe rays of a point is
-missed: one smaller than about two strata of the light as seen from the point.
-
 Normals should face the viewer (Cycles flips back-facing normals before shading).
 """
 from __future__ import annotations
@@ -89,39 +82,6 @@ def _occluded(occluder, origins, directions, max_t) -> np.ndarray:
     return raycast.occluded(occluder, origins, directions, max_t)
 
 
-def probe_strata(count: int) -> np.ndarray:
-    """(count,) bool: the strata of ``count`` = m × m shadow rays traced first (see the module
-    doc): row and column even, for m ≥ 4; every stratum below that."""
-    m = math.isqrt(count)
-    k = np.arange(count)
-    if m < 4 or m * m != count:
-        return np.ones(count, bool)
-    return ((k // m) % 2 == 0) & ((k % m) % 2 == 0)
-
-
-def _blocked(occluder, origins, directions, lengths) -> np.ndarray:
-    """(N, K) bool: shadow rays blocked, traced adaptively (``probe_strata``)."""
-    n, k, _ = directions.shape
-    probes = probe_strata(k)
-
-    def trace(rows, columns):
-        o = np.repeat(origins[rows], len(columns), axis=0)
-        return _occluded(occluder, o, directions[rows][:, columns].reshape(-1, 3),
-                         lengths[rows][:, columns].reshape(-1)).reshape(len(rows), len(columns))
-
-    if probes.all():
-        return trace(np.arange(n), np.arange(k))
-    blocked = np.zeros((n, k), bool)
-    first, rest = np.flatnonzero(probes), np.flatnonzero(~probes)
-    blocked[:, first] = trace(np.arange(n), first)
-    unanimous = blocked[:, first].all(axis=1) | ~blocked[:, first].any(axis=1)
-    blocked[np.ix_(unanimous, rest)] = blocked[unanimous, first[0], None]
-    mixed = np.flatnonzero(~unanimous)
-    if len(mixed):
-        blocked[np.ix_(mixed, rest)] = trace(mixed, rest)
-    return blocked
-
-
 def _visible_share(occluder, origins, directions, lengths, weights=None) -> np.ndarray:
     """(N,) unoccluded share of K shadow rays per point.
 
@@ -129,7 +89,8 @@ def _visible_share(occluder, origins, directions, lengths, weights=None) -> np.n
     weights : (N, K) importance of each ray, or None for equal weights.
     """
     n, k, _ = directions.shape
-    blocked = _blocked(occluder, origins, directions, lengths)
+    blocked = _occluded(occluder, np.repeat(origins, k, axis=0), directions.reshape(-1, 3),
+                        lengths.reshape(-1)).reshape(n, k)
     if weights is None:
         return 1.0 - blocked.mean(axis=1)
     total = weights.sum(axis=1)
