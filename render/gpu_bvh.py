@@ -38,7 +38,7 @@ KERNELS = {
     "bvh_probe": (("bvh_probe",), _BVH + ("ray_origin", "ray_direction"), ("mode",)),
     "bvh_direct": (("bvh_lights", "bvh_direct"), _BVH + ("lights", "gbuffer_position",
                                                           "gbuffer_normal"), ("sampling",)),
-    "bvh_gather": (("pixels", "principled", "bvh_lights", "bvh_gather"),
+    "bvh_gather": (("pixels", "principled", "bvh_lights", "bvh_shade", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "materials", "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "principled_lut", "partial_image",
                            "partial_variance"),

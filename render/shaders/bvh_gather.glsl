@@ -15,11 +15,6 @@
  * 0, 0); the last one writes the outputs above.  * Sampler `materials`: (M + 1) × 3 texels, row 0 base colour, row 1 emission, row 2 (metallic,
  * Specular IOR Level, roughness) (last column: none); `principled_lut`: principled.glsl's. */
 
-vec4 bvh_texel_normals(int k)
-{
-  return texelFetch(bvh_normals, ivec2(k & (BVH_WIDTH - 1), k >> BVH_WIDTH_LOG2), 0);
-}
-
 void main()
 {
   ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
@@ -42,7 +37,6 @@ void main()
   uint id = uint((full.y - 1 - px.y) * full.x + px.x);
   uint seed = uint(sampling.x);
   int rays = int(sampling.y);
-  int last_material = textureSize(materials, 0).x - 1;
   vec3 origin = position.xyz + SURFACE_EPSILON * n;
   uint state = point_stream(id, RAY_STREAM, seed);
   vec3 t, b;
@@ -64,48 +58,9 @@ void main()
     float z = sqrt(max(0.0, 1.0 - dot(disk, disk)));
     vec3 d = normalize(disk.x * t + disk.y * b + z * n);
     float th;
-    int triangle, slot;
-    vec2 uv;
-    vec3 radiance = world.rgb;
-    if (!bvh_closest_hit(origin, d, 0.0, BVH_FAR, th, triangle, slot, uv)) {
-      unoccluded += 1.0;
-    }
-    else {
-      unoccluded += th >= sampling.z ? 1.0 : 0.0;
-      vec3 x = origin + th * d;
-      vec3 face = bvh_triangle_face_normal(slot);
-      vec3 smooth_n = (1.0 - uv.x - uv.y) * bvh_texel_normals(3 * slot).xyz +
-                      uv.x * bvh_texel_normals(3 * slot + 1).xyz +
-                      uv.y * bvh_texel_normals(3 * slot + 2).xyz;
-      float len = length(smooth_n);
-      vec3 ns = len > 1e-12 ? smooth_n / len : face;
-      ns *= dot(face, d) > 0.0 ? -1.0 : 1.0;
-      int material = bvh_triangle_material(slot);
-      material = (material >= 0 && material < last_material) ? material : last_material;
-      vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
-      vec3 emission = texelFetch(materials, ivec2(material, 1), 0).rgb;
-      vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
-      /* The Principled diffuse weight seen from the receiver (docs/gi_pipeline.md "The
-       * Accurate integrator"). */
-      vec3 weight = principled_diffuse_weight(base, params.x, params.y, params.z,
-                                              clamp(-dot(ns, d), 0.0, 1.0));
-      vec3 lit_at = x + ns * SURFACE_EPSILON;
-      uint hit_id = id * uint(rays) + uint(j);
-      radiance = emission;
-      for (int light = 0; light < textureSize(lights, 0).y; light++) {
-        vec3 direct = light_direct(light, lit_at, ns, hit_id, seed + 1u, int(sampling.w));
-        radiance += weight * direct;
-        /* world.w = 1 (GatherSettings.hit_glossy, the default): the hit's glossy lobe
-         * reflects each light toward the receiver too (light at its centre direction). */
-        vec3 towards = light_towards(light, x);
-        float c = dot(ns, towards);
-        if (world.w > 0.5 && c > 1e-4 && dot(direct, vec3(1.0)) > 0.0) {
-          radiance += direct * (3.14159265358979323846 / c) *
-                      principled_glossy_reflectance(base, params.x, params.y, params.z, ns, -d,
-                                                    towards);
-        }
-      }
-    }
+    vec3 radiance = ray_radiance(origin, d, id * uint(rays) + uint(j), seed, int(sampling.w),
+                                 world.w > 0.5, world.rgb, th);
+    unoccluded += th >= sampling.z ? 1.0 : 0.0;
     sum += radiance;
     float l = dot(radiance, LUMINANCE);
     lum2 += l * l;

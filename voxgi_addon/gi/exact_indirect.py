@@ -32,7 +32,7 @@ from .direct_light import concentric_disk, diffuse_direct, light_directions
 from .principled import diffuse_weight, glossy_reflectance
 from .sampling import hammersley, perpendicular_basis
 
-__all__ = ["RAY_STREAM", "SURFACE_EPSILON", "cosine_directions", "indirect_and_ao"]
+__all__ = ["RAY_STREAM", "SURFACE_EPSILON", "cosine_directions", "indirect_and_ao", "ray_radiance"]
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 weights of R, G, B
 RAY_STREAM = 0x5EED   # hash stream of the diffuse rays' rotation
@@ -61,6 +61,39 @@ def _hit_normals(tris, tri, u, v, d):
         shading = np.where(length > 1e-12, smooth / np.maximum(length, 1e-12), face)
     sign = np.where(np.einsum("ij,ij->i", face, d) > 0, -1.0, 1.0)[:, None]
     return shading * sign
+
+
+def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
+                 world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False):
+    """((K, 3) radiance arriving back along each ray, (K,) distance of its nearest hit, inf on
+    a miss): what a bounce ray of the gathers sees — ``world`` on a miss, else the hit's
+    emission plus its exact direct light reflected toward the ray's origin (see
+    ``indirect_and_ao``; ``hit_ids`` (K,) uint32 are the hits' light-sample ids)."""
+    t, tri, u, v = closest_hits(tris, origins, dirs, 0.0, np.inf)
+    radiance = np.tile(np.asarray(world, dtype=np.float64), (len(dirs), 1))
+    hit = np.flatnonzero(tri >= 0)
+    if len(hit):
+        x = origins[hit] + t[hit, None] * dirs[hit]
+        ns = _hit_normals(tris, tri[hit], u[hit], v[hit], dirs[hit])
+        material = np.asarray(tris.materials)[tri[hit]]
+        last = len(emission) - 1
+        material = np.where((material >= 0) & (material < last), material, last)
+        lit = diffuse_direct(x + ns * SURFACE_EPSILON, ns, lights, tris, samples=hit_samples,
+                             seed=seed + 1, sample_ids=hit_ids[hit], per_light=True)
+        radiance[hit] = np.asarray(emission, np.float64)[material]
+        if isinstance(albedo, tuple):  # Principled (base, (metallic, level, roughness))
+            base, params = (np.asarray(a, np.float64)[material] for a in albedo)
+            shading = (base, params[:, 0], params[:, 1], params[:, 2])
+            mu = np.clip(-np.einsum("ij,ij->i", ns, dirs[hit]), 0.0, 1.0)
+            radiance[hit] += diffuse_weight(*shading, mu) * lit.sum(axis=0)
+            for direct, towards in zip(lit if hit_glossy else (), light_directions(lights, x)):
+                cos = np.einsum("ij,ij->i", ns, towards)
+                shine = direct * (np.pi / np.maximum(cos, 1e-4))[:, None] * \
+                    glossy_reflectance(*shading, ns, -dirs[hit], towards)
+                radiance[hit] += np.where(cos[:, None] > 1e-4, shine, 0.0)
+        else:
+            radiance[hit] += np.asarray(albedo, np.float64)[material] * lit.sum(axis=0)
+    return radiance, t
 
 
 def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission, rays: int = 16,
@@ -93,33 +126,11 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
         return (*empty, np.zeros((0, 2), np.float32)) if statistics else empty
     dirs = cosine_directions(n, hammersley(ids, RAY_STREAM, rays, seed)).reshape(-1, 3)
     origins = np.repeat(p + SURFACE_EPSILON * n, rays, axis=0)
-    t, tri, u, v = closest_hits(tris, origins, dirs, 0.0, np.inf)
+    with np.errstate(over="ignore"):
+        hit_ids = ids.repeat(rays) * np.uint32(rays) + np.tile(np.arange(rays, dtype=np.uint32), count)
+    radiance, t = ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed,
+                               world, hit_samples, hit_glossy)
     unoccluded = (t >= ao_distance).reshape(count, rays).mean(axis=1)
-    radiance = np.tile(np.asarray(world, dtype=np.float64), (count * rays, 1))
-    hit = np.flatnonzero(tri >= 0)
-    if len(hit):
-        x = origins[hit] + t[hit, None] * dirs[hit]
-        ns = _hit_normals(tris, tri[hit], u[hit], v[hit], dirs[hit])
-        material = np.asarray(tris.materials)[tri[hit]]
-        last = len(emission) - 1
-        material = np.where((material >= 0) & (material < last), material, last)
-        with np.errstate(over="ignore"):
-            hit_ids = ids.repeat(rays) * np.uint32(rays) + np.tile(np.arange(rays, dtype=np.uint32), count)
-        lit = diffuse_direct(x + ns * SURFACE_EPSILON, ns, lights, tris, samples=hit_samples,
-                             seed=seed + 1, sample_ids=hit_ids[hit], per_light=True)
-        radiance[hit] = np.asarray(emission, np.float64)[material]
-        if isinstance(albedo, tuple):  # Principled (base, (metallic, level, roughness))
-            base, params = (np.asarray(a, np.float64)[material] for a in albedo)
-            shading = (base, params[:, 0], params[:, 1], params[:, 2])
-            mu = np.clip(-np.einsum("ij,ij->i", ns, dirs[hit]), 0.0, 1.0)
-            radiance[hit] += diffuse_weight(*shading, mu) * lit.sum(axis=0)
-            for direct, towards in zip(lit if hit_glossy else (), light_directions(lights, x)):
-                cos = np.einsum("ij,ij->i", ns, towards)
-                shine = direct * (np.pi / np.maximum(cos, 1e-4))[:, None] * \
-                    glossy_reflectance(*shading, ns, -dirs[hit], towards)
-                radiance[hit] += np.where(cos[:, None] > 1e-4, shine, 0.0)
-        else:
-            radiance[hit] += np.asarray(albedo, np.float64)[material] * lit.sum(axis=0)
     per_ray = radiance.reshape(count, rays, 3)
     indirect = per_ray.mean(axis=1)
     if not statistics:

@@ -1,0 +1,56 @@
+/* What a bounce ray of the gathers sees (voxgi_addon/gi/exact_indirect.py ray_radiance): the
+ * radiance arriving back along the ray from `origin` in unit direction `d` — `world_rgb` on a
+ * miss, else the hit's emission plus its exact direct light (one shadow ray per light and
+ * stratum, `strata` = m of m × m, sample id `hit_id`, seed `seed` + 1) reflected toward the
+ * origin by the Principled diffuse weight and, when `hit_glossy`, its glossy lobe (each light
+ * at its centre direction). `th` = distance of the hit, BVH_FAR on a miss.
+ * Samplers: bvh_* (bvh_common.glsl), lights (bvh_lights.glsl), materials ((M + 1) × 3 texels:
+ * base colour, emission, (metallic, Specular IOR Level, roughness)), principled_lut. */
+
+vec4 bvh_texel_normals(int k)
+{
+  return texelFetch(bvh_normals, ivec2(k & (BVH_WIDTH - 1), k >> BVH_WIDTH_LOG2), 0);
+}
+
+vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
+                  vec3 world_rgb, out float th)
+{
+  int triangle, slot;
+  vec2 uv;
+  if (!bvh_closest_hit(origin, d, 0.0, BVH_FAR, th, triangle, slot, uv)) {
+    th = BVH_FAR;
+    return world_rgb;
+  }
+  int last_material = textureSize(materials, 0).x - 1;
+  vec3 x = origin + th * d;
+  vec3 face = bvh_triangle_face_normal(slot);
+  vec3 smooth_n = (1.0 - uv.x - uv.y) * bvh_texel_normals(3 * slot).xyz +
+                  uv.x * bvh_texel_normals(3 * slot + 1).xyz +
+                  uv.y * bvh_texel_normals(3 * slot + 2).xyz;
+  float len = length(smooth_n);
+  vec3 ns = len > 1e-12 ? smooth_n / len : face;
+  ns *= dot(face, d) > 0.0 ? -1.0 : 1.0;
+  int material = bvh_triangle_material(slot);
+  material = (material >= 0 && material < last_material) ? material : last_material;
+  vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
+  vec3 emission = texelFetch(materials, ivec2(material, 1), 0).rgb;
+  vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
+  /* The Principled diffuse weight seen from the receiver (docs/gi_pipeline.md "The Accurate
+   * integrator"). */
+  vec3 weight = principled_diffuse_weight(base, params.x, params.y, params.z,
+                                          clamp(-dot(ns, d), 0.0, 1.0));
+  vec3 lit_at = x + ns * SURFACE_EPSILON;
+  vec3 radiance = emission;
+  for (int light = 0; light < textureSize(lights, 0).y; light++) {
+    vec3 direct = light_direct(light, lit_at, ns, hit_id, seed + 1u, strata);
+    radiance += weight * direct;
+    vec3 towards = light_towards(light, x);
+    float c = dot(ns, towards);
+    if (hit_glossy && c > 1e-4 && dot(direct, vec3(1.0)) > 0.0) {
+      radiance += direct * (3.14159265358979323846 / c) *
+                  principled_glossy_reflectance(base, params.x, params.y, params.z, ns, -d,
+                                                towards);
+    }
+  }
+  return radiance;
+}
