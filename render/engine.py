@@ -23,7 +23,9 @@ EXTRA_PASSES = {
     "Diffuse Direct": "use_pass_diffuse_direct",
     "Diffuse Indirect": "use_pass_diffuse_indirect",
     "Diffuse Color": "use_pass_diffuse_color",
+    "Glossy Direct": "use_pass_glossy_direct",
     "Glossy Indirect": "use_pass_glossy_indirect",
+    "Glossy Color": "use_pass_glossy_color",
     "Ambient Occlusion": "use_pass_ambient_occlusion",
 }
 

@@ -11,6 +11,8 @@ time). Kernels (``shaders/``, each prefixed with ``bvh_common.glsl``):
   (``bvh_lights.glsl``, the port of ``direct_light.diffuse_direct``).
 * ``bvh_gather`` — the Accurate final gather: exact AO and the one-bounce diffuse-indirect
   estimate with their variances (``voxgi_addon.gi.exact_indirect``; run by ``gpu_gather``).
+* ``bvh_glossy`` — the glossy gather: exact one-bounce Glossy Indirect and its variance
+  (``voxgi_addon.gi.exact_glossy``; run by ``gpu_gather``).
 
 Needs a GPU context.
 """
@@ -22,6 +24,7 @@ import time
 import gpu
 import numpy as np
 
+from ..voxgi_addon.gi.exact_glossy import GLOSSY_STREAM
 from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
@@ -44,8 +47,12 @@ KERNELS = {
                            "partial_variance"),
                    ("sampling", "world", "grid", "chunk")),
 }
+# The glossy gather reads the same inputs as the diffuse one.
+KERNELS["bvh_glossy"] = (("pixels", "principled", "bvh_lights", "bvh_shade", "bvh_glossy"),
+                         *KERNELS["bvh_gather"][1:])
 # Kernels with more than one output image (the others write ``out_image``).
-OUTPUTS = {"bvh_gather": ("out_image", "out_variance")}
+OUTPUTS = {"bvh_gather": ("out_image", "out_variance"),
+           "bvh_glossy": ("out_image", "out_variance")}
 _shaders: dict[str, object] = {}
 
 
@@ -59,8 +66,9 @@ def bvh_shader(kernel: str):
                    "DET_EPSILON": repr(float(DET_EPSILON)), "RAY_STREAM": f"{RAY_STREAM}u"}
         if "principled" in files:
             defines.update(PRINCIPLED_DEFINES)
-        if kernel == "bvh_gather":
+        if kernel in ("bvh_gather", "bvh_glossy"):
             defines["VIEW_BACKOFF"] = repr(float(VIEW_BACKOFF))
+            defines["GLOSSY_STREAM"] = f"{GLOSSY_STREAM}u"
         _shaders[kernel] = build_compute(("bvh_common",) + files, samplers, constants,
                                          OUTPUTS.get(kernel, ("out_image",)), defines)
     return _shaders[kernel]

@@ -79,9 +79,11 @@ def rays_per_dispatch(light_count: int, hit_samples: int = 1) -> int:
 
 
 def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
-           width: int, height: int):
+           width: int, height: int, kernel: str = "bvh_gather"):
     """The raw gather: (values, variance) RGBA32F textures of the low-resolution grid, the
-    rays split over dispatches of ``rays_per_dispatch``.
+    rays split over dispatches of ``rays_per_dispatch``. kernel : "bvh_gather" (Diffuse
+    Indirect and AO, ``settings.rays``) or "bvh_glossy" (Glossy Indirect,
+    ``settings.glossy_rays``).
     principled : (base, params) of ``preview.passes.principled_table``;
     settings : ``voxgi_addon.preview.gather.GatherSettings``."""
     low_h, low_w = low_shape(height, width, stride)
@@ -90,16 +92,17 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
     inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights),
               "materials": principled_materials_texture(principled, emission),
               "principled_lut": lut_texture()}
-    assert OUTPUTS["bvh_gather"] == ("out_image", "out_variance")
+    assert OUTPUTS[kernel] == ("out_image", "out_variance")
+    rays = settings.rays if kernel == "bvh_gather" else settings.glossy_rays
     step = rays_per_dispatch(len(lights), settings.hit_samples)
-    for first in range(0, max(settings.rays, 1), step):
-        partial = dispatch_bvh("bvh_gather", {
+    for first in range(0, max(rays, 1), step):
+        partial = dispatch_bvh(kernel, {
             **inputs, "partial_image": partial[0], "partial_variance": partial[1]}, low_w, low_h, {
-            "sampling": (settings.seed, settings.rays, settings.ao_distance,
+            "sampling": (settings.seed, rays, settings.ao_distance,
                          strata_side(settings.hit_samples)),
             "world": (*settings.world, float(settings.hit_glossy)),
             "grid": (stride, width, height, 0),
-            "chunk": (first, step, float(first > 0), float(first + step >= settings.rays))})
+            "chunk": (first, step, float(first > 0), float(first + step >= rays))})
     return partial
 
 
@@ -109,6 +112,20 @@ def gather_gi(bvh: GPUBVH, volume, gbuffer_inputs, lights, principled, emission,
     filter, upsample. ``volume`` : any ``GPUVolume`` (the upsample kernel binds its textures)."""
     values, variance = gather(bvh, gbuffer_inputs, lights, principled, emission, settings,
                               stride, width, height)
+    values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
+                        settings.denoise_iterations)
+    if stride > 1:
+        values = dispatch("upsample", volume, {**gbuffer_inputs, "low_image": values}, width,
+                          height, {"sampling": (stride, width, height, 0)})
+    return values
+
+
+def glossy_gi(bvh: GPUBVH, volume, gbuffer_inputs, lights, principled, emission, settings,
+              stride: int, width: int, height: int):
+    """Full-resolution RGBA32F texture (Glossy Indirect rgb, 0), bottom row first: the glossy
+    gather (``shaders/bvh_glossy.glsl``), the same filter and upsample as ``gather_gi``."""
+    values, variance = gather(bvh, gbuffer_inputs, lights, principled, emission, settings,
+                              stride, width, height, kernel="bvh_glossy")
     values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
                         settings.denoise_iterations)
     if stride > 1:

@@ -28,7 +28,7 @@ from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
 from .gpu_bvh import direct_light_texture, lights_texture, shared_bvh
-from .gpu_gather import gather_gi, glossy_direct_texture
+from .gpu_gather import gather_gi, glossy_direct_texture, glossy_gi
 from .gpu_tracer import dispatch, read_texture
 from .gpu_volume import GPUVolume
 
@@ -119,7 +119,14 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
         diffuse_ao = traced("diffuse_ao")
         timings["diffuse+ao cones (GPU)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    if glossy_indirect:
+    if glossy_indirect and quality == "ACCURATE":
+        _, _, _, emission = material_table(snapshot)
+        texture = glossy_gi(shared_bvh().update(tris), volume, gbuffer.inputs, snapshot.lights,
+                            principled_table(snapshot), emission, gather_settings, gi_stride,
+                            width, height)
+        glossy = np.flipud(read_texture(texture))
+        timings["glossy gather (GPU)"] = time.perf_counter() - t0
+    elif glossy_indirect:
         glossy = traced("glossy")
         timings["glossy cones (GPU)"] = time.perf_counter() - t0
     else:  # as Cycles with no glossy bounces

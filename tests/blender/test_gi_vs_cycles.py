@@ -12,8 +12,8 @@ import pytest
 import scenes
 
 WIDTH, HEIGHT = 96, 72
-PASSES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color", "Glossy Indirect",
-          "Ambient Occlusion")
+PASSES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color", "Glossy Direct",
+          "Glossy Indirect", "Glossy Color", "Ambient Occlusion")
 
 
 def relative_l1(ours, reference, mask):

@@ -11,8 +11,8 @@ import pytest
 import scenes
 
 WIDTH, HEIGHT = 64, 48
-PASSES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color", "Glossy Indirect",
-          "Ambient Occlusion")
+PASSES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color", "Glossy Direct",
+          "Glossy Indirect", "Glossy Color", "Ambient Occlusion")
 
 
 def relative_l1(ours, reference):

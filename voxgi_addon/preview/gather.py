@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..gi.exact_glossy import glossy_indirect
 from ..gi.exact_indirect import indirect_and_ao
 from .denoise import atrous_filter
 from .upsample import sample_pixels, upsample
@@ -27,7 +28,8 @@ from .upsample import sample_pixels, upsample
 
 @dataclass(frozen=True)
 class GatherSettings:
-    """rays : exact rays per gather point; ao_distance : metres (Cycles' AO distance);
+    """rays : exact rays per gather point; glossy_rays : exact rays per point of the glossy
+    gather (``gather_glossy``); ao_distance : metres (Cycles' AO distance);
     hit_glossy : a bounce hit's glossy lobe reflects the lights toward the receiver (the light
     path diffuse → glossy; Cycles keeps it even with no glossy bounce: its light sampling at a
     hit evaluates every closure, docs/gi_pipeline.md "What one bounce means in Cycles");
@@ -36,6 +38,7 @@ class GatherSettings:
     (0 gives Cycles' pass split, where the world seen from a receiver is direct light)."""
 
     rays: int = 64
+    glossy_rays: int = 16
     ao_distance: float = 1.0
     hit_glossy: bool = True
     hit_samples: int = 1
@@ -77,3 +80,33 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
                               iterations=settings.denoise_iterations)
     return upsample(values, valid, hit, position, normal, stride)
+
+
+def gather_glossy(tris, lights, principled, emission, hit, position, normal, direction, material,
+                  settings: GatherSettings, stride: int) -> np.ndarray:
+    """(H, W, 3) float32: Glossy Indirect (Cycles' units, without the glossy colour) per pixel,
+    0 where the pixel sees no surface — ``settings.glossy_rays`` exact rays from the GGX visible
+    normals of each gather point (``gi.exact_glossy``), the à-trous filter and the upsample of
+    ``gather_gi`` (the glossy light is filtered in the AO slot's place, which stays 0).
+
+    direction : (H, W, 3) the camera rays' unit directions; material : (H, W) material index
+    per pixel (the tables' last row for none); principled : ``passes.principled_table``.
+    """
+    height, width = hit.shape
+    rows, cols = sample_pixels(height, width, stride)
+    valid = hit[rows][:, cols]
+    cell_p = position[rows][:, cols] - VIEW_BACKOFF * direction[rows][:, cols]
+    cell_n = normal[rows][:, cols]
+    ids = (rows[:, None] * width + cols[None, :])[valid]
+    values = np.zeros(valid.shape + (4,), np.float32)
+    variance = np.zeros(valid.shape + (2,), np.float32)
+    glossy, var = glossy_indirect(
+        cell_p[valid], cell_n[valid], -direction[rows][:, cols][valid],
+        material[rows][:, cols][valid], ids, tris, lights, principled, emission,
+        rays=settings.glossy_rays, seed=settings.seed, world=settings.world,
+        hit_samples=settings.hit_samples, hit_glossy=settings.hit_glossy)
+    values[valid, :3] = glossy
+    variance[valid, 0] = var
+    values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
+                              iterations=settings.denoise_iterations)
+    return upsample(values, valid, hit, position, normal, stride)[..., :3]

@@ -19,11 +19,11 @@ from ..gi.direct_light import diffuse_direct, light_directions, light_frame
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
-from .gather import GatherSettings, gather_gi
+from .gather import GatherSettings, gather_gi, gather_glossy
 from .upsample import STRIDES, sample_pixels, upsample
 
 PASS_NAMES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color",
-              "Glossy Indirect", "Ambient Occlusion")
+              "Glossy Direct", "Glossy Indirect", "Glossy Color", "Ambient Occlusion")
 SURFACE_EPSILON = 1e-4  # metres off the surface for shadow rays
 
 
@@ -150,16 +150,23 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
         cos_view = np.clip(np.einsum("ij,ij->i", normals, views), 0.0, 1.0)
         args = (base[mat], params[mat, 0], params[mat, 1], params[mat, 2], cos_view)
         diffuse_colour, glossy_colour = diffuse_weight(*args), glossy_color(*args)
+    # Cycles stores a pass of light as the light over its colour, and 0 where the colour is 0
+    # (per channel): a pure metal has no Diffuse Direct or Indirect.
+    has_diffuse = np.asarray(diffuse_colour) > 0.0
+    glossy_colour = np.broadcast_to(np.asarray(glossy_colour, np.float64), np.shape(direct))
+    has_glossy = glossy_colour > 0.0
+    shine = np.zeros(np.shape(direct)) if glossy_direct is None else glossy_direct
     values = {
-        "Diffuse Direct": direct,
-        "Diffuse Indirect": indirect,
+        "Diffuse Direct": np.where(has_diffuse, direct, 0.0),
+        "Diffuse Indirect": np.where(has_diffuse, indirect, 0.0),
         "Diffuse Color": diffuse_colour,
-        "Glossy Indirect": glossy,
+        "Glossy Direct": np.where(has_glossy, shine / np.where(has_glossy, glossy_colour, 1.0), 0.0),
+        "Glossy Indirect": np.where(has_glossy, glossy, 0.0),
+        "Glossy Color": glossy_colour,
         "Ambient Occlusion": np.repeat(np.asarray(ao)[:, None], 3, axis=1),
     }
     values["Combined"] = (diffuse_colour * (direct + indirect) + emission[mat]
-                          + glossy_colour * glossy
-                          + (0.0 if glossy_direct is None else glossy_direct))
+                          + glossy_colour * glossy + shine)
     passes = {}
     for name in PASS_NAMES:
         image = np.zeros((height * width, 3), np.float32)
@@ -201,8 +208,9 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
                   glossy_indirect: bool = True):
     """Render the passes at ``width`` × ``height`` with the numpy tracer.
 
-    glossy_indirect : trace glossy reflections (cones); False leaves Glossy Indirect 0, as
-    Cycles does with no glossy bounces.
+    glossy_indirect : trace glossy reflections (exact rays in Accurate quality,
+    ``gather.gather_glossy``; cones in Fast); False leaves Glossy Indirect 0, as Cycles does
+    with no glossy bounces.
 
     quality : "ACCURATE" — exact direct light and the exact-ray final gather for Diffuse Indirect
     and AO (``gather``; ``gather_settings``, default: 64 rays, the cones' AO distance);
@@ -267,7 +275,13 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         timings["diffuse+ao cones"] = time.perf_counter() - t0
     indirect, ao = traced[:, :3], traced[:, 3]
     t0 = time.perf_counter()
-    if glossy_indirect:
+    if glossy_indirect and quality == "ACCURATE":
+        glossy = gather_glossy(tris, snapshot.lights, principled_table(snapshot), emission,
+                               seen.hit, seen.position, seen.normal, seen.direction,
+                               materials.reshape(height, width), gather_settings, gi_stride
+                               ).reshape(-1, 3)[hit]
+        timings["glossy gather"] = time.perf_counter() - t0
+    elif glossy_indirect:
         glossy = _traced(seen, gi_stride, hit, glossy_cones, 3)
         timings["glossy cones"] = time.perf_counter() - t0
     else:

@@ -1,0 +1,117 @@
+/* The glossy gather of the Accurate integrator at reduced resolution: exact one-bounce Glossy
+ * Indirect (without the glossy colour) for the G-buffer pixel each low-resolution cell traces,
+ * and the variance of its luminance mean (voxgi_addon/gi/exact_glossy.py glossy_indirect is the
+ * reference and has the estimator: reflections of GGX visible-normal samples, weighted by the
+ * Principled glossy BSDF × cos over their density). out_image = (Glossy Indirect rgb, 0);
+ * out_variance = (variance, 0, 0, 0). Push constants as bvh_gather.glsl's, with
+ * sampling.y = the glossy rays; the rays are split over dispatches the same way (chunk). */
+
+/* GGX visible normal for the local view v (z > 0) and roughness alpha (Heitz 2018). */
+vec3 vndf_half_vector(vec3 v, float alpha, vec2 u)
+{
+  vec3 vh = normalize(vec3(alpha * v.x, alpha * v.y, v.z));
+  float lensq = vh.x * vh.x + vh.y * vh.y;
+  vec3 t1 = lensq > 1e-7 ? vec3(-vh.y, vh.x, 0.0) / sqrt(lensq) : vec3(1.0, 0.0, 0.0);
+  vec3 t2 = cross(vh, t1);
+  float r = sqrt(u.x);
+  float phi = 2.0 * M_PI_F * u.y;
+  float p1 = r * cos(phi);
+  float p2 = r * sin(phi);
+  float s = 0.5 * (1.0 + vh.z);
+  p2 = (1.0 - s) * sqrt(max(1.0 - p1 * p1, 0.0)) + s * p2;
+  float p3 = sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0));
+  vec3 nh = p1 * t1 + p2 * t2 + p3 * vh;
+  vec3 h = vec3(alpha * nh.x, alpha * nh.y, max(nh.z, 0.0));
+  return h / max(length(h), 1e-30);
+}
+
+void main()
+{
+  ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
+  ivec2 size = imageSize(out_image);
+  if (cell.x >= size.x || cell.y >= size.y) {
+    return;
+  }
+  int stride = int(grid.x);
+  ivec2 full = ivec2(grid.yz);
+  ivec2 px = traced_pixel(size.y - 1 - cell.y, cell.x, stride, full);
+  vec4 position = texelFetch(gbuffer_position, px, 0);
+  if (position.w < 0.5) {
+    imageStore(out_image, cell, vec4(0.0));
+    imageStore(out_variance, cell, vec4(0.0));
+    return;
+  }
+  vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
+  vec4 ray = texelFetch(gbuffer_view, px, 0);
+  vec3 v = -ray.xyz;
+  position.xyz -= VIEW_BACKOFF * ray.xyz;
+  int last_material = textureSize(materials, 0).x - 1;
+  int material = int(ray.w + 0.5);
+  material = (material >= 0 && material < last_material) ? material : last_material;
+  vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
+  vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
+  float rough = clamp(params.z, 0.0, 1.0);
+  float alpha = rough * rough;
+  float alpha2 = alpha * alpha;
+  bool mirror = alpha2 <= PR_ROUGHNESS_SQ_THRESHOLD;
+  float cos_ni = dot(n, v);
+  vec3 colour = principled_glossy_color(base, params.x, params.y, rough, clamp(cos_ni, 0.0, 1.0));
+  vec3 t, b;
+  perpendicular_basis(n, t, b);
+  vec3 v_local = normalize(vec3(dot(t, v), dot(b, v), max(cos_ni, 1e-4)));
+  float pdf_scale = 4.0 * max(cos_ni, 1e-4) * (1.0 + pr_ggx_lambda(alpha2, max(cos_ni, 1e-4)));
+
+  uint id = uint((full.y - 1 - px.y) * full.x + px.x);
+  uint seed = uint(sampling.x);
+  int rays = int(sampling.y);
+  vec3 origin = position.xyz + SURFACE_EPSILON * n;
+  uint state = point_stream(id, GLOSSY_STREAM, seed);
+  const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
+  vec3 sum = vec3(0.0);
+  float lum2 = 0.0;
+  if (chunk.z > 0.5) {
+    sum = texelFetch(partial_image, cell, 0).rgb;
+    lum2 = texelFetch(partial_variance, cell, 0).x;
+  }
+  bool reflects = cos_ni > 0.0 && dot(colour, vec3(1.0)) > 0.0;
+  int first_ray = int(chunk.x);
+  int end_ray = min(rays, first_ray + int(chunk.y));
+  for (int j = first_ray; j < end_ray && reflects; j++) {
+    vec3 h = n;
+    if (!mirror) {
+      vec3 hl = vndf_half_vector(v_local, alpha, hammersley(state, j, rays));
+      h = hl.x * t + hl.y * b + hl.z * n;
+    }
+    vec3 l = normalize(2.0 * dot(v, h) * h - v);
+    vec3 weight = vec3(1.0); /* a mirror: the pass is the reflected radiance itself */
+    if (!mirror) {
+      float cos_nh = clamp(dot(h, n), 0.0, 1.0);
+      float den = 1.0 - cos_nh * cos_nh + alpha2 * cos_nh * cos_nh;
+      float pdf = alpha2 / (M_PI_F * max(den * den, 1e-30)) / pdf_scale;
+      weight = dot(l, n) > 0.0 && pdf > 0.0 ?
+               principled_glossy_reflectance(base, params.x, params.y, rough, n, v, l) /
+               max(pdf, 1e-30) / max(colour, vec3(1e-30)) : vec3(0.0);
+    }
+    vec3 value = vec3(0.0);
+    if (dot(weight, vec3(1.0)) > 0.0) {
+      float th;
+      vec3 radiance = ray_radiance(origin, l, id * uint(rays) + uint(j), seed, int(sampling.w),
+                                   world.w > 0.5, world.rgb, th);
+      value = mix(vec3(0.0), weight * radiance, greaterThan(colour, vec3(0.0)));
+    }
+    sum += value;
+    float lum = dot(value, LUMINANCE);
+    lum2 += lum * lum;
+  }
+  if (chunk.w < 0.5) {
+    imageStore(out_image, cell, vec4(sum, 0.0));
+    imageStore(out_variance, cell, vec4(lum2, 0.0, 0.0, 0.0));
+    return;
+  }
+  float count = float(rays);
+  vec3 mean = sum / count;
+  float lum_mean = dot(mean, LUMINANCE);
+  float var = max(lum2 / count - lum_mean * lum_mean, 0.0) / max(count - 1.0, 1.0);
+  imageStore(out_image, cell, vec4(mean, 0.0));
+  imageStore(out_variance, cell, vec4(var, 0.0, 0.0, 0.0));
+}

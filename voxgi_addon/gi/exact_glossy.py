@@ -1,0 +1,134 @@
+"""Exact one-bounce glossy reflections: Cycles' Glossy Indirect pass with exact rays (numpy
+reference of ``render/shaders/bvh_glossy.glsl``; both draw the same rays).
+
+Per surface point p with unit normal n (facing the viewer), unit direction v to the viewer, its
+Principled material and a sample id (the pixel index, row 0 on top):
+
+* ``rays`` reflected directions l from GGX's distribution of visible normals (Heitz 2018,
+  "Sampling the GGX distribution of visible normals") for α = roughness²: half vectors h drawn
+  from the point's rotated Hammersley set (``sampling.hammersley``, stream ``GLOSSY_STREAM``),
+  l = 2(v·h)h − v, in the frame ``sampling.perpendicular_basis(n)``;
+* each ray weighted by the Principled glossy lobes' BSDF × cos (``principled.glossy_reflectance``,
+  Cycles' ``eval``) over the sample's density pdf(l) = G1(v) D(h) / (4 n·v); reflections below
+  the surface weigh 0;
+* the radiance arriving along each ray as the diffuse gather sees it
+  (``exact_indirect.ray_radiance``: the hit's exact direct light, diffuse and glossy, plus its
+  emission);
+* **Glossy Indirect** = mean(weight × radiance) / Glossy Color (``principled.glossy_color``),
+  the light without the glossy colour, as Cycles' pass holds it. A mirror (α² at or below
+  ``principled.ROUGHNESS_SQ_THRESHOLD``) reflects about n, one ray's radiance.
+
+Importance sampling the visible normals keeps the weight to Fresnel × (1 + Λ(v)) /
+(1 + Λ(v) + Λ(l)), at most about 1: no fireflies from the lobe itself.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .exact_indirect import LUMINANCE, SURFACE_EPSILON, ray_radiance
+from .principled import ROUGHNESS_SQ_THRESHOLD, glossy_color, glossy_reflectance
+from .sampling import hammersley, perpendicular_basis
+
+__all__ = ["GLOSSY_STREAM", "glossy_indirect", "vndf_half_vectors"]
+
+GLOSSY_STREAM = 0x6105  # hash stream of the glossy rays' rotation
+
+
+def vndf_half_vectors(view_local: np.ndarray, alpha: np.ndarray, square: np.ndarray) -> np.ndarray:
+    """(N, K, 3) unit half vectors in the local frame (z = normal) drawn from GGX's visible
+    normals for views ``view_local`` (N, 3) (z > 0) and roughness α (N,), from ``square``
+    (N, K, 2) in [0, 1)² (Heitz 2018, listing 1)."""
+    a = np.asarray(alpha, np.float64)[:, None]
+    vh = np.stack([a[:, 0] * view_local[:, 0], a[:, 0] * view_local[:, 1], view_local[:, 2]], axis=1)
+    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
+    lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
+    safe = np.sqrt(np.maximum(lensq, 1e-30))
+    t1 = np.where((lensq > 1e-7)[:, None],
+                  np.stack([-vh[:, 1] / safe, vh[:, 0] / safe, np.zeros_like(safe)], axis=1),
+                  [[1.0, 0.0, 0.0]])
+    t2 = np.cross(vh, t1)
+    r = np.sqrt(square[..., 0])
+    phi = 2.0 * np.pi * square[..., 1]
+    p1, p2 = r * np.cos(phi), r * np.sin(phi)
+    s = 0.5 * (1.0 + vh[:, 2:3])
+    p2 = (1.0 - s) * np.sqrt(np.maximum(1.0 - p1 * p1, 0.0)) + s * p2
+    p3 = np.sqrt(np.maximum(1.0 - p1 * p1 - p2 * p2, 0.0))
+    nh = p1[..., None] * t1[:, None] + p2[..., None] * t2[:, None] + p3[..., None] * vh[:, None]
+    h = np.stack([a * nh[..., 0], a * nh[..., 1], np.maximum(nh[..., 2], 0.0)], axis=-1)
+    return h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-30)
+
+
+def _lambda(alpha2, cos):
+    tan2 = np.maximum(1.0 / np.maximum(cos * cos, 1e-30) - 1.0, 0.0)
+    return 0.5 * (np.sqrt(1.0 + alpha2 * tan2) - 1.0)
+
+
+def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights, principled,
+                    emission, rays: int = 16, seed: int = 0, world=(0.0, 0.0, 0.0),
+                    hit_samples: int = 1, hit_glossy: bool = True):
+    """(Glossy Indirect (N, 3) float32, variance of its luminance mean (N,) float32) — see the
+    module doc.
+
+    points, normals, views : (N, 3) surface points, unit normals facing the viewer and unit
+    directions to the viewer; materials : (N,) material index per point (the last row of the
+    tables for none); sample_ids : (N,) integer ids (pixel indices); principled : (base (M + 1,
+    3), (metallic, Specular IOR Level, roughness) (M + 1, 3)) of
+    ``preview.passes.principled_table``; emission : (M + 1, 3); the rest as
+    ``exact_indirect.indirect_and_ao``.
+    """
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    n = np.asarray(normals, np.float64).reshape(-1, 3)
+    v = np.asarray(views, np.float64).reshape(-1, 3)
+    ids = np.asarray(sample_ids).reshape(-1).astype(np.uint32)
+    count = len(p)
+    if count == 0 or rays < 1:
+        return np.zeros((count, 3), np.float32), np.zeros(count, np.float32)
+    base_table, param_table = (np.asarray(a, np.float64) for a in principled)
+    last = len(base_table) - 1
+    mat = np.asarray(materials).reshape(-1)
+    mat = np.where((mat >= 0) & (mat < last), mat, last)
+    base, params = base_table[mat], param_table[mat]
+    metallic, level, rough = params[:, 0], params[:, 1], np.clip(params[:, 2], 0.0, 1.0)
+    alpha = rough * rough
+    mirror = alpha * alpha <= ROUGHNESS_SQ_THRESHOLD
+
+    t, b = perpendicular_basis(n)
+    cos_ni = np.einsum("ij,ij->i", n, v)
+    view_local = np.stack([np.einsum("ij,ij->i", t, v), np.einsum("ij,ij->i", b, v),
+                           np.maximum(cos_ni, 1e-4)], axis=1)
+    view_local /= np.linalg.norm(view_local, axis=1, keepdims=True)
+    h_local = vndf_half_vectors(view_local, np.where(mirror, 1e-3, alpha),
+                                hammersley(ids, GLOSSY_STREAM, rays, seed))
+    h = h_local[..., :1] * t[:, None] + h_local[..., 1:2] * b[:, None] + h_local[..., 2:] * n[:, None]
+    h = np.where(mirror[:, None, None], n[:, None], h)
+    cos_vh = np.einsum("nkc,nc->nk", h, v)
+    dirs = 2.0 * cos_vh[..., None] * h - v[:, None]
+    dirs /= np.maximum(np.linalg.norm(dirs, axis=-1, keepdims=True), 1e-30)
+    cos_no = np.einsum("nkc,nc->nk", dirs, n)
+
+    shading = (base[:, None], metallic[:, None], level[:, None], rough[:, None])
+    reflect = glossy_reflectance(*shading, n[:, None], v[:, None], dirs)  # (N, K, 3)
+    alpha2 = (alpha * alpha)[:, None]
+    cos_nh = np.clip(np.einsum("nkc,nc->nk", h, n), 0.0, 1.0)
+    den = 1.0 - cos_nh ** 2 + alpha2 * cos_nh ** 2
+    d = alpha2 / (np.pi * np.maximum(den * den, 1e-30))
+    pdf = d / (4.0 * np.maximum(cos_ni, 1e-4)[:, None] * (1.0 + _lambda(alpha2, cos_ni[:, None])))
+    colour = glossy_color(base, metallic, level, rough, np.clip(cos_ni, 0.0, 1.0))  # (N, 3)
+    weight = np.where(((cos_no > 0.0) & (pdf > 0.0))[..., None],
+                      reflect / np.maximum(pdf, 1e-30)[..., None], 0.0)
+
+    origins = np.repeat(p + SURFACE_EPSILON * n, rays, axis=0)
+    with np.errstate(over="ignore"):
+        hit_ids = ids.repeat(rays) * np.uint32(rays) + np.tile(np.arange(rays, dtype=np.uint32), count)
+    radiance, _ = ray_radiance(origins, dirs.reshape(-1, 3), hit_ids, tris, lights,
+                               (base_table, param_table), emission, seed, world, hit_samples,
+                               hit_glossy)
+    safe_colour = np.where(colour > 0.0, colour, 1.0)
+    per_ray = np.where(colour[:, None] > 0.0,
+                       weight * radiance.reshape(count, rays, 3) / safe_colour[:, None], 0.0)
+    per_ray[mirror] = np.where(colour[mirror, None] > 0.0, radiance.reshape(count, rays, 3)[mirror], 0.0)
+    per_ray[cos_ni <= 0.0] = 0.0
+    value = per_ray.mean(axis=1)
+    luminance = per_ray @ LUMINANCE
+    variance = np.maximum((luminance ** 2).mean(axis=1) - (value @ LUMINANCE) ** 2, 0.0)
+    return value.astype(np.float32), (variance / max(rays - 1, 1)).astype(np.float32)
