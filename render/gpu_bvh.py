@@ -84,13 +84,14 @@ class GPUBVH:
     """The BVH textures of the latest ``SceneTriangles`` (see the module doc).
 
     nodes, triangles, normals : RGBA32F GPUTextures (``voxgi_addon.scene.bvh.BVHTextures``).
-    uploaded_bytes : bytes the last ``update`` sent (0 = unchanged); build_seconds : the last
-    BVH build's time.
+    uploaded_bytes : bytes the last ``update`` sent (0 = unchanged); resident_bytes : bytes of
+    the textures on the GPU; build_seconds : the last BVH build's time.
     """
 
     def __init__(self):
         self.nodes = self.triangles = self.normals = None
         self.uploaded_bytes = 0
+        self.resident_bytes = 0
         self.build_seconds = 0.0
         self._tris = None
 
@@ -119,7 +120,7 @@ class GPUBVH:
         self.nodes = upload(packed.nodes)
         self.triangles = upload(packed.triangles)
         self.normals = upload(packed.normals)
-        self.uploaded_bytes = packed.nbytes
+        self.uploaded_bytes = self.resident_bytes = packed.nbytes
         self._tris = tris
         return self
 

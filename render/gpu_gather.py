@@ -19,10 +19,10 @@ from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, strata_side
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
 from .gpu_shaders import LOCAL_SIZE, build_compute
-from .gpu_tracer import dispatch
 from .gpu_volume import float_texture
 
 _DENOISE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "low_image", "low_variance")
+_UPSAMPLE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "low_image")
 _shaders: dict[str, object] = {}
 
 
@@ -106,32 +106,45 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
     return partial
 
 
-def gather_gi(bvh: GPUBVH, volume, gbuffer_inputs, lights, principled, emission, settings,
-              stride: int, width: int, height: int):
+def upsample(values, gbuffer_inputs, stride: int, width: int, height: int):
+    """The joint-bilateral upsample (``shaders/upsample.glsl``) of a low-resolution texture to
+    the full width × height; the texture itself for stride 1."""
+    if stride == 1:
+        return values
+    if "upsample" not in _shaders:
+        _shaders["upsample"] = build_compute(("pixels", "upsample"), _UPSAMPLE_SAMPLERS, ("sampling",))
+    shader = _shaders["upsample"]
+    out = gpu.types.GPUTexture((width, height), format="RGBA32F")
+    inputs = {**gbuffer_inputs, "low_image": values}
+    shader.bind()
+    for name in _UPSAMPLE_SAMPLERS:
+        shader.uniform_sampler(name, inputs[name])
+    shader.uniform_float("sampling", (float(stride), float(width), float(height), 0.0))
+    shader.image("out_image", out)
+    gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
+    return out
+
+
+def gather_gi(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
+              width: int, height: int):
     """Full-resolution RGBA32F texture (Diffuse Indirect rgb, AO), bottom row first: gather,
-    filter, upsample. ``volume`` : any ``GPUVolume`` (the upsample kernel binds its textures)."""
+    filter, upsample."""
     values, variance = gather(bvh, gbuffer_inputs, lights, principled, emission, settings,
                               stride, width, height)
     values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
                         settings.denoise_iterations)
-    if stride > 1:
-        values = dispatch("upsample", volume, {**gbuffer_inputs, "low_image": values}, width,
-                          height, {"sampling": (stride, width, height, 0)})
-    return values
+    return upsample(values, gbuffer_inputs, stride, width, height)
 
 
-def glossy_gi(bvh: GPUBVH, volume, gbuffer_inputs, lights, principled, emission, settings,
-              stride: int, width: int, height: int):
+def glossy_gi(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
+              width: int, height: int):
     """Full-resolution RGBA32F texture (Glossy Indirect rgb, 0), bottom row first: the glossy
     gather (``shaders/bvh_glossy.glsl``), the same filter and upsample as ``gather_gi``."""
     values, variance = gather(bvh, gbuffer_inputs, lights, principled, emission, settings,
                               stride, width, height, kernel="bvh_glossy")
     values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
                         settings.denoise_iterations)
-    if stride > 1:
-        values = dispatch("upsample", volume, {**gbuffer_inputs, "low_image": values}, width,
-                          height, {"sampling": (stride, width, height, 0)})
-    return values
+    return upsample(values, gbuffer_inputs, stride, width, height)
 
 
 _GLOSSY_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "direct_image",

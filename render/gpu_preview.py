@@ -14,6 +14,7 @@ import time
 
 import numpy as np
 
+from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.cone_shadows import shadow_cone
 from ..voxgi_addon.preview.gather import GatherSettings
 from ..voxgi_addon.preview.passes import (
@@ -38,7 +39,8 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
                       quality: str = "ACCURATE", gather_settings: GatherSettings | None = None,
                       glossy_indirect: bool = True):
     """(passes, timings) like ``preview.render_passes``. ``volume`` : a ``GPUVolume`` kept
-    between calls so an unchanged octree is not uploaded again (a new one when None).
+    between calls so an unchanged octree is not uploaded again (a new one when None); Fast
+    quality only: Accurate uses neither it nor ``gi_state`` (None is fine).
     quality "ACCURATE": exact direct light and the exact-ray final gather (``gpu_gather``);
     "FAST": cone tracing through the octree (shadows as ``shadows`` says)."""
     check_request(snapshot, width, height, gi_stride, quality)
@@ -46,13 +48,16 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
         shadows = "RAYS"
     gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
     timings = {}
-    t0 = time.perf_counter()
-    volume = volume or GPUVolume()
-    volume.update(gi_state.octree, cones)
-    timings["upload"] = time.perf_counter() - t0
+    if quality != "ACCURATE":  # the cones march the octree; Accurate traces the triangles only
+        t0 = time.perf_counter()
+        volume = volume or GPUVolume()
+        volume.update(gi_state.octree, cones)
+        timings["upload"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     tris = world_triangles(snapshot)
+    if len(tris) == 0:
+        raise VoxGIError("the scene has no triangles to render")
     _, rough, _, _ = material_table(snapshot)
     gbuffer = rasterize(tris, snapshot.camera, rough, width, height)
     seen = read_gbuffer(gbuffer)
@@ -110,7 +115,7 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
 
     if quality == "ACCURATE":
         _, _, _, emission = material_table(snapshot)
-        texture = gather_gi(shared_bvh().update(tris), volume, gbuffer.inputs, snapshot.lights,
+        texture = gather_gi(shared_bvh().update(tris), gbuffer.inputs, snapshot.lights,
                             principled_table(snapshot), emission, gather_settings, gi_stride,
                             width, height)
         diffuse_ao = np.flipud(read_texture(texture))
@@ -121,7 +126,7 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
     t0 = time.perf_counter()
     if glossy_indirect and quality == "ACCURATE":
         _, _, _, emission = material_table(snapshot)
-        texture = glossy_gi(shared_bvh().update(tris), volume, gbuffer.inputs, snapshot.lights,
+        texture = glossy_gi(shared_bvh().update(tris), gbuffer.inputs, snapshot.lights,
                             principled_table(snapshot), emission, gather_settings, gi_stride,
                             width, height)
         glossy = np.flipud(read_texture(texture))

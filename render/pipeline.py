@@ -1,10 +1,13 @@
 """The preview pipeline shared by F12 (``engine.py``) and ``voxgi.render_preview``.
 
-``render_scene_passes``: snapshot (main thread) → in Auto mode the view fit (span, resolution
-and centre of the cascades, docs/gi_pipeline.md "View-fitted cascades") → the session's voxel
-caches of that span (voxelizing when there are none) → one GI update → the camera's
-Cycles-named passes, traced on the GPU when it can (``gpu_preview``) and with the numpy tracer
-otherwise, with report lines saying which tracer and why, and what each cascade covers.
+``render_scene_passes``: snapshot (main thread) → for Fast quality (cone tracing) the voxel
+scene: in Auto mode the view fit (span, resolution and centre of the cascades,
+docs/gi_pipeline.md "View-fitted cascades"), the session's voxel caches of that span
+(voxelizing when there are none) and one GI update → the camera's Cycles-named passes, traced
+on the GPU when it can (``gpu_preview``) and with the numpy tracer otherwise, with report
+lines saying which tracer and why, and what each cascade covers. Accurate quality (the
+default) traces the scene's triangles for every pass, so it builds no voxels at all: the
+session keeps the last voxel state for the debug views and probes.
 """
 from __future__ import annotations
 
@@ -128,22 +131,29 @@ def render_scene_passes(context, scene, depsgraph, width, height, indirect_sourc
         raise VoxGIError("the scene has no camera to render the preview from")
     start = time.perf_counter()
     snapshot, snap_seconds = snapshot_or_error(context, depsgraph)
-    t0 = time.perf_counter()
-    caches, settings, anchor, fit = gi_inputs(context, snapshot, scene)
-    fit_seconds = time.perf_counter() - t0
-    state = update_gi(snapshot, caches, settings, anchor=anchor)
-    state.view_shares = view_shares(snapshot, state.grids, fit)
+    session = scene_session(scene.name_full)
+    voxels = {}
+    state = fit = None
+    if scene.voxgi.quality != "ACCURATE":  # the cones need this update's voxel cascades
+        t0 = time.perf_counter()
+        caches, settings, anchor, fit = gi_inputs(context, snapshot, scene)
+        fit_seconds = time.perf_counter() - t0
+        state = update_gi(snapshot, caches, settings, anchor=anchor)
+        state.view_shares = view_shares(snapshot, state.grids, fit)
+        voxels = {"fit + caches": fit_seconds, **state.timings}
     passes, render_timings, lines = trace_passes(scene, snapshot, state, width, height)
     if (indirect_source or scene.voxgi.indirect_source) == "PROBES":
         from .probe_preview import apply_probe_indirect
         seconds, line = apply_probe_indirect(scene, snapshot, passes, width, height)
         render_timings["probes"] = seconds
         lines.append(line)
-    session = scene_session(scene.name_full)
-    session.gi_state = state
-    session.gi_timings = {"snapshot": snap_seconds, "fit + caches": fit_seconds, **state.timings,
-                          **render_timings, "total": time.perf_counter() - start}
-    lines += coverage_lines(state, fit, scene.voxgi.view_ahead)
-    lines += [("WARNING", w) for w in (fit.warnings if fit is not None else ())]
+    session.gi_timings = {"snapshot": snap_seconds, **voxels, **render_timings,
+                          "total": time.perf_counter() - start}
+    if state is not None:
+        session.gi_state = state
+        lines += coverage_lines(state, fit, scene.voxgi.view_ahead)
+        lines += [("WARNING", w) for w in (fit.warnings if fit is not None else ())]
+    else:
+        lines.append(("INFO", "VoxGI: Accurate quality traces the triangles; no voxels needed"))
     lines.append(("INFO", timing_text(session.gi_timings)))
     return passes, lines

@@ -119,33 +119,43 @@ class VOXGI_PT_gi(_SidebarPanel, bpy.types.Panel):
 
 
 def _draw_gi_state(layout, session) -> None:
-    """Voxels per cascade, octree memory and stage timings of the last GI update."""
-    state = None if session is None else session.gi_state
-    if state is None:
+    """Voxels per cascade and octree memory of the last voxel update, then the tracer, GPU
+    memory and stage timings of the last preview."""
+    if session is None:
+        return
+    state = session.gi_state
+    if state is not None:
+        box = layout.box()
+        box.label(text="Last update", icon="LIGHT")
+        fit = session.view_fit
+        box.label(text="Auto: fitted to the view" if fit is not None else
+                  "Manual: anchored ahead of the camera")
+        # Per cascade: span, extent, share of the visible points it is the finest cascade of.
+        for name, extent, share, count in cascade_cover_rows(state):
+            row = box.row()
+            row.label(text=name)
+            row.label(text=extent.split(",")[0])
+            row.label(text=share.replace(" of the view", " of view"))
+            row.label(text=count)
+        stats = state.octree.stats()
+        row = box.row()
+        row.label(text=f"Octree: {len(stats)} levels")
+        row.label(text=f"{sum(s.nodes for s in stats):,} nodes")
+        row.label(text=f"{sum(s.bytes for s in stats) / MEGABYTE:.2f} MB")
+    if not (session.tracer_used or session.gi_timings):
         return
     box = layout.box()
-    box.label(text="Last update", icon="LIGHT")
-    fit = session.view_fit
-    box.label(text="Auto: fitted to the view" if fit is not None else
-              "Manual: anchored ahead of the camera")
-    # Per cascade: span, extent, share of the visible points it is the finest cascade of.
-    for name, extent, share, count in cascade_cover_rows(state):
-        row = box.row()
-        row.label(text=name)
-        row.label(text=extent.split(",")[0])
-        row.label(text=share.replace(" of the view", " of view"))
-        row.label(text=count)
-    stats = state.octree.stats()
     row = box.row()
-    row.label(text=f"Octree: {len(stats)} levels")
-    row.label(text=f"{sum(s.nodes for s in stats):,} nodes")
-    row.label(text=f"{sum(s.bytes for s in stats) / MEGABYTE:.2f} MB")
     if session.tracer_used:
+        row.label(text=f"Last preview traced with: {session.tracer_used}", icon="RENDER_STILL")
+    if session.tracer_used == "GPU":
+        from ..render.gpu_bvh import shared_bvh
+
         volume = session.gpu_volume
-        row = box.row()
-        row.label(text=f"Last preview traced with: {session.tracer_used}")
-        if session.tracer_used == "GPU" and volume is not None:
+        if volume is not None and volume.resident_bytes:
             row.label(text=f"atlas {volume.resident_bytes / MEGABYTE:.1f} MB on the GPU")
+        if shared_bvh().resident_bytes:
+            row.label(text=f"BVH {shared_bvh().resident_bytes / MEGABYTE:.1f} MB on the GPU")
     for name, seconds in session.gi_timings.items():
         row = box.row()
         row.label(text=name)

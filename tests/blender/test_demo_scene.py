@@ -128,8 +128,14 @@ def test_gi_panel_says_which_tracer_drew_the_last_preview(voxgi, tmp_path):
     assert {"quality", "gi_rays", "gi_resolution", "tracer"} <= set(layout.props)
     assert "shadows" not in layout.props  # soft-shadow cones are a Fast-quality choice
     assert "Last preview traced with: GPU" in layout.labels
+    # Accurate traces the triangles: their BVH is on the GPU, no voxel atlas
+    assert any(text.startswith("BVH ") and text.endswith("MB on the GPU") for text in layout.labels)
+    assert not any(text.startswith("atlas ") for text in layout.labels)
     bpy.context.scene.voxgi.quality = "FAST"
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "f.exr"), resolution_x=16,
+                                        resolution_y=12) == {"FINISHED"}
     fast = _Layout()
     bpy.types.VOXGI_PT_gi.draw(type("PanelStub", (), {"layout": fast})(), bpy.context)
     assert {"shadows", "diffuse_cones"} <= set(fast.props) and "gi_rays" not in fast.props
-    assert any(text.startswith("atlas ") and text.endswith("MB on the GPU") for text in layout.labels)
+    assert any(text.startswith("atlas ") and text.endswith("MB on the GPU") for text in fast.labels)
+    assert any(text.startswith("Octree: ") for text in fast.labels)  # the voxel update's table

@@ -87,6 +87,7 @@ def test_manual_keeps_the_camera_anchored_cascades(voxgi, session):
 def test_switching_modes_reuses_each_spans_caches(voxgi, session, tmp_path):
     scene = bpy.context.scene
     build_far_room(scene)
+    scene.voxgi.quality = "FAST"  # the cones' preview voxelizes (Accurate needs no voxels)
     path = str(tmp_path / "far.exr")
     assert bpy.ops.voxgi.render_preview(filepath=path, resolution_x=32, resolution_y=24) == {"FINISHED"}
     state = last(session)

@@ -206,7 +206,8 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
                   light_samples: int = 16, shadows: str = "RAYS", gi_stride: int = 1,
                   quality: str = "ACCURATE", gather_settings: GatherSettings | None = None,
                   glossy_indirect: bool = True):
-    """Render the passes at ``width`` × ``height`` with the numpy tracer.
+    """Render the passes at ``width`` × ``height`` with the numpy tracer. ``gi_state`` (the
+    voxel octree) is used by Fast quality only; Accurate may pass None.
 
     glossy_indirect : trace glossy reflections (exact rays in Accurate quality,
     ``gather.gather_glossy``; cones in Fast); False leaves Glossy Indirect 0, as Cycles does
@@ -232,6 +233,8 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     timings = {}
     t0 = time.perf_counter()
     tris = world_triangles(snapshot)
+    if len(tris) == 0:
+        raise VoxGIError("the scene has no triangles to render")
     seen = primary_visibility(tris, snapshot.camera, width, height)
     hit = np.flatnonzero(seen.hit.ravel())
     p = seen.position.reshape(-1, 3)[hit]
