@@ -145,3 +145,26 @@ def test_stored_tables_match_their_definition():
         average = np.mean(2 * mus * pr.lookup(luts["ggx_E"], rough, mus))
         assert abs(pr.lookup(luts["ggx_Eavg"], rough) - average) < 3e-3
     assert pr.lut_texels().shape == (305, 32, 4)
+
+
+def test_tabulated_colours_of_a_big_image_equal_the_direct_evaluation():
+    """preview.passes.principled_colours interpolates per-material tables over cos(view) when
+    there are more pixels than table entries: a metal, a glossy dielectric, a rough one."""
+    from snapshots import snapshot
+
+    from voxgi.voxgi_addon.preview.passes import COLOUR_BINS, principled_colours, principled_table
+    from voxgi.voxgi_addon.scene.snapshot import MaterialData
+
+    materials = [MaterialData("metal", np.array([0.9, 0.6, 0.3], np.float32), 0.05, 1.0),
+                 MaterialData("glossy", np.array([0.2, 0.4, 0.8], np.float32), 0.15, 0.0, 0.9),
+                 MaterialData("rough", np.array([0.8, 0.8, 0.8], np.float32), 0.9, 0.3)]
+    scene = snapshot([], [], materials)
+    rng = np.random.default_rng(5)
+    count = 5 * COLOUR_BINS  # more than the 4 materials' (with "none") table entries
+    mat = rng.integers(0, 4, count)
+    cos_view = np.concatenate([rng.random(count - 3), [0.0, 1e-6, 1.0]])
+    diffuse, glossy = principled_colours(scene, mat, cos_view)
+    base, params = principled_table(scene)
+    args = (base[mat], params[mat, 0], params[mat, 1], params[mat, 2], cos_view)
+    np.testing.assert_allclose(diffuse, pr.diffuse_weight(*args), atol=2e-4)
+    np.testing.assert_allclose(glossy, pr.glossy_color(*args), atol=2e-4)
