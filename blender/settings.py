@@ -142,15 +142,16 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
     )
     glossy_indirect: bpy.props.BoolProperty(
         name="Glossy Indirect",
-        description="Trace glossy reflections of the scene (cones through the voxels); off "
-                    "leaves the Glossy Indirect pass black, like Cycles with Max Bounces "
-                    "Glossy 0",
+        description="Trace glossy reflections of the scene (exact rays in Accurate quality, "
+                    "cones through the voxels in Fast); off leaves the Glossy Indirect pass "
+                    "black",
         default=True,
     )
     gi_rays: bpy.props.IntProperty(
         name="GI Rays",
         description="Exact rays per gather point for diffuse indirect light and AO (Accurate "
-                    "quality); more rays, less noise before denoising",
+                    "quality), and an eighth of them for glossy reflections; more rays, less "
+                    "noise before denoising",
         default=64, min=1, max=1024,
     )
     tracer: bpy.props.EnumProperty(
@@ -276,6 +277,7 @@ def trace_options(settings: VoxGISceneSettings, width: int, height: int) -> dict
             "gi_stride": gi_stride(settings, width, height), "quality": settings.quality,
             "glossy_indirect": settings.glossy_indirect,
             "gather_settings": GatherSettings(rays=settings.gi_rays,
+                                              glossy_rays=max(1, settings.gi_rays // 8),
                                               ao_distance=settings.ao_distance)}
 
 

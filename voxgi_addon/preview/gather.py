@@ -38,7 +38,7 @@ class GatherSettings:
     (0 gives Cycles' pass split, where the world seen from a receiver is direct light)."""
 
     rays: int = 64
-    glossy_rays: int = 16
+    glossy_rays: int = 8
     ao_distance: float = 1.0
     hit_glossy: bool = True
     hit_samples: int = 1
