@@ -1,10 +1,10 @@
 """GI benchmark on the four issue scenes (tests/blender/gi_scenes.py), run with the bpy venv:
 ``.venv/bin/python tools/bench/bench_scenes_blender.py [--quick]``.
 
-Per scene at 160×120: the default preview (GPU, Accurate) and the Fast (cone) preview — median
-time and relative L1 of each pass against the stored Cycles 2048-spp one-bounce reference
-(tests/data/gi_refs) — beside Cycles at 16/64/256 spp rendered in the same run, with their
-times and errors against the same reference. Then the default 640×480 preview of the demo
+Per scene at 160×120: the default preview (GPU, Accurate), a draft of it and the Fast (cone)
+preview (``VARIANTS``) — median time and relative L1 of each pass against the stored Cycles
+2048-spp one-bounce reference (tests/data/gi_refs) — beside Cycles at 16/64/256 spp rendered
+in the same run, with their times and errors against the same reference. Then the default 640×480 preview of the demo
 scene. Prints markdown tables.
 """
 from __future__ import annotations
@@ -20,7 +20,15 @@ ROOT = HERE.parents[1]
 sys.path[:0] = [str(HERE), str(ROOT / "tools"), str(ROOT / "tests" / "blender")]
 from bench_blender import load_addon  # noqa: E402
 
-PASSES = ("Diffuse Direct", "Diffuse Indirect", "Ambient Occlusion", "Combined")
+PASSES = ("Diffuse Direct", "Diffuse Indirect", "Ambient Occlusion", "Glossy Indirect", "Combined")
+# Preview variants: label → settings over the defaults. "Draft" spends a quarter of everything:
+# GI Resolution Half, a quarter of the GI rays and of the light samples.
+VARIANTS = {
+    "VoxGI Accurate (GPU, defaults)": {},
+    "VoxGI Accurate draft (GPU: Half, 16 rays, 4 light samples)":
+        {"gi_resolution": "2", "gi_rays": 16, "light_samples": 4},
+    "VoxGI Fast (GPU, cones)": {"quality": "FAST"},
+}
 
 
 def relative_l1(ours, reference, mask):
@@ -54,9 +62,9 @@ def main(argv=None) -> int:
     repeats = 1 if args.quick else 3
     spps = (16, 64) if args.quick else (16, 64, 256)
     names = ["cornell_far"] if args.quick else sorted(gi_scenes.SCENES)
-    print("### GI scenes at 160×120 vs Cycles 2048 spp, one diffuse bounce (relative L1)\n")
-    print("| scene | renderer | median time | Direct | Indirect | AO | Combined |")
-    print("|---|---|---:|---:|---:|---:|---:|")
+    print("### GI scenes at 160×120 vs Cycles 2048 spp, one bounce (relative L1)\n")
+    print("| scene | renderer | median time | Direct | Indirect | AO | Glossy Ind. | Combined |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|")
     for name in names:
         bpy.ops.wm.read_factory_settings(use_empty=True)
         scene = bpy.context.scene
@@ -66,12 +74,17 @@ def main(argv=None) -> int:
         mask = reference["Alpha"] > 0.5
         w, h = gi_scenes.WIDTH, gi_scenes.HEIGHT
         rows = []
-        for quality in ("ACCURATE", "FAST"):
-            scene.voxgi.quality = quality
+        defaults = {k: getattr(scene.voxgi, k) for k in ("quality", "gi_resolution", "gi_rays",
+                                                          "light_samples")}
+        for label, variant in VARIANTS.items():
+            for key, value in {**defaults, **variant}.items():
+                setattr(scene.voxgi, key, value)
             render_scene_passes(bpy.context, scene, None, w, h)  # warm: caches, shaders, BVH
             seconds, (passes, _) = timed(
                 lambda: render_scene_passes(bpy.context, scene, None, w, h), repeats)
-            rows.append((f"VoxGI {quality.title()} (GPU)", seconds, passes))
+            rows.append((label, seconds, passes))
+        for key, value in defaults.items():
+            setattr(scene.voxgi, key, value)
         for spp in spps:
             seconds, passes = timed(lambda: render_cycles_passes(
                 scene, w, h, spp, diffuse_bounces=1, ao_distance=1.0, glossy_bounces=1,
