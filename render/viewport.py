@@ -10,9 +10,9 @@
    a new view is reported to ``LiveGI.view_changed`` (trace again; the cascades move when the
    view leaves their anchor cell);
 2. when the applied results, the view, the pass or the trace settings changed since the last
-   trace: upload the octree atlas the worker laid out (``GPUVolume.update(…, atlas=…)``) and
-   trace with the GPU tracer (``gpu_preview.render_passes_gpu``, as F12), keeping the chosen
-   pass as a texture;
+   trace: in Fast quality upload the octree atlas the worker laid out
+   (``GPUVolume.update(…, atlas=…)``); trace with the GPU tracer
+   (``gpu_preview.render_passes_gpu``, as F12), keeping the chosen pass as a texture;
 3. draw that texture over the region. While newer work runs, the last texture is drawn again:
    the view never goes blank.
 
@@ -70,7 +70,7 @@ class ViewportRenderer:
     def _trace_key(self, live, camera_key, scene, pass_name):
         s = scene.voxgi
         return (live.generation, camera_key, pass_name, cone_settings(s), s.light_samples,
-                s.shadows, s.gi_resolution, s.tracer)
+                s.shadows, s.gi_resolution, s.tracer, s.quality, s.gi_rays, s.glossy_indirect)
 
     def trace(self, live, scene, camera, camera_key, pass_name: str) -> bool:
         """Trace ``live``'s applied results seen by ``camera`` unless the texture already
@@ -86,7 +86,8 @@ class ViewportRenderer:
         cones = cone_settings(settings)
         width, height = camera.resolution
         t0 = time.perf_counter()
-        self.volume.update(live.staged.state.octree, cones, atlas=live.atlas)
+        if settings.quality != "ACCURATE":  # Accurate traces the triangles, not the octree
+            self.volume.update(live.staged.state.octree, cones, atlas=live.atlas)
         upload = time.perf_counter() - t0
         snapshot = dataclasses.replace(live.snapshot, camera=camera)
         passes, timings = render_passes_gpu(snapshot, live.staged.state, width, height, cones,

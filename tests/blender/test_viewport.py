@@ -109,6 +109,13 @@ def test_viewport_path_with_the_camera_view_equals_f12(voxgi, tmp_path, camera_t
     # Redrawing the same view draws the kept texture without tracing again.
     drawn, again = offscreen_view(renderer, scene, depsgraph, view, window)
     assert drawn and renderer.traces == 1 and np.array_equal(again, image)
+    assert renderer.volume.resident_bytes == 0  # Accurate traces the triangles: no atlas
+
+    # A trace setting changes the image: Fast cone-traces the octree the worker laid out.
+    scene.voxgi.quality = "FAST"
+    drawn, fast = offscreen_view(renderer, scene, depsgraph, view, window)
+    assert drawn and renderer.traces == 2 and not np.array_equal(fast, image)
+    assert renderer.volume.resident_bytes > 0
 
 
 def test_viewport_keeps_the_last_image_while_newer_work_runs(voxgi, interactive):
