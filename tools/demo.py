@@ -154,7 +154,7 @@ def gi_section(scene, args) -> int:
     errors = gi_compare.pass_errors(ours, cycles)
     print(f"\nstrips: {args.out / 'preview_strip.png'} and {args.out / 'cycles_strip.png'} "
           f"({', '.join(gi_compare.STRIP_PASSES)})")
-    print(f"preview {seconds:.2f} s vs Cycles {args.cycles_samples} spp, one diffuse bounce "
+    print(f"preview {seconds:.2f} s vs Cycles {args.cycles_samples} spp, one bounce "
           f"{cycles_seconds:.2f} s; relative L1 error vs Cycles:")
     print("\n".join(f"  {name:<18} {value:.3f}" for name, value in errors.items()))
     return 0

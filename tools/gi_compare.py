@@ -1,7 +1,7 @@
 """GI preview vs Cycles for the demo and the benchmark (run inside Blender / the bpy module).
 
 ``preview_and_cycles`` renders the scene camera with ``voxgi.render_preview`` (EXR) and with
-Cycles (one diffuse bounce), writes PNG strips (Combined, Diffuse Indirect, Ambient
+Cycles (one bounce), writes PNG strips (Combined, Diffuse Indirect, Ambient
 Occlusion) of both, and returns the per-pass relative L1 errors over geometry pixels.
 """
 from __future__ import annotations
