@@ -85,8 +85,12 @@ void main()
     vec3 l = normalize(2.0 * dot(v, h) * h - v);
     vec3 weight = vec3(1.0); /* a mirror: the pass is the reflected radiance itself */
     if (!mirror) {
-      float cos_nh = clamp(dot(h, n), 0.0, 1.0);
-      float den = 1.0 - cos_nh * cos_nh + alpha2 * cos_nh * cos_nh;
+      /* D of normalize(v + l) computed as principled_glossy_reflectance does (1 − cos² as
+       * |n × h|², exact in float32 near a mirror's peak), so that it cancels in the weight. */
+      vec3 h_eval = normalize(v + l);
+      float cos_nh = dot(n, h_eval);
+      vec3 nxh = cross(n, h_eval);
+      float den = min(dot(nxh, nxh), 1.0) + alpha2 * min(cos_nh * cos_nh, 1.0);
       float pdf = alpha2 / (M_PI_F * max(den * den, 1e-30)) / pdf_scale;
       weight = dot(l, n) > 0.0 && pdf > 0.0 ?
                principled_glossy_reflectance(base, params.x, params.y, rough, n, v, l) /

@@ -201,7 +201,9 @@ vec3 principled_glossy_reflectance(vec3 base, float metallic, float level, float
   float cos_nh = dot(n, h);
   float cos_hi = dot(h, view);
   float c2 = min(cos_nh * cos_nh, 1.0);
-  float den = 1.0 - c2 + alpha2 * c2;
+  /* 1 − cos² as |n × h|²: near a mirror's peak 1 − cos² keeps few float32 digits. */
+  vec3 nxh = cross(n, h);
+  float den = min(dot(nxh, nxh), 1.0) + alpha2 * c2;
   float d = alpha2 / (PR_PI * den * den);
   float ggx = d / (4.0 * cos_ni * (1.0 + pr_ggx_lambda(alpha2, cos_ni) +
                                       pr_ggx_lambda(alpha2, cos_no)));

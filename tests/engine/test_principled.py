@@ -168,3 +168,18 @@ def test_tabulated_colours_of_a_big_image_equal_the_direct_evaluation():
     args = (base[mat], params[mat, 0], params[mat, 1], params[mat, 2], cos_view)
     np.testing.assert_allclose(diffuse, pr.diffuse_weight(*args), atol=2e-4)
     np.testing.assert_allclose(glossy, pr.glossy_color(*args), atol=2e-4)
+
+
+def test_nan_material_inputs_fall_back_to_the_defaults():
+    """A NaN roughness or metallic (a broken driver, a bad import) must not turn every ray
+    that meets the material into NaN: the table keeps the Principled defaults instead."""
+    from snapshots import snapshot
+
+    from voxgi.voxgi_addon.preview.passes import principled_table
+    from voxgi.voxgi_addon.scene.snapshot import MaterialData
+
+    nan = float("nan")
+    broken = MaterialData("broken", np.array([nan, 0.5, 0.2], np.float32), nan, nan, 2.0)
+    base, params = principled_table(snapshot([], [], [broken]))
+    assert np.isfinite(base).all() and np.isfinite(params).all()
+    np.testing.assert_allclose(params[0], [0.0, 1.0, 0.5])  # metallic 0, level clipped, rough ½

@@ -109,8 +109,14 @@ def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights,
     shading = (base[:, None], metallic[:, None], level[:, None], rough[:, None])
     reflect = glossy_reflectance(*shading, n[:, None], v[:, None], dirs)  # (N, K, 3)
     alpha2 = (alpha * alpha)[:, None]
-    cos_nh = np.clip(np.einsum("nkc,nc->nk", h, n), 0.0, 1.0)
-    den = 1.0 - cos_nh ** 2 + alpha2 * cos_nh ** 2
+    # D of the half vector of (v, l) as glossy_reflectance evaluates it, so that D cancels in
+    # the weight; the GLSL port takes 1 − cos² as |n × h|², which float32 keeps exact near a
+    # mirror's peak (shaders/bvh_glossy.glsl, principled.glsl).
+    h_eval = v[:, None] + dirs
+    h_eval /= np.maximum(np.linalg.norm(h_eval, axis=-1, keepdims=True), 1e-30)
+    cos2 = np.minimum(np.einsum("nkc,nc->nk", h_eval, n) ** 2, 1.0)
+    sin2 = np.minimum((np.cross(n[:, None], h_eval) ** 2).sum(-1), 1.0)
+    den = sin2 + alpha2 * cos2
     d = alpha2 / (np.pi * np.maximum(den * den, 1e-30))
     pdf = d / (4.0 * np.maximum(cos_ni, 1e-4)[:, None] * (1.0 + _lambda(alpha2, cos_ni[:, None])))
     colour = glossy_color(base, metallic, level, rough, np.clip(cos_ni, 0.0, 1.0))  # (N, 3)

@@ -55,8 +55,8 @@ def principled_table(snapshot):
     params = np.tile([0.0, 0.5, 0.5], (len(mats) + 1, 1))
     for i, m in enumerate(mats):
         base[i] = np.clip(np.nan_to_num(np.asarray(m.base_color[:3], np.float64)), 0, 1)
-        params[i] = (np.clip(m.metallic, 0, 1), np.clip(m.specular, 0, 1),
-                     np.clip(m.roughness, 0, 1))
+        given = np.array([m.metallic, m.specular, m.roughness], np.float64)
+        params[i] = np.clip(np.where(np.isfinite(given), given, params[i]), 0, 1)  # NaN: default
     return base, params
 
 
