@@ -69,7 +69,7 @@ def bvh_shader(kernel: str):
         if kernel in ("bvh_gather", "bvh_glossy"):
             defines["VIEW_BACKOFF"] = repr(float(VIEW_BACKOFF))
             defines["GLOSSY_STREAM"] = f"{GLOSSY_STREAM}u"
-        _shaders[kernel] = build_compute(("bvh_common",) + files, samplers, constants,
+        _shaders[kernel] = build_compute(("sampling", "bvh_common") + files, samplers, constants,
                                          OUTPUTS.get(kernel, ("out_image",)), defines)
     return _shaders[kernel]
 

@@ -14,6 +14,7 @@ import math
 import gpu
 import numpy as np
 
+from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import low_shape
 from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, strata_side
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
@@ -157,8 +158,10 @@ def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: 
     (``shaders/glossy_direct.glsl``, the port of ``preview.passes.glossy_direct_radiance``);
     direct : that light's Diffuse Direct texture; an RGBA32F texture (bottom row first)."""
     if "glossy" not in _shaders:
-        _shaders["glossy"] = build_compute(("principled", "glossy_direct"), _GLOSSY_SAMPLERS,
-                                           ("light",), ("out_image",), PRINCIPLED_DEFINES)
+        defines = {**PRINCIPLED_DEFINES, "AREA_GLOSSY_GRID": str(AREA_GLOSSY_GRID),
+                   "GLOSSY_LIGHT_STREAM": f"{GLOSSY_LIGHT_STREAM}u"}
+        _shaders["glossy"] = build_compute(("sampling", "principled", "glossy_direct"),
+                                           _GLOSSY_SAMPLERS, ("light",), ("out_image",), defines)
     shader = _shaders["glossy"]
     out = gpu.types.GPUTexture((direct.width, direct.height), format="RGBA32F")
     inputs = {**gbuffer_inputs, "direct_image": direct, "lights": lights_texture_,

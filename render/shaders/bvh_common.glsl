@@ -1,5 +1,5 @@
 /* Ray casting through the threaded BVH of voxgi_addon/bvh.py (see its module doc), a port of
- * bvh.traverse; and the hashed sample patterns of voxgi_addon/sampling.py, bit for bit.
+ * bvh.traverse.
  *
  * Samplers (2D RGBA32F, texel k at (k mod BVH_WIDTH, k div BVH_WIDTH)):
  *   bvh_nodes     : 2 texels per node, (lo.xyz, miss link), (hi.xyz, leaf code = first·16 + count
@@ -8,11 +8,14 @@
  *                   the SceneTriangles), (e2.xyz, |e1|·|e2|).
  * Defines: BVH_WIDTH_LOG2, SHADOW_EPSILON (metres), DET_EPSILON (relative). Hits are
  * double-sided Möller–Trumbore with raycast.py's determinant test; shadow rays count hits with
- * SHADOW_EPSILON < t < tmax − SHADOW_EPSILON, as raycast.occluded. */
+ * SHADOW_EPSILON < t < tmax − SHADOW_EPSILON, as raycast.occluded. The hashed sample patterns
+ * are in sampling.glsl, which comes first. */
 
 #define BVH_WIDTH (1 << BVH_WIDTH_LOG2)
 #define BVH_FAR 1e30
+#ifndef M_PI_F
 #define M_PI_F 3.14159265358979323846
+#endif
 
 vec4 bvh_texel_nodes(int k)
 {
@@ -132,71 +135,4 @@ vec3 bvh_triangle_face_normal(int slot)
   vec3 n = cross(bvh_texel_triangles(3 * slot + 1).xyz, bvh_texel_triangles(3 * slot + 2).xyz);
   float len = length(n);
   return len > 0.0 ? n / len : vec3(0.0);
-}
-
-/* ------------------------------------------------------------ voxgi_addon/sampling.py */
-
-uint pcg_hash(uint v)
-{
-  uint state = v * 747796405u + 2891336453u;
-  uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
-  return (word >> 22u) ^ word;
-}
-
-float unit_float(uint h)
-{
-  return float(h >> 8u) * (1.0 / 16777216.0);
-}
-
-uint point_stream(uint id, uint stream, uint seed)
-{
-  return pcg_hash(pcg_hash(id + seed * 0x9E3779B9u) + stream);
-}
-
-/* Stratum k of m×m of a point's stream (sampling.hashed_square). */
-vec2 hashed_stratum(uint state, int k, int m)
-{
-  vec2 jitter = vec2(unit_float(pcg_hash(state + uint(2 * k))),
-                     unit_float(pcg_hash(state + uint(2 * k + 1))));
-  return (vec2(float(k / m), float(k % m)) + jitter) / float(m);
-}
-
-float radical_inverse(uint b)
-{
-  b = (b << 16u) | (b >> 16u);
-  b = ((b & 0x55555555u) << 1u) | ((b & 0xAAAAAAAAu) >> 1u);
-  b = ((b & 0x33333333u) << 2u) | ((b & 0xCCCCCCCCu) >> 2u);
-  b = ((b & 0x0F0F0F0Fu) << 4u) | ((b & 0xF0F0F0F0u) >> 4u);
-  b = ((b & 0x00FF00FFu) << 8u) | ((b & 0xFF00FF00u) >> 8u);
-  return float(b >> 8u) * (1.0 / 16777216.0);
-}
-
-/* Point j of `count` of the rotated Hammersley set of a point's stream (sampling.hammersley). */
-vec2 hammersley(uint state, int j, int count)
-{
-  vec2 rotation = vec2(unit_float(pcg_hash(state)), unit_float(pcg_hash(state + 1u)));
-  vec2 u = vec2((float(j) + 0.5) / float(count), radical_inverse(uint(j))) + rotation;
-  return u - floor(u);
-}
-
-/* Shirley–Chiu map of [0, 1)² to the unit disc (direct_light.concentric_disk). */
-vec2 concentric_disk(vec2 s)
-{
-  float a = 2.0 * s.x - 1.0;
-  float b = 2.0 * s.y - 1.0;
-  if (a == 0.0 && b == 0.0) {
-    return vec2(0.0);
-  }
-  bool first = abs(a) > abs(b);
-  float r = first ? a : b;
-  float phi = first ? (M_PI_F / 4.0) * b / a : M_PI_F / 2.0 - (M_PI_F / 4.0) * a / b;
-  return r * vec2(cos(phi), sin(phi));
-}
-
-/* Tangents of unit w (sampling.perpendicular_basis). */
-void perpendicular_basis(vec3 w, out vec3 t, out vec3 b)
-{
-  vec3 helper = abs(w.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
-  t = normalize(cross(w, helper));
-  b = cross(w, t);
 }

@@ -1,13 +1,13 @@
 /* The glossy light one light sends to the viewer (Glossy Color × Glossy Direct) per G-buffer
  * pixel: the port of voxgi_addon/preview/passes.glossy_direct_radiance for light `light.x`.
  * Its shadowed Diffuse Direct (direct_image, that light alone) is turned back into irradiance
- * (× π) and spread over the light's directions — one for suns and point lights, the centres of
- * a 4 × 4 grid over an area light (inside the ellipse for round ones), weighted by their share
- * of the unshadowed irradiance — each reflected toward the viewer by the Principled glossy
- * lobe (principled.glsl) / cos. Samplers: lights (preview/light_table.py), materials (base,
- * emission, (metallic, level, roughness) rows), principled_lut; gbuffer_view = (ray direction,
- * material). */
-#define AREA_GLOSSY_GRID 4
+ * (× π) and spread over the light's directions — one for suns and point lights, 4 × 4 strata
+ * over an area light (centres, jittered with the pixel's hash stream GLOSSY_LIGHT_STREAM +
+ * light index as far as passes.glossy_jitter says, mapped as the shadow rays map theirs:
+ * sampling.glsl), weighted by their share of the unshadowed
+ * irradiance — each reflected toward the viewer by the Principled glossy lobe (principled.glsl)
+ * / cos. Samplers: lights (preview/light_table.py), materials (base, emission, (metallic, level,
+ * roughness) rows), principled_lut; gbuffer_view = (ray direction, material). */
 
 vec4 glossy_light_texel(int k)
 {
@@ -53,24 +53,28 @@ void main()
     vec3 emits = glossy_light_texel(5).xyz;
     bool round_shape = head.y > 0.5;
     float total = 0.0;
-    for (int j = 0; j < AREA_GLOSSY_GRID; j++) {
-      for (int i = 0; i < AREA_GLOSSY_GRID; i++) {
-        float u = 2.0 * ((float(i) + 0.5) / float(AREA_GLOSSY_GRID) - 0.5);
-        float v = 2.0 * ((float(j) + 0.5) / float(AREA_GLOSSY_GRID) - 0.5);
-        if (round_shape && u * u + v * v > 1.0) {
-          continue;
-        }
-        vec3 offset = centre + u * ex + v * ey - position.xyz;
-        float distance = max(length(offset), 1e-9);
-        vec3 towards = offset / distance;
-        float c = dot(n, towards);
-        float weight = max(-dot(towards, emits), 0.0) * max(c, 0.0) / (distance * distance);
-        total += weight;
-        if (c > 1e-4) {
-          lobe += weight *
-                  principled_glossy_reflectance(base, params.x, params.y, params.z, n, view,
-                                                towards) / c;
-        }
+    uint id = uint((size.y - 1 - px.y) * size.x + px.x);
+    uint state = point_stream(id, GLOSSY_LIGHT_STREAM + uint(light.x), 0u);
+    /* passes.glossy_jitter: strata centres while the lobe is wider than a stratum */
+    float alpha = clamp(params.z, 0.0, 1.0) * clamp(params.z, 0.0, 1.0);
+    float extent = 2.0 * max(length(ex), length(ey));
+    float spacing = extent / max(length(centre - position.xyz), 1e-9) / float(AREA_GLOSSY_GRID);
+    float amount = clamp(spacing / max(2.0 * alpha, 1e-6) - 1.0, 0.0, 1.0);
+    for (int k = 0; k < AREA_GLOSSY_GRID * AREA_GLOSSY_GRID; k++) {
+      vec2 mid = (vec2(float(k / AREA_GLOSSY_GRID), float(k % AREA_GLOSSY_GRID)) + 0.5) /
+                 float(AREA_GLOSSY_GRID);
+      vec2 s = mid + amount * (hashed_stratum(state, k, AREA_GLOSSY_GRID) - mid);
+      vec2 unit = round_shape ? concentric_disk(s) : s * 2.0 - 1.0;
+      vec3 offset = centre + unit.x * ex + unit.y * ey - position.xyz;
+      float distance = max(length(offset), 1e-9);
+      vec3 towards = offset / distance;
+      float c = dot(n, towards);
+      float weight = max(-dot(towards, emits), 0.0) * max(c, 0.0) / (distance * distance);
+      total += weight;
+      if (c > 1e-4) {
+        lobe += weight *
+                principled_glossy_reflectance(base, params.x, params.y, params.z, n, view,
+                                              towards) / c;
       }
     }
     lobe /= max(total, 1e-30);

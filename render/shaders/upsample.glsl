@@ -1,6 +1,7 @@
 /* Joint bilateral upsample of the reduced-resolution diffuse/AO image (gi_upsample.upsample,
- * ported line for line): per full-resolution pixel, the 4 nearest traced cells weighted
- * bilinearly × max(n·n_k, 0)^8 × exp(−(|n·(p_k − p)| / (0.1·|p_k − p| + 1e-4))²); a pixel with
+ * ported line for line): per full-resolution pixel, the 3 × 3 traced cells around the nearest
+ * one weighted by quadratic B-splines × max(n·n_k, 0)^8 ×
+ * exp(−(|n·(p_k − p)| / (0.1·|p_k − p| + 1e-4))²); a pixel with
  * no usable neighbour takes the nearest traced cell within two cells.
  * sampling = (stride, full width, full height); low_image rows count from the bottom. */
 void main()
@@ -22,18 +23,23 @@ void main()
   float v = float(full.y - 1 - px.y - stride / 2) / float(stride);
   int i0 = clamp(int(floor(u)), 0, low.x - 1);
   int j0 = clamp(int(floor(v)), 0, low.y - 1);
-  float fu = clamp(u - float(i0), 0.0, 1.0);
-  float fv = clamp(v - float(j0), 0.0, 1.0);
+  /* Quadratic B-spline weights over the 3 × 3 cells around the nearest one. */
+  int ci = int(floor(u + 0.5));
+  int cj = int(floor(v + 0.5));
+  float tu = u - float(ci);
+  float tv = v - float(cj);
+  vec3 wu = vec3(0.5 * (0.5 - tu) * (0.5 - tu), 0.75 - tu * tu, 0.5 * (0.5 + tu) * (0.5 + tu));
+  vec3 wv = vec3(0.5 * (0.5 - tv) * (0.5 - tv), 0.75 - tv * tv, 0.5 * (0.5 + tv) * (0.5 + tv));
   vec4 total = vec4(0.0);
   float weight = 0.0;
-  for (int dj = 0; dj < 2; dj++) {
-    for (int di = 0; di < 2; di++) {
-      int j = min(j0 + dj, low.y - 1);
-      int i = min(i0 + di, low.x - 1);
+  for (int dj = -1; dj <= 1; dj++) {
+    for (int di = -1; di <= 1; di++) {
+      int j = clamp(cj + dj, 0, low.y - 1);
+      int i = clamp(ci + di, 0, low.x - 1);
       ivec2 q = traced_pixel(j, i, stride, full);
       vec4 pk = texelFetch(gbuffer_position, q, 0);
       vec3 nk = texelFetch(gbuffer_normal, q, 0).xyz;
-      float w = (di == 1 ? fu : 1.0 - fu) * (dj == 1 ? fv : 1.0 - fv) * (pk.w > 0.5 ? 1.0 : 0.0);
+      float w = wu[di + 1] * wv[dj + 1] * (pk.w > 0.5 ? 1.0 : 0.0);
       vec3 offset = pk.xyz - position.xyz;
       float facing = max(dot(n, nk), 0.0);
       float facing2 = facing * facing;

@@ -35,8 +35,12 @@ def test_upsampling_keeps_surfaces_apart_and_reproduces_traced_pixels(stride):
     assert rows.tolist() == list(range(stride // 2, height, stride))
     low = value[rows][:, cols]
     out = upsample(low, hit[rows][:, cols], hit, position, normal, stride)
-    # Traced pixels keep their own value; no floor value leaks onto the wall or back.
-    np.testing.assert_allclose(out[rows][:, cols], low, rtol=1e-5)
+    # Traced pixels keep their value: the B-spline reproduces the ramps inside each surface;
+    # at image borders and where the other surface's cells drop out, nearly.
+    inner = out[rows][:, cols][1:-1, 1:len(cols) // 2 - 1]
+    np.testing.assert_allclose(inner, low[1:-1, 1:len(cols) // 2 - 1], rtol=1e-5)
+    assert np.abs(out[rows][:, cols] - low).max() < 0.005 * stride + 1e-6
+    # No floor value leaks onto the wall or back.
     left = np.arange(width) < width // 2
     assert out[:, left].max() < 1.0 and out[:, ~left].min() > 1.0
     # Smooth values come back within what the block size allows.
@@ -65,3 +69,22 @@ def test_auto_stride_keeps_the_traced_points_near_160_by_120():
         stride = auto_stride(w, h)
         hl, wl = low_shape(h, w, stride)
         assert hl * wl <= AUTO_POINTS or stride == 4
+
+
+@pytest.mark.parametrize("stride", [2, 4])
+def test_cell_noise_does_not_show_the_grid_of_traced_pixels(stride):
+    """The traced cells keep some noise after denoising. Bilinear upsampling showed it at full
+    strength on the traced pixels and averaged it between them: a grid of dots one block
+    apart on every flat wall at Half and Quarter GI resolution. The B-spline averages
+    everywhere, so the noise left is alike at every pixel of a block."""
+    height, width = 64 * stride, 64 * stride
+    ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
+    position = np.stack([xs, ys, 0 * xs], -1) / width
+    normal = np.broadcast_to(np.array([0, 0, 1], np.float32), position.shape)
+    hit = np.ones((height, width), bool)
+    rows, cols = sample_pixels(height, width, stride)
+    noise = np.random.default_rng(1).normal(size=(len(rows), len(cols), 1)).astype(np.float32)
+    out = upsample(noise, np.ones(noise.shape[:2], bool), hit, position, normal, stride)[..., 0]
+    inner = out[stride:-stride, stride:-stride]
+    phase = inner.reshape(-1, stride, inner.shape[1] // stride, stride).var(axis=(0, 2))
+    assert phase.min() > 0.6 * phase.max(), phase  # bilinear: 0.25 at stride 2

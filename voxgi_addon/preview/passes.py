@@ -15,8 +15,9 @@ import numpy as np
 from ..errors import VoxGIError
 from ..gi.cone_shadows import cone_shadowed_direct
 from ..gi.conetrace import ConeSettings, trace_diffuse_and_ao, trace_glossy
-from ..gi.direct_light import diffuse_direct, light_directions, light_frame
+from ..gi.direct_light import concentric_disk, diffuse_direct, light_directions, light_frame
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
+from ..gi.sampling import hashed_square
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
 from .gather import GatherSettings, gather_gi, gather_glossy
@@ -60,24 +61,42 @@ def principled_table(snapshot):
     return base, params
 
 
-AREA_GLOSSY_GRID = 4  # an area light's glossy reflection: sampled at 4 × 4 points on it
+AREA_GLOSSY_GRID = 4  # an area light's glossy reflection: 4 × 4 strata of it
+GLOSSY_LIGHT_STREAM = 0x6A1E  # + the light's index: the hash stream of those strata
 
 
-def _glossy_points(light, points, normals):
-    """(K, N, 3) unit directions from ``points`` to K points of ``light`` and (K, N) weights
-    summing to 1: each point's share of the unshadowed irradiance. Suns and point lights are one
-    direction; an area light is AREA_GLOSSY_GRID² cell centres of its rectangle or ellipse."""
+def glossy_jitter(alpha, light_extent, distance):
+    """How far (0 … 1 of a stratum) an area light's glossy points leave their strata's centres:
+    0 while the lobe (about 2α wide) spans more than a stratum of the light as seen from the
+    point — the centres are then a quadrature with no noise — rising to 1 (jittered strata:
+    no aliasing, some noise) once it is half a stratum or narrower, where fixed centres showed
+    a smooth metal's reflection of the light as AREA_GLOSSY_GRID² dots."""
+    spacing = light_extent / np.maximum(distance, 1e-9) / AREA_GLOSSY_GRID
+    return np.clip(spacing / np.maximum(2.0 * alpha, 1e-6) - 1.0, 0.0, 1.0)
+
+
+def _glossy_points(light, index, points, normals, sample_ids, alpha):
+    """(K, N, 3) unit directions from ``points`` to K points of ``light`` (the ``index``-th
+    light) and (K, N) weights summing to 1: each point's share of the unshadowed irradiance.
+    Suns and point lights are one direction; an area light is AREA_GLOSSY_GRID² strata of its
+    rectangle or ellipse (mapped as its shadow rays map theirs), at their centres or jittered
+    by ``glossy_jitter`` of the points' GGX α (N,) with each point's hash stream
+    (``sampling.hashed_square``, ``GLOSSY_LIGHT_STREAM`` + index, keyed by ``sample_ids``)."""
     if light.type != "AREA":
         return np.stack(light_directions([light], points)), np.ones((1, len(points)))
     position, x_axis, y_axis, emits = light_frame(light)
     size_y = light.size_y if light.shape in ("RECTANGLE", "ELLIPSE") else light.size
-    cells = (np.arange(AREA_GLOSSY_GRID) + 0.5) / AREA_GLOSSY_GRID - 0.5
-    u, v = (c.ravel() for c in np.meshgrid(cells, cells))
-    if light.shape in ("DISK", "ELLIPSE"):
-        inside = u * u + v * v <= 0.25
-        u, v = u[inside], v[inside]
-    on_light = position + (u * light.size)[:, None] * x_axis + (v * size_y)[:, None] * y_axis
-    offset = on_light[:, None, :] - points[None]  # (K, N, 3)
+    half_x, half_y = 0.5 * light.size * x_axis, 0.5 * size_y * y_axis
+    extent = 2.0 * max(np.linalg.norm(half_x), np.linalg.norm(half_y))
+    amount = glossy_jitter(alpha, extent, np.linalg.norm(position - points, axis=1))[:, None, None]
+    m = AREA_GLOSSY_GRID
+    k = np.arange(m * m)
+    centres = (np.stack([k // m, k % m], axis=1) + 0.5) / m
+    jittered = hashed_square(sample_ids, GLOSSY_LIGHT_STREAM + index, m * m)
+    square = centres + amount * (jittered - centres)
+    unit = concentric_disk(square) if light.shape in ("DISK", "ELLIPSE") else 2.0 * square - 1.0
+    on_light = position + unit[..., :1] * half_x + unit[..., 1:] * half_y  # (N, K, 3)
+    offset = np.swapaxes(on_light, 0, 1) - points[None]  # (K, N, 3)
     distance = np.maximum(np.linalg.norm(offset, axis=-1), 1e-9)
     towards = offset / distance[..., None]
     receiver = np.maximum(np.einsum("knj,nj->kn", towards, normals), 0.0)
@@ -85,21 +104,24 @@ def _glossy_points(light, points, normals):
     return towards, weight / np.maximum(weight.sum(axis=0, keepdims=True), 1e-30)
 
 
-def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_direct):
+def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_direct, sample_ids):
     """(N, 3) the glossy light the lights send to the viewer (Glossy Color × Glossy Direct).
 
     Each light's shadowed Diffuse Direct is turned back into the irradiance it brings (× π) and
-    spread over the light's directions (``_glossy_points``: one for suns and point lights, a
-    grid over an area light, weighted by their share of the irradiance), each reflected by the
+    spread over the light's directions (``_glossy_points``: one for suns and point lights,
+    jittered strata over an area light, weighted by their share of the irradiance), each
+    reflected by the
     Principled glossy lobe toward the viewer (``principled.glossy_reflectance`` / cos). The
     light's shadowing is taken as uniform over it. views : (N, 3) unit directions from the
-    points to the viewer; per_light_direct : (L, N, 3) Diffuse Direct light by light.
+    points to the viewer; per_light_direct : (L, N, 3) Diffuse Direct light by light;
+    sample_ids : (N,) the points' sample ids (pixel indices, row 0 on top).
     """
     base, params = principled_table(snapshot)
     shading = (base[mat], params[mat, 0], params[mat, 1], params[mat, 2])
     total = np.zeros((len(points), 3))
-    for light, direct in zip(snapshot.lights, per_light_direct):
-        towards, share = _glossy_points(light, points, normals)
+    for index, (light, direct) in enumerate(zip(snapshot.lights, per_light_direct)):
+        alpha = np.clip(params[mat, 2], 0.0, 1.0) ** 2
+        towards, share = _glossy_points(light, index, points, normals, sample_ids, alpha)
         lobe = np.zeros((len(points), 3))
         for direction, weight in zip(towards, share):
             cos = np.einsum("ij,ij->i", normals, direction)
@@ -321,6 +343,6 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao,
                               glossy), timings
     views = -dirs[hit]
-    shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_light)
+    shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_light, hit)
     return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy, n,
                           views, shine), timings

@@ -67,14 +67,15 @@ def upsample(values: np.ndarray, valid: np.ndarray, hit: np.ndarray, position: n
     v = (ys - stride // 2) / stride
     i0 = np.clip(np.floor(u).astype(np.int64), 0, wl - 1)
     j0 = np.clip(np.floor(v).astype(np.int64), 0, hl - 1)
-    fu = np.clip(u - i0, 0.0, 1.0).astype(np.float32)
-    fv = np.clip(v - j0, 0.0, 1.0).astype(np.float32)
+    # Quadratic B-spline weights over the 3 × 3 cells around the nearest one (c, t = u − c).
+    ci, cj = np.floor(u + 0.5).astype(np.int64), np.floor(v + 0.5).astype(np.int64)
+    wu, wv = _bspline(u - ci), _bspline(v - cj)
     total = np.zeros((len(ys), values.shape[2]), np.float32)
     weight = np.zeros(len(ys), np.float32)
-    for dj in (0, 1):
-        for di in (0, 1):
-            k = np.minimum(j0 + dj, hl - 1) * wl + np.minimum(i0 + di, wl - 1)
-            w = (fu if di else 1.0 - fu) * (fv if dj else 1.0 - fv) * cell_ok[k]
+    for dj in (-1, 0, 1):
+        for di in (-1, 0, 1):
+            k = np.clip(cj + dj, 0, hl - 1) * wl + np.clip(ci + di, 0, wl - 1)
+            w = wu[di + 1] * wv[dj + 1] * cell_ok[k]
             offset = cell_p[k] - p
             facing = np.maximum(np.einsum("ij,ij->i", n, cell_n[k]), 0.0)
             plane = np.abs(np.einsum("ij,ij->i", n, offset))
@@ -89,6 +90,13 @@ def upsample(values: np.ndarray, valid: np.ndarray, hit: np.ndarray, position: n
     image = np.zeros((height, width, values.shape[2]), np.float32)
     image[ys, xs] = out
     return image
+
+
+def _bspline(t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Quadratic B-spline weights (float32) of cells −1, 0, +1 for offsets t ∈ [−½, ½] from
+    the nearest cell: (½ − t)²/2, ¾ − t², (½ + t)²/2."""
+    t = np.asarray(t, np.float32)
+    return 0.5 * (0.5 - t) ** 2, 0.75 - t * t, 0.5 * (0.5 + t) ** 2
 
 
 def _nearest_valid(values, valid, j0, i0, reach: int = 2) -> np.ndarray:

@@ -1,0 +1,72 @@
+/* The hashed sample patterns of voxgi_addon/gi/sampling.py, bit for bit: per-point hash
+ * streams, jittered strata, rotated Hammersley sets, the concentric disc and a tangent frame.
+ * Prepended to the BVH kernels (render/gpu_bvh.py) and to glossy_direct.glsl. */
+
+#ifndef M_PI_F
+#define M_PI_F 3.14159265358979323846
+#endif
+
+uint pcg_hash(uint v)
+{
+  uint state = v * 747796405u + 2891336453u;
+  uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+  return (word >> 22u) ^ word;
+}
+
+float unit_float(uint h)
+{
+  return float(h >> 8u) * (1.0 / 16777216.0);
+}
+
+uint point_stream(uint id, uint stream, uint seed)
+{
+  return pcg_hash(pcg_hash(id + seed * 0x9E3779B9u) + stream);
+}
+
+/* Stratum k of m×m of a point's stream (sampling.hashed_square). */
+vec2 hashed_stratum(uint state, int k, int m)
+{
+  vec2 jitter = vec2(unit_float(pcg_hash(state + uint(2 * k))),
+                     unit_float(pcg_hash(state + uint(2 * k + 1))));
+  return (vec2(float(k / m), float(k % m)) + jitter) / float(m);
+}
+
+float radical_inverse(uint b)
+{
+  b = (b << 16u) | (b >> 16u);
+  b = ((b & 0x55555555u) << 1u) | ((b & 0xAAAAAAAAu) >> 1u);
+  b = ((b & 0x33333333u) << 2u) | ((b & 0xCCCCCCCCu) >> 2u);
+  b = ((b & 0x0F0F0F0Fu) << 4u) | ((b & 0xF0F0F0F0u) >> 4u);
+  b = ((b & 0x00FF00FFu) << 8u) | ((b & 0xFF00FF00u) >> 8u);
+  return float(b >> 8u) * (1.0 / 16777216.0);
+}
+
+/* Point j of `count` of the rotated Hammersley set of a point's stream (sampling.hammersley). */
+vec2 hammersley(uint state, int j, int count)
+{
+  vec2 rotation = vec2(unit_float(pcg_hash(state)), unit_float(pcg_hash(state + 1u)));
+  vec2 u = vec2((float(j) + 0.5) / float(count), radical_inverse(uint(j))) + rotation;
+  return u - floor(u);
+}
+
+/* Shirley–Chiu map of [0, 1)² to the unit disc (direct_light.concentric_disk). */
+vec2 concentric_disk(vec2 s)
+{
+  float a = 2.0 * s.x - 1.0;
+  float b = 2.0 * s.y - 1.0;
+  if (a == 0.0 && b == 0.0) {
+    return vec2(0.0);
+  }
+  bool first = abs(a) > abs(b);
+  float r = first ? a : b;
+  float phi = first ? (M_PI_F / 4.0) * b / a : M_PI_F / 2.0 - (M_PI_F / 4.0) * a / b;
+  return r * vec2(cos(phi), sin(phi));
+}
+
+/* Tangents of unit w (sampling.perpendicular_basis). */
+void perpendicular_basis(vec3 w, out vec3 t, out vec3 b)
+{
+  vec3 helper = abs(w.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
+  t = normalize(cross(w, helper));
+  b = cross(w, t);
+}
