@@ -107,33 +107,50 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
     return partial
 
 
-def upsample(values, gbuffer_inputs, stride: int, width: int, height: int):
+def upsample(values, gbuffer_inputs, stride: int, width: int, height: int, second=None):
     """The joint-bilateral upsample (``shaders/upsample.glsl``) of a low-resolution texture to
-    the full width × height; the texture itself for stride 1."""
+    the full width × height (the texture itself for stride 1). With ``second`` (another
+    low-resolution texture of the same grid) both are upsampled in one dispatch with the same
+    weights and a pair of textures comes back."""
     if stride == 1:
-        return values
-    if "upsample" not in _shaders:
-        _shaders["upsample"] = build_compute(("pixels", "upsample"), _UPSAMPLE_SAMPLERS, ("sampling",))
-    shader = _shaders["upsample"]
-    out = gpu.types.GPUTexture((width, height), format="RGBA32F")
-    inputs = {**gbuffer_inputs, "low_image": values}
+        return values if second is None else (values, second)
+    pair = second is not None
+    key = "upsample_pair" if pair else "upsample"
+    samplers = _UPSAMPLE_SAMPLERS + (("low_image2",) if pair else ())
+    outputs = ("out_image", "out_image2") if pair else ("out_image",)
+    if key not in _shaders:
+        _shaders[key] = build_compute(("pixels", "upsample"), samplers, ("sampling",), outputs,
+                                      {"UPSAMPLE_PAIR": "1"} if pair else None)
+    shader = _shaders[key]
+    out = [gpu.types.GPUTexture((width, height), format="RGBA32F") for _ in outputs]
+    inputs = {**gbuffer_inputs, "low_image": values, "low_image2": second}
     shader.bind()
-    for name in _UPSAMPLE_SAMPLERS:
+    for name in samplers:
         shader.uniform_sampler(name, inputs[name])
     shader.uniform_float("sampling", (float(stride), float(width), float(height), 0.0))
-    shader.image("out_image", out)
+    for name, texture in zip(outputs, out):
+        shader.image(name, texture)
     gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
-    return out
+    return tuple(out) if pair else out[0]
+
+
+def gather_low(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
+               width: int, height: int, kernel: str = "bvh_gather"):
+    """The gather's low-resolution result after the à-trous filter (not upsampled): (Diffuse
+    Indirect rgb, AO) for "bvh_gather", (Glossy Indirect rgb, 0) for "bvh_glossy"."""
+    values, variance = gather(bvh, gbuffer_inputs, lights, principled, emission, settings,
+                              stride, width, height, kernel=kernel)
+    values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
+                        settings.denoise_iterations)
+    return values
 
 
 def gather_gi(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
               width: int, height: int):
     """Full-resolution RGBA32F texture (Diffuse Indirect rgb, AO), bottom row first: gather,
     filter, upsample."""
-    values, variance = gather(bvh, gbuffer_inputs, lights, principled, emission, settings,
-                              stride, width, height)
-    values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
-                        settings.denoise_iterations)
+    values = gather_low(bvh, gbuffer_inputs, lights, principled, emission, settings, stride,
+                        width, height)
     return upsample(values, gbuffer_inputs, stride, width, height)
 
 
@@ -141,10 +158,8 @@ def glossy_gi(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, setting
               width: int, height: int):
     """Full-resolution RGBA32F texture (Glossy Indirect rgb, 0), bottom row first: the glossy
     gather (``shaders/bvh_glossy.glsl``), the same filter and upsample as ``gather_gi``."""
-    values, variance = gather(bvh, gbuffer_inputs, lights, principled, emission, settings,
-                              stride, width, height, kernel="bvh_glossy")
-    values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
-                        settings.denoise_iterations)
+    values = gather_low(bvh, gbuffer_inputs, lights, principled, emission, settings, stride,
+                        width, height, kernel="bvh_glossy")
     return upsample(values, gbuffer_inputs, stride, width, height)
 
 

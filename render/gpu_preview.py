@@ -29,7 +29,7 @@ from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
 from .gpu_bvh import direct_light_texture, lights_texture, shared_bvh
-from .gpu_gather import gather_gi, glossy_direct_texture, glossy_gi
+from .gpu_gather import gather_low, glossy_direct_texture, upsample
 from .gpu_tracer import dispatch, read_texture
 from .gpu_volume import GPUVolume
 
@@ -113,29 +113,33 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
                            height, sampling)
         return np.flipud(read_texture(low))
 
-    if quality == "ACCURATE":
+    if quality == "ACCURATE":  # both gathers at low resolution, then one upsample for both
         _, _, _, emission = material_table(snapshot)
-        texture = gather_gi(shared_bvh().update(tris), gbuffer.inputs, snapshot.lights,
-                            principled_table(snapshot), emission, gather_settings, gi_stride,
-                            width, height)
-        diffuse_ao = np.flipud(read_texture(texture))
+        bvh, principled = shared_bvh().update(tris), principled_table(snapshot)
+        gathered = (bvh, gbuffer.inputs, snapshot.lights, principled, emission, gather_settings,
+                    gi_stride, width, height)
+        low_diffuse = gather_low(*gathered)
         timings["diffuse+ao gather (GPU)"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        low_glossy = gather_low(*gathered, kernel="bvh_glossy") if glossy_indirect else None
+        if glossy_indirect:
+            timings["glossy gather (GPU)"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        full = upsample(low_diffuse, gbuffer.inputs, gi_stride, width, height, low_glossy)
+        diffuse_ao, glossy_texture = full if glossy_indirect else (full, None)
+        diffuse_ao = np.flipud(read_texture(diffuse_ao))
+        glossy = (np.flipud(read_texture(glossy_texture)) if glossy_indirect else
+                  np.zeros((height, width, 4), np.float32))
+        timings["upsample + read-back"] = time.perf_counter() - t0
     else:
         diffuse_ao = traced("diffuse_ao")
         timings["diffuse+ao cones (GPU)"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    if glossy_indirect and quality == "ACCURATE":
-        _, _, _, emission = material_table(snapshot)
-        texture = glossy_gi(shared_bvh().update(tris), gbuffer.inputs, snapshot.lights,
-                            principled_table(snapshot), emission, gather_settings, gi_stride,
-                            width, height)
-        glossy = np.flipud(read_texture(texture))
-        timings["glossy gather (GPU)"] = time.perf_counter() - t0
-    elif glossy_indirect:
-        glossy = traced("glossy")
-        timings["glossy cones (GPU)"] = time.perf_counter() - t0
-    else:  # as Cycles with no glossy bounces
-        glossy = np.zeros((height, width, 4), np.float32)
+        t0 = time.perf_counter()
+        if glossy_indirect:
+            glossy = traced("glossy")
+            timings["glossy cones (GPU)"] = time.perf_counter() - t0
+        else:  # as Cycles with no glossy bounces
+            glossy = np.zeros((height, width, 4), np.float32)
 
     flat_da = diffuse_ao.reshape(-1, 4)[hit]
     terms = (direct, flat_da[:, :3], flat_da[:, 3], glossy.reshape(-1, 4)[hit, :3])
