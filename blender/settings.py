@@ -132,12 +132,12 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
     )
     quality: bpy.props.EnumProperty(
         name="Quality",
-        description="How the preview's diffuse indirect light and AO are computed",
-        items=(("ACCURATE", "Accurate", "Exact rays through the scene's triangles from a gather "
-                "point per GI block, denoised along surfaces, with exact direct light: close "
-                "to Cycles"),
+        description="How the preview's light is computed",
+        items=(("ACCURATE", "Accurate", "Exact rays through the scene's triangles for every "
+                "pass (direct light, diffuse indirect, AO, glossy), gathered per GI block and "
+                "denoised along surfaces; needs no voxels: close to Cycles"),
                ("FAST", "Fast", "Cone tracing through the voxel octree (the thesis' method): "
-                "fastest, approximate")),
+                "approximate")),
         default="ACCURATE",
     )
     glossy_indirect: bpy.props.BoolProperty(

@@ -105,13 +105,14 @@ class VOXGI_PT_gi(_SidebarPanel, bpy.types.Panel):
         layout = self.layout
         settings = context.scene.voxgi
         manual = ("view_ahead",) if settings.span_mode == "MANUAL" else ()
-        # Accurate traces exact rays: the cone settings and soft-shadow cones apply to Fast only
-        # (glossy reflections are cone-traced in both).
+        # Accurate traces exact rays for every pass: the cone and voxel settings apply to Fast
+        # only.
         trace = (("gi_rays",) if settings.quality == "ACCURATE"
-                 else ("diffuse_cones", "falloff", "gi_intensity", "ao_intensity", "shadows"))
+                 else ("diffuse_cones", "falloff", "gi_intensity", "ao_intensity", "shadows",
+                       *manual, "dense_depth", "cone_angle", "sample_factor", "max_distance"))
         _settings_column(layout, context, (
-            "quality", *trace, "glossy_indirect", *manual, "dense_depth", "cone_angle", "sample_factor",
-            "max_distance", "ao_distance", "light_samples", "gi_resolution", "tracer"))
+            "quality", *trace, "glossy_indirect", "ao_distance", "light_samples", "gi_resolution",
+            "tracer"))
         row = layout.row(align=True)
         row.operator("voxgi.update", icon="FILE_REFRESH")
         row.operator("voxgi.render_preview", icon="RENDER_STILL")

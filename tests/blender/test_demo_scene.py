@@ -107,6 +107,7 @@ def test_gi_panel_draws_cone_settings_buttons_and_the_last_update(voxgi):
     bpy.ops.voxgi.add_demo_scene()
     bpy.ops.voxgi.voxelize()
     bpy.ops.voxgi.update()
+    bpy.context.scene.voxgi.quality = "FAST"  # the cone settings are Fast quality's
     layout = _Layout()
     panel = type("PanelStub", (), {"layout": layout})()
     bpy.types.VOXGI_PT_gi.draw(panel, bpy.context)
@@ -127,6 +128,7 @@ def test_gi_panel_says_which_tracer_drew_the_last_preview(voxgi, tmp_path):
     bpy.types.VOXGI_PT_gi.draw(panel, bpy.context)
     assert {"quality", "gi_rays", "gi_resolution", "tracer"} <= set(layout.props)
     assert "shadows" not in layout.props  # soft-shadow cones are a Fast-quality choice
+    assert "cone_angle" not in layout.props and "ao_distance" in layout.props
     assert "Last preview traced with: GPU" in layout.labels
     # Accurate traces the triangles: their BVH is on the GPU, no voxel atlas
     assert any(text.startswith("BVH ") and text.endswith("MB on the GPU") for text in layout.labels)
