@@ -18,26 +18,15 @@
 void main()
 {
   ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
-  ivec2 size = imageSize(out_image);
-  if (cell.x >= size.x || cell.y >= size.y) {
+  vec3 position, n;
+  vec4 ray;
+  uint id;
+  if (!gather_point(cell, position, n, ray, id)) {
     return;
   }
-  int stride = int(grid.x);
-  ivec2 full = ivec2(grid.yz);
-  ivec2 px = traced_pixel(size.y - 1 - cell.y, cell.x, stride, full);
-  vec4 position = texelFetch(gbuffer_position, px, 0);
-  if (position.w < 0.5) {
-    imageStore(out_image, cell, vec4(0.0));
-    imageStore(out_variance, cell, vec4(0.0));
-    return;
-  }
-  vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
-  /* A step back along the camera ray (preview/gather.py VIEW_BACKOFF). */
-  position.xyz -= VIEW_BACKOFF * texelFetch(gbuffer_view, px, 0).xyz;
-  uint id = uint((full.y - 1 - px.y) * full.x + px.x);
   uint seed = uint(sampling.x);
   int rays = int(sampling.y);
-  vec3 origin = position.xyz + SURFACE_EPSILON * n;
+  vec3 origin = position + SURFACE_EPSILON * n;
   uint state = point_stream(id, RAY_STREAM, seed);
   vec3 t, b;
   perpendicular_basis(n, t, b);

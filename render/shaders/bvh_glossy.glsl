@@ -28,23 +28,13 @@ vec3 vndf_half_vector(vec3 v, float alpha, vec2 u)
 void main()
 {
   ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
-  ivec2 size = imageSize(out_image);
-  if (cell.x >= size.x || cell.y >= size.y) {
+  vec3 position, n;
+  vec4 ray;
+  uint id;
+  if (!gather_point(cell, position, n, ray, id)) {
     return;
   }
-  int stride = int(grid.x);
-  ivec2 full = ivec2(grid.yz);
-  ivec2 px = traced_pixel(size.y - 1 - cell.y, cell.x, stride, full);
-  vec4 position = texelFetch(gbuffer_position, px, 0);
-  if (position.w < 0.5) {
-    imageStore(out_image, cell, vec4(0.0));
-    imageStore(out_variance, cell, vec4(0.0));
-    return;
-  }
-  vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
-  vec4 ray = texelFetch(gbuffer_view, px, 0);
   vec3 v = -ray.xyz;
-  position.xyz -= VIEW_BACKOFF * ray.xyz;
   int last_material = textureSize(materials, 0).x - 1;
   int material = int(ray.w + 0.5);
   material = (material >= 0 && material < last_material) ? material : last_material;
@@ -61,10 +51,9 @@ void main()
   vec3 v_local = normalize(vec3(dot(t, v), dot(b, v), max(cos_ni, 1e-4)));
   float pdf_scale = 4.0 * max(cos_ni, 1e-4) * (1.0 + pr_ggx_lambda(alpha2, max(cos_ni, 1e-4)));
 
-  uint id = uint((full.y - 1 - px.y) * full.x + px.x);
   uint seed = uint(sampling.x);
   int rays = int(sampling.y);
-  vec3 origin = position.xyz + SURFACE_EPSILON * n;
+  vec3 origin = position + SURFACE_EPSILON * n;
   uint state = point_stream(id, GLOSSY_STREAM, seed);
   const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
   vec3 sum = vec3(0.0);
