@@ -105,7 +105,6 @@ class LiveGI:
         self.generation = 0        # bumped per applied result: view_draw traces again
         self.index: SceneIndex | None = None  # of the last snapshot taken
         self.latest_snapshot = None  # the last snapshot taken (maybe not applied yet)
-        self.snapshot_generation = 0  # bumped per snapshot taken: Accurate traces it at once
         self.planned = StageCounter()  # every plan scheduled
         self.plans: list[UpdatePlan] = []  # the same, in order (tests, panel)
         self.pending: UpdatePlan | None = None  # the plan of the running job
@@ -188,7 +187,6 @@ class LiveGI:
             self.error = str(error)
             return None
         self.latest_snapshot = snapshot
-        self.snapshot_generation += 1
         self.skin = skin_states(snapshot, depsgraph)
         self.index = scene_index(snapshot, depsgraph.view_layer)
         if self.view_camera is not None:

@@ -9,13 +9,10 @@
    (``voxgi_addon/scene/view_camera.py``: perspective or orthographic, camera or free view);
    a new view is reported to ``LiveGI.view_changed`` (trace again; the cascades move when the
    view leaves their anchor cell);
-2. when the scene, the view, the pass or the trace settings changed since the last trace:
-   trace with the GPU tracer (``gpu_preview.render_passes_gpu``, as F12), keeping the chosen
-   pass as a texture. Accurate quality (the default) traces the triangles of the latest
-   snapshot, taken on the main thread when the change came in: a moved object or light shows
-   at the next redraw, while the worker's voxel stages (for the debug views, Fast and the
-   probes) run behind. Fast waits for the worker's applied results and uploads the octree
-   atlas it laid out (``GPUVolume.update(…, atlas=…)``);
+2. when the applied results, the view, the pass or the trace settings changed since the last
+   trace: in Fast quality upload the octree atlas the worker laid out
+   (``GPUVolume.update(…, atlas=…)``); trace with the GPU tracer
+   (``gpu_preview.render_passes_gpu``, as F12), keeping the chosen pass as a texture;
 3. draw that texture over the region. While newer work runs, the last texture is drawn again:
    the view never goes blank.
 
@@ -72,17 +69,13 @@ class ViewportRenderer:
 
     def _trace_key(self, live, camera_key, scene, pass_name):
         s = scene.voxgi
-        scene_version = live.snapshot_generation if s.quality == "ACCURATE" else live.generation
-        return (scene_version, camera_key, pass_name, cone_settings(s), s.light_samples,
+        return (live.generation, camera_key, pass_name, cone_settings(s), s.light_samples,
                 s.shadows, s.gi_resolution, s.tracer, s.quality, s.gi_rays, s.glossy_indirect)
 
     def trace(self, live, scene, camera, camera_key, pass_name: str) -> bool:
-        """Trace the scene seen by ``camera`` unless the texture already shows it; True when it
-        traced. Accurate quality traces the triangles of the latest snapshot at once; Fast
-        waits for ``live``'s applied results (the worker's cascades and octree)."""
-        accurate = scene.voxgi.quality == "ACCURATE"
-        snapshot = live.latest_snapshot if accurate else live.snapshot
-        if snapshot is None or (live.staged is None and not accurate):
+        """Trace ``live``'s applied results seen by ``camera`` unless the texture already
+        shows them; True when it traced."""
+        if live.staged is None or live.snapshot is None:
             return False
         key = self._trace_key(live, camera_key, scene, pass_name)
         if key == self.trace_key and self.texture is not None:
@@ -93,12 +86,11 @@ class ViewportRenderer:
         cones = cone_settings(settings)
         width, height = camera.resolution
         t0 = time.perf_counter()
-        if not accurate:  # the cones march the octree; Accurate traces the triangles
+        if settings.quality != "ACCURATE":  # Accurate traces the triangles, not the octree
             self.volume.update(live.staged.state.octree, cones, atlas=live.atlas)
         upload = time.perf_counter() - t0
-        snapshot = dataclasses.replace(snapshot, camera=camera)
-        state = None if accurate else live.staged.state
-        passes, timings = render_passes_gpu(snapshot, state, width, height, cones,
+        snapshot = dataclasses.replace(live.snapshot, camera=camera)
+        passes, timings = render_passes_gpu(snapshot, live.staged.state, width, height, cones,
                                             volume=self.volume,
                                             **trace_options(settings, width, height))
         image = np.asarray(passes[pass_name], np.float32)

@@ -8,9 +8,8 @@ drained by hand as the timer would):
   ticks as Blender's UI would (drain the queue, redraw the last image, take a transform
   snapshot of a moved object and submit it), and each tick's duration is measured;
 * the latency from an object move to new GI drawn: ``LiveGI.update`` (snapshot + submit) →
-  ``draw_view`` (GPU trace at a fraction of a 640×360 region) for the default Accurate
-  quality, which traces the new snapshot at once; for Fast quality the worker's stages
-  (caches, cascades, injection, octree, atlas) and the atlas upload come in between;
+  worker (caches, cascades, injection, octree, atlas) → ``draw_view`` (atlas upload + GPU
+  trace at a fraction of a 640×360 region) — with the default and with fast trace settings;
 * the time from a cancel request to the worker letting go of a long voxelization;
 * the debug view's draw time for 1M voxel cubes into a 1280×720 offscreen.
 
@@ -116,30 +115,21 @@ def main(argv=None) -> int:
                      f"{len(moves)} moves during the job; transform-only snapshot, no mesh read"))
 
     # 2. Object move → new GI drawn.
-    def wait_for_worker(generation):
-        while live.generation == generation:
-            jobs.drain()
-            if live.error:
-                raise RuntimeError(live.error)
-            time.sleep(0.001)
-
     def latency(label, repeats):
-        """Fast quality draws once the worker applied its voxels; Accurate traces the moved
-        scene's snapshot at the next draw (the worker's job then finishes behind it)."""
-        accurate = scene.voxgi.quality == "ACCURATE"
         results = []
         for i in range(repeats):
             generation = live.generation
             t0 = time.perf_counter()
             move(0.02 * (1 if i % 2 else -1))
             t_submit = time.perf_counter()
-            if not accurate:
-                wait_for_worker(generation)
+            while live.generation == generation:
+                jobs.drain()
+                if live.error:
+                    raise RuntimeError(live.error)
+                time.sleep(0.001)
             t_applied = time.perf_counter()
             draw()
             t_drawn = time.perf_counter()
-            if accurate:
-                wait_for_worker(generation)  # before the next move, as a user would pause
             results.append((t_drawn - t0, t_submit - t0, t_applied - t_submit, t_drawn - t_applied,
                             dict(live.stats.timings), dict(renderer.timings)))
         results.sort(key=lambda r: r[0])
@@ -159,12 +149,10 @@ def main(argv=None) -> int:
                      f"{ms(trace_stages, 'atlas upload')})"))
 
     repeats = 2 if args.quick else 5
-    latency("defaults (Accurate: the moved scene traced at once), ¼ of 640×360", repeats)
-    scene.voxgi.quality, scene.voxgi.shadows, scene.voxgi.gi_resolution = "FAST", "CONES", "4"
+    latency("defaults (exact shadows, full GI resolution), ¼ of 640×360", repeats)
+    scene.voxgi.shadows, scene.voxgi.gi_resolution = "CONES", "4"
     scene.voxgi_viewport.resolution_fraction = 0.125
-    latency("Fast (cones, after the worker's voxels), quarter GI resolution, ⅛ of 640×360",
-            repeats)
-    scene.voxgi.quality = "ACCURATE"
+    latency("soft-shadow cones, quarter GI resolution, ⅛ of 640×360", repeats)
 
     # 3. Cancel latency on a long voxelization.
     scene.voxgi.base_span = 0.01
