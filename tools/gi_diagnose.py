@@ -181,7 +181,7 @@ def inject_at_centres(state, snapshot, samples=1):
     light's unshadowed model evaluated at the voxel centre instead of at that offset point."""
     from voxgi.voxgi_addon.gi.direct_light import diffuse_direct
     from voxgi.voxgi_addon.gi.light_injection import SHADOW_START_VOXELS, voxel_centres
-    from voxgi.voxgi_addon.voxel_shadows import CascadeOccupancy
+    from voxgi.voxgi_addon.gi.voxel_shadows import CascadeOccupancy
 
     occupancy = CascadeOccupancy(state.cascades)
     out = []
@@ -207,7 +207,7 @@ def inject_at_centres(state, snapshot, samples=1):
 # --------------------------------------------------------------------------- preview
 
 def render_preview(scene, width, height):
-    """Default-settings GI preview passes and the session's GI state."""
+    """Default-settings GI preview passes and the session's voxel GI state."""
     import bpy
 
     from voxgi.blender.session import scene_session
@@ -221,6 +221,10 @@ def render_preview(scene, width, height):
             raise RuntimeError("the GI preview failed")
         seconds = time.perf_counter() - start
         passes = group_passes(read_exr(path))
+    # The default (Accurate) preview builds no voxels: one GI update gives the voxel state the
+    # estimates (ii) and (iii) read.
+    if bpy.ops.voxgi.update() != {"FINISHED"}:
+        raise RuntimeError("the GI update failed")
     session = scene_session(scene.name_full)
     return passes, session.gi_state, session.tracer_used, seconds
 
