@@ -26,6 +26,7 @@ bpy facts this relies on (Blender 5.0, checked with the ``bpy`` module):
 """
 from __future__ import annotations
 
+import contextlib
 import queue
 import threading
 import time
@@ -371,7 +372,8 @@ def show_progress(pending: list[Job]) -> None:
     with a ``Progress``; both cleared once none runs. Interactive sessions only."""
     global _progress_shown
     jobs_with_progress = [j for j in pending if j.progress is not None and not j.superseded]
-    try:
+    # No window (background mode) or a closing one raises: there is nothing to show then.
+    with contextlib.suppress(AttributeError, RuntimeError):
         for wm in bpy.data.window_managers:
             if jobs_with_progress:
                 job = jobs_with_progress[0]
@@ -384,8 +386,6 @@ def show_progress(pending: list[Job]) -> None:
                 if window.workspace is not None:
                     window.workspace.status_text_set_internal(
                         progress_text(jobs_with_progress[0]) if jobs_with_progress else None)
-    except (AttributeError, RuntimeError):  # no window (background) or a closing one
-        pass
     _progress_shown = bool(jobs_with_progress)
 
 
