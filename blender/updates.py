@@ -90,7 +90,7 @@ def transform_snapshot(previous, scene, depsgraph):
     objects, armatures = [], {}
     for obj in previous.objects:
         blender_object = bpy.data.objects[obj.name]
-        kind, armature = object_kind(blender_object)
+        kind, armature = object_kind(blender_object, depsgraph)
         if kind != obj.kind or (armature.name_full if armature else None) != obj.armature:
             return None
         evaluated = blender_object.evaluated_get(depsgraph)

@@ -11,6 +11,8 @@ from __future__ import annotations
 import atexit
 import sys
 
+import bpy
+
 from ..registration import register_modules, unregister_modules
 from . import engine
 
@@ -30,13 +32,25 @@ def release_gpu_resources() -> None:
             module.release()
 
 
+@bpy.app.handlers.persistent
+def _release_on_load(*_args) -> None:
+    # GPU objects belong to the file (and the GPU context) they were made for: the next file's
+    # F12 or preview may run in another context, where cached shaders and textures read back
+    # nothing (docs/gi_pipeline.md, "One file's state").
+    release_gpu_resources()
+
+
 def register() -> None:
     register_modules(modules)
     atexit.unregister(release_gpu_resources)
     atexit.register(release_gpu_resources)
+    if _release_on_load not in bpy.app.handlers.load_pre:
+        bpy.app.handlers.load_pre.append(_release_on_load)
 
 
 def unregister() -> None:
+    if _release_on_load in bpy.app.handlers.load_pre:
+        bpy.app.handlers.load_pre.remove(_release_on_load)
     atexit.unregister(release_gpu_resources)
     unregister_modules(modules)
     release_gpu_resources()

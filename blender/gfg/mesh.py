@@ -13,17 +13,11 @@ import bpy
 import numpy as np
 
 from ...voxgi_addon.files.gfg import MeshArrays, VertexTypes, build_mesh, mesh_arrays
-from ..snapshot.mesh import read_corner_uvs, read_positions, read_triangles
+from ..snapshot.mesh import read_corner_uvs, read_triangles
+from ..snapshot.skin import rest_corner_normals, rest_positions
 
 CUSTOM_NORMAL = "custom_normal"  # a FLOAT_VECTOR corner attribute of this name = free normals
 UV_MAP = "UVMap"
-
-
-def corner_normals(mesh) -> np.ndarray:
-    """(loops, 3) float32 corner normals of a ``bpy.types.Mesh``."""
-    normals = np.empty(len(mesh.loops) * 3, np.float32)
-    mesh.corner_normals.foreach_get("vector", normals)
-    return normals.reshape(-1, 3)
 
 
 def export_mesh(name: str, mesh, slot_materials, skin, skeleton: int, types: VertexTypes,
@@ -31,14 +25,15 @@ def export_mesh(name: str, mesh, slot_materials, skin, skeleton: int, types: Ver
     """The GFG mesh of an evaluated ``bpy.types.Mesh``.
 
     slot_materials : callable(used slot indices) -> (S,) material index per slot (-1 = none).
-    skin : ``SkinData`` (weights (V, 4), bone_indices (V, 4)) or None.
+    skin : ``SkinData`` (weights (V, 4), bone_indices (V, 4)) or None. A skinned mesh read
+    inside ``snapshot.skin.temporary_weight_attributes`` is exported in its rest shape.
     """
     triangles, corners, slots = read_triangles(mesh)
     count = max(len(mesh.materials), 1)
     used = np.unique(np.clip(slots, 0, count - 1)) if len(slots) else np.zeros(0, np.int64)
     return build_mesh(
-        name, read_positions(mesh), triangles,
-        corner_normals=corner_normals(mesh)[corners],
+        name, rest_positions(mesh), triangles,
+        corner_normals=rest_corner_normals(mesh, corners),
         corner_uvs=read_corner_uvs(mesh, corners),
         triangle_slots=slots, slot_materials=slot_materials(count, used),
         weights=None if skin is None else skin.weights,

@@ -31,7 +31,10 @@ from .mesh import (
 from .skin import (
     armature_modifiers,
     deform_bone_names,
+    modifier_enabled,
     read_armature,
+    rest_corner_normals,
+    rest_positions,
     temporary_weight_attributes,
     top_weights,
     weight_layers,
@@ -56,10 +59,11 @@ def _is_animated(obj) -> bool:
     )
 
 
-def object_kind(obj) -> tuple[str, bpy.types.Object | None]:
-    """('skinned', armature) with an enabled Armature modifier, ('rigid', None) if it or a parent
-    is animated or constrained, else ('static', None)."""
-    deformers = armature_modifiers(obj)
+def object_kind(obj, depsgraph=None) -> tuple[str, bpy.types.Object | None]:
+    """('skinned', armature) with an Armature modifier enabled in ``depsgraph``'s mode
+    (``skin.modifier_enabled``), ('rigid', None) if it or a parent is animated or constrained,
+    else ('static', None)."""
+    deformers = armature_modifiers(obj, depsgraph)
     if deformers:
         return "skinned", deformers[0].object
     node = obj
@@ -70,15 +74,15 @@ def object_kind(obj) -> tuple[str, bpy.types.Object | None]:
     return "static", None
 
 
-def _shares_mesh(obj) -> bool:
-    return not any(m.show_viewport for m in obj.modifiers) and not any(
+def _shares_mesh(obj, depsgraph=None) -> bool:
+    return not any(modifier_enabled(m, depsgraph) for m in obj.modifiers) and not any(
         slot.link == "OBJECT" for slot in obj.material_slots
     )
 
 
-def _mesh_key(obj, used: dict[str, object]) -> str:
+def _mesh_key(obj, used: dict[str, object], depsgraph=None) -> str:
     """The MeshData key of ``obj``; ``used`` maps keys to their source (mesh or object)."""
-    source = obj.data if _shares_mesh(obj) else obj
+    source = obj.data if _shares_mesh(obj, depsgraph) else obj
     base = obj.data.name_full if source is obj.data else f"{obj.name_full} (modified)"
     key, n = base, 1
     while key in used and used[key] != source:
@@ -102,28 +106,30 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
             warnings.append(f"Object '{entry.obj.name}' has no faces; it is left out")
             return None
         lookup = material_lookup(_slot_materials(obj_eval, mesh), table.index_of)
-        skin = None
-        if entry.kind == "skinned":
+        skin, positions = None, read_positions(mesh)
+        normals = None
+        if entry.kind == "skinned":  # the rest shape, which the skinning matrices pose
             skin = top_weights(mesh, entry.layers, entry.armature.name_full)
+            positions, normals = rest_positions(mesh), rest_corner_normals(mesh, corners)
         return MeshData(
             name=entry.key,
-            positions=read_positions(mesh),
+            positions=positions,
             triangles=triangles,
             triangle_materials=triangle_materials(slots, lookup),
             uvs=read_corner_uvs(mesh, corners),
             skin=skin,
-            corner_normals=read_corner_normals(mesh, corners),
+            corner_normals=read_corner_normals(mesh, corners) if normals is None else normals,
         )
     finally:
         obj_eval.to_mesh_clear()
 
 
-def _visible_mesh_entries(view_layer, warnings: list[str]) -> list[_Entry]:
+def _visible_mesh_entries(view_layer, warnings: list[str], depsgraph=None) -> list[_Entry]:
     entries, used = [], {}
     for obj in view_layer.objects:
         if obj.type != "MESH" or not obj.visible_get(view_layer=view_layer):
             continue
-        kind, armature = object_kind(obj)
+        kind, armature = object_kind(obj, depsgraph)
         if kind == "skinned" and obj.library is not None:
             # Reading weights needs a temporary modifier, which linked data refuses.
             warnings.append(
@@ -131,9 +137,9 @@ def _visible_mesh_entries(view_layer, warnings: list[str]) -> list[_Entry]:
                 "so it is voxelized in its current pose and will not deform"
             )
             kind, armature = "rigid", None
-        entry = _Entry(obj, _mesh_key(obj, used), kind, armature)
+        entry = _Entry(obj, _mesh_key(obj, used, depsgraph), kind, armature)
         if kind == "skinned":
-            if len(armature_modifiers(obj)) > 1:
+            if len(armature_modifiers(obj, depsgraph)) > 1:
                 warnings.append(f"Object '{obj.name}' has several Armature modifiers; only the first is used")
             entry.layers = weight_layers(obj, deform_bone_names(armature))
             if not entry.layers:
@@ -164,7 +170,7 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
     warnings: list[str] = []
     table = MaterialTable(warnings)
 
-    entries = _visible_mesh_entries(view_layer, warnings)
+    entries = _visible_mesh_entries(view_layer, warnings, depsgraph)
     skinned = {e.obj: e.layers for e in entries if e.kind == "skinned"}
     meshes: dict[str, MeshData] = {}
     read_keys: set[str] = set()
@@ -176,7 +182,7 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
                 if mesh is not None:
                     meshes[entry.key] = mesh
 
-    # Matrices are read after the rest-pose evaluation has been undone.
+    # Matrices are read after the temporary modifiers are gone.
     objects = [
         ObjectData(
             name=e.obj.name_full,

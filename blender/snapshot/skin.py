@@ -1,10 +1,11 @@
 """Skinning data for the snapshot: armatures, rest shapes and top-4 bone weights (main thread).
 
 Vertex groups of an evaluated mesh are not readable with ``foreach_get``, so for the
-duration of a snapshot each skinned object gets a temporary Geometry Nodes modifier
-(appended after the user's modifiers) that copies every deform-bone vertex group into
-a float POINT attribute, and its Armature modifiers are switched off in the viewport
-so the evaluated mesh is the REST shape with the other modifiers applied.
+duration of a snapshot each skinned object gets a temporary Geometry Nodes modifier, placed
+just before its first Armature modifier, that stores the rest shape (positions per point,
+normals per corner) and copies every deform-bone vertex group into a float POINT attribute.
+The user's modifiers are never switched on or off, so the viewport, F12 and animation renders
+(whose depsgraphs honour different visibility toggles) all read the same rest shape.
 ``temporary_weight_attributes`` undoes all of it on exit, whatever happened.
 """
 from __future__ import annotations
@@ -16,18 +17,30 @@ import numpy as np
 
 from ...voxgi_addon.errors import VoxGIError
 from ...voxgi_addon.scene.snapshot import ArmatureData, SkinData
+from .mesh import read_corner_normals, read_positions
 
 MAX_INFLUENCES = 4
 MAX_DEFORM_BONES = 256  # bone indices are uint8
 WEIGHT_ATTRIBUTE_PREFIX = "__voxgi_weight_"
+REST_POSITION = "__voxgi_rest_position"  # POINT FLOAT_VECTOR: the shape before the Armature modifier
+REST_NORMAL = "__voxgi_rest_normal"      # CORNER FLOAT_VECTOR: its corner normals
 _TEMP_NAME = "VoxGI weights (temporary)"
 
 
-def armature_modifiers(obj) -> list:
-    """The object's Armature modifiers that deform it in the viewport (enabled, with an armature)."""
+def modifier_enabled(modifier, depsgraph=None) -> bool:
+    """Whether ``modifier`` runs in ``depsgraph``'s evaluation: its Render toggle in a render
+    depsgraph (F12, animation renders), its Viewport toggle otherwise (no depsgraph: viewport)."""
+    if depsgraph is not None and depsgraph.mode == "RENDER":
+        return modifier.show_render
+    return modifier.show_viewport
+
+
+def armature_modifiers(obj, depsgraph=None) -> list:
+    """The object's Armature modifiers that deform it in ``depsgraph``'s evaluation mode
+    (``modifier_enabled``, with an armature object)."""
     return [
         mod for mod in obj.modifiers
-        if mod.type == "ARMATURE" and mod.show_viewport
+        if mod.type == "ARMATURE" and modifier_enabled(mod, depsgraph)
         and mod.object is not None and mod.object.type == "ARMATURE"
     ]
 
@@ -83,24 +96,33 @@ def read_armature(armature_obj, armature_eval) -> ArmatureData:
     )
 
 
-def _weight_node_group(layers: list[tuple[str, str]]):
-    """A geometry node group copying each vertex group ``src`` to a float POINT attribute ``dst``."""
+def _skin_node_group(layers: list[tuple[str, str]]):
+    """A geometry node group storing the incoming shape (``REST_POSITION`` per point,
+    ``REST_NORMAL`` per face corner) and copying each vertex group ``src`` to a float POINT
+    attribute ``dst``. Placed before the Armature modifier, it records the rest shape; the
+    attributes ride through the deformation unchanged."""
     group = bpy.data.node_groups.new(_TEMP_NAME, "GeometryNodeTree")
     group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
     group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
     nodes, links = group.nodes, group.links
     geometry = nodes.new("NodeGroupInput").outputs[0]
+
+    def store(data_type, domain, name, value):
+        nonlocal geometry
+        node = nodes.new("GeometryNodeStoreNamedAttribute")
+        node.data_type, node.domain = data_type, domain
+        node.inputs["Name"].default_value = name
+        links.new(geometry, node.inputs["Geometry"])
+        links.new(value, node.inputs["Value"])
+        geometry = node.outputs["Geometry"]
+
+    store("FLOAT_VECTOR", "POINT", REST_POSITION, nodes.new("GeometryNodeInputPosition").outputs[0])
+    store("FLOAT_VECTOR", "CORNER", REST_NORMAL, nodes.new("GeometryNodeInputNormal").outputs[0])
     for src, dst in layers:
         read = nodes.new("GeometryNodeInputNamedAttribute")
         read.data_type = "FLOAT"
         read.inputs["Name"].default_value = src
-        store = nodes.new("GeometryNodeStoreNamedAttribute")
-        store.data_type = "FLOAT"
-        store.domain = "POINT"
-        store.inputs["Name"].default_value = dst
-        links.new(geometry, store.inputs["Geometry"])
-        links.new(read.outputs["Attribute"], store.inputs["Value"])
-        geometry = store.outputs["Geometry"]
+        store("FLOAT", "POINT", dst, read.outputs["Attribute"])
     links.new(geometry, nodes.new("NodeGroupOutput").inputs[0])
     return group
 
@@ -116,12 +138,18 @@ def weight_layers(obj, bone_names: tuple[str, ...]) -> list[tuple[int, str, str]
 
 @contextmanager
 def temporary_weight_attributes(skinned: dict, depsgraph):
-    """Evaluate skinned objects in their rest shape with weight attributes, then restore them.
+    """Evaluate skinned objects with their rest shape and weights as attributes, then restore them.
 
     skinned : {object: list of (bone index, vertex group, attribute) from ``weight_layers``}.
-    Inside the block, ``depsgraph`` is re-evaluated: each object's evaluated mesh is its rest
-    shape (Armature modifiers off, other modifiers on) carrying the float POINT attributes.
-    On exit every change is undone in reverse order and the depsgraph re-evaluated.
+    Inside the block, ``depsgraph`` is re-evaluated: each object's evaluated mesh is posed as
+    that depsgraph poses it and carries ``REST_POSITION`` / ``REST_NORMAL`` (its shape just
+    before its first Armature modifier, every modifier before that applied, every one after
+    it applied to the attributes; read them with ``rest_positions`` / ``rest_corner_normals``)
+    and the float POINT weight attributes. The user's modifiers are never switched: one
+    temporary Geometry Nodes modifier goes in front of the Armature modifier, so the result is
+    the same whichever visibility toggle the depsgraph honours (F12 renders with
+    ``show_render``, the viewport with ``show_viewport``). On exit every change is undone in
+    reverse order, whatever happened, and the depsgraph re-evaluated.
     """
     undo = []
     try:
@@ -129,15 +157,15 @@ def temporary_weight_attributes(skinned: dict, depsgraph):
             active = obj.modifiers.active
             if active is not None:  # adding a modifier makes it the active one
                 undo.append(lambda o=obj, a=active: setattr(o.modifiers, "active", a))
-            for mod in armature_modifiers(obj):
-                mod.show_viewport = False
-                undo.append(lambda m=mod: setattr(m, "show_viewport", True))
-            if layers:
-                group = _weight_node_group([(src, dst) for _, src, dst in layers])
-                undo.append(lambda g=group: bpy.data.node_groups.remove(g))
-                modifier = obj.modifiers.new(_TEMP_NAME, "NODES")
-                undo.append(lambda o=obj, m=modifier: o.modifiers.remove(m))
-                modifier.node_group = group
+            group = _skin_node_group([(src, dst) for _, src, dst in layers])
+            undo.append(lambda g=group: bpy.data.node_groups.remove(g))
+            first = next((i for i, m in enumerate(obj.modifiers) if m.type == "ARMATURE"), None)
+            modifier = obj.modifiers.new(_TEMP_NAME, "NODES")
+            undo.append(lambda o=obj, m=modifier: o.modifiers.remove(m))
+            modifier.node_group = group
+            modifier.show_viewport = modifier.show_render = True
+            if first is not None:
+                obj.modifiers.move(len(obj.modifiers) - 1, first)
         if undo:
             depsgraph.update()
         yield
@@ -146,6 +174,29 @@ def temporary_weight_attributes(skinned: dict, depsgraph):
             restore()
         if undo:
             depsgraph.update()
+
+
+def rest_positions(mesh) -> np.ndarray:
+    """(V, 3) float32 rest positions of an evaluated mesh read inside
+    ``temporary_weight_attributes`` (its own positions when it carries none)."""
+    if REST_POSITION not in mesh.attributes:
+        return read_positions(mesh)
+    values = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
+    mesh.attributes[REST_POSITION].data.foreach_get("vector", values)
+    return values.reshape(-1, 3)
+
+
+def rest_corner_normals(mesh, corners: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) float32 rest-shape corner normals at ``corners`` (``rest_positions``'s
+    counterpart; the mesh's own corner normals when it carries none)."""
+    if REST_NORMAL not in mesh.attributes:
+        return read_corner_normals(mesh, corners)
+    values = np.empty(len(mesh.loops) * 3, dtype=np.float32)
+    mesh.attributes[REST_NORMAL].data.foreach_get("vector", values)
+    normals = values.reshape(-1, 3)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    normals = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
+    return normals[corners]
 
 
 def top_weights(mesh, layers: list[tuple[int, str, str]], armature_name: str) -> SkinData:
