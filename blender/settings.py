@@ -154,6 +154,19 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
                     "noise before denoising",
         default=64, min=1, max=1024,
     )
+    seed: bpy.props.IntProperty(
+        name="Seed",
+        description="Seed of the sampling patterns (shadow rays and gathers), as Cycles' Seed: "
+                    "the same seed gives the same noise, so still parts of an animation do not "
+                    "flicker",
+        default=0, min=0, max=2 ** 20,
+    )
+    use_animated_seed: bpy.props.BoolProperty(
+        name="Animated Seed",
+        description="Use a different seed on every frame (Cycles' Use Animated Seed): the noise "
+                    "changes from frame to frame",
+        default=False,
+    )
     tracer: bpy.props.EnumProperty(
         name="Tracer",
         description="Where the preview's cone tracing runs",
@@ -268,9 +281,14 @@ def gi_stride(settings: VoxGISceneSettings, width: int, height: int) -> int:
     return int(settings.gi_resolution)
 
 
-def trace_options(settings: VoxGISceneSettings, width: int, height: int) -> dict:
+def sampling_seed(settings: VoxGISceneSettings, frame: int) -> int:
+    """The sampling seed of ``frame``: the scene's Seed, plus the frame with Animated Seed."""
+    return int(settings.seed) + (int(frame) if settings.use_animated_seed else 0)
+
+
+def trace_options(settings: VoxGISceneSettings, width: int, height: int, frame: int = 0) -> dict:
     """Keyword arguments of both tracers (``preview.passes.render_passes``,
-    ``render.gpu_preview.render_passes_gpu``) for a ``width`` × ``height`` image."""
+    ``render.gpu_preview.render_passes_gpu``) for a ``width`` × ``height`` image of ``frame``."""
     from ..voxgi_addon.preview.gather import GatherSettings
 
     return {"light_samples": settings.light_samples, "shadows": settings.shadows,
@@ -278,7 +296,8 @@ def trace_options(settings: VoxGISceneSettings, width: int, height: int) -> dict
             "glossy_indirect": settings.glossy_indirect,
             "gather_settings": GatherSettings(rays=settings.gi_rays,
                                               glossy_rays=max(1, settings.gi_rays // 8),
-                                              ao_distance=settings.ao_distance)}
+                                              ao_distance=settings.ao_distance,
+                                              seed=sampling_seed(settings, frame))}
 
 
 def gi_settings(settings: VoxGISceneSettings):

@@ -10,6 +10,8 @@ live GI (``viewport.py``).
 """
 from __future__ import annotations
 
+import traceback
+
 import bpy
 import numpy as np
 
@@ -71,6 +73,10 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
             passes, report = render_scene_passes(bpy.context, scene, depsgraph, width, height)
         except VoxGIError as error:
             self.report({"ERROR"}, f"VoxGI render failed: {error}")
+            return
+        except Exception as error:  # a bug must fail this frame, never take Blender down
+            traceback.print_exc()
+            self.report({"ERROR"}, f"VoxGI render failed unexpectedly: {error!r} (see the console)")
             return
         for level, line in report:
             self.report({level}, line)

@@ -91,7 +91,7 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
         shine = np.zeros((len(hit), 3))
         for index in range(len(snapshot.lights)):
             texture = direct_light_texture(bvh, gbuffer.inputs, snapshot.lights, light_samples,
-                                           only=index)
+                                           seed=gather_settings.seed, only=index)
             direct += pixels(texture)
             if quality == "ACCURATE":
                 shine += pixels(glossy_direct_texture(gbuffer.inputs, texture, table, index,

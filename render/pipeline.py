@@ -107,7 +107,8 @@ def trace_passes(scene, snapshot, state, width, height):
                 session.gpu_volume = session.gpu_volume or GPUVolume()
                 passes, timings = render_passes_gpu(snapshot, state, width, height, cones,
                                                     volume=session.gpu_volume,
-                                                    **trace_options(settings, width, height))
+                                                    **trace_options(settings, width, height,
+                                                                    snapshot.frame))
                 session.tracer_used = "GPU"
                 how = ("exact rays" if settings.quality == "ACCURATE" else "cones")
                 return passes, timings, [("INFO", f"VoxGI: {how} traced on the GPU")]
@@ -117,7 +118,7 @@ def trace_passes(scene, snapshot, state, width, height):
                 session.gpu_volume = None
                 why = f"the GPU tracer failed: {error}"
     passes, timings = render_passes(snapshot, state, width, height, cones,
-                                    **trace_options(settings, width, height))
+                                    **trace_options(settings, width, height, snapshot.frame))
     session.tracer_used = "numpy"
     return passes, timings, [("WARNING" if settings.tracer == "AUTO" else "INFO",
                               f"VoxGI: numpy tracer used ({why})")]

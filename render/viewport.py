@@ -70,7 +70,8 @@ class ViewportRenderer:
     def _trace_key(self, live, camera_key, scene, pass_name):
         s = scene.voxgi
         return (live.generation, camera_key, pass_name, cone_settings(s), s.light_samples,
-                s.shadows, s.gi_resolution, s.tracer, s.quality, s.gi_rays, s.glossy_indirect)
+                s.shadows, s.gi_resolution, s.tracer, s.quality, s.gi_rays, s.glossy_indirect,
+                s.seed)
 
     def trace(self, live, scene, camera, camera_key, pass_name: str) -> bool:
         """Trace ``live``'s applied results seen by ``camera`` unless the texture already

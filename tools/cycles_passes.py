@@ -106,7 +106,7 @@ def _ao_world(scene, ao_distance):
 
 
 def _render_settings(scene, view_layer, width, height, samples, diffuse_bounces, glossy_bounces,
-                     seed, filter_width, path):
+                     seed, filter_width, path, denoise=False):
     render, cycles = scene.render, scene.cycles
     settings = [
         (render, "engine", "CYCLES"),
@@ -124,7 +124,7 @@ def _render_settings(scene, view_layer, width, height, samples, diffuse_bounces,
         (cycles, "device", "CPU"),
         (cycles, "samples", int(samples)),
         (cycles, "use_adaptive_sampling", False),
-        (cycles, "use_denoising", False),
+        (cycles, "use_denoising", bool(denoise)),
         (cycles, "seed", int(seed)),
         (cycles, "use_animated_seed", False),
         (cycles, "max_bounces", max(int(diffuse_bounces), int(glossy_bounces))),
@@ -136,6 +136,9 @@ def _render_settings(scene, view_layer, width, height, samples, diffuse_bounces,
         (cycles, "sample_clamp_indirect", 0.0),
         (cycles, "blur_glossy", 0.0),
     ]
+    if denoise:  # the quick preview artists use: OpenImageDenoise with albedo and normal
+        settings += [(cycles, "denoiser", "OPENIMAGEDENOISE"),
+                     (cycles, "denoising_input_passes", "RGB_ALBEDO_NORMAL")]
     if filter_width is not None:
         settings += [(cycles, "pixel_filter_type", "BLACKMAN_HARRIS"),
                      (cycles, "filter_width", float(filter_width))]
@@ -146,8 +149,8 @@ def _render_settings(scene, view_layer, width, height, samples, diffuse_bounces,
 def render_cycles_passes(scene, width: int, height: int, samples: int, diffuse_bounces: int = 1,
                          ao_distance: float | None = None, seed: int = 0, *,
                          glossy_bounces: int = 1, filter_width: float | None = None,
-                         view_layer=None, extra_passes: dict[str, str] | None = None
-                         ) -> dict[str, np.ndarray]:
+                         view_layer=None, extra_passes: dict[str, str] | None = None,
+                         denoise: bool = False) -> dict[str, np.ndarray]:
     """Render ``scene``'s camera with Cycles and return its passes.
 
     Parameters
@@ -164,6 +167,7 @@ def render_cycles_passes(scene, width: int, height: int, samples: int, diffuse_b
     view_layer : the view layer to render; default ``scene.view_layers[0]``.
     extra_passes : more passes to return, name → the ViewLayer property enabling it (e.g.
         ``{"Position": "use_pass_position"}``).
+    denoise : run OpenImageDenoise on Combined (the other passes stay noisy, as in Cycles).
 
     Returns
     -------
@@ -176,7 +180,7 @@ def render_cycles_passes(scene, width: int, height: int, samples: int, diffuse_b
     with tempfile.TemporaryDirectory(prefix="voxgi-cycles-") as tmp:
         path = os.path.join(tmp, "passes.exr")
         settings = _render_settings(scene, view_layer, width, height, samples, diffuse_bounces,
-                                    glossy_bounces, seed, filter_width, path)
+                                    glossy_bounces, seed, filter_width, path, denoise)
         settings += [(view_layer, prop, True) for prop in (extra_passes or {}).values()]
         with _ao_world(scene, ao_distance) as world:
             if ao_distance is not None:

@@ -112,7 +112,7 @@ class VOXGI_PT_gi(_SidebarPanel, bpy.types.Panel):
                        *manual, "dense_depth", "cone_angle", "sample_factor", "max_distance"))
         _settings_column(layout, context, (
             "quality", *trace, "glossy_indirect", "ao_distance", "light_samples", "gi_resolution",
-            "tracer"))
+            "seed", "use_animated_seed", "tracer"))
         row = layout.row(align=True)
         row.operator("voxgi.update", icon="FILE_REFRESH")
         row.operator("voxgi.render_preview", icon="RENDER_STILL")

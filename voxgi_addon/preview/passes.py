@@ -226,16 +226,17 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
 
 
 def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
-                 visibility=None, sample_ids=None, per_light=False):
+                 visibility=None, sample_ids=None, per_light=False, seed=0):
     """(N, 3) Diffuse Direct at surface points: exact shadow rays against ``tris`` (shadows
     "RAYS") or one soft-shadow cone per light through ``octree`` ("CONES"; ``visibility``
     as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own).
     sample_ids : the points' pixel indices: shadow rays then use the hashed strata that the
-    GPU kernel ``render/shaders/bvh_direct.glsl`` draws (``direct_light.diffuse_direct``)."""
+    GPU kernel ``render/shaders/bvh_direct.glsl`` draws (``direct_light.diffuse_direct``);
+    seed : the strata's seed (the scene's Seed, ``GatherSettings.seed``)."""
     if shadows == "CONES":
         return cone_shadowed_direct(octree, points, normals, lights, cones, samples, visibility)
     return diffuse_direct(points + normals * SURFACE_EPSILON, normals, lights, tris,
-                          samples=samples, sample_ids=sample_ids, per_light=per_light)
+                          samples=samples, sample_ids=sample_ids, per_light=per_light, seed=seed)
 
 
 def _traced(seen, stride, hit, trace, channels):
@@ -299,7 +300,8 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     t0 = time.perf_counter()
     if quality == "ACCURATE":  # light by light: each one's light feeds the glossy lobe
         per_light = direct_light(None, p, n, snapshot.lights, tris, cones, light_samples,
-                                 shadows, sample_ids=hit, per_light=True)
+                                 shadows, sample_ids=hit, per_light=True,
+                                 seed=gather_settings.seed)
         direct = per_light.sum(axis=0)
     else:
         direct = direct_light(gi_state.octree, p, n, snapshot.lights, tris, cones, light_samples,
