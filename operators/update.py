@@ -31,9 +31,12 @@ class VOXGI_OT_update(VoxGISceneOperator, bpy.types.Operator):
         except VoxGIError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
+        # what did not change since the last update is taken from it (update_gi checks what)
+        previous = scene_session(scene_name).gi_state
 
         def job(cancel):  # worker thread: engine code only
-            state = update_gi(snapshot, caches, settings, cancel=cancel, anchor=anchor)
+            state = update_gi(snapshot, caches, settings, cancel=cancel, anchor=anchor,
+                              previous=previous)
             state.view_shares = view_shares(snapshot, state.grids, fit)
             return state
 
@@ -42,7 +45,8 @@ class VOXGI_OT_update(VoxGISceneOperator, bpy.types.Operator):
             session.gi_state = state
             session.gi_timings = {"snapshot": snap_seconds, **state.timings}
             counts = ", ".join(f"{n:,}" for n in state.voxel_counts)
-            session.last_report = [("INFO", f"GI updated: cascade voxels {counts}"),
+            session.last_report = [("INFO", f"GI updated: cascade voxels {counts}"
+                                            f"{reuse_text(state)}"),
                                    *coverage_lines(state, fit, view_ahead),
                                    ("INFO", f"octree: {octree_text(state.octree)}"),
                                    ("INFO", timing_text(session.gi_timings)),
@@ -60,6 +64,18 @@ class VOXGI_OT_update(VoxGISceneOperator, bpy.types.Operator):
         for level, message in scene_session(scene_name).last_report:
             self.report({level}, message)
         return {"FINISHED"} if submitted.state == "done" else {"CANCELLED"}
+
+
+def reuse_text(state) -> str:
+    """What the update took from the previous one, for the report line."""
+    if state.reused == "all":
+        return " (nothing changed: the previous cascades, light and octree kept)"
+    if state.reused == "objects":
+        moved = ", ".join(f"'{n}'" for n in state.placed_objects[:3])
+        more = len(state.placed_objects) - 3
+        moved += f" and {more} more" if more > 0 else ""
+        return f" (transformed {moved or 'no object'}; the other objects' voxels kept)"
+    return ""
 
 
 classes = (VOXGI_OT_update,)

@@ -40,6 +40,7 @@ from ..voxelize.scene_caches import CacheBuildResult
 from ..voxelize.surface import voxelize_triangles
 
 __all__ = ["CascadeGrid", "CascadeVoxels", "place_cascades", "build_cascades", "merge_voxels",
+           "place_objects", "merge_placement", "Placement", "ObjectPlacement", "grids_key",
            "transformed_cell_bounds", "voxel_patches", "TRANSFORM_MODES", "PATCH_SHRINK"]
 
 MAX_CASCADES = 8
@@ -160,21 +161,20 @@ def _check_grids(grids) -> None:
 
 
 class _ObjectTransform:
-    """Object space → world for one object at this frame: one matrix, or blended bone matrices."""
+    """Object space → world for one object at this frame: one matrix, or blended bone matrices.
+
+    span_scale : a cache voxel of object-space span ``c`` is a world voxel of ``c · span_scale``
+    (the unit scale of a skinned mesh, ``object_scale.skin_bake``; 1 for the others, whose
+    scale is baked into their cache).
+    """
 
     def __init__(self, obj: ObjectData, binding_key: str, snapshot: SceneSnapshot,
                  warnings: list):
         world = np.asarray(obj.world_matrix, np.float64)
         self.bones = None
+        self.span_scale = 1.0
         if obj.kind == "skinned":
-            self.matrix = world  # skinned caches are unscaled: the bones carry everything
-            armature = snapshot.armatures.get(obj.armature) if obj.armature else None
-            if armature is not None:
-                self.bones = skin_matrices(armature, world)
-            if self.bones is None or not np.isfinite(self.bones).all():
-                self.bones = None
-                warnings.append(f"object '{obj.name}': armature '{obj.armature}' is missing or "
-                                "has NaN/inf matrices; its voxels stay in the rest pose")
+            self._skinned(obj, world, binding_key, snapshot, warnings)
             return
         self.matrix, stretch = object_scale.split_rigid(world)  # the scale is baked in the cache
         baked = binding_key.partition("|scale:")[2]
@@ -182,6 +182,27 @@ class _ObjectTransform:
         if baked != now:
             warnings.append(f"object '{obj.name}' changed scale since it was voxelized; its voxels "
                             "keep the old scale until the scene is voxelized again")
+
+    def _skinned(self, obj, world, binding_key, snapshot, warnings):
+        """The bones carry the object matrix; the cache is in model space with the residual
+        stretch N baked in and spans divided by s (``object_scale.skin_bake``), so every bone
+        matrix is right-multiplied by N⁻¹."""
+        s, residual = object_scale.skin_bake(world)
+        if object_scale.skin_key(obj.mesh, s, residual) != binding_key:
+            s, residual = object_scale.parse_skin_key(binding_key, obj.mesh)  # as voxelized
+            warnings.append(f"object '{obj.name}' changed scale since it was voxelized; the "
+                            "skinning resizes its voxels until the scene is voxelized again")
+        self.span_scale = 1.0 if binding_key == obj.mesh else s
+        unbake = np.eye(4)
+        unbake[:3, :3] = np.linalg.inv(residual)
+        self.matrix = world @ unbake
+        armature = snapshot.armatures.get(obj.armature) if obj.armature else None
+        if armature is not None:
+            self.bones = skin_matrices(armature, world) @ unbake
+        if self.bones is None or not np.isfinite(self.bones).all():
+            self.bones = None
+            warnings.append(f"object '{obj.name}': armature '{obj.armature}' is missing or "
+                            "has NaN/inf matrices; its voxels stay in the rest pose")
 
     def all_matrices(self) -> np.ndarray:
         """(M, 4, 4) every matrix a voxel's blended matrix is a convex combination of."""
@@ -292,7 +313,7 @@ def _object_patch_voxels(cache: VoxelCache, transform: _ObjectTransform, grid: C
     object_centres = cache.centres()
     centres = transform_points(matrices, object_centres)
     # a patch stays within (√3/2)·span·scale of its centre: cull by the centre's cell first
-    margin = int(np.ceil(0.87 * _max_scale(all_m))) + 1
+    margin = int(np.ceil(0.87 * _max_scale(all_m) * cache.span / grid.span)) + 1
     centre_cells = grid.cells_of(centres)
     keep = ((centre_cells >= -margin) & (centre_cells < res + margin)).all(axis=1)
     if drop_finer:
@@ -361,8 +382,10 @@ def merge_voxels(grid: CascadeGrid, cells, albedo, normal, specular, has_finer) 
                          count.astype(np.int32), finer)
 
 
-def _cache_at(caches: CacheBuildResult, key: str, grid: CascadeGrid) -> tuple[VoxelCache | None, bool]:
-    """The mesh's cache at the grid's cascade and whether it has one at the finer cascade."""
+def _cache_at(caches: CacheBuildResult, key: str, grid: CascadeGrid,
+              span_scale: float = 1.0) -> tuple[VoxelCache | None, bool]:
+    """The mesh's cache at the grid's cascade and whether it has one at the finer cascade.
+    span_scale : world span of a cache voxel per object-space span (``_ObjectTransform``)."""
     per_cascade = caches.caches.get(key)
     if per_cascade is None:
         raise VoxGIError(f"no voxel cache for mesh '{key}'; voxelize the scene again")
@@ -371,10 +394,119 @@ def _cache_at(caches: CacheBuildResult, key: str, grid: CascadeGrid) -> tuple[Vo
         raise VoxGIError(f"the caches hold {len(per_cascade)} cascades but cascade {i} was "
                          "asked for; voxelize the scene again with this cascade count")
     cache = per_cascade[i]
-    if cache is not None and abs(cache.span - grid.span) > _SPAN_TOLERANCE * grid.span:
-        raise VoxGIError(f"mesh '{key}' was voxelized with span {cache.span:g} m at cascade {i} "
+    if cache is not None and abs(cache.span * span_scale - grid.span) > _SPAN_TOLERANCE * grid.span:
+        raise VoxGIError(f"mesh '{key}' was voxelized with span {cache.span * span_scale:g} m at "
+                         f"cascade {i} "
                          f"but the cascade's span is {grid.span:g} m; voxelize the scene again")
     return cache, i > 0 and per_cascade[i - 1] is not None
+
+
+@dataclass(eq=False)
+class ObjectPlacement:
+    """One object's world voxels in every grid, before merging, and what they were made of.
+
+    cache_list : the caches (per cascade) they were placed from (compared by identity);
+    signature : the object's matrix, kind, cache key and armature matrices (bytes);
+    per_grid : per grid a tuple (cells, albedo, normal, specular, has_finer) or None;
+    warnings : what placing it reported (repeated when it is reused).
+    """
+
+    cache_list: object
+    signature: tuple
+    per_grid: list
+    warnings: list
+
+
+@dataclass(eq=False)
+class Placement:
+    """Every object's placed voxels for one set of grids (``place_objects``). ``placed`` names
+    the objects transformed by the call that made it; the others were taken from the
+    previous placement as they were."""
+
+    grids_key: tuple
+    mode: str
+    objects: dict
+    placed: tuple
+    warnings: list
+
+
+def grids_key(grids) -> tuple:
+    """The identity of a grid family: (index, span, resolution, origin bytes) per grid."""
+    return tuple((g.index, float(g.span), int(g.resolution), g.origin.tobytes()) for g in grids)
+
+
+def _bytes(array) -> bytes:
+    return np.ascontiguousarray(np.asarray(array, np.float64)).tobytes()
+
+
+def object_signature(obj: ObjectData, binding_key: str, snapshot: SceneSnapshot) -> tuple:
+    """What an object's placed voxels depend on besides its caches and the grids."""
+    armature = snapshot.armatures.get(obj.armature) if obj.armature else None
+    bones = () if obj.kind != "skinned" or armature is None else (
+        _bytes(armature.rest_matrices), _bytes(armature.pose_matrices),
+        _bytes(armature.world_matrix))
+    return (binding_key, obj.kind, obj.armature, _bytes(obj.world_matrix), bones)
+
+
+def place_objects(caches: CacheBuildResult, snapshot: SceneSnapshot, grids: list[CascadeGrid],
+                  transform_mode: str = "patch", previous: Placement | None = None) -> Placement:
+    """Every bound object's cache voxels placed in every grid (``build_cascades`` before
+    merging). With ``previous`` (the placement of an earlier update), an object whose caches,
+    matrix and armature pose are unchanged on the same grids is not transformed again: its
+    voxels are taken from ``previous``, so an update costs in proportion to what moved.
+    Raises VoxGIError when the caches do not fit the grids."""
+    if transform_mode not in TRANSFORM_MODES:
+        raise VoxGIError(f"transform mode must be one of {TRANSFORM_MODES}, got {transform_mode!r}")
+    place = _object_patch_voxels if transform_mode == "patch" else _object_voxels
+    _check_grids(grids)
+    key = grids_key(grids)
+    old = previous.objects if previous is not None and previous.grids_key == key and \
+        previous.mode == transform_mode else {}
+    objects = {o.name: o for o in snapshot.objects}
+    warnings = [f"object '{o.name}' has no voxel cache yet; voxelize the scene to include it"
+                for o in snapshot.objects
+                if o.name not in caches.bindings and np.isfinite(o.world_matrix).all()]
+    out, placed = {}, []
+    for name, binding in caches.bindings.items():
+        obj = objects.get(name)
+        if obj is None:
+            continue  # deleted or hidden since voxelization
+        if not np.isfinite(obj.world_matrix).all():
+            warnings.append(f"object '{name}': its matrix has NaN/inf values; left out")
+            continue
+        cache_list = caches.caches.get(binding.cache_key)
+        signature = object_signature(obj, binding.cache_key, snapshot)
+        before = old.get(name)
+        if before is not None and before.cache_list is cache_list and \
+                before.signature == signature:
+            out[name] = before
+            continue
+        mine: list[str] = []
+        transform = _ObjectTransform(obj, binding.cache_key, snapshot, mine)
+        per_grid = []
+        for grid in grids:
+            cache, has_finer = _cache_at(caches, binding.cache_key, grid, transform.span_scale)
+            voxels = None
+            if cache is not None and cache.voxel_count:
+                voxels = place(cache, transform, grid, drop_finer=has_finer)
+            per_grid.append(None if voxels is None else
+                            (*voxels, np.full(len(voxels[0]), has_finer)))
+        out[name] = ObjectPlacement(cache_list, signature, per_grid, mine)
+        placed.append(name)
+    for item in out.values():
+        warnings.extend(item.warnings)
+    return Placement(key, transform_mode, out, tuple(placed), warnings)
+
+
+def merge_placement(placement: Placement, grids: list[CascadeGrid]) -> list[CascadeVoxels]:
+    """The merged ``CascadeVoxels`` of every grid from a ``place_objects`` result."""
+    out = []
+    for grid in grids:
+        items = [p.per_grid[grid.index] for p in placement.objects.values()
+                 if p.per_grid[grid.index] is not None]
+        joined = [np.concatenate(a) for a in zip(*items)] if items else [np.zeros((0, 3))] * 5
+        out.append(merge_voxels(grid, *joined))
+    return out
 
 
 def build_cascades(caches: CacheBuildResult, snapshot: SceneSnapshot, grids: list[CascadeGrid],
@@ -385,40 +517,15 @@ def build_cascades(caches: CacheBuildResult, snapshot: SceneSnapshot, grids: lis
     caches : the voxelization result (caches per mesh key and cascade, object bindings).
     snapshot : the current frame: object matrices, kinds and armature poses are read here,
         so moving objects, bones or the camera only needs a new snapshot.
-    grids : from ``place_cascades`` (finest first); cache spans must match the grid spans.
+    grids : from ``place_cascades`` (finest first); cache spans (times a skinned cache's unit
+        scale) must match the grid spans.
     warnings : optional list that receives messages about objects that could not be placed.
     transform_mode : ``'patch'`` (default) voxelizes each voxel's transformed surface patch;
         ``'centre'`` snaps its transformed centre (see the module docstring). In patch mode
         ``count`` is the number of cache voxels whose patch touches the cell.
     Returns one ``CascadeVoxels`` per grid. Raises VoxGIError when the caches do not fit.
     """
-    if transform_mode not in TRANSFORM_MODES:
-        raise VoxGIError(f"transform mode must be one of {TRANSFORM_MODES}, got {transform_mode!r}")
-    place = _object_patch_voxels if transform_mode == "patch" else _object_voxels
-    _check_grids(grids)
-    warnings = [] if warnings is None else warnings
-    parts: list[list[tuple]] = [[] for _ in grids]
-    objects = {o.name: o for o in snapshot.objects}
-    warnings.extend(f"object '{o.name}' has no voxel cache yet; voxelize the scene to include it"
-                    for o in snapshot.objects
-                    if o.name not in caches.bindings and np.isfinite(o.world_matrix).all())
-    for name, binding in caches.bindings.items():
-        obj = objects.get(name)
-        if obj is None:
-            continue  # deleted or hidden since voxelization
-        if not np.isfinite(obj.world_matrix).all():
-            warnings.append(f"object '{name}': its matrix has NaN/inf values; left out")
-            continue
-        transform = _ObjectTransform(obj, binding.cache_key, snapshot, warnings)
-        for grid in grids:
-            cache, has_finer = _cache_at(caches, binding.cache_key, grid)
-            if cache is None or cache.voxel_count == 0:
-                continue
-            voxels = place(cache, transform, grid, drop_finer=has_finer)
-            if voxels is not None:
-                parts[grid.index].append((*voxels, np.full(len(voxels[0]), has_finer)))
-    out = []
-    for grid, items in zip(grids, parts):
-        joined = [np.concatenate(a) for a in zip(*items)] if items else [np.zeros((0, 3))] * 5
-        out.append(merge_voxels(grid, *joined))
-    return out
+    placement = place_objects(caches, snapshot, grids, transform_mode)
+    if warnings is not None:
+        warnings.extend(placement.warnings)
+    return merge_placement(placement, grids)

@@ -17,7 +17,7 @@ from ..errors import VoxGICancelled
 from .cascades import place_cascades
 from .light_injection import inject_direct_light
 from .svo import build_octree
-from .update import GISettings, GIState, anchor_position, update_gi
+from .update import GISettings, GIState, anchor_position, light_key, update_gi
 from .voxel_shadows import CascadeOccupancy
 
 __all__ = ["StagedGI", "cascade_grids", "grids_equal", "same_caches", "update_gi_stages"]
@@ -71,7 +71,8 @@ def update_gi_stages(snapshot, caches, settings: GISettings, previous: StagedGI 
     if not reuse:
         if progress is not None:
             progress(0.0, "transforming voxels into cascades")
-        state = update_gi(snapshot, caches, settings, cancel=cancel)
+        state = update_gi(snapshot, caches, settings, cancel=cancel,
+                          previous=None if previous is None else previous.state)
         return StagedGI(state, caches, ("transform", "inject", "octree"))
     timings: dict[str, float] = {}
 
@@ -93,5 +94,6 @@ def update_gi_stages(snapshot, caches, settings: GISettings, previous: StagedGI 
     octree = stage("svo", 0.6, build_octree, previous.cascades, radiance,
                    min(settings.dense_depth, depth), one_sided_leaves=settings.one_sided_leaves)
     state = GIState(previous.grids, previous.cascades, radiance, octree, timings,
-                    list(previous.warnings))
+                    list(previous.warnings), placement=previous.placement,
+                    light_key=light_key(snapshot, settings))
     return StagedGI(state, caches, ("inject", "octree"))

@@ -5,13 +5,14 @@ cone tracer and the preview read.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import VoxGICancelled, VoxGIError
-from .cascades import build_cascades, place_cascades
+from .cascades import grids_key, merge_placement, place_cascades, place_objects
 from .light_injection import inject_direct_light
 from .svo import build_octree
 from .voxel_shadows import CascadeOccupancy
@@ -50,6 +51,14 @@ class GIState:
     # (len(grids) + 1,) share of the visible points whose finest cascade is i, the last entry
     # outside all (view_fit.cascade_shares); set by the caller that probed the view, or None.
     view_shares: object = None
+    # What the update could take from the previous state (``update_gi``'s ``previous``):
+    # "all" (nothing changed: the previous cascades, light and octree), "objects" (some or all
+    # objects' placed voxels) or "" (nothing). placed_objects: the objects transformed anew.
+    reused: str = ""
+    placed_objects: tuple = ()
+    # the per-object placed voxels (cascades.Placement) and the light inputs, for the next update
+    placement: object = None
+    light_key: tuple = ()
 
     @property
     def voxel_counts(self) -> list[int]:
@@ -69,14 +78,35 @@ def anchor_position(snapshot, ahead: float = 0.0) -> tuple[np.ndarray, list[str]
     return np.mean(centres, axis=0), ["the scene has no camera: cascades are centred on the objects"]
 
 
+def _value_key(value):
+    if isinstance(value, np.ndarray):
+        return (value.dtype.str, value.shape, value.tobytes())
+    return value
+
+
+def light_key(snapshot, settings: GISettings) -> tuple:
+    """Everything the injection and the octree read besides the cascades: lights, world and
+    the settings (plain values and array bytes, comparable with ``==``)."""
+    def fields(item):
+        return tuple((f.name, _value_key(getattr(item, f.name))) for f in dataclasses.fields(item))
+
+    return (tuple(fields(light) for light in snapshot.lights), fields(snapshot.world),
+            fields(settings))
+
+
 def update_gi(snapshot, caches, settings: GISettings = GISettings(), cancel=None,
-              anchor=None) -> GIState:
+              anchor=None, previous: GIState | None = None) -> GIState:
     """Transform the caches into camera-anchored cascades, light them and build the octree.
 
     caches : mesh_caches.CacheBuildResult from the last voxelization (its spans set the
     cascades' spans). cancel : callable returning True to stop between stages.
     anchor : (3,) world centre of the cascades instead of the camera (``view_fit.ViewFit``'s
     centre, docs/gi_pipeline.md "View-fitted cascades"); ``view_ahead`` is then unused.
+    previous : the state of an earlier update (any scene or caches: what it may reuse is
+    checked). Objects whose caches, matrix and pose did not change on the same grids keep
+    their placed voxels (only what moved is transformed: ``reused == "objects"``); when no
+    object changed and the lights, world and settings are the same, the previous cascades,
+    light and octree are returned as they are (``reused == "all"``).
     """
     if not caches.cascade_stats:
         raise VoxGIError("there are no voxel caches yet: voxelize the scene first")
@@ -98,11 +128,21 @@ def update_gi(snapshot, caches, settings: GISettings = GISettings(), cancel=None
         position, warnings = np.asarray(anchor, np.float64), []
     grids = stage("cascades", place_cascades, position, base_span, settings.resolution,
                   len(caches.cascade_stats))
-    cascades = stage("transform", build_cascades, caches, snapshot, grids, warnings)
+    before = previous.placement if previous is not None else None
+    placement = stage("transform", place_objects, caches, snapshot, grids, previous=before)
+    warnings.extend(placement.warnings)
+    lights = light_key(snapshot, settings)
+    reused = "" if before is None or len(placement.placed) == len(placement.objects) else "objects"
+    if reused and not placement.placed and placement.objects.keys() == before.objects.keys() \
+            and previous.light_key == lights and grids_key(previous.grids) == grids_key(grids):
+        return GIState(previous.grids, previous.cascades, previous.radiance, previous.octree,
+                       timings, warnings, reused="all", placement=placement, light_key=lights)
+    cascades = stage("merge", merge_placement, placement, grids)
     occupancy = stage("occupancy", CascadeOccupancy, cascades)
     radiance = stage("inject", inject_direct_light, cascades, snapshot, occupancy,
                      settings.light_samples)
     depth = int(np.log2(settings.resolution)) + len(grids) - 1
     octree = stage("svo", build_octree, cascades, radiance, min(settings.dense_depth, depth),
                    one_sided_leaves=settings.one_sided_leaves)
-    return GIState(grids, cascades, radiance, octree, timings, warnings)
+    return GIState(grids, cascades, radiance, octree, timings, warnings, reused=reused,
+                   placed_objects=placement.placed, placement=placement, light_key=lights)

@@ -27,6 +27,8 @@ deterministic.
 """
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import math
 from dataclasses import dataclass, field
 
@@ -100,6 +102,8 @@ class ViewProbe:
     source: str
     width: int = 0
     height: int = 0
+    # digest of what it was cast from (``view_key``): a fit of an unchanged view reuses it
+    key: bytes = b""
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,10 +136,49 @@ class ViewFit:
 
 # ------------------------------------------------------------------------------ probe
 
+def _feed(digest, value) -> None:
+    if isinstance(value, np.ndarray):
+        a = np.ascontiguousarray(value)
+        digest.update(f"{a.dtype.str}{a.shape}".encode())
+        digest.update(a.tobytes())
+    else:
+        digest.update(repr(value).encode())
+
+
+def view_key(snapshot, width: int) -> bytes:
+    """Digest of everything the probe and the mesh sizes read: the camera, every object's
+    matrix, kind and mesh (positions, triangles), the armatures' matrices, and ``width``.
+    Hashing is ~1000× cheaper than casting the probe, so an unchanged view costs nearly
+    nothing to fit again."""
+    digest = hashlib.blake2b(digest_size=16)
+    _feed(digest, int(width))
+    camera = snapshot.camera
+    if camera is not None:
+        for f in dataclasses.fields(camera):
+            _feed(digest, getattr(camera, f.name))
+    for obj in snapshot.objects:
+        for value in (obj.name, obj.mesh, obj.kind, obj.armature, obj.world_matrix):
+            _feed(digest, value)
+    for name in sorted(snapshot.meshes):
+        mesh = snapshot.meshes[name]
+        for value in (name, mesh.positions, mesh.triangles):
+            _feed(digest, value)
+        skin = mesh.skin
+        if skin is not None:
+            for value in (skin.armature, skin.weights, skin.bone_indices):
+                _feed(digest, value)
+    for name in sorted(snapshot.armatures):
+        arm = snapshot.armatures[name]
+        for value in (name, arm.rest_matrices, arm.pose_matrices, arm.world_matrix):
+            _feed(digest, value)
+    return digest.digest()
+
+
 def probe_view(snapshot, width: int = PROBE_WIDTH, triangles=None) -> ViewProbe:
     """Hit points of a ``width``-column grid of exact primary rays of the snapshot's camera (the
     rows follow its aspect), or, without a camera or hits, the area-weighted triangle centres.
     Raises VoxGIError when the snapshot has no triangles at all."""
+    key = view_key(snapshot, width) if triangles is None else b""
     tris = world_triangles(snapshot) if triangles is None else triangles
     if len(tris) == 0:
         raise VoxGIError("the scene has no triangles to fit the cascades to")
@@ -147,14 +190,15 @@ def probe_view(snapshot, width: int = PROBE_WIDTH, triangles=None) -> ViewProbe:
         points = hits.position[hits.hit]
         if len(points):
             return ViewProbe(points, np.full(len(points), 1.0 / len(points)), "camera",
-                             width, height)
+                             width, height, key)
     corners = np.asarray(tris.positions, np.float64)
     area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
                                          corners[:, 2] - corners[:, 0]), axis=1)
     keep = np.isfinite(area) & (area > 0)
     if not keep.any():
         raise VoxGIError("the scene has no triangles with an area to fit the cascades to")
-    return ViewProbe(corners[keep].mean(axis=1), area[keep] / area[keep].sum(), "triangles")
+    return ViewProbe(corners[keep].mean(axis=1), area[keep] / area[keep].sum(), "triangles",
+                     key=key)
 
 
 def cascade_shares(probe: ViewProbe, grids: list[CascadeGrid], margin_cells: int = 0) -> np.ndarray:
@@ -276,13 +320,18 @@ def fit_view(snapshot, settings: FitSettings = FitSettings(), previous: ViewFit 
     previous : the last fit of this scene; it is kept (span, centre and all) while its shares
         stay within ``HYSTERESIS`` of the targets and the resolution and count are unchanged,
         and its span is kept while a finer one does not meet the targets.
-    probe : a ViewProbe to use instead of casting the probe rays again.
+    probe : a ViewProbe to use instead of casting the probe rays again. Without one, the
+        previous fit's probe is reused when its ``view_key`` is this snapshot's (nothing in
+        view moved), else the probe rays are cast.
     Raises VoxGIError for a scene without triangles or bad settings.
     """
     count = int(settings.cascade_count)
     if not 1 <= count <= MAX_CASCADES:
         raise VoxGIError(f"cascade count must be between 1 and {MAX_CASCADES}, got {count!r}")
     warnings: list[str] = []
+    if probe is None and previous is not None and previous.probe.key and \
+            previous.probe.key == view_key(snapshot, settings.probe_width):
+        probe = previous.probe
     probe = probe or probe_view(snapshot, settings.probe_width)
     res, memory = _pick_resolution(settings, warnings)
     margin = int(settings.margin_cells)

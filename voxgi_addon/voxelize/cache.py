@@ -22,7 +22,9 @@ from .cube_clipping import PATCH_SHRINK, voxel_patches
 class VoxelCache:
     """Packed voxels of one mesh at one cascade.
 
-    key : mesh (cache) key; cascade : cascade index; span : voxel edge in metres (object space).
+    key : mesh (cache) key; cascade : cascade index; span : voxel edge in object-space units
+    (the cascade's span in metres, divided by the unit scale of a skinned mesh's key,
+    ``object_scale.skin_key``).
     origin_cell : (3,) int64; dims : (3,) int64 cells of the AABB per axis (each ≤ 1024).
     positions, normals, colors : (N,) uint32; weights, bone_indices : (N,) uint32 or None.
     """

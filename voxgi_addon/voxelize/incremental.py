@@ -133,21 +133,21 @@ def refresh_caches(store: CacheStore, snapshot: SceneSnapshot, base_span: float,
     timer = StageTimer(result.timings)
     sources = cache_sources(snapshot, result)
     t0 = time.perf_counter()
-    prints = {key: store.fingerprint(key, positions, mesh, snapshot, base_span, cascade_count)
-              for key, (positions, mesh) in sources.items()}
+    prints = {key: store.fingerprint(key, src.positions, src.mesh, snapshot, base_span,
+                                     cascade_count) for key, src in sources.items()}
     timer.add("fingerprint", t0)
     todo = [key for key in sources if store.find(key, prints[key]) is None]
-    weights = {key: max(1, len(sources[key][1].triangles)) for key in todo}
+    weights = {key: max(1, len(sources[key].mesh.triangles)) for key in todo}
     total, done = sum(weights.values()), 0
     for key in todo:
         if cancel is not None and cancel():
             raise VoxGICancelled("voxelization cancelled")
         if progress is not None:
             progress(done / max(total, 1), f"voxelizing '{key}'")
-        positions, mesh = sources[key]
+        src = sources[key]
         one = CacheBuildResult()
-        build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, one, timer,
-                          cancel)
+        build_mesh_caches(key, src.positions, src.mesh, snapshot, base_span, cascade_count, one,
+                          timer, cancel, src.span_scale)
         store.put(key, _KeyCaches(prints[key], one.caches[key], one.skipped,
                                   one.dropped_triangles.get(key, 0), one.warnings))
         done += weights[key]

@@ -3,6 +3,11 @@
 One cache per (mesh key, cascade); cascade i uses ``base_span · 2**i``. Static and rigid
 objects with a non-unit scale get a cache of their scaled mesh (key ``mesh|scale``), shared
 by every object with that mesh and scale; the runtime then applies only their rigid part.
+Skinned objects keep their cache in model space, since their bones carry the whole object
+matrix: a uniform scale s (an armature at 0.01 over a mesh in centimetres) is voxelized at
+``span / s`` (key ``mesh|span:s``), so the cache holds the voxels of the same character built
+at scale 1 and the skinning matrices carry them to the world span (Yalçıner 2016, 4.7); a
+non-uniform remainder is baked into the rest vertices (``object_scale.skin_bake``).
 """
 from __future__ import annotations
 
@@ -55,6 +60,18 @@ class ObjectBinding:
     kind: str
 
 
+@dataclass(frozen=True)
+class CacheSource:
+    """What one cache key is voxelized from: object-space ``positions`` (V, 3) (a scale or
+    residual stretch baked in), the ``mesh`` (triangles, materials, skin) and ``span_scale``:
+    the cache's spans are the cascade spans divided by it (the unit scale of a skinned mesh,
+    1 for everything else)."""
+
+    positions: np.ndarray
+    mesh: MeshData
+    span_scale: float = 1.0
+
+
 @dataclass
 class CacheBuildResult:
     caches: dict[str, list[VoxelCache | None]] = field(default_factory=dict)
@@ -84,9 +101,10 @@ class StageTimer:
         self.timings[stage] = self.timings.get(stage, 0.0) + time.perf_counter() - start
 
 
-def cache_sources(snapshot: SceneSnapshot, result: CacheBuildResult):
-    """Which (key → positions, mesh) to voxelize, baking non-unit scales; fills bindings."""
-    sources: dict[str, tuple[np.ndarray, MeshData]] = {}
+def cache_sources(snapshot: SceneSnapshot, result: CacheBuildResult) -> dict[str, CacheSource]:
+    """Which keys to voxelize from what (``CacheSource``), baking non-unit scales; fills
+    bindings."""
+    sources: dict[str, CacheSource] = {}
     for obj in snapshot.objects:
         mesh = snapshot.meshes.get(obj.mesh)
         if mesh is None:
@@ -95,13 +113,23 @@ def cache_sources(snapshot: SceneSnapshot, result: CacheBuildResult):
             result.warnings.append(f"object '{obj.name}': its matrix has NaN/inf values; skipped")
             continue
         rigid, stretch = object_scale.split_rigid(obj.world_matrix)
-        key, positions = obj.mesh, mesh.positions
+        key, positions, span_scale = obj.mesh, mesh.positions, 1.0
         if obj.kind == "skinned":
             rigid = np.asarray(obj.world_matrix, np.float64)  # bones carry the deformation
-            if not object_scale.is_identity(stretch):
+            span_scale, residual = object_scale.skin_bake(rigid)
+            if not (np.isfinite(span_scale) and span_scale > 1e-12):
+                result.warnings.append(f"object '{obj.name}': its matrix has zero scale; skipped")
+                continue
+            key = object_scale.skin_key(obj.mesh, span_scale, residual)
+            if key == obj.mesh:
+                span_scale = 1.0
+            if not object_scale.is_identity(residual):
                 result.warnings.append(
-                    f"object '{obj.name}': skinned with a scaled object matrix; its voxels are "
-                    "resized by the skinning matrices, not baked")
+                    f"object '{obj.name}' is skinned with non-uniform scale or shear: its "
+                    "non-uniform part is baked into its rest shape and the uniform part "
+                    f"({span_scale:.4g}) into its voxel span, so at rest its voxels are cubes "
+                    "of the cascade's span")
+                positions = np.asarray(mesh.positions, np.float64) @ residual.T
         elif not object_scale.is_identity(stretch):
             if not object_scale.is_uniform(stretch):
                 result.warnings.append(
@@ -111,7 +139,7 @@ def cache_sources(snapshot: SceneSnapshot, result: CacheBuildResult):
             key = f"{obj.mesh}|scale:{object_scale.stretch_key(stretch)}"
             positions = np.asarray(mesh.positions, np.float64) @ stretch.T
         result.bindings[obj.name] = ObjectBinding(key, rigid, obj.kind)
-        sources.setdefault(key, (positions, mesh))
+        sources.setdefault(key, CacheSource(positions, mesh, span_scale))
     return sources
 
 
@@ -129,10 +157,11 @@ def triangle_materials(snapshot: SceneSnapshot, mesh: MeshData):
 
 
 def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, result, timer,
-                      cancel=None):
+                      cancel=None, span_scale: float = 1.0):
     """Voxelize one mesh at every cascade span into ``result.caches[key]``.
 
     cancel : optional callable returning True to stop; raises VoxGICancelled between cascades.
+    span_scale : the object-space span is ``base_span · 2**i / span_scale`` (``CacheSource``).
     """
     t0 = time.perf_counter()
     check = filter_triangles(key, positions, mesh.triangles)
@@ -156,10 +185,11 @@ def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, 
     for cascade in range(cascade_count):
         if cancel is not None and cancel():
             raise VoxGICancelled("voxelization cancelled; no caches were kept")
-        span = base_span * 2**cascade
+        span = base_span * 2**cascade / span_scale
         lo, dims = lattice_bounds(np.asarray(positions)[used], span)
         if (dims > MAX_CELLS_PER_AXIS).any():
-            result.skipped.append(SkippedMesh(key, cascade, span, tuple(int(d) for d in dims)))
+            result.skipped.append(SkippedMesh(key, cascade, base_span * 2**cascade,
+                                              tuple(int(d) for d in dims)))
             caches.append(None)
             continue
         t0 = time.perf_counter()
@@ -199,11 +229,11 @@ def build_scene_caches(snapshot: SceneSnapshot, base_span: float, cascade_count:
     result = CacheBuildResult(warnings=list(snapshot.warnings))
     timer = StageTimer(result.timings)
     sources = cache_sources(snapshot, result)
-    for key, (positions, mesh) in sources.items():
+    for key, source in sources.items():
         if cancel is not None and cancel():
             raise VoxGICancelled("voxelization cancelled; no caches were kept")
-        build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, result, timer,
-                          cancel)
+        build_mesh_caches(key, source.positions, source.mesh, snapshot, base_span, cascade_count,
+                          result, timer, cancel, source.span_scale)
     add_cascade_stats(result, base_span, cascade_count)
     return result
 
