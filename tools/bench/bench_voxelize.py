@@ -1,4 +1,6 @@
-"""Benchmark: surface voxelization, ours against trimesh and Open3D (dev-only).
+"""Benchmark: surface voxelization, ours against trimesh and Open3D (dev-only); then Voxelize and
+Update of a centimetre rig at scale 0.01 beside the same rig with its scale applied
+(``bench_unit_scale_blender.py``, run with the bpy venv).
 
 Run through ``tools/bench/bench.py`` (``make bench``), or alone:
 ``.venv-bench/bin/python tools/bench/bench_voxelize.py [--repeats 5] [--triangles 100000]``.
@@ -37,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -301,6 +304,24 @@ def run(quick: bool = False, out=print, repeats: int | None = None, triangles: i
     out(table)
     if problems:
         raise RuntimeError("voxelization self-check failed: " + "; ".join(problems))
+    return table + "\n\n" + run_unit_scale(quick, out)
+
+
+def run_unit_scale(quick: bool = False, out=print) -> str:
+    """The unit-scaled rig beside the applied one (``bench_unit_scale_blender.py``, run with
+    the bpy venv .venv, since it goes through the add-on's operators)."""
+    root = Path(__file__).resolve().parents[2]
+    python = root / ".venv" / "bin" / "python"
+    if not python.exists():
+        raise RuntimeError("the bpy venv .venv is missing: run `make venv` (make bench does)")
+    cmd = [str(python), str(root / "tools" / "bench" / "bench_unit_scale_blender.py")]
+    done = subprocess.run(cmd + (["--quick"] if quick else []), capture_output=True, text=True,
+                          cwd=root)
+    if done.returncode != 0:
+        raise RuntimeError(f"bench_unit_scale_blender.py failed:\n{done.stderr[-2000:]}")
+    table = "\n".join(line for line in done.stdout.splitlines()
+                      if line.startswith(("|", "###", "Goals")) or not line.strip()).strip()
+    out(table + "\n")
     return table
 
 
