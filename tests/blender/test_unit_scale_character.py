@@ -2,7 +2,8 @@
 (armature object at scale 0.01, mesh vertices and bones in centimetres, the mesh parented to
 the armature) gives the voxels and the previews of the same character with its scale applied.
 
-Also: rigid meshes under a chain of scaled empties keep their baked scale, and ``voxgi.update``
+Also: the rig round-tripped through Blender's glTF exporter and importer against itself with
+Object › Apply › Scale; rigid meshes under scaled empties keep their baked scale; ``voxgi.update``
 redoes nothing when nothing changed and only the moved character when it is posed.
 """
 from __future__ import annotations
@@ -131,3 +132,62 @@ def test_update_redoes_nothing_unchanged_and_only_the_posed_character(voxgi, ses
     assert lit.reused == "objects" and lit.placed_objects == () and lit.cascades is not posed.cascades
     assert all(np.array_equal(a.cells, b.cells) for a, b in zip(posed.cascades, lit.cascades))
     assert lit.radiance[0].sum() > posed.radiance[0].sum()
+
+
+def _imported_room(path):
+    """The room with its own character replaced by the one Blender's glTF importer makes of
+    ``path`` (armature at 0.01, mesh and bones in cm). Returns (mesh object, armature)."""
+    scene = bpy.context.scene
+    built = scenes.build_character_room(scene, 1.0)
+    for role in ("body", "rig"):
+        bpy.data.objects.remove(built[role])
+    assert bpy.ops.import_scene.gltf(filepath=str(path)) == {"FINISHED"}
+    rig = next(o for o in scene.objects if o.type == "ARMATURE")
+    body = next(o for o in scene.objects if o.type == "MESH" and o.parent is rig)
+    return body, rig
+
+
+def _voxels_and_fast_preview(session, path):
+    scene = bpy.context.scene
+    assert bpy.ops.voxgi.voxelize() == {"FINISHED"}
+    caches = [s.voxel_count for s in session.scene_session(scene.name_full).caches.cascade_stats]
+    scene.voxgi.quality = "FAST"
+    assert bpy.ops.voxgi.render_preview(filepath=str(path), resolution_x=WIDTH,
+                                        resolution_y=HEIGHT) == {"FINISHED"}
+    return caches, importlib.import_module("voxgi.voxgi_addon.files.exr").read_exr_passes(path)
+
+
+def test_a_gltf_round_tripped_rig_matches_itself_with_the_scale_applied(voxgi, session, tmp_path):
+    """Through Blender's own glTF exporter and importer (what users actually get), then
+    Object › Apply › Scale on the armature and its mesh, as issue 22 measured."""
+    scene = bpy.context.scene
+    scenes.add_character(scene, 0.01)
+    bpy.context.view_layer.update()
+    glb = tmp_path / "character.glb"
+    assert bpy.ops.export_scene.gltf(filepath=str(glb), export_format="GLB") == {"FINISHED"}
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    if not hasattr(bpy.types.Scene, "voxgi"):
+        voxgi.register()
+    body, rig = _imported_room(glb)
+    assert rig.scale[0] == pytest.approx(0.01) and rig.data.bones[0].head_local.length > 50
+    imported = _voxels_and_fast_preview(session, tmp_path / "imported.exr")
+    view_layer = bpy.context.view_layer
+    for obj in bpy.context.scene.objects:
+        obj.select_set(obj in (body, rig))
+    view_layer.objects.active = rig
+    with bpy.context.temp_override(active_object=rig, object=rig,
+                                   selected_editable_objects=[rig, body]):
+        assert bpy.ops.object.transform_apply(location=False, rotation=False,
+                                              scale=True) == {"FINISHED"}
+    view_layer.update()
+    assert rig.scale[0] == pytest.approx(1.0)
+    assert np.abs(np.array(body.matrix_world)[:3, :3]).max() > 0.5  # metres now
+    applied = _voxels_and_fast_preview(session, tmp_path / "applied.exr")
+    print(f"glTF round trip: cache voxels imported {imported[0]}, applied {applied[0]}")
+    assert applied[0][0] > 1000
+    assert imported[0] == pytest.approx(applied[0], rel=0.02)
+    a, b = imported[1]["Combined"], applied[1]["Combined"]
+    lit = b.sum(axis=-1) > 0
+    error = float(np.abs(a - b)[lit].sum() / np.abs(b[lit]).sum())
+    print(f"glTF round trip: Fast Combined relative L1 imported vs applied {error:.4f}")
+    assert error <= 0.02
