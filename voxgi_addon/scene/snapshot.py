@@ -159,10 +159,23 @@ class CameraData:
 
 @dataclass(frozen=True)
 class WorldData:
-    """Uniform world background: linear RGB colour and strength (Background node)."""
+    """The world background: what a camera ray that misses everything sees in Cycles.
+
+    radiance : (H, W, 3) float32 equirect map of linear RGB radiance in Cycles' units
+        (Background Color x Strength applied), W = 2H, in the convention of
+        ``voxgi_addon/scene/equirect.py`` (the only place it is defined; world space, Z up).
+        None is a black world (no world, or strength 0).
+    color, strength : an ambient term, ``color * strength`` (probes and voxel injection):
+        a uniform world's Background Color and Strength; for a map its solid-angle-weighted
+        mean radiance and 1.0.
+    key : a content key of the world (same world content -> same key; "" for no world), for
+        caching tables built from ``radiance``.
+    """
 
     color: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
     strength: float = 0.0
+    radiance: np.ndarray | None = None
+    key: str = ""
 
 
 @dataclass(frozen=True)
