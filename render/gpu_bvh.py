@@ -26,6 +26,7 @@ import numpy as np
 
 from ..voxgi_addon.gi.exact_glossy import GLOSSY_STREAM
 from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
+from ..voxgi_addon.gi.world_light import world_table
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
 from ..voxgi_addon.scene.bvh import DET_EPSILON, TEXTURE_WIDTH, build_bvh, pack_bvh
@@ -39,10 +40,10 @@ _BVH = ("bvh_nodes", "bvh_triangles")
 # Kernel → (GLSL files after bvh_common.glsl, 2D samplers, VEC4 push constants).
 KERNELS = {
     "bvh_probe": (("bvh_probe",), _BVH + ("ray_origin", "ray_direction"), ("mode",)),
-    "bvh_direct": (("bvh_lights", "bvh_direct"), _BVH + ("lights", "gbuffer_position",
+    "bvh_direct": (("bvh_lights", "bvh_direct"), _BVH + ("lights", "world_map", "gbuffer_position",
                                                           "gbuffer_normal"), ("sampling",)),
     "bvh_gather": (("pixels", "principled", "bvh_lights", "bvh_shade", "bvh_gather"),
-                   _BVH + ("bvh_normals", "lights", "materials", "gbuffer_position",
+                   _BVH + ("bvh_normals", "lights", "world_map", "materials", "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "principled_lut", "partial_image",
                            "partial_variance"),
                    ("sampling", "world", "grid", "chunk")),
@@ -175,18 +176,26 @@ def lights_texture(lights, only: int | None = None):
     return float_texture(table, (LIGHT_TEXELS, len(table)))
 
 
+def world_texture(world, stream: int = 0):
+    """``world_light.world_table`` of a ``WorldLight`` (None: no world) as a texture."""
+    table = world_table(world, stream)
+    return float_texture(table, (table.shape[1], table.shape[0]))
+
+
 def strata_side(samples: int) -> int:
     """m of the m × m strata ``direct_light`` uses for ``samples`` shadow rays."""
     return max(1, math.ceil(math.sqrt(samples)))
 
 
 def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0,
-                         only: int | None = None):
+                         only: int | None = None, world=None):
     """Diffuse Direct over a G-buffer (``shaders/bvh_direct.glsl``), an RGBA32F texture of the
-    G-buffer's size (bottom row first), rgb in Cycles' units; ``only`` : of that light alone
-    (``lights_texture``)."""
+    G-buffer's size (bottom row first), rgb in Cycles' units; ``only`` : of that lamp alone
+    (``lights_texture``; -1: none); world : a ``world_texture`` to add the world's light (None:
+    not)."""
     position = gbuffer_inputs["gbuffer_position"]
-    inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights, only)}
+    inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights, only),
+              "world_map": world if world is not None else world_texture(None)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
                         {"sampling": (seed, strata_side(samples), 0, 0)})
 

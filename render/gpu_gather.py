@@ -16,7 +16,7 @@ import numpy as np
 
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import low_shape
-from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, strata_side
+from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, strata_side, world_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
 from .gpu_shaders import LOCAL_SIZE, build_compute
@@ -90,12 +90,15 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
     low_h, low_w = low_shape(height, width, stride)
     placeholder = gpu.types.GPUTexture((1, 1), format="RGBA32F")
     partial = (placeholder, placeholder)
+    world = [(i, light) for i, light in enumerate(lights) if light.type == "WORLD"]
     inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights),
+              "world_map": world_texture(*(world[0][::-1] if world else (None,))),
               "materials": principled_materials_texture(principled, emission),
               "principled_lut": lut_texture()}
     assert OUTPUTS[kernel] == ("out_image", "out_variance")
     rays = settings.rays if kernel == "bvh_gather" else settings.glossy_rays
-    step = rays_per_dispatch(len(lights), settings.hit_samples)
+    # the world draws two rays per stratum (one per sampling technique): it counts twice
+    step = rays_per_dispatch(len(lights) + len(world), settings.hit_samples)
     for first in range(0, max(rays, 1), step):
         partial = dispatch_bvh(kernel, {
             **inputs, "partial_image": partial[0], "partial_variance": partial[1]}, low_w, low_h, {

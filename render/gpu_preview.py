@@ -16,6 +16,7 @@ import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.cone_shadows import shadow_cone
+from ..voxgi_addon.gi.world_light import scene_lights, world_light
 from ..voxgi_addon.preview.gather import GatherSettings
 from ..voxgi_addon.preview.passes import (
     check_request,
@@ -28,7 +29,7 @@ from ..voxgi_addon.preview.passes import (
 from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
-from .gpu_bvh import direct_light_texture, lights_texture, shared_bvh
+from .gpu_bvh import direct_light_texture, lights_texture, shared_bvh, world_texture
 from .gpu_gather import gather_low, glossy_direct_texture, upsample
 from .gpu_tracer import dispatch, read_texture
 from .gpu_volume import GPUVolume
@@ -96,6 +97,11 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
             if quality == "ACCURATE":
                 shine += pixels(glossy_direct_texture(gbuffer.inputs, texture, table, index,
                                                       principled, emission))
+        world = world_light(snapshot.world)
+        if world is not None:  # the world's own dispatch (its stream: after the lamps)
+            direct += pixels(direct_light_texture(
+                bvh, gbuffer.inputs, snapshot.lights, light_samples, seed=gather_settings.seed,
+                only=-1, world=world_texture(world, len(snapshot.lights))))
         timings["direct"] = time.perf_counter() - t0
     else:
         direct = direct_light(None, p, n, snapshot.lights, tris, cones, light_samples, shadows,
@@ -116,8 +122,8 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
     if quality == "ACCURATE":  # both gathers at low resolution, then one upsample for both
         _, _, _, emission = material_table(snapshot)
         bvh, principled = shared_bvh().update(tris), principled_table(snapshot)
-        gathered = (bvh, gbuffer.inputs, snapshot.lights, principled, emission, gather_settings,
-                    gi_stride, width, height)
+        gathered = (bvh, gbuffer.inputs, scene_lights(snapshot), principled, emission,
+                    gather_settings, gi_stride, width, height)
         low_diffuse = gather_low(*gathered)
         timings["diffuse+ao gather (GPU)"] = time.perf_counter() - t0
         t0 = time.perf_counter()

@@ -172,8 +172,162 @@ vec3 light_towards(int light, vec3 p)
   return normalize(light_texel(light, 2).xyz - p);
 }
 
+/* ---- The world as a light (voxgi_addon/gi/world_light.py; sampler `world_map` holds
+ * world_light.world_table: the map with its CDFs, the unshadowed-irradiance table and a
+ * header row). */
+
+#define LUMA vec3(0.2126, 0.7152, 0.0722)
+
+vec4 world_header()
+{
+  return texelFetch(world_map, ivec2(0, textureSize(world_map, 0).y - 1), 0);
+}
+
+bool world_on()
+{
+  return texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).x > 0.5;
+}
+
+/* Pixel (row, column) of unit direction d (scene/equirect.direction_to_pixel). */
+ivec2 world_pixel(vec3 d, int h, int w)
+{
+  float el = asin(clamp(d.z, -1.0, 1.0));
+  float phi = (d.x == 0.0 && d.y == 0.0) ? 0.0 : atan(d.y, d.x);
+  int i = clamp(int(floor((M_PI_F / 2.0 - el) * float(h) / M_PI_F)), 0, h - 1);
+  int j = int(floor((phi + M_PI_F) * float(w) / (2.0 * M_PI_F)));
+  j = ((j % w) + w) % w;
+  return ivec2(i, j);
+}
+
+vec3 world_radiance_at(ivec2 pixel)
+{
+  return texelFetch(world_map, ivec2(pixel.y, pixel.x), 0).rgb;
+}
+
+/* E(n)/π: bilinear lookup of the irradiance table (equirect.sample_bilinear). */
+vec3 world_unshadowed(vec3 n, int h)
+{
+  int ih = int(world_header().z);
+  int iw = 2 * ih;
+  float el = asin(clamp(n.z, -1.0, 1.0));
+  float phi = (n.x == 0.0 && n.y == 0.0) ? 0.0 : atan(n.y, n.x); /* numpy's arctan2(0, 0) */
+  float y = clamp((M_PI_F / 2.0 - el) * float(ih) / M_PI_F - 0.5, 0.0, float(ih) - 1.0);
+  float x = (phi + M_PI_F) * float(iw) / (2.0 * M_PI_F) - 0.5;
+  int y0 = min(int(floor(y)), ih - 1);
+  int y1 = min(y0 + 1, ih - 1);
+  float x0f = floor(x);
+  float fy = y - float(y0);
+  float fx = x - x0f;
+  int x0 = ((int(x0f) % iw) + iw) % iw;
+  int x1 = (x0 + 1) % iw;
+  vec3 top = texelFetch(world_map, ivec2(x0, h + y0), 0).rgb * (1.0 - fx) +
+             texelFetch(world_map, ivec2(x1, h + y0), 0).rgb * fx;
+  vec3 bottom = texelFetch(world_map, ivec2(x0, h + y1), 0).rgb * (1.0 - fx) +
+                texelFetch(world_map, ivec2(x1, h + y1), 0).rgb * fx;
+  return top * (1.0 - fy) + bottom * fy;
+}
+
+/* world_light.sample_world: the row, then the column by their inclusive CDFs (the first entry
+ * above u), then uniform in z and azimuth inside the pixel. */
+vec3 world_sample(vec2 u, int h, int w)
+{
+  int lo = 0;
+  int hi = h - 1;
+  while (lo < hi) {
+    int mid = (lo + hi) / 2;
+    if (texelFetch(world_map, ivec2(w, mid), 0).x <= u.x) {
+      lo = mid + 1;
+    }
+    else {
+      hi = mid;
+    }
+  }
+  int i = lo;
+  float low = i > 0 ? texelFetch(world_map, ivec2(w, i - 1), 0).x : 0.0;
+  float f0 = clamp((u.x - low) / max(texelFetch(world_map, ivec2(w, i), 0).x - low, 1e-30),
+                   0.0, 1.0);
+  lo = 0;
+  hi = w - 1;
+  while (lo < hi) {
+    int mid = (lo + hi) / 2;
+    if (texelFetch(world_map, ivec2(mid, i), 0).a <= u.y) {
+      lo = mid + 1;
+    }
+    else {
+      hi = mid;
+    }
+  }
+  int j = lo;
+  float left = j > 0 ? texelFetch(world_map, ivec2(j - 1, i), 0).a : 0.0;
+  float right = texelFetch(world_map, ivec2(j, i), 0).a;
+  float f1 = clamp((u.y - left) / max(right - left, 1e-30), 0.0, 1.0);
+  float z_top = cos(float(i) * M_PI_F / float(h));
+  float z_bottom = cos(float(i + 1) * M_PI_F / float(h));
+  float z = z_top + f0 * (z_bottom - z_top);
+  float phi = -M_PI_F + (float(j) + f1) * (2.0 * M_PI_F / float(w));
+  float r = sqrt(max(0.0, 1.0 - z * z));
+  return vec3(r * cos(phi), r * sin(phi), z);
+}
+
+/* Diffuse Direct of the world (world_light.world_direct): the unshadowed table value times
+ * the per-channel visible share of one map sample and one cosine sample per stratum. */
+vec3 world_direct(vec3 p, vec3 n, uint state, int m)
+{
+  vec4 head = world_header();
+  int h = int(head.x);
+  int w = int(head.y);
+  vec3 value = world_unshadowed(n, h);
+  if (max(value.r, max(value.g, value.b)) <= 0.0) {
+    return value;
+  }
+  vec3 origin = p + NORMAL_OFFSET * n;
+  vec3 t, b;
+  perpendicular_basis(n, t, b);
+  vec3 f_sum = vec3(0.0);
+  vec3 f_lit = vec3(0.0);
+  for (int technique = 0; technique < 2; technique++) {
+    for (int k = 0; k < m * m; k++) {
+      vec2 s = hashed_stratum(state, k, m);
+      vec3 dir;
+      if (technique == 0) {
+        dir = world_sample(s, h, w);
+      }
+      else {
+        vec2 disk = concentric_disk(s);
+        float lift = sqrt(max(0.0, 1.0 - dot(disk, disk)));
+        dir = normalize(disk.x * t + disk.y * b + lift * n);
+      }
+      float cos_n = dot(dir, n);
+      if (cos_n <= 0.0) {
+        continue;
+      }
+      vec3 radiance = world_radiance_at(world_pixel(dir, h, w));
+      float pdf = dot(radiance, LUMA) / head.w + cos_n / M_PI_F;
+      vec3 f = radiance * (cos_n / max(pdf, 1e-30));
+      f_sum += f;
+      if (max(f.r, max(f.g, f.b)) > 0.0 && !bvh_any_hit(origin, dir, BVH_FAR)) {
+        f_lit += f;
+      }
+    }
+  }
+  vec3 share = vec3(f_sum.r > 0.0 ? f_lit.r / f_sum.r : 1.0, f_sum.g > 0.0 ? f_lit.g / f_sum.g : 1.0,
+                    f_sum.b > 0.0 ? f_lit.b / f_sum.b : 1.0);
+  return value * share;
+}
+
+/* The world's Diffuse Direct with the samples diffuse_direct draws for it (its hash stream,
+ * its index after the lamps, is the header's texel 1.y); 0 without a world. */
+vec3 world_light_direct(vec3 p, vec3 n, uint id, uint seed, int m)
+{
+  if (!world_on()) {
+    return vec3(0.0);
+  }
+  uint stream = uint(texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).y);
+  return world_direct(p, n, point_stream(id, stream, seed), m);
+}
+
 /* Diffuse Direct of all lights at p (normal n facing the viewer), `id` the point's sample id
- * and `m` × `m` strata per light with an extent. */
+ * and `m` × `m` strata per light with an extent, the world's included. */
 vec3 diffuse_direct(vec3 p, vec3 n, uint id, uint seed, int m)
 {
   vec3 sum = vec3(0.0);
@@ -181,5 +335,5 @@ vec3 diffuse_direct(vec3 p, vec3 n, uint id, uint seed, int m)
   for (int light = 0; light < count; light++) {
     sum += light_direct(light, p, n, id, seed, m);
   }
-  return sum;
+  return sum + world_light_direct(p, n, id, seed, m);
 }

@@ -4,7 +4,7 @@
  * stratum, `strata` = m of m × m, sample id `hit_id`, seed `seed` + 1) reflected toward the
  * origin by the Principled diffuse weight and, when `hit_glossy`, its glossy lobe (each light
  * at its centre direction). `th` = distance of the hit, BVH_FAR on a miss.
- * Samplers: bvh_* (bvh_common.glsl), lights (bvh_lights.glsl), materials ((M + 1) × 3 texels:
+ * Samplers: bvh_* (bvh_common.glsl), lights and world_map (bvh_lights.glsl), materials ((M + 1) × 3 texels:
  * base colour, emission, (metallic, Specular IOR Level, roughness)), principled_lut. */
 
 vec4 bvh_texel_normals(int k)
@@ -52,6 +52,8 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
                                                 towards);
     }
   }
+  /* the world lights the hit too (its diffuse share; world_light.py) */
+  radiance += weight * world_light_direct(lit_at, ns, hit_id, seed + 1u, strata);
   return radiance;
 }
 

@@ -232,7 +232,16 @@ def _area(light, p, n, tris, strata):
     return value
 
 
-_BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area}
+def _world(world, p, n, tris, strata):
+    from .world_light import world_direct
+
+    origins_offset = _NORMAL_OFFSET * n
+    occluded = None if tris is None else (
+        lambda origins, dirs: _occluded(tris, origins, dirs, np.full(len(dirs), np.inf)))
+    return world_direct(world, p + origins_offset, n, occluded, strata)
+
+
+_BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD": _world}
 
 
 def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
@@ -243,7 +252,8 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
     ----------
     points : (N, 3) float world-space surface positions.
     normals : (N, 3) float unit normals facing the viewer.
-    lights : list of ``LightData`` (types SUN, POINT, SPOT, AREA; others are ignored).
+    lights : list of ``LightData`` (types SUN, POINT, SPOT, AREA; others are ignored) and
+        ``world_light.WorldLight`` (the world, RGB light of its own).
     tris : ``SceneTriangles`` (or a ``raycast.TriangleGrid``) that casts shadows, or any object with
         an ``occluded(origins, dirs, max_t)`` method (voxel occupancy); None = no shadows.
     samples : shadow rays per point for lights with an extent (area, point/spot radius, sun
@@ -267,9 +277,9 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
     ids = None if sample_ids is None else np.asarray(sample_ids).reshape(-1)
     for index, light in enumerate(lights):
         shade = _BY_TYPE.get(light.type)
-        if shade is None or light.power == 0:
+        if shade is None or getattr(light, "power", 1.0) == 0:
             continue
-        color = np.asarray(light.color, dtype=np.float64)
+        color = np.asarray(getattr(light, "color", np.ones(3)), dtype=np.float64)
         for a in range(0, len(p), _POINT_CHUNK):
             b = min(len(p), a + _POINT_CHUNK)
             if ids is None:
@@ -278,15 +288,19 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
             else:
                 def strata(points_of_chunk, chunk_ids=ids[a:b], stream=index):
                     return hashed_square(chunk_ids[points_of_chunk], stream, samples, seed)
-            out[index, a:b] += shade(light, p[a:b], n[a:b], tris, strata)[:, None] * color
+            value = shade(light, p[a:b], n[a:b], tris, strata)
+            out[index, a:b] += (value[:, None] if value.ndim == 1 else value) * color
     return (out if per_light else out.sum(axis=0)).astype(np.float32)
 
 
 def light_directions(lights, points) -> list[np.ndarray]:
-    """Per light, (N, 3) unit directions from ``points`` towards it (a sun: against its
-    direction of travel; others: towards its position)."""
+    """Per lamp, (N, 3) unit directions from ``points`` towards it (a sun: against its
+    direction of travel; others: towards its position). The world, which comes after the
+    lamps (``world_light.scene_lights``), has no direction and is left out."""
     out = []
     for light in lights:
+        if light.type == "WORLD":
+            continue
         m = np.asarray(light.world_matrix, np.float64)
         if light.type == "SUN":
             d = np.broadcast_to(m[:3, 2] / np.linalg.norm(m[:3, 2]), points.shape)

@@ -18,6 +18,7 @@ from ..gi.conetrace import ConeSettings, trace_diffuse_and_ao, trace_glossy
 from ..gi.direct_light import concentric_disk, diffuse_direct, light_directions, light_frame
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.sampling import hashed_square
+from ..gi.world_light import scene_lights
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
 from .gather import GatherSettings, gather_gi, gather_glossy
@@ -298,11 +299,13 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     mat = materials[hit]
 
     t0 = time.perf_counter()
-    if quality == "ACCURATE":  # light by light: each one's light feeds the glossy lobe
-        per_light = direct_light(None, p, n, snapshot.lights, tris, cones, light_samples,
+    lights = scene_lights(snapshot)  # the lamps, then the world
+    if quality == "ACCURATE":  # light by light: each lamp's light feeds the glossy lobe
+        per_light = direct_light(None, p, n, lights, tris, cones, light_samples,
                                  shadows, sample_ids=hit, per_light=True,
                                  seed=gather_settings.seed)
         direct = per_light.sum(axis=0)
+        per_light = per_light[:len(snapshot.lights)]
     else:
         direct = direct_light(gi_state.octree, p, n, snapshot.lights, tris, cones, light_samples,
                               shadows, sample_ids=hit)
@@ -321,7 +324,7 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     t0 = time.perf_counter()
     if quality == "ACCURATE":
         _, _, _, emission = material_table(snapshot)
-        traced = gather_gi(tris, snapshot.lights, principled_table(snapshot), emission, seen.hit,
+        traced = gather_gi(tris, lights, principled_table(snapshot), emission, seen.hit,
                            seen.position, seen.normal, gather_settings, gi_stride,
                            seen.direction).reshape(-1, 4)[hit]
         timings["diffuse+ao gather"] = time.perf_counter() - t0
@@ -331,7 +334,7 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     indirect, ao = traced[:, :3], traced[:, 3]
     t0 = time.perf_counter()
     if glossy_indirect and quality == "ACCURATE":
-        glossy = gather_glossy(tris, snapshot.lights, principled_table(snapshot), emission,
+        glossy = gather_glossy(tris, lights, principled_table(snapshot), emission,
                                seen.hit, seen.position, seen.normal, seen.direction,
                                materials.reshape(height, width), gather_settings, gi_stride
                                ).reshape(-1, 3)[hit]
