@@ -139,7 +139,8 @@ def render_scene_passes(context, scene, depsgraph, width, height, indirect_sourc
         t0 = time.perf_counter()
         caches, settings, anchor, fit = gi_inputs(context, snapshot, scene)
         fit_seconds = time.perf_counter() - t0
-        state = update_gi(snapshot, caches, settings, anchor=anchor)
+        # the last update's state: what did not move is reused (voxgi_addon/gi/update.py)
+        state = update_gi(snapshot, caches, settings, anchor=anchor, previous=session.gi_state)
         state.view_shares = view_shares(snapshot, state.grids, fit)
         voxels = {"fit + caches": fit_seconds, **state.timings}
     passes, render_timings, lines = trace_passes(scene, snapshot, state, width, height)

@@ -20,6 +20,7 @@ import bpy
 import gi_scenes
 import numpy as np
 import pytest
+import unit_scale_scenes
 from animation_scenes import FRAMES, mean_change, walking_rig
 from cycles_reference import relative_l1, render_cycles_passes
 
@@ -115,6 +116,8 @@ def _every_lamp(scene):
 
 SCENE_CLASSES = {
     "skinned": lambda scene: gi_scenes.build("skinned_figure", scene),
+    # as glTF / FBX importers leave a rig: armature at scale 0.01, mesh and bones in cm
+    "skinned_cm_rig": lambda scene: unit_scale_scenes.build_character_room(scene, unit=0.01),
     "rigid_animated": _rigid_animated,
     "linked_duplicates": _linked_duplicates,
     "every_lamp": _every_lamp,
@@ -130,6 +133,19 @@ def test_f12_gives_render_previews_passes(voxgi, tmp_path, kind):
     geometry = theirs["Diffuse Color"].sum(-1) > 0
     assert geometry.mean() > 0.3, "the camera sees too little of the scene"
     assert theirs["Combined"][geometry].mean() > 0.01, "the scene is not lit"
+    for name in PASSES:
+        assert rel(ours[name], theirs[name]) < 0.01, name
+
+
+@pytest.mark.parametrize("kind", ["skinned", "skinned_cm_rig", "rigid_animated"])
+def test_fast_quality_f12_gives_render_previews_passes(voxgi, tmp_path, kind):
+    """Fast quality traces cones through the voxels transformed from the rest-shape caches."""
+    scene = bpy.context.scene
+    SCENE_CLASSES[kind](scene)
+    scene.voxgi.quality = "FAST"
+    ours = f12(scene, tmp_path / "f12.exr")
+    theirs = preview(tmp_path / "preview.exr")
+    assert theirs["Diffuse Indirect"].mean() > 0
     for name in PASSES:
         assert rel(ours[name], theirs[name]) < 0.01, name
 
