@@ -80,13 +80,14 @@ def rays_per_dispatch(light_count: int, hit_samples: int = 1) -> int:
 
 
 def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
-           width: int, height: int, kernel: str = "bvh_gather"):
+           width: int, height: int, kernel: str = "bvh_gather", world_mode: bool = False):
     """The raw gather: (values, variance) RGBA32F textures of the low-resolution grid, the
     rays split over dispatches of ``rays_per_dispatch``. kernel : "bvh_gather" (Diffuse
     Indirect and AO, ``settings.rays``) or "bvh_glossy" (Glossy Indirect,
     ``settings.glossy_rays``).
     principled : (base, params) of ``preview.passes.principled_table``;
-    settings : ``voxgi_addon.preview.gather.GatherSettings``."""
+    settings : ``voxgi_addon.preview.gather.GatherSettings``; world_mode : "bvh_glossy"
+    gathers the world's Glossy Direct instead (``exact_glossy.glossy_world_direct``)."""
     low_h, low_w = low_shape(height, width, stride)
     placeholder = gpu.types.GPUTexture((1, 1), format="RGBA32F")
     partial = (placeholder, placeholder)
@@ -105,7 +106,7 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
             "sampling": (settings.seed, rays, settings.ao_distance,
                          strata_side(settings.hit_samples)),
             "world": (*settings.world, float(settings.hit_glossy)),
-            "grid": (stride, width, height, 0),
+            "grid": (stride, width, height, float(world_mode)),
             "chunk": (first, step, float(first > 0), float(first + step >= rays))})
     return partial
 
@@ -138,11 +139,12 @@ def upsample(values, gbuffer_inputs, stride: int, width: int, height: int, secon
 
 
 def gather_low(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
-               width: int, height: int, kernel: str = "bvh_gather"):
+               width: int, height: int, kernel: str = "bvh_gather", world_mode: bool = False):
     """The gather's low-resolution result after the à-trous filter (not upsampled): (Diffuse
-    Indirect rgb, AO) for "bvh_gather", (Glossy Indirect rgb, 0) for "bvh_glossy"."""
+    Indirect rgb, AO) for "bvh_gather", (Glossy Indirect rgb, 0) for "bvh_glossy", (the world's
+    Glossy Direct rgb, 0) for "bvh_glossy" in ``world_mode``."""
     values, variance = gather(bvh, gbuffer_inputs, lights, principled, emission, settings,
-                              stride, width, height, kernel=kernel)
+                              stride, width, height, kernel=kernel, world_mode=world_mode)
     values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
                         settings.denoise_iterations)
     return values

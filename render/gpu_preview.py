@@ -137,6 +137,14 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
         glossy = (np.flipud(read_texture(glossy_texture)) if glossy_indirect else
                   np.zeros((height, width, 4), np.float32))
         timings["upsample + read-back"] = time.perf_counter() - t0
+        glossy_world = None
+        if world_light(snapshot.world) is not None:  # the world's Glossy Direct
+            t0 = time.perf_counter()
+            low_world = gather_low(*gathered, kernel="bvh_glossy", world_mode=True)
+            glossy_world = np.flipud(read_texture(
+                upsample(low_world, gbuffer.inputs, gi_stride, width, height)))
+            glossy_world = glossy_world.reshape(-1, 4)[hit, :3].astype(np.float64)
+            timings["world glossy gather (GPU)"] = time.perf_counter() - t0
     else:
         diffuse_ao = traced("diffuse_ao")
         timings["diffuse+ao cones (GPU)"] = time.perf_counter() - t0
@@ -152,4 +160,5 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
     if quality != "ACCURATE":
         return compose_passes(snapshot, width, height, hit, mat, *terms), timings
     views = -seen["direction"].reshape(-1, 3)[hit].astype(np.float64)
-    return compose_passes(snapshot, width, height, hit, mat, *terms, n, views, shine), timings
+    return compose_passes(snapshot, width, height, hit, mat, *terms, n, views, shine,
+                          glossy_world), timings

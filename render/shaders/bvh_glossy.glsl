@@ -4,7 +4,9 @@
  * reference and has the estimator: reflections of GGX visible-normal samples, weighted by the
  * Principled glossy BSDF × cos over their density). out_image = (Glossy Indirect rgb, 0);
  * out_variance = (variance, 0, 0, 0). Push constants as bvh_gather.glsl's, with
- * sampling.y = the glossy rays; the rays are split over dispatches the same way (chunk). */
+ * sampling.y = the glossy rays; the rays are split over dispatches the same way (chunk).
+ * With grid.w = 1 the kernel gathers the world's Glossy Direct instead (exact_glossy.py
+ * glossy_world_direct), the same outputs. */
 
 /* GGX visible normal for the local view v (z > 0) and roughness alpha (Heitz 2018). */
 vec3 vndf_half_vector(vec3 v, float alpha, vec2 u)
@@ -23,6 +25,18 @@ vec3 vndf_half_vector(vec3 v, float alpha, vec2 u)
   vec3 nh = p1 * t1 + p2 * t2 + p3 * vh;
   vec3 h = vec3(alpha * nh.x, alpha * nh.y, max(nh.z, 0.0));
   return h / max(length(h), 1e-30);
+}
+
+/* Density of the visible-normal sample l (voxgi_addon/gi/exact_glossy.py _Lobe.pdf): D of
+ * normalize(v + l) computed as principled_glossy_reflectance does (1 − cos² as |n × h|², exact
+ * in float32 near a mirror's peak), so that it cancels in the weight. */
+float lobe_pdf(vec3 n, vec3 v, vec3 l, float alpha2, float pdf_scale)
+{
+  vec3 h_eval = normalize(v + l);
+  float cos_nh = dot(n, h_eval);
+  vec3 nxh = cross(n, h_eval);
+  float den = min(dot(nxh, nxh), 1.0) + alpha2 * min(cos_nh * cos_nh, 1.0);
+  return alpha2 / (M_PI_F * max(den * den, 1e-30)) / pdf_scale;
 }
 
 void main()
@@ -55,6 +69,8 @@ void main()
   int rays = int(sampling.y);
   vec3 origin = position + SURFACE_EPSILON * n;
   uint state = point_stream(id, GLOSSY_STREAM, seed);
+  uint world_state = point_stream(id, WORLD_GLOSSY_STREAM, seed);
+  bool world_mode = grid.w > 0.5 && world_on();
   const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
   vec3 sum = vec3(0.0);
   float lum2 = 0.0;
@@ -73,20 +89,41 @@ void main()
     }
     vec3 l = normalize(2.0 * dot(v, h) * h - v);
     vec3 weight = vec3(1.0); /* a mirror: the pass is the reflected radiance itself */
+    float pdf = 0.0;
     if (!mirror) {
-      /* D of normalize(v + l) computed as principled_glossy_reflectance does (1 − cos² as
-       * |n × h|², exact in float32 near a mirror's peak), so that it cancels in the weight. */
-      vec3 h_eval = normalize(v + l);
-      float cos_nh = dot(n, h_eval);
-      vec3 nxh = cross(n, h_eval);
-      float den = min(dot(nxh, nxh), 1.0) + alpha2 * min(cos_nh * cos_nh, 1.0);
-      float pdf = alpha2 / (M_PI_F * max(den * den, 1e-30)) / pdf_scale;
+      pdf = lobe_pdf(n, v, l, alpha2, pdf_scale);
       weight = dot(l, n) > 0.0 && pdf > 0.0 ?
                principled_glossy_reflectance(base, params.x, params.y, rough, n, v, l) /
                max(pdf, 1e-30) / max(colour, vec3(1e-30)) : vec3(0.0);
     }
     vec3 value = vec3(0.0);
-    if (dot(weight, vec3(1.0)) > 0.0) {
+    if (world_mode) {
+      /* the world's Glossy Direct (exact_glossy.glossy_world_direct): the lobe's ray where it
+       * reaches the sky, then one ray by the map's importance, balance heuristic */
+      vec4 head = world_header();
+      int wh = int(head.x);
+      int ww = int(head.y);
+      if (dot(weight, vec3(1.0)) > 0.0 && dot(l, n) > 0.0) {
+        vec3 sky = world_radiance_at(world_pixel(l, wh, ww));
+        float map_pdf = dot(sky, LUMA) / head.w;
+        float share = mirror ? 1.0 : pdf / max(pdf + map_pdf, 1e-30);
+        if (!bvh_any_hit(origin, l, BVH_FAR)) {
+          value += sky * weight * share;
+        }
+      }
+      if (!mirror) {
+        vec3 le = world_sample(hammersley(world_state, j, rays), wh, ww);
+        vec3 sky = world_radiance_at(world_pixel(le, wh, ww));
+        float map_pdf = dot(sky, LUMA) / head.w;
+        if (dot(le, n) > 0.0 && map_pdf > 0.0 && !bvh_any_hit(origin, le, BVH_FAR)) {
+          float both = lobe_pdf(n, v, le, alpha2, pdf_scale) + map_pdf;
+          value += sky * principled_glossy_reflectance(base, params.x, params.y, rough, n, v, le) /
+                   max(both, 1e-30) / max(colour, vec3(1e-30));
+        }
+      }
+      value = mix(vec3(0.0), value, greaterThan(colour, vec3(0.0)));
+    }
+    else if (dot(weight, vec3(1.0)) > 0.0) {
       float th;
       vec3 radiance = ray_radiance(origin, l, id * uint(rays) + uint(j), seed, int(sampling.w),
                                    world.w > 0.5, world.rgb, th);

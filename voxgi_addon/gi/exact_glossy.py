@@ -29,9 +29,11 @@ from .exact_indirect import LUMINANCE, SURFACE_EPSILON, ray_radiance
 from .principled import ROUGHNESS_SQ_THRESHOLD, glossy_color, glossy_reflectance
 from .sampling import hammersley, perpendicular_basis
 
-__all__ = ["GLOSSY_STREAM", "glossy_indirect", "vndf_half_vectors"]
+__all__ = ["GLOSSY_STREAM", "WORLD_GLOSSY_STREAM", "glossy_indirect", "glossy_world_direct",
+           "vndf_half_vectors"]
 
 GLOSSY_STREAM = 0x6105  # hash stream of the glossy rays' rotation
+WORLD_GLOSSY_STREAM = 0x6107  # hash stream of the map-importance rays of glossy_world_direct
 
 
 def vndf_half_vectors(view_local: np.ndarray, alpha: np.ndarray, square: np.ndarray) -> np.ndarray:
@@ -63,6 +65,65 @@ def _lambda(alpha2, cos):
     return 0.5 * (np.sqrt(1.0 + alpha2 * tan2) - 1.0)
 
 
+class _Lobe:
+    """The Principled glossy lobe of each point: its colour and its GGX visible-normal samples
+    (the module doc)."""
+
+    def __init__(self, normals, views, materials, principled):
+        n = self.n = np.asarray(normals, np.float64).reshape(-1, 3)
+        v = self.v = np.asarray(views, np.float64).reshape(-1, 3)
+        base_table, param_table = (np.asarray(a, np.float64) for a in principled)
+        last = len(base_table) - 1
+        mat = np.asarray(materials).reshape(-1)
+        mat = np.where((mat >= 0) & (mat < last), mat, last)
+        base, params = base_table[mat], param_table[mat]
+        metallic, level, rough = params[:, 0], params[:, 1], np.clip(params[:, 2], 0.0, 1.0)
+        alpha = rough * rough
+        self.alpha2 = (alpha * alpha)[:, None]
+        self.mirror = alpha * alpha <= ROUGHNESS_SQ_THRESHOLD
+        self.alpha = np.where(self.mirror, 1e-3, alpha)
+        self.t, self.b = perpendicular_basis(n)
+        self.cos_ni = np.einsum("ij,ij->i", n, v)
+        self.shading = (base[:, None], metallic[:, None], level[:, None], rough[:, None])
+        self.colour = glossy_color(base, metallic, level, rough, np.clip(self.cos_ni, 0.0, 1.0))
+
+    def pdf(self, dirs):
+        """(N, K) density of ``sample``'s directions (N, K, 3) (GGX visible normals; D of the
+        half vector as ``glossy_reflectance`` evaluates it, so that it cancels in the weight;
+        the GLSL port takes 1 − cos² as |n × h|², exact in float32 near a mirror's peak)."""
+        n, v = self.n, self.v
+        h_eval = v[:, None] + dirs
+        h_eval /= np.maximum(np.linalg.norm(h_eval, axis=-1, keepdims=True), 1e-30)
+        cos2 = np.minimum(np.einsum("nkc,nc->nk", h_eval, n) ** 2, 1.0)
+        sin2 = np.minimum((np.cross(n[:, None], h_eval) ** 2).sum(-1), 1.0)
+        den = sin2 + self.alpha2 * cos2
+        d = self.alpha2 / (np.pi * np.maximum(den * den, 1e-30))
+        cos_ni = self.cos_ni[:, None]
+        return d / (4.0 * np.maximum(cos_ni, 1e-4) * (1.0 + _lambda(self.alpha2, cos_ni)))
+
+    def reflectance(self, dirs):
+        """(N, K, 3) BSDF × cos of the lobe toward the viewer for light from ``dirs``."""
+        return glossy_reflectance(*self.shading, self.n[:, None], self.v[:, None], dirs)
+
+    def sample(self, ids, rays: int, seed: int):
+        """((N, K, 3) reflected directions, (N, K, 3) their weight BSDF × cos / density)."""
+        n, v, t, b = self.n, self.v, self.t, self.b
+        view_local = np.stack([np.einsum("ij,ij->i", t, v), np.einsum("ij,ij->i", b, v),
+                               np.maximum(self.cos_ni, 1e-4)], axis=1)
+        view_local /= np.linalg.norm(view_local, axis=1, keepdims=True)
+        h_local = vndf_half_vectors(view_local, self.alpha, hammersley(ids, GLOSSY_STREAM, rays, seed))
+        h = h_local[..., :1] * t[:, None] + h_local[..., 1:2] * b[:, None] + h_local[..., 2:] * n[:, None]
+        h = np.where(self.mirror[:, None, None], n[:, None], h)
+        cos_vh = np.einsum("nkc,nc->nk", h, v)
+        dirs = 2.0 * cos_vh[..., None] * h - v[:, None]
+        dirs /= np.maximum(np.linalg.norm(dirs, axis=-1, keepdims=True), 1e-30)
+        cos_no = np.einsum("nkc,nc->nk", dirs, n)
+        pdf = self.pdf(dirs)
+        weight = np.where(((cos_no > 0.0) & (pdf > 0.0))[..., None],
+                          self.reflectance(dirs) / np.maximum(pdf, 1e-30)[..., None], 0.0)
+        return dirs, weight
+
+
 def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights, principled,
                     emission, rays: int = 16, seed: int = 0, world=(0.0, 0.0, 0.0),
                     hit_samples: int = 1, hit_glossy: bool = True):
@@ -78,50 +139,14 @@ def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights,
     """
     p = np.asarray(points, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
-    v = np.asarray(views, np.float64).reshape(-1, 3)
     ids = np.asarray(sample_ids).reshape(-1).astype(np.uint32)
     count = len(p)
     if count == 0 or rays < 1:
         return np.zeros((count, 3), np.float32), np.zeros(count, np.float32)
+    lobe = _Lobe(n, views, materials, principled)
+    dirs, weight = lobe.sample(ids, rays, seed)
     base_table, param_table = (np.asarray(a, np.float64) for a in principled)
-    last = len(base_table) - 1
-    mat = np.asarray(materials).reshape(-1)
-    mat = np.where((mat >= 0) & (mat < last), mat, last)
-    base, params = base_table[mat], param_table[mat]
-    metallic, level, rough = params[:, 0], params[:, 1], np.clip(params[:, 2], 0.0, 1.0)
-    alpha = rough * rough
-    mirror = alpha * alpha <= ROUGHNESS_SQ_THRESHOLD
-
-    t, b = perpendicular_basis(n)
-    cos_ni = np.einsum("ij,ij->i", n, v)
-    view_local = np.stack([np.einsum("ij,ij->i", t, v), np.einsum("ij,ij->i", b, v),
-                           np.maximum(cos_ni, 1e-4)], axis=1)
-    view_local /= np.linalg.norm(view_local, axis=1, keepdims=True)
-    h_local = vndf_half_vectors(view_local, np.where(mirror, 1e-3, alpha),
-                                hammersley(ids, GLOSSY_STREAM, rays, seed))
-    h = h_local[..., :1] * t[:, None] + h_local[..., 1:2] * b[:, None] + h_local[..., 2:] * n[:, None]
-    h = np.where(mirror[:, None, None], n[:, None], h)
-    cos_vh = np.einsum("nkc,nc->nk", h, v)
-    dirs = 2.0 * cos_vh[..., None] * h - v[:, None]
-    dirs /= np.maximum(np.linalg.norm(dirs, axis=-1, keepdims=True), 1e-30)
-    cos_no = np.einsum("nkc,nc->nk", dirs, n)
-
-    shading = (base[:, None], metallic[:, None], level[:, None], rough[:, None])
-    reflect = glossy_reflectance(*shading, n[:, None], v[:, None], dirs)  # (N, K, 3)
-    alpha2 = (alpha * alpha)[:, None]
-    # D of the half vector of (v, l) as glossy_reflectance evaluates it, so that D cancels in
-    # the weight; the GLSL port takes 1 − cos² as |n × h|², which float32 keeps exact near a
-    # mirror's peak (shaders/bvh_glossy.glsl, principled.glsl).
-    h_eval = v[:, None] + dirs
-    h_eval /= np.maximum(np.linalg.norm(h_eval, axis=-1, keepdims=True), 1e-30)
-    cos2 = np.minimum(np.einsum("nkc,nc->nk", h_eval, n) ** 2, 1.0)
-    sin2 = np.minimum((np.cross(n[:, None], h_eval) ** 2).sum(-1), 1.0)
-    den = sin2 + alpha2 * cos2
-    d = alpha2 / (np.pi * np.maximum(den * den, 1e-30))
-    pdf = d / (4.0 * np.maximum(cos_ni, 1e-4)[:, None] * (1.0 + _lambda(alpha2, cos_ni[:, None])))
-    colour = glossy_color(base, metallic, level, rough, np.clip(cos_ni, 0.0, 1.0))  # (N, 3)
-    weight = np.where(((cos_no > 0.0) & (pdf > 0.0))[..., None],
-                      reflect / np.maximum(pdf, 1e-30)[..., None], 0.0)
+    colour, mirror, cos_ni = lobe.colour, lobe.mirror, lobe.cos_ni
 
     origins = np.repeat(p + SURFACE_EPSILON * n, rays, axis=0)
     with np.errstate(over="ignore"):
@@ -138,3 +163,56 @@ def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights,
     luminance = per_ray @ LUMINANCE
     variance = np.maximum((luminance ** 2).mean(axis=1) - (value @ LUMINANCE) ** 2, 0.0)
     return value.astype(np.float32), (variance / max(rays - 1, 1)).astype(np.float32)
+
+
+def glossy_world_direct(points, normals, views, materials, sample_ids, tris, world, principled,
+                        rays: int = 16, seed: int = 0):
+    """(the world's Glossy Direct (N, 3) float32 without the glossy colour, variance of its
+    luminance mean (N,) float32): the world seen in the glossy lobe (Cycles files it under
+    Glossy Direct). Multiple importance sampling with the balance heuristic: ray j of the
+    lobe's ``rays`` (``glossy_indirect``'s, same stream) and ray j drawn from the map's
+    importance (``world_light.sample_world``, stream ``WORLD_GLOSSY_STREAM``) each add
+    L f / (p_lobe + p_map) where they reach the sky unoccluded; a mirror takes its one
+    reflected ray. world : ``world_light.WorldLight``."""
+    from ..scene.raycast import occluded
+    from .world_light import sample_world, world_pdf, world_radiance
+
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    n = np.asarray(normals, np.float64).reshape(-1, 3)
+    ids = np.asarray(sample_ids).reshape(-1).astype(np.uint32)
+    count = len(p)
+    if count == 0 or rays < 1 or world is None:
+        return np.zeros((count, 3), np.float32), np.zeros(count, np.float32)
+    lobe = _Lobe(n, views, materials, principled)
+    origins = np.repeat(p + SURFACE_EPSILON * n, rays, axis=0)
+
+    def reaching(dirs, useful):  # (N, K) the rays that leave the scene
+        out = np.zeros(useful.shape, bool)
+        if useful.any():
+            out[useful] = ~occluded(tris, origins[useful.ravel()], dirs[useful],
+                                    np.full(int(useful.sum()), np.inf))
+        return out
+
+    dirs, weight = lobe.sample(ids, rays, seed)
+    lobe_pdf, map_pdf = lobe.pdf(dirs), world_pdf(world, dirs)
+    share = np.where(lobe.mirror[:, None], 1.0, lobe_pdf / np.maximum(lobe_pdf + map_pdf, 1e-30))
+    weight = np.where(lobe.mirror[:, None, None], 1.0, weight)
+    useful = (weight.sum(-1) > 0) & (np.einsum("nkc,nc->nk", dirs, n) > 0)
+    value = np.where(reaching(dirs, useful)[..., None],
+                     world_radiance(world, dirs) * weight * share[..., None], 0.0)
+
+    dirs = sample_world(world, hammersley(ids, WORLD_GLOSSY_STREAM, rays, seed))
+    lobe_pdf, map_pdf = lobe.pdf(dirs), world_pdf(world, dirs)
+    useful = (~lobe.mirror[:, None]) & (np.einsum("nkc,nc->nk", dirs, n) > 0) & (map_pdf > 0)
+    f = lobe.reflectance(dirs) / np.maximum(lobe_pdf + map_pdf, 1e-30)[..., None]
+    value += np.where((useful & reaching(dirs, useful))[..., None],
+                      world_radiance(world, dirs) * f, 0.0)
+
+    colour = lobe.colour
+    safe_colour = np.where(colour > 0.0, colour, 1.0)
+    per_ray = np.where(colour[:, None] > 0.0, value / safe_colour[:, None], 0.0)
+    per_ray[lobe.cos_ni <= 0.0] = 0.0
+    mean = per_ray.mean(axis=1)
+    luminance = per_ray @ LUMINANCE
+    variance = np.maximum((luminance ** 2).mean(axis=1) - (mean @ LUMINANCE) ** 2, 0.0)
+    return mean.astype(np.float32), (variance / max(rays - 1, 1)).astype(np.float32)

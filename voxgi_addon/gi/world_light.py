@@ -35,7 +35,7 @@ from ..scene.equirect import box_downsample, direction_to_pixel, pixel_direction
 from .sampling import perpendicular_basis
 
 __all__ = ["WorldLight", "world_light", "scene_lights", "world_direct", "world_table",
-           "sample_world", "world_pdf", "IRRADIANCE_HEIGHT", "SOURCE_HEIGHT"]
+           "sample_world", "world_pdf", "world_radiance", "IRRADIANCE_HEIGHT", "SOURCE_HEIGHT"]
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 IRRADIANCE_HEIGHT = 32   # rows of the unshadowed-irradiance table (columns: twice that)
@@ -136,6 +136,13 @@ def _pixel_of(world: WorldLight, directions):
     return i, j
 
 
+def world_radiance(world: WorldLight, directions) -> np.ndarray:
+    """(..., 3) radiance of the map's pixel holding each unit direction (..., 3) (nearest, as
+    its pdf is piecewise constant)."""
+    i, j = _pixel_of(world, directions)
+    return world.radiance[i, j]
+
+
 def world_pdf(world: WorldLight, directions) -> np.ndarray:
     """Solid-angle pdf of ``sample_world`` in unit ``directions`` (..., 3)."""
     i, j = _pixel_of(world, directions)
@@ -200,8 +207,7 @@ def world_direct(world: WorldLight, p, n, occluded, strata) -> np.ndarray:
     k = square.shape[1]
     dirs = np.concatenate([sample_world(world, square), _cosine(n[lit], square)], axis=1)
     cos = np.einsum("mkc,mc->mk", dirs, n[lit])
-    i, j = _pixel_of(world, dirs)
-    radiance = world.radiance[i, j]
+    radiance = world_radiance(world, dirs)
     pdf = radiance @ LUMINANCE / world.total + np.maximum(cos, 0.0) / math.pi
     f = radiance * (np.maximum(cos, 0.0) / np.maximum(pdf, 1e-30))[..., None]  # (M, 2K, 3)
     up = cos > 0

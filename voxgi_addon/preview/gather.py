@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..gi.exact_glossy import glossy_indirect
+from ..gi.exact_glossy import glossy_indirect, glossy_world_direct
 from ..gi.exact_indirect import indirect_and_ao
 from .denoise import atrous_filter
 from .upsample import sample_pixels, upsample
@@ -105,6 +105,33 @@ def gather_glossy(tris, lights, principled, emission, hit, position, normal, dir
         material[rows][:, cols][valid], ids, tris, lights, principled, emission,
         rays=settings.glossy_rays, seed=settings.seed, world=settings.world,
         hit_samples=settings.hit_samples, hit_glossy=settings.hit_glossy)
+    values[valid, :3] = glossy
+    variance[valid, 0] = var
+    values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
+                              iterations=settings.denoise_iterations)
+    return upsample(values, valid, hit, position, normal, stride)[..., :3]
+
+
+def gather_glossy_world(tris, world, principled, hit, position, normal, direction, material,
+                        settings: GatherSettings, stride: int) -> np.ndarray:
+    """(H, W, 3) float32: the world's Glossy Direct (Cycles' units, without the glossy colour)
+    per pixel — ``gi.exact_glossy.glossy_world_direct`` with ``settings.glossy_rays`` rays of
+    each technique at the gather points of ``gather_glossy``, the same filter and upsample.
+    world : ``gi.world_light.WorldLight`` (None: zeros)."""
+    height, width = hit.shape
+    if world is None:
+        return np.zeros((height, width, 3), np.float32)
+    rows, cols = sample_pixels(height, width, stride)
+    valid = hit[rows][:, cols]
+    cell_p = position[rows][:, cols] - VIEW_BACKOFF * direction[rows][:, cols]
+    cell_n = normal[rows][:, cols]
+    ids = (rows[:, None] * width + cols[None, :])[valid]
+    values = np.zeros(valid.shape + (4,), np.float32)
+    variance = np.zeros(valid.shape + (2,), np.float32)
+    glossy, var = glossy_world_direct(
+        cell_p[valid], cell_n[valid], -direction[rows][:, cols][valid],
+        material[rows][:, cols][valid], ids, tris, world, principled,
+        rays=settings.glossy_rays, seed=settings.seed)
     values[valid, :3] = glossy
     variance[valid, 0] = var
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,

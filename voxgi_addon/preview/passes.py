@@ -18,10 +18,10 @@ from ..gi.conetrace import ConeSettings, trace_diffuse_and_ao, trace_glossy
 from ..gi.direct_light import concentric_disk, diffuse_direct, light_directions, light_frame
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.sampling import hashed_square
-from ..gi.world_light import scene_lights
+from ..gi.world_light import scene_lights, world_light
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
-from .gather import GatherSettings, gather_gi, gather_glossy
+from .gather import GatherSettings, gather_gi, gather_glossy, gather_glossy_world
 from .upsample import STRIDES, sample_pixels, upsample
 
 PASS_NAMES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color",
@@ -185,7 +185,7 @@ def principled_colours(snapshot, mat, cos_view):
 
 
 def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy,
-                   normals=None, views=None, glossy_direct=None):
+                   normals=None, views=None, glossy_direct=None, glossy_world=None):
     """The PASS_NAMES images (H, W, 3) float32 (row 0 = top) from the per-hit-pixel terms.
 
     hit : (H·W,) indices of the pixels that see a surface; mat : their material indices;
@@ -195,6 +195,8 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
     (``gi.principled``), else the base colour × (1 − metallic) and a constant specular colour.
     glossy_direct : (N, 3) glossy light from the lights (already × the glossy colour), added to
     Combined as Cycles' Glossy Color × Glossy Direct.
+    glossy_world : (N, 3) the world's glossy light without the glossy colour (part of Glossy
+    Direct, ``gather.gather_glossy_world``).
     """
     albedo, _, spec, emission = material_table(snapshot)
     diffuse_colour, glossy_colour = albedo[mat], spec[mat]
@@ -207,6 +209,8 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
     glossy_colour = np.broadcast_to(np.asarray(glossy_colour, np.float64), np.shape(direct))
     has_glossy = glossy_colour > 0.0
     shine = np.zeros(np.shape(direct)) if glossy_direct is None else glossy_direct
+    if glossy_world is not None:
+        shine = shine + glossy_colour * glossy_world
     values = {
         "Diffuse Direct": np.where(has_diffuse, direct, 0.0),
         "Diffuse Indirect": np.where(has_diffuse, indirect, 0.0),
@@ -349,5 +353,11 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
                               glossy), timings
     views = -dirs[hit]
     shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_light, hit)
+    t0 = time.perf_counter()
+    glossy_world = gather_glossy_world(tris, world_light(snapshot.world), principled_table(snapshot),
+                                       seen.hit, seen.position, seen.normal, seen.direction,
+                                       materials.reshape(height, width), gather_settings,
+                                       gi_stride).reshape(-1, 3)[hit]
+    timings["world glossy gather"] = time.perf_counter() - t0
     return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy, n,
-                          views, shine), timings
+                          views, shine, glossy_world), timings
