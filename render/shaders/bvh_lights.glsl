@@ -227,37 +227,35 @@ vec3 world_unshadowed(vec3 n, int h)
   return top * (1.0 - fy) + bottom * fy;
 }
 
-/* world_light.sample_world: the row, then the column by their inclusive CDFs (the first entry
- * above u), then uniform in z and azimuth inside the pixel. */
-vec3 world_sample(vec2 u, int h, int w)
+/* Index of the first of `count` inclusive CDF entries above u: the row CDF (column W's x) or
+ * row i's column CDF (its alpha). */
+int world_cdf_search(bool rows, int i, int w, int count, float u)
 {
   int lo = 0;
-  int hi = h - 1;
+  int hi = count - 1;
   while (lo < hi) {
     int mid = (lo + hi) / 2;
-    if (texelFetch(world_map, ivec2(w, mid), 0).x <= u.x) {
+    float cdf = rows ? texelFetch(world_map, ivec2(w, mid), 0).x :
+                       texelFetch(world_map, ivec2(mid, i), 0).a;
+    if (cdf <= u) {
       lo = mid + 1;
     }
     else {
       hi = mid;
     }
   }
-  int i = lo;
+  return lo;
+}
+
+/* world_light.sample_world: the row, then the column by their inclusive CDFs, then uniform in
+ * z and azimuth inside the pixel. */
+vec3 world_sample(vec2 u, int h, int w)
+{
+  int i = world_cdf_search(true, 0, w, h, u.x);
   float low = i > 0 ? texelFetch(world_map, ivec2(w, i - 1), 0).x : 0.0;
   float f0 = clamp((u.x - low) / max(texelFetch(world_map, ivec2(w, i), 0).x - low, 1e-30),
                    0.0, 1.0);
-  lo = 0;
-  hi = w - 1;
-  while (lo < hi) {
-    int mid = (lo + hi) / 2;
-    if (texelFetch(world_map, ivec2(mid, i), 0).a <= u.y) {
-      lo = mid + 1;
-    }
-    else {
-      hi = mid;
-    }
-  }
-  int j = lo;
+  int j = world_cdf_search(false, i, w, w, u.y);
   float left = j > 0 ? texelFetch(world_map, ivec2(j - 1, i), 0).a : 0.0;
   float right = texelFetch(world_map, ivec2(j, i), 0).a;
   float f1 = clamp((u.y - left) / max(right - left, 1e-30), 0.0, 1.0);

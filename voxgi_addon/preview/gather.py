@@ -92,24 +92,10 @@ def gather_glossy(tris, lights, principled, emission, hit, position, normal, dir
     direction : (H, W, 3) the camera rays' unit directions; material : (H, W) material index
     per pixel (the tables' last row for none); principled : ``passes.principled_table``.
     """
-    height, width = hit.shape
-    rows, cols = sample_pixels(height, width, stride)
-    valid = hit[rows][:, cols]
-    cell_p = position[rows][:, cols] - VIEW_BACKOFF * direction[rows][:, cols]
-    cell_n = normal[rows][:, cols]
-    ids = (rows[:, None] * width + cols[None, :])[valid]
-    values = np.zeros(valid.shape + (4,), np.float32)
-    variance = np.zeros(valid.shape + (2,), np.float32)
-    glossy, var = glossy_indirect(
-        cell_p[valid], cell_n[valid], -direction[rows][:, cols][valid],
-        material[rows][:, cols][valid], ids, tris, lights, principled, emission,
-        rays=settings.glossy_rays, seed=settings.seed, world=settings.world,
-        hit_samples=settings.hit_samples, hit_glossy=settings.hit_glossy)
-    values[valid, :3] = glossy
-    variance[valid, 0] = var
-    values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
-                              iterations=settings.denoise_iterations)
-    return upsample(values, valid, hit, position, normal, stride)[..., :3]
+    return _glossy_cells(glossy_indirect, (tris, lights, principled, emission), {
+        "world": settings.world, "hit_samples": settings.hit_samples,
+        "hit_glossy": settings.hit_glossy}, hit, position, normal, direction, material, settings,
+        stride)
 
 
 def gather_glossy_world(tris, world, principled, hit, position, normal, direction, material,
@@ -118,9 +104,18 @@ def gather_glossy_world(tris, world, principled, hit, position, normal, directio
     per pixel — ``gi.exact_glossy.glossy_world_direct`` with ``settings.glossy_rays`` rays of
     each technique at the gather points of ``gather_glossy``, the same filter and upsample.
     world : ``gi.world_light.WorldLight`` (None: zeros)."""
-    height, width = hit.shape
     if world is None:
-        return np.zeros((height, width, 3), np.float32)
+        return np.zeros(hit.shape + (3,), np.float32)
+    return _glossy_cells(glossy_world_direct, (tris, world, principled), {}, hit, position,
+                         normal, direction, material, settings, stride)
+
+
+def _glossy_cells(estimator, scene, options, hit, position, normal, direction, material,
+                  settings: GatherSettings, stride: int) -> np.ndarray:
+    """``estimator(points, normals, views, materials, ids, *scene, rays, seed, **options)`` →
+    (rgb, variance) at the glossy gather points (stepped back along the camera rays), filtered
+    and upsampled to (H, W, 3)."""
+    height, width = hit.shape
     rows, cols = sample_pixels(height, width, stride)
     valid = hit[rows][:, cols]
     cell_p = position[rows][:, cols] - VIEW_BACKOFF * direction[rows][:, cols]
@@ -128,10 +123,9 @@ def gather_glossy_world(tris, world, principled, hit, position, normal, directio
     ids = (rows[:, None] * width + cols[None, :])[valid]
     values = np.zeros(valid.shape + (4,), np.float32)
     variance = np.zeros(valid.shape + (2,), np.float32)
-    glossy, var = glossy_world_direct(
-        cell_p[valid], cell_n[valid], -direction[rows][:, cols][valid],
-        material[rows][:, cols][valid], ids, tris, world, principled,
-        rays=settings.glossy_rays, seed=settings.seed)
+    glossy, var = estimator(cell_p[valid], cell_n[valid], -direction[rows][:, cols][valid],
+                            material[rows][:, cols][valid], ids, *scene,
+                            rays=settings.glossy_rays, seed=settings.seed, **options)
     values[valid, :3] = glossy
     variance[valid, 0] = var
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
