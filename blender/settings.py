@@ -286,12 +286,23 @@ def sampling_seed(settings: VoxGISceneSettings, frame: int) -> int:
     return int(settings.seed) + (int(frame) if settings.use_animated_seed else 0)
 
 
+def pixel_filter_width(scene) -> float:
+    """The anti-aliased preview's pixel Filter Size: Cycles' (Render Properties › Film ›
+    Pixel Filter, Blackman-Harris) when Cycles is there to own it, else its default 1.5 px."""
+    from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
+
+    cycles = getattr(scene, "cycles", None)
+    width = getattr(cycles, "filter_width", None)
+    return DEFAULT_FILTER_WIDTH if width is None else float(width)
+
+
 def trace_options(settings: VoxGISceneSettings, width: int, height: int, frame: int = 0) -> dict:
     """Keyword arguments of both tracers (``preview.passes.render_passes``,
     ``render.gpu_preview.render_passes_gpu``) for a ``width`` × ``height`` image of ``frame``."""
     from ..voxgi_addon.preview.gather import GatherSettings
 
     return {"light_samples": settings.light_samples, "shadows": settings.shadows,
+            "filter_width": pixel_filter_width(settings.id_data),
             "gi_stride": gi_stride(settings, width, height), "quality": settings.quality,
             "glossy_indirect": settings.glossy_indirect,
             "gather_settings": GatherSettings(rays=settings.gi_rays,

@@ -26,7 +26,7 @@ def release_gpu_resources() -> None:
     on unregister and, since the bpy module never unregisters add-ons, at exit before bpy's own
     exit handler (docs/gi_pipeline.md, "GPU resources at exit")."""
     for name in ("viewport", "debug_draw", "gbuffer", "gpu_shaders", "gpu_bvh", "gpu_gather",
-                 "gpu_principled"):
+                 "gpu_principled", "gpu_preview"):
         module = sys.modules.get(f"{__name__}.{name}")  # not imported: nothing cached
         if module is not None:
             module.release()

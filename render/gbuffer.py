@@ -1,6 +1,7 @@
 """Primary visibility on the GPU: rasterize the scene's triangles into a G-buffer.
 
-The same per-pixel answers as ``voxgi_addon.scene.raycast.primary_visibility`` (pixel-centre rays,
+The same per-pixel answers as ``voxgi_addon.scene.raycast.primary_visibility`` (pixel-centre rays
+or all moved by one sub-pixel offset,
 shading normals turned to the camera by the face normal, the camera's clipping range), by
 rasterizing ``scene_geometry.world_triangles`` with ``raycast.view_projection`` into three
 RGBA32F textures that the cone-tracing kernels read directly. GPU images are stored bottom
@@ -68,16 +69,19 @@ class GBuffer:
                 "gbuffer_view": self.view}
 
 
-def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int) -> GBuffer:
+def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
+              offset=(0.0, 0.0)) -> GBuffer:
     """Draw ``tris`` (``SceneTriangles``) seen by ``camera`` into a new ``GBuffer``.
 
     roughness : (M + 1,) per material index (last = no material), as ``preview`` tables it.
+    offset : (x, y) pixels (x right, y down): every pixel sees what the camera ray that far
+    from its centre sees (``camera.camera_rays``' offset; one sub-pixel pass).
     """
     out = GBuffer(width, height)
     framebuffer = gpu.types.GPUFrameBuffer(depth_slot=out.depth,
                                            color_slots=(out.position, out.normal, out.view))
     rotation, position = camera_frame(camera)
-    matrix = view_projection(camera, width, height)
+    matrix = view_projection(camera, width, height, offset)
     shader = _gbuffer_shader()
     with framebuffer.bind():
         framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)

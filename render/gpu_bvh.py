@@ -41,7 +41,7 @@ _BVH = ("bvh_nodes", "bvh_triangles")
 KERNELS = {
     "bvh_probe": (("bvh_probe",), _BVH + ("ray_origin", "ray_direction"), ("mode",)),
     "bvh_direct": (("bvh_lights", "bvh_direct"), _BVH + ("lights", "world_map", "gbuffer_position",
-                                                          "gbuffer_normal"), ("sampling",)),
+                                                          "gbuffer_normal"), ("sampling", "strata")),
     "bvh_gather": (("pixels", "principled", "bvh_lights", "bvh_shade", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "world_map", "materials", "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "principled_lut", "partial_image",
@@ -67,6 +67,8 @@ def bvh_shader(kernel: str):
                    "DET_EPSILON": repr(float(DET_EPSILON)), "RAY_STREAM": f"{RAY_STREAM}u"}
         if "principled" in files:
             defines.update(PRINCIPLED_DEFINES)
+        if kernel == "bvh_direct":
+            defines["STRATA_BLOCK"] = "ivec3(strata.xyz)"
         if kernel in ("bvh_gather", "bvh_glossy"):
             defines["VIEW_BACKOFF"] = repr(float(VIEW_BACKOFF))
             defines["GLOSSY_STREAM"] = f"{GLOSSY_STREAM}u"
@@ -189,16 +191,21 @@ def strata_side(samples: int) -> int:
 
 
 def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0,
-                         only: int | None = None, world=None):
+                         only: int | None = None, world=None, strata_block=None, table=None):
     """Diffuse Direct over a G-buffer (``shaders/bvh_direct.glsl``), an RGBA32F texture of the
     G-buffer's size (bottom row first), rgb in Cycles' units; ``only`` : of that lamp alone
     (``lights_texture``; -1: none); world : a ``world_texture`` to add the world's light (None:
-    not)."""
+    not). strata_block : (M, row, column, m) — draw only the m × m block at (row, column) of the
+    M × M strata (``direct_light.diffuse_direct``'s ``strata_block``); None: all
+    ``strata_side(samples)``². table : a ``lights_texture(lights, only)`` made already."""
     position = gbuffer_inputs["gbuffer_position"]
-    inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights, only),
+    side = strata_side(samples)
+    block = strata_block or (side, 0, 0, side)
+    inputs = {**bvh.inputs, **gbuffer_inputs,
+              "lights": table if table is not None else lights_texture(lights, only),
               "world_map": world if world is not None else world_texture(None)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
-                        {"sampling": (seed, strata_side(samples), 0, 0)})
+                        {"sampling": (seed, block[3], 0, 0), "strata": (*block[:3], 0)})
 
 
 def trace_rays(bvh: GPUBVH, origins, directions, t_min=0.0, t_max=np.inf, any_hit=False):

@@ -10,8 +10,10 @@ the unshadowed light (numpy, cheap) times one soft-shadow cone per light traced 
 """
 from __future__ import annotations
 
+import math
 import time
 
+import gpu
 import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
@@ -22,29 +24,39 @@ from ..voxgi_addon.preview.passes import (
     check_request,
     compose_passes,
     direct_light,
+    finish_passes,
     material_indices,
     material_table,
     principled_table,
+    subpixel_passes,
 )
 from ..voxgi_addon.preview.upsample import low_shape
+from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
 from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
 from .gpu_bvh import direct_light_texture, lights_texture, shared_bvh, world_texture
-from .gpu_gather import gather_low, glossy_direct_texture, upsample
+from .gpu_gather import gather_low, glossy_direct_texture, principled_materials_texture, upsample
+from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
+from .gpu_principled import lut_texture
+from .gpu_shaders import LOCAL_SIZE, build_compute
 from .gpu_tracer import dispatch, read_texture
-from .gpu_volume import GPUVolume
+from .gpu_volume import GPUVolume, float_texture
 
 
 def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_samples: int = 16,
                       volume: GPUVolume | None = None, shadows: str = "RAYS", gi_stride: int = 1,
                       quality: str = "ACCURATE", gather_settings: GatherSettings | None = None,
-                      glossy_indirect: bool = True):
-    """(passes, timings) like ``preview.render_passes``. ``volume`` : a ``GPUVolume`` kept
+                      glossy_indirect: bool = True, filter_width: float = DEFAULT_FILTER_WIDTH):
+    """(passes, timings) like ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
     between calls so an unchanged octree is not uploaded again (a new one when None); Fast
     quality only: Accurate uses neither it nor ``gi_state`` (None is fine).
     quality "ACCURATE": exact direct light and the exact-ray final gather (``gpu_gather``);
     "FAST": cone tracing through the octree (shadows as ``shadows`` says)."""
     check_request(snapshot, width, height, gi_stride, quality)
+    if quality == "ACCURATE":
+        return _accurate_passes(snapshot, width, height, light_samples, gi_stride,
+                                gather_settings or GatherSettings(ao_distance=cones.ao_distance),
+                                glossy_indirect, filter_width)
     if quality == "ACCURATE":
         shadows = "RAYS"
     gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
@@ -162,3 +174,142 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
     views = -seen["direction"].reshape(-1, 3)[hit].astype(np.float64)
     return compose_passes(snapshot, width, height, hit, mat, *terms, n, views, shine,
                           glossy_world), timings
+
+
+# ---------------------------------------------------------------- Accurate: sub-pixel passes
+
+# The sums of preview.passes.accumulate_pass as textures: name → (texture, channels) where
+# channels name what its rgb and alpha hold (see shaders/aa_surface.glsl).
+_SURFACE_SUMS = ("a", "b", "c", "d", "e", "f")
+_SURFACE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "centre_diffuse",
+                     "centre_glossy", "centre_world", "materials", "principled_lut",
+                     *(f"sum_{k}" for k in _SURFACE_SUMS))
+_LIGHT_SAMPLERS = ("colour", "direct_image", "shine_image", "sum_f", "sum_g")
+_aa_shaders: dict[str, object] = {}
+
+
+def _aa_shader(kernel: str):
+    if kernel not in _aa_shaders:
+        if kernel == "aa_surface":
+            _aa_shaders[kernel] = build_compute(
+                ("principled", "aa_surface"), _SURFACE_SAMPLERS, (),
+                (*(f"out_{k}" for k in _SURFACE_SUMS), "out_colour"), PRINCIPLED_DEFINES)
+        else:
+            _aa_shaders[kernel] = build_compute(("aa_light",), _LIGHT_SAMPLERS, (),
+                                                ("out_f", "out_g"))
+    return _aa_shaders[kernel]
+
+
+def _run(kernel, samplers, inputs, outputs, width, height):
+    """Dispatch ``kernel`` over width × height; returns its new output textures by name."""
+    shader = _aa_shader(kernel)
+    images = {name: gpu.types.GPUTexture((width, height), format="RGBA32F") for name in outputs}
+    shader.bind()
+    for name in samplers:
+        shader.uniform_sampler(name, inputs[name])
+    for name, image in images.items():
+        shader.image(name, image)
+    gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
+    return images
+
+
+def release() -> None:
+    """Drop the cached sub-pixel pass shaders."""
+    _aa_shaders.clear()
+
+
+def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_settings,
+                     glossy_indirect, filter_width):
+    """Accurate quality on the GPU: the gathers from the pixel centres' G-buffer, then one
+    rasterized G-buffer, direct light (``bvh_direct``, a block of the shadow-ray strata) and
+    glossy light of the lights per sub-pixel pass (``preview.passes.subpixel_passes``),
+    summed on the GPU (``shaders/aa_surface.glsl``, ``aa_light.glsl``) and read back once."""
+    timings = {}
+    t0 = time.perf_counter()
+    tris = world_triangles(snapshot)
+    if len(tris) == 0:
+        raise VoxGIError("the scene has no triangles to render")
+    _, rough, _, emission = material_table(snapshot)
+    plan = subpixel_passes(filter_width, light_samples)
+    centre = rasterize(tris, snapshot.camera, rough, width, height)
+    timings["visibility (GPU)"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    bvh = shared_bvh().update(tris)  # rebuilt and uploaded only for changed triangles
+    if bvh.uploaded_bytes:
+        timings["BVH build + upload"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    principled = principled_table(snapshot)
+    lights = scene_lights(snapshot)
+    gathered = (bvh, centre.inputs, lights, principled, emission, gather_settings, gi_stride,
+                width, height)
+    low_diffuse = gather_low(*gathered)
+    timings["diffuse+ao gather (GPU)"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    zero = float_texture(np.zeros((height, width, 4), np.float32), (width, height))
+    low_glossy = gather_low(*gathered, kernel="bvh_glossy") if glossy_indirect else None
+    if glossy_indirect:
+        timings["glossy gather (GPU)"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    full = upsample(low_diffuse, centre.inputs, gi_stride, width, height, low_glossy)
+    diffuse_ao, glossy = full if glossy_indirect else (full, zero)
+    timings["upsample"] = time.perf_counter() - t0
+    glossy_world = zero
+    world = world_light(snapshot.world)
+    if world is not None:  # the world's Glossy Direct
+        t0 = time.perf_counter()
+        low_world = gather_low(*gathered, kernel="bvh_glossy", world_mode=True)
+        glossy_world = upsample(low_world, centre.inputs, gi_stride, width, height)
+        timings["world glossy gather (GPU)"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    materials = principled_materials_texture(principled, emission)
+    tables = [lights_texture(snapshot.lights, only) for only in range(len(snapshot.lights))]
+    world_table = None if world is None else world_texture(world, len(snapshot.lights))
+    no_lamp = lights_texture(snapshot.lights, -1)
+    sums = {name: zero for name in (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")}
+    for offset, block in plan:
+        gbuffer = centre if offset == (0.0, 0.0) else rasterize(
+            tris, snapshot.camera, rough, width, height, offset)
+        out = _run("aa_surface", _SURFACE_SAMPLERS, {
+            **gbuffer.inputs, **sums, "centre_diffuse": diffuse_ao, "centre_glossy": glossy,
+            "centre_world": glossy_world, "materials": materials,
+            "principled_lut": lut_texture()},
+            (*(f"out_{k}" for k in _SURFACE_SUMS), "out_colour"), width, height)
+        sums.update({f"sum_{k}": out[f"out_{k}"] for k in _SURFACE_SUMS})
+        colour = out["out_colour"]
+        # Light by light: each lamp's light feeds the glossy lobe, and one dispatch stays
+        # within llvmpipe's loop limit (docs/blender_facts.md "llvmpipe's loop limit").
+        for index, table in enumerate(tables):
+            direct = direct_light_texture(bvh, gbuffer.inputs, snapshot.lights, light_samples,
+                                          seed=gather_settings.seed, strata_block=block,
+                                          table=table)
+            shine = glossy_direct_texture(gbuffer.inputs, direct, table, index, principled,
+                                          emission)
+            out = _run("aa_light", _LIGHT_SAMPLERS, {
+                "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
+                ("out_f", "out_g"), width, height)
+            sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
+        if world is not None:  # the world's own dispatch (its stream: after the lamps)
+            direct = direct_light_texture(bvh, gbuffer.inputs, snapshot.lights, light_samples,
+                                          seed=gather_settings.seed, world=world_table,
+                                          strata_block=block, table=no_lamp)
+            out = _run("aa_light", _LIGHT_SAMPLERS, {
+                "colour": colour, "direct_image": direct, "shine_image": zero, **sums},
+                ("out_f", "out_g"), width, height)
+            sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
+    timings["sub-pixel passes (GPU)" if len(plan) > 1 else "direct (GPU)"] = \
+        time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    texel = {name: np.flipud(read_texture(texture)).reshape(-1, 4).astype(np.float64)
+             for name, texture in sums.items()}
+    accumulated = {
+        "emission": texel["sum_a"][:, :3], "coverage": texel["sum_a"][:, 3],
+        "diffuse_color": texel["sum_b"][:, :3], "ao": texel["sum_b"][:, 3],
+        "glossy_color": texel["sum_c"][:, :3], "diffuse_indirect": texel["sum_d"][:, :3],
+        "glossy_indirect": texel["sum_e"][:, :3], "glossy_direct": texel["sum_f"][:, :3],
+        "diffuse_direct": texel["sum_g"][:, :3]}
+    passes = finish_passes(accumulated, len(plan), width, height)
+    timings["read-back"] = time.perf_counter() - t0
+    return passes, timings

@@ -1,7 +1,10 @@
 /* Diffuse Direct per G-buffer pixel with shadow rays through the BVH (bvh_lights.glsl): what
  * preview.direct_light computes with shadows "RAYS" — diffuse_direct at the point lifted by
  * SURFACE_EPSILON along its normal, sample id = pixel index (row 0 on top).
- * Push constant sampling = (seed, strata side m, 0, 0). out = (rgb, 1). */
+ * Push constants: sampling = (seed, strata side m of this dispatch, 0, 0); strata = (M, row,
+ * column, 0): the dispatch draws the m × m block at (row, column) of each light's M × M strata
+ * (sampling.glsl STRATA_BLOCK; the whole set when m = M), so the anti-aliased preview's
+ * sub-pixel passes share one stratified set of shadow rays. out = (rgb, 1). */
 
 void main()
 {

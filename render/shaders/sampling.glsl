@@ -23,9 +23,17 @@ uint point_stream(uint id, uint stream, uint seed)
   return pcg_hash(pcg_hash(id + seed * 0x9E3779B9u) + stream);
 }
 
-/* Stratum k of m×m of a point's stream (sampling.hashed_square). */
+/* Stratum k of m×m of a point's stream (sampling.hashed_square). A kernel that defines
+ * STRATA_BLOCK = ivec3(M, row, column) (bvh_direct.glsl's sub-pixel passes) draws a block of a
+ * larger set instead: stratum k of the loop's m × m is stratum (row + k / m, column + k % m) of
+ * the M × M strata (direct_light.diffuse_direct's strata_block). */
 vec2 hashed_stratum(uint state, int k, int m)
 {
+#ifdef STRATA_BLOCK
+  ivec3 block = STRATA_BLOCK;
+  k = (block.y + k / m) * block.x + block.z + k % m;
+  m = block.x;
+#endif
   vec2 jitter = vec2(unit_float(pcg_hash(state + uint(2 * k))),
                      unit_float(pcg_hash(state + uint(2 * k + 1))));
   return (vec2(float(k / m), float(k % m)) + jitter) / float(m);

@@ -245,7 +245,7 @@ _BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD"
 
 
 def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
-                   sample_ids=None, per_light: bool = False) -> np.ndarray:
+                   sample_ids=None, per_light: bool = False, strata_block=None) -> np.ndarray:
     """Cycles' ``Diffuse Direct`` (irradiance / π, no albedo) at surface points.
 
     Parameters
@@ -265,6 +265,10 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
         generator in point order.
 
     per_light : return each light's share separately (the same samples as the sum).
+    strata_block : (M, row, column, m), with ``sample_ids`` only: draw just the m × m block at
+        (row, column) of each light's M × M hashed strata (``samples`` is then ignored) — one
+        sub-pixel pass of the anti-aliased preview, whose passes share one stratified set
+        (GLSL: ``STRATA_BLOCK`` in ``render/shaders/sampling.glsl``). None: all strata.
 
     Returns
     -------
@@ -285,9 +289,15 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
             if ids is None:
                 def strata(points_of_chunk):  # (count, K, 2) from the generator, in order
                     return stratified_square(len(points_of_chunk), samples, rng)
-            else:
+            elif strata_block is None:
                 def strata(points_of_chunk, chunk_ids=ids[a:b], stream=index):
                     return hashed_square(chunk_ids[points_of_chunk], stream, samples, seed)
+            else:
+                def strata(points_of_chunk, chunk_ids=ids[a:b], stream=index):
+                    side, row, column, m = strata_block
+                    square = hashed_square(chunk_ids[points_of_chunk], stream, side * side, seed)
+                    i, j = np.divmod(np.arange(m * m), m)
+                    return square[:, (row + i) * side + column + j]
             value = shade(light, p[a:b], n[a:b], tris, strata)
             out[index, a:b] += (value[:, None] if value.ndim == 1 else value) * color
     return (out if per_light else out.sum(axis=0)).astype(np.float32)

@@ -8,6 +8,7 @@ albedo, ``Diffuse Color`` is the albedo, ``Combined`` = albedo × (direct + indi
 """
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -19,6 +20,7 @@ from ..gi.direct_light import concentric_disk, diffuse_direct, light_directions,
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.sampling import hashed_square
 from ..gi.world_light import scene_lights, world_light
+from ..scene.camera import DEFAULT_FILTER_WIDTH, filter_offsets
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
 from .gather import GatherSettings, gather_gi, gather_glossy, gather_glossy_world
@@ -230,18 +232,106 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
     return passes
 
 
+AA_SIDE = 4  # the anti-aliased preview renders AA_SIDE² sub-pixel passes
+
+
+def subpixel_passes(filter_width: float, light_samples: int):
+    """The anti-aliased preview's passes: [(offset (x, y) in pixels, strata_block)], one per
+    ``camera.filter_offsets`` entry (AA_SIDE² of them), each drawing a block of the shadow
+    rays' M × M strata (``direct_light.diffuse_direct``'s strata_block) so that the passes
+    together trace every stratum equally often — the shadow rays and their stratification stay
+    those of one pass over all strata. M = ⌈√light_samples⌉ when it tiles the AA_SIDE ×
+    AA_SIDE passes (1, 2 or a multiple of AA_SIDE), else the nearest that does (3 → 4, 5 → 4,
+    6 → 8, …). Pass (a, b) draws block (a, b) of side M / AA_SIDE, or for M < AA_SIDE
+    stratum (a mod M, b mod M). filter_width ≤ 0: one pass through the pixel centres with
+    all strata (point sampling)."""
+    side = max(1, math.ceil(math.sqrt(light_samples)))
+    if filter_width <= 0.0:
+        return [((0.0, 0.0), (side, 0, 0, side))]
+    if side > 2 and side % AA_SIDE:
+        side = max(AA_SIDE, AA_SIDE * int(math.floor(side / AA_SIDE + 0.5)))
+    out = []
+    for k, offset in enumerate(filter_offsets(filter_width, AA_SIDE)):
+        a, b = divmod(k, AA_SIDE)
+        if side % AA_SIDE == 0:
+            m = side // AA_SIDE
+            out.append((tuple(offset), (side, a * m, b * m, m)))
+        else:
+            out.append((tuple(offset), (side, a % side, b % side, 1)))
+    return out
+
+
+# Accumulated sums of the sub-pixel passes (accumulate_pass, finish_passes): light passes are
+# sums of light × colour, divided by the summed colour at the end, as Cycles divides its
+# Diffuse/Glossy Direct/Indirect passes by Diffuse/Glossy Color (measured: a surface's edge
+# pixels keep its full Diffuse Direct while their Diffuse Color falls with the coverage).
+SUMS = ("emission", "coverage", "diffuse_color", "ao", "glossy_color", "diffuse_direct",
+        "diffuse_indirect", "glossy_direct", "glossy_indirect")
+
+
+def accumulate_pass(sums, snapshot, hit, mat, normals, views, direct, indirect, ao, glossy,
+                    shine, glossy_world=None):
+    """Add one sub-pixel pass to ``sums`` (name of SUMS → (H·W, 3) float64, ``coverage`` and
+    ``ao`` (H·W,)): hit, mat, normals, views, direct, shine as ``compose_passes`` takes them
+    for this pass's camera rays; indirect, ao, glossy, glossy_world : the centre pass's
+    gathered terms at the same pixels (the gathers are not anti-aliased)."""
+    _, _, _, emission = material_table(snapshot)
+    cos_view = np.clip(np.einsum("ij,ij->i", normals, views), 0.0, 1.0)
+    diffuse_colour, glossy_colour = principled_colours(snapshot, mat, cos_view)
+    light = np.asarray(shine, np.float64)
+    if glossy_world is not None:
+        light = light + glossy_colour * glossy_world
+    for name, value in (("emission", emission[mat]), ("coverage", 1.0),
+                        ("diffuse_color", diffuse_colour), ("ao", ao),
+                        ("glossy_color", glossy_colour),
+                        ("diffuse_direct", diffuse_colour * direct),
+                        ("diffuse_indirect", diffuse_colour * indirect),
+                        ("glossy_direct", light), ("glossy_indirect", glossy_colour * glossy)):
+        sums[name][hit] += value
+
+
+def new_sums(pixels: int):
+    """Zero ``SUMS`` for ``pixels`` pixels (see ``accumulate_pass``)."""
+    return {name: np.zeros(pixels if name in ("coverage", "ao") else (pixels, 3))
+            for name in SUMS}
+
+
+def finish_passes(sums, count: int, width: int, height: int):
+    """The PASS_NAMES images (H, W, 3) float32 of ``count`` accumulated passes: colours,
+    AO and Combined are means over the passes (0 where a pass saw the background, as Cycles'
+    film), light passes the summed light × colour over the summed colour (0 where that is 0)."""
+    def ratio(light, colour):
+        return np.divide(light, colour, out=np.zeros_like(light), where=colour > 0.0)
+
+    values = {
+        "Combined": (sums["emission"] + sums["diffuse_direct"] + sums["diffuse_indirect"]
+                     + sums["glossy_direct"] + sums["glossy_indirect"]) / count,
+        "Diffuse Direct": ratio(sums["diffuse_direct"], sums["diffuse_color"]),
+        "Diffuse Indirect": ratio(sums["diffuse_indirect"], sums["diffuse_color"]),
+        "Diffuse Color": sums["diffuse_color"] / count,
+        "Glossy Direct": ratio(sums["glossy_direct"], sums["glossy_color"]),
+        "Glossy Indirect": ratio(sums["glossy_indirect"], sums["glossy_color"]),
+        "Glossy Color": sums["glossy_color"] / count,
+        "Ambient Occlusion": np.repeat((sums["ao"] / count)[:, None], 3, axis=1),
+    }
+    return {name: values[name].astype(np.float32).reshape(height, width, 3)
+            for name in PASS_NAMES}
+
+
 def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
-                 visibility=None, sample_ids=None, per_light=False, seed=0):
+                 visibility=None, sample_ids=None, per_light=False, seed=0, strata_block=None):
     """(N, 3) Diffuse Direct at surface points: exact shadow rays against ``tris`` (shadows
     "RAYS") or one soft-shadow cone per light through ``octree`` ("CONES"; ``visibility``
     as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own).
     sample_ids : the points' pixel indices: shadow rays then use the hashed strata that the
     GPU kernel ``render/shaders/bvh_direct.glsl`` draws (``direct_light.diffuse_direct``);
-    seed : the strata's seed (the scene's Seed, ``GatherSettings.seed``)."""
+    seed : the strata's seed (the scene's Seed, ``GatherSettings.seed``); strata_block : one
+    sub-pixel pass's block of them (``subpixel_passes``)."""
     if shadows == "CONES":
         return cone_shadowed_direct(octree, points, normals, lights, cones, samples, visibility)
     return diffuse_direct(points + normals * SURFACE_EPSILON, normals, lights, tris,
-                          samples=samples, sample_ids=sample_ids, per_light=per_light, seed=seed)
+                          samples=samples, sample_ids=sample_ids, per_light=per_light, seed=seed,
+                          strata_block=strata_block)
 
 
 def _traced(seen, stride, hit, trace, channels):
@@ -261,7 +351,7 @@ def _traced(seen, stride, hit, trace, channels):
 def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettings,
                   light_samples: int = 16, shadows: str = "RAYS", gi_stride: int = 1,
                   quality: str = "ACCURATE", gather_settings: GatherSettings | None = None,
-                  glossy_indirect: bool = True):
+                  glossy_indirect: bool = True, filter_width: float = DEFAULT_FILTER_WIDTH):
     """Render the passes at ``width`` × ``height`` with the numpy tracer. ``gi_state`` (the
     voxel octree) is used by Fast quality only; Accurate may pass None.
 
@@ -278,6 +368,11 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
 
     shadows : "RAYS" (exact shadow rays against the triangles) or "CONES" (one cone per light
     through the octree, ``cone_shadows``).
+
+    filter_width : Cycles' pixel Filter Size (Blackman-Harris, pixels). Accurate quality
+    anti-aliases with it: ``subpixel_passes`` camera passes, each with its own visibility,
+    direct light, glossy light of the lights and colours, averaged (``accumulate_pass``); the
+    gathers come from the pixel centres. ≤ 0, or Fast quality: pixel centres only.
 
     Returns (passes, timings): passes maps each name of PASS_NAMES to an (H, W, 3) float32
     image (row 0 = top); timings maps stage names to seconds.
@@ -302,18 +397,12 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     materials = material_indices(snapshot, seen.material.ravel())
     mat = materials[hit]
 
-    t0 = time.perf_counter()
     lights = scene_lights(snapshot)  # the lamps, then the world
-    if quality == "ACCURATE":  # light by light: each lamp's light feeds the glossy lobe
-        per_light = direct_light(None, p, n, lights, tris, cones, light_samples,
-                                 shadows, sample_ids=hit, per_light=True,
-                                 seed=gather_settings.seed)
-        direct = per_light.sum(axis=0)
-        per_light = per_light[:len(snapshot.lights)]
-    else:
+    if quality != "ACCURATE":  # Accurate: per sub-pixel pass, below
+        t0 = time.perf_counter()
         direct = direct_light(gi_state.octree, p, n, snapshot.lights, tris, cones, light_samples,
                               shadows, sample_ids=hit)
-    timings["direct"] = time.perf_counter() - t0
+        timings["direct"] = time.perf_counter() - t0
     positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
 
     def diffuse_and_ao(pixels):
@@ -351,13 +440,37 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     if quality != "ACCURATE":
         return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao,
                               glossy), timings
-    views = -dirs[hit]
-    shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_light, hit)
     t0 = time.perf_counter()
     glossy_world = gather_glossy_world(tris, world_light(snapshot.world), principled_table(snapshot),
                                        seen.hit, seen.position, seen.normal, seen.direction,
                                        materials.reshape(height, width), gather_settings,
-                                       gi_stride).reshape(-1, 3)[hit]
+                                       gi_stride).reshape(-1, 3)
     timings["world glossy gather"] = time.perf_counter() - t0
-    return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy, n,
-                          views, shine, glossy_world), timings
+    t0 = time.perf_counter()
+
+    def centre(values, channels):  # the gathered terms over every pixel (0 off the centre hits)
+        out = np.zeros((height * width, channels))
+        out[hit] = np.asarray(values).reshape(len(hit), channels)
+        return out
+
+    indirect, ao, glossy = centre(indirect, 3), centre(ao, 1)[:, 0], centre(glossy, 3)
+    sums = new_sums(height * width)
+    plan = subpixel_passes(filter_width, light_samples)
+    for offset, block in plan:
+        if offset != (0.0, 0.0):
+            seen = primary_visibility(tris, snapshot.camera, width, height, offset)
+        hit = np.flatnonzero(seen.hit.ravel())
+        p = seen.position.reshape(-1, 3)[hit]
+        n = seen.normal.reshape(-1, 3)[hit]
+        mat = material_indices(snapshot, seen.material.ravel())[hit]
+        views = -seen.direction.reshape(-1, 3)[hit]
+        per_light = direct_light(None, p, n, lights, tris, cones, light_samples, shadows,
+                                 sample_ids=hit, per_light=True, seed=gather_settings.seed,
+                                 strata_block=block)
+        shine = glossy_direct_radiance(snapshot, p, n, views, mat,
+                                       per_light[:len(snapshot.lights)], hit)
+        accumulate_pass(sums, snapshot, hit, mat, n, views, per_light.sum(axis=0),
+                        indirect[hit], ao[hit], glossy[hit], shine, glossy_world[hit])
+    timings["sub-pixel passes" if len(plan) > 1 else "direct + compose"] = \
+        time.perf_counter() - t0
+    return finish_passes(sums, len(plan), width, height), timings

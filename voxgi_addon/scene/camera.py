@@ -5,6 +5,10 @@
 * ``camera_ray_lengths`` — distance along each ray from the near plane's origin to the eye.
 * ``view_projection`` — the (4, 4) world → clip matrix that rasterizes the same pixels.
 * ``camera_frame`` — the camera's orthonormal rotation and position.
+* ``filter_offsets`` — sub-pixel offsets drawn by importance from Cycles' pixel filter.
+
+Every ray function takes a sub-pixel ``offset`` (x right, y down, in pixels) that moves all
+pixels' rays alike: the anti-aliased preview renders one pass per ``filter_offsets`` entry.
 """
 from __future__ import annotations
 
@@ -12,7 +16,41 @@ import numpy as np
 
 from .snapshot import CameraData
 
-__all__ = ["camera_frame", "camera_rays", "camera_ray_lengths", "view_projection"]
+__all__ = ["DEFAULT_FILTER_WIDTH", "camera_frame", "camera_rays", "camera_ray_lengths",
+           "filter_offsets", "view_projection"]
+
+DEFAULT_FILTER_WIDTH = 1.5  # pixels: Cycles' default Blackman-Harris Filter Size
+_FILTER_TABLE = 4096  # entries of the filter's inverse CDF
+
+
+def blackman_harris(offset, width: float):
+    """Cycles' Blackman-Harris pixel filter (unnormalised) at ``offset`` pixels from the pixel
+    centre for Filter Size ``width``: a window of total width 2 × ``width`` (Cycles doubles the
+    width of this filter; measured: a straight edge through a pixel border gives the pixels
+    beside it 0.117 and 0.035 coverage at sizes 1.5 and 3, the window's tails beyond 0.5 and
+    1.5 pixels), 0 outside it."""
+    x = np.asarray(offset, np.float64) / (2.0 * width) + 0.5
+    a = 2.0 * np.pi * x
+    value = 0.35875 - 0.48829 * np.cos(a) + 0.14128 * np.cos(2 * a) - 0.01168 * np.cos(3 * a)
+    return np.where((x >= 0.0) & (x <= 1.0), value, 0.0)
+
+
+def filter_offsets(width: float = DEFAULT_FILTER_WIDTH, side: int = 4) -> np.ndarray:
+    """(side², 2) sub-pixel offsets (x right, y down, pixels) of the anti-aliased preview: the
+    centres of a side × side stratified square warped through the inverse CDF of Cycles' pixel
+    filter (``blackman_harris``, separable in x and y as Cycles samples it), so that equal
+    weights average the passes as the filter weights them. Offset k is stratum (k // side,
+    k % side) in (x, y). width ≤ 0 gives pixel centres."""
+    u = (np.arange(side) + 0.5) / side
+    if width <= 0.0:
+        along = np.zeros(side)
+    else:
+        x = np.linspace(-width, width, _FILTER_TABLE)
+        cdf = np.concatenate([[0.0], np.cumsum(0.5 * (blackman_harris(x[1:], width)
+                                                     + blackman_harris(x[:-1], width)))])
+        along = np.interp(u, cdf / cdf[-1], x)
+    k = np.arange(side * side)
+    return np.stack([along[k // side], along[k % side]], axis=1)
 
 
 def _frustum(camera: CameraData, width: int, height: int) -> tuple[float, float, float, float]:
@@ -43,13 +81,15 @@ def camera_frame(camera: CameraData) -> tuple[np.ndarray, np.ndarray]:
     return rotation, m[:3, 3].copy()
 
 
-def camera_rays(camera: CameraData, width: int | None = None, height: int | None = None):
+def camera_rays(camera: CameraData, width: int | None = None, height: int | None = None,
+                offset=(0.0, 0.0)):
     """Rays through the pixel centres of a ``width`` × ``height`` image of ``camera``.
 
     Parameters
     ----------
     camera : the scene camera (PERSP or ORTHO; PANO is refused).
     width, height : image size in pixels; default ``camera.resolution``.
+    offset : (x, y) sub-pixel offset of every ray from its pixel centre (x right, y down).
 
     Returns
     -------
@@ -64,8 +104,8 @@ def camera_rays(camera: CameraData, width: int | None = None, height: int | None
     width = int(width or camera.resolution[0])
     height = int(height or camera.resolution[1])
     cx, cy, hx, hy = _frustum(camera, width, height)
-    x = cx + hx * (2.0 * (np.arange(width) + 0.5) / width - 1.0)
-    y = cy + hy * (1.0 - 2.0 * (np.arange(height) + 0.5) / height)
+    x = cx + hx * (2.0 * (np.arange(width) + 0.5 + float(offset[0])) / width - 1.0)
+    y = cy + hy * (1.0 - 2.0 * (np.arange(height) + 0.5 + float(offset[1])) / height)
     gx, gy = np.meshgrid(x, y)  # (H, W), row 0 on top
     rotation, position = camera_frame(camera)
     near = float(camera.clip_start)
@@ -90,9 +130,11 @@ def camera_ray_lengths(camera: CameraData, directions: np.ndarray) -> np.ndarray
 
 
 
-def view_projection(camera: CameraData, width: int, height: int) -> np.ndarray:
+def view_projection(camera: CameraData, width: int, height: int,
+                    offset=(0.0, 0.0)) -> np.ndarray:
     """(4, 4) float64 world → OpenGL clip matrix whose pixel centres are ``camera_rays``'
-    (NDC y up, so GL row 0 is the image's bottom row); depth spans the clipping range."""
+    (NDC y up, so GL row 0 is the image's bottom row); depth spans the clipping range.
+    offset : as ``camera_rays``' (the image slides the other way under the pixel centres)."""
     cx, cy, hx, hy = _frustum(camera, width, height)
     rotation, position = camera_frame(camera)
     view = np.eye(4)
@@ -110,4 +152,7 @@ def view_projection(camera: CameraData, width: int, height: int) -> np.ndarray:
         proj[1] = (0.0, 1.0 / hy, cy / hy, 0.0)
         proj[2] = (0.0, 0.0, -(far + near) / (far - near), -2.0 * far * near / (far - near))
         proj[3] = (0.0, 0.0, -1.0, 0.0)
-    return proj @ view
+    shift = np.eye(4)  # NDC translation (× w in clip space): the offset ray lands on the centre
+    shift[0, 3] = -2.0 * float(offset[0]) / width
+    shift[1, 3] = 2.0 * float(offset[1]) / height
+    return shift @ proj @ view

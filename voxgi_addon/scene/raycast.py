@@ -294,12 +294,12 @@ class PrimaryHits:
 
 
 def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | None = None,
-                       height: int | None = None) -> PrimaryHits:
-    """Exact primary visibility of a ``width`` × ``height`` image of ``camera`` (see ``camera_rays``);
-    rays stop at the far clipping plane."""
+                       height: int | None = None, offset=(0.0, 0.0)) -> PrimaryHits:
+    """Exact primary visibility of a ``width`` × ``height`` image of ``camera`` (see ``camera_rays``;
+    ``offset`` moves every ray off its pixel centre); rays stop at the far clipping plane."""
     width = int(width or camera.resolution[0])
     height = int(height or camera.resolution[1])
-    origins, directions = camera_rays(camera, width, height)
+    origins, directions = camera_rays(camera, width, height, offset)
     t, tri, u, v = closest_hits(tris, origins, directions, 0.0, camera_ray_lengths(camera, directions))
     hit = tri >= 0
     index = np.where(hit, tri, 0)
