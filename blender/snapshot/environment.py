@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...voxgi_addon.scene.snapshot import LIGHT_TYPES, CameraData, LightData, WorldData
+from . import world_map
 
 
 def _matrix(matrix) -> np.ndarray:
@@ -71,29 +72,8 @@ def read_camera(scene, depsgraph) -> CameraData | None:
     )
 
 
-def read_world(scene, warnings: list[str]) -> WorldData:
-    """Uniform background of the scene's world: the Background node feeding the output, else ``World.color``."""
-    world = scene.world
-    if world is None:
-        return WorldData()
-    tree = world.node_tree
-    background = None
-    if tree is not None:
-        output = tree.get_output_node("ALL")
-        surface = output.inputs.get("Surface") if output is not None else None
-        if surface is not None and surface.is_linked and surface.links[0].from_node.type == "BACKGROUND":
-            background = surface.links[0].from_node
-        else:
-            background = next((n for n in tree.nodes if n.type == "BACKGROUND"), None)
-    if background is None:
-        return WorldData(color=np.array(world.color[:3], dtype=np.float32), strength=1.0)
-    color = background.inputs["Color"]
-    if color.is_linked:
-        warnings.append(
-            f"World '{world.name}': the background colour comes from a '{color.links[0].from_node.name}' "
-            "node, which VoxGI cannot evaluate; using the Color value instead"
-        )
-    return WorldData(
-        color=np.array(color.default_value[:3], dtype=np.float32),
-        strength=float(background.inputs["Strength"].default_value),
-    )
+def read_world(scene, warnings: list[str], bake: bool | None = None) -> WorldData:
+    """The scene's world as an equirect radiance map (``world_map.read_world``): uniform
+    colours and Environment Textures are read from the nodes, anything else is evaluated by
+    Cycles (``bake``: allow that here; None: where a nested render can run)."""
+    return world_map.read_world(scene.world, warnings, bake)
