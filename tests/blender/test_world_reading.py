@@ -269,3 +269,42 @@ def test_sky_texture_is_baked_once(voxgi, world_map):
     sky.sun_elevation = math.radians(20.0)
     changed, _ = _snapshot_world(voxgi)
     assert world_map.bake_count() == bakes + 2 and changed.key != data.key
+
+
+def test_f12_and_render_preview_bake_a_sky_world(voxgi, world_map, tmp_path):
+    """F12 in background mode calls the engine on the main thread: the nested Cycles bake of
+    the world runs inside it, leaves no datablock behind, and the F12 still renders."""
+    from voxgi.render.engine import enable_passes
+    from voxgi.voxgi_addon.files.exr import read_exr_passes
+
+    scene = bpy.context.scene
+    bpy.ops.mesh.primitive_plane_add(size=4.0)
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    scene.collection.objects.link(camera)
+    camera.location, camera.rotation_euler = (0.0, -4.0, 3.0), (math.radians(55.0), 0.0, 0.0)
+    scene.camera = camera
+    world = bpy.data.worlds.new("Sky")
+    sky = world.node_tree.nodes.new("ShaderNodeTexSky")
+    world.node_tree.links.new(sky.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    scene.world = world
+    scene.render.engine = "VOXGI"
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 32, 24, 100
+    scene.render.image_settings.media_type = "MULTI_LAYER_IMAGE"
+    scene.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
+    enable_passes(scene.view_layers[0])
+    scene.render.filepath = str(tmp_path / "f12.exr")
+
+    def counts():
+        return {name: len(getattr(bpy.data, name)) for name in ("scenes", "objects", "cameras", "worlds")} | {
+            "images": sorted(i.name for i in bpy.data.images if i.type != "RENDER_RESULT")}
+
+    before, bakes = counts(), world_map.bake_count()
+    bpy.ops.render.render(write_still=True)
+    assert world_map.bake_count() == bakes + 1
+    assert counts() == before
+    passes = read_exr_passes(str(tmp_path / "f12.exr"))
+    assert passes["Diffuse Color"].max() > 0  # the plane was rendered
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "preview.exr"), resolution_x=32,
+                                        resolution_y=24) == {"FINISHED"}
+    assert world_map.bake_count() == bakes + 1  # the same world: cached
+    assert counts() == before
