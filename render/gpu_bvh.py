@@ -24,6 +24,7 @@ import time
 import gpu
 import numpy as np
 
+from ..voxgi_addon.gi.emitters import emitter_table
 from ..voxgi_addon.gi.exact_glossy import GLOSSY_STREAM, WORLD_GLOSSY_STREAM
 from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
 from ..voxgi_addon.gi.world_light import world_table
@@ -40,10 +41,12 @@ _BVH = ("bvh_nodes", "bvh_triangles")
 # Kernel → (GLSL files after bvh_common.glsl, 2D samplers, VEC4 push constants).
 KERNELS = {
     "bvh_probe": (("bvh_probe",), _BVH + ("ray_origin", "ray_direction"), ("mode",)),
-    "bvh_direct": (("bvh_lights", "bvh_direct"), _BVH + ("lights", "world_map", "gbuffer_position",
+    "bvh_direct": (("bvh_lights", "bvh_direct"), _BVH + ("lights", "world_map", "emitters",
+                                                          "gbuffer_position",
                                                           "gbuffer_normal"), ("sampling", "strata")),
     "bvh_gather": (("pixels", "principled", "bvh_lights", "bvh_shade", "bvh_gather"),
-                   _BVH + ("bvh_normals", "lights", "world_map", "materials", "gbuffer_position",
+                   _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials",
+                           "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "principled_lut", "partial_image",
                            "partial_variance"),
                    ("sampling", "world", "grid", "chunk")),
@@ -185,25 +188,43 @@ def world_texture(world, stream: int = 0):
     return float_texture(table, (table.shape[1], table.shape[0]))
 
 
+def emitters_texture(emitters, stream: int = 0):
+    """``emitters.emitter_table`` of an ``EmitterLight`` (None: nothing emits) as a texture."""
+    table = emitter_table(emitters, stream)
+    return float_texture(table, (table.shape[1], table.shape[0]))
+
+
+def scene_light_textures(lights) -> dict:
+    """{"world_map", "emitters"} textures of the world and emitters in a lights list
+    (``world_light.scene_lights``), each with its index as its samples' stream."""
+    found = {light.type: (light, index) for index, light in enumerate(lights)
+             if light.type in ("WORLD", "EMITTERS")}
+    return {"world_map": world_texture(*found.get("WORLD", (None,))),
+            "emitters": emitters_texture(*found.get("EMITTERS", (None,)))}
+
+
 def strata_side(samples: int) -> int:
     """m of the m × m strata ``direct_light`` uses for ``samples`` shadow rays."""
     return max(1, math.ceil(math.sqrt(samples)))
 
 
 def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0,
-                         only: int | None = None, world=None, strata_block=None, table=None):
+                         only: int | None = None, world=None, emitters=None, strata_block=None,
+                         table=None):
     """Diffuse Direct over a G-buffer (``shaders/bvh_direct.glsl``), an RGBA32F texture of the
     G-buffer's size (bottom row first), rgb in Cycles' units; ``only`` : of that lamp alone
-    (``lights_texture``; -1: none); world : a ``world_texture`` to add the world's light (None:
-    not). strata_block : (M, row, column, m) — draw only the m × m block at (row, column) of the
-    M × M strata (``direct_light.diffuse_direct``'s ``strata_block``); None: all
-    ``strata_side(samples)``². table : a ``lights_texture(lights, only)`` made already."""
+    (``lights_texture``; -1: none); world, emitters : a ``world_texture`` / ``emitters_texture``
+    to add their light (None: not). strata_block : (M, row, column, m) — draw only the m × m
+    block at (row, column) of the M × M strata (``direct_light.diffuse_direct``'s
+    ``strata_block``); None: all ``strata_side(samples)``². table : a
+    ``lights_texture(lights, only)`` made already."""
     position = gbuffer_inputs["gbuffer_position"]
     side = strata_side(samples)
     block = strata_block or (side, 0, 0, side)
     inputs = {**bvh.inputs, **gbuffer_inputs,
               "lights": table if table is not None else lights_texture(lights, only),
-              "world_map": world if world is not None else world_texture(None)}
+              "world_map": world if world is not None else world_texture(None),
+              "emitters": emitters if emitters is not None else emitters_texture(None)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
                         {"sampling": (seed, block[3], 0, 0), "strata": (*block[:3], 0)})
 

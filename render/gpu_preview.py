@@ -18,7 +18,7 @@ import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.cone_shadows import shadow_cone
-from ..voxgi_addon.gi.world_light import scene_lights, world_light
+from ..voxgi_addon.gi.world_light import scene_lights
 from ..voxgi_addon.preview.gather import GatherSettings
 from ..voxgi_addon.preview.passes import (
     check_request,
@@ -34,7 +34,12 @@ from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
 from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
-from .gpu_bvh import direct_light_texture, lights_texture, shared_bvh, world_texture
+from .gpu_bvh import (
+    direct_light_texture,
+    lights_texture,
+    scene_light_textures,
+    shared_bvh,
+)
 from .gpu_gather import gather_low, glossy_direct_texture, principled_materials_texture, upsample
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
@@ -109,11 +114,12 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
             if quality == "ACCURATE":
                 shine += pixels(glossy_direct_texture(gbuffer.inputs, texture, table, index,
                                                       principled, emission))
-        world = world_light(snapshot.world)
-        if world is not None:  # the world's own dispatch (its stream: after the lamps)
+        lights = scene_lights(snapshot, tris, emission)  # lamps, world, emissive triangles
+        if len(lights) > len(snapshot.lights):  # the world's and emitters' own dispatch
+            extra = scene_light_textures(lights)
             direct += pixels(direct_light_texture(
                 bvh, gbuffer.inputs, snapshot.lights, light_samples, seed=gather_settings.seed,
-                only=-1, world=world_texture(world, len(snapshot.lights))))
+                only=-1, world=extra["world_map"], emitters=extra["emitters"]))
         timings["direct"] = time.perf_counter() - t0
     else:
         direct = direct_light(None, p, n, snapshot.lights, tris, cones, light_samples, shadows,
@@ -134,7 +140,7 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
     if quality == "ACCURATE":  # both gathers at low resolution, then one upsample for both
         _, _, _, emission = material_table(snapshot)
         bvh, principled = shared_bvh().update(tris), principled_table(snapshot)
-        gathered = (bvh, gbuffer.inputs, scene_lights(snapshot), principled, emission,
+        gathered = (bvh, gbuffer.inputs, scene_lights(snapshot, tris, emission), principled, emission,
                     gather_settings, gi_stride, width, height)
         low_diffuse = gather_low(*gathered)
         timings["diffuse+ao gather (GPU)"] = time.perf_counter() - t0
@@ -150,7 +156,7 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
                   np.zeros((height, width, 4), np.float32))
         timings["upsample + read-back"] = time.perf_counter() - t0
         glossy_world = None
-        if world_light(snapshot.world) is not None:  # the world's Glossy Direct
+        if len(gathered[2]) > len(snapshot.lights):  # Glossy Direct of the world and emitters
             t0 = time.perf_counter()
             low_world = gather_low(*gathered, kernel="bvh_glossy", world_mode=True)
             glossy_world = np.flipud(read_texture(
@@ -240,7 +246,7 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         timings["BVH build + upload"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     principled = principled_table(snapshot)
-    lights = scene_lights(snapshot)
+    lights = scene_lights(snapshot, tris, emission)  # lamps, world, emissive triangles
     gathered = (bvh, centre.inputs, lights, principled, emission, gather_settings, gi_stride,
                 width, height)
     low_diffuse = gather_low(*gathered)
@@ -255,8 +261,7 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     diffuse_ao, glossy = full if glossy_indirect else (full, zero)
     timings["upsample"] = time.perf_counter() - t0
     glossy_world = zero
-    world = world_light(snapshot.world)
-    if world is not None:  # the world's Glossy Direct
+    if len(gathered[2]) > len(snapshot.lights):  # Glossy Direct of the world and emitters
         t0 = time.perf_counter()
         low_world = gather_low(*gathered, kernel="bvh_glossy", world_mode=True)
         glossy_world = upsample(low_world, centre.inputs, gi_stride, width, height)
@@ -265,7 +270,7 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     t0 = time.perf_counter()
     materials = principled_materials_texture(principled, emission)
     tables = [lights_texture(snapshot.lights, only) for only in range(len(snapshot.lights))]
-    world_table = None if world is None else world_texture(world, len(snapshot.lights))
+    extra = scene_light_textures(lights) if len(lights) > len(snapshot.lights) else None
     no_lamp = lights_texture(snapshot.lights, -1)
     sums = {name: zero for name in (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")}
     for offset, block in plan:
@@ -290,10 +295,11 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
                 "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
                 ("out_f", "out_g"), width, height)
             sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
-        if world is not None:  # the world's own dispatch (its stream: after the lamps)
+        if extra is not None:  # the world's and emitters' own dispatch (streams after the lamps)
             direct = direct_light_texture(bvh, gbuffer.inputs, snapshot.lights, light_samples,
-                                          seed=gather_settings.seed, world=world_table,
-                                          strata_block=block, table=no_lamp)
+                                          seed=gather_settings.seed, world=extra["world_map"],
+                                          emitters=extra["emitters"], strata_block=block,
+                                          table=no_lamp)
             out = _run("aa_light", _LIGHT_SAMPLERS, {
                 "colour": colour, "direct_image": direct, "shine_image": zero, **sums},
                 ("out_f", "out_g"), width, height)

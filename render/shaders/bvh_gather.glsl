@@ -48,7 +48,7 @@ void main()
     vec3 d = normalize(disk.x * t + disk.y * b + z * n);
     float th;
     vec3 radiance = ray_radiance(origin, d, id * uint(rays) + uint(j), seed, int(sampling.w),
-                                 world.w > 0.5, world.rgb, th);
+                                 world.w > 0.5, world.rgb, false, th);
     unoccluded += th >= sampling.z ? 1.0 : 0.0;
     sum += radiance;
     float l = dot(radiance, LUMINANCE);

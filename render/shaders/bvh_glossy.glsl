@@ -70,7 +70,9 @@ void main()
   vec3 origin = position + SURFACE_EPSILON * n;
   uint state = point_stream(id, GLOSSY_STREAM, seed);
   uint world_state = point_stream(id, WORLD_GLOSSY_STREAM, seed);
-  bool world_mode = grid.w > 0.5 && world_on();
+  bool world_mode = grid.w > 0.5; /* Glossy Direct of the world and the emitters */
+  bool sky_on = world_on();
+  bool emitting = emitter_header().w > 0.5;
   const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
   vec3 sum = vec3(0.0);
   float lum2 = 0.0;
@@ -98,20 +100,32 @@ void main()
     }
     vec3 value = vec3(0.0);
     if (world_mode) {
-      /* the world's Glossy Direct (exact_glossy.glossy_world_direct): the lobe's ray where it
-       * reaches the sky, then one ray by the map's importance, balance heuristic */
+      /* Glossy Direct of the world and emitters (exact_glossy.glossy_world_direct): the lobe's
+       * ray where it lands on an emitter or reaches the sky, then one ray by the map's
+       * importance, balance heuristic for the sky */
       vec4 head = world_header();
       int wh = int(head.x);
       int ww = int(head.y);
       if (dot(weight, vec3(1.0)) > 0.0 && dot(l, n) > 0.0) {
-        vec3 sky = world_radiance_at(world_pixel(l, wh, ww));
-        float map_pdf = dot(sky, LUMA) / head.w;
-        float share = mirror ? 1.0 : pdf / max(pdf + map_pdf, 1e-30);
-        if (!bvh_any_hit(origin, l, BVH_FAR)) {
+        float th;
+        int triangle, slot;
+        vec2 uv;
+        if (bvh_closest_hit(origin, l, 0.0, BVH_FAR, th, triangle, slot, uv)) {
+          if (emitting) {
+            int hit_material = bvh_triangle_material(slot);
+            hit_material = (hit_material >= 0 && hit_material < last_material) ? hit_material
+                                                                               : last_material;
+            value += texelFetch(materials, ivec2(hit_material, 1), 0).rgb * weight;
+          }
+        }
+        else if (sky_on) {
+          vec3 sky = world_radiance_at(world_pixel(l, wh, ww));
+          float map_pdf = dot(sky, LUMA) / head.w;
+          float share = mirror ? 1.0 : pdf / max(pdf + map_pdf, 1e-30);
           value += sky * weight * share;
         }
       }
-      if (!mirror) {
+      if (!mirror && sky_on) {
         vec3 le = world_sample(hammersley(world_state, j, rays), wh, ww);
         vec3 sky = world_radiance_at(world_pixel(le, wh, ww));
         float map_pdf = dot(sky, LUMA) / head.w;
@@ -126,7 +140,7 @@ void main()
     else if (dot(weight, vec3(1.0)) > 0.0) {
       float th;
       vec3 radiance = ray_radiance(origin, l, id * uint(rays) + uint(j), seed, int(sampling.w),
-                                   world.w > 0.5, world.rgb, th);
+                                   world.w > 0.5, world.rgb, false, th);
       value = mix(vec3(0.0), weight * radiance, greaterThan(colour, vec3(0.0)));
     }
     sum += value;

@@ -324,8 +324,155 @@ vec3 world_light_direct(vec3 p, vec3 n, uint id, uint seed, int m)
   return world_direct(p, n, point_stream(id, stream, seed), m);
 }
 
+/* ---- Emissive triangles as a light (voxgi_addon/gi/emitters.py; sampler `emitters` holds
+ * emitters.emitter_table: per triangle (corner, radiance channel) × 3 and its power CDF, and a
+ * header row (count, total power, stream, on)). */
+
+vec4 emitter_header()
+{
+  return texelFetch(emitters, ivec2(0, textureSize(emitters, 0).y - 1), 0);
+}
+
+/* ∫ max(n·ω, 0)/π dω over triangle t clipped to the horizon of (p, n), either side
+ * (emitters.clipped_form_factors). */
+float clipped_form_factor(int t, vec3 p, vec3 n)
+{
+  vec3 rel[3];
+  float h[3];
+  for (int i = 0; i < 3; i++) {
+    rel[i] = texelFetch(emitters, ivec2(i, t), 0).xyz - p;
+    h[i] = dot(rel[i], n);
+  }
+  vec3 poly[4];
+  int count = 0;
+  for (int i = 0; i < 3; i++) {
+    int j = (i + 1) % 3;
+    if (h[i] >= 0.0) {
+      poly[count++] = rel[i];
+    }
+    if ((h[i] >= 0.0) != (h[j] >= 0.0)) {
+      float d = h[i] - h[j];
+      float s = d != 0.0 ? h[i] / d : 0.0;
+      poly[count++] = rel[i] + s * (rel[j] - rel[i]);
+    }
+  }
+  if (count < 3) {
+    return 0.0;
+  }
+  float sum = 0.0;
+  for (int k = 0; k < count; k++) {
+    vec3 a = poly[k];
+    vec3 b = poly[(k + 1) % count];
+    float la = length(a);
+    float lb = length(b);
+    a = la > 0.0 ? a / la : vec3(0.0);
+    b = lb > 0.0 ? b / lb : vec3(0.0);
+    vec3 c = cross(a, b);
+    float s = length(c);
+    if (s > 1e-12) {
+      sum += atan(s, dot(a, b)) * dot(c / s, n);
+    }
+  }
+  return abs(sum) / (2.0 * M_PI_F);
+}
+
+/* Does triangle t light the side of it where p is (emitters.EmitterLight.sides)? */
+bool emitter_facing(int t, vec3 p)
+{
+  float side = texelFetch(emitters, ivec2(3, t), 0).y;
+  if (side == 0.0) {
+    return true;
+  }
+  vec3 c0 = texelFetch(emitters, ivec2(0, t), 0).xyz;
+  vec3 normal = cross(texelFetch(emitters, ivec2(1, t), 0).xyz - c0,
+                      texelFetch(emitters, ivec2(2, t), 0).xyz - c0);
+  return side * dot(p - c0, normal) > 0.0;
+}
+
+/* Diffuse Direct of the emissive triangles (emitters.emitters_direct): the exact unshadowed
+ * sum times the per-channel visible share of one point per stratum, sampled by power; not
+ * `exact` (bounce hits): the shadow rays' plain estimate. */
+vec3 emitters_direct(vec3 p, vec3 n, uint state, int m, bool exact)
+{
+  vec4 head = emitter_header();
+  int count = int(head.x);
+  p += NORMAL_OFFSET * n; /* as direct_light._emitters lifts the point */
+  vec3 value = exact ? vec3(0.0) : vec3(1.0);
+  for (int t = 0; t < count && exact; t++) {
+    float factor = emitter_facing(t, p) ? clipped_form_factor(t, p, n) : 0.0;
+    if (factor > 0.0) {
+      value += factor * vec3(texelFetch(emitters, ivec2(0, t), 0).w,
+                             texelFetch(emitters, ivec2(1, t), 0).w,
+                             texelFetch(emitters, ivec2(2, t), 0).w);
+    }
+  }
+  if (max(value.r, max(value.g, value.b)) <= 0.0) {
+    return value;
+  }
+  vec3 origin = p;
+  vec3 f_sum = vec3(0.0);
+  vec3 f_lit = vec3(0.0);
+  for (int k = 0; k < m * m; k++) {
+    vec2 u = hashed_stratum(state, k, m);
+    int lo = 0;
+    int hi = count - 1;
+    while (lo < hi) {
+      int mid = (lo + hi) / 2;
+      if (texelFetch(emitters, ivec2(3, mid), 0).x <= u.x) {
+        lo = mid + 1;
+      }
+      else {
+        hi = mid;
+      }
+    }
+    int t = lo;
+    float low = t > 0 ? texelFetch(emitters, ivec2(3, t - 1), 0).x : 0.0;
+    float r = clamp((u.x - low) / max(texelFetch(emitters, ivec2(3, t), 0).x - low, 1e-30),
+                    0.0, 1.0);
+    float s = sqrt(r);
+    vec3 c0 = texelFetch(emitters, ivec2(0, t), 0).xyz;
+    vec3 c1 = texelFetch(emitters, ivec2(1, t), 0).xyz;
+    vec3 c2 = texelFetch(emitters, ivec2(2, t), 0).xyz;
+    vec3 target = (1.0 - s) * c0 + (s * (1.0 - u.y)) * c1 + (s * u.y) * c2;
+    vec3 radiance = vec3(texelFetch(emitters, ivec2(0, t), 0).w,
+                         texelFetch(emitters, ivec2(1, t), 0).w,
+                         texelFetch(emitters, ivec2(2, t), 0).w);
+    vec3 w = target - p;
+    float r2 = dot(w, w);
+    float dist = sqrt(r2);
+    vec3 d = w / max(dist, 1e-30);
+    vec3 normal = cross(c1 - c0, c2 - c0);
+    normal /= max(length(normal), 1e-30);
+    float g = max(dot(d, n), 0.0) * abs(dot(d, normal)) / max(r2, 1e-30) /
+              max(dot(radiance, LUMA) / head.y, 1e-30);
+    g = emitter_facing(t, p) ? g : 0.0;
+    vec3 f = radiance * g;
+    f_sum += f;
+    if (g > 0.0 && !bvh_any_hit(origin, d, dist)) {
+      f_lit += f;
+    }
+  }
+  if (!exact) {
+    return f_lit / (M_PI_F * float(m * m));
+  }
+  vec3 share = vec3(f_sum.r > 0.0 ? f_lit.r / f_sum.r : 1.0, f_sum.g > 0.0 ? f_lit.g / f_sum.g : 1.0,
+                    f_sum.b > 0.0 ? f_lit.b / f_sum.b : 1.0);
+  return value * share;
+}
+
+/* The emitters' Diffuse Direct with the samples diffuse_direct draws for them (their stream
+ * is the header's z); 0 when nothing emits. */
+vec3 emitters_light_direct(vec3 p, vec3 n, uint id, uint seed, int m, bool exact)
+{
+  vec4 head = emitter_header();
+  if (head.w < 0.5) {
+    return vec3(0.0);
+  }
+  return emitters_direct(p, n, point_stream(id, uint(head.z), seed), m, exact);
+}
+
 /* Diffuse Direct of all lights at p (normal n facing the viewer), `id` the point's sample id
- * and `m` × `m` strata per light with an extent, the world's included. */
+ * and `m` × `m` strata per light with an extent, the world and the emitters included. */
 vec3 diffuse_direct(vec3 p, vec3 n, uint id, uint seed, int m)
 {
   vec3 sum = vec3(0.0);
@@ -333,5 +480,6 @@ vec3 diffuse_direct(vec3 p, vec3 n, uint id, uint seed, int m)
   for (int light = 0; light < count; light++) {
     sum += light_direct(light, p, n, id, seed, m);
   }
-  return sum + world_light_direct(p, n, id, seed, m);
+  return sum + world_light_direct(p, n, id, seed, m) +
+         emitters_light_direct(p, n, id, seed, m, true);
 }

@@ -13,7 +13,7 @@ vec4 bvh_texel_normals(int k)
 }
 
 vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
-                  vec3 world_rgb, out float th)
+                  vec3 world_rgb, bool emission_seen, out float th)
 {
   int triangle, slot;
   vec2 uv;
@@ -40,7 +40,9 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
   vec3 weight = principled_diffuse_weight(base, params.x, params.y, params.z,
                                           clamp(-dot(ns, d), 0.0, 1.0));
   vec3 lit_at = x + ns * SURFACE_EPSILON;
-  vec3 radiance = emission;
+  /* with the emitters among the lights their light comes by next-event estimation: a ray
+   * landing on one adds no emission (exact_indirect.ray_radiance) unless `emission_seen` */
+  vec3 radiance = (emission_seen || emitter_header().w < 0.5) ? emission : vec3(0.0);
   for (int light = 0; light < textureSize(lights, 0).y; light++) {
     vec3 direct = light_direct(light, lit_at, ns, hit_id, seed + 1u, strata);
     radiance += weight * direct;
@@ -53,7 +55,8 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
     }
   }
   /* the world lights the hit too (its diffuse share; world_light.py) */
-  radiance += weight * world_light_direct(lit_at, ns, hit_id, seed + 1u, strata);
+  radiance += weight * (world_light_direct(lit_at, ns, hit_id, seed + 1u, strata) +
+                        emitters_light_direct(lit_at, ns, hit_id, seed + 1u, strata, false));
   return radiance;
 }
 

@@ -241,7 +241,16 @@ def _world(world, p, n, tris, strata):
     return world_direct(world, p + origins_offset, n, occluded, strata)
 
 
-_BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD": _world}
+def _emitters(emitters, p, n, tris, strata):
+    from .emitters import emitters_direct
+
+    occluded = None if tris is None else (
+        lambda origins, dirs, lengths: _occluded(tris, origins, dirs, lengths))
+    return emitters_direct(emitters, p + _NORMAL_OFFSET * n, n, occluded, strata)
+
+
+_BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD": _world,
+            "EMITTERS": _emitters}
 
 
 def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
@@ -252,8 +261,9 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
     ----------
     points : (N, 3) float world-space surface positions.
     normals : (N, 3) float unit normals facing the viewer.
-    lights : list of ``LightData`` (types SUN, POINT, SPOT, AREA; others are ignored) and
-        ``world_light.WorldLight`` (the world, RGB light of its own).
+    lights : list of ``LightData`` (types SUN, POINT, SPOT, AREA; others are ignored),
+        ``world_light.WorldLight`` (the world) and ``emitters.EmitterLight`` (emissive
+        triangles), the last two RGB lights of their own.
     tris : ``SceneTriangles`` (or a ``raycast.TriangleGrid``) that casts shadows, or any object with
         an ``occluded(origins, dirs, max_t)`` method (voxel occupancy); None = no shadows.
     samples : shadow rays per point for lights with an extent (area, point/spot radius, sun
@@ -309,7 +319,7 @@ def light_directions(lights, points) -> list[np.ndarray]:
     lamps (``world_light.scene_lights``), has no direction and is left out."""
     out = []
     for light in lights:
-        if light.type == "WORLD":
+        if light.type in ("WORLD", "EMITTERS"):
             continue
         m = np.asarray(light.world_matrix, np.float64)
         if light.type == "SUN":

@@ -166,51 +166,72 @@ def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights,
 
 
 def glossy_world_direct(points, normals, views, materials, sample_ids, tris, world, principled,
-                        rays: int = 16, seed: int = 0):
-    """(the world's Glossy Direct (N, 3) float32 without the glossy colour, variance of its
-    luminance mean (N,) float32): the world seen in the glossy lobe (Cycles files it under
-    Glossy Direct). Multiple importance sampling with the balance heuristic: ray j of the
-    lobe's ``rays`` (``glossy_indirect``'s, same stream) and ray j drawn from the map's
-    importance (``world_light.sample_world``, stream ``WORLD_GLOSSY_STREAM``) each add
-    L f / (p_lobe + p_map) where they reach the sky unoccluded; a mirror takes its one
-    reflected ray. world : ``world_light.WorldLight``."""
-    from ..scene.raycast import occluded
+                        rays: int = 16, seed: int = 0, emission=None):
+    """(Glossy Direct of the world and the emissive surfaces (N, 3) float32 without the glossy
+    colour, variance of its luminance mean (N,) float32): what the glossy lobe sees of them
+    (Cycles files it under Glossy Direct). The world by multiple importance sampling with the
+    balance heuristic: ray j of the lobe's ``rays`` (``glossy_indirect``'s, same stream) and
+    ray j drawn from the map's importance (``world_light.sample_world``, stream
+    ``WORLD_GLOSSY_STREAM``) each add L f / (p_lobe + p_map) where they reach the sky
+    unoccluded; a mirror takes its one reflected ray. With ``emission`` (M + 1, 3) per
+    material, a lobe ray landing on an emissive triangle adds its emission × the ray's weight
+    (the lobe's own sampling; ``glossy_indirect`` then leaves it out). world :
+    ``world_light.WorldLight`` or None."""
+    from ..scene.raycast import closest_hits
     from .world_light import sample_world, world_pdf, world_radiance
 
     p = np.asarray(points, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     ids = np.asarray(sample_ids).reshape(-1).astype(np.uint32)
     count = len(p)
-    if count == 0 or rays < 1 or world is None:
+    if count == 0 or rays < 1 or (world is None and emission is None):
         return np.zeros((count, 3), np.float32), np.zeros(count, np.float32)
     lobe = _Lobe(n, views, materials, principled)
     origins = np.repeat(p + SURFACE_EPSILON * n, rays, axis=0)
 
-    def reaching(dirs, useful):  # (N, K) the rays that leave the scene
-        out = np.zeros(useful.shape, bool)
+    def nearest(dirs, useful):  # (N, K) the rays' nearest triangle (-1: they leave the scene)
+        out = np.full(useful.shape, -1)
         if useful.any():
-            out[useful] = ~occluded(tris, origins[useful.ravel()], dirs[useful],
-                                    np.full(int(useful.sum()), np.inf))
+            t, tri, _, _ = closest_hits(tris, origins[useful.ravel()], dirs[useful], 0.0, np.inf)
+            out[useful] = np.where(np.isfinite(t), tri, -1)
         return out
 
     dirs, weight = lobe.sample(ids, rays, seed)
-    lobe_pdf, map_pdf = lobe.pdf(dirs), world_pdf(world, dirs)
-    share = np.where(lobe.mirror[:, None], 1.0, lobe_pdf / np.maximum(lobe_pdf + map_pdf, 1e-30))
     weight = np.where(lobe.mirror[:, None, None], 1.0, weight)
     useful = (weight.sum(-1) > 0) & (np.einsum("nkc,nc->nk", dirs, n) > 0)
-    value = np.where(reaching(dirs, useful)[..., None],
-                     world_radiance(world, dirs) * weight * share[..., None], 0.0)
+    hit = nearest(dirs, useful)
+    value = np.zeros(dirs.shape)
+    if emission is not None:
+        table = np.asarray(emission, np.float64)
+        last = len(table) - 1
+        material = np.asarray(tris.materials)[np.maximum(hit, 0)]
+        material = np.where((material >= 0) & (material < last), material, last)
+        value += np.where((useful & (hit >= 0))[..., None], table[material] * weight, 0.0)
+    if world is None:
+        return _glossy_mean(lobe, value)
+    lobe_pdf, map_pdf = lobe.pdf(dirs), world_pdf(world, dirs)
+    share = np.where(lobe.mirror[:, None], 1.0, lobe_pdf / np.maximum(lobe_pdf + map_pdf, 1e-30))
+    value += np.where((useful & (hit < 0))[..., None],
+                      world_radiance(world, dirs) * weight * share[..., None], 0.0)
+
+    def reaching(dirs, useful):  # (N, K) the rays that leave the scene
+        return useful & (nearest(dirs, useful) < 0)
 
     dirs = sample_world(world, hammersley(ids, WORLD_GLOSSY_STREAM, rays, seed))
     lobe_pdf, map_pdf = lobe.pdf(dirs), world_pdf(world, dirs)
     useful = (~lobe.mirror[:, None]) & (np.einsum("nkc,nc->nk", dirs, n) > 0) & (map_pdf > 0)
     f = lobe.reflectance(dirs) / np.maximum(lobe_pdf + map_pdf, 1e-30)[..., None]
-    value += np.where((useful & reaching(dirs, useful))[..., None],
-                      world_radiance(world, dirs) * f, 0.0)
+    value += np.where(reaching(dirs, useful)[..., None], world_radiance(world, dirs) * f, 0.0)
+    return _glossy_mean(lobe, value)
 
-    colour = lobe.colour
+
+def _glossy_mean(lobe: _Lobe, value):
+    """(mean over the rays of value (N, K, 3) without the glossy colour, its luminance
+    variance), as ``glossy_indirect`` gives them (a mirror's value is the pass itself)."""
+    colour, mirror, rays = lobe.colour, lobe.mirror, value.shape[1]
     safe_colour = np.where(colour > 0.0, colour, 1.0)
     per_ray = np.where(colour[:, None] > 0.0, value / safe_colour[:, None], 0.0)
+    per_ray[mirror] = np.where(colour[mirror, None] > 0.0, value[mirror], 0.0)
     per_ray[lobe.cos_ni <= 0.0] = 0.0
     mean = per_ray.mean(axis=1)
     luminance = per_ray @ LUMINANCE

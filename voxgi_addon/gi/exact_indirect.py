@@ -25,6 +25,8 @@ scenes have black worlds, where both agree).
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..scene.raycast import closest_hits
@@ -64,13 +66,19 @@ def _hit_normals(tris, tri, u, v, d):
 
 
 def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
-                 world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False):
+                 world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
+                 emission_seen: bool | None = None):
     """((K, 3) radiance arriving back along each ray, (K,) distance of its nearest hit, inf on
     a miss): what a bounce ray of the gathers sees — ``world`` on a miss, else the hit's
     emission plus its exact direct light reflected toward the ray's origin (see
     ``indirect_and_ao``; ``hit_ids`` (K,) uint32 are the hits' light-sample ids)."""
     t, tri, u, v = closest_hits(tris, origins, dirs, 0.0, np.inf)
     radiance = np.tile(np.asarray(world, dtype=np.float64), (len(dirs), 1))
+    # With the emissive triangles among the lights their light reaches the origin as direct
+    # light (next-event estimation, gi/emitters.py): a ray landing on one adds no emission
+    # (unless the caller says it sees it: the glossy gather, which has no such estimate yet).
+    if emission_seen is None:
+        emission_seen = not any(light.type == "EMITTERS" for light in lights)
     hit = np.flatnonzero(tri >= 0)
     if len(hit):
         x = origins[hit] + t[hit, None] * dirs[hit]
@@ -78,9 +86,12 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
         material = np.asarray(tris.materials)[tri[hit]]
         last = len(emission) - 1
         material = np.where((material >= 0) & (material < last), material, last)
-        lit = diffuse_direct(x + ns * SURFACE_EPSILON, ns, lights, tris, samples=hit_samples,
+        # emissive triangles by their shadow rays' plain estimate here (emitters.EmitterLight)
+        at_hits = [replace(light, exact=False) if light.type == "EMITTERS" else light
+                   for light in lights]
+        lit = diffuse_direct(x + ns * SURFACE_EPSILON, ns, at_hits, tris, samples=hit_samples,
                              seed=seed + 1, sample_ids=hit_ids[hit], per_light=True)
-        radiance[hit] = np.asarray(emission, np.float64)[material]
+        radiance[hit] = np.asarray(emission, np.float64)[material] if emission_seen else 0.0
         if isinstance(albedo, tuple):  # Principled (base, (metallic, level, roughness))
             base, params = (np.asarray(a, np.float64)[material] for a in albedo)
             shading = (base, params[:, 0], params[:, 1], params[:, 2])

@@ -122,10 +122,16 @@ def world_light(world) -> WorldLight | None:
     return light
 
 
-def scene_lights(snapshot) -> list:
-    """The snapshot's lamps, then its world when it sheds light (``WorldLight``)."""
+def scene_lights(snapshot, tris=None, emission=None) -> list:
+    """The snapshot's lamps, then its world when it sheds light (``WorldLight``), then, given
+    its triangles (``SceneTriangles``) and the materials' emission (``preview.passes
+    .material_table``), its emissive triangles (``emitters.EmitterLight``)."""
+    from .emitters import emitter_light
+
     world = world_light(snapshot.world)
-    return list(snapshot.lights) + ([world] if world is not None else [])
+    lights = list(snapshot.lights) + ([world] if world is not None else [])
+    emitters = None if tris is None else emitter_light(tris, emission)
+    return lights + ([emitters] if emitters is not None else [])
 
 
 def _pixel_of(world: WorldLight, directions):

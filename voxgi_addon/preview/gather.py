@@ -99,15 +99,16 @@ def gather_glossy(tris, lights, principled, emission, hit, position, normal, dir
 
 
 def gather_glossy_world(tris, world, principled, hit, position, normal, direction, material,
-                        settings: GatherSettings, stride: int) -> np.ndarray:
-    """(H, W, 3) float32: the world's Glossy Direct (Cycles' units, without the glossy colour)
-    per pixel — ``gi.exact_glossy.glossy_world_direct`` with ``settings.glossy_rays`` rays of
-    each technique at the gather points of ``gather_glossy``, the same filter and upsample.
-    world : ``gi.world_light.WorldLight`` (None: zeros)."""
-    if world is None:
+                        settings: GatherSettings, stride: int, emission=None) -> np.ndarray:
+    """(H, W, 3) float32: the Glossy Direct of the world and, given their ``emission`` table,
+    the emissive surfaces (Cycles' units, without the glossy colour) per pixel —
+    ``gi.exact_glossy.glossy_world_direct`` with ``settings.glossy_rays`` rays of each
+    technique at the gather points of ``gather_glossy``, the same filter and upsample.
+    world : ``gi.world_light.WorldLight`` (None with no emission: zeros)."""
+    if world is None and emission is None:
         return np.zeros(hit.shape + (3,), np.float32)
-    return _glossy_cells(glossy_world_direct, (tris, world, principled), {}, hit, position,
-                         normal, direction, material, settings, stride)
+    return _glossy_cells(glossy_world_direct, (tris, world, principled), {"emission": emission},
+                         hit, position, normal, direction, material, settings, stride)
 
 
 def _glossy_cells(estimator, scene, options, hit, position, normal, direction, material,

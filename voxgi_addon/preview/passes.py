@@ -397,7 +397,8 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     materials = material_indices(snapshot, seen.material.ravel())
     mat = materials[hit]
 
-    lights = scene_lights(snapshot)  # the lamps, then the world
+    # the lamps, then the world and the emissive triangles
+    lights = scene_lights(snapshot, tris, material_table(snapshot)[3])
     if quality != "ACCURATE":  # Accurate: per sub-pixel pass, below
         t0 = time.perf_counter()
         direct = direct_light(gi_state.octree, p, n, snapshot.lights, tris, cones, light_samples,
@@ -441,10 +442,11 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao,
                               glossy), timings
     t0 = time.perf_counter()
+    emitting = any(light.type == "EMITTERS" for light in lights)
     glossy_world = gather_glossy_world(tris, world_light(snapshot.world), principled_table(snapshot),
                                        seen.hit, seen.position, seen.normal, seen.direction,
                                        materials.reshape(height, width), gather_settings,
-                                       gi_stride).reshape(-1, 3)
+                                       gi_stride, emission if emitting else None).reshape(-1, 3)
     timings["world glossy gather"] = time.perf_counter() - t0
     t0 = time.perf_counter()
 

@@ -1,0 +1,246 @@
+"""Emissive surfaces as a light: every triangle whose material emits, sampled by next-event
+estimation like a lamp, so that their light is Diffuse Direct as in Cycles (a surface that sees
+an emitter, straight or through its shadow rays, is lit directly; the gathers' bounce hits are
+lit by the emitters the same way and no longer count the emission they land on).
+
+Each emissive triangle t (world corners, radiance L_t = Emission Color × Strength in Cycles'
+units, both sides emitting, as Cycles' mesh lights do) is evaluated as the area lights are
+(``direct_light``):
+
+* **Unshadowed**, exact: ``Σ_t L_t ∫_t max(n·ω, 0)/π dω`` — Lambert's formula over each
+  triangle clipped to the point's horizon (``clipped_form_factors``). No noise.
+* **Visible share**, per colour channel: a ratio estimator ``Σ f V / Σ f`` over m × m strata of
+  the point's hashed stream (``sampling.hashed_square``, stream = the emitters' index in the
+  lights list): stratum k picks a triangle by power (area × luminance, an inclusive CDF) with
+  its first coordinate and a uniform point on it with the remainder and the second
+  (``sample_points``); f = L cos_x cos_l / r² / p_area. Where every shadow ray is unoccluded
+  the share is exactly 1.
+
+``EmitterLight`` stands in the lights list (``world_light.scene_lights``) with
+``type == "EMITTERS"``; ``emitter_table`` packs it for ``render/shaders/bvh_lights.glsl``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["EmitterLight", "emitter_light", "emitters_direct", "clipped_form_factors",
+           "sample_points", "emitter_table", "EMITTER_TEXELS", "MAX_EMITTER_TRIANGLES",
+           "ITERATIONS_PER_TRIANGLE"]
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+EMITTER_TEXELS = 4
+# Beyond this many emissive triangles the exact per-point sum costs too much (and a GPU
+# invocation's loops would pass llvmpipe's limit, docs/blender_facts.md): such scenes keep the
+# emission seen by the gathers' rays instead (emitter_light returns None).
+MAX_EMITTER_TRIANGLES = 1024
+ITERATIONS_PER_TRIANGLE = 12  # GLSL loop iterations of one triangle's clipped form factor
+_CHUNK = 8  # emissive triangles per step of the exact sum (memory: points × 8 × 6 corners)
+
+
+@dataclass(frozen=True, eq=False)
+class EmitterLight:
+    """corners (E, 3, 3) float64 world corners; radiance (E, 3); area (E,); cdf (E,)
+    inclusive CDF of power (area × luminance); sides (E,): +1 the triangle lights the side its
+    normal faces, −1 the other side, 0 both (``emitting_sides``).
+    exact : the unshadowed light is the exact sum over the triangles (primary surfaces); False
+    at the gathers' bounce hits, where the shadow rays' plain estimate (unbiased, noisier) is
+    enough and the sum would cost most of the gather."""
+
+    corners: np.ndarray
+    radiance: np.ndarray
+    area: np.ndarray
+    cdf: np.ndarray
+    sides: np.ndarray
+    exact: bool = True
+    type: str = "EMITTERS"
+    name: str = "Emissive surfaces"
+
+
+def emitting_sides(corners, objects) -> np.ndarray:
+    """(E,) which side of each emissive triangle can light anything: an object whose emissive
+    triangles close up (every edge shared by two of them) only lights its outside (+1 with
+    outward normals, −1 with inward ones, by the sign of its enclosed volume) — its inside
+    emission never leaves it, and counting it would double the exact sum that the shadow rays
+    must then halve, noisily; an open surface (a panel) lights both sides, as Cycles' mesh
+    lights do."""
+    sides = np.zeros(len(corners), np.int8)
+    for obj in np.unique(objects):
+        members = np.flatnonzero(objects == obj)
+        c = corners[members]
+        keys = [tuple(sorted((tuple(c[t, i]), tuple(c[t, (i + 1) % 3])))) for t in range(len(c))
+                for i in range(3)]
+        _, counts = np.unique(np.array([np.concatenate(k) for k in keys]), axis=0,
+                              return_counts=True)
+        if len(c) < 4 or not np.all(counts == 2):
+            continue
+        volume = np.einsum("ij,ij->i", c[:, 0], np.cross(c[:, 1], c[:, 2])).sum()
+        sides[members] = 1 if volume > 0 else -1
+    return sides
+
+
+def emitter_light(tris, emission) -> EmitterLight | None:
+    """The emissive triangles of ``tris`` (``SceneTriangles``) with ``emission`` (M + 1, 3) per
+    material (``preview.passes.material_table``, the last row for none); None when nothing
+    emits or more than ``MAX_EMITTER_TRIANGLES`` do. float32-rounded as the GPU table holds
+    them."""
+    emission = np.maximum(np.nan_to_num(np.asarray(emission, np.float64)), 0.0)
+    materials = np.asarray(tris.materials)
+    last = len(emission) - 1
+    materials = np.where((materials >= 0) & (materials < last), materials, last)
+    radiance = emission[materials]
+    corners = np.asarray(tris.positions, np.float64)
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                         corners[:, 2] - corners[:, 0]), axis=1)
+    keep = (radiance @ LUMINANCE > 0) & (area > 0) & np.isfinite(area)
+    if not keep.any() or keep.sum() > MAX_EMITTER_TRIANGLES:
+        return None
+    sides = emitting_sides(corners[keep], np.asarray(tris.objects)[keep])
+    corners = corners[keep].astype(np.float32).astype(np.float64)
+    radiance = radiance[keep].astype(np.float32).astype(np.float64)
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                         corners[:, 2] - corners[:, 0]), axis=1)
+    power = area * (radiance @ LUMINANCE)
+    cdf = np.cumsum(power) / power.sum()
+    cdf[-1] = 1.0
+    return EmitterLight(corners, radiance, area.astype(np.float32).astype(np.float64),
+                        cdf.astype(np.float32).astype(np.float64), sides)
+
+
+def _facing(light: EmitterLight, p, index=None) -> np.ndarray:
+    """(N, E) or, with ``index`` (N, K) triangle indices, (N, K): does the triangle light the
+    side of it where p is (``EmitterLight.sides``)?"""
+    corners = light.corners if index is None else light.corners[index]
+    sides = light.sides if index is None else light.sides[index]
+    normal = np.cross(corners[..., 1, :] - corners[..., 0, :], corners[..., 2, :] - corners[..., 0, :])
+    if index is None:
+        height = np.einsum("nc,ec->ne", p, normal) - np.einsum("ec,ec->e", corners[:, 0], normal)
+    else:
+        height = np.einsum("nkc,nkc->nk", p[:, None] - corners[..., 0, :], normal)
+    return (sides == 0) | (sides * height > 0)
+
+
+def clipped_form_factors(p, n, corners) -> np.ndarray:
+    """(N, E) ``∫ max(n·ω, 0)/π dω`` over each triangle (E, 3, 3) seen from points p (N, 3)
+    with unit normals n (N, 3), either side: the triangle clipped to the part above the point's
+    tangent plane (up to 4 corners), then Lambert's formula |Σ_edges θ_k γ_k·n| / 2π."""
+    rel = corners[None] - p[:, None, None]                      # (N, E, 3, 3)
+    h = np.einsum("nevc,nc->nev", rel, n)                       # heights above the plane
+    slots = []
+    for i in range(3):  # Sutherland–Hodgman against h >= 0: v_i if above, then the crossing
+        j = (i + 1) % 3
+        hi, hj = h[..., i], h[..., j]
+        slots.append((rel[..., i, :], hi >= 0))
+        t = np.divide(hi, hi - hj, out=np.zeros_like(hi), where=(hi - hj) != 0)
+        slots.append((rel[..., i, :] + t[..., None] * (rel[..., j, :] - rel[..., i, :]),
+                      (hi >= 0) != (hj >= 0)))
+    points = np.stack([s[0] for s in slots], axis=-2)           # (N, E, 6, 3)
+    valid = np.stack([s[1] for s in slots], axis=-1)            # (N, E, 6)
+    # Unused slots repeat the previous valid corner: their edges have zero length and add 0.
+    index = np.where(valid, np.arange(6), -1)
+    last_valid = np.max(index, axis=-1, keepdims=True)
+    index = np.maximum.accumulate(index, axis=-1)
+    index = np.where(index < 0, last_valid, index)
+    index = np.maximum(index, 0)
+    points = np.take_along_axis(points, index[..., None], axis=-2)
+    length = np.linalg.norm(points, axis=-1, keepdims=True)
+    a = np.divide(points, length, out=np.zeros_like(points), where=length > 0)
+    b = np.roll(a, -1, axis=-2)
+    cross = np.cross(a, b)
+    sin = np.linalg.norm(cross, axis=-1)
+    angle = np.arctan2(sin, np.einsum("...c,...c->...", a, b))
+    gamma = np.divide(cross, sin[..., None], out=np.zeros_like(cross), where=sin[..., None] > 1e-12)
+    total = (angle * np.einsum("nekc,nc->nek", gamma, n)).sum(axis=-1)
+    out = np.abs(total) / (2.0 * math.pi)
+    return np.where(valid.any(axis=-1), out, 0.0)
+
+
+def sample_points(light: EmitterLight, square) -> tuple[np.ndarray, np.ndarray]:
+    """(triangle index (...,), uniform point on it (..., 3)) from ``square`` (..., 2) in
+    [0, 1)²: the triangle by power from the first coordinate (inverse CDF), the point from its
+    remainder and the second (√-warped barycentrics)."""
+    u = np.asarray(square, np.float64)
+    u0, u1 = u[..., 0], u[..., 1]
+    k = np.minimum(np.searchsorted(light.cdf, u0, side="right"), len(light.cdf) - 1)
+    low = np.where(k > 0, light.cdf[np.maximum(k - 1, 0)], 0.0)
+    r = np.clip((u0 - low) / np.maximum(light.cdf[k] - low, 1e-30), 0.0, 1.0)
+    s = np.sqrt(r)
+    c = light.corners[k]
+    point = (1.0 - s)[..., None] * c[..., 0, :] + (s * (1.0 - u1))[..., None] * c[..., 1, :] \
+        + (s * u1)[..., None] * c[..., 2, :]
+    return k, point
+
+
+def _unshadowed(light: EmitterLight, p, n) -> np.ndarray:
+    out = np.zeros((len(p), 3))
+    facing = _facing(light, p)
+    for a in range(0, len(light.corners), _CHUNK):
+        factors = clipped_form_factors(p, n, light.corners[a:a + _CHUNK])
+        out += (factors * facing[:, a:a + _CHUNK]) @ light.radiance[a:a + _CHUNK]
+    return out
+
+
+def emitters_direct(light: EmitterLight, p, n, occluded, strata) -> np.ndarray:
+    """(N, 3) Diffuse Direct of the emissive triangles at points p with unit normals n (facing
+    the viewer). occluded : callable(origins (M, 3), unit directions (M, 3), lengths (M,)) ->
+    (M,) bool, the shadow test (None: no shadows); strata : callable(point indices) -> (N, K, 2)
+    the points' hashed strata."""
+    p = np.asarray(p, np.float64)
+    n = np.asarray(n, np.float64)
+    if light.exact or occluded is None:
+        value = _unshadowed(light, p, n)
+        lit = np.flatnonzero((value > 0).any(axis=1))
+    else:  # the shadow rays' own estimate, mean of f V
+        value, lit = np.ones((len(p), 3)), np.arange(len(p))
+    if len(lit) == 0 or occluded is None:
+        return value
+    k, targets = sample_points(light, strata(lit))              # (M, K), (M, K, 3)
+    w = targets - p[lit, None]
+    r2 = np.einsum("mkc,mkc->mk", w, w)
+    r = np.sqrt(r2)
+    d = w / np.maximum(r, 1e-30)[..., None]
+    corners = light.corners[k]
+    normal = np.cross(corners[..., 1, :] - corners[..., 0, :], corners[..., 2, :] - corners[..., 0, :])
+    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-30)
+    cos_x = np.einsum("mkc,mc->mk", d, n[lit])
+    cos_l = np.abs(np.einsum("mkc,mkc->mk", d, normal))
+    pdf_area = (light.radiance[k] @ LUMINANCE) / _total_power(light)
+    g = np.maximum(cos_x, 0.0) * cos_l / np.maximum(r2, 1e-30) / np.maximum(pdf_area, 1e-30)
+    g = np.where(_facing(light, p[lit], k), g, 0.0)
+    f = light.radiance[k] * g[..., None]
+    useful = g > 0
+    blocked = np.zeros(useful.shape, bool)
+    if useful.any():
+        origins = np.repeat(p[lit], k.shape[1], axis=0).reshape(k.shape + (3,))
+        blocked[useful] = occluded(origins[useful], d[useful], r[useful])
+    seen = (f * ~blocked[..., None]).sum(axis=1)
+    if not light.exact:
+        return seen / (math.pi * k.shape[1])  # E/π = mean of L cos_x cos_l / r² / p_area / π
+    total = f.sum(axis=1)
+    share = np.divide(seen, total, out=np.ones_like(seen), where=total > 0)
+    value[lit] *= share
+    return value
+
+
+def _total_power(light: EmitterLight) -> float:
+    """Σ area × luminance (p_area of a point on triangle t = luminance_t / this)."""
+    return float(np.sum(light.area * (light.radiance @ LUMINANCE)))
+
+
+def emitter_table(light: EmitterLight | None, stream: int = 0) -> np.ndarray:
+    """(E + 1, EMITTER_TEXELS, 4) float32 for ``bvh_lights.glsl``: row t = (corner 0, radiance
+    r), (corner 1, radiance g), (corner 2, radiance b), (inclusive power CDF, side, 0, 0); the
+    last row = (E, Σ area × luminance, stream, 1 = emitters) — a lone header row of zeros when
+    nothing emits."""
+    if light is None:
+        return np.zeros((1, EMITTER_TEXELS, 4), np.float32)
+    count = len(light.corners)
+    table = np.zeros((count + 1, EMITTER_TEXELS, 4))
+    table[:count, :3, :3] = light.corners
+    table[:count, :3, 3] = light.radiance
+    table[:count, 3, 0] = light.cdf
+    table[:count, 3, 1] = light.sides
+    table[count, 0] = (count, _total_power(light), stream, 1.0)
+    return table.astype(np.float32)
