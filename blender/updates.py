@@ -104,10 +104,12 @@ def transform_snapshot(previous, scene, depsgraph):
             light = read_light(obj, obj.evaluated_get(depsgraph))
             if light is not None:
                 lights.append(light)
+    notes: list[str] = []
+    world = read_world(scene, notes)  # what it cannot read is said, once
     return dataclasses.replace(previous, objects=objects, armatures=armatures, lights=lights,
-                               camera=read_camera(scene, depsgraph),
-                               world=read_world(scene, []),
-                               frame=int(scene.frame_current))
+                               camera=read_camera(scene, depsgraph), world=world,
+                               frame=int(scene.frame_current),
+                               warnings=tuple(dict.fromkeys((*previous.warnings, *notes))))
 
 
 def skin_state(obj, depsgraph) -> tuple[bytes, bytes]:

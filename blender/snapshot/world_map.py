@@ -75,6 +75,13 @@ def _ensure_load_handler() -> None:
         bpy.app.handlers.load_post.append(_clear_on_load)
 
 
+classes = ()
+
+
+def register() -> None:
+    _ensure_load_handler()
+
+
 def unregister() -> None:
     clear_cache()
     if _clear_on_load in bpy.app.handlers.load_post:

@@ -90,8 +90,11 @@ def light_key(snapshot, settings: GISettings) -> tuple:
     def fields(item):
         return tuple((f.name, _value_key(getattr(item, f.name))) for f in dataclasses.fields(item))
 
-    return (tuple(fields(light) for light in snapshot.lights), fields(snapshot.world),
-            fields(settings))
+    world = snapshot.world
+    # a world map is known by its content key (hashing megabytes of radiance every update
+    # would cost more than what it saves)
+    world_key = (world.key, _value_key(world.color), world.strength) if world.key else fields(world)
+    return (tuple(fields(light) for light in snapshot.lights), world_key, fields(settings))
 
 
 def update_gi(snapshot, caches, settings: GISettings = GISettings(), cancel=None,
