@@ -204,17 +204,18 @@ vec3 world_radiance_at(ivec2 pixel)
   return texelFetch(world_map, ivec2(pixel.y, pixel.x), 0).rgb;
 }
 
-/* E(n)/π: bilinear lookup of the irradiance table (equirect.sample_bilinear). */
+/* E(n)/π: bilinear lookup of the irradiance table, rows from the zenith to the nadir
+ * inclusive (world_light.unshadowed). */
 vec3 world_unshadowed(vec3 n, int h)
 {
   int ih = int(world_header().z);
   int iw = 2 * ih;
   float el = asin(clamp(n.z, -1.0, 1.0));
   float phi = (n.x == 0.0 && n.y == 0.0) ? 0.0 : atan(n.y, n.x); /* numpy's arctan2(0, 0) */
-  float y = clamp((M_PI_F / 2.0 - el) * float(ih) / M_PI_F - 0.5, 0.0, float(ih) - 1.0);
+  float y = clamp((M_PI_F / 2.0 - el) * float(ih - 1) / M_PI_F, 0.0, float(ih) - 1.0);
   float x = (phi + M_PI_F) * float(iw) / (2.0 * M_PI_F) - 0.5;
-  int y0 = min(int(floor(y)), ih - 1);
-  int y1 = min(y0 + 1, ih - 1);
+  int y0 = min(int(floor(y)), ih - 2);
+  int y1 = y0 + 1;
   float x0f = floor(x);
   float fy = y - float(y0);
   float fx = x - x0f;

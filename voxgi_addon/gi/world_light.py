@@ -7,9 +7,11 @@ lights are (``direct_light``): the unshadowed value exactly, times the visible s
 with shadow rays.
 
 * **Unshadowed**, ``E(n)/π``: a table of the map's cosine convolution over a grid of normals
-  (``IRRADIANCE_HEIGHT`` × 2·that, the map's equirect convention, ``scene.equirect``), from the
-  map box-averaged to at most ``SOURCE_HEIGHT`` rows, read bilinearly. No noise; the cosine
-  lobe is so wide that the grid's interpolation error stays below 0.2 % of the peak.
+  (``IRRADIANCE_HEIGHT`` rows from the zenith to the nadir *inclusive*, so that the poles —
+  every floor and ceiling — are exact, × 2·that columns at the map's azimuths), from the map
+  box-averaged to ``SOURCE_HEIGHT`` rows (smaller maps repeat their pixels up to it), read
+  bilinearly (``unshadowed``). No noise; the cosine lobe is so wide that the grid's
+  interpolation error stays below 0.2 % of the peak.
 * **Visible share**, per colour channel: a ratio estimator ``Σ f V / Σ f`` over the shadow
   rays, f = L(ω) max(n·ω, 0) / (p_map(ω) + p_cos(ω)) — each of the m × m strata of the point's
   hashed stream (``sampling.hashed_square``, stream = the world's index after the lamps) gives
@@ -65,12 +67,25 @@ class WorldLight:
     name: str = "World"
 
 
+def _table_normals() -> np.ndarray:
+    """(IRRADIANCE_HEIGHT, 2 · that, 3) the normals of the irradiance table: row i at elevation
+    π/2 − i·π/(IRRADIANCE_HEIGHT − 1), column j at the map convention's azimuth."""
+    ih = IRRADIANCE_HEIGHT
+    el = np.pi / 2 - np.arange(ih) * np.pi / (ih - 1)
+    phi = -np.pi + (np.arange(2 * ih) + 0.5) * np.pi / ih
+    return np.stack([np.cos(el)[:, None] * np.cos(phi)[None], np.cos(el)[:, None] * np.sin(phi)[None],
+                     np.broadcast_to(np.sin(el)[:, None], (ih, 2 * ih))], axis=-1)
+
+
 def _irradiance_table(radiance: np.ndarray) -> np.ndarray:
+    if len(radiance) < SOURCE_HEIGHT:  # finer quadrature over the same constant pixels
+        k = -(-SOURCE_HEIGHT // len(radiance))
+        radiance = np.repeat(np.repeat(radiance, k, axis=0), k, axis=1)
     source = box_downsample(radiance, SOURCE_HEIGHT).astype(np.float64)
     h, w = source.shape[:2]
     dirs = pixel_directions(h, w).reshape(-1, 3)
     weighted = (source * row_solid_angles(h, w)[:, None, None]).reshape(-1, 3) / math.pi
-    normals = pixel_directions(IRRADIANCE_HEIGHT, 2 * IRRADIANCE_HEIGHT).reshape(-1, 3)
+    normals = _table_normals().reshape(-1, 3)
     out = np.zeros((len(normals), 3))
     for a in range(0, len(normals), 256):
         cos = np.maximum(normals[a:a + 256] @ dirs.T, 0.0)
@@ -191,10 +206,26 @@ def _cosine(normals, square):
 
 
 def unshadowed(world: WorldLight, normals) -> np.ndarray:
-    """(N, 3) E(n)/π of the whole map at unit ``normals`` (the bilinear table lookup)."""
-    from ..scene.equirect import sample_bilinear
-
-    return sample_bilinear(world.irradiance, normals).astype(np.float64)
+    """(N, 3) E(n)/π of the whole map at unit ``normals``: the table read bilinearly, rows in
+    elevation (poles included), columns wrapping in azimuth (``bvh_lights.glsl``
+    world_unshadowed does the same in float32)."""
+    n = np.asarray(normals, np.float64)
+    ih = IRRADIANCE_HEIGHT
+    iw = 2 * ih
+    el = np.arcsin(np.clip(n[..., 2], -1.0, 1.0))
+    phi = np.where((n[..., 0] == 0) & (n[..., 1] == 0), 0.0, np.arctan2(n[..., 1], n[..., 0]))
+    y = np.clip((np.pi / 2 - el) * (ih - 1) / np.pi, 0.0, ih - 1.0)
+    x = (phi + np.pi) * iw / (2 * np.pi) - 0.5
+    y0 = np.minimum(np.floor(y).astype(np.int64), ih - 2)
+    fy = (y - y0)[..., None]
+    x0f = np.floor(x)
+    fx = (x - x0f)[..., None]
+    x0 = x0f.astype(np.int64) % iw
+    x1 = (x0 + 1) % iw
+    table = world.irradiance
+    top = table[y0, x0] * (1 - fx) + table[y0, x1] * fx
+    bottom = table[y0 + 1, x0] * (1 - fx) + table[y0 + 1, x1] * fx
+    return top * (1 - fy) + bottom * fy
 
 
 def world_direct(world: WorldLight, p, n, occluded, strata) -> np.ndarray:
@@ -229,8 +260,8 @@ def world_direct(world: WorldLight, p, n, occluded, strata) -> np.ndarray:
 
 
 def world_table(world: WorldLight | None, stream: int = 0) -> np.ndarray:
-    """The world as one (rows, W + 1, 4) float32 texture for ``bvh_lights.glsl`` (W ≥ 2 ·
-    IRRADIANCE_HEIGHT, the map's width):
+    """The world as one (rows, max(W + 1, 2 · IRRADIANCE_HEIGHT), 4) float32 texture for
+    ``bvh_lights.glsl`` (W the map's width):
 
     * rows 0 … H − 1, columns 0 … W − 1: radiance rgb, the row's inclusive column CDF;
       column W: the inclusive row CDF in x;
@@ -244,9 +275,7 @@ def world_table(world: WorldLight | None, stream: int = 0) -> np.ndarray:
         return table
     h, w = world.radiance.shape[:2]
     ih = IRRADIANCE_HEIGHT
-    if w < 2 * ih:
-        raise ValueError(f"world maps need at least {2 * ih} columns (got {w})")
-    table = np.zeros((h + ih + 1, w + 1, 4), np.float64)
+    table = np.zeros((h + ih + 1, max(w + 1, 2 * ih), 4), np.float64)
     table[:h, :w, :3] = world.radiance
     table[:h, :w, 3] = world.column_cdf
     table[:h, w, 0] = world.row_cdf

@@ -1,0 +1,116 @@
+"""The world as a light (voxgi_addon/gi/world_light.py): its tables, its sampling and its direct
+light against brute-force integrals over the map."""
+import math
+
+import numpy as np
+import pytest
+
+from voxgi.voxgi_addon.gi.direct_light import diffuse_direct
+from voxgi.voxgi_addon.gi.sampling import hashed_square
+from voxgi.voxgi_addon.gi.world_light import (
+    build_world_light,
+    sample_world,
+    unshadowed,
+    world_direct,
+    world_pdf,
+    world_table,
+)
+from voxgi.voxgi_addon.scene.equirect import direction_to_pixel, pixel_directions, row_solid_angles
+
+SUN = np.array([0.45, -0.35, 0.82]) / np.linalg.norm([0.45, -0.35, 0.82])
+
+
+def sky_with_sun(height=64, width=128, sun=1000.0):
+    d = pixel_directions(height, width)
+    sky = np.where(d[..., 2:] > 0, np.array([0.2, 0.3, 0.6]), np.array([0.05, 0.04, 0.03]))
+    disc = (d @ SUN) > math.cos(math.radians(3.0))
+    return sky + disc[..., None] * sun
+
+
+def brute_force(radiance, normal, visible=None):
+    """E(n)/π of a map by summing over its pixels (optionally only the visible directions)."""
+    h, w = radiance.shape[:2]
+    d = pixel_directions(h, w)
+    weight = np.maximum(d @ normal, 0.0) * row_solid_angles(h, w)[:, None] / math.pi
+    if visible is not None:
+        weight = weight * visible(d)
+    return np.einsum("hw,hwc->c", weight, radiance)
+
+
+def strata_for(count, samples=64, seed=0):
+    ids = np.arange(count)
+    return lambda points: hashed_square(ids[points], 0, samples, seed)
+
+
+def test_a_uniform_world_gives_its_radiance_whatever_the_normal():
+    world = build_world_light(np.full((8, 16, 3), 0.7))  # the small map a uniform colour gives
+    normals = np.array([[0, 0, 1.0], [1, 0, 0], [0.3, -0.5, -0.81]])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    np.testing.assert_allclose(unshadowed(world, normals), 0.7, rtol=2e-3)
+    assert world_table(world).shape[1] >= 64  # the irradiance table fits beside a small map
+
+
+def test_the_pdf_integrates_to_one_and_samples_follow_it():
+    radiance = sky_with_sun()
+    world = build_world_light(radiance)
+    h, w = radiance.shape[:2]
+    omega = np.repeat(row_solid_angles(h, w)[:, None], w, axis=1)
+    assert world_pdf(world, pixel_directions(h, w)).ravel() @ omega.ravel() == pytest.approx(1.0, abs=1e-6)
+    samples = sample_world(world, np.random.default_rng(1).random((200_000, 2)))
+    np.testing.assert_allclose(np.linalg.norm(samples, axis=1), 1.0, atol=1e-9)
+    luminance = radiance @ np.array([0.2126, 0.7152, 0.0722])
+    disc = pixel_directions(h, w) @ SUN > math.cos(math.radians(3.0))
+    rows, cols = direction_to_pixel(samples, h, w)
+    in_disc = disc[np.clip(rows.astype(int), 0, h - 1), cols.astype(int) % w]
+    expected = (luminance * omega)[disc].sum() / (luminance * omega).sum()
+    assert in_disc.mean() == pytest.approx(expected, rel=0.01)
+
+
+@pytest.mark.parametrize("normal", [(0, 0, 1.0), (0.6, 0.0, 0.8), (-0.5, 0.5, 0.2)])
+def test_unshadowed_light_equals_the_brute_force_integral(normal):
+    radiance = sky_with_sun()
+    world = build_world_light(radiance)
+    n = np.asarray(normal) / np.linalg.norm(normal)
+    np.testing.assert_allclose(unshadowed(world, n[None])[0], brute_force(radiance, n), rtol=0.02)
+
+
+def test_shadowed_light_converges_to_the_visible_integral():
+    """A wall blocking every direction with y > 0.2: the visible share estimated by the shadow
+    rays (map and cosine samples) converges to the brute-force integral over what is left."""
+    radiance = sky_with_sun()
+    world = build_world_light(radiance)
+    n = np.array([[0.0, 0.0, 1.0]])
+
+    def occluded(origins, dirs):
+        return dirs[:, 1] > 0.2
+
+    points = np.zeros((400, 3))
+    normals = np.repeat(n, 400, axis=0)
+    value = world_direct(world, points, normals, occluded, strata_for(400, 16)).mean(axis=0)
+    expected = brute_force(radiance, n[0], lambda d: d[..., 1] <= 0.2)
+    np.testing.assert_allclose(value, expected, rtol=0.05)
+    # the sun (y < 0.2) stays in view: its light is most of the point's
+    assert SUN[1] <= 0.2 and value @ [0.2126, 0.7152, 0.0722] > 2 * brute_force(
+        np.where(radiance > 100, 0.0, radiance), n[0]) @ [0.2126, 0.7152, 0.0722]
+
+
+def test_no_occluder_gives_exactly_the_unshadowed_light():
+    world = build_world_light(sky_with_sun())
+    normals = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])
+    np.testing.assert_array_equal(
+        world_direct(world, np.zeros((2, 3)), normals, lambda o, d: np.zeros(len(d), bool),
+                     strata_for(2)),
+        unshadowed(world, normals))
+
+
+def test_the_world_among_the_lights_adds_its_direct_light():
+    world = build_world_light(np.full((8, 16, 3), 0.5))
+    value = diffuse_direct(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), [world], None)
+    np.testing.assert_allclose(value, 0.5, rtol=2e-3)
+
+
+def test_a_black_or_broken_map_is_no_light():
+    assert build_world_light(np.zeros((8, 16, 3))) is None
+    assert build_world_light(np.full((8, 16, 3), np.nan)) is None
+    world = build_world_light(np.where(np.arange(16)[None, :, None] % 2, np.inf, 1.0) * np.ones((8, 16, 3)))
+    assert world is not None and np.isfinite(world.irradiance).all()
