@@ -1,0 +1,129 @@
+"""Emissive triangles as a light (voxgi_addon/gi/emitters.py) against numerical integrals."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from voxgi.voxgi_addon.gi.emitters import (
+    clipped_form_factors,
+    emitter_light,
+    emitter_table,
+    emitters_direct,
+    emitting_sides,
+)
+from voxgi.voxgi_addon.gi.sampling import hashed_square
+from voxgi.voxgi_addon.scene.geometry import SceneTriangles
+
+
+def triangles(corners, materials=None, objects=None):
+    corners = np.asarray(corners, np.float64).reshape(-1, 3, 3)
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    count = len(corners)
+    return SceneTriangles(corners, normals,
+                          np.zeros(count, np.int32) if materials is None else np.asarray(materials, np.int32),
+                          np.zeros(count, np.int32) if objects is None else np.asarray(objects, np.int32))
+
+
+def form_factor_by_area(p, n, corner, samples=400_000):
+    """∫ max(n·ω, 0)/π dω over a triangle by integrating over its area (either side)."""
+    rng = np.random.default_rng(3)
+    u = rng.random((samples, 2))
+    s = np.sqrt(u[:, 0])
+    points = (1 - s)[:, None] * corner[0] + (s * (1 - u[:, 1]))[:, None] * corner[1] \
+        + (s * u[:, 1])[:, None] * corner[2]
+    normal = np.cross(corner[1] - corner[0], corner[2] - corner[0])
+    area = 0.5 * np.linalg.norm(normal)
+    normal /= np.linalg.norm(normal)
+    w = points - p
+    r2 = (w * w).sum(1)
+    d = w / np.sqrt(r2)[:, None]
+    g = np.maximum(d @ n, 0) * np.abs(d @ normal) / r2
+    return g.mean() * area / np.pi
+
+
+@pytest.mark.parametrize("corner", [
+    [(-1, -1, 2), (1, -1, 2), (0, 1, 2)],             # overhead
+    [(2, -1, -1), (2, 1, -0.5), (2, 0, 1.5)],         # across the horizon
+    [(-0.5, 0.3, 0.8), (0.7, -0.2, 0.1), (0.2, 0.9, 1.4)],
+])
+def test_clipped_form_factor_equals_the_area_integral(corner):
+    corner = np.asarray(corner, np.float64)
+    p, n = np.zeros(3), np.array([0.0, 0.0, 1.0])
+    ours = clipped_form_factors(p[None], n[None], corner[None])[0, 0]
+    assert ours == pytest.approx(form_factor_by_area(p, n, corner), rel=0.01)
+
+
+def test_a_triangle_below_the_horizon_sheds_nothing():
+    corner = np.array([[(-1, -1, -0.5), (1, -1, -0.5), (0, 1, -0.2)]], np.float64)
+    assert clipped_form_factors(np.zeros((1, 3)), np.array([[0, 0, 1.0]]), corner)[0, 0] == 0.0
+
+
+def panel(z=2.0, size=1.0):
+    return [[(-size, -size, z), (size, -size, z), (size, size, z)],
+            [(-size, -size, z), (size, size, z), (-size, size, z)]]
+
+
+def test_unoccluded_points_get_the_exact_sum_and_the_plain_estimate_converges_to_it():
+    light = emitter_light(triangles(panel()), np.array([[2.0, 1.5, 1.0], [0.0, 0.0, 0.0]]))
+    p = np.zeros((300, 3))
+    n = np.tile([0.0, 0.0, 1.0], (300, 1))
+    ids = np.arange(300)
+
+    def strata(points):
+        return hashed_square(ids[points], 0, 16)
+
+    def open_sky(origins, dirs, lengths):
+        return np.zeros(len(dirs), bool)
+
+    exact = emitters_direct(light, p, n, open_sky, strata)
+    by_area = 2 * form_factor_by_area(np.zeros(3), np.array([0, 0, 1.0]), np.array(panel()[0]))
+    np.testing.assert_allclose(exact[0], by_area * np.array([2.0, 1.5, 1.0]), rtol=0.01)
+    assert np.ptp(exact, axis=0).max() == 0.0  # no noise
+    plain = emitters_direct(dataclasses.replace(light, exact=False), p, n, open_sky, strata)
+    np.testing.assert_allclose(plain.mean(axis=0), exact[0], rtol=0.03)
+
+
+def test_half_the_panel_hidden_halves_its_light():
+    light = emitter_light(triangles(panel()), np.array([[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]]))
+    ids = np.arange(400)
+
+    def behind_a_wall(origins, dirs, lengths):  # blocks every ray towards x > 0
+        return dirs[:, 0] > 0
+
+    value = emitters_direct(light, np.zeros((400, 3)), np.tile([0.0, 0.0, 1.0], (400, 1)),
+                            behind_a_wall, lambda pts: hashed_square(ids[pts], 0, 16))
+    full = emitters_direct(light, np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), None, None)
+    assert value.mean(axis=0)[0] == pytest.approx(0.5 * full[0, 0], rel=0.05)
+
+
+def box(lo, hi):
+    (x0, y0, z0), (x1, y1, z1) = lo, hi
+    v = np.array([(x, y, z) for z in (z0, z1) for y in (y0, y1) for x in (x0, x1)], np.float64)
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    return np.array([v[[a, b, c]] for q in quads for a, b, c in ((q[0], q[1], q[2]), (q[0], q[2], q[3]))])
+
+
+def test_closed_emitters_light_their_outside_and_open_ones_both_sides():
+    closed = box((0, 0, 0), (1, 1, 1))
+    open_panel = np.array(panel(3.0))
+    corners = np.concatenate([closed, open_panel])
+    objects = np.array([0] * len(closed) + [1] * len(open_panel))
+    sides = emitting_sides(corners, objects)
+    assert set(sides[:len(closed)]) == {1} and set(sides[len(closed):]) == {0}
+    assert set(emitting_sides(closed[:, ::-1], np.zeros(len(closed), int))) == {-1}  # inward
+
+
+def test_a_glowing_cube_seen_from_outside_is_counted_once():
+    light = emitter_light(triangles(box((-0.5, -0.5, 2.0), (0.5, 0.5, 3.0))), np.array([[1.0] * 3, [0.0] * 3]))
+    value = emitters_direct(light, np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]), None, None)
+    bottom = 2 * form_factor_by_area(np.zeros(3), np.array([0, 0, 1.0]),
+                                     np.array([(-0.5, -0.5, 2.0), (0.5, -0.5, 2.0), (0.5, 0.5, 2.0)]))
+    # straight below it only the bottom face's outside faces the point (the sides' and top's
+    # insides would double it)
+    assert value[0, 0] == pytest.approx(bottom, rel=0.01)
+
+
+def test_nothing_emits_gives_no_light_and_an_empty_table():
+    assert emitter_light(triangles(panel()), np.zeros((2, 3))) is None
+    assert emitter_table(None).shape == (1, 4, 4) and not emitter_table(None).any()
