@@ -5,7 +5,8 @@ Usage: ``.venv/bin/python tools/make_gi_references.py [--scenes NAME ...] [--sam
 
 Per scene: Cycles at ``--samples`` spp (2048), one bounce (one diffuse, one glossy, at most one
 in total: why both, docs/gi_pipeline.md "What one bounce means in Cycles"), 160 × 120,
-a point-sample pixel filter (so pixels are pixel centres, like VoxGI's rays), black world,
+Cycles' default pixel filter (Blackman-Harris, 1.5 px: what artists render with, and what
+VoxGI's anti-aliased preview reproduces), black world,
 AO distance 1 m (``Scene.voxgi.ao_distance``'s default). Stored in ``<out>/<scene>.npz``
 (compressed) as float16 (H, W, 3) arrays named after the passes — ``Diffuse Direct``,
 ``Diffuse Indirect``, ``Diffuse Color``, ``Ambient Occlusion``, ``Glossy Indirect``,
@@ -30,6 +31,7 @@ STORED = ("Diffuse Direct", "Diffuse Indirect", "Diffuse Color", "Ambient Occlus
           "Glossy Color", "Combined")
 CHECK_SAMPLES = (16, 64, 256)
 AO_DISTANCE = 1.0
+DEFAULT_FILTER_WIDTH = 1.5  # Cycles' default Filter Size (pixels)
 
 
 def load_addon():
@@ -61,7 +63,7 @@ def render(scene, samples, seed):
 
     passes = render_cycles_passes(scene, gi_scenes.WIDTH, gi_scenes.HEIGHT, samples,
                                   diffuse_bounces=1, ao_distance=AO_DISTANCE, seed=seed,
-                                  glossy_bounces=1, filter_width=0.01)
+                                  glossy_bounces=1, filter_width=DEFAULT_FILTER_WIDTH)
     return passes, last_render_seconds()
 
 

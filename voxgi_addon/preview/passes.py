@@ -232,7 +232,7 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
     return passes
 
 
-AA_SIDE = 2  # the anti-aliased preview renders AA_SIDE² sub-pixel passes
+AA_SIDE = 4  # the anti-aliased preview renders AA_SIDE² sub-pixel passes
 
 
 def subpixel_passes(filter_width: float, light_samples: int):
