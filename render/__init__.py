@@ -34,10 +34,13 @@ def release_gpu_resources() -> None:
 
 @bpy.app.handlers.persistent
 def _release_on_load(*_args) -> None:
-    # GPU objects belong to the file (and the GPU context) they were made for: the next file's
-    # F12 or preview may run in another context, where cached shaders and textures read back
-    # nothing (docs/gi_pipeline.md, "One file's state").
-    release_gpu_resources()
+    # The G-buffer's raster shader (and the vertex arrays Blender keeps with it) belongs to the
+    # GPU context it was made in; after another file is loaded the next F12 or preview may draw
+    # in another one, where it rasterized a partial G-buffer (docs/gi_pipeline.md, "One file's
+    # state"). Compute shaders and textures are shared between contexts and stay.
+    module = sys.modules.get(f"{__name__}.gbuffer")
+    if module is not None:
+        module.release()
 
 
 def register() -> None:

@@ -98,8 +98,13 @@ def emitter_light(tris, emission) -> EmitterLight | None:
     if not keep.any() or keep.sum() > MAX_EMITTER_TRIANGLES:
         return None
     sides = emitting_sides(corners[keep], np.asarray(tris.objects)[keep])
-    corners = corners[keep].astype(np.float32).astype(np.float64)
-    radiance = radiance[keep].astype(np.float32).astype(np.float64)
+    # a canonical order (by centroid), so that the samples do not depend on the order in which
+    # the meshes list their triangles
+    centroid = corners[keep].mean(axis=1)
+    order = np.lexsort((centroid[:, 2], centroid[:, 1], centroid[:, 0]))
+    sides = sides[order]
+    corners = corners[keep][order].astype(np.float32).astype(np.float64)
+    radiance = radiance[keep][order].astype(np.float32).astype(np.float64)
     area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
                                          corners[:, 2] - corners[:, 0]), axis=1)
     power = area * (radiance @ LUMINANCE)
