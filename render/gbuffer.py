@@ -17,40 +17,35 @@ from ..voxgi_addon.scene.camera import camera_frame, view_projection
 from .gpu_shaders import SHADER_DIR
 from .gpu_tracer import read_texture
 
-_shader = None
 
-
-def _gbuffer_shader():
-    global _shader
-    if _shader is None:
-        varying = gpu.types.GPUStageInterfaceInfo("voxgi_gbuffer")
-        varying.smooth("VEC3", "world_position")
-        varying.smooth("VEC3", "shading_normal")
-        varying.flat("VEC3", "flat_normal")
-        varying.flat("VEC2", "surface")
-        info = gpu.types.GPUShaderCreateInfo()
-        info.vertex_in(0, "VEC3", "position")
-        info.vertex_in(1, "VEC3", "normal")
-        info.vertex_in(2, "VEC3", "face_normal")
-        info.vertex_in(3, "VEC2", "material")
-        info.vertex_out(varying)
-        info.push_constant("MAT4", "view_projection")
-        info.push_constant("VEC3", "camera_position")
-        info.push_constant("VEC3", "camera_forward")
-        info.push_constant("FLOAT", "camera_ortho")
-        info.fragment_out(0, "VEC4", "out_position")
-        info.fragment_out(1, "VEC4", "out_normal")
-        info.fragment_out(2, "VEC4", "out_view")
-        info.vertex_source((SHADER_DIR / "gbuffer_vert.glsl").read_text())
-        info.fragment_source((SHADER_DIR / "gbuffer_frag.glsl").read_text())
-        _shader = gpu.shader.create_from_info(info)
-    return _shader
-
-
-def release() -> None:
-    """Drop the cached G-buffer shader (Blender frees a ``GPUShader`` with its last reference)."""
-    global _shader
-    _shader = None
+def gbuffer_shader():
+    """A new G-buffer raster shader. Not cached between renders: a raster shader (and the vertex
+    arrays Blender keeps with it) belongs to the GPU context it was made in, and the next F12,
+    preview or viewport draw may run in another (after a file load, between F12's and the
+    operators' contexts), where a cached one rasterized a partial G-buffer
+    (docs/gi_pipeline.md, "One file's state"). A render makes one and passes it to its
+    ``rasterize`` calls."""
+    varying = gpu.types.GPUStageInterfaceInfo("voxgi_gbuffer")
+    varying.smooth("VEC3", "world_position")
+    varying.smooth("VEC3", "shading_normal")
+    varying.flat("VEC3", "flat_normal")
+    varying.flat("VEC2", "surface")
+    info = gpu.types.GPUShaderCreateInfo()
+    info.vertex_in(0, "VEC3", "position")
+    info.vertex_in(1, "VEC3", "normal")
+    info.vertex_in(2, "VEC3", "face_normal")
+    info.vertex_in(3, "VEC2", "material")
+    info.vertex_out(varying)
+    info.push_constant("MAT4", "view_projection")
+    info.push_constant("VEC3", "camera_position")
+    info.push_constant("VEC3", "camera_forward")
+    info.push_constant("FLOAT", "camera_ortho")
+    info.fragment_out(0, "VEC4", "out_position")
+    info.fragment_out(1, "VEC4", "out_normal")
+    info.fragment_out(2, "VEC4", "out_view")
+    info.vertex_source((SHADER_DIR / "gbuffer_vert.glsl").read_text())
+    info.fragment_source((SHADER_DIR / "gbuffer_frag.glsl").read_text())
+    return gpu.shader.create_from_info(info)
 
 
 class GBuffer:
@@ -70,19 +65,20 @@ class GBuffer:
 
 
 def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
-              offset=(0.0, 0.0)) -> GBuffer:
+              offset=(0.0, 0.0), shader=None) -> GBuffer:
     """Draw ``tris`` (``SceneTriangles``) seen by ``camera`` into a new ``GBuffer``.
 
     roughness : (M + 1,) per material index (last = no material), as ``preview`` tables it.
     offset : (x, y) pixels (x right, y down): every pixel sees what the camera ray that far
     from its centre sees (``camera.camera_rays``' offset; one sub-pixel pass).
+    shader : the render's ``gbuffer_shader`` (None: a new one for this call).
     """
     out = GBuffer(width, height)
     framebuffer = gpu.types.GPUFrameBuffer(depth_slot=out.depth,
                                            color_slots=(out.position, out.normal, out.view))
     rotation, position = camera_frame(camera)
     matrix = view_projection(camera, width, height, offset)
-    shader = _gbuffer_shader()
+    shader = shader or gbuffer_shader()
     with framebuffer.bind():
         framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
         if len(tris):

@@ -33,7 +33,7 @@ from ..voxgi_addon.preview.passes import (
 from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
 from ..voxgi_addon.scene.geometry import world_triangles
-from .gbuffer import rasterize, read_gbuffer
+from .gbuffer import gbuffer_shader, rasterize, read_gbuffer
 from .gpu_bvh import (
     direct_light_texture,
     lights_texture,
@@ -237,7 +237,8 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         raise VoxGIError("the scene has no triangles to render")
     _, rough, _, emission = material_table(snapshot)
     plan = subpixel_passes(filter_width, light_samples)
-    centre = rasterize(tris, snapshot.camera, rough, width, height)
+    raster = gbuffer_shader()  # this render's, for its G-buffers (gbuffer.gbuffer_shader)
+    centre = rasterize(tris, snapshot.camera, rough, width, height, shader=raster)
     timings["visibility (GPU)"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -275,7 +276,7 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     sums = {name: zero for name in (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")}
     for offset, block in plan:
         gbuffer = centre if offset == (0.0, 0.0) else rasterize(
-            tris, snapshot.camera, rough, width, height, offset)
+            tris, snapshot.camera, rough, width, height, offset, shader=raster)
         out = _run("aa_surface", _SURFACE_SAMPLERS, {
             **gbuffer.inputs, **sums, "centre_diffuse": diffuse_ao, "centre_glossy": glossy,
             "centre_world": glossy_world, "materials": materials,

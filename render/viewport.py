@@ -91,9 +91,11 @@ class ViewportRenderer:
             self.volume.update(live.staged.state.octree, cones, atlas=live.atlas)
         upload = time.perf_counter() - t0
         snapshot = dataclasses.replace(live.snapshot, camera=camera)
+        # point-sampled: one camera pass, not F12's anti-aliased sub-pixel passes (which cost
+        # 2.3x; progressive viewport accumulation, issue 19, is where they belong)
+        options = {**trace_options(settings, width, height), "filter_width": 0.0}
         passes, timings = render_passes_gpu(snapshot, live.staged.state, width, height, cones,
-                                            volume=self.volume,
-                                            **trace_options(settings, width, height))
+                                            volume=self.volume, **options)
         image = np.asarray(passes[pass_name], np.float32)
         rgba = np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=2)
         flat = np.ascontiguousarray(np.flipud(rgba)).ravel()  # GPU rows go bottom to top

@@ -22,6 +22,9 @@ def metal_box():
     bsdf = bpy.data.materials["Test White"].node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Metallic"].default_value = 1.0
     bsdf.inputs["Roughness"].default_value = 0.3
+    # point samples, as the references here are rendered (a pure metal's pixels are then metal
+    # only, not blended with an edge's neighbours by the pixel filter)
+    scene.cycles.filter_width = 0.01
     return scene
 
 

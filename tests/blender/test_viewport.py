@@ -39,6 +39,9 @@ def cornell(camera_type="PERSP"):
     scene.render.engine = "VOXGI"
     scene.render.resolution_x, scene.render.resolution_y = WIDTH, HEIGHT
     scene.render.resolution_percentage = 100
+    # the viewport is point-sampled; a 0.01 px pixel filter makes F12's sub-pixel passes
+    # point-sampled too, so the two paths can be compared pixel by pixel
+    scene.cycles.filter_width = 0.01
     if camera_type == "ORTHO":
         scene.camera.data.type = "ORTHO"
         scene.camera.data.ortho_scale = 2.6
