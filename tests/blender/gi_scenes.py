@@ -226,24 +226,14 @@ def _ring_weights(heights, bones, length):
 
 def _add_chain(scene, rig, names, step):
     """A connected chain of bones up local Z (edit mode through a context override)."""
-    view_layer = scene.view_layers[0]
-    previous = view_layer.objects.active
-    view_layer.objects.active = rig
-    try:
-        with bpy.context.temp_override(scene=scene, view_layer=view_layer, active_object=rig,
-                                       object=rig):
-            bpy.ops.object.mode_set(mode="EDIT")
-            try:
-                bones = rig.data.edit_bones
-                for i, name in enumerate(names):
-                    bone = bones.new(name)
-                    bone.head, bone.tail = (0.0, 0.0, i * step), (0.0, 0.0, (i + 1) * step)
-                    if i:
-                        bone.parent, bone.use_connect = bones[names[i - 1]], True
-            finally:
-                bpy.ops.object.mode_set(mode="OBJECT")
-    finally:
-        view_layer.objects.active = previous
+    from voxgi.blender.scene_building import armature_edit_mode
+
+    with armature_edit_mode(scene, rig) as bones:
+        for i, name in enumerate(names):
+            bone = bones.new(name)
+            bone.head, bone.tail = (0.0, 0.0, i * step), (0.0, 0.0, (i + 1) * step)
+            if i:
+                bone.parent, bone.use_connect = bones[names[i - 1]], True
 
 
 def build_skinned_figure(scene):

@@ -54,7 +54,8 @@ def hdri_world(name="HDRI World"):
     image.pixels.foreach_set(hdri_pixels(256, 128).ravel())
     image.pack()
     world = bpy.data.worlds.new(name)
-    world.use_nodes = True
+    if world.node_tree is None:  # Blender before 5.0 makes worlds without a node tree
+        world.use_nodes = True
     nodes, links = world.node_tree.nodes, world.node_tree.links
     background = next(n for n in nodes if n.type == "BACKGROUND")
     texture = nodes.new("ShaderNodeTexEnvironment")
@@ -93,7 +94,8 @@ def build_sky_courtyard(scene):
     """The courtyard under a uniform sky colour (Background strength 1) plus a sun lamp."""
     _courtyard(scene)
     world = bpy.data.worlds.new("Sky")
-    world.use_nodes = True
+    if world.node_tree is None:  # Blender before 5.0 makes worlds without a node tree
+        world.use_nodes = True
     background = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
     background.inputs["Color"].default_value = (0.35, 0.5, 0.8, 1.0)
     background.inputs["Strength"].default_value = 1.0

@@ -151,25 +151,15 @@ def character_geometry(detail: float = 1.0):
 
 
 def _build_bones(scene, rig, unit):
-    view_layer = scene.view_layers[0]
-    previous = view_layer.objects.active
-    view_layer.objects.active = rig
-    try:
-        with bpy.context.temp_override(scene=scene, view_layer=view_layer, active_object=rig,
-                                       object=rig):
-            bpy.ops.object.mode_set(mode="EDIT")
-            try:
-                edit = rig.data.edit_bones
-                for name, parent, head, tail in BONES:
-                    bone = edit.new(name)
-                    bone.head = [c / unit for c in head]
-                    bone.tail = [c / unit for c in tail]
-                    if parent is not None:
-                        bone.parent = edit[parent]
-            finally:
-                bpy.ops.object.mode_set(mode="OBJECT")
-    finally:
-        view_layer.objects.active = previous
+    from voxgi.blender.scene_building import armature_edit_mode
+
+    with armature_edit_mode(scene, rig) as edit:
+        for name, parent, head, tail in BONES:
+            bone = edit.new(name)
+            bone.head = [c / unit for c in head]
+            bone.tail = [c / unit for c in tail]
+            if parent is not None:
+                bone.parent = edit[parent]
 
 
 def add_character(scene, unit: float = 0.01, detail: float = 1.0, location=(0.3, 0.4, 0.0),

@@ -15,25 +15,18 @@ from __future__ import annotations
 
 import argparse
 import pathlib
-import statistics
 import sys
-import time
 
 HERE = pathlib.Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path[:0] = [str(HERE), str(ROOT / "tests" / "blender")]
-from bench_blender import load_addon  # noqa: E402
+from bench_blender import load_addon, median_seconds  # noqa: E402
 
 DETAIL = 1.1  # ~11k triangles, as the character measured in issue 22
 
 
 def _median(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return median_seconds(fn, repeats)
 
 
 def measure(voxgi, unit, repeats):
