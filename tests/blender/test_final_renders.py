@@ -18,6 +18,7 @@ import textwrap
 
 import bpy
 import gi_scenes
+import light_scenes
 import numpy as np
 import pytest
 import unit_scale_scenes
@@ -121,6 +122,8 @@ SCENE_CLASSES = {
     "rigid_animated": _rigid_animated,
     "linked_duplicates": _linked_duplicates,
     "every_lamp": _every_lamp,
+    "hdri_world": lambda scene: light_scenes.build("hdri_courtyard", scene),
+    "emissive_surfaces": lambda scene: light_scenes.build("emissive_room", scene),
 }
 
 
