@@ -70,6 +70,7 @@ void main()
   vec3 origin = position + SURFACE_EPSILON * n;
   uint state = point_stream(id, GLOSSY_STREAM, seed);
   uint world_state = point_stream(id, WORLD_GLOSSY_STREAM, seed);
+  uint emitter_state = point_stream(id, EMITTER_GLOSSY_STREAM, seed);
   bool world_mode = grid.w > 0.5; /* Glossy Direct of the world and the emitters */
   bool sky_on = world_on();
   bool emitting = emitter_header().w > 0.5;
@@ -115,7 +116,13 @@ void main()
             int hit_material = bvh_triangle_material(slot);
             hit_material = (hit_material >= 0 && hit_material < last_material) ? hit_material
                                                                                : last_material;
-            value += texelFetch(materials, ivec2(hit_material, 1), 0).rgb * weight;
+            vec3 glow = texelFetch(materials, ivec2(hit_material, 1), 0).rgb;
+            /* balance heuristic against the emitter samples below (exact_glossy
+             * _emitter_share): p_emit = p_area r² / |cos_l| */
+            float cos_l = abs(dot(bvh_triangle_face_normal(slot), l));
+            float emit_pdf = dot(glow, LUMA) / emitter_header().y * th * th / max(cos_l, 1e-30);
+            float share = mirror ? 1.0 : pdf / max(pdf + emit_pdf, 1e-30);
+            value += glow * weight * share;
           }
         }
         else if (sky_on) {
@@ -123,6 +130,46 @@ void main()
           float map_pdf = dot(sky, LUMA) / head.w;
           float share = mirror ? 1.0 : pdf / max(pdf + map_pdf, 1e-30);
           value += sky * weight * share;
+        }
+      }
+      if (!mirror && emitting) { /* ray j drawn on the emitters (exact_glossy._emitter_samples) */
+        vec4 eh = emitter_header();
+        int count = int(eh.x);
+        vec2 u = hammersley(emitter_state, j, rays);
+        int t = 0;
+        int hi = count - 1;
+        while (t < hi) {
+          int mid = (t + hi) / 2;
+          if (texelFetch(emitters, ivec2(3, mid), 0).x <= u.x) {
+            t = mid + 1;
+          }
+          else {
+            hi = mid;
+          }
+        }
+        float low = t > 0 ? texelFetch(emitters, ivec2(3, t - 1), 0).x : 0.0;
+        float rr = clamp((u.x - low) / max(texelFetch(emitters, ivec2(3, t), 0).x - low, 1e-30),
+                         0.0, 1.0);
+        float s = sqrt(rr);
+        vec3 c0 = texelFetch(emitters, ivec2(0, t), 0).xyz;
+        vec3 c1 = texelFetch(emitters, ivec2(1, t), 0).xyz;
+        vec3 c2 = texelFetch(emitters, ivec2(2, t), 0).xyz;
+        vec3 target = (1.0 - s) * c0 + (s * (1.0 - u.y)) * c1 + (s * u.y) * c2;
+        vec3 w = target - origin;
+        float r2 = dot(w, w);
+        float dist = sqrt(r2);
+        vec3 d = w / max(dist, 1e-30);
+        vec3 normal = cross(c1 - c0, c2 - c0);
+        normal /= max(length(normal), 1e-30);
+        float cos_l = dot(d, normal);
+        vec3 glow = vec3(texelFetch(emitters, ivec2(0, t), 0).w, texelFetch(emitters, ivec2(1, t), 0).w,
+                         texelFetch(emitters, ivec2(2, t), 0).w);
+        if (dot(d, n) > 0.0 && abs(cos_l) > 0.0 && emitter_facing(t, origin) &&
+            !bvh_any_hit(origin, d, dist)) {
+          float emit_pdf = dot(glow, LUMA) / eh.y * r2 / abs(cos_l);
+          float both = lobe_pdf(n, v, d, alpha2, pdf_scale) + emit_pdf;
+          value += glow * principled_glossy_reflectance(base, params.x, params.y, rough, n, v, d) /
+                   max(both, 1e-30) / max(colour, vec3(1e-30));
         }
       }
       if (!mirror && sky_on) {

@@ -29,11 +29,12 @@ from .exact_indirect import LUMINANCE, SURFACE_EPSILON, ray_radiance
 from .principled import ROUGHNESS_SQ_THRESHOLD, glossy_color, glossy_reflectance
 from .sampling import hammersley, perpendicular_basis
 
-__all__ = ["GLOSSY_STREAM", "WORLD_GLOSSY_STREAM", "glossy_indirect", "glossy_world_direct",
-           "vndf_half_vectors"]
+__all__ = ["GLOSSY_STREAM", "WORLD_GLOSSY_STREAM", "EMITTER_GLOSSY_STREAM", "glossy_indirect",
+           "glossy_world_direct", "vndf_half_vectors"]
 
 GLOSSY_STREAM = 0x6105  # hash stream of the glossy rays' rotation
 WORLD_GLOSSY_STREAM = 0x6107  # hash stream of the map-importance rays of glossy_world_direct
+EMITTER_GLOSSY_STREAM = 0x6109  # hash stream of its rays drawn on the emitters
 
 
 def vndf_half_vectors(view_local: np.ndarray, alpha: np.ndarray, square: np.ndarray) -> np.ndarray:
@@ -166,7 +167,7 @@ def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights,
 
 
 def glossy_world_direct(points, normals, views, materials, sample_ids, tris, world, principled,
-                        rays: int = 16, seed: int = 0, emission=None):
+                        rays: int = 16, seed: int = 0, emission=None, emitters=None):
     """(Glossy Direct of the world and the emissive surfaces (N, 3) float32 without the glossy
     colour, variance of its luminance mean (N,) float32): what the glossy lobe sees of them
     (Cycles files it under Glossy Direct). The world by multiple importance sampling with the
@@ -175,7 +176,11 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
     ``WORLD_GLOSSY_STREAM``) each add L f / (p_lobe + p_map) where they reach the sky
     unoccluded; a mirror takes its one reflected ray. With ``emission`` (M + 1, 3) per
     material, a lobe ray landing on an emissive triangle adds its emission × the ray's weight
-    (the lobe's own sampling; ``glossy_indirect`` then leaves it out). world :
+    (``glossy_indirect`` then leaves it out); with ``emitters`` (``emitters.EmitterLight``, the
+    same triangles) that is weighted by the balance heuristic against ray j drawn on the
+    emitters by power (stream ``EMITTER_GLOSSY_STREAM``), which adds L f / (p_lobe + p_emit)
+    where it reaches its point unoccluded — p_emit = p_area r² / |cos_l| in solid angle (a ray
+    from outside lands on an emitting side: a closed emitter's outside). world :
     ``world_light.WorldLight`` or None."""
     from ..scene.raycast import closest_hits
     from .world_light import sample_world, world_pdf, world_radiance
@@ -206,7 +211,12 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
         last = len(table) - 1
         material = np.asarray(tris.materials)[np.maximum(hit, 0)]
         material = np.where((material >= 0) & (material < last), material, last)
-        value += np.where((useful & (hit >= 0))[..., None], table[material] * weight, 0.0)
+        share = 1.0
+        if emitters is not None:
+            share = _emitter_share(lobe, emitters, tris, table[material], hit, origins, dirs)
+        value += np.where((useful & (hit >= 0))[..., None], table[material] * weight * share, 0.0)
+        if emitters is not None:
+            value += _emitter_samples(lobe, emitters, tris, origins, ids, rays, seed)
     if world is None:
         return _glossy_mean(lobe, value)
     lobe_pdf, map_pdf = lobe.pdf(dirs), world_pdf(world, dirs)
@@ -223,6 +233,57 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
     f = lobe.reflectance(dirs) / np.maximum(lobe_pdf + map_pdf, 1e-30)[..., None]
     value += np.where(reaching(dirs, useful)[..., None], world_radiance(world, dirs) * f, 0.0)
     return _glossy_mean(lobe, value)
+
+
+def _emitter_pdf(emitters, radiance, distance2, cos_l):
+    """Solid-angle pdf of drawing a point of radiance ``radiance`` on the emitters (by power)
+    seen at squared distance ``distance2`` under |cos_l|."""
+    from .emitters import LUMINANCE as LUMA
+    from .emitters import _total_power
+
+    p_area = (radiance @ LUMA) / _total_power(emitters)
+    return p_area * distance2 / np.maximum(np.abs(cos_l), 1e-30)
+
+
+def _emitter_share(lobe: _Lobe, emitters, tris, radiance, hit, origins, dirs):
+    """(N, K, 1) the balance-heuristic weight of the lobe's rays that land on an emitter."""
+    corners = np.asarray(tris.positions, np.float64)[np.maximum(hit, 0)]
+    normal = np.asarray(tris.normals, np.float64)[np.maximum(hit, 0)]
+    cos_l = np.einsum("nkc,nkc->nk", normal, dirs)
+    # the hit distance from the ray's plane crossing (the triangle's plane through corner 0)
+    start = origins.reshape(dirs.shape)
+    t = np.einsum("nkc,nkc->nk", corners[..., 0, :] - start, normal) / np.where(
+        np.abs(cos_l) > 1e-30, cos_l, 1e-30)
+    emit_pdf = _emitter_pdf(emitters, radiance, t * t, cos_l)
+    lobe_pdf = lobe.pdf(dirs)
+    share = np.where(lobe.mirror[:, None], 1.0, lobe_pdf / np.maximum(lobe_pdf + emit_pdf, 1e-30))
+    return share[..., None]
+
+
+def _emitter_samples(lobe: _Lobe, emitters, tris, origins, ids, rays: int, seed: int):
+    """(N, K, 3) L f / (p_lobe + p_emit) of ray j drawn on the emitters (0 for a mirror)."""
+    from ..scene.raycast import occluded
+    from .emitters import _facing, sample_points
+
+    k, targets = sample_points(emitters, hammersley(ids, EMITTER_GLOSSY_STREAM, rays, seed))
+    start = origins.reshape(targets.shape)
+    w = targets - start
+    r2 = np.einsum("nkc,nkc->nk", w, w)
+    r = np.sqrt(r2)
+    d = w / np.maximum(r, 1e-30)[..., None]
+    corners = emitters.corners[k]
+    normal = np.cross(corners[..., 1, :] - corners[..., 0, :], corners[..., 2, :] - corners[..., 0, :])
+    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-30)
+    cos_l = np.einsum("nkc,nkc->nk", d, normal)
+    radiance = emitters.radiance[k]
+    emit_pdf = _emitter_pdf(emitters, radiance, r2, cos_l)
+    useful = (~lobe.mirror[:, None]) & (np.einsum("nkc,nc->nk", d, lobe.n) > 0) & \
+        (np.abs(cos_l) > 0) & _facing(emitters, start[:, 0], k)
+    seen = np.zeros(useful.shape, bool)
+    if useful.any():
+        seen[useful] = ~occluded(tris, start[useful], d[useful], r[useful])
+    f = lobe.reflectance(d) / np.maximum(lobe.pdf(d) + emit_pdf, 1e-30)[..., None]
+    return np.where(seen[..., None], radiance * f, 0.0)
 
 
 def _glossy_mean(lobe: _Lobe, value):

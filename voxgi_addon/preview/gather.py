@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..gi.emitters import emitter_light
 from ..gi.exact_glossy import glossy_indirect, glossy_world_direct
 from ..gi.exact_indirect import indirect_and_ao
 from .denoise import atrous_filter
@@ -107,7 +108,9 @@ def gather_glossy_world(tris, world, principled, hit, position, normal, directio
     world : ``gi.world_light.WorldLight`` (None with no emission: zeros)."""
     if world is None and emission is None:
         return np.zeros(hit.shape + (3,), np.float32)
-    return _glossy_cells(glossy_world_direct, (tris, world, principled), {"emission": emission},
+    emitters = None if emission is None else emitter_light(tris, emission)
+    return _glossy_cells(glossy_world_direct, (tris, world, principled),
+                         {"emission": emission, "emitters": emitters},
                          hit, position, normal, direction, material, settings, stride)
 
 
