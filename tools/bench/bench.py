@@ -31,6 +31,8 @@ SECTIONS = {
                                    "debug-view draw of 1M voxels"),
     "probes": ("bench_probes", "light-probe bake time/memory (numpy, GPU), queries, EEVEE, Cycles"),
     "animation": ("bench_animation", "F12 animation render of a walking rig vs Cycles 16 spp + OIDN"),
+    "lights": ("bench_lights", "HDRI, sky, emissive and metal scenes: preview vs Cycles 16/64 spp "
+                               "with and without OIDN"),
 }
 
 
