@@ -286,3 +286,26 @@ def test_the_documented_numpy_loader_reads_the_probe_sections(tmp_path):
         for f in ("origin", "volume_size", "dims", "positions", "sh", "volume_cells", "volume_probes",
                   "volume_masks", "sh_index", "mask_index"):
             np.testing.assert_array_equal(got[f], np.asarray(getattr(grid, f)).astype(got[f].dtype))
+
+
+def test_probes_see_the_world_map_and_are_lit_by_it():
+    """A floor under a sky map that is blue above and dark below the horizon (no lamp): a probe
+    above the floor sees the map where its rays miss (its upward irradiance is the sky's π·L
+    over the hemisphere), and the floor it sees below is lit by the sky (not black)."""
+    from voxgi.voxgi_addon.scene.equirect import pixel_directions
+    from voxgi.voxgi_addon.scene.snapshot import MaterialData, MeshData, ObjectData, SceneSnapshot, WorldData
+
+    d = pixel_directions(16, 32)
+    sky = np.where(d[..., 2:] > 0, np.array([0.2, 0.4, 0.9]), 0.0).astype(np.float32)
+    floor = MeshData("Floor", np.array([(-50, -50, 0), (50, -50, 0), (50, 50, 0), (-50, 50, 0)],
+                                       np.float32), np.array([(0, 1, 2), (0, 2, 3)], np.int32),
+                     np.zeros(2, np.int32))
+    snapshot = SceneSnapshot({"Floor": floor}, [MaterialData("grey", np.array([0.5] * 3, np.float32))],
+                             [ObjectData("Floor", "Floor", np.eye(4))],
+                             world=WorldData(np.array([0.1, 0.2, 0.45], np.float32), 1.0, sky, "sky"))
+    grid = bake_probe_grid(snapshot, ProbeSettings(resolution=2, directions=256, seed=1),
+                           box=((-1, -1, -0.5), (1, 1, 1.5))).grid
+    up, down = query_irradiance(grid, [[0.0, 0.0, 1.0]] * 2, [[0, 0, 1.0], [0, 0, -1.0]])
+    np.testing.assert_allclose(up, math.pi * np.array([0.2, 0.4, 0.9]), rtol=0.1)
+    # the floor (albedo 0.5) lit by the whole sky: radiance 0.5 × L, so irradiance ≈ π × that
+    np.testing.assert_allclose(down, math.pi * 0.5 * np.array([0.2, 0.4, 0.9]), rtol=0.15)

@@ -66,11 +66,21 @@ def material_colours(snapshot) -> tuple[np.ndarray, np.ndarray]:
 
 def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
                  light_samples: int = 4, seed: int = 0) -> np.ndarray:
-    """(N, 3) radiance arriving along rays: one diffuse bounce of direct light at the hit, or the
-    world colour for a miss (tri = -1). Hits are shaded on the side the ray came from."""
+    """(N, 3) radiance arriving along rays: one diffuse bounce of direct light at the hit (every
+    light: lamps, the world, emissive triangles — ``world_light.scene_lights``) plus its
+    emission, or for a miss (tri = -1) the world in that direction (its map; its colour when it
+    has none). Hits are shaded on the side the ray came from."""
+    from ..gi.world_light import scene_lights, world_light, world_radiance
+
     dirs = np.asarray(dirs, np.float64).reshape(-1, 3)
     world = np.asarray(snapshot.world.color, np.float64)[:3] * float(snapshot.world.strength)
     out = np.tile(world, (len(dirs), 1))
+    sky = world_light(snapshot.world)
+    miss = np.flatnonzero(tri < 0)
+    if sky is not None and len(miss):
+        out[miss] = world_radiance(sky, dirs[miss])
+    elif getattr(snapshot.world, "radiance", None) is not None:
+        out[miss] = 0.0  # a map with no light in it
     hit = np.flatnonzero(tri >= 0)
     if len(hit) == 0:
         return out
@@ -86,8 +96,9 @@ def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
     face = np.asarray(tris.normals, np.float64)[k]
     sign = np.where(np.einsum("ij,ij->i", face, dirs[hit]) > 0, -1.0, 1.0)  # Cycles flips back faces
     normal = normal * sign[:, None]
-    direct = diffuse_direct(points, normal, snapshot.lights, tris, samples=light_samples, seed=seed)
     albedo, emission = material_colours(snapshot)
+    direct = diffuse_direct(points, normal, scene_lights(snapshot, tris, emission), tris,
+                            samples=light_samples, seed=seed)
     m = len(snapshot.materials)
     mat = np.asarray(tris.materials, np.int64)[k]
     mat = np.where((mat >= 0) & (mat < m), mat, m)

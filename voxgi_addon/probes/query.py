@@ -36,6 +36,8 @@ def probe_weights(grid: ProbeGrid, points, normals, use_masks: bool = True):
     index = np.asarray(grid.sh_index)[lin]
     has = index != NO_INDEX
     probes = np.where(has, index, 0).astype(np.int64)
+    if len(np.asarray(grid.enabled)) == 0:  # a grid with no probe (no geometry in its box)
+        return probes, np.zeros(probes.shape)
     enabled = has & np.asarray(grid.enabled)[probes]
     w = np.prod(np.where(CORNER_OFFSETS[None] == 1, f[:, None, :], 1.0 - f[:, None, :]), axis=2)
     usable = w * enabled
