@@ -24,7 +24,7 @@ import numpy as np
 
 from ..voxgi_addon.scene.changes import ObjectEntry, SceneIndex, UpdateRecord
 from .snapshot.environment import read_camera, read_light, read_world
-from .snapshot.scene import object_kind
+from .snapshot.scene import RENDERABLE, object_kind, renders
 from .snapshot.skin import read_armature
 
 VISIBILITY_RECORD = UpdateRecord("VISIBILITY", "visible objects", geometry=True)
@@ -43,8 +43,9 @@ def id_type(id_data) -> str:
 
 
 def visible_mesh_names(view_layer) -> set[str]:
+    """Names of the objects a full snapshot reads from the view layer (instances aside)."""
     return {o.name_full for o in view_layer.objects
-            if o.type == "MESH" and o.visible_get(view_layer=view_layer)}
+            if o.type in RENDERABLE and renders(o, view_layer)}
 
 
 def records_from_depsgraph(depsgraph, index: SceneIndex | None = None) -> list[UpdateRecord]:

@@ -97,13 +97,17 @@ def _slot_materials(obj_eval, mesh) -> list:
     return slots + list(mesh.materials[len(slots):])
 
 
-def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[str]) -> MeshData | None:
-    obj_eval = entry.obj.evaluated_get(depsgraph)
+def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[str],
+               obj_eval=None) -> MeshData | None:
+    """The MeshData of an entry's evaluated object (``obj_eval``: given for an instance, which
+    only exists while the depsgraph's instances are iterated)."""
+    obj_eval = obj_eval or entry.obj.evaluated_get(depsgraph)
     mesh = obj_eval.to_mesh()
     try:
         triangles, corners, slots = read_triangles(mesh)
         if len(triangles) == 0:
-            warnings.append(f"Object '{entry.obj.name}' has no faces; it is left out")
+            if entry.obj.type == "MESH":  # curves without bevel or fill have no faces, as in Cycles
+                warnings.append(f"Object '{entry.obj.name}' has no faces; it is left out")
             return None
         lookup = material_lookup(_slot_materials(obj_eval, mesh), table.index_of)
         skin, positions = None, read_positions(mesh)
@@ -124,10 +128,22 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
         obj_eval.to_mesh_clear()
 
 
+# Object types whose evaluated geometry is a mesh (what Cycles renders of them).
+RENDERABLE = ("MESH", "CURVE", "FONT", "SURFACE", "META")
+
+
+def renders(obj, view_layer) -> bool:
+    """Does Blender render ``obj`` from this view layer: visible there (not hidden, its
+    collections not excluded) and not disabled in renders (the object, or a collection it is
+    in)?"""
+    return (obj.visible_get(view_layer=view_layer) and not obj.hide_render
+            and not any(c.hide_render for c in obj.users_collection))
+
+
 def _visible_mesh_entries(view_layer, warnings: list[str], depsgraph=None) -> list[_Entry]:
     entries, used = [], {}
     for obj in view_layer.objects:
-        if obj.type != "MESH" or not obj.visible_get(view_layer=view_layer):
+        if obj.type not in RENDERABLE or not renders(obj, view_layer):
             continue
         kind, armature = object_kind(obj, depsgraph)
         if kind == "skinned" and obj.library is not None:
@@ -174,6 +190,7 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
     skinned = {e.obj: e.layers for e in entries if e.kind == "skinned"}
     meshes: dict[str, MeshData] = {}
     read_keys: set[str] = set()
+    instances = _instances(depsgraph, table, warnings, meshes, read_keys)
     with temporary_weight_attributes(skinned, depsgraph):
         for entry in entries:
             if entry.key not in read_keys:  # linked duplicates are read once
@@ -192,7 +209,7 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
             armature=e.armature.name_full if e.armature is not None else None,
         )
         for e in entries if e.key in meshes
-    ]
+    ] + [o for o in instances if o.mesh in meshes]
     armatures = {}
     for e in entries:
         if e.armature is not None and e.key in meshes and e.armature.name_full not in armatures:
@@ -214,6 +231,42 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
         frame=int(scene.frame_current),
         warnings=tuple(warnings),
     )
+
+
+def _instances(depsgraph, table: MaterialTable, warnings: list[str], meshes: dict,
+               read_keys: set) -> list[ObjectData]:
+    """The depsgraph's instances (collection instances, geometry-nodes and particle instances)
+    of renderable objects: one ObjectData per instance with its own world matrix, their meshes
+    read once per instanced object (``meshes`` / ``read_keys`` are filled). An instance of a
+    plain mesh shares the mesh datablock's key with its other users."""
+    out, used = [], {}
+    for inst in depsgraph.object_instances:
+        if not inst.is_instance:
+            continue
+        obj_eval = inst.object
+        original = obj_eval.original
+        if obj_eval.type not in RENDERABLE or original.hide_render:
+            continue
+        if inst.parent is not None and inst.parent.original == original:
+            continue  # a curve's or text's own evaluated geometry: read with the object itself
+        plain = obj_eval.type == "MESH" and _shares_mesh(original, depsgraph) and \
+            obj_eval.data is not None and obj_eval.data.name_full == original.data.name_full
+        key = original.data.name_full if plain else f"{original.name_full} (instanced)"
+        if key not in read_keys:
+            read_keys.add(key)
+            entry = _Entry(original, key, "static")
+            mesh = _read_mesh(entry, depsgraph, table, warnings, obj_eval)
+            if mesh is not None:
+                meshes[key] = mesh
+        parent = inst.parent.original.name_full if inst.parent is not None else "?"
+        base = f"{parent} › {original.name_full}"
+        name, n = base, 1
+        while name in used:
+            name, n = f"{base} [{n}]", n + 1
+        used[name] = True
+        out.append(ObjectData(name=name, mesh=key, kind="static",
+                              world_matrix=np.array(inst.matrix_world, dtype=np.float64)))
+    return out
 
 
 def _world_matrix(obj, depsgraph) -> np.ndarray:
