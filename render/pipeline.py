@@ -144,6 +144,8 @@ def render_scene_passes(context, scene, depsgraph, width, height, indirect_sourc
         state.view_shares = view_shares(snapshot, state.grids, fit)
         voxels = {"fit + caches": fit_seconds, **state.timings}
     passes, render_timings, lines = trace_passes(scene, snapshot, state, width, height)
+    # what the snapshot could not read or leaves out (once each), before the tracer's lines
+    lines = [("WARNING", w) for w in dict.fromkeys(snapshot.warnings)] + lines
     if (indirect_source or scene.voxgi.indirect_source) == "PROBES":
         from .probe_preview import apply_probe_indirect
         seconds, line = apply_probe_indirect(scene, snapshot, passes, width, height)

@@ -78,9 +78,31 @@ class MaterialTable:
             self.materials.append(self._read(material))
         return index
 
+    def _left_out(self, material, principled) -> None:
+        """Say, once per material, what of it the preview does not render yet."""
+        tree = material.node_tree
+        notes = []
+        output = tree.get_output_node("ALL") if tree is not None else None
+        if output is not None:
+            for socket, what in (("Volume", "its volume shader"), ("Displacement", "displacement")):
+                if output.inputs.get(socket) is not None and output.inputs[socket].is_linked:
+                    notes.append(what)
+        if principled is not None:
+            inputs = principled.inputs
+            transmission = inputs.get("Transmission Weight")
+            if transmission is not None and (transmission.is_linked or transmission.default_value > 0):
+                notes.append("transmission (it renders opaque)")
+            alpha = inputs.get("Alpha")
+            if alpha is not None and (alpha.is_linked or alpha.default_value < 1.0):
+                notes.append("transparency (it renders opaque)")
+        if notes:
+            self.warnings.append(f"Material '{material.name}': the preview leaves out "
+                                 f"{', '.join(notes)} for now")
+
     def _read(self, material) -> MaterialData:
         node_tree = material.node_tree
         principled = None if node_tree is None else _surface_node(node_tree, "BSDF_PRINCIPLED")
+        self._left_out(material, principled)
         if principled is None:
             return MaterialData(
                 name=material.name_full,

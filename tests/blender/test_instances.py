@@ -80,3 +80,24 @@ def test_the_preview_draws_what_cycles_draws(voxgi, tmp_path):
     assert relative_l1(ours["Diffuse Color"], cycles["Diffuse Color"], geometry) < 0.03
     red = (cycles["Diffuse Color"][..., 0] > 0.6) & (cycles["Diffuse Color"][..., 1] < 0.3)
     assert red.sum() > 30 and (np.asarray(ours["Diffuse Color"])[red][:, 0] > 0.6).mean() > 0.95
+
+
+def test_what_the_preview_leaves_out_is_said_once(voxgi, tmp_path):
+    from voxgi.blender.session import scene_session
+
+    scene = bpy.context.scene
+    build_open_room(scene)
+    glass = gi_scenes._material("Glass", (0.9, 0.9, 0.9))
+    glass.node_tree.nodes["Principled BSDF"].inputs["Transmission Weight"].default_value = 1.0
+    pane = gi_scenes._mesh(scene, "Pane", [(-1, -2, 0), (1, -2, 0), (1, -2, 1), (-1, -2, 1)],
+                           [(0, 1, 2, 3)], (glass,))
+    pane.data.materials.append(glass)
+    hair = bpy.data.objects.new("Hair", bpy.data.hair_curves.new("Hair"))
+    scene.collection.objects.link(hair)
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=32,
+                                        resolution_y=24) == {"FINISHED"}
+    warnings = [line for level, line in scene_session(scene.name_full).last_report
+                if level == "WARNING"]
+    said = [w for w in warnings if "Glass" in w and "transmission" in w]
+    assert len(said) == 1
+    assert any("Hair" in w and "hair curves" in w for w in warnings)
