@@ -103,6 +103,13 @@ class MaterialTable:
         node_tree = material.node_tree
         principled = None if node_tree is None else _surface_node(node_tree, "BSDF_PRINCIPLED")
         self._left_out(material, principled)
+        glow = None if node_tree is None or principled is not None else \
+            _surface_node(node_tree, "EMISSION")
+        if glow is not None:  # an Emission shader: light, and nothing reflected (Cycles)
+            emission = _rgb(glow.inputs["Color"]) * np.float32(glow.inputs["Strength"].default_value)
+            return MaterialData(name=material.name_full, base_color=np.zeros(3, np.float32),
+                                roughness=1.0, metallic=0.0, specular=0.0,
+                                emission=emission.astype(np.float32))
         if principled is None:
             return MaterialData(
                 name=material.name_full,

@@ -75,3 +75,31 @@ def test_default_preview_against_cycles(voxgi, name):
           quick["relative_l1"])
     for pass_name, error in errors.items():
         assert error <= limits[pass_name], (pass_name, error, limits[pass_name])
+
+
+def test_an_emission_shader_lights_like_principled_emission(voxgi):
+    """The ceiling panel as an Emission shader (Color × Strength) instead of a Principled BSDF's
+    emission: the same light on the room; the panel itself reflects nothing."""
+    principled = preview("emissive_room", "AUTO", 64, 48)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    light_scenes.build("emissive_room", scene)
+    material = bpy.data.materials["Panel Glow"]
+    tree = material.node_tree
+    emission = tree.nodes.new("ShaderNodeEmission")
+    emission.inputs["Color"].default_value = (1.0, 0.9, 0.8, 1.0)
+    emission.inputs["Strength"].default_value = 6.0
+    tree.links.new(emission.outputs["Emission"], tree.get_output_node("ALL").inputs["Surface"])
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    from voxgi.render.pipeline import render_scene_passes
+
+    passes, _ = render_scene_passes(bpy.context, scene, None, 64, 48)
+    shader = {k: np.asarray(v, np.float64) for k, v in passes.items()}
+    # away from the panel (whose own colour differs, edge pixels included)
+    both = (np.abs(principled["Diffuse Color"] - shader["Diffuse Color"]).sum(-1) < 1e-3) & \
+        (shader["Diffuse Color"].sum(-1) > 0)
+    assert both.mean() > 0.5
+    assert relative_l1(shader["Diffuse Direct"], principled["Diffuse Direct"], both) < 0.02
+    # the panel's pixels: less diffuse colour than the Principled panel had, and they glow
+    panel = shader["Diffuse Color"].sum(-1) < principled["Diffuse Color"].sum(-1) - 0.5
+    assert panel.sum() > 3 and shader["Combined"][panel].mean() > 2.0
