@@ -28,8 +28,14 @@ def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None =
     cascades : list of CascadeVoxels (finest first); snapshot : for lights and world.
     occupancy : shadow casters (defaults to the cascades' own voxels).
     """
+    from .world_light import scene_lights
+
     occupancy = occupancy or CascadeOccupancy(cascades)
-    ambient = np.asarray(snapshot.world.color, np.float64) * float(snapshot.world.strength)
+    # The world lights the voxels as a light (its map, shadowed by the voxels) where it has a
+    # map; a world known only by its colour adds it unshadowed, as before.
+    lights = scene_lights(snapshot)
+    ambient = np.zeros(3) if getattr(snapshot.world, "radiance", None) is not None else \
+        np.asarray(snapshot.world.color, np.float64) * float(snapshot.world.strength)
     out = []
     for cv in cascades:
         if cv.voxel_count == 0:
@@ -38,6 +44,6 @@ def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None =
         normals = np.asarray(cv.normal, np.float64)
         normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
         start = voxel_centres(cv) + normals * (SHADOW_START_VOXELS * cv.grid.span)
-        direct = diffuse_direct(start, normals, snapshot.lights, occupancy, samples=samples)
+        direct = diffuse_direct(start, normals, lights, occupancy, samples=samples)
         out.append((np.asarray(cv.albedo, np.float64) * (direct + ambient)).astype(np.float32))
     return out
