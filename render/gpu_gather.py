@@ -14,7 +14,6 @@ import math
 import gpu
 import numpy as np
 
-from ..voxgi_addon.gi.emitters import ITERATIONS_PER_TRIANGLE
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import low_shape
 from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, scene_light_textures, strata_side
@@ -73,12 +72,10 @@ def principled_materials_texture(principled, emission):
 TRAVERSALS_PER_DISPATCH = 32
 
 
-def rays_per_dispatch(light_count: int, hit_samples: int = 1, emitter_triangles: int = 0) -> int:
+def rays_per_dispatch(light_count: int, hit_samples: int = 1) -> int:
     """Bounce rays per gather dispatch: each ray traverses the BVH once and, at its hit, once
-    per light and shadow sample (``TRAVERSALS_PER_DISPATCH``), and sums the exact light of
-    every emissive triangle (about a traversal's loop iterations per 2000 / 12 triangles)."""
-    sums = math.ceil(emitter_triangles * ITERATIONS_PER_TRIANGLE / 2000)
-    per_ray = 1 + max(light_count, 1) * strata_side(hit_samples) ** 2 + sums
+    per light and shadow sample (``TRAVERSALS_PER_DISPATCH``)."""
+    per_ray = 1 + max(light_count, 1) * strata_side(hit_samples) ** 2
     return max(1, TRAVERSALS_PER_DISPATCH // per_ray)
 
 
@@ -94,16 +91,16 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
     low_h, low_w = low_shape(height, width, stride)
     placeholder = gpu.types.GPUTexture((1, 1), format="RGBA32F")
     partial = (placeholder, placeholder)
-    extra = [light for light in lights if light.type in ("WORLD", "EMITTERS")]
     inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights),
               **scene_light_textures(lights),
               "materials": principled_materials_texture(principled, emission),
               "principled_lut": lut_texture()}
     assert OUTPUTS[kernel] == ("out_image", "out_variance")
     rays = settings.rays if kernel == "bvh_gather" else settings.glossy_rays
-    # the world draws two rays per stratum (one per sampling technique): it counts twice
-    triangles = sum(len(light.corners) for light in extra if light.type == "EMITTERS")
-    step = rays_per_dispatch(len(lights) + len(extra), settings.hit_samples, triangles)
+    # at a bounce hit the emitters draw one shadow ray per stratum, like a lamp (their plain
+    # estimate, emitters.EmitterLight.exact = False), the world two (one per technique)
+    worlds = sum(light.type == "WORLD" for light in lights)
+    step = rays_per_dispatch(len(lights) + worlds, settings.hit_samples)
     for first in range(0, max(rays, 1), step):
         partial = dispatch_bvh(kernel, {
             **inputs, "partial_image": partial[0], "partial_variance": partial[1]}, low_w, low_h, {

@@ -27,8 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["EmitterLight", "emitter_light", "emitters_direct", "clipped_form_factors",
-           "sample_points", "emitter_table", "EMITTER_TEXELS", "MAX_EMITTER_TRIANGLES",
-           "ITERATIONS_PER_TRIANGLE"]
+           "sample_points", "emitter_table", "EMITTER_TEXELS", "MAX_EMITTER_TRIANGLES"]
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 EMITTER_TEXELS = 4
@@ -36,7 +35,6 @@ EMITTER_TEXELS = 4
 # invocation's loops would pass llvmpipe's limit, docs/blender_facts.md): such scenes keep the
 # emission seen by the gathers' rays instead (emitter_light returns None).
 MAX_EMITTER_TRIANGLES = 1024
-ITERATIONS_PER_TRIANGLE = 12  # GLSL loop iterations of one triangle's clipped form factor
 _CHUNK = 8  # emissive triangles per step of the exact sum (memory: points × 8 × 6 corners)
 
 
