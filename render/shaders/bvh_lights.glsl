@@ -284,7 +284,8 @@ vec3 world_direct(vec3 p, vec3 n, uint state, int m)
   perpendicular_basis(n, t, b);
   vec3 f_sum = vec3(0.0);
   vec3 f_lit = vec3(0.0);
-  for (int technique = 0; technique < 2; technique++) {
+  bool uniform_sky = texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).z > 0.5;
+  for (int technique = uniform_sky ? 1 : 0; technique < 2; technique++) { /* uniform: cosine only */
     for (int k = 0; k < m * m; k++) {
       vec2 s = hashed_stratum(state, k, m);
       vec3 dir;
@@ -301,7 +302,7 @@ vec3 world_direct(vec3 p, vec3 n, uint state, int m)
         continue;
       }
       vec3 radiance = world_radiance_at(world_pixel(dir, h, w));
-      float pdf = dot(radiance, LUMA) / head.w + cos_n / M_PI_F;
+      float pdf = (uniform_sky ? 0.0 : dot(radiance, LUMA) / head.w) + cos_n / M_PI_F;
       vec3 f = radiance * (cos_n / max(pdf, 1e-30));
       f_sum += f;
       if (max(f.r, max(f.g, f.b)) > 0.0 && !bvh_any_hit(origin, dir, BVH_FAR)) {

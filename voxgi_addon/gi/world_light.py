@@ -66,6 +66,12 @@ class WorldLight:
     type: str = "WORLD"
     name: str = "World"
 
+    @property
+    def uniform(self) -> bool:
+        """One radiance everywhere (a plain Background colour): the cosine rays alone are the
+        exact importance of its light, so the map's rays are left out."""
+        return bool(np.all(self.radiance == self.radiance[0, 0]))
+
 
 def _table_normals() -> np.ndarray:
     """(IRRADIANCE_HEIGHT, 2 · that, 3) the normals of the irradiance table: row i at elevation
@@ -241,14 +247,17 @@ def world_direct(world: WorldLight, p, n, occluded, strata) -> np.ndarray:
     if len(lit) == 0 or occluded is None:
         return value
     square = strata(lit)  # (M, K, 2)
-    k = square.shape[1]
-    dirs = np.concatenate([sample_world(world, square), _cosine(n[lit], square)], axis=1)
+    dirs = _cosine(n[lit], square) if world.uniform else \
+        np.concatenate([sample_world(world, square), _cosine(n[lit], square)], axis=1)
     cos = np.einsum("mkc,mc->mk", dirs, n[lit])
     radiance = world_radiance(world, dirs)
-    pdf = radiance @ LUMINANCE / world.total + np.maximum(cos, 0.0) / math.pi
+    # the density the rays were drawn with (both techniques' sum; the cosine's alone for a
+    # uniform world), so that the ratio weighs each ray by L cos / pdf
+    pdf = (0.0 if world.uniform else radiance @ LUMINANCE / world.total) + \
+        np.maximum(cos, 0.0) / math.pi
     f = radiance * (np.maximum(cos, 0.0) / np.maximum(pdf, 1e-30))[..., None]  # (M, 2K, 3)
     up = cos > 0
-    origins = np.repeat(p[lit], 2 * k, axis=0)
+    origins = np.repeat(p[lit], dirs.shape[1], axis=0)
     blocked = np.zeros(up.shape, bool)
     if up.any():
         blocked[up] = occluded(origins[up.ravel()], dirs[up])
@@ -267,7 +276,8 @@ def world_table(world: WorldLight | None, stream: int = 0) -> np.ndarray:
       column W: the inclusive row CDF in x;
     * rows H … H + IRRADIANCE_HEIGHT − 1, columns 0 … 2·IRRADIANCE_HEIGHT − 1: E(n)/π rgb;
     * the last row: texel 0 = (H, W, IRRADIANCE_HEIGHT, total), texel 1 = (1 = a world, its
-      samples' hash stream ``stream`` = its index in the lights list after the lamps, 0, 0).
+      samples' hash stream ``stream`` = its index in the lights list after the lamps,
+      1 = uniform (``WorldLight.uniform``), 0).
 
     None gives a 1-row table saying "no world"."""
     if world is None:
@@ -281,5 +291,5 @@ def world_table(world: WorldLight | None, stream: int = 0) -> np.ndarray:
     table[:h, w, 0] = world.row_cdf
     table[h:h + ih, :2 * ih, :3] = world.irradiance
     table[-1, 0] = (h, w, ih, world.total)
-    table[-1, 1, :2] = 1.0, stream
+    table[-1, 1, :3] = 1.0, stream, float(world.uniform)
     return table.astype(np.float32)
