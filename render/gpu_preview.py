@@ -21,14 +21,18 @@ from ..voxgi_addon.gi.cone_shadows import shadow_cone
 from ..voxgi_addon.gi.world_light import scene_lights
 from ..voxgi_addon.preview.gather import GatherSettings
 from ..voxgi_addon.preview.passes import (
+    centre_pass,
     check_request,
     compose_passes,
     direct_light,
+    edge_pixels,
     finish_passes,
+    light_edge_pixels,
     material_indices,
     material_table,
     principled_table,
     subpixel_passes,
+    subpixel_reach,
 )
 from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
@@ -191,6 +195,8 @@ _SURFACE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "cent
                      "centre_glossy", "centre_world", "materials", "principled_lut",
                      *(f"sum_{k}" for k in _SURFACE_SUMS))
 _LIGHT_SAMPLERS = ("colour", "direct_image", "shine_image", "sum_f", "sum_g")
+_MASK_SAMPLERS = ("gbuffer_position", "pixels")
+_COMPACT_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "pixels")
 _aa_shaders: dict[str, object] = {}
 
 
@@ -200,6 +206,13 @@ def _aa_shader(kernel: str):
             _aa_shaders[kernel] = build_compute(
                 ("principled", "aa_surface"), _SURFACE_SAMPLERS, (),
                 (*(f"out_{k}" for k in _SURFACE_SUMS), "out_colour"), PRINCIPLED_DEFINES)
+        elif kernel in ("aa_list", "aa_list_raw"):
+            _aa_shaders[kernel] = build_compute(
+                ("aa_compact",), _COMPACT_SAMPLERS, (), ("out_position", "out_normal", "out_view"),
+                {"RAW": "1"} if kernel == "aa_list_raw" else None)
+        elif kernel == "aa_mask":
+            _aa_shaders[kernel] = build_compute(("aa_mask",), _MASK_SAMPLERS, (),
+                                                ("out_position",))
         else:
             _aa_shaders[kernel] = build_compute(("aa_light",), _LIGHT_SAMPLERS, (),
                                                 ("out_f", "out_g"))
@@ -217,6 +230,27 @@ def _run(kernel, samplers, inputs, outputs, width, height):
         shader.image(name, image)
     gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
     return images
+
+
+def _pixel_list(listed, width: int, height: int):
+    """(texture, (w, h)) of the edge pixels' list (aa_compact.glsl): texel t (row-major from
+    the texture's first row) = (x, y, id, 1) of pixel id = listed[t] (flat, row 0 on top; GL
+    y = height − 1 − row), padded with zeros to w × h, w a multiple of the work group size."""
+    side = LOCAL_SIZE * max(1, math.ceil(math.sqrt(len(listed)) / LOCAL_SIZE))
+    rows = math.ceil(len(listed) / side)
+    texels = np.zeros((rows * side, 4), np.float32)
+    texels[:len(listed)] = np.stack([listed % width, height - 1 - listed // width, listed,
+                                     np.ones(len(listed))], axis=1)
+    return float_texture(texels.reshape(rows, side, 4), (side, rows)), (side, rows)
+
+
+def _compact(kernel, inputs, size):
+    """The G-buffer (or the three centre terms, kernel "aa_list_raw") at the edge pixels' list
+    (aa_compact.glsl), as G-buffer inputs of the list's ``size``."""
+    out = _run(kernel, _COMPACT_SAMPLERS, inputs, ("out_position", "out_normal", "out_view"),
+               *size)
+    return {"gbuffer_position": out["out_position"], "gbuffer_normal": out["out_normal"],
+            "gbuffer_view": out["out_view"]}
 
 
 def release() -> None:
@@ -273,50 +307,99 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     tables = [lights_texture(snapshot.lights, only) for only in range(len(snapshot.lights))]
     extra = scene_light_textures(lights) if len(lights) > len(snapshot.lights) else None
     no_lamp = lights_texture(snapshot.lights, -1)
-    sums = {name: zero for name in (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")}
-    for offset, block in plan:
-        gbuffer = centre if offset == (0.0, 0.0) else rasterize(
-            tris, snapshot.camera, rough, width, height, offset, shader=raster)
+    # The edge pixels (preview.passes.edge_pixels on the read-back centre G-buffer, the numpy
+    # tracer's test) get the sub-pixel passes, over a list of them (aa_compact.glsl); the
+    # others the centre pass with all strata, over the image.
+    seen = read_gbuffer(centre)
+    reach = subpixel_reach(plan)
+    edge = edge_pixels(seen["hit"], material_indices(snapshot, seen["material"]),
+                       seen["position"], seen["normal"], reach)
+    timings["edge pixels"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+
+    def shade(inputs, sums, terms, blank, size, block, lamps=None):
+        """``sums`` + one pass over ``inputs``, a G-buffer of ``size`` (the image's or the edge
+        pixels' list's): terms = the centre's gathered (Diffuse Indirect, AO), Glossy
+        Indirect and world glossy light at the same texels; blank : zeros of ``size``.
+        lamps : a dict that gets the (H·W,) light of the lamps (light_edge_pixels)."""
         out = _run("aa_surface", _SURFACE_SAMPLERS, {
-            **gbuffer.inputs, **sums, "centre_diffuse": diffuse_ao, "centre_glossy": glossy,
-            "centre_world": glossy_world, "materials": materials,
+            **inputs, **sums, "centre_diffuse": terms[0], "centre_glossy": terms[1],
+            "centre_world": terms[2], "materials": materials,
             "principled_lut": lut_texture()},
-            (*(f"out_{k}" for k in _SURFACE_SUMS), "out_colour"), width, height)
-        sums.update({f"sum_{k}": out[f"out_{k}"] for k in _SURFACE_SUMS})
+            (*(f"out_{k}" for k in _SURFACE_SUMS), "out_colour"), *size)
+        sums = {**sums, **{f"sum_{k}": out[f"out_{k}"] for k in _SURFACE_SUMS}}
         colour = out["out_colour"]
         # Light by light: each lamp's light feeds the glossy lobe, and one dispatch stays
         # within llvmpipe's loop limit (docs/blender_facts.md "llvmpipe's loop limit").
         for index, table in enumerate(tables):
-            direct = direct_light_texture(bvh, gbuffer.inputs, snapshot.lights, light_samples,
+            direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples,
                                           seed=gather_settings.seed, strata_block=block,
                                           table=table)
-            shine = glossy_direct_texture(gbuffer.inputs, direct, table, index, principled,
-                                          emission)
+            shine = glossy_direct_texture(inputs, direct, table, index, principled, emission)
             out = _run("aa_light", _LIGHT_SAMPLERS, {
                 "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
-                ("out_f", "out_g"), width, height)
+                ("out_f", "out_g"), *size)
             sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
+        if lamps is not None:
+            lamps["light"] = sum(np.flipud(read_texture(sums[k]))[..., :3].sum(axis=-1)
+                                 .astype(np.float64) for k in ("sum_f", "sum_g")).ravel()
         if extra is not None:  # the world's and emitters' own dispatch (streams after the lamps)
-            direct = direct_light_texture(bvh, gbuffer.inputs, snapshot.lights, light_samples,
+            direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples,
                                           seed=gather_settings.seed, world=extra["world_map"],
                                           emitters=extra["emitters"], strata_block=block,
                                           table=no_lamp)
             out = _run("aa_light", _LIGHT_SAMPLERS, {
-                "colour": colour, "direct_image": direct, "shine_image": zero, **sums},
-                ("out_f", "out_g"), width, height)
+                "colour": colour, "direct_image": direct, "shine_image": blank, **sums},
+                ("out_f", "out_g"), *size)
             sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
-    timings["sub-pixel passes (GPU)" if len(plan) > 1 else "direct (GPU)"] = \
-        time.perf_counter() - t0
+        return sums
 
-    t0 = time.perf_counter()
+    # The centre pass over the image off the geometry's edges (preview.passes.edge_pixels on
+    # the read-back centre G-buffer, the numpy tracer's test; the edge pixels as background, so
+    # every kernel returns early there), then its shadow and light edges
+    # (light_edge_pixels) join them, and the sub-pixel passes render the edge pixels over a
+    # list of them (aa_compact.glsl); their sums replace the centre pass's at read-back.
+    inputs = dict(centre.inputs)
+    if edge.any():
+        keep = np.flipud(~edge).astype(np.float32)
+        inputs["gbuffer_position"] = _run("aa_mask", _MASK_SAMPLERS, {
+            "gbuffer_position": centre.position,
+            "pixels": float_texture(np.repeat(keep[..., None], 4, axis=2), (width, height))},
+            ("out_position",), width, height)["out_position"]
+    names = (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")
+    lamps = {}
+    sums = shade(inputs, {name: zero for name in names}, (diffuse_ao, glossy, glossy_world),
+                 zero, (width, height), centre_pass(light_samples)[1], lamps if reach else None)
     texel = {name: np.flipud(read_texture(texture)).reshape(-1, 4).astype(np.float64)
              for name, texture in sums.items()}
+    if reach:
+        edge = edge | light_edge_pixels(lamps["light"].reshape(height, width),
+                                        seen["hit"] & ~edge, reach, len(plan))
+    listed = np.flatnonzero(edge.ravel())
+    if len(listed):
+        pixels, list_size = _pixel_list(listed, width, height)
+        blank = float_texture(np.zeros((list_size[1], list_size[0], 4)), list_size)
+        terms = tuple(_compact("aa_list_raw", {
+            "gbuffer_position": diffuse_ao, "gbuffer_normal": glossy,
+            "gbuffer_view": glossy_world, "pixels": pixels}, list_size).values())
+        edge_sums = {name: blank for name in names}
+        for offset, block in plan:
+            gbuffer = rasterize(tris, snapshot.camera, rough, width, height, offset,
+                                shader=raster)
+            inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": pixels}, list_size)
+            edge_sums = shade(inputs, edge_sums, terms, blank, list_size, block)
+        for name, texture in edge_sums.items():
+            texel[name][listed] = read_texture(texture).reshape(-1, 4)[:len(listed)]
+    count = np.where(edge.ravel(), len(plan), 1)
+    timings["sub-pixel passes (GPU)" if len(plan) > 1 else "direct (GPU)"] = \
+        time.perf_counter() - t0
+    t0 = time.perf_counter()
     accumulated = {
         "emission": texel["sum_a"][:, :3], "coverage": texel["sum_a"][:, 3],
         "diffuse_color": texel["sum_b"][:, :3], "ao": texel["sum_b"][:, 3],
         "glossy_color": texel["sum_c"][:, :3], "diffuse_indirect": texel["sum_d"][:, :3],
         "glossy_indirect": texel["sum_e"][:, :3], "glossy_direct": texel["sum_f"][:, :3],
         "diffuse_direct": texel["sum_g"][:, :3]}
-    passes = finish_passes(accumulated, len(plan), width, height)
+    passes = finish_passes(accumulated, count, width, height)
     timings["read-back"] = time.perf_counter() - t0
     return passes, timings

@@ -19,7 +19,8 @@ void main()
     return;
   }
   vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
-  uint id = uint((size.y - 1 - px.y) * size.x + px.x);
+  uint id = position.w > 1.5 ? uint(position.w) - 2u  /* a listed pixel: aa_compact.glsl */
+                             : uint((size.y - 1 - px.y) * size.x + px.x);
   vec3 value = diffuse_direct(position.xyz + n * SURFACE_EPSILON, n, id, uint(sampling.x),
                               int(sampling.y));
   imageStore(out_image, px, vec4(value, 1.0));

@@ -53,7 +53,8 @@ void main()
     vec3 emits = glossy_light_texel(5).xyz;
     bool round_shape = head.y > 0.5;
     float total = 0.0;
-    uint id = uint((size.y - 1 - px.y) * size.x + px.x);
+    uint id = position.w > 1.5 ? uint(position.w) - 2u  /* a listed pixel: aa_compact.glsl */
+                               : uint((size.y - 1 - px.y) * size.x + px.x);
     uint state = point_stream(id, GLOSSY_LIGHT_STREAM + uint(light.x), 0u);
     /* passes.glossy_jitter: strata centres while the lobe is wider than a stratum */
     float alpha = clamp(params.z, 0.0, 1.0) * clamp(params.z, 0.0, 1.0);

@@ -101,3 +101,85 @@ def test_filter_size_setting_changes_the_result(voxgi):
         print(name, round(near, 5), round(apart, 5), round(wider, 5))
         assert near < 0.2 * apart, name
         assert wider > apart, name
+
+
+def test_only_edge_pixels_take_sub_pixel_passes(voxgi):
+    """Edge-adaptive passes (``preview.passes.edge_pixels``, ``adaptive_passes``): a pixel whose
+    neighbours within the passes' reach all see its surface keeps the pixel-centre pass with
+    all strata — exactly the point-sampled preview (Filter Size 0) there, in every pass — while
+    the pixels along coverage and material edges are anti-aliased: where a share of their
+    camera rays sees the other side, their Diffuse Color moves toward it."""
+    from voxgi.blender.settings import cone_settings, trace_options
+    from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.render.gbuffer import rasterize, read_gbuffer
+    from voxgi.render.gpu_context import ensure_gpu_context
+    from voxgi.render.gpu_preview import render_passes_gpu
+    from voxgi.voxgi_addon.preview.passes import (
+        edge_pixels,
+        light_edge_pixels,
+        material_indices,
+        material_table,
+        subpixel_passes,
+        subpixel_reach,
+    )
+    from voxgi.voxgi_addon.scene.geometry import world_triangles
+
+    assert ensure_gpu_context()[0]
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    gi_scenes.build("columned_hall", scene)
+    width, height = 80, 60
+    options = trace_options(scene.voxgi, width, height)
+    snapshot = take_snapshot(bpy.context, bpy.context.evaluated_depsgraph_get())
+    images = {}
+    for filter_width in (0.0, 1.5):
+        passes, _ = render_passes_gpu(snapshot, None, width, height,
+                                      cone_settings(scene.voxgi),
+                                      **{**options, "filter_width": filter_width})
+        images[filter_width] = {k: np.asarray(v, np.float64) for k, v in passes.items()}
+    seen = read_gbuffer(rasterize(world_triangles(snapshot), snapshot.camera,
+                                  material_table(snapshot)[1], width, height))
+    material = material_indices(snapshot, seen["material"])
+    reach = subpixel_reach(subpixel_passes(1.5, options["light_samples"]))
+    assert reach == 1  # Cycles' default filter: the outermost pass lands 0.49 px off centre
+    edge = edge_pixels(seen["hit"], material, seen["position"], seen["normal"], reach)
+    point, smooth = images[0.0], images[1.5]
+    # The lamps' light of the centre pass (a black world: all of it), as the point-sampled
+    # passes give it back, and its shadow edges (light_edge_pixels).
+    light = sum((point[f"{kind} Color"] * point[f"{kind} Direct"]).sum(axis=-1)
+                for kind in ("Diffuse", "Glossy"))
+    passes = len(subpixel_passes(1.5, options["light_samples"]))
+    lit = light_edge_pixels(light, seen["hit"] & ~edge, reach, passes)
+    print("edge pixels", edge.mean(), "shadow edge pixels", lit.mean())
+    assert 0.0 < edge.mean() < 0.5 and 0.0 < lit.mean() < 0.5
+    # Interior: off both kinds of edge and one pixel away from them (the read-back light is the
+    # sums' ratio, so a pixel at the threshold may fall either way).
+    near = edge | lit
+    grown = near.copy()
+    grown[1:] |= near[:-1]
+    grown[:-1] |= near[1:]
+    grown[:, 1:] |= near[:, :-1]
+    grown[:, :-1] |= near[:, 1:]
+    interior = ~grown
+    assert interior.mean() > 0.3
+    for name in point:
+        assert np.array_equal(smooth[name][interior], point[name][interior]), name
+    # Pixels along a change of coverage or material (both sides of it in their 3 × 3 window):
+    # the passes' rays reach 0.49 px, so about half of them see across the change.
+    hit = seen["hit"]
+    colour = point["Diffuse Color"]
+    changes = np.zeros_like(edge)
+    spread = np.zeros(edge.shape)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            shifted = (slice(max(0, dy), height + min(0, dy)), slice(max(0, dx), width + min(0, dx)))
+            here = (slice(max(0, -dy), height + min(0, -dy)), slice(max(0, -dx), width + min(0, -dx)))
+            changes[here] |= (hit[shifted] != hit[here]) | (material[shifted] != material[here])
+            spread[here] = np.maximum(spread[here],
+                                      np.abs(colour[shifted] - colour[here]).max(axis=-1))
+    across = changes & (spread > 0.0)
+    assert across.sum() > 20 and not (across & ~edge).any()
+    moved = np.abs(smooth["Diffuse Color"] - colour).max(axis=-1)
+    share = float((moved[across] >= spread[across] / 32).mean())  # half a pass's share
+    print("edge pixels anti-aliased", share)
+    assert share >= 0.25

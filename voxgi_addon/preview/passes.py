@@ -24,7 +24,7 @@ from ..scene.camera import DEFAULT_FILTER_WIDTH, filter_offsets
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
 from .gather import GatherSettings, gather_gi, gather_glossy, gather_glossy_world
-from .upsample import STRIDES, sample_pixels, upsample
+from .upsample import PLANE_TOLERANCE, STRIDES, sample_pixels, upsample
 
 PASS_NAMES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color",
               "Glossy Direct", "Glossy Indirect", "Glossy Color", "Ambient Occlusion")
@@ -261,6 +261,95 @@ def subpixel_passes(filter_width: float, light_samples: int):
     return out
 
 
+def subpixel_reach(plan) -> int:
+    """How many pixels around a pixel's centre the sub-pixel ``plan``'s camera rays reach:
+    ⌈largest |offset|⌉ (1 for Filter Size 1.5, whose outermost offset is 0.49 px; 0 for pixel
+    centres alone). A ray of a pass lands between the centres of the pixels within that reach,
+    so where they all see one surface, the pass's rays see it too (``edge_pixels``)."""
+    largest = max((max(abs(x), abs(y)) for (x, y), _ in plan), default=0.0)
+    return int(math.ceil(largest - 1e-12)) if largest > 0.0 else 0
+
+
+def edge_pixels(hit, material, position, normal, reach: int) -> np.ndarray:
+    """(H, W) bool: the pixels that need sub-pixel passes, from the pixel-centre G-buffer
+    (hit (H, W) bool, material (H, W) int, position, normal (H, W, 3); row 0 on top). A pixel is
+    an edge pixel when a pixel within ``reach`` (``subpixel_reach``; a square window) differs
+    from it in coverage or material, or does not lie on the same surface: either point is off
+    the other's tangent plane by more than ``upsample.PLANE_TOLERANCE`` × their distance (the
+    joint-bilateral upsample's same-surface test; depth steps and creases). Pixels within
+    ``reach`` of the image border are edge pixels too (their passes' rays leave the G-buffer).
+    Everything else is one smooth surface under every camera ray of the pixel: it keeps the
+    pixel-centre pass with all strata. reach 0: no edge pixels. The numpy and GPU tracers both
+    call this (the GPU on its read-back centre G-buffer), so they split the pixels alike."""
+    hit = np.asarray(hit, bool)
+    height, width = hit.shape
+    edge = np.zeros((height, width), bool)
+    if reach <= 0:
+        return edge
+    edge[:reach] = edge[-reach:] = True
+    edge[:, :reach] = edge[:, -reach:] = True
+    material = np.asarray(material)
+    p = np.asarray(position, np.float64)
+    n = np.asarray(normal, np.float64)
+    for dy in range(reach + 1):
+        for dx in range(-reach, reach + 1):
+            if dy == 0 and dx <= 0:
+                continue  # every unordered pair once
+            a = (slice(0, height - dy), slice(max(0, -dx), width - max(0, dx)))
+            b = (slice(dy, height), slice(max(0, dx), width - max(0, -dx)))
+            both = hit[a] & hit[b]
+            step = p[b] - p[a]
+            off_plane = np.maximum(np.abs(np.einsum("...i,...i->...", n[a], step)),
+                                   np.abs(np.einsum("...i,...i->...", n[b], step)))
+            apart = off_plane > PLANE_TOLERANCE * np.linalg.norm(step, axis=-1)
+            differ = (hit[a] != hit[b]) | (both & ((material[a] != material[b]) | apart))
+            edge[a] |= differ
+            edge[b] |= differ
+    return edge
+
+
+def centre_pass(light_samples: int):
+    """(offset, strata_block) of the edge-adaptive preview's first pass: the pixel centres
+    with all strata (``subpixel_passes(0, light_samples)``), rendered at the pixels off the
+    edges, which thus get exactly the point-sampled preview."""
+    return subpixel_passes(0.0, light_samples)[0]
+
+
+def light_edge_pixels(light, computed, reach: int, passes: int) -> np.ndarray:
+    """(H, W) bool: the pixels of the edge-adaptive preview's shadow and light edges, from the
+    centre pass's light of the lamps (H, W) (Diffuse Color × Diffuse Direct + glossy light,
+    summed over the channels; the world's and emitters' light, soft and noisier, is left out)
+    at the ``computed`` pixels (H, W) bool. Cycles' pixel filter is symmetric, so
+    the sub-pixel passes average a light that varies linearly across a pixel to its centre
+    value; they change it where it bends. A pixel is a light edge pixel when it belongs to a
+    line of three computed pixels (across, along, either diagonal) whose second difference
+    exceeds 1 / ``passes`` of their largest light — more than one pass's share, what a
+    shadow's edge through the window brings — and, for reach > 1, the pixels within reach − 1
+    of those. reach 0: none."""
+    light = np.asarray(light, np.float64)
+    height, width = light.shape
+    out = np.zeros((height, width), bool)
+    if reach <= 0:
+        return out
+    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        ay, ax = abs(dy), abs(dx)
+        middle = (slice(ay, height - ay), slice(ax, width - ax))
+        before = (slice(ay - dy, height - ay - dy), slice(ax - dx, width - ax - dx))
+        after = (slice(ay + dy, height - ay + dy), slice(ax + dx, width - ax + dx))
+        valid = computed[before] & computed[middle] & computed[after]
+        bend = np.abs(light[before] + light[after] - 2.0 * light[middle])
+        top = np.maximum(np.maximum(light[before], light[middle]), light[after])
+        bent = valid & (bend * passes > top)
+        for part in (before, middle, after):
+            out[part] |= bent
+    grown = out.copy()
+    for dy in range(-(reach - 1), reach):
+        for dx in range(-(reach - 1), reach):
+            grown[max(0, dy):height + min(0, dy), max(0, dx):width + min(0, dx)] |= \
+                out[max(0, -dy):height + min(0, -dy), max(0, -dx):width + min(0, -dx)]
+    return grown
+
+
 # Accumulated sums of the sub-pixel passes (accumulate_pass, finish_passes): light passes are
 # sums of light × colour, divided by the summed colour at the end, as Cycles divides its
 # Diffuse/Glossy Direct/Indirect passes by Diffuse/Glossy Color (measured: a surface's edge
@@ -296,22 +385,26 @@ def new_sums(pixels: int):
             for name in SUMS}
 
 
-def finish_passes(sums, count: int, width: int, height: int):
-    """The PASS_NAMES images (H, W, 3) float32 of ``count`` accumulated passes: colours,
-    AO and Combined are means over the passes (0 where a pass saw the background, as Cycles'
-    film), light passes the summed light × colour over the summed colour (0 where that is 0)."""
+def finish_passes(sums, count, width: int, height: int):
+    """The PASS_NAMES images (H, W, 3) float32 of ``count`` accumulated passes (an int, or
+    (H·W,) per pixel: ``adaptive_passes``): colours, AO and Combined are means over the passes
+    (0 where a pass saw the background, as Cycles' film), light passes the summed light ×
+    colour over the summed colour (0 where that is 0)."""
     def ratio(light, colour):
         return np.divide(light, colour, out=np.zeros_like(light), where=colour > 0.0)
 
+    count = np.broadcast_to(np.asarray(count, np.float64), (width * height,))
+    per_pixel = count[:, None]
+
     values = {
         "Combined": (sums["emission"] + sums["diffuse_direct"] + sums["diffuse_indirect"]
-                     + sums["glossy_direct"] + sums["glossy_indirect"]) / count,
+                     + sums["glossy_direct"] + sums["glossy_indirect"]) / per_pixel,
         "Diffuse Direct": ratio(sums["diffuse_direct"], sums["diffuse_color"]),
         "Diffuse Indirect": ratio(sums["diffuse_indirect"], sums["diffuse_color"]),
-        "Diffuse Color": sums["diffuse_color"] / count,
+        "Diffuse Color": sums["diffuse_color"] / per_pixel,
         "Glossy Direct": ratio(sums["glossy_direct"], sums["glossy_color"]),
         "Glossy Indirect": ratio(sums["glossy_indirect"], sums["glossy_color"]),
-        "Glossy Color": sums["glossy_color"] / count,
+        "Glossy Color": sums["glossy_color"] / per_pixel,
         "Ambient Occlusion": np.repeat((sums["ao"] / count)[:, None], 3, axis=1),
     }
     return {name: values[name].astype(np.float32).reshape(height, width, 3)
@@ -458,10 +551,14 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     indirect, ao, glossy = centre(indirect, 3), centre(ao, 1)[:, 0], centre(glossy, 3)
     sums = new_sums(height * width)
     plan = subpixel_passes(filter_width, light_samples)
-    for offset, block in plan:
-        if offset != (0.0, 0.0):
-            seen = primary_visibility(tris, snapshot.camera, width, height, offset)
-        hit = np.flatnonzero(seen.hit.ravel())
+    reach = subpixel_reach(plan)
+    edge = edge_pixels(seen.hit, materials.reshape(height, width), seen.position, seen.normal,
+                       reach).ravel()
+    centre_seen = seen
+
+    def shade(seen, pixels, block, lamps=None):
+        """Add one pass at ``pixels`` (H·W,) bool; lamps : gets the lamps' light there."""
+        hit = np.flatnonzero(seen.hit.ravel() & pixels)
         p = seen.position.reshape(-1, 3)[hit]
         n = seen.normal.reshape(-1, 3)[hit]
         mat = material_indices(snapshot, seen.material.ravel())[hit]
@@ -473,6 +570,27 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
                                        per_light[:len(snapshot.lights)], hit)
         accumulate_pass(sums, snapshot, hit, mat, n, views, per_light.sum(axis=0),
                         indirect[hit], ao[hit], glossy[hit], shine, glossy_world[hit])
+        if lamps is not None:  # the lamps' light as the GPU's sums hold it after the lamps
+            only = new_sums(height * width)
+            accumulate_pass(only, snapshot, hit, mat, n, views,
+                            per_light[:len(snapshot.lights)].sum(axis=0), indirect[hit],
+                            ao[hit], glossy[hit], shine, glossy_world[hit])
+            lamps["light"] = (only["diffuse_direct"] + only["glossy_direct"]).sum(axis=1)
+
+    # The centre pass off the geometry's edges, then its shadow and light edges join them
+    # (their centre pass is dropped) and the sub-pixel passes render all edges.
+    lamps = {}
+    shade(centre_seen, ~edge, centre_pass(light_samples)[1], lamps)
+    lit = light_edge_pixels(lamps["light"].reshape(height, width),
+                            centre_seen.hit & ~edge.reshape(height, width), reach,
+                            len(plan)).ravel()
+    for values in sums.values():
+        values[lit] = 0.0
+    edge |= lit
+    if edge.any():
+        for offset, block in plan:
+            shade(primary_visibility(tris, snapshot.camera, width, height, offset), edge, block)
+    count = np.where(edge, len(plan), 1)
     timings["sub-pixel passes" if len(plan) > 1 else "direct + compose"] = \
         time.perf_counter() - t0
-    return finish_passes(sums, len(plan), width, height), timings
+    return finish_passes(sums, count, width, height), timings
