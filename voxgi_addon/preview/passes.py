@@ -387,7 +387,7 @@ def new_sums(pixels: int):
 
 def finish_passes(sums, count, width: int, height: int):
     """The PASS_NAMES images (H, W, 3) float32 of ``count`` accumulated passes (an int, or
-    (H·W,) per pixel: ``adaptive_passes``): colours, AO and Combined are means over the passes
+    (H·W,) per pixel: 1 off the edges, the pass count on them): colours, AO and Combined are means over the passes
     (0 where a pass saw the background, as Cycles' film), light passes the summed light ×
     colour over the summed colour (0 where that is 0)."""
     def ratio(light, colour):
