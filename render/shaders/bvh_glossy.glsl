@@ -136,25 +136,11 @@ void main()
         vec4 eh = emitter_header();
         int count = int(eh.x);
         vec2 u = hammersley(emitter_state, j, rays);
-        int t = 0;
-        int hi = count - 1;
-        while (t < hi) {
-          int mid = (t + hi) / 2;
-          if (texelFetch(emitters, ivec2(3, mid), 0).x <= u.x) {
-            t = mid + 1;
-          }
-          else {
-            hi = mid;
-          }
-        }
-        float low = t > 0 ? texelFetch(emitters, ivec2(3, t - 1), 0).x : 0.0;
-        float rr = clamp((u.x - low) / max(texelFetch(emitters, ivec2(3, t), 0).x - low, 1e-30),
-                         0.0, 1.0);
-        float s = sqrt(rr);
+        int t;
+        vec3 target = emitter_sample(u, count, t);
         vec3 c0 = texelFetch(emitters, ivec2(0, t), 0).xyz;
         vec3 c1 = texelFetch(emitters, ivec2(1, t), 0).xyz;
         vec3 c2 = texelFetch(emitters, ivec2(2, t), 0).xyz;
-        vec3 target = (1.0 - s) * c0 + (s * (1.0 - u.y)) * c1 + (s * u.y) * c2;
         vec3 w = target - origin;
         float r2 = dot(w, w);
         float dist = sqrt(r2);

@@ -391,6 +391,31 @@ bool emitter_facing(int t, vec3 p)
   return side * dot(p - c0, normal) > 0.0;
 }
 
+/* A point on the emitters drawn by power from u (emitters.sample_points): its triangle t and
+ * the point. */
+vec3 emitter_sample(vec2 u, int count, out int t)
+{
+  int lo = 0;
+  int hi = count - 1;
+  while (lo < hi) {
+    int mid = (lo + hi) / 2;
+    if (texelFetch(emitters, ivec2(3, mid), 0).x <= u.x) {
+      lo = mid + 1;
+    }
+    else {
+      hi = mid;
+    }
+  }
+  t = lo;
+  float low = t > 0 ? texelFetch(emitters, ivec2(3, t - 1), 0).x : 0.0;
+  float r = clamp((u.x - low) / max(texelFetch(emitters, ivec2(3, t), 0).x - low, 1e-30), 0.0,
+                  1.0);
+  float s = sqrt(r);
+  return (1.0 - s) * texelFetch(emitters, ivec2(0, t), 0).xyz +
+         (s * (1.0 - u.y)) * texelFetch(emitters, ivec2(1, t), 0).xyz +
+         (s * u.y) * texelFetch(emitters, ivec2(2, t), 0).xyz;
+}
+
 /* Diffuse Direct of the emissive triangles (emitters.emitters_direct): the exact unshadowed
  * sum times the per-channel visible share of one point per stratum, sampled by power; not
  * `exact` (bounce hits): the shadow rays' plain estimate. */
@@ -416,26 +441,11 @@ vec3 emitters_direct(vec3 p, vec3 n, uint state, int m, bool exact)
   vec3 f_lit = vec3(0.0);
   for (int k = 0; k < m * m; k++) {
     vec2 u = hashed_stratum(state, k, m);
-    int lo = 0;
-    int hi = count - 1;
-    while (lo < hi) {
-      int mid = (lo + hi) / 2;
-      if (texelFetch(emitters, ivec2(3, mid), 0).x <= u.x) {
-        lo = mid + 1;
-      }
-      else {
-        hi = mid;
-      }
-    }
-    int t = lo;
-    float low = t > 0 ? texelFetch(emitters, ivec2(3, t - 1), 0).x : 0.0;
-    float r = clamp((u.x - low) / max(texelFetch(emitters, ivec2(3, t), 0).x - low, 1e-30),
-                    0.0, 1.0);
-    float s = sqrt(r);
+    int t;
+    vec3 target = emitter_sample(u, count, t);
     vec3 c0 = texelFetch(emitters, ivec2(0, t), 0).xyz;
     vec3 c1 = texelFetch(emitters, ivec2(1, t), 0).xyz;
     vec3 c2 = texelFetch(emitters, ivec2(2, t), 0).xyz;
-    vec3 target = (1.0 - s) * c0 + (s * (1.0 - u.y)) * c1 + (s * u.y) * c2;
     vec3 radiance = vec3(texelFetch(emitters, ivec2(0, t), 0).w,
                          texelFetch(emitters, ivec2(1, t), 0).w,
                          texelFetch(emitters, ivec2(2, t), 0).w);
