@@ -17,14 +17,11 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
-from ..voxgi_addon.gi.cone_shadows import shadow_cone
 from ..voxgi_addon.gi.world_light import scene_lights
 from ..voxgi_addon.preview.gather import GatherSettings
 from ..voxgi_addon.preview.passes import (
     centre_pass,
     check_request,
-    compose_passes,
-    direct_light,
     edge_pixels,
     finish_passes,
     light_edge_pixels,
@@ -34,7 +31,6 @@ from ..voxgi_addon.preview.passes import (
     subpixel_passes,
     subpixel_reach,
 )
-from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
 from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import gbuffer_shader, rasterize, read_gbuffer
@@ -44,11 +40,12 @@ from .gpu_bvh import (
     scene_light_textures,
     shared_bvh,
 )
+from .gpu_fast import fast_passes
 from .gpu_gather import gather_low, glossy_direct_texture, principled_materials_texture, upsample
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
 from .gpu_shaders import LOCAL_SIZE, build_compute
-from .gpu_tracer import dispatch, read_texture
+from .gpu_tracer import read_texture
 from .gpu_volume import GPUVolume, float_texture
 
 
@@ -66,124 +63,9 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
         return _accurate_passes(snapshot, width, height, light_samples, gi_stride,
                                 gather_settings or GatherSettings(ao_distance=cones.ao_distance),
                                 glossy_indirect, filter_width)
-    if quality == "ACCURATE":
-        shadows = "RAYS"
-    gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
-    timings = {}
-    if quality != "ACCURATE":  # the cones march the octree; Accurate traces the triangles only
-        t0 = time.perf_counter()
-        volume = volume or GPUVolume()
-        volume.update(gi_state.octree, cones)
-        timings["upload"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    tris = world_triangles(snapshot)
-    if len(tris) == 0:
-        raise VoxGIError("the scene has no triangles to render")
-    _, rough, _, _ = material_table(snapshot)
-    gbuffer = rasterize(tris, snapshot.camera, rough, width, height)
-    seen = read_gbuffer(gbuffer)
-    hit = np.flatnonzero(seen["hit"].ravel())
-    p = seen["position"].reshape(-1, 3)[hit].astype(np.float64)
-    n = seen["normal"].reshape(-1, 3)[hit].astype(np.float64)
-    mat = material_indices(snapshot, seen["material"].ravel()[hit])
-    timings["visibility (GPU)"] = time.perf_counter() - t0
-
-    def pixels(texture):  # (N, 3) float64 of the hit pixels, from a bottom-row-first texture
-        return np.flipud(read_texture(texture))[..., :3].reshape(-1, 3)[hit].astype(np.float64)
-
-    def visibility(light, lit):  # shaders/shadow.glsl, one dispatch per light
-        target, size, is_sun = shadow_cone(light)
-        constants = {"light_position": (*target, float(is_sun)), "light_size": (size, 0, 0, 0)}
-        image = read_texture(dispatch("shadow", volume, gbuffer.inputs, width, height, constants))
-        return np.flipud(image)[..., 0].ravel()[hit[lit]]
-
-    t0 = time.perf_counter()
-    if shadows == "RAYS":
-        bvh = shared_bvh().update(tris)  # rebuilt and uploaded only for changed triangles
-        if bvh.uploaded_bytes:
-            timings["BVH build + upload"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        # Light by light: each one's light feeds the glossy lobe (Accurate), and one dispatch
-        # stays within llvmpipe's loop limit (docs/blender_facts.md "llvmpipe's loop limit").
-        _, _, _, emission = material_table(snapshot)
-        principled = principled_table(snapshot)
-        table = lights_texture(snapshot.lights)
-        direct = np.zeros((len(hit), 3))
-        shine = np.zeros((len(hit), 3))
-        for index in range(len(snapshot.lights)):
-            texture = direct_light_texture(bvh, gbuffer.inputs, snapshot.lights, light_samples,
-                                           seed=gather_settings.seed, only=index)
-            direct += pixels(texture)
-            if quality == "ACCURATE":
-                shine += pixels(glossy_direct_texture(gbuffer.inputs, texture, table, index,
-                                                      principled, emission))
-        lights = scene_lights(snapshot, tris, emission)  # lamps, world, emissive triangles
-        if len(lights) > len(snapshot.lights):  # the world's and emitters' own dispatch
-            extra = scene_light_textures(lights)
-            direct += pixels(direct_light_texture(
-                bvh, gbuffer.inputs, snapshot.lights, light_samples, seed=gather_settings.seed,
-                only=-1, world=extra["world_map"], emitters=extra["emitters"]))
-        timings["direct"] = time.perf_counter() - t0
-    else:
-        direct = direct_light(None, p, n, snapshot.lights, tris, cones, light_samples, shadows,
-                              visibility)
-        timings["direct"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    low_h, low_w = low_shape(height, width, gi_stride)
-    sampling = {"sampling": (gi_stride, width, height, 0)}
-
-    def traced(kernel):
-        low = dispatch(kernel, volume, gbuffer.inputs, low_w, low_h, sampling)
-        if gi_stride > 1:  # shaders/upsample.glsl, the port of gi_upsample.upsample
-            low = dispatch("upsample", volume, {**gbuffer.inputs, "low_image": low}, width,
-                           height, sampling)
-        return np.flipud(read_texture(low))
-
-    if quality == "ACCURATE":  # both gathers at low resolution, then one upsample for both
-        _, _, _, emission = material_table(snapshot)
-        bvh, principled = shared_bvh().update(tris), principled_table(snapshot)
-        gathered = (bvh, gbuffer.inputs, scene_lights(snapshot, tris, emission), principled, emission,
-                    gather_settings, gi_stride, width, height)
-        low_diffuse = gather_low(*gathered)
-        timings["diffuse+ao gather (GPU)"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        low_glossy = gather_low(*gathered, kernel="bvh_glossy") if glossy_indirect else None
-        if glossy_indirect:
-            timings["glossy gather (GPU)"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        full = upsample(low_diffuse, gbuffer.inputs, gi_stride, width, height, low_glossy)
-        diffuse_ao, glossy_texture = full if glossy_indirect else (full, None)
-        diffuse_ao = np.flipud(read_texture(diffuse_ao))
-        glossy = (np.flipud(read_texture(glossy_texture)) if glossy_indirect else
-                  np.zeros((height, width, 4), np.float32))
-        timings["upsample + read-back"] = time.perf_counter() - t0
-        glossy_world = None
-        if len(gathered[2]) > len(snapshot.lights):  # Glossy Direct of the world and emitters
-            t0 = time.perf_counter()
-            low_world = gather_low(*gathered, kernel="bvh_glossy", world_mode=True)
-            glossy_world = np.flipud(read_texture(
-                upsample(low_world, gbuffer.inputs, gi_stride, width, height)))
-            glossy_world = glossy_world.reshape(-1, 4)[hit, :3].astype(np.float64)
-            timings["world glossy gather (GPU)"] = time.perf_counter() - t0
-    else:
-        diffuse_ao = traced("diffuse_ao")
-        timings["diffuse+ao cones (GPU)"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        if glossy_indirect:
-            glossy = traced("glossy")
-            timings["glossy cones (GPU)"] = time.perf_counter() - t0
-        else:  # as Cycles with no glossy bounces
-            glossy = np.zeros((height, width, 4), np.float32)
-
-    flat_da = diffuse_ao.reshape(-1, 4)[hit]
-    terms = (direct, flat_da[:, :3], flat_da[:, 3], glossy.reshape(-1, 4)[hit, :3])
-    if quality != "ACCURATE":
-        return compose_passes(snapshot, width, height, hit, mat, *terms), timings
-    views = -seen["direction"].reshape(-1, 3)[hit].astype(np.float64)
-    return compose_passes(snapshot, width, height, hit, mat, *terms, n, views, shine,
-                          glossy_world), timings
+    return fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
+                       gi_stride, gather_settings or GatherSettings(ao_distance=cones.ao_distance),
+                       glossy_indirect)
 
 
 # ---------------------------------------------------------------- Accurate: sub-pixel passes
