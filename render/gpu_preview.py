@@ -282,6 +282,6 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         "glossy_color": texel["sum_c"][:, :3], "diffuse_indirect": texel["sum_d"][:, :3],
         "glossy_indirect": texel["sum_e"][:, :3], "glossy_direct": texel["sum_f"][:, :3],
         "diffuse_direct": texel["sum_g"][:, :3]}
-    passes = finish_passes(accumulated, count, width, height)
+    passes = finish_passes(accumulated, count, width, height, filter_width)
     timings["read-back"] = time.perf_counter() - t0
     return passes, timings
