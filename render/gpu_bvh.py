@@ -19,6 +19,7 @@ Needs a GPU context.
 from __future__ import annotations
 
 import math
+import sys
 import time
 
 import gpu
@@ -142,7 +143,8 @@ _shared: GPUBVH | None = None
 
 
 def shared_bvh() -> GPUBVH:
-    """One ``GPUBVH`` for the previews of this session (the GPU context's lifetime)."""
+    """One ``GPUBVH`` for the previews of this session (the GPU context's lifetime); the
+    Accurate path's ``gpu_scene.GPUScene`` holds it as its ``bvh``."""
     global _shared
     if _shared is None:
         _shared = GPUBVH()
@@ -272,3 +274,6 @@ def release() -> None:
     global _shared
     _shaders.clear()
     _shared = None
+    scene = sys.modules.get(f"{__package__}.gpu_scene")  # it holds the shared BVH too
+    if scene is not None:
+        scene.release()

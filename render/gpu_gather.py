@@ -80,21 +80,25 @@ def rays_per_dispatch(light_count: int, hit_samples: int = 1) -> int:
 
 
 def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
-           width: int, height: int, kernel: str = "bvh_gather", world_mode: bool = False):
+           width: int, height: int, kernel: str = "bvh_gather", world_mode: bool = False,
+           tables=None):
     """The raw gather: (values, variance) RGBA32F textures of the low-resolution grid, the
     rays split over dispatches of ``rays_per_dispatch``. kernel : "bvh_gather" (Diffuse
     Indirect and AO, ``settings.rays``) or "bvh_glossy" (Glossy Indirect,
     ``settings.glossy_rays``).
     principled : (base, params) of ``preview.passes.principled_table``;
     settings : ``voxgi_addon.preview.gather.GatherSettings``; world_mode : "bvh_glossy"
-    gathers the world's Glossy Direct instead (``exact_glossy.glossy_world_direct``)."""
+    gathers the world's Glossy Direct instead (``exact_glossy.glossy_world_direct``).
+    tables : the light and material textures of ``lights``, ``principled`` and ``emission``
+    made already (``gpu_scene.GPUScene.gather_tables``); None: made here."""
     low_h, low_w = low_shape(height, width, stride)
     placeholder = gpu.types.GPUTexture((1, 1), format="RGBA32F")
     partial = (placeholder, placeholder)
-    inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture(lights),
-              **scene_light_textures(lights),
-              "materials": principled_materials_texture(principled, emission),
-              "principled_lut": lut_texture()}
+    if tables is None:
+        tables = {"lights": lights_texture(lights), **scene_light_textures(lights),
+                  "materials": principled_materials_texture(principled, emission),
+                  "principled_lut": lut_texture()}
+    inputs = {**bvh.inputs, **gbuffer_inputs, **tables}
     assert OUTPUTS[kernel] == ("out_image", "out_variance")
     rays = settings.rays if kernel == "bvh_gather" else settings.glossy_rays
     # at a bounce hit the emitters draw one shadow ray per stratum, like a lamp (their plain
@@ -140,12 +144,14 @@ def upsample(values, gbuffer_inputs, stride: int, width: int, height: int, secon
 
 
 def gather_low(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
-               width: int, height: int, kernel: str = "bvh_gather", world_mode: bool = False):
+               width: int, height: int, kernel: str = "bvh_gather", world_mode: bool = False,
+               tables=None):
     """The gather's low-resolution result after the à-trous filter (not upsampled): (Diffuse
     Indirect rgb, AO) for "bvh_gather", (Glossy Indirect rgb, 0) for "bvh_glossy", (the world's
-    Glossy Direct rgb, 0) for "bvh_glossy" in ``world_mode``."""
+    Glossy Direct rgb, 0) for "bvh_glossy" in ``world_mode``; tables : as ``gather``'s."""
     values, variance = gather(bvh, gbuffer_inputs, lights, principled, emission, settings,
-                              stride, width, height, kernel=kernel, world_mode=world_mode)
+                              stride, width, height, kernel=kernel, world_mode=world_mode,
+                              tables=tables)
     values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
                         settings.denoise_iterations)
     return values
@@ -174,10 +180,12 @@ _GLOSSY_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "direc
 
 
 def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: int, principled,
-                          emission):
+                          emission, materials=None):
     """The glossy light light ``light_index`` sends to the viewer over the G-buffer
     (``shaders/glossy_direct.glsl``, the port of ``preview.passes.glossy_direct_radiance``);
-    direct : that light's Diffuse Direct texture; an RGBA32F texture (bottom row first)."""
+    direct : that light's Diffuse Direct texture; an RGBA32F texture (bottom row first).
+    materials : the ``principled_materials_texture`` of ``principled`` and ``emission`` made
+    already (None: made here)."""
     if "glossy" not in _shaders:
         defines = {**PRINCIPLED_DEFINES, "AREA_GLOSSY_GRID": str(AREA_GLOSSY_GRID),
                    "GLOSSY_LIGHT_STREAM": f"{GLOSSY_LIGHT_STREAM}u"}
@@ -186,7 +194,8 @@ def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: 
     shader = _shaders["glossy"]
     out = gpu.types.GPUTexture((direct.width, direct.height), format="RGBA32F")
     inputs = {**gbuffer_inputs, "direct_image": direct, "lights": lights_texture_,
-              "materials": principled_materials_texture(principled, emission),
+              "materials": materials if materials is not None else
+              principled_materials_texture(principled, emission),
               "principled_lut": lut_texture()}
     shader.bind()
     for name in _GLOSSY_SAMPLERS:

@@ -17,7 +17,6 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
-from ..voxgi_addon.gi.world_light import scene_lights
 from ..voxgi_addon.preview.gather import GatherSettings
 from ..voxgi_addon.preview.passes import (
     centre_pass,
@@ -26,24 +25,16 @@ from ..voxgi_addon.preview.passes import (
     finish_passes,
     light_edge_pixels,
     material_indices,
-    material_table,
-    principled_table,
     subpixel_passes,
     subpixel_reach,
 )
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
-from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import gbuffer_shader, rasterize, read_gbuffer
-from .gpu_bvh import (
-    direct_light_texture,
-    lights_texture,
-    scene_light_textures,
-    shared_bvh,
-)
+from .gpu_bvh import direct_light_texture
 from .gpu_fast import fast_passes
-from .gpu_gather import gather_low, glossy_direct_texture, principled_materials_texture, upsample
+from .gpu_gather import gather_low, glossy_direct_texture, upsample
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
-from .gpu_principled import lut_texture
+from .gpu_scene import GPUScene, current_scene
 from .gpu_shaders import LOCAL_SIZE, build_compute
 from .gpu_tracer import read_texture
 from .gpu_volume import GPUVolume, float_texture
@@ -52,17 +43,20 @@ from .gpu_volume import GPUVolume, float_texture
 def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_samples: int = 16,
                       volume: GPUVolume | None = None, shadows: str = "RAYS", gi_stride: int = 1,
                       quality: str = "ACCURATE", gather_settings: GatherSettings | None = None,
-                      glossy_indirect: bool = True, filter_width: float = DEFAULT_FILTER_WIDTH):
+                      glossy_indirect: bool = True, filter_width: float = DEFAULT_FILTER_WIDTH,
+                      gpu_scene: GPUScene | None = None):
     """(passes, timings) like ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
     between calls so an unchanged octree is not uploaded again (a new one when None); Fast
     quality only: Accurate uses neither it nor ``gi_state`` (None is fine).
     quality "ACCURATE": exact direct light and the exact-ray final gather (``gpu_gather``);
-    "FAST": cone tracing through the octree (shadows as ``shadows`` says)."""
+    "FAST": cone tracing through the octree (shadows as ``shadows`` says).
+    gpu_scene : the ``gpu_scene.GPUScene`` Accurate draws from, updated to ``snapshot`` here
+    (None: the session's, ``gpu_scene.current_scene``)."""
     check_request(snapshot, width, height, gi_stride, quality)
     if quality == "ACCURATE":
         return _accurate_passes(snapshot, width, height, light_samples, gi_stride,
                                 gather_settings or GatherSettings(ao_distance=cones.ao_distance),
-                                glossy_indirect, filter_width)
+                                glossy_indirect, filter_width, gpu_scene)
     return fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
                        gi_stride, gather_settings or GatherSettings(ao_distance=cones.ao_distance),
                        glossy_indirect)
@@ -141,36 +135,38 @@ def release() -> None:
 
 
 def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_settings,
-                     glossy_indirect, filter_width):
+                     glossy_indirect, filter_width, scene=None):
     """Accurate quality on the GPU: the gathers from the pixel centres' G-buffer, then one
     rasterized G-buffer, direct light (``bvh_direct``, a block of the shadow-ray strata) and
     glossy light of the lights per sub-pixel pass (``preview.passes.subpixel_passes``),
-    summed on the GPU (``shaders/aa_surface.glsl``, ``aa_light.glsl``) and read back once."""
+    summed on the GPU (``shaders/aa_surface.glsl``, ``aa_light.glsl``) and read back once.
+    Triangles, BVH, materials and light tables come from ``scene`` (a ``GPUScene``, updated
+    here: only what changed is uploaded)."""
     timings = {}
     t0 = time.perf_counter()
-    tris = world_triangles(snapshot)
+    scene = (scene or current_scene()).update(snapshot)
+    tris, rough, emission = scene.tris, scene.rough, scene.emission
     if len(tris) == 0:
         raise VoxGIError("the scene has no triangles to render")
-    _, rough, _, emission = material_table(snapshot)
+    if scene.uploaded:  # rebuilt and uploaded only what changed
+        timings["scene build + upload"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     plan = subpixel_passes(filter_width, light_samples)
     raster = gbuffer_shader()  # this render's, for its G-buffers (gbuffer.gbuffer_shader)
     centre = rasterize(tris, snapshot.camera, rough, width, height, shader=raster)
     timings["visibility (GPU)"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    bvh = shared_bvh().update(tris)  # rebuilt and uploaded only for changed triangles
-    if bvh.uploaded_bytes:
-        timings["BVH build + upload"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    principled = principled_table(snapshot)
-    lights = scene_lights(snapshot, tris, emission)  # lamps, world, emissive triangles
+    bvh, principled, lights = scene.bvh, scene.principled, scene.lights
     gathered = (bvh, centre.inputs, lights, principled, emission, gather_settings, gi_stride,
                 width, height)
-    low_diffuse = gather_low(*gathered)
+    tables = scene.gather_tables()
+    low_diffuse = gather_low(*gathered, tables=tables)
     timings["diffuse+ao gather (GPU)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    zero = float_texture(np.zeros((height, width, 4), np.float32), (width, height))
-    low_glossy = gather_low(*gathered, kernel="bvh_glossy") if glossy_indirect else None
+    zero = scene.zeros(width, height)
+    low_glossy = gather_low(*gathered, kernel="bvh_glossy", tables=tables) \
+        if glossy_indirect else None
     if glossy_indirect:
         timings["glossy gather (GPU)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -178,17 +174,15 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     diffuse_ao, glossy = full if glossy_indirect else (full, zero)
     timings["upsample"] = time.perf_counter() - t0
     glossy_world = zero
-    if len(gathered[2]) > len(snapshot.lights):  # Glossy Direct of the world and emitters
+    if scene.has_scene_lights:  # Glossy Direct of the world and emitters
         t0 = time.perf_counter()
-        low_world = gather_low(*gathered, kernel="bvh_glossy", world_mode=True)
+        low_world = gather_low(*gathered, kernel="bvh_glossy", world_mode=True, tables=tables)
         glossy_world = upsample(low_world, centre.inputs, gi_stride, width, height)
         timings["world glossy gather (GPU)"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    materials = principled_materials_texture(principled, emission)
-    tables = [lights_texture(snapshot.lights, only) for only in range(len(snapshot.lights))]
-    extra = scene_light_textures(lights) if len(lights) > len(snapshot.lights) else None
-    no_lamp = lights_texture(snapshot.lights, -1)
+    materials, lut = scene.materials, scene.lut
+    extra = scene.has_scene_lights
     # The edge pixels (preview.passes.edge_pixels on the read-back centre G-buffer, the numpy
     # tracer's test) get the sub-pixel passes, over a list of them (aa_compact.glsl); the
     # others the centre pass with all strata, over the image.
@@ -206,18 +200,18 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         lamps : a dict that gets the (H·W,) light of the lamps (light_edge_pixels)."""
         out = _run("aa_surface", _SURFACE_SAMPLERS, {
             **inputs, **sums, "centre_diffuse": terms[0], "centre_glossy": terms[1],
-            "centre_world": terms[2], "materials": materials,
-            "principled_lut": lut_texture()},
+            "centre_world": terms[2], "materials": materials, "principled_lut": lut},
             (*(f"out_{k}" for k in _SURFACE_SUMS), "out_colour"), *size)
         sums = {**sums, **{f"sum_{k}": out[f"out_{k}"] for k in _SURFACE_SUMS}}
         colour = out["out_colour"]
         # Light by light: each lamp's light feeds the glossy lobe, and one dispatch stays
         # within llvmpipe's loop limit (docs/blender_facts.md "llvmpipe's loop limit").
-        for index, table in enumerate(tables):
+        for index, table in enumerate(scene.lamp_tables):
             direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples,
                                           seed=gather_settings.seed, strata_block=block,
                                           table=table)
-            shine = glossy_direct_texture(inputs, direct, table, index, principled, emission)
+            shine = glossy_direct_texture(inputs, direct, table, index, principled, emission,
+                                          materials=materials)
             out = _run("aa_light", _LIGHT_SAMPLERS, {
                 "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
                 ("out_f", "out_g"), *size)
@@ -225,11 +219,11 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         if lamps is not None:
             lamps["light"] = sum(np.flipud(read_texture(sums[k]))[..., :3].sum(axis=-1)
                                  .astype(np.float64) for k in ("sum_f", "sum_g")).ravel()
-        if extra is not None:  # the world's and emitters' own dispatch (streams after the lamps)
+        if extra:  # the world's and emitters' own dispatch (streams after the lamps)
             direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples,
-                                          seed=gather_settings.seed, world=extra["world_map"],
-                                          emitters=extra["emitters"], strata_block=block,
-                                          table=no_lamp)
+                                          seed=gather_settings.seed, world=scene.world_map,
+                                          emitters=scene.emitters, strata_block=block,
+                                          table=scene.no_lamp)
             out = _run("aa_light", _LIGHT_SAMPLERS, {
                 "colour": colour, "direct_image": direct, "shine_image": blank, **sums},
                 ("out_f", "out_g"), *size)
@@ -246,7 +240,7 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         keep = np.flipud(~edge).astype(np.float32)
         inputs["gbuffer_position"] = _run("aa_mask", _MASK_SAMPLERS, {
             "gbuffer_position": centre.position,
-            "pixels": float_texture(np.repeat(keep[..., None], 4, axis=2), (width, height))},
+            "pixels": float_texture(keep, (width, height), "R32F")},  # aa_mask reads .x
             ("out_position",), width, height)["out_position"]
     names = (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")
     lamps = {}
@@ -260,7 +254,7 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     listed = np.flatnonzero(edge.ravel())
     if len(listed):
         pixels, list_size = _pixel_list(listed, width, height)
-        blank = float_texture(np.zeros((list_size[1], list_size[0], 4)), list_size)
+        blank = scene.zeros(*list_size)
         terms = tuple(_compact("aa_list_raw", {
             "gbuffer_position": diffuse_ao, "gbuffer_normal": glossy,
             "gbuffer_view": glossy_world, "pixels": pixels}, list_size).values())

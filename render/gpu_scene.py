@@ -1,0 +1,313 @@
+"""One GPU-side scene per snapshot: what the Accurate kernels read, uploaded once and then
+updated by what changed (docs/gi_pipeline.md "One GPU scene per snapshot").
+
+A ``GPUScene`` holds, for the latest snapshot it was updated with:
+
+* ``tris`` — the world-space triangles (``scene.geometry.world_triangles``) and ``bvh``, their
+  BVH textures (``gpu_bvh.GPUBVH``, the session's ``shared_bvh``);
+* ``materials`` — the Principled materials texture (``gpu_gather.principled_materials_texture``)
+  with the numpy tables it was made of (``rough``, ``emission``, ``principled``), and
+  ``lut``, the Principled LUT (``gpu_principled.lut_texture``);
+* ``lights`` — the lights list (``world_light.scene_lights``: lamps, world, emitters) and its
+  tables: ``lamp_table`` (every lamp, the gathers'), ``lamp_tables`` (one per lamp, the other
+  rows padding: the direct light's per-lamp dispatches), ``no_lamp`` (padding only: the world's
+  and emitters' dispatch), ``world_map`` and ``emitters`` (``gpu_bvh.world_texture`` /
+  ``emitters_texture``, each with its stream).
+
+``update(snapshot)`` keys each part by its content — the snapshot carries no version counters,
+so geometry is a digest of the objects' matrices, the meshes' arrays and the armatures' poses
+(one per ``MeshData`` object, reused while the snapshotter hands the same object again), the
+materials and lamps the bytes of their tables, the world its ``WorldData.key`` — and rebuilds
+and uploads only the parts whose key changed; a part whose new table has the bytes of the
+uploaded one (the emitters after a non-emissive object moved) is not uploaded again.
+``uploaded`` says what the last update (and the render after it) sent: part → bytes.
+
+Textures and compute shaders are shared between GPU contexts (docs/blender_facts.md, and
+docs/gi_pipeline.md "One file's state"), so one scene serves F12, ``voxgi.render_preview``, the
+viewport and probe bakes (``current_scene``). It holds no raster shader. A file load drops it
+(a ``load_post`` handler), as the sessions are dropped; ``release`` frees it on unregister and
+at exit. Needs a GPU context; main thread only.
+"""
+from __future__ import annotations
+
+import hashlib
+import time
+
+import bpy
+import numpy as np
+
+from ..voxgi_addon.gi.emitters import emitter_table
+from ..voxgi_addon.gi.world_light import scene_lights, world_table
+from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
+from ..voxgi_addon.preview.passes import material_table, principled_table
+from ..voxgi_addon.scene.geometry import world_triangles
+from .gpu_bvh import shared_bvh
+from .gpu_gather import principled_materials_texture
+from .gpu_principled import lut_texture
+from .gpu_volume import float_texture
+
+# What ``uploaded`` names: the parts of a scene, and the render's cached zero images.
+PARTS = ("bvh", "materials", "lut", "lights", "world", "emitters", "zeros")
+MAX_ZERO_SIZES = 4  # image sizes whose zero texture is kept (F12, viewport, edge lists …)
+
+
+def _feed(h, value) -> None:
+    """Add ``value`` (array, None, scalar, string or a tuple of these) to the hash ``h``."""
+    if value is None:
+        h.update(b"\x00none")
+    elif isinstance(value, np.ndarray):
+        array = np.ascontiguousarray(value)
+        h.update(f"{array.dtype.str}{array.shape}".encode())
+        h.update(array.view(np.uint8).reshape(-1) if array.size else b"")
+    elif isinstance(value, (tuple, list)):
+        h.update(f"({len(value)}".encode())
+        for item in value:
+            _feed(h, item)
+        h.update(b")")
+    else:
+        h.update(repr(value).encode())
+        h.update(b"\x00")
+
+
+def digest(*values) -> str:
+    """A content key of ``values`` (numpy arrays by dtype, shape and bytes)."""
+    h = hashlib.blake2b(digest_size=16)
+    _feed(h, values)
+    return h.hexdigest()
+
+
+def _mesh_digest(mesh) -> str:
+    skin = mesh.skin
+    return digest(np.asarray(mesh.positions), np.asarray(mesh.triangles),
+                  np.asarray(mesh.triangle_materials),
+                  None if mesh.corner_normals is None else np.asarray(mesh.corner_normals),
+                  None if skin is None else (np.asarray(skin.weights),
+                                             np.asarray(skin.bone_indices), skin.armature))
+
+
+def _texture_bytes(table: np.ndarray) -> int:
+    return int(np.asarray(table, np.float32).nbytes)
+
+
+def _table_texture(table: np.ndarray):
+    """An RGBA32F texture of a (rows, texels, 4) table (texels wide)."""
+    return float_texture(table, (table.shape[1], table.shape[0]))
+
+
+def lamp_tables(lights) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """(every lamp's table, one table per lamp index, the no-lamp table) of
+    ``gpu_bvh.lights_texture(lights, only)`` for only None, 0 … len − 1 and −1, from one
+    ``light_table``: the rows of the other lamps become padding (type −1), so each lamp's
+    samples keep their stream; a table with no row gets one padding row."""
+    table = light_table(lights)
+
+    def only(index):
+        kept = table.copy()
+        if index is not None:
+            kept[kept[:, 0, 3] != index, 0, 0] = -1.0
+        if len(kept) == 0:
+            kept = np.zeros((1, LIGHT_TEXELS, 4), np.float32)
+            kept[0, 0, 0] = -1.0
+        return np.asarray(kept, np.float32)
+
+    return only(None), [only(i) for i in range(len(lights))], only(-1)
+
+
+class GPUScene:
+    """The GPU-side scene of the latest snapshot (see the module doc).
+
+    uploaded : part (``PARTS``) → bytes sent by the last ``update`` and the render that
+    followed (``zeros``); empty when nothing was. keys : part → the content key of what is
+    uploaded. seconds : part → time of its last rebuild + upload."""
+
+    def __init__(self):
+        self.bvh = shared_bvh()
+        self.tris = None
+        self.rough = self.emission = self.principled = None
+        self.materials = self.lut = None
+        self.lights: list = []
+        self._tail: list = []  # the lights list's world and emitters
+        self.lamp_table = self.no_lamp = self.world_map = self.emitters = None
+        self.lamp_tables: list = []
+        self.keys: dict[str, object] = {}
+        self.uploaded: dict[str, int] = {}
+        self.seconds: dict[str, float] = {}
+        self._meshes: dict[int, tuple[object, str]] = {}  # id(MeshData) → (it, its digest)
+        self._zeros: dict[tuple[int, int], object] = {}
+
+    @property
+    def uploaded_bytes(self) -> int:
+        return sum(self.uploaded.values())
+
+    def _sent(self, part: str, nbytes: int) -> None:
+        self.uploaded[part] = self.uploaded.get(part, 0) + int(nbytes)
+
+    # ------------------------------------------------------------------ keys
+
+    def geometry_key(self, snapshot) -> str:
+        """Content key of what ``world_triangles`` makes of ``snapshot``: the objects (mesh,
+        kind, armature, matrix), their meshes' arrays and the armatures."""
+        meshes = {}
+        for obj in snapshot.objects:
+            mesh = snapshot.meshes.get(obj.mesh)
+            if mesh is None or id(mesh) in meshes:
+                continue
+            known = self._meshes.get(id(mesh))
+            meshes[id(mesh)] = known if known is not None and known[0] is mesh else \
+                (mesh, _mesh_digest(mesh))
+        self._meshes = meshes  # only this snapshot's meshes stay referenced
+        objects = tuple(
+            (o.name, o.mesh, o.kind, o.armature, np.asarray(o.world_matrix, np.float64),
+             meshes[id(snapshot.meshes[o.mesh])][1] if o.mesh in snapshot.meshes else None)
+            for o in snapshot.objects)
+        armatures = tuple(
+            (name, a.bone_names, np.asarray(a.parents), np.asarray(a.rest_matrices),
+             np.asarray(a.pose_matrices), np.asarray(a.world_matrix))
+            for name, a in sorted(snapshot.armatures.items()))
+        return digest(objects, armatures)
+
+    # ------------------------------------------------------------------ update
+
+    def update(self, snapshot) -> GPUScene:
+        """Make the scene ``snapshot``'s: rebuild and upload the parts whose content changed
+        (``uploaded`` says which). The triangles may be empty (nothing is then built for them;
+        the caller decides what an empty scene means)."""
+        self.uploaded = {}
+        self.bvh = shared_bvh()  # the session's (gpu_bvh.release may have made a new one)
+        t0 = time.perf_counter()
+        geometry = self.geometry_key(snapshot)
+        geometry_changed = geometry != self.keys.get("geometry") or self.tris is None
+        if geometry_changed:
+            self.tris = world_triangles(snapshot)
+            self.keys["geometry"] = geometry
+        if len(self.tris):
+            # identity check first (free); another user of the shared BVH (the Fast path) may
+            # have uploaded other triangles since, which a content comparison then catches
+            self.bvh.update(self.tris)
+            if self.bvh.uploaded_bytes:
+                self._sent("bvh", self.bvh.uploaded_bytes)
+                self.seconds["bvh"] = time.perf_counter() - t0
+
+        t0 = time.perf_counter()
+        _, rough, _, emission = material_table(snapshot)
+        principled = principled_table(snapshot)
+        materials = digest(rough, emission, *principled)
+        materials_changed = materials != self.keys.get("materials")
+        if materials_changed:
+            self.rough, self.emission, self.principled = rough, emission, principled
+            self.materials = principled_materials_texture(principled, emission)
+            self._sent("materials", 3 * len(principled[0]) * 16)
+            self.keys["materials"] = materials
+            self.seconds["materials"] = time.perf_counter() - t0
+        lut = lut_texture()  # constant; cached by gpu_principled
+        if lut is not self.lut:
+            self.lut = lut
+            self._sent("lut", lut.width * lut.height * 16)
+
+        t0 = time.perf_counter()
+        lamps = list(snapshot.lights)
+        every, each, none = lamp_tables(lamps)
+        lamp_key = digest(len(lamps), every)
+        if lamp_key != self.keys.get("lights"):
+            self.lamp_table = _table_texture(every)
+            self.lamp_tables = [_table_texture(table) for table in each]
+            self.no_lamp = _table_texture(none)
+            self._sent("lights", sum(_texture_bytes(t) for t in (every, *each, none)))
+            self.keys["lights"] = lamp_key
+            self.seconds["lights"] = time.perf_counter() - t0
+
+        # the world and the emitters follow the lamps in the lights list; their streams are
+        # their indices there
+        t0 = time.perf_counter()
+        world = snapshot.world
+        world_key = None if world.radiance is None else (world.key or digest(world.radiance))
+        tail_key = (geometry, materials, world_key)
+        if tail_key != self.keys.get("tail"):
+            self._tail = scene_lights(snapshot, self.tris, emission)[len(lamps):]
+            self.keys["tail"] = tail_key
+        self.lights = lamps + self._tail
+        found = {light.type: (light, index) for index, light in enumerate(self.lights)
+                 if light.type in ("WORLD", "EMITTERS")}
+        world_light, stream = found.get("WORLD", (None, 0))
+        key = (world_key, stream)
+        if key != self.keys.get("world"):
+            table = world_table(world_light, stream)
+            self.world_map = _table_texture(table)
+            self._sent("world", _texture_bytes(table))
+            self.keys["world"] = key
+            self.seconds["world"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        emitters, stream = found.get("EMITTERS", (None, 0))
+        key = (geometry, materials, stream)
+        if key != self.keys.get("emitters_source"):
+            table = emitter_table(emitters, stream)
+            content = digest(table)
+            if content != self.keys.get("emitters"):  # e.g. a non-emissive object moved
+                self.emitters = _table_texture(table)
+                self._sent("emitters", _texture_bytes(table))
+                self.keys["emitters"] = content
+                self.seconds["emitters"] = time.perf_counter() - t0
+            self.keys["emitters_source"] = key
+        return self
+
+    # ------------------------------------------------------------------ what kernels read
+
+    @property
+    def has_scene_lights(self) -> bool:
+        """True when the world or emitters shed light (their own dispatch and gathers)."""
+        return len(self.lights) > len(self.lamp_tables)
+
+    def gather_tables(self) -> dict[str, object]:
+        """The light and material textures of the gathers (``gpu_gather.gather``'s
+        ``tables``)."""
+        return {"lights": self.lamp_table, "world_map": self.world_map,
+                "emitters": self.emitters, "materials": self.materials,
+                "principled_lut": self.lut}
+
+    def zeros(self, width: int, height: int):
+        """A width × height RGBA32F texture of zeros, kept for the next render of that size
+        (kernels only read it)."""
+        size = (int(width), int(height))
+        if size not in self._zeros:
+            while len(self._zeros) >= MAX_ZERO_SIZES:
+                self._zeros.pop(next(iter(self._zeros)))
+            self._zeros[size] = float_texture(np.zeros((size[1], size[0], 4), np.float32), size)
+            self._sent("zeros", size[0] * size[1] * 16)
+        return self._zeros[size]
+
+
+_current: GPUScene | None = None
+
+
+def peek_scene() -> GPUScene | None:
+    """The current scene if there is one (tests, reports), without making one."""
+    return _current
+
+
+def current_scene(snapshot=None) -> GPUScene:
+    """The session's ``GPUScene`` (one for F12, the operators, the viewport and probe bakes),
+    updated to ``snapshot`` when one is given. Dropped on file load and by ``release``."""
+    global _current
+    if _current is None:
+        _current = GPUScene()
+        if _drop_on_load not in bpy.app.handlers.load_post:
+            bpy.app.handlers.load_post.append(_drop_on_load)
+    if snapshot is not None:
+        _current.update(snapshot)
+    return _current
+
+
+@bpy.app.handlers.persistent
+def _drop_on_load(*_args) -> None:
+    # What was uploaded belongs to the file it came from (docs/gi_pipeline.md "One file's
+    # state"): the next render builds the new file's scene.
+    global _current
+    _current = None
+
+
+def release() -> None:
+    """Drop the current scene's textures and the load handler (unregister, exit)."""
+    global _current
+    _current = None
+    if _drop_on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(_drop_on_load)
