@@ -5,7 +5,8 @@ direction) pair through the octree atlas with the preview's march (``cone_common
 (``shaders/probe_sh.glsl``) projects each probe's radiance on SH L2 — the port of
 ``voxgi_addon.probes.octree_bake.octree_probe_sh`` (the reference, tested equal within 1 %).
 ``bake_grid_from_octree``: the whole bake with that radiance stage (placement, validity and masks
-exact, as ever), the numpy reference when no GPU context can be had. Main thread only.
+exact, as ever, and the world's light straight at the probe too: ``probes.direct``), the numpy
+reference when no GPU context can be had. Main thread only.
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import numpy as np
 from ..blender.session import scene_session
 from ..blender.settings import cone_settings, gi_settings
 from ..voxgi_addon.gi.update import update_gi
+from ..voxgi_addon.gi.world_light import world_light
 from ..voxgi_addon.probes.bake import bake_probe_grid
 from ..voxgi_addon.probes.octree_bake import START_OFFSET, cone_half_angle, octree_probe_sh
 from . import gpu_context
@@ -66,11 +68,20 @@ def octree_state(context, scene, snapshot):
     return session.gi_state
 
 
+def octree_world(snapshot) -> np.ndarray:
+    """What an open cone of the octree bakes sees: nothing when the world is a light (its map
+    sheds light: the bake adds its light at the probe exactly, ``probes.bake.direct_probe_sh``),
+    else the world's colour × strength."""
+    if world_light(snapshot.world) is not None:
+        return np.zeros(3)
+    return np.asarray(snapshot.world.color, np.float64)[:3] * float(snapshot.world.strength)
+
+
 def octree_sh_function(context, scene, snapshot):
     """(sh_fn for ``bake_probe_grid``, 'GPU' or 'numpy')."""
     state = octree_state(context, scene, snapshot)
     cones = cone_settings(scene.voxgi)
-    world = np.asarray(snapshot.world.color, np.float64)[:3] * float(snapshot.world.strength)
+    world = octree_world(snapshot)
     ready, _ = gpu_context.ensure_gpu_context()
     if ready:
         from .gpu_volume import GPUVolume

@@ -2,11 +2,13 @@
 
 ``bake_probe_grid``: place the probes (``placement``), test and relocate them (``validity``),
 build the occlusion masks (``masks``), then give each probe the SH L2 projection (``sh``) of
-its incoming radiance along the bake's directions (``sh.sample_directions``, the same set for
-every probe, fixed by the seed). Radiance along a probe ray is one diffuse bounce of direct
-light, exactly as Cycles' ``Diffuse Indirect`` with one bounce sees it: the closest triangle hit
-(``scene.raycast``) shaded with Cycles' light models and shadow rays (``gi.direct_light``) ×
-albedo, plus emission; the world colour where the ray leaves the scene.
+its incoming radiance. Light off surfaces comes along the bake's directions
+(``sh.sample_directions``, the same set for every probe, fixed by the seed): one diffuse
+bounce of direct light, exactly as Cycles' ``Diffuse Indirect`` with one bounce sees it — the
+closest triangle hit (``scene.raycast``) shaded with Cycles' light models and shadow rays
+(``gi.direct_light``: lamps, the world, emissive triangles) × albedo. Light straight from the
+world and from the emissive surfaces comes by next-event estimation at the probe, combined
+with those directions by multiple importance sampling (``direct``).
 """
 from __future__ import annotations
 
@@ -18,13 +20,15 @@ import numpy as np
 from ..errors import VoxGICancelled, VoxGIError
 from ..gi.direct_light import diffuse_direct
 from ..scene.geometry import SceneTriangles, world_triangles
+from .direct import emissive_sides, emitter_probe_sh, world_probe_sh
 from .grid import DISABLED, RELOCATED, ProbeGrid
 from .masks import ALL_SUBVOLUMES, occlusion_masks
 from .placement import place_probes, scene_box
 from .sh import project, sample_directions
 from .validity import relocate_probes
 
-__all__ = ["ProbeSettings", "BakeResult", "bake_probe_grid", "hit_radiance", "material_colours"]
+__all__ = ["ProbeSettings", "BakeResult", "bake_probe_grid", "hit_radiance", "material_colours",
+           "direct_probe_sh"]
 
 _PROBE_CHUNK = 32  # probes whose rays are shaded together (progress and cancel granularity)
 
@@ -36,7 +40,10 @@ class ProbeSettings:
     occlusion masks and the front-facing share they require (eq. 3.1). validity_threshold :
     back-face share above which a probe is invalid; relocate : move invalid probes out
     (else they are disabled). light_samples : shadow rays per hit for lights with an extent
-    (one stratified ray is enough: the SH projection averages the probe's hundreds of hits)."""
+    (one stratified ray is enough: the SH projection averages the probe's hundreds of hits).
+    direct_samples : rays per probe drawn by the world map's importance, and as many points
+    drawn on the emissive triangles by power, for the light arriving straight from them
+    (``direct``; rounded up to a square)."""
 
     resolution: int | tuple[int, int, int] = 8
     directions: int = 256
@@ -46,6 +53,7 @@ class ProbeSettings:
     validity_threshold: float = 0.25
     relocate: bool = True
     light_samples: int = 1
+    direct_samples: int = 64
 
 
 @dataclass
@@ -65,11 +73,14 @@ def material_colours(snapshot) -> tuple[np.ndarray, np.ndarray]:
 
 
 def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
-                 light_samples: int = 4, seed: int = 0) -> np.ndarray:
+                 light_samples: int = 4, seed: int = 0, seen_world: bool = True,
+                 seen_emission: bool = True) -> np.ndarray:
     """(N, 3) radiance arriving along rays: one diffuse bounce of direct light at the hit (every
     light: lamps, the world, emissive triangles — ``world_light.scene_lights``) plus its
     emission, or for a miss (tri = -1) the world in that direction (its map; its colour when it
-    has none). Hits are shaded on the side the ray came from."""
+    has none). Hits are shaded on the side the ray came from. ``seen_world`` / ``seen_emission``
+    False leave out the world's map on a miss / the emission of a hit (the bake estimates those
+    by next-event estimation at the probe, ``direct``)."""
     from ..gi.world_light import scene_lights, world_light, world_radiance
 
     dirs = np.asarray(dirs, np.float64).reshape(-1, 3)
@@ -78,7 +89,7 @@ def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
     sky = world_light(snapshot.world)
     miss = np.flatnonzero(tri < 0)
     if sky is not None and len(miss):
-        out[miss] = world_radiance(sky, dirs[miss])
+        out[miss] = world_radiance(sky, dirs[miss]) if seen_world else 0.0
     elif getattr(snapshot.world, "radiance", None) is not None:
         out[miss] = 0.0  # a map with no light in it
     hit = np.flatnonzero(tri >= 0)
@@ -102,8 +113,34 @@ def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
     m = len(snapshot.materials)
     mat = np.asarray(tris.materials, np.int64)[k]
     mat = np.where((mat >= 0) & (mat < m), mat, m)
-    out[hit] = albedo[mat] * direct + emission[mat]
+    out[hit] = albedo[mat] * direct + (emission[mat] if seen_emission else 0.0)
     return out
+
+
+def direct_probe_sh(snapshot, tris: SceneTriangles, positions, directions, rays,
+                    samples: int = 64, seed: int = 0, world: bool = True,
+                    emitters: bool = True) -> tuple[np.ndarray, bool, bool]:
+    """((P, 9, 3) SH of the light arriving at each probe straight from the world and/or the
+    emissive triangles (``direct``), whether the world was, whether the emitters were estimated
+    so: each only when it is a light of ``world_light.scene_lights`` (a world with a map that
+    sheds light; at most ``emitters.MAX_EMITTER_TRIANGLES`` emissive triangles), else the
+    uniform rays keep seeing it. rays : ``validity.ProbeRays`` of ``directions`` from
+    ``positions``; the probes' sample ids are their indices."""
+    from ..gi.world_light import scene_lights
+
+    _, emission = material_colours(snapshot)
+    lights = scene_lights(snapshot, tris, emission)
+    sky = next((light for light in lights if light.type == "WORLD"), None) if world else None
+    glow = next((light for light in lights if light.type == "EMITTERS"), None) if emitters else None
+    out = np.zeros((len(positions), 9, 3))
+    ids = np.arange(len(positions), dtype=np.uint32)
+    if sky is not None:
+        out += world_probe_sh(tris, sky, positions, directions, rays.triangle, ids, samples, seed)
+    if glow is not None:
+        radiance, sides = emissive_sides(tris, emission)
+        out += emitter_probe_sh(tris, glow, positions, directions, rays, radiance, sides, ids,
+                                samples, seed)
+    return out, sky is not None, glow is not None
 
 
 def _box(tris, box):
@@ -122,7 +159,9 @@ def bake_probe_grid(snapshot, settings: ProbeSettings = ProbeSettings(), box=Non
     cancel : callable returning True to stop (raises ``VoxGICancelled``); progress : callable
     taking the finished share in [0, 1]. sh_fn : ``sh_fn(positions (P, 3), directions (N, 3))``
     → (P, 9, 3) replaces the exact radiance stage (the octree bakes, ``octree_bake`` and
-    ``render/gpu_probes.py``); placement, validity and masks stay exact.
+    ``render/gpu_probes.py``); placement, validity, masks and the world's light straight at the
+    probe (``direct_probe_sh``) stay exact, so sh_fn leaves a world that is a light out
+    (``octree_world``).
     """
     if settings.directions < 9:
         raise VoxGIError(f"a probe needs at least 9 directions for SH L2, got {settings.directions}")
@@ -158,9 +197,16 @@ def bake_probe_grid(snapshot, settings: ProbeSettings = ProbeSettings(), box=Non
 
     t0 = time.perf_counter()
     p_count, n = len(positions), len(dirs)
-    sh = np.zeros((p_count, 9, 3), np.float64)
+    # the octree bakes' voxels hold the emission (their cones see it): only the world there
+    sh, by_world, by_emitters = direct_probe_sh(snapshot, tris, positions, dirs, rays,
+                                                settings.direct_samples, settings.seed,
+                                                emitters=sh_fn is None)
+    timings["direct"] = time.perf_counter() - t0
+    check()
+
+    t0 = time.perf_counter()
     if sh_fn is not None:
-        sh[:] = sh_fn(positions, dirs)
+        sh += sh_fn(positions, dirs)
         p_count = 0  # nothing left for the exact stage
     for a in range(0, p_count, _PROBE_CHUNK):
         b = min(p_count, a + _PROBE_CHUNK)
@@ -168,8 +214,9 @@ def bake_probe_grid(snapshot, settings: ProbeSettings = ProbeSettings(), box=Non
         radiance = hit_radiance(snapshot, tris, origins, np.tile(dirs, (b - a, 1)),
                                 rays.t[a:b].ravel(), rays.triangle[a:b].ravel(),
                                 rays.u[a:b].ravel(), rays.v[a:b].ravel(),
-                                settings.light_samples, settings.seed + a)
-        sh[a:b] = project(radiance.reshape(b - a, n, 3), dirs)
+                                settings.light_samples, settings.seed + a,
+                                seen_world=not by_world, seen_emission=not by_emitters)
+        sh[a:b] += project(radiance.reshape(b - a, n, 3), dirs)
         if progress is not None:
             progress(b / p_count)
         check()
