@@ -3,6 +3,13 @@ shadow rays through the BVH (``shaders/bvh_direct.glsl``) or one soft-shadow con
 (``shaders/shadow.glsl``), and diffuse/AO and glossy light cone-traced through the octree
 (``gpu_tracer``, ``shaders/cone_*.glsl``). The numpy reference is ``voxgi_addon.preview``'s
 Fast path; ``gpu_preview.render_passes_gpu`` is the entry point that picks this or Accurate.
+
+Every light (docs/gi_pipeline.md "Fast quality: world and emission"): Diffuse Direct has the
+lamps, the world and the emissive triangles of ``world_light.scene_lights`` — with shadow rays
+as Accurate's (one more ``bvh_direct`` dispatch for the world and emitters), or with shadows
+"CONES" the world's visible share from the diffuse cone set (``diffuse_ao`` with
+sampling.w = 1) and one shadow cone per connected emitter; the glossy cones see the world
+where they leave the voxels (``GPUVolume`` packs the world's prefiltered maps).
 """
 from __future__ import annotations
 
@@ -11,12 +18,14 @@ import time
 import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
-from ..voxgi_addon.gi.cone_shadows import shadow_cone
-from ..voxgi_addon.preview.passes import compose_passes, direct_light, material_indices, material_table
+from ..voxgi_addon.gi.cone_shadows import cone_shadowed_direct, shadow_cone
+from ..voxgi_addon.gi.conetrace import world_mips
+from ..voxgi_addon.gi.world_light import scene_lights
+from ..voxgi_addon.preview.passes import compose_passes, material_indices, material_table
 from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
-from .gpu_bvh import direct_light_texture, shared_bvh
+from .gpu_bvh import direct_light_texture, scene_light_textures, shared_bvh
 from .gpu_tracer import dispatch, read_texture
 from .gpu_volume import GPUVolume
 
@@ -28,14 +37,15 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     timings = {}
     t0 = time.perf_counter()
     volume = volume or GPUVolume()
-    volume.update(gi_state.octree, cones)
+    volume.update(gi_state.octree, cones, world=world_mips(getattr(snapshot.world, "radiance", None)))
     timings["upload"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     tris = world_triangles(snapshot)
     if len(tris) == 0:
         raise VoxGIError("the scene has no triangles to render")
-    _, rough, _, _ = material_table(snapshot)
+    _, rough, _, emission = material_table(snapshot)
+    lights = scene_lights(snapshot, tris, emission)  # lamps, world, emissive triangles
     gbuffer = rasterize(tris, snapshot.camera, rough, width, height)
     seen = read_gbuffer(gbuffer)
     hit = np.flatnonzero(seen["hit"].ravel())
@@ -53,6 +63,16 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
         image = read_texture(dispatch("shadow", volume, gbuffer.inputs, width, height, constants))
         return np.flipud(image)[..., 0].ravel()[hit[lit]]
 
+    low_h, low_w = low_shape(height, width, gi_stride)
+
+    def traced(kernel, mode=0):
+        sampling = {"sampling": (gi_stride, width, height, mode)}
+        low = dispatch(kernel, volume, gbuffer.inputs, low_w, low_h, sampling)
+        if gi_stride > 1:  # shaders/upsample.glsl, the port of gi_upsample.upsample
+            low = dispatch("upsample", volume, {**gbuffer.inputs, "low_image": low}, width,
+                           height, sampling)
+        return np.flipud(read_texture(low))
+
     t0 = time.perf_counter()
     if shadows == "RAYS":
         bvh = shared_bvh().update(tris)  # rebuilt and uploaded only for changed triangles
@@ -66,22 +86,21 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
             direct += pixels(direct_light_texture(bvh, gbuffer.inputs, snapshot.lights,
                                                   light_samples, seed=gather_settings.seed,
                                                   only=index))
+        if len(lights) > len(snapshot.lights):  # the world's and emitters' own dispatch
+            extra = scene_light_textures(lights)
+            direct += pixels(direct_light_texture(bvh, gbuffer.inputs, snapshot.lights,
+                                                  light_samples, seed=gather_settings.seed,
+                                                  only=-1, world=extra["world_map"],
+                                                  emitters=extra["emitters"]))
     else:
-        direct = direct_light(None, p, n, snapshot.lights, tris, cones, light_samples, shadows,
-                              visibility)
+        world_seen = None
+        if any(light.type == "WORLD" for light in lights):  # the cones' view of the world
+            world_seen = traced("diffuse_ao", 1).reshape(-1, 4)[hit].astype(np.float64).__getitem__
+        direct = cone_shadowed_direct(None, p, n, lights, cones, light_samples, visibility,
+                                      world_seen).astype(np.float64)
     timings["direct"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    low_h, low_w = low_shape(height, width, gi_stride)
-    sampling = {"sampling": (gi_stride, width, height, 0)}
-
-    def traced(kernel):
-        low = dispatch(kernel, volume, gbuffer.inputs, low_w, low_h, sampling)
-        if gi_stride > 1:  # shaders/upsample.glsl, the port of gi_upsample.upsample
-            low = dispatch("upsample", volume, {**gbuffer.inputs, "low_image": low}, width,
-                           height, sampling)
-        return np.flipud(read_texture(low))
-
     diffuse_ao = traced("diffuse_ao")
     timings["diffuse+ao cones (GPU)"] = time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -65,7 +65,8 @@ float local_voxel_size(vec3 p)
 /* One level's sample for a cone along dir: premultiplied colour for the extinction alpha
  * (rgb), extinction alpha (.w) and the blended alpha (returned in blended). The colour weighs
  * each face by its share |d_a|·τ_a of the optical depth (svo_sampling.trilinear_directional). */
-vec4 sample_level(int level, vec3 p, vec3 dir, bool anisotropic, out float blended)
+vec4 sample_level_at(int level, vec3 p, vec3 dir, bool anisotropic, float zbase,
+                     out float blended)
 {
   vec4 win = g_levels[level];
   float node = g_root.w / exp2(float(level));
@@ -73,7 +74,7 @@ vec4 sample_level(int level, vec3 p, vec3 dir, bool anisotropic, out float blend
   /* Texel coordinates within the level's blocks, kept inside their zero border. */
   vec3 t = clamp((p - g_root.xyz) / node - win.xyz + 1.0, 0.0, win.w + 2.0);
   vec3 scale = vec3(1.0 / (7.0 * pad), 1.0 / pad, 1.0 / g_atlas.y);
-  t.z += g_slabs[level];
+  t.z += g_slabs[level] + zbase;
   if (!anisotropic) {
     vec4 v = textureLod(atlas, (t + vec3(6.0 * pad, 0.0, 0.0)) * scale, 0.0);
     blended = v.w;
@@ -99,22 +100,105 @@ vec4 sample_level(int level, vec3 p, vec3 dir, bool anisotropic, out float blend
   return vec4(colour * (alpha / max(optical_depth, 1e-12)), alpha);
 }
 
-/* Levels floor(level) and floor(level) + 1 blended linearly (svo_sampling.sample_levels). */
-vec4 sample_volume(float level, vec3 p, vec3 dir, bool anisotropic, out float blended)
+vec4 sample_level(int level, vec3 p, vec3 dir, bool anisotropic, out float blended)
+{
+  return sample_level_at(level, p, dir, anisotropic, 0.0, blended);
+}
+
+/* Light cones of Diffuse Indirect set this: their samples' colour loses the emission octree's
+ * (the atlas' copy of VoxelOctree.emission from z = g_atlas.z on, when g_atlas.z > 0), as
+ * conetrace.march_cones' subtract does. */
+bool g_subtract_emission = false;
+
+/* Levels floor(level) and floor(level) + 1 blended linearly (svo_sampling.sample_levels),
+ * from the slabs starting at zbase. */
+vec4 sample_volume_at(float level, vec3 p, vec3 dir, bool anisotropic, float zbase,
+                      out float blended)
 {
   int depth = int(g_shape.x);
   float lev = clamp(level, 0.0, float(depth));
   int lo = int(floor(lev));
   float t = lev - float(lo);
-  vec4 v = sample_level(lo, p, dir, anisotropic, blended);
+  vec4 v = sample_level_at(lo, p, dir, anisotropic, zbase, blended);
   if (t > 0.0) {
     float blended_hi;
-    vec4 hi = sample_level(min(lo + 1, depth), p, dir, anisotropic, blended_hi);
+    vec4 hi = sample_level_at(min(lo + 1, depth), p, dir, anisotropic, zbase, blended_hi);
     v = mix(v, hi, t);
     blended = mix(blended, blended_hi, t);
   }
   return v;
 }
+
+vec4 sample_volume(float level, vec3 p, vec3 dir, bool anisotropic, out float blended)
+{
+  vec4 v = sample_volume_at(level, p, dir, anisotropic, 0.0, blended);
+  if (g_subtract_emission && g_atlas.z > 0.0 && v.w > 1e-6) {  /* emission is premultiplied */
+    float unused;
+    vec4 e = sample_volume_at(level, p, dir, anisotropic, g_atlas.z, unused);
+    v.rgb = max(v.rgb - e.rgb, vec3(0.0));
+  }
+  return v;
+}
+
+/* ---- The world seen by cones that leave the voxels (conetrace.WorldMips), packed after the
+ * parameter rows by volume_textures.world_mip_rows: the last texel = (count, 0, 0, -1), the
+ * count texels before it = (first texel, rows H) of each map (W = 2H), finest first. */
+int g_world_header = -1;
+
+void load_world()
+{
+  int width = textureSize(params, 0).x;
+  g_world_header = param(width - 1).w < -0.5 ? width - 1 : -1;
+}
+
+vec3 world_bilinear(int first, int rows, vec3 d)
+{
+  int cols = 2 * rows;
+  float len = length(d);
+  float z = len > 0.0 ? d.z / len : 0.0;
+  float el = asin(clamp(z, -1.0, 1.0));
+  float phi = (d.x == 0.0 && d.y == 0.0) ? 0.0 : atan(d.y, d.x);
+  float y = clamp((1.5707963267948966 - el) * float(rows) / 3.141592653589793 - 0.5, 0.0,
+                  float(rows) - 1.0);
+  float x = (phi + 3.141592653589793) * float(cols) / 6.283185307179586 - 0.5;
+  int y0 = min(int(floor(y)), rows - 1);
+  int y1 = min(y0 + 1, rows - 1);
+  float fy = y - float(y0);
+  float x0f = floor(x);
+  float fx = x - x0f;
+  int x0 = ((int(x0f) % cols) + cols) % cols;
+  int x1 = (x0 + 1) % cols;
+  vec3 top = param(first + y0 * cols + x0).rgb * (1.0 - fx) + param(first + y0 * cols + x1).rgb * fx;
+  vec3 bottom = param(first + y1 * cols + x0).rgb * (1.0 - fx) + param(first + y1 * cols + x1).rgb * fx;
+  return top * (1.0 - fy) + bottom * fy;
+}
+
+/* Radiance of the world along unit d for a cone of half-angle half_angle (radians): the map
+ * whose rows are as wide as the cone (conetrace.world_mip_level), bilinear, the two nearest
+ * blended; 0 without a world. */
+vec3 world_radiance(vec3 d, float half_angle)
+{
+  if (g_world_header < 0) {
+    return vec3(0.0);
+  }
+  int count = int(param(g_world_header).x);
+  vec4 base = param(g_world_header - count);
+  float width = 2.0 * max(half_angle, 1e-6);
+  float level = clamp(log2(base.y * width / 3.141592653589793), 0.0, float(count - 1));
+  int lo = int(floor(level));
+  float t = level - float(lo);
+  vec4 mip = param(g_world_header - count + lo);
+  vec3 value = world_bilinear(int(mip.x), int(mip.y), d);
+  if (lo + 1 < count) {
+    vec4 upper = param(g_world_header - count + lo + 1);
+    value = value * (1.0 - t) + world_bilinear(int(upper.x), int(upper.y), d) * t;
+  }
+  return value;
+}
+
+/* Light cones that only need their transmittance (the world's visibility) skip the finer
+ * level's colour. */
+bool g_want_colour = true;
 
 /* Scale alpha by opacity_scale (clamped to 1), premultiplied colour alike. */
 vec4 scale_opacity(vec4 v, float scale)
@@ -167,7 +251,7 @@ void march(vec3 origin, vec3 dir, float tan_half, float local, float light_dista
     /* Light: the colour from radiance_detail levels finer where that level holds the
      * occluders this one sees (conetrace.march_cones). */
     float fine = min(level + g_settings3.x, finest);
-    if (on_light && v.w > 1e-6 && fine > level) {
+    if (on_light && g_want_colour && v.w > 1e-6 && fine > level) {
       float unused;
       vec4 f = sample_volume(fine, p, dir, anisotropic, unused);
       float m = min(f.w / v.w, 1.0);

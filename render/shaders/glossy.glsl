@@ -1,5 +1,6 @@
 /* Glossy indirect (rgb) per traced pixel (conetrace.trace_glossy): one cone along the mirror
- * direction of the view ray, its half-angle from the roughness (gbuffer_normal.w). One
+ * direction of the view ray, its half-angle from the roughness (gbuffer_normal.w); it sees the
+ * voxels' emission, and the world (its remaining transmittance × world_radiance). One
  * invocation per low-resolution cell, as diffuse_ao.glsl (sampling = stride, full size). */
 void main()
 {
@@ -28,5 +29,7 @@ void main()
   float alpha_light, alpha_occlusion;
   march(origin, reflected, tan(half_angle), local_voxel_size(origin), s1.x, 0.0, 0.0, false, n, 0.0,
         radiance, alpha_light, alpha_occlusion);
+  load_world();
+  radiance += (1.0 - alpha_light) * world_radiance(reflected, half_angle);
   imageStore(out_image, cell, vec4(s2.z * radiance, 1.0));
 }

@@ -1,5 +1,6 @@
 /* Soft-shadow visibility of one light per pixel (conetrace.trace_shadow): one cone from the
- * lifted surface point to the light, wide enough to cover its radius; out = (1 − occlusion).
+ * lifted surface point to the light, wide enough to cover its radius, its samples no wider
+ * than 2/3 of their height above the surface; out = (1 − occlusion).
  * light_position.xyz: a point light's centre, or the direction towards a sun (w = 1);
  * light_size.x: the light's radius in metres, or for a sun the tangent of its half-angle. */
 void main()
@@ -16,7 +17,8 @@ void main()
   }
   vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
   vec4 s1 = param(ROW_SETTINGS + 1);
-  vec3 origin = position.xyz + n * (s1.z * local_voxel_size(position.xyz));
+  float height = s1.z * local_voxel_size(position.xyz);
+  vec3 origin = position.xyz + n * height;
   vec3 target = light_position.xyz;
   float radius = max(light_size.x, 1e-3);
   if (light_position.w > 0.5) {  /* a sun: a point max_distance away in its direction */
@@ -32,7 +34,8 @@ void main()
   float reach = max(dist - max(radius, 2.0 * local_voxel_size(target)), 0.0);
   vec3 radiance;
   float alpha_light, alpha_occlusion;
-  march(origin, axis, tan_half, local_voxel_size(origin), 0.0, reach, 0.0, false, n, 0.0,
+  /* no sample reads nodes wider than 2/3 of its height above the surface (as diffuse_ao) */
+  march(origin, axis, tan_half, local_voxel_size(origin), 0.0, reach, 0.0, true, n, height,
         radiance, alpha_light, alpha_occlusion);
   imageStore(out_image, px, vec4(1.0 - alpha_occlusion));
 }

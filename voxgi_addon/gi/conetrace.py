@@ -15,6 +15,14 @@ what lies behind a sample a little more than its coverage (``ConeSettings.radian
 ``transmittance_exponent``): a 2 cm wall in 7 cm voxels passes 1.3% of the lit side's light.
 Outputs are in Cycles' pass units: diffuse indirect = indirect irradiance / π (light without
 albedo), AO = the cosine-weighted unoccluded fraction within the AO distance.
+
+The world and emission (docs/gi_pipeline.md "Fast quality: world and emission"): voxels hold
+their emission in their radiance (``light_injection``) and the octree keeps it apart as well
+(``VoxelOctree.emission``). Glossy cones see it, and where they leave the voxels they see the
+world (``WorldMips``: the remaining transmittance × the map prefiltered at the cone's aperture).
+Diffuse cones give Diffuse Indirect, the light of one bounce: they subtract the emission and
+add no world, both of which a surface sees as direct light (Fast's Diffuse Direct has them);
+``trace_world_visibility`` gives what the same cones see of the world, for shadows by cones.
 """
 from __future__ import annotations
 
@@ -23,6 +31,64 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+
+from ..scene.equirect import box_downsample, sample_bilinear
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+WORLD_MIP_HEIGHT = 64   # rows of the finest prefiltered world map (columns: twice that)
+WORLD_MIP_LAST = 2      # rows of the coarsest
+
+
+@dataclass(frozen=True, eq=False)
+class WorldMips:
+    """The world map box-filtered into a chain of equirect maps, what a cone that leaves the
+    voxels sees: ``maps[k]`` is (H_k, 2·H_k, 3) float32, H_0 ≤ WORLD_MIP_HEIGHT (the map's own
+    rows when fewer), each the 2 × 2 box average of the one before, down to WORLD_MIP_LAST rows.
+    ``radiance`` reads the map whose pixels are as wide as the cone (rows π / H_k ≈ the
+    cone's diameter), bilinearly, blending the two nearest maps (``cone_common.glsl``
+    world_radiance does the same in float32)."""
+
+    maps: tuple
+
+    def radiance(self, dirs, half_angle) -> np.ndarray:
+        """(N, 3) float64 radiance seen along unit ``dirs`` (N, 3) by cones of ``half_angle``
+        (radians, scalar or (N,))."""
+        dirs = np.asarray(dirs, np.float64).reshape(-1, 3)
+        level = world_mip_level(len(self.maps[0]), len(self.maps), half_angle)
+        level = np.broadcast_to(level, (len(dirs),))
+        low = np.floor(level).astype(np.int64)
+        t = (level - low)[:, None]
+        out = np.zeros((len(dirs), 3))
+        for k in np.unique(low):
+            rows = np.flatnonzero(low == k)
+            value = sample_bilinear(self.maps[k], dirs[rows]).astype(np.float64)
+            if k + 1 < len(self.maps):
+                upper = sample_bilinear(self.maps[k + 1], dirs[rows]).astype(np.float64)
+                value = value * (1.0 - t[rows]) + upper * t[rows]
+            out[rows] = value
+        return out
+
+
+def world_mip_level(base_rows: int, count: int, half_angle) -> np.ndarray:
+    """Continuous map index in [0, count − 1] for cones of ``half_angle`` (radians): the map
+    whose rows (π / H) are as wide as the cone's diameter, log2(base_rows · 2·half / π)."""
+    width = 2.0 * np.maximum(np.asarray(half_angle, np.float64), 1e-6)
+    return np.clip(np.log2(base_rows * width / math.pi), 0.0, count - 1.0)
+
+
+def world_mips(radiance) -> WorldMips | None:
+    """The ``WorldMips`` of an (H, W, 3) world map (``WorldData.radiance``; None or black:
+    None). Values are float32 and non-negative, as the GPU table holds them."""
+    if radiance is None:
+        return None
+    image = np.maximum(np.nan_to_num(np.asarray(radiance, np.float32), nan=0.0, posinf=0.0,
+                                     neginf=0.0), 0.0)
+    if not image.max() > 0:
+        return None
+    maps = [box_downsample(image, WORLD_MIP_HEIGHT)]
+    while len(maps[-1]) > WORLD_MIP_LAST:
+        maps.append(box_downsample(maps[-1], max(len(maps[-1]) // 2, WORLD_MIP_LAST)))
+    return WorldMips(tuple(np.ascontiguousarray(m, np.float32) for m in maps))
 
 
 class ConeVolume(Protocol):
@@ -139,7 +205,7 @@ def diffuse_cone_set(count: int, half_angle: float) -> tuple[np.ndarray, np.ndar
 def march_cones(volume: ConeVolume, origins, dirs, half_angle, max_distance, *, falloff=0.0,
                 sample_factor=1.0, start_offset=2.0, opacity_scale=1.0, want_light=True,
                 surface_normals=None, start_height=None, anisotropic=True, radiance_detail=0.0,
-                transmittance_exponent=1.0):
+                transmittance_exponent=1.0, subtract=None):
     """March N cones front to back.
 
     origins, dirs : (N, 3) world points (already off the surface) and unit axes.
@@ -154,6 +220,9 @@ def march_cones(volume: ConeVolume, origins, dirs, half_angle, max_distance, *, 
         c = m·(α_s/α_f)·c_f + (1 − m)·c_s, m = min(α_f/α_s, 1): the finer colour where the
         finer level holds the occluders the coarse one sees, the coarse colour where it falls
         between them (empty fine nodes have no colour to give).
+    subtract : a volume of the same nodes and occlusion (``VoxelOctree.emission``) whose
+        premultiplied colour is taken off each light sample, at the same point and level,
+        before the finer level's colour is mixed in (the colour is linear in it), floored at 0.
     Returns radiance (N, 3) float64 (premultiplied, composited) and occlusion α (N,) in [0, 1].
     """
     n = len(origins)
@@ -183,20 +252,28 @@ def march_cones(volume: ConeVolume, origins, dirs, half_angle, max_distance, *, 
             level = np.maximum(level, np.ceil(volume.depth - np.log2(widest / leaf) - 1e-9))
         finest = volume.finest_level_at(p).astype(np.float64)
         level = np.clip(level, 0.0, finest)
-        if directional:
-            # Light cones see thin walls as opaque from any angle; AO keeps the plain blend
-            # (measured closer to Cycles' AO on the Cornell box: 0.13 vs 0.19 relative L1).
-            c_s, a_s = volume.sample_directional(p, level, dirs[active], extinction=want_light)
-        else:
-            c_s, a_s = volume.sample(p, level)
+        def colour(source, points, levels, axes, extinction=True):
+            if directional:
+                return source.sample_directional(points, levels, axes, extinction=extinction)
+            return source.sample(points, levels)
+
+        # Light cones see thin walls as opaque from any angle; AO keeps the plain blend
+        # (measured closer to Cycles' AO on the Cornell box: 0.13 vs 0.19 relative L1).
+        c_s, a_s = colour(volume, p, level, dirs[active], want_light)
+        if want_light and subtract is not None:  # (empty samples have no emission to lose)
+            full = np.flatnonzero(a_s > 1e-6)
+            c_s[full] = np.maximum(c_s[full] - colour(subtract, p[full], level[full],
+                                                      dirs[active][full])[0], 0.0)
         if want_light and radiance_detail > 0:
             fine = np.minimum(level + radiance_detail, finest)
             need = np.flatnonzero((a_s > 1e-6) & (fine > level))  # empty samples have no colour
             if len(need):
-                if directional:
-                    c_f, a_f = volume.sample_directional(p[need], fine[need], dirs[active][need])
-                else:
-                    c_f, a_f = volume.sample(p[need], fine[need])
+                c_f, a_f = colour(volume, p[need], fine[need], dirs[active][need])
+                full = np.flatnonzero(a_f > 1e-6)
+                if subtract is not None and len(full):
+                    c_f[full] = np.maximum(c_f[full] - colour(
+                        subtract, p[need][full], fine[need][full], dirs[active][need][full])[0],
+                        0.0)
                 a_c = a_s[need]
                 m = np.minimum(a_f / a_c, 1.0)
                 c_s[need] = ((m * a_c / np.maximum(a_f, 1e-12))[:, None] * c_f
@@ -235,6 +312,8 @@ def trace_diffuse_and_ao(volume: ConeVolume, points, normals, settings: ConeSett
     """Diffuse indirect light (N, 3) and AO (N,) from the same cone set around each normal.
 
     AO reuses the cones' occlusion within ``ao_distance``; diffuse uses ``max_distance``.
+    Diffuse is the light of one bounce: the volume's emission (``VoxelOctree.emission``) is
+    subtracted and the world is not added (a surface sees both directly: Diffuse Direct).
     """
     n = len(points)
     half = math.radians(settings.cone_angle)
@@ -252,7 +331,8 @@ def trace_diffuse_and_ao(volume: ConeVolume, points, normals, settings: ConeSett
                                surface_normals=normals, start_height=height,
                                anisotropic=settings.anisotropic,
                                radiance_detail=settings.radiance_detail,
-                               transmittance_exponent=settings.transmittance_exponent)
+                               transmittance_exponent=settings.transmittance_exponent,
+                               subtract=getattr(volume, "emission", None))
         _, occ = march_cones(volume, origins, axis, half, settings.ao_distance,
                              falloff=settings.ao_falloff, sample_factor=settings.sample_factor,
                              start_offset=0.0, opacity_scale=settings.opacity_scale,
@@ -270,17 +350,52 @@ def glossy_half_angle(roughness: np.ndarray) -> np.ndarray:
     return np.clip(np.arctan(r * r * 1.5), math.radians(1.0), math.radians(60.0))
 
 
-def trace_glossy(volume: ConeVolume, points, normals, view_dirs, roughness, settings: ConeSettings):
-    """One cone along the mirror direction of ``view_dirs`` (unit, camera → point): (N, 3)."""
+def trace_world_visibility(volume: ConeVolume, points, normals, settings: ConeSettings,
+                           world: WorldMips) -> np.ndarray:
+    """(N, 4) float32 what the diffuse cone set sees of the world: rgb = Σ_k w_k T_k L_k and
+    a = Σ_k w_k lum(L_k), with T_k the transmittance left at the end of cone k's light march
+    (as ``trace_diffuse_and_ao`` marches it) and L_k the world prefiltered at the cone's
+    aperture in its direction (``WorldMips``). lum(rgb) / a is the world's cosine-weighted
+    visible share (``cone_shadows``: the world's Diffuse Direct with shadows by cones); under a
+    uniform world of radiance L with nothing in the way rgb = L."""
+    half = math.radians(settings.cone_angle)
+    local, weights = diffuse_cone_set(settings.diffuse_cones, half)
+    t, s = _tangent_frame(normals)
+    origins = offset_origins(points, normals, volume, settings.start_offset)
+    height = settings.start_offset * local_voxel_size(volume, points)
+    out = np.zeros((len(points), 4))
+    for (lx, ly, lz), w in zip(local, weights):
+        axis = t * lx + s * ly + normals * lz
+        _, alpha = march_cones(volume, origins, axis, half, settings.max_distance,
+                               falloff=settings.falloff, sample_factor=settings.sample_factor,
+                               start_offset=0.0, opacity_scale=settings.opacity_scale,
+                               surface_normals=normals, start_height=height,
+                               anisotropic=settings.anisotropic,
+                               radiance_detail=0.0,
+                               transmittance_exponent=settings.transmittance_exponent)
+        sky = world.radiance(axis, half)
+        out[:, :3] += w * (1.0 - alpha)[:, None] * sky
+        out[:, 3] += w * (sky @ LUMINANCE)
+    return out.astype(np.float32)
+
+
+def trace_glossy(volume: ConeVolume, points, normals, view_dirs, roughness, settings: ConeSettings,
+                 world: WorldMips | None = None):
+    """One cone along the mirror direction of ``view_dirs`` (unit, camera → point): (N, 3).
+    The cone sees the voxels' emission, and with ``world`` the world where it leaves the voxels
+    (its remaining transmittance × the map prefiltered at its aperture)."""
     reflect = view_dirs - 2.0 * (view_dirs * normals).sum(axis=1, keepdims=True) * normals
     origins = offset_origins(points, normals, volume, settings.start_offset)
-    light, _ = march_cones(volume, origins, reflect, glossy_half_angle(roughness),
+    half = glossy_half_angle(roughness)
+    light, alpha = march_cones(volume, origins, reflect, half,
                            settings.max_distance, falloff=settings.falloff,
                            sample_factor=settings.sample_factor, start_offset=0.0,
                            opacity_scale=settings.opacity_scale,
                            anisotropic=settings.anisotropic,
                            radiance_detail=settings.radiance_detail,
                            transmittance_exponent=settings.transmittance_exponent)
+    if world is not None:
+        light = light + (1.0 - alpha)[:, None] * world.radiance(reflect, half)
     return (settings.gi_intensity * light).astype(np.float32)
 
 
@@ -290,9 +405,13 @@ def trace_shadow(volume: ConeVolume, points, normals, light_positions, light_rad
 
     The cone's half-angle covers the light's radius as seen from the point, and it stops
     short of the light by the larger of that radius and 2 voxels there, so the surface a light
-    is mounted on (an area light under a ceiling) does not shadow it.
+    is mounted on (an area light under a ceiling) does not shadow it. Like the diffuse cones,
+    a sample never reads nodes wider than 2/3 of its height above the surface it leaves, so a
+    wide cone to a near light (an emissive panel overhead) does not read that surface's own
+    voxels as a shadow.
     """
     origins = offset_origins(points, normals, volume, settings.start_offset)
+    height = settings.start_offset * local_voxel_size(volume, points)
     to_light = light_positions - origins
     dist = np.linalg.norm(to_light, axis=1)
     axis = to_light / np.maximum(dist, 1e-12)[:, None]
@@ -302,5 +421,6 @@ def trace_shadow(volume: ConeVolume, points, normals, light_positions, light_rad
     _, occ = march_cones(volume, origins, axis, half, np.maximum(dist - short, 0.0),
                          sample_factor=settings.sample_factor,
                          start_offset=0.0, opacity_scale=settings.opacity_scale, want_light=False,
+                         surface_normals=normals, start_height=height,
                          anisotropic=settings.anisotropic)
     return (1.0 - occ).astype(np.float32)

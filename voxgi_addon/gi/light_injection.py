@@ -1,10 +1,20 @@
 """Direct light injected into cascade voxels (Yalçıner 2016 4.5, "inject" step).
 
-Each voxel's outgoing diffuse radiance = albedo × (Diffuse Direct + world ambient), in Cycles'
-units (``direct_light`` holds the light models; shadows march through the voxel occupancy
-instead of the triangles). The octree then averages it upward.
+Each voxel's outgoing radiance = albedo × (Diffuse Direct + world ambient) + emission, in
+Cycles' units (``direct_light`` holds the light models; shadows march through the voxel
+occupancy instead of the triangles). The lights are every light of the scene: the lamps, the
+world map (``world_light``) and the emissive triangles (``emitters``; their shadow rays' plain
+estimate, as at the Accurate gathers' bounce hits). The emission is the material's Emission
+Color × Strength of the emissive triangles that cross the voxel, weighted by how much of the
+voxel they cover (``voxel_emission``). The octree then averages it upward.
+
+``inject_direct_light`` returns the radiance as an ``InjectedRadiance`` list whose
+``emission`` holds the emission part alone, so that ``svo.build_octree`` can keep an emission
+octree beside the radiance one (docs/gi_pipeline.md "Fast quality: world and emission").
 """
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -13,6 +23,16 @@ from .voxel_shadows import CascadeOccupancy
 
 # Shadow rays start this many voxels off the surface so a voxel does not shadow itself.
 SHADOW_START_VOXELS = 1.5
+# Shadow rays to a point on an emissive triangle stop this many voxels (at the point) short of
+# it: the emitter's own voxels must not shadow it.
+EMITTER_STOP_VOXELS = 2.0
+
+
+class InjectedRadiance(list):
+    """Per cascade (N_i, 3) float32 outgoing radiance (emission included), with ``emission``:
+    per cascade the (N_i, 3) float32 emission part (None when nothing emits)."""
+
+    emission: list | None = None
 
 
 def voxel_centres(cascade) -> np.ndarray:
@@ -21,13 +41,90 @@ def voxel_centres(cascade) -> np.ndarray:
     return np.asarray(g.origin, np.float64) + (np.asarray(cascade.cells, np.float64) + 0.5) * g.span
 
 
-def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None = None,
-                        samples: int = 4) -> list[np.ndarray]:
-    """Outgoing radiance (N_i, 3) float32 of every cascade's voxels.
+def material_emission(snapshot) -> np.ndarray:
+    """(M + 1, 3) float64 Emission Color × Strength per material, the last row (no material) 0;
+    non-finite or negative values count as 0."""
+    rows = [np.asarray(m.emission, np.float64)[:3] for m in snapshot.materials] + [np.zeros(3)]
+    return np.maximum(np.nan_to_num(np.array(rows, np.float64).reshape(-1, 3)), 0.0)
 
-    cascades : list of CascadeVoxels (finest first); snapshot : for lights and world.
+
+def emissive_triangles(tris, emission) -> tuple[np.ndarray, np.ndarray]:
+    """(corners (E, 3, 3), radiance (E, 3)) of the triangles of ``tris`` (``SceneTriangles``)
+    whose material emits (``emission`` per material as ``material_emission``)."""
+    last = len(emission) - 1
+    materials = np.asarray(tris.materials)
+    materials = np.where((materials >= 0) & (materials < last), materials, last)
+    radiance = emission[materials]
+    keep = radiance.max(axis=1) > 0 if len(radiance) else np.zeros(0, bool)
+    return np.asarray(tris.positions, np.float64)[keep], radiance[keep]
+
+
+def voxel_emission(cascades, corners, radiance) -> list[np.ndarray]:
+    """Per cascade, the (N_i, 3) float32 emission of its voxels: Σ over the emissive triangles
+    (``corners`` (E, 3, 3) world, ``radiance`` (E, 3)) that cross the voxel of radiance × the
+    area of the triangle inside the voxel / span², the covered share capped at 1 (a triangle
+    crossing the whole voxel covers it, as the octree's occlusion reads such a voxel as
+    opaque; a voxel the triangle only grazes glows in proportion). Voxels the cascade does not
+    hold get nothing."""
+    from ..voxelize.attributes import clip_pairs
+    from ..voxelize.surface import voxelize_triangles
+
+    out = []
+    for cv in cascades:
+        value = np.zeros((cv.voxel_count, 3), np.float64)
+        if len(corners) and cv.voxel_count:
+            g = cv.grid
+            local = (np.asarray(corners, np.float64) - np.asarray(g.origin, np.float64)).reshape(-1, 3)
+            triangles = np.arange(len(local)).reshape(-1, 3)
+            surface = voxelize_triangles(local, triangles, float(g.span))
+            # the voxelizer's cells are the cascade's cells (its lattice offset is 2⁻¹⁶ voxel)
+            area, _ = clip_pairs(surface, local, triangles)
+            area = np.nan_to_num(area, nan=0.0)
+            cells = surface.cells.astype(np.int64)
+            res = int(g.resolution)
+            inside = ((cells >= 0) & (cells < res)).all(axis=1)
+            key = (cells[:, 0] * res + cells[:, 1]) * res + cells[:, 2]
+            own = np.asarray(cv.cells, np.int64)
+            own_key = (own[:, 0] * res + own[:, 1]) * res + own[:, 2]
+            order = np.argsort(own_key)
+            at = np.clip(np.searchsorted(own_key[order], key), 0, len(own_key) - 1)
+            row = np.where(inside & (own_key[order][at] == key), order[at], -1)
+            pair_row = row[surface.cell_of_pair]
+            used = pair_row >= 0
+            glow = np.zeros((cv.voxel_count, 3))
+            cover = np.zeros(cv.voxel_count)
+            np.add.at(glow, pair_row[used], area[used, None] * radiance[surface.triangle_of_pair[used]])
+            np.add.at(cover, pair_row[used], area[used])
+            value = glow / np.maximum(cover, 1.0)[:, None]
+        out.append(value.astype(np.float32))
+    return out
+
+
+class _StopShort:
+    """An occluder that ends each finite shadow ray EMITTER_STOP_VOXELS voxels before its end
+    (rays to points on emissive triangles, whose own voxels would block them)."""
+
+    def __init__(self, occupancy: CascadeOccupancy):
+        self.occupancy = occupancy
+
+    def occluded(self, origins, dirs, max_t):
+        max_t = np.broadcast_to(np.asarray(max_t, np.float64), (len(origins),))
+        finite = np.isfinite(max_t)
+        ends = origins + dirs * np.where(finite, max_t, 0.0)[:, None]
+        span = self.occupancy.local_span(ends)
+        short = np.where(finite & np.isfinite(span), max_t - EMITTER_STOP_VOXELS * span, max_t)
+        return self.occupancy.occluded(origins, dirs, short)
+
+
+def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None = None,
+                        samples: int = 4) -> InjectedRadiance:
+    """Outgoing radiance (N_i, 3) float32 of every cascade's voxels (``InjectedRadiance``).
+
+    cascades : list of CascadeVoxels (finest first); snapshot : for lights, world, materials.
     occupancy : shadow casters (defaults to the cascades' own voxels).
     """
+    from ..scene.geometry import world_triangles
+    from .emitters import emitter_light
     from .world_light import scene_lights
 
     occupancy = occupancy or CascadeOccupancy(cascades)
@@ -36,8 +133,18 @@ def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None =
     lights = scene_lights(snapshot)
     ambient = np.zeros(3) if getattr(snapshot.world, "radiance", None) is not None else \
         np.asarray(snapshot.world.color, np.float64) * float(snapshot.world.strength)
-    out = []
-    for cv in cascades:
+    emission = material_emission(snapshot)
+    corners = glow = np.zeros((0, 3, 3))
+    emitters = None
+    if emission.max() > 0:
+        tris = world_triangles(snapshot)
+        corners, glow = emissive_triangles(tris, emission)
+        emitters = emitter_light(tris, emission)
+        if emitters is not None:  # the shadow rays' plain estimate: no exact sum per voxel
+            emitters = dataclasses.replace(emitters, exact=False)
+    emitted = voxel_emission(cascades, corners, glow) if len(corners) else None
+    out = InjectedRadiance()
+    for index, cv in enumerate(cascades):
         if cv.voxel_count == 0:
             out.append(np.zeros((0, 3), np.float32))
             continue
@@ -45,5 +152,13 @@ def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None =
         normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
         start = voxel_centres(cv) + normals * (SHADOW_START_VOXELS * cv.grid.span)
         direct = diffuse_direct(start, normals, lights, occupancy, samples=samples)
-        out.append((np.asarray(cv.albedo, np.float64) * (direct + ambient)).astype(np.float32))
+        if emitters is not None:
+            direct = direct + diffuse_direct(start, normals, [emitters], _StopShort(occupancy),
+                                             samples=samples)
+        value = np.asarray(cv.albedo, np.float64) * (direct + ambient)
+        if emitted is not None:
+            value = value + emitted[index]
+        out.append(value.astype(np.float32))
+    if emitted is not None:
+        out.emission = emitted
     return out

@@ -75,6 +75,10 @@ class VoxelOctree:
     root_origin : (3,) float64 metres; root_size : metres; resolution : cascade res;
     cascade_levels : ℓ_i per cascade index i (finest first); cascade_offsets : node offset of
     cascade i's cell (0, 0, 0) at level ℓ_i.
+    emission : the octree of the same voxels with their emission alone as radiance (same
+    nodes, same occlusion), when the radiance it was built from carried an ``emission`` part
+    (``light_injection.InjectedRadiance``); None when nothing emits. The tracers subtract its
+    samples where a cone must not see emission (``conetrace.march_cones``' ``subtract``).
     """
 
     root_origin: np.ndarray
@@ -85,6 +89,7 @@ class VoxelOctree:
     cascade_levels: tuple[int, ...]
     cascade_offsets: tuple[int, ...]
     levels: list = field(repr=False)
+    emission: "VoxelOctree | None" = field(default=None, repr=False)
 
     def node_size(self, level) -> float | np.ndarray:
         """Edge in metres of a node at ``level`` (int or array)."""
@@ -454,7 +459,16 @@ def build_octree(cascades, radiance, dense_depth: int = 6, *,
     faces hide the radiance of their back side (``_one_sided_faces``) instead of showing the
     same value on all 6 faces; the isotropic fields are unaffected. Raises ValueError when the grids
     do not nest as docs/gi_pipeline.md states or an array has the wrong length.
+    radiance may carry an ``emission`` attribute (``light_injection.InjectedRadiance``): a list
+    aligned with it of the emission part; when any voxel emits, the octree of that part is built
+    too (``VoxelOctree.emission``).
     """
+    emission = getattr(radiance, "emission", None)
+    emission_octree = None
+    if emission is not None and any(len(e) and np.max(e) > 0 for e in emission):
+        emission_octree = build_octree(cascades, list(emission), dense_depth,
+                                       max_index_window=max_index_window,
+                                       one_sided_leaves=one_sided_leaves)
     if len(radiance) != len(cascades):
         raise ValueError("need one radiance array per cascade")
     frame = _frame([c.grid for c in cascades])
@@ -486,4 +500,4 @@ def build_octree(cascades, radiance, dense_depth: int = 6, *,
             base = np.zeros(len(nd.keys), np.int64) if base is None else base  # deepest level
             levels.append(_sparse_level(ell, nd, base, frame, max_index_window))
     return VoxelOctree(frame.root_origin, frame.root_size, depth, dense_depth, frame.resolution,
-                       frame.levels, frame.offsets, levels)
+                       frame.levels, frame.offsets, levels, emission_octree)

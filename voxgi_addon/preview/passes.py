@@ -15,7 +15,13 @@ import numpy as np
 
 from ..errors import VoxGIError
 from ..gi.cone_shadows import cone_shadowed_direct
-from ..gi.conetrace import ConeSettings, trace_diffuse_and_ao, trace_glossy
+from ..gi.conetrace import (
+    ConeSettings,
+    trace_diffuse_and_ao,
+    trace_glossy,
+    trace_world_visibility,
+    world_mips,
+)
 from ..gi.direct_light import concentric_disk, diffuse_direct, light_directions, light_frame
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.sampling import hashed_square
@@ -427,6 +433,27 @@ def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
                           strata_block=strata_block)
 
 
+def fast_direct(octree, seen, stride, hit, lights, tris, cones, samples, shadows):
+    """(N, 3) Fast quality's Diffuse Direct at the ``hit`` pixels of ``seen`` from every light
+    (``world_light.scene_lights``: lamps, world, emissive triangles): with shadows "RAYS" as
+    Accurate's centre pass (``direct_light``, the pixels' hashed strata); with "CONES" by
+    ``cone_shadows`` — the world's visible share from the diffuse cone set, traced at the
+    cones' ``stride`` and upsampled as they are (``render/gpu_fast.py`` does the same)."""
+    p = seen.position.reshape(-1, 3)[hit]
+    n = seen.normal.reshape(-1, 3)[hit]
+    if shadows != "CONES":
+        return direct_light(octree, p, n, lights, tris, cones, samples, shadows, sample_ids=hit)
+    world = next((light for light in lights if light.type == "WORLD"), None)
+    positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
+    seen_world = None
+    if world is not None:
+        sky = world_mips(world.radiance)
+        seen_world = _traced(seen, stride, hit, lambda pixels: trace_world_visibility(
+            octree, positions[pixels], normals[pixels], cones, sky), 4)
+    return cone_shadowed_direct(octree, p, n, lights, cones, samples,
+                                world_seen=None if seen_world is None else seen_world.__getitem__)
+
+
 def _traced(seen, stride, hit, trace, channels):
     """(N, channels) of ``trace(pixels)`` at the ``hit`` pixels (flat indices), tracing every
     pixel (stride 1) or one per stride × stride block and upsampling (``gi_upsample``)."""
@@ -481,8 +508,6 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         raise VoxGIError("the scene has no triangles to render")
     seen = primary_visibility(tris, snapshot.camera, width, height)
     hit = np.flatnonzero(seen.hit.ravel())
-    p = seen.position.reshape(-1, 3)[hit]
-    n = seen.normal.reshape(-1, 3)[hit]  # shading normal, turned to the camera
     dirs = seen.direction.reshape(-1, 3)
     timings["visibility"] = time.perf_counter() - t0
 
@@ -494,8 +519,8 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     lights = scene_lights(snapshot, tris, material_table(snapshot)[3])
     if quality != "ACCURATE":  # Accurate: per sub-pixel pass, below
         t0 = time.perf_counter()
-        direct = direct_light(gi_state.octree, p, n, snapshot.lights, tris, cones, light_samples,
-                              shadows, sample_ids=hit)
+        direct = fast_direct(gi_state.octree, seen, gi_stride, hit, lights, tris, cones,
+                             light_samples, shadows)
         timings["direct"] = time.perf_counter() - t0
     positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
 
@@ -504,9 +529,10 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
                                             cones)
         return np.concatenate([indirect, ao[:, None]], axis=1)
 
-    def glossy_cones(pixels):
+    def glossy_cones(pixels):  # Fast: the cones see the world where they leave the voxels
         return trace_glossy(gi_state.octree, positions[pixels], normals[pixels], dirs[pixels],
-                            rough[materials[pixels]], cones)
+                            rough[materials[pixels]], cones,
+                            world_mips(getattr(snapshot.world, "radiance", None)))
 
     t0 = time.perf_counter()
     if quality == "ACCURATE":

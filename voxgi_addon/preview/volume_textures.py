@@ -109,3 +109,33 @@ def sample_atlas(atlas: VolumeAtlas, level: int, points: np.ndarray, root_origin
         z = win.z0 + np.clip(idx[:, 2], 0, win.size + 1)
         out += weight[:, None] * atlas.texels[z, y, x]
     return out
+
+
+def world_mip_rows(mips, first: int) -> np.ndarray:
+    """(T, 4) float32 texels of a ``conetrace.WorldMips`` for the GPU's parameter table, to be
+    placed from texel ``first`` on (after ``trace_params``' rows): every map row-major (rgb, 0),
+    finest first, then one texel per map (its first texel, its rows H, 0, 0), then the header
+    (map count, 0, 0, −1), the table's last texel (``cone_common.glsl`` world_radiance)."""
+    texels, index = [], []
+    at = first
+    for image in mips.maps:
+        rows, cols = image.shape[:2]
+        flat = np.zeros((rows * cols, 4), np.float32)
+        flat[:, :3] = image.reshape(-1, 3)
+        texels.append(flat)
+        index.append((at, rows, 0.0, 0.0))
+        at += rows * cols
+    header = np.array([[len(mips.maps), 0.0, 0.0, -1.0]], np.float32)
+    return np.concatenate(texels + [np.asarray(index, np.float32), header])
+
+
+def stacked_atlas(atlas: VolumeAtlas, emission: VolumeAtlas | None) -> tuple[np.ndarray, int]:
+    """(texels, z offset): the atlas with the emission octree's atlas (same nodes, so the same
+    layout) stacked after it in z, and where that starts (0: no emission, texels unchanged).
+    The shaders read the emission's samples at z + offset (``cone_common.glsl``
+    sample_volume)."""
+    if emission is None:
+        return atlas.texels, 0
+    if emission.texels.shape != atlas.texels.shape:
+        raise ValueError("the emission octree's atlas must have the radiance atlas' layout")
+    return np.concatenate([atlas.texels, emission.texels], axis=0), atlas.texels.shape[0]
