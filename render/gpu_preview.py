@@ -208,7 +208,8 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         # within llvmpipe's loop limit (docs/blender_facts.md "llvmpipe's loop limit").
         for index, table in enumerate(scene.lamp_tables):
             direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples,
-                                          seed=gather_settings.seed, strata_block=block,
+                                          seed=gather_settings.seed, world=scene.no_world,
+                                          emitters=scene.no_emitters, strata_block=block,
                                           table=table)
             shine = glossy_direct_texture(inputs, direct, table, index, principled, emission,
                                           materials=materials)

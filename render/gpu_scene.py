@@ -12,7 +12,8 @@ A ``GPUScene`` holds, for the latest snapshot it was updated with:
   tables: ``lamp_table`` (every lamp, the gathers'), ``lamp_tables`` (one per lamp, the other
   rows padding: the direct light's per-lamp dispatches), ``no_lamp`` (padding only: the world's
   and emitters' dispatch), ``world_map`` and ``emitters`` (``gpu_bvh.world_texture`` /
-  ``emitters_texture``, each with its stream).
+  ``emitters_texture``, each with its stream), and ``no_world`` / ``no_emitters`` (their "none"
+  tables: what a lamp's own dispatch reads).
 
 ``update(snapshot)`` keys each part by its content — the snapshot carries no version counters,
 so geometry is a digest of the objects' matrices, the meshes' arrays and the armatures' poses
@@ -41,13 +42,13 @@ from ..voxgi_addon.gi.world_light import scene_lights, world_table
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
 from ..voxgi_addon.preview.passes import material_table, principled_table
 from ..voxgi_addon.scene.geometry import world_triangles
-from .gpu_bvh import shared_bvh
+from .gpu_bvh import GPUBVH, shared_bvh
 from .gpu_gather import principled_materials_texture
 from .gpu_principled import lut_texture
 from .gpu_volume import float_texture
 
 # What ``uploaded`` names: the parts of a scene, and the render's cached zero images.
-PARTS = ("bvh", "materials", "lut", "lights", "world", "emitters", "zeros")
+PARTS = ("bvh", "materials", "constants", "lights", "world", "emitters", "zeros")
 MAX_ZERO_SIZES = 4  # image sizes whose zero texture is kept (F12, viewport, edge lists …)
 
 
@@ -118,13 +119,15 @@ class GPUScene:
 
     uploaded : part (``PARTS``) → bytes sent by the last ``update`` and the render that
     followed (``zeros``); empty when nothing was. keys : part → the content key of what is
-    uploaded. seconds : part → time of its last rebuild + upload."""
+    uploaded. seconds : part → time of its last rebuild + upload. bvh : a ``GPUBVH`` of its
+    own (tests: a scene sharing nothing), else the session's ``shared_bvh``."""
 
-    def __init__(self):
-        self.bvh = shared_bvh()
+    def __init__(self, bvh: GPUBVH | None = None):
+        self._own_bvh = bvh
+        self.bvh = bvh or shared_bvh()
         self.tris = None
         self.rough = self.emission = self.principled = None
-        self.materials = self.lut = None
+        self.materials = self.lut = self.no_world = self.no_emitters = None
         self.lights: list = []
         self._tail: list = []  # the lights list's world and emitters
         self.lamp_table = self.no_lamp = self.world_map = self.emitters = None
@@ -173,7 +176,7 @@ class GPUScene:
         (``uploaded`` says which). The triangles may be empty (nothing is then built for them;
         the caller decides what an empty scene means)."""
         self.uploaded = {}
-        self.bvh = shared_bvh()  # the session's (gpu_bvh.release may have made a new one)
+        self.bvh = self._own_bvh or shared_bvh()  # gpu_bvh.release may have made a new one
         t0 = time.perf_counter()
         geometry = self.geometry_key(snapshot)
         geometry_changed = geometry != self.keys.get("geometry") or self.tris is None
@@ -202,7 +205,11 @@ class GPUScene:
         lut = lut_texture()  # constant; cached by gpu_principled
         if lut is not self.lut:
             self.lut = lut
-            self._sent("lut", lut.width * lut.height * 16)
+            self._sent("constants", lut.width * lut.height * 16)
+        if self.no_world is None:
+            none = (world_table(None, 0), emitter_table(None, 0))
+            self.no_world, self.no_emitters = (_table_texture(table) for table in none)
+            self._sent("constants", sum(_texture_bytes(table) for table in none))
 
         t0 = time.perf_counter()
         lamps = list(snapshot.lights)
@@ -256,6 +263,12 @@ class GPUScene:
     def has_scene_lights(self) -> bool:
         """True when the world or emitters shed light (their own dispatch and gathers)."""
         return len(self.lights) > len(self.lamp_tables)
+
+    def inputs(self) -> dict[str, object]:
+        """Every scene sampler of the BVH kernels (``gpu_bvh.KERNELS``: BVH nodes, triangles
+        and normals, the lamps', world's and emitters' tables, materials, LUT) by name; add
+        the G-buffer's (or a probe's ray origins) to dispatch ``bvh_gather``/``bvh_glossy``."""
+        return {**self.bvh.inputs, **self.gather_tables()}
 
     def gather_tables(self) -> dict[str, object]:
         """The light and material textures of the gathers (``gpu_gather.gather``'s

@@ -116,6 +116,8 @@ def trace_passes(scene, snapshot, state, width, height):
                 raise
             except Exception as error:  # shader creation or dispatch failed: fall back
                 session.gpu_volume = None
+                from . import gpu_scene
+                gpu_scene.release()  # what a failed update left is not trusted again
                 why = f"the GPU tracer failed: {error}"
     passes, timings = render_passes(snapshot, state, width, height, cones,
                                     **trace_options(settings, width, height, snapshot.frame))

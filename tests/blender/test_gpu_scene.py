@@ -1,0 +1,159 @@
+"""One GPU scene per snapshot (issue 17, point 6; render/gpu_scene.py): a second render of an
+unchanged scene uploads nothing, a change re-uploads only the part it touches, the passes are
+those of a scene built from nothing, and a file load leaves no stale tables behind.
+"""
+from __future__ import annotations
+
+import bpy
+import light_scenes
+import numpy as np
+import pytest
+
+WIDTH, HEIGHT = 40, 30
+
+
+def gpu_ready():
+    from voxgi.render.gpu_context import ensure_gpu_context
+
+    ready, why = ensure_gpu_context()
+    if not ready:
+        pytest.skip(f"no GPU context: {why}")
+
+
+def snapshot_now():
+    from voxgi.blender.snapshot import snapshot_or_error
+
+    bpy.context.view_layer.update()
+    return snapshot_or_error(bpy.context, None)[0]
+
+
+def render(snapshot, gpu_scene, width=WIDTH, height=HEIGHT):
+    """The Accurate GPU passes of ``snapshot`` (the scene's settings) drawn from ``gpu_scene``."""
+    from voxgi.blender.settings import cone_settings, trace_options
+    from voxgi.render.gpu_preview import render_passes_gpu
+
+    settings = bpy.context.scene.voxgi
+    assert settings.quality == "ACCURATE"
+    passes, _ = render_passes_gpu(snapshot, None, width, height, cone_settings(settings),
+                                  gpu_scene=gpu_scene,
+                                  **trace_options(settings, width, height, snapshot.frame))
+    return {name: np.asarray(image, np.float64) for name, image in passes.items()}
+
+
+def fresh(snapshot, width=WIDTH, height=HEIGHT):
+    """The passes of ``snapshot`` from a scene that shares nothing (its own BVH too)."""
+    from voxgi.render.gpu_bvh import GPUBVH
+    from voxgi.render.gpu_scene import GPUScene
+
+    return render(snapshot, GPUScene(bvh=GPUBVH()), width, height)
+
+
+def assert_same_passes(ours, theirs):
+    for name, image in theirs.items():
+        scale = max(float(np.abs(image).max()), 1e-6)
+        assert np.abs(ours[name] - image).max() <= 1e-5 * scale, name
+
+
+def largest_change(before, after):
+    return max(float(np.abs(after[n] - before[n]).sum() / max(np.abs(before[n]).sum(), 1e-12))
+               for n in before)
+
+
+def test_an_unchanged_scene_uploads_nothing_the_second_time(voxgi):
+    """The room with a spot, an emissive panel and a glowing sphere: the first render uploads
+    every part; a second one, from a new snapshot of the same scene, uploads 0 bytes and gives
+    the same passes."""
+    from voxgi.render.gpu_bvh import GPUBVH
+    from voxgi.render.gpu_scene import GPUScene
+
+    gpu_ready()
+    light_scenes.build("emissive_room", bpy.context.scene)
+    scene = GPUScene(bvh=GPUBVH())
+    first = render(snapshot_now(), scene)
+    assert {"bvh", "materials", "lights", "emitters", "zeros"} <= set(scene.uploaded)
+    assert scene.uploaded_bytes > 0
+    assert len(scene.lights) == 2 and scene.lights[-1].type == "EMITTERS"  # spot + emitters
+    second = render(snapshot_now(), scene)
+    assert scene.uploaded == {} and scene.uploaded_bytes == 0
+    assert_same_passes(second, first)
+
+
+def _move_spot():
+    bpy.data.objects["Spot"].location.x -= 1.5
+
+
+def _move_box():
+    bpy.data.objects["Box"].location.x -= 0.6
+
+
+def _recolour_red():
+    bpy.data.materials["Red"].node_tree.nodes["Principled BSDF"] \
+        .inputs["Base Color"].default_value = (0.1, 0.6, 0.2, 1.0)
+
+
+@pytest.mark.parametrize("change, parts", [
+    (_move_spot, {"lights"}),       # a lamp: its tables only
+    (_move_box, {"bvh"}),           # a non-emissive object: the BVH (the emitters stay)
+    (_recolour_red, {"materials"}),  # a material's colour: the materials texture
+], ids=["lamp moved", "object moved", "material recoloured"])
+def test_a_change_uploads_only_what_it_touches(voxgi, change, parts):
+    from voxgi.render.gpu_bvh import GPUBVH
+    from voxgi.render.gpu_scene import GPUScene
+
+    gpu_ready()
+    light_scenes.build("emissive_room", bpy.context.scene)
+    scene = GPUScene(bvh=GPUBVH())
+    before = render(snapshot_now(), scene)
+    change()
+    snapshot = snapshot_now()
+    after = render(snapshot, scene)
+    assert set(scene.uploaded) == parts, scene.uploaded
+    assert largest_change(before, after) > 0.01, "the change did not show in the passes"
+    assert_same_passes(after, fresh(snapshot))
+
+
+def test_a_world_edit_uploads_the_world_map_only(voxgi):
+    """The uniform sky + sun courtyard with another sky colour: the world map (and its
+    importance table) alone goes up again."""
+    from voxgi.render.gpu_bvh import GPUBVH
+    from voxgi.render.gpu_scene import GPUScene
+
+    gpu_ready()
+    light_scenes.build("sky_courtyard", bpy.context.scene)
+    scene = GPUScene(bvh=GPUBVH())
+    before = render(snapshot_now(), scene)
+    background = bpy.context.scene.world.node_tree.nodes["Background"]
+    background.inputs["Color"].default_value = (0.8, 0.5, 0.3, 1.0)
+    snapshot = snapshot_now()
+    after = render(snapshot, scene)
+    assert set(scene.uploaded) == {"world"}, scene.uploaded
+    assert largest_change(before, after) > 0.01
+    assert_same_passes(after, fresh(snapshot))
+
+
+def test_f12_after_a_file_load_draws_the_new_files_scene(voxgi, tmp_path):
+    """F12 of the emissive room, a factory reset (the load drops the session's scene), then F12
+    of the HDRI courtyard: its passes are those of a scene built from nothing."""
+    from test_final_renders import HEIGHT as F12_HEIGHT
+    from test_final_renders import WIDTH as F12_WIDTH
+    from test_final_renders import f12
+
+    from voxgi.render import gpu_scene
+
+    gpu_ready()
+    light_scenes.build("emissive_room", bpy.context.scene)
+    f12(bpy.context.scene, tmp_path / "room.exr")
+    assert gpu_scene.peek_scene() is not None
+    assert [light.type for light in gpu_scene.peek_scene().lights] == ["SPOT", "EMITTERS"]
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    assert gpu_scene.peek_scene() is None, "the file load kept the last file's GPU scene"
+
+    scene = bpy.context.scene
+    light_scenes.build("hdri_courtyard", scene)
+    ours = f12(scene, tmp_path / "courtyard.exr")
+    assert [light.type for light in gpu_scene.peek_scene().lights] == ["WORLD"]
+    theirs = fresh(snapshot_now(), F12_WIDTH, F12_HEIGHT)
+    assert theirs["Diffuse Direct"].mean() > 0.01
+    for name in ("Combined", "Diffuse Direct", "Diffuse Indirect", "Glossy Direct"):
+        error = np.abs(ours[name] - theirs[name]).sum() / np.abs(theirs[name]).sum()
+        assert error < 1e-3, (name, error)
