@@ -270,8 +270,14 @@ vec3 world_sample(vec2 u, int h, int w)
 
 /* Diffuse Direct of the world (world_light.world_direct): the unshadowed table value times
  * the per-channel visible share of one map sample and one cosine sample per stratum. */
-vec3 world_direct(vec3 p, vec3 n, uint state, int m)
+/* The world's Diffuse Direct at p (world_light.world_direct) and, with `lobe` (kernels with
+ * principled.glsl), in `glossy` the radiance a bounce hit's glossy lobe (Principled `base`,
+ * `params`) reflects of it toward `v` from the same rays: each ray's L V f / (m² (p_map +
+ * p_cos)), the balance heuristic of both techniques. */
+vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec3 base,
+                       vec3 params, out vec3 glossy)
 {
+  glossy = vec3(0.0);
   vec4 head = world_header();
   int h = int(head.x);
   int w = int(head.y);
@@ -307,23 +313,45 @@ vec3 world_direct(vec3 p, vec3 n, uint state, int m)
       f_sum += f;
       if (max(f.r, max(f.g, f.b)) > 0.0 && !bvh_any_hit(origin, dir, BVH_FAR)) {
         f_lit += f;
+#ifdef PRINCIPLED_IOR
+        if (lobe) {
+          glossy += radiance * principled_glossy_reflectance(base, params.x, params.y, params.z,
+                                                             n, v, dir) / max(pdf, 1e-30);
+        }
+#endif
       }
     }
   }
+  glossy /= float(m * m);
   vec3 share = vec3(f_sum.r > 0.0 ? f_lit.r / f_sum.r : 1.0, f_sum.g > 0.0 ? f_lit.g / f_sum.g : 1.0,
                     f_sum.b > 0.0 ? f_lit.b / f_sum.b : 1.0);
   return value * share;
 }
 
+vec3 world_direct(vec3 p, vec3 n, uint state, int m)
+{
+  vec3 unused;
+  return world_direct_lobe(p, n, state, m, false, n, vec3(0.0), vec3(0.0), unused);
+}
+
 /* The world's Diffuse Direct with the samples diffuse_direct draws for it (its hash stream,
  * its index after the lamps, is the header's texel 1.y); 0 without a world. */
-vec3 world_light_direct(vec3 p, vec3 n, uint id, uint seed, int m)
+vec3 world_light_lobe(vec3 p, vec3 n, uint id, uint seed, int m, bool lobe, vec3 v, vec3 base,
+                      vec3 params, out vec3 glossy)
 {
+  glossy = vec3(0.0);
   if (!world_on()) {
     return vec3(0.0);
   }
   uint stream = uint(texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).y);
-  return world_direct(p, n, point_stream(id, stream, seed), m);
+  return world_direct_lobe(p, n, point_stream(id, stream, seed), m, lobe, v, base, params,
+                           glossy);
+}
+
+vec3 world_light_direct(vec3 p, vec3 n, uint id, uint seed, int m)
+{
+  vec3 unused;
+  return world_light_lobe(p, n, id, seed, m, false, n, vec3(0.0), vec3(0.0), unused);
 }
 
 /* ---- Emissive triangles as a light (voxgi_addon/gi/emitters.py; sampler `emitters` holds
@@ -418,9 +446,13 @@ vec3 emitter_sample(vec2 u, int count, out int t)
 
 /* Diffuse Direct of the emissive triangles (emitters.emitters_direct): the exact unshadowed
  * sum times the per-channel visible share of one point per stratum, sampled by power; not
- * `exact` (bounce hits): the shadow rays' plain estimate. */
-vec3 emitters_direct(vec3 p, vec3 n, uint state, int m, bool exact)
+ * `exact` (bounce hits): the shadow rays' plain estimate. With `lobe` (kernels with
+ * principled.glsl) `glossy` gets what a bounce hit's glossy lobe reflects of them toward `v`
+ * from the same rays (mean of L V f |cos_l| / (r² p_area)). */
+vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, bool lobe, vec3 v,
+                          vec3 base, vec3 params, out vec3 glossy)
 {
+  glossy = vec3(0.0);
   vec4 head = emitter_header();
   int count = int(head.x);
   p += NORMAL_OFFSET * n; /* as direct_light._emitters lifts the point */
@@ -462,8 +494,16 @@ vec3 emitters_direct(vec3 p, vec3 n, uint state, int m, bool exact)
     f_sum += f;
     if (g > 0.0 && !bvh_any_hit(origin, d, dist)) {
       f_lit += f;
+#ifdef PRINCIPLED_IOR
+      if (lobe) {
+        glossy += radiance * (abs(dot(d, normal)) / max(r2, 1e-30) /
+                              max(dot(radiance, LUMA) / head.y, 1e-30)) *
+                  principled_glossy_reflectance(base, params.x, params.y, params.z, n, v, d);
+      }
+#endif
     }
   }
+  glossy /= float(m * m);
   if (!exact) {
     return f_lit / (M_PI_F * float(m * m));
   }
@@ -474,13 +514,28 @@ vec3 emitters_direct(vec3 p, vec3 n, uint state, int m, bool exact)
 
 /* The emitters' Diffuse Direct with the samples diffuse_direct draws for them (their stream
  * is the header's z); 0 when nothing emits. */
-vec3 emitters_light_direct(vec3 p, vec3 n, uint id, uint seed, int m, bool exact)
+vec3 emitters_direct(vec3 p, vec3 n, uint state, int m, bool exact)
 {
+  vec3 unused;
+  return emitters_direct_lobe(p, n, state, m, exact, false, n, vec3(0.0), vec3(0.0), unused);
+}
+
+vec3 emitters_light_lobe(vec3 p, vec3 n, uint id, uint seed, int m, bool exact, bool lobe,
+                         vec3 v, vec3 base, vec3 params, out vec3 glossy)
+{
+  glossy = vec3(0.0);
   vec4 head = emitter_header();
   if (head.w < 0.5) {
     return vec3(0.0);
   }
-  return emitters_direct(p, n, point_stream(id, uint(head.z), seed), m, exact);
+  return emitters_direct_lobe(p, n, point_stream(id, uint(head.z), seed), m, exact, lobe, v,
+                              base, params, glossy);
+}
+
+vec3 emitters_light_direct(vec3 p, vec3 n, uint id, uint seed, int m, bool exact)
+{
+  vec3 unused;
+  return emitters_light_lobe(p, n, id, seed, m, exact, false, n, vec3(0.0), vec3(0.0), unused);
 }
 
 /* Diffuse Direct of all lights at p (normal n facing the viewer), `id` the point's sample id

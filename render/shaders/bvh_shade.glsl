@@ -54,10 +54,14 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
                                                 towards);
     }
   }
-  /* the world lights the hit too (its diffuse share; world_light.py) */
-  radiance += weight * (world_light_direct(lit_at, ns, hit_id, seed + 1u, strata) +
-                        emitters_light_direct(lit_at, ns, hit_id, seed + 1u, strata, false));
-  return radiance;
+  /* the world and the emitters light the hit too: its diffuse weight and, when `hit_glossy`,
+   * its glossy lobe from the same shadow rays (exact_indirect.ray_radiance) */
+  vec3 world_glossy, emitter_glossy;
+  radiance += weight * (world_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, hit_glossy, -d,
+                                         base, params, world_glossy) +
+                        emitters_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, false,
+                                            hit_glossy, -d, base, params, emitter_glossy));
+  return radiance + world_glossy + emitter_glossy;
 }
 
 /* The gather point of low-resolution cell `cell` of the gathers (bvh_gather.glsl,

@@ -232,21 +232,21 @@ def _area(light, p, n, tris, strata):
     return value
 
 
-def _world(world, p, n, tris, strata):
+def _world(world, p, n, tris, strata, reflect=None):
     from .world_light import world_direct
 
     origins_offset = _NORMAL_OFFSET * n
     occluded = None if tris is None else (
         lambda origins, dirs: _occluded(tris, origins, dirs, np.full(len(dirs), np.inf)))
-    return world_direct(world, p + origins_offset, n, occluded, strata)
+    return world_direct(world, p + origins_offset, n, occluded, strata, reflect)
 
 
-def _emitters(emitters, p, n, tris, strata):
+def _emitters(emitters, p, n, tris, strata, reflect=None):
     from .emitters import emitters_direct
 
     occluded = None if tris is None else (
         lambda origins, dirs, lengths: _occluded(tris, origins, dirs, lengths))
-    return emitters_direct(emitters, p + _NORMAL_OFFSET * n, n, occluded, strata)
+    return emitters_direct(emitters, p + _NORMAL_OFFSET * n, n, occluded, strata, reflect)
 
 
 _BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD": _world,
@@ -254,7 +254,7 @@ _BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD"
 
 
 def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
-                   sample_ids=None, per_light: bool = False, strata_block=None) -> np.ndarray:
+                   sample_ids=None, per_light: bool = False, strata_block=None, reflect=None):
     """Cycles' ``Diffuse Direct`` (irradiance / π, no albedo) at surface points.
 
     Parameters
@@ -279,14 +279,20 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
         (row, column) of each light's M × M hashed strata (``samples`` is then ignored) — one
         sub-pixel pass of the anti-aliased preview, whose passes share one stratified set
         (GLSL: ``STRATA_BLOCK`` in ``render/shaders/sampling.glsl``). None: all strata.
+    reflect : callable(point indices (M,), unit directions (M, K, 3)) -> (M, K, 3), a glossy
+        BSDF × cos at the points (``world_light.world_direct``): then also returns, for the
+        world and the emitters, the radiance it reflects from the same shadow rays — a bounce
+        hit's glossy lobe lit by them (the lamps' is the caller's, at their centre direction).
 
     Returns
     -------
-    (N, 3) float32 linear RGB; with ``per_light`` (L, N, 3), light by light.
+    (N, 3) float32 linear RGB; with ``per_light`` (L, N, 3), light by light; with ``reflect``
+    a pair (that, the reflected radiance in the same shape).
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     out = np.zeros((len(lights), len(p), 3), dtype=np.float64)
+    shine = np.zeros_like(out)
     rng = np.random.default_rng(seed)
     ids = None if sample_ids is None else np.asarray(sample_ids).reshape(-1)
     for index, light in enumerate(lights):
@@ -308,9 +314,17 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
                     square = hashed_square(chunk_ids[points_of_chunk], stream, side * side, seed)
                     i, j = np.divmod(np.arange(m * m), m)
                     return square[:, (row + i) * side + column + j]
-            value = shade(light, p[a:b], n[a:b], tris, strata)
+            if reflect is not None and light.type in ("WORLD", "EMITTERS"):
+                value, glossy = shade(light, p[a:b], n[a:b], tris, strata,
+                                      lambda lit, dirs, a=a: reflect(a + lit, dirs))
+                shine[index, a:b] += glossy * color
+            else:
+                value = shade(light, p[a:b], n[a:b], tris, strata)
             out[index, a:b] += (value[:, None] if value.ndim == 1 else value) * color
-    return (out if per_light else out.sum(axis=0)).astype(np.float32)
+    result = (out if per_light else out.sum(axis=0)).astype(np.float32)
+    if reflect is None:
+        return result
+    return result, (shine if per_light else shine.sum(axis=0)).astype(np.float32)
 
 
 def light_directions(lights, points) -> list[np.ndarray]:

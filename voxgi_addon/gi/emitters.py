@@ -185,11 +185,15 @@ def _unshadowed(light: EmitterLight, p, n) -> np.ndarray:
     return out
 
 
-def emitters_direct(light: EmitterLight, p, n, occluded, strata) -> np.ndarray:
+def emitters_direct(light: EmitterLight, p, n, occluded, strata, reflect=None):
     """(N, 3) Diffuse Direct of the emissive triangles at points p with unit normals n (facing
     the viewer). occluded : callable(origins (M, 3), unit directions (M, 3), lengths (M,)) ->
     (M,) bool, the shadow test (None: no shadows); strata : callable(point indices) -> (N, K, 2)
-    the points' hashed strata."""
+    the points' hashed strata.
+    reflect : callable(point indices (M,), unit directions (M, K, 3)) -> (M, K, 3), a BSDF ×
+    cos toward the light (a bounce hit's glossy lobe, ``world_light.world_direct``'s): then
+    also returns the (N, 3) radiance it reflects of the emitters, the same shadow rays' plain
+    estimate (mean of L V reflect |cos_l| / (r² p_area))."""
     p = np.asarray(p, np.float64)
     n = np.asarray(n, np.float64)
     if light.exact or occluded is None:
@@ -197,8 +201,9 @@ def emitters_direct(light: EmitterLight, p, n, occluded, strata) -> np.ndarray:
         lit = np.flatnonzero((value > 0).any(axis=1))
     else:  # the shadow rays' own estimate, mean of f V
         value, lit = np.ones((len(p), 3)), np.arange(len(p))
+    glossy = np.zeros_like(value)
     if len(lit) == 0 or occluded is None:
-        return value
+        return value if reflect is None else (value, glossy)
     k, targets = sample_points(light, strata(lit))              # (M, K), (M, K, 3)
     w = targets - p[lit, None]
     r2 = np.einsum("mkc,mkc->mk", w, w)
@@ -219,12 +224,18 @@ def emitters_direct(light: EmitterLight, p, n, occluded, strata) -> np.ndarray:
         origins = np.repeat(p[lit], k.shape[1], axis=0).reshape(k.shape + (3,))
         blocked[useful] = occluded(origins[useful], d[useful], r[useful])
     seen = (f * ~blocked[..., None]).sum(axis=1)
+    if reflect is not None:
+        towards = np.where(_facing(light, p[lit], k), cos_l / np.maximum(r2, 1e-30)
+                           / np.maximum(pdf_area, 1e-30), 0.0)
+        shine = light.radiance[k] * towards[..., None] * reflect(lit, d)
+        glossy[lit] = np.where((useful & ~blocked)[..., None], shine, 0.0).sum(axis=1) / k.shape[1]
     if not light.exact:
-        return seen / (math.pi * k.shape[1])  # E/π = mean of L cos_x cos_l / r² / p_area / π
+        value = seen / (math.pi * k.shape[1])  # E/π = mean of L cos_x cos_l / r² / p_area / π
+        return value if reflect is None else (value, glossy)
     total = f.sum(axis=1)
     share = np.divide(seen, total, out=np.ones_like(seen), where=total > 0)
     value[lit] *= share
-    return value
+    return value if reflect is None else (value, glossy)
 
 
 def _total_power(light: EmitterLight) -> float:

@@ -89,14 +89,29 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
         # emissive triangles by their shadow rays' plain estimate here (emitters.EmitterLight)
         at_hits = [replace(light, exact=False) if light.type == "EMITTERS" else light
                    for light in lights]
-        lit = diffuse_direct(x + ns * SURFACE_EPSILON, ns, at_hits, tris, samples=hit_samples,
-                             seed=seed + 1, sample_ids=hit_ids[hit], per_light=True)
-        radiance[hit] = np.asarray(emission, np.float64)[material] if emission_seen else 0.0
-        if isinstance(albedo, tuple):  # Principled (base, (metallic, level, roughness))
+        principled = isinstance(albedo, tuple)  # (base, (metallic, level, roughness))
+        if principled:
             base, params = (np.asarray(a, np.float64)[material] for a in albedo)
             shading = (base, params[:, 0], params[:, 1], params[:, 2])
+        reflect = None
+        if principled and hit_glossy:
+            def reflect(points, towards):  # the hit's glossy lobe toward the ray's origin
+                k = towards.shape[1]
+                return glossy_reflectance(
+                    *(np.repeat(a[points], k, axis=0) for a in shading),
+                    np.repeat(ns[points], k, axis=0), -np.repeat(dirs[hit][points], k, axis=0),
+                    towards.reshape(-1, 3)).reshape(towards.shape)
+        lit = diffuse_direct(x + ns * SURFACE_EPSILON, ns, at_hits, tris, samples=hit_samples,
+                             seed=seed + 1, sample_ids=hit_ids[hit], per_light=True,
+                             reflect=reflect)
+        if reflect is not None:  # the world's and emitters' light off the hit's glossy lobe
+            lit, reflected = lit
+        radiance[hit] = np.asarray(emission, np.float64)[material] if emission_seen else 0.0
+        if principled:
             mu = np.clip(-np.einsum("ij,ij->i", ns, dirs[hit]), 0.0, 1.0)
             radiance[hit] += diffuse_weight(*shading, mu) * lit.sum(axis=0)
+            if reflect is not None:
+                radiance[hit] += reflected.sum(axis=0)
             for direct, towards in zip(lit if hit_glossy else (), light_directions(lights, x)):
                 cos = np.einsum("ij,ij->i", ns, towards)
                 shine = direct * (np.pi / np.maximum(cos, 1e-4))[:, None] * \

@@ -234,18 +234,24 @@ def unshadowed(world: WorldLight, normals) -> np.ndarray:
     return top * (1 - fy) + bottom * fy
 
 
-def world_direct(world: WorldLight, p, n, occluded, strata) -> np.ndarray:
+def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None):
     """(N, 3) Diffuse Direct of the world at points p with unit normals n (facing the viewer).
 
     occluded : callable(origins (M, 3), unit directions (M, 3)) -> (M,) bool, the shadow test
         of rays to infinity (None: no shadows); strata : callable(point indices) -> (N, K, 2)
-        the points' hashed strata."""
+        the points' hashed strata.
+    reflect : callable(point indices (M,), unit directions (M, K, 3)) -> (M, K, 3), a BSDF ×
+        cos toward the light (a bounce hit's glossy lobe seen from the receiver,
+        ``principled.glossy_reflectance``): then also returns the (N, 3) radiance it reflects
+        of the world, from the same rays — each ray's L V reflect / (K (p_map + p_cos)), the
+        balance heuristic of both techniques (p_cos alone for a uniform world)."""
     p = np.asarray(p, np.float64)
     n = np.asarray(n, np.float64)
     value = unshadowed(world, n)
     lit = np.flatnonzero((value > 0).any(axis=1))
+    glossy = np.zeros_like(value)
     if len(lit) == 0 or occluded is None:
-        return value
+        return value if reflect is None else (value, glossy)
     square = strata(lit)  # (M, K, 2)
     dirs = _cosine(n[lit], square) if world.uniform else \
         np.concatenate([sample_world(world, square), _cosine(n[lit], square)], axis=1)
@@ -265,7 +271,12 @@ def world_direct(world: WorldLight, p, n, occluded, strata) -> np.ndarray:
     seen = (f * ~blocked[..., None]).sum(axis=1)
     share = np.divide(seen, total, out=np.ones_like(seen), where=total > 0)
     value[lit] *= share
-    return value
+    if reflect is None:
+        return value
+    per_technique = square.shape[1]
+    shine = radiance * reflect(lit, dirs) / np.maximum(pdf, 1e-30)[..., None]
+    glossy[lit] = np.where((up & ~blocked)[..., None], shine, 0.0).sum(axis=1) / per_technique
+    return value, glossy
 
 
 def world_table(world: WorldLight | None, stream: int = 0) -> np.ndarray:

@@ -26,7 +26,7 @@ from ..gi.direct_light import concentric_disk, diffuse_direct, light_directions,
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.sampling import hashed_square
 from ..gi.world_light import scene_lights, world_light
-from ..scene.camera import DEFAULT_FILTER_WIDTH, filter_offsets
+from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, filter_offsets
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
 from .gather import GatherSettings, gather_gi, gather_glossy, gather_glossy_world
@@ -391,16 +391,85 @@ def new_sums(pixels: int):
             for name in SUMS}
 
 
-def finish_passes(sums, count, width: int, height: int):
-    """The PASS_NAMES images (H, W, 3) float32 of ``count`` accumulated passes (an int, or
-    (H·W,) per pixel: 1 off the edges, the pass count on them): colours, AO and Combined are means over the passes
-    (0 where a pass saw the background, as Cycles' film), light passes the summed light ×
-    colour over the summed colour (0 where that is 0)."""
-    def ratio(light, colour):
-        return np.divide(light, colour, out=np.zeros_like(light), where=colour > 0.0)
+def neighbour_weights(filter_width: float) -> np.ndarray:
+    """(3, 3) share of Cycles' pixel filter (``blackman_harris`` over ± ``filter_width``,
+    separable) that falls in each pixel of the 3 × 3 around a pixel's centre, relative to the
+    centre pixel's share: 1 : 0.155 : 0.024 at Filter Size 1.5; zeros off the centre when
+    the filter does not reach the neighbours (width ≤ 0.5)."""
+    out = np.zeros((3, 3))
+    out[1, 1] = 1.0
+    if filter_width <= 0.5:
+        return out
+    x = np.linspace(-filter_width, filter_width, 4001)
+    f = blackman_harris(x, filter_width)
+    centre, side = f[np.abs(x) <= 0.5].sum(), f[x > 0.5].sum()
+    along = np.array([side, centre, side]) / centre
+    return np.outer(along, along)
 
+
+def _neighbour_sum(image: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """(H, W, C): Σ weights[dy + 1, dx + 1] × image[y + dy, x + dx] over the 8 neighbours
+    (the centre left out; outside the image counts as 0)."""
+    padded = np.pad(image, ((1, 1), (1, 1), (0, 0)))
+    height, width = image.shape[:2]
+    out = np.zeros_like(image)
+    for dy in range(3):
+        for dx in range(3):
+            if (dy, dx) != (1, 1) and weights[dy, dx] > 0.0:
+                out += weights[dy, dx] * padded[dy:dy + height, dx:dx + width]
+    return out
+
+
+def _window_max(image: np.ndarray) -> np.ndarray:
+    """(H, W): the largest value of the (H, W) ``image`` in each pixel's 3 × 3 window."""
+    padded = np.pad(image, 1)
+    height, width = image.shape
+    return np.max([padded[dy:dy + height, dx:dx + width] for dy in range(3) for dx in range(3)],
+                  axis=0)
+
+
+def light_ratio(light: np.ndarray, colour: np.ndarray, filter_width: float,
+                covered: np.ndarray | None = None) -> np.ndarray:
+    """(H, W, 3) light pass = light / colour (0 where both are 0), as Cycles' film divides
+    Σ light × colour by Σ colour over its pixel filter's whole footprint (± filter_width px).
+    The sub-pixel passes' rays stay within half a pixel of the centre, so a pixel whose
+    footprint holds only a sliver of a coloured surface (a diffuse wall beside a metal floor)
+    may get no colour at all, where Cycles takes the sliver's full light (its samples in the
+    filter's tails find it). A neighbour at least half covered by its surface (its colour at
+    least half the largest around it) has that surface at its border with the pixel, inside
+    the footprint: where a pixel's own rays saw a surface (``covered`` (H, W) bool; None: all)
+    but no colour, such neighbours' light over their colour, weighted by the filter's share of
+    each (``neighbour_weights``), is its light. Every other pixel keeps its own ratio."""
+    out = np.divide(light, colour, out=np.zeros_like(light), where=colour > 0.0)
+    weights = neighbour_weights(filter_width)
+    empty = (colour <= 0.0) & (True if covered is None else covered[..., None])
+    if weights.sum() <= 1.0 or not empty.any():
+        return out
+    amount = colour.sum(axis=-1)
+    solid = (amount >= 0.5 * _window_max(amount))[..., None]
+    tail_light = _neighbour_sum(np.where(solid, light, 0.0), weights)
+    tail_colour = _neighbour_sum(np.where(solid, colour, 0.0), weights)
+    fill = empty & (tail_colour > 0.0)
+    out[fill] = tail_light[fill] / tail_colour[fill]
+    return out
+
+
+def finish_passes(sums, count, width: int, height: int,
+                  filter_width: float = DEFAULT_FILTER_WIDTH):
+    """The PASS_NAMES images (H, W, 3) float32 of ``count`` accumulated passes (an int, or
+    (H·W,) per pixel: 1 off the edges, the pass count on them): colours, AO and Combined are
+    means over the passes (0 where a pass saw the background, as Cycles' film), light passes
+    the light × colour over the colour (``light_ratio``: 0 where no colour is in the filter's
+    footprint; pixels whose passes all saw the background are 0 in every pass)."""
     count = np.broadcast_to(np.asarray(count, np.float64), (width * height,))
     per_pixel = count[:, None]
+
+    covered = (np.asarray(sums["coverage"]) > 0.0).reshape(height, width)
+
+    def ratio(light, colour):
+        return light_ratio((light / per_pixel).reshape(height, width, 3),
+                           (colour / per_pixel).reshape(height, width, 3),
+                           filter_width, covered).reshape(-1, 3)
 
     values = {
         "Combined": (sums["emission"] + sums["diffuse_direct"] + sums["diffuse_indirect"]
@@ -619,4 +688,4 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     count = np.where(edge, len(plan), 1)
     timings["sub-pixel passes" if len(plan) > 1 else "direct + compose"] = \
         time.perf_counter() - t0
-    return finish_passes(sums, count, width, height), timings
+    return finish_passes(sums, count, width, height, filter_width), timings
