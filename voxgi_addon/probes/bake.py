@@ -25,7 +25,7 @@ from .grid import DISABLED, RELOCATED, ProbeGrid
 from .masks import ALL_SUBVOLUMES, occlusion_masks
 from .placement import place_probes, scene_box
 from .sh import project, sample_directions
-from .validity import relocate_probes
+from .validity import ProbeRays, relocate_probes, trace_probe_rays
 
 __all__ = ["ProbeSettings", "BakeResult", "bake_probe_grid", "hit_radiance", "material_colours",
            "direct_probe_sh"]
@@ -43,7 +43,11 @@ class ProbeSettings:
     (one stratified ray is enough: the SH projection averages the probe's hundreds of hits).
     direct_samples : rays per probe drawn by the world map's importance, and as many points
     drawn on the emissive triangles by power, for the light arriving straight from them
-    (``direct``; rounded up to a square)."""
+    (``direct``; rounded up to a square). radiance_factor : the light off surfaces is gathered
+    along ``directions × radiance_factor`` directions (a second near-uniform set, traced from
+    the probes' final places); the validity test keeps ``directions``. A shaded probe beside a
+    sunlit floor sees a sharp-edged patch of bounce light that 256 directions sample coarsely
+    (docs/probes.md "Lights at the probe")."""
 
     resolution: int | tuple[int, int, int] = 8
     directions: int = 256
@@ -54,6 +58,7 @@ class ProbeSettings:
     relocate: bool = True
     light_samples: int = 1
     direct_samples: int = 64
+    radiance_factor: int = 2
 
 
 @dataclass
@@ -119,13 +124,13 @@ def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
 
 def direct_probe_sh(snapshot, tris: SceneTriangles, positions, directions, rays,
                     samples: int = 64, seed: int = 0, world: bool = True,
-                    emitters: bool = True) -> tuple[np.ndarray, bool, bool]:
+                    emitters: bool = True, first_id: int = 0) -> tuple[np.ndarray, bool, bool]:
     """((P, 9, 3) SH of the light arriving at each probe straight from the world and/or the
     emissive triangles (``direct``), whether the world was, whether the emitters were estimated
     so: each only when it is a light of ``world_light.scene_lights`` (a world with a map that
     sheds light; at most ``emitters.MAX_EMITTER_TRIANGLES`` emissive triangles), else the
     uniform rays keep seeing it. rays : ``validity.ProbeRays`` of ``directions`` from
-    ``positions``; the probes' sample ids are their indices."""
+    ``positions``; the probes' sample ids are their indices in the grid (``first_id`` + row)."""
     from ..gi.world_light import scene_lights
 
     _, emission = material_colours(snapshot)
@@ -133,7 +138,7 @@ def direct_probe_sh(snapshot, tris: SceneTriangles, positions, directions, rays,
     sky = next((light for light in lights if light.type == "WORLD"), None) if world else None
     glow = next((light for light in lights if light.type == "EMITTERS"), None) if emitters else None
     out = np.zeros((len(positions), 9, 3))
-    ids = np.arange(len(positions), dtype=np.uint32)
+    ids = np.arange(first_id, first_id + len(positions), dtype=np.uint32)
     if sky is not None:
         out += world_probe_sh(tris, sky, positions, directions, rays.triangle, ids, samples, seed)
     if glow is not None:
@@ -141,6 +146,11 @@ def direct_probe_sh(snapshot, tris: SceneTriangles, positions, directions, rays,
         out += emitter_probe_sh(tris, glow, positions, directions, rays, radiance, sides, ids,
                                 samples, seed)
     return out, sky is not None, glow is not None
+
+
+def _rows(rays: ProbeRays, a: int, b: int) -> ProbeRays:
+    """Probes a … b − 1 of ``rays``."""
+    return ProbeRays(rays.t[a:b], rays.triangle[a:b], rays.u[a:b], rays.v[a:b], rays.back[a:b])
 
 
 def _box(tris, box):
@@ -196,27 +206,29 @@ def bake_probe_grid(snapshot, settings: ProbeSettings = ProbeSettings(), box=Non
     check()
 
     t0 = time.perf_counter()
-    p_count, n = len(positions), len(dirs)
-    # the octree bakes' voxels hold the emission (their cones see it): only the world there
-    sh, by_world, by_emitters = direct_probe_sh(snapshot, tris, positions, dirs, rays,
-                                                settings.direct_samples, settings.seed,
-                                                emitters=sh_fn is None)
-    timings["direct"] = time.perf_counter() - t0
-    check()
-
-    t0 = time.perf_counter()
+    p_count = len(positions)
+    sh = np.zeros((p_count, 9, 3), np.float64)
     if sh_fn is not None:
+        # the octree bakes' voxels hold the emission (their cones see it): only the world here
+        sh += direct_probe_sh(snapshot, tris, positions, dirs, rays, settings.direct_samples,
+                              settings.seed, emitters=False)[0]
         sh += sh_fn(positions, dirs)
         p_count = 0  # nothing left for the exact stage
+    factor = max(1, int(settings.radiance_factor))
+    radiance_dirs = dirs if factor == 1 else sample_directions(len(dirs) * factor, settings.seed)
+    n = len(radiance_dirs)
     for a in range(0, p_count, _PROBE_CHUNK):
         b = min(p_count, a + _PROBE_CHUNK)
+        chunk = _rows(rays, a, b) if factor == 1 else trace_probe_rays(tris, positions[a:b], radiance_dirs)
+        direct, by_world, by_emitters = direct_probe_sh(
+            snapshot, tris, positions[a:b], radiance_dirs, chunk, settings.direct_samples,
+            settings.seed, first_id=a)
         origins = np.repeat(positions[a:b], n, axis=0)
-        radiance = hit_radiance(snapshot, tris, origins, np.tile(dirs, (b - a, 1)),
-                                rays.t[a:b].ravel(), rays.triangle[a:b].ravel(),
-                                rays.u[a:b].ravel(), rays.v[a:b].ravel(),
-                                settings.light_samples, settings.seed + a,
+        radiance = hit_radiance(snapshot, tris, origins, np.tile(radiance_dirs, (b - a, 1)),
+                                chunk.t.ravel(), chunk.triangle.ravel(), chunk.u.ravel(),
+                                chunk.v.ravel(), settings.light_samples, settings.seed + a,
                                 seen_world=not by_world, seen_emission=not by_emitters)
-        sh[a:b] += project(radiance.reshape(b - a, n, 3), dirs)
+        sh[a:b] = direct + project(radiance.reshape(b - a, n, 3), radiance_dirs)
         if progress is not None:
             progress(b / p_count)
         check()
