@@ -26,7 +26,12 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.gi.emitters import emitter_table
-from ..voxgi_addon.gi.exact_glossy import EMITTER_GLOSSY_STREAM, GLOSSY_STREAM, WORLD_GLOSSY_STREAM
+from ..voxgi_addon.gi.exact_glossy import (
+    EMITTER_GLOSSY_STREAM,
+    GLOSSY_STREAM,
+    METAL_RAY_FACTOR,
+    WORLD_GLOSSY_STREAM,
+)
 from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
 from ..voxgi_addon.gi.world_light import world_table
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF
@@ -78,6 +83,7 @@ def bvh_shader(kernel: str):
             defines["GLOSSY_STREAM"] = f"{GLOSSY_STREAM}u"
             defines["WORLD_GLOSSY_STREAM"] = f"{WORLD_GLOSSY_STREAM}u"
             defines["EMITTER_GLOSSY_STREAM"] = f"{EMITTER_GLOSSY_STREAM}u"
+            defines["METAL_RAY_FACTOR"] = str(METAL_RAY_FACTOR)
         _shaders[kernel] = build_compute(("sampling", "bvh_common") + files, samplers, constants,
                                          OUTPUTS.get(kernel, ("out_image",)), defines)
     return _shaders[kernel]

@@ -14,6 +14,7 @@ import math
 import gpu
 import numpy as np
 
+from ..voxgi_addon.gi.exact_glossy import METAL_RAY_FACTOR
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import low_shape
 from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, scene_light_textures, strata_side
@@ -101,18 +102,23 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
     inputs = {**bvh.inputs, **gbuffer_inputs, **tables}
     assert OUTPUTS[kernel] == ("out_image", "out_variance")
     rays = settings.rays if kernel == "bvh_gather" else settings.glossy_rays
+    # metals take METAL_RAY_FACTOR × the glossy rays (exact_glossy.glossy_indirect): the
+    # dispatches run to their count when the scene has one
+    last = rays
+    if kernel == "bvh_glossy" and not world_mode and np.max(principled[1][:, 0]) >= 0.5:
+        last = rays * METAL_RAY_FACTOR
     # at a bounce hit the emitters draw one shadow ray per stratum, like a lamp (their plain
     # estimate, emitters.EmitterLight.exact = False), the world two (one per technique)
     worlds = sum(light.type == "WORLD" for light in lights)
     step = rays_per_dispatch(len(lights) + worlds, settings.hit_samples)
-    for first in range(0, max(rays, 1), step):
+    for first in range(0, max(last, 1), step):
         partial = dispatch_bvh(kernel, {
             **inputs, "partial_image": partial[0], "partial_variance": partial[1]}, low_w, low_h, {
             "sampling": (settings.seed, rays, settings.ao_distance,
                          strata_side(settings.hit_samples)),
             "world": (*settings.world, float(settings.hit_glossy)),
             "grid": (stride, width, height, float(world_mode)),
-            "chunk": (first, step, float(first > 0), float(first + step >= rays))})
+            "chunk": (first, step, float(first > 0), float(first + step >= last))})
     return partial
 
 

@@ -67,11 +67,14 @@ void main()
 
   uint seed = uint(sampling.x);
   int rays = int(sampling.y);
+  bool world_mode = grid.w > 0.5; /* Glossy Direct of the world and the emitters */
+  if (!world_mode && params.x >= 0.5) {
+    rays *= METAL_RAY_FACTOR; /* exact_glossy.glossy_indirect: a metal's colour is all glossy */
+  }
   vec3 origin = position + SURFACE_EPSILON * n;
   uint state = point_stream(id, GLOSSY_STREAM, seed);
   uint world_state = point_stream(id, WORLD_GLOSSY_STREAM, seed);
   uint emitter_state = point_stream(id, EMITTER_GLOSSY_STREAM, seed);
-  bool world_mode = grid.w > 0.5; /* Glossy Direct of the world and the emitters */
   bool sky_on = world_on();
   bool emitting = emitter_header().w > 0.5;
   const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);

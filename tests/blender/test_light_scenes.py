@@ -33,10 +33,11 @@ def preview(name, tracer="AUTO", width=light_scenes.WIDTH, height=light_scenes.H
     return {k: np.asarray(v, np.float64) for k, v in passes.items()}
 
 
-@pytest.mark.parametrize("name", ["hdri_courtyard", "sky_courtyard", "emissive_room"])
+@pytest.mark.parametrize("name", ["hdri_courtyard", "sky_courtyard", "emissive_room", "metal_room"])
 def test_numpy_and_gpu_draw_the_same_light(voxgi, name):
-    """The world map (importance-sampled, MIS with the cosine) and the emissive triangles (exact
-    sum, shadow rays by power) are the same samples in numpy and GLSL."""
+    """The world map (importance-sampled, MIS with the cosine), the emissive triangles (exact
+    sum, shadow rays by power) and the metals' glossy rays (METAL_RAY_FACTOR × a dielectric's)
+    are the same samples in numpy and GLSL."""
     gpu = preview(name, "AUTO", 64, 48)
     bpy.ops.wm.read_factory_settings(use_empty=True)
     reference = preview(name, "NUMPY", 64, 48)
