@@ -13,7 +13,7 @@ with those directions by multiple importance sampling (``direct``).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -113,8 +113,11 @@ def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
     sign = np.where(np.einsum("ij,ij->i", face, dirs[hit]) > 0, -1.0, 1.0)  # Cycles flips back faces
     normal = normal * sign[:, None]
     albedo, emission = material_colours(snapshot)
-    direct = diffuse_direct(points, normal, scene_lights(snapshot, tris, emission), tris,
-                            samples=light_samples, seed=seed)
+    # emissive triangles by their shadow rays' plain estimate (as the gathers' bounce hits,
+    # exact_indirect.ray_radiance): the exact sum over every emitter at every hit cost minutes
+    lights = [replace(light, exact=False) if light.type == "EMITTERS" else light
+              for light in scene_lights(snapshot, tris, emission)]
+    direct = diffuse_direct(points, normal, lights, tris, samples=light_samples, seed=seed)
     m = len(snapshot.materials)
     mat = np.asarray(tris.materials, np.int64)[k]
     mat = np.where((mat >= 0) & (mat < m), mat, m)
