@@ -81,7 +81,8 @@ def test_probe_bake_of_the_hdri_courtyard_is_within_15_percent_of_cycles(courtya
           f"spp panoramas, noise ≤ {refs['noise'].max():.4f}): error median {np.median(error):.3f}, "
           f"90th percentile {np.percentile(error, 90):.3f}, worst {error.max():.3f}. Uniform rays only: median "
           f"{np.median(old):.3f}, worst {old.max():.2f}. SH L2 of Cycles' own light: median "
-          f"{np.median(floor):.3f}, worst {floor.max():.3f}")
+          f"{np.median(floor):.3f}, worst {floor.max():.3f}; the bake where that is within 5 %: worst "
+          f"{error[floor < 0.05].max():.3f} ({(floor < 0.05).sum()} of {floor.size})")
     assert refs["noise"].max() < 0.01  # the references are converged
     per_probe = np.abs(ours - cycles).sum(axis=(1, 2)) / np.abs(cycles).sum(axis=(1, 2))
     old_per_probe = np.abs(np.stack([sh.irradiance(c, normals) for c in uniform]) - cycles).sum(
