@@ -9,7 +9,9 @@ lamps, the world and the emissive triangles of ``world_light.scene_lights`` — 
 as Accurate's (one more ``bvh_direct`` dispatch for the world and emitters), or with shadows
 "CONES" the world's visible share from the diffuse cone set (``diffuse_ao`` with
 sampling.w = 1) and one shadow cone per connected emitter; the glossy cones see the world
-where they leave the voxels (``GPUVolume`` packs the world's prefiltered maps).
+where they leave the voxels (``GPUVolume`` packs the world's prefiltered maps). The lamps'
+glossy light is Accurate's centre pass's (``gpu_gather.glossy_direct_texture`` of each lamp's
+Diffuse Direct), and the colours are the Principled BSDF's for the view.
 """
 from __future__ import annotations
 
@@ -21,13 +23,19 @@ from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.cone_shadows import cone_shadowed_direct, shadow_cone
 from ..voxgi_addon.gi.conetrace import world_mips
 from ..voxgi_addon.gi.world_light import scene_lights
-from ..voxgi_addon.preview.passes import compose_passes, material_indices, material_table
+from ..voxgi_addon.preview.passes import (
+    compose_passes,
+    material_indices,
+    material_table,
+    principled_table,
+)
 from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
-from .gpu_bvh import direct_light_texture, scene_light_textures, shared_bvh
+from .gpu_bvh import direct_light_texture, lights_texture, scene_light_textures, shared_bvh
+from .gpu_gather import glossy_direct_texture, principled_materials_texture
 from .gpu_tracer import dispatch, read_texture
-from .gpu_volume import GPUVolume
+from .gpu_volume import GPUVolume, float_texture
 
 
 def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
@@ -74,6 +82,12 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
         return np.flipud(read_texture(low))
 
     t0 = time.perf_counter()
+    # the lamps' glossy light (preview.passes.glossy_direct_radiance; the glossy cones see the
+    # world and the emission), and the colours for the view as Cycles' Principled BSDF gives them
+    principled = principled_table(snapshot)
+    materials = principled_materials_texture(principled, emission)
+    shine = np.zeros((len(hit), 3))
+    views = -seen["direction"].reshape(-1, 3)[hit].astype(np.float64)
     if shadows == "RAYS":
         bvh = shared_bvh().update(tris)  # rebuilt and uploaded only for changed triangles
         if bvh.uploaded_bytes:
@@ -83,9 +97,12 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
         # (docs/blender_facts.md "llvmpipe's loop limit").
         direct = np.zeros((len(hit), 3))
         for index in range(len(snapshot.lights)):
-            direct += pixels(direct_light_texture(bvh, gbuffer.inputs, snapshot.lights,
-                                                  light_samples, seed=gather_settings.seed,
-                                                  only=index))
+            table = lights_texture(snapshot.lights, index)
+            lamp = direct_light_texture(bvh, gbuffer.inputs, snapshot.lights, light_samples,
+                                        seed=gather_settings.seed, table=table)
+            direct += pixels(lamp)
+            shine += pixels(glossy_direct_texture(gbuffer.inputs, lamp, table, index,
+                                                  principled, emission, materials))
         if len(lights) > len(snapshot.lights):  # the world's and emitters' own dispatch
             extra = scene_light_textures(lights)
             direct += pixels(direct_light_texture(bvh, gbuffer.inputs, snapshot.lights,
@@ -96,9 +113,21 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
         world_seen = None
         if any(light.type == "WORLD" for light in lights):  # the cones' view of the world
             world_seen = traced("diffuse_ao", 1).reshape(-1, 4)[hit].astype(np.float64).__getitem__
-        direct = cone_shadowed_direct(None, p, n, lights, cones, light_samples, visibility,
-                                      world_seen).astype(np.float64)
-    timings["direct"] = time.perf_counter() - t0
+        lamps = len(snapshot.lights)
+        direct = cone_shadowed_direct(None, p, n, lights[lamps:], cones, light_samples,
+                                      visibility, world_seen).astype(np.float64)
+        for index in range(lamps):
+            lamp = cone_shadowed_direct(None, p, n, lights[index:index + 1], cones,
+                                        light_samples, visibility).astype(np.float64)
+            direct += lamp
+            image = np.zeros((height * width, 4), np.float32)
+            image[hit, :3] = lamp
+            texture = float_texture(np.flipud(image.reshape(height, width, 4)).copy(),
+                                    (width, height))
+            shine += pixels(glossy_direct_texture(gbuffer.inputs, texture,
+                                                  lights_texture(snapshot.lights, index), index,
+                                                  principled, emission, materials))
+    timings["direct + lamps' glossy light"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     diffuse_ao = traced("diffuse_ao")
@@ -112,4 +141,4 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
 
     flat_da = diffuse_ao.reshape(-1, 4)[hit]
     terms = (direct, flat_da[:, :3], flat_da[:, 3], glossy.reshape(-1, 4)[hit, :3])
-    return compose_passes(snapshot, width, height, hit, mat, *terms), timings
+    return compose_passes(snapshot, width, height, hit, mat, *terms, n, views, shine), timings

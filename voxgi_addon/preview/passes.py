@@ -502,16 +502,20 @@ def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
                           strata_block=strata_block)
 
 
-def fast_direct(octree, seen, stride, hit, lights, tris, cones, samples, shadows):
-    """(N, 3) Fast quality's Diffuse Direct at the ``hit`` pixels of ``seen`` from every light
-    (``world_light.scene_lights``: lamps, world, emissive triangles): with shadows "RAYS" as
-    Accurate's centre pass (``direct_light``, the pixels' hashed strata); with "CONES" by
-    ``cone_shadows`` — the world's visible share from the diffuse cone set, traced at the
-    cones' ``stride`` and upsampled as they are (``render/gpu_fast.py`` does the same)."""
+def fast_direct(octree, seen, stride, hit, lights, tris, cones, samples, shadows, lamps=0):
+    """Fast quality's Diffuse Direct at the ``hit`` pixels of ``seen`` from every light
+    (``world_light.scene_lights``: lamps, world, emissive triangles): (N, 3) in all and
+    (lamps, N, 3) of each of the first ``lamps`` lights (the lamps, for their glossy light).
+    With shadows "RAYS" as Accurate's centre pass (``direct_light``, the pixels' hashed
+    strata); with "CONES" by ``cone_shadows`` — the world's visible share from the diffuse cone
+    set, traced at the cones' ``stride`` and upsampled as they are (``render/gpu_fast.py`` does
+    the same)."""
     p = seen.position.reshape(-1, 3)[hit]
     n = seen.normal.reshape(-1, 3)[hit]
     if shadows != "CONES":
-        return direct_light(octree, p, n, lights, tris, cones, samples, shadows, sample_ids=hit)
+        each = direct_light(octree, p, n, lights, tris, cones, samples, shadows, sample_ids=hit,
+                            per_light=True)
+        return each.sum(axis=0), each[:lamps]
     world = next((light for light in lights if light.type == "WORLD"), None)
     positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
     seen_world = None
@@ -519,8 +523,12 @@ def fast_direct(octree, seen, stride, hit, lights, tris, cones, samples, shadows
         sky = world_mips(world.radiance)
         seen_world = _traced(seen, stride, hit, lambda pixels: trace_world_visibility(
             octree, positions[pixels], normals[pixels], cones, sky), 4)
-    return cone_shadowed_direct(octree, p, n, lights, cones, samples,
+    each = np.zeros((lamps, len(p), 3), np.float32)
+    for index in range(lamps):
+        each[index] = cone_shadowed_direct(octree, p, n, lights[index:index + 1], cones, samples)
+    rest = cone_shadowed_direct(octree, p, n, lights[lamps:], cones, samples,
                                 world_seen=None if seen_world is None else seen_world.__getitem__)
+    return each.sum(axis=0) + rest, each
 
 
 def _traced(seen, stride, hit, trace, channels):
@@ -588,8 +596,8 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     lights = scene_lights(snapshot, tris, material_table(snapshot)[3])
     if quality != "ACCURATE":  # Accurate: per sub-pixel pass, below
         t0 = time.perf_counter()
-        direct = fast_direct(gi_state.octree, seen, gi_stride, hit, lights, tris, cones,
-                             light_samples, shadows)
+        direct, per_lamp = fast_direct(gi_state.octree, seen, gi_stride, hit, lights, tris,
+                                       cones, light_samples, shadows, len(snapshot.lights))
         timings["direct"] = time.perf_counter() - t0
     positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
 
@@ -626,9 +634,11 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         timings["glossy cones"] = time.perf_counter() - t0
     else:
         glossy = np.zeros((len(hit), 3))
-    if quality != "ACCURATE":
+    if quality != "ACCURATE":  # the lamps' glossy light (the cones see the rest), colours
+        p, n, views = positions[hit], normals[hit], -dirs[hit]  # for the view as Cycles'
+        shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_lamp, hit)
         return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao,
-                              glossy), timings
+                              glossy, n, views, shine), timings
     t0 = time.perf_counter()
     emitting = any(light.type == "EMITTERS" for light in lights)
     glossy_world = gather_glossy_world(tris, world_light(snapshot.world), principled_table(snapshot),
