@@ -216,3 +216,21 @@ def test_cone_shadows_light_with_the_world_and_each_emitter():
     on_panel = cone_shadowed_direct(state.octree, np.array([[0.0, 0.0, 1.0]]), -up, [emitters],
                                     ConeSettings())
     assert on_panel[0, 0] < 0.05 * direct[0, 0]  # from the tile only, far away and low
+
+
+def test_an_emission_edit_alone_relights_the_voxels():
+    """Changing only a material's emission (nothing moved) must not reuse the previous
+    update's light: the voxels glow with the new emission."""
+    snap = room()
+    caches = build_scene_caches(snap, 0.0625, 2)
+    settings = GISettings(resolution=64)
+    first = update_gi(snap, caches, settings, anchor=np.zeros(3))
+    dimmer = [snap.materials[0], dataclasses.replace(snap.materials[1],
+                                                     emission=np.float32(0.25) * GLOW.astype(np.float32))]
+    again = update_gi(dataclasses.replace(snap, materials=dimmer), caches, settings,
+                      anchor=np.zeros(3), previous=first)
+    assert again.reused != "all"
+    glow = again.radiance.emission[0]
+    assert glow.max() == pytest.approx(0.25 * GLOW.max(), rel=1e-4)
+    same = update_gi(snap, caches, settings, anchor=np.zeros(3), previous=first)
+    assert same.reused == "all"  # an unchanged scene still reuses everything

@@ -85,8 +85,9 @@ def _value_key(value):
 
 
 def light_key(snapshot, settings: GISettings) -> tuple:
-    """Everything the injection and the octree read besides the cascades: lights, world and
-    the settings (plain values and array bytes, comparable with ``==``)."""
+    """Everything the injection and the octree read besides the cascades: lights, world, the
+    materials' emission (voxels glow with it and are lit by it) and the settings (plain values
+    and array bytes, comparable with ``==``)."""
     def fields(item):
         return tuple((f.name, _value_key(getattr(item, f.name))) for f in dataclasses.fields(item))
 
@@ -94,7 +95,9 @@ def light_key(snapshot, settings: GISettings) -> tuple:
     # a world map is known by its content key (hashing megabytes of radiance every update
     # would cost more than what it saves)
     world_key = (world.key, _value_key(world.color), world.strength) if world.key else fields(world)
-    return (tuple(fields(light) for light in snapshot.lights), world_key, fields(settings))
+    emission = tuple(_value_key(m.emission) for m in snapshot.materials)
+    return (tuple(fields(light) for light in snapshot.lights), world_key, emission,
+            fields(settings))
 
 
 def update_gi(snapshot, caches, settings: GISettings = GISettings(), cancel=None,
