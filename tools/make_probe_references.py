@@ -1,11 +1,11 @@
-"""Cycles references of light-probe irradiance in the HDRI courtyard (issue 17: "a probe bake of
+"""Cycles references of light-probe irradiance in the light scenes (issue 17: "a probe bake of
 the HDRI scene is within 15 % of Cycles' irradiance"; tests/blender/test_probe_hdri.py).
 
-Usage: ``.venv/bin/python tools/make_probe_references.py [--probes 12] [--samples 256]
-[--out tests/data/probe_refs]``
+Usage: ``.venv/bin/python tools/make_probe_references.py [--scene hdri_courtyard] [--probes 16]
+[--samples 256] [--out tests/data/probe_refs]``
 
-The scene (``light_scenes.hdri_courtyard``) is baked with the default settings (Bake Probes as
-a user runs it); ``--probes`` of its enabled probes, drawn with a fixed seed, each get two
+The scene (``light_scenes``) is baked with the default settings (Bake Probes as a user runs
+it); ``--probes`` of its enabled probes, drawn with a fixed seed, each get two
 equirectangular Cycles renders (``WIDTH`` × ``HEIGHT``, ``--samples`` each, seeds 0 and 1) from
 the probe's position with no bounce at all (max bounces 0: a surface seen shows its emission
 and the direct light it reflects, diffuse and glossy — one bounce as the probe holds it) and
@@ -13,12 +13,14 @@ the Environment pass (the world seen straight, which a transparent film leaves o
 Combined). The incoming radiance of each pixel, its direction (the panorama's row and column)
 and solid angle (its latitude band's share) give the irradiance for each of ``NORMALS``:
 E(n) = Σ L max(n·ω, 0) Ω; and the same radiance projected on SH L2 gives what a perfect L2
-probe would hold (``sh.irradiance`` of it), the representation's own error.
+probe would hold (``sh.irradiance`` of it), the representation's own error. Lamps are hidden
+from the panoramas' camera rays: a probe holds the light lamps shed on surfaces, not the lamps
+seen straight (docs/probes.md "Bake").
 
-``<out>/hdri_courtyard.npz``: positions (P, 3), normals (5, 3), irradiance (P, 5, 3) (the two
+``<out>/<scene>.npz``: positions (P, 3), normals (5, 3), irradiance (P, 5, 3) (the two
 renders' mean), irradiance_l2 (P, 5, 3), noise (P, 5) (half the two renders' relative
 difference, the mean's standard error within a factor of about 1.5). ``<out>/summary.json``:
-samples, size, seconds.
+per scene, samples, size, seconds.
 """
 from __future__ import annotations
 
@@ -34,7 +36,6 @@ import numpy as np
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from make_gi_references import REPO_ROOT, load_addon  # noqa: E402
 
-SCENE = "hdri_courtyard"
 WIDTH, HEIGHT = 256, 128
 NORMALS = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0],
                     [0.0, -1.0, 0.0]])
@@ -117,19 +118,23 @@ def main(argv=None):
     from voxgi.blender.probe_store import load_grids
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--probes", type=int, default=12)
+    parser.add_argument("--scene", default="hdri_courtyard", choices=list(light_scenes.SCENES))
+    parser.add_argument("--probes", type=int, default=16)
     parser.add_argument("--samples", type=int, default=256)
     parser.add_argument("--out", type=pathlib.Path, default=REPO_ROOT / "tests" / "data" / "probe_refs")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
-    light_scenes.build(SCENE, scene)
+    light_scenes.build(args.scene, scene)
     assert bpy.ops.voxgi.bake_probes() == {"FINISHED"}
     grid = load_grids(scene)[0]
     indices = chosen_probes(grid, args.probes)
     positions = np.asarray(grid.positions, np.float64)[indices]
     camera = panorama_camera(scene)
+    for obj in scene.objects:
+        if obj.type == "LIGHT":
+            obj.visible_camera = False
     exact, l2, noise = [], [], []
     start = time.perf_counter()
     for index, p in zip(indices, positions):
@@ -142,14 +147,16 @@ def main(argv=None):
         print(f"probe {index} at {np.round(p, 3)}: E {np.round(e.mean(axis=1), 3)} "
               f"(noise {np.round(spread, 4)})", flush=True)
     seconds = time.perf_counter() - start
-    path = args.out / f"{SCENE}.npz"
+    path = args.out / f"{args.scene}.npz"
     np.savez_compressed(path, positions=positions.astype(np.float32), normals=NORMALS,
                         indices=indices, irradiance=np.array(exact, np.float32),
                         irradiance_l2=np.array(l2, np.float32), noise=np.array(noise, np.float32))
-    summary = {SCENE: {"probes": len(indices), "samples_per_render": args.samples,
-                       "renders_per_probe": 2, "size": [WIDTH, HEIGHT],
-                       "seconds": round(seconds, 1)}}
-    (args.out / "summary.json").write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
+    summary_path = args.out / "summary.json"
+    summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
+    summary[args.scene] = {"probes": len(indices), "samples_per_render": args.samples,
+                           "renders_per_probe": 2, "size": [WIDTH, HEIGHT],
+                           "seconds": round(seconds, 1)}
+    summary_path.write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
     print(f"{path} ({path.stat().st_size / 1024:.1f} KB) in {seconds:.0f} s")
 
 

@@ -5,6 +5,8 @@
   ``placement``  volumes with geometry (exact triangle/box test) and their corner probes
   ``validity``   back-face share of each probe's rays; relocation or disabling
   ``masks``      per corner probe, the 64-bit mask of the 4×4×4 sub-volumes it may light
+  ``direct``     the world's and the emissive surfaces' light straight at a probe (next-event
+                 estimation, multiple importance sampling with the bake's directions)
   ``bake``       ``bake_probe_grid``: the stages above and the exact one-bounce radiance
   ``octree_bake`` the same SH from the voxel octree's cone march (the GPU bake's reference)
   ``query``      irradiance at points and normals through the index arrays, trilinear

@@ -56,8 +56,8 @@ _C1 = math.sqrt(3.0 / (4.0 * math.pi))
 _C2 = 0.5 * math.sqrt(15.0 / math.pi)
 _C20 = 0.25 * math.sqrt(5.0 / math.pi)
 _C22 = 0.25 * math.sqrt(15.0 / math.pi)
-_CACHE_SIZE = 4
-_world_cache: dict[int, tuple[object, np.ndarray]] = {}
+_CACHE_SIZE = 8
+_world_cache: dict[tuple, tuple[object, np.ndarray]] = {}  # per WorldLight (kept alive here)
 
 
 def _pixel_basis_integrals(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
@@ -103,15 +103,14 @@ def _pixel_mean_basis(world, directions) -> np.ndarray:
 def world_sh(world) -> np.ndarray:
     """(9, 3) exact SH projection ∫ L_w Y dω of the world's map (nearest-pixel radiance, as
     ``world_light.world_radiance`` reads it); cached per ``WorldLight``."""
-    cached = _world_cache.get(id(world))
+    key = ("sh", id(world))
+    cached = _world_cache.get(key)
     if cached is not None and cached[0] is world:
         return cached[1]
     h, w = world.radiance.shape[:2]
     rows, cols = _pixel_basis_integrals(h, w)
     out = np.einsum("ik,jk,ijc->kc", rows, cols, np.asarray(world.radiance, np.float64))
-    while len(_world_cache) >= _CACHE_SIZE:
-        _world_cache.pop(next(iter(_world_cache)))
-    _world_cache[id(world)] = (world, out)
+    _remember(key, world, out)
     return out
 
 
@@ -123,12 +122,24 @@ def _by_map(world, directions, n_uniform: int, k_light: int) -> np.ndarray:
 
 def _map_share(world, n_uniform: int, k_light: int) -> np.ndarray:
     """(3,) the DC coefficient ∫ L Y_0 dω of the pixels the map's rays estimate (``_by_map``),
-    exact."""
+    exact; cached per (``WorldLight``, N, K)."""
+    key = ("share", id(world), n_uniform, k_light)
+    cached = _world_cache.get(key)
+    if cached is not None and cached[0] is world:
+        return cached[1]
     h, w = world.radiance.shape[:2]
     rows, cols = _pixel_basis_integrals(h, w)
     radiance = np.asarray(world.radiance, np.float64)
     mine = k_light * (radiance @ LUMINANCE / world.total) > n_uniform / (4.0 * math.pi)
-    return np.einsum("i,j,ijc->c", rows[:, 0], cols[:, 0], radiance * mine[..., None])
+    out = np.einsum("i,j,ijc->c", rows[:, 0], cols[:, 0], radiance * mine[..., None])
+    _remember(key, world, out)
+    return out
+
+
+def _remember(key, world, value) -> None:
+    while len(_world_cache) >= _CACHE_SIZE:
+        _world_cache.pop(next(iter(_world_cache)))
+    _world_cache[key] = (world, value)
 
 
 def _balance(n_uniform: int, k_light: int, pdf_light) -> np.ndarray:
