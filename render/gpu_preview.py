@@ -197,7 +197,9 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         """``sums`` + one pass over ``inputs``, a G-buffer of ``size`` (the image's or the edge
         pixels' list's): terms = the centre's gathered (Diffuse Indirect, AO), Glossy
         Indirect and world glossy light at the same texels; blank : zeros of ``size``.
-        lamps : a dict that gets the (H·W,) light of the lamps (light_edge_pixels)."""
+        lamps : a dict that gets the lamps' sum_g texture before the world's and emitters'
+        dispatch adds to it, when it does (their sum_f is the final one: that dispatch adds
+        no glossy light), for light_edge_pixels."""
         out = _run("aa_surface", _SURFACE_SAMPLERS, {
             **inputs, **sums, "centre_diffuse": terms[0], "centre_glossy": terms[1],
             "centre_world": terms[2], "materials": materials, "principled_lut": lut},
@@ -217,9 +219,8 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
                 "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
                 ("out_f", "out_g"), *size)
             sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
-        if lamps is not None:
-            lamps["light"] = sum(np.flipud(read_texture(sums[k]))[..., :3].sum(axis=-1)
-                                 .astype(np.float64) for k in ("sum_f", "sum_g")).ravel()
+        if lamps is not None and extra:
+            lamps["sum_g"] = sums["sum_g"]
         if extra:  # the world's and emitters' own dispatch (streams after the lamps)
             direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples,
                                           seed=gather_settings.seed, world=scene.world_map,
@@ -247,11 +248,13 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     lamps = {}
     sums = shade(inputs, {name: zero for name in names}, (diffuse_ao, glossy, glossy_world),
                  zero, (width, height), centre_pass(light_samples)[1], lamps if reach else None)
-    texel = {name: np.flipud(read_texture(texture)).reshape(-1, 4).astype(np.float64)
-             for name, texture in sums.items()}
-    if reach:
-        edge = edge | light_edge_pixels(lamps["light"].reshape(height, width),
-                                        seen["hit"] & ~edge, reach, len(plan))
+    read = {name: np.flipud(read_texture(texture)) for name, texture in sums.items()}
+    texel = {name: image.reshape(-1, 4).astype(np.float64) for name, image in read.items()}
+    if reach:  # the centre pass's lamp light, from the same read-back (no read per light)
+        lamp_g = np.flipud(read_texture(lamps["sum_g"])) if "sum_g" in lamps else read["sum_g"]
+        light = sum(image[..., :3].sum(axis=-1).astype(np.float64)
+                    for image in (read["sum_f"], lamp_g))
+        edge = edge | light_edge_pixels(light, seen["hit"] & ~edge, reach, len(plan))
     listed = np.flatnonzero(edge.ravel())
     if len(listed):
         pixels, list_size = _pixel_list(listed, width, height)
