@@ -234,3 +234,22 @@ def test_an_emission_edit_alone_relights_the_voxels():
     assert glow.max() == pytest.approx(0.25 * GLOW.max(), rel=1e-4)
     same = update_gi(snap, caches, settings, anchor=np.zeros(3), previous=first)
     assert same.reused == "all"  # an unchanged scene still reuses everything
+
+
+def test_many_separate_emitters_share_a_few_shadow_cones():
+    """Twenty glowing tiles: the strongest stay one cone each, the rest share one, and every
+    triangle is in exactly one group."""
+    from voxgi.voxgi_addon.gi.cone_shadows import MAX_EMITTER_CONES
+    from voxgi.voxgi_addon.scene.geometry import SceneTriangles
+
+    tiles = np.array([[[x, 0, 2], [x + 0.2, 0, 2], [x, 0.2, 2]] for x in np.arange(20) * 0.5], float)
+    strength = np.arange(1, 21, dtype=float)
+    tris = SceneTriangles(tiles, np.tile([0, 0, 1.0], (20, 1)), np.arange(20, dtype=np.int32),
+                          np.arange(20, dtype=np.int32))
+    emitters = emitter_light(tris, np.r_[strength[:, None] * [1.0, 1.0, 1.0], [[0, 0, 0]]])
+    groups = emitter_groups(emitters)
+    assert len(groups) == MAX_EMITTER_CONES
+    sizes = sorted(len(g.corners) for g in groups)
+    assert sizes == [1] * (MAX_EMITTER_CONES - 1) + [20 - MAX_EMITTER_CONES + 1]
+    strongest = sorted(float(g.radiance.max()) for g in groups if len(g.corners) == 1)
+    assert strongest == list(strength[-(MAX_EMITTER_CONES - 1):])

@@ -35,11 +35,17 @@ from .conetrace import (
 from .direct_light import area_outline, diffuse_direct, light_frame
 
 SHADOWED_TYPES = ("SUN", "POINT", "SPOT", "AREA")
+# At most this many shadow cones for the emissive triangles: beyond it the weakest connected
+# emitters share one (towards their power-weighted centre), so that a wall of small glowing
+# tiles costs a few cones, not one per tile.
+MAX_EMITTER_CONES = 8
 
 
 def emitter_groups(light) -> list:
     """The connected parts of an ``emitters.EmitterLight`` (triangles sharing a corner belong
-    together: a panel, a sphere), each an ``EmitterLight`` of its own triangles."""
+    together: a panel, a sphere), each an ``EmitterLight`` of its own triangles; the
+    MAX_EMITTER_CONES − 1 strongest (area × luminance) stay apart, the others make one
+    group."""
     corners = np.asarray(light.corners, np.float64)
     _, vertex = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
     vertex = vertex.reshape(-1, 3)
@@ -52,9 +58,14 @@ def emitter_groups(light) -> list:
         if np.array_equal(new, label):
             break
         label = new
+    parts = [np.flatnonzero(label[vertex[:, 0]] == value) for value in np.unique(label[vertex[:, 0]])]
+    if len(parts) > MAX_EMITTER_CONES:
+        power = light.area * (light.radiance @ LUMINANCE)
+        parts.sort(key=lambda members: -power[members].sum())
+        keep = MAX_EMITTER_CONES - 1
+        parts = parts[:keep] + [np.sort(np.concatenate(parts[keep:]))]
     groups = []
-    for value in np.unique(label[vertex[:, 0]]):
-        members = np.flatnonzero(label[vertex[:, 0]] == value)
+    for members in parts:
         power = light.area[members] * (light.radiance[members] @ LUMINANCE)
         cdf = np.cumsum(power) / max(power.sum(), 1e-30)
         groups.append(dataclasses.replace(
