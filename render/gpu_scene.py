@@ -77,13 +77,25 @@ def digest(*values) -> str:
     return h.hexdigest()
 
 
+def _optional(array):
+    return None if array is None else np.asarray(array)
+
+
 def _mesh_digest(mesh) -> str:
     skin = mesh.skin
     return digest(np.asarray(mesh.positions), np.asarray(mesh.triangles),
-                  np.asarray(mesh.triangle_materials),
-                  None if mesh.corner_normals is None else np.asarray(mesh.corner_normals),
+                  np.asarray(mesh.triangle_materials), _optional(mesh.corner_normals),
+                  _optional(mesh.uvs),
                   None if skin is None else (np.asarray(skin.weights),
                                              np.asarray(skin.bone_indices), skin.armature))
+
+
+def _texture_key(texture):
+    """A snapshot texture's content (``TextureData``: pixels by their key, sampling)."""
+    pixels = getattr(texture, "pixels", None)
+    return (getattr(texture, "key", "") or (None if pixels is None else digest(pixels)),
+            getattr(texture, "interpolation", None), getattr(texture, "extension", None),
+            _optional(getattr(texture, "uv_transform", None)))
 
 
 def _texture_bytes(table: np.ndarray) -> int:
@@ -149,7 +161,9 @@ class GPUScene:
 
     def geometry_key(self, snapshot) -> str:
         """Content key of what ``world_triangles`` makes of ``snapshot``: the objects (mesh,
-        kind, armature, matrix), their meshes' arrays and the armatures."""
+        kind, armature, matrix), their meshes' arrays (UVs included) and the armatures, and
+        the materials' per-texel textures (``SceneTriangles.textures``, where the snapshot
+        has them). Whatever ``world_triangles`` reads must be in here."""
         meshes = {}
         for obj in snapshot.objects:
             mesh = snapshot.meshes.get(obj.mesh)
@@ -167,7 +181,9 @@ class GPUScene:
             (name, a.bone_names, np.asarray(a.parents), np.asarray(a.rest_matrices),
              np.asarray(a.pose_matrices), np.asarray(a.world_matrix))
             for name, a in sorted(snapshot.armatures.items()))
-        return digest(objects, armatures)
+        textures = (tuple(getattr(m, "base_color_texture", -1) for m in snapshot.materials),
+                    tuple(_texture_key(t) for t in getattr(snapshot, "textures", ())))
+        return digest(objects, armatures, textures)
 
     # ------------------------------------------------------------------ update
 
