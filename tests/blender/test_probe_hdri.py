@@ -14,11 +14,11 @@ projected on L2, to tell that representation error from the bake's).
 """
 import json
 import pathlib
+from dataclasses import dataclass
 
 import bpy
 import light_scenes
 import numpy as np
-import pytest
 
 REFS = pathlib.Path(__file__).resolve().parents[1] / "data" / "probe_refs"
 LIMIT = 0.15
@@ -29,14 +29,27 @@ def _relative(ours, cycles):
     return np.abs(ours - cycles).sum(axis=-1) / np.maximum(np.abs(cycles).sum(axis=-1), 1e-9)
 
 
-@pytest.fixture
-def courtyard(voxgi):
-    scene = bpy.context.scene
-    light_scenes.build("hdri_courtyard", scene)
-    return scene
+@dataclass
+class Comparison:
+    """The default bake of a light scene against its Cycles references (tests/data/probe_refs).
+    error, floor, old : (P, 5) relative irradiance error per probe and normal of the bake, of
+    Cycles' own light in SH L2, and of the uniform directions alone (the bake before next-event
+    estimation at the probe); per_probe, old_per_probe : (P,) relative L1 over the normals."""
+
+    index: np.ndarray
+    positions: np.ndarray
+    cycles: np.ndarray
+    ours: np.ndarray
+    error: np.ndarray
+    floor: np.ndarray
+    old: np.ndarray
+    per_probe: np.ndarray
+    old_per_probe: np.ndarray
+    noise: float
+    samples: int
 
 
-def test_probe_bake_of_the_hdri_courtyard_is_within_15_percent_of_cycles(courtyard):
+def _compare(name) -> Comparison:
     from voxgi.blender.probe_store import load_grids
     from voxgi.blender.snapshot import snapshot_or_error
     from voxgi.voxgi_addon.probes import sh
@@ -44,10 +57,12 @@ def test_probe_bake_of_the_hdri_courtyard_is_within_15_percent_of_cycles(courtya
     from voxgi.voxgi_addon.probes.validity import trace_probe_rays
     from voxgi.voxgi_addon.scene.geometry import world_triangles
 
-    refs = np.load(REFS / "hdri_courtyard.npz")
-    summary = json.loads((REFS / "summary.json").read_text())["hdri_courtyard"]
+    scene = bpy.context.scene
+    light_scenes.build(name, scene)
+    refs = np.load(REFS / f"{name}.npz")
+    summary = json.loads((REFS / "summary.json").read_text())[name]
     assert bpy.ops.voxgi.bake_probes() == {"FINISHED"}
-    grid = load_grids(courtyard)[0]
+    grid = load_grids(scene)[0]
     positions = np.asarray(grid.positions, np.float64)
     # the reference probes are the bake's own (placement and relocation do not depend on light)
     distance = np.linalg.norm(positions[None] - refs["positions"][:, None], axis=2)
@@ -57,46 +72,56 @@ def test_probe_bake_of_the_hdri_courtyard_is_within_15_percent_of_cycles(courtya
     normals = refs["normals"]
     cycles = refs["irradiance"].astype(np.float64)
     ours = np.stack([sh.irradiance(np.asarray(grid.sh[i], np.float64), normals) for i in index])
-    error = _relative(ours, cycles)
-    floor = _relative(refs["irradiance_l2"].astype(np.float64), cycles)
 
     # the bake before next-event estimation at the probe: the same uniform rays see the map where
-    # they miss (hit_radiance with the world seen), nothing drawn from the map
+    # they miss and the emission they land on, nothing is drawn from the lights
     snapshot, _ = snapshot_or_error(bpy.context)
     tris = world_triangles(snapshot)
-    dirs = sh.sample_directions(courtyard.voxgi.probe_directions, courtyard.voxgi.probe_seed)
+    dirs = sh.sample_directions(scene.voxgi.probe_directions, scene.voxgi.probe_seed)
     rays = trace_probe_rays(tris, positions[index], dirs)
     n = len(dirs)
     radiance = hit_radiance(snapshot, tris, np.repeat(positions[index], n, axis=0),
                             np.tile(dirs, (len(index), 1)), rays.t.ravel(), rays.triangle.ravel(),
-                            rays.u.ravel(), rays.v.ravel(), 1, courtyard.voxgi.probe_seed)
-    uniform = sh.project(radiance.reshape(len(index), n, 3), dirs)
-    old = _relative(np.stack([sh.irradiance(c, normals) for c in uniform]), cycles)
+                            rays.u.ravel(), rays.v.ravel(), 1, scene.voxgi.probe_seed)
+    uniform = np.stack([sh.irradiance(c, normals)
+                        for c in sh.project(radiance.reshape(len(index), n, 3), dirs)])
 
-    for k, i in enumerate(index):
-        print(f"probe {i} at {np.round(positions[i], 2)}: Cycles E {np.round(cycles[k].mean(1), 2)}, "
-              f"probe {np.round(ours[k].mean(1), 2)}; error {np.round(error[k], 3)} "
-              f"(uniform rays {np.round(old[k], 2)}, L2 of Cycles' own light {np.round(floor[k], 3)})")
-    print(f"{len(index)} probes × {len(normals)} normals (Cycles: 2 × {summary['samples_per_render']} "
-          f"spp panoramas, noise ≤ {refs['noise'].max():.4f}): error median {np.median(error):.3f}, "
-          f"90th percentile {np.percentile(error, 90):.3f}, worst {error.max():.3f}. Uniform rays only: median "
-          f"{np.median(old):.3f}, worst {old.max():.2f}. SH L2 of Cycles' own light: median "
-          f"{np.median(floor):.3f}, worst {floor.max():.3f}; the bake where that is within 5 %: worst "
-          f"{error[floor < 0.05].max():.3f} ({(floor < 0.05).sum()} of {floor.size})")
-    assert refs["noise"].max() < 0.01  # the references are converged
-    per_probe = np.abs(ours - cycles).sum(axis=(1, 2)) / np.abs(cycles).sum(axis=(1, 2))
-    old_per_probe = np.abs(np.stack([sh.irradiance(c, normals) for c in uniform]) - cycles).sum(
-        axis=(1, 2)) / np.abs(cycles).sum(axis=(1, 2))
-    print(f"per probe (relative L1 over its five normals): worst {per_probe.max():.3f}, median "
-          f"{np.median(per_probe):.3f}; uniform rays only: worst {old_per_probe.max():.3f}, median "
-          f"{np.median(old_per_probe):.3f}")
+    def per_probe(e):
+        return np.abs(e - cycles).sum(axis=(1, 2)) / np.abs(cycles).sum(axis=(1, 2))
+
+    return Comparison(index, positions[index], cycles, ours, _relative(ours, cycles),
+                      _relative(refs["irradiance_l2"].astype(np.float64), cycles),
+                      _relative(uniform, cycles), per_probe(ours), per_probe(uniform),
+                      float(refs["noise"].max()), int(summary["samples_per_render"]))
+
+
+def _report(c: Comparison) -> None:
+    for k, i in enumerate(c.index):
+        print(f"probe {i} at {np.round(c.positions[k], 2)}: Cycles E {np.round(c.cycles[k].mean(1), 2)}, "
+              f"probe {np.round(c.ours[k].mean(1), 2)}; error {np.round(c.error[k], 3)} "
+              f"(uniform rays {np.round(c.old[k], 2)}, L2 of Cycles' own light {np.round(c.floor[k], 3)})")
+    print(f"{len(c.index)} probes × 5 normals (Cycles: 2 × {c.samples} spp panoramas, noise ≤ "
+          f"{c.noise:.4f}): error median {np.median(c.error):.3f}, 90th percentile "
+          f"{np.percentile(c.error, 90):.3f}, worst {c.error.max():.3f}. Uniform rays only: median "
+          f"{np.median(c.old):.3f}, worst {c.old.max():.2f}. SH L2 of Cycles' own light: median "
+          f"{np.median(c.floor):.3f}, worst {c.floor.max():.3f}; the bake where that is within 5 %: "
+          f"worst {c.error[c.floor < 0.05].max():.3f} ({(c.floor < 0.05).sum()} of {c.floor.size})")
+    print(f"per probe (relative L1 over its five normals): worst {c.per_probe.max():.3f}, median "
+          f"{np.median(c.per_probe):.3f}; uniform rays only: worst {c.old_per_probe.max():.3f}, "
+          f"median {np.median(c.old_per_probe):.3f}")
+
+
+def test_probe_bake_of_the_hdri_courtyard_is_within_15_percent_of_cycles(voxgi):
+    c = _compare("hdri_courtyard")
+    _report(c)
+    assert c.noise < 0.01  # the references are converged
     # every probe's irradiance within the limit, and the typical normal's
-    assert per_probe.max() < LIMIT
-    assert np.median(error) < LIMIT
+    assert c.per_probe.max() < LIMIT
+    assert np.median(c.error) < LIMIT
     # where an L2 probe can hold Cycles' light (its own projection within 5 %), every normal of
     # every probe is within the limit; elsewhere (a normal facing away from the sun, which L2
     # rings into) the bake is no further off than Cycles' own L2 projection plus the limit
-    assert error[floor < 0.05].max() < LIMIT
-    assert (error < floor + LIMIT).all()
+    assert c.error[c.floor < 0.05].max() < LIMIT
+    assert (c.error < c.floor + LIMIT).all()
     # the old bake (the uniform directions alone) found the sun by luck
-    assert old_per_probe.max() > 3 * LIMIT and np.median(old) > LIMIT
+    assert c.old_per_probe.max() > 3 * LIMIT and np.median(c.old) > LIMIT
