@@ -202,3 +202,24 @@ def test_bake_lights_probes_with_the_panel_at_every_seed():
     print("baked / reference upward irradiance (panel's light + the floor's bounce):", np.round(values, 3))
     # the probe also gets the floor's bounce from below (not in the reference): only more light
     assert all(0.97 < v.min() and v.max() < 1.1 for v in values)
+
+
+def test_a_uniform_sky_is_left_to_the_uniform_rays_and_exact_in_the_open():
+    """A plain Background colour: no pixel is bright enough for the map's rays (K p_w < N p_u),
+    so none is traced; a probe above a floor gets the exact upper hemisphere, and the floor
+    hides the lower one (uniform rays' quadrature)."""
+    snapshot = SceneSnapshot({}, [], [], world=WorldData(np.ones(3, np.float32), 1.0,
+                                                         np.full((8, 16, 3), 0.5, np.float32), "grey"))
+    world = build_world_light(snapshot.world.radiance, "grey")
+    floor = MeshData("Floor", np.array([(-50, -50, 0), (50, -50, 0), (50, 50, 0), (-50, 50, 0)], np.float32),
+                     np.array([(0, 1, 2), (0, 2, 3)], np.int32), np.zeros(2, np.int32))
+    with_floor = SceneSnapshot({"Floor": floor}, [MaterialData("m", np.array([0.5] * 3, np.float32))],
+                               [ObjectData("Floor", "Floor", np.eye(4))], world=snapshot.world)
+    tris = world_triangles(with_floor)
+    dirs = sh.sample_directions(256, seed=3)
+    p = np.array([[0.0, 0.0, 1.0]])
+    rays = trace_probe_rays(tris, p, dirs)
+    out = world_probe_sh(tris, world, p, dirs, rays.triangle, np.arange(1), 64, 0)[0]
+    up, down = sh.irradiance(out, np.array([[0, 0, 1.0], [0, 0, -1.0]]))
+    np.testing.assert_allclose(up, math.pi * 0.5, rtol=0.05)  # the sky's hemisphere (L2: ~2 %)
+    assert np.all(np.abs(down) < 0.05 * math.pi * 0.5)       # the floor hides the rest

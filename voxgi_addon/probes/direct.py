@@ -161,7 +161,8 @@ def world_probe_sh(tris, world, positions, directions, ray_triangles, ids, sampl
     square = hashed_square(np.asarray(ids), WORLD_STREAM, samples, seed)  # (P, K, 2)
     k = square.shape[1]
     drawn = sample_world(world, square)                                  # (P, K, 3)
-    blocked = occluded(tris, np.repeat(p, k, axis=0), drawn.reshape(-1, 3), np.inf).reshape(count, k)
+    if not (_map_share(world, n, k) > 0).any():
+        k = 0  # no pixel bright enough for the map's rays (a uniform sky): the uniform rays alone
     # Maximum heuristic (Veach 1997, 9.2.4): a pixel belongs to the technique that draws it
     # more densely — bright pixels (a sun) to the map's rays, dim ones to the uniform rays. The
     # balance heuristic left a uniform ray landing on the sun a few per cent of its light: a
@@ -171,6 +172,9 @@ def world_probe_sh(tris, world, positions, directions, ray_triangles, ids, sampl
     f_u = world_radiance(world, d) * (~by_map_u * 4.0 * math.pi / n)[:, None]  # (N, 3)
     hidden = (np.asarray(ray_triangles) >= 0).astype(np.float64)        # (P, N)
     out -= np.einsum("pn,nk,nc->pkc", hidden, basis_u, f_u)
+    if k == 0:
+        return out
+    blocked = occluded(tris, np.repeat(p, k, axis=0), drawn.reshape(-1, 3), np.inf).reshape(count, k)
     # the map's rays that are blocked, each with its pixel's mean basis: the ray says whether
     # the pixel is hidden, and the basis's spread within one pixel of a sun 10⁴–10⁵ times the
     # sky would be noise the size of a shaded probe's whole light
