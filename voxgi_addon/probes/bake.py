@@ -44,10 +44,10 @@ class ProbeSettings:
     direct_samples : rays per probe drawn by the world map's importance, and as many points
     drawn on the emissive triangles by power, for the light arriving straight from them
     (``direct``; rounded up to a square). radiance_factor : the light off surfaces is gathered
-    along ``directions × radiance_factor`` directions (a second near-uniform set, traced from
-    the probes' final places); the validity test keeps ``directions``. A shaded probe beside a
-    sunlit floor sees a sharp-edged patch of bounce light that 256 directions sample coarsely
-    (docs/probes.md "Lights at the probe")."""
+    along ``directions × radiance_factor`` directions: the validity test's (from the probes'
+    final places) and radiance_factor − 1 more sets of as many, each under its own rotation.
+    A shaded probe beside a sunlit floor sees a sharp-edged patch of bounce light that 256
+    directions sample coarsely (docs/probes.md "Lights at the probe")."""
 
     resolution: int | tuple[int, int, int] = 8
     directions: int = 256
@@ -156,6 +156,12 @@ def _rows(rays: ProbeRays, a: int, b: int) -> ProbeRays:
     return ProbeRays(rays.t[a:b], rays.triangle[a:b], rays.u[a:b], rays.v[a:b], rays.back[a:b])
 
 
+def _join(a: ProbeRays, b: ProbeRays) -> ProbeRays:
+    """Each probe's rays of ``a`` then those of ``b``."""
+    return ProbeRays(*(np.concatenate([x, y], axis=1) for x, y in
+                       zip((a.t, a.triangle, a.u, a.v, a.back), (b.t, b.triangle, b.u, b.v, b.back))))
+
+
 def _box(tris, box):
     if box is None:
         return scene_box(tris.positions)
@@ -217,12 +223,16 @@ def bake_probe_grid(snapshot, settings: ProbeSettings = ProbeSettings(), box=Non
                               settings.seed, emitters=False)[0]
         sh += sh_fn(positions, dirs)
         p_count = 0  # nothing left for the exact stage
+    # the validity rays (from the final places) and (factor − 1) more rotated sets: near-uniform
     factor = max(1, int(settings.radiance_factor))
-    radiance_dirs = dirs if factor == 1 else sample_directions(len(dirs) * factor, settings.seed)
+    extra = [sample_directions(len(dirs), settings.seed + 1 + i) for i in range(factor - 1)]
+    radiance_dirs = np.concatenate([dirs, *extra])
     n = len(radiance_dirs)
     for a in range(0, p_count, _PROBE_CHUNK):
         b = min(p_count, a + _PROBE_CHUNK)
-        chunk = _rows(rays, a, b) if factor == 1 else trace_probe_rays(tris, positions[a:b], radiance_dirs)
+        chunk = _rows(rays, a, b)
+        if extra:
+            chunk = _join(chunk, trace_probe_rays(tris, positions[a:b], np.concatenate(extra)))
         direct, by_world, by_emitters = direct_probe_sh(
             snapshot, tris, positions[a:b], radiance_dirs, chunk, settings.direct_samples,
             settings.seed, first_id=a)
