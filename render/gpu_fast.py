@@ -22,18 +22,15 @@ import numpy as np
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.cone_shadows import cone_shadowed_direct, shadow_cone
 from ..voxgi_addon.gi.conetrace import world_mips
-from ..voxgi_addon.gi.world_light import scene_lights
 from ..voxgi_addon.preview.passes import (
     compose_passes,
     material_indices,
-    material_table,
-    principled_table,
 )
 from ..voxgi_addon.preview.upsample import low_shape
-from ..voxgi_addon.scene.geometry import world_triangles
 from .gbuffer import rasterize, read_gbuffer
-from .gpu_bvh import direct_light_texture, lights_texture, scene_light_textures, shared_bvh
-from .gpu_gather import glossy_direct_texture, principled_materials_texture
+from .gpu_bvh import direct_light_texture
+from .gpu_gather import glossy_direct_texture
+from .gpu_scene import current_scene
 from .gpu_tracer import dispatch, read_texture
 from .gpu_volume import GPUVolume, float_texture
 
@@ -49,11 +46,15 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     timings["upload"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    tris = world_triangles(snapshot)
+    # the session's GPU scene (gpu_scene.GPUScene, as Accurate's): triangles, BVH, material
+    # and light tables, uploaded only where they changed
+    scene = current_scene(snapshot)
+    tris, rough, emission, lights = scene.tris, scene.rough, scene.emission, scene.lights
     if len(tris) == 0:
         raise VoxGIError("the scene has no triangles to render")
-    _, rough, _, emission = material_table(snapshot)
-    lights = scene_lights(snapshot, tris, emission)  # lamps, world, emissive triangles
+    if scene.uploaded:
+        timings["scene update (GPU)"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
     gbuffer = rasterize(tris, snapshot.camera, rough, width, height)
     seen = read_gbuffer(gbuffer)
     hit = np.flatnonzero(seen["hit"].ravel())
@@ -84,31 +85,26 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     t0 = time.perf_counter()
     # the lamps' glossy light (preview.passes.glossy_direct_radiance; the glossy cones see the
     # world and the emission), and the colours for the view as Cycles' Principled BSDF gives them
-    principled = principled_table(snapshot)
-    materials = principled_materials_texture(principled, emission)
+    principled, materials = scene.principled, scene.materials
     shine = np.zeros((len(hit), 3))
     views = -seen["direction"].reshape(-1, 3)[hit].astype(np.float64)
     if shadows == "RAYS":
-        bvh = shared_bvh().update(tris)  # rebuilt and uploaded only for changed triangles
-        if bvh.uploaded_bytes:
-            timings["BVH build + upload"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
         # Light by light: one dispatch stays within llvmpipe's loop limit
         # (docs/blender_facts.md "llvmpipe's loop limit").
         direct = np.zeros((len(hit), 3))
-        for index in range(len(snapshot.lights)):
-            table = lights_texture(snapshot.lights, index)
-            lamp = direct_light_texture(bvh, gbuffer.inputs, snapshot.lights, light_samples,
-                                        seed=gather_settings.seed, table=table)
+        for index, table in enumerate(scene.lamp_tables):
+            lamp = direct_light_texture(scene.bvh, gbuffer.inputs, snapshot.lights,
+                                        light_samples, seed=gather_settings.seed,
+                                        world=scene.no_world, emitters=scene.no_emitters,
+                                        table=table)
             direct += pixels(lamp)
             shine += pixels(glossy_direct_texture(gbuffer.inputs, lamp, table, index,
                                                   principled, emission, materials))
-        if len(lights) > len(snapshot.lights):  # the world's and emitters' own dispatch
-            extra = scene_light_textures(lights)
-            direct += pixels(direct_light_texture(bvh, gbuffer.inputs, snapshot.lights,
+        if scene.has_scene_lights:  # the world's and emitters' own dispatch
+            direct += pixels(direct_light_texture(scene.bvh, gbuffer.inputs, snapshot.lights,
                                                   light_samples, seed=gather_settings.seed,
-                                                  only=-1, world=extra["world_map"],
-                                                  emitters=extra["emitters"]))
+                                                  world=scene.world_map,
+                                                  emitters=scene.emitters, table=scene.no_lamp))
     else:
         world_seen = None
         if any(light.type == "WORLD" for light in lights):  # the cones' view of the world
@@ -125,8 +121,8 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
             texture = float_texture(np.flipud(image.reshape(height, width, 4)).copy(),
                                     (width, height))
             shine += pixels(glossy_direct_texture(gbuffer.inputs, texture,
-                                                  lights_texture(snapshot.lights, index), index,
-                                                  principled, emission, materials))
+                                                  scene.lamp_tables[index], index, principled,
+                                                  emission, materials))
     timings["direct + lamps' glossy light"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
