@@ -35,6 +35,7 @@ import hashlib
 import time
 
 import bpy
+import gpu
 import numpy as np
 
 from ..voxgi_addon.gi.emitters import emitter_table
@@ -47,9 +48,8 @@ from .gpu_gather import principled_materials_texture
 from .gpu_principled import lut_texture
 from .gpu_volume import float_texture
 
-# What ``uploaded`` names: the parts of a scene, and the render's cached zero images.
-PARTS = ("bvh", "materials", "constants", "lights", "world", "emitters", "zeros")
-MAX_ZERO_SIZES = 4  # image sizes whose zero texture is kept (F12, viewport, edge lists …)
+# What ``uploaded`` names: the parts of a scene.
+PARTS = ("bvh", "materials", "constants", "lights", "world", "emitters")
 
 
 def _feed(h, value) -> None:
@@ -129,8 +129,8 @@ def lamp_tables(lights) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
 class GPUScene:
     """The GPU-side scene of the latest snapshot (see the module doc).
 
-    uploaded : part (``PARTS``) → bytes sent by the last ``update`` and the render that
-    followed (``zeros``); empty when nothing was. keys : part → the content key of what is
+    uploaded : part (``PARTS``) → bytes sent by the last ``update``; empty when nothing
+    was. keys : part → the content key of what is
     uploaded. seconds : part → time of its last rebuild + upload. bvh : a ``GPUBVH`` of its
     own (tests: a scene sharing nothing), else the session's ``shared_bvh``."""
 
@@ -148,7 +148,6 @@ class GPUScene:
         self.uploaded: dict[str, int] = {}
         self.seconds: dict[str, float] = {}
         self._meshes: dict[int, tuple[object, str]] = {}  # id(MeshData) → (it, its digest)
-        self._zeros: dict[tuple[int, int], object] = {}
 
     @property
     def uploaded_bytes(self) -> int:
@@ -293,16 +292,13 @@ class GPUScene:
                 "emitters": self.emitters, "materials": self.materials,
                 "principled_lut": self.lut}
 
-    def zeros(self, width: int, height: int):
-        """A width × height RGBA32F texture of zeros, kept for the next render of that size
-        (kernels only read it)."""
-        size = (int(width), int(height))
-        if size not in self._zeros:
-            while len(self._zeros) >= MAX_ZERO_SIZES:
-                self._zeros.pop(next(iter(self._zeros)))
-            self._zeros[size] = float_texture(np.zeros((size[1], size[0], 4), np.float32), size)
-            self._sent("zeros", size[0] * size[1] * 16)
-        return self._zeros[size]
+    @staticmethod
+    def zeros(width: int, height: int):
+        """A new width × height RGBA32F texture of zeros, cleared on the GPU: nothing is
+        uploaded, and nothing of a render's size is kept between renders."""
+        texture = gpu.types.GPUTexture((int(width), int(height)), format="RGBA32F")
+        texture.clear(format="FLOAT", value=(0.0, 0.0, 0.0, 0.0))
+        return texture
 
 
 _current: GPUScene | None = None
