@@ -50,15 +50,16 @@ KERNELS = {
     "bvh_direct": (("bvh_lights", "bvh_direct"), _BVH + ("lights", "world_map", "emitters",
                                                           "gbuffer_position",
                                                           "gbuffer_normal"), ("sampling", "strata")),
-    "bvh_gather": (("pixels", "principled", "bvh_lights", "bvh_shade", "bvh_gather"),
+    "bvh_gather": (("pixels", "principled", "bvh_lights", "textures", "bvh_shade", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials",
                            "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "principled_lut", "partial_image",
-                           "partial_variance"),
+                           "partial_variance", "texture_table", "texture_atlas"),
                    ("sampling", "world", "grid", "chunk")),
 }
 # The glossy gather reads the same inputs as the diffuse one.
-KERNELS["bvh_glossy"] = (("pixels", "principled", "bvh_lights", "bvh_shade", "bvh_glossy"),
+KERNELS["bvh_glossy"] = (("pixels", "principled", "bvh_lights", "textures", "bvh_shade",
+                          "bvh_glossy"),
                          *KERNELS["bvh_gather"][1:])
 # Kernels with more than one output image (the others write ``out_image``).
 OUTPUTS = {"bvh_gather": ("out_image", "out_variance"),

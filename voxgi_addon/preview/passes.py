@@ -29,6 +29,7 @@ from ..gi.world_light import scene_lights, world_light
 from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, filter_offsets
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
+from ..scene.textures import primary_base
 from .gather import GatherSettings, gather_gi, gather_glossy, gather_glossy_world
 from .upsample import PLANE_TOLERANCE, STRIDES, sample_pixels, upsample
 
@@ -113,7 +114,8 @@ def _glossy_points(light, index, points, normals, sample_ids, alpha):
     return towards, weight / np.maximum(weight.sum(axis=0, keepdims=True), 1e-30)
 
 
-def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_direct, sample_ids):
+def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_direct, sample_ids,
+                           base=None):
     """(N, 3) the glossy light the lights send to the viewer (Glossy Color × Glossy Direct).
 
     Each light's shadowed Diffuse Direct is turned back into the irradiance it brings (× π) and
@@ -123,10 +125,11 @@ def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_dire
     Principled glossy lobe toward the viewer (``principled.glossy_reflectance`` / cos). The
     light's shadowing is taken as uniform over it. views : (N, 3) unit directions from the
     points to the viewer; per_light_direct : (L, N, 3) Diffuse Direct light by light;
-    sample_ids : (N,) the points' sample ids (pixel indices, row 0 on top).
+    sample_ids : (N,) the points' sample ids (pixel indices, row 0 on top); base : (N, 3) the
+    points' Base Color per texel (``scene.textures.primary_base``), None: the table's.
     """
-    base, params = principled_table(snapshot)
-    shading = (base[mat], params[mat, 0], params[mat, 1], params[mat, 2])
+    table, params = principled_table(snapshot)
+    shading = (table[mat] if base is None else base, params[mat, 0], params[mat, 1], params[mat, 2])
     total = np.zeros((len(points), 3))
     for index, (light, direct) in enumerate(zip(snapshot.lights, per_light_direct)):
         alpha = np.clip(params[mat, 2], 0.0, 1.0) ** 2
@@ -165,13 +168,26 @@ def material_indices(snapshot, material: np.ndarray) -> np.ndarray:
 COLOUR_BINS = 2049  # cos(view) samples of principled_colours' tables (0, 1/2048, …, 1)
 
 
-def principled_colours(snapshot, mat, cos_view):
+def principled_colours(snapshot, mat, cos_view, base=None):
     """(Diffuse Color, Glossy Color) (N, 3) of Cycles' Principled BSDF for materials ``mat``
     (N,) seen at ``cos_view`` (N,) in [0, 1] (``gi.principled.diffuse_weight``,
     ``glossy_color``). The colours depend on the view through cos_view alone, so for more
     pixels than table entries each material is evaluated at ``COLOUR_BINS`` cosines and the
     pixels interpolate linearly: within 1e-4 of the direct evaluation, 8× faster at 640 × 480.
+    base : (N, 3) the points' Base Color per texel (``scene.textures.primary_base``): points
+    whose colour is not their material's are evaluated directly.
     """
+    if base is not None:
+        table = principled_table(snapshot)[0]
+        own = np.flatnonzero(np.any(np.asarray(base) != table[np.asarray(mat)], axis=1))
+        diffuse, glossy = principled_colours(snapshot, mat, cos_view)
+        if len(own):
+            params = principled_table(snapshot)[1][np.asarray(mat)[own]]
+            args = (np.asarray(base)[own], params[:, 0], params[:, 1], params[:, 2],
+                    np.asarray(cos_view, np.float64)[own])
+            diffuse, glossy = np.array(diffuse, copy=True), np.array(glossy, copy=True)
+            diffuse[own], glossy[own] = diffuse_weight(*args), glossy_color(*args)
+        return diffuse, glossy
     base, params = principled_table(snapshot)
     mat = np.asarray(mat)
     cos_view = np.asarray(cos_view, np.float64)
@@ -365,14 +381,15 @@ SUMS = ("emission", "coverage", "diffuse_color", "ao", "glossy_color", "diffuse_
 
 
 def accumulate_pass(sums, snapshot, hit, mat, normals, views, direct, indirect, ao, glossy,
-                    shine, glossy_world=None):
+                    shine, glossy_world=None, base=None):
     """Add one sub-pixel pass to ``sums`` (name of SUMS → (H·W, 3) float64, ``coverage`` and
     ``ao`` (H·W,)): hit, mat, normals, views, direct, shine as ``compose_passes`` takes them
     for this pass's camera rays; indirect, ao, glossy, glossy_world : the centre pass's
-    gathered terms at the same pixels (the gathers are not anti-aliased)."""
+    gathered terms at the same pixels (the gathers are not anti-aliased); base : (N, 3) Base
+    Color per texel (``scene.textures.primary_base``) or None."""
     _, _, _, emission = material_table(snapshot)
     cos_view = np.clip(np.einsum("ij,ij->i", normals, views), 0.0, 1.0)
-    diffuse_colour, glossy_colour = principled_colours(snapshot, mat, cos_view)
+    diffuse_colour, glossy_colour = principled_colours(snapshot, mat, cos_view, base)
     light = np.asarray(shine, np.float64)
     if glossy_world is not None:
         light = light + glossy_colour * glossy_world
@@ -668,18 +685,20 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         n = seen.normal.reshape(-1, 3)[hit]
         mat = material_indices(snapshot, seen.material.ravel())[hit]
         views = -seen.direction.reshape(-1, 3)[hit]
+        base = primary_base(tris, seen, hit, principled_table(snapshot)[0][mat],
+                            snapshot.camera, width, height)  # None: untextured
         per_light = direct_light(None, p, n, lights, tris, cones, light_samples, shadows,
                                  sample_ids=hit, per_light=True, seed=gather_settings.seed,
                                  strata_block=block)
         shine = glossy_direct_radiance(snapshot, p, n, views, mat,
-                                       per_light[:len(snapshot.lights)], hit)
+                                       per_light[:len(snapshot.lights)], hit, base)
         accumulate_pass(sums, snapshot, hit, mat, n, views, per_light.sum(axis=0),
-                        indirect[hit], ao[hit], glossy[hit], shine, glossy_world[hit])
+                        indirect[hit], ao[hit], glossy[hit], shine, glossy_world[hit], base)
         if lamps is not None:  # the lamps' light as the GPU's sums hold it after the lamps
             only = new_sums(height * width)
             accumulate_pass(only, snapshot, hit, mat, n, views,
                             per_light[:len(snapshot.lights)].sum(axis=0), indirect[hit],
-                            ao[hit], glossy[hit], shine, glossy_world[hit])
+                            ao[hit], glossy[hit], shine, glossy_world[hit], base)
             lamps["light"] = (only["diffuse_direct"] + only["glossy_direct"]).sum(axis=1)
 
     # The centre pass off the geometry's edges, then its shadow and light edges join them
