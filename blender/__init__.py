@@ -19,11 +19,12 @@ from __future__ import annotations
 
 from ..registration import register_modules, unregister_modules
 from . import jobs, session, settings, viewport_session, viewport_settings
+from .snapshot import materials as snapshot_materials
 from .snapshot import world_map
 
 # Registered in this order (settings first), unregistered in reverse (jobs stop before the
 # sessions are cleared; the world maps' cache goes last).
-modules = (world_map, settings, viewport_settings, session, viewport_session, jobs)
+modules = (world_map, snapshot_materials, settings, viewport_settings, session, viewport_session, jobs)
 
 
 def register() -> None:

@@ -14,6 +14,7 @@ import numpy as np
 from gpu_extras.batch import batch_for_shader
 
 from ..voxgi_addon.scene.camera import camera_frame, view_projection
+from ..voxgi_addon.scene.textures import FOOTPRINT_COS_MIN, pixel_spread
 from .gpu_shaders import SHADER_DIR
 from .gpu_tracer import read_texture
 
@@ -30,12 +31,19 @@ def gbuffer_shader():
     varying.smooth("VEC3", "shading_normal")
     varying.flat("VEC3", "flat_normal")
     varying.flat("VEC2", "surface")
+    varying.smooth("VEC2", "surface_uv")
+    varying.flat("VEC2", "surface_slot")
     info = gpu.types.GPUShaderCreateInfo()
     info.vertex_in(0, "VEC3", "position")
     info.vertex_in(1, "VEC3", "normal")
     info.vertex_in(2, "VEC3", "face_normal")
     info.vertex_in(3, "VEC2", "material")
+    info.vertex_in(4, "VEC2", "uv")
+    info.vertex_in(5, "VEC2", "texel")
     info.vertex_out(varying)
+    info.sampler(0, "FLOAT_2D", "texture_table")
+    info.sampler(1, "FLOAT_2D", "texture_atlas")
+    info.define("FOOTPRINT_COS_MIN", repr(float(FOOTPRINT_COS_MIN)))
     info.push_constant("MAT4", "view_projection")
     info.push_constant("VEC3", "camera_position")
     info.push_constant("VEC3", "camera_forward")
@@ -43,39 +51,47 @@ def gbuffer_shader():
     info.fragment_out(0, "VEC4", "out_position")
     info.fragment_out(1, "VEC4", "out_normal")
     info.fragment_out(2, "VEC4", "out_view")
+    info.fragment_out(3, "VEC4", "out_base")
     info.vertex_source((SHADER_DIR / "gbuffer_vert.glsl").read_text())
-    info.fragment_source((SHADER_DIR / "gbuffer_frag.glsl").read_text())
+    info.fragment_source((SHADER_DIR / "textures.glsl").read_text() +
+                         (SHADER_DIR / "gbuffer_frag.glsl").read_text())
     return gpu.shader.create_from_info(info)
 
 
 class GBuffer:
-    """position, normal, view : RGBA32F textures (see module doc) of width × height."""
+    """position, normal, view : RGBA32F textures (see module doc) of width × height; base :
+    (Base Color sampled per texel, 1) where the pixel's material has a texture, else 0."""
 
     def __init__(self, width: int, height: int):
         self.width, self.height = width, height
         self.position = gpu.types.GPUTexture((width, height), format="RGBA32F")
         self.normal = gpu.types.GPUTexture((width, height), format="RGBA32F")
         self.view = gpu.types.GPUTexture((width, height), format="RGBA32F")
+        self.base = gpu.types.GPUTexture((width, height), format="RGBA32F")
         self.depth = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
 
     @property
     def inputs(self) -> dict[str, object]:
         return {"gbuffer_position": self.position, "gbuffer_normal": self.normal,
-                "gbuffer_view": self.view}
+                "gbuffer_view": self.view, "gbuffer_base": self.base}
 
 
 def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
-              offset=(0.0, 0.0), shader=None) -> GBuffer:
+              offset=(0.0, 0.0), shader=None, textures=None) -> GBuffer:
     """Draw ``tris`` (``SceneTriangles``) seen by ``camera`` into a new ``GBuffer``.
 
     roughness : (M + 1,) per material index (last = no material), as ``preview`` tables it.
     offset : (x, y) pixels (x right, y down): every pixel sees what the camera ray that far
     from its centre sees (``camera.camera_rays``' offset; one sub-pixel pass).
     shader : the render's ``gbuffer_shader`` (None: a new one for this call).
+    textures : (texture table, atlas) GPU textures of ``tris.textures`` (``gpu_scene``'s
+    ``textures`` part): the fragment samples each textured material's Base Color per texel at
+    ``scene.textures.primary_lod`` into ``base``; None: no texture is sampled.
     """
     out = GBuffer(width, height)
     framebuffer = gpu.types.GPUFrameBuffer(depth_slot=out.depth,
-                                           color_slots=(out.position, out.normal, out.view))
+                                           color_slots=(out.position, out.normal, out.view,
+                                                        out.base))
     rotation, position = camera_frame(camera)
     matrix = view_projection(camera, width, height, offset)
     shader = shader or gbuffer_shader()
@@ -95,9 +111,24 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
                 np.asarray(tris.corner_normals, np.float32).reshape(-1, 3)
             surface = np.repeat(np.stack([material, roughness[material]], axis=1)
                                 .astype(np.float32), 3, axis=0)
+            surface_textures = getattr(tris, "textures", None)
+            if textures is None or surface_textures is None:
+                uv = np.zeros((len(corners), 2), np.float32)
+                texel = np.tile(np.float32([-1.0, 0.0]), (len(corners), 1))
+                textures = _no_textures()
+            else:
+                uv = np.asarray(surface_textures.uvs, np.float32).reshape(-1, 2)
+                # (slot, level-0 texels per metre × a pixel's width at unit distance)
+                spread = np.float32(pixel_spread(camera, width, height))
+                texel = np.repeat(np.stack(
+                    [surface_textures.slot_of(tris.materials).astype(np.float32),
+                     surface_textures.density * spread], axis=1), 3, axis=0)
             batch = batch_for_shader(shader, "TRIS", {"position": corners, "normal": smooth,
-                                                      "face_normal": face, "material": surface})
+                                                      "face_normal": face, "material": surface,
+                                                      "uv": uv, "texel": texel})
             shader.bind()
+            shader.uniform_sampler("texture_table", textures[0])
+            shader.uniform_sampler("texture_atlas", textures[1])
             shader.uniform_float("view_projection", matrix.T.ravel().tolist())
             shader.uniform_float("camera_position", position.astype(np.float32))
             shader.uniform_float("camera_forward", (-rotation[:, 2]).astype(np.float32))
@@ -108,13 +139,22 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
     return out
 
 
+def _no_textures():
+    """A (table, atlas) pair of 1 × 1 textures for a render with no texture to sample."""
+    blank = gpu.types.Buffer("FLOAT", 4, [0.0, 0.0, 0.0, 0.0])
+    return (gpu.types.GPUTexture((1, 1), format="RGBA32F", data=blank),
+            gpu.types.GPUTexture((1, 1), format="RGBA32F", data=blank))
+
+
 def read_gbuffer(gbuffer: GBuffer) -> dict[str, np.ndarray]:
     """The G-buffer as top-row-first numpy arrays: hit (H, W) bool, position, normal,
     direction (H, W, 3) float32, roughness (H, W) float32, material (H, W) int32."""
     position = np.flipud(read_texture(gbuffer.position))
     normal = np.flipud(read_texture(gbuffer.normal))
     view = np.flipud(read_texture(gbuffer.view))
+    base = np.flipud(read_texture(gbuffer.base))
     hit = position[..., 3] > 0.5
     return {"hit": hit, "position": position[..., :3], "normal": normal[..., :3],
             "roughness": normal[..., 3], "direction": view[..., :3],
-            "material": np.where(hit, np.rint(view[..., 3]), -1).astype(np.int32)}
+            "material": np.where(hit, np.rint(view[..., 3]), -1).astype(np.int32),
+            "base": base[..., :3], "textured": base[..., 3] > 0.5}

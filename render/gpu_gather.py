@@ -57,13 +57,23 @@ def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: i
     return values, variance
 
 
-def principled_materials_texture(principled, emission):
-    """(M + 1) × 3 texture of the hits' materials: row 0 base colour, row 1 emission, row 2
-    (metallic, Specular IOR Level, roughness) (``preview.passes.principled_table``)."""
+def principled_materials_texture(principled, emission, slots=None):
+    """(M + 1) × 4 texture of the hits' materials: row 0 base colour, row 1 emission, row 2
+    (metallic, Specular IOR Level, roughness) (``preview.passes.principled_table``), row 3
+    (Base Color texture slot, 0, 0, 0): ``slots`` (M + 1,) of ``scene.textures.SurfaceTextures``,
+    -1 (none) without."""
     base, params = principled
-    rows = np.zeros((3, len(base), 4), np.float32)
+    rows = np.zeros((4, len(base), 4), np.float32)
     rows[0, :, :3], rows[1, :, :3], rows[2, :, :3] = base, emission, params
-    return float_texture(rows, (len(base), 3))
+    rows[3, :, 0] = -1.0 if slots is None else np.asarray(slots, np.float32)
+    return float_texture(rows, (len(base), 4))
+
+
+def no_texture_inputs() -> dict[str, object]:
+    """1 × 1 stand-ins for the bounce hits' texture samplers (``bvh_shade.glsl``) of a scene
+    whose materials sample no texture (row 3 of the materials texture is -1 throughout)."""
+    blank = np.zeros((1, 1, 4), np.float32)
+    return {name: float_texture(blank, (1, 1)) for name in ("texture_table", "texture_atlas")}
 
 
 # Ray traversals (a bounce ray or a shadow ray) one gather invocation may make per dispatch.
@@ -100,6 +110,8 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
                   "materials": principled_materials_texture(principled, emission),
                   "principled_lut": lut_texture()}
     inputs = {**bvh.inputs, **gbuffer_inputs, **tables}
+    if "texture_atlas" not in inputs:
+        inputs.update(no_texture_inputs())
     assert OUTPUTS[kernel] == ("out_image", "out_variance")
     rays = settings.rays if kernel == "bvh_gather" else settings.glossy_rays
     # metals take METAL_RAY_FACTOR × the glossy rays (exact_glossy.glossy_indirect): the
@@ -181,8 +193,8 @@ def glossy_gi(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, setting
     return upsample(values, gbuffer_inputs, stride, width, height)
 
 
-_GLOSSY_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "direct_image",
-                    "lights", "materials", "principled_lut")
+_GLOSSY_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "gbuffer_base",
+                    "direct_image", "lights", "materials", "principled_lut")
 
 
 def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: int, principled,

@@ -67,7 +67,8 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
 # The sums of preview.passes.accumulate_pass as textures: name → (texture, channels) where
 # channels name what its rgb and alpha hold (see shaders/aa_surface.glsl).
 _SURFACE_SUMS = ("a", "b", "c", "d", "e", "f")
-_SURFACE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "centre_diffuse",
+_SURFACE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "gbuffer_base",
+                     "centre_diffuse",
                      "centre_glossy", "centre_world", "materials", "principled_lut",
                      *(f"sum_{k}" for k in _SURFACE_SUMS))
 _LIGHT_SAMPLERS = ("colour", "direct_image", "shine_image", "sum_f", "sum_g")
@@ -153,7 +154,8 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     t0 = time.perf_counter()
     plan = subpixel_passes(filter_width, light_samples)
     raster = gbuffer_shader()  # this render's, for its G-buffers (gbuffer.gbuffer_shader)
-    centre = rasterize(tris, snapshot.camera, rough, width, height, shader=raster)
+    centre = rasterize(tris, snapshot.camera, rough, width, height, shader=raster,
+                       textures=scene.raster_textures())
     timings["visibility (GPU)"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -265,8 +267,12 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         edge_sums = {name: blank for name in names}
         for offset, block in plan:
             gbuffer = rasterize(tris, snapshot.camera, rough, width, height, offset,
-                                shader=raster)
+                                shader=raster, textures=scene.raster_textures())
             inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": pixels}, list_size)
+            inputs["gbuffer_base"] = blank if not scene.textured else _compact(
+                "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,
+                                "gbuffer_view": gbuffer.base, "pixels": pixels},
+                list_size)["gbuffer_position"]
             edge_sums = shade(inputs, edge_sums, terms, blank, list_size, block)
         for name, texture in edge_sums.items():
             texel[name][listed] = read_texture(texture).reshape(-1, 4)[:len(listed)]

@@ -42,14 +42,16 @@ from ..voxgi_addon.gi.emitters import emitter_table
 from ..voxgi_addon.gi.world_light import scene_lights, world_table
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
 from ..voxgi_addon.preview.passes import material_table, principled_table
+from ..voxgi_addon.scene.bvh import TEXTURE_WIDTH
 from ..voxgi_addon.scene.geometry import world_triangles
+from ..voxgi_addon.scene.textures import pack_atlas
 from .gpu_bvh import GPUBVH, shared_bvh
-from .gpu_gather import principled_materials_texture
+from .gpu_gather import no_texture_inputs, principled_materials_texture
 from .gpu_principled import lut_texture
 from .gpu_volume import float_texture
 
 # What ``uploaded`` names: the parts of a scene.
-PARTS = ("bvh", "materials", "constants", "lights", "world", "emitters")
+PARTS = ("bvh", "materials", "textures", "constants", "lights", "world", "emitters")
 
 
 def _feed(h, value) -> None:
@@ -142,6 +144,8 @@ class GPUScene:
         self.materials = self.lut = self.no_world = self.no_emitters = None
         self.lights: list = []
         self._tail: list = []  # the lights list's world and emitters
+        self.textures: dict[str, object] = {}  # texture_table, texture_atlas
+        self.slots = None
         self.lamp_table = self.no_lamp = self.world_map = self.emitters = None
         self.lamp_tables: list = []
         self.keys: dict[str, object] = {}
@@ -209,11 +213,13 @@ class GPUScene:
         t0 = time.perf_counter()
         _, rough, _, emission = material_table(snapshot)
         principled = principled_table(snapshot)
-        materials = digest(rough, emission, *principled)
+        self._update_textures(geometry)
+        t0 = time.perf_counter()
+        materials = digest(rough, emission, *principled, self.slots)
         materials_changed = materials != self.keys.get("materials")
         if materials_changed:
             self.rough, self.emission, self.principled = rough, emission, principled
-            self.materials = principled_materials_texture(principled, emission)
+            self.materials = principled_materials_texture(principled, emission, self.slots)
             self._sent("materials", 3 * len(principled[0]) * 16)
             self.keys["materials"] = materials
             self.seconds["materials"] = time.perf_counter() - t0
@@ -272,6 +278,62 @@ class GPUScene:
             self.keys["emitters_source"] = key
         return self
 
+    def _update_textures(self, geometry: str) -> None:
+        """The ``textures`` part, two textures (the gathers' kernels have one sampler to spare
+        per stage, not three): ``texture_atlas``, every level of every texture
+        (``scene.textures.pack_atlas``; RGBA16F, as the numpy pyramids hold half floats), and
+        ``texture_table``, RGBA32F BVH_WIDTH wide: row s = texture s's table row, then from
+        the row its texel (BVH_WIDTH − 1, 0) names, the triangles' corner UVs (2 texels per
+        triangle index: (uv0, uv1), (uv2, 0, 0)). Keyed by the textures' content and the
+        geometry; 1 × 1 stand-ins without textures."""
+        t0 = time.perf_counter()
+        surface = getattr(self.tris, "textures", None) if self.tris is not None else None
+        if surface is None:
+            if self.keys.get("textures") != "none":
+                self.textures, self.slots = no_texture_inputs(), None
+                self.keys["textures"] = "none"
+                self.keys.pop("texture_table", None)
+            return
+        self.slots = surface.slots
+        key = digest(tuple((t.key or digest(t.pixels), t.interpolation, t.extension,
+                            np.asarray(t.uv_transform, np.float64)) for t in surface.textures))
+        atlas = table = None
+        if key != self.keys.get("textures"):
+            atlas, table = pack_atlas(surface.textures)
+            self.textures = {**self.textures, "texture_atlas": float_texture(
+                atlas, (atlas.shape[1], atlas.shape[0]), "RGBA16F")}
+            self._sent("textures", atlas.size * 2)
+            self.keys["textures"] = key
+        if (key, geometry) != self.keys.get("texture_table"):
+            if table is None:
+                table = pack_atlas(surface.textures)[1]
+            uvs = np.asarray(surface.uvs, np.float32).reshape(-1, 6)
+            texels = np.zeros((len(uvs), 2, 4), np.float32)
+            texels[:, 0], texels[:, 1, :2] = uvs[:, :4], uvs[:, 4:]
+            flat = texels.reshape(-1, 4)
+            head = len(table)
+            rows = head + max(1, -(-len(flat) // TEXTURE_WIDTH))
+            out = np.zeros((rows * TEXTURE_WIDTH, 4), np.float32)
+            grid = out.reshape(rows, TEXTURE_WIDTH, 4)
+            grid[:head, :table.shape[1]] = table
+            grid[0, TEXTURE_WIDTH - 1, 0] = head
+            out[head * TEXTURE_WIDTH:head * TEXTURE_WIDTH + len(flat)] = flat
+            self.textures = {**self.textures,
+                             "texture_table": float_texture(out, (TEXTURE_WIDTH, rows))}
+            self._sent("textures", out.nbytes)
+            self.keys["texture_table"] = (key, geometry)
+        self.seconds["textures"] = time.perf_counter() - t0
+
+    @property
+    def textured(self) -> bool:
+        """Some material samples a texture (the G-buffer samples it, ``raster_textures``)."""
+        return self.slots is not None
+
+    def raster_textures(self):
+        """(texture table, atlas) for ``gbuffer.rasterize``, None without textures."""
+        return (self.textures["texture_table"], self.textures["texture_atlas"]) \
+            if self.textured else None
+
     # ------------------------------------------------------------------ what kernels read
 
     @property
@@ -290,7 +352,7 @@ class GPUScene:
         ``tables``)."""
         return {"lights": self.lamp_table, "world_map": self.world_map,
                 "emitters": self.emitters, "materials": self.materials,
-                "principled_lut": self.lut}
+                "principled_lut": self.lut, **self.textures}
 
     @staticmethod
     def zeros(width: int, height: int):

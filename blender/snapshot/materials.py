@@ -1,14 +1,57 @@
-"""Read Blender materials into ``MaterialData`` (main thread).
+"""Read Blender materials into ``MaterialData`` and their textures into ``TextureData``
+(main thread; docs/gi_pipeline.md "Materials per texel").
 
-The engine needs one colour per material: the Principled BSDF's Base Color
-input, or the mean of the Image Texture linked into it. Colours are linear
-scene-referred RGB; 8-bit sRGB images are linearised per pixel before averaging.
+The Base Color comes from where the material takes it:
+
+* a value: the socket's ``default_value``;
+* an **Image Texture** node (directly, or through Mapping nodes fed by a UV Map node or the
+  Texture Coordinate's UV): the image's pixels as a ``TextureData`` (linear: sRGB byte images
+  linearised as Blender's colour management does; Non-Color and linear images as they are),
+  its interpolation and extension, the Mappings as a UV affine map, sampled per texel through
+  the mesh's UV map (the node's, else the active render UV map). A missing or unreadable
+  image: a warning and the socket's value;
+* anything else (procedural textures, mixes, ramps, an image through other nodes, a surface
+  that is not a lone Principled BSDF): **Cycles bakes it** into an image over the mesh's
+  active render UV map, per (material, mesh) — the socket routed to an Emission shader (an
+  Emit bake) for a Principled BSDF, the Diffuse Color pass (a Diffuse bake) otherwise — in a
+  temporary scene with a temporary copy of the mesh and material, everything removed
+  afterwards (the user's file is left as it was). Bakes are cached by the node tree's content
+  and the mesh's; where no bake can run (off the main thread, during a render job) or the mesh
+  has no UV map, a warning and the socket's value (the viewport colour for other surfaces).
 """
 from __future__ import annotations
 
+import hashlib
+import threading
+
+import bpy
 import numpy as np
 
-from ...voxgi_addon.scene.snapshot import MaterialData
+from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
+from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _NeedsBake, _tree_key
+
+BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
+BAKE_SAMPLES = 8      # Cycles samples per texel (the texel's mean over its area)
+BAKE_MARGIN = 4       # texels the bake extends each UV island by (no dark seams when filtered)
+LINEAR_SPACES = ("Linear Rec.709", "scene_linear", "Non-Color", "Linear CIE-XYZ E")
+SCENE_LINEAR = ("Linear Rec.709", "scene_linear")
+MAPPING_TYPES = ("POINT", "TEXTURE", "VECTOR")
+_BAKED: dict[str, TextureData] = {}
+_BAKES = [0]
+
+
+def bake_count() -> int:
+    """How many Cycles bakes of a material socket this session ran."""
+    return _BAKES[0]
+
+
+def clear_bake_cache() -> None:
+    _BAKED.clear()
+
+
+@bpy.app.handlers.persistent
+def _clear_on_load(*_args) -> None:
+    clear_bake_cache()
 
 
 def srgb_to_linear(values: np.ndarray) -> np.ndarray:
@@ -25,17 +68,84 @@ def image_mean_color(image) -> np.ndarray | None:
     ``Image.pixels`` holds float buffers in scene-linear and byte buffers in the image's
     colour space, so only byte images tagged sRGB are converted.
     """
-    width, height = image.size
-    channels = image.channels
-    if width * height == 0 or channels == 0:
+    rgb = image_rgb(image)
+    return None if rgb is None else rgb.reshape(-1, 3).mean(axis=0, dtype=np.float64).astype(np.float32)
+
+
+def image_rgb(image) -> np.ndarray | None:
+    """(H, W, 3) float32 linear RGB of an image (row 0 = bottom), None without pixels; raises
+    ``_NeedsBake`` for colour spaces only Blender can convert."""
+    if image.source not in ("FILE", "GENERATED"):
+        raise _NeedsBake(f"the image '{image.name}' is a {image.source.lower()}")
+    pixels = _image_pixels(image)
+    if pixels is None:
         return None
-    pixels = np.empty(width * height * channels, dtype=np.float32)
-    image.pixels.foreach_get(pixels)
-    pixels = pixels.reshape(-1, channels)
-    rgb = pixels[:, :3] if channels >= 3 else np.repeat(pixels[:, :1], 3, axis=1)
-    if image.colorspace_settings.name == "sRGB" and not image.is_float:
-        rgb = srgb_to_linear(rgb)
-    return rgb.mean(axis=0, dtype=np.float64).astype(np.float32)
+    rgb = np.ascontiguousarray(pixels[..., :3], np.float32)
+    space = image.colorspace_settings.name
+    if space in LINEAR_SPACES and (space == "Non-Color" or
+                                   bpy.data.colorspace.working_space in SCENE_LINEAR):
+        return rgb
+    if bpy.data.colorspace.working_space not in SCENE_LINEAR:
+        raise _NeedsBake(f"the file's working colour space is {bpy.data.colorspace.working_space}")
+    if space == "sRGB" and not image.is_float:
+        return srgb_to_linear(rgb)  # byte pixels hold the encoded values (docs "World")
+    if space == "sRGB":
+        return rgb  # float buffers are made scene-linear on load
+    raise _NeedsBake(f"the image '{image.name}' is in the colour space '{space}'")
+
+
+def _mapping_affine(node) -> np.ndarray:
+    """(3, 4) affine matrix of a Mapping node on points (Cycles' evaluation, docs "World")."""
+    for name in ("Location", "Rotation", "Scale"):
+        socket = node.inputs.get(name)
+        if socket is not None and socket.is_linked:
+            raise _NeedsBake(f"the Mapping node '{node.name}' has a linked {name}")
+    kind = node.vector_type
+    if kind not in MAPPING_TYPES:
+        raise _NeedsBake(f"the Mapping node '{node.name}' is of type {kind}")
+    rotation = _euler_matrix(node.inputs["Rotation"].default_value)
+    scale = np.array(node.inputs["Scale"].default_value, np.float64)
+    location = np.array(node.inputs["Location"].default_value, np.float64) \
+        if kind in ("POINT", "TEXTURE") else np.zeros(3)
+    out = np.zeros((3, 4))
+    if kind == "TEXTURE":
+        inverse = np.divide(1.0, scale, out=np.zeros(3), where=scale != 0)
+        out[:, :3] = inverse[:, None] * rotation.T
+        out[:, 3] = -out[:, :3] @ location
+    else:
+        out[:, :3] = rotation * scale[None, :]
+        out[:, 3] = location
+    return out
+
+
+def uv_source(node) -> tuple[str, np.ndarray]:
+    """(UV map name or "" for the active render one, (2, 3) affine map of (u, v, 1)) of an
+    Image Texture node's Vector input; raises ``_NeedsBake`` for other coordinates."""
+    matrix = np.eye(4)[:3]
+    socket = node.inputs.get("Vector")
+    if socket is None or not socket.is_linked:
+        return "", np.eye(2, 3)
+    while True:
+        if socket is None or not socket.is_linked:
+            raise _NeedsBake("a Mapping node without a vector input")
+        source, output = _follow(socket)
+        if source is None:
+            raise _NeedsBake("a muted link in front of the image")
+        if source.type == "MAPPING":
+            step = _mapping_affine(source)
+            matrix = np.concatenate([step[:, :3] @ matrix[:, :3],
+                                     (step[:, :3] @ matrix[:, 3] + step[:, 3])[:, None]], axis=1)
+            socket = source.inputs.get("Vector")
+            continue
+        if source.type == "UVMAP" and not source.from_instancer:
+            name = source.uv_map
+            break
+        if source.type == "TEX_COORD" and output.identifier == "UV" and not source.from_instancer:
+            name = ""
+            break
+        raise _NeedsBake(f"the image's coordinates come from '{source.name}'")
+    # (u, v, 0): the image reads x and y of the vector
+    return name, np.stack([matrix[:2, 0], matrix[:2, 1], matrix[:2, 3]], axis=1)
 
 
 def _surface_node(node_tree, node_type: str):
@@ -54,29 +164,77 @@ def _rgb(socket) -> np.ndarray:
     return np.array(socket.default_value[:3], dtype=np.float32)
 
 
+def _digest(*values) -> str:
+    return hashlib.blake2b(repr(values).encode(), digest_size=16).hexdigest()
+
+
+class Surface:
+    """The mesh a material is read for (its textures are baked over this mesh's UV map).
+
+    key : the MeshData key; obj_eval : the evaluated object; mesh : its evaluated mesh
+    (``Object.to_mesh()``, valid while the snapshot reads it); slot_materials : its slots'
+    materials (``bpy.types.Material`` or None); digest : content key of the triangles and UVs
+    (what a bake depends on besides the node tree); has_uvs : the mesh has a UV map."""
+
+    def __init__(self, key: str, obj_eval, mesh, slot_materials: list, digest: str,
+                 has_uvs: bool):
+        self.key, self.obj_eval, self.mesh, self.slot_materials = key, obj_eval, mesh, slot_materials
+        self.digest, self.has_uvs = digest, has_uvs
+
+
 class MaterialTable:
     """The snapshot's material list, filled as meshes reference materials.
 
-    ``index_of(material)`` returns the index of a ``bpy.types.Material`` in
-    ``materials`` (a list of ``MaterialData``), reading it on first use.
-    Warnings about approximations (unreadable images, procedural colours) go to
-    ``warnings``.
+    ``index_of(material, surface)`` returns the index of a ``bpy.types.Material`` in
+    ``materials`` (a list of ``MaterialData``), reading it on first use; a material whose Base
+    Color Cycles must bake gets one entry per mesh (``surface``). ``textures`` collects the
+    ``TextureData`` the materials sample; ``uv_map(index)`` names the UV map a material's
+    texture reads ("" = the active render one). Warnings about approximations (unreadable
+    images, what cannot be baked) go to ``warnings``.
     """
 
-    def __init__(self, warnings: list[str]):
+    def __init__(self, warnings: list[str], bake: bool | None = None):
         self.materials: list[MaterialData] = []
+        self.textures: list[TextureData] = []
         self.warnings = warnings
+        self._bake = bake
         self._index: dict[str, int] = {}
-        self._image_means: dict[str, np.ndarray | None] = {}
+        self._read_cache: dict[str, tuple[MaterialData, object, str]] = {}
+        self._uv_maps: dict[int, str] = {}
+        self._texture_index: dict[str, int] = {}
+        self._warned: set[str] = set()
 
-    def index_of(self, material) -> int:
+    def _warn(self, text: str) -> None:
+        if text not in self._warned:
+            self._warned.add(text)
+            self.warnings.append(text)
+
+    def uv_map(self, index: int) -> str:
+        return self._uv_maps.get(index, "")
+
+    def index_of(self, material, surface: Surface | None = None) -> int:
         material = material.original  # evaluated copies share the name but not the image data
-        key = material.name_full
+        name = material.name_full
+        if name not in self._read_cache:
+            self._read_cache[name] = self._read(material)
+        data, bake, uv_map = self._read_cache[name]
+        key = name if bake is None else f"{name} @ {surface.key if surface else ''}"
         index = self._index.get(key)
         if index is None:
+            if bake is not None:
+                data = self._baked(material, data, bake, surface)
             index = self._index[key] = len(self.materials)
-            self.materials.append(self._read(material))
+            self.materials.append(data)
+            self._uv_maps[index] = uv_map
         return index
+
+    def _add_texture(self, texture: TextureData) -> int:
+        key = _digest(texture.key, texture.interpolation, texture.extension,
+                      np.asarray(texture.uv_transform).tobytes())
+        if key not in self._texture_index:
+            self._texture_index[key] = len(self.textures)
+            self.textures.append(texture)
+        return self._texture_index[key]
 
     def _left_out(self, material, principled) -> None:
         """Say, once per material, what of it the preview does not render yet."""
@@ -99,7 +257,8 @@ class MaterialTable:
             self.warnings.append(f"Material '{material.name}': the preview leaves out "
                                  f"{', '.join(notes)} for now")
 
-    def _read(self, material) -> MaterialData:
+    def _read(self, material) -> tuple[MaterialData, object, str]:
+        """(MaterialData, what to bake per mesh (None, or (mode, socket name)), UV map)."""
         node_tree = material.node_tree
         principled = None if node_tree is None else _surface_node(node_tree, "BSDF_PRINCIPLED")
         self._left_out(material, principled)
@@ -109,47 +268,255 @@ class MaterialTable:
             emission = _rgb(glow.inputs["Color"]) * np.float32(glow.inputs["Strength"].default_value)
             return MaterialData(name=material.name_full, base_color=np.zeros(3, np.float32),
                                 roughness=1.0, metallic=0.0, specular=0.0,
-                                emission=emission.astype(np.float32))
+                                emission=emission.astype(np.float32)), None, ""
         if principled is None:
-            return MaterialData(
+            data = MaterialData(
                 name=material.name_full,
                 base_color=np.array(material.diffuse_color[:3], dtype=np.float32),
                 roughness=float(material.roughness),
                 metallic=float(material.metallic),
                 specular=float(material.specular_intensity),
             )
+            output = None if node_tree is None else node_tree.get_output_node("CYCLES")
+            surface = None if output is None else output.inputs.get("Surface")
+            if surface is not None and surface.is_linked:
+                # another surface (a Diffuse BSDF, a Mix Shader …): its diffuse colour, baked;
+                # no glossy layer of our own
+                data = MaterialData(name=data.name, base_color=data.base_color, roughness=1.0,
+                                    metallic=0.0, specular=0.0)
+                return data, ("DIFFUSE", "Surface"), ""
+            return data, None, ""
         inputs = principled.inputs
         emission = _rgb(inputs["Emission Color"]) * np.float32(inputs["Emission Strength"].default_value)
-        return MaterialData(
+        base, texture, bake, uv_map = self._base_color(material, inputs["Base Color"])
+        data = MaterialData(
             name=material.name_full,
-            base_color=self._base_color(material, inputs["Base Color"]),
+            base_color=base,
             roughness=float(inputs["Roughness"].default_value),
             metallic=float(inputs["Metallic"].default_value),
             specular=float(inputs["Specular IOR Level"].default_value),
             emission=emission.astype(np.float32),
+            base_color_texture=-1 if texture is None else self._add_texture(texture),
         )
+        return data, bake, uv_map
 
-    def _base_color(self, material, socket) -> np.ndarray:
+    def _base_color(self, material, socket):
+        """(value (3,), TextureData or None, what to bake or None, UV map name)."""
         if not socket.is_linked:
-            return _rgb(socket)
-        node = socket.links[0].from_node
-        if node.type == "TEX_IMAGE" and node.image is not None:
-            mean = self._image_mean(node.image)
-            if mean is not None:
-                return mean
-            self.warnings.append(
-                f"Material '{material.name_full}': image '{node.image.name_full}' has no pixels "
-                "(missing file?); using the Base Color value instead"
-            )
-        else:
-            self.warnings.append(
-                f"Material '{material.name_full}': Base Color comes from a '{node.name}' node, "
-                "which VoxGI cannot evaluate; using the Base Color value instead"
-            )
-        return _rgb(socket)
+            return _rgb(socket), None, None, ""
+        try:
+            node, output = _follow(socket)
+            if node is None:
+                return _rgb(socket), None, None, ""
+            if node.type != "TEX_IMAGE":
+                raise _NeedsBake(f"Base Color comes from a '{node.name}' node")
+            if output.identifier != "Color":
+                raise _NeedsBake(f"Base Color comes from the image's {output.name} output")
+            if node.image is None:
+                self._warn(f"Material '{material.name_full}': the Image Texture node "
+                           f"'{node.name}' has no image; using the Base Color value instead")
+                return _rgb(socket), None, None, ""
+            if node.projection != "FLAT" or node.extension not in ("REPEAT", "EXTEND", "CLIP"):
+                raise _NeedsBake(f"the image node '{node.name}' uses {node.projection.lower()} "
+                                 f"projection / {node.extension.lower()} extension")
+            uv_map, transform = uv_source(node)
+            rgb = image_rgb(node.image)
+            if rgb is None:
+                self._warn(
+                    f"Material '{material.name_full}': image '{node.image.name_full}' has no "
+                    "pixels (missing or unreadable file?); using the Base Color value instead")
+                return _rgb(socket), None, None, ""
+            texture = TextureData(
+                name=node.image.name_full, pixels=rgb,
+                interpolation="Closest" if node.interpolation == "Closest" else "Linear",
+                extension=node.extension, uv_transform=transform,
+                key=_digest(_image_key(node.image), rgb.shape))
+            return rgb.reshape(-1, 3).mean(axis=0).astype(np.float32), texture, None, uv_map
+        except _NeedsBake:
+            return _rgb(socket), None, ("EMIT", socket.name), ""
 
-    def _image_mean(self, image) -> np.ndarray | None:
-        key = image.name_full
-        if key not in self._image_means:
-            self._image_means[key] = image_mean_color(image)
-        return self._image_means[key]
+    # ------------------------------------------------------------------ bakes
+
+    def _baked(self, material, data: MaterialData, bake, surface: Surface | None) -> MaterialData:
+        """``data`` with its Base Color baked by Cycles over ``surface``'s UV map, or ``data``
+        with a warning where no bake can run."""
+        mode, socket = bake
+        what = "Base Color" if mode == "EMIT" else "surface"
+        name = material.name_full
+        if surface is None or surface.obj_eval is None:
+            self._warn(f"Material '{name}': its {what} needs a bake by Cycles, which needs a "
+                       "mesh; using its value")
+            return data
+        if not surface.has_uvs:
+            self._warn(f"Material '{name}' on '{surface.key}': its {what} comes from nodes "
+                       "Cycles must evaluate (baked into the mesh's UV map), but the mesh has "
+                       "no UV map; using its value")
+            return data
+        key = _digest(_tree_key(material.node_tree), mode, socket, surface.digest, BAKE_SIZE,
+                      BAKE_SAMPLES, tuple(np.array(surface.obj_eval.matrix_world).ravel())
+                      if _uses_object_space(material.node_tree) else None)
+        texture = _BAKED.get(key)
+        if texture is None:
+            allowed = self._bake if self._bake is not None else can_bake()
+            if not allowed:
+                self._warn(f"Material '{name}': its {what} must be baked by Cycles, which "
+                           "cannot run here (during an F12 render in the UI or off the main "
+                           "thread); using its value until a viewport update or "
+                           "voxgi.render_preview bakes it")
+                return data
+            try:
+                pixels = bake_socket(material, mode, socket, surface)
+            except Exception as error:  # a failed bake must not fail the snapshot
+                self._warn(f"Material '{name}': baking its {what} with Cycles failed "
+                           f"({error}); using its value")
+                return data
+            texture = _BAKED[key] = TextureData(
+                name=f"{name} ({surface.key})", pixels=pixels, interpolation="Linear",
+                extension="EXTEND", key=key)
+        mean = texture.pixels.reshape(-1, 3).mean(axis=0).astype(np.float32)
+        return MaterialData(name=data.name, base_color=mean, roughness=data.roughness,
+                            metallic=data.metallic, specular=data.specular,
+                            emission=data.emission, base_color_texture=self._add_texture(texture))
+
+
+def _uses_object_space(tree, depth: int = 0) -> bool:
+    """Does the tree read coordinates that move with the object (Texture Coordinate's Object,
+    Camera, Window, Reflection; Geometry)?"""
+    if tree is None or depth > 8:
+        return False
+    for node in tree.nodes:
+        if node.type == "NEW_GEOMETRY" or (node.type == "TEX_COORD" and any(
+                o.is_linked for o in node.outputs if o.identifier not in ("UV", "Generated"))):
+            return True
+        if node.type == "GROUP" and _uses_object_space(node.node_tree, depth + 1):
+            return True
+    return False
+
+
+def can_bake() -> bool:
+    """A Cycles bake is possible here: the main thread, no render job running."""
+    if threading.current_thread() is not threading.main_thread():
+        return False
+    return not (hasattr(bpy.app, "is_job_running") and bpy.app.is_job_running("RENDER"))
+
+
+def _route_to_emission(tree, socket_name: str) -> None:
+    """Make a material copy's surface an Emission shader of what feeds the Principled BSDF's
+    ``socket_name`` (its value when unlinked)."""
+    principled = _surface_node(tree, "BSDF_PRINCIPLED")
+    target = principled.inputs[socket_name]
+    emit = tree.nodes.new("ShaderNodeEmission")
+    emit.inputs["Strength"].default_value = 1.0
+    if target.is_linked:
+        tree.links.new(target.links[0].from_socket, emit.inputs["Color"])
+    else:
+        emit.inputs["Color"].default_value = tuple(target.default_value)
+    output = tree.get_output_node("CYCLES")
+    if output is None:
+        output = tree.nodes.new("ShaderNodeOutputMaterial")
+    for node in tree.nodes:  # the only active output
+        if node.type == "OUTPUT_MATERIAL":
+            node.is_active_output = node == output
+    tree.links.new(emit.outputs["Emission"], output.inputs["Surface"])
+
+
+def bake_socket(material, mode: str, socket_name: str, surface: Surface) -> np.ndarray:
+    """(BAKE_SIZE, BAKE_SIZE, 3) float32 linear RGB of a material's socket (mode "EMIT": the
+    Principled input ``socket_name``) or diffuse colour (mode "DIFFUSE") baked by Cycles over
+    the active render UV map of ``surface``'s evaluated mesh (its faces of this material).
+
+    Everything is temporary — a scene, an object, a copy of the evaluated mesh with only this
+    material's faces, a copy of the material with an image node, the image — and removed
+    afterwards, also when the bake fails: the user's data is not touched."""
+    import bmesh
+
+    _BAKES[0] += 1
+    scene = obj = mesh = copy = image = None
+    try:
+        layers = surface.mesh.uv_layers
+        render_uv = next((layer.name for layer in layers if layer.active_render), None) or \
+            (layers.active.name if layers.active is not None else None)
+        mesh = bpy.data.meshes.new("VoxGI Bake")
+        slots = [i for i, m in enumerate(surface.slot_materials)
+                 if m is not None and m.original == material]
+        last = max(len(surface.slot_materials) - 1, 0)
+        bm = bmesh.new()
+        try:
+            bm.from_mesh(surface.mesh)
+            others = [f for f in bm.faces if min(f.material_index, last) not in slots]
+            if others:
+                bmesh.ops.delete(bm, geom=others, context="FACES")
+            for face in bm.faces:
+                face.material_index = 0
+            bm.to_mesh(mesh)
+        finally:
+            bm.free()
+        if render_uv is not None and mesh.uv_layers.get(render_uv) is not None:
+            mesh.uv_layers.active = mesh.uv_layers[render_uv]
+        copy = material.copy()
+        tree = copy.node_tree
+        if mode == "EMIT":
+            _route_to_emission(tree, socket_name)
+        image = bpy.data.images.new("VoxGI Bake", BAKE_SIZE, BAKE_SIZE, float_buffer=True,
+                                    alpha=False)
+        node = tree.nodes.new("ShaderNodeTexImage")
+        node.image = image
+        tree.nodes.active = node
+        mesh.materials.clear()
+        mesh.materials.append(copy)
+        obj = bpy.data.objects.new("VoxGI Bake", mesh)
+        obj.matrix_world = surface.obj_eval.matrix_world
+        scene = bpy.data.scenes.new("VoxGI Bake")
+        scene.collection.objects.link(obj)
+        scene.render.engine = "CYCLES"
+        cycles = scene.cycles
+        cycles.device = "CPU"
+        cycles.samples = BAKE_SAMPLES
+        cycles.use_denoising = False
+        cycles.seed = 0
+        settings = scene.render.bake
+        settings.margin = BAKE_MARGIN
+        settings.margin_type = "EXTEND"
+        settings.use_clear = True
+        settings.use_selected_to_active = False
+        settings.target = "IMAGE_TEXTURES"
+        view_layer = scene.view_layers[0]
+        obj.select_set(True, view_layer=view_layer)
+        view_layer.objects.active = obj
+        kwargs = {"type": mode, "margin": BAKE_MARGIN, "use_clear": True}
+        if mode == "DIFFUSE":
+            kwargs["pass_filter"] = {"COLOR"}
+        with bpy.context.temp_override(scene=scene, view_layer=view_layer, active_object=obj,
+                                       object=obj, selected_objects=[obj],
+                                       selected_editable_objects=[obj]):
+            result = bpy.ops.object.bake(**kwargs)
+        if "FINISHED" not in result:
+            raise RuntimeError(f"the bake returned {result}")
+        pixels = np.empty(BAKE_SIZE * BAKE_SIZE * 4, np.float32)
+        image.pixels.foreach_get(pixels)
+        return np.ascontiguousarray(pixels.reshape(BAKE_SIZE, BAKE_SIZE, 4)[..., :3])
+    finally:
+        if scene is not None:
+            bpy.data.scenes.remove(scene)
+        if obj is not None:
+            bpy.data.objects.remove(obj)
+        if mesh is not None:
+            bpy.data.meshes.remove(mesh)
+        if copy is not None:
+            bpy.data.materials.remove(copy)
+        if image is not None:
+            bpy.data.images.remove(image)
+
+
+classes = ()
+
+
+def register() -> None:
+    if _clear_on_load not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(_clear_on_load)
+
+
+def unregister() -> None:
+    clear_bake_cache()
+    if _clear_on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(_clear_on_load)

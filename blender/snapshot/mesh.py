@@ -39,18 +39,37 @@ def read_triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return triangles.reshape(-1, 3), corners.reshape(-1, 3), slot_indices
 
 
-def read_corner_uvs(mesh, corners: np.ndarray) -> np.ndarray | None:
-    """UVs of the active UV map at the given corners.
+def read_corner_uvs(mesh, corners: np.ndarray, name: str = "") -> np.ndarray | None:
+    """UVs of a UV map at the given corners: the one called ``name``, else the active render
+    one (what Cycles' textures read by default), else the active one.
 
     corners : (T, 3) int32 loop indices (from ``read_triangles``).
     Returns (T, 3, 2) float32, or None when the mesh has no UV map.
     """
-    layer = mesh.uv_layers.active
+    layers = mesh.uv_layers
+    layer = layers.get(name) if name else None
+    if layer is None:
+        layer = next((candidate for candidate in layers if candidate.active_render), None) \
+            or layers.active
     if layer is None:
         return None
     uv = np.empty(len(mesh.loops) * 2, dtype=np.float32)
     layer.data.foreach_get("uv", uv)
     return uv.reshape(-1, 2)[corners]
+
+
+def named_uvs(mesh, corners: np.ndarray, materials: np.ndarray, table, uvs):
+    """``uvs`` (T, 3, 2) with the triangles whose material's texture names another UV map
+    (``table.uv_map(index)``) reading that one; unchanged when none does."""
+    if uvs is None:
+        return None
+    for index in np.unique(materials[materials >= 0]):
+        name = table.uv_map(int(index))
+        if name and mesh.uv_layers.get(name) is not None:
+            at = materials == index
+            uvs = np.array(uvs, copy=True)
+            uvs[at] = read_corner_uvs(mesh, corners[at], name)
+    return uvs
 
 
 def read_corner_normals(mesh, corners: np.ndarray) -> np.ndarray:

@@ -12,6 +12,7 @@ share one ``MeshData`` and one cache; any other object gets its own key
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import bpy
@@ -19,9 +20,10 @@ import numpy as np
 
 from ...voxgi_addon.scene.snapshot import MeshData, ObjectData, SceneSnapshot
 from .environment import read_camera, read_light, read_world
-from .materials import MaterialTable
+from .materials import MaterialTable, Surface, _digest
 from .mesh import (
     material_lookup,
+    named_uvs,
     read_corner_normals,
     read_corner_uvs,
     read_positions,
@@ -109,8 +111,17 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
             if entry.obj.type == "MESH":  # curves without bevel or fill have no faces, as in Cycles
                 warnings.append(f"Object '{entry.obj.name}' has no faces; it is left out")
             return None
-        lookup = material_lookup(_slot_materials(obj_eval, mesh), table.index_of)
-        skin, positions = None, read_positions(mesh)
+        slot_materials = _slot_materials(obj_eval, mesh)
+        positions = read_positions(mesh)
+        uvs = read_corner_uvs(mesh, corners)
+        surface = Surface(entry.key, obj_eval, mesh, slot_materials,
+                          _digest(*(None if a is None else
+                                   hashlib.blake2b(a.tobytes(), digest_size=16).hexdigest()
+                                   for a in (positions, triangles, slots, uvs))), uvs is not None)
+        lookup = material_lookup(slot_materials, lambda m: table.index_of(m, surface))
+        materials = triangle_materials(slots, lookup)
+        uvs = named_uvs(mesh, corners, materials, table, uvs)
+        skin = None
         normals = None
         if entry.kind == "skinned":  # the rest shape, which the skinning matrices pose
             skin = top_weights(mesh, entry.layers, entry.armature.name_full)
@@ -119,8 +130,8 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
             name=entry.key,
             positions=positions,
             triangles=triangles,
-            triangle_materials=triangle_materials(slots, lookup),
-            uvs=read_corner_uvs(mesh, corners),
+            triangle_materials=materials,
+            uvs=uvs,
             skin=skin,
             corner_normals=read_corner_normals(mesh, corners) if normals is None else normals,
         )
@@ -228,6 +239,7 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
     return SceneSnapshot(
         meshes=meshes,
         materials=table.materials,
+        textures=tuple(table.textures),
         objects=objects,
         armatures=armatures,
         lights=lights,

@@ -9,7 +9,8 @@
  *   d = (Diffuse Color × Diffuse Indirect, 0), e = (Glossy Color × Glossy Indirect, 0),
  *   f = (glossy light, 0) += Glossy Color × centre_world.
  * out_colour = (Diffuse Color, 0) of this pass, for aa_light.glsl. Samplers: materials (base,
- * emission, (metallic, level, roughness) rows), principled_lut. */
+ * emission, (metallic, level, roughness) rows), principled_lut, gbuffer_base (the Base Color
+ * sampled per texel where w = 1). */
 
 void main()
 {
@@ -31,7 +32,8 @@ void main()
     int last_material = textureSize(materials, 0).x - 1;
     int material = int(ray.w + 0.5);
     material = (material >= 0 && material < last_material) ? material : last_material;
-    vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
+    vec4 texel = texelFetch(gbuffer_base, px, 0);  /* Base Color per texel (G-buffer) */
+    vec3 base = texel.w > 0.5 ? texel.rgb : texelFetch(materials, ivec2(material, 0), 0).rgb;
     vec3 emission = texelFetch(materials, ivec2(material, 1), 0).rgb;
     vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
     float mu = clamp(dot(n, -ray.xyz), 0.0, 1.0);

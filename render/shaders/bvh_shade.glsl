@@ -5,7 +5,8 @@
  * origin by the Principled diffuse weight and, when `hit_glossy`, its glossy lobe (each light
  * at its centre direction). `th` = distance of the hit, BVH_FAR on a miss.
  * Samplers: bvh_* (bvh_common.glsl), lights and world_map (bvh_lights.glsl), materials ((M + 1) × 3 texels:
- * base colour, emission, (metallic, Specular IOR Level, roughness)), principled_lut. */
+ * base colour, emission, (metallic, Specular IOR Level, roughness), Base Color texture slot),
+ * principled_lut, texture_table, texture_atlas (textures.glsl). */
 
 vec4 bvh_texel_normals(int k)
 {
@@ -35,6 +36,20 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
   vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
   vec3 emission = texelFetch(materials, ivec2(material, 1), 0).rgb;
   vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
+  /* Base Color per texel (textures.glsl; level 0, as exact_indirect.ray_radiance): the
+   * hit's UV from its triangle's corner UVs, 2 texels per triangle index in texture_table's
+   * rows from the one its last texel of row 0 names (gpu_scene._update_textures) */
+  int texture_slot = int(texelFetch(materials, ivec2(material, 3), 0).x);
+  if (texture_slot >= 0) {
+    int k = 2 * triangle;
+    int row = int(texelFetch(texture_table, ivec2(BVH_WIDTH - 1, 0), 0).x + 0.5);
+    vec4 c01 = texelFetch(texture_table,
+                          ivec2(k & (BVH_WIDTH - 1), row + (k >> BVH_WIDTH_LOG2)), 0);
+    vec4 c2 = texelFetch(texture_table,
+                         ivec2((k + 1) & (BVH_WIDTH - 1), row + ((k + 1) >> BVH_WIDTH_LOG2)), 0);
+    vec2 at = (1.0 - uv.x - uv.y) * c01.xy + uv.x * c01.zw + uv.y * c2.xy;
+    base = clamp(surface_texture(texture_slot, at, 0.0), 0.0, 1.0);
+  }
   /* The Principled diffuse weight seen from the receiver (docs/gi_pipeline.md "The Accurate
    * integrator"). */
   vec3 weight = principled_diffuse_weight(base, params.x, params.y, params.z,

@@ -1,6 +1,9 @@
 /* G-buffer pass: what raycast.primary_visibility returns per pixel, bottom row first.
  * out_position: world xyz, 1 (hit); out_normal: shading normal turned to the camera (by the
- * face normal, as Cycles does), roughness; out_view: camera → point unit direction, material. */
+ * face normal, as Cycles does), roughness; out_view: camera → point unit direction, material;
+ * out_base: (Base Color sampled per texel, 1) where the material has a texture
+ * (surface_slot = (slot, level-0 texels per metre × a pixel's width at unit distance)) at
+ * scene/textures.primary_lod, else 0. */
 void main()
 {
   vec3 view = camera_ortho > 0.5 ? camera_forward : normalize(world_position - camera_position);
@@ -10,4 +13,13 @@ void main()
   out_position = vec4(world_position, 1.0);
   out_normal = vec4(n * facing, surface.y);
   out_view = vec4(view, surface.x);
+  out_base = vec4(0.0);
+  if (surface_slot.x > -0.5) {
+    float distance = camera_ortho > 0.5 ? 1.0 : length(world_position - camera_position);
+    float c = max(abs(dot(flat_normal, view)), FOOTPRINT_COS_MIN);
+    float footprint = surface_slot.y * distance / sqrt(c);
+    float lod = log2(max(footprint, 1.0));
+    out_base = vec4(clamp(surface_texture(int(surface_slot.x + 0.5), surface_uv, lod), 0.0,
+                          1.0), 1.0);
+  }
 }

@@ -5,5 +5,7 @@ void main()
   shading_normal = normal;
   flat_normal = face_normal;
   surface = material;
+  surface_uv = uv;
+  surface_slot = texel;
   gl_Position = view_projection * vec4(position, 1.0);
 }

@@ -7,7 +7,8 @@
  * sampling.glsl), weighted by their share of the unshadowed
  * irradiance — each reflected toward the viewer by the Principled glossy lobe (principled.glsl)
  * / cos. Samplers: lights (preview/light_table.py), materials (base, emission, (metallic, level,
- * roughness) rows), principled_lut; gbuffer_view = (ray direction, material). */
+ * roughness) rows), principled_lut; gbuffer_view = (ray direction, material); gbuffer_base =
+ * (Base Color per texel, 1) where textured. */
 
 vec4 glossy_light_texel(int k)
 {
@@ -34,7 +35,8 @@ void main()
   int last_material = textureSize(materials, 0).x - 1;
   int material = int(ray.w + 0.5);
   material = (material >= 0 && material < last_material) ? material : last_material;
-  vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
+  vec4 texel = texelFetch(gbuffer_base, px, 0);  /* Base Color per texel (G-buffer) */
+  vec3 base = texel.w > 0.5 ? texel.rgb : texelFetch(materials, ivec2(material, 0), 0).rgb;
   vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
   int kind = int(head.x);
   vec3 lobe = vec3(0.0);

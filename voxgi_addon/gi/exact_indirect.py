@@ -92,6 +92,9 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
         principled = isinstance(albedo, tuple)  # (base, (metallic, level, roughness))
         if principled:
             base, params = (np.asarray(a, np.float64)[material] for a in albedo)
+            if getattr(tris, "textures", None) is not None:  # Base Color per texel, level 0
+                base = tris.textures.base_at(tri[hit], np.asarray(tris.materials)[tri[hit]],
+                                             u[hit], v[hit], base)
             shading = (base, params[:, 0], params[:, 1], params[:, 2])
         reflect = None
         if principled and hit_glossy:

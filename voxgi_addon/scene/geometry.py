@@ -16,6 +16,7 @@ import numpy as np
 
 from .skinning import blend_matrices, skin_matrices, transform_normals, transform_points
 from .snapshot import MeshData, ObjectData, SceneSnapshot
+from .textures import SurfaceTextures, surface_textures
 
 __all__ = ["SceneTriangles", "world_triangles", "object_vertices_world"]
 
@@ -30,6 +31,8 @@ class SceneTriangles:
     objects : (T,) int32 index into ``SceneSnapshot.objects``.
     corner_normals : (T, 3, 3) float64 unit shading normals at each corner (smooth shading), or
         None when no mesh of the snapshot carries them (then shading uses the face normals).
+    textures : ``textures.SurfaceTextures`` (corner UVs, each material's Base Color texture),
+        or None when no material of the snapshot has a texture.
     """
 
     positions: np.ndarray
@@ -37,6 +40,7 @@ class SceneTriangles:
     materials: np.ndarray
     objects: np.ndarray
     corner_normals: np.ndarray | None = None
+    textures: SurfaceTextures | None = None
 
     def __len__(self) -> int:
         return len(self.positions)
@@ -84,7 +88,7 @@ def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
     Objects whose mesh is missing from the snapshot are skipped. Triangles keep the order of
     ``snapshot.objects`` then of each mesh's triangles.
     """
-    positions, materials, objects, corner_normals = [], [], [], []
+    positions, materials, objects, corner_normals, uvs = [], [], [], [], []
     for index, obj in enumerate(snapshot.objects):
         mesh = snapshot.meshes.get(obj.mesh)
         if mesh is None or len(mesh.triangles) == 0:
@@ -94,6 +98,8 @@ def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
         materials.append(np.asarray(mesh.triangle_materials, dtype=np.int32))
         objects.append(np.full(len(triangles), index, dtype=np.int32))
         corner_normals.append(_corner_normals_world(obj, mesh, snapshot, triangles))
+        uvs.append(np.zeros((len(triangles), 3, 2), np.float32) if mesh.uvs is None else
+                   np.asarray(mesh.uvs, np.float32).reshape(len(triangles), 3, 2))
     if not positions:
         empty = np.zeros(0, np.int32)
         return SceneTriangles(np.zeros((0, 3, 3)), np.zeros((0, 3)), empty, empty.copy())
@@ -105,4 +111,6 @@ def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
     if any(c is not None for c in corner_normals):  # meshes without them shade flat
         flat = np.split(np.repeat(normal[:, None], 3, axis=1), np.cumsum([len(p) for p in positions])[:-1])
         shading = np.concatenate([c if c is not None else f for c, f in zip(corner_normals, flat)])
-    return SceneTriangles(tri, normal, np.concatenate(materials), np.concatenate(objects), shading)
+    materials = np.concatenate(materials)
+    textures = surface_textures(snapshot, tri, materials, np.concatenate(uvs))
+    return SceneTriangles(tri, normal, materials, np.concatenate(objects), shading, textures)

@@ -280,6 +280,8 @@ class PrimaryHits:
     depth : (H, W) float64 distance from the near plane along the ray (inf = background).
     triangle, material, object : (H, W) int32 indices into ``SceneTriangles``, the snapshot's
         materials and objects (-1 = background or no material).
+    barycentric : (H, W, 2) float64 weights of the hit triangle's corners 1 and 2 (corner 0
+        has 1 − both; 0 on the background), or None.
     """
 
     hit: np.ndarray
@@ -291,6 +293,7 @@ class PrimaryHits:
     triangle: np.ndarray
     material: np.ndarray
     object: np.ndarray
+    barycentric: np.ndarray | None = None
 
 
 def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | None = None,
@@ -328,4 +331,5 @@ def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | No
         triangle=per_pixel(np.arange(len(tris))),
         material=per_pixel(tris.materials),
         object=per_pixel(tris.objects),
+        barycentric=np.where(hit[:, None], np.stack([u, v], axis=1), 0.0).reshape(height, width, 2),
     )

@@ -44,7 +44,8 @@ class MeshData:
     positions : (V, 3) float32, object space.
     triangles : (T, 3) int32 vertex indices (Blender loop triangles).
     triangle_materials : (T,) int32 index into ``SceneSnapshot.materials`` (-1 = none).
-    uvs : (T, 3, 2) float32 UV of each triangle corner, or None when the mesh has no UV map.
+    uvs : (T, 3, 2) float32 UV of each triangle corner — of the UV map its material's textures
+        name, else the active render UV map — or None when the mesh has no UV map.
     skin : rest-pose skinning, or None for a mesh that no armature deforms.
     corner_normals : (T, 3, 3) float32 object-space shading normal at each triangle corner
         (Blender's ``Mesh.corner_normals``: smooth, flat or custom), or None (face normals).
@@ -60,11 +61,37 @@ class MeshData:
 
 
 @dataclass(frozen=True)
+class TextureData:
+    """An image a material's socket samples per texel (docs/gi_pipeline.md "Materials per
+    texel"): an Image Texture node's, or Cycles' bake of a node tree into the mesh's UV map.
+
+    pixels : (H, W, 3) float32, row 0 = the bottom row (v = 0), as ``Image.pixels`` holds them:
+        linear RGB (sRGB byte images linearised), a Non-Color image's values as they are.
+    interpolation : 'Linear' (bilinear) or 'Closest'.
+    extension : 'REPEAT', 'EXTEND' (clamp to the edge) or 'CLIP' (black outside [0, 1]).
+    uv_transform : (2, 3) float64 affine map of a surface's UV (u, v, 1) to the image's
+        coordinates (the Mapping nodes in front of the image; the identity without).
+    key : content key of the pixels (same pixels → same key; caches of mip pyramids and
+        uploads).
+    """
+
+    name: str
+    pixels: np.ndarray
+    interpolation: str = "Linear"
+    extension: str = "REPEAT"
+    uv_transform: np.ndarray = field(default_factory=lambda: np.eye(2, 3))
+    key: str = ""
+
+
+@dataclass(frozen=True)
 class MaterialData:
     """What the engine needs of a material (Principled BSDF inputs).
 
-    base_color : (3,) float32 linear RGB (the input's value, or the mean of its linked image).
+    base_color : (3,) float32 linear RGB (the input's value, or the mean of its texture: what
+        a per-material table uses).
     emission : (3,) float32 linear RGB, colour × strength.
+    base_color_texture : index into ``SceneSnapshot.textures`` of the texture giving the Base
+        Color per texel through the meshes' ``uvs``, or -1 (the value is uniform).
     """
 
     name: str
@@ -73,6 +100,7 @@ class MaterialData:
     metallic: float = 0.0
     specular: float = 0.5
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
+    base_color_texture: int = -1
 
 
 @dataclass(frozen=True)
@@ -191,3 +219,4 @@ class SceneSnapshot:
     world: WorldData = field(default_factory=WorldData)
     frame: int = 1
     warnings: tuple[str, ...] = ()
+    textures: tuple[TextureData, ...] = ()

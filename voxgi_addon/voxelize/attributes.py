@@ -86,12 +86,16 @@ def _weighted_mean(values, pair_tri, pair_cell, weight, count):
 
 
 def average_attributes(surface: VoxelizedSurface, positions, triangles, tri_albedo, tri_specular,
-                       skin_weights=None, skin_indices=None) -> VoxelAttributes:
+                       skin_weights=None, skin_indices=None, texel_albedo=None) -> VoxelAttributes:
     """Average triangle attributes into the voxels of ``surface``.
 
     positions : (V, 3) object space; triangles : (T, 3) the ones passed to the voxelizer.
     tri_albedo : (T, 3), tri_specular : (T,). skin_weights (V, 4) / skin_indices (V, 4):
     each voxel takes the weights of the nearest vertex among the triangles touching it.
+    texel_albedo : optional callable (pair triangles (P,), barycentrics (P, 2) of corners 1 and
+    2, span) -> (P, 3) albedo of each (triangle, voxel) contact: the material's texture at the
+    centroid of the triangle's piece clipped to the voxel (the triangle's centroid where the
+    piece has no area), filtered over the voxel's span; each voxel averages its pieces by area.
     The result includes ``plane_offset`` (see the module docstring).
     """
     n = surface.voxel_count
@@ -106,7 +110,12 @@ def average_attributes(surface: VoxelizedSurface, positions, triangles, tri_albe
         even = areas[pt] / np.maximum(per_tri[pt], 1) / surface.span**2
         weight[grazed] = even[grazed]
     weight += 1e-30
-    albedo = _weighted_mean(np.asarray(tri_albedo, np.float64), pt, pc, weight, n)
+    if texel_albedo is None:
+        albedo = _weighted_mean(np.asarray(tri_albedo, np.float64), pt, pc, weight, n)
+    else:
+        bary = _piece_barycentrics(surface, positions, triangles, centroid)
+        per_pair = np.asarray(texel_albedo(pt, bary, surface.span), np.float64)
+        albedo = _weighted_mean(per_pair, np.arange(len(pt)), pc, weight, n)
     spec = _weighted_mean(np.asarray(tri_specular, np.float64)[:, None], pt, pc, weight, n)[:, 0]
     normal = _weighted_mean(normals, pt, pc, weight, n)
     pieces = _Pieces(pc, normals[pt], clipped, centroid, n)
@@ -196,6 +205,23 @@ class _Pieces:
         n, weight = self._weights(normals)
         dist = (n * self.centroid).sum(axis=1)
         return self._sum(weight * dist) / np.maximum(self._sum(weight), 1e-300)
+
+
+def _piece_barycentrics(surface: VoxelizedSurface, positions, triangles, centroid):
+    """(P, 2) barycentrics (corners 1 and 2) of each contact's clipped-piece centroid in its
+    triangle (``clip_pairs``' centroids; NaN ones: the triangle's centroid)."""
+    pt, pc = surface.triangle_of_pair, surface.cell_of_pair
+    q = to_grid_units(positions, surface.span)[np.asarray(triangles, np.int64)[pt]]
+    point = surface.cells[pc] + centroid
+    e1, e2, d = q[:, 1] - q[:, 0], q[:, 2] - q[:, 0], point - q[:, 0]
+    d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    d1, d2 = (d * e1).sum(1), (d * e2).sum(1)
+    det = d11 * d22 - d12 * d12
+    ok = np.isfinite(d1) & np.isfinite(d2) & (np.abs(det) > 1e-30)
+    safe = np.where(ok, det, 1.0)
+    b1 = np.where(ok, (d22 * d1 - d12 * d2) / safe, 1.0 / 3.0)
+    b2 = np.where(ok, (d11 * d2 - d12 * d1) / safe, 1.0 / 3.0)
+    return np.stack([b1, b2], axis=1)
 
 
 def clip_pairs(surface: VoxelizedSurface, positions, triangles):

@@ -55,6 +55,14 @@ def mesh_fingerprint(key: str, positions, mesh, snapshot: SceneSnapshot, base_sp
     albedo, spec = triangle_materials(snapshot, mesh)
     for array in (positions, mesh.triangles, albedo, spec):
         _feed(digest, array)
+    # textured materials: their UVs and the textures' content and sampling (per texel albedo)
+    textures = tuple(getattr(snapshot, "textures", ()) or ())
+    slots = [int(getattr(m, "base_color_texture", -1)) for m in snapshot.materials]
+    if any(0 <= s < len(textures) for s in slots):
+        _feed(digest, mesh.uvs)
+        digest.update(repr([(textures[s].key, textures[s].interpolation, textures[s].extension,
+                             np.asarray(textures[s].uv_transform).tolist()) if
+                            0 <= s < len(textures) else None for s in slots]).encode())
     skin = mesh.skin
     _feed(digest, None if skin is None else skin.weights)
     _feed(digest, None if skin is None else skin.bone_indices)

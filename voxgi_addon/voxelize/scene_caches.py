@@ -18,6 +18,7 @@ import numpy as np
 
 from ..errors import VoxGICancelled, VoxGIError
 from ..scene.snapshot import MeshData, SceneSnapshot
+from ..scene.textures import sample_texture, texel_density, texture_texels
 from . import object_scale
 from .attributes import average_attributes
 from .cache import VoxelCache, pack_cache
@@ -156,6 +157,49 @@ def triangle_materials(snapshot: SceneSnapshot, mesh: MeshData):
     return albedo[idx], spec[idx]
 
 
+def texel_albedo(snapshot: SceneSnapshot, mesh: MeshData, positions, keep=None):
+    """The voxelizer's ``texel_albedo`` callable for ``mesh`` (object-space ``positions``, its
+    triangles ``keep`` (indices) as voxelized), or None when none of its materials has a
+    texture or it has no UVs: a (triangle, voxel) contact's albedo is the Base Color texture at
+    the piece's centroid UV, trilinear at the footprint of one voxel span (the mean over about
+    the voxel's area); untextured triangles keep their material's colour."""
+    if mesh.uvs is None:
+        return None
+    textures = tuple(getattr(snapshot, "textures", ()) or ())
+    slots = np.full(len(snapshot.materials) + 1, -1, np.int64)
+    for i, m in enumerate(snapshot.materials):
+        index = int(getattr(m, "base_color_texture", -1))
+        if 0 <= index < len(textures):
+            slots[i] = index
+    keep = np.arange(len(mesh.triangles)) if keep is None else np.asarray(keep)
+    idx = np.asarray(mesh.triangle_materials, np.int64)[keep]
+    slot = slots[np.where((idx >= 0) & (idx < len(snapshot.materials)), idx, len(snapshot.materials))]
+    if not (slot >= 0).any():
+        return None
+    albedo, _ = triangle_materials(snapshot, mesh)
+    albedo = albedo[keep]
+    uvs = np.asarray(mesh.uvs, np.float32)[keep]
+    corners = np.asarray(positions, np.float64)[np.asarray(mesh.triangles, np.int64)[keep]]
+    density = texel_density(corners, uvs)
+    texels = np.array([texture_texels(t) for t in textures] + [0.0])
+
+    def sample(pair_tri, bary, span):
+        out = np.asarray(albedo, np.float64)[pair_tri].copy()
+        for s in np.unique(slot[pair_tri]):
+            if s < 0:
+                continue
+            at = np.flatnonzero(slot[pair_tri] == s)
+            tri = pair_tri[at]
+            b = np.asarray(bary, np.float32)[at]
+            c = uvs[tri]
+            uv = (1.0 - b[:, :1] - b[:, 1:]) * c[:, 0] + b[:, :1] * c[:, 1] + b[:, 1:] * c[:, 2]
+            lod = np.log2(np.maximum(span * density[tri] * texels[s], 1.0))
+            out[at] = np.clip(sample_texture(textures[s], uv, lod), 0.0, 1.0)
+        return out
+
+    return sample
+
+
 def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, result, timer,
                       cancel=None, span_scale: float = 1.0):
     """Voxelize one mesh at every cascade span into ``result.caches[key]``.
@@ -171,6 +215,7 @@ def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, 
             f"mesh '{key}': dropped {check.dropped} triangles "
             f"({check.degenerate} zero-area, {check.non_finite} with NaN/inf vertices)")
     tris = np.asarray(mesh.triangles, np.int64)[check.keep]
+    texels = texel_albedo(snapshot, mesh, positions, np.flatnonzero(check.keep))
     albedo, spec = triangle_materials(snapshot, mesh)
     albedo, spec = albedo[check.keep], spec[check.keep]
     used = np.unique(tris)
@@ -198,7 +243,7 @@ def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, 
         t0 = time.perf_counter()
         attrs = average_attributes(surface, positions, tris, albedo, spec,
                                    None if skin is None else skin.weights,
-                                   None if skin is None else skin.bone_indices)
+                                   None if skin is None else skin.bone_indices, texels)
         timer.add("attributes", t0)
         t0 = time.perf_counter()
         caches.append(pack_cache(key, cascade, span, lo, dims, surface.cells, attrs, finer))

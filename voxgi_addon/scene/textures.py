@@ -1,0 +1,288 @@
+"""Materials per texel: sampling the snapshot's textures at surface points (numpy reference).
+
+A material whose Base Color comes from an image (``MaterialData.base_color_texture`` into
+``SceneSnapshot.textures``) is looked up at a surface point's UV — the triangle's corner UVs
+(``MeshData.uvs``) interpolated by the point's barycentrics — through the texture's
+``uv_transform`` (its Mapping nodes), with its interpolation (Linear: bilinear, Closest) and
+extension (Repeat, Extend, Clip) as Cycles' image texture node does
+(docs/gi_pipeline.md "Materials per texel").
+
+Minification: each texture gets a mip pyramid (``mip_pyramid``: 2 × 2 box averages, odd sizes
+padded by their last row / column), sampled trilinearly at a level of detail from the point's
+footprint. Primary pixels take it from the camera (``primary_lod``: one pixel's width at the
+point's distance, over the square root of the cosine between the ray and the face, in texels
+of the triangle's UV density, ``texel_density``) — a stand-in for Cycles' pixel filter, which
+averages a high-frequency texture over the pixel. Bounce hits sample level 0.
+
+Values are held at half precision (``HALF``), as the GPU atlas (RGBA16F) stores them, so the
+numpy reference and the GLSL port (render/shaders/textures.glsl) read the same texels; the
+filtering arithmetic is float32 on both. ``pack_atlas`` lays every level of every texture
+into one atlas with a table of where each level lies (what the GPU uploads).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .camera import _frustum, camera_frame
+from .snapshot import SceneSnapshot, TextureData
+
+MAX_LEVELS = 12              # mip levels kept per texture (level 0 = the image)
+MAX_SIZE = 2048              # larger images start at the first level within this size
+FOOTPRINT_COS_MIN = 0.05     # the footprint's cosine is held above this (grazing views)
+TEXTURE_TEXELS = 3 + MAX_LEVELS  # per texture in the GPU table (pack_atlas)
+INTERPOLATIONS = {"Linear": 0, "Closest": 1}
+EXTENSIONS = {"REPEAT": 0, "EXTEND": 1, "CLIP": 2}
+HALF = np.float16
+_PYRAMIDS: dict[str, list[np.ndarray]] = {}
+MAX_CACHED = 64
+
+
+def _halve(image: np.ndarray) -> np.ndarray:
+    """One mip step: 2 × 2 box averages, an odd size padded with its last row / column."""
+    h, w = image.shape[:2]
+    if h % 2 and h > 1:
+        image = np.concatenate([image, image[-1:]], axis=0)
+    if w % 2 and w > 1:
+        image = np.concatenate([image, image[:, -1:]], axis=1)
+    if h > 1:
+        image = 0.5 * (image[0::2] + image[1::2])
+    if w > 1:
+        image = 0.5 * (image[:, 0::2] + image[:, 1::2])
+    return image
+
+
+def mip_pyramid(pixels: np.ndarray) -> list[np.ndarray]:
+    """[(h_k, w_k, 3) float32] levels of ``pixels`` (row 0 at the bottom) down to 1 × 1 or
+    MAX_LEVELS, each rounded to half precision (``HALF``); images larger than MAX_SIZE start at
+    their first level within it."""
+    level = np.asarray(pixels, np.float64)[..., :3]
+    levels = []
+    while True:
+        if max(level.shape[:2]) <= MAX_SIZE:
+            levels.append(level.astype(HALF).astype(np.float32))
+        if len(levels) == MAX_LEVELS or max(level.shape[:2]) == 1:
+            return levels
+        level = _halve(level)
+
+
+def pyramid(texture: TextureData) -> list[np.ndarray]:
+    """The cached ``mip_pyramid`` of a texture (by its key; by its pixels' identity without)."""
+    key = texture.key or f"id{id(texture.pixels)}"
+    levels = _PYRAMIDS.get(key)
+    if levels is None:
+        while len(_PYRAMIDS) >= MAX_CACHED:
+            _PYRAMIDS.pop(next(iter(_PYRAMIDS)))
+        levels = _PYRAMIDS[key] = mip_pyramid(texture.pixels)
+    return levels
+
+
+def _fetch(image: np.ndarray, x: np.ndarray, y: np.ndarray, extension: str) -> np.ndarray:
+    """(N, 3) texels at integer (x, y), wrapped by ``extension`` (Clip: 0 outside)."""
+    h, w = image.shape[:2]
+    if extension == "REPEAT":
+        return image[np.mod(y, h), np.mod(x, w)]
+    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+    value = image[np.clip(y, 0, h - 1), np.clip(x, 0, w - 1)]
+    if extension == "CLIP":
+        value = np.where(inside[:, None], value, np.float32(0.0))
+    return value
+
+
+def sample_level(image: np.ndarray, s: np.ndarray, t: np.ndarray, interpolation: str,
+                 extension: str) -> np.ndarray:
+    """(N, 3) float32 of one level at image coordinates (s, t) (N,) float32 (0 … 1 across the
+    image, t = 0 at the bottom row): Closest = the texel containing the point, Linear =
+    bilinear between the four nearest texel centres."""
+    h, w = image.shape[:2]
+    x = s * np.float32(w)
+    y = t * np.float32(h)
+    if interpolation == "Closest":
+        return _fetch(image, np.floor(x).astype(np.int64), np.floor(y).astype(np.int64), extension)
+    x = x - np.float32(0.5)
+    y = y - np.float32(0.5)
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    ix, iy = x0.astype(np.int64), y0.astype(np.int64)
+    one = np.float32(1.0)
+    bottom = _fetch(image, ix, iy, extension) * (one - fx) + _fetch(image, ix + 1, iy, extension) * fx
+    top = _fetch(image, ix, iy + 1, extension) * (one - fx) + _fetch(image, ix + 1, iy + 1, extension) * fx
+    return (bottom * (one - fy) + top * fy).astype(np.float32)
+
+
+def sample_texture(texture: TextureData, uv: np.ndarray, lod=None) -> np.ndarray:
+    """(N, 3) float32: ``texture`` at surface UVs (N, 2) through its ``uv_transform``,
+    trilinear between mip levels at level of detail ``lod`` (N,) (log2 of the footprint in
+    level-0 texels; None: level 0)."""
+    levels = pyramid(texture)
+    uv = np.asarray(uv, np.float32).reshape(-1, 2)
+    a = np.asarray(texture.uv_transform, np.float32)
+    s = a[0, 0] * uv[:, 0] + a[0, 1] * uv[:, 1] + a[0, 2]
+    t = a[1, 0] * uv[:, 0] + a[1, 1] * uv[:, 1] + a[1, 2]
+    interp, ext = texture.interpolation, texture.extension
+    if lod is None:
+        return sample_level(levels[0], s, t, interp, ext)
+    lod = np.clip(np.asarray(lod, np.float32), 0.0, np.float32(len(levels) - 1))
+    l0 = np.floor(lod).astype(np.int64)
+    f = (lod - l0.astype(np.float32))[:, None]
+    out = np.zeros((len(uv), 3), np.float32)
+    for level in np.unique(l0):
+        at = np.flatnonzero(l0 == level)
+        value = sample_level(levels[level], s[at], t[at], interp, ext)
+        if level + 1 < len(levels):
+            upper = sample_level(levels[level + 1], s[at], t[at], interp, ext)
+            value = value * (np.float32(1.0) - f[at]) + upper * f[at]
+        out[at] = value
+    return out
+
+
+def texture_texels(texture: TextureData) -> float:
+    """sqrt(w · h) of the texture's level 0 (as ``pyramid`` keeps it) times the area scale of
+    its ``uv_transform``: level-0 texels per unit of surface UV."""
+    h, w = pyramid(texture)[0].shape[:2]
+    a = np.asarray(texture.uv_transform, np.float64)
+    return math.sqrt(w * h) * math.sqrt(abs(a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]))
+
+
+@dataclass(eq=False)
+class SurfaceTextures:
+    """What the triangles of a ``SceneTriangles`` need to sample their materials' textures.
+
+    textures : the snapshot's ``TextureData``; slots : (M + 1,) int32 Base Color texture per
+    material index (the last row, no material: -1); uvs : (T, 3, 2) float32 corner UVs (zeros
+    for meshes without a UV map, as Cycles reads a missing UV map); density : (T,) float32
+    level-0 texels per metre of each triangle's texture (0 without one)."""
+
+    textures: tuple
+    slots: np.ndarray
+    uvs: np.ndarray
+    density: np.ndarray = field(default=None)
+
+    def slot_of(self, materials: np.ndarray) -> np.ndarray:
+        m = np.asarray(materials)
+        last = len(self.slots) - 1
+        return self.slots[np.where((m >= 0) & (m < last), m, last)]
+
+    def base_at(self, triangles, materials, b1, b2, base, lod=None) -> np.ndarray:
+        """``base`` (N, 3) with the textured points' Base Color sampled per texel, clipped to
+        [0, 1] as ``preview.passes.principled_table`` clips the values: triangles (N,) indices,
+        b1, b2 (N,) the barycentrics of corners 1 and 2, lod (N,) or None (level 0)."""
+        slots = self.slot_of(materials)
+        out = np.array(base, np.float64, copy=True)
+        for slot in np.unique(slots[slots >= 0]):
+            at = np.flatnonzero(slots == slot)
+            corner = self.uvs[np.asarray(triangles)[at]]
+            w1 = np.asarray(b1, np.float32)[at, None]
+            w2 = np.asarray(b2, np.float32)[at, None]
+            uv = (np.float32(1.0) - w1 - w2) * corner[:, 0] + w1 * corner[:, 1] + w2 * corner[:, 2]
+            value = sample_texture(self.textures[slot], uv, None if lod is None else
+                                   np.asarray(lod)[at])
+            out[at] = np.clip(value, 0.0, 1.0)
+        return out
+
+
+def texel_density(positions: np.ndarray, uvs: np.ndarray) -> np.ndarray:
+    """(T,) float32 UV units per metre of each triangle: sqrt(UV area / world area)."""
+    p = np.asarray(positions, np.float64)
+    uv = np.asarray(uvs, np.float64)
+    world = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    flat = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    return np.sqrt(np.divide(flat, world, out=np.zeros_like(world), where=world > 0)).astype(np.float32)
+
+
+def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: np.ndarray,
+                     uvs: np.ndarray) -> SurfaceTextures | None:
+    """The ``SurfaceTextures`` of a snapshot's world triangles (None when no material has a
+    texture): positions (T, 3, 3), materials (T,), uvs (T, 3, 2)."""
+    textures = tuple(getattr(snapshot, "textures", ()) or ())
+    slots = np.full(len(snapshot.materials) + 1, -1, np.int32)
+    for i, m in enumerate(snapshot.materials):
+        index = int(getattr(m, "base_color_texture", -1))
+        if 0 <= index < len(textures):
+            slots[i] = index
+    if not (slots >= 0).any():
+        return None
+    out = SurfaceTextures(textures, slots, np.asarray(uvs, np.float32))
+    slot = out.slot_of(materials)
+    scale = np.array([texture_texels(t) for t in textures] + [0.0], np.float64)
+    out.density = (texel_density(positions, uvs) * scale[slot]).astype(np.float32)
+    return out
+
+
+def pixel_spread(camera, width: int, height: int) -> float:
+    """A pixel's width at unit distance (perspective) or in metres (orthographic)."""
+    _, _, hx, _ = _frustum(camera, int(width), int(height))
+    return float(2.0 * hx / int(width))
+
+
+def primary_lod(density, distance, cos_view, spread: float) -> np.ndarray:
+    """(N,) float32 level of detail of a pixel's hit: log2 of its footprint in level-0 texels,
+    ``spread`` × distance (1 for an orthographic camera: pass ones) / sqrt(|cos| held above
+    FOOTPRINT_COS_MIN) × the triangle's ``density``."""
+    c = np.maximum(np.abs(np.asarray(cos_view, np.float32)), np.float32(FOOTPRINT_COS_MIN))
+    footprint = (np.float32(spread) * np.asarray(distance, np.float32) / np.sqrt(c)
+                 * np.asarray(density, np.float32))
+    return np.log2(np.maximum(footprint, np.float32(1.0))).astype(np.float32)
+
+
+def pack_atlas(textures, width: int | None = None):
+    """Every level of every texture's pyramid in one atlas (what the GPU samples).
+
+    Returns (atlas (H, W, 4) float32, table (len(textures), TEXTURE_TEXELS, 4) float32): per
+    texture, texel 0 = (uv_transform row 0, level count), 1 = (row 1, interpolation), 2 =
+    (extension, 0, 0, 0), 3 + k = level k's (x0, y0, w, h) in the atlas (row 0 = the images'
+    bottom rows). Levels are packed on shelves, tallest first."""
+    rects = []
+    for i, texture in enumerate(textures):
+        for k, level in enumerate(pyramid(texture)):
+            rects.append((level.shape[0], level.shape[1], i, k, level))
+    widest = max((r[1] for r in rects), default=1)
+    area = sum(r[0] * r[1] for r in rects)
+    if width is None:
+        width = max(widest, min(8192, 1 << max(0, math.ceil(math.log2(max(1.0, math.sqrt(area) * 1.2))))))
+    places = {}
+    x = y = shelf = 0
+    for h, w, i, k, _ in sorted(rects, key=lambda r: (-r[0], -r[1])):
+        if x + w > width:
+            x, y, shelf = 0, y + shelf, 0
+        places[(i, k)] = (x, y)
+        x += w
+        shelf = max(shelf, h)
+    atlas = np.zeros((max(1, y + shelf), width, 4), np.float32)
+    table = np.zeros((max(1, len(textures)), TEXTURE_TEXELS, 4), np.float32)
+    for h, w, i, k, level in rects:
+        x0, y0 = places[(i, k)]
+        atlas[y0:y0 + h, x0:x0 + w, :3] = level
+        table[i, 3 + k] = (x0, y0, w, h)
+    for i, texture in enumerate(textures):
+        a = np.asarray(texture.uv_transform, np.float32)
+        table[i, 0] = (*a[0], len(pyramid(texture)))
+        table[i, 1] = (*a[1], INTERPOLATIONS.get(texture.interpolation, 0))
+        table[i, 2, 0] = EXTENSIONS.get(texture.extension, 0)
+    return atlas, table
+
+
+def primary_base(tris, seen, pixels, base, camera, width: int, height: int):
+    """(N, 3) float64 Base Color of the pixels ``pixels`` (N,) flat indices that see a
+    surface in ``seen`` (``raycast.PrimaryHits`` with barycentrics): ``base`` (N, 3) (the
+    material table's rows) with textured materials sampled per texel at the pixel's
+    ``primary_lod``; None when the triangles carry no textures (use ``base``)."""
+    tex = getattr(tris, "textures", None)
+    if tex is None or seen.barycentric is None:
+        return None
+    pixels = np.asarray(pixels)
+    triangle = seen.triangle.ravel()[pixels]
+    bary = seen.barycentric.reshape(-1, 2)[pixels]
+    position = seen.position.reshape(-1, 3)[pixels]
+    if camera.type == "ORTHO":
+        distance = np.ones(len(pixels))
+    else:
+        distance = np.linalg.norm(position - camera_frame(camera)[1], axis=1)
+    cos = np.einsum("ij,ij->i", seen.face_normal.reshape(-1, 3)[pixels],
+                    seen.direction.reshape(-1, 3)[pixels])
+    lod = primary_lod(tex.density[triangle], distance, cos, pixel_spread(camera, width, height))
+    return tex.base_at(triangle, np.asarray(tris.materials)[triangle], bary[:, 0], bary[:, 1],
+                       base, lod)
