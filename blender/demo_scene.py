@@ -1,4 +1,4 @@
-"""The demo scene: a Cornell box with a skinned tube and a rotating sphere.
+"""The demo scene: a Cornell box with a tiled floor, a skinned tube and a rotating sphere.
 
 Built from data API calls (``from_pydata``, ``bmesh``) so it works in background mode;
 only the armature's bones need edit mode (``object.mode_set`` under a context override).
@@ -22,7 +22,47 @@ TUBE_RINGS = 9
 TUBE_SEGMENTS = 16
 
 
-def _cornell_box(collection, white, red, green):
+TILE_IMAGE = "VoxGI Tiles"
+TILE_IMAGE_SIZE = 64
+TILES = 4  # tiles across the image; the floor repeats it TILE_REPEAT times each way
+TILE_REPEAT = 2
+
+
+def tile_pixels(size: int = TILE_IMAGE_SIZE, tiles: int = TILES) -> np.ndarray:
+    """(size, size, 4) float32 sRGB-encoded RGBA (row 0 at the bottom): light and dark stone
+    tiles in a checker, each a little darker towards one corner, with grey grout lines."""
+    y, x = np.mgrid[0:size, 0:size]
+    cell = size // tiles
+    odd = ((x // cell) + (y // cell)) % 2 == 1
+    shade = 1.0 - 0.12 * ((x % cell) + (y % cell)) / (2 * cell)
+    rgb = np.where(odd[..., None], (0.45, 0.42, 0.38), (0.85, 0.82, 0.76)) * shade[..., None]
+    grout = ((x % cell) == 0) | ((y % cell) == 0)
+    rgb[grout] = (0.3, 0.3, 0.3)
+    return np.concatenate([rgb, np.ones((size, size, 1))], axis=-1).astype(np.float32)
+
+
+def tiled_material(name: str = "VoxGI Tiles"):
+    """A Principled BSDF whose Base Color is a generated tile image, packed into the file,
+    repeated TILE_REPEAT times through UV → Mapping → Image Texture."""
+    image = bpy.data.images.new(TILE_IMAGE, TILE_IMAGE_SIZE, TILE_IMAGE_SIZE, alpha=False)
+    image.colorspace_settings.name = "sRGB"
+    image.pixels.foreach_set(tile_pixels().ravel())
+    image.pack()
+    material = principled_material(name, (0.6, 0.58, 0.53), roughness=0.6)
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    bsdf = next(n for n in nodes if n.type == "BSDF_PRINCIPLED")
+    coords = nodes.new("ShaderNodeTexCoord")
+    mapping = nodes.new("ShaderNodeMapping")
+    mapping.inputs["Scale"].default_value = (TILE_REPEAT, TILE_REPEAT, 1.0)
+    texture = nodes.new("ShaderNodeTexImage")
+    texture.image = image
+    links.new(coords.outputs["UV"], mapping.inputs["Vector"])
+    links.new(mapping.outputs["Vector"], texture.inputs["Vector"])
+    links.new(texture.outputs["Color"], bsdf.inputs["Base Color"])
+    return material
+
+
+def _cornell_box(collection, white, red, green, tiles):
     corners = [(x, y, z) for z in (0.0, 2.0) for y in (-1.0, 1.0) for x in (-1.0, 1.0)]
     # Corner index = x + 2*y + 4*z (0/1 each); faces wind so normals point inwards.
     faces = [
@@ -32,9 +72,14 @@ def _cornell_box(collection, white, red, green):
         (0, 2, 6, 4),  # left wall (red), +X
         (1, 5, 7, 3),  # right wall (green), -X
     ]
-    box = mesh_object("Cornell Box", corners, faces, collection=collection, materials=(white, red, green),
-                      face_materials=(0, 0, 0, 1, 2))
-    box.data.uv_layers.new(name="UVMap")
+    box = mesh_object("Cornell Box", corners, faces, collection=collection,
+                      materials=(white, red, green, tiles), face_materials=(3, 0, 0, 1, 2))
+    layer = box.data.uv_layers.new(name="UVMap")
+    # the floor's corners (0, 1, 3, 2) at (x, y) → UV ((x + 1) / 2, (y + 1) / 2)
+    uv = np.empty(len(layer.data) * 2, np.float32)
+    layer.data.foreach_get("uv", uv)
+    uv[:8] = (0, 0, 1, 0, 1, 1, 0, 1)
+    layer.data.foreach_set("uv", uv)
     return box
 
 
@@ -170,7 +215,7 @@ def build_demo_scene(scene) -> dict[str, bpy.types.Object]:
     scene.frame_start, scene.frame_end = 1, 120
     tube, rig = _skinned_tube(scene, collection, orange)
     objects = {
-        "box": _cornell_box(collection, white, red, green),
+        "box": _cornell_box(collection, white, red, green, tiled_material()),
         "light": _ceiling_light(collection),
         "tube": tube,
         "rig": rig,

@@ -49,6 +49,25 @@ def test_demo_scene_contents(voxgi):
     assert 0.3 < ndc.x < 0.7 and 0.3 < ndc.y < 0.7 and ndc.z > 0
 
 
+def test_demo_floor_is_textured(voxgi):
+    """The demo's floor samples a packed tile image per texel (issue 18): the snapshot reads
+    it as a texture through the floor's UVs and its Mapping's 2 × 2 repeat."""
+    from voxgi.blender.demo_scene import TILE_REPEAT, tile_pixels
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    assert bpy.ops.voxgi.add_demo_scene() == {"FINISHED"}
+    assert bpy.data.images["VoxGI Tiles"].packed_file is not None
+    snapshot = take_snapshot(bpy.context.scene)
+    assert snapshot.warnings == ()
+    tiles = next(m for m in snapshot.materials if m.name == "VoxGI Tiles")
+    texture = snapshot.textures[tiles.base_color_texture]
+    np.testing.assert_allclose(texture.uv_transform, [[TILE_REPEAT, 0, 0], [0, TILE_REPEAT, 0]])
+    assert texture.pixels.shape == tile_pixels().shape[:2] + (3,)
+    box = snapshot.meshes["Cornell Box"]
+    floor = box.triangle_materials == snapshot.materials.index(tiles)
+    assert floor.sum() == 2 and np.ptp(box.uvs[floor].reshape(-1, 2), axis=0).tolist() == [1, 1]
+
+
 def test_unregister_removes_settings_and_operators(voxgi):
     voxgi.unregister()
     try:

@@ -205,3 +205,36 @@ def test_voxel_albedo_reads_the_floor_texture(voxgi):
     texture = snapshot.textures[snapshot.materials[floor.triangle_materials[0]].base_color_texture]
     np.testing.assert_allclose(voxels.mean(axis=0), texture.pixels.reshape(-1, 3).mean(axis=0),
                                atol=0.03)
+
+
+def test_f12_bakes_inside_the_render_and_leaves_the_file_unchanged(voxgi, tmp_path):
+    """F12 of a fresh file (its procedural wall not baked yet): Cycles bakes it from inside
+    the VoxGI render (background mode: F12 runs on the main thread), the frame has the
+    textures' colours as ``voxgi.render_preview`` has them, and the file is as it was."""
+    from voxgi.blender.snapshot import materials as snapshot_materials
+    from voxgi.render.engine import enable_passes
+    from voxgi.voxgi_addon.files.exr import read_exr_passes
+
+    scene = build()
+    snapshot_materials.clear_bake_cache()
+    before = file_state()
+    bakes = snapshot_materials.bake_count()
+    scene.render.engine = "VOXGI"
+    scene.render.image_settings.media_type = "MULTI_LAYER_IMAGE"
+    scene.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
+    for view_layer in scene.view_layers:
+        enable_passes(view_layer)
+    scene.render.filepath = str(tmp_path / "f12.exr")
+    before["engine"] = "VOXGI"
+    before["images"] = sorted(before["images"] + ["Render Result"])  # F12's own
+    bpy.ops.render.render(write_still=True)
+    assert snapshot_materials.bake_count() == bakes + 1
+    assert file_state() == before
+    f12 = read_exr_passes(str(tmp_path / "f12.exr"))
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "preview.exr"),
+                                        resolution_x=texture_scenes.WIDTH,
+                                        resolution_y=texture_scenes.HEIGHT) == {"FINISHED"}
+    operator = read_exr_passes(str(tmp_path / "preview.exr"))
+    colour, reference = (np.asarray(p["Diffuse Color"], np.float64) for p in (f12, operator))
+    assert np.ptp(reference[24:40, 32:96, 0]) > 0.3  # the wall's checker
+    assert relative_l1(colour, reference, np.ones(colour.shape[:2], bool)) < 1e-3
