@@ -25,6 +25,7 @@ from ..voxgi_addon.gi.conetrace import world_mips
 from ..voxgi_addon.preview.passes import (
     compose_passes,
     material_indices,
+    principled_table,
 )
 from ..voxgi_addon.preview.upsample import low_shape
 from .gbuffer import rasterize, read_gbuffer
@@ -55,7 +56,8 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     if scene.uploaded:
         timings["scene update (GPU)"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-    gbuffer = rasterize(tris, snapshot.camera, rough, width, height)
+    gbuffer = rasterize(tris, snapshot.camera, rough, width, height,
+                        textures=scene.raster_textures())  # Base Color per texel: seen["base"]
     seen = read_gbuffer(gbuffer)
     hit = np.flatnonzero(seen["hit"].ravel())
     p = seen["position"].reshape(-1, 3)[hit].astype(np.float64)
@@ -137,4 +139,9 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
 
     flat_da = diffuse_ao.reshape(-1, 4)[hit]
     terms = (direct, flat_da[:, :3], flat_da[:, 3], glossy.reshape(-1, 4)[hit, :3])
-    return compose_passes(snapshot, width, height, hit, mat, *terms, n, views, shine), timings
+    base = None
+    if scene.textured:  # the textured pixels' colour, the others their material's
+        base = np.where(seen["textured"].ravel()[hit, None], seen["base"].reshape(-1, 3)[hit],
+                        principled_table(snapshot)[0][mat])
+    return compose_passes(snapshot, width, height, hit, mat, *terms, n, views, shine,
+                          base=base), timings

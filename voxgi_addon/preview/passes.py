@@ -209,7 +209,7 @@ def principled_colours(snapshot, mat, cos_view, base=None):
 
 
 def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy,
-                   normals=None, views=None, glossy_direct=None, glossy_world=None):
+                   normals=None, views=None, glossy_direct=None, glossy_world=None, base=None):
     """The PASS_NAMES images (H, W, 3) float32 (row 0 = top) from the per-hit-pixel terms.
 
     hit : (H·W,) indices of the pixels that see a surface; mat : their material indices;
@@ -221,12 +221,13 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
     Combined as Cycles' Glossy Color × Glossy Direct.
     glossy_world : (N, 3) the world's glossy light without the glossy colour (part of Glossy
     Direct, ``gather.gather_glossy_world``).
+    base : (N, 3) Base Color per texel (``scene.textures.primary_base``) or None.
     """
     albedo, _, spec, emission = material_table(snapshot)
     diffuse_colour, glossy_colour = albedo[mat], spec[mat]
     if normals is not None:
         cos_view = np.clip(np.einsum("ij,ij->i", normals, views), 0.0, 1.0)
-        diffuse_colour, glossy_colour = principled_colours(snapshot, mat, cos_view)
+        diffuse_colour, glossy_colour = principled_colours(snapshot, mat, cos_view, base)
     # Cycles stores a pass of light as the light over its colour, and 0 where the colour is 0
     # (per channel): a pure metal has no Diffuse Direct or Indirect.
     has_diffuse = np.asarray(diffuse_colour) > 0.0
@@ -653,9 +654,11 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         glossy = np.zeros((len(hit), 3))
     if quality != "ACCURATE":  # the lamps' glossy light (the cones see the rest), colours
         p, n, views = positions[hit], normals[hit], -dirs[hit]  # for the view as Cycles'
-        shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_lamp, hit)
+        base = primary_base(tris, seen, hit, principled_table(snapshot)[0][mat],
+                            snapshot.camera, width, height)  # None: untextured
+        shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_lamp, hit, base)
         return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao,
-                              glossy, n, views, shine), timings
+                              glossy, n, views, shine, base=base), timings
     t0 = time.perf_counter()
     emitting = any(light.type == "EMITTERS" for light in lights)
     glossy_world = gather_glossy_world(tris, world_light(snapshot.world), principled_table(snapshot),
