@@ -47,6 +47,7 @@ def bake_count() -> int:
 
 def clear_bake_cache() -> None:
     _BAKED.clear()
+    _IMAGES.clear()
 
 
 @bpy.app.handlers.persistent
@@ -162,6 +163,43 @@ def _surface_node(node_tree, node_type: str):
 
 def _rgb(socket) -> np.ndarray:
     return np.array(socket.default_value[:3], dtype=np.float32)
+
+
+def _value(socket) -> np.float32:
+    return np.float32(socket.default_value)
+
+
+_IMAGES: dict[tuple, np.ndarray | None] = {}
+MAX_IMAGES = 16
+
+
+def _cached_image_rgb(image) -> np.ndarray | None:
+    return _cached_image(image)[0]
+
+
+def _cached_image(image) -> tuple[np.ndarray | None, str]:
+    """(``image_rgb`` of an image, a content key of it), kept between snapshots while the
+    image is unchanged: a file image by its path and modification time, a packed one by its
+    packed bytes (each snapshot of a live viewport would otherwise read every pixel again); an
+    image edited in this session (``is_dirty``) is read, and its pixels hashed, every time."""
+    if image.is_dirty or image.source not in ("FILE", "GENERATED"):
+        rgb = image_rgb(image)
+        content = None if rgb is None else hashlib.blake2b(rgb.tobytes(), digest_size=16).hexdigest()
+        return rgb, _digest(image.name_full, content)
+    packed = image.packed_file
+    if packed is not None:
+        content = hashlib.blake2b(bytes(packed.data), digest_size=16).hexdigest()
+    elif image.source == "FILE":
+        content = _image_key(image)
+    else:  # a generated image nobody painted: its generator's settings
+        content = (image.generated_type, tuple(image.generated_color), image.use_generated_float)
+    key = (image.name_full, tuple(image.size), image.colorspace_settings.name,
+           bpy.data.colorspace.working_space, content)
+    if key not in _IMAGES:
+        while len(_IMAGES) >= MAX_IMAGES:
+            _IMAGES.pop(next(iter(_IMAGES)))
+        _IMAGES[key] = image_rgb(image)
+    return _IMAGES[key], _digest(key)
 
 
 def _digest(*values) -> str:
@@ -287,18 +325,56 @@ class MaterialTable:
                 return data, ("DIFFUSE", "Surface"), ""
             return data, None, ""
         inputs = principled.inputs
-        emission = _rgb(inputs["Emission Color"]) * np.float32(inputs["Emission Strength"].default_value)
+        strength = np.float32(inputs["Emission Strength"].default_value)
+        emission = self._socket_mean(material, inputs["Emission Color"], _rgb) * strength
         base, texture, bake, uv_map = self._base_color(material, inputs["Base Color"])
         data = MaterialData(
             name=material.name_full,
             base_color=base,
-            roughness=float(inputs["Roughness"].default_value),
-            metallic=float(inputs["Metallic"].default_value),
+            roughness=float(self._socket_mean(material, inputs["Roughness"], _value)),
+            metallic=float(self._socket_mean(material, inputs["Metallic"], _value)),
             specular=float(inputs["Specular IOR Level"].default_value),
             emission=emission.astype(np.float32),
             base_color_texture=-1 if texture is None else self._add_texture(texture),
         )
         return data, bake, uv_map
+
+    def _socket_mean(self, material, socket, value):
+        """A Roughness, Metallic or Emission Color socket's value: its own when unlinked; the
+        mean of the image feeding it (directly, or one channel through a Separate Color node,
+        as the glTF importer builds them) with a warning that it is not read per texel yet;
+        else its own value with a warning."""
+        if not socket.is_linked:
+            return value(socket)
+        try:
+            node, output = _follow(socket)
+        except _NeedsBake:
+            node = output = None
+        channel = None
+        if node is not None and node.type in ("SEPRGB", "SEPARATE_COLOR", "SEPARATE_RGB"):
+            channel = {"R": 0, "G": 1, "B": 2, "Red": 0, "Green": 1, "Blue": 2}.get(
+                output.identifier, {"R": 0, "G": 1, "B": 2}.get(output.name))
+            try:
+                node, output = _follow(node.inputs[0])
+            except _NeedsBake:
+                node = None
+        name = f"Material '{material.name_full}': {socket.name}"
+        if node is not None and node.type == "TEX_IMAGE" and node.image is not None and \
+                output is not None and output.identifier == "Color":
+            try:
+                rgb = _cached_image_rgb(node.image)
+            except _NeedsBake:
+                rgb = None
+            if rgb is not None:
+                mean = rgb.reshape(-1, 3).mean(axis=0)
+                self._warn(f"{name} comes from the image '{node.image.name_full}': the "
+                           "preview uses its mean (only Base Color is read per texel yet)")
+                if np.ndim(value(socket)) == 0:
+                    return np.float32(mean[channel] if channel is not None else mean.mean())
+                return mean.astype(np.float32)
+        self._warn(f"{name} comes from nodes the preview does not evaluate yet; using its "
+                   "value")
+        return value(socket)
 
     def _base_color(self, material, socket):
         """(value (3,), TextureData or None, what to bake or None, UV map name)."""
@@ -320,7 +396,7 @@ class MaterialTable:
                 raise _NeedsBake(f"the image node '{node.name}' uses {node.projection.lower()} "
                                  f"projection / {node.extension.lower()} extension")
             uv_map, transform = uv_source(node)
-            rgb = image_rgb(node.image)
+            rgb, image_key = _cached_image(node.image)
             if rgb is None:
                 self._warn(
                     f"Material '{material.name_full}': image '{node.image.name_full}' has no "
@@ -330,7 +406,7 @@ class MaterialTable:
                 name=node.image.name_full, pixels=rgb,
                 interpolation="Closest" if node.interpolation == "Closest" else "Linear",
                 extension=node.extension, uv_transform=transform,
-                key=_digest(_image_key(node.image), rgb.shape))
+                key=image_key)
             return rgb.reshape(-1, 3).mean(axis=0).astype(np.float32), texture, None, uv_map
         except _NeedsBake:
             return _rgb(socket), None, ("EMIT", socket.name), ""

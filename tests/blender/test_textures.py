@@ -246,3 +246,23 @@ def test_f12_bakes_inside_the_render_and_leaves_the_file_unchanged(voxgi, tmp_pa
     colour, reference = (np.asarray(p["Diffuse Color"], np.float64) for p in (f12, operator))
     assert np.ptp(reference[24:40, 32:96, 0]) > 0.3  # the wall's checker
     assert relative_l1(colour, reference, np.ones(colour.shape[:2], bool)) < 1e-3
+
+
+def test_roughness_from_an_image_channel_takes_its_mean_with_a_warning(voxgi):
+    """Roughness through a Separate Color node from an image (as the glTF importer builds a
+    metallic-roughness map): the channel's mean and a warning that it is not per texel yet,
+    instead of the socket's unlinked value without a word."""
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    build()
+    tree = bpy.data.materials["Checker Floor"].node_tree
+    image_node = next(n for n in tree.nodes if n.type == "TEX_IMAGE")
+    separate = tree.nodes.new("ShaderNodeSeparateColor")
+    tree.links.new(image_node.outputs["Color"], separate.inputs["Color"])
+    bsdf = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
+    tree.links.new(separate.outputs["Green"], bsdf.inputs["Roughness"])
+    snapshot = take_snapshot(bpy.context.scene)
+    floor = next(m for m in snapshot.materials if m.name == "Checker Floor")
+    green = snapshot.textures[floor.base_color_texture].pixels[..., 1].mean()
+    assert floor.roughness == pytest.approx(green, abs=1e-4)
+    assert any("Roughness comes from the image" in w for w in snapshot.warnings), snapshot.warnings
