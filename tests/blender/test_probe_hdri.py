@@ -107,12 +107,16 @@ def _report(c: Comparison) -> None:
         print(f"probe {i} at {np.round(c.positions[k], 2)}: Cycles E {np.round(c.cycles[k].mean(1), 2)}, "
               f"probe {np.round(c.ours[k].mean(1), 2)}; error {np.round(c.error[k], 3)} "
               f"(uniform rays {np.round(c.old[k], 2)}, L2 of Cycles' own light {np.round(c.floor[k], 3)})")
+    # the worst only over normals with some light (≥ 1/1000 of the probe's brightest normal's)
+    energy = c.cycles.sum(axis=-1)
+    seen = energy >= 1e-3 * energy.max(axis=1, keepdims=True)
     print(f"{len(c.index)} probes × 5 normals (Cycles: 2 × {c.samples} spp panoramas, noise ≤ "
           f"{c.noise:.4f}): error median {np.median(c.error):.3f}, 90th percentile "
-          f"{np.percentile(c.error, 90):.3f}, worst {c.error.max():.3f}. Uniform rays only: median "
-          f"{np.median(c.old):.3f}, worst {c.old.max():.2f}. SH L2 of Cycles' own light: median "
-          f"{np.median(c.floor):.3f}, worst {c.floor.max():.3f}; the bake where that is within 5 %: "
-          f"worst {c.error[c.floor < 0.05].max():.3f} ({(c.floor < 0.05).sum()} of {c.floor.size})")
+          f"{np.percentile(c.error, 90):.3f}, worst {c.error[seen].max():.3f} ({seen.sum()} normals "
+          f"with light). Uniform rays only: median {np.median(c.old):.3f}, worst "
+          f"{c.old[seen].max():.2f}. SH L2 of Cycles' own light: median {np.median(c.floor):.3f}, "
+          f"worst {c.floor[seen].max():.3f}; the bake where that is within 5 %: worst "
+          f"{c.error[c.floor < 0.05].max():.3f} ({(c.floor < 0.05).sum()} of {c.floor.size})")
     print(f"per probe (relative L1 over its five normals, {len(c.index)} probes that Cycles finds "
           f"light at; the others' largest |E| {c.dark:.2g}): worst {c.per_probe.max():.3f}, median "
           f"{np.median(c.per_probe):.3f}; uniform rays only: worst {c.old_per_probe.max():.3f}, "
