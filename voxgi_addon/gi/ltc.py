@@ -31,7 +31,7 @@ import pathlib
 
 import numpy as np
 
-__all__ = ["TABLE_PATH", "load_table", "ltc_inverse", "ltc_matrix", "hemisphere_norm",
+__all__ = ["TABLE_PATH", "load_table", "ltc_inverse", "view_x", "ltc_matrix", "hemisphere_norm",
            "ltc_density", "ltc_polygon_integral", "table_texels", "local_frame"]
 
 TABLE_PATH = pathlib.Path(__file__).resolve().with_name("ltc_ggx.npz")
@@ -78,8 +78,9 @@ def _abcd(params: np.ndarray) -> np.ndarray:
     return np.stack([cos / (sx * e), -sin / (sx * e), 1.0 / (sy * e), (sin - kappa * cos) / e], -1)
 
 
-def _interp(values: np.ndarray, rough, cos_view) -> np.ndarray:
-    """(a, b, c, d) at roughness and cos θ_v (clamped) from the table ``values`` (R, V, 4).
+def _interp(values: np.ndarray, rough, view_x) -> np.ndarray:
+    """(a, b, c, d) at roughness and view_x = sqrt(1 − cos θ_v) (clamped) from the table
+    ``values`` (R, V, 4).
 
     The four cells are blended in the fit's parameters (``_params``: lobe direction φ, log
     spreads, skew), not as matrix entries: a blend of entries of two narrow lobes pointing in
@@ -89,7 +90,7 @@ def _interp(values: np.ndarray, rough, cos_view) -> np.ndarray:
     n_r, n_v = values.shape[:2]
     rough_min = float(load_table()["rough_min"])
     r = np.clip(np.nan_to_num(np.asarray(rough, np.float64)), 0.0, 1.0)
-    x = np.sqrt(np.clip(1.0 - np.nan_to_num(np.asarray(cos_view, np.float64)), 0.0, 1.0))
+    x = np.clip(np.nan_to_num(np.asarray(view_x, np.float64)), 0.0, 1.0)
     r, x = np.broadcast_arrays(r, x)
     i = np.minimum((r * (n_r - 1)).astype(np.int64), n_r - 2)
     fv = x * (n_v - 1)
@@ -107,7 +108,22 @@ def _interp(values: np.ndarray, rough, cos_view) -> np.ndarray:
 def ltc_inverse(roughness, cos_view) -> np.ndarray:
     """(…, 3, 3) M⁻¹ = [[a, 0, b], [0, c, 0], [d, 0, 1]] for the view at cos θ_v = ``cos_view``
     in the x–z plane of the local frame (table lookup ``_interp``, coordinates clamped)."""
-    abcd = _interp(load_table()["minv"], roughness, cos_view)
+    x = np.sqrt(np.clip(1.0 - np.nan_to_num(np.asarray(cos_view, np.float64)), 0.0, 1.0))
+    return _matrix(_interp(load_table()["minv"], roughness, x))
+
+
+def view_x(n, v) -> np.ndarray:
+    """(…) the table's view coordinate sqrt(1 − cos θ_v) of unit n, v (…, 3), from the view's
+    tangential part |v − n (n·v)| = sin θ_v as sqrt(sin² / (1 + cos)): near normal incidence
+    1 − n·v of rounded vectors loses θ_v (float32: ~3·10⁻⁴ rad), enough to move a narrow
+    lobe's highlight; the shader does the same."""
+    cos = np.sum(n * v, axis=-1)
+    tangential = v - n * cos[..., None]
+    return np.sqrt(np.clip(np.sum(tangential * tangential, axis=-1) / np.maximum(1.0 + cos, 1e-6),
+                           0.0, 1.0))
+
+
+def _matrix(abcd: np.ndarray) -> np.ndarray:
     a, b, c, d = np.moveaxis(abcd, -1, 0)
     zero, one = np.zeros_like(a), np.ones_like(a)
     return np.stack([np.stack([a, zero, b], -1), np.stack([zero, c, zero], -1),
@@ -211,7 +227,7 @@ def ltc_polygon_integral(p, n, v, roughness, corners, chunk: int = 64) -> np.nda
     rough = np.broadcast_to(rough, (count,))
     cos_view = np.sum(n * v, axis=-1)
     frame = local_frame(n, v)                                   # (N, 3, 3)
-    minv = ltc_inverse(rough, cos_view)                         # (N, 3, 3)
+    minv = _matrix(_interp(load_table()["minv"], rough, view_x(n, v)))   # (N, 3, 3)
     norm = hemisphere_norm(minv)                                # (N,)
     out = np.zeros((count, len(corners)))
     for start in range(0, len(corners), chunk):

@@ -1,0 +1,191 @@
+/* Linearly Transformed Cosines for the Principled GGX lobe: a port of voxgi_addon/gi/ltc.py
+ * (docs/gi_pipeline.md "LTC: the glossy lobe over polygons"; read that module's doc for the
+ * model). ltc_triangle(p, n, v, roughness, c0, c1, c2) = the integral over the triangle (world
+ * corners, either orientation, clipped to the point's horizon) of the normalised GGX lobe
+ * rho (f cos / its hemisphere integral; no Fresnel) of the point p with unit normal n, unit
+ * direction to the viewer v and Principled roughness; 0 when v is at or below the horizon.
+ *
+ * Needs the 2D sampler `ltc_table` (render/gpu_ltc.py ltc_texture: RGBA32F, one texel per
+ * cell = (a, b, c, d) of M^-1 = [[a, 0, b], [0, c, 0], [d, 0, 1]], x = view axis
+ * sqrt(1 - cos theta_v), y = roughness, both uniform on [0, 1]) and the defines of
+ * gpu_ltc.DEFINES (LTC_ROUGH_SIZE, LTC_VIEW_SIZE, LTC_ROUGH_MIN: the roughness the r = 0 row
+ * was fitted at). */
+
+#define LTC_PI 3.14159265358979
+
+/* The table's view coordinate sqrt(1 - cos theta_v) from the view's tangential part
+ * |v - n (n.v)| = sin theta_v: sqrt(sin^2 / (1 + cos)). Near normal incidence a float's cos
+ * loses theta (1 - cos rounds by 6e-8: theta by ~3e-4, which moves a narrow lobe's highlight). */
+float ltc_view_x(vec3 n, vec3 v)
+{
+  float cos_view = dot(n, v);
+  vec3 tangential = v - n * cos_view;
+  return sqrt(clamp(dot(tangential, tangential) / max(1.0 + cos_view, 1e-6), 0.0, 1.0));
+}
+
+/* (phi, log s_x, log s_y, kappa) of a cell's (a, b, c, d) (ltc.py _params). */
+vec4 ltc_params(vec4 m)
+{
+  float phi = atan(-m.y, m.x);
+  float c = cos(phi);
+  float s = sin(phi);
+  float kappa = (s - m.w * c) / (c + m.w * s);
+  float e = c + kappa * s;
+  return vec4(phi, log(c / (m.x * e)), log(1.0 / (m.z * e)), kappa);
+}
+
+/* (a, b, c, d) of parameters (ltc.py _abcd). */
+vec4 ltc_abcd(vec4 q)
+{
+  float c = cos(q.x);
+  float s = sin(q.x);
+  float e = c + q.w * s;
+  float sx = exp(q.y);
+  float sy = exp(q.z);
+  return vec4(c / (sx * e), -s / (sx * e), 1.0 / (sy * e), (s - q.w * c) / e);
+}
+
+/* M^-1 = (a, b, c, d) at roughness and view_x = sqrt(1 - cos theta_v), clamped: the four cells
+ * blended in their parameters, linear in view_x and in log(roughness) (ltc.py _interp). */
+vec4 ltc_inverse_x(float roughness, float view_x)
+{
+  float r = clamp(roughness, 0.0, 1.0);
+  float fv = clamp(view_x, 0.0, 1.0) * float(LTC_VIEW_SIZE - 1);
+  int i = min(int(r * float(LTC_ROUGH_SIZE - 1)), LTC_ROUGH_SIZE - 2);
+  int j = min(int(fv), LTC_VIEW_SIZE - 2);
+  float t = fv - float(j);
+  float log0 = log(max(float(i) / float(LTC_ROUGH_SIZE - 1), LTC_ROUGH_MIN));
+  float log1 = log(max(float(i + 1) / float(LTC_ROUGH_SIZE - 1), LTC_ROUGH_MIN));
+  float s = clamp((log(max(r, LTC_ROUGH_MIN)) - log0) / (log1 - log0), 0.0, 1.0);
+  vec4 q00 = ltc_params(texelFetch(ltc_table, ivec2(j, i), 0));
+  vec4 q01 = ltc_params(texelFetch(ltc_table, ivec2(j + 1, i), 0));
+  vec4 q10 = ltc_params(texelFetch(ltc_table, ivec2(j, i + 1), 0));
+  vec4 q11 = ltc_params(texelFetch(ltc_table, ivec2(j + 1, i + 1), 0));
+  return ltc_abcd((1.0 - s) * ((1.0 - t) * q00 + t * q01) + s * ((1.0 - t) * q10 + t * q11));
+}
+
+vec4 ltc_inverse(float roughness, float cos_view)
+{
+  return ltc_inverse_x(roughness, sqrt(clamp(1.0 - cos_view, 0.0, 1.0)));
+}
+
+vec3 ltc_apply(vec4 m, vec3 w)
+{
+  return vec3(m.x * w.x + m.y * w.z, m.z * w.y, m.w * w.x + w.z);
+}
+
+/* Clamped cosine of the hemisphere under M^-1: (1 + sign(a - b d) a / sqrt(a^2 + d^2)) / 2. */
+float ltc_hemisphere_norm(vec4 m)
+{
+  float s = (m.x - m.y * m.w) >= 0.0 ? 1.0 : -1.0;
+  return 0.5 * (1.0 + s * m.x / sqrt(m.x * m.x + m.w * m.w));
+}
+
+/* Sutherland-Hodgman of the polygon poly[0 .. count) against dot(plane, x) >= 0, in place
+ * (at most 5 corners). */
+int ltc_clip(inout vec3 poly[5], int count, vec3 plane)
+{
+  vec3 src[5] = poly;
+  int out_count = 0;
+  for (int i = 0; i < count; i++) {
+    vec3 a = src[i];
+    vec3 b = src[(i + 1 == count) ? 0 : i + 1];
+    float ha = dot(plane, a);
+    float hb = dot(plane, b);
+    if (ha >= 0.0 && out_count < 5) {
+      poly[out_count++] = a;
+    }
+    if ((ha >= 0.0) != (hb >= 0.0) && out_count < 5) {
+      float denom = ha - hb;
+      float t = denom != 0.0 ? ha / denom : 0.0;
+      poly[out_count++] = a + t * (b - a);
+    }
+  }
+  return out_count;
+}
+
+/* |sum over edges theta_k gamma_k.z| / 2 pi of the transformed polygon M^-1 poly (poly in the
+ * local frame, already clipped to both horizons). The edges' normals are taken as
+ * M^-1 x cross M^-1 y = cof(M^-1) (x cross y), cof = [[c, 0, -c d], [0, a - b d, 0],
+ * [-b c, 0, a c]]: a narrow lobe's M^-1 stretches the polygon until its corners are nearly
+ * opposite, where the cross of the stretched corners loses float precision (10^-3 of the
+ * lobe at roughness 0.05) but this product does not. */
+float ltc_edge_integral(vec3 poly[5], int count, vec4 m)
+{
+  float total = 0.0;
+  for (int i = 0; i < count; i++) {
+    vec3 x = poly[i];
+    vec3 y = poly[(i + 1 == count) ? 0 : i + 1];
+    vec3 g = cross(x, y);
+    vec3 c = vec3(m.z * (g.x - m.w * g.z), (m.x - m.y * m.w) * g.y, m.z * (m.x * g.z - m.y * g.x));
+    float s = length(c);
+    if (s > 0.0) {
+      total += atan(s, dot(ltc_apply(m, x), ltc_apply(m, y))) * c.z / s;
+    }
+  }
+  return abs(total) / (2.0 * LTC_PI);
+}
+
+/* Rows (t, b, n) of the local frame: t toward the view (ltc.py local_frame). */
+mat3 ltc_frame(vec3 n, vec3 v)
+{
+  vec3 t = v - n * dot(n, v);
+  float len = length(t);
+  if (len > 1e-6) {
+    t /= len;
+  }
+  else {
+    vec3 an = abs(n);
+    vec3 axis = (an.x <= an.y && an.x <= an.z) ? vec3(1.0, 0.0, 0.0) :
+                (an.y <= an.z ? vec3(0.0, 1.0, 0.0) : vec3(0.0, 0.0, 1.0));
+    t = normalize(axis - n * dot(n, axis));
+  }
+  /* columns t, b, n: transpose(frame) * x = (t.x, b.x, n.x) */
+  return transpose(mat3(t, cross(n, t), n));
+}
+
+float ltc_triangle(vec3 p, vec3 n, vec3 v, float roughness, vec3 c0, vec3 c1, vec3 c2)
+{
+  float cos_view = dot(n, v);
+  if (!(cos_view > 0.0)) {
+    return 0.0;
+  }
+  mat3 to_local = ltc_frame(n, v);
+  vec3 poly[5];
+  poly[0] = to_local * (c0 - p);
+  poly[1] = to_local * (c1 - p);
+  poly[2] = to_local * (c2 - p);
+  poly[3] = vec3(0.0);
+  poly[4] = vec3(0.0);
+  /* the surface's horizon (rho is 0 below it), then the cosine's (z >= 0 after M^-1: the local
+   * plane d x + z >= 0), both in the local frame */
+  int count = ltc_clip(poly, 3, vec3(0.0, 0.0, 1.0));
+  if (count == 0) {
+    return 0.0;
+  }
+  vec4 m = ltc_inverse_x(roughness, ltc_view_x(n, v));
+  count = ltc_clip(poly, count, vec3(m.w, 0.0, 1.0));
+  if (count == 0) {
+    return 0.0;
+  }
+  return ltc_edge_integral(poly, count, m) / ltc_hemisphere_norm(m);
+}
+
+#ifdef LTC_TEST_KERNEL
+/* Test kernel (render/gpu_ltc.py evaluate): one point and triangle per texel, in_p = (p,
+ * roughness), in_n = (n, -), in_v = (v, -), in_c0 / in_c1 / in_c2 = (corner, -);
+ * out_image = (ltc_triangle, -, -, -). */
+void main()
+{
+  ivec2 px = ivec2(gl_GlobalInvocationID.xy);
+  ivec2 size = imageSize(out_image);
+  if (px.x >= size.x || px.y >= size.y) {
+    return;
+  }
+  vec4 p = texelFetch(in_p, px, 0);
+  float value = ltc_triangle(p.xyz, texelFetch(in_n, px, 0).xyz, texelFetch(in_v, px, 0).xyz, p.w,
+                             texelFetch(in_c0, px, 0).xyz, texelFetch(in_c1, px, 0).xyz,
+                             texelFetch(in_c2, px, 0).xyz);
+  imageStore(out_image, px, vec4(value, 0.0, 0.0, 1.0));
+}
+#endif
