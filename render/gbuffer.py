@@ -13,8 +13,8 @@ import gpu
 import numpy as np
 from gpu_extras.batch import batch_for_shader
 
-from ..voxgi_addon.scene.camera import camera_frame, view_projection
-from ..voxgi_addon.scene.textures import FOOTPRINT_COS_MIN, pixel_spread
+from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame, view_projection
+from ..voxgi_addon.scene.textures import FOOTPRINT_COS_MIN, filter_footprint, pixel_spread
 from .gpu_shaders import SHADER_DIR
 from .gpu_tracer import read_texture
 
@@ -77,7 +77,8 @@ class GBuffer:
 
 
 def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
-              offset=(0.0, 0.0), shader=None, textures=None) -> GBuffer:
+              offset=(0.0, 0.0), shader=None, textures=None,
+              filter_width: float = DEFAULT_FILTER_WIDTH) -> GBuffer:
     """Draw ``tris`` (``SceneTriangles``) seen by ``camera`` into a new ``GBuffer``.
 
     roughness : (M + 1,) per material index (last = no material), as ``preview`` tables it.
@@ -86,7 +87,8 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
     shader : the render's ``gbuffer_shader`` (None: a new one for this call).
     textures : (texture table, atlas) GPU textures of ``tris.textures`` (``gpu_scene``'s
     ``textures`` part): the fragment samples each textured material's Base Color per texel at
-    ``scene.textures.primary_lod`` into ``base``; None: no texture is sampled.
+    ``scene.textures.primary_lod`` (Filter Size ``filter_width``) into ``base``; None: no
+    texture is sampled.
     """
     out = GBuffer(width, height)
     framebuffer = gpu.types.GPUFrameBuffer(depth_slot=out.depth,
@@ -118,8 +120,9 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
                 textures = _no_textures()
             else:
                 uv = np.asarray(surface_textures.uvs, np.float32).reshape(-1, 2)
-                # (slot, level-0 texels per metre × a pixel's width at unit distance)
-                spread = np.float32(pixel_spread(camera, width, height))
+                # (slot, level-0 texels per metre × a pixel's footprint at unit distance)
+                spread = np.float32(pixel_spread(camera, width, height) *
+                                    filter_footprint(filter_width))
                 texel = np.repeat(np.stack(
                     [surface_textures.slot_of(tris.materials).astype(np.float32),
                      surface_textures.density * spread], axis=1), 3, axis=0)

@@ -155,7 +155,7 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     plan = subpixel_passes(filter_width, light_samples)
     raster = gbuffer_shader()  # this render's, for its G-buffers (gbuffer.gbuffer_shader)
     centre = rasterize(tris, snapshot.camera, rough, width, height, shader=raster,
-                       textures=scene.raster_textures())
+                       textures=scene.raster_textures(), filter_width=filter_width)
     timings["visibility (GPU)"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -267,7 +267,8 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         edge_sums = {name: blank for name in names}
         for offset, block in plan:
             gbuffer = rasterize(tris, snapshot.camera, rough, width, height, offset,
-                                shader=raster, textures=scene.raster_textures())
+                                shader=raster, textures=scene.raster_textures(),
+                                filter_width=filter_width)
             inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": pixels}, list_size)
             inputs["gbuffer_base"] = blank if not scene.textured else _compact(
                 "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,

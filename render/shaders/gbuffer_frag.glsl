@@ -2,7 +2,7 @@
  * out_position: world xyz, 1 (hit); out_normal: shading normal turned to the camera (by the
  * face normal, as Cycles does), roughness; out_view: camera → point unit direction, material;
  * out_base: (Base Color sampled per texel, 1) where the material has a texture
- * (surface_slot = (slot, level-0 texels per metre × a pixel's width at unit distance)) at
+ * (surface_slot = (slot, level-0 texels per metre × a pixel's footprint at unit distance)) at
  * scene/textures.primary_lod, else 0. */
 void main()
 {

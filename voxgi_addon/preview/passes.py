@@ -689,7 +689,7 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         mat = material_indices(snapshot, seen.material.ravel())[hit]
         views = -seen.direction.reshape(-1, 3)[hit]
         base = primary_base(tris, seen, hit, principled_table(snapshot)[0][mat],
-                            snapshot.camera, width, height)  # None: untextured
+                            snapshot.camera, width, height, filter_width)  # None: untextured
         per_light = direct_light(None, p, n, lights, tris, cones, light_samples, shadows,
                                  sample_ids=hit, per_light=True, seed=gather_settings.seed,
                                  strata_block=block)

@@ -9,10 +9,11 @@ extension (Repeat, Extend, Clip) as Cycles' image texture node does
 
 Minification: each texture gets a mip pyramid (``mip_pyramid``: 2 × 2 box averages, odd sizes
 padded by their last row / column), sampled trilinearly at a level of detail from the point's
-footprint. Primary pixels take it from the camera (``primary_lod``: one pixel's width at the
-point's distance, over the square root of the cosine between the ray and the face, in texels
-of the triangle's UV density, ``texel_density``) — a stand-in for Cycles' pixel filter, which
-averages a high-frequency texture over the pixel. Bounce hits sample level 0.
+footprint. Primary pixels take it from the camera (``primary_lod``: the footprint of Cycles'
+pixel filter over the pixel's own square, ``filter_footprint``, at the point's distance, over
+the square root of the cosine between the ray and the face, in texels of the triangle's UV
+density, ``texel_density``) — a stand-in for the pixel filter, which averages a high-frequency
+texture over the pixel. Bounce hits sample level 0.
 
 Values are held at half precision (``HALF``), as the GPU atlas (RGBA16F) stores them, so the
 numpy reference and the GLSL port (render/shaders/textures.glsl) read the same texels; the
@@ -26,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .camera import _frustum, camera_frame
+from .camera import DEFAULT_FILTER_WIDTH, _frustum, blackman_harris, camera_frame
 from .snapshot import SceneSnapshot, TextureData
 
 MAX_LEVELS = 12              # mip levels kept per texture (level 0 = the image)
@@ -218,10 +219,26 @@ def pixel_spread(camera, width: int, height: int) -> float:
     return float(2.0 * hx / int(width))
 
 
+def filter_footprint(filter_width: float = DEFAULT_FILTER_WIDTH) -> float:
+    """The width (pixels) of the texture footprint one pixel's sample stands for: 2σ of Cycles'
+    pixel filter (``camera.blackman_harris`` at Filter Size ``filter_width``) over the pixel's
+    own square (|x| ≤ ½), which its passes' samples cover (``filter_offsets``; the filter's
+    tails are the neighbours' share). Trilinear sampling at level k (texels 2^k level-0 texels
+    wide) has σ = 2^k / 2 (the mip's box and the bilinear tent), so a footprint of 2σ matches
+    the filter's σ. 0.53 at Filter Size 1.5; 0 (level 0) for a width ≤ 0."""
+    if filter_width <= 0.0:
+        return 0.0
+    reach = min(float(filter_width), 0.5)
+    x = np.linspace(-reach, reach, 2001)
+    weight = blackman_harris(x, float(filter_width))
+    return float(2.0 * np.sqrt((weight * x * x).sum() / weight.sum()))
+
+
 def primary_lod(density, distance, cos_view, spread: float) -> np.ndarray:
     """(N,) float32 level of detail of a pixel's hit: log2 of its footprint in level-0 texels,
-    ``spread`` × distance (1 for an orthographic camera: pass ones) / sqrt(|cos| held above
-    FOOTPRINT_COS_MIN) × the triangle's ``density``."""
+    ``spread`` (``pixel_spread`` × ``filter_footprint``) × distance (1 for an orthographic
+    camera: pass ones) / sqrt(|cos| held above FOOTPRINT_COS_MIN) × the triangle's
+    ``density``."""
     c = np.maximum(np.abs(np.asarray(cos_view, np.float32)), np.float32(FOOTPRINT_COS_MIN))
     footprint = (np.float32(spread) * np.asarray(distance, np.float32) / np.sqrt(c)
                  * np.asarray(density, np.float32))
@@ -265,11 +282,13 @@ def pack_atlas(textures, width: int | None = None):
     return atlas, table
 
 
-def primary_base(tris, seen, pixels, base, camera, width: int, height: int):
+def primary_base(tris, seen, pixels, base, camera, width: int, height: int,
+                 filter_width: float = DEFAULT_FILTER_WIDTH):
     """(N, 3) float64 Base Color of the pixels ``pixels`` (N,) flat indices that see a
     surface in ``seen`` (``raycast.PrimaryHits`` with barycentrics): ``base`` (N, 3) (the
     material table's rows) with textured materials sampled per texel at the pixel's
-    ``primary_lod``; None when the triangles carry no textures (use ``base``)."""
+    ``primary_lod`` for Filter Size ``filter_width``; None when the triangles carry no
+    textures (use ``base``)."""
     tex = getattr(tris, "textures", None)
     if tex is None or seen.barycentric is None:
         return None
@@ -283,6 +302,7 @@ def primary_base(tris, seen, pixels, base, camera, width: int, height: int):
         distance = np.linalg.norm(position - camera_frame(camera)[1], axis=1)
     cos = np.einsum("ij,ij->i", seen.face_normal.reshape(-1, 3)[pixels],
                     seen.direction.reshape(-1, 3)[pixels])
-    lod = primary_lod(tex.density[triangle], distance, cos, pixel_spread(camera, width, height))
+    spread = pixel_spread(camera, width, height) * filter_footprint(filter_width)
+    lod = primary_lod(tex.density[triangle], distance, cos, spread)
     return tex.base_at(triangle, np.asarray(tris.materials)[triangle], bary[:, 0], bary[:, 1],
                        base, lod)
