@@ -3,7 +3,8 @@ box, traced by the GPU tracer and by the numpy reference.
 
 The preview is rendered the way users do it — ``bpy.ops.voxgi.render_preview`` writing a
 multilayer EXR — and read back; Cycles renders the same view at 1024 spp with a point-sample
-pixel filter so both images sample pixel centres. The GPU passes must equal the numpy
+pixel filter, and the preview with the same Filter Size, so both images sample pixel centres.
+The GPU passes must equal the numpy
 tracer's within 2% relative L1 per pass, and both must stay within the bounds below.
 """
 import bpy
@@ -27,6 +28,7 @@ def render_preview(tmp_path, scene, tracer="AUTO"):
     settings.base_span = 0.07
     settings.grid_resolution = "64"
     settings.ao_distance = 1.0
+    scene.cycles.filter_width = 0.01  # pixel centres, as the Cycles reference below
     from voxgi.voxgi_addon.files.exr import read_exr
 
     path = tmp_path / f"preview_{tracer}.exr"

@@ -286,7 +286,7 @@ def subpixel_passes(filter_width: float, light_samples: int):
 
 def subpixel_reach(plan) -> int:
     """How many pixels around a pixel's centre the sub-pixel ``plan``'s camera rays reach:
-    ⌈largest |offset|⌉ (1 for Filter Size 1.5, whose outermost offset is 0.49 px; 0 for pixel
+    ⌈largest |offset|⌉ (1 at any Filter Size: the offsets stay in the pixel's square; 0 for pixel
     centres alone). A ray of a pass lands between the centres of the pixels within that reach,
     so where they all see one surface, the pass's rays see it too (``edge_pixels``)."""
     largest = max((max(abs(x), abs(y)) for (x, y), _ in plan), default=0.0)
@@ -446,48 +446,58 @@ def _window_max(image: np.ndarray) -> np.ndarray:
                   axis=0)
 
 
-def light_ratio(light: np.ndarray, colour: np.ndarray, filter_width: float,
-                covered: np.ndarray | None = None) -> np.ndarray:
-    """(H, W, 3) light pass = light / colour (0 where both are 0), as Cycles' film divides
-    Σ light × colour by Σ colour over its pixel filter's whole footprint (± filter_width px).
-    The sub-pixel passes' rays stay within half a pixel of the centre, so a pixel whose
-    footprint holds only a sliver of a coloured surface (a diffuse wall beside a metal floor)
-    may get no colour at all, where Cycles takes the sliver's full light (its samples in the
-    filter's tails find it). A neighbour at least half covered by its surface (its colour at
-    least half the largest around it) has that surface at its border with the pixel, inside
-    the footprint: where a pixel's own rays saw a surface (``covered`` (H, W) bool; None: all)
-    but no colour, such neighbours' light over their colour, weighted by the filter's share of
-    each (``neighbour_weights``), is its light. Every other pixel keeps its own ratio."""
-    out = np.divide(light, colour, out=np.zeros_like(light), where=colour > 0.0)
+_LIGHTS = {"Diffuse Direct": "Diffuse Color", "Diffuse Indirect": "Diffuse Color",
+           "Glossy Direct": "Glossy Color", "Glossy Indirect": "Glossy Color"}
+
+
+def filter_passes(passes, filter_width: float):
+    """Cycles' pixel filter over the neighbours (PASS_NAMES images (H, W, 3) → the same): each
+    pixel's own passes are its square's share of the filter (the sub-pixel passes sample the
+    filter inside it, ``camera.filter_offsets``); the filter's tails reach the 8 neighbours'
+    squares, which add their images weighted by the filter's share of each
+    (``neighbour_weights``: 1 : 0.155 : 0.024 at Filter Size 1.5; nothing at ≤ 0.5). Colours,
+    AO and Combined are the weighted means (a background neighbour adds 0, as to Cycles'
+    film); light passes are Σ light × colour over Σ colour, as Cycles' film divides them — a
+    pixel with no colour of its own (a metal beside a diffuse wall, the background beside an
+    object) takes the light of the neighbours at least half covered by a coloured surface
+    (their colour at least half the largest around them: that surface is at their border with
+    the pixel, inside its filter; a sliver may lie beyond its reach)."""
     weights = neighbour_weights(filter_width)
-    empty = (colour <= 0.0) & (True if covered is None else covered[..., None])
-    if weights.sum() <= 1.0 or not empty.any():
-        return out
-    amount = colour.sum(axis=-1)
-    solid = (amount >= 0.5 * _window_max(amount))[..., None]
-    tail_light = _neighbour_sum(np.where(solid, light, 0.0), weights)
-    tail_colour = _neighbour_sum(np.where(solid, colour, 0.0), weights)
-    fill = empty & (tail_colour > 0.0)
-    out[fill] = tail_light[fill] / tail_colour[fill]
-    return out
+    if weights.sum() <= 1.0:
+        return passes
+    height, width = passes["Combined"].shape[:2]
+    norm = weights[1, 1] + _neighbour_sum(np.ones((height, width, 1)), weights)
+    out = {}
+    for name in ("Combined", "Diffuse Color", "Glossy Color", "Ambient Occlusion"):
+        image = np.asarray(passes[name], np.float64)
+        out[name] = (image + _neighbour_sum(image, weights)) / norm
+    for name, colour_name in _LIGHTS.items():
+        colour = np.asarray(passes[colour_name], np.float64)
+        light = np.asarray(passes[name], np.float64) * colour
+        amount = colour.sum(axis=-1)
+        solid = (amount >= 0.5 * _window_max(amount))[..., None]
+        own = colour > 0.0
+        # pixels with colour: every neighbour; without: the solid ones
+        top = light + np.where(own, _neighbour_sum(light, weights),
+                               _neighbour_sum(np.where(solid, light, 0.0), weights))
+        bottom = colour + np.where(own, _neighbour_sum(colour, weights),
+                                   _neighbour_sum(np.where(solid, colour, 0.0), weights))
+        out[name] = np.divide(top, bottom, out=np.zeros_like(top), where=bottom > 0.0)
+    return {name: out[name].astype(np.float32) for name in PASS_NAMES}
 
 
 def finish_passes(sums, count, width: int, height: int,
                   filter_width: float = DEFAULT_FILTER_WIDTH):
     """The PASS_NAMES images (H, W, 3) float32 of ``count`` accumulated passes (an int, or
-    (H·W,) per pixel: 1 off the edges, the pass count on them): colours, AO and Combined are
-    means over the passes (0 where a pass saw the background, as Cycles' film), light passes
-    the light × colour over the colour (``light_ratio``: 0 where no colour is in the filter's
-    footprint; pixels whose passes all saw the background are 0 in every pass)."""
+    (H·W,) per pixel: 1 off the edges, the pass count on them): per pixel, colours, AO and
+    Combined are means over the passes (0 where a pass saw the background, as Cycles' film),
+    light passes the light × colour over the colour (0 where that is 0); then Cycles' pixel
+    filter over the neighbours (``filter_passes``)."""
     count = np.broadcast_to(np.asarray(count, np.float64), (width * height,))
     per_pixel = count[:, None]
 
-    covered = (np.asarray(sums["coverage"]) > 0.0).reshape(height, width)
-
     def ratio(light, colour):
-        return light_ratio((light / per_pixel).reshape(height, width, 3),
-                           (colour / per_pixel).reshape(height, width, 3),
-                           filter_width, covered).reshape(-1, 3)
+        return np.divide(light, colour, out=np.zeros_like(light), where=colour > 0.0)
 
     values = {
         "Combined": (sums["emission"] + sums["diffuse_direct"] + sums["diffuse_indirect"]
@@ -500,8 +510,8 @@ def finish_passes(sums, count, width: int, height: int,
         "Glossy Color": sums["glossy_color"] / per_pixel,
         "Ambient Occlusion": np.repeat((sums["ao"] / count)[:, None], 3, axis=1),
     }
-    return {name: values[name].astype(np.float32).reshape(height, width, 3)
-            for name in PASS_NAMES}
+    return filter_passes({name: values[name].reshape(height, width, 3) for name in PASS_NAMES},
+                         filter_width)
 
 
 def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,

@@ -5,7 +5,8 @@
 * ``camera_ray_lengths`` — distance along each ray from the near plane's origin to the eye.
 * ``view_projection`` — the (4, 4) world → clip matrix that rasterizes the same pixels.
 * ``camera_frame`` — the camera's orthonormal rotation and position.
-* ``filter_offsets`` — sub-pixel offsets drawn by importance from Cycles' pixel filter.
+* ``filter_offsets`` — sub-pixel offsets drawn by importance from Cycles' pixel filter
+  within the pixel's own square.
 
 Every ray function takes a sub-pixel ``offset`` (x right, y down, in pixels) that moves all
 pixels' rays alike: the anti-aliased preview renders one pass per ``filter_offsets`` entry.
@@ -38,14 +39,17 @@ def blackman_harris(offset, width: float):
 def filter_offsets(width: float = DEFAULT_FILTER_WIDTH, side: int = 4) -> np.ndarray:
     """(side², 2) sub-pixel offsets (x right, y down, pixels) of the anti-aliased preview: the
     centres of a side × side stratified square warped through the inverse CDF of Cycles' pixel
-    filter (``blackman_harris``, separable in x and y as Cycles samples it), so that equal
-    weights average the passes as the filter weights them. Offset k is stratum (k // side,
-    k % side) in (x, y). width ≤ 0 gives pixel centres."""
+    filter (``blackman_harris``, separable in x and y as Cycles samples it) over the pixel's
+    own square (|x|, |y| ≤ ½), so that equal weights average the passes as the filter weights
+    the pixel's own area; the filter's tails beyond it are the neighbours' share
+    (``preview.passes.filter_passes``). Offset k is stratum (k // side, k % side) in (x, y).
+    width ≤ 0 gives pixel centres."""
     u = (np.arange(side) + 0.5) / side
     if width <= 0.0:
         along = np.zeros(side)
     else:
-        x = np.linspace(-width, width, _FILTER_TABLE)
+        reach = min(width, 0.5)
+        x = np.linspace(-reach, reach, _FILTER_TABLE)
         cdf = np.concatenate([[0.0], np.cumsum(0.5 * (blackman_harris(x[1:], width)
                                                      + blackman_harris(x[:-1], width)))])
         along = np.interp(u, cdf / cdf[-1], x)

@@ -1,0 +1,104 @@
+"""Cycles' pixel filter over the neighbours (``preview.passes.filter_passes``): each pixel's own
+sub-pixel passes sample the filter inside its square (``camera.filter_offsets``), and the
+filter's tails bring in the neighbours' squares — light passes divided as Cycles' film divides
+them, Σ light × colour over Σ colour, so a pixel with no colour of its own beside a coloured
+surface takes that surface's light (no dark outline where a diffuse wall meets metal)."""
+import numpy as np
+import pytest
+
+from voxgi.voxgi_addon.preview.passes import PASS_NAMES, filter_passes, neighbour_weights
+from voxgi.voxgi_addon.scene.camera import blackman_harris, filter_offsets
+
+
+def passes_of(light, colour, combined=None):
+    """PASS_NAMES images of a diffuse scene: Diffuse Direct = light where colour > 0."""
+    height, width = colour.shape[:2]
+    out = {name: np.zeros((height, width, 3)) for name in PASS_NAMES}
+    out["Diffuse Color"] = colour
+    out["Diffuse Direct"] = np.where(colour > 0.0, light, 0.0)
+    out["Combined"] = colour * light if combined is None else combined
+    return out
+
+
+def wall_beside_metal(wall_columns=4, width=8, height=3, light=2.0, colour=0.7):
+    """A diffuse wall (colour, light) in the left columns, a metal (no diffuse colour) the
+    rest."""
+    c = np.zeros((height, width, 3))
+    c[:, :wall_columns] = colour
+    return np.full((height, width, 3), light), c
+
+
+def test_a_pixel_beside_a_wall_takes_the_walls_light_as_cycles_does():
+    light, colour = wall_beside_metal()
+    out = filter_passes(passes_of(light, colour), 1.5)["Diffuse Direct"]
+    assert np.allclose(out[:, :4], 2.0)          # the wall itself: unchanged
+    assert np.allclose(out[:, 4], 2.0)           # its neighbour: the wall is in its footprint
+    assert np.all(out[:, 5:] == 0.0)             # beyond the filter's reach: no light
+
+
+def test_point_sampling_keeps_pixels_to_themselves():
+    light, colour = wall_beside_metal()
+    for size in (0.0, 0.5):
+        passes = passes_of(light, colour)
+        assert all(np.array_equal(filter_passes(passes, size)[k], passes[k]) for k in passes)
+
+
+def test_a_sliver_in_a_neighbour_does_not_spread():
+    """A neighbour holding only a sliver of the wall (a tenth of the wall's colour) may have it
+    on its far side, outside the pixel's footprint: a pixel with no colour borrows nothing."""
+    light, colour = wall_beside_metal()
+    colour[:, 4] = 0.07
+    out = filter_passes(passes_of(light, colour), 1.5)["Diffuse Direct"]
+    assert np.allclose(out[:, 4], 2.0)
+    assert np.all(out[:, 5] == 0.0)
+
+
+def test_a_light_edge_is_blended_by_the_filters_share_of_each_neighbour():
+    """One surface, light 1 on the left half and 0 on the right: the pixels beside the edge get
+    the neighbours' light by the filter's share of their squares (0.155 : 1 : 0.155 across at
+    Filter Size 1.5) — Cycles' filtered image, not the pixel-centre samples."""
+    width = 8
+    light = np.zeros((5, width, 3))
+    light[:, :4] = 1.0
+    colour = np.full((5, width, 3), 0.5)
+    out = filter_passes(passes_of(light, colour), 1.5)
+    side = neighbour_weights(1.5)[1, 0]
+    expected = side / (1.0 + 2.0 * side)
+    assert out["Diffuse Direct"][2, 4] == pytest.approx(expected, rel=1e-5)
+    assert out["Diffuse Direct"][2, 3] == pytest.approx(1.0 - expected, rel=1e-5)
+    assert out["Combined"][2, 4] == pytest.approx(0.5 * expected, rel=1e-5)
+    assert np.allclose(out["Diffuse Direct"][:, [0, 1, 6, 7], 0], [[1, 1, 0, 0]] * 5, atol=1e-6)
+
+
+def test_a_background_pixel_beside_an_object_is_partly_covered():
+    """As Cycles' film: the background next to an object gets a share of its colour and
+    Combined, and its light (the pass ratio), while pixels two away stay black."""
+    light, colour = wall_beside_metal()
+    out = filter_passes(passes_of(light, colour), 1.5)
+    assert 0.0 < out["Diffuse Color"][1, 4, 0] < 0.2 * 0.7
+    assert out["Diffuse Direct"][1, 4, 0] == pytest.approx(2.0)
+    assert np.all(out["Combined"][:, 5:] == 0.0)
+
+
+@pytest.mark.parametrize("size", [1.0, 1.5, 3.0])
+def test_the_neighbours_share_is_the_filters(size):
+    weights = neighbour_weights(size)
+    assert weights[1, 1] == 1.0
+    assert np.allclose(weights, weights.T) and np.allclose(weights, weights[::-1, ::-1])
+    assert 0.0 < weights[1, 0] < 1.0 and np.isclose(weights[0, 0], weights[1, 0] ** 2)
+    if size == 1.5:  # 11.9% of Cycles' 1.5 px Blackman-Harris beyond half a pixel on each side
+        assert weights[1, 0] == pytest.approx(0.1555, abs=2e-3)
+
+
+@pytest.mark.parametrize("size", [0.3, 1.5, 3.0])
+def test_the_sub_pixel_offsets_sample_the_filter_inside_the_pixel(size):
+    """The 4 × 4 offsets stay in the pixel's square (within the filter's reach), stratified by
+    the filter: their mean weight over the square equals the filter's mean there."""
+    offsets = filter_offsets(size, 4)
+    along = np.unique(offsets[:, 0])
+    assert len(along) == 4 and np.abs(offsets).max() < min(0.5, size)
+    assert np.allclose(along, -along[::-1])
+    x = np.linspace(-min(0.5, size), min(0.5, size), 2001)
+    f = blackman_harris(x, size)
+    cdf = np.cumsum(f) / f.sum()
+    assert np.allclose(np.interp(along, x, cdf), (np.arange(4) + 0.5) / 4, atol=2e-3)
