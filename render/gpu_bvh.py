@@ -29,6 +29,7 @@ from ..voxgi_addon.gi.emitters import emitter_table
 from ..voxgi_addon.gi.exact_glossy import (
     EMITTER_GLOSSY_STREAM,
     GLOSSY_STREAM,
+    HORIZON_LIFT,
     METAL_RAY_FACTOR,
     WORLD_GLOSSY_STREAM,
 )
@@ -38,6 +39,8 @@ from ..voxgi_addon.preview.gather import VIEW_BACKOFF
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
 from ..voxgi_addon.scene.bvh import DET_EPSILON, TEXTURE_WIDTH, build_bvh, pack_bvh
 from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
+from .gpu_ltc import DEFINES as LTC_DEFINES
+from .gpu_ltc import ltc_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_shaders import LOCAL_SIZE, build_compute
 from .gpu_tracer import read_texture
@@ -61,6 +64,12 @@ KERNELS = {
 KERNELS["bvh_glossy"] = (("pixels", "principled", "bvh_lights", "textures", "bvh_shade",
                           "bvh_glossy"),
                          *KERNELS["bvh_gather"][1:])
+# The world-mode glossy gather integrates the lobe over the emitters by LTC (shaders/ltc.glsl).
+KERNELS["bvh_glossy"] = (KERNELS["bvh_glossy"][0][:-1] + ("ltc", "bvh_glossy"),
+                         KERNELS["bvh_glossy"][1] + ("ltc_table",), KERNELS["bvh_glossy"][2])
+# Samplers that hold constants of the code, not of the scene: bound when a dispatch's inputs
+# leave them out.
+CONSTANT_SAMPLERS = {"ltc_table": ltc_texture}
 # Kernels with more than one output image (the others write ``out_image``).
 OUTPUTS = {"bvh_gather": ("out_image", "out_variance"),
            "bvh_glossy": ("out_image", "out_variance")}
@@ -85,6 +94,9 @@ def bvh_shader(kernel: str):
             defines["WORLD_GLOSSY_STREAM"] = f"{WORLD_GLOSSY_STREAM}u"
             defines["EMITTER_GLOSSY_STREAM"] = f"{EMITTER_GLOSSY_STREAM}u"
             defines["METAL_RAY_FACTOR"] = str(METAL_RAY_FACTOR)
+        if "ltc" in files:
+            defines.update(LTC_DEFINES)
+            defines["HORIZON_LIFT"] = repr(float(HORIZON_LIFT))
         _shaders[kernel] = build_compute(("sampling", "bvh_common") + files, samplers, constants,
                                          OUTPUTS.get(kernel, ("out_image",)), defines)
     return _shaders[kernel]
@@ -168,7 +180,7 @@ def dispatch_bvh(kernel: str, inputs: dict[str, object], width: int, height: int
     images = [gpu.types.GPUTexture((width, height), format="RGBA32F") for _ in outputs]
     shader.bind()
     for name in samplers:
-        shader.uniform_sampler(name, inputs[name])
+        shader.uniform_sampler(name, inputs[name] if name in inputs else CONSTANT_SAMPLERS[name]())
     for name in names:
         value = (constants or {}).get(name, (0.0, 0.0, 0.0, 0.0))
         shader.uniform_float(name, tuple(float(v) for v in value))

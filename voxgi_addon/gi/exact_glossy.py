@@ -37,6 +37,9 @@ WORLD_GLOSSY_STREAM = 0x6107  # hash stream of the map-importance rays of glossy
 # A metal's colour is all glossy: its Glossy Indirect carries what a dielectric's Diffuse
 # Indirect does, so the glossy gather gives points of metallic ≥ 0.5 this many times the rays.
 METAL_RAY_FACTOR = 4
+# emitters_glossy: a direction toward a triangle's centre below this cosine over the horizon is
+# lifted to it, so that the Fresnel ratio there stays defined (the LTC integral itself clips).
+HORIZON_LIFT = 0.02
 EMITTER_GLOSSY_STREAM = 0x6109  # hash stream of its rays drawn on the emitters
 
 
@@ -196,11 +199,9 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
     unoccluded; a mirror takes its one reflected ray. With ``emission`` (M + 1, 3) per
     material, a lobe ray landing on an emissive triangle adds its emission × the ray's weight
     (``glossy_indirect`` then leaves it out); with ``emitters`` (``emitters.EmitterLight``, the
-    same triangles) that is weighted by the balance heuristic against ray j drawn on the
-    emitters by power (stream ``EMITTER_GLOSSY_STREAM``), which adds L f / (p_lobe + p_emit)
-    where it reaches its point unoccluded — p_emit = p_area r² / |cos_l| in solid angle (a ray
-    from outside lands on an emitting side: a closed emitter's outside). world :
-    ``world_light.WorldLight`` or None."""
+    same triangles) only a mirror's ray does, and a glossy lobe gets them from
+    ``emitters_glossy``: the LTC integral of the lobe over each triangle (noise-free) times
+    the visible share of rays drawn on them. world : ``world_light.WorldLight`` or None."""
     from ..scene.raycast import closest_hits
     from .world_light import sample_world, world_pdf, world_radiance
 
@@ -230,12 +231,12 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
         last = len(table) - 1
         material = np.asarray(tris.materials)[np.maximum(hit, 0)]
         material = np.where((material >= 0) & (material < last), material, last)
-        share = 1.0
-        if emitters is not None:
-            share = _emitter_share(lobe, emitters, tris, table[material], hit, origins, dirs)
+        # with the emitters as lights a glossy lobe gets them from emitters_glossy (noise-free);
+        # a mirror's one reflected ray still sees them
+        share = 1.0 if emitters is None else lobe.mirror[:, None, None].astype(np.float64)
         value += np.where((useful & (hit >= 0))[..., None], table[material] * weight * share, 0.0)
         if emitters is not None:
-            value += _emitter_samples(lobe, emitters, tris, origins, ids, rays, seed)
+            value += emitters_glossy(lobe, emitters, tris, p, origins, ids, rays, seed)[:, None]
     if world is None:
         return _glossy_mean(lobe, value)
     lobe_pdf, map_pdf = lobe.pdf(dirs), world_pdf(world, dirs)
@@ -264,23 +265,52 @@ def _emitter_pdf(emitters, radiance, distance2, cos_l):
     return p_area * distance2 / np.maximum(np.abs(cos_l), 1e-30)
 
 
-def _emitter_share(lobe: _Lobe, emitters, tris, radiance, hit, origins, dirs):
-    """(N, K, 1) the balance-heuristic weight of the lobe's rays that land on an emitter."""
-    corners = np.asarray(tris.positions, np.float64)[np.maximum(hit, 0)]
-    normal = np.asarray(tris.normals, np.float64)[np.maximum(hit, 0)]
-    cos_l = np.einsum("nkc,nkc->nk", normal, dirs)
-    # the hit distance from the ray's plane crossing (the triangle's plane through corner 0)
-    start = origins.reshape(dirs.shape)
-    t = np.einsum("nkc,nkc->nk", corners[..., 0, :] - start, normal) / np.where(
-        np.abs(cos_l) > 1e-30, cos_l, 1e-30)
-    emit_pdf = _emitter_pdf(emitters, radiance, t * t, cos_l)
-    lobe_pdf = lobe.pdf(dirs)
-    share = np.where(lobe.mirror[:, None], 1.0, lobe_pdf / np.maximum(lobe_pdf + emit_pdf, 1e-30))
-    return share[..., None]
+def emitters_glossy(lobe: _Lobe, emitters, tris, points, origins, ids, rays: int, seed: int):
+    """(N, 3) the glossy radiance the lobes reflect of the emissive triangles: the unshadowed
+    integral, noise-free, times the visible share of ``rays`` points drawn on the emitters by
+    power (stream ``EMITTER_GLOSSY_STREAM``), each weighted by its luminance L f |cos_l| /
+    (r² p_area) — a ratio estimator, as the diffuse light's; 1 where no drawn point reaches
+    the lobe. 0 for a mirror (its reflected ray sees the emitters).
+
+    The unshadowed integral of triangle t (facing the point) is L_t × the LTC integral of the
+    GGX lobe over it (``ltc.ltc_polygon_integral``, fitted with F = 1) × the Fresnel the
+    Principled lobe has toward the triangle's centre relative to F = 1 (the lobe's
+    reflectance there over a white metal's) × a white metal's glossy colour: the LTC shape
+    holds no Fresnel, which a dielectric's lobe at a grazing view is mostly made of (without
+    it: up to 5× off at 75°; with it 2.5% median error against brute force)."""
+    from .emitters import _facing
+    from .ltc import ltc_polygon_integral
+
+    out = np.zeros((len(points), 3))
+    glossy = np.flatnonzero(~lobe.mirror & (lobe.cos_ni > 0.0))
+    if len(glossy) == 0:
+        return out
+    p, n, v = points[glossy], lobe.n[glossy], lobe.v[glossy]
+    base, metallic, level, rough = (a[glossy] for a in lobe.shading)  # (G, 1, 3), (G, 1) …
+    shape = ltc_polygon_integral(p, n, v, rough[:, 0], emitters.corners)   # (G, T)
+    shape = np.where(_facing(emitters, p), shape, 0.0)
+    towards = emitters.corners.mean(axis=1)[None] - p[:, None]             # (G, T, 3)
+    towards /= np.maximum(np.linalg.norm(towards, axis=-1, keepdims=True), 1e-30)
+    lift = np.maximum(HORIZON_LIFT - np.einsum("gtc,gc->gt", towards, n), 0.0)
+    towards = towards + lift[..., None] * n[:, None]
+    towards /= np.linalg.norm(towards, axis=-1, keepdims=True)
+    white = np.ones((len(glossy), 1, 3))
+    actual = glossy_reflectance(base, metallic, level, rough, n[:, None], v[:, None], towards)
+    plain = glossy_reflectance(white, 1.0, level, rough, n[:, None], v[:, None], towards)
+    fresnel = np.divide(actual, plain, out=np.zeros_like(actual), where=plain > 0.0)
+    white_colour = glossy_color(white[:, 0], 1.0, level[:, 0], rough[:, 0],
+                                np.clip(lobe.cos_ni[glossy], 0.0, 1.0))
+    unshadowed = np.einsum("gt,gtc->gc", shape, fresnel * emitters.radiance[None]) * white_colour
+    seen, drawn = _emitter_weights(lobe, emitters, tris, origins, ids, rays, seed)
+    total, lit = drawn[glossy].sum(axis=1), seen[glossy].sum(axis=1)
+    visible = np.divide(lit, total, out=np.ones_like(lit), where=total > 0.0)
+    out[glossy] = unshadowed * visible[:, None]
+    return out
 
 
-def _emitter_samples(lobe: _Lobe, emitters, tris, origins, ids, rays: int, seed: int):
-    """(N, K, 3) L f / (p_lobe + p_emit) of ray j drawn on the emitters (0 for a mirror)."""
+def _emitter_weights(lobe: _Lobe, emitters, tris, origins, ids, rays: int, seed: int):
+    """((N, K) luminance weight L f |cos_l| / (r² p_area) of ray j drawn on the emitters where
+    it reaches its point unoccluded, the same weights drawn) — 0 for a mirror."""
     from ..scene.raycast import occluded
     from .emitters import _facing, sample_points
 
@@ -301,8 +331,9 @@ def _emitter_samples(lobe: _Lobe, emitters, tris, origins, ids, rays: int, seed:
     seen = np.zeros(useful.shape, bool)
     if useful.any():
         seen[useful] = ~occluded(tris, start[useful], d[useful], r[useful])
-    f = lobe.reflectance(d) / np.maximum(lobe.pdf(d) + emit_pdf, 1e-30)[..., None]
-    return np.where(seen[..., None], radiance * f, 0.0)
+    drawn = np.where(useful, (radiance * lobe.reflectance(d)) @ LUMINANCE
+                     / np.maximum(emit_pdf, 1e-30), 0.0)
+    return np.where(seen, drawn, 0.0), drawn
 
 
 def _glossy_mean(lobe: _Lobe, value):
