@@ -334,39 +334,55 @@ def random_triangles(rng, lobe_dir: np.ndarray, count: int, spread: float) -> np
     return np.array(out)
 
 
-def accuracy(roughs=(0.1, 0.2, 0.3, 0.5, 0.7, 1.0), views=8, tris=24, n=1024, seed=5,
-             full=None):
-    """Per roughness: (mean, 95th percentile) of |LTC − reference| / reference (triangles
-    holding ≥ 1% of the lobe) and of |LTC − reference| (relative to 1)."""
+MATERIALS = (("white metal", ((1.0, 1.0, 1.0), 1.0, 0.5)),
+             ("gold metal", ((1.0, 0.766, 0.336), 1.0, 0.5)),
+             ("dielectric (level 0.5, F0 0.04)", ((0.8, 0.8, 0.8), 0.0, 0.5)))
+
+
+def accuracy(roughs=(0.1, 0.2, 0.3, 0.5, 0.7, 1.0), views=8, tris=24, n=512, seed=5):
+    """Per roughness: dicts of arrays over random (view, triangle): ``mu``, ``ltc``, ``ref``
+    (∫ρ by quadrature) and, per ``MATERIALS`` name, the full Principled lobe's
+    ∫ glossy_reflectance / glossy_color (green channel)."""
     rng = np.random.default_rng(seed)
-    rows = []
+    out = []
     for r in roughs:
-        rel, absolute = [], []
+        rows = {"mu": [], "ltc": [], "ref": [], **{name: [] for name, _ in MATERIALS}}
         for mu in np.linspace(0.05, 1.0, views):
             lobe = Lobe(r * r, mu)
             mirror = np.array([-lobe.v[0], 0, mu])
             corners = random_triangles(rng, mirror, tris, spread=max(2 * r * r, 0.02))
-            ref = reference_integrals(r, mu, corners, n, full)
-            got = ltc.ltc_polygon_integral(np.zeros(3), [0, 0, 1.0], lobe.v, r, corners)[0]
-            absolute.extend(np.abs(got - ref))
-            big = ref >= 0.01
-            rel.extend(np.abs(got - ref)[big] / ref[big])
-        rows.append((r, np.mean(rel), np.percentile(rel, 95), np.mean(absolute),
-                     np.percentile(absolute, 95), np.max(absolute)))
-    return rows
+            rows["mu"].extend([mu] * tris)
+            rows["ref"].extend(reference_integrals(r, mu, corners, n))
+            rows["ltc"].extend(ltc.ltc_polygon_integral(np.zeros(3), [0, 0, 1.0], lobe.v, r, corners)[0])
+            for name, full in MATERIALS:
+                rows[name].extend(reference_integrals(r, mu, corners, n, full))
+        out.append((r, {k: np.array(v) for k, v in rows.items()}))
+    return out
+
+
+def _stats(got, ref):
+    err = np.abs(got - ref)
+    big = ref >= 0.05
+    rel = err[big] / ref[big]
+    return (f"{err.mean():.4f} | {np.percentile(err, 95):.4f} | {err.max():.4f} | "
+            f"{rel.mean():.3f} | {np.percentile(rel, 95):.3f}")
 
 
 def report():
-    print("| roughness | rel. mean | rel. p95 | abs. mean | abs. p95 | abs. max |")
-    print("|---|---|---|---|---|---|")
-    for row in accuracy():
-        print("| {:.1f} | {:.3f} | {:.3f} | {:.4f} | {:.4f} | {:.4f} |".format(*row))
-    for name, full in (("white metal", ((1, 1, 1.0), 1.0, 0.5)),
-                       ("dielectric F0 0.04", ((0.8, 0.8, 0.8), 0.0, 0.5)),
-                       ("gold", ((1.0, 0.77, 0.34), 1.0, 0.5))):
-        print(f"\nfull Principled lobe (Fresnel), {name}: LTC against ∫ glossy_reflectance / glossy_color")
-        for row in accuracy(full=full):
-            print("| {:.1f} | {:.3f} | {:.3f} | {:.4f} | {:.4f} | {:.4f} |".format(*row))
+    results = accuracy()
+    header = ("| roughness | views | \\|err\\| mean | p95 | max | rel. mean | rel. p95 |\n"
+              "|---|---|---|---|---|---|---|")
+    print("LTC against ∫ρ (quadrature), errors relative to 1 and (triangles ≥ 5% of the lobe) to "
+          "the triangle's integral\n" + header)
+    for r, rows in results:
+        for label, keep in (("cos θ_v ≥ 0.3", rows["mu"] >= 0.3), ("cos θ_v < 0.3", rows["mu"] < 0.3)):
+            print(f"| {r:.1f} | {label} | {_stats(rows['ltc'][keep], rows['ref'][keep])} |")
+    for name, _ in MATERIALS:
+        print(f"\nFresnel neglected, {name}: ∫ρ against ∫ glossy_reflectance / glossy_color (same "
+              "columns), then the LTC against the latter\n" + header)
+        for r, rows in results:
+            print(f"| {r:.1f} | ρ | {_stats(rows['ref'], rows[name])} |")
+            print(f"| {r:.1f} | LTC | {_stats(rows['ltc'], rows[name])} |")
 
 
 def main() -> None:

@@ -107,9 +107,8 @@ int ltc_clip(inout vec3 poly[5], int count, vec3 plane)
 /* |sum over edges theta_k gamma_k.z| / 2 pi of the transformed polygon M^-1 poly (poly in the
  * local frame, already clipped to both horizons). The edges' normals are taken as
  * M^-1 x cross M^-1 y = cof(M^-1) (x cross y), cof = [[c, 0, -c d], [0, a - b d, 0],
- * [-b c, 0, a c]]: a narrow lobe's M^-1 stretches the polygon until its corners are nearly
- * opposite, where the cross of the stretched corners loses float precision (10^-3 of the
- * lobe at roughness 0.05) but this product does not. */
+ * [-b c, 0, a c]], from the unstretched corners (a narrow lobe's M^-1 stretches the polygon
+ * until its corners are nearly opposite, where a cross of the stretched corners would cancel). */
 float ltc_edge_integral(vec3 poly[5], int count, vec4 m)
 {
   float total = 0.0;
