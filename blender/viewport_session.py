@@ -109,6 +109,8 @@ class LiveGI:
         self.plans: list[UpdatePlan] = []  # the same, in order (tests, panel)
         self.pending: UpdatePlan | None = None  # the plan of the running job
         self.view_camera = None    # CameraData of the last drawn view (anchors the cascades)
+        self.view_status = ""      # the 3D view's status line (render/viewport.py status_line)
+        self.view_shown = ""       # what it drew last: "Coarse", "Traced", "Cached", "Previous"
         self.error = ""
         self.stats = LiveStats()
         self.progress = jobs.Progress()

@@ -30,6 +30,13 @@ class VoxGIViewportSettings(bpy.types.PropertyGroup):
                     "(scaled up to fill it); lower is faster",
         subtype="FACTOR", default=0.25, min=0.05, max=1.0, update=tag_3d_views,
     )
+    coarse_first: bpy.props.BoolProperty(
+        name="Coarse First Image",
+        description="After a change of the view, the scene or a setting, first trace a quarter "
+                    "of the pixels (half the width and height) and the full image on the next "
+                    "redraw; while orbiting every redraw costs about a quarter",
+        default=True, update=tag_3d_views,
+    )
     viewport_pass: bpy.props.EnumProperty(
         name="Pass",
         description="Which pass the Rendered viewport shows",

@@ -9,12 +9,21 @@
    (``voxgi_addon/scene/view_camera.py``: perspective or orthographic, camera or free view);
    a new view is reported to ``LiveGI.view_changed`` (trace again; the cascades move when the
    view leaves their anchor cell);
-2. when the applied results, the view, the pass or the trace settings changed since the last
-   trace: in Fast quality upload the octree atlas the worker laid out
-   (``GPUVolume.update(…, atlas=…)``); trace with the GPU tracer
-   (``gpu_preview.render_passes_gpu``, as F12), keeping the chosen pass as a texture;
+2. the image is keyed by everything it depends on (``trace_key``): the applied results'
+   generation (bumped by every depsgraph change the session acted on), the view and
+   projection matrices, the traced size (region size × fraction), the pass, the cone
+   settings and every tracer option (``trace_options``). When the shown texture has that key,
+   nothing is traced: the redraw is one textured quad ("Cached"). Otherwise, in Fast quality
+   upload the octree atlas the worker laid out (``GPUVolume.update(…, atlas=…)``) and trace
+   with the GPU tracer (``gpu_preview.render_passes_gpu``, as F12), keeping the chosen pass
+   as a texture. With *Coarse First Image* (default on) a new key is first traced at half
+   the width and height (a quarter of the pixels, "Coarse") and a redraw is requested, so
+   the next ``view_draw`` traces the full image — while orbiting every draw is coarse, and
+   the full image follows when the view stops;
 3. draw that texture over the region. While newer work runs, the last texture is drawn again:
    the view never goes blank.
+4. the status line (``ViewportRenderer.status``: stage, time, quality) goes to the view's
+   header through ``RenderEngine.update_stats`` and to the sidebar (``LiveGI.view_status``).
 
 GPU objects (textures, the atlas) belong to one ``ViewportRenderer`` per engine instance and
 are freed with it, on unregister and at exit (``release``; docs/gi_pipeline.md "GPU resources
@@ -48,52 +57,77 @@ def _matrix(m) -> np.ndarray:
     return np.array(m, dtype=np.float64).reshape(4, 4)
 
 
+def _options(settings, width: int, height: int) -> dict:
+    """The tracer's options for a ``width`` × ``height`` viewport image: F12's, but
+    point-sampled (one camera pass, not F12's anti-aliased sub-pixel passes, which cost 2.3x;
+    progressive viewport accumulation, issue 19, is where they belong)."""
+    return {**trace_options(settings, width, height), "filter_width": 0.0}
+
+
+def coarse_size(width: int, height: int) -> tuple[int, int]:
+    """The coarse first image's size: half the width and height, a quarter of the pixels."""
+    return max(1, (width + 1) // 2), max(1, (height + 1) // 2)
+
+
 class ViewportRenderer:
     """The traced image of one 3D view and the GPU objects behind it."""
 
     def __init__(self):
         self.volume = GPUVolume()
         self.texture = None        # RGBA32F, the shown pass; kept until a newer trace replaces it
-        self.trace_key = None      # what ``texture`` shows (see ``_trace_key``)
+        self.trace_key_shown = None  # what ``texture`` shows (``trace_key``)
         self.view_key = None       # the last view seen
         self.timings: dict[str, float] = {}
         self.traces = 0            # how many times this view traced (tests, panel)
+        self.shown = ""            # what the last draw showed: "Coarse", "Traced", "Cached", ""
+        self.coarse = False        # the texture is a coarse (quarter-pixel) image
+        self.trace_seconds = 0.0   # how long the shown texture took to trace
+        self.status = ""           # the status line (header, sidebar)
         self.error = ""
         _renderers.add(self)
 
     def free(self) -> None:
-        self.texture = self.trace_key = None
+        self.texture = self.trace_key_shown = None
         self.volume = GPUVolume()
 
     # ------------------------------------------------------------------ tracing
 
-    def _trace_key(self, live, camera_key, scene, pass_name):
+    @staticmethod
+    def trace_key(live, camera_key, scene, pass_name, options) -> tuple:
+        """Everything the traced image depends on: the applied results, the view (view and
+        projection matrices, traced size), the pass, the cones and every tracer option."""
         s = scene.voxgi
-        return (live.generation, camera_key, pass_name, cone_settings(s), s.light_samples,
-                s.shadows, s.gi_resolution, s.tracer, s.quality, s.gi_rays, s.glossy_indirect,
-                s.seed)
+        return (live.generation, camera_key, pass_name, cone_settings(s), s.tracer, s.quality,
+                tuple(sorted(options.items())))
 
-    def trace(self, live, scene, camera, camera_key, pass_name: str) -> bool:
+    def shows(self, live, scene, camera_key, pass_name: str) -> bool:
+        """Whether the texture is the image of ``camera_key`` (matrices, width, height) for
+        the current results and settings: a redraw then only draws it."""
+        if self.texture is None or live.staged is None:
+            return False
+        width, height = camera_key[2], camera_key[3]
+        options = _options(scene.voxgi, width, height)
+        return self.trace_key(live, camera_key, scene, pass_name, options) == self.trace_key_shown
+
+    def trace(self, live, scene, camera, camera_key, pass_name: str, coarse: bool = False) -> bool:
         """Trace ``live``'s applied results seen by ``camera`` unless the texture already
-        shows them; True when it traced."""
+        shows them; True when it traced. coarse : the trace is a coarse first image."""
         if live.staged is None or live.snapshot is None:
             return False
-        key = self._trace_key(live, camera_key, scene, pass_name)
-        if key == self.trace_key and self.texture is not None:
+        settings = scene.voxgi
+        width, height = camera.resolution
+        options = _options(settings, width, height)
+        key = self.trace_key(live, camera_key, scene, pass_name, options)
+        if key == self.trace_key_shown and self.texture is not None:
             return False
         from .gpu_preview import render_passes_gpu
 
-        settings = scene.voxgi
         cones = cone_settings(settings)
-        width, height = camera.resolution
         t0 = time.perf_counter()
         if settings.quality != "ACCURATE":  # Accurate traces the triangles, not the octree
             self.volume.update(live.staged.state.octree, cones, atlas=live.atlas)
         upload = time.perf_counter() - t0
         snapshot = dataclasses.replace(live.snapshot, camera=camera)
-        # point-sampled: one camera pass, not F12's anti-aliased sub-pixel passes (which cost
-        # 2.3x; progressive viewport accumulation, issue 19, is where they belong)
-        options = {**trace_options(settings, width, height), "filter_width": 0.0}
         passes, timings = render_passes_gpu(snapshot, live.staged.state, width, height, cones,
                                             volume=self.volume, **options)
         image = np.asarray(passes[pass_name], np.float32)
@@ -101,9 +135,11 @@ class ViewportRenderer:
         flat = np.ascontiguousarray(np.flipud(rgba)).ravel()  # GPU rows go bottom to top
         self.texture = gpu.types.GPUTexture((width, height), format="RGBA32F",
                                             data=gpu.types.Buffer("FLOAT", flat.size, flat))
-        self.trace_key = key
+        self.trace_key_shown = key
         self.traces += 1
-        self.timings = {"atlas upload": upload, **timings, "trace": time.perf_counter() - t0}
+        self.coarse = coarse
+        self.trace_seconds = time.perf_counter() - t0
+        self.timings = {"atlas upload": upload, **timings, "trace": self.trace_seconds}
         return True
 
     # ------------------------------------------------------------------ drawing
@@ -128,25 +164,48 @@ class ViewportRenderer:
 
 
 def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_matrix,
-              region_width: int, region_height: int, bind=None, unbind=None) -> bool:
-    """What ``view_draw`` does (module doc, steps 1–3) for a region of that size; tests call
+              region_width: int, region_height: int, bind=None, unbind=None,
+              redraw=None) -> bool:
+    """What ``view_draw`` does (module doc, steps 1–4) for a region of that size; tests call
     it with a camera's matrices into a ``GPUOffScreen``. bind / unbind : called around the
-    texture draw (the engine's display-space shader). Returns whether anything was drawn."""
+    texture draw (the engine's display-space shader); redraw : asks for another draw (the
+    engine's ``tag_redraw``) after a coarse first image. Returns whether anything was drawn."""
     view_settings = scene.voxgi_viewport
     width, height = viewport_size(region_width, region_height, view_settings.resolution_fraction)
     view, window = _matrix(view_matrix), _matrix(window_matrix)
-    camera = camera_from_view(view, window, width, height)
     camera_key = (view.tobytes(), window.tobytes(), width, height)
+    pass_name = VIEWPORT_PASSES[view_settings.viewport_pass]
     live = live_gi(scene.name_full)
     if camera_key != renderer.view_key:
         renderer.view_key = camera_key
-        live.view_changed(camera, scene, depsgraph)
-    try:
-        renderer.trace(live, scene, camera, camera_key, VIEWPORT_PASSES[view_settings.viewport_pass])
-        renderer.error = ""
-    except Exception as error:  # noqa: BLE001 - keep drawing the last image, say why
-        renderer.error = f"viewport trace failed: {type(error).__name__}: {error}"
-        live.error = renderer.error
+        live.view_changed(camera_from_view(view, window, width, height), scene, depsgraph)
+    traced = ""
+    if not renderer.shows(live, scene, camera_key, pass_name):
+        small = coarse_size(width, height)
+        small_key = (camera_key[0], camera_key[1], *small)
+        coarse = (view_settings.coarse_first and small != (width, height)
+                  and not (renderer.coarse and renderer.shows(live, scene, small_key, pass_name)))
+        size, key = (small, small_key) if coarse else ((width, height), camera_key)
+        try:
+            if renderer.trace(live, scene, camera_from_view(view, window, *size), key, pass_name,
+                              coarse=coarse):
+                traced = "Coarse" if coarse else "Traced"
+                if coarse and redraw is not None:
+                    redraw()  # the full image on the next draw
+            renderer.error = ""
+        except Exception as error:  # noqa: BLE001 - keep drawing the last image, say why
+            renderer.error = f"viewport trace failed: {type(error).__name__}: {error}"
+            live.error = renderer.error
+    if traced:
+        renderer.shown = traced
+    elif renderer.texture is None:
+        renderer.shown = ""
+    elif renderer.shows(live, scene, camera_key, pass_name):
+        renderer.shown = "Cached"
+    else:  # a failed trace, or a coarse image of this view kept: the last image stays
+        renderer.shown = "Coarse" if renderer.coarse else "Previous"
+    renderer.status = status_line(renderer, scene, live)
+    live.view_status, live.view_shown = renderer.status, renderer.shown
     if bind is not None:
         bind()
     try:
@@ -154,6 +213,35 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
     finally:
         if unbind is not None:
             unbind()
+
+
+QUALITY_NAMES = {"ACCURATE": "Accurate", "FAST": "Fast"}
+
+
+def status_line(renderer: ViewportRenderer, scene, live) -> str:
+    """The view's status: 'VoxGI | Sample 1/1 | Traced in 0.74 s | Accurate', '… | Cached
+    (converged) …', 'VoxGI | Coarse (¼ of the pixels) in 0.20 s | … | refining'; a running
+    job or an error is added."""
+    quality = QUALITY_NAMES.get(scene.voxgi.quality, scene.voxgi.quality.title())
+    if renderer.error:
+        return f"VoxGI | {renderer.error}"
+    seconds = f"{renderer.trace_seconds:.2f} s"
+    shown = renderer.shown
+    if shown == "":
+        line = "VoxGI | Waiting for the first GI update"
+    elif shown == "Coarse":
+        line = f"VoxGI | Sample 0/1 | Coarse (¼ of the pixels) in {seconds} | {quality} | refining"
+    elif shown == "Traced":
+        line = f"VoxGI | Sample 1/1 | Traced in {seconds} | {quality}"
+    elif shown == "Cached":
+        line = f"VoxGI | Sample 1/1 | Cached, traced in {seconds} | {quality}"
+    else:
+        line = f"VoxGI | Previous image | {quality}"
+    if live.running is not None:
+        line += " | Updating GI…"
+    elif shown == "Cached":
+        line = line.replace("Cached,", "Cached (converged),")
+    return line
 
 
 def view_update(engine, context, depsgraph) -> None:
@@ -181,9 +269,10 @@ def view_draw(engine, context, depsgraph) -> None:
     try:
         draw_view(renderer, scene, depsgraph, region_data.view_matrix, region_data.window_matrix,
                   region.width, region.height, bind=lambda: engine.bind_display_space_shader(scene),
-                  unbind=engine.unbind_display_space_shader)
+                  unbind=engine.unbind_display_space_shader, redraw=engine.tag_redraw)
     finally:
         gpu.state.blend_set("NONE")
+    engine.update_stats("", renderer.status)  # the view's header shows it
 
 
 def release() -> None:

@@ -12,7 +12,7 @@ from ..blender import jobs
 from ..blender.viewport_session import peek_live_gi
 
 LEVEL_ICONS = {"ERROR": "CANCEL", "WARNING": "ERROR", "INFO": "INFO"}
-VIEWPORT_SETTINGS = ("resolution_fraction", "viewport_pass")
+VIEWPORT_SETTINGS = ("resolution_fraction", "coarse_first", "viewport_pass")
 
 
 def split_column(layout):
@@ -61,6 +61,20 @@ def draw_job(layout, scene) -> None:
     row.operator("voxgi.cancel_job", text="Cancel", icon="CANCEL")
 
 
+def view_state_line(live) -> str:
+    """What the Rendered view shows, for the sidebar: converged (cached), refining (a coarse
+    first image) or updating; "" before the first draw."""
+    shown = live.view_shown
+    if not shown:
+        return ""
+    if live.running is not None:
+        return "Updating: the view shows the previous image"
+    return {"Cached": "Converged: the view shows the cached image",
+            "Traced": "Converged: the view shows a new image",
+            "Coarse": "Refining: the view shows a coarse first image",
+            }.get(shown, "The view shows the previous image")
+
+
 def draw_live_stats(layout, scene) -> None:
     """The last viewport update: trigger, stages run, meshes voxelized, voxels and MB per
     cascade, octree nodes and MB, seconds per stage; the last error if one happened."""
@@ -70,6 +84,9 @@ def draw_live_stats(layout, scene) -> None:
         return
     if live.error:
         layout.label(text=live.error, icon=LEVEL_ICONS["ERROR"])
+    view = view_state_line(live)
+    if view:
+        layout.label(text=view, icon="CHECKMARK" if view.startswith("Converged") else "SORTTIME")
     stats = live.stats
     if not stats.stages and not stats.triggers:
         return

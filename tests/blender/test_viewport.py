@@ -42,6 +42,8 @@ def cornell(camera_type="PERSP"):
     # the viewport is point-sampled; a 0.01 px pixel filter makes F12's sub-pixel passes
     # point-sampled too, so the two paths can be compared pixel by pixel
     scene.cycles.filter_width = 0.01
+    # one full trace per new view: the coarse first image has its own tests
+    scene.voxgi_viewport.coarse_first = False
     if camera_type == "ORTHO":
         scene.camera.data.type = "ORTHO"
         scene.camera.data.ortho_scale = 2.6
@@ -261,3 +263,180 @@ def test_depsgraph_updates_trigger_exactly_the_expected_stages(voxgi):
     counts = live.planned.snapshot()
     assert counts["voxelize"] == 2 and counts["albedo"] == 1  # first update + the vertex edit
     assert live.planned.voxelized == [key] and live.planned.recoloured == [key]
+
+
+class Dispatches:
+    """Counts ``gpu.compute.dispatch`` calls: every kernel of a trace goes through it."""
+
+    def __init__(self, monkeypatch):
+        self.count = 0
+        original = gpu.compute.dispatch
+
+        def counted(*args, **kwargs):
+            self.count += 1
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(gpu.compute, "dispatch", counted)
+
+    def take(self) -> int:
+        count, self.count = self.count, 0
+        return count
+
+
+def turned(view, degrees):
+    """The view matrix orbited by ``degrees`` about the world's z axis."""
+    from mathutils import Matrix
+
+    return view @ Matrix.Rotation(np.radians(degrees), 4, "Z")
+
+
+def test_an_unchanged_redraw_traces_nothing_and_any_change_traces_again(voxgi, monkeypatch):
+    """The last image is keyed by what it depends on: a redraw with nothing changed
+    dispatches no compute work and draws the same pixels; a view, projection, region size,
+    scene or tracer setting change traces again."""
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render.viewport import ViewportRenderer
+    from voxgi.voxgi_addon.scene.changes import UpdateRecord
+
+    scene = cornell()
+    scene.voxgi_viewport.resolution_fraction = 0.5
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    live.update(scene, depsgraph)
+    renderer = ViewportRenderer()
+    view, window = camera_matrices(scene, depsgraph)
+    dispatches = Dispatches(monkeypatch)
+
+    drawn, first = offscreen_view(renderer, scene, depsgraph, view, window)
+    assert drawn and renderer.traces == 1 and dispatches.take() > 0
+    assert renderer.shown == "Traced"
+    for _ in range(2):
+        drawn, again = offscreen_view(renderer, scene, depsgraph, view, window)
+        assert drawn and dispatches.take() == 0 and renderer.traces == 1
+        assert np.array_equal(again, first) and renderer.shown == "Cached"
+    assert "Cached (converged)" in renderer.status and live.view_shown == "Cached"
+
+    # the view orbits by 2°: traced again, a different image
+    view2 = turned(view, 2.0)
+    drawn, orbit = offscreen_view(renderer, scene, depsgraph, view2, window)
+    assert drawn and dispatches.take() > 0 and renderer.traces == 2
+    assert not np.array_equal(orbit, first)
+    # another projection (zoom) and another region size trace too
+    zoom = window.copy()
+    zoom[0][0] *= 1.1
+    offscreen_view(renderer, scene, depsgraph, view2, zoom)
+    assert dispatches.take() > 0 and renderer.traces == 3
+    offscreen_view(renderer, scene, depsgraph, view2, zoom, WIDTH - 8, HEIGHT)
+    assert dispatches.take() > 0 and renderer.traces == 4
+    offscreen_view(renderer, scene, depsgraph, view2, zoom, WIDTH - 8, HEIGHT)
+    assert dispatches.take() == 0 and renderer.traces == 4
+
+    # a tracer setting that used to be missing from the key (AO distance) traces again
+    scene.voxgi.ao_distance *= 0.5
+    offscreen_view(renderer, scene, depsgraph, view2, zoom, WIDTH - 8, HEIGHT)
+    assert dispatches.take() > 0 and renderer.traces == 5
+
+    # an object moves: the session applies new results, the next draw traces them
+    box = bpy.data.objects["Test Box"]
+    box.location.x += 0.2
+    depsgraph.update()
+    generation = live.generation
+    plan = live.update(scene, depsgraph, [UpdateRecord("OBJECT", box.name, transform=True,
+                                                       object_type="MESH")])
+    assert "transform" in plan.stages and live.generation == generation + 1, live.error
+    _, moved = offscreen_view(renderer, scene, depsgraph, view, window)
+    assert dispatches.take() > 0 and renderer.traces == 6
+    assert not np.array_equal(moved, first)
+    _, still = offscreen_view(renderer, scene, depsgraph, view, window)
+    assert dispatches.take() == 0 and np.array_equal(still, moved)
+
+
+class FakeEngine:
+    """What ``view_draw`` uses of a ``RenderEngine`` (bpy cannot make a viewport engine in
+    background mode): the display-space shader, ``tag_redraw`` and ``update_stats``."""
+
+    def __init__(self):
+        self.redraws, self.stats = 0, []
+
+    def bind_display_space_shader(self, scene):
+        pass
+
+    def unbind_display_space_shader(self):
+        pass
+
+    def tag_redraw(self):
+        self.redraws += 1
+
+    def update_stats(self, stats, info):
+        self.stats.append(info)
+
+
+def engine_view(engine, scene, depsgraph, view, window, width=WIDTH, height=HEIGHT):
+    """``view_draw`` itself into a float offscreen; (H, W, 4) top row first."""
+    import types
+
+    from voxgi.render.gpu_tracer import read_texture
+    from voxgi.render.viewport import view_draw
+
+    context = types.SimpleNamespace(
+        region=types.SimpleNamespace(width=width, height=height),
+        region_data=types.SimpleNamespace(view_matrix=view, window_matrix=window))
+    offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            gpu.state.active_framebuffer_get().clear(color=(0.5, 0.5, 0.5, 1.0))
+            view_draw(engine, context, depsgraph)
+        return np.flipud(read_texture(offscreen.texture_color))
+    finally:
+        offscreen.free()
+
+
+def test_a_changed_view_shows_a_coarse_image_first_then_the_full_one(voxgi, monkeypatch):
+    """With Coarse First Image (the default) the first ``view_draw`` after a change traces a
+    quarter of the pixels, draws them (never a blank view) and asks for a redraw; the next
+    traces the full image; the one after only draws it. The header's status line
+    (``update_stats``) and the sidebar say which."""
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.ui.viewport_panel import view_state_line
+
+    scene = cornell()
+    scene.voxgi_viewport.coarse_first = True
+    scene.voxgi_viewport.resolution_fraction = 1.0
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    live.update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    engine = FakeEngine()
+    dispatches = Dispatches(monkeypatch)
+
+    def filled(image):  # the share of pixels that are not the grey clear colour
+        return float((np.abs(image[..., :3] - 0.5).sum(-1) > 1e-6).mean())
+
+    coarse = engine_view(engine, scene, depsgraph, view, window)
+    renderer = engine.voxgi_viewport
+    assert (renderer.texture.width, renderer.texture.height) == (WIDTH // 2, HEIGHT // 2)
+    assert dispatches.take() > 0 and engine.redraws == 1 and filled(coarse) > 0.99
+    assert engine.stats[-1].startswith("VoxGI | Sample 0/1 | Coarse (¼ of the pixels)")
+    assert view_state_line(live).startswith("Refining")
+
+    full = engine_view(engine, scene, depsgraph, view, window)
+    assert (renderer.texture.width, renderer.texture.height) == (WIDTH, HEIGHT)
+    assert dispatches.take() > 0 and engine.redraws == 1 and renderer.traces == 2
+    assert engine.stats[-1].startswith("VoxGI | Sample 1/1 | Traced in ")
+    assert engine.stats[-1].endswith("| Accurate")
+    # the coarse image is the full one at half the resolution: close, not equal
+    assert not np.array_equal(coarse, full) and relative_l1(coarse[..., :3], full[..., :3]) < 0.25
+
+    cached = engine_view(engine, scene, depsgraph, view, window)
+    assert dispatches.take() == 0 and engine.redraws == 1 and np.array_equal(cached, full)
+    assert engine.stats[-1].startswith("VoxGI | Sample 1/1 | Cached (converged), traced in ")
+    assert view_state_line(live).startswith("Converged")
+
+    # a camera move: a coarse, non-empty image on the very next call, then the full one
+    moved = engine_view(engine, scene, depsgraph, turned(view, 2.0), window)
+    assert renderer.texture.width == WIDTH // 2 and engine.redraws == 2 and filled(moved) > 0.99
+    assert dispatches.take() > 0 and renderer.shown == "Coarse"
+    engine_view(engine, scene, depsgraph, turned(view, 2.0), window)
+    assert renderer.texture.width == WIDTH and renderer.shown == "Traced" and engine.redraws == 2
