@@ -23,7 +23,7 @@ def test_demo_snapshot_counts_shapes_and_dtypes(voxgi, snapshot_module):
 
     kinds = {o.name: o.kind for o in snap.objects}
     assert kinds == {"Cornell Box": "static", "Skinned Tube": "skinned", "Rotating Sphere": "rigid"}
-    assert len(snap.meshes) == 3 and len(snap.materials) == 5
+    assert len(snap.meshes) == 3 and len(snap.materials) == 6
     for mesh in snap.meshes.values():
         v, t = len(mesh.positions), len(mesh.triangles)
         assert mesh.positions.shape == (v, 3) and mesh.positions.dtype == np.float32
@@ -36,7 +36,8 @@ def test_demo_snapshot_counts_shapes_and_dtypes(voxgi, snapshot_module):
     box = snap.meshes["Cornell Box"]
     assert box.triangles.shape == (10, 3) and box.uvs is not None
     names = [snap.materials[i].name for i in box.triangle_materials]
-    assert names.count("VoxGI White") == 6 and names.count("VoxGI Red") == 2 and names.count("VoxGI Green") == 2
+    assert names.count("VoxGI White") == 4 and names.count("VoxGI Red") == 2 and names.count("VoxGI Green") == 2
+    assert names.count("VoxGI Tiles") == 2  # the floor
 
     tube_obj = next(o for o in snap.objects if o.kind == "skinned")
     assert tube_obj.armature == "Tube Rig" and tube_obj.mesh != "Skinned Tube"  # own key: it has modifiers
