@@ -28,6 +28,7 @@ import bpy
 import numpy as np
 
 from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
+from ...voxgi_addon.scene.textures import within_max_size
 from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _NeedsBake, _tree_key
 
 BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
@@ -403,7 +404,7 @@ class MaterialTable:
                     "pixels (missing or unreadable file?); using the Base Color value instead")
                 return _rgb(socket), None, None, ""
             texture = TextureData(
-                name=node.image.name_full, pixels=rgb,
+                name=node.image.name_full, pixels=within_max_size(rgb),
                 interpolation="Closest" if node.interpolation == "Closest" else "Linear",
                 extension=node.extension, uv_transform=transform,
                 key=image_key)

@@ -175,3 +175,15 @@ def test_voxel_albedo_follows_the_texture(span):
         assert attrs.albedo[:, 0].mean() == pytest.approx(0.5, abs=0.03)
     else:  # the voxels span 2 × 2 cells: the texture's mean
         np.testing.assert_allclose(attrs.albedo[:, 0], 0.5, atol=0.05)
+
+
+def test_large_images_are_kept_within_the_largest_level():
+    from voxgi.voxgi_addon.scene.textures import MAX_SIZE, within_max_size
+
+    image = np.random.default_rng(1).random((8, 2 * MAX_SIZE + 3, 3)).astype(np.float32)
+    kept = within_max_size(image)
+    assert kept.dtype == np.float32 and max(kept.shape[:2]) <= MAX_SIZE
+    assert kept.shape[1] == MAX_SIZE // 2 + 1 or kept.shape[1] <= MAX_SIZE
+    assert kept.mean() == pytest.approx(image.mean(), abs=2e-3)
+    small = np.zeros((4, 4, 3), np.float32)
+    assert within_max_size(small).shape == (4, 4, 3)

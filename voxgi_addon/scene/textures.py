@@ -48,10 +48,20 @@ def _halve(image: np.ndarray) -> np.ndarray:
         image = np.concatenate([image, image[-1:]], axis=0)
     if w % 2 and w > 1:
         image = np.concatenate([image, image[:, -1:]], axis=1)
+    half = image.dtype.type(0.5)
     if h > 1:
-        image = 0.5 * (image[0::2] + image[1::2])
+        image = half * (image[0::2] + image[1::2])
     if w > 1:
-        image = 0.5 * (image[:, 0::2] + image[:, 1::2])
+        image = half * (image[:, 0::2] + image[:, 1::2])
+    return image
+
+
+def within_max_size(pixels: np.ndarray) -> np.ndarray:
+    """``pixels`` halved (``mip_pyramid``'s steps, float32) until neither side exceeds MAX_SIZE:
+    what the snapshot keeps of a larger image (the preview never samples finer levels)."""
+    image = np.asarray(pixels, np.float32)
+    while max(image.shape[:2]) > MAX_SIZE:
+        image = _halve(image)
     return image
 
 
@@ -59,7 +69,7 @@ def mip_pyramid(pixels: np.ndarray) -> list[np.ndarray]:
     """[(h_k, w_k, 3) float32] levels of ``pixels`` (row 0 at the bottom) down to 1 × 1 or
     MAX_LEVELS, each rounded to half precision (``HALF``); images larger than MAX_SIZE start at
     their first level within it."""
-    level = np.asarray(pixels, np.float64)[..., :3]
+    level = np.asarray(pixels, np.float32)[..., :3]
     levels = []
     while True:
         if max(level.shape[:2]) <= MAX_SIZE:
