@@ -266,3 +266,22 @@ def test_roughness_from_an_image_channel_takes_its_mean_with_a_warning(voxgi):
     green = snapshot.textures[floor.base_color_texture].pixels[..., 1].mean()
     assert floor.roughness == pytest.approx(green, abs=1e-4)
     assert any("Roughness comes from the image" in w for w in snapshot.warnings), snapshot.warnings
+
+
+def test_a_procedural_material_on_a_mesh_without_uvs_warns(voxgi):
+    """Cycles bakes into a UV map: a mesh without one keeps the socket's value, with a warning
+    naming the material and the mesh (the wall with UVs is still baked)."""
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    build()
+    wall = bpy.data.materials["Checker Wall"]
+    left = bpy.data.objects["Left Wall"]
+    assert len(left.data.uv_layers) == 0
+    left.data.materials[0] = wall
+    snapshot = take_snapshot(bpy.context.scene)
+    assert any("Checker Wall" in w and "Left Wall" in w and "no UV map" in w
+               for w in snapshot.warnings), snapshot.warnings
+    variants = [m for m in snapshot.materials if m.name == "Checker Wall"]
+    assert sorted(m.base_color_texture >= 0 for m in variants) == [False, True]
+    untextured = next(m for m in variants if m.base_color_texture < 0)
+    np.testing.assert_allclose(untextured.base_color, 0.5, atol=1e-6)  # the socket's value
