@@ -39,7 +39,7 @@ import gpu
 import numpy as np
 from gpu_extras.batch import batch_for_shader
 
-from ..blender.settings import cone_settings, trace_options
+from ..blender.settings import cone_settings, gi_stride, trace_options
 from ..blender.viewport_session import live_gi
 from ..blender.viewport_settings import VIEWPORT_PASSES
 from ..voxgi_addon.scene.view_camera import camera_from_view
@@ -57,11 +57,17 @@ def _matrix(m) -> np.ndarray:
     return np.array(m, dtype=np.float64).reshape(4, 4)
 
 
-def _options(settings, width: int, height: int) -> dict:
+def _options(settings, width: int, height: int, full=None) -> dict:
     """The tracer's options for a ``width`` × ``height`` viewport image: F12's, but
     point-sampled (one camera pass, not F12's anti-aliased sub-pixel passes, which cost 2.3x;
-    progressive viewport accumulation, issue 19, is where they belong)."""
-    return {**trace_options(settings, width, height), "filter_width": 0.0}
+    progressive viewport accumulation, issue 19, is where they belong). full : the full
+    image's size when this is its coarse first image: the GI stride is the full image's, so
+    the coarse image traces a quarter of the gather points too (GI Resolution Auto would
+    otherwise trace as many as for the full image)."""
+    options = {**trace_options(settings, width, height), "filter_width": 0.0}
+    if full is not None:
+        options["gi_stride"] = gi_stride(settings, *full)
+    return options
 
 
 def coarse_size(width: int, height: int) -> tuple[int, int]:
@@ -100,23 +106,24 @@ class ViewportRenderer:
         return (live.generation, camera_key, pass_name, cone_settings(s), s.tracer, s.quality,
                 tuple(sorted(options.items())))
 
-    def shows(self, live, scene, camera_key, pass_name: str) -> bool:
+    def shows(self, live, scene, camera_key, pass_name: str, full=None) -> bool:
         """Whether the texture is the image of ``camera_key`` (matrices, width, height) for
         the current results and settings: a redraw then only draws it."""
         if self.texture is None or live.staged is None:
             return False
         width, height = camera_key[2], camera_key[3]
-        options = _options(scene.voxgi, width, height)
+        options = _options(scene.voxgi, width, height, full)
         return self.trace_key(live, camera_key, scene, pass_name, options) == self.trace_key_shown
 
-    def trace(self, live, scene, camera, camera_key, pass_name: str, coarse: bool = False) -> bool:
+    def trace(self, live, scene, camera, camera_key, pass_name: str, full=None) -> bool:
         """Trace ``live``'s applied results seen by ``camera`` unless the texture already
-        shows them; True when it traced. coarse : the trace is a coarse first image."""
+        shows them; True when it traced. full : the full image's (width, height) when this
+        trace is its coarse first image (``_options``)."""
         if live.staged is None or live.snapshot is None:
             return False
         settings = scene.voxgi
         width, height = camera.resolution
-        options = _options(settings, width, height)
+        options = _options(settings, width, height, full)
         key = self.trace_key(live, camera_key, scene, pass_name, options)
         if key == self.trace_key_shown and self.texture is not None:
             return False
@@ -137,7 +144,7 @@ class ViewportRenderer:
                                             data=gpu.types.Buffer("FLOAT", flat.size, flat))
         self.trace_key_shown = key
         self.traces += 1
-        self.coarse = coarse
+        self.coarse = full is not None
         self.trace_seconds = time.perf_counter() - t0
         self.timings = {"atlas upload": upload, **timings, "trace": self.trace_seconds}
         return True
@@ -184,11 +191,12 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
         small = coarse_size(width, height)
         small_key = (camera_key[0], camera_key[1], *small)
         coarse = (view_settings.coarse_first and small != (width, height)
-                  and not (renderer.coarse and renderer.shows(live, scene, small_key, pass_name)))
+                  and not (renderer.coarse
+                           and renderer.shows(live, scene, small_key, pass_name, (width, height))))
         size, key = (small, small_key) if coarse else ((width, height), camera_key)
         try:
             if renderer.trace(live, scene, camera_from_view(view, window, *size), key, pass_name,
-                              coarse=coarse):
+                              full=(width, height) if coarse else None):
                 traced = "Coarse" if coarse else "Traced"
                 if coarse and redraw is not None:
                     redraw()  # the full image on the next draw

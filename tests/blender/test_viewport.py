@@ -269,12 +269,13 @@ class Dispatches:
     """Counts ``gpu.compute.dispatch`` calls: every kernel of a trace goes through it."""
 
     def __init__(self, monkeypatch):
-        self.count = 0
+        self.count = self.groups = 0  # calls; work groups (x × y × z) dispatched
         original = gpu.compute.dispatch
 
-        def counted(*args, **kwargs):
+        def counted(shader, x, y, z, *args, **kwargs):
             self.count += 1
-            return original(*args, **kwargs)
+            self.groups += x * y * z
+            return original(shader, x, y, z, *args, **kwargs)
 
         monkeypatch.setattr(gpu.compute, "dispatch", counted)
 
@@ -440,3 +441,28 @@ def test_a_changed_view_shows_a_coarse_image_first_then_the_full_one(voxgi, monk
     assert dispatches.take() > 0 and renderer.shown == "Coarse"
     engine_view(engine, scene, depsgraph, turned(view, 2.0), window)
     assert renderer.texture.width == WIDTH and renderer.shown == "Traced" and engine.redraws == 2
+
+
+def test_the_coarse_first_image_dispatches_about_a_quarter_of_the_work(voxgi, monkeypatch):
+    """Half the width and height, and the full image's GI stride (GI Resolution Auto would
+    pick a finer stride for the smaller image and gather as many points as the full one)."""
+    from voxgi.blender.viewport_session import live_gi
+
+    scene = cornell()
+    scene.voxgi_viewport.coarse_first = True
+    scene.voxgi_viewport.resolution_fraction = 1.0
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live_gi(scene.name_full).update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    engine = FakeEngine()
+    dispatches = Dispatches(monkeypatch)
+    size = (4 * WIDTH, 4 * HEIGHT)  # 256 × 192: GI Resolution Auto traces every 2nd pixel
+    engine_view(engine, scene, depsgraph, view, window, *size)
+    coarse = dispatches.groups
+    dispatches.groups = 0
+    engine_view(engine, scene, depsgraph, view, window, *size)
+    full = dispatches.groups
+    assert engine.voxgi_viewport.shown == "Traced" and engine.redraws == 1
+    print(f"work groups: coarse {coarse}, full {full} ({coarse / full:.2f})")
+    assert 0.15 * full < coarse < 0.35 * full
