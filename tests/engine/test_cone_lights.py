@@ -185,7 +185,7 @@ def test_cone_shadows_light_with_the_world_and_each_emitter():
     emitter is one shadow cone of its own, and where nothing is in the way the emitters give
     their exact unshadowed light; the panel does not light itself."""
     sky = np.full((8, 16, 3), 0.5, np.float32)
-    snap = room(world=WorldData(np.full(3, 0.5, np.float32), 1.0, sky, "sky"))
+    snap = room(world=WorldData(np.full(3, 0.5, np.float32), 1.0, sky, "grey sky"))
     state = room_state(snap, light_samples=1)
     world = world_light(snap.world)
     far = np.array([[1.8, 1.8, 0.0]])

@@ -114,3 +114,18 @@ def test_a_black_or_broken_map_is_no_light():
     assert build_world_light(np.full((8, 16, 3), np.nan)) is None
     world = build_world_light(np.where(np.arange(16)[None, :, None] % 2, np.inf, 1.0) * np.ones((8, 16, 3)))
     assert world is not None and np.isfinite(world.irradiance).all()
+
+
+def test_a_reused_key_does_not_return_another_worlds_light():
+    """The world light is cached by WorldData.key (a content key); a caller that reuses a key
+    for other content gets the new map's light, not the cached one's."""
+    from voxgi.voxgi_addon.gi.world_light import unshadowed, world_light
+    from voxgi.voxgi_addon.scene.snapshot import WorldData
+
+    grey = np.full((16, 32, 3), 0.5, np.float32)
+    blue = np.broadcast_to(np.array([0.2, 0.4, 0.9], np.float32), (16, 32, 3)).copy()
+    up = np.array([[0.0, 0.0, 1.0]])
+    first = unshadowed(world_light(WorldData(np.full(3, 0.5, np.float32), 1.0, grey, "same")), up)
+    second = unshadowed(world_light(WorldData(np.full(3, 0.5, np.float32), 1.0, blue, "same")), up)
+    np.testing.assert_allclose(first[0], [0.5, 0.5, 0.5], rtol=1e-3)
+    np.testing.assert_allclose(second[0], [0.2, 0.4, 0.9], rtol=1e-3)

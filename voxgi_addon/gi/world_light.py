@@ -124,22 +124,34 @@ def build_world_light(radiance, key: str = "") -> WorldLight | None:
     return WorldLight(key, radiance, row_cdf, column_cdf, total, irradiance)
 
 
-_cache: dict[str, WorldLight | None] = {}
+_cache: dict[str, tuple[tuple, WorldLight | None]] = {}
+
+
+def _fingerprint(radiance) -> tuple:
+    """A cheap check that a cached key still names the same map: its shape and a strided
+    sample of at most 4096 of its values."""
+    flat = np.asarray(radiance).reshape(-1)
+    step = max(1, len(flat) // 4096)
+    return radiance.shape, flat[::step].tobytes()
 
 
 def world_light(world) -> WorldLight | None:
-    """The ``WorldLight`` of a ``WorldData`` (None: a black world), cached by its ``key``."""
+    """The ``WorldLight`` of a ``WorldData`` (None: a black world), cached by its ``key`` (a
+    content key; a map that no longer matches the cached one's fingerprint is built anew, so a
+    reused key cannot hand back another world's light)."""
     radiance = getattr(world, "radiance", None)
     if radiance is None:
         return None
     key = getattr(world, "key", "") or ""
-    if key and key in _cache:
-        return _cache[key]
+    fingerprint = _fingerprint(radiance) if key else None
+    if key and key in _cache and _cache[key][0] == fingerprint:
+        return _cache[key][1]
     light = build_world_light(radiance, key)
     if key:
+        _cache.pop(key, None)
         while len(_cache) >= _CACHE_SIZE:
             _cache.pop(next(iter(_cache)))
-        _cache[key] = light
+        _cache[key] = (fingerprint, light)
     return light
 
 
