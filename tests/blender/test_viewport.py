@@ -393,7 +393,7 @@ def engine_view(engine, scene, depsgraph, view, window, width=WIDTH, height=HEIG
         offscreen.free()
 
 
-def test_a_changed_view_shows_a_coarse_image_first_then_the_full_one(voxgi, monkeypatch):
+def test_a_changed_view_shows_a_coarse_image_first_then_the_full_one(voxgi, monkeypatch, tmp_path):
     """With Coarse First Image (the default) the first ``view_draw`` after a change traces a
     quarter of the pixels, draws them (never a blank view) and asks for a redraw; the next
     traces the full image; the one after only draws it. The header's status line
@@ -429,6 +429,10 @@ def test_a_changed_view_shows_a_coarse_image_first_then_the_full_one(voxgi, monk
     assert engine.stats[-1].endswith("| Accurate")
     # the coarse image is the full one at half the resolution: close, not equal
     assert not np.array_equal(coarse, full) and relative_l1(coarse[..., :3], full[..., :3]) < 0.25
+    # and the full image after it is F12's, as without the coarse one
+    # (view_draw once traced with its blending on: its G-buffer triangles blended, 0.034 off)
+    assert relative_l1(full[..., :3], f12_combined(scene, tmp_path)) <= 0.02
+    dispatches.take()  # F12's own
 
     cached = engine_view(engine, scene, depsgraph, view, window)
     assert dispatches.take() == 0 and engine.redraws == 1 and np.array_equal(cached, full)
