@@ -23,6 +23,7 @@ from ..voxgi_addon.preview.passes import (
     check_request,
     edge_pixels,
     finish_passes,
+    lamp_light,
     light_edge_pixels,
     material_indices,
     subpixel_passes,
@@ -254,8 +255,8 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     texel = {name: image.reshape(-1, 4).astype(np.float64) for name, image in read.items()}
     if reach:  # the centre pass's lamp light, from the same read-back (no read per light)
         lamp_g = np.flipud(read_texture(lamps["sum_g"])) if "sum_g" in lamps else read["sum_g"]
-        light = sum(image[..., :3].sum(axis=-1).astype(np.float64)
-                    for image in (read["sum_f"], lamp_g))
+        light = lamp_light(lamp_g[..., :3], read["sum_b"][..., :3], read["sum_f"][..., :3],
+                           read["sum_c"][..., :3])
         edge = edge | light_edge_pixels(light, seen["hit"] & ~edge, reach, len(plan))
     listed = np.flatnonzero(edge.ravel())
     if len(listed):
