@@ -27,26 +27,33 @@ STORED_LIGHT = (*STORED, "Glossy Direct")
 CHECKED = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Glossy Direct", "Glossy Indirect")
 
 
-def render(scene, samples, seed, denoise=False):
-    import light_scenes
+def render(scene, samples, seed, denoise=False, size=None):
+    """(passes, seconds) of Cycles at ``size`` (the light scenes' when None)."""
     from cycles_passes import last_render_seconds, render_cycles_passes
 
-    passes = render_cycles_passes(scene, light_scenes.WIDTH, light_scenes.HEIGHT, samples,
-                                  diffuse_bounces=1, ao_distance=1.0, seed=seed,
-                                  glossy_bounces=1, denoise=denoise)
+    if size is None:
+        import light_scenes
+        size = (light_scenes.WIDTH, light_scenes.HEIGHT)
+    passes = render_cycles_passes(scene, *size, samples, diffuse_bounces=1, ao_distance=1.0,
+                                  seed=seed, glossy_bounces=1, denoise=denoise)
     return passes, last_render_seconds()
 
 
-def main(argv=None):
+def make_references(argv, module_name: str, out_name: str, checked, description: str):
+    """The command line of a reference maker: build each scene of the test module
+    ``module_name`` (its SCENES, build, WIDTH, HEIGHT), store its Cycles reference in
+    tests/data/``out_name``/<scene>.npz and, in cycles_spp.json there, the relative L1 of the
+    ``checked`` passes of Cycles 16 spp + OIDN and 64 spp (another seed)."""
     load_addon()
-    import bpy
-    import light_scenes
+    import importlib
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", nargs="*", default=list(light_scenes.SCENES))
+    import bpy
+
+    scenes = importlib.import_module(module_name)
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--scenes", nargs="*", default=list(scenes.SCENES))
     parser.add_argument("--samples", type=int, default=2048)
-    parser.add_argument("--out", type=pathlib.Path,
-                        default=REPO_ROOT / "tests" / "data" / "light_refs")
+    parser.add_argument("--out", type=pathlib.Path, default=REPO_ROOT / "tests" / "data" / out_name)
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     summary_path = args.out / "cycles_spp.json"
@@ -54,8 +61,9 @@ def main(argv=None):
     for name in args.scenes:
         bpy.ops.wm.read_factory_settings(use_empty=True)
         scene = bpy.context.scene
-        light_scenes.build(name, scene)
-        reference, seconds = render(scene, args.samples, seed=0)
+        scenes.build(name, scene)
+        size = (scenes.WIDTH, scenes.HEIGHT)
+        reference, seconds = render(scene, args.samples, seed=0, size=size)
         stored = {n: reference[n].astype(np.float16) for n in STORED_LIGHT}
         stored["Alpha"] = reference["Alpha"].astype(np.float16)
         path = args.out / f"{name}.npz"
@@ -65,13 +73,17 @@ def main(argv=None):
         mask = reference["Alpha"] > 0.5
         checks = {}
         for label, samples, denoise in (("16+OIDN", 16, True), ("64", 64, False)):
-            passes, t = render(scene, samples, seed=1, denoise=denoise)
+            passes, t = render(scene, samples, seed=1, denoise=denoise, size=size)
             checks[label] = {"seconds": round(t, 2), "relative_l1": {
-                n: round(relative_l1(passes[n], reference[n], mask), 4) for n in CHECKED}}
+                n: round(relative_l1(passes[n], reference[n], mask), 4) for n in checked}}
         summary[name] = {"reference_samples": args.samples, "reference_seconds": round(seconds, 2),
-                         "size": [light_scenes.WIDTH, light_scenes.HEIGHT], "checks": checks}
+                         "size": list(size), "checks": checks}
         summary_path.write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
         print(f"  {checks}", flush=True)
+
+
+def main(argv=None):
+    make_references(argv, "light_scenes", "light_refs", CHECKED, __doc__.splitlines()[0])
 
 
 if __name__ == "__main__":

@@ -10,55 +10,17 @@ and time of Cycles 16 spp + OpenImageDenoise and of 64 spp, with another seed.
 """
 from __future__ import annotations
 
-import argparse
-import json
 import pathlib
 import sys
 
-import numpy as np
-
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from make_gi_references import REPO_ROOT, load_addon, relative_l1  # noqa: E402
-from make_light_references import STORED_LIGHT, render  # noqa: E402
+from make_light_references import make_references  # noqa: E402
 
 CHECKED = ("Combined", "Diffuse Color", "Diffuse Direct", "Diffuse Indirect")
 
 
 def main(argv=None):
-    load_addon()
-    import bpy
-    import texture_scenes
-
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", nargs="*", default=list(texture_scenes.SCENES))
-    parser.add_argument("--samples", type=int, default=2048)
-    parser.add_argument("--out", type=pathlib.Path,
-                        default=REPO_ROOT / "tests" / "data" / "texture_refs")
-    args = parser.parse_args(argv)
-    args.out.mkdir(parents=True, exist_ok=True)
-    summary_path = args.out / "cycles_spp.json"
-    summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
-    for name in args.scenes:
-        bpy.ops.wm.read_factory_settings(use_empty=True)
-        scene = bpy.context.scene
-        texture_scenes.build(name, scene)
-        reference, seconds = render(scene, args.samples, seed=0)
-        stored = {n: reference[n].astype(np.float16) for n in STORED_LIGHT}
-        stored["Alpha"] = reference["Alpha"].astype(np.float16)
-        path = args.out / f"{name}.npz"
-        np.savez_compressed(path, **stored)
-        print(f"{name}: {args.samples} spp in {seconds:.1f} s -> {path} "
-              f"({path.stat().st_size / 1024:.0f} KB)", flush=True)
-        mask = reference["Alpha"] > 0.5
-        checks = {}
-        for label, samples, denoise in (("16+OIDN", 16, True), ("64", 64, False)):
-            passes, t = render(scene, samples, seed=1, denoise=denoise)
-            checks[label] = {"seconds": round(t, 2), "relative_l1": {
-                n: round(relative_l1(passes[n], reference[n], mask), 4) for n in CHECKED}}
-        summary[name] = {"reference_samples": args.samples, "reference_seconds": round(seconds, 2),
-                         "size": [texture_scenes.WIDTH, texture_scenes.HEIGHT], "checks": checks}
-        summary_path.write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
-        print(f"  {checks}", flush=True)
+    make_references(argv, "texture_scenes", "texture_refs", CHECKED, __doc__.splitlines()[0])
 
 
 if __name__ == "__main__":
