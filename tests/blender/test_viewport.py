@@ -13,6 +13,7 @@ import gpu
 import numpy as np
 import pytest
 import scenes
+from stand_in_engine import StandInEngine
 
 WIDTH, HEIGHT = 64, 48
 MOVE = {"snapshot", "transform", "inject", "octree", "trace"}
@@ -353,26 +354,6 @@ def test_an_unchanged_redraw_traces_nothing_and_any_change_traces_again(voxgi, m
     assert dispatches.take() == 0 and np.array_equal(still, moved)
 
 
-class FakeEngine:
-    """What ``view_draw`` uses of a ``RenderEngine`` (bpy cannot make a viewport engine in
-    background mode): the display-space shader, ``tag_redraw`` and ``update_stats``."""
-
-    def __init__(self):
-        self.redraws, self.stats = 0, []
-
-    def bind_display_space_shader(self, scene):
-        pass
-
-    def unbind_display_space_shader(self):
-        pass
-
-    def tag_redraw(self):
-        self.redraws += 1
-
-    def update_stats(self, stats, info):
-        self.stats.append(info)
-
-
 def engine_view(engine, scene, depsgraph, view, window, width=WIDTH, height=HEIGHT):
     """``view_draw`` itself into a float offscreen; (H, W, 4) top row first."""
     import types
@@ -409,7 +390,7 @@ def test_a_changed_view_shows_a_coarse_image_first_then_the_full_one(voxgi, monk
     live = live_gi(scene.name_full)
     live.update(scene, depsgraph)
     view, window = camera_matrices(scene, depsgraph)
-    engine = FakeEngine()
+    engine = StandInEngine()
     dispatches = Dispatches(monkeypatch)
 
     def filled(image):  # the share of pixels that are not the grey clear colour
@@ -459,7 +440,7 @@ def test_the_coarse_first_image_dispatches_about_a_quarter_of_the_work(voxgi, mo
     depsgraph = bpy.context.evaluated_depsgraph_get()
     live_gi(scene.name_full).update(scene, depsgraph)
     view, window = camera_matrices(scene, depsgraph)
-    engine = FakeEngine()
+    engine = StandInEngine()
     dispatches = Dispatches(monkeypatch)
     size = (4 * WIDTH, 4 * HEIGHT)  # 256 × 192: GI Resolution Auto traces every 2nd pixel
     engine_view(engine, scene, depsgraph, view, window, *size)

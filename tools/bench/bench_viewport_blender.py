@@ -34,31 +34,14 @@ import time
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from bench_blender import demo_snapshot, load_addon, print_table  # noqa: E402
 
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "tests" / "blender"))
+from stand_in_engine import StandInEngine  # noqa: E402
+
 REGION = (640, 360)
 VIEW_REGION = (1280, 720)
 # Issue 19's measurements before any change (same scene kind, region and settings).
 BEFORE = {"first": "0.82–0.88 s", "orbit": "0.71–0.83 s", "unchanged": "0.68–0.73 s",
           "move": "1.4 s (move → new GI drawn)"}
-
-
-class StandInEngine:
-    """What ``view_draw`` uses of a ``RenderEngine`` (none can be made for a viewport in
-    background mode); its Python attributes (``voxgi_viewport``) persist as a real engine's do."""
-
-    def __init__(self):
-        self.redraws, self.info = 0, ""
-
-    def bind_display_space_shader(self, scene):
-        pass
-
-    def unbind_display_space_shader(self):
-        pass
-
-    def tag_redraw(self):
-        self.redraws += 1
-
-    def update_stats(self, stats, info):
-        self.info = info
 
 
 def view_draw_rows(scene, depsgraph, quick: bool) -> list:
