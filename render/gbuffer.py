@@ -14,6 +14,7 @@ import numpy as np
 from gpu_extras.batch import batch_for_shader
 
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame, view_projection
+from ..voxgi_addon.scene.snapshot import RAY_CAMERA
 from ..voxgi_addon.scene.textures import FOOTPRINT_COS_MIN, filter_footprint, pixel_spread
 from .gpu_shaders import SHADER_DIR
 from .gpu_tracer import read_texture
@@ -113,6 +114,16 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
                 np.asarray(tris.corner_normals, np.float32).reshape(-1, 3)
             surface = np.repeat(np.stack([material, roughness[material]], axis=1)
                                 .astype(np.float32), 3, axis=0)
+            # Cycles' ray visibility and holdouts, as raycast.primary_visibility: a triangle
+            # camera rays do not see is drawn degenerate (no fragment); a holdout's fragments
+            # hide what is behind them and leave the pixel empty (material -2, gbuffer_frag).
+            seen = tris.accepted(RAY_CAMERA) if hasattr(tris, "accepted") else None
+            if seen is not None:
+                corners = corners.reshape(-1, 3, 3).copy()
+                corners[~seen] = corners[~seen][:, :1]
+                corners = corners.reshape(-1, 3)
+            if getattr(tris, "holdout", None) is not None:
+                surface[np.repeat(np.asarray(tris.holdout), 3), 0] = -2.0
             surface_textures = getattr(tris, "textures", None)
             if textures is None or surface_textures is None:
                 uv = np.zeros((len(corners), 2), np.float32)

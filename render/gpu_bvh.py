@@ -39,6 +39,7 @@ from ..voxgi_addon.preview.gather import VIEW_BACKOFF
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
 from ..voxgi_addon.scene.bvh import DET_EPSILON, TEXTURE_WIDTH, build_bvh, pack_bvh
 from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
+from ..voxgi_addon.scene.snapshot import RAY_DIFFUSE, RAY_GLOSSY, RAY_SHADOW
 from .gpu_ltc import DEFINES as LTC_DEFINES
 from .gpu_ltc import ltc_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
@@ -83,7 +84,11 @@ def bvh_shader(kernel: str):
         defines = {"BVH_WIDTH_LOG2": str(int(math.log2(TEXTURE_WIDTH))),
                    "SHADOW_EPSILON": repr(float(SHADOW_EPSILON)),
                    "SURFACE_EPSILON": repr(float(SURFACE_EPSILON)),
-                   "DET_EPSILON": repr(float(DET_EPSILON)), "RAY_STREAM": f"{RAY_STREAM}u"}
+                   "DET_EPSILON": repr(float(DET_EPSILON)), "RAY_STREAM": f"{RAY_STREAM}u",
+                   # the kind of ray a kernel's closest hits are (ray visibility, bvh_common)
+                   "BVH_RAY_SHADOW": str(RAY_SHADOW),
+                   "BVH_CLOSEST_RAY": {"bvh_glossy": str(RAY_GLOSSY),
+                                       "bvh_probe": "int(mode.y)"}.get(kernel, str(RAY_DIFFUSE))}
         if "principled" in files:
             defines.update(PRINCIPLED_DEFINES)
         if kernel == "bvh_direct":
@@ -130,6 +135,7 @@ class GPUBVH:
         if old is tris:
             return True
         return (_same(old.positions, tris.positions) and _same(old.materials, tris.materials)
+                and _same(getattr(old, "visibility", None), getattr(tris, "visibility", None))
                 and _same(old.corner_normals, tris.corner_normals))
 
     def update(self, tris) -> GPUBVH:
@@ -251,9 +257,11 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
                         {"sampling": (seed, block[3], 0, 0), "strata": (*block[:3], 0)})
 
 
-def trace_rays(bvh: GPUBVH, origins, directions, t_min=0.0, t_max=np.inf, any_hit=False):
+def trace_rays(bvh: GPUBVH, origins, directions, t_min=0.0, t_max=np.inf, any_hit=False,
+               ray: int = RAY_DIFFUSE):
     """Trace N rays on the GPU (``bvh_probe``). Closest hit: (t (inf = miss), triangle (-1),
-    u, v); any hit (shadow-ray convention, ``raycast.occluded`` with max_t = t_max): (N,) bool."""
+    u, v) of rays of kind ``ray`` (a ``snapshot.RAY_*`` bit: the triangles they see); any hit
+    (shadow rays, ``raycast.occluded`` with max_t = t_max): (N,) bool."""
     o = np.asarray(origins, np.float32).reshape(-1, 3)
     d = np.asarray(directions, np.float32).reshape(-1, 3)
     n = len(o)
@@ -268,7 +276,7 @@ def trace_rays(bvh: GPUBVH, origins, directions, t_min=0.0, t_max=np.inf, any_hi
     inputs = {**bvh.inputs, "ray_origin": float_texture(ray_o, (side, rows)),
               "ray_direction": float_texture(ray_d, (side, rows))}
     out = read_texture(dispatch_bvh("bvh_probe", inputs, side, rows,
-                                    {"mode": (1.0 if any_hit else 0.0, 0, 0, 0)}))
+                                    {"mode": (1.0 if any_hit else 0.0, ray, 0, 0)}))
     out = out.reshape(-1, 4)[:n]
     if any_hit:
         return out[:, 0] > 0.5

@@ -178,6 +178,7 @@ class GPUScene:
         self._meshes = meshes  # only this snapshot's meshes stay referenced
         objects = tuple(
             (o.name, o.mesh, o.kind, o.armature, np.asarray(o.world_matrix, np.float64),
+             getattr(o, "visibility", None), getattr(o, "holdout", None),
              meshes[id(snapshot.meshes[o.mesh])][1] if o.mesh in snapshot.meshes else None)
             for o in snapshot.objects)
         armatures = tuple(
@@ -186,7 +187,7 @@ class GPUScene:
             for name, a in sorted(snapshot.armatures.items()))
         textures = (tuple(getattr(m, "base_color_texture", -1) for m in snapshot.materials),
                     tuple(_texture_key(t) for t in getattr(snapshot, "textures", ())))
-        return digest(objects, armatures, textures)
+        return digest(objects, armatures, textures, tuple(getattr(snapshot, "holdout_materials", ())))
 
     # ------------------------------------------------------------------ update
 

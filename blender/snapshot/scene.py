@@ -18,7 +18,16 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from ...voxgi_addon.scene.snapshot import MeshData, ObjectData, SceneSnapshot
+from ...voxgi_addon.scene.snapshot import (
+    RAY_CAMERA,
+    RAY_DIFFUSE,
+    RAY_GLOSSY,
+    RAY_SHADOW,
+    MaterialData,
+    MeshData,
+    ObjectData,
+    SceneSnapshot,
+)
 from .environment import read_camera, read_light, read_world
 from .materials import MaterialTable, Surface, _digest
 from .mesh import (
@@ -99,10 +108,39 @@ def _slot_materials(obj_eval, mesh) -> list:
     return slots + list(mesh.materials[len(slots):])
 
 
+def ray_visibility(obj) -> int:
+    """The ``RAY_*`` bits of the rays that see ``obj`` (Object › Visibility › Ray Visibility,
+    as Cycles reads them; transmission and volume rays are not traced)."""
+    return ((RAY_CAMERA if obj.visible_camera else 0) | (RAY_DIFFUSE if obj.visible_diffuse else 0)
+            | (RAY_GLOSSY if obj.visible_glossy else 0) | (RAY_SHADOW if obj.visible_shadow else 0))
+
+
+def is_holdout_shader(material) -> bool:
+    """Does a Holdout shader feed the Surface of ``material``'s Cycles output?"""
+    tree = material.node_tree if material is not None else None
+    output = tree.get_output_node("CYCLES") if tree is not None else None
+    surface = output.inputs.get("Surface") if output is not None else None
+    return bool(surface is not None and surface.is_linked
+                and surface.links[0].from_node.type == "HOLDOUT")
+
+
+def _holdout_index(material, table: MaterialTable, holdouts: dict[str, int]) -> int:
+    """The index of a Holdout-shader material: black to every ray (no BSDF, no emission: what
+    Cycles' bounce and shadow rays meet there); camera rays see nothing at it
+    (``SceneSnapshot.holdout_materials``)."""
+    name = material.original.name_full
+    if name not in holdouts:
+        holdouts[name] = len(table.materials)
+        table.materials.append(MaterialData(name=name, base_color=np.zeros(3, np.float32),
+                                            roughness=1.0, metallic=0.0, specular=0.0))
+    return holdouts[name]
+
+
 def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[str],
-               obj_eval=None) -> MeshData | None:
+               holdouts: dict[str, int], obj_eval=None) -> MeshData | None:
     """The MeshData of an entry's evaluated object (``obj_eval``: given for an instance, which
-    only exists while the depsgraph's instances are iterated)."""
+    only exists while the depsgraph's instances are iterated); ``holdouts`` : Holdout-shader
+    materials' indices (``_holdout_index``)."""
     obj_eval = obj_eval or entry.obj.evaluated_get(depsgraph)
     mesh = obj_eval.to_mesh()
     try:
@@ -118,7 +156,8 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
                           _digest(*(None if a is None else
                                    hashlib.blake2b(a.tobytes(), digest_size=16).hexdigest()
                                    for a in (positions, triangles, slots, uvs))), uvs is not None)
-        lookup = material_lookup(slot_materials, lambda m: table.index_of(m, surface))
+        lookup = material_lookup(slot_materials, lambda m: _holdout_index(m, table, holdouts)
+                                 if is_holdout_shader(m) else table.index_of(m, surface))
         materials = triangle_materials(slots, lookup)
         uvs = named_uvs(mesh, corners, materials, table, uvs)
         skin = None
@@ -206,12 +245,13 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
     skinned = {e.obj: e.layers for e in entries if e.kind == "skinned"}
     meshes: dict[str, MeshData] = {}
     read_keys: set[str] = set()
-    instances = _instances(depsgraph, table, warnings, meshes, read_keys)
+    holdouts: dict[str, int] = {}
+    instances = _instances(depsgraph, table, warnings, meshes, read_keys, holdouts)
     with temporary_weight_attributes(skinned, depsgraph):
         for entry in entries:
             if entry.key not in read_keys:  # linked duplicates are read once
                 read_keys.add(entry.key)
-                mesh = _read_mesh(entry, depsgraph, table, warnings)
+                mesh = _read_mesh(entry, depsgraph, table, warnings, holdouts)
                 if mesh is not None:
                     meshes[entry.key] = mesh
 
@@ -223,6 +263,8 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
             world_matrix=_world_matrix(e.obj, depsgraph),
             kind=e.kind,
             armature=e.armature.name_full if e.armature is not None else None,
+            visibility=ray_visibility(e.obj),
+            holdout=bool(e.obj.holdout_get(view_layer=view_layer)),
         )
         for e in entries if e.key in meshes
     ] + [o for o in instances if o.mesh in meshes]
@@ -247,15 +289,18 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
         world=read_world(scene, warnings),
         frame=int(scene.frame_current),
         warnings=tuple(warnings),
+        holdout_materials=tuple(sorted(holdouts.values())),
     )
 
 
 def _instances(depsgraph, table: MaterialTable, warnings: list[str], meshes: dict,
-               read_keys: set) -> list[ObjectData]:
+               read_keys: set, holdouts: dict[str, int]) -> list[ObjectData]:
     """The depsgraph's instances (collection instances, geometry-nodes and particle instances)
     of renderable objects: one ObjectData per instance with its own world matrix, their meshes
     read once per instanced object (``meshes`` / ``read_keys`` are filled). An instance of a
-    plain mesh shares the mesh datablock's key with its other users."""
+    plain mesh shares the mesh datablock's key with its other users. Ray visibility is the
+    instanced object's and its instancer's together, holdout the instancer's (or the object's),
+    as Cycles syncs instances."""
     out, used = [], {}
     for inst in depsgraph.object_instances:
         if not inst.is_instance:
@@ -272,7 +317,7 @@ def _instances(depsgraph, table: MaterialTable, warnings: list[str], meshes: dic
         if key not in read_keys:
             read_keys.add(key)
             entry = _Entry(original, key, "static")
-            mesh = _read_mesh(entry, depsgraph, table, warnings, obj_eval)
+            mesh = _read_mesh(entry, depsgraph, table, warnings, holdouts, obj_eval)
             if mesh is not None:
                 meshes[key] = mesh
         parent = inst.parent.original.name_full if inst.parent is not None else "?"
@@ -281,8 +326,13 @@ def _instances(depsgraph, table: MaterialTable, warnings: list[str], meshes: dic
         while name in used:
             name, n = f"{base} [{n}]", n + 1
         used[name] = True
+        visibility, holdout = ray_visibility(original), original.is_holdout
+        if inst.parent is not None:
+            visibility &= ray_visibility(inst.parent.original)
+            holdout = holdout or inst.parent.original.holdout_get(view_layer=depsgraph.view_layer)
         out.append(ObjectData(name=name, mesh=key, kind="static",
-                              world_matrix=np.array(inst.matrix_world, dtype=np.float64)))
+                              world_matrix=np.array(inst.matrix_world, dtype=np.float64),
+                              visibility=visibility, holdout=bool(holdout)))
     return out
 
 

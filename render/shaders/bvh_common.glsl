@@ -12,6 +12,7 @@
  * are in sampling.glsl, which comes first. */
 
 #define BVH_WIDTH (1 << BVH_WIDTH_LOG2)
+bool bvh_hidden(int slot, int ray);
 #define BVH_FAR 1e30
 #ifndef M_PI_F
 #define M_PI_F 3.14159265358979323846
@@ -90,6 +91,9 @@ int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_
         float t;
         vec2 tuv;
         if (bvh_triangle(slot, o, d, dlen, t, tuv) && t > tmin && t < best) {
+          if (bvh_hidden(slot, any_hit ? BVH_RAY_SHADOW : BVH_CLOSEST_RAY)) {
+            continue;
+          }
           best = t;
           found = slot;
           uv = tuv;
@@ -124,9 +128,23 @@ bool bvh_closest_hit(vec3 o, vec3 d, float tmin, float tmax, out float t, out in
   return slot >= 0;
 }
 
+/* Ray visibility (bvh.py material_code): the RAY_* bits of the rays that do not see a triangle
+ * are packed above its material index, code + 1 = material + 1 + 65536 · hidden. Closest hits
+ * are rays of kind BVH_CLOSEST_RAY (a define per kernel: the gathers' diffuse or glossy bounce
+ * rays), any hits shadow rays (BVH_RAY_SHADOW). */
+int bvh_material_code(int slot)
+{
+  return int(bvh_texel_triangles(3 * slot).w) + 1;
+}
+
+bool bvh_hidden(int slot, int ray)
+{
+  return ((bvh_material_code(slot) >> 16) & ray) != 0;
+}
+
 int bvh_triangle_material(int slot)
 {
-  return int(bvh_texel_triangles(3 * slot).w);
+  return (bvh_material_code(slot) & 0xFFFF) - 1;
 }
 
 /* Unit face normal of packed triangle `slot` (right-hand winding, as SceneTriangles.normals). */

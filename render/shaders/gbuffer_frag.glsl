@@ -7,6 +7,10 @@
 void main()
 {
   vec3 view = camera_ortho > 0.5 ? camera_forward : normalize(world_position - camera_position);
+  if (surface.x < -1.5) { /* a holdout (gbuffer.rasterize): hides what is behind, shows nothing */
+    out_position = out_normal = out_view = out_base = vec4(0.0);
+    return;
+  }
   float facing = dot(flat_normal, view) > 0.0 ? -1.0 : 1.0;
   vec3 n = shading_normal;
   n = dot(n, n) > 1e-24 ? normalize(n) : flat_normal;

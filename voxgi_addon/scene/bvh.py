@@ -33,6 +33,7 @@ import numpy as np
 
 from .geometry import SceneTriangles
 from .raycast import SHADOW_EPSILON
+from .snapshot import RAY_ALL, RAY_DIFFUSE, RAY_SHADOW
 
 __all__ = [
     "BINS",
@@ -43,9 +44,11 @@ __all__ = [
     "TEXTURE_WIDTH",
     "TRIANGLE_TEXELS",
     "BVHTextures",
+    "HIDDEN_SHIFT",
     "build_bvh",
     "bvh_of",
     "closest_hits",
+    "material_code",
     "occluded",
     "pack_bvh",
     "traverse",
@@ -56,7 +59,8 @@ MAX_LEAF = 8            # most triangles in a leaf (the leaf code keeps 4 bits f
 TRAVERSAL_COST = 1.0    # SAH cost of visiting a node, relative to one triangle test
 TEXTURE_WIDTH = 4096    # texels per row of the packed textures (a power of two)
 NODE_TEXELS = 2         # (lo.xyz, miss), (hi.xyz, leaf code)
-TRIANGLE_TEXELS = 3     # (v0.xyz, material), (e1.xyz, triangle index), (e2.xyz, |e1|·|e2|)
+TRIANGLE_TEXELS = 3     # (v0.xyz, material code), (e1.xyz, triangle index), (e2.xyz, |e1|·|e2|)
+HIDDEN_SHIFT = 1 << 16  # material code = material + HIDDEN_SHIFT · (RAY_* bits it is hidden from)
 DET_EPSILON = 1e-12     # as raycast's Möller–Trumbore: |det| > ε·|e1|·|e2|·|d| or no hit
 _LEAF_SHIFT = 16        # leaf code = first · 16 + count
 _MAX_TRIANGLES = (1 << 24) // _LEAF_SHIFT
@@ -256,10 +260,13 @@ class BVHTextures:
 
     nodes : 2 texels per node: (lo.xyz, miss link), (hi.xyz, leaf code) with leaf code =
         first · 16 + count (first indexes the packed triangles) or -1 for an interior node.
-    triangles : 3 texels per triangle, in leaf order: (v0.xyz, material index), (e1.xyz,
+    triangles : 3 texels per triangle, in leaf order: (v0.xyz, material code), (e1.xyz,
         index into the SceneTriangles), (e2.xyz, |e1|·|e2|) — v0 and the edges in metres.
     normals : 3 texels per triangle, in leaf order: the shading normals at v0, v1, v2 (the
         face normal where the triangles carry no corner normals), w = 0.
+        The material code (``material_code``) is the material index (-1 = none) plus
+        ``HIDDEN_SHIFT`` × the ``RAY_*`` bits of the rays that do not see the triangle (its
+        Cycles ray visibility): a triangle every ray sees holds its material index.
     node_count, triangle_count : how many are packed (rows are zero-padded).
     """
 
@@ -282,6 +289,16 @@ def _rows(texels: np.ndarray) -> np.ndarray:
     return out.reshape(rows, TEXTURE_WIDTH, 4)
 
 
+def material_code(tris: SceneTriangles) -> np.ndarray:
+    """(T,) int64 the packed material code of each triangle (see ``BVHTextures``; decoded by
+    ``bvh_common.glsl``'s ``bvh_triangle_material`` and ``bvh_hidden``)."""
+    materials = np.asarray(tris.materials, np.int64)
+    if getattr(tris, "visibility", None) is None:
+        return materials
+    hidden = ~np.asarray(tris.visibility, np.int64) & RAY_ALL
+    return materials + HIDDEN_SHIFT * hidden
+
+
 def pack_bvh(bvh: BVH, tris: SceneTriangles) -> BVHTextures:
     """The texel arrays of ``bvh`` over ``tris`` (see ``BVHTextures``)."""
     n = len(bvh)
@@ -295,7 +312,7 @@ def pack_bvh(bvh: BVH, tris: SceneTriangles) -> BVHTextures:
     e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
     t = len(order)
     packed = np.zeros((t, 3, 4), np.float32)
-    packed[:, 0, :3], packed[:, 0, 3] = p[:, 0], np.asarray(tris.materials)[order]
+    packed[:, 0, :3], packed[:, 0, 3] = p[:, 0], material_code(tris)[order]
     packed[:, 1, :3], packed[:, 1, 3] = e1, order
     packed[:, 2, :3] = e2
     packed[:, 2, 3] = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
@@ -329,12 +346,14 @@ def _intersect(p, o, d):
 
 
 def traverse(bvh: BVH, tris: SceneTriangles, origins, directions, t_min=0.0, t_max=np.inf,
-             any_hit: bool = False):
+             any_hit: bool = False, ray: int = RAY_ALL):
     """The stackless traversal of ``bvh_common.glsl`` in numpy (float64), vectorised over rays.
 
     origins, directions : (N, 3); t_min, t_max : scalar or (N,); hits with t_min < t < t_max
     count. Returns t (N,) (inf = miss), tri (N,) int64 (-1), u, v (N,) as
     ``raycast.closest_hits``; with ``any_hit`` a ray stops at its first hit (not the nearest).
+    ray : the kind of ray (``snapshot.RAY_*``): triangles it does not see are passed through
+    (``SceneTriangles.visibility``, packed as ``material_code``'s hidden bits).
     """
     o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
@@ -345,6 +364,7 @@ def traverse(bvh: BVH, tris: SceneTriangles, origins, directions, t_min=0.0, t_m
     bu, bv = np.zeros(n), np.zeros(n)
     if len(bvh.order) == 0:
         return np.full(n, np.inf), tri, bu, bv
+    accept = tris.accepted(ray) if hasattr(tris, "accepted") else None
     positions = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)
     with np.errstate(divide="ignore"):
         inv = 1.0 / np.where(np.abs(d) > 1e-30, d, 1e-30)
@@ -372,6 +392,8 @@ def traverse(bvh: BVH, tris: SceneTriangles, origins, directions, t_min=0.0, t_m
                 sel = np.flatnonzero((slot - np.repeat(bvh.first[k], count)) == j)
                 rj = r[sel]
                 good = (t[sel] > lo_t[rj]) & (t[sel] < best[rj])
+                if accept is not None:
+                    good &= accept[which[sel]]
                 if any_hit:
                     good &= tri[rj] < 0
                 g = sel[good]
@@ -385,13 +407,16 @@ def traverse(bvh: BVH, tris: SceneTriangles, origins, directions, t_min=0.0, t_m
     return t, tri, np.where(tri >= 0, bu, 0.0), np.where(tri >= 0, bv, 0.0)
 
 
-def closest_hits(tris: SceneTriangles, origins, directions, t_min=0.0, t_max=np.inf):
+def closest_hits(tris: SceneTriangles, origins, directions, t_min=0.0, t_max=np.inf,
+                 ray: int = RAY_DIFFUSE):
     """``raycast.closest_hits`` through the (cached) BVH of ``tris``."""
-    return traverse(bvh_of(tris), tris, origins, directions, t_min, t_max)
+    return traverse(bvh_of(tris), tris, origins, directions, t_min, t_max, ray=ray)
 
 
-def occluded(tris: SceneTriangles, origins, directions, max_t, epsilon: float = SHADOW_EPSILON):
+def occluded(tris: SceneTriangles, origins, directions, max_t, epsilon: float = SHADOW_EPSILON,
+             ray: int = RAY_SHADOW):
     """``raycast.occluded`` through the (cached) BVH: any hit with ε < t < max_t − ε."""
     max_t = np.asarray(max_t, dtype=np.float64) - epsilon
-    t, _, _, _ = traverse(bvh_of(tris), tris, origins, directions, epsilon, max_t, any_hit=True)
+    t, _, _, _ = traverse(bvh_of(tris), tris, origins, directions, epsilon, max_t, any_hit=True,
+                          ray=ray)
     return np.isfinite(t)

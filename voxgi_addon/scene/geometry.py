@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .skinning import blend_matrices, skin_matrices, transform_normals, transform_points
-from .snapshot import MeshData, ObjectData, SceneSnapshot
+from .snapshot import RAY_ALL, MeshData, ObjectData, SceneSnapshot
 from .textures import SurfaceTextures, surface_textures
 
 __all__ = ["SceneTriangles", "world_triangles", "object_vertices_world"]
@@ -33,6 +33,10 @@ class SceneTriangles:
         None when no mesh of the snapshot carries them (then shading uses the face normals).
     textures : ``textures.SurfaceTextures`` (corner UVs, each material's Base Color texture),
         or None when no material of the snapshot has a texture.
+    visibility : (T,) uint8 ``snapshot.RAY_*`` bits of the rays that see each triangle (its
+        object's Cycles ray visibility), or None when every ray sees every triangle.
+    holdout : (T,) bool triangles a camera ray sees nothing at (a holdout object or a Holdout
+        shader), or None when there are none.
     """
 
     positions: np.ndarray
@@ -41,6 +45,16 @@ class SceneTriangles:
     objects: np.ndarray
     corner_normals: np.ndarray | None = None
     textures: SurfaceTextures | None = None
+    visibility: np.ndarray | None = None
+    holdout: np.ndarray | None = None
+
+    def accepted(self, ray: int) -> np.ndarray | None:
+        """(T,) bool: the triangles a ray of kind ``ray`` (a ``RAY_*`` bit) can hit; None when
+        it can hit all of them."""
+        if self.visibility is None:
+            return None
+        seen = (np.asarray(self.visibility) & ray) != 0
+        return None if seen.all() else seen
 
     def __len__(self) -> int:
         return len(self.positions)
@@ -89,6 +103,7 @@ def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
     ``snapshot.objects`` then of each mesh's triangles.
     """
     positions, materials, objects, corner_normals, uvs = [], [], [], [], []
+    kept = []  # indices of the objects whose triangles are in, in order
     for index, obj in enumerate(snapshot.objects):
         mesh = snapshot.meshes.get(obj.mesh)
         if mesh is None or len(mesh.triangles) == 0:
@@ -97,6 +112,7 @@ def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
         positions.append(object_vertices_world(obj, mesh, snapshot)[triangles])
         materials.append(np.asarray(mesh.triangle_materials, dtype=np.int32))
         objects.append(np.full(len(triangles), index, dtype=np.int32))
+        kept.append(index)
         corner_normals.append(_corner_normals_world(obj, mesh, snapshot, triangles))
         uvs.append(np.zeros((len(triangles), 3, 2), np.float32) if mesh.uvs is None else
                    np.asarray(mesh.uvs, np.float32).reshape(len(triangles), 3, 2))
@@ -112,5 +128,25 @@ def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
         flat = np.split(np.repeat(normal[:, None], 3, axis=1), np.cumsum([len(p) for p in positions])[:-1])
         shading = np.concatenate([c if c is not None else f for c, f in zip(corner_normals, flat)])
     materials = np.concatenate(materials)
+    objects = np.concatenate(objects)
     textures = surface_textures(snapshot, tri, materials, np.concatenate(uvs))
-    return SceneTriangles(tri, normal, materials, np.concatenate(objects), shading, textures)
+    visibility, holdout = _ray_visibility(snapshot, kept, objects, materials)
+    return SceneTriangles(tri, normal, materials, objects, shading, textures, visibility, holdout)
+
+
+def _ray_visibility(snapshot: SceneSnapshot, kept: list[int], objects: np.ndarray,
+                    materials: np.ndarray):
+    """(visibility, holdout) per triangle (``SceneTriangles``) from the objects' ray visibility
+    and holdout and the snapshot's Holdout-shader materials; None where nothing is special."""
+    bits = np.full(len(snapshot.objects), RAY_ALL, np.uint8)
+    held = np.zeros(len(snapshot.objects), bool)
+    for index in kept:
+        obj = snapshot.objects[index]
+        bits[index] = int(getattr(obj, "visibility", RAY_ALL)) & RAY_ALL
+        held[index] = bool(getattr(obj, "holdout", False))
+    visibility = None if (bits[kept] == RAY_ALL).all() else bits[objects]
+    holdout = held[objects]
+    shaders = tuple(getattr(snapshot, "holdout_materials", ()))
+    if shaders:
+        holdout |= np.isin(materials, np.asarray(shaders, np.int32))
+    return visibility, (holdout if holdout.any() else None)

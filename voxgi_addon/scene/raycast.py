@@ -18,7 +18,7 @@ import numpy as np
 from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
 from .camera import camera_ray_lengths, camera_rays
 from .geometry import SceneTriangles
-from .snapshot import CameraData
+from .snapshot import RAY_CAMERA, RAY_DIFFUSE, RAY_SHADOW, CameraData
 
 __all__ = [
     "TriangleGrid", "build_grid", "closest_hits", "occluded", "SHADOW_EPSILON", "PrimaryHits",
@@ -168,8 +168,9 @@ def _start_state(grid: TriangleGrid, o, d, t_min, t_max):
     return ray, state, np.ascontiguousarray(cell.T), np.ascontiguousarray(step.T)
 
 
-def _trace_chunk(grid: TriangleGrid, o, d, t_min, t_max, any_hit: bool):
-    """Trace one chunk of rays; returns best t (inf = none), triangle (-1), u, v."""
+def _trace_chunk(grid: TriangleGrid, o, d, t_min, t_max, any_hit: bool, accept=None):
+    """Trace one chunk of rays; returns best t (inf = none), triangle (-1), u, v. accept :
+    (T,) bool triangles the rays may hit (their ray visibility), None = all."""
     n = len(o)
     best_t, best_tri = np.full(n, np.inf), np.full(n, -1, dtype=np.int64)
     best_u, best_v = np.zeros(n), np.zeros(n)
@@ -184,6 +185,8 @@ def _trace_chunk(grid: TriangleGrid, o, d, t_min, t_max, any_hit: bool):
             pair_state = state[:_PAIR_ROWS, slot]
             t, u, v = _intersect(grid.corners[:, tri], pair_state[_O], pair_state[_D])
             good = (t > pair_state[_LO]) & (t < np.minimum(pair_state[_FOUND], pair_state[_HI]))
+            if accept is not None:
+                good &= accept[tri]
             if good.any():
                 slot, tri, t, u, v = slot[good], tri[good], t[good], u[good], v[good]
                 found = state[_FOUND]
@@ -214,8 +217,9 @@ def _trace_chunk(grid: TriangleGrid, o, d, t_min, t_max, any_hit: bool):
     return best_t, best_tri, best_u, best_v
 
 
-def _trace(tris, origins, directions, t_min, t_max, any_hit):
+def _trace(tris, origins, directions, t_min, t_max, any_hit, ray):
     grid = _grid_of(tris)
+    accept = tris.accepted(ray) if hasattr(tris, "accepted") else None
     o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     n = len(o)
@@ -229,12 +233,12 @@ def _trace(tris, origins, directions, t_min, t_max, any_hit):
     for a in range(0, n, _RAY_CHUNK):
         b = min(n, a + _RAY_CHUNK)
         out_t[a:b], out_tri[a:b], out_u[a:b], out_v[a:b] = _trace_chunk(
-            grid, o[a:b], d[a:b], t_min[a:b], t_max[a:b], any_hit
+            grid, o[a:b], d[a:b], t_min[a:b], t_max[a:b], any_hit, accept
         )
     return out_t, out_tri, out_u, out_v
 
 
-def closest_hits(tris, origins, directions, t_min=0.0, t_max=np.inf):
+def closest_hits(tris, origins, directions, t_min=0.0, t_max=np.inf, ray: int = RAY_DIFFUSE):
     """Nearest triangle hit along each ray.
 
     Parameters
@@ -243,6 +247,8 @@ def closest_hits(tris, origins, directions, t_min=0.0, t_max=np.inf):
     origins, directions : (N, 3) float world space; directions need not be unit (t is then in
         units of their length).
     t_min, t_max : scalar or (N,) bounds; hits with ``t_min < t < t_max`` count.
+    ray : the kind of ray (a ``snapshot.RAY_*`` bit): only triangles it sees count
+        (``SceneTriangles.visibility``).
 
     Returns
     -------
@@ -250,17 +256,19 @@ def closest_hits(tris, origins, directions, t_min=0.0, t_max=np.inf):
     tri : (N,) int64 triangle index into ``tris``, -1 for a miss.
     u, v : (N,) float64 barycentrics of the hit (point = v0 + u·e1 + v·e2), 0 for a miss.
     """
-    return _trace(tris, origins, directions, t_min, t_max, any_hit=False)
+    return _trace(tris, origins, directions, t_min, t_max, False, ray)
 
 
-def occluded(tris, origins, directions, max_t, epsilon: float = SHADOW_EPSILON) -> np.ndarray:
-    """(N,) bool: does any triangle cross the ray with ``epsilon < t < max_t - epsilon``?
+def occluded(tris, origins, directions, max_t, epsilon: float = SHADOW_EPSILON,
+             ray: int = RAY_SHADOW) -> np.ndarray:
+    """(N,) bool: does any triangle that ``ray`` rays see (shadow rays: the objects that cast
+    shadows) cross the ray with ``epsilon < t < max_t - epsilon``?
 
     ``directions`` should be unit vectors so that ``epsilon`` is in metres; ``max_t`` is a scalar
     or (N,) (``inf`` for a directional light).
     """
     max_t = np.asarray(max_t, dtype=np.float64) - epsilon
-    t, _, _, _ = _trace(tris, origins, directions, epsilon, max_t, any_hit=True)
+    t, _, _, _ = _trace(tris, origins, directions, epsilon, max_t, True, ray)
     return np.isfinite(t)
 
 
@@ -299,11 +307,17 @@ class PrimaryHits:
 def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | None = None,
                        height: int | None = None, offset=(0.0, 0.0)) -> PrimaryHits:
     """Exact primary visibility of a ``width`` × ``height`` image of ``camera`` (see ``camera_rays``;
-    ``offset`` moves every ray off its pixel centre); rays stop at the far clipping plane."""
+    ``offset`` moves every ray off its pixel centre); rays stop at the far clipping plane.
+    Camera rays see only what Cycles' camera rays see; one that meets a holdout sees nothing
+    (``hit`` False there, as on the background)."""
     width = int(width or camera.resolution[0])
     height = int(height or camera.resolution[1])
     origins, directions = camera_rays(camera, width, height, offset)
-    t, tri, u, v = closest_hits(tris, origins, directions, 0.0, camera_ray_lengths(camera, directions))
+    t, tri, u, v = closest_hits(tris, origins, directions, 0.0, camera_ray_lengths(camera, directions),
+                                RAY_CAMERA)
+    holdout = getattr(tris, "holdout", None)
+    if holdout is not None:
+        tri = np.where((tri >= 0) & np.asarray(holdout)[np.maximum(tri, 0)], -1, tri)
     hit = tri >= 0
     index = np.where(hit, tri, 0)
     position = np.where(hit[:, None], origins + directions * np.where(hit, t, 0.0)[:, None], 0.0)

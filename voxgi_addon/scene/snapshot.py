@@ -20,6 +20,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 OBJECT_KINDS = ("static", "rigid", "skinned")
+# Cycles' ray visibility (Object › Visibility › Ray Visibility): the bits of
+# ``ObjectData.visibility``, one per kind of ray that may see the object.
+RAY_CAMERA, RAY_DIFFUSE, RAY_GLOSSY, RAY_SHADOW = 1, 2, 4, 8
+RAY_ALL = RAY_CAMERA | RAY_DIFFUSE | RAY_GLOSSY | RAY_SHADOW
 LIGHT_TYPES = ("SUN", "POINT", "SPOT", "AREA")
 
 
@@ -130,6 +134,9 @@ class ObjectData:
     world_matrix : (4, 4) float64.
     kind : 'static' (never moves), 'rigid' (animated or constrained transform) or 'skinned'.
     armature : name of the deforming ``ArmatureData`` for skinned objects, else None.
+    visibility : the ``RAY_*`` bits of the rays that see it (Cycles' ray visibility).
+    holdout : a holdout (``Object.holdout_get``): camera rays that meet it see nothing
+        (every pass 0, as Cycles' transparent hole); other rays see its material.
     """
 
     name: str
@@ -137,6 +144,8 @@ class ObjectData:
     world_matrix: np.ndarray
     kind: str = "static"
     armature: str | None = None
+    visibility: int = RAY_ALL
+    holdout: bool = False
 
 
 @dataclass(frozen=True)
@@ -208,7 +217,11 @@ class WorldData:
 
 @dataclass(frozen=True)
 class SceneSnapshot:
-    """Everything the engine reads of a scene at one frame."""
+    """Everything the engine reads of a scene at one frame.
+
+    holdout_materials : indices into ``materials`` of Holdout shaders (black to every ray; a
+    camera ray that meets one sees nothing, as at a holdout object).
+    """
 
     meshes: dict[str, MeshData]
     materials: list[MaterialData]
@@ -220,3 +233,4 @@ class SceneSnapshot:
     frame: int = 1
     warnings: tuple[str, ...] = ()
     textures: tuple[TextureData, ...] = ()
+    holdout_materials: tuple[int, ...] = ()
