@@ -206,10 +206,10 @@ void main()
       vec3 c0 = texelFetch(emitters, ivec2(0, k), 0).xyz;
       vec3 c1 = texelFetch(emitters, ivec2(1, k), 0).xyz;
       vec3 c2 = texelFetch(emitters, ivec2(2, k), 0).xyz;
-      float shape = ltc_triangle(position, n, v, rough, c0, c1, c2);
+      vec3 towards;
+      float shape = ltc_triangle_towards(position, n, v, rough, c0, c1, c2, towards);
       if (shape > 0.0) {
-        /* the lobe's Fresnel toward the triangle's centre relative to F = 1 */
-        vec3 towards = normalize((c0 + c1 + c2) / 3.0 - position);
+        /* the lobe's Fresnel where it meets the triangle relative to F = 1 */
         towards = normalize(towards + max(HORIZON_LIFT - dot(towards, n), 0.0) * n);
         vec3 actual = principled_glossy_reflectance(base, params.x, params.y, rough, n, v, towards);
         vec3 plain = principled_glossy_reflectance(vec3(1.0), 1.0, params.y, rough, n, v, towards);

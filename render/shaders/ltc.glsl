@@ -109,9 +109,9 @@ int ltc_clip(inout vec3 poly[5], int count, vec3 plane)
  * M^-1 x cross M^-1 y = cof(M^-1) (x cross y), cof = [[c, 0, -c d], [0, a - b d, 0],
  * [-b c, 0, a c]], from the unstretched corners (a narrow lobe's M^-1 stretches the polygon
  * until its corners are nearly opposite, where a cross of the stretched corners would cancel). */
-float ltc_edge_integral(vec3 poly[5], int count, vec4 m)
+float ltc_edge_integral(vec3 poly[5], int count, vec4 m, out vec3 mean)
 {
-  float total = 0.0;
+  vec3 total = vec3(0.0);
   for (int i = 0; i < count; i++) {
     vec3 x = poly[i];
     vec3 y = poly[(i + 1 == count) ? 0 : i + 1];
@@ -119,10 +119,12 @@ float ltc_edge_integral(vec3 poly[5], int count, vec4 m)
     vec3 c = vec3(m.z * (g.x - m.w * g.z), (m.x - m.y * m.w) * g.y, m.z * (m.x * g.z - m.y * g.x));
     float s = length(c);
     if (s > 0.0) {
-      total += atan(s, dot(ltc_apply(m, x), ltc_apply(m, y))) * c.z / s;
+      total += atan(s, dot(ltc_apply(m, x), ltc_apply(m, y))) * c / s;
     }
   }
-  return abs(total) / (2.0 * LTC_PI);
+  /* the polygon's mean direction in the cosine's space (ltc.py _clamped_cosine_integral) */
+  mean = (total.z < 0.0 ? -total : total) / (2.0 * LTC_PI);
+  return abs(total.z) / (2.0 * LTC_PI);
 }
 
 /* Rows (t, b, n) of the local frame: t toward the view (ltc.py local_frame). */
@@ -143,8 +145,13 @@ mat3 ltc_frame(vec3 n, vec3 v)
   return transpose(mat3(t, cross(n, t), n));
 }
 
-float ltc_triangle(vec3 p, vec3 n, vec3 v, float roughness, vec3 c0, vec3 c1, vec3 c2)
+/* ltc_triangle, and in `towards` the world unit direction where the lobe meets the triangle:
+ * the clipped polygon's mean direction in the cosine's space carried back by M (ltc.py
+ * ltc_polygon_integral's directions); n where the integral is 0. */
+float ltc_triangle_towards(vec3 p, vec3 n, vec3 v, float roughness, vec3 c0, vec3 c1, vec3 c2,
+                           out vec3 towards)
 {
+  towards = n;
   float cos_view = dot(n, v);
   if (!(cos_view > 0.0)) {
     return 0.0;
@@ -167,7 +174,21 @@ float ltc_triangle(vec3 p, vec3 n, vec3 v, float roughness, vec3 c0, vec3 c1, ve
   if (count == 0) {
     return 0.0;
   }
-  return ltc_edge_integral(poly, count, m) / ltc_hemisphere_norm(m);
+  vec3 mean;
+  float value = ltc_edge_integral(poly, count, m, mean) / ltc_hemisphere_norm(m);
+  /* M = inverse of M^-1 = [[a, 0, b], [0, c, 0], [d, 0, 1]] (columns in GLSL's order) */
+  vec3 local = inverse(mat3(m.x, 0.0, m.w, 0.0, m.z, 0.0, m.y, 0.0, 1.0)) * mean;
+  vec3 world = transpose(to_local) * local;
+  if (value > 0.0 && dot(world, world) > 0.0) {
+    towards = normalize(world);
+  }
+  return value;
+}
+
+float ltc_triangle(vec3 p, vec3 n, vec3 v, float roughness, vec3 c0, vec3 c1, vec3 c2)
+{
+  vec3 towards;
+  return ltc_triangle_towards(p, n, v, roughness, c0, c1, c2, towards);
 }
 
 #ifdef LTC_TEST_KERNEL

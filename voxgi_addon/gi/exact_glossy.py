@@ -274,10 +274,15 @@ def emitters_glossy(lobe: _Lobe, emitters, tris, points, origins, ids, rays: int
 
     The unshadowed integral of triangle t (facing the point) is L_t × the LTC integral of the
     GGX lobe over it (``ltc.ltc_polygon_integral``, fitted with F = 1) × the Fresnel the
-    Principled lobe has toward the triangle's centre relative to F = 1 (the lobe's
-    reflectance there over a white metal's) × a white metal's glossy colour: the LTC shape
-    holds no Fresnel, which a dielectric's lobe at a grazing view is mostly made of (without
-    it: up to 5× off at 75°; with it 2.5% median error against brute force)."""
+    Principled lobe has where the lobe meets the triangle (the clipped triangle's mean
+    direction under the LTC, ``ltc_polygon_integral``'s directions) relative to F = 1 (the
+    lobe's reflectance there over a white metal's) × a white metal's glossy colour: the LTC
+    shape holds no Fresnel, which a dielectric's lobe at a grazing view is mostly made of
+    (without it: up to 5× off at 75°; with it 2.5% median error against brute force). The
+    triangle's centre was the direction before: for a large emitter a few centimetres away
+    (a ceiling panel over the ceiling) that is straight up, 45–65% dark at grazing views
+    (tests/engine/test_exact_glossy.py); a Fresnel that varies across a lobe the triangle
+    fills is still read 16–21% low at 60–80°."""
     from .emitters import _facing
     from .ltc import ltc_polygon_integral
 
@@ -287,10 +292,9 @@ def emitters_glossy(lobe: _Lobe, emitters, tris, points, origins, ids, rays: int
         return out
     p, n, v = points[glossy], lobe.n[glossy], lobe.v[glossy]
     base, metallic, level, rough = (a[glossy] for a in lobe.shading)  # (G, 1, 3), (G, 1) …
-    shape = ltc_polygon_integral(p, n, v, rough[:, 0], emitters.corners)   # (G, T)
+    shape, towards = ltc_polygon_integral(p, n, v, rough[:, 0], emitters.corners,
+                                          directions=True)                 # (G, T), (G, T, 3)
     shape = np.where(_facing(emitters, p), shape, 0.0)
-    towards = emitters.corners.mean(axis=1)[None] - p[:, None]             # (G, T, 3)
-    towards /= np.maximum(np.linalg.norm(towards, axis=-1, keepdims=True), 1e-30)
     lift = np.maximum(HORIZON_LIFT - np.einsum("gtc,gc->gt", towards, n), 0.0)
     towards = towards + lift[..., None] * n[:, None]
     towards /= np.linalg.norm(towards, axis=-1, keepdims=True)

@@ -196,9 +196,11 @@ def _clip(points: np.ndarray, h: np.ndarray):
     return np.take_along_axis(points, index[..., None], axis=-2), valid.any(axis=-1)
 
 
-def _clamped_cosine_integral(points: np.ndarray) -> np.ndarray:
+def _clamped_cosine_integral(points: np.ndarray, vector: bool = False):
     """(…) ∫ max(ω_z, 0)/π over the polygons (…, K, 3) seen from the origin, either
-    orientation, those crossing z = 0 clipped: Lambert's |Σ_edges θ_k γ_k·z| / 2π."""
+    orientation, those crossing z = 0 clipped: Lambert's |Σ_edges θ_k γ_k·z| / 2π. vector:
+    also (…, 3) ±Σ_edges θ_k γ_k / 2π = ∫ ω dω / 2π over the clipped polygon (Stokes), signed
+    so that its z ≥ 0: the polygon's mean direction, 0 where nothing is above z = 0."""
     points, any_above = _clip(points, points[..., 2])
     length = np.linalg.norm(points, axis=-1, keepdims=True)
     a = np.divide(points, length, out=np.zeros_like(points), where=length > 0)
@@ -207,16 +209,28 @@ def _clamped_cosine_integral(points: np.ndarray) -> np.ndarray:
     sin = np.linalg.norm(cross, axis=-1)
     angle = np.arctan2(sin, np.sum(a * b, axis=-1))
     gz = np.divide(cross[..., 2], sin, out=np.zeros_like(sin), where=sin > 0)
-    total = np.abs((angle * gz).sum(axis=-1)) / (2.0 * math.pi)
-    return np.where(any_above, total, 0.0)
+    signed = (angle * gz).sum(axis=-1) / (2.0 * math.pi)
+    total = np.where(any_above, np.abs(signed), 0.0)
+    if not vector:
+        return total
+    gamma = np.divide(cross, sin[..., None], out=np.zeros_like(cross), where=sin[..., None] > 0)
+    mean = (angle[..., None] * gamma).sum(axis=-2) / (2.0 * math.pi)
+    mean = np.where((any_above & (signed < 0))[..., None], -mean, mean)
+    return total, np.where(any_above[..., None], mean, 0.0)
 
 
-def ltc_polygon_integral(p, n, v, roughness, corners, chunk: int = 64) -> np.ndarray:
+def ltc_polygon_integral(p, n, v, roughness, corners, chunk: int = 64, directions: bool = False):
     """(N, T) ∫ ρ over each triangle: the normalised GGX lobe of the points p (N, 3) with unit
     normals n (N, 3), unit directions toward the viewer v (N, 3) and Principled ``roughness``
     (N,) or scalar, over triangles ``corners`` (T, 3, 3) (either orientation; clipped to the
     point's horizon). 0 where the view is at or below the horizon. Sums over all triangles of
-    a closed surface around p give 1."""
+    a closed surface around p give 1.
+
+    directions: also (N, T, 3) world unit directions where the lobe meets each triangle: the
+    clipped polygon's mean direction in the cosine's space (``_clamped_cosine_integral``)
+    carried back by M — for a small triangle its centre, for a large or near one the part of
+    it the lobe reaches (what a Fresnel that varies over the lobe must be evaluated toward); 0
+    where the integral is 0."""
     p = np.atleast_2d(np.asarray(p, np.float64))
     n = np.atleast_2d(np.asarray(n, np.float64))
     v = np.atleast_2d(np.asarray(v, np.float64))
@@ -230,11 +244,23 @@ def ltc_polygon_integral(p, n, v, roughness, corners, chunk: int = 64) -> np.nda
     minv = _matrix(_interp(load_table()["minv"], rough, view_x(n, v)))   # (N, 3, 3)
     norm = hemisphere_norm(minv)                                # (N,)
     out = np.zeros((count, len(corners)))
+    towards = np.zeros((count, len(corners), 3)) if directions else None
+    back = np.linalg.inv(minv) if directions else None       # M
     for start in range(0, len(corners), chunk):
         rel = corners[None, start:start + chunk] - p[:, None, None]       # (N, t, 3, 3)
         local = np.einsum("nij,ntkj->ntki", frame, rel)
         # the surface's horizon first (ρ is 0 below it), then the transform
         clipped, _ = _clip(local, local[..., 2])                # (N, t, 6, 3)
         transformed = np.einsum("nij,ntkj->ntki", minv, clipped)
-        out[:, start:start + chunk] = _clamped_cosine_integral(transformed)
-    return np.where((cos_view > 0.0)[:, None], out / norm[:, None], 0.0)
+        if not directions:
+            out[:, start:start + chunk] = _clamped_cosine_integral(transformed)
+            continue
+        out[:, start:start + chunk], mean = _clamped_cosine_integral(transformed, vector=True)
+        world = np.einsum("nji,ntj->nti", frame, np.einsum("nij,ntj->nti", back, mean))
+        length = np.linalg.norm(world, axis=-1, keepdims=True)
+        towards[:, start:start + chunk] = np.divide(world, length, out=np.zeros_like(world),
+                                                    where=length > 0)
+    out = np.where((cos_view > 0.0)[:, None], out / norm[:, None], 0.0)
+    if directions:
+        return out, np.where((out > 0.0)[..., None], towards, 0.0)
+    return out
