@@ -110,7 +110,9 @@ class LiveGI:
         self.pending: UpdatePlan | None = None  # the plan of the running job
         self.view_camera = None    # CameraData of the last drawn view (anchors the cascades)
         self.view_status = ""      # the 3D view's status line (render/viewport.py status_line)
-        self.view_shown = ""       # what it drew last: "Coarse", "Traced", "Cached", "Previous"
+        self.view_shown = ""       # what it drew last: "Coarse", "Refining", "Converged",
+        #                            "Cached", "Previous" (render/viewport.py draw_view)
+        self.view_samples = (0, 0)  # (samples done, target) of the view's accumulation
         self.error = ""
         self.stats = LiveStats()
         self.progress = jobs.Progress()

@@ -30,11 +30,19 @@ class VoxGIViewportSettings(bpy.types.PropertyGroup):
                     "(scaled up to fill it); lower is faster",
         subtype="FACTOR", default=0.25, min=0.05, max=1.0, update=tag_3d_views,
     )
+    samples: bpy.props.IntProperty(
+        name="Viewport Samples",
+        description="Samples the Rendered view accumulates before it stops refining; each "
+                    "redraw traces a small slice of one sample (a tile), so the view never "
+                    "freezes. The samples share F12's rays (GI Rays, Light Samples) and each "
+                    "has its own sub-pixel offset, so the converged view is F12's image",
+        default=16, min=1, max=4096, update=tag_3d_views,
+    )
     coarse_first: bpy.props.BoolProperty(
         name="Coarse First Image",
-        description="After a change of the view, the scene or a setting, first trace a quarter "
-                    "of the pixels (half the width and height) and the full image on the next "
-                    "redraw; while orbiting every redraw costs about a quarter",
+        description="After a change of the view, the scene or a setting, first trace the whole "
+                    "view at low resolution (one slice) so it shows at once; off: the previous "
+                    "image stays under the new tiles until they cover it",
         default=True, update=tag_3d_views,
     )
     viewport_pass: bpy.props.EnumProperty(

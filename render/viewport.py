@@ -31,7 +31,6 @@ at exit").
 """
 from __future__ import annotations
 
-import dataclasses
 import time
 import weakref
 
@@ -39,11 +38,12 @@ import gpu
 import numpy as np
 from gpu_extras.batch import batch_for_shader
 
-from ..blender.settings import cone_settings, gi_stride, trace_options
+from ..blender.settings import cone_settings, gi_stride, pixel_filter_width
 from ..blender.viewport_session import live_gi
 from ..blender.viewport_settings import VIEWPORT_PASSES
 from ..voxgi_addon.scene.view_camera import camera_from_view
 from .gpu_volume import GPUVolume
+from .progressive import SLICE_BUDGET, ProgressiveImage, base_options, tracer
 
 _renderers: "weakref.WeakSet[ViewportRenderer]" = weakref.WeakSet()
 
@@ -58,101 +58,101 @@ def _matrix(m) -> np.ndarray:
 
 
 def _options(settings, width: int, height: int, full=None) -> dict:
-    """The tracer's options for a ``width`` × ``height`` viewport image: F12's, but
-    point-sampled (one camera pass, not F12's anti-aliased sub-pixel passes, which cost 2.3x;
-    progressive viewport accumulation, issue 19, is where they belong). full : the full
-    image's size when this is its coarse first image: the GI stride is the full image's, so
-    the coarse image traces a quarter of the gather points too (GI Resolution Auto would
-    otherwise trace as many as for the full image)."""
-    options = {**trace_options(settings, width, height), "filter_width": 0.0}
+    """The tracer's options for a one-shot ``width`` × ``height`` viewport image (``trace``):
+    F12's, point-sampled. full : the full image's size when this is a reduced image of it: the
+    GI stride is the full image's."""
+    options = base_options(settings, width, height)
     if full is not None:
         options["gi_stride"] = gi_stride(settings, *full)
     return options
 
 
-def coarse_size(width: int, height: int) -> tuple[int, int]:
-    """The coarse first image's size: half the width and height, a quarter of the pixels."""
-    return max(1, (width + 1) // 2), max(1, (height + 1) // 2)
-
-
 class ViewportRenderer:
-    """The traced image of one 3D view and the GPU objects behind it."""
+    """The image of one 3D view, its progressive accumulation and the GPU objects behind it."""
 
-    def __init__(self):
+    def __init__(self, budget: float = SLICE_BUDGET):
         self.volume = GPUVolume()
-        self.texture = None        # RGBA32F, the shown pass; kept until a newer trace replaces it
-        self.trace_key_shown = None  # what ``texture`` shows (``trace_key``)
+        self.texture = None        # RGBA32F, the shown estimate; kept until a newer one
+        self.progressive = ProgressiveImage(budget)
         self.view_key = None       # the last view seen
         self.timings: dict[str, float] = {}
-        self.traces = 0            # how many times this view traced (tests, panel)
-        self.shown = ""            # what the last draw showed: "Coarse", "Traced", "Cached", ""
-        self.coarse = False        # the texture is a coarse (quarter-pixel) image
-        self.trace_seconds = 0.0   # how long the shown texture took to trace
+        self.traces = 0            # slices (tracer calls) this view traced (tests, panel)
+        self.shown = ""            # what the last draw showed: "Coarse", "Refining",
+        #                            "Converged" (traced this draw), "Cached", "Previous", ""
         self.status = ""           # the status line (header, sidebar)
         self.error = ""
         _renderers.add(self)
 
     def free(self) -> None:
-        self.texture = self.trace_key_shown = None
+        self.texture = None
+        self.progressive = ProgressiveImage(self.progressive.sizer.budget)
         self.volume = GPUVolume()
 
     # ------------------------------------------------------------------ tracing
 
     @staticmethod
     def trace_key(live, camera_key, scene, pass_name, options) -> tuple:
-        """Everything the traced image depends on: the applied results, the view (view and
-        projection matrices, traced size), the pass, the cones and every tracer option."""
+        """Everything the image depends on: the applied results, the view (view and
+        projection matrices, traced size), the pass, the cones, every tracer option and the
+        sample target."""
         s = scene.voxgi
         return (live.generation, camera_key, pass_name, cone_settings(s), s.tracer, s.quality,
-                tuple(sorted(options.items())))
+                tuple(sorted(options.items())), scene.voxgi_viewport.samples,
+                pixel_filter_width(scene))
 
-    def shows(self, live, scene, camera_key, pass_name: str, full=None) -> bool:
-        """Whether the texture is the image of ``camera_key`` (matrices, width, height) for
-        the current results and settings: a redraw then only draws it."""
-        if self.texture is None or live.staged is None:
-            return False
-        width, height = camera_key[2], camera_key[3]
-        options = _options(scene.voxgi, width, height, full)
-        return self.trace_key(live, camera_key, scene, pass_name, options) == self.trace_key_shown
-
-    def trace(self, live, scene, camera, camera_key, pass_name: str, full=None) -> bool:
-        """Trace ``live``'s applied results seen by ``camera`` unless the texture already
-        shows them; True when it traced. full : the full image's (width, height) when this
-        trace is its coarse first image (``_options``)."""
+    def trace(self, live, scene, camera, key, pass_name: str) -> bool:
+        """One-shot: trace ``live``'s applied results seen by ``camera`` whole (its
+        resolution) into the texture, outside the progressive accumulation; True when it
+        traced."""
         if live.staged is None or live.snapshot is None:
             return False
         settings = scene.voxgi
         width, height = camera.resolution
-        options = _options(settings, width, height, full)
-        key = self.trace_key(live, camera_key, scene, pass_name, options)
-        if key == self.trace_key_shown and self.texture is not None:
-            return False
-        from .gpu_preview import render_passes_gpu
+        if settings.quality != "ACCURATE":
+            self.volume.update(live.staged.state.octree, cone_settings(settings),
+                               atlas=live.atlas)
+        passes = tracer(live, self.volume, settings)(camera, width, height,
+                                                      _options(settings, width, height))
+        self.upload(np.asarray(passes[pass_name], np.float32))
+        self.traces += 1
+        return True
 
-        cones = cone_settings(settings)
-        t0 = time.perf_counter()
-        if settings.quality != "ACCURATE":  # Accurate traces the triangles, not the octree
-            self.volume.update(live.staged.state.octree, cones, atlas=live.atlas)
-        upload = time.perf_counter() - t0
-        snapshot = dataclasses.replace(live.snapshot, camera=camera)
-        passes, timings = render_passes_gpu(snapshot, live.staged.state, width, height, cones,
-                                            volume=self.volume, **options)
-        image = np.asarray(passes[pass_name], np.float32)
-        rgba = np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=2)
+    def upload(self, image) -> None:
+        """Make ``image`` ((H, W, 3), row 0 on top) the shown texture."""
+        height, width = image.shape[:2]
+        rgba = np.concatenate([image, np.ones((height, width, 1), np.float32)], axis=2)
         flat = np.ascontiguousarray(np.flipud(rgba)).ravel()  # GPU rows go bottom to top
         self.texture = gpu.types.GPUTexture((width, height), format="RGBA32F",
                                             data=gpu.types.Buffer("FLOAT", flat.size, flat))
-        self.trace_key_shown = key
+
+    def refine(self, live, scene, view, window) -> str:
+        """One slice of the current key (``ProgressiveImage.step``); what it traced: "Coarse",
+        "Refining", "Converged", or "" (nothing: converged already, or it failed)."""
+        settings = scene.voxgi
+        progressive = self.progressive
+        if progressive.converged:
+            return ""
+        t0 = time.perf_counter()
+        if settings.quality != "ACCURATE":  # Accurate traces the triangles, not the octree
+            self.volume.update(live.staged.state.octree, cone_settings(settings),
+                               atlas=live.atlas)
+        upload = time.perf_counter() - t0
+        done = progressive.step(tracer(live, self.volume, settings), view, window, settings,
+                                pixel_filter_width(scene))
+        if done is None:
+            return ""
+        self.upload(progressive.image)
         self.traces += 1
-        self.coarse = full is not None
-        self.trace_seconds = time.perf_counter() - t0
-        self.timings = {"atlas upload": upload, **timings, "trace": self.trace_seconds}
-        return True
+        self.timings = {"atlas upload": upload, f"slice ({done.kind})": done.seconds,
+                        "view_draw work": time.perf_counter() - t0}
+        if done.kind == "coarse":
+            return "Coarse"
+        return "Converged" if progressive.converged else "Refining"
 
     # ------------------------------------------------------------------ drawing
 
     def draw(self) -> bool:
-        """Draw the last traced texture over the whole viewport (NDC quad); False if none."""
+        """Draw the shown texture over the whole viewport (NDC quad); False if none."""
         if self.texture is None:
             return False
         from mathutils import Matrix
@@ -176,7 +176,8 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
     """What ``view_draw`` does (module doc, steps 1–4) for a region of that size; tests call
     it with a camera's matrices into a ``GPUOffScreen``. bind / unbind : called around the
     texture draw (the engine's display-space shader); redraw : asks for another draw (the
-    engine's ``tag_redraw``) after a coarse first image. Returns whether anything was drawn."""
+    engine's ``tag_redraw``) while the image has not converged. Returns whether anything was
+    drawn."""
     view_settings = scene.voxgi_viewport
     width, height = viewport_size(region_width, region_height, view_settings.resolution_fraction)
     view, window = _matrix(view_matrix), _matrix(window_matrix)
@@ -187,38 +188,38 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
         renderer.view_key = camera_key
         live.view_changed(camera_from_view(view, window, width, height), scene, depsgraph)
     traced = ""
-    blend = gpu.state.blend_get()
-    # The trace rasterizes its G-buffer: with the caller's blending on (view_draw's state)
-    # its triangles blended into the cleared targets and the image was 3% off F12's.
-    gpu.state.blend_set("NONE")
-    if not renderer.shows(live, scene, camera_key, pass_name):
-        small = coarse_size(width, height)
-        small_key = (camera_key[0], camera_key[1], *small)
-        coarse = (view_settings.coarse_first and small != (width, height)
-                  and not (renderer.coarse
-                           and renderer.shows(live, scene, small_key, pass_name, (width, height))))
-        size, key = (small, small_key) if coarse else ((width, height), camera_key)
+    progressive = renderer.progressive
+    if live.staged is not None and live.snapshot is not None:
+        key = renderer.trace_key(live, camera_key, scene, pass_name,
+                                 base_options(scene.voxgi, width, height))
+        if key != progressive.key:
+            progressive.restart(key, pass_name, width, height, view_settings.samples,
+                                view_settings.coarse_first)
+        blend = gpu.state.blend_get()
+        # The trace rasterizes its G-buffer: with the caller's blending on (view_draw's state)
+        # its triangles blended into the cleared targets and the image was 3% off F12's.
+        gpu.state.blend_set("NONE")
         try:
-            if renderer.trace(live, scene, camera_from_view(view, window, *size), key, pass_name,
-                              full=(width, height) if coarse else None):
-                traced = "Coarse" if coarse else "Traced"
-                if coarse and redraw is not None:
-                    redraw()  # the full image on the next draw
+            traced = renderer.refine(live, scene, view, window)
             renderer.error = ""
         except Exception as error:  # noqa: BLE001 - keep drawing the last image, say why
             renderer.error = f"viewport trace failed: {type(error).__name__}: {error}"
             live.error = renderer.error
-    gpu.state.blend_set(blend)
+            progressive.converged = True  # no retry loop on every redraw: a change retries
+        gpu.state.blend_set(blend)
+        if traced and not progressive.converged and redraw is not None:
+            redraw()  # the next slice on the next draw
     if traced:
         renderer.shown = traced
     elif renderer.texture is None:
         renderer.shown = ""
-    elif renderer.shows(live, scene, camera_key, pass_name):
+    elif progressive.converged and progressive.key is not None and not renderer.error:
         renderer.shown = "Cached"
-    else:  # a failed trace, or a coarse image of this view kept: the last image stays
-        renderer.shown = "Coarse" if renderer.coarse else "Previous"
+    else:  # a failed trace, or nothing applied yet: the last image stays
+        renderer.shown = "Previous"
     renderer.status = status_line(renderer, scene, live)
     live.view_status, live.view_shown = renderer.status, renderer.shown
+    live.view_samples = (progressive.samples_done, progressive.target)
     if bind is not None:
         bind()
     try:
@@ -232,28 +233,26 @@ QUALITY_NAMES = {"ACCURATE": "Accurate", "FAST": "Fast"}
 
 
 def status_line(renderer: ViewportRenderer, scene, live) -> str:
-    """The view's status: 'VoxGI | Sample 1/1 | Traced in 0.74 s | Accurate', '… | Cached
-    (converged) …', 'VoxGI | Coarse (¼ of the pixels) in 0.20 s | … | refining'; a running
-    job or an error is added."""
+    """The view's status, as Cycles': 'VoxGI | Sample 3/16 | 1.24 s | Tile 5/12 | Accurate'
+    while refining ('Coarse image' first), 'VoxGI | Sample 16/16 | Converged in 6.10 s |
+    Accurate' at the end; a running job or an error is added."""
     quality = QUALITY_NAMES.get(scene.voxgi.quality, scene.voxgi.quality.title())
     if renderer.error:
         return f"VoxGI | {renderer.error}"
-    seconds = f"{renderer.trace_seconds:.2f} s"
+    progressive = renderer.progressive
     shown = renderer.shown
+    samples = f"Sample {progressive.samples_done}/{progressive.target}"
     if shown == "":
         line = "VoxGI | Waiting for the first GI update"
-    elif shown == "Coarse":
-        line = f"VoxGI | Sample 0/1 | Coarse (¼ of the pixels) in {seconds} | {quality} | refining"
-    elif shown == "Traced":
-        line = f"VoxGI | Sample 1/1 | Traced in {seconds} | {quality}"
-    elif shown == "Cached":
-        line = f"VoxGI | Sample 1/1 | Cached, traced in {seconds} | {quality}"
-    else:
+    elif shown == "Previous":
         line = f"VoxGI | Previous image | {quality}"
+    elif progressive.converged:
+        line = f"VoxGI | {samples} | Converged in {progressive.elapsed:.2f} s | {quality}"
+    else:
+        line = (f"VoxGI | {samples} | {progressive.elapsed:.2f} s | {progressive.stage()} | "
+                f"{quality}")
     if live.running is not None:
         line += " | Updating GI…"
-    elif shown == "Cached":
-        line = line.replace("Cached,", "Cached (converged),")
     return line
 
 

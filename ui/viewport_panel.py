@@ -12,7 +12,7 @@ from ..blender import jobs
 from ..blender.viewport_session import peek_live_gi
 
 LEVEL_ICONS = {"ERROR": "CANCEL", "WARNING": "ERROR", "INFO": "INFO"}
-VIEWPORT_SETTINGS = ("resolution_fraction", "coarse_first", "viewport_pass")
+VIEWPORT_SETTINGS = ("resolution_fraction", "samples", "coarse_first", "viewport_pass")
 
 
 def split_column(layout):
@@ -62,17 +62,21 @@ def draw_job(layout, scene) -> None:
 
 
 def view_state_line(live) -> str:
-    """What the Rendered view shows, for the sidebar: converged (cached), refining (a coarse
-    first image) or updating; "" before the first draw."""
+    """What the Rendered view shows, for the sidebar: converged (all its samples), refining
+    (sample N of M, a coarse first image before) or updating; "" before the first draw."""
     shown = live.view_shown
     if not shown:
         return ""
     if live.running is not None:
         return "Updating: the view shows the previous image"
-    return {"Cached": "Converged: the view shows the cached image",
-            "Traced": "Converged: the view shows a new image",
-            "Coarse": "Refining: the view shows a coarse first image",
-            }.get(shown, "The view shows the previous image")
+    done, target = getattr(live, "view_samples", (0, 0))
+    if shown in ("Cached", "Converged"):
+        return f"Converged: {target} of {target} samples"
+    if shown == "Coarse":
+        return "Refining: a coarse first image"
+    if shown == "Refining":
+        return f"Refining: sample {min(done + 1, target)} of {target}"
+    return "The view shows the previous image"
 
 
 def draw_live_stats(layout, scene) -> None:

@@ -45,10 +45,23 @@ def cornell(camera_type="PERSP"):
     scene.cycles.filter_width = 0.01
     # one full trace per new view: the coarse first image has its own tests
     scene.voxgi_viewport.coarse_first = False
+    scene.voxgi_viewport.samples = 1
     if camera_type == "ORTHO":
         scene.camera.data.type = "ORTHO"
         scene.camera.data.ortho_scale = 2.6
     return scene
+
+
+def one_shot(renderer=None):
+    """A renderer whose image is one sample traced in one slice (the whole image), as every
+    draw traced before progressive accumulation: the tests of keys and kept images use it
+    (test_viewport_progressive.py tests the slices)."""
+    from voxgi.render.viewport import ViewportRenderer
+
+    renderer = renderer or ViewportRenderer()
+    renderer.progressive.fixed_pixels = 1 << 30
+    bpy.context.scene.voxgi_viewport.samples = 1
+    return renderer
 
 
 def camera_matrices(scene, depsgraph):
@@ -90,7 +103,6 @@ def f12_combined(scene, tmp_path):
 @pytest.mark.parametrize("camera_type", ["PERSP", "ORTHO"])
 def test_viewport_path_with_the_camera_view_equals_f12(voxgi, tmp_path, camera_type):
     from voxgi.blender.viewport_session import live_gi
-    from voxgi.render.viewport import ViewportRenderer
 
     scene = cornell(camera_type)
     scene.voxgi_viewport.resolution_fraction = 1.0
@@ -99,7 +111,7 @@ def test_viewport_path_with_the_camera_view_equals_f12(voxgi, tmp_path, camera_t
     live = live_gi(scene.name_full)
     plan = live.update(scene, depsgraph)  # what view_update does first: everything
     assert "voxelize" in plan.stages and live.staged is not None and live.error == ""
-    renderer = ViewportRenderer()
+    renderer = one_shot()
     view, window = camera_matrices(scene, depsgraph)
     drawn, image = offscreen_view(renderer, scene, depsgraph, view, window)
     assert drawn and renderer.traces == 1
@@ -128,7 +140,6 @@ def test_viewport_keeps_the_last_image_while_newer_work_runs(voxgi, interactive)
     """Interactively, a change only submits a job: until it is applied, the view draws the
     last traced image (never blank or grey); then it traces the new results."""
     from voxgi.blender.viewport_session import live_gi
-    from voxgi.render.viewport import ViewportRenderer
     from voxgi.voxgi_addon.scene.changes import UpdateRecord, plan_updates
 
     jobs = interactive
@@ -140,7 +151,7 @@ def test_viewport_keeps_the_last_image_while_newer_work_runs(voxgi, interactive)
     jobs.synchronous = True
     live.update(scene, depsgraph)
     jobs.synchronous = False
-    renderer = ViewportRenderer()
+    renderer = one_shot()
     view, window = camera_matrices(scene, depsgraph)
     _, first = offscreen_view(renderer, scene, depsgraph, view, window)
     generation = live.generation
@@ -284,6 +295,10 @@ class Dispatches:
         count, self.count = self.count, 0
         return count
 
+    def take_groups(self) -> int:
+        groups, self.groups = self.groups, 0
+        return groups
+
 
 def turned(view, degrees):
     """The view matrix orbited by ``degrees`` about the world's z axis."""
@@ -297,7 +312,6 @@ def test_an_unchanged_redraw_traces_nothing_and_any_change_traces_again(voxgi, m
     dispatches no compute work and draws the same pixels; a view, projection, region size,
     scene or tracer setting change traces again."""
     from voxgi.blender.viewport_session import live_gi
-    from voxgi.render.viewport import ViewportRenderer
     from voxgi.voxgi_addon.scene.changes import UpdateRecord
 
     scene = cornell()
@@ -306,18 +320,18 @@ def test_an_unchanged_redraw_traces_nothing_and_any_change_traces_again(voxgi, m
     depsgraph = bpy.context.evaluated_depsgraph_get()
     live = live_gi(scene.name_full)
     live.update(scene, depsgraph)
-    renderer = ViewportRenderer()
+    renderer = one_shot()
     view, window = camera_matrices(scene, depsgraph)
     dispatches = Dispatches(monkeypatch)
 
     drawn, first = offscreen_view(renderer, scene, depsgraph, view, window)
     assert drawn and renderer.traces == 1 and dispatches.take() > 0
-    assert renderer.shown == "Traced"
+    assert renderer.shown == "Converged"
     for _ in range(2):
         drawn, again = offscreen_view(renderer, scene, depsgraph, view, window)
         assert drawn and dispatches.take() == 0 and renderer.traces == 1
         assert np.array_equal(again, first) and renderer.shown == "Cached"
-    assert "Cached (converged)" in renderer.status and live.view_shown == "Cached"
+    assert "Sample 1/1 | Converged in" in renderer.status and live.view_shown == "Cached"
 
     # the view orbits by 2°: traced again, a different image
     view2 = turned(view, 2.0)
@@ -375,10 +389,11 @@ def engine_view(engine, scene, depsgraph, view, window, width=WIDTH, height=HEIG
 
 
 def test_a_changed_view_shows_a_coarse_image_first_then_the_full_one(voxgi, monkeypatch, tmp_path):
-    """With Coarse First Image (the default) the first ``view_draw`` after a change traces a
-    quarter of the pixels, draws them (never a blank view) and asks for a redraw; the next
-    traces the full image; the one after only draws it. The header's status line
-    (``update_stats``) and the sidebar say which."""
+    """With Coarse First Image (the default) the first ``view_draw`` after a change traces the
+    whole view at low resolution (here a quarter of the pixels: one slice may hold the whole
+    image), draws it (never a blank view) and asks for a redraw; the next traces the full
+    image; the one after only draws it. The header's status line (``update_stats``) and the
+    sidebar say which."""
     from voxgi.blender.viewport_session import live_gi
     from voxgi.ui.viewport_panel import view_state_line
 
@@ -391,22 +406,23 @@ def test_a_changed_view_shows_a_coarse_image_first_then_the_full_one(voxgi, monk
     live.update(scene, depsgraph)
     view, window = camera_matrices(scene, depsgraph)
     engine = StandInEngine()
+    renderer = engine.voxgi_viewport = one_shot()
     dispatches = Dispatches(monkeypatch)
 
     def filled(image):  # the share of pixels that are not the grey clear colour
         return float((np.abs(image[..., :3] - 0.5).sum(-1) > 1e-6).mean())
 
     coarse = engine_view(engine, scene, depsgraph, view, window)
-    renderer = engine.voxgi_viewport
-    assert (renderer.texture.width, renderer.texture.height) == (WIDTH // 2, HEIGHT // 2)
+    assert renderer.progressive.last.size == (WIDTH // 2, HEIGHT // 2)
     assert dispatches.take() > 0 and engine.redraws == 1 and filled(coarse) > 0.99
-    assert engine.stats[-1].startswith("VoxGI | Sample 0/1 | Coarse (¼ of the pixels)")
-    assert view_state_line(live).startswith("Refining")
+    assert engine.stats[-1].startswith("VoxGI | Sample 0/1 | ")
+    assert engine.stats[-1].endswith("| Coarse image | Accurate")
+    assert view_state_line(live) == "Refining: a coarse first image"
 
     full = engine_view(engine, scene, depsgraph, view, window)
-    assert (renderer.texture.width, renderer.texture.height) == (WIDTH, HEIGHT)
+    assert renderer.progressive.last.size == (WIDTH, HEIGHT)
     assert dispatches.take() > 0 and engine.redraws == 1 and renderer.traces == 2
-    assert engine.stats[-1].startswith("VoxGI | Sample 1/1 | Traced in ")
+    assert engine.stats[-1].startswith("VoxGI | Sample 1/1 | Converged in ")
     assert engine.stats[-1].endswith("| Accurate")
     # the coarse image is the full one at half the resolution: close, not equal
     assert not np.array_equal(coarse, full) and relative_l1(coarse[..., :3], full[..., :3]) < 0.25
@@ -417,20 +433,22 @@ def test_a_changed_view_shows_a_coarse_image_first_then_the_full_one(voxgi, monk
 
     cached = engine_view(engine, scene, depsgraph, view, window)
     assert dispatches.take() == 0 and engine.redraws == 1 and np.array_equal(cached, full)
-    assert engine.stats[-1].startswith("VoxGI | Sample 1/1 | Cached (converged), traced in ")
-    assert view_state_line(live).startswith("Converged")
+    assert engine.stats[-1].startswith("VoxGI | Sample 1/1 | Converged in ")
+    assert view_state_line(live) == "Converged: 1 of 1 samples"
 
     # a camera move: a coarse, non-empty image on the very next call, then the full one
     moved = engine_view(engine, scene, depsgraph, turned(view, 2.0), window)
-    assert renderer.texture.width == WIDTH // 2 and engine.redraws == 2 and filled(moved) > 0.99
-    assert dispatches.take() > 0 and renderer.shown == "Coarse"
+    assert renderer.progressive.last.size == (WIDTH // 2, HEIGHT // 2) and engine.redraws == 2
+    assert dispatches.take() > 0 and renderer.shown == "Coarse" and filled(moved) > 0.99
     engine_view(engine, scene, depsgraph, turned(view, 2.0), window)
-    assert renderer.texture.width == WIDTH and renderer.shown == "Traced" and engine.redraws == 2
+    assert renderer.progressive.last.size == (WIDTH, HEIGHT) and renderer.shown == "Converged"
+    assert engine.redraws == 2
 
 
 def test_the_coarse_first_image_dispatches_about_a_quarter_of_the_work(voxgi, monkeypatch):
-    """Half the width and height, and the full image's GI stride (GI Resolution Auto would
-    pick a finer stride for the smaller image and gather as many points as the full one)."""
+    """When one slice may hold the whole image, the coarse image is half its width and height,
+    traced at the full image's GI stride (GI Resolution Auto would pick a finer stride for the
+    smaller image and gather as many points as the full one)."""
     from voxgi.blender.viewport_session import live_gi
 
     scene = cornell()
@@ -441,13 +459,13 @@ def test_the_coarse_first_image_dispatches_about_a_quarter_of_the_work(voxgi, mo
     live_gi(scene.name_full).update(scene, depsgraph)
     view, window = camera_matrices(scene, depsgraph)
     engine = StandInEngine()
+    engine.voxgi_viewport = one_shot()
     dispatches = Dispatches(monkeypatch)
     size = (4 * WIDTH, 4 * HEIGHT)  # 256 × 192: GI Resolution Auto traces every 2nd pixel
     engine_view(engine, scene, depsgraph, view, window, *size)
-    coarse = dispatches.groups
-    dispatches.groups = 0
+    coarse = dispatches.take_groups()
     engine_view(engine, scene, depsgraph, view, window, *size)
-    full = dispatches.groups
-    assert engine.voxgi_viewport.shown == "Traced" and engine.redraws == 1
+    full = dispatches.take_groups()
+    assert engine.voxgi_viewport.shown == "Converged" and engine.redraws == 1
     print(f"work groups: coarse {coarse}, full {full} ({coarse / full:.2f})")
     assert 0.15 * full < coarse < 0.35 * full

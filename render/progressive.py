@@ -1,0 +1,204 @@
+"""Time-sliced, progressive drawing of the viewport's image: one bounded slice per
+``view_draw`` (``viewport.py``).
+
+An image of ``target`` samples (*Viewport Samples*) is traced in slices, each one call of the
+one-shot GPU tracer (``gpu_preview.render_passes_gpu``, F12's kernels) over a small image:
+
+1. **coarse**: the whole view at low resolution (about a slice's pixels), drawn at once so a
+   changed view, scene or setting is never blank (with *Coarse First Image*; without it the
+   previous image stays under the tiles until they cover it);
+2. **tiles**: sample k of the full image, tile by tile: a tile is a rectangle of the image
+   traced through its own off-axis camera (``preview.progressive.tile_camera``) with sample k's
+   sub-pixel offset, seed and share of the rays (``sample_settings``), and added to the
+   per-pixel sums (``Accumulation``); the tile grid moves from sample to sample;
+3. **converged** after ``target`` samples: the mean gets the pixel filter's tails over the
+   neighbours as F12's image does; nothing more is traced until the key changes.
+
+The slice's pixels come from measured slice times (``SliceSizer``: a fixed cost per slice
+plus a cost per pixel) so that one slice stays near ``SLICE_BUDGET``. The work one slice
+dispatches is one tracer call over at most ``slice_pixels`` pixels (tests count the
+dispatched work groups).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import numpy as np
+
+from ..blender.settings import cone_settings, trace_options
+from ..voxgi_addon.preview.progressive import (
+    Accumulation,
+    SliceSizer,
+    sample_offset,
+    sample_settings,
+    tile_camera,
+    tile_grid,
+    tile_shape,
+)
+from ..voxgi_addon.scene.view_camera import camera_from_view
+from .gpu_shaders import LOCAL_SIZE
+
+SLICE_BUDGET = 0.030  # seconds one view_draw's slice aims at (issue 19)
+LEAST_TILE = 16       # pixels: the smallest tile side (and coarse image side)
+
+
+def base_options(settings, width: int, height: int) -> dict:
+    """The tracer's options for the viewport's ``width`` × ``height`` image: F12's for that
+    size, point-sampled per slice (the samples' sub-pixel offsets anti-alias it)."""
+    return {**trace_options(settings, width, height), "filter_width": 0.0}
+
+
+@dataclasses.dataclass
+class Slice:
+    """What one slice traced: kind "coarse" or "tile", its rectangle of the image (the whole
+    image for coarse), the traced size, the sample index, seconds."""
+
+    kind: str
+    rect: tuple[int, int, int, int]
+    size: tuple[int, int]
+    sample: int
+    seconds: float = 0.0
+
+
+class ProgressiveImage:
+    """The accumulation of one view's image and the slices still to trace."""
+
+    def __init__(self, budget: float = SLICE_BUDGET):
+        self.sizer = SliceSizer(budget, first_pixels=64 * 64, least=LEAST_TILE * LEAST_TILE)
+        self.fixed_pixels: int | None = None  # tests: every slice this many pixels
+        self.key = None
+        self.accumulation: Accumulation | None = None
+        self.backdrop = None       # (h, w, 3): what shows where no tile landed yet
+        self.image = None          # (H, W, 3) float32: the current estimate
+        self.target = 1
+        self.sample = 0            # the sample being traced
+        self.tiles: list = []      # its tiles still to trace
+        self.tile_count = 0        # how many tiles the sample has
+        self.started = 0.0         # when the key's accumulation started (perf_counter)
+        self.elapsed = 0.0         # seconds from the start to the last slice's end
+        self.slices = 0            # slices traced for this key
+        self.last: Slice | None = None
+        self.converged = False
+        self.coarse_pending = False
+
+    # ------------------------------------------------------------------ planning
+
+    def restart(self, key, pass_name: str, width: int, height: int, target: int,
+                coarse: bool) -> None:
+        """A new key: start over; the last estimate (scaled) stays the backdrop until the
+        coarse image or the tiles replace it."""
+        previous = self.image
+        self.key, self.target = key, max(1, int(target))
+        self.accumulation = Accumulation(pass_name, width, height)
+        self.backdrop = previous
+        self.sample, self.tiles, self.tile_count = 0, [], 0
+        self.started, self.elapsed, self.slices = time.perf_counter(), 0.0, 0
+        self.converged, self.coarse_pending = False, bool(coarse)
+        self.last = None
+
+    def slice_pixels(self) -> int:
+        """Pixels of the next slice (at most the image's)."""
+        acc = self.accumulation
+        most = acc.width * acc.height
+        if self.fixed_pixels is not None:
+            return max(1, min(most, self.fixed_pixels))
+        return self.sizer.pixels(most)
+
+    def coarse_size(self) -> tuple[int, int]:
+        """The coarse image: the view's aspect in about a slice's pixels, at most half the
+        width and height (and at least ``LEAST_TILE`` on its shorter side when it fits)."""
+        acc = self.accumulation
+        scale = min(0.5, math.sqrt(self.slice_pixels() / (acc.width * acc.height)))
+        least = min(LEAST_TILE, acc.width, acc.height) / min(acc.width, acc.height)
+        scale = max(scale, least)
+        return max(1, round(acc.width * scale)), max(1, round(acc.height * scale))
+
+    def _next_tiles(self, stride: int) -> None:
+        acc = self.accumulation
+        # sides of whole work groups of the gather grid (LOCAL_SIZE cells of stride pixels)
+        tile_w, tile_h = tile_shape(self.slice_pixels(), acc.width, acc.height,
+                                    LOCAL_SIZE * stride)
+        # the grid moves by a hashed fraction of a tile each sample (whole GI blocks)
+        k = self.sample
+        shift = ((k * 5 % 8) * tile_w // 8 // stride * stride,
+                 (k * 3 % 8) * tile_h // 8 // stride * stride)  # whole GI blocks
+        self.tiles = tile_grid(acc.width, acc.height, tile_w, tile_h, shift)
+        self.tile_count = len(self.tiles)
+
+    # ------------------------------------------------------------------ tracing
+
+    def step(self, trace, view, window, settings, filter_width: float) -> Slice | None:
+        """Trace one slice of the current key with ``trace(camera, width, height, options)``
+        → passes (PASS_NAMES → (h, w, 3)); None when the image has converged."""
+        if self.converged or self.accumulation is None:
+            return None
+        acc = self.accumulation
+        width, height = acc.width, acc.height
+        options = base_options(settings, width, height)
+        t0 = time.perf_counter()
+        if self.coarse_pending:
+            size = self.coarse_size()
+            gather, lights = sample_settings(options["gather_settings"],
+                                             options["light_samples"], self.target, 0)
+            camera = camera_from_view(view, window, *size)
+            passes = trace(camera, *size, {**options, "gather_settings": gather,
+                                           "light_samples": lights})
+            self.backdrop = np.asarray(passes[acc.pass_name], np.float32)
+            self.coarse_pending = False
+            done = Slice("coarse", (0, 0, width, height), size, 0)
+        else:
+            if not self.tiles:
+                self._next_tiles(options["gi_stride"])
+            rect = self.tiles.pop(0)
+            gather, lights = sample_settings(options["gather_settings"],
+                                             options["light_samples"], self.target, self.sample)
+            full = camera_from_view(view, window, width, height)
+            camera = tile_camera(full, *rect,
+                                 offset=sample_offset(filter_width, self.target, self.sample))
+            passes = trace(camera, rect[2], rect[3], {**options, "gather_settings": gather,
+                                                      "light_samples": lights})
+            acc.add(rect, passes)
+            done = Slice("tile", rect, (rect[2], rect[3]), self.sample)
+            if not self.tiles:
+                self.sample += 1
+                self.converged = self.sample >= self.target
+        if self.converged:
+            self.image = acc.finished(filter_width)
+        else:
+            self.image = acc.estimate(self.backdrop)
+        done.seconds = time.perf_counter() - t0
+        self.sizer.measured(done.size[0] * done.size[1], done.seconds)
+        self.slices += 1
+        self.elapsed = time.perf_counter() - self.started
+        self.last = done
+        return done
+
+    @property
+    def samples_done(self) -> int:
+        return self.sample
+
+    def stage(self) -> str:
+        """'Coarse image', 'Tile 3/12', 'Converged' (what the last slice did)."""
+        if self.converged:
+            return "Converged"
+        if self.last is None or self.last.kind == "coarse":
+            return "Coarse image"
+        done = self.tile_count - len(self.tiles)
+        return f"Tile {done}/{self.tile_count}"
+
+
+def tracer(live, volume, settings):
+    """``trace(camera, width, height, options)`` → passes: the GPU tracer on ``live``'s
+    applied results (F12's ``render_passes_gpu``)."""
+    from .gpu_preview import render_passes_gpu
+
+    cones = cone_settings(settings)
+
+    def trace(camera, width, height, options):
+        snapshot = dataclasses.replace(live.snapshot, camera=camera)
+        passes, _ = render_passes_gpu(snapshot, live.staged.state, width, height, cones,
+                                      volume=volume, **options)
+        return passes
+    return trace

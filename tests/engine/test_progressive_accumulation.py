@@ -1,0 +1,161 @@
+"""The progressive viewport's numpy parts (voxgi_addon/preview/progressive.py): tile cameras
+see exactly the image's pixels, tiles cover the image once, samples share the one-shot
+image's rays and pixel filter, the accumulation averages them and the slice sizer fits a
+budget."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from voxgi.voxgi_addon.preview.gather import GatherSettings
+from voxgi.voxgi_addon.preview.passes import PASS_NAMES
+from voxgi.voxgi_addon.preview.progressive import (
+    Accumulation,
+    SliceSizer,
+    sample_offset,
+    sample_settings,
+    tile_camera,
+    tile_grid,
+    tile_shape,
+)
+from voxgi.voxgi_addon.scene.camera import camera_rays, filter_offsets
+from voxgi.voxgi_addon.scene.view_camera import camera_from_view
+
+
+def view_camera(kind, width=40, height=30, shift=0.0):
+    view = np.eye(4)
+    view[:3, 3] = (0.2, -0.1, -3.0)
+    window = np.zeros((4, 4))
+    if kind == "PERSP":
+        window[0] = (1.8, 0.0, shift, 0.0)
+        window[1] = (0.0, 1.8 * width / height, 0.0, 0.0)
+        window[2] = (0.0, 0.0, -1.002, -0.2002)
+        window[3] = (0.0, 0.0, -1.0, 0.0)
+    else:
+        window[0] = (0.5, 0.0, 0.0, shift)
+        window[1] = (0.0, 0.5 * width / height, 0.0, 0.0)
+        window[2] = (0.0, 0.0, -0.02, -1.0)
+        window[3] = (0.0, 0.0, 0.0, 1.0)
+    return camera_from_view(view, window, width, height)
+
+
+@pytest.mark.parametrize("kind,shift", [("PERSP", 0.0), ("PERSP", 0.3), ("ORTHO", -0.2)])
+def test_a_tile_camera_sees_exactly_the_images_pixels(kind, shift):
+    camera = view_camera(kind, shift=shift)
+    offset = (0.3, -0.2)
+    origins, directions = camera_rays(camera, offset=offset)
+    origins, directions = origins.reshape(30, 40, 3), directions.reshape(30, 40, 3)
+    x0, y0, w, h = 8, 5, 16, 12
+    tile = tile_camera(camera, x0, y0, w, h, offset=offset)
+    assert tile.resolution == (w, h)
+    o, d = camera_rays(tile)
+    assert np.allclose(o.reshape(h, w, 3), origins[y0:y0 + h, x0:x0 + w], atol=1e-9)
+    assert np.allclose(d.reshape(h, w, 3), directions[y0:y0 + h, x0:x0 + w], atol=1e-9)
+    with pytest.raises(ValueError, match="not inside"):
+        tile_camera(camera, 30, 0, 16, 12)
+
+
+@pytest.mark.parametrize("shift", [(0, 0), (5, 3), (16, 24), (31, 1)])
+def test_the_tiles_cover_every_pixel_once(shift):
+    tiles = tile_grid(70, 45, 16, 24, shift)
+    cover = np.zeros((45, 70), int)
+    for x0, y0, w, h in tiles:
+        assert 1 <= w <= 16 and 1 <= h <= 24
+        cover[y0:y0 + h, x0:x0 + w] += 1
+    assert (cover == 1).all()
+
+
+def test_tile_shapes_hold_whole_work_groups_and_about_the_pixels():
+    w, h = tile_shape(4096, 320, 180, 16)
+    assert w % 16 == 0 and h % 16 == 0 and 0.5 * 4096 <= w * h <= 4096
+    assert tile_shape(10 ** 6, 320, 180, 16) == (320, 180)  # the whole image fits
+    assert tile_shape(1, 320, 180, 16) == (16, 16)  # at least one group each way
+    w, h = tile_shape(320 * 40, 320, 180, 8)
+    assert w * h <= 320 * 40
+
+
+def test_the_samples_share_the_one_shot_images_rays():
+    gather = GatherSettings(rays=64, glossy_rays=8, seed=3)
+    parts = [sample_settings(gather, 16, 16, k) for k in range(16)]
+    assert sum(p[0].rays for p in parts) == 64
+    assert sum(p[0].glossy_rays for p in parts) >= 8
+    assert sum(p[1] for p in parts) == 16
+    assert len({p[0].seed for p in parts}) == 16 and parts[0][0].seed == 3
+    assert sample_settings(gather, 16, 1, 0) == (gather, 16)
+    with pytest.raises(ValueError, match="at least 1"):
+        sample_settings(gather, 16, 0, 0)
+    with pytest.raises(ValueError, match="outside"):
+        sample_settings(gather, 16, 4, 4)
+
+
+def test_the_samples_offsets_are_the_pixel_filters_strata_each_once():
+    offsets = np.array([sample_offset(1.5, 16, k) for k in range(16)])
+    strata = filter_offsets(1.5, 4)
+    assert sorted(map(tuple, offsets)) == sorted(map(tuple, strata))
+    # the first sample is a stratum nearest the pixel centre; the next ones spread out
+    assert np.hypot(*offsets[0]) == pytest.approx(np.hypot(*strata.T).min())
+    assert np.hypot(*(offsets[1] - offsets[0])) > 0.3
+    assert sample_offset(0.0, 16, 5) == (0.0, 0.0)
+
+
+def passes_of(value, colour, shape=(2, 3)):
+    out = {name: np.zeros((*shape, 3)) for name in PASS_NAMES}
+    out["Combined"] = np.full((*shape, 3), value)
+    out["Diffuse Indirect"] = np.full((*shape, 3), value)
+    out["Diffuse Color"] = np.full((*shape, 3), colour)
+    return out
+
+
+def test_the_accumulation_averages_samples_as_cyclesfilm_does():
+    acc = Accumulation("Combined", 4, 2)
+    acc.add((0, 0, 3, 2), passes_of(1.0, 0.5))
+    acc.add((0, 0, 3, 2), passes_of(3.0, 0.5))
+    assert acc.samples == 0  # column 3 has none yet
+    estimate = acc.estimate(coarse=np.full((1, 2, 3), 7.0))
+    assert np.allclose(estimate[:, :3], 2.0) and np.allclose(estimate[:, 3], 7.0)
+    acc.add((3, 0, 1, 2), passes_of(5.0, 0.5, (2, 1)))
+    assert acc.samples == 1 and np.allclose(acc.estimate()[:, 3], 5.0)
+
+    # a light pass is Σ light × colour over Σ colour (a sample that saw no colour adds none)
+    light = Accumulation("Diffuse Indirect", 3, 2)
+    light.add((0, 0, 3, 2), passes_of(1.0, 1.0))
+    light.add((0, 0, 3, 2), passes_of(4.0, 0.0))
+    assert np.allclose(light.mean(), 1.0)
+    with pytest.raises(ValueError, match="unknown pass"):
+        Accumulation("Beauty", 2, 2)
+    with pytest.raises(ValueError, match="tile"):
+        acc.add((0, 0, 2, 2), passes_of(1.0, 1.0))
+
+
+def test_the_finished_image_gets_the_filters_tails_as_the_one_shot_image():
+    from voxgi.voxgi_addon.preview.passes import filter_passes
+
+    rng = np.random.default_rng(1)
+    acc = Accumulation("Combined", 6, 5)
+    images = [rng.uniform(0, 1, (5, 6, 3)) for _ in range(3)]
+    for image in images:
+        sample = {name: image for name in PASS_NAMES}
+        acc.add((0, 0, 6, 5), sample)
+    mean = np.mean(images, axis=0)
+    expected = filter_passes({name: mean for name in PASS_NAMES}, 1.5)["Combined"]
+    assert np.allclose(acc.finished(1.5), expected, atol=1e-6)
+    assert not np.allclose(acc.finished(1.5), mean, atol=1e-3)
+
+
+def test_the_slice_sizer_fits_the_budget_from_measured_slices():
+    sizer = SliceSizer(0.030, first_pixels=4096, least=256)
+    assert sizer.pixels(10 ** 6) == 4096  # nothing measured yet
+    for pixels in (1000, 4000, 2000, 8000):
+        sizer.measured(pixels, 0.010 + 2e-6 * pixels)  # 10 ms per slice + 2 µs per pixel
+    fixed, per_pixel = sizer.model()
+    assert fixed == pytest.approx(0.010) and per_pixel == pytest.approx(2e-6)
+    assert sizer.pixels(10 ** 6) == pytest.approx(10_000, abs=2)
+    assert sizer.pixels(5000) == 5000  # never more than the image
+    slow = SliceSizer(0.030, least=256)
+    slow.measured(1000, 0.050)  # the fixed cost alone is over the budget: the least slice
+    assert slow.pixels(10 ** 6) == 600
+    slower = SliceSizer(0.030, least=256)
+    slower.measured(1000, 1.0)
+    assert slower.pixels(10 ** 6) == 256
+    with pytest.raises(ValueError, match="budget"):
+        SliceSizer(0.0)

@@ -1,0 +1,248 @@
+"""Progressive accumulation of a preview image (numpy only): the viewport's time-sliced
+drawing (``render/progressive.py``) splits a full image into *samples* and each sample into
+*tiles*, traces one tile of one sample per slice and averages the samples here.
+
+* ``sample_settings`` — one sample's share of the image's rays: ⌈rays / samples⌉ gather rays,
+  ⌈glossy rays / samples⌉ glossy rays, ⌈light samples / samples⌉ shadow rays, its own seed;
+  ``samples`` of them trace at least the one-shot image's rays.
+* ``sample_offset`` — its sub-pixel offset, drawn by importance from Cycles' pixel filter
+  inside the pixel (``camera.filter_offsets``, the strata the one-shot image's sub-pixel passes
+  use), so the samples' mean is the anti-aliased image, edges included.
+* ``tile_camera`` — the camera of a rectangle of the image (an off-axis frustum with the
+  offset baked in): its pixels are exactly the image's pixels there.
+* ``tile_grid`` — the tiles covering the image, the grid shifted from sample to sample so the
+  tiles' borders (the gather's filter sees fewer neighbours there) do not stay in place.
+* ``Accumulation`` — per-pixel sums of one pass (light passes as light × colour over colour,
+  as Cycles' film divides them) and per-pixel counts; ``estimate`` fills the pixels no sample
+  reached yet from a coarse image; ``finished`` adds the filter's tails over the neighbours
+  as the one-shot image does (``passes.filter_passes``).
+* ``SliceSizer`` — the tile size that fits a time budget, from measured slices (a fixed
+  cost per slice plus a cost per pixel, fitted by least squares).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from ..scene.camera import filter_offsets
+from .gather import GatherSettings
+from .passes import PASS_NAMES, filter_passes
+
+# A light pass is accumulated as light × colour over colour (Cycles' film, passes.finish_passes).
+LIGHT_COLOURS = {"Diffuse Direct": "Diffuse Color", "Diffuse Indirect": "Diffuse Color",
+                 "Glossy Direct": "Glossy Color", "Glossy Indirect": "Glossy Color"}
+SEED_STEP = 7919  # seeds of successive samples: far apart in the hashed sequences
+
+
+def sample_settings(gather: GatherSettings, light_samples: int, samples: int, index: int):
+    """(GatherSettings, light samples) of sample ``index`` of ``samples``: each traces
+    ⌈rays / samples⌉ gather rays, ⌈glossy rays / samples⌉ glossy rays and ⌈light samples /
+    samples⌉ shadow rays per light with its own seed, so the samples together trace at least
+    the one-shot image's rays."""
+    if samples < 1:
+        raise ValueError(f"samples must be at least 1, not {samples}")
+    if not 0 <= index < samples:
+        raise ValueError(f"sample index {index} is outside 0..{samples - 1}")
+    per = dataclasses.replace(gather, rays=max(1, math.ceil(gather.rays / samples)),
+                              glossy_rays=max(1, math.ceil(gather.glossy_rays / samples)),
+                              seed=gather.seed + SEED_STEP * index)
+    return per, max(1, math.ceil(light_samples / samples))
+
+
+def bayer(side: int) -> np.ndarray:
+    """(side, side) ranks 0 … side² − 1 of an ordered-dither (Bayer) matrix: visiting the
+    cells by rank spreads every prefix over the square. Sides that are not a power of two
+    take the ranks of the next power's matrix, renumbered."""
+    size = 1
+    ranks = np.zeros((1, 1), np.int64)
+    while size < side:
+        ranks = np.block([[4 * ranks, 4 * ranks + 2], [4 * ranks + 3, 4 * ranks + 1]])
+        size *= 2
+    ranks = ranks[:side, :side]
+    return np.argsort(np.argsort(ranks.ravel())).reshape(side, side)
+
+
+def sample_offset(filter_width: float, samples: int, index: int) -> tuple[float, float]:
+    """Sub-pixel offset (x right, y down, pixels) of sample ``index``: the strata of a side ×
+    side square (side = ⌈√samples⌉) warped by the pixel filter (``camera.filter_offsets``),
+    visited in ordered-dither order (``bayer``) from a stratum next to the centre, so the
+    first samples spread over the pixel. Filter Size ≤ 0: the pixel centre."""
+    side = max(1, math.ceil(math.sqrt(samples)))
+    offsets = filter_offsets(filter_width, side)
+    ranks = np.roll(bayer(side), (max(0, side // 2 - 1),) * 2, axis=(0, 1))
+    a, b = np.argwhere(ranks == index % (side * side))[0]
+    x, y = offsets[a * side + b]  # offset k is stratum (k // side, k % side) in (x, y)
+    return float(x), float(y)
+
+
+def _frustum(camera) -> tuple[float, float, float, float]:
+    """(centre x, centre y, half width, half height) of the camera's image (``camera.py``)."""
+    p = np.asarray(camera.projection_matrix, np.float64)
+    hx, hy = 1.0 / p[0, 0], 1.0 / p[1, 1]
+    if camera.type == "ORTHO":
+        return -p[0, 3] * hx, -p[1, 3] * hy, hx, hy
+    return p[0, 2] * hx, p[1, 2] * hy, hx, hy
+
+
+def tile_camera(camera, x0: int, y0: int, width: int, height: int, offset=(0.0, 0.0)):
+    """The camera of the ``width`` × ``height`` pixels of ``camera``'s image whose top-left
+    pixel is (x0, y0) (row 0 on top), every ray moved by ``offset`` (x right, y down, pixels):
+    pixel (i, j) of the tile is pixel (x0 + i, y0 + j) of the image. ``camera.resolution`` is
+    the whole image's size (its projection's aspect)."""
+    full_w, full_h = camera.resolution
+    if width < 1 or height < 1 or x0 < 0 or y0 < 0 or x0 + width > full_w \
+            or y0 + height > full_h:
+        raise ValueError(f"tile {width}×{height} at ({x0}, {y0}) is not inside the "
+                         f"{full_w}×{full_h} image")
+    cx, cy, hx, hy = _frustum(camera)
+    tx, ty = hx * width / full_w, hy * height / full_h
+    tcx = cx + hx * (2.0 * (x0 + offset[0]) + width) / full_w - hx
+    tcy = cy + hy - 2.0 * hy * (y0 + offset[1]) / full_h - ty
+    p = np.array(camera.projection_matrix, np.float64)
+    p[0, 0], p[1, 1] = 1.0 / tx, 1.0 / ty
+    if camera.type == "ORTHO":
+        p[0, 3], p[1, 3] = -tcx / tx, -tcy / ty
+    else:
+        p[0, 2], p[1, 2] = tcx / tx, tcy / ty
+    return dataclasses.replace(camera, projection_matrix=p, resolution=(int(width), int(height)))
+
+
+def tile_grid(width: int, height: int, tile_w: int, tile_h: int, shift=(0, 0)):
+    """[(x0, y0, w, h)] tiles covering the ``width`` × ``height`` image once each, row by row
+    from the top: a grid of ``tile_w`` × ``tile_h`` cells whose lines are moved by ``shift``
+    pixels (the border tiles are cut to the image)."""
+    tile_w, tile_h = max(1, min(tile_w, width)), max(1, min(tile_h, height))
+    sx, sy = shift[0] % tile_w, shift[1] % tile_h
+    xs = sorted({0, *range(sx, width, tile_w), width}) if sx else [*range(0, width, tile_w), width]
+    ys = sorted({0, *range(sy, height, tile_h), height}) if sy else [*range(0, height, tile_h),
+                                                                     height]
+    return [(x0, y0, x1 - x0, y1 - y0) for y0, y1 in zip(ys, ys[1:])
+            for x0, x1 in zip(xs, xs[1:])]
+
+
+class Accumulation:
+    """The samples of one pass of a ``width`` × ``height`` image: per pixel the sum of the
+    pass (× its colour for a light pass), of the weights (the colour, or 1) and the count."""
+
+    def __init__(self, pass_name: str, width: int, height: int):
+        if pass_name not in PASS_NAMES:
+            raise ValueError(f"unknown pass {pass_name!r}; one of {', '.join(PASS_NAMES)}")
+        self.pass_name, self.width, self.height = pass_name, width, height
+        self.colour_name = LIGHT_COLOURS.get(pass_name)
+        self.sums = np.zeros((height, width, 3))
+        self.weights = np.zeros((height, width, 3))
+        # the colour's sum, for the filter over the neighbours (``finished``)
+        self.colour = np.zeros((height, width, 3)) if self.colour_name else None
+        self.counts = np.zeros((height, width), np.int32)
+
+    def add(self, rect, passes) -> None:
+        """Add one sample's ``passes`` (PASS_NAMES → (h, w, 3), row 0 on top) of the tile
+        ``rect`` (x0, y0, w, h)."""
+        x0, y0, w, h = rect
+        window = np.s_[y0:y0 + h, x0:x0 + w]
+        value = np.asarray(passes[self.pass_name], np.float64)
+        if value.shape[:2] != (h, w):
+            raise ValueError(f"a {value.shape[1]}×{value.shape[0]} sample for a {w}×{h} tile")
+        if self.colour_name:
+            colour = np.asarray(passes[self.colour_name], np.float64)
+            self.sums[window] += value * colour
+            self.weights[window] += colour
+            self.colour[window] += colour
+        else:
+            self.sums[window] += value
+            self.weights[window] += 1.0
+        self.counts[window] += 1
+
+    @property
+    def samples(self) -> int:
+        """Samples every pixel has (the complete ones)."""
+        return int(self.counts.min()) if self.counts.size else 0
+
+    def mean(self) -> np.ndarray:
+        """(H, W, 3) the samples' mean (0 where a pixel has none, or no colour)."""
+        return np.divide(self.sums, self.weights, out=np.zeros_like(self.sums),
+                         where=self.weights > 0.0)
+
+    def estimate(self, coarse=None) -> np.ndarray:
+        """(H, W, 3) float32: the mean where a pixel has samples, elsewhere ``coarse`` ((h, w,
+        3), any size: scaled to the image by nearest pixel), or 0 without it."""
+        out = self.mean()
+        empty = self.counts == 0
+        if coarse is not None and empty.any():
+            out[empty] = scale_nearest(coarse, self.width, self.height)[empty]
+        return out.astype(np.float32)
+
+    def finished(self, filter_width: float) -> np.ndarray:
+        """(H, W, 3) float32: the mean with Cycles' pixel filter over the neighbours, as the
+        one-shot image gets it (``passes.filter_passes``): the samples cover the pixel's own
+        square, the filter's tails the neighbours'."""
+        mean = self.mean()
+        passes = {name: np.zeros_like(mean) for name in PASS_NAMES}  # not read for this pass
+        passes[self.pass_name] = mean
+        if self.colour_name:
+            passes[self.colour_name] = self.colour / np.maximum(self.counts, 1)[..., None]
+        return np.asarray(filter_passes(passes, filter_width)[self.pass_name], np.float32)
+
+
+def scale_nearest(image, width: int, height: int) -> np.ndarray:
+    """``image`` (h, w, C) scaled to ``width`` × ``height`` by nearest pixel."""
+    image = np.asarray(image)
+    h, w = image.shape[:2]
+    rows = np.minimum((np.arange(height) + 0.5) * h / height, h - 1).astype(int)
+    cols = np.minimum((np.arange(width) + 0.5) * w / width, w - 1).astype(int)
+    return image[rows][:, cols]
+
+
+class SliceSizer:
+    """Pixels per slice for a time budget, from measured slices: seconds ≈ fixed + per_pixel ×
+    pixels, fitted by least squares over the last ``keep`` slices (the fixed cost alone when
+    they all had one size). Until there is a measurement: ``first_pixels``."""
+
+    def __init__(self, budget: float, first_pixels: int = 4096, least: int = 256,
+                 keep: int = 12):
+        if budget <= 0.0:
+            raise ValueError(f"the slice budget must be positive, not {budget}")
+        self.budget, self.first_pixels, self.least, self.keep = budget, first_pixels, least, keep
+        self.samples: list[tuple[int, float]] = []
+
+    def measured(self, pixels: int, seconds: float) -> None:
+        self.samples = [*self.samples, (int(pixels), float(seconds))][-self.keep:]
+
+    def model(self) -> tuple[float, float] | None:
+        """(fixed seconds, seconds per pixel), or None before any measurement."""
+        if not self.samples:
+            return None
+        p = np.array([s[0] for s in self.samples], np.float64)
+        t = np.array([s[1] for s in self.samples], np.float64)
+        if np.ptp(p) > 0.1 * p.mean():
+            per_pixel, fixed = np.polyfit(p, t, 1)
+            if per_pixel > 0.0 and fixed >= 0.0:
+                return float(fixed), float(per_pixel)
+        return 0.0, float(t.mean() / p.mean())  # one size: all of it counted per pixel
+
+    def pixels(self, most: int) -> int:
+        """Pixels of the next slice, between ``least`` and ``most``."""
+        fitted = self.model()
+        if fitted is None:
+            pixels = self.first_pixels
+        else:
+            fixed, per_pixel = fitted
+            pixels = (self.budget - fixed) / per_pixel if per_pixel > 0.0 else most
+        return int(max(min(self.least, most), min(most, pixels)))
+
+
+def tile_shape(pixels: int, width: int, height: int, multiple: int = 1) -> tuple[int, int]:
+    """(tile width, tile height) of about ``pixels`` pixels: square-ish, sides a multiple of
+    ``multiple`` (whole work groups of the gather grid), within the image; the whole image
+    when it has no more than ``pixels``."""
+    if pixels >= width * height:
+        return width, height
+    side = max(multiple, int(math.sqrt(max(pixels, 1))) // multiple * multiple)
+    tile_w = min(width, side)
+    tile_h = min(height, max(multiple, int(pixels / tile_w) // multiple * multiple))
+    if tile_h >= height:  # the whole height fits: widen instead
+        tile_h = height
+        tile_w = min(width, max(multiple, int(pixels / height) // multiple * multiple))
+    return max(1, tile_w), max(1, tile_h)
