@@ -34,6 +34,7 @@ def gbuffer_shader():
     varying.flat("VEC2", "surface")
     varying.smooth("VEC2", "surface_uv")
     varying.flat("VEC2", "surface_slot")
+    varying.flat("VEC2", "surface_cutout")
     info = gpu.types.GPUShaderCreateInfo()
     info.vertex_in(0, "VEC3", "position")
     info.vertex_in(1, "VEC3", "normal")
@@ -41,6 +42,7 @@ def gbuffer_shader():
     info.vertex_in(3, "VEC2", "material")
     info.vertex_in(4, "VEC2", "uv")
     info.vertex_in(5, "VEC2", "texel")
+    info.vertex_in(6, "VEC2", "cutout")
     info.vertex_out(varying)
     info.sampler(0, "FLOAT_2D", "texture_table")
     info.sampler(1, "FLOAT_2D", "texture_atlas")
@@ -54,7 +56,8 @@ def gbuffer_shader():
     info.fragment_out(2, "VEC4", "out_view")
     info.fragment_out(3, "VEC4", "out_base")
     info.vertex_source((SHADER_DIR / "gbuffer_vert.glsl").read_text())
-    info.fragment_source((SHADER_DIR / "textures.glsl").read_text() +
+    info.fragment_source((SHADER_DIR / "sampling.glsl").read_text() +
+                         (SHADER_DIR / "textures.glsl").read_text() +
                          (SHADER_DIR / "gbuffer_frag.glsl").read_text())
     return gpu.shader.create_from_info(info)
 
@@ -89,7 +92,9 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
     textures : (texture table, atlas) GPU textures of ``tris.textures`` (``gpu_scene``'s
     ``textures`` part): the fragment samples each textured material's Base Color per texel at
     ``scene.textures.primary_lod`` (Filter Size ``filter_width``) into ``base``; None: no
-    texture is sampled.
+    texture is sampled. Fragments of cut-outs are kept by their Alpha (level 0) against a
+    hash of the fragment's point, view and triangle (``textures.cutout_random``), as camera
+    rays pass them in ``raycast``.
     """
     out = GBuffer(width, height)
     framebuffer = gpu.types.GPUFrameBuffer(depth_slot=out.depth,
@@ -125,6 +130,8 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
             if getattr(tris, "holdout", None) is not None:
                 surface[np.repeat(np.asarray(tris.holdout), 3), 0] = -2.0
             surface_textures = getattr(tris, "textures", None)
+            # (alpha texture, alpha value) of cut-outs (textures.cutout_hits), -2: opaque
+            cutout = np.tile(np.float32([-2.0, 1.0]), (len(corners), 1))
             if textures is None or surface_textures is None:
                 uv = np.zeros((len(corners), 2), np.float32)
                 texel = np.tile(np.float32([-1.0, 0.0]), (len(corners), 1))
@@ -137,9 +144,15 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
                 texel = np.repeat(np.stack(
                     [surface_textures.slot_of(tris.materials).astype(np.float32),
                      surface_textures.density * spread], axis=1), 3, axis=0)
+                if surface_textures.cutout is not None:
+                    row = surface_textures.row_of(tris.materials)
+                    cutout = np.repeat(np.stack(
+                        [np.where(surface_textures.cutout, surface_textures.alpha_slots[row], -2),
+                         surface_textures.alpha_values[row]], axis=1).astype(np.float32), 3, axis=0)
             batch = batch_for_shader(shader, "TRIS", {"position": corners, "normal": smooth,
                                                       "face_normal": face, "material": surface,
-                                                      "uv": uv, "texel": texel})
+                                                      "uv": uv, "texel": texel,
+                                                      "cutout": cutout})
             shader.bind()
             shader.uniform_sampler("texture_table", textures[0])
             shader.uniform_sampler("texture_atlas", textures[1])

@@ -49,11 +49,14 @@ from .gpu_volume import float_texture
 
 _BVH = ("bvh_nodes", "bvh_triangles")
 # Kernel → (GLSL files after bvh_common.glsl, 2D samplers, VEC4 push constants).
+# Cut-outs (textures.cutout_hits): kernels with textures.glsl trace through them.
+_TEXTURES = ("texture_table", "texture_atlas")
 KERNELS = {
-    "bvh_probe": (("bvh_probe",), _BVH + ("ray_origin", "ray_direction"), ("mode",)),
-    "bvh_direct": (("bvh_lights", "bvh_direct"), _BVH + ("lights", "world_map", "emitters",
-                                                          "gbuffer_position",
-                                                          "gbuffer_normal"), ("sampling", "strata")),
+    "bvh_probe": (("textures", "bvh_probe"), _BVH + ("ray_origin", "ray_direction") + _TEXTURES,
+                  ("mode",)),
+    "bvh_direct": (("textures", "bvh_lights", "bvh_direct"),
+                   _BVH + ("lights", "world_map", "emitters", "gbuffer_position",
+                           "gbuffer_normal") + _TEXTURES, ("sampling", "strata")),
     "bvh_gather": (("pixels", "principled", "bvh_lights", "textures", "bvh_shade", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials",
                            "gbuffer_position",
@@ -68,9 +71,20 @@ KERNELS["bvh_glossy"] = (("pixels", "principled", "bvh_lights", "textures", "bvh
 # The world-mode glossy gather integrates the lobe over the emitters by LTC (shaders/ltc.glsl).
 KERNELS["bvh_glossy"] = (KERNELS["bvh_glossy"][0][:-1] + ("ltc", "bvh_glossy"),
                          KERNELS["bvh_glossy"][1] + ("ltc_table",), KERNELS["bvh_glossy"][2])
+_BLANK: dict[str, object] = {}
+
+
+def _blank_texture():
+    """A 1 × 1 RGBA32F texture of zeros (the texture samplers of a scene without textures)."""
+    if "blank" not in _BLANK:
+        _BLANK["blank"] = float_texture(np.zeros((1, 1, 4), np.float32), (1, 1))
+    return _BLANK["blank"]
+
+
 # Samplers that hold constants of the code, not of the scene: bound when a dispatch's inputs
-# leave them out.
-CONSTANT_SAMPLERS = {"ltc_table": ltc_texture}
+# leave them out (the texture samplers of a BVH without cut-outs are never read).
+CONSTANT_SAMPLERS = {"ltc_table": ltc_texture, "texture_table": _blank_texture,
+                     "texture_atlas": _blank_texture}
 # Kernels with more than one output image (the others write ``out_image``).
 OUTPUTS = {"bvh_gather": ("out_image", "out_variance"),
            "bvh_glossy": ("out_image", "out_variance")}
@@ -91,6 +105,8 @@ def bvh_shader(kernel: str):
                                        "bvh_probe": "int(mode.y)"}.get(kernel, str(RAY_DIFFUSE))}
         if "principled" in files:
             defines.update(PRINCIPLED_DEFINES)
+        if "textures" in files:
+            defines["BVH_CUTOUTS"] = "1"
         if kernel == "bvh_direct":
             defines["STRATA_BLOCK"] = "ivec3(strata.xyz)"
         if kernel in ("bvh_gather", "bvh_glossy"):
@@ -117,12 +133,15 @@ class GPUBVH:
     """The BVH textures of the latest ``SceneTriangles`` (see the module doc).
 
     nodes, triangles, normals : RGBA32F GPUTextures (``voxgi_addon.scene.bvh.BVHTextures``).
+    surface : the texture samplers its cut-outs' Alpha is read from (``texture_table``,
+    ``texture_atlas``: ``gpu_scene.GPUScene`` sets them with the triangles'; empty: none).
     uploaded_bytes : bytes the last ``update`` sent (0 = unchanged); resident_bytes : bytes of
     the textures on the GPU; build_seconds : the last BVH build's time.
     """
 
     def __init__(self):
         self.nodes = self.triangles = self.normals = None
+        self.surface: dict[str, object] = {}
         self.uploaded_bytes = 0
         self.resident_bytes = 0
         self.build_seconds = 0.0
@@ -136,7 +155,8 @@ class GPUBVH:
             return True
         return (_same(old.positions, tris.positions) and _same(old.materials, tris.materials)
                 and _same(getattr(old, "visibility", None), getattr(tris, "visibility", None))
-                and _same(old.corner_normals, tris.corner_normals))
+                and _same(old.corner_normals, tris.corner_normals)
+                and _same(_cutout(old), _cutout(tris)))
 
     def update(self, tris) -> GPUBVH:
         """Upload the BVH of ``tris`` unless the uploaded one is of the same triangles."""
@@ -161,7 +181,13 @@ class GPUBVH:
     @property
     def inputs(self) -> dict[str, object]:
         return {"bvh_nodes": self.nodes, "bvh_triangles": self.triangles,
-                "bvh_normals": self.normals}
+                "bvh_normals": self.normals, **self.surface}
+
+
+def _cutout(tris):
+    """(T,) bool cut-out triangles of ``tris`` (packed with a negative scale), or None."""
+    surface = getattr(tris, "textures", None)
+    return None if surface is None or surface.cutout is None else np.asarray(surface.cutout)
 
 
 _shared: GPUBVH | None = None
@@ -300,6 +326,7 @@ def release() -> None:
     at exit")."""
     global _shared
     _shaders.clear()
+    _BLANK.clear()
     _shared = None
     scene = sys.modules.get(f"{__package__}.gpu_scene")  # it holds the shared BVH too
     if scene is not None:

@@ -185,7 +185,8 @@ class GPUScene:
             (name, a.bone_names, np.asarray(a.parents), np.asarray(a.rest_matrices),
              np.asarray(a.pose_matrices), np.asarray(a.world_matrix))
             for name, a in sorted(snapshot.armatures.items()))
-        textures = (tuple(getattr(m, "base_color_texture", -1) for m in snapshot.materials),
+        textures = (tuple((getattr(m, "base_color_texture", -1), getattr(m, "alpha_texture", -1),
+                           float(getattr(m, "alpha", 1.0))) for m in snapshot.materials),
                     tuple(_texture_key(t) for t in getattr(snapshot, "textures", ())))
         return digest(objects, armatures, textures, tuple(getattr(snapshot, "holdout_materials", ())))
 
@@ -207,6 +208,7 @@ class GPUScene:
             # identity check first (free); another user of the shared BVH (the Fast path) may
             # have uploaded other triangles since, which a content comparison then catches
             self.bvh.update(self.tris)
+            self.bvh.surface = {}
             if self.bvh.uploaded_bytes:
                 self._sent("bvh", self.bvh.uploaded_bytes)
                 self.seconds["bvh"] = time.perf_counter() - t0
@@ -215,6 +217,8 @@ class GPUScene:
         _, rough, _, emission = material_table(snapshot)
         principled = principled_table(snapshot)
         self._update_textures(geometry)
+        if getattr(self.tris.textures, "cutout", None) is not None:
+            self.bvh.surface = dict(self.textures)  # cut-outs read their Alpha there
         t0 = time.perf_counter()
         materials = digest(rough, emission, *principled, self.slots)
         materials_changed = materials != self.keys.get("materials")
@@ -285,8 +289,9 @@ class GPUScene:
         (``scene.textures.pack_atlas``; RGBA16F, as the numpy pyramids hold half floats), and
         ``texture_table``, RGBA32F BVH_WIDTH wide: row s = texture s's table row, then from
         the row its texel (BVH_WIDTH − 1, 0) names, the triangles' corner UVs (2 texels per
-        triangle index: (uv0, uv1), (uv2, 0, 0)). Keyed by the textures' content and the
-        geometry; 1 × 1 stand-ins without textures."""
+        triangle index: (uv0, uv1), (uv2, alpha texture or -1, alpha value): ``textures.glsl``
+        ``bvh_cutout_counts``). Keyed by the textures' content and the geometry (which holds
+        the materials' texture indices and alphas); 1 × 1 stand-ins without textures."""
         t0 = time.perf_counter()
         surface = getattr(self.tris, "textures", None) if self.tris is not None else None
         if surface is None:
@@ -311,6 +316,10 @@ class GPUScene:
             uvs = np.asarray(surface.uvs, np.float32).reshape(-1, 6)
             texels = np.zeros((len(uvs), 2, 4), np.float32)
             texels[:, 0], texels[:, 1, :2] = uvs[:, :4], uvs[:, 4:]
+            if surface.alpha_slots is not None:
+                row = surface.row_of(self.tris.materials)
+                texels[:, 1, 2] = surface.alpha_slots[row]
+                texels[:, 1, 3] = surface.alpha_values[row]
             flat = texels.reshape(-1, 4)
             head = len(table)
             rows = head + max(1, -(-len(flat) // TEXTURE_WIDTH))

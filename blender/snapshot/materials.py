@@ -18,9 +18,16 @@ The Base Color comes from where the material takes it:
   afterwards (the user's file is left as it was). Bakes are cached by the node tree's content
   and the mesh's; where no bake can run (off the main thread, during a render job) or the mesh
   has no UV map, a warning and the socket's value (the viewport colour for other surfaces).
+
+The Alpha socket likewise (cut-outs, issue 22 point 2): a value; an Image Texture's Alpha
+output (the image's alpha channel, in the 4th channel of its ``TextureData``: one texture for
+Base Color and Alpha when both come from the same image node; an image whose Alpha Mode is
+None is opaque); anything else baked (an Emit bake of the socket, into a texture's 4th
+channel).
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import threading
 
@@ -289,9 +296,6 @@ class MaterialTable:
             transmission = inputs.get("Transmission Weight")
             if transmission is not None and (transmission.is_linked or transmission.default_value > 0):
                 notes.append("transmission (it renders opaque)")
-            alpha = inputs.get("Alpha")
-            if alpha is not None and (alpha.is_linked or alpha.default_value < 1.0):
-                notes.append("transparency (it renders opaque)")
         if notes:
             self.warnings.append(f"Material '{material.name}': the preview leaves out "
                                  f"{', '.join(notes)} for now")
@@ -323,12 +327,20 @@ class MaterialTable:
                 # no glossy layer of our own
                 data = MaterialData(name=data.name, base_color=data.base_color, roughness=1.0,
                                     metallic=0.0, specular=0.0)
-                return data, ("DIFFUSE", "Surface"), ""
+                return data, (("DIFFUSE", "Surface"),), ""
             return data, None, ""
         inputs = principled.inputs
         strength = np.float32(inputs["Emission Strength"].default_value)
         emission = self._socket_mean(material, inputs["Emission Color"], _rgb) * strength
         base, texture, bake, uv_map = self._base_color(material, inputs["Base Color"])
+        alpha, alpha_texture, alpha_bake, alpha_uv = self._alpha(material, inputs.get("Alpha"),
+                                                                  texture)
+        if alpha_texture is not None and texture is None:
+            uv_map = alpha_uv
+        elif alpha_texture is not None and alpha_texture is not texture and alpha_uv != uv_map:
+            self._warn(f"Material '{material.name_full}': its Base Color and Alpha images read "
+                       "different UV maps; the Alpha is read through the Base Color's")
+        bakes = tuple(b for b in (bake, alpha_bake) if b is not None)
         data = MaterialData(
             name=material.name_full,
             base_color=base,
@@ -337,8 +349,10 @@ class MaterialTable:
             specular=float(inputs["Specular IOR Level"].default_value),
             emission=emission.astype(np.float32),
             base_color_texture=-1 if texture is None else self._add_texture(texture),
+            alpha=float(alpha),
+            alpha_texture=-1 if alpha_texture is None else self._add_texture(alpha_texture),
         )
-        return data, bake, uv_map
+        return data, bakes or None, uv_map
 
     def _socket_mean(self, material, socket, value):
         """A Roughness, Metallic or Emission Color socket's value: its own when unlinked; the
@@ -393,32 +407,58 @@ class MaterialTable:
                 self._warn(f"Material '{material.name_full}': the Image Texture node "
                            f"'{node.name}' has no image; using the Base Color value instead")
                 return _rgb(socket), None, None, ""
-            if node.projection != "FLAT" or node.extension not in ("REPEAT", "EXTEND", "CLIP"):
-                raise _NeedsBake(f"the image node '{node.name}' uses {node.projection.lower()} "
-                                 f"projection / {node.extension.lower()} extension")
-            uv_map, transform = uv_source(node)
-            rgb, image_key = _cached_image(node.image)
-            if rgb is None:
+            texture, uv_map = _image_texture(node, with_alpha=_alpha_node(socket.node) == node)
+            if texture is None:
                 self._warn(
                     f"Material '{material.name_full}': image '{node.image.name_full}' has no "
                     "pixels (missing or unreadable file?); using the Base Color value instead")
                 return _rgb(socket), None, None, ""
-            texture = TextureData(
-                name=node.image.name_full, pixels=within_max_size(rgb),
-                interpolation="Closest" if node.interpolation == "Closest" else "Linear",
-                extension=node.extension, uv_transform=transform,
-                key=image_key)
-            return rgb.reshape(-1, 3).mean(axis=0).astype(np.float32), texture, None, uv_map
+            mean = texture.pixels[..., :3].reshape(-1, 3).mean(axis=0).astype(np.float32)
+            return mean, texture, None, uv_map
         except _NeedsBake:
             return _rgb(socket), None, ("EMIT", socket.name), ""
 
+    def _alpha(self, material, socket, base_texture):
+        """(value, TextureData whose 4th channel is the Alpha or None, what to bake or None,
+        the UV map its image reads) of a Principled BSDF's Alpha socket; the Base Color's
+        texture itself when it is the same image node's."""
+        if socket is None:
+            return 1.0, None, None, ""
+        value = float(np.clip(socket.default_value, 0.0, 1.0))
+        if not socket.is_linked:
+            return value, None, None, ""
+        try:
+            node, output = _follow(socket)
+            if node is None:
+                return value, None, None, ""
+            if node.type != "TEX_IMAGE" or output.identifier != "Alpha":
+                raise _NeedsBake(f"Alpha comes from '{node.name}'")
+            if node.image is None or node.image.alpha_mode == "NONE":
+                return 1.0, None, None, ""  # no image, or one whose alpha Cycles ignores
+            texture, uv_map = _image_texture(node, with_alpha=True)
+            if texture is None:
+                self._warn(f"Material '{material.name_full}': image '{node.image.name_full}' "
+                           "has no pixels (missing or unreadable file?); using the Alpha value")
+                return value, None, None, ""
+            if base_texture is not None and base_texture.key == texture.key and \
+                    np.array_equal(base_texture.uv_transform, texture.uv_transform):
+                return value, base_texture, None, uv_map  # one RGBA texture for both
+            return value, texture, None, uv_map
+        except _NeedsBake:
+            return value, None, ("EMIT", socket.name), ""
+
     # ------------------------------------------------------------------ bakes
 
-    def _baked(self, material, data: MaterialData, bake, surface: Surface | None) -> MaterialData:
-        """``data`` with its Base Color baked by Cycles over ``surface``'s UV map, or ``data``
-        with a warning where no bake can run."""
+    def _baked(self, material, data: MaterialData, bakes, surface: Surface | None) -> MaterialData:
+        """``data`` with its sockets ``bakes`` ((mode, socket) pairs) baked by Cycles over
+        ``surface``'s UV map, or ``data`` with a warning where no bake can run."""
+        for bake in bakes:
+            data = self._baked_socket(material, data, bake, surface)
+        return data
+
+    def _baked_socket(self, material, data: MaterialData, bake, surface) -> MaterialData:
         mode, socket = bake
-        what = "Base Color" if mode == "EMIT" else "surface"
+        what = socket if mode == "EMIT" else "surface"
         name = material.name_full
         if surface is None or surface.obj_eval is None:
             self._warn(f"Material '{name}': its {what} needs a bake by Cycles, which needs a "
@@ -450,10 +490,52 @@ class MaterialTable:
             texture = _BAKED[key] = TextureData(
                 name=f"{name} ({surface.key})", pixels=pixels, interpolation="Linear",
                 extension="EXTEND", key=key)
+        if socket == "Alpha":  # the baked value into the 4th channel
+            pixels = texture.pixels[..., :1]
+            alpha = TextureData(name=texture.name, pixels=np.concatenate(
+                [np.repeat(pixels, 3, axis=-1), pixels], axis=-1), interpolation="Linear",
+                extension="EXTEND", key=f"{key}+alpha")
+            return dataclasses.replace(data, alpha_texture=self._add_texture(alpha))
         mean = texture.pixels.reshape(-1, 3).mean(axis=0).astype(np.float32)
-        return MaterialData(name=data.name, base_color=mean, roughness=data.roughness,
-                            metallic=data.metallic, specular=data.specular,
-                            emission=data.emission, base_color_texture=self._add_texture(texture))
+        return dataclasses.replace(data, base_color=mean,
+                                   base_color_texture=self._add_texture(texture))
+
+
+def _alpha_node(principled):
+    """The Image Texture node whose Alpha output feeds ``principled``'s Alpha, or None."""
+    socket = principled.inputs.get("Alpha")
+    if socket is None or not socket.is_linked:
+        return None
+    try:
+        node, output = _follow(socket)
+    except _NeedsBake:
+        return None
+    if node is None or node.type != "TEX_IMAGE" or output.identifier != "Alpha" or \
+            node.image is None or node.image.alpha_mode == "NONE":
+        return None
+    return node
+
+
+def _image_texture(node, with_alpha: bool = False):
+    """(TextureData of an Image Texture node's image, the UV map it reads) — RGBA with the
+    image's alpha channel when ``with_alpha`` — or (None, "") when the image has no pixels;
+    raises ``_NeedsBake`` for what only Cycles can evaluate."""
+    if node.projection != "FLAT" or node.extension not in ("REPEAT", "EXTEND", "CLIP"):
+        raise _NeedsBake(f"the image node '{node.name}' uses {node.projection.lower()} "
+                         f"projection / {node.extension.lower()} extension")
+    uv_map, transform = uv_source(node)
+    rgb, image_key = _cached_image(node.image)
+    if rgb is None:
+        return None, ""
+    if with_alpha:
+        alpha = _image_pixels(node.image)[..., 3:4]  # alpha is linear whatever the colour space
+        rgb = np.concatenate([rgb, alpha], axis=-1)
+        image_key = f"{image_key}+alpha"
+    texture = TextureData(
+        name=node.image.name_full, pixels=within_max_size(rgb),
+        interpolation="Closest" if node.interpolation == "Closest" else "Linear",
+        extension=node.extension, uv_transform=transform, key=image_key)
+    return texture, uv_map
 
 
 def _uses_object_space(tree, depth: int = 0) -> bool:

@@ -9,13 +9,18 @@
  * Defines: BVH_WIDTH_LOG2, SHADOW_EPSILON (metres), DET_EPSILON (relative). Hits are
  * double-sided Möller–Trumbore with raycast.py's determinant test; shadow rays count hits with
  * SHADOW_EPSILON < t < tmax − SHADOW_EPSILON, as raycast.occluded. The hashed sample patterns
- * are in sampling.glsl, which comes first. */
+ * are in sampling.glsl, which comes first. A triangle packed with a negative |e1|·|e2| is a
+ * cut-out: kernels that define BVH_CUTOUTS (and include textures.glsl, which defines
+ * bvh_cutout_counts) count its hits by its Alpha, as textures.cutout_hits; others as opaque. */
 
 #define BVH_WIDTH (1 << BVH_WIDTH_LOG2)
 bool bvh_hidden(int slot, int ray);
 #define BVH_FAR 1e30
 #ifndef M_PI_F
 #define M_PI_F 3.14159265358979323846
+#endif
+#ifdef BVH_CUTOUTS
+bool bvh_cutout_counts(int triangle, vec2 uv, vec3 o, vec3 d);
 #endif
 
 vec4 bvh_texel_nodes(int k)
@@ -38,7 +43,7 @@ bool bvh_triangle(int slot, vec3 o, vec3 d, float dlen, out float t, out vec2 uv
   float det = dot(e1.xyz, pv);
   t = BVH_FAR;
   uv = vec2(0.0);
-  if (!(abs(det) > DET_EPSILON * e2.w * dlen)) {
+  if (!(abs(det) > DET_EPSILON * abs(e2.w) * dlen)) {
     return false;
   }
   float inv = 1.0 / det;
@@ -94,6 +99,12 @@ int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_
           if (bvh_hidden(slot, any_hit ? BVH_RAY_SHADOW : BVH_CLOSEST_RAY)) {
             continue;
           }
+#ifdef BVH_CUTOUTS
+          if (bvh_texel_triangles(3 * slot + 2).w < 0.0 &&
+              !bvh_cutout_counts(int(bvh_texel_triangles(3 * slot + 1).w), tuv, o, d)) {
+            continue;
+          }
+#endif
           best = t;
           found = slot;
           uv = tuv;

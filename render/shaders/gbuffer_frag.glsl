@@ -3,10 +3,21 @@
  * face normal, as Cycles does), roughness; out_view: camera → point unit direction, material;
  * out_base: (Base Color sampled per texel, 1) where the material has a texture
  * (surface_slot = (slot, level-0 texels per metre × a pixel's footprint at unit distance)) at
- * scene/textures.primary_lod, else 0. */
+ * scene/textures.primary_lod, else 0. A cut-out's fragment (surface_cutout = (alpha texture or
+ * -1, alpha value); -2 opaque) is kept where textures.cutout_random of its point, view and
+ * triangle is below its Alpha (level 0), as camera rays count hits in raycast. */
 void main()
 {
   vec3 view = camera_ortho > 0.5 ? camera_forward : normalize(world_position - camera_position);
+  if (surface_cutout.x > -1.5) {
+    float alpha = surface_cutout.y;
+    if (surface_cutout.x > -0.5) {
+      alpha = clamp(surface_alpha(int(surface_cutout.x + 0.5), surface_uv), 0.0, 1.0);
+    }
+    if (cutout_random(world_position, view, gl_PrimitiveID) >= alpha) {
+      discard;
+    }
+  }
   if (surface.x < -1.5) { /* a holdout (gbuffer.rasterize): hides what is behind, shows nothing */
     out_position = out_normal = out_view = out_base = vec4(0.0);
     return;

@@ -7,5 +7,6 @@ void main()
   surface = material;
   surface_uv = uv;
   surface_slot = texel;
+  surface_cutout = cutout;
   gl_Position = view_projection * vec4(position, 1.0);
 }

@@ -3,14 +3,15 @@
  * Linear (bilinear) or Closest within a mip level, Repeat / Extend / Clip, trilinear between
  * levels. Samplers: texture_table (TEXTURE_TEXELS texels per texture, one row each:
  * textures.pack_atlas), texture_atlas (every level of every texture, RGBA16F). The wrap is
- * done here on texel indices (an atlas cannot wrap), as numpy does it. */
+ * done here on texel indices (an atlas cannot wrap), as numpy does it. The atlas' A channel
+ * is the textures' alpha (1 without one): cut-outs (bvh_cutout_counts, at the end). */
 
 int texture_wrap(int x, int size)
 {
   return x - size * int(floor(float(x) / float(size)));
 }
 
-vec3 texture_fetch(vec4 rect, int x, int y, int extension)
+vec4 texture_fetch4(vec4 rect, int x, int y, int extension)
 {
   int w = int(rect.z + 0.5);
   int h = int(rect.w + 0.5);
@@ -20,21 +21,21 @@ vec3 texture_fetch(vec4 rect, int x, int y, int extension)
   }
   else {
     if (extension == 2 && (x < 0 || x >= w || y < 0 || y >= h)) {
-      return vec3(0.0);
+      return vec4(0.0);
     }
     x = clamp(x, 0, w - 1);
     y = clamp(y, 0, h - 1);
   }
-  return texelFetch(texture_atlas, ivec2(int(rect.x + 0.5) + x, int(rect.y + 0.5) + y), 0).rgb;
+  return texelFetch(texture_atlas, ivec2(int(rect.x + 0.5) + x, int(rect.y + 0.5) + y), 0);
 }
 
-vec3 texture_level(int slot, int level, vec2 st, int interpolation, int extension)
+vec4 texture_level4(int slot, int level, vec2 st, int interpolation, int extension)
 {
   vec4 rect = texelFetch(texture_table, ivec2(3 + level, slot), 0);
   float x = st.x * rect.z;
   float y = st.y * rect.w;
   if (interpolation == 1) {
-    return texture_fetch(rect, int(floor(x)), int(floor(y)), extension);
+    return texture_fetch4(rect, int(floor(x)), int(floor(y)), extension);
   }
   x -= 0.5;
   y -= 0.5;
@@ -44,11 +45,16 @@ vec3 texture_level(int slot, int level, vec2 st, int interpolation, int extensio
   float fy = y - y0;
   int ix = int(x0);
   int iy = int(y0);
-  vec3 bottom = texture_fetch(rect, ix, iy, extension) * (1.0 - fx) +
-                texture_fetch(rect, ix + 1, iy, extension) * fx;
-  vec3 top = texture_fetch(rect, ix, iy + 1, extension) * (1.0 - fx) +
-             texture_fetch(rect, ix + 1, iy + 1, extension) * fx;
+  vec4 bottom = texture_fetch4(rect, ix, iy, extension) * (1.0 - fx) +
+                texture_fetch4(rect, ix + 1, iy, extension) * fx;
+  vec4 top = texture_fetch4(rect, ix, iy + 1, extension) * (1.0 - fx) +
+             texture_fetch4(rect, ix + 1, iy + 1, extension) * fx;
   return bottom * (1.0 - fy) + top * fy;
+}
+
+vec3 texture_level(int slot, int level, vec2 st, int interpolation, int extension)
+{
+  return texture_level4(slot, level, st, interpolation, extension).rgb;
 }
 
 /* Texture `slot` at surface UV `uv`, level of detail `lod` (log2 of the footprint in
@@ -70,3 +76,52 @@ vec3 surface_texture(int slot, vec2 uv, float lod)
   }
   return value;
 }
+
+/* Texture `slot`'s alpha (its 4th channel) at surface UV `uv`, level 0. */
+float surface_alpha(int slot, vec2 uv)
+{
+  vec4 a = texelFetch(texture_table, ivec2(0, slot), 0);
+  vec4 b = texelFetch(texture_table, ivec2(1, slot), 0);
+  int extension = int(texelFetch(texture_table, ivec2(2, slot), 0).x + 0.5);
+  vec2 st = vec2(a.x * uv.x + a.y * uv.y + a.z, b.x * uv.x + b.y * uv.y + b.z);
+  return texture_level4(slot, 0, st, int(b.w + 0.5), extension).a;
+}
+
+/* textures.cutout_random: the hash of a ray's origin and direction in steps of
+ * 1 / CUTOUT_QUANTUM and a triangle index, uniform in [0, 1) (pcg_hash: sampling.glsl). */
+float cutout_random(vec3 o, vec3 d, int triangle)
+{
+  ivec3 qo = ivec3(floor(o * 4096.0));
+  ivec3 qd = ivec3(floor(d * 4096.0));
+  uint h = pcg_hash(uint(triangle));
+  h = pcg_hash(h ^ uint(qo.x));
+  h = pcg_hash(h ^ uint(qo.y));
+  h = pcg_hash(h ^ uint(qo.z));
+  h = pcg_hash(h ^ uint(qd.x));
+  h = pcg_hash(h ^ uint(qd.y));
+  h = pcg_hash(h ^ uint(qd.z));
+  return unit_float(h);
+}
+
+/* textures.cutout_hits: does the ray (o, d)'s hit at barycentrics uv of cut-out triangle
+ * `triangle` (a SceneTriangles index) count? The triangle's texels in texture_table's rows
+ * after the textures' (gpu_scene._update_textures): (uv0, uv1), (uv2, alpha texture, alpha
+ * value); the Alpha is the texture's 4th channel where there is one, else the value. */
+#ifdef BVH_CUTOUTS
+bool bvh_cutout_counts(int triangle, vec2 uv, vec3 o, vec3 d)
+{
+  int k = 2 * triangle;
+  int row = int(texelFetch(texture_table, ivec2(BVH_WIDTH - 1, 0), 0).x + 0.5);
+  vec4 c2 = texelFetch(texture_table,
+                       ivec2((k + 1) & (BVH_WIDTH - 1), row + ((k + 1) >> BVH_WIDTH_LOG2)), 0);
+  float alpha = c2.w;
+  int slot = int(floor(c2.z + 0.5));
+  if (slot >= 0) {
+    vec4 c01 = texelFetch(texture_table,
+                          ivec2(k & (BVH_WIDTH - 1), row + (k >> BVH_WIDTH_LOG2)), 0);
+    vec2 at = (1.0 - uv.x - uv.y) * c01.xy + uv.x * c01.zw + uv.y * c2.xy;
+    alpha = clamp(surface_alpha(slot, at), 0.0, 1.0);
+  }
+  return cutout_random(o, d, triangle) < alpha;
+}
+#endif

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import SceneTriangles
-from .raycast import SHADOW_EPSILON
+from .raycast import SHADOW_EPSILON, counted_hits, cutouts_of
 from .snapshot import RAY_ALL, RAY_DIFFUSE, RAY_SHADOW
 
 __all__ = [
@@ -261,7 +261,8 @@ class BVHTextures:
     nodes : 2 texels per node: (lo.xyz, miss link), (hi.xyz, leaf code) with leaf code =
         first · 16 + count (first indexes the packed triangles) or -1 for an interior node.
     triangles : 3 texels per triangle, in leaf order: (v0.xyz, material code), (e1.xyz,
-        index into the SceneTriangles), (e2.xyz, |e1|·|e2|) — v0 and the edges in metres.
+        index into the SceneTriangles), (e2.xyz, ±|e1|·|e2|, negative for a cut-out:
+        ``textures.cutout_hits``) — v0 and the edges in metres.
     normals : 3 texels per triangle, in leaf order: the shading normals at v0, v1, v2 (the
         face normal where the triangles carry no corner normals), w = 0.
         The material code (``material_code``) is the material index (-1 = none) plus
@@ -316,6 +317,9 @@ def pack_bvh(bvh: BVH, tris: SceneTriangles) -> BVHTextures:
     packed[:, 1, :3], packed[:, 1, 3] = e1, order
     packed[:, 2, :3] = e2
     packed[:, 2, 3] = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+    cutout = cutouts_of(tris)
+    if cutout is not None:  # cut-outs (textures.cutout_hits) carry a negative scale
+        packed[:, 2, 3] *= np.where(cutout[0].cutout[order], -1.0, 1.0)
     normals = np.zeros((t, 3, 4), np.float32)
     if tris.corner_normals is not None:
         normals[..., :3] = np.asarray(tris.corner_normals)[order]
@@ -366,6 +370,7 @@ def traverse(bvh: BVH, tris: SceneTriangles, origins, directions, t_min=0.0, t_m
         return np.full(n, np.inf), tri, bu, bv
     accept = tris.accepted(ray) if hasattr(tris, "accepted") else None
     positions = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)
+    cutout = cutouts_of(tris)
     with np.errstate(divide="ignore"):
         inv = 1.0 / np.where(np.abs(d) > 1e-30, d, 1e-30)
     node = np.zeros(n, np.int64)
@@ -394,6 +399,7 @@ def traverse(bvh: BVH, tris: SceneTriangles, origins, directions, t_min=0.0, t_m
                 good = (t[sel] > lo_t[rj]) & (t[sel] < best[rj])
                 if accept is not None:
                     good &= accept[which[sel]]
+                good = counted_hits(cutout, good, which[sel], u[sel], v[sel], o[rj], d[rj])
                 if any_hit:
                     good &= tri[rj] < 0
                 g = sel[good]

@@ -19,6 +19,7 @@ from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
 from .camera import camera_ray_lengths, camera_rays
 from .geometry import SceneTriangles
 from .snapshot import RAY_CAMERA, RAY_DIFFUSE, RAY_SHADOW, CameraData
+from .textures import cutout_hits
 
 __all__ = [
     "TriangleGrid", "build_grid", "closest_hits", "occluded", "SHADOW_EPSILON", "PrimaryHits",
@@ -46,6 +47,8 @@ class TriangleGrid:
         an always-empty sentinel cell).
     corners : (10, T) float64 rows: first corner xyz, edge 1 xyz, edge 2 xyz and |e1|·|e2| (the
         scale of the Möller–Trumbore determinant) of each triangle.
+    cutout : (``textures.SurfaceTextures``, materials (T,)) of triangles some of whose
+        materials are not opaque (a hit on them counts by ``textures.cutout_hits``), or None.
     """
 
     origin: np.ndarray
@@ -54,6 +57,32 @@ class TriangleGrid:
     cell_start: np.ndarray
     cell_triangles: np.ndarray
     corners: np.ndarray
+    cutout: tuple | None = None
+
+
+def cutouts_of(tris):
+    """(``SurfaceTextures``, materials) of ``tris`` when some triangle is a cut-out, else None."""
+    surface = getattr(tris, "textures", None)
+    if surface is None or surface.cutout is None or not np.any(surface.cutout):
+        return None
+    return surface, np.asarray(tris.materials)
+
+
+def counted_hits(cutout, good, tri, u, v, origins, directions) -> np.ndarray:
+    """``good`` (P,) bool with the hits on cut-out triangles that the ray passes through
+    (``textures.cutout_hits``) taken out; origins, directions (P, 3) per pair."""
+    if cutout is None or not good.any():
+        return good
+    surface, materials = cutout
+    at = np.flatnonzero(good)
+    at = at[surface.cutout[tri[at]]]
+    if len(at) == 0:
+        return good
+    kept = cutout_hits(surface, materials, tri[at], u[at], v[at], np.asarray(origins)[at],
+                       np.asarray(directions)[at])
+    good = good.copy()
+    good[at[~kept]] = False
+    return good
 
 
 def build_grid(tris: SceneTriangles) -> TriangleGrid:
@@ -73,7 +102,7 @@ def build_grid(tris: SceneTriangles) -> TriangleGrid:
     corners = np.ascontiguousarray(np.concatenate([positions[:, 0].T, e1.T, e2.T, scale[None]]))
     if count == 0:
         return TriangleGrid(origin, span, dims, np.zeros(int(dims.prod()) + 2, np.int64),
-                            np.zeros(0, np.int32), corners)
+                            np.zeros(0, np.int32), corners, cutouts_of(tris))
     surface = voxelize_triangles(
         (positions - origin).reshape(-1, 3), np.arange(3 * count).reshape(count, 3), span
     )
@@ -82,7 +111,8 @@ def build_grid(tris: SceneTriangles) -> TriangleGrid:
     order = np.argsort(keys, kind="stable")
     counts = np.bincount(keys, minlength=int(dims.prod()) + 1)  # + the empty sentinel cell
     cell_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    return TriangleGrid(origin, span, dims, cell_start, surface.triangle_of_pair[order], corners)
+    return TriangleGrid(origin, span, dims, cell_start, surface.triangle_of_pair[order], corners,
+                        cutouts_of(tris))
 
 
 _GRIDS: "weakref.WeakKeyDictionary[SceneTriangles, TriangleGrid]" = weakref.WeakKeyDictionary()
@@ -187,6 +217,7 @@ def _trace_chunk(grid: TriangleGrid, o, d, t_min, t_max, any_hit: bool, accept=N
             good = (t > pair_state[_LO]) & (t < np.minimum(pair_state[_FOUND], pair_state[_HI]))
             if accept is not None:
                 good &= accept[tri]
+            good = counted_hits(grid.cutout, good, tri, u, v, pair_state[_O].T, pair_state[_D].T)
             if good.any():
                 slot, tri, t, u, v = slot[good], tri[good], t[good], u[good], v[good]
                 found = state[_FOUND]

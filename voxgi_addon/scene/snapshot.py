@@ -69,8 +69,9 @@ class TextureData:
     """An image a material's socket samples per texel (docs/gi_pipeline.md "Materials per
     texel"): an Image Texture node's, or Cycles' bake of a node tree into the mesh's UV map.
 
-    pixels : (H, W, 3) float32, row 0 = the bottom row (v = 0), as ``Image.pixels`` holds them:
-        linear RGB (sRGB byte images linearised), a Non-Color image's values as they are.
+    pixels : (H, W, 3) or (H, W, 4) float32, row 0 = the bottom row (v = 0), as ``Image.pixels``
+        holds them: linear RGB (sRGB byte images linearised), a Non-Color image's values as
+        they are, and the image's alpha where a material reads it (4 channels).
     interpolation : 'Linear' (bilinear) or 'Closest'.
     extension : 'REPEAT', 'EXTEND' (clamp to the edge) or 'CLIP' (black outside [0, 1]).
     uv_transform : (2, 3) float64 affine map of a surface's UV (u, v, 1) to the image's
@@ -96,6 +97,8 @@ class MaterialData:
     emission : (3,) float32 linear RGB, colour × strength.
     base_color_texture : index into ``SceneSnapshot.textures`` of the texture giving the Base
         Color per texel through the meshes' ``uvs``, or -1 (the value is uniform).
+    alpha : the Alpha socket's value (1 opaque); alpha_texture : index of the texture whose
+        4th channel gives the Alpha per texel (-1: ``alpha`` everywhere).
     """
 
     name: str
@@ -105,6 +108,8 @@ class MaterialData:
     specular: float = 0.5
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
     base_color_texture: int = -1
+    alpha: float = 1.0
+    alpha_texture: int = -1
 
 
 @dataclass(frozen=True)

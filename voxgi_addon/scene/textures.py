@@ -19,6 +19,15 @@ Values are held at half precision (``HALF``), as the GPU atlas (RGBA16F) stores 
 numpy reference and the GLSL port (render/shaders/textures.glsl) read the same texels; the
 filtering arithmetic is float32 on both. ``pack_atlas`` lays every level of every texture
 into one atlas with a table of where each level lies (what the GPU uploads).
+
+Alpha (cut-outs, issue 22 point 2): a material's Alpha is a value or the 4th channel of a
+texture (``MaterialData.alpha`` / ``alpha_texture``; the atlas' A channel, 1 for textures
+without one). A ray that meets a triangle whose material is not opaque (``SurfaceTextures
+.cutout``) counts the hit only when a hash of the ray and the triangle (``cutout_random``,
+uniform in [0, 1)) is below the Alpha at the hit (level 0): ``cutout_hits``. Camera, bounce and
+shadow rays thus pass through in proportion, as Cycles' stochastic transparency does; numpy
+(``raycast``, ``bvh.traverse``) and the GLSL traversal (``bvh_common.glsl``,
+``textures.glsl``) run the same test.
 """
 from __future__ import annotations
 
@@ -66,10 +75,10 @@ def within_max_size(pixels: np.ndarray) -> np.ndarray:
 
 
 def mip_pyramid(pixels: np.ndarray) -> list[np.ndarray]:
-    """[(h_k, w_k, 3) float32] levels of ``pixels`` (row 0 at the bottom) down to 1 × 1 or
-    MAX_LEVELS, each rounded to half precision (``HALF``); images larger than MAX_SIZE start at
-    their first level within it."""
-    level = np.asarray(pixels, np.float32)[..., :3]
+    """[(h_k, w_k, C) float32] levels of ``pixels`` (row 0 at the bottom; C = 3, or 4 with
+    alpha) down to 1 × 1 or MAX_LEVELS, each rounded to half precision (``HALF``); images
+    larger than MAX_SIZE start at their first level within it."""
+    level = np.asarray(pixels, np.float32)[..., :4]
     levels = []
     while True:
         if max(level.shape[:2]) <= MAX_SIZE:
@@ -91,7 +100,7 @@ def pyramid(texture: TextureData) -> list[np.ndarray]:
 
 
 def _fetch(image: np.ndarray, x: np.ndarray, y: np.ndarray, extension: str) -> np.ndarray:
-    """(N, 3) texels at integer (x, y), wrapped by ``extension`` (Clip: 0 outside)."""
+    """(N, C) texels at integer (x, y), wrapped by ``extension`` (Clip: 0 outside)."""
     h, w = image.shape[:2]
     if extension == "REPEAT":
         return image[np.mod(y, h), np.mod(x, w)]
@@ -104,7 +113,7 @@ def _fetch(image: np.ndarray, x: np.ndarray, y: np.ndarray, extension: str) -> n
 
 def sample_level(image: np.ndarray, s: np.ndarray, t: np.ndarray, interpolation: str,
                  extension: str) -> np.ndarray:
-    """(N, 3) float32 of one level at image coordinates (s, t) (N,) float32 (0 … 1 across the
+    """(N, C) float32 of one level at image coordinates (s, t) (N,) float32 (0 … 1 across the
     image, t = 0 at the bottom row): Closest = the texel containing the point, Linear =
     bilinear between the four nearest texel centres."""
     h, w = image.shape[:2]
@@ -124,9 +133,21 @@ def sample_level(image: np.ndarray, s: np.ndarray, t: np.ndarray, interpolation:
 
 
 def sample_texture(texture: TextureData, uv: np.ndarray, lod=None) -> np.ndarray:
-    """(N, 3) float32: ``texture`` at surface UVs (N, 2) through its ``uv_transform``,
-    trilinear between mip levels at level of detail ``lod`` (N,) (log2 of the footprint in
-    level-0 texels; None: level 0)."""
+    """(N, 3) float32: ``texture``'s colour at surface UVs (N, 2) through its
+    ``uv_transform``, trilinear between mip levels at level of detail ``lod`` (N,) (log2 of
+    the footprint in level-0 texels; None: level 0)."""
+    return sample_rgba(texture, uv, lod)[:, :3]
+
+
+def sample_alpha(texture: TextureData, uv: np.ndarray, lod=None) -> np.ndarray:
+    """(N,) float32: ``texture``'s 4th channel (its alpha; 1 for a texture without one) at
+    surface UVs (N, 2), as ``sample_texture``."""
+    return sample_rgba(texture, uv, lod)[:, 3]
+
+
+def sample_rgba(texture: TextureData, uv: np.ndarray, lod=None) -> np.ndarray:
+    """(N, 4) float32: ``sample_texture`` with the 4th channel (1 where the texture has
+    three)."""
     levels = pyramid(texture)
     uv = np.asarray(uv, np.float32).reshape(-1, 2)
     a = np.asarray(texture.uv_transform, np.float32)
@@ -134,11 +155,11 @@ def sample_texture(texture: TextureData, uv: np.ndarray, lod=None) -> np.ndarray
     t = a[1, 0] * uv[:, 0] + a[1, 1] * uv[:, 1] + a[1, 2]
     interp, ext = texture.interpolation, texture.extension
     if lod is None:
-        return sample_level(levels[0], s, t, interp, ext)
+        return _rgba(sample_level(levels[0], s, t, interp, ext))
     lod = np.clip(np.asarray(lod, np.float32), 0.0, np.float32(len(levels) - 1))
     l0 = np.floor(lod).astype(np.int64)
     f = (lod - l0.astype(np.float32))[:, None]
-    out = np.zeros((len(uv), 3), np.float32)
+    out = np.zeros((len(uv), levels[0].shape[2]), np.float32)
     for level in np.unique(l0):
         at = np.flatnonzero(l0 == level)
         value = sample_level(levels[level], s[at], t[at], interp, ext)
@@ -146,7 +167,14 @@ def sample_texture(texture: TextureData, uv: np.ndarray, lod=None) -> np.ndarray
             upper = sample_level(levels[level + 1], s[at], t[at], interp, ext)
             value = value * (np.float32(1.0) - f[at]) + upper * f[at]
         out[at] = value
-    return out
+    return _rgba(out)
+
+
+def _rgba(values: np.ndarray) -> np.ndarray:
+    """(N, 4) of (N, 3) or (N, 4) samples: alpha 1 where the texture has none."""
+    if values.shape[1] == 4:
+        return values
+    return np.concatenate([values, np.ones((len(values), 1), np.float32)], axis=1)
 
 
 def texture_texels(texture: TextureData) -> float:
@@ -164,17 +192,50 @@ class SurfaceTextures:
     textures : the snapshot's ``TextureData``; slots : (M + 1,) int32 Base Color texture per
     material index (the last row, no material: -1); uvs : (T, 3, 2) float32 corner UVs (zeros
     for meshes without a UV map, as Cycles reads a missing UV map); density : (T,) float32
-    level-0 texels per metre of each triangle's texture (0 without one)."""
+    level-0 texels per metre of each triangle's texture (0 without one). alpha_slots : (M + 1,)
+    int32 the texture whose 4th channel is each material's Alpha (-1: ``alpha_values``);
+    alpha_values : (M + 1,) float32 the Alpha of materials without an alpha texture; cutout :
+    (T,) bool triangles whose material is not opaque (rays test their Alpha, ``cutout_hits``)."""
 
     textures: tuple
     slots: np.ndarray
     uvs: np.ndarray
     density: np.ndarray = field(default=None)
+    alpha_slots: np.ndarray = field(default=None)
+    alpha_values: np.ndarray = field(default=None)
+    cutout: np.ndarray = field(default=None)
 
-    def slot_of(self, materials: np.ndarray) -> np.ndarray:
+    def row_of(self, materials: np.ndarray) -> np.ndarray:
+        """(N,) rows of the per-material arrays for material indices (the last: none)."""
         m = np.asarray(materials)
         last = len(self.slots) - 1
-        return self.slots[np.where((m >= 0) & (m < last), m, last)]
+        return np.where((m >= 0) & (m < last), m, last)
+
+    def slot_of(self, materials: np.ndarray) -> np.ndarray:
+        return self.slots[self.row_of(materials)]
+
+    def alpha_at(self, triangles, materials, b1, b2) -> np.ndarray:
+        """(N,) float32 Alpha at surface points (level 0): triangles (N,) indices, materials
+        (N,) their material indices, b1, b2 (N,) barycentrics of corners 1 and 2."""
+        triangles = np.asarray(triangles)
+        row = self.row_of(materials)
+        out = np.ones(len(triangles), np.float32)
+        if self.alpha_values is not None:
+            out = self.alpha_values[row].astype(np.float32)
+        if self.alpha_slots is None:
+            return out
+        slots = self.alpha_slots[row]
+        for slot in np.unique(slots[slots >= 0]):
+            at = np.flatnonzero(slots == slot)
+            out[at] = sample_alpha(self.textures[slot], self._uv(triangles[at], np.asarray(b1)[at],
+                                                                 np.asarray(b2)[at]))
+        return np.clip(out, 0.0, 1.0)
+
+    def _uv(self, triangles, b1, b2) -> np.ndarray:
+        corner = self.uvs[np.asarray(triangles)]
+        w1 = np.asarray(b1, np.float32)[:, None]
+        w2 = np.asarray(b2, np.float32)[:, None]
+        return (np.float32(1.0) - w1 - w2) * corner[:, 0] + w1 * corner[:, 1] + w2 * corner[:, 2]
 
     def base_at(self, triangles, materials, b1, b2, base, lod=None) -> np.ndarray:
         """``base`` (N, 3) with the textured points' Base Color sampled per texel, clipped to
@@ -209,18 +270,69 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
     """The ``SurfaceTextures`` of a snapshot's world triangles (None when no material has a
     texture): positions (T, 3, 3), materials (T,), uvs (T, 3, 2)."""
     textures = tuple(getattr(snapshot, "textures", ()) or ())
-    slots = np.full(len(snapshot.materials) + 1, -1, np.int32)
+    count = len(snapshot.materials) + 1
+    slots = np.full(count, -1, np.int32)
+    alpha_slots = np.full(count, -1, np.int32)
+    alpha_values = np.ones(count, np.float32)
     for i, m in enumerate(snapshot.materials):
         index = int(getattr(m, "base_color_texture", -1))
         if 0 <= index < len(textures):
             slots[i] = index
-    if not (slots >= 0).any():
+        index = int(getattr(m, "alpha_texture", -1))
+        if 0 <= index < len(textures):
+            alpha_slots[i] = index
+        alpha_values[i] = np.clip(float(getattr(m, "alpha", 1.0)), 0.0, 1.0)
+    transparent = (alpha_slots >= 0) | (alpha_values < 1.0)
+    if not (slots >= 0).any() and not transparent.any():
         return None
     out = SurfaceTextures(textures, slots, np.asarray(uvs, np.float32))
+    if transparent.any():
+        out.alpha_slots, out.alpha_values = alpha_slots, alpha_values
+        out.cutout = transparent[out.row_of(materials)]
     slot = out.slot_of(materials)
     scale = np.array([texture_texels(t) for t in textures] + [0.0], np.float64)
     out.density = (texel_density(positions, uvs) * scale[slot]).astype(np.float32)
     return out
+
+
+def _hash(v: np.ndarray) -> np.ndarray:
+    """sampling.glsl's ``pcg_hash`` on uint32 arrays."""
+    state = v.astype(np.uint32) * np.uint32(747796405) + np.uint32(2891336453)
+    word = ((state >> ((state >> np.uint32(28)) + np.uint32(4))) ^ state) * np.uint32(277803737)
+    return (word >> np.uint32(22)) ^ word
+
+
+CUTOUT_QUANTUM = 4096.0  # rays are hashed on their origin and direction in 1/4096 steps
+
+
+def _quantized(values) -> np.ndarray:
+    """(N, 3) uint32: float32 ``values`` × CUTOUT_QUANTUM floored, as two's-complement bits."""
+    q = np.floor(np.asarray(values, np.float32).reshape(-1, 3) * np.float32(CUTOUT_QUANTUM))
+    return q.astype(np.int64).astype(np.uint32)
+
+
+def cutout_random(origins, directions, triangles) -> np.ndarray:
+    """(N,) float32 in [0, 1): the hash of a ray (its float32 origin and direction in steps of
+    1 / CUTOUT_QUANTUM, so that the GPU's float32 rays and numpy's float64 ones nearly always
+    hash alike) and a triangle index, which decides whether the ray passes a cut-out
+    (``cutout_hits``); the GLSL port is ``textures.glsl``'s ``cutout_random``."""
+    o, d = _quantized(origins), _quantized(directions)
+    with np.errstate(over="ignore"):
+        h = _hash(np.asarray(triangles).astype(np.int64).astype(np.uint32))
+        for column in (o[:, 0], o[:, 1], o[:, 2], d[:, 0], d[:, 1], d[:, 2]):
+            h = _hash(h ^ column)
+    return ((h >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0))
+
+
+def cutout_hits(surface: SurfaceTextures, materials, triangles, b1, b2, origins,
+                directions) -> np.ndarray:
+    """(N,) bool: does each ray's hit of a cut-out triangle count (``cutout_random`` below the
+    Alpha there)? triangles (N,) indices into the ``SceneTriangles``, materials their
+    ``materials`` array (all triangles), b1, b2 (N,) the hits' barycentrics, origins,
+    directions (N, 3) the rays."""
+    triangles = np.asarray(triangles)
+    alpha = surface.alpha_at(triangles, np.asarray(materials)[triangles], b1, b2)
+    return cutout_random(origins, directions, triangles) < alpha
 
 
 def pixel_spread(camera, width: int, height: int) -> float:
@@ -282,7 +394,9 @@ def pack_atlas(textures, width: int | None = None):
     table = np.zeros((max(1, len(textures)), TEXTURE_TEXELS, 4), np.float32)
     for h, w, i, k, level in rects:
         x0, y0 = places[(i, k)]
-        atlas[y0:y0 + h, x0:x0 + w, :3] = level
+        atlas[y0:y0 + h, x0:x0 + w, :level.shape[2]] = level
+        if level.shape[2] == 3:
+            atlas[y0:y0 + h, x0:x0 + w, 3] = 1.0  # no alpha: opaque
         table[i, 3 + k] = (x0, y0, w, h)
     for i, texture in enumerate(textures):
         a = np.asarray(texture.uv_transform, np.float32)

@@ -57,6 +57,8 @@ class VoxelAttributes:
     weights : (N, 4) float32 summing to 1, bone_indices : (N, 4) uint8 — or None if unskinned.
     plane_offset : (N,) float32 metres or None: signed distance along ``normal`` from the voxel
         centre to the voxel's surface plane (see the module docstring).
+    coverage : (N,) float32 or None: the Alpha of the voxel's surface, its pieces' mean by area
+        (cut-outs, ``texel_alpha``); None: opaque.
     """
 
     albedo: np.ndarray
@@ -65,6 +67,7 @@ class VoxelAttributes:
     weights: np.ndarray | None = None
     bone_indices: np.ndarray | None = None
     plane_offset: np.ndarray | None = None
+    coverage: np.ndarray | None = None
 
 
 def face_normals_and_areas(positions: np.ndarray, triangles: np.ndarray):
@@ -86,7 +89,8 @@ def _weighted_mean(values, pair_tri, pair_cell, weight, count):
 
 
 def average_attributes(surface: VoxelizedSurface, positions, triangles, tri_albedo, tri_specular,
-                       skin_weights=None, skin_indices=None, texel_albedo=None) -> VoxelAttributes:
+                       skin_weights=None, skin_indices=None, texel_albedo=None,
+                       texel_alpha=None) -> VoxelAttributes:
     """Average triangle attributes into the voxels of ``surface``.
 
     positions : (V, 3) object space; triangles : (T, 3) the ones passed to the voxelizer.
@@ -96,6 +100,9 @@ def average_attributes(surface: VoxelizedSurface, positions, triangles, tri_albe
     2, span) -> (P, 3) albedo of each (triangle, voxel) contact: the material's texture at the
     centroid of the triangle's piece clipped to the voxel (the triangle's centroid where the
     piece has no area), filtered over the voxel's span; each voxel averages its pieces by area.
+    texel_alpha : optional callable, the same arguments -> (P,) Alpha of each contact (over the
+    voxel's span): the voxel's ``coverage`` is its pieces' mean Alpha by area, and its albedo
+    the alpha-weighted mean (what the surface shows where it is there).
     The result includes ``plane_offset`` (see the module docstring).
     """
     n = surface.voxel_count
@@ -110,12 +117,19 @@ def average_attributes(surface: VoxelizedSurface, positions, triangles, tri_albe
         even = areas[pt] / np.maximum(per_tri[pt], 1) / surface.span**2
         weight[grazed] = even[grazed]
     weight += 1e-30
+    bary = None if texel_albedo is None and texel_alpha is None else \
+        _piece_barycentrics(surface, positions, triangles, centroid)
+    coverage = None
+    colour_weight = weight
+    if texel_alpha is not None:
+        alpha = np.clip(np.asarray(texel_alpha(pt, bary, surface.span), np.float64), 0.0, 1.0)
+        coverage = _weighted_mean(alpha[:, None], np.arange(len(pt)), pc, weight, n)[:, 0]
+        colour_weight = weight * alpha + 1e-30
     if texel_albedo is None:
-        albedo = _weighted_mean(np.asarray(tri_albedo, np.float64), pt, pc, weight, n)
+        albedo = _weighted_mean(np.asarray(tri_albedo, np.float64), pt, pc, colour_weight, n)
     else:
-        bary = _piece_barycentrics(surface, positions, triangles, centroid)
         per_pair = np.asarray(texel_albedo(pt, bary, surface.span), np.float64)
-        albedo = _weighted_mean(per_pair, np.arange(len(pt)), pc, weight, n)
+        albedo = _weighted_mean(per_pair, np.arange(len(pt)), pc, colour_weight, n)
     spec = _weighted_mean(np.asarray(tri_specular, np.float64)[:, None], pt, pc, weight, n)[:, 0]
     normal = _weighted_mean(normals, pt, pc, weight, n)
     pieces = _Pieces(pc, normals[pt], clipped, centroid, n)
@@ -139,7 +153,8 @@ def average_attributes(surface: VoxelizedSurface, positions, triangles, tri_albe
     offset[small[grazed]] = np.nan
     return VoxelAttributes(albedo.astype(np.float32), normal.astype(np.float32),
                            spec.astype(np.float32), w, idx,
-                           (offset * surface.span).astype(np.float32))
+                           (offset * surface.span).astype(np.float32),
+                           None if coverage is None else coverage.astype(np.float32))
 
 
 def _dominant_face_normal(normals, pt, pc, weight, voxels, count):

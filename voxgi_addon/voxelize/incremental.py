@@ -63,6 +63,14 @@ def mesh_fingerprint(key: str, positions, mesh, snapshot: SceneSnapshot, base_sp
         digest.update(repr([(textures[s].key, textures[s].interpolation, textures[s].extension,
                              np.asarray(textures[s].uv_transform).tolist()) if
                             0 <= s < len(textures) else None for s in slots]).encode())
+    # cut-outs: the Alpha per material and its textures (the voxels' coverage)
+    alphas = [(float(getattr(m, "alpha", 1.0)), int(getattr(m, "alpha_texture", -1)))
+              for m in snapshot.materials]
+    if any(a < 1.0 or 0 <= s < len(textures) for a, s in alphas):
+        _feed(digest, mesh.uvs)
+        digest.update(repr([(a, (textures[s].key, textures[s].interpolation,
+                                 textures[s].extension, np.asarray(textures[s].uv_transform).tolist())
+                             if 0 <= s < len(textures) else None) for a, s in alphas]).encode())
     skin = mesh.skin
     _feed(digest, None if skin is None else skin.weights)
     _feed(digest, None if skin is None else skin.bone_indices)

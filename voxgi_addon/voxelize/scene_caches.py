@@ -11,6 +11,7 @@ non-uniform remainder is baked into the rest vertices (``object_scale.skin_bake`
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -18,7 +19,13 @@ import numpy as np
 
 from ..errors import VoxGICancelled, VoxGIError
 from ..scene.snapshot import MeshData, SceneSnapshot
-from ..scene.textures import sample_texture, texel_density, texture_texels
+from ..scene.textures import (
+    cutout_random,
+    sample_alpha,
+    sample_texture,
+    texel_density,
+    texture_texels,
+)
 from . import object_scale
 from .attributes import average_attributes
 from .cache import VoxelCache, pack_cache
@@ -200,6 +207,66 @@ def texel_albedo(snapshot: SceneSnapshot, mesh: MeshData, positions, keep=None):
     return sample
 
 
+def texel_alpha(snapshot: SceneSnapshot, mesh: MeshData, positions, keep=None):
+    """The voxelizer's ``texel_alpha`` callable for ``mesh`` (as ``texel_albedo``), or None
+    when all its materials are opaque: a (triangle, voxel) contact's Alpha is the material's
+    value, or its alpha texture at the piece's centroid UV at the footprint of one voxel span
+    (the cut-out's coverage of about the voxel's area)."""
+    textures = tuple(getattr(snapshot, "textures", ()) or ())
+    count = len(snapshot.materials)
+    values = np.ones(count + 1)
+    slots = np.full(count + 1, -1, np.int64)
+    for i, m in enumerate(snapshot.materials):
+        values[i] = np.clip(float(getattr(m, "alpha", 1.0)), 0.0, 1.0)
+        index = int(getattr(m, "alpha_texture", -1))
+        if 0 <= index < len(textures) and mesh.uvs is not None:
+            slots[i] = index
+    keep = np.arange(len(mesh.triangles)) if keep is None else np.asarray(keep)
+    idx = np.asarray(mesh.triangle_materials, np.int64)[keep]
+    row = np.where((idx >= 0) & (idx < count), idx, count)
+    value, slot = values[row], slots[row]
+    if not ((slot >= 0) | (value < 1.0)).any():
+        return None
+    uvs = None if mesh.uvs is None else np.asarray(mesh.uvs, np.float32)[keep]
+    corners = np.asarray(positions, np.float64)[np.asarray(mesh.triangles, np.int64)[keep]]
+    density = None if uvs is None else texel_density(corners, uvs)
+    texels = np.array([texture_texels(t) for t in textures] + [0.0])
+
+    def sample(pair_tri, bary, span):
+        out = value[pair_tri].copy()
+        for s in np.unique(slot[pair_tri]):
+            if s < 0:
+                continue
+            at = np.flatnonzero(slot[pair_tri] == s)
+            tri = pair_tri[at]
+            b = np.asarray(bary, np.float32)[at]
+            c = uvs[tri]
+            uv = (1.0 - b[:, :1] - b[:, 1:]) * c[:, 0] + b[:, :1] * c[:, 1] + b[:, 1:] * c[:, 2]
+            lod = np.log2(np.maximum(span * density[tri] * texels[s], 1.0))
+            out[at] = sample_alpha(textures[s], uv, lod)
+        return out
+
+    return sample
+
+
+def covered_voxels(cells: np.ndarray, coverage, cascade: int) -> np.ndarray | None:
+    """(N,) bool voxels kept of a cut-out's voxels: each one where a hash of its cell and
+    cascade (``textures.cutout_random``) is below its ``coverage`` — so cones and probes see
+    through in proportion, as rays pass cut-outs; None when every voxel is opaque."""
+    if coverage is None or (np.asarray(coverage) >= 1.0).all():
+        return None
+    cells = np.asarray(cells, np.float32).reshape(-1, 3)
+    salt = np.full_like(cells, np.float32(cascade + 1))
+    return cutout_random(cells, salt, np.zeros(len(cells), np.int64)) < np.asarray(coverage)
+
+
+def _kept(attrs, keep):
+    """``attrs`` (``VoxelAttributes``) of the voxels ``keep`` (bool)."""
+    return dataclasses.replace(attrs, **{
+        f.name: None if getattr(attrs, f.name) is None else np.asarray(getattr(attrs, f.name))[keep]
+        for f in dataclasses.fields(attrs)})
+
+
 def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, result, timer,
                       cancel=None, span_scale: float = 1.0):
     """Voxelize one mesh at every cascade span into ``result.caches[key]``.
@@ -216,6 +283,7 @@ def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, 
             f"({check.degenerate} zero-area, {check.non_finite} with NaN/inf vertices)")
     tris = np.asarray(mesh.triangles, np.int64)[check.keep]
     texels = texel_albedo(snapshot, mesh, positions, np.flatnonzero(check.keep))
+    alphas = texel_alpha(snapshot, mesh, positions, np.flatnonzero(check.keep))
     albedo, spec = triangle_materials(snapshot, mesh)
     albedo, spec = albedo[check.keep], spec[check.keep]
     used = np.unique(tris)
@@ -243,10 +311,14 @@ def build_mesh_caches(key, positions, mesh, snapshot, base_span, cascade_count, 
         t0 = time.perf_counter()
         attrs = average_attributes(surface, positions, tris, albedo, spec,
                                    None if skin is None else skin.weights,
-                                   None if skin is None else skin.bone_indices, texels)
+                                   None if skin is None else skin.bone_indices, texels, alphas)
+        cells = surface.cells
+        keep = covered_voxels(cells, attrs.coverage, cascade)
+        if keep is not None:
+            cells, attrs = np.asarray(cells)[keep], _kept(attrs, keep)
         timer.add("attributes", t0)
         t0 = time.perf_counter()
-        caches.append(pack_cache(key, cascade, span, lo, dims, surface.cells, attrs, finer))
+        caches.append(pack_cache(key, cascade, span, lo, dims, cells, attrs, finer))
         timer.add("pack", t0)
         finer = True
     result.caches[key] = caches
