@@ -37,7 +37,7 @@ from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
 from ..voxgi_addon.gi.world_light import world_table
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
-from ..voxgi_addon.scene.bvh import DET_EPSILON, TEXTURE_WIDTH, build_bvh, pack_bvh
+from ..voxgi_addon.scene.bvh import DET_EPSILON, TEXTURE_WIDTH, build_scene_bvh, pack_bvh
 from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
 from ..voxgi_addon.scene.snapshot import RAY_DIFFUSE, RAY_GLOSSY, RAY_SHADOW
 from .gpu_ltc import DEFINES as LTC_DEFINES
@@ -165,7 +165,7 @@ class GPUBVH:
             self._tris = tris
             return self
         t0 = time.perf_counter()
-        packed = pack_bvh(build_bvh(tris), tris)
+        packed = pack_bvh(build_scene_bvh(tris), tris)  # built once per instanced mesh
         self.build_seconds = time.perf_counter() - t0
 
         def upload(texels):

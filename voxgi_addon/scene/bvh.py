@@ -103,7 +103,7 @@ def _ranges(start, count):
     return np.repeat(start - offsets, count) + np.arange(int(count.sum())), offsets
 
 
-def _split_level(order, tlo, thi, cen, start, count, bins=BINS):
+def _split_level(order, tlo, thi, cen, start, count, bins=BINS, max_leaf=MAX_LEAF):
     """Choose splits for a level's nodes with ``bins`` SAH bins. Returns (split (A,) bool,
     left count (A,)) and reorders ``order`` in place so that each split node's left part
     comes first."""
@@ -142,7 +142,7 @@ def _split_level(order, tlo, thi, cen, start, count, bins=BINS):
     best_cost = cost[rows, best]
     parent = np.maximum(_area(blo.min(axis=1), bhi.max(axis=1)), 1e-30)
     sah = np.isfinite(best_cost)
-    leaf = (count <= 1) | ((count <= MAX_LEAF) &
+    leaf = (count <= 1) | ((count <= max_leaf) &
                            (~sah | (count <= TRAVERSAL_COST + best_cost / parent)))
     split = ~leaf
     median = split & ~sah  # every centroid in one place: split the list in half
@@ -156,8 +156,9 @@ def _split_level(order, tlo, thi, cen, start, count, bins=BINS):
     return split, left
 
 
-def build_bvh(tris: SceneTriangles) -> BVH:
-    """A threaded binned-SAH ``BVH`` over ``tris`` (see the module doc)."""
+def build_bvh(tris: SceneTriangles, max_leaf: int = MAX_LEAF) -> BVH:
+    """A threaded binned-SAH ``BVH`` over ``tris`` (see the module doc); leaves hold at most
+    ``max_leaf`` triangles."""
     positions = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)
     t = len(positions)
     if t > _MAX_TRIANGLES:
@@ -187,7 +188,7 @@ def build_bvh(tris: SceneTriangles) -> BVH:
         for group, bins in groups:
             if group.any():
                 split[group], left[group] = _split_level(order, blo32, bhi32, cen, level_start[group],
-                                                         level_count[group], bins)
+                                                         level_count[group], bins, max_leaf)
         parents = np.flatnonzero(split)
         child = np.full(len(level_ids), -1, np.int64)
         child[parents] = next_id + 2 * np.arange(len(parents))
@@ -241,14 +242,160 @@ def build_bvh(tris: SceneTriangles) -> BVH:
                order=order.astype(np.int32), depth=len(levels))
 
 
+# --------------------------------------------------------------------------- instanced meshes
+
+def _soup(positions) -> SceneTriangles:
+    """Bare SceneTriangles over (n, 3, 3) corners (what ``build_bvh`` reads)."""
+    n = len(positions)
+    return SceneTriangles(positions, np.zeros((n, 3)), np.zeros(n, np.int32), np.zeros(n, np.int32))
+
+
+def instance_groups(tris: SceneTriangles):
+    """(groups, rest) of a scene's triangles by ``SceneTriangles.object_meshes``: groups is a
+    list of ((K,) int64 first-triangle indices, triangles per object) of the K ≥ 2 objects
+    placing one mesh (each object's triangles are contiguous, in the mesh's order); rest (R,)
+    int64 the other triangles. None when no mesh is placed twice."""
+    meshes = getattr(tris, "object_meshes", None)
+    if meshes is None or len(tris) == 0:
+        return None
+    objects = np.asarray(tris.objects)
+    cut = np.flatnonzero(np.diff(objects)) + 1
+    starts, ends = np.r_[0, cut], np.r_[cut, len(objects)]
+    ids = objects[starts]
+    if len(np.unique(ids)) != len(ids):  # an object's triangles are not in one run
+        return None
+    mesh, size = np.asarray(meshes)[ids], ends - starts
+    key = mesh * (int(size.max()) + 1) + size  # same mesh and triangle count
+    values, inverse, users = np.unique(key, return_inverse=True, return_counts=True)
+    shared = (users[inverse] >= 2) & (mesh >= 0)
+    if not shared.any():
+        return None
+    groups = [(starts[shared & (inverse == k)], int(size[shared & (inverse == k)][0]))
+              for k in np.unique(inverse[shared])]
+    rest = np.flatnonzero(np.repeat(~shared, size))
+    return groups, rest
+
+
+def _node_levels(bvh: BVH) -> list[np.ndarray]:
+    """The nodes of ``bvh`` by depth (root first); an interior node's children are node + 1
+    and miss[node + 1]."""
+    levels = [np.zeros(1, np.int64)]
+    while True:
+        inner = levels[-1][bvh.first[levels[-1]] < 0]
+        if len(inner) == 0 or len(bvh.order) == 0:
+            return levels
+        levels.append(np.concatenate([inner + 1, bvh.miss[inner + 1].astype(np.int64)]))
+
+
+def _placed_bounds(proto: BVH, tlo, thi, starts):
+    """(K, N, 3) lo, hi of the nodes of ``proto`` (a BVH of one mesh's triangles) over each
+    placement's own world-space triangles (first triangle ``starts[k]``): tight boxes whatever
+    the placement's transform."""
+    leaves = np.flatnonzero(proto.count > 0)
+    leaves = leaves[np.argsort(proto.first[leaves])]
+    slots = starts[:, None] + proto.order[None, :].astype(np.int64)
+    lo = np.zeros((len(starts), len(proto), 3), tlo.dtype)
+    hi = np.zeros_like(lo)
+    offsets = proto.first[leaves]
+    lo[:, leaves] = np.minimum.reduceat(tlo[slots], offsets, axis=1)
+    hi[:, leaves] = np.maximum.reduceat(thi[slots], offsets, axis=1)
+    for ids in reversed(_node_levels(proto)):
+        inner = ids[proto.first[ids] < 0]
+        right = proto.miss[inner + 1]
+        lo[:, inner] = np.minimum(lo[:, inner + 1], lo[:, right])
+        hi[:, inner] = np.maximum(hi[:, inner + 1], hi[:, right])
+    return lo, hi
+
+
+def build_instanced_bvh(tris: SceneTriangles, groups, rest) -> BVH:
+    """One threaded BVH over all of ``tris``, built once per instanced mesh: a binned-SAH BVH
+    of one placement of each mesh of ``groups`` (``instance_groups``) gives every placement
+    its topology, with boxes from that placement's own triangles (O(T) array work instead of
+    a SAH build over all T); the other triangles get one SAH BVH; a SAH tree over the
+    placements' and that BVH's boxes (one per leaf) is on top, each of its leaves replaced by
+    the subtree it holds (so the top's leaf links thread into the subtrees). The result is a
+    flattened world-space BVH like ``build_bvh``'s (same traversal, same textures)."""
+    positions = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)
+    if len(positions) > _MAX_TRIANGLES:
+        raise ValueError(f"{len(positions)} triangles: the packed BVH holds at most {_MAX_TRIANGLES}")
+    # float32 boxes (half the memory traffic; the pad below covers their rounding)
+    tlo, thi = positions.min(axis=1).astype(np.float32), positions.max(axis=1).astype(np.float32)
+    # items: the rest's BVH (if any), then every placement; per item its nodes and triangles
+    lo, hi, miss, first, count, order, nodes, tris_of = [], [], [], [], [], [], [], []
+    depth = 1
+    if len(rest):
+        own = build_bvh(_soup(positions[rest]))
+        lo.append(own.lo), hi.append(own.hi), miss.append(own.miss), first.append(own.first)
+        count.append(own.count), order.append(rest[own.order])
+        nodes.append([len(own)]), tris_of.append([len(rest)])
+        depth = own.depth
+    for starts, size in groups:
+        proto = build_bvh(_soup(positions[starts[0]:starts[0] + size]))
+        depth = max(depth, proto.depth)
+        glo, ghi = _placed_bounds(proto, tlo, thi, starts)
+        k = len(starts)
+        lo.append(glo.reshape(-1, 3).astype(np.float64)), hi.append(ghi.reshape(-1, 3).astype(np.float64))
+        miss.append(np.tile(proto.miss, k)), first.append(np.tile(proto.first, k))
+        count.append(np.tile(proto.count, k))
+        order.append((starts[:, None] + proto.order[None, :]).ravel())
+        nodes.append([len(proto)] * k), tris_of.append([size] * k)
+    lo, hi = np.concatenate(lo), np.concatenate(hi)
+    miss, first, count = np.concatenate(miss), np.concatenate(first), np.concatenate(count)
+    order = np.concatenate(order)
+    nodes, tris_of = np.concatenate(nodes).astype(np.int64), np.concatenate(tris_of).astype(np.int64)
+    node_start, tri_start = np.cumsum(nodes) - nodes, np.cumsum(tris_of) - tris_of
+    roots = node_start
+    scene_lo, scene_hi = lo[roots].min(axis=0), hi[roots].max(axis=0)
+    pad = _BOX_PAD * (float(np.max(scene_hi - scene_lo))
+                      + float(np.abs(np.r_[scene_lo, scene_hi]).max())) + 1e-12
+    lo, hi = lo - pad, hi + pad
+    # the top: a SAH tree over the items' boxes (a triangle (lo, hi, lo) has that box)
+    boxes = np.stack([lo[roots], hi[roots], lo[roots]], axis=1)
+    top = build_bvh(_soup(boxes), max_leaf=1)
+    is_leaf = top.count > 0
+    item = np.where(is_leaf, top.order[np.maximum(top.first, 0)], -1).astype(np.int64)
+    size = np.where(is_leaf, nodes[item], 1)
+    at = np.cumsum(size) - size  # where each top node's block starts
+    top_miss = np.where(top.miss >= 0, at[np.maximum(top.miss, 0)], -1)
+    total = int(size.sum())
+    out_lo, out_hi = np.empty((total, 3)), np.empty((total, 3))
+    out_miss = np.empty(total, np.int64)
+    out_first, out_count = np.full(total, -1, np.int64), np.zeros(total, np.int64)
+    inner = np.flatnonzero(~is_leaf)
+    out_lo[at[inner]], out_hi[at[inner]] = top.lo[inner], top.hi[inner]
+    out_miss[at[inner]] = top_miss[inner]
+    leaves = np.flatnonzero(is_leaf)
+    items = item[leaves]
+    src, _ = _ranges(node_start[items], nodes[items])
+    dst, _ = _ranges(at[leaves], nodes[items])
+    owner = np.repeat(np.arange(len(leaves)), nodes[items])
+    out_lo[dst], out_hi[dst] = lo[src], hi[src]
+    local = miss[src].astype(np.int64)
+    out_miss[dst] = np.where(local >= 0, at[leaves][owner] + local, top_miss[leaves][owner])
+    base = np.cumsum(tris_of[items]) - tris_of[items]  # the items' triangles, in this order
+    out_first[dst] = np.where(count[src] > 0, base[owner] + first[src], -1)
+    out_count[dst] = count[src]
+    tri_src, _ = _ranges(tri_start[items], tris_of[items])
+    return BVH(lo=out_lo, hi=out_hi, miss=out_miss.astype(np.int32),
+               first=out_first.astype(np.int32), count=out_count.astype(np.int32),
+               order=order[tri_src].astype(np.int32), depth=top.depth + depth)
+
+
+def build_scene_bvh(tris: SceneTriangles) -> BVH:
+    """The BVH of a scene's triangles: ``build_instanced_bvh`` where a mesh is placed by two
+    objects or more (``instance_groups``), else ``build_bvh``."""
+    found = instance_groups(tris)
+    return build_bvh(tris) if found is None else build_instanced_bvh(tris, *found)
+
+
 _BVHS: weakref.WeakKeyDictionary[SceneTriangles, BVH] = weakref.WeakKeyDictionary()
 
 
 def bvh_of(tris: SceneTriangles) -> BVH:
-    """``build_bvh(tris)``, cached per ``SceneTriangles`` object."""
+    """``build_scene_bvh(tris)``, cached per ``SceneTriangles`` object."""
     bvh = _BVHS.get(tris)
     if bvh is None:
-        bvh = _BVHS[tris] = build_bvh(tris)
+        bvh = _BVHS[tris] = build_scene_bvh(tris)
     return bvh
 
 

@@ -37,6 +37,9 @@ class SceneTriangles:
         object's Cycles ray visibility), or None when every ray sees every triangle.
     holdout : (T,) bool triangles a camera ray sees nothing at (a holdout object or a Holdout
         shader), or None when there are none.
+    object_meshes : (O,) int32 per snapshot object an id of the mesh it places (objects with
+        one id place the same triangles, in the same order; -1 = not placed), or None: what
+        ``bvh.build_scene_bvh`` builds once per instanced mesh.
     """
 
     positions: np.ndarray
@@ -47,6 +50,7 @@ class SceneTriangles:
     textures: SurfaceTextures | None = None
     visibility: np.ndarray | None = None
     holdout: np.ndarray | None = None
+    object_meshes: np.ndarray | None = None
 
     def accepted(self, ray: int) -> np.ndarray | None:
         """(T,) bool: the triangles a ray of kind ``ray`` (a ``RAY_*`` bit) can hit; None when
@@ -131,7 +135,12 @@ def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
     objects = np.concatenate(objects)
     textures = surface_textures(snapshot, tri, materials, np.concatenate(uvs))
     visibility, holdout = _ray_visibility(snapshot, kept, objects, materials)
-    return SceneTriangles(tri, normal, materials, objects, shading, textures, visibility, holdout)
+    ids: dict[str, int] = {}
+    placed = np.full(len(snapshot.objects), -1, np.int32)
+    for index in kept:
+        placed[index] = ids.setdefault(snapshot.objects[index].mesh, len(ids))
+    return SceneTriangles(tri, normal, materials, objects, shading, textures, visibility, holdout,
+                          placed)
 
 
 def _ray_visibility(snapshot: SceneSnapshot, kept: list[int], objects: np.ndarray,

@@ -1,0 +1,89 @@
+"""The BVH built once per instanced mesh (voxgi_addon/scene/bvh.py ``build_scene_bvh``, issue 18
+point 3): every triangle is in it once, every box holds what is under it, and rays meet exactly
+what the grid caster and brute force meet, whatever the placements' rotations, scales and
+shears; a scene without instancing gets the plain SAH build."""
+import numpy as np
+from meshes import box, uv_sphere
+
+from voxgi.voxgi_addon.scene import bvh as bvh_module
+from voxgi.voxgi_addon.scene.geometry import world_triangles
+from voxgi.voxgi_addon.scene.raycast import closest_hits, occluded
+from voxgi.voxgi_addon.scene.snapshot import MaterialData, MeshData, ObjectData, SceneSnapshot
+
+
+def _mesh(name, positions, triangles):
+    return MeshData(name, np.asarray(positions, np.float32), np.asarray(triangles, np.int32),
+                    np.zeros(len(triangles), np.int32))
+
+
+def placed_scene(count=30, seed=1):
+    """Spheres and boxes placed ``count`` times with random linear maps (rotation, scale,
+    shear) and offsets, mixed with one-off meshes between them in the objects' order."""
+    rng = np.random.default_rng(seed)
+    meshes = [_mesh("sphere", *uv_sphere(10, 20)), _mesh("box", *box((1.0, 2.0, 0.5)))]
+    objects = []
+    for k in range(count):
+        m = np.eye(4)
+        m[:3, :3] = rng.normal(size=(3, 3)) * 0.7 + np.eye(3)
+        m[:3, 3] = rng.uniform(-8, 8, 3)
+        objects.append(ObjectData(f"o{k}", ("sphere", "box")[k % 2], m))
+        if k % 7 == 3:
+            lone = _mesh(f"lone{k}", *box(tuple(rng.uniform(0.5, 3.0, 3)), tuple(rng.uniform(-8, 8, 3))))
+            meshes.append(lone)
+            objects.append(ObjectData(lone.name, lone.name, np.eye(4)))
+    return SceneSnapshot(meshes={m.name: m for m in meshes},
+                         materials=[MaterialData("grey", np.full(3, 0.5, np.float32))],
+                         objects=objects)
+
+
+def rays(n=6000, seed=2):
+    rng = np.random.default_rng(seed)
+    d = rng.normal(size=(n, 3))
+    return rng.uniform(-10, 10, (n, 3)), d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def test_instances_are_grouped_by_mesh():
+    tris = world_triangles(placed_scene())
+    groups, rest = bvh_module.instance_groups(tris)
+    sizes = sorted((len(starts), size) for starts, size in groups)
+    assert sizes == [(15, 12), (15, len(uv_sphere(10, 20)[1]))]
+    assert len(rest) == 12 * 4  # the one-off boxes
+    covered = np.concatenate([rest] + [(s[:, None] + np.arange(n)).ravel() for s, n in groups])
+    np.testing.assert_array_equal(np.sort(covered), np.arange(len(tris)))
+
+
+def test_instanced_build_holds_every_triangle_in_boxes_that_hold_them():
+    tris = world_triangles(placed_scene())
+    bvh = bvh_module.build_scene_bvh(tris)
+    np.testing.assert_array_equal(np.sort(bvh.order), np.arange(len(tris)))
+    corners = np.asarray(tris.positions)
+    for node in np.flatnonzero(bvh.count > 0):
+        inside = corners[bvh.order[bvh.first[node]:bvh.first[node] + bvh.count[node]]]
+        assert (inside >= bvh.lo[node] - 1e-9).all() and (inside <= bvh.hi[node] + 1e-9).all()
+    for node in np.flatnonzero(bvh.count == 0):
+        for child in (node + 1, bvh.miss[node + 1]):
+            assert (bvh.lo[child] >= bvh.lo[node]).all() and (bvh.hi[child] <= bvh.hi[node]).all()
+    assert bvh.miss[0] == -1 and bvh.count.max() <= bvh_module.MAX_LEAF
+
+
+def test_instanced_build_meets_what_the_grid_caster_meets():
+    tris = world_triangles(placed_scene())
+    bvh = bvh_module.build_scene_bvh(tris)
+    origins, dirs = rays()
+    t, tri, u, v = bvh_module.traverse(bvh, tris, origins, dirs)
+    gt, gtri, gu, gv = closest_hits(tris, origins, dirs)
+    assert (gtri >= 0).mean() > 0.1  # 800 of the rays meet something
+    np.testing.assert_array_equal(tri, gtri)
+    np.testing.assert_allclose(t[tri >= 0], gt[gtri >= 0], rtol=1e-9)
+    blocked = np.isfinite(bvh_module.traverse(bvh, tris, origins, dirs, 1e-4, 2.0 - 1e-4,
+                                              any_hit=True)[0])
+    np.testing.assert_array_equal(blocked, occluded(tris, origins, dirs, 2.0))
+
+
+def test_a_scene_without_instancing_gets_the_sah_build():
+    snapshot = placed_scene(count=1)
+    tris = world_triangles(snapshot)
+    assert bvh_module.instance_groups(tris) is None
+    plain, scene = bvh_module.build_bvh(tris), bvh_module.build_scene_bvh(tris)
+    for field in ("lo", "hi", "miss", "first", "count", "order"):
+        np.testing.assert_array_equal(getattr(plain, field), getattr(scene, field))
