@@ -33,7 +33,7 @@ from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
 from .gbuffer import gbuffer_shader, rasterize, read_gbuffer
 from .gpu_bvh import direct_light_texture
 from .gpu_fast import fast_passes
-from .gpu_gather import gather_low, glossy_direct_texture, upsample
+from .gpu_gather import denoise, gather, gather_low, glossy_direct_texture, upsample
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_scene import GPUScene, current_scene
 from .gpu_shaders import LOCAL_SIZE, build_compute
@@ -45,19 +45,24 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
                       volume: GPUVolume | None = None, shadows: str = "RAYS", gi_stride: int = 1,
                       quality: str = "ACCURATE", gather_settings: GatherSettings | None = None,
                       glossy_indirect: bool = True, filter_width: float = DEFAULT_FILTER_WIDTH,
-                      gpu_scene: GPUScene | None = None):
+                      gpu_scene: GPUScene | None = None, gather_hook=None):
     """(passes, timings) like ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
     between calls so an unchanged octree is not uploaded again (a new one when None); Fast
     quality only: Accurate uses neither it nor ``gi_state`` (None is fine).
     quality "ACCURATE": exact direct light and the exact-ray final gather (``gpu_gather``);
     "FAST": cone tracing through the octree (shadows as ``shadows`` says).
     gpu_scene : the ``gpu_scene.GPUScene`` Accurate draws from, updated to ``snapshot`` here
-    (None: the session's, ``gpu_scene.current_scene``)."""
+    (None: the session's, ``gpu_scene.current_scene``).
+    gather_hook : Accurate only: ``hook(kind, values, variance)`` → (values, variance) gets
+    each gather's raw low-resolution textures before the à-trous filter (kind: "diffuse",
+    "glossy", "world glossy") and returns what is filtered instead: the viewport's
+    progressive accumulation adds them to its sums and returns the sums' mean (None: the
+    gather's own, as F12)."""
     check_request(snapshot, width, height, gi_stride, quality)
     if quality == "ACCURATE":
         return _accurate_passes(snapshot, width, height, light_samples, gi_stride,
                                 gather_settings or GatherSettings(ao_distance=cones.ao_distance),
-                                glossy_indirect, filter_width, gpu_scene)
+                                glossy_indirect, filter_width, gpu_scene, gather_hook)
     return fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
                        gi_stride, gather_settings or GatherSettings(ao_distance=cones.ao_distance),
                        glossy_indirect)
@@ -137,7 +142,7 @@ def release() -> None:
 
 
 def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_settings,
-                     glossy_indirect, filter_width, scene=None):
+                     glossy_indirect, filter_width, scene=None, gather_hook=None):
     """Accurate quality on the GPU: the gathers from the pixel centres' G-buffer, then one
     rasterized G-buffer, direct light (``bvh_direct``, a block of the shadow-ray strata) and
     glossy light of the lights per sub-pixel pass (``preview.passes.subpixel_passes``),
@@ -164,12 +169,23 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     gathered = (bvh, centre.inputs, lights, principled, emission, gather_settings, gi_stride,
                 width, height)
     tables = scene.gather_tables()
-    low_diffuse = gather_low(*gathered, tables=tables)
+
+    def low(kind, kernel="bvh_gather", world_mode=False):
+        """One gather's filtered low-resolution texture (``gpu_gather.gather_low``), its raw
+        result replaced by ``gather_hook``'s when there is one."""
+        if gather_hook is None:
+            return gather_low(*gathered, kernel=kernel, world_mode=world_mode, tables=tables)
+        values, variance = gather(*gathered, kernel=kernel, world_mode=world_mode,
+                                  tables=tables)
+        values, variance = gather_hook(kind, values, variance)
+        return denoise(values, variance, centre.inputs, gi_stride, width, height,
+                       gather_settings.denoise_iterations)[0]
+
+    low_diffuse = low("diffuse")
     timings["diffuse+ao gather (GPU)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     zero = scene.zeros(width, height)
-    low_glossy = gather_low(*gathered, kernel="bvh_glossy", tables=tables) \
-        if glossy_indirect else None
+    low_glossy = low("glossy", "bvh_glossy") if glossy_indirect else None
     if glossy_indirect:
         timings["glossy gather (GPU)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -179,7 +195,7 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     glossy_world = zero
     if scene.has_scene_lights:  # Glossy Direct of the world and emitters
         t0 = time.perf_counter()
-        low_world = gather_low(*gathered, kernel="bvh_glossy", world_mode=True, tables=tables)
+        low_world = low("world glossy", "bvh_glossy", world_mode=True)
         glossy_world = upsample(low_world, centre.inputs, gi_stride, width, height)
         timings["world glossy gather (GPU)"] = time.perf_counter() - t0
 

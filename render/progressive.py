@@ -30,6 +30,7 @@ import numpy as np
 from ..blender.settings import cone_settings, trace_options
 from ..voxgi_addon.preview.progressive import (
     Accumulation,
+    GatherSums,
     SliceSizer,
     sample_offset,
     sample_settings,
@@ -70,6 +71,7 @@ class ProgressiveImage:
         self.fixed_pixels: int | None = None  # tests: every slice this many pixels
         self.key = None
         self.accumulation: Accumulation | None = None
+        self.gathers: GatherSums | None = None  # Accurate: the samples' raw gathers
         self.backdrop = None       # (h, w, 3): what shows where no tile landed yet
         self.image = None          # (H, W, 3) float32: the current estimate
         self.target = 1
@@ -92,6 +94,7 @@ class ProgressiveImage:
         previous = self.image
         self.key, self.target = key, max(1, int(target))
         self.accumulation = Accumulation(pass_name, width, height)
+        self.gathers = None
         self.backdrop = previous
         self.sample, self.tiles, self.tile_count = 0, [], 0
         self.started, self.elapsed, self.slices = time.perf_counter(), 0.0, 0
@@ -157,9 +160,15 @@ class ProgressiveImage:
             full = camera_from_view(view, window, width, height)
             camera = tile_camera(full, *rect,
                                  offset=sample_offset(filter_width, self.target, self.sample))
-            passes = trace(camera, rect[2], rect[3], {**options, "gather_settings": gather,
-                                                      "light_samples": lights})
-            acc.add(rect, passes)
+            tile_options = {**options, "gather_settings": gather, "light_samples": lights}
+            weight = 1.0
+            if settings.quality == "ACCURATE":  # the filter runs on the accumulated gathers
+                if self.gathers is None:
+                    self.gathers = GatherSums(width, height, options["gi_stride"])
+                tile_options["gather_hook"] = gather_hook(self.gathers, rect, gather)
+                weight = float(self.sample + 1)  # the samples behind the tile's gathers
+            passes = trace(camera, rect[2], rect[3], tile_options)
+            acc.add(rect, passes, gather_weight=weight)
             done = Slice("tile", rect, (rect[2], rect[3]), self.sample)
             if not self.tiles:
                 self.sample += 1
@@ -187,6 +196,24 @@ class ProgressiveImage:
             return "Coarse image"
         done = self.tile_count - len(self.tiles)
         return f"Tile {done}/{self.tile_count}"
+
+
+def gather_hook(sums: GatherSums, rect, gather):
+    """``render_passes_gpu``'s gather_hook for one tile: read the tile's raw gather back, add
+    it to ``sums`` and hand the filter the mean over all samples so far (``GatherSums``)."""
+    from .gpu_tracer import read_texture
+    from .gpu_volume import float_texture
+
+    rays = {"diffuse": gather.rays, "glossy": gather.glossy_rays,
+            "world glossy": gather.glossy_rays}
+
+    def hook(kind, values, variance):
+        # the low-resolution textures' rows go bottom to top
+        mean, pooled = sums.add(kind, rect, np.flipud(read_texture(values)),
+                                np.flipud(read_texture(variance)), rays[kind])
+        size = (values.width, values.height)
+        return (float_texture(np.flipud(mean), size), float_texture(np.flipud(pooled), size))
+    return hook
 
 
 def tracer(live, volume, settings):

@@ -159,3 +159,48 @@ def test_the_slice_sizer_fits_the_budget_from_measured_slices():
     assert slower.pixels(10 ** 6) == 256
     with pytest.raises(ValueError, match="budget"):
         SliceSizer(0.0)
+
+
+def test_the_gathers_are_accumulated_per_cell_of_the_images_grid():
+    from voxgi.voxgi_addon.preview.progressive import LUMINANCE, GatherSums
+
+    sums = GatherSums(20, 10, 2)  # 10 × 5 cells
+    rng = np.random.default_rng(4)
+    first_v, first_var = rng.uniform(0, 1, (3, 4, 4)), rng.uniform(0, 0.1, (3, 4, 4))
+    second_v, second_var = rng.uniform(0, 1, (3, 4, 4)), rng.uniform(0, 0.1, (3, 4, 4))
+    sums.add("diffuse", (4, 2, 8, 6), first_v, first_var, rays=4)
+    mean, var = sums.add("diffuse", (4, 2, 8, 6), second_v, second_var, rays=4)
+    assert np.allclose(mean, (first_v + second_v) / 2, atol=1e-6)
+    assert np.allclose(var, (first_var + second_var) / 4, atol=1e-6)  # of the mean of two
+    # a smaller tile inside it: its cells (x 4–5, y 1) get a third sample
+    third = rng.uniform(0, 1, (1, 2, 4))
+    mean, _ = sums.add("diffuse", (8, 2, 4, 2), third, second_var[:1, :2], rays=4)
+    assert np.allclose(mean, (first_v[:1, 2:] + second_v[:1, 2:] + third) / 3, atol=1e-6)
+    # one ray per sample: the kernel's variance is 0, the samples' spread is used
+    a, b = np.zeros((1, 1, 4)), np.zeros((1, 1, 4))
+    a[..., :3], b[..., :3] = 1.0, 3.0
+    sums.add("glossy", (0, 0, 2, 2), a, np.zeros((1, 1, 4)), rays=1)
+    _, var = sums.add("glossy", (0, 0, 2, 2), b, np.zeros((1, 1, 4)), rays=1)
+    lum = np.array([1.0, 3.0]) * LUMINANCE.sum()
+    assert var[0, 0, 0] == pytest.approx(np.var(lum, ddof=1) / 2)
+    with pytest.raises(ValueError, match="stride-2 block"):
+        sums.add("diffuse", (3, 0, 4, 4), first_v[:2, :2], first_var[:2, :2], rays=4)
+    with pytest.raises(ValueError, match="cells"):
+        sums.add("diffuse", (0, 0, 4, 4), first_v, first_var, rays=4)
+
+
+def test_gathered_light_is_weighted_by_the_samples_behind_the_gathers():
+    acc = Accumulation("Combined", 3, 2)
+    first, second = passes_of(2.0, 1.0), passes_of(4.0, 1.0)  # gathered light 2 and 4
+    first["Combined"] += 1.0  # 1 of direct light besides
+    second["Combined"] += 1.0
+    acc.add((0, 0, 3, 2), first, gather_weight=1.0)
+    acc.add((0, 0, 3, 2), second, gather_weight=3.0)
+    # direct light: the plain mean (1); gathered: (1 × 2 + 3 × 4) / 4
+    assert np.allclose(acc.mean(), 1.0 + 14.0 / 4.0)
+    ao = Accumulation("Ambient Occlusion", 3, 2)
+    for value, weight in ((0.2, 1.0), (0.6, 3.0)):
+        sample = passes_of(0.0, 1.0)
+        sample["Ambient Occlusion"] = np.full((2, 3, 3), value)
+        ao.add((0, 0, 3, 2), sample, gather_weight=weight)
+    assert np.allclose(ao.mean(), (0.2 + 1.8) / 4.0)

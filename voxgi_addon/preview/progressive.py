@@ -29,7 +29,12 @@ import numpy as np
 from ..scene.camera import filter_offsets
 from .gather import GatherSettings
 from .passes import PASS_NAMES, filter_passes
+from .upsample import low_shape
 
+# The passes made of the gathers: their samples are weighted by the samples behind the
+# gathers' sums (``GatherSums``: a later sample's gather filters more rays).
+GATHERED = ("Diffuse Indirect", "Glossy Indirect", "Ambient Occlusion")
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 # A light pass is accumulated as light × colour over colour (Cycles' film, passes.finish_passes).
 LIGHT_COLOURS = {"Diffuse Direct": "Diffuse Color", "Diffuse Indirect": "Diffuse Color",
                  "Glossy Direct": "Glossy Color", "Glossy Indirect": "Glossy Color"}
@@ -124,7 +129,10 @@ def tile_grid(width: int, height: int, tile_w: int, tile_h: int, shift=(0, 0)):
 
 class Accumulation:
     """The samples of one pass of a ``width`` × ``height`` image: per pixel the sum of the
-    pass (× its colour for a light pass), of the weights (the colour, or 1) and the count."""
+    pass (× its colour for a light pass), of the weights (the colour, or 1) and the count.
+    A gathered pass's samples (``GATHERED``) are weighted by ``add``'s ``gather_weight``;
+    Combined keeps its gathered light (Diffuse Color × Diffuse Indirect + Glossy Color ×
+    Glossy Indirect) apart, weighted so, and the rest with weight 1."""
 
     def __init__(self, pass_name: str, width: int, height: int):
         if pass_name not in PASS_NAMES:
@@ -133,26 +141,39 @@ class Accumulation:
         self.colour_name = LIGHT_COLOURS.get(pass_name)
         self.sums = np.zeros((height, width, 3))
         self.weights = np.zeros((height, width, 3))
+        # Combined: the gathered light's weighted sum and weights
+        self.gathered = np.zeros((height, width, 3)) if pass_name == "Combined" else None
+        self.gather_weights = np.zeros((height, width, 1)) if pass_name == "Combined" else None
         # the colour's sum, for the filter over the neighbours (``finished``)
         self.colour = np.zeros((height, width, 3)) if self.colour_name else None
         self.counts = np.zeros((height, width), np.int32)
 
-    def add(self, rect, passes) -> None:
+    def add(self, rect, passes, gather_weight: float = 1.0) -> None:
         """Add one sample's ``passes`` (PASS_NAMES → (h, w, 3), row 0 on top) of the tile
-        ``rect`` (x0, y0, w, h)."""
+        ``rect`` (x0, y0, w, h); gather_weight : the weight of its gathered light."""
         x0, y0, w, h = rect
         window = np.s_[y0:y0 + h, x0:x0 + w]
         value = np.asarray(passes[self.pass_name], np.float64)
         if value.shape[:2] != (h, w):
             raise ValueError(f"a {value.shape[1]}×{value.shape[0]} sample for a {w}×{h} tile")
-        if self.colour_name:
+        weight = gather_weight if self.pass_name in GATHERED else 1.0
+        if self.gathered is not None:
+            light = (np.asarray(passes["Diffuse Color"], np.float64)
+                     * np.asarray(passes["Diffuse Indirect"], np.float64)
+                     + np.asarray(passes["Glossy Color"], np.float64)
+                     * np.asarray(passes["Glossy Indirect"], np.float64))
+            self.sums[window] += value - light
+            self.weights[window] += 1.0
+            self.gathered[window] += gather_weight * light
+            self.gather_weights[window] += gather_weight
+        elif self.colour_name:
             colour = np.asarray(passes[self.colour_name], np.float64)
-            self.sums[window] += value * colour
-            self.weights[window] += colour
+            self.sums[window] += weight * value * colour
+            self.weights[window] += weight * colour
             self.colour[window] += colour
         else:
-            self.sums[window] += value
-            self.weights[window] += 1.0
+            self.sums[window] += weight * value
+            self.weights[window] += weight
         self.counts[window] += 1
 
     @property
@@ -162,8 +183,12 @@ class Accumulation:
 
     def mean(self) -> np.ndarray:
         """(H, W, 3) the samples' mean (0 where a pixel has none, or no colour)."""
-        return np.divide(self.sums, self.weights, out=np.zeros_like(self.sums),
+        mean = np.divide(self.sums, self.weights, out=np.zeros_like(self.sums),
                          where=self.weights > 0.0)
+        if self.gathered is not None:
+            mean += np.divide(self.gathered, self.gather_weights,
+                              out=np.zeros_like(self.gathered), where=self.gather_weights > 0.0)
+        return mean
 
     def estimate(self, coarse=None) -> np.ndarray:
         """(H, W, 3) float32: the mean where a pixel has samples, elsewhere ``coarse`` ((h, w,
@@ -184,6 +209,59 @@ class Accumulation:
         if self.colour_name:
             passes[self.colour_name] = self.colour / np.maximum(self.counts, 1)[..., None]
         return np.asarray(filter_passes(passes, filter_width)[self.pass_name], np.float32)
+
+
+class GatherSums:
+    """The samples' raw gathers (before the à-trous filter) per cell of the image's
+    low-resolution gather grid (``upsample.low_shape`` at ``stride``), per kind ("diffuse",
+    "glossy", "world glossy"): a tile's gather adds its cells, and the filter gets the mean
+    of every sample so far — the filter runs on the accumulated rays, as on one gather of
+    all of them (F12's), not on each sample's few rays.
+
+    values (rgb, a): the mean of the samples' means. variance (the gather kernels' (var of the
+    luminance mean, var of the AO mean, …)): the pooled kernel variances over n² — except the
+    luminance's when a sample traces one ray (its kernel variance is 0): then the samples'
+    spread, (Σ l² / n − l̄²) / (n − 1)."""
+
+    def __init__(self, width: int, height: int, stride: int):
+        self.width, self.height, self.stride = width, height, stride
+        self.shape = low_shape(height, width, stride)
+        self.kinds: dict[str, dict[str, np.ndarray]] = {}
+
+    def add(self, kind: str, rect, values, variance, rays: int):
+        """Add one sample's raw gather of the tile ``rect`` (x0, y0, w, h; x0, y0 multiples
+        of the stride): values, variance (h_l, w_l, 4), row 0 on top; rays : its rays per
+        point. Returns the (values, variance) of those cells over every sample so far."""
+        x0, y0, w, h = rect
+        s = self.stride
+        if x0 % s or y0 % s:
+            raise ValueError(f"a tile at ({x0}, {y0}) does not start on a stride-{s} block")
+        low_h, low_w = low_shape(h, w, s)
+        values = np.nan_to_num(np.asarray(values, np.float64))  # cells of no surface: unset
+        variance = np.nan_to_num(np.asarray(variance, np.float64))
+        if values.shape[:2] != (low_h, low_w) or variance.shape[:2] != (low_h, low_w):
+            raise ValueError(f"a {values.shape[1]}×{values.shape[0]} gather for a tile of "
+                             f"{low_w}×{low_h} cells")
+        sums = self.kinds.get(kind)
+        if sums is None:
+            sums = self.kinds[kind] = {
+                "values": np.zeros((*self.shape, 4)), "variance": np.zeros((*self.shape, 4)),
+                "lum2": np.zeros(self.shape), "n": np.zeros(self.shape)}
+        cells = np.s_[y0 // s:y0 // s + low_h, x0 // s:x0 // s + low_w]
+        sums["values"][cells] += values
+        sums["variance"][cells] += variance
+        sums["lum2"][cells] += (values[..., :3] @ LUMINANCE) ** 2
+        sums["n"][cells] += 1.0
+        n = sums["n"][cells][..., None]
+        mean = sums["values"][cells] / n
+        pooled = sums["variance"][cells] / (n * n)
+        if rays <= 1:
+            count = n[..., 0]
+            lum = mean[..., :3] @ LUMINANCE
+            spread = np.maximum(sums["lum2"][cells] / count - lum * lum, 0.0) / \
+                np.maximum(count - 1.0, 1.0)
+            pooled[..., 0] = np.where(count > 1.0, spread, pooled[..., 0])
+        return mean.astype(np.float32), pooled.astype(np.float32)
 
 
 def scale_nearest(image, width: int, height: int) -> np.ndarray:
