@@ -87,3 +87,36 @@ def test_a_scene_without_instancing_gets_the_sah_build():
     plain, scene = bvh_module.build_bvh(tris), bvh_module.build_scene_bvh(tris)
     for field in ("lo", "hi", "miss", "first", "count", "order"):
         np.testing.assert_array_equal(getattr(plain, field), getattr(scene, field))
+
+
+def test_placements_are_transformed_as_each_object_alone():
+    """world_triangles transforms the objects that place one mesh together: corners and shading
+    normals equal those of each object transformed on its own (geometry.object_vertices_world,
+    skinning.transform_normals), in the objects' order."""
+    from voxgi.voxgi_addon.scene.skinning import transform_normals
+
+    snapshot = placed_scene()
+    sphere = snapshot.meshes["sphere"]
+    rng = np.random.default_rng(5)
+    normals = rng.normal(size=(len(sphere.triangles), 3, 3))
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    meshes = {**snapshot.meshes, "sphere": MeshData(sphere.name, sphere.positions, sphere.triangles,
+                                                    sphere.triangle_materials,
+                                                    corner_normals=normals.astype(np.float32))}
+    snapshot = SceneSnapshot(meshes=meshes, materials=snapshot.materials, objects=snapshot.objects)
+    tris = world_triangles(snapshot)
+    corners, shading = [], []
+    for obj in snapshot.objects:
+        mesh = snapshot.meshes[obj.mesh]
+        m = np.asarray(obj.world_matrix)
+        p = np.asarray(mesh.positions, np.float64) @ m[:3, :3].T + m[:3, 3]
+        corners.append(p[np.asarray(mesh.triangles)])
+        if mesh.corner_normals is None:  # flat: the face normal at every corner
+            c = corners[-1]
+            n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+            shading.append(np.repeat((n / np.linalg.norm(n, axis=1, keepdims=True))[:, None], 3, 1))
+        else:
+            shading.append(transform_normals(m, np.asarray(mesh.corner_normals, np.float64)
+                                             .reshape(-1, 3)).reshape(-1, 3, 3))
+    np.testing.assert_allclose(tris.positions, np.concatenate(corners), atol=1e-12)
+    np.testing.assert_allclose(tris.corner_normals, np.concatenate(shading), atol=1e-9)

@@ -100,37 +100,87 @@ def _corner_normals_world(obj, mesh, snapshot, triangles) -> np.ndarray | None:
     return transform_normals(matrices, flat).reshape(-1, 3, 3)
 
 
+def _is_rigid(obj: ObjectData, mesh: MeshData, snapshot: SceneSnapshot) -> bool:
+    """Is ``obj`` placed by its world matrix alone (``_vertex_matrices`` gives one matrix)?"""
+    return obj.kind != "skinned" or mesh.skin is None or obj.armature not in snapshot.armatures \
+        or len(snapshot.armatures[obj.armature].bone_names) == 0
+
+
+_PLACED_CHUNK = 1 << 18  # triangles placed together (bounds the (K, T, 3, 3) temporaries)
+
+
+def _place_rigid(matrices: np.ndarray, mesh: MeshData):
+    """(K, T, 3, 3) world corners and shading normals (None without ``corner_normals``) of the
+    K placements ``matrices`` (K, 4, 4) of ``mesh``: ``object_vertices_world`` and
+    ``_corner_normals_world`` of many objects in one pass."""
+    linear, offset = matrices[:, :3, :3], matrices[:, :3, 3]
+    corners = np.asarray(mesh.positions, np.float64)[np.asarray(mesh.triangles, np.int64)]
+    world = (np.matmul(corners.reshape(1, -1, 3), linear.transpose(0, 2, 1))
+             + offset[:, None, :]).reshape(len(matrices), -1, 3, 3)
+    if getattr(mesh, "corner_normals", None) is None:
+        return world, None
+    a, b, c = linear[..., :, 0], linear[..., :, 1], linear[..., :, 2]
+    cofactor = np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=-1)
+    sign = np.sign(np.einsum("ki,ki->k", a, cofactor[..., :, 0]))  # as skinning.transform_normals
+    normals = np.matmul(np.asarray(mesh.corner_normals, np.float64).reshape(1, -1, 3),
+                        (cofactor * sign[:, None, None]).transpose(0, 2, 1))
+    normals = normals.reshape(len(matrices), -1, 3, 3)
+    length = np.linalg.norm(normals, axis=-1, keepdims=True)
+    return world, np.divide(normals, length, out=np.zeros_like(normals), where=length > 1e-12)
+
+
 def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
     """Every triangle of every object in ``snapshot`` in world space (see ``SceneTriangles``).
 
     Objects whose mesh is missing from the snapshot are skipped. Triangles keep the order of
-    ``snapshot.objects`` then of each mesh's triangles.
+    ``snapshot.objects`` then of each mesh's triangles. The objects that place one mesh by
+    their world matrices (linked duplicates, instances) are transformed together.
     """
-    positions, materials, objects, corner_normals, uvs = [], [], [], [], []
-    kept = []  # indices of the objects whose triangles are in, in order
-    for index, obj in enumerate(snapshot.objects):
-        mesh = snapshot.meshes.get(obj.mesh)
-        if mesh is None or len(mesh.triangles) == 0:
-            continue
-        triangles = np.asarray(mesh.triangles, dtype=np.int64)
-        positions.append(object_vertices_world(obj, mesh, snapshot)[triangles])
-        materials.append(np.asarray(mesh.triangle_materials, dtype=np.int32))
-        objects.append(np.full(len(triangles), index, dtype=np.int32))
-        kept.append(index)
-        corner_normals.append(_corner_normals_world(obj, mesh, snapshot, triangles))
-        uvs.append(np.zeros((len(triangles), 3, 2), np.float32) if mesh.uvs is None else
-                   np.asarray(mesh.uvs, np.float32).reshape(len(triangles), 3, 2))
-    if not positions:
+    placed = [(index, obj, snapshot.meshes.get(obj.mesh)) for index, obj in enumerate(snapshot.objects)]
+    placed = [(index, obj, mesh) for index, obj, mesh in placed
+              if mesh is not None and len(mesh.triangles) > 0]
+    if not placed:
         empty = np.zeros(0, np.int32)
         return SceneTriangles(np.zeros((0, 3, 3)), np.zeros((0, 3)), empty, empty.copy())
-    tri = np.concatenate(positions)
+    counts = np.array([len(mesh.triangles) for _, _, mesh in placed], np.int64)
+    starts = np.cumsum(counts) - counts
+    tri = np.empty((int(counts.sum()), 3, 3))
+    smooth = any(getattr(mesh, "corner_normals", None) is not None for _, _, mesh in placed)
+    shading = np.empty_like(tri) if smooth else None
+    flat = np.zeros(len(tri), bool)  # rows whose mesh has no corner normals
+    kept = [index for index, _, _ in placed]  # the objects whose triangles are in, in order
+    rigid: dict[str, list[int]] = {}
+    for k, (_, obj, mesh) in enumerate(placed):
+        rows = slice(starts[k], starts[k] + counts[k])
+        flat[rows] = getattr(mesh, "corner_normals", None) is None
+        if _is_rigid(obj, mesh, snapshot):
+            rigid.setdefault(obj.mesh, []).append(k)
+            continue
+        triangles = np.asarray(mesh.triangles, dtype=np.int64)
+        tri[rows] = object_vertices_world(obj, mesh, snapshot)[triangles]
+        if smooth and not flat[rows.start]:
+            shading[rows] = _corner_normals_world(obj, mesh, snapshot, triangles)
+    for name, group in rigid.items():
+        mesh = snapshot.meshes[name]
+        step = max(1, _PLACED_CHUNK // len(mesh.triangles))
+        for at in range(0, len(group), step):
+            ks = np.asarray(group[at:at + step])
+            matrices = np.stack([np.asarray(placed[k][1].world_matrix, np.float64) for k in ks])
+            world, normals = _place_rigid(matrices, mesh)
+            rows = (starts[ks][:, None] + np.arange(len(mesh.triangles))).ravel()
+            tri[rows] = world.reshape(-1, 3, 3)
+            if normals is not None:
+                shading[rows] = normals.reshape(-1, 3, 3)
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     length = np.linalg.norm(normal, axis=1, keepdims=True)
     normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
-    shading = None
-    if any(c is not None for c in corner_normals):  # meshes without them shade flat
-        flat = np.split(np.repeat(normal[:, None], 3, axis=1), np.cumsum([len(p) for p in positions])[:-1])
-        shading = np.concatenate([c if c is not None else f for c, f in zip(corner_normals, flat)])
+    if smooth and flat.any():  # meshes without corner normals shade flat
+        shading[flat] = normal[flat][:, None]
+    materials = [np.asarray(mesh.triangle_materials, dtype=np.int32) for _, _, mesh in placed]
+    objects = [np.full(count, index, np.int32) for (index, _, _), count in zip(placed, counts)]
+    uvs = [np.zeros((len(mesh.triangles), 3, 2), np.float32) if mesh.uvs is None else
+           np.asarray(mesh.uvs, np.float32).reshape(len(mesh.triangles), 3, 2)
+           for _, _, mesh in placed]
     materials = np.concatenate(materials)
     objects = np.concatenate(objects)
     textures = surface_textures(snapshot, tri, materials, np.concatenate(uvs))
