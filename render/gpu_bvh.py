@@ -37,7 +37,13 @@ from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
 from ..voxgi_addon.gi.world_light import world_table
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
-from ..voxgi_addon.scene.bvh import DET_EPSILON, TEXTURE_WIDTH, build_scene_bvh, pack_bvh
+from ..voxgi_addon.scene.bvh import (
+    DET_EPSILON,
+    LEAF_BIAS,
+    TEXTURE_WIDTH,
+    build_scene_bvh,
+    pack_bvh,
+)
 from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
 from ..voxgi_addon.scene.snapshot import RAY_DIFFUSE, RAY_GLOSSY, RAY_SHADOW
 from .gpu_ltc import DEFINES as LTC_DEFINES
@@ -100,7 +106,7 @@ def bvh_shader(kernel: str):
                    "SURFACE_EPSILON": repr(float(SURFACE_EPSILON)),
                    "DET_EPSILON": repr(float(DET_EPSILON)), "RAY_STREAM": f"{RAY_STREAM}u",
                    # the kind of ray a kernel's closest hits are (ray visibility, bvh_common)
-                   "BVH_RAY_SHADOW": str(RAY_SHADOW),
+                   "BVH_RAY_SHADOW": str(RAY_SHADOW), "BVH_LEAF_BIAS": str(LEAF_BIAS),
                    "BVH_CLOSEST_RAY": {"bvh_glossy": str(RAY_GLOSSY),
                                        "bvh_probe": "int(mode.y)"}.get(kernel, str(RAY_DIFFUSE))}
         if "principled" in files:

@@ -3,7 +3,8 @@
  *
  * Samplers (2D RGBA32F, texel k at (k mod BVH_WIDTH, k div BVH_WIDTH)):
  *   bvh_nodes     : 2 texels per node, (lo.xyz, miss link), (hi.xyz, leaf code = first·16 + count
- *                   or -1 for an interior node); depth-first order, node 0 the root.
+ *                   as the float of bits code + BVH_LEAF_BIAS, or -1 for an interior node);
+ *                   depth-first order, node 0 the root.
  *   bvh_triangles : 3 texels per triangle in leaf order, (v0.xyz, material), (e1.xyz, index into
  *                   the SceneTriangles), (e2.xyz, |e1|·|e2|).
  * Defines: BVH_WIDTH_LOG2, SHADOW_EPSILON (metres), DET_EPSILON (relative). Hits are
@@ -89,7 +90,7 @@ int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_
         node += 1;
         continue;
       }
-      int code = int(hi.w);
+      int code = floatBitsToInt(hi.w) - BVH_LEAF_BIAS; /* bvh.py LEAF_BIAS */
       int first = code >> 4;
       int last = first + (code & 15);
       for (int slot = first; slot < last; slot++) {

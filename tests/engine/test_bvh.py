@@ -121,7 +121,7 @@ def test_degenerate_inputs_build():
     t, tri, _, _ = traverse(bvh, empty, np.zeros((3, 3)), np.eye(3))
     assert np.isinf(t).all() and (tri == -1).all()
     packed = pack_bvh(bvh, empty)
-    assert packed.nodes[0, 1, 3] == 0  # an empty leaf
+    assert bvh_module.leaf_codes(packed.nodes[0, 1, 3]) == 0  # an empty leaf
     # 40 copies of one triangle: centroids coincide, the build splits at the median.
     same = soup(np.repeat([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], 40, axis=0))
     bvh = build_bvh(same)
@@ -166,7 +166,7 @@ def test_packing_layout():
     assert packed.node_count == len(bvh) and packed.triangle_count == 50
     k = np.arange(len(bvh))
     np.testing.assert_array_equal(nodes[NODE_TEXELS * k, 3], bvh.miss)
-    code = nodes[NODE_TEXELS * k + 1, 3].astype(np.int64)
+    code = bvh_module.leaf_codes(nodes[NODE_TEXELS * k + 1, 3])
     leaf = bvh.first >= 0
     np.testing.assert_array_equal(code[~leaf], -1)
     np.testing.assert_array_equal(code[leaf] >> 4, bvh.first[leaf])

@@ -45,9 +45,11 @@ __all__ = [
     "TRIANGLE_TEXELS",
     "BVHTextures",
     "HIDDEN_SHIFT",
+    "LEAF_BIAS",
     "build_bvh",
     "bvh_of",
     "closest_hits",
+    "leaf_codes",
     "material_code",
     "occluded",
     "pack_bvh",
@@ -63,7 +65,8 @@ TRIANGLE_TEXELS = 3     # (v0.xyz, material code), (e1.xyz, triangle index), (e2
 HIDDEN_SHIFT = 1 << 16  # material code = material + HIDDEN_SHIFT · (RAY_* bits it is hidden from)
 DET_EPSILON = 1e-12     # as raycast's Möller–Trumbore: |det| > ε·|e1|·|e2|·|d| or no hit
 _LEAF_SHIFT = 16        # leaf code = first · 16 + count
-_MAX_TRIANGLES = (1 << 24) // _LEAF_SHIFT
+LEAF_BIAS = 1 << 23     # packed leaf codes: the float whose bits are code + LEAF_BIAS (normal)
+_MAX_TRIANGLES = 1 << 23  # node links and triangle indices are floats, exact below 2^24
 _BOX_PAD = 1e-5         # node boxes grow by this fraction of the scene's size (float32 safety)
 
 
@@ -406,7 +409,9 @@ class BVHTextures:
     """RGBA32F texel arrays for ``bvh_common.glsl``, each (rows, TEXTURE_WIDTH, 4) float32.
 
     nodes : 2 texels per node: (lo.xyz, miss link), (hi.xyz, leaf code) with leaf code =
-        first · 16 + count (first indexes the packed triangles) or -1 for an interior node.
+        first · 16 + count (first indexes the packed triangles) stored as the float whose bits
+        are code + ``LEAF_BIAS`` (exact whatever the triangle count; ``leaf_codes`` reads it),
+        or -1.0 for an interior node.
     triangles : 3 texels per triangle, in leaf order: (v0.xyz, material code), (e1.xyz,
         index into the SceneTriangles), (e2.xyz, ±|e1|·|e2|, negative for a cut-out:
         ``textures.cutout_hits``) — v0 and the edges in metres.
@@ -437,6 +442,13 @@ def _rows(texels: np.ndarray) -> np.ndarray:
     return out.reshape(rows, TEXTURE_WIDTH, 4)
 
 
+def leaf_codes(values: np.ndarray) -> np.ndarray:
+    """The leaf codes (first · 16 + count; -1 for an interior node) of packed node texels'
+    w (``BVHTextures.nodes``), as ``bvh_common.glsl`` reads them."""
+    values = np.asarray(values, np.float32)
+    return np.where(values < 0, -1, values.view(np.int32).astype(np.int64) - LEAF_BIAS)
+
+
 def material_code(tris: SceneTriangles) -> np.ndarray:
     """(T,) int64 the packed material code of each triangle (see ``BVHTextures``; decoded by
     ``bvh_common.glsl``'s ``bvh_triangle_material`` and ``bvh_hidden``)."""
@@ -454,7 +466,8 @@ def pack_bvh(bvh: BVH, tris: SceneTriangles) -> BVHTextures:
     nodes[:, 0, :3] = bvh.lo
     nodes[:, 0, 3] = bvh.miss
     nodes[:, 1, :3] = bvh.hi
-    nodes[:, 1, 3] = np.where(bvh.first >= 0, bvh.first.astype(np.int64) * _LEAF_SHIFT + bvh.count, -1)
+    code = (bvh.first.astype(np.int64) * _LEAF_SHIFT + bvh.count + LEAF_BIAS).astype(np.int32)
+    nodes[:, 1, 3] = np.where(bvh.first >= 0, code.view(np.float32), np.float32(-1.0))
     order = bvh.order
     p = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)[order]
     e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
