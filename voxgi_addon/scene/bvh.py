@@ -290,6 +290,23 @@ def _node_levels(bvh: BVH) -> list[np.ndarray]:
         levels.append(np.concatenate([inner + 1, bvh.miss[inner + 1].astype(np.int64)]))
 
 
+def _subtree_sizes(bvh: BVH) -> np.ndarray:
+    """(N,) nodes in each node's subtree (the node itself included): its depth-first block
+    ends where its miss link points (or at the end)."""
+    end = np.where(bvh.miss >= 0, bvh.miss, len(bvh)).astype(np.int64)
+    return end - np.arange(len(bvh))
+
+
+def _subtrees(bvh: BVH, depth: int) -> np.ndarray:
+    """The nodes at ``depth`` and the leaves above it: subtrees that together hold every
+    node below the cut once, in depth-first order."""
+    levels = _node_levels(bvh)
+    cut = [ids[bvh.first[ids] >= 0] for ids in levels[:depth]]
+    if depth < len(levels):
+        cut.append(levels[depth])
+    return np.sort(np.concatenate(cut))
+
+
 def _placed_bounds(proto: BVH, tlo, thi, starts):
     """(K, N, 3) lo, hi of the nodes of ``proto`` (a BVH of one mesh's triangles) over each
     placement's own world-space triangles (first triangle ``starts[k]``): tight boxes whatever
@@ -328,9 +345,23 @@ def build_instanced_bvh(tris: SceneTriangles, groups, rest) -> BVH:
     depth = 1
     if len(rest):
         own = build_bvh(_soup(positions[rest]))
-        lo.append(own.lo), hi.append(own.hi), miss.append(own.miss), first.append(own.first)
-        count.append(own.count), order.append(rest[own.order])
-        nodes.append([len(own)]), tris_of.append([len(rest)])
+        # its subtrees at the depth where there are about as many as placements become items
+        # of their own, so the top tree mixes them with the placements where they are
+        # (one item with the whole rest's box costs every ray a visit to both)
+        cut = _subtrees(own, int(np.ceil(np.log2(max(2, sum(len(g) for g, _ in groups))))))
+        block, _ = _ranges(cut, own_size := _subtree_sizes(own)[cut])
+        inside = np.repeat(cut, own_size)
+        local = own.miss[block].astype(np.int64)
+        before = np.concatenate([[0], np.cumsum(own.count)])  # triangles before each node
+        first0 = before[cut]  # the leaves of a subtree hold one run of ``order``
+        lo.append(own.lo[block]), hi.append(own.hi[block])
+        miss.append(np.where((local > inside) & (local < inside + np.repeat(own_size, own_size)),
+                             local - inside, -1))
+        first.append(np.where(own.count[block] > 0, own.first[block] - np.repeat(first0, own_size), -1))
+        count.append(own.count[block])
+        runs = before[cut + own_size] - first0
+        order.append(rest[own.order[_ranges(first0, runs)[0]]])
+        nodes.append(own_size), tris_of.append(runs)
         depth = own.depth
     for starts, size in groups:
         proto = build_bvh(_soup(positions[starts[0]:starts[0] + size]))
