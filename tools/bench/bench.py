@@ -33,7 +33,7 @@ SECTIONS = {
     "animation": ("bench_animation", "F12 animation render of a walking rig vs Cycles 16 spp + OIDN"),
     "lights": ("bench_lights", "HDRI, sky, emissive and metal scenes: preview vs Cycles 16/64 spp "
                                "with and without OIDN"),
-    "scale": ("bench_scale", "a 905k-triangle city block of instanced domes: snapshot, BVH build, "
+    "scale": ("bench_scale", "a 1.06M-triangle city block of instanced domes: snapshot, BVH build, "
                              "upload, trace, peak memory vs Cycles 16 spp + OIDN"),
 }
 

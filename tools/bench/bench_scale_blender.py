@@ -1,8 +1,8 @@
 """Scale benchmark rows (issue 18 point 3), run with the bpy venv:
 ``.venv/bin/python tools/bench/bench_scale_blender.py [--quick]``.
 
-The city block of ``scale_scene.py`` (576 box buildings, each crowned by a linked duplicate of
-one dome mesh: 905k triangles; ``--quick``: 64 buildings, 101k): the snapshot, the world-space
+The city block of ``scale_scene.py`` (676 box buildings, each crowned by a linked duplicate of
+one dome mesh: 1.06M triangles; ``--quick``: 64 buildings, 101k): the snapshot, the world-space
 triangles, the BVH build (once per instanced mesh, ``bvh.build_scene_bvh``, beside the SAH
 build over all triangles, ``build_bvh``) and its packing, the whole default (Accurate) preview
 at 160×120 and 640×480 with its stages (BVH build + upload, gathers, sub-pixel passes), the
@@ -48,6 +48,29 @@ def combined_error(combined, reference) -> float:
                        reference["Alpha"] > 0.5)
 
 
+def node_visits(bvh, origins, directions) -> float:
+    """Mean BVH nodes a closest-hit ray visits (the threaded traversal of bvh_common.glsl,
+    counted in numpy; the hit distance from ``bvh.traverse`` bounds it as the search does)."""
+    from voxgi.voxgi_addon.scene.bvh import traverse
+
+    o, d = np.asarray(origins, np.float64), np.asarray(directions, np.float64)
+    best = traverse(bvh, visits_tris[0], o, d)[0]
+    inv = 1.0 / np.where(np.abs(d) > 1e-30, d, 1e-30)
+    node, count, live = np.zeros(len(o), np.int64), np.zeros(len(o), np.int64), np.arange(len(o))
+    while len(live):
+        k = node[live]
+        count[live] += 1
+        t0, t1 = (bvh.lo[k] - o[live]) * inv[live], (bvh.hi[k] - o[live]) * inv[live]
+        enter = np.maximum(np.minimum(t0, t1).max(axis=1), 0.0)
+        leave = np.minimum(np.maximum(t0, t1).min(axis=1), best[live])
+        node[live] = np.where((enter <= leave) & (bvh.first[k] < 0), k + 1, bvh.miss[k])
+        live = live[node[live] >= 0]
+    return float(count.mean())
+
+
+visits_tris = [None]
+
+
 def two_level_bytes(tris, pack_bvh, build_bvh, instance_groups, soup) -> int:
     """Texture bytes of a two-level BVH of ``tris``: the one-off triangles' BVH, one BVH per
     instanced mesh, and a top level over the placements (nodes only; each placement would
@@ -79,8 +102,10 @@ def main(argv=None) -> int:
 
     from voxgi.blender.session import scene_session
     from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.render.gpu_bvh import GPUBVH, trace_rays
     from voxgi.render.gpu_context import ensure_gpu_context
     from voxgi.render.gpu_scene import peek_scene
+    from voxgi.render.gpu_volume import float_texture
     from voxgi.render.pipeline import render_scene_passes
     from voxgi.voxgi_addon.scene.bvh import (
         _soup,
@@ -89,9 +114,10 @@ def main(argv=None) -> int:
         instance_groups,
         pack_bvh,
     )
+    from voxgi.voxgi_addon.scene.camera import camera_rays
     from voxgi.voxgi_addon.scene.geometry import world_triangles
 
-    side = 8 if args.quick else 24
+    side = 8 if args.quick else 26
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     triangles = scale_scene.city_block(scene, side)
@@ -107,19 +133,36 @@ def main(argv=None) -> int:
                  f"(the dome once for its {shared} users)"))
     tris, seconds = timed(lambda: world_triangles(snapshot))
     rows.append(("world-space triangles", seconds, peak_mb(), f"{len(tris):,} triangles"))
+    visits_tris[0] = tris
+    sample = np.random.default_rng(0).choice(512 * 384, 4000, replace=False)
+    origins, directions = camera_rays(snapshot.camera, 512, 384)
+    origins, directions = origins[sample], directions[sample]
     bvh, seconds = timed(lambda: build_scene_bvh(tris))
     rows.append(("BVH build, once per instanced mesh", seconds, peak_mb(),
-                 f"{len(bvh):,} nodes, depth {bvh.depth}"))
+                 f"{len(bvh):,} nodes, depth {bvh.depth}; "
+                 f"{node_visits(bvh, origins, directions):.1f} nodes visited per camera ray"))
     sah, seconds = timed(lambda: build_bvh(tris))
     rows.append(("BVH build, SAH over all triangles", seconds, peak_mb(),
-                 f"{len(sah):,} nodes, depth {sah.depth} (what the preview built before)"))
+                 f"{len(sah):,} nodes, depth {sah.depth}; "
+                 f"{node_visits(sah, origins, directions):.1f} nodes visited per camera ray "
+                 "(what the preview built before)"))
     sah = None  # noqa: F841 - free it before packing
     packed, seconds = timed(lambda: pack_bvh(bvh, tris))
     flat = packed.nbytes
     rows.append(("BVH packing (textures)", seconds, peak_mb(),
                  f"flattened: {flat / 1e6:.0f} MB on the GPU; a two-level BVH of the same meshes: "
                  f"{two_level_bytes(tris, pack_bvh, build_bvh, instance_groups, _soup) / 1e6:.1f} MB"))
-    packed = bvh = tris = None  # noqa: F841 - free them before the previews
+    textures, seconds = timed(lambda: [float_texture(t, (t.shape[1], t.shape[0]))
+                                       for t in (packed.nodes, packed.triangles, packed.normals)])
+    rows.append(("BVH upload (3 RGBA32F textures)", seconds, peak_mb(), f"{flat / 1e6:.0f} MB"))
+    gpu_bvh = GPUBVH()
+    gpu_bvh.nodes, gpu_bvh.triangles, gpu_bvh.normals = textures
+    origins, directions = camera_rays(snapshot.camera, 512, 384)
+    trace_rays(gpu_bvh, origins[:64], directions[:64])  # compile the kernel first
+    (t, _, _, _), seconds = timed(lambda: trace_rays(gpu_bvh, origins, directions))
+    rows.append(("GPU closest hits, 512×384 camera rays", seconds, peak_mb(),
+                 f"{len(origins) / seconds / 1e6:.2f} M rays/s, {np.isfinite(t).mean():.0%} hit"))
+    packed = bvh = tris = textures = gpu_bvh = None  # noqa: F841 - free them before the previews
 
     cycles_rows = []
     sizes = [(160, 120)] if args.quick else [(160, 120), (640, 480)]
