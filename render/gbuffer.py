@@ -15,7 +15,13 @@ from gpu_extras.batch import batch_for_shader
 
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame, view_projection
 from ..voxgi_addon.scene.snapshot import RAY_CAMERA
-from ..voxgi_addon.scene.textures import FOOTPRINT_COS_MIN, filter_footprint, pixel_spread
+from ..voxgi_addon.scene.textures import (
+    FOOTPRINT_COS_MIN,
+    METALLIC_LEVELS,
+    ROUGHNESS_LEVELS,
+    filter_footprint,
+    pixel_spread,
+)
 from .gpu_shaders import SHADER_DIR
 from .gpu_tracer import read_texture
 
@@ -35,6 +41,7 @@ def gbuffer_shader():
     varying.smooth("VEC2", "surface_uv")
     varying.flat("VEC2", "surface_slot")
     varying.flat("VEC2", "surface_cutout")
+    varying.flat("VEC2", "surface_params")
     info = gpu.types.GPUShaderCreateInfo()
     info.vertex_in(0, "VEC3", "position")
     info.vertex_in(1, "VEC3", "normal")
@@ -43,10 +50,13 @@ def gbuffer_shader():
     info.vertex_in(4, "VEC2", "uv")
     info.vertex_in(5, "VEC2", "texel")
     info.vertex_in(6, "VEC2", "cutout")
+    info.vertex_in(7, "VEC2", "params")
     info.vertex_out(varying)
     info.sampler(0, "FLOAT_2D", "texture_table")
     info.sampler(1, "FLOAT_2D", "texture_atlas")
     info.define("FOOTPRINT_COS_MIN", repr(float(FOOTPRINT_COS_MIN)))
+    info.define("ROUGHNESS_LEVELS", str(ROUGHNESS_LEVELS))
+    info.define("METALLIC_LEVELS", str(METALLIC_LEVELS))
     info.push_constant("MAT4", "view_projection")
     info.push_constant("VEC3", "camera_position")
     info.push_constant("VEC3", "camera_forward")
@@ -94,7 +104,9 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
     ``scene.textures.primary_lod`` (Filter Size ``filter_width``) into ``base``; None: no
     texture is sampled. Fragments of cut-outs are kept by their Alpha (level 0) against a
     hash of the fragment's point, view and triangle (``textures.cutout_random``), as camera
-    rays pass them in ``raycast``.
+    rays pass them in ``raycast``. A material with Roughness / Metallic per texel writes the
+    material variant of the fragment's texel (``textures.SurfaceTextures.variant_at``) and its
+    roughness.
     """
     out = GBuffer(width, height)
     framebuffer = gpu.types.GPUFrameBuffer(depth_slot=out.depth,
@@ -132,6 +144,8 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
             surface_textures = getattr(tris, "textures", None)
             # (alpha texture, alpha value) of cut-outs (textures.cutout_hits), -2: opaque
             cutout = np.tile(np.float32([-2.0, 1.0]), (len(corners), 1))
+            # (parameter texture, first variant) of Roughness / Metallic per texel, -1: none
+            params = np.tile(np.float32([-1.0, 0.0]), (len(corners), 1))
             if textures is None or surface_textures is None:
                 uv = np.zeros((len(corners), 2), np.float32)
                 texel = np.tile(np.float32([-1.0, 0.0]), (len(corners), 1))
@@ -149,10 +163,15 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
                     cutout = np.repeat(np.stack(
                         [np.where(surface_textures.cutout, surface_textures.alpha_slots[row], -2),
                          surface_textures.alpha_values[row]], axis=1).astype(np.float32), 3, axis=0)
+                if surface_textures.param_slots is not None:
+                    row = surface_textures.row_of(tris.materials)
+                    params = np.repeat(np.stack(
+                        [surface_textures.param_slots[row], surface_textures.variants[row]],
+                        axis=1).astype(np.float32), 3, axis=0)
             batch = batch_for_shader(shader, "TRIS", {"position": corners, "normal": smooth,
                                                       "face_normal": face, "material": surface,
                                                       "uv": uv, "texel": texel,
-                                                      "cutout": cutout})
+                                                      "cutout": cutout, "params": params})
             shader.bind()
             shader.uniform_sampler("texture_table", textures[0])
             shader.uniform_sampler("texture_atlas", textures[1])

@@ -46,6 +46,7 @@ from ..voxgi_addon.scene.bvh import (
 )
 from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
 from ..voxgi_addon.scene.snapshot import RAY_DIFFUSE, RAY_GLOSSY, RAY_SHADOW
+from ..voxgi_addon.scene.textures import METALLIC_LEVELS, ROUGHNESS_LEVELS
 from .gpu_ltc import DEFINES as LTC_DEFINES
 from .gpu_ltc import ltc_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
@@ -113,6 +114,8 @@ def bvh_shader(kernel: str):
             defines.update(PRINCIPLED_DEFINES)
         if "textures" in files:
             defines["BVH_CUTOUTS"] = "1"
+            defines["ROUGHNESS_LEVELS"] = str(ROUGHNESS_LEVELS)
+            defines["METALLIC_LEVELS"] = str(METALLIC_LEVELS)
         if kernel == "bvh_direct":
             defines["STRATA_BLOCK"] = "ivec3(strata.xyz)"
         if kernel in ("bvh_gather", "bvh_glossy"):

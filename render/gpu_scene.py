@@ -220,11 +220,14 @@ class GPUScene:
         if getattr(self.tris.textures, "cutout", None) is not None:
             self.bvh.surface = dict(self.textures)  # cut-outs read their Alpha there
         t0 = time.perf_counter()
-        materials = digest(rough, emission, *principled, self.slots)
+        surface = getattr(self.tris, "textures", None)
+        variants = (None, None) if surface is None else (surface.param_slots, surface.variants)
+        materials = digest(rough, emission, *principled, self.slots, *variants)
         materials_changed = materials != self.keys.get("materials")
         if materials_changed:
             self.rough, self.emission, self.principled = rough, emission, principled
-            self.materials = principled_materials_texture(principled, emission, self.slots)
+            self.materials = principled_materials_texture(principled, emission, self.slots,
+                                                          variants)
             self._sent("materials", 3 * len(principled[0]) * 16)
             self.keys["materials"] = materials
             self.seconds["materials"] = time.perf_counter() - t0

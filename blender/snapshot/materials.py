@@ -24,6 +24,13 @@ output (the image's alpha channel, in the 4th channel of its ``TextureData``: on
 Base Color and Alpha when both come from the same image node; an image whose Alpha Mode is
 None is opaque); anything else baked (an Emit bake of the socket, into a texture's 4th
 channel).
+
+Roughness and Metallic from an image (directly — its Color as luminance, or its Alpha — or one
+channel through a Separate Color node, as the glTF importer builds them from one
+metallic-roughness image) become a parameter texture (channel 0 roughness, channel 1
+metallic), and the material is followed in the list by its ``textures.PARAM_VARIANTS``
+variants at quantized values, which surface points shade with per texel. Both sockets from
+two different images, or from other nodes: the images' means / the value, with a warning.
 """
 from __future__ import annotations
 
@@ -35,12 +42,13 @@ import bpy
 import numpy as np
 
 from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
-from ...voxgi_addon.scene.textures import within_max_size
+from ...voxgi_addon.scene.textures import PARAM_VARIANTS, variant_values, within_max_size
 from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _NeedsBake, _tree_key
 
 BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
 BAKE_SAMPLES = 8      # Cycles samples per texel (the texel's mean over its area)
 BAKE_MARGIN = 4       # texels the bake extends each UV island by (no dark seams when filtered)
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)  # Cycles' colour → float (Rec.709)
 LINEAR_SPACES = ("Linear Rec.709", "scene_linear", "Non-Color", "Linear CIE-XYZ E")
 SCENE_LINEAR = ("Linear Rec.709", "scene_linear")
 MAPPING_TYPES = ("POINT", "TEXTURE", "VECTOR")
@@ -270,8 +278,17 @@ class MaterialTable:
             if bake is not None:
                 data = self._baked(material, data, bake, surface)
             index = self._index[key] = len(self.materials)
+            if data.param_texture >= 0:  # its variants follow it (textures.PARAM_VARIANTS)
+                data = dataclasses.replace(data, param_variants=index + 1)
             self.materials.append(data)
             self._uv_maps[index] = uv_map
+            if data.param_texture >= 0:
+                for k in range(PARAM_VARIANTS):
+                    rough, metal = variant_values(k)
+                    self.materials.append(dataclasses.replace(
+                        data, name=f"{data.name} [roughness {rough:.3f}, metallic {metal:.3f}]",
+                        roughness=float(rough), metallic=float(metal), param_texture=-1,
+                        param_variants=-1))
         return index
 
     def _add_texture(self, texture: TextureData) -> int:
@@ -333,6 +350,14 @@ class MaterialTable:
         strength = np.float32(inputs["Emission Strength"].default_value)
         emission = self._socket_mean(material, inputs["Emission Color"], _rgb) * strength
         base, texture, bake, uv_map = self._base_color(material, inputs["Base Color"])
+        params, params_uv = self._params(material, inputs)
+        if params is not None:
+            roughness, metallic = (float(params.pixels[..., c].mean()) for c in (0, 1))
+            if texture is None:
+                uv_map = params_uv
+        else:
+            roughness = float(self._socket_mean(material, inputs["Roughness"], _value))
+            metallic = float(self._socket_mean(material, inputs["Metallic"], _value))
         alpha, alpha_texture, alpha_bake, alpha_uv = self._alpha(material, inputs.get("Alpha"),
                                                                   texture)
         if alpha_texture is not None and texture is None:
@@ -344,13 +369,14 @@ class MaterialTable:
         data = MaterialData(
             name=material.name_full,
             base_color=base,
-            roughness=float(self._socket_mean(material, inputs["Roughness"], _value)),
-            metallic=float(self._socket_mean(material, inputs["Metallic"], _value)),
+            roughness=roughness,
+            metallic=metallic,
             specular=float(inputs["Specular IOR Level"].default_value),
             emission=emission.astype(np.float32),
             base_color_texture=-1 if texture is None else self._add_texture(texture),
             alpha=float(alpha),
             alpha_texture=-1 if alpha_texture is None else self._add_texture(alpha_texture),
+            param_texture=-1 if params is None else self._add_texture(params),
         )
         return data, bakes or None, uv_map
 
@@ -383,7 +409,8 @@ class MaterialTable:
             if rgb is not None:
                 mean = rgb.reshape(-1, 3).mean(axis=0)
                 self._warn(f"{name} comes from the image '{node.image.name_full}': the "
-                           "preview uses its mean (only Base Color is read per texel yet)")
+                           "preview uses its mean (Emission Color is not read per texel yet, nor "
+                           "Roughness / Metallic from two images)")
                 if np.ndim(value(socket)) == 0:
                     return np.float32(mean[channel] if channel is not None else mean.mean())
                 return mean.astype(np.float32)
@@ -417,6 +444,44 @@ class MaterialTable:
             return mean, texture, None, uv_map
         except _NeedsBake:
             return _rgb(socket), None, ("EMIT", socket.name), ""
+
+    def _params(self, material, inputs):
+        """(TextureData of Roughness (channel 0) and Metallic (channel 1) per texel, the UV map
+        it reads), or (None, "") when neither comes from an image, or they come from two image
+        nodes or other nodes (``_socket_mean`` then takes means and warns)."""
+        sources = {}
+        for name in ("Roughness", "Metallic"):
+            socket = inputs.get(name)
+            if socket is None or not socket.is_linked:
+                continue
+            found = _image_channel(socket)
+            if found is None:
+                return None, ""
+            sources[name] = found
+        if not sources or len({node.name for node, _ in sources.values()}) > 1:
+            return None, ""
+        node = next(iter(sources.values()))[0]
+        try:
+            texture, uv_map = _image_texture(node, with_alpha=True)
+        except _NeedsBake:
+            return None, ""
+        if texture is None:
+            return None, ""
+        rgba = texture.pixels
+        params = np.zeros(rgba.shape[:2] + (4,), np.float32)
+        params[..., 3] = 1.0
+        for c, name in enumerate(("Roughness", "Metallic")):
+            if name not in sources:
+                params[..., c] = float(inputs[name].default_value)
+                continue
+            channel = sources[name][1]
+            params[..., c] = rgba[..., :3] @ LUMINANCE if channel is None else rgba[..., channel]
+        key = _digest(texture.key, tuple(sources[n][1] if n in sources else
+                                         float(inputs[n].default_value)
+                                         for n in ("Roughness", "Metallic")))
+        return TextureData(name=f"{texture.name} (roughness, metallic)", pixels=params,
+                           interpolation=texture.interpolation, extension=texture.extension,
+                           uv_transform=texture.uv_transform, key=key), uv_map
 
     def _alpha(self, material, socket, base_texture):
         """(value, TextureData whose 4th channel is the Alpha or None, what to bake or None,
@@ -499,6 +564,31 @@ class MaterialTable:
         mean = texture.pixels.reshape(-1, 3).mean(axis=0).astype(np.float32)
         return dataclasses.replace(data, base_color=mean,
                                    base_color_texture=self._add_texture(texture))
+
+
+def _image_channel(socket):
+    """(Image Texture node, channel: 0–2 through a Separate Color node (RGB mode), 3 for its
+    Alpha output, None for its Color as luminance) feeding a float socket, or None."""
+    try:
+        node, output = _follow(socket)
+        channel = None
+        if node is not None and node.type in ("SEPRGB", "SEPARATE_COLOR", "SEPARATE_RGB"):
+            if getattr(node, "mode", "RGB") != "RGB":
+                return None
+            channel = {"R": 0, "G": 1, "B": 2, "Red": 0, "Green": 1, "Blue": 2}.get(
+                output.identifier, {"R": 0, "G": 1, "B": 2}.get(output.name))
+            if channel is None:
+                return None
+            node, output = _follow(node.inputs[0])
+            if node is None or output.identifier != "Color":
+                return None
+        elif node is not None and node.type == "TEX_IMAGE" and output.identifier == "Alpha":
+            channel = 3
+        if node is None or node.type != "TEX_IMAGE" or node.image is None:
+            return None
+        return node, channel
+    except _NeedsBake:
+        return None
 
 
 def _alpha_node(principled):

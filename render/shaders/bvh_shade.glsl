@@ -5,7 +5,8 @@
  * origin by the Principled diffuse weight and, when `hit_glossy`, its glossy lobe (each light
  * at its centre direction). `th` = distance of the hit, BVH_FAR on a miss.
  * Samplers: bvh_* (bvh_common.glsl), lights and world_map (bvh_lights.glsl), materials ((M + 1) × 3 texels:
- * base colour, emission, (metallic, Specular IOR Level, roughness), Base Color texture slot),
+ * base colour, emission, (metallic, Specular IOR Level, roughness), (Base Color texture slot,
+ * Roughness / Metallic texture slot, first variant)),
  * principled_lut, texture_table, texture_atlas (textures.glsl). */
 
 vec4 bvh_texel_normals(int k)
@@ -33,6 +34,22 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
   ns *= dot(face, d) > 0.0 ? -1.0 : 1.0;
   int material = bvh_triangle_material(slot);
   material = (material >= 0 && material < last_material) ? material : last_material;
+  /* Roughness / Metallic per texel (textures.SurfaceTextures.variant_at, level 0): row 3's
+   * (.y, .z) = (parameter texture, first variant), -1 none */
+  vec4 variant = texelFetch(materials, ivec2(material, 3), 0);
+  if (variant.y > -0.5) {
+    int k = 2 * triangle;
+    int row = int(texelFetch(texture_table, ivec2(BVH_WIDTH - 1, 0), 0).x + 0.5);
+    vec4 c01 = texelFetch(texture_table,
+                          ivec2(k & (BVH_WIDTH - 1), row + (k >> BVH_WIDTH_LOG2)), 0);
+    vec4 c2 = texelFetch(texture_table,
+                         ivec2((k + 1) & (BVH_WIDTH - 1), row + ((k + 1) >> BVH_WIDTH_LOG2)), 0);
+    vec4 p = surface_texel(int(variant.y + 0.5),
+                           (1.0 - uv.x - uv.y) * c01.xy + uv.x * c01.zw + uv.y * c2.xy);
+    float r = roundEven(clamp(p.x, 0.0, 1.0) * float(ROUGHNESS_LEVELS - 1));
+    float m = roundEven(clamp(p.y, 0.0, 1.0) * float(METALLIC_LEVELS - 1));
+    material = int(variant.z + 0.5) + int(m) * ROUGHNESS_LEVELS + int(r);
+  }
   vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
   vec3 emission = texelFetch(materials, ivec2(material, 1), 0).rgb;
   vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;

@@ -5,7 +5,9 @@
  * (surface_slot = (slot, level-0 texels per metre × a pixel's footprint at unit distance)) at
  * scene/textures.primary_lod, else 0. A cut-out's fragment (surface_cutout = (alpha texture or
  * -1, alpha value); -2 opaque) is kept where textures.cutout_random of its point, view and
- * triangle is below its Alpha (level 0), as camera rays count hits in raycast. */
+ * triangle is below its Alpha (level 0), as camera rays count hits in raycast. surface_params =
+ * (parameter texture, first variant) of a material with Roughness / Metallic per texel: the
+ * material written is its texel's variant (textures.SurfaceTextures.variant_at). */
 void main()
 {
   vec3 view = camera_ortho > 0.5 ? camera_forward : normalize(world_position - camera_position);
@@ -28,6 +30,15 @@ void main()
   out_position = vec4(world_position, 1.0);
   out_normal = vec4(n * facing, surface.y);
   out_view = vec4(view, surface.x);
+  if (surface_params.x > -0.5) {
+    /* Roughness / Metallic per texel: the material variant nearest the texel
+     * (textures.variant_of; rint rounds half to even, as roundEven) */
+    vec4 p = surface_texel(int(surface_params.x + 0.5), surface_uv);
+    float r = roundEven(clamp(p.x, 0.0, 1.0) * float(ROUGHNESS_LEVELS - 1));
+    float m = roundEven(clamp(p.y, 0.0, 1.0) * float(METALLIC_LEVELS - 1));
+    out_view.w = surface_params.y + m * float(ROUGHNESS_LEVELS) + r;
+    out_normal.w = r / float(ROUGHNESS_LEVELS - 1);
+  }
   out_base = vec4(0.0);
   if (surface_slot.x > -0.5) {
     float distance = camera_ortho > 0.5 ? 1.0 : length(world_position - camera_position);

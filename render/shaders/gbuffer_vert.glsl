@@ -8,5 +8,6 @@ void main()
   surface_uv = uv;
   surface_slot = texel;
   surface_cutout = cutout;
+  surface_params = params;
   gl_Position = view_projection * vec4(position, 1.0);
 }

@@ -77,14 +77,20 @@ vec3 surface_texture(int slot, vec2 uv, float lod)
   return value;
 }
 
-/* Texture `slot`'s alpha (its 4th channel) at surface UV `uv`, level 0. */
-float surface_alpha(int slot, vec2 uv)
+/* Texture `slot`'s four channels at surface UV `uv`, level 0 (textures.sample_rgba). */
+vec4 surface_texel(int slot, vec2 uv)
 {
   vec4 a = texelFetch(texture_table, ivec2(0, slot), 0);
   vec4 b = texelFetch(texture_table, ivec2(1, slot), 0);
   int extension = int(texelFetch(texture_table, ivec2(2, slot), 0).x + 0.5);
   vec2 st = vec2(a.x * uv.x + a.y * uv.y + a.z, b.x * uv.x + b.y * uv.y + b.z);
-  return texture_level4(slot, 0, st, int(b.w + 0.5), extension).a;
+  return texture_level4(slot, 0, st, int(b.w + 0.5), extension);
+}
+
+/* Texture `slot`'s alpha (its 4th channel) at surface UV `uv`, level 0. */
+float surface_alpha(int slot, vec2 uv)
+{
+  return surface_texel(slot, uv).a;
 }
 
 /* textures.cutout_random: the hash of a ray's origin and direction in steps of

@@ -248,11 +248,13 @@ def test_f12_bakes_inside_the_render_and_leaves_the_file_unchanged(voxgi, tmp_pa
     assert relative_l1(colour, reference, np.ones(colour.shape[:2], bool)) < 1e-3
 
 
-def test_roughness_from_an_image_channel_takes_its_mean_with_a_warning(voxgi):
+def test_roughness_from_an_image_channel_is_read_per_texel(voxgi):
     """Roughness through a Separate Color node from an image (as the glTF importer builds a
-    metallic-roughness map): the channel's mean and a warning that it is not per texel yet,
-    instead of the socket's unlinked value without a word."""
+    metallic-roughness map): a parameter texture holding the channel (its mean as the
+    material's roughness) and the material's variants after it, without a warning; an
+    Emission Color from an image still takes its mean, with a warning."""
     from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.voxgi_addon.scene.textures import PARAM_VARIANTS
 
     build()
     tree = bpy.data.materials["Checker Floor"].node_tree
@@ -262,10 +264,21 @@ def test_roughness_from_an_image_channel_takes_its_mean_with_a_warning(voxgi):
     bsdf = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
     tree.links.new(separate.outputs["Green"], bsdf.inputs["Roughness"])
     snapshot = take_snapshot(bpy.context.scene)
-    floor = next(m for m in snapshot.materials if m.name == "Checker Floor")
-    green = snapshot.textures[floor.base_color_texture].pixels[..., 1].mean()
-    assert floor.roughness == pytest.approx(green, abs=1e-4)
-    assert any("Roughness comes from the image" in w for w in snapshot.warnings), snapshot.warnings
+    index, floor = next((i, m) for i, m in enumerate(snapshot.materials)
+                        if m.name == "Checker Floor")
+    green = snapshot.textures[floor.base_color_texture].pixels[..., 1]
+    params = snapshot.textures[floor.param_texture].pixels
+    np.testing.assert_allclose(params[..., 0], green, atol=1e-6)
+    np.testing.assert_allclose(params[..., 1], bsdf.inputs["Metallic"].default_value)
+    assert floor.roughness == pytest.approx(green.mean(), abs=1e-4)
+    assert floor.param_variants == index + 1
+    assert len(snapshot.materials) >= index + 1 + PARAM_VARIANTS
+    assert not any("Roughness" in w for w in snapshot.warnings), snapshot.warnings
+    tree.links.new(image_node.outputs["Color"], bsdf.inputs["Emission Color"])
+    bsdf.inputs["Emission Strength"].default_value = 1.0
+    snapshot = take_snapshot(bpy.context.scene)
+    assert any("Emission Color comes from the image" in w for w in snapshot.warnings), \
+        snapshot.warnings
 
 
 def test_a_procedural_material_on_a_mesh_without_uvs_warns(voxgi):

@@ -86,6 +86,8 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
         material = np.asarray(tris.materials)[tri[hit]]
         last = len(emission) - 1
         material = np.where((material >= 0) & (material < last), material, last)
+        if getattr(tris, "textures", None) is not None:  # Roughness / Metallic per texel
+            material = tris.textures.variant_at(tri[hit], material, u[hit], v[hit])
         # emissive triangles by their shadow rays' plain estimate here (emitters.EmitterLight)
         at_hits = [replace(light, exact=False) if light.type == "EMITTERS" else light
                    for light in lights]

@@ -318,7 +318,8 @@ class PrimaryHits:
     direction : (H, W, 3) float64 unit camera-ray direction (the view vector is its negative).
     depth : (H, W) float64 distance from the near plane along the ray (inf = background).
     triangle, material, object : (H, W) int32 indices into ``SceneTriangles``, the snapshot's
-        materials and objects (-1 = background or no material).
+        materials and objects (-1 = background or no material); a material with Roughness /
+        Metallic per texel gives its texel's variant (``textures.SurfaceTextures.variant_at``).
     barycentric : (H, W, 2) float64 weights of the hit triangle's corners 1 and 2 (corner 0
         has 1 − both; 0 on the background), or None.
     """
@@ -366,6 +367,14 @@ def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | No
         out = np.where(hit, np.asarray(values)[index] if len(tris) else -1, -1)
         return out.astype(np.int32).reshape(height, width)
 
+    material = per_pixel(tris.materials)
+    surface = getattr(tris, "textures", None)
+    if surface is not None and surface.param_slots is not None and hit.any():
+        # Roughness / Metallic per texel: the material variant of the hit's texel
+        seen = np.flatnonzero(hit)
+        flat = material.reshape(-1)
+        flat[seen] = surface.variant_at(index[seen], flat[seen], u[seen], v[seen])
+
     return PrimaryHits(
         hit=hit.reshape(height, width),
         position=position.reshape(height, width, 3),
@@ -374,7 +383,7 @@ def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | No
         direction=directions.reshape(height, width, 3),
         depth=t.reshape(height, width),
         triangle=per_pixel(np.arange(len(tris))),
-        material=per_pixel(tris.materials),
+        material=material,
         object=per_pixel(tris.objects),
         barycentric=np.where(hit[:, None], np.stack([u, v], axis=1), 0.0).reshape(height, width, 2),
     )

@@ -99,6 +99,11 @@ class MaterialData:
         Color per texel through the meshes' ``uvs``, or -1 (the value is uniform).
     alpha : the Alpha socket's value (1 opaque); alpha_texture : index of the texture whose
         4th channel gives the Alpha per texel (-1: ``alpha`` everywhere).
+    param_texture : index of the texture whose channels 0 and 1 give Roughness and Metallic
+        per texel (-1: ``roughness``, ``metallic`` everywhere, which are then the texture's
+        means); param_variants : index of the first of ``textures.PARAM_VARIANTS`` materials
+        that follow it, this material at each quantized (roughness, metallic) — what a surface
+        point shades with (``textures.SurfaceTextures.variant_at``).
     """
 
     name: str
@@ -110,6 +115,8 @@ class MaterialData:
     base_color_texture: int = -1
     alpha: float = 1.0
     alpha_texture: int = -1
+    param_texture: int = -1
+    param_variants: int = -1
 
 
 @dataclass(frozen=True)

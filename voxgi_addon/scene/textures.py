@@ -28,6 +28,15 @@ uniform in [0, 1)) is below the Alpha at the hit (level 0): ``cutout_hits``. Cam
 shadow rays thus pass through in proportion, as Cycles' stochastic transparency does; numpy
 (``raycast``, ``bvh.traverse``) and the GLSL traversal (``bvh_common.glsl``,
 ``textures.glsl``) run the same test.
+
+Roughness and Metallic per texel (issue 18 point 2, what glTF imports build): a material whose
+Roughness or Metallic comes from an image gets a parameter texture (channel 0 roughness,
+channel 1 metallic: ``MaterialData.param_texture``) and is followed in the snapshot's
+materials by ``PARAM_VARIANTS`` variants of itself at quantized values (``ROUGHNESS_LEVELS`` ×
+``METALLIC_LEVELS``). A surface point seen by the camera samples the texture (level 0) and
+shades as the variant nearest its texel (``SurfaceTextures.variant_at``): every table the
+passes and gathers index by material then holds the texel's values, with no change to the
+shading code. Bounce hits shade with the material's own row (the texture's means).
 """
 from __future__ import annotations
 
@@ -43,6 +52,9 @@ MAX_LEVELS = 12              # mip levels kept per texture (level 0 = the image)
 MAX_SIZE = 2048              # larger images start at the first level within this size
 FOOTPRINT_COS_MIN = 0.05     # the footprint's cosine is held above this (grazing views)
 TEXTURE_TEXELS = 3 + MAX_LEVELS  # per texture in the GPU table (pack_atlas)
+ROUGHNESS_LEVELS = 16        # roughness variants: k / 15
+METALLIC_LEVELS = 4          # metallic variants: k / 3
+PARAM_VARIANTS = ROUGHNESS_LEVELS * METALLIC_LEVELS
 INTERPOLATIONS = {"Linear": 0, "Closest": 1}
 EXTENSIONS = {"REPEAT": 0, "EXTEND": 1, "CLIP": 2}
 HALF = np.float16
@@ -204,6 +216,25 @@ class SurfaceTextures:
     alpha_slots: np.ndarray = field(default=None)
     alpha_values: np.ndarray = field(default=None)
     cutout: np.ndarray = field(default=None)
+    param_slots: np.ndarray = field(default=None)
+    variants: np.ndarray = field(default=None)
+
+    def variant_at(self, triangles, materials, b1, b2) -> np.ndarray:
+        """(N,) int material indices surface points shade with: their own, or for materials
+        with a parameter texture (``param_slots``) the variant (``variants`` + ``variant_of``)
+        of its texel (level 0); triangles (N,) indices, materials (N,) their materials."""
+        materials = np.asarray(materials)
+        out = materials.astype(np.int64, copy=True)
+        if self.param_slots is None:
+            return out
+        row = self.row_of(materials)
+        slots = self.param_slots[row]
+        for slot in np.unique(slots[slots >= 0]):
+            at = np.flatnonzero(slots == slot)
+            rgba = sample_rgba(self.textures[slot], self._uv(np.asarray(triangles)[at],
+                                                             np.asarray(b1)[at], np.asarray(b2)[at]))
+            out[at] = self.variants[row[at]] + variant_of(rgba[:, 0], rgba[:, 1])
+        return out
 
     def row_of(self, materials: np.ndarray) -> np.ndarray:
         """(N,) rows of the per-material arrays for material indices (the last: none)."""
@@ -274,7 +305,13 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
     slots = np.full(count, -1, np.int32)
     alpha_slots = np.full(count, -1, np.int32)
     alpha_values = np.ones(count, np.float32)
+    param_slots = np.full(count, -1, np.int32)
+    variants = np.full(count, -1, np.int64)
     for i, m in enumerate(snapshot.materials):
+        index = int(getattr(m, "param_texture", -1))
+        first = int(getattr(m, "param_variants", -1))
+        if 0 <= index < len(textures) and 0 <= first <= len(snapshot.materials) - PARAM_VARIANTS:
+            param_slots[i], variants[i] = index, first
         index = int(getattr(m, "base_color_texture", -1))
         if 0 <= index < len(textures):
             slots[i] = index
@@ -283,9 +320,11 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
             alpha_slots[i] = index
         alpha_values[i] = np.clip(float(getattr(m, "alpha", 1.0)), 0.0, 1.0)
     transparent = (alpha_slots >= 0) | (alpha_values < 1.0)
-    if not (slots >= 0).any() and not transparent.any():
+    if not (slots >= 0).any() and not transparent.any() and not (param_slots >= 0).any():
         return None
     out = SurfaceTextures(textures, slots, np.asarray(uvs, np.float32))
+    if (param_slots >= 0).any():
+        out.param_slots, out.variants = param_slots, variants
     if transparent.any():
         out.alpha_slots, out.alpha_values = alpha_slots, alpha_values
         out.cutout = transparent[out.row_of(materials)]
@@ -293,6 +332,21 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
     scale = np.array([texture_texels(t) for t in textures] + [0.0], np.float64)
     out.density = (texel_density(positions, uvs) * scale[slot]).astype(np.float32)
     return out
+
+
+def variant_values(index) -> tuple[np.ndarray, np.ndarray]:
+    """(roughness, metallic) of variant ``index`` (0 … PARAM_VARIANTS − 1)."""
+    index = np.asarray(index)
+    return ((index % ROUGHNESS_LEVELS) / (ROUGHNESS_LEVELS - 1.0),
+            (index // ROUGHNESS_LEVELS) / (METALLIC_LEVELS - 1.0))
+
+
+def variant_of(roughness, metallic) -> np.ndarray:
+    """(N,) int: the variant nearest (roughness, metallic), each clipped to [0, 1] (the GLSL
+    port is in ``gbuffer_frag.glsl``)."""
+    r = np.rint(np.clip(np.asarray(roughness, np.float32), 0, 1) * np.float32(ROUGHNESS_LEVELS - 1))
+    m = np.rint(np.clip(np.asarray(metallic, np.float32), 0, 1) * np.float32(METALLIC_LEVELS - 1))
+    return (m * ROUGHNESS_LEVELS + r).astype(np.int64)
 
 
 def _hash(v: np.ndarray) -> np.ndarray:
