@@ -120,3 +120,18 @@ def test_placements_are_transformed_as_each_object_alone():
                                              .reshape(-1, 3)).reshape(-1, 3, 3))
     np.testing.assert_allclose(tris.positions, np.concatenate(corners), atol=1e-12)
     np.testing.assert_allclose(tris.corner_normals, np.concatenate(shading), atol=1e-9)
+
+
+def test_leaf_codes_past_a_million_triangles_survive_packing():
+    """Leaf codes are stored as float bits: a leaf whose first triangle is past 2²⁰ (where
+    first · 16 is no longer an exact float value) packs and reads back exactly."""
+    firsts = np.array([-1, 0, (1 << 20) + 1, (1 << 23) - 5], np.int32)
+    counts = np.array([0, 8, 3, 5], np.int32)
+    fake = bvh_module.BVH(lo=np.zeros((4, 3)), hi=np.ones((4, 3)), miss=np.array([-1, 2, 3, -1], np.int32),
+                          first=firsts, count=counts, order=np.zeros(0, np.int32), depth=2)
+    tris = world_triangles(placed_scene(count=0))
+    packed = bvh_module.pack_bvh(fake, tris)
+    codes = bvh_module.leaf_codes(packed.nodes.reshape(-1, 4)[1:8:2, 3])
+    np.testing.assert_array_equal(codes, [-1, 8, ((1 << 20) + 1) * 16 + 3, ((1 << 23) - 5) * 16 + 5])
+    values = packed.nodes.reshape(-1, 4)[3:8:2, 3]
+    assert np.isfinite(values).all() and (values > 0).all() and (values >= np.finfo(np.float32).tiny).all()
