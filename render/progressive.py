@@ -22,7 +22,6 @@ dispatched work groups).
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 
 import numpy as np
@@ -109,20 +108,22 @@ class ProgressiveImage:
             return max(1, min(most, self.fixed_pixels))
         return self.sizer.pixels(most)
 
-    def coarse_size(self) -> tuple[int, int]:
-        """The coarse image: the view's aspect in about a slice's pixels, at most half the
-        width and height (and at least ``LEAST_TILE`` on its shorter side when it fits)."""
+    def coarse_size(self, stride: int) -> tuple[int, int]:
+        """The coarse image: the whole view in one slice's tile (``tile_shape``: textures of
+        the tiles' kind, its pixels stretched over the view's aspect), or half the width and
+        height when one slice holds more than a quarter of the image."""
         acc = self.accumulation
-        scale = min(0.5, math.sqrt(self.slice_pixels() / (acc.width * acc.height)))
-        least = min(LEAST_TILE, acc.width, acc.height) / min(acc.width, acc.height)
-        scale = max(scale, least)
-        return max(1, round(acc.width * scale)), max(1, round(acc.height * scale))
+        tile_w, tile_h = tile_shape(self.slice_pixels(), acc.width, acc.height,
+                                    LOCAL_SIZE * stride, stride)
+        if 2 * tile_w > acc.width or 2 * tile_h > acc.height:
+            return max(1, (acc.width + 1) // 2), max(1, (acc.height + 1) // 2)
+        return tile_w, tile_h
 
     def _next_tiles(self, stride: int) -> None:
         acc = self.accumulation
         # sides of whole work groups of the gather grid (LOCAL_SIZE cells of stride pixels)
         tile_w, tile_h = tile_shape(self.slice_pixels(), acc.width, acc.height,
-                                    LOCAL_SIZE * stride)
+                                    LOCAL_SIZE * stride, stride)
         # the grid moves by a hashed fraction of a tile each sample (whole GI blocks)
         k = self.sample
         shift = ((k * 5 % 8) * tile_w // 8 // stride * stride,
@@ -142,7 +143,7 @@ class ProgressiveImage:
         options = base_options(settings, width, height)
         t0 = time.perf_counter()
         if self.coarse_pending:
-            size = self.coarse_size()
+            size = self.coarse_size(options["gi_stride"])
             gather, lights = sample_settings(options["gather_settings"],
                                              options["light_samples"], self.target, 0)
             camera = camera_from_view(view, window, *size)

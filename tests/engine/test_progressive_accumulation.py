@@ -51,27 +51,39 @@ def test_a_tile_camera_sees_exactly_the_images_pixels(kind, shift):
     o, d = camera_rays(tile)
     assert np.allclose(o.reshape(h, w, 3), origins[y0:y0 + h, x0:x0 + w], atol=1e-9)
     assert np.allclose(d.reshape(h, w, 3), directions[y0:y0 + h, x0:x0 + w], atol=1e-9)
-    with pytest.raises(ValueError, match="not inside"):
-        tile_camera(camera, 30, 0, 16, 12)
+    # a tile reaching past the image continues its pixels
+    o, d = camera_rays(tile_camera(camera, -4, 20, 16, 12, offset=offset))
+    assert np.allclose(d.reshape(12, 16, 3)[:10, 4:], directions[20:, :12], atol=1e-9)
+    with pytest.raises(ValueError, match="does not meet"):
+        tile_camera(camera, 40, 0, 16, 12)
 
 
 @pytest.mark.parametrize("shift", [(0, 0), (5, 3), (16, 24), (31, 1)])
-def test_the_tiles_cover_every_pixel_once(shift):
+def test_the_tiles_cover_every_pixel_once_and_have_one_size(shift):
+    from voxgi.voxgi_addon.preview.progressive import inside
+
     tiles = tile_grid(70, 45, 16, 24, shift)
     cover = np.zeros((45, 70), int)
-    for x0, y0, w, h in tiles:
-        assert 1 <= w <= 16 and 1 <= h <= 24
-        cover[y0:y0 + h, x0:x0 + w] += 1
+    for rect in tiles:
+        assert rect[2:] == (16, 24)
+        window, part = inside(rect, 70, 45)
+        cover[window] += 1
+        assert np.ones((24, 16))[part].shape == cover[window].shape
     assert (cover == 1).all()
 
 
-def test_tile_shapes_hold_whole_work_groups_and_about_the_pixels():
-    w, h = tile_shape(4096, 320, 180, 16)
-    assert w % 16 == 0 and h % 16 == 0 and 0.5 * 4096 <= w * h <= 4096
-    assert tile_shape(10 ** 6, 320, 180, 16) == (320, 180)  # the whole image fits
-    assert tile_shape(1, 320, 180, 16) == (16, 16)  # at least one group each way
-    w, h = tile_shape(320 * 40, 320, 180, 8)
-    assert w * h <= 320 * 40
+def test_tile_shapes_hold_whole_work_groups_of_one_texture_kind():
+    def power_of_two(n):
+        return n & (n - 1) == 0
+
+    for pixels in (100, 2000, 4096, 9000, 30000):
+        w, h = tile_shape(pixels, 320, 180, 16, 2)
+        assert w % 16 == 0 and h % 16 == 0
+        assert not any(power_of_two(n) for n in (w, h, w // 2, h // 2)), (w, h)
+        assert w * h <= max(pixels, 48 * 48)
+    assert tile_shape(10 ** 6, 320, 180, 16, 2) == (320, 180)  # the whole image fits
+    assert tile_shape(1, 320, 180, 16, 2) == (48, 48)  # the smallest: 3 groups (16, 32: 2ⁿ)
+    assert tile_shape(40000, 320, 180, 16, 2) == (192, 192)  # one row of tiles: 180 px high
 
 
 def test_the_samples_share_the_one_shot_images_rays():
@@ -145,17 +157,22 @@ def test_the_finished_image_gets_the_filters_tails_as_the_one_shot_image():
 def test_the_slice_sizer_fits_the_budget_from_measured_slices():
     sizer = SliceSizer(0.030, first_pixels=4096, least=256)
     assert sizer.pixels(10 ** 6) == 4096  # nothing measured yet
-    for pixels in (1000, 4000, 2000, 8000):
+    sizer.measured(4096, 0.010 + 2e-6 * 4096)
+    assert sizer.model() is None and sizer.pixels(10 ** 6) == 8192  # one size: try another
+    for pixels in (1000, 8000, 2000):
         sizer.measured(pixels, 0.010 + 2e-6 * pixels)  # 10 ms per slice + 2 µs per pixel
     fixed, per_pixel = sizer.model()
     assert fixed == pytest.approx(0.010) and per_pixel == pytest.approx(2e-6)
     assert sizer.pixels(10 ** 6) == pytest.approx(10_000, abs=2)
     assert sizer.pixels(5000) == 5000  # never more than the image
+    # the fixed cost alone is over the budget: slices at least as long again (half tracing)
     slow = SliceSizer(0.030, least=256)
-    slow.measured(1000, 0.050)  # the fixed cost alone is over the budget: the least slice
-    assert slow.pixels(10 ** 6) == 600
+    for pixels in (1000, 3000):
+        slow.measured(pixels, 0.040 + 1e-5 * pixels)
+    assert slow.pixels(10 ** 6) == pytest.approx(4000, abs=2)
     slower = SliceSizer(0.030, least=256)
-    slower.measured(1000, 1.0)
+    for pixels in (300, 600):
+        slower.measured(pixels, 1e-6 + 1e-3 * pixels)
     assert slower.pixels(10 ** 6) == 256
     with pytest.raises(ValueError, match="budget"):
         SliceSizer(0.0)

@@ -94,12 +94,13 @@ def _frustum(camera) -> tuple[float, float, float, float]:
 def tile_camera(camera, x0: int, y0: int, width: int, height: int, offset=(0.0, 0.0)):
     """The camera of the ``width`` × ``height`` pixels of ``camera``'s image whose top-left
     pixel is (x0, y0) (row 0 on top), every ray moved by ``offset`` (x right, y down, pixels):
-    pixel (i, j) of the tile is pixel (x0 + i, y0 + j) of the image. ``camera.resolution`` is
-    the whole image's size (its projection's aspect)."""
+    pixel (i, j) of the tile is pixel (x0 + i, y0 + j) of the image, continued past its
+    borders where the tile reaches beyond them. ``camera.resolution`` is the whole image's
+    size (its projection's aspect)."""
     full_w, full_h = camera.resolution
-    if width < 1 or height < 1 or x0 < 0 or y0 < 0 or x0 + width > full_w \
-            or y0 + height > full_h:
-        raise ValueError(f"tile {width}×{height} at ({x0}, {y0}) is not inside the "
+    if width < 1 or height < 1 or x0 + width <= 0 or y0 + height <= 0 or x0 >= full_w \
+            or y0 >= full_h:
+        raise ValueError(f"tile {width}×{height} at ({x0}, {y0}) does not meet the "
                          f"{full_w}×{full_h} image")
     cx, cy, hx, hy = _frustum(camera)
     tx, ty = hx * width / full_w, hy * height / full_h
@@ -114,17 +115,26 @@ def tile_camera(camera, x0: int, y0: int, width: int, height: int, offset=(0.0, 
     return dataclasses.replace(camera, projection_matrix=p, resolution=(int(width), int(height)))
 
 
+def inside(rect, width: int, height: int):
+    """(image window, tile window): numpy slices of the part of the tile ``rect`` (x0, y0, w,
+    h) inside the ``width`` × ``height`` image, in the image's and in the tile's pixels."""
+    x0, y0, w, h = rect
+    ix0, iy0 = max(x0, 0), max(y0, 0)
+    ix1, iy1 = min(x0 + w, width), min(y0 + h, height)
+    return (np.s_[iy0:iy1, ix0:ix1], np.s_[iy0 - y0:iy1 - y0, ix0 - x0:ix1 - x0])
+
+
 def tile_grid(width: int, height: int, tile_w: int, tile_h: int, shift=(0, 0)):
     """[(x0, y0, w, h)] tiles covering the ``width`` × ``height`` image once each, row by row
-    from the top: a grid of ``tile_w`` × ``tile_h`` cells whose lines are moved by ``shift``
-    pixels (the border tiles are cut to the image)."""
-    tile_w, tile_h = max(1, min(tile_w, width)), max(1, min(tile_h, height))
+    from the top: a grid of ``tile_w`` × ``tile_h`` tiles whose lines are moved by ``shift``
+    pixels. Every tile has that size — the border tiles reach past the image (their pixels
+    there are traced and dropped): on llvmpipe a texture size of another kind (a power of two
+    or not) compiles the kernels anew, seconds each (``tile_shape``)."""
+    tile_w, tile_h = max(1, tile_w), max(1, tile_h)
     sx, sy = shift[0] % tile_w, shift[1] % tile_h
-    xs = sorted({0, *range(sx, width, tile_w), width}) if sx else [*range(0, width, tile_w), width]
-    ys = sorted({0, *range(sy, height, tile_h), height}) if sy else [*range(0, height, tile_h),
-                                                                     height]
-    return [(x0, y0, x1 - x0, y1 - y0) for y0, y1 in zip(ys, ys[1:])
-            for x0, x1 in zip(xs, xs[1:])]
+    xs = range(sx - tile_w if sx else 0, width, tile_w)
+    ys = range(sy - tile_h if sy else 0, height, tile_h)
+    return [(x0, y0, tile_w, tile_h) for y0 in ys for x0 in xs]
 
 
 class Accumulation:
@@ -152,22 +162,22 @@ class Accumulation:
         """Add one sample's ``passes`` (PASS_NAMES → (h, w, 3), row 0 on top) of the tile
         ``rect`` (x0, y0, w, h); gather_weight : the weight of its gathered light."""
         x0, y0, w, h = rect
-        window = np.s_[y0:y0 + h, x0:x0 + w]
-        value = np.asarray(passes[self.pass_name], np.float64)
-        if value.shape[:2] != (h, w):
-            raise ValueError(f"a {value.shape[1]}×{value.shape[0]} sample for a {w}×{h} tile")
+        if np.shape(passes[self.pass_name])[:2] != (h, w):
+            shape = np.shape(passes[self.pass_name])
+            raise ValueError(f"a {shape[1]}×{shape[0]} sample for a {w}×{h} tile")
+        window, part = inside(rect, self.width, self.height)
+        passes = {name: np.asarray(image, np.float64)[part] for name, image in passes.items()}
+        value = passes[self.pass_name]
         weight = gather_weight if self.pass_name in GATHERED else 1.0
         if self.gathered is not None:
-            light = (np.asarray(passes["Diffuse Color"], np.float64)
-                     * np.asarray(passes["Diffuse Indirect"], np.float64)
-                     + np.asarray(passes["Glossy Color"], np.float64)
-                     * np.asarray(passes["Glossy Indirect"], np.float64))
+            light = (passes["Diffuse Color"] * passes["Diffuse Indirect"]
+                     + passes["Glossy Color"] * passes["Glossy Indirect"])
             self.sums[window] += value - light
             self.weights[window] += 1.0
             self.gathered[window] += gather_weight * light
             self.gather_weights[window] += gather_weight
         elif self.colour_name:
-            colour = np.asarray(passes[self.colour_name], np.float64)
+            colour = passes[self.colour_name]
             self.sums[window] += weight * value * colour
             self.weights[window] += weight * colour
             self.colour[window] += colour
@@ -230,8 +240,9 @@ class GatherSums:
 
     def add(self, kind: str, rect, values, variance, rays: int):
         """Add one sample's raw gather of the tile ``rect`` (x0, y0, w, h; x0, y0 multiples
-        of the stride): values, variance (h_l, w_l, 4), row 0 on top; rays : its rays per
-        point. Returns the (values, variance) of those cells over every sample so far."""
+        of the stride; it may reach past the image): values, variance (h_l, w_l, 4), row 0 on
+        top; rays : its rays per point. Returns the tile's (values, variance): over every
+        sample so far in the image's cells, its own past them."""
         x0, y0, w, h = rect
         s = self.stride
         if x0 % s or y0 % s:
@@ -247,10 +258,10 @@ class GatherSums:
             sums = self.kinds[kind] = {
                 "values": np.zeros((*self.shape, 4)), "variance": np.zeros((*self.shape, 4)),
                 "lum2": np.zeros(self.shape), "n": np.zeros(self.shape)}
-        cells = np.s_[y0 // s:y0 // s + low_h, x0 // s:x0 // s + low_w]
-        sums["values"][cells] += values
-        sums["variance"][cells] += variance
-        sums["lum2"][cells] += (values[..., :3] @ LUMINANCE) ** 2
+        cells, part = inside((x0 // s, y0 // s, low_w, low_h), self.shape[1], self.shape[0])
+        sums["values"][cells] += values[part]
+        sums["variance"][cells] += variance[part]
+        sums["lum2"][cells] += (values[part][..., :3] @ LUMINANCE) ** 2
         sums["n"][cells] += 1.0
         n = sums["n"][cells][..., None]
         mean = sums["values"][cells] / n
@@ -261,7 +272,10 @@ class GatherSums:
             spread = np.maximum(sums["lum2"][cells] / count - lum * lum, 0.0) / \
                 np.maximum(count - 1.0, 1.0)
             pooled[..., 0] = np.where(count > 1.0, spread, pooled[..., 0])
-        return mean.astype(np.float32), pooled.astype(np.float32)
+        # the tile's cells past the image keep their own gather
+        values, variance = values.copy(), variance.copy()
+        values[part], variance[part] = mean, pooled
+        return values.astype(np.float32), variance.astype(np.float32)
 
 
 def scale_nearest(image, width: int, height: int) -> np.ndarray:
@@ -275,8 +289,12 @@ def scale_nearest(image, width: int, height: int) -> np.ndarray:
 
 class SliceSizer:
     """Pixels per slice for a time budget, from measured slices: seconds ≈ fixed + per_pixel ×
-    pixels, fitted by least squares over the last ``keep`` slices (the fixed cost alone when
-    they all had one size). Until there is a measurement: ``first_pixels``."""
+    pixels, fitted by least squares over the last ``keep`` slices. Until there is a
+    measurement: ``first_pixels``; while every measured slice had one size, the next is twice
+    that (the fit needs two sizes). A slice never has fewer pixels than its fixed cost is
+    worth (fixed / per_pixel: at least half of it tracing), so where the fixed cost alone is
+    over the budget (a slow or loaded machine) slices run over it rather than spend most of
+    their time on overhead."""
 
     def __init__(self, budget: float, first_pixels: int = 4096, least: int = 256,
                  keep: int = 12):
@@ -288,39 +306,56 @@ class SliceSizer:
     def measured(self, pixels: int, seconds: float) -> None:
         self.samples = [*self.samples, (int(pixels), float(seconds))][-self.keep:]
 
+    def _spread(self) -> bool:
+        p = np.array([s[0] for s in self.samples], np.float64)
+        return len(p) > 1 and np.ptp(p) > 0.25 * p.mean()
+
     def model(self) -> tuple[float, float] | None:
-        """(fixed seconds, seconds per pixel), or None before any measurement."""
-        if not self.samples:
+        """(fixed seconds, seconds per pixel), or None until two sizes were measured."""
+        if not self._spread():
             return None
         p = np.array([s[0] for s in self.samples], np.float64)
         t = np.array([s[1] for s in self.samples], np.float64)
-        if np.ptp(p) > 0.1 * p.mean():
-            per_pixel, fixed = np.polyfit(p, t, 1)
-            if per_pixel > 0.0 and fixed >= 0.0:
-                return float(fixed), float(per_pixel)
-        return 0.0, float(t.mean() / p.mean())  # one size: all of it counted per pixel
+        per_pixel, fixed = np.polyfit(p, t, 1)
+        if per_pixel <= 0.0:  # noise swamped the sizes' difference: all of it per pixel
+            return 0.0, float(t.mean() / p.mean())
+        return max(float(fixed), 0.0), float(per_pixel)
 
     def pixels(self, most: int) -> int:
         """Pixels of the next slice, between ``least`` and ``most``."""
         fitted = self.model()
         if fitted is None:
-            pixels = self.first_pixels
+            pixels = 2 * self.samples[-1][0] if self.samples else self.first_pixels
         else:
             fixed, per_pixel = fitted
-            pixels = (self.budget - fixed) / per_pixel if per_pixel > 0.0 else most
+            pixels = max(self.budget - fixed, fixed) / per_pixel
         return int(max(min(self.least, most), min(most, pixels)))
 
 
-def tile_shape(pixels: int, width: int, height: int, multiple: int = 1) -> tuple[int, int]:
-    """(tile width, tile height) of about ``pixels`` pixels: square-ish, sides a multiple of
-    ``multiple`` (whole work groups of the gather grid), within the image; the whole image
-    when it has no more than ``pixels``."""
+def tile_side(target: float, multiple: int, stride: int) -> int:
+    """The allowed tile side nearest below ``target`` (at least the smallest): a multiple of
+    ``multiple`` that is no power of two, in pixels nor in gather cells (pixels / stride), so
+    every tile's textures are of one kind (llvmpipe compiles a kernel variant per
+    power-of-two-ness of its textures' sizes: 5–20 s each for the BVH kernels under load)."""
+    def allowed(side):
+        cells = side // stride
+        return side & (side - 1) != 0 and cells & (cells - 1) != 0
+
+    k = max(1, int(target // multiple))
+    while k > 1 and not allowed(k * multiple):
+        k -= 1
+    if not allowed(k * multiple):
+        k = next(j for j in range(2, 64) if allowed(j * multiple))
+    return k * multiple
+
+
+def tile_shape(pixels: int, width: int, height: int, multiple: int = 1,
+               stride: int = 1) -> tuple[int, int]:
+    """(tile width, tile height) of about ``pixels`` pixels (``tile_side``: square-ish, sides
+    multiples of ``multiple`` — whole work groups of the gather grid — of one texture kind);
+    the whole image when it has no more than ``pixels``."""
     if pixels >= width * height:
         return width, height
-    side = max(multiple, int(math.sqrt(max(pixels, 1))) // multiple * multiple)
-    tile_w = min(width, side)
-    tile_h = min(height, max(multiple, int(pixels / tile_w) // multiple * multiple))
-    if tile_h >= height:  # the whole height fits: widen instead
-        tile_h = height
-        tile_w = min(width, max(multiple, int(pixels / height) // multiple * multiple))
-    return max(1, tile_w), max(1, tile_h)
+    tile_w = tile_side(min(math.sqrt(max(pixels, 1)), width + multiple - 1), multiple, stride)
+    tile_h = tile_side(min(pixels / tile_w, height + multiple - 1), multiple, stride)
+    return tile_w, tile_h
