@@ -205,10 +205,13 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     # The edge pixels (preview.passes.edge_pixels on the read-back centre G-buffer, the numpy
     # tracer's test) get the sub-pixel passes, over a list of them (aa_compact.glsl); the
     # others the centre pass with all strata, over the image.
-    seen = read_gbuffer(centre)
     reach = subpixel_reach(plan)
-    edge = edge_pixels(seen["hit"], material_indices(snapshot, seen["material"]),
-                       seen["position"], seen["normal"], reach)
+    if reach:
+        seen = read_gbuffer(centre)
+        edge = edge_pixels(seen["hit"], material_indices(snapshot, seen["material"]),
+                           seen["position"], seen["normal"], reach)
+    else:  # point-sampled (the viewport's slices): no edge pixels, nothing to read back
+        edge = np.zeros((height, width), bool)
     timings["edge pixels"] = time.perf_counter() - t0
     t0 = time.perf_counter()
 

@@ -83,6 +83,7 @@ class ProgressiveImage:
         self.last: Slice | None = None
         self.converged = False
         self.coarse_pending = False
+        self.image_stale = True
 
     # ------------------------------------------------------------------ planning
 
@@ -99,6 +100,7 @@ class ProgressiveImage:
         self.started, self.elapsed, self.slices = time.perf_counter(), 0.0, 0
         self.converged, self.coarse_pending = False, bool(coarse)
         self.last = None
+        self.image_stale = True  # ``image`` is another key's: the next slice rebuilds it
 
     def slice_pixels(self) -> int:
         """Pixels of the next slice (at most the image's)."""
@@ -176,8 +178,12 @@ class ProgressiveImage:
                 self.converged = self.sample >= self.target
         if self.converged:
             self.image = acc.finished(filter_width)
-        else:
+        elif done.kind == "tile" and self.image is not None \
+                and self.image.shape[:2] == (height, width) and not self.image_stale:
+            acc.estimate_into(self.image, done.rect)  # only the tile's pixels changed
+        else:  # the backdrop (scaled) where no tile landed yet
             self.image = acc.estimate(self.backdrop)
+        self.image_stale = False
         done.seconds = time.perf_counter() - t0
         self.sizer.measured(done.size[0] * done.size[1], done.seconds)
         self.slices += 1

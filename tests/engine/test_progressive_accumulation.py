@@ -221,3 +221,19 @@ def test_gathered_light_is_weighted_by_the_samples_behind_the_gathers():
         sample["Ambient Occlusion"] = np.full((2, 3, 3), value)
         ao.add((0, 0, 3, 2), sample, gather_weight=weight)
     assert np.allclose(ao.mean(), (0.2 + 1.8) / 4.0)
+
+
+def test_refreshing_the_estimate_where_a_tile_landed_equals_a_new_estimate():
+    rng = np.random.default_rng(7)
+    acc = Accumulation("Combined", 10, 8)
+
+    def sample(h, w):
+        out = {name: rng.uniform(0, 1, (h, w, 3)) for name in PASS_NAMES}
+        return out
+
+    acc.add((0, 0, 10, 8), sample(8, 10))
+    image = acc.estimate()
+    for rect in ((-2, 3, 6, 6), (6, -1, 6, 6)):  # tiles reaching past the image
+        acc.add(rect, sample(6, 6), gather_weight=2.0)
+        acc.estimate_into(image, rect)
+    assert np.allclose(image, acc.estimate(), atol=1e-6)

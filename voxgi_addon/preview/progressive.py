@@ -200,6 +200,18 @@ class Accumulation:
                               out=np.zeros_like(self.gathered), where=self.gather_weights > 0.0)
         return mean
 
+    def estimate_into(self, image, rect) -> None:
+        """Refresh ``image`` ((H, W, 3), the last ``estimate``) where the tile ``rect`` landed:
+        only its pixels changed."""
+        window, _ = inside(rect, self.width, self.height)
+        sums, weights = self.sums[window], self.weights[window]
+        mean = np.divide(sums, weights, out=np.zeros_like(sums), where=weights > 0.0)
+        if self.gathered is not None:
+            gathered, gweights = self.gathered[window], self.gather_weights[window]
+            mean += np.divide(gathered, gweights, out=np.zeros_like(gathered),
+                              where=gweights > 0.0)
+        image[window] = mean
+
     def estimate(self, coarse=None) -> np.ndarray:
         """(H, W, 3) float32: the mean where a pixel has samples, elsewhere ``coarse`` ((h, w,
         3), any size: scaled to the image by nearest pixel), or 0 without it."""
@@ -302,6 +314,7 @@ class SliceSizer:
             raise ValueError(f"the slice budget must be positive, not {budget}")
         self.budget, self.first_pixels, self.least, self.keep = budget, first_pixels, least, keep
         self.samples: list[tuple[int, float]] = []
+        self.fitted: tuple[float, float] | None = None  # the last fit from two sizes
 
     def measured(self, pixels: int, seconds: float) -> None:
         self.samples = [*self.samples, (int(pixels), float(seconds))][-self.keep:]
@@ -311,15 +324,18 @@ class SliceSizer:
         return len(p) > 1 and np.ptp(p) > 0.25 * p.mean()
 
     def model(self) -> tuple[float, float] | None:
-        """(fixed seconds, seconds per pixel), or None until two sizes were measured."""
+        """(fixed seconds, seconds per pixel), or None until two sizes were measured; while
+        the recent slices have one size, the last fit from two."""
         if not self._spread():
-            return None
+            return self.fitted
         p = np.array([s[0] for s in self.samples], np.float64)
         t = np.array([s[1] for s in self.samples], np.float64)
         per_pixel, fixed = np.polyfit(p, t, 1)
         if per_pixel <= 0.0:  # noise swamped the sizes' difference: all of it per pixel
-            return 0.0, float(t.mean() / p.mean())
-        return max(float(fixed), 0.0), float(per_pixel)
+            self.fitted = 0.0, float(t.mean() / p.mean())
+        else:
+            self.fitted = max(float(fixed), 0.0), float(per_pixel)
+        return self.fitted
 
     def pixels(self, most: int) -> int:
         """Pixels of the next slice, between ``least`` and ``most``."""
