@@ -42,6 +42,8 @@ def gbuffer_shader():
     varying.flat("VEC2", "surface_slot")
     varying.flat("VEC2", "surface_cutout")
     varying.flat("VEC2", "surface_params")
+    varying.flat("VEC2", "surface_normal_map")
+    varying.flat("VEC4", "surface_tangent")
     info = gpu.types.GPUShaderCreateInfo()
     info.vertex_in(0, "VEC3", "position")
     info.vertex_in(1, "VEC3", "normal")
@@ -51,6 +53,8 @@ def gbuffer_shader():
     info.vertex_in(5, "VEC2", "texel")
     info.vertex_in(6, "VEC2", "cutout")
     info.vertex_in(7, "VEC2", "params")
+    info.vertex_in(8, "VEC2", "normal_map")
+    info.vertex_in(9, "VEC4", "tangent")
     info.vertex_out(varying)
     info.sampler(0, "FLOAT_2D", "texture_table")
     info.sampler(1, "FLOAT_2D", "texture_atlas")
@@ -106,7 +110,8 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
     hash of the fragment's point, view and triangle (``textures.cutout_random``), as camera
     rays pass them in ``raycast``. A material with Roughness / Metallic per texel writes the
     material variant of the fragment's texel (``textures.SurfaceTextures.variant_at``) and its
-    roughness.
+    roughness; a normal map perturbs the fragment's shading normal
+    (``textures.SurfaceTextures.normal_at``).
     """
     out = GBuffer(width, height)
     framebuffer = gpu.types.GPUFrameBuffer(depth_slot=out.depth,
@@ -146,6 +151,9 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
             cutout = np.tile(np.float32([-2.0, 1.0]), (len(corners), 1))
             # (parameter texture, first variant) of Roughness / Metallic per texel, -1: none
             params = np.tile(np.float32([-1.0, 0.0]), (len(corners), 1))
+            # (normal map texture, Strength) and the triangle's tangent (textures.normal_at)
+            normal_map = np.tile(np.float32([-1.0, 1.0]), (len(corners), 1))
+            tangent = np.zeros((len(corners), 4), np.float32)
             if textures is None or surface_textures is None:
                 uv = np.zeros((len(corners), 2), np.float32)
                 texel = np.tile(np.float32([-1.0, 0.0]), (len(corners), 1))
@@ -168,10 +176,19 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
                     params = np.repeat(np.stack(
                         [surface_textures.param_slots[row], surface_textures.variants[row]],
                         axis=1).astype(np.float32), 3, axis=0)
+                if surface_textures.normal_slots is not None:
+                    row = surface_textures.row_of(tris.materials)
+                    normal_map = np.repeat(np.stack(
+                        [surface_textures.normal_slots[row], surface_textures.normal_strength[row]],
+                        axis=1).astype(np.float32), 3, axis=0)
+                    tangent = np.repeat(np.asarray(surface_textures.tangents, np.float32), 3,
+                                        axis=0)
             batch = batch_for_shader(shader, "TRIS", {"position": corners, "normal": smooth,
                                                       "face_normal": face, "material": surface,
                                                       "uv": uv, "texel": texel,
-                                                      "cutout": cutout, "params": params})
+                                                      "cutout": cutout, "params": params,
+                                                      "normal_map": normal_map,
+                                                      "tangent": tangent})
             shader.bind()
             shader.uniform_sampler("texture_table", textures[0])
             shader.uniform_sampler("texture_atlas", textures[1])

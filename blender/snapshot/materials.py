@@ -31,6 +31,10 @@ metallic-roughness image) become a parameter texture (channel 0 roughness, chann
 metallic), and the material is followed in the list by its ``textures.PARAM_VARIANTS``
 variants at quantized values, which surface points shade with per texel. Both sockets from
 two different images, or from other nodes: the images' means / the value, with a warning.
+
+Normal: a tangent-space Normal Map node fed by an Image Texture's Color (as the glTF importer
+builds normal maps) gives ``normal_texture`` and ``normal_strength``; other normal inputs
+(Bump, object- or world-space maps) are left out with a note.
 """
 from __future__ import annotations
 
@@ -365,6 +369,9 @@ class MaterialTable:
         elif alpha_texture is not None and alpha_texture is not texture and alpha_uv != uv_map:
             self._warn(f"Material '{material.name_full}': its Base Color and Alpha images read "
                        "different UV maps; the Alpha is read through the Base Color's")
+        normal, strength, normal_uv = self._normal_map(material, inputs.get("Normal"))
+        if normal is not None and texture is None and params is None and alpha_texture is None:
+            uv_map = normal_uv
         bakes = tuple(b for b in (bake, alpha_bake) if b is not None)
         data = MaterialData(
             name=material.name_full,
@@ -377,6 +384,8 @@ class MaterialTable:
             alpha=float(alpha),
             alpha_texture=-1 if alpha_texture is None else self._add_texture(alpha_texture),
             param_texture=-1 if params is None else self._add_texture(params),
+            normal_texture=-1 if normal is None else self._add_texture(normal),
+            normal_strength=strength,
         )
         return data, bakes or None, uv_map
 
@@ -482,6 +491,38 @@ class MaterialTable:
         return TextureData(name=f"{texture.name} (roughness, metallic)", pixels=params,
                            interpolation=texture.interpolation, extension=texture.extension,
                            uv_transform=texture.uv_transform, key=key), uv_map
+
+    def _normal_map(self, material, socket):
+        """(TextureData of a tangent-space normal map or None, its Strength, its UV map)."""
+        if socket is None or not socket.is_linked:
+            return None, 1.0, ""
+        name = material.name_full
+        try:
+            node, _ = _follow(socket)
+            if node is None:
+                return None, 1.0, ""
+            if node.type != "NORMAL_MAP" or node.space != "TANGENT":
+                raise _NeedsBake(f"its Normal comes from '{node.name}'")
+            strength = node.inputs["Strength"]
+            if strength.is_linked:
+                raise _NeedsBake("its Normal Map's Strength is linked")
+            colour = node.inputs["Color"]
+            if not colour.is_linked:
+                return None, 1.0, ""
+            image, output = _follow(colour)
+            if image is None:
+                return None, 1.0, ""
+            if image.type != "TEX_IMAGE" or output.identifier != "Color" or image.image is None:
+                raise _NeedsBake(f"its Normal Map's Color comes from '{image.name}'")
+            texture, uv_map = _image_texture(image)
+            if texture is None:
+                self._warn(f"Material '{name}': normal map image '{image.image.name_full}' has "
+                           "no pixels (missing or unreadable file?); the normals are not mapped")
+                return None, 1.0, ""
+            return texture, float(strength.default_value), node.uv_map or uv_map
+        except _NeedsBake as why:
+            self._warn(f"Material '{name}': {why}; the preview leaves its normal map out")
+            return None, 1.0, ""
 
     def _alpha(self, material, socket, base_texture):
         """(value, TextureData whose 4th channel is the Alpha or None, what to bake or None,

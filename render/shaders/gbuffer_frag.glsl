@@ -7,7 +7,10 @@
  * -1, alpha value); -2 opaque) is kept where textures.cutout_random of its point, view and
  * triangle is below its Alpha (level 0), as camera rays count hits in raycast. surface_params =
  * (parameter texture, first variant) of a material with Roughness / Metallic per texel: the
- * material written is its texel's variant (textures.SurfaceTextures.variant_at). */
+ * material written is its texel's variant (textures.SurfaceTextures.variant_at).
+ * surface_normal_map = (normal map texture or -1, Strength), surface_tangent = the triangle's
+ * textures.face_tangents row: the shading normal is perturbed as
+ * textures.SurfaceTextures.normal_at. */
 void main()
 {
   vec3 view = camera_ortho > 0.5 ? camera_forward : normalize(world_position - camera_position);
@@ -27,6 +30,20 @@ void main()
   float facing = dot(flat_normal, view) > 0.0 ? -1.0 : 1.0;
   vec3 n = shading_normal;
   n = dot(n, n) > 1e-24 ? normalize(n) : flat_normal;
+  if (surface_normal_map.x > -0.5) {
+    /* a tangent-space normal map (textures.perturbed_normals, level 0) */
+    vec3 t = surface_tangent.xyz - n * dot(surface_tangent.xyz, n);
+    float tl = length(t);
+    if (tl > 1e-12) {
+      t /= tl;
+      vec3 b = surface_tangent.w * cross(n, t);
+      vec3 c = 2.0 * surface_texel(int(surface_normal_map.x + 0.5), surface_uv).rgb - 1.0;
+      vec3 m = c.x * t + c.y * b + c.z * n;
+      m /= max(length(m), 1e-12);
+      m = n + (m - n) * max(surface_normal_map.y, 0.0);
+      n = m / max(length(m), 1e-12);
+    }
+  }
   out_position = vec4(world_position, 1.0);
   out_normal = vec4(n * facing, surface.y);
   out_view = vec4(view, surface.x);

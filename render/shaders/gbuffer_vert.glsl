@@ -9,5 +9,7 @@ void main()
   surface_slot = texel;
   surface_cutout = cutout;
   surface_params = params;
+  surface_normal_map = normal_map;
+  surface_tangent = tangent;
   gl_Position = view_projection * vec4(position, 1.0);
 }

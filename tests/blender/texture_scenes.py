@@ -100,7 +100,43 @@ def build_textured_room(scene):
     gi_scenes._finish(scene, {})
 
 
-SCENES = {"textured_room": build_textured_room}
+def tile_normal_pixels(size=128, tiles=4, bevel=0.2, tilt=0.6, ripple=0.25):
+    """(size, size, 4) float32 RGBA tangent-space normal map (row 0 at the bottom, Non-Color):
+    ``tiles`` × ``tiles`` tiles whose borders (``bevel`` of a tile) lean out by ``tilt`` and
+    whose faces ripple by ``ripple`` — grout and hand-made tiles."""
+    y, x = (np.mgrid[0:size, 0:size] + 0.5) / size * tiles
+    fx, fy = x % 1.0, y % 1.0
+    nx = np.where(fx < bevel, -tilt, np.where(fx > 1 - bevel, tilt, 0.0))
+    ny = np.where(fy < bevel, -tilt, np.where(fy > 1 - bevel, tilt, 0.0))
+    nx = nx + ripple * np.sin(6.0 * np.pi * x)
+    ny = ny + ripple * np.cos(6.0 * np.pi * y)
+    n = np.stack([nx, ny, np.ones_like(nx)], axis=-1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    return np.concatenate([0.5 * n + 0.5, np.ones((size, size, 1))], axis=-1).astype(np.float32)
+
+
+def build_normal_mapped_room(scene):
+    """The textured room with a tangent-space normal map on its floor (Image Texture, Non-Color,
+    through the floor's Mapping → Normal Map node → the Principled BSDF's Normal)."""
+    build_textured_room(scene)
+    size = 128
+    image = bpy.data.images.new("Tile Normals", size, size, alpha=False, float_buffer=False)
+    image.colorspace_settings.name = "Non-Color"
+    image.pixels.foreach_set(tile_normal_pixels(size).ravel())
+    image.pack()
+    tree = bpy.data.materials["Checker Floor"].node_tree
+    bsdf = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
+    mapping = next(n for n in tree.nodes if n.type == "MAPPING")
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = image
+    tree.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    normal_map = tree.nodes.new("ShaderNodeNormalMap")
+    tree.links.new(tex.outputs["Color"], normal_map.inputs["Color"])
+    tree.links.new(normal_map.outputs["Normal"], bsdf.inputs["Normal"])
+    bpy.context.view_layer.update()
+
+
+SCENES = {"textured_room": build_textured_room, "normal_mapped_room": build_normal_mapped_room}
 
 
 def build(name, scene=None):

@@ -86,3 +86,51 @@ def test_the_camera_sees_each_texels_variant():
     np.testing.assert_allclose(metal[right], 0.0)
     # the triangles keep the material itself (bounce hits shade with its means)
     assert (np.asarray(tris.materials) == 0).all()
+
+
+def test_face_tangents_follow_the_uv_map():
+    from voxgi.voxgi_addon.scene.textures import face_tangents
+
+    p = np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0]]], np.float64)
+    uv = np.array([[[0, 0], [1, 0], [1, 1]]], np.float64)
+    np.testing.assert_allclose(face_tangents(p, uv), [[1, 0, 0, 1]], atol=1e-6)
+    mirrored = uv.copy()
+    mirrored[..., 0] *= -1.0  # u runs along −x: the tangent turns, v still along +y
+    np.testing.assert_allclose(face_tangents(p, mirrored), [[-1, 0, 0, -1]], atol=1e-6)
+    flat = np.zeros_like(uv)  # no UV map: no tangent
+    np.testing.assert_allclose(face_tangents(p, flat)[:, :3], 0.0)
+
+
+def test_normal_maps_perturb_as_cycles_normal_map_node():
+    from voxgi.voxgi_addon.scene.textures import perturbed_normals
+
+    n = np.array([[0.0, 0.0, 1.0]] * 4)
+    t = np.array([[1.0, 0.0, 0.0, 1.0]] * 4)
+    colour = np.array([[0.5, 0.5, 1.0], [1.0, 0.5, 0.5], [0.5, 1.0, 0.5], [1.0, 0.5, 0.5]])
+    out = perturbed_normals(n, t, colour, np.array([1.0, 1.0, 1.0, 0.0]))
+    np.testing.assert_allclose(out, [[0, 0, 1], [1, 0, 0], [0, 1, 0], [0, 0, 1]], atol=1e-9)
+    # half strength: halfway between the normal and the mapped one, normalised
+    half = perturbed_normals(n[:1], t[:1], colour[1:2], np.array([0.5]))
+    np.testing.assert_allclose(half, [[np.sqrt(0.5), 0, np.sqrt(0.5)]], atol=1e-9)
+    # a negative bitangent sign mirrors the map's y
+    mirrored = perturbed_normals(n[:1], np.array([[1.0, 0, 0, -1.0]]), colour[2:3], np.ones(1))
+    np.testing.assert_allclose(mirrored, [[0, -1, 0]], atol=1e-9)
+
+
+def test_the_camera_sees_normal_mapped_shading_normals():
+    snapshot = textured_quad_snapshot()
+    lean = np.zeros((4, 4, 3), np.float32)
+    lean[:, :2] = [0.85, 0.5, 0.85]    # left half leans towards +x (tangent = +u = +x)
+    lean[:, 2:] = [0.5, 0.5, 1.0]      # right half flat
+    materials = [dataclasses.replace(m, normal_texture=1, normal_strength=1.0)
+                 for m in snapshot.materials]
+    snapshot = dataclasses.replace(snapshot, materials=materials, textures=snapshot.textures + (
+        TextureData("lean", lean, interpolation="Closest", extension="EXTEND", key="lean"),))
+    seen = primary_visibility(world_triangles(snapshot), snapshot.camera, 16, 16)
+    left = seen.position[..., 0] < -0.05
+    right = seen.position[..., 0] > 0.05
+    c = 2 * np.array([0.85, 0.5, 0.85]) - 1
+    np.testing.assert_allclose(seen.normal[left], np.tile(c / np.linalg.norm(c), (left.sum(), 1)),
+                               atol=1e-6)
+    np.testing.assert_allclose(seen.normal[right], np.tile([0, 0, 1.0], (right.sum(), 1)), atol=1e-9)
+    np.testing.assert_allclose(seen.face_normal[left], np.tile([0, 0, 1.0], (left.sum(), 1)))

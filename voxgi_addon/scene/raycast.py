@@ -361,6 +361,13 @@ def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | No
                   + v[:, None] * corners[:, 2])
         length = np.linalg.norm(smooth, axis=1, keepdims=True)
         shading = np.where(length > 1e-12, smooth / np.maximum(length, 1e-12), face)
+    surface = getattr(tris, "textures", None)
+    if surface is not None and surface.normal_slots is not None and hit.any():
+        # normal maps: the shading normal perturbed per texel (before it is turned)
+        seen = np.flatnonzero(hit)
+        shading = np.array(shading, copy=True)
+        shading[seen] = surface.normal_at(index[seen], np.asarray(tris.materials)[index[seen]],
+                                          u[seen], v[seen], shading[seen])
     sign = np.where(np.einsum("ij,ij->i", face, directions) > 0, -1.0, 1.0)[:, None] * hit[:, None]
 
     def per_pixel(values):
@@ -368,7 +375,6 @@ def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | No
         return out.astype(np.int32).reshape(height, width)
 
     material = per_pixel(tris.materials)
-    surface = getattr(tris, "textures", None)
     if surface is not None and surface.param_slots is not None and hit.any():
         # Roughness / Metallic per texel: the material variant of the hit's texel
         seen = np.flatnonzero(hit)

@@ -104,6 +104,9 @@ class MaterialData:
         means); param_variants : index of the first of ``textures.PARAM_VARIANTS`` materials
         that follow it, this material at each quantized (roughness, metallic) — what a surface
         point shades with (``textures.SurfaceTextures.variant_at``).
+    normal_texture : index of a tangent-space normal map's texture (its Normal Map node's Color
+        input) perturbing the shading normal of what the camera sees, ``normal_strength`` its
+        Strength; -1: none.
     """
 
     name: str
@@ -117,6 +120,8 @@ class MaterialData:
     alpha_texture: int = -1
     param_texture: int = -1
     param_variants: int = -1
+    normal_texture: int = -1
+    normal_strength: float = 1.0
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,13 @@ materials by ``PARAM_VARIANTS`` variants of itself at quantized values (``ROUGHN
 shades as the variant nearest its texel (``SurfaceTextures.variant_at``): every table the
 passes and gathers index by material then holds the texel's values, with no change to the
 shading code. Bounce hits shade with the material's own row (the texture's means).
+
+Normal maps (tangent space, ``MaterialData.normal_texture``): what the camera sees shades with
+the interpolated normal perturbed as Cycles' Normal Map node does — n = normalize(c.x T +
+c.y B + c.z N) for c = 2 · texel − 1 (level 0), B = sign · N × T, then blended towards N by
+the Strength — with T the triangle's tangent from its UV map (``face_tangents``: the UV
+gradient of a flat triangle, which MikkTSpace equals on flat surfaces; curved low-poly meshes
+differ by the per-vertex smoothing MikkTSpace adds). Bounce hits keep the interpolated normal.
 """
 from __future__ import annotations
 
@@ -218,6 +225,27 @@ class SurfaceTextures:
     cutout: np.ndarray = field(default=None)
     param_slots: np.ndarray = field(default=None)
     variants: np.ndarray = field(default=None)
+    normal_slots: np.ndarray = field(default=None)
+    normal_strength: np.ndarray = field(default=None)
+    tangents: np.ndarray = field(default=None)
+
+    def normal_at(self, triangles, materials, b1, b2, normals) -> np.ndarray:
+        """(N, 3) unit shading normals ``normals`` (N, 3) (interpolated, unit) perturbed by
+        their materials' normal maps (level 0) where they have one (``normal_slots``)."""
+        out = np.array(normals, np.float64, copy=True)
+        if self.normal_slots is None:
+            return out
+        triangles = np.asarray(triangles)
+        row = self.row_of(materials)
+        slots = self.normal_slots[row]
+        for slot in np.unique(slots[slots >= 0]):
+            at = np.flatnonzero(slots == slot)
+            tri = triangles[at]
+            colour = sample_texture(self.textures[slot], self._uv(tri, np.asarray(b1)[at],
+                                                                  np.asarray(b2)[at]))
+            out[at] = perturbed_normals(out[at], self.tangents[tri], colour,
+                                        self.normal_strength[row[at]])
+        return out
 
     def variant_at(self, triangles, materials, b1, b2) -> np.ndarray:
         """(N,) int material indices surface points shade with: their own, or for materials
@@ -307,7 +335,13 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
     alpha_values = np.ones(count, np.float32)
     param_slots = np.full(count, -1, np.int32)
     variants = np.full(count, -1, np.int64)
+    normal_slots = np.full(count, -1, np.int32)
+    normal_strength = np.ones(count, np.float32)
     for i, m in enumerate(snapshot.materials):
+        index = int(getattr(m, "normal_texture", -1))
+        if 0 <= index < len(textures):
+            normal_slots[i] = index
+            normal_strength[i] = float(getattr(m, "normal_strength", 1.0))
         index = int(getattr(m, "param_texture", -1))
         first = int(getattr(m, "param_variants", -1))
         if 0 <= index < len(textures) and 0 <= first <= len(snapshot.materials) - PARAM_VARIANTS:
@@ -320,9 +354,13 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
             alpha_slots[i] = index
         alpha_values[i] = np.clip(float(getattr(m, "alpha", 1.0)), 0.0, 1.0)
     transparent = (alpha_slots >= 0) | (alpha_values < 1.0)
-    if not (slots >= 0).any() and not transparent.any() and not (param_slots >= 0).any():
+    if not (slots >= 0).any() and not transparent.any() and not (param_slots >= 0).any() and \
+            not (normal_slots >= 0).any():
         return None
     out = SurfaceTextures(textures, slots, np.asarray(uvs, np.float32))
+    if (normal_slots >= 0).any():
+        out.normal_slots, out.normal_strength = normal_slots, normal_strength
+        out.tangents = face_tangents(positions, uvs)
     if (param_slots >= 0).any():
         out.param_slots, out.variants = param_slots, variants
     if transparent.any():
@@ -332,6 +370,45 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
     scale = np.array([texture_texels(t) for t in textures] + [0.0], np.float64)
     out.density = (texel_density(positions, uvs) * scale[slot]).astype(np.float32)
     return out
+
+
+def face_tangents(positions: np.ndarray, uvs: np.ndarray) -> np.ndarray:
+    """(T, 4) float32 per triangle: the unit direction of increasing u over the triangle
+    (the UV map's gradient) and the bitangent sign (+1 when the direction of increasing v is
+    on the N × T side, N the face normal); zeros for triangles with a degenerate UV map."""
+    p = np.asarray(positions, np.float64)
+    uv = np.asarray(uvs, np.float64)
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    d1, d2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    r = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    ok = np.abs(r) > 1e-20
+    inv = np.divide(1.0, r, out=np.zeros_like(r), where=ok)[:, None]
+    t = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * inv
+    b = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * inv
+    n = np.cross(e1, e2)
+    length = np.linalg.norm(t, axis=1, keepdims=True)
+    out = np.zeros((len(p), 4), np.float32)
+    out[:, :3] = np.divide(t, length, out=np.zeros_like(t), where=length > 0)
+    out[:, 3] = np.where(np.einsum("ij,ij->i", np.cross(n, t), b) < 0.0, -1.0, 1.0)
+    return out
+
+
+def perturbed_normals(normals, tangents, colour, strength) -> np.ndarray:
+    """(N, 3) Cycles' Normal Map node (tangent space): unit ``normals`` (N, 3), ``tangents``
+    (N, 4) (direction, sign), ``colour`` (N, 3) the map's texels, ``strength`` (N,)."""
+    n = np.asarray(normals, np.float64)
+    t = np.asarray(tangents, np.float64)
+    t_dir = t[:, :3] - n * np.einsum("ij,ij->i", t[:, :3], n)[:, None]  # orthogonal to N
+    length = np.linalg.norm(t_dir, axis=1, keepdims=True)
+    t_dir = np.divide(t_dir, length, out=np.zeros_like(t_dir), where=length > 1e-12)
+    b = t[:, 3:4] * np.cross(n, t_dir)
+    c = 2.0 * np.asarray(colour, np.float64) - 1.0
+    m = c[:, :1] * t_dir + c[:, 1:2] * b + c[:, 2:3] * n
+    m /= np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)
+    k = np.maximum(np.asarray(strength, np.float64), 0.0)[:, None]
+    m = n + (m - n) * k
+    out = m / np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)
+    return np.where(length > 1e-12, out, n)  # no tangent (degenerate UVs): unperturbed
 
 
 def variant_values(index) -> tuple[np.ndarray, np.ndarray]:
