@@ -126,10 +126,11 @@ class ProgressiveImage:
         # sides of whole work groups of the gather grid (LOCAL_SIZE cells of stride pixels)
         tile_w, tile_h = tile_shape(self.slice_pixels(), acc.width, acc.height,
                                     LOCAL_SIZE * stride, stride)
-        # the grid moves by a hashed fraction of a tile each sample (whole GI blocks)
+        # the grid moves by a hashed fraction of a tile each sample (whole GI blocks), along
+        # the axes where tiles are smaller than the image
         k = self.sample
-        shift = ((k * 5 % 8) * tile_w // 8 // stride * stride,
-                 (k * 3 % 8) * tile_h // 8 // stride * stride)  # whole GI blocks
+        shift = ((k * 5 % 8) * tile_w // 8 // stride * stride if tile_w < acc.width else 0,
+                 (k * 3 % 8) * tile_h // 8 // stride * stride if tile_h < acc.height else 0)
         self.tiles = tile_grid(acc.width, acc.height, tile_w, tile_h, shift)
         self.tile_count = len(self.tiles)
 
