@@ -199,6 +199,8 @@ void main()
      * share of the rays drawn on the emitters */
     int count_t = int(emitter_header().x);
     vec3 unshadowed = vec3(0.0);
+    vec3 white_colour = principled_glossy_color(vec3(1.0), 1.0, params.y, rough,
+                                                clamp(cos_ni, 0.0, 1.0));
     for (int k = 0; k < count_t; k++) {
       if (!emitter_facing(k, position)) {
         continue;
@@ -214,13 +216,22 @@ void main()
         vec3 actual = principled_glossy_reflectance(base, params.x, params.y, rough, n, v, towards);
         vec3 plain = principled_glossy_reflectance(vec3(1.0), 1.0, params.y, rough, n, v, towards);
         vec3 fresnel = mix(vec3(0.0), actual / max(plain, vec3(1e-30)), greaterThan(plain, vec3(0.0)));
+        /* the full lobe over the fitted one there, for triangles small in the lobe, fading out
+         * for those that fill it (exact_glossy.emitters_glossy) */
+        vec3 model = ltc_lobe_density(n, v, rough, towards) * white_colour;
+        float cover = clamp(shape, 0.0, 1.0);
+        for (int c = 0; c < 3; c++) {
+          if (model[c] > 0.0) {
+            float ratio = actual[c] / model[c];
+            fresnel[c] = (ratio > 0.0 && fresnel[c] > 0.0) ?
+                         exp((1.0 - cover) * log(ratio) + cover * log(fresnel[c])) : 0.0;
+          }
+        }
         unshadowed += shape * fresnel * vec3(texelFetch(emitters, ivec2(0, k), 0).w,
                                              texelFetch(emitters, ivec2(1, k), 0).w,
                                              texelFetch(emitters, ivec2(2, k), 0).w);
       }
     }
-    vec3 white_colour = principled_glossy_color(vec3(1.0), 1.0, params.y, rough,
-                                                clamp(cos_ni, 0.0, 1.0));
     float visible = emit_drawn > 0.0 ? emit_seen / emit_drawn : 1.0;
     mean += mix(vec3(0.0), unshadowed * white_colour / max(colour, vec3(1e-30)) * visible,
                 greaterThan(colour, vec3(0.0)));

@@ -145,6 +145,24 @@ mat3 ltc_frame(vec3 n, vec3 v)
   return transpose(mat3(t, cross(n, t), n));
 }
 
+/* rho(w) of the fitted lobe (ltc.py ltc_lobe_density): the LTC's density over its hemisphere
+ * integral at the world unit direction w; 0 below the horizon or where v is. */
+float ltc_lobe_density(vec3 n, vec3 v, float roughness, vec3 w)
+{
+  if (!(dot(n, v) > 0.0)) {
+    return 0.0;
+  }
+  vec3 local = ltc_frame(n, v) * w;
+  if (!(local.z > 0.0)) {
+    return 0.0;
+  }
+  vec4 m = ltc_inverse_x(roughness, ltc_view_x(n, v));
+  vec3 wo = ltc_apply(m, local);
+  float len = length(wo);
+  float det = abs(m.z * (m.x - m.y * m.w));
+  return max(wo.z / len, 0.0) / LTC_PI * det / (len * len * len) / ltc_hemisphere_norm(m);
+}
+
 /* ltc_triangle, and in `towards` the world unit direction where the lobe meets the triangle:
  * the clipped polygon's mean direction in the cosine's space carried back by M (ltc.py
  * ltc_polygon_integral's directions); n where the integral is 0. */

@@ -284,7 +284,7 @@ def emitters_glossy(lobe: _Lobe, emitters, tris, points, origins, ids, rays: int
     (tests/engine/test_exact_glossy.py); a Fresnel that varies across a lobe the triangle
     fills is still read 16–21% low at 60–80°."""
     from .emitters import _facing
-    from .ltc import ltc_polygon_integral
+    from .ltc import ltc_lobe_density, ltc_polygon_integral
 
     out = np.zeros((len(points), 3))
     glossy = np.flatnonzero(~lobe.mirror & (lobe.cos_ni > 0.0))
@@ -301,9 +301,17 @@ def emitters_glossy(lobe: _Lobe, emitters, tris, points, origins, ids, rays: int
     white = np.ones((len(glossy), 1, 3))
     actual = glossy_reflectance(base, metallic, level, rough, n[:, None], v[:, None], towards)
     plain = glossy_reflectance(white, 1.0, level, rough, n[:, None], v[:, None], towards)
-    fresnel = np.divide(actual, plain, out=np.zeros_like(actual), where=plain > 0.0)
     white_colour = glossy_color(white[:, 0], 1.0, level[:, 0], rough[:, 0],
                                 np.clip(lobe.cos_ni[glossy], 0.0, 1.0))
+    # the lobe itself where the LTC's density strays from it (toward the horizon): the full
+    # lobe over the fitted one at that direction, for triangles small in the lobe (cover → 0,
+    # where shape × it is the exact f L Ω), fading out for triangles that fill it (where the
+    # LTC's integral is right and one direction does not stand for it)
+    model = ltc_lobe_density(n, v, rough[:, 0], towards)[..., None] * white_colour[:, None]
+    ratio = np.divide(actual, model, out=np.zeros_like(actual), where=model > 0.0)
+    fresnel = np.divide(actual, plain, out=np.zeros_like(actual), where=plain > 0.0)
+    cover = np.clip(shape, 0.0, 1.0)[..., None]
+    fresnel = np.where(model > 0.0, ratio ** (1.0 - cover) * fresnel ** cover, fresnel)
     unshadowed = np.einsum("gt,gtc->gc", shape, fresnel * emitters.radiance[None]) * white_colour
     seen, drawn = _emitter_weights(lobe, emitters, tris, origins, ids, rays, seed)
     total, lit = drawn[glossy].sum(axis=1), seen[glossy].sum(axis=1)

@@ -219,6 +219,22 @@ def _clamped_cosine_integral(points: np.ndarray, vector: bool = False):
     return total, np.where(any_above[..., None], mean, 0.0)
 
 
+def ltc_lobe_density(n, v, roughness, directions) -> np.ndarray:
+    """(N, T) ρ(ω) of the fitted lobe — the LTC's density D_o over its hemisphere integral,
+    what ``ltc_polygon_integral`` integrates — at world unit directions ``directions`` (N, T, 3)
+    for the points' unit normals n (N, 3), views v (N, 3) and Principled ``roughness`` (N,); 0
+    below the horizon or where v is."""
+    n = np.atleast_2d(np.asarray(n, np.float64))
+    v = np.atleast_2d(np.asarray(v, np.float64))
+    rough = np.broadcast_to(np.asarray(roughness, np.float64).reshape(-1), (len(n),))
+    frame = local_frame(n, v)
+    minv = _matrix(_interp(load_table()["minv"], rough, view_x(n, v)))
+    local = np.einsum("nij,ntj->nti", frame, np.asarray(directions, np.float64))
+    density = ltc_density(minv[:, None], local) / hemisphere_norm(minv)[:, None]
+    ok = (local[..., 2] > 0.0) & (np.sum(n * v, axis=-1) > 0.0)[:, None]
+    return np.where(ok, density, 0.0)
+
+
 def ltc_polygon_integral(p, n, v, roughness, corners, chunk: int = 64, directions: bool = False):
     """(N, T) ∫ ρ over each triangle: the normalised GGX lobe of the points p (N, 3) with unit
     normals n (N, 3), unit directions toward the viewer v (N, 3) and Principled ``roughness``
