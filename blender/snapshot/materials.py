@@ -49,6 +49,7 @@ from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
 from ...voxgi_addon.scene.textures import PARAM_VARIANTS, variant_values, within_max_size
 from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _NeedsBake, _tree_key
 
+MAX_VARIANT_MATERIALS = 96  # materials with Roughness / Metallic per texel (each adds 64 rows)
 BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
 BAKE_SAMPLES = 8      # Cycles samples per texel (the texel's mean over its area)
 BAKE_MARGIN = 4       # texels the bake extends each UV island by (no dark seams when filtered)
@@ -261,6 +262,7 @@ class MaterialTable:
         self._uv_maps: dict[int, str] = {}
         self._texture_index: dict[str, int] = {}
         self._warned: set[str] = set()
+        self._variant_materials = 0
 
     def _warn(self, text: str) -> None:
         if text not in self._warned:
@@ -282,7 +284,13 @@ class MaterialTable:
             if bake is not None:
                 data = self._baked(material, data, bake, surface)
             index = self._index[key] = len(self.materials)
+            if data.param_texture >= 0 and self._variant_materials >= MAX_VARIANT_MATERIALS:
+                self._warn(f"Material '{data.name}': more than {MAX_VARIANT_MATERIALS} "
+                           "materials take Roughness / Metallic per texel; this one takes the "
+                           "image's means")
+                data = dataclasses.replace(data, param_texture=-1)
             if data.param_texture >= 0:  # its variants follow it (textures.PARAM_VARIANTS)
+                self._variant_materials += 1
                 data = dataclasses.replace(data, param_variants=index + 1)
             self.materials.append(data)
             self._uv_maps[index] = uv_map

@@ -87,3 +87,18 @@ def test_numpy_and_gpu_agree_on_texel_parameters(voxgi):
     for name in PASSES + ("Glossy Color",):
         error = relative_l1(gpu[name], reference[name])
         assert error < 0.02, (name, error)
+
+
+def test_variant_materials_are_capped(voxgi, monkeypatch):
+    """Each material with Roughness / Metallic per texel adds PARAM_VARIANTS rows to the GPU's
+    materials texture; past MAX_VARIANT_MATERIALS the others take their images' means, with a
+    warning (here the cap is lowered to one of the scene's two such materials)."""
+    from voxgi.blender.snapshot import materials as snapshot_materials
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    build()
+    monkeypatch.setattr(snapshot_materials, "MAX_VARIANT_MATERIALS", 1)
+    snapshot = take_snapshot(bpy.context.scene)
+    textured = [m for m in snapshot.materials if m.name in ("Floor", "Box")]
+    assert sorted(m.param_texture >= 0 for m in textured) == [False, True]
+    assert any("per texel" in w and "means" in w for w in snapshot.warnings), snapshot.warnings
