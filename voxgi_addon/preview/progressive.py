@@ -304,50 +304,56 @@ def scale_nearest(image, width: int, height: int) -> np.ndarray:
 
 class SliceSizer:
     """Pixels per slice for a time budget, from measured slices: seconds ≈ fixed + per_pixel ×
-    pixels, fitted by least squares over the last ``keep`` slices. Until there is a
-    measurement: ``first_pixels``; while every measured slice had one size, the next is twice
-    that (the fit needs two sizes). A slice never has fewer pixels than its fixed cost is
-    worth (fixed / per_pixel: at least half of it tracing), so where the fixed cost alone is
-    over the budget (a slow or loaded machine) slices run over it rather than spend most of
-    their time on overhead."""
+    pixels, fitted robustly (Theil–Sen: the median slope between slices of different sizes,
+    then the median intercept) over the last ``keep`` slices, so a slice that waited for a
+    kernel compile or another process does not skew it. Until there is a measurement:
+    ``first_pixels``; while the measured slices have one size, twice that (the fit needs two),
+    and after a fit the last fit, with every ``explore``-th call asking 1.5 × the fitted size
+    so the fit follows a machine whose load changes. A slice never has fewer pixels than its
+    fixed cost is worth (fixed / per_pixel: at least half of it tracing), so where the fixed
+    cost alone is over the budget (a slow or loaded machine) slices run over it rather than
+    spend most of their time on overhead."""
 
     def __init__(self, budget: float, first_pixels: int = 4096, least: int = 256,
-                 keep: int = 12):
+                 keep: int = 48, explore: int = 4):
         if budget <= 0.0:
             raise ValueError(f"the slice budget must be positive, not {budget}")
         self.budget, self.first_pixels, self.least, self.keep = budget, first_pixels, least, keep
+        self.explore = explore
         self.samples: list[tuple[int, float]] = []
         self.fitted: tuple[float, float] | None = None  # the last fit from two sizes
+        self.calls = 0
 
     def measured(self, pixels: int, seconds: float) -> None:
         self.samples = [*self.samples, (int(pixels), float(seconds))][-self.keep:]
 
-    def _spread(self) -> bool:
-        p = np.array([s[0] for s in self.samples], np.float64)
-        return len(p) > 1 and np.ptp(p) > 0.25 * p.mean()
-
     def model(self) -> tuple[float, float] | None:
         """(fixed seconds, seconds per pixel), or None until two sizes were measured; while
         the recent slices have one size, the last fit from two."""
-        if not self._spread():
-            return self.fitted
         p = np.array([s[0] for s in self.samples], np.float64)
         t = np.array([s[1] for s in self.samples], np.float64)
-        per_pixel, fixed = np.polyfit(p, t, 1)
-        if per_pixel <= 0.0:  # noise swamped the sizes' difference: all of it per pixel
-            self.fitted = 0.0, float(t.mean() / p.mean())
+        if len(p) < 2 or np.ptp(p) <= 0.25 * p.mean():
+            return self.fitted
+        i, j = np.triu_indices(len(p), 1)
+        apart = np.abs(p[i] - p[j]) > 0.25 * p.mean()
+        slope = float(np.median((t[i] - t[j])[apart] / (p[i] - p[j])[apart]))
+        if slope <= 0.0:  # noise swamped the sizes' difference: all of it per pixel
+            self.fitted = 0.0, float(np.median(t / p))
         else:
-            self.fitted = max(float(fixed), 0.0), float(per_pixel)
+            self.fitted = max(float(np.median(t - slope * p)), 0.0), slope
         return self.fitted
 
     def pixels(self, most: int) -> int:
         """Pixels of the next slice, between ``least`` and ``most``."""
         fitted = self.model()
+        self.calls += 1
         if fitted is None:
             pixels = 2 * self.samples[-1][0] if self.samples else self.first_pixels
         else:
             fixed, per_pixel = fitted
             pixels = max(self.budget - fixed, fixed) / per_pixel
+            if self.explore and self.calls % self.explore == 0:
+                pixels *= 1.5
         return int(max(min(self.least, most), min(most, pixels)))
 
 
