@@ -12,18 +12,19 @@
 2. the image is keyed by everything it depends on (``trace_key``): the applied results'
    generation (bumped by every depsgraph change the session acted on), the view and
    projection matrices, the traced size (region size × fraction), the pass, the cone
-   settings and every tracer option (``trace_options``). When the shown texture has that key,
-   nothing is traced: the redraw is one textured quad ("Cached"). Otherwise, in Fast quality
-   upload the octree atlas the worker laid out (``GPUVolume.update(…, atlas=…)``) and trace
-   with the GPU tracer (``gpu_preview.render_passes_gpu``, as F12), keeping the chosen pass
-   as a texture. With *Coarse First Image* (default on) a new key is first traced at half
-   the width and height (a quarter of the pixels, "Coarse") and a redraw is requested, so
-   the next ``view_draw`` traces the full image — while orbiting every draw is coarse, and
-   the full image follows when the view stops;
-3. draw that texture over the region. While newer work runs, the last texture is drawn again:
-   the view never goes blank.
-4. the status line (``ViewportRenderer.status``: stage, time, quality) goes to the view's
-   header through ``RenderEngine.update_stats`` and to the sidebar (``LiveGI.view_status``).
+   settings, every tracer option (``trace_options``), the Viewport Samples and the pixel
+   filter. A new key restarts the progressive accumulation (``progressive.py``); in Fast
+   quality the octree atlas the worker laid out is uploaded first (``GPUVolume.update(…,
+   atlas=…)``). Each draw then traces **one slice** — the coarse image of the whole view
+   first (*Coarse First Image*), then one tile of one sample — with F12's tracer
+   (``gpu_preview.render_passes_gpu``), adds it to the samples and asks for a redraw until
+   the Viewport Samples are in ("Coarse", "Refining", "Converged"); a converged key traces
+   nothing ("Cached");
+3. draw the current estimate's texture over the region. While newer work runs, the last
+   texture is drawn again: the view never goes blank.
+4. the status line (``status_line``: "Sample N/M", elapsed time, stage, quality) goes to the
+   view's header through ``RenderEngine.update_stats`` and to the sidebar
+   (``LiveGI.view_status``, ``view_samples``).
 
 GPU objects (textures, the atlas) belong to one ``ViewportRenderer`` per engine instance and
 are freed with it, on unregister and at exit (``release``; docs/gi_pipeline.md "GPU resources
