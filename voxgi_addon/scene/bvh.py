@@ -465,6 +465,14 @@ class BVHTextures:
         return self.nodes.nbytes + self.triangles.nbytes + self.normals.nbytes
 
 
+_PACK_CHUNK = 1 << 18
+
+
+def _blank_rows(count: int) -> np.ndarray:
+    """(rows, TEXTURE_WIDTH, 4) float32 zeros holding ``count`` texels (at least one row)."""
+    return np.zeros((max(1, -(-count // TEXTURE_WIDTH)), TEXTURE_WIDTH, 4), np.float32)
+
+
 def _rows(texels: np.ndarray) -> np.ndarray:
     """(K, 4) texels → (rows, TEXTURE_WIDTH, 4) float32, zero-padded (at least one row)."""
     rows = max(1, -(-len(texels) // TEXTURE_WIDTH))
@@ -500,24 +508,32 @@ def pack_bvh(bvh: BVH, tris: SceneTriangles) -> BVHTextures:
     code = (bvh.first.astype(np.int64) * _LEAF_SHIFT + bvh.count + LEAF_BIAS).astype(np.int32)
     nodes[:, 1, 3] = np.where(bvh.first >= 0, code.view(np.float32), np.float32(-1.0))
     order = bvh.order
-    p = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)[order]
-    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
     t = len(order)
-    packed = np.zeros((t, 3, 4), np.float32)
-    packed[:, 0, :3], packed[:, 0, 3] = p[:, 0], material_code(tris)[order]
-    packed[:, 1, :3], packed[:, 1, 3] = e1, order
-    packed[:, 2, :3] = e2
-    packed[:, 2, 3] = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+    positions = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)
+    codes = material_code(tris)
     cutout = cutouts_of(tris)
-    if cutout is not None:  # cut-outs (textures.cutout_hits) carry a negative scale
-        packed[:, 2, 3] *= np.where(cutout[0].cutout[order], -1.0, 1.0)
-    normals = np.zeros((t, 3, 4), np.float32)
-    if tris.corner_normals is not None:
-        normals[..., :3] = np.asarray(tris.corner_normals)[order]
-    else:
-        normals[..., :3] = np.asarray(tris.normals)[order][:, None]
-    return BVHTextures(_rows(nodes.reshape(-1, 4)), _rows(packed.reshape(-1, 4)),
-                       _rows(normals.reshape(-1, 4)), n, t)
+    corner_normals = tris.corner_normals
+    # written in place into the textures' rows, _PACK_CHUNK triangles at a time (the float64
+    # temporaries of all triangles at once took ~400 MB at a million triangles)
+    triangles, normals = _blank_rows(3 * t), _blank_rows(3 * t)
+    packed = triangles.reshape(-1, 4)[:3 * t].reshape(t, 3, 4)
+    shading = normals.reshape(-1, 4)[:3 * t].reshape(t, 3, 4)
+    for a in range(0, t, _PACK_CHUNK):
+        b = min(t, a + _PACK_CHUNK)
+        which = order[a:b]
+        p = positions[which]
+        e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+        packed[a:b, 0, :3], packed[a:b, 0, 3] = p[:, 0], codes[which]
+        packed[a:b, 1, :3], packed[a:b, 1, 3] = e1, which
+        packed[a:b, 2, :3] = e2
+        packed[a:b, 2, 3] = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+        if cutout is not None:  # cut-outs (textures.cutout_hits) carry a negative scale
+            packed[a:b, 2, 3] *= np.where(cutout[0].cutout[which], -1.0, 1.0)
+        if corner_normals is not None:
+            shading[a:b, :, :3] = np.asarray(corner_normals)[which]
+        else:
+            shading[a:b, :, :3] = np.asarray(tris.normals)[which][:, None]
+    return BVHTextures(_rows(nodes.reshape(-1, 4)), triangles, normals, n, t)
 
 
 # --------------------------------------------------------------------------- numpy traversal
