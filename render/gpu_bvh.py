@@ -50,6 +50,7 @@ from ..voxgi_addon.scene.textures import METALLIC_LEVELS, ROUGHNESS_LEVELS
 from .gpu_ltc import DEFINES as LTC_DEFINES
 from .gpu_ltc import ltc_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
+from .gpu_principled import lut_texture
 from .gpu_shaders import LOCAL_SIZE, build_compute
 from .gpu_tracer import read_texture
 from .gpu_volume import float_texture
@@ -78,6 +79,12 @@ KERNELS["bvh_glossy"] = (("pixels", "principled", "bvh_lights", "textures", "bvh
 # The world-mode glossy gather integrates the lobe over the emitters by LTC (shaders/ltc.glsl).
 KERNELS["bvh_glossy"] = (KERNELS["bvh_glossy"][0][:-1] + ("ltc", "bvh_glossy"),
                          KERNELS["bvh_glossy"][1] + ("ltc_table",), KERNELS["bvh_glossy"][2])
+# The emitters' glossy light per sub-pixel pass (exact_glossy.emitters_shine).
+KERNELS["bvh_emitter_glossy"] = (
+    ("principled", "bvh_lights", "textures", "ltc", "bvh_emitter_glossy"),
+    _BVH + ("lights", "world_map", "emitters", "materials", "principled_lut", "gbuffer_position",
+            "gbuffer_normal", "gbuffer_view", "gbuffer_base", "ltc_table") + _TEXTURES,
+    ("sampling",))
 _BLANK: dict[str, object] = {}
 
 
@@ -124,6 +131,8 @@ def bvh_shader(kernel: str):
             defines["WORLD_GLOSSY_STREAM"] = f"{WORLD_GLOSSY_STREAM}u"
             defines["EMITTER_GLOSSY_STREAM"] = f"{EMITTER_GLOSSY_STREAM}u"
             defines["METAL_RAY_FACTOR"] = str(METAL_RAY_FACTOR)
+        if kernel == "bvh_emitter_glossy":
+            defines["EMITTER_GLOSSY_STREAM"] = f"{EMITTER_GLOSSY_STREAM}u"
         if "ltc" in files:
             defines.update(LTC_DEFINES)
             defines["HORIZON_LIFT"] = repr(float(HORIZON_LIFT))
@@ -290,6 +299,24 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
               "emitters": emitters if emitters is not None else emitters_texture(None)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
                         {"sampling": (seed, block[3], 0, 0), "strata": (*block[:3], 0)})
+
+
+def emitter_glossy_texture(bvh: GPUBVH, gbuffer_inputs, emitters, materials, rays: int,
+                           seed: int = 0, lights=None, world=None):
+    """The glossy light the emissive triangles send toward the viewer over a G-buffer
+    (``shaders/bvh_emitter_glossy.glsl``, the port of ``exact_glossy.emitters_shine``): an
+    RGBA32F texture of the G-buffer's size (bottom row first), rgb = Glossy Color × their
+    Glossy Direct. emitters : an ``emitters_texture``; materials : the
+    ``principled_materials_texture``; rays : shadow rays per pixel for the visible share;
+    lights, world : the scene's ``lights_texture`` / ``world_texture`` (read by no code path
+    here; bound because bvh_lights.glsl declares them; None: empty ones)."""
+    position = gbuffer_inputs["gbuffer_position"]
+    inputs = {**bvh.inputs, **gbuffer_inputs, "emitters": emitters, "materials": materials,
+              "principled_lut": lut_texture(),
+              "lights": lights if lights is not None else lights_texture([], None),
+              "world_map": world if world is not None else world_texture(None)}
+    return dispatch_bvh("bvh_emitter_glossy", inputs, position.width, position.height,
+                        {"sampling": (seed, max(1, int(rays)), 0, 0)})
 
 
 def trace_rays(bvh: GPUBVH, origins, directions, t_min=0.0, t_max=np.inf, any_hit=False,

@@ -31,7 +31,7 @@ from ..voxgi_addon.preview.passes import (
 )
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
 from .gbuffer import gbuffer_shader, rasterize, read_gbuffer
-from .gpu_bvh import direct_light_texture
+from .gpu_bvh import direct_light_texture, emitter_glossy_texture
 from .gpu_fast import fast_passes
 from .gpu_gather import denoise, gather, gather_low, glossy_direct_texture, upsample
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
@@ -202,6 +202,7 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     t0 = time.perf_counter()
     materials, lut = scene.materials, scene.lut
     extra = scene.has_scene_lights
+    emitting = any(light.type == "EMITTERS" for light in scene.lights)
     # The edge pixels (preview.passes.edge_pixels on the read-back centre G-buffer, the numpy
     # tracer's test) get the sub-pixel passes, over a list of them (aa_compact.glsl); the
     # others the centre pass with all strata, over the image.
@@ -242,14 +243,18 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
                 ("out_f", "out_g"), *size)
             sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
         if lamps is not None and extra:
-            lamps["sum_g"] = sums["sum_g"]
+            lamps["sum_g"], lamps["sum_f"] = sums["sum_g"], sums["sum_f"]
         if extra:  # the world's and emitters' own dispatch (streams after the lamps)
             direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples,
                                           seed=gather_settings.seed, world=scene.world_map,
                                           emitters=scene.emitters, strata_block=block,
                                           table=scene.no_lamp)
+            # the emitters' glossy light at this pass's own points (emitters_shine)
+            shine = emitter_glossy_texture(bvh, inputs, scene.emitters, materials,
+                                           gather_settings.glossy_rays, gather_settings.seed,
+                                           scene.no_lamp, scene.world_map) if emitting else blank
             out = _run("aa_light", _LIGHT_SAMPLERS, {
-                "colour": colour, "direct_image": direct, "shine_image": blank, **sums},
+                "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
                 ("out_f", "out_g"), *size)
             sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
         return sums
@@ -274,7 +279,8 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     texel = {name: image.reshape(-1, 4).astype(np.float64) for name, image in read.items()}
     if reach:  # the centre pass's lamp light, from the same read-back (no read per light)
         lamp_g = np.flipud(read_texture(lamps["sum_g"])) if "sum_g" in lamps else read["sum_g"]
-        light = lamp_light(lamp_g[..., :3], read["sum_b"][..., :3], read["sum_f"][..., :3],
+        lamp_f = np.flipud(read_texture(lamps["sum_f"])) if "sum_f" in lamps else read["sum_f"]
+        light = lamp_light(lamp_g[..., :3], read["sum_b"][..., :3], lamp_f[..., :3],
                            read["sum_c"][..., :3])
         edge = edge | light_edge_pixels(light, seen["hit"] & ~edge, reach, len(plan))
     listed = np.flatnonzero(edge.ravel())

@@ -74,21 +74,15 @@ void main()
   vec3 origin = position + SURFACE_EPSILON * n;
   uint state = point_stream(id, GLOSSY_STREAM, seed);
   uint world_state = point_stream(id, WORLD_GLOSSY_STREAM, seed);
-  uint emitter_state = point_stream(id, EMITTER_GLOSSY_STREAM, seed);
   bool sky_on = world_on();
   bool emitting = emitter_header().w > 0.5;
   const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
   vec3 sum = vec3(0.0);
   float lum2 = 0.0;
-  /* world mode: luminance weights of the rays drawn on the emitters, all and unoccluded */
-  float emit_drawn = 0.0;
-  float emit_seen = 0.0;
   if (chunk.z > 0.5) {
     sum = texelFetch(partial_image, cell, 0).rgb;
     vec4 partial = texelFetch(partial_variance, cell, 0);
     lum2 = partial.x;
-    emit_drawn = partial.y;
-    emit_seen = partial.z;
   }
   bool reflects = cos_ni > 0.0 && dot(colour, vec3(1.0)) > 0.0;
   int first_ray = int(chunk.x);
@@ -121,7 +115,8 @@ void main()
         int triangle, slot;
         vec2 uv;
         if (bvh_closest_hit(origin, l, 0.0, BVH_FAR, th, triangle, slot, uv)) {
-          if (emitting && mirror) { /* a glossy lobe gets the emitters by LTC, below */
+          if (emitting && mirror) { /* a glossy lobe gets the emitters per sub-pixel pass
+                                     * (bvh_emitter_glossy.glsl) */
             int hit_material = bvh_triangle_material(slot);
             hit_material = (hit_material >= 0 && hit_material < last_material) ? hit_material
                                                                                : last_material;
@@ -133,35 +128,6 @@ void main()
           float map_pdf = dot(sky, LUMA) / head.w;
           float share = mirror ? 1.0 : pdf / max(pdf + map_pdf, 1e-30);
           value += sky * weight * share;
-        }
-      }
-      if (!mirror && emitting) { /* ray j drawn on the emitters (exact_glossy._emitter_weights) */
-        vec4 eh = emitter_header();
-        int count = int(eh.x);
-        vec2 u = hammersley(emitter_state, j, rays);
-        int t;
-        vec3 target = emitter_sample(u, count, t);
-        vec3 c0 = texelFetch(emitters, ivec2(0, t), 0).xyz;
-        vec3 c1 = texelFetch(emitters, ivec2(1, t), 0).xyz;
-        vec3 c2 = texelFetch(emitters, ivec2(2, t), 0).xyz;
-        vec3 w = target - origin;
-        float r2 = dot(w, w);
-        float dist = sqrt(r2);
-        vec3 d = w / max(dist, 1e-30);
-        vec3 normal = cross(c1 - c0, c2 - c0);
-        normal /= max(length(normal), 1e-30);
-        float cos_l = dot(d, normal);
-        vec3 glow = vec3(texelFetch(emitters, ivec2(0, t), 0).w, texelFetch(emitters, ivec2(1, t), 0).w,
-                         texelFetch(emitters, ivec2(2, t), 0).w);
-        if (dot(d, n) > 0.0 && abs(cos_l) > 0.0 && emitter_facing(t, origin)) {
-          float emit_pdf = dot(glow, LUMA) / eh.y * r2 / abs(cos_l);
-          float drawn = dot(glow * principled_glossy_reflectance(base, params.x, params.y, rough,
-                                                                n, v, d), LUMINANCE) /
-                        max(emit_pdf, 1e-30);
-          emit_drawn += drawn;
-          if (!bvh_any_hit(origin, d, dist)) {
-            emit_seen += drawn;
-          }
         }
       }
       if (!mirror && sky_on) {
@@ -188,54 +154,11 @@ void main()
   }
   if (chunk.w < 0.5) {
     imageStore(out_image, cell, vec4(sum, 0.0));
-    imageStore(out_variance, cell, vec4(lum2, emit_drawn, emit_seen, 0.0));
+    imageStore(out_variance, cell, vec4(lum2, 0.0, 0.0, 0.0));
     return;
   }
   float count = float(rays);
   vec3 mean = sum / count;
-  if (world_mode && emitting && !mirror && cos_ni > 0.0) {
-    /* exact_glossy.emitters_glossy: the lobe's LTC integral over each emitting triangle facing
-     * the point × its radiance (the pass: the glossy colour divides it out) × the visible
-     * share of the rays drawn on the emitters */
-    int count_t = int(emitter_header().x);
-    vec3 unshadowed = vec3(0.0);
-    vec3 white_colour = principled_glossy_color(vec3(1.0), 1.0, params.y, rough,
-                                                clamp(cos_ni, 0.0, 1.0));
-    for (int k = 0; k < count_t; k++) {
-      if (!emitter_facing(k, position)) {
-        continue;
-      }
-      vec3 c0 = texelFetch(emitters, ivec2(0, k), 0).xyz;
-      vec3 c1 = texelFetch(emitters, ivec2(1, k), 0).xyz;
-      vec3 c2 = texelFetch(emitters, ivec2(2, k), 0).xyz;
-      vec3 towards;
-      float shape = ltc_triangle_towards(position, n, v, rough, c0, c1, c2, towards);
-      if (shape > 0.0) {
-        /* the lobe's Fresnel where it meets the triangle relative to F = 1 */
-        towards = normalize(towards + max(HORIZON_LIFT - dot(towards, n), 0.0) * n);
-        vec3 actual = principled_glossy_reflectance(base, params.x, params.y, rough, n, v, towards);
-        vec3 plain = principled_glossy_reflectance(vec3(1.0), 1.0, params.y, rough, n, v, towards);
-        vec3 fresnel = mix(vec3(0.0), actual / max(plain, vec3(1e-30)), greaterThan(plain, vec3(0.0)));
-        /* the full lobe over the fitted one there, for triangles small in the lobe, fading out
-         * for those that fill it (exact_glossy.emitters_glossy) */
-        vec3 model = ltc_lobe_density(n, v, rough, towards) * white_colour;
-        float cover = clamp(shape, 0.0, 1.0);
-        for (int c = 0; c < 3; c++) {
-          if (model[c] > 0.0) {
-            float ratio = actual[c] / model[c];
-            fresnel[c] = (ratio > 0.0 && fresnel[c] > 0.0) ?
-                         exp((1.0 - cover) * log(ratio) + cover * log(fresnel[c])) : 0.0;
-          }
-        }
-        unshadowed += shape * fresnel * vec3(texelFetch(emitters, ivec2(0, k), 0).w,
-                                             texelFetch(emitters, ivec2(1, k), 0).w,
-                                             texelFetch(emitters, ivec2(2, k), 0).w);
-      }
-    }
-    float visible = emit_drawn > 0.0 ? emit_seen / emit_drawn : 1.0;
-    mean += mix(vec3(0.0), unshadowed * white_colour / max(colour, vec3(1e-30)) * visible,
-                greaterThan(colour, vec3(0.0)));
-  }
   float lum_mean = dot(mean, LUMINANCE);
   float var = max(lum2 / count - lum_mean * lum_mean, 0.0) / max(count - 1.0, 1.0);
   imageStore(out_image, cell, vec4(mean, 0.0));

@@ -196,3 +196,35 @@ def test_a_glowing_sphere_low_over_a_glossy_floor_reflects_as_brute_force(metall
     ours = emitters_glossy(lobe, light, tris, p[None], origins, np.arange(1), 16, 0)[0]
     expected = _lobe_over_panel(p, n, v, corner, principled, emission[0])
     np.testing.assert_allclose(ours, expected, rtol=0.02)
+
+
+def test_an_emitting_panel_does_not_reflect_itself():
+    """emitters_shine at points on a glowing panel (the pixels that see it): its own triangles
+    lie in the points' horizon and send them nothing; a panel 0.6 m above still does. Without
+    lifting the points off the plane, float rounding put half the panel above the horizon."""
+    from voxgi.voxgi_addon.gi.emitters import emitter_light
+    from voxgi.voxgi_addon.gi.exact_glossy import emitters_shine
+
+    rng = np.random.default_rng(4)
+    own = np.array([[(-1.0, -1.0, 0.0), (1.0, 1.0, 0.0), (1.0, -1.0, 0.0)],
+                    [(-1.0, -1.0, 0.0), (-1.0, 1.0, 0.0), (1.0, 1.0, 0.0)]])
+    above = own + np.array([0.0, 0.0, 0.6])
+    corner = np.concatenate([own, above])
+    normals = np.tile([0.0, 0.0, -1.0], (4, 1))
+    tris = SceneTriangles(corner, normals, np.zeros(4, np.int32), np.array([0, 0, 1, 1], np.int32))
+    principled = (np.array([[0.8, 0.8, 0.8], [1.0, 1.0, 1.0]]),
+                  np.array([[0.0, 0.5, 0.5], [0.0, 0.5, 0.5]]))
+    points = np.concatenate([rng.uniform(-0.9, 0.9, (32, 2)), np.zeros((32, 1))], axis=1)
+    points += rng.normal(0.0, 1e-7, points.shape) * [0, 0, 1]  # a float G-buffer's rounding
+    views = np.tile([0.0, 0.3, 1.0], (32, 1)) / np.hypot(0.3, 1.0)
+    up = np.tile([0.0, 0.0, 1.0], (32, 1))
+    down = -up
+    alone = emitter_light(SceneTriangles(own, normals[:2], np.zeros(2, np.int32),
+                                         np.zeros(2, np.int32)), np.array([[5.0, 5.0, 5.0]]))
+    np.testing.assert_array_equal(
+        emitters_shine(points, down, -views, np.zeros(32, int), np.arange(32), tris, principled,
+                       alone, rays=8), 0.0)
+    both = emitter_light(tris, np.array([[5.0, 5.0, 5.0]]))
+    lit = emitters_shine(points, up, views, np.zeros(32, int), np.arange(32), tris, principled,
+                         both, rays=8)
+    assert (lit > 0.0).all()

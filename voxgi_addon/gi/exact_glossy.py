@@ -30,7 +30,7 @@ from .principled import ROUGHNESS_SQ_THRESHOLD, glossy_color, glossy_reflectance
 from .sampling import hammersley, perpendicular_basis
 
 __all__ = ["GLOSSY_STREAM", "WORLD_GLOSSY_STREAM", "EMITTER_GLOSSY_STREAM", "glossy_indirect",
-           "glossy_world_direct", "vndf_half_vectors"]
+           "emitters_shine", "glossy_world_direct", "vndf_half_vectors"]
 
 GLOSSY_STREAM = 0x6105  # hash stream of the glossy rays' rotation
 WORLD_GLOSSY_STREAM = 0x6107  # hash stream of the map-importance rays of glossy_world_direct
@@ -76,14 +76,15 @@ class _Lobe:
     """The Principled glossy lobe of each point: its colour and its GGX visible-normal samples
     (the module doc)."""
 
-    def __init__(self, normals, views, materials, principled):
+    def __init__(self, normals, views, materials, principled, base=None):
         n = self.n = np.asarray(normals, np.float64).reshape(-1, 3)
         v = self.v = np.asarray(views, np.float64).reshape(-1, 3)
         base_table, param_table = (np.asarray(a, np.float64) for a in principled)
         last = len(base_table) - 1
         mat = np.asarray(materials).reshape(-1)
         mat = np.where((mat >= 0) & (mat < last), mat, last)
-        base, params = base_table[mat], param_table[mat]
+        base = base_table[mat] if base is None else np.asarray(base, np.float64).reshape(-1, 3)
+        params = param_table[mat]
         metallic, level, rough = params[:, 0], params[:, 1], np.clip(params[:, 2], 0.0, 1.0)
         alpha = rough * rough
         self.alpha2 = (alpha * alpha)[:, None]
@@ -199,9 +200,9 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
     unoccluded; a mirror takes its one reflected ray. With ``emission`` (M + 1, 3) per
     material, a lobe ray landing on an emissive triangle adds its emission × the ray's weight
     (``glossy_indirect`` then leaves it out); with ``emitters`` (``emitters.EmitterLight``, the
-    same triangles) only a mirror's ray does, and a glossy lobe gets them from
-    ``emitters_glossy``: the LTC integral of the lobe over each triangle (noise-free) times
-    the visible share of rays drawn on them. world : ``world_light.WorldLight`` or None."""
+    same triangles) only a mirror's ray does: a glossy lobe gets them from ``emitters_shine``
+    per sub-pixel pass (the LTC integral of the lobe over each triangle, noise-free, times the
+    visible share of rays drawn on them). world : ``world_light.WorldLight`` or None."""
     from ..scene.raycast import closest_hits
     from .world_light import sample_world, world_pdf, world_radiance
 
@@ -231,12 +232,10 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
         last = len(table) - 1
         material = np.asarray(tris.materials)[np.maximum(hit, 0)]
         material = np.where((material >= 0) & (material < last), material, last)
-        # with the emitters as lights a glossy lobe gets them from emitters_glossy (noise-free);
-        # a mirror's one reflected ray still sees them
+        # with the emitters as lights a glossy lobe gets them from emitters_shine, per sub-pixel
+        # pass (noise-free); a mirror's one reflected ray still sees them
         share = 1.0 if emitters is None else lobe.mirror[:, None, None].astype(np.float64)
         value += np.where((useful & (hit >= 0))[..., None], table[material] * weight * share, 0.0)
-        if emitters is not None:
-            value += emitters_glossy(lobe, emitters, tris, p, origins, ids, rays, seed)[:, None]
     if world is None:
         return _glossy_mean(lobe, value)
     lobe_pdf, map_pdf = lobe.pdf(dirs), world_pdf(world, dirs)
@@ -263,6 +262,30 @@ def _emitter_pdf(emitters, radiance, distance2, cos_l):
 
     p_area = (radiance @ LUMA) / _total_power(emitters)
     return p_area * distance2 / np.maximum(np.abs(cos_l), 1e-30)
+
+
+def emitters_shine(points, normals, views, materials, sample_ids, tris, principled, emitters,
+                   rays: int = 16, seed: int = 0, base=None) -> np.ndarray:
+    """(N, 3) the glossy light the emissive triangles send toward the viewer (Glossy Color ×
+    their Glossy Direct) at surface points: ``emitters_glossy`` of the points' Principled lobes
+    (``principled`` as ``glossy_indirect``'s; base : (N, 3) Base Color per texel, None: the
+    table's), at the points lifted by SURFACE_EPSILON (off an emitter's own plane), as are its
+    ``rays`` shadow rays. The preview
+    evaluates it per sub-pixel pass at the pass's own points, as the lamps' glossy light: a
+    one-pixel slot between a ceiling and a panel 5 cm under it has its reflection in a few of a
+    pixel's passes, which the gather's value at the pixel's centre cannot show. 0 for a
+    mirror (its reflected ray in ``glossy_world_direct`` sees the emitters). The GLSL port is
+    shaders/bvh_emitter_glossy.glsl."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    n = np.asarray(normals, np.float64).reshape(-1, 3)
+    out = np.zeros((len(p), 3))
+    if emitters is None or len(p) == 0 or rays < 1:
+        return out
+    ids = np.asarray(sample_ids).reshape(-1).astype(np.uint32)
+    lobe = _Lobe(n, views, materials, principled, base)
+    lifted = p + SURFACE_EPSILON * n  # off its own plane (an emitter's point sees none of it)
+    origins = np.repeat(lifted, rays, axis=0).reshape(len(p), rays, 3)
+    return emitters_glossy(lobe, emitters, tris, lifted, origins, ids, rays, seed)
 
 
 def emitters_glossy(lobe: _Lobe, emitters, tris, points, origins, ids, rays: int, seed: int):

@@ -23,6 +23,7 @@ from ..gi.conetrace import (
     world_mips,
 )
 from ..gi.direct_light import concentric_disk, diffuse_direct, light_directions, light_frame
+from ..gi.exact_glossy import emitters_shine
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.sampling import hashed_square
 from ..gi.world_light import scene_lights, world_light
@@ -684,6 +685,7 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
                               glossy, n, views, shine, base=base), timings
     t0 = time.perf_counter()
     emitting = any(light.type == "EMITTERS" for light in lights)
+    emitters = next((light for light in lights if light.type == "EMITTERS"), None)
     glossy_world = gather_glossy_world(tris, world_light(snapshot.world), principled_table(snapshot),
                                        seen.hit, seen.position, seen.normal, seen.direction,
                                        materials.reshape(height, width), gather_settings,
@@ -718,8 +720,12 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
                                  strata_block=block)
         shine = glossy_direct_radiance(snapshot, p, n, views, mat,
                                        per_light[:len(snapshot.lights)], hit, base)
+        glow = 0.0 if emitters is None else emitters_shine(
+            p, n, views, mat, hit, tris, principled_table(snapshot), emitters,
+            gather_settings.glossy_rays, gather_settings.seed, base)  # at this pass's points
         accumulate_pass(sums, snapshot, hit, mat, n, views, per_light.sum(axis=0),
-                        indirect[hit], ao[hit], glossy[hit], shine, glossy_world[hit], base)
+                        indirect[hit], ao[hit], glossy[hit], shine + glow, glossy_world[hit],
+                        base)
         if lamps is not None:  # the lamps' light as the GPU's sums hold it after the lamps
             only = new_sums(height * width)
             accumulate_pass(only, snapshot, hit, mat, n, views,

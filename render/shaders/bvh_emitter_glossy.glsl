@@ -1,0 +1,111 @@
+/* The glossy light the emissive triangles send toward the viewer per G-buffer pixel (Glossy
+ * Color x their Glossy Direct): the port of voxgi_addon/gi/exact_glossy.py emitters_shine /
+ * emitters_glossy. For each emitting triangle facing the point, the LTC integral of the GGX lobe
+ * over it (ltc.glsl) x the Principled lobe's reflectance where the lobe meets it over the fitted
+ * lobe's (full lobe for small triangles, Fresnel for those that fill it) x its radiance, summed,
+ * x a white metal's glossy colour, x the visible share of `rays` points drawn on the emitters
+ * by power (stream EMITTER_GLOSSY_STREAM), each weighted by the luminance of L f |cos_l| /
+ * (r^2 p_area); 0 for a mirror (its reflected ray sees the emitters in the glossy gather).
+ * Samplers as bvh_direct.glsl's plus materials, principled_lut, gbuffer_view = (ray direction,
+ * material), gbuffer_base = (Base Color per texel, 1) where textured, ltc_table.
+ * Push constants: sampling = (seed, rays, 0, 0). out = (rgb, 1). */
+
+void main()
+{
+  ivec2 px = ivec2(gl_GlobalInvocationID.xy);
+  ivec2 size = imageSize(out_image);
+  if (px.x >= size.x || px.y >= size.y) {
+    return;
+  }
+  vec4 position = texelFetch(gbuffer_position, px, 0);
+  vec4 head = emitter_header();
+  if (position.w < 0.5 || head.w < 0.5) {
+    imageStore(out_image, px, vec4(0.0));
+    return;
+  }
+  vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
+  vec3 p = position.xyz + SURFACE_EPSILON * n; /* off an emitter's own plane */
+  vec4 ray = texelFetch(gbuffer_view, px, 0);
+  vec3 v = -ray.xyz;
+  int last_material = textureSize(materials, 0).x - 1;
+  int material = int(ray.w + 0.5);
+  material = (material >= 0 && material < last_material) ? material : last_material;
+  vec4 texel = texelFetch(gbuffer_base, px, 0);  /* Base Color per texel (G-buffer) */
+  vec3 base = texel.w > 0.5 ? texel.rgb : texelFetch(materials, ivec2(material, 0), 0).rgb;
+  vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
+  float rough = clamp(params.z, 0.0, 1.0);
+  float alpha = rough * rough;
+  float cos_ni = dot(n, v);
+  if (alpha * alpha <= PR_ROUGHNESS_SQ_THRESHOLD || !(cos_ni > 0.0)) {
+    imageStore(out_image, px, vec4(0.0));
+    return;
+  }
+  uint id = position.w > 1.5 ? uint(position.w) - 2u  /* a listed pixel: aa_compact.glsl */
+                             : uint((size.y - 1 - px.y) * size.x + px.x);
+  const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
+  int count = int(head.x);
+  int rays = int(sampling.y);
+  uint state = point_stream(id, EMITTER_GLOSSY_STREAM, uint(sampling.x));
+  vec3 origin = p;
+  /* the visible share (exact_glossy._emitter_weights) */
+  float drawn_sum = 0.0;
+  float seen_sum = 0.0;
+  for (int j = 0; j < rays; j++) {
+    int t;
+    vec3 target = emitter_sample(hammersley(state, j, rays), count, t);
+    vec3 c0 = texelFetch(emitters, ivec2(0, t), 0).xyz;
+    vec3 c1 = texelFetch(emitters, ivec2(1, t), 0).xyz;
+    vec3 c2 = texelFetch(emitters, ivec2(2, t), 0).xyz;
+    vec3 w = target - origin;
+    float r2 = dot(w, w);
+    float dist = sqrt(r2);
+    vec3 d = w / max(dist, 1e-30);
+    vec3 normal = cross(c1 - c0, c2 - c0);
+    normal /= max(length(normal), 1e-30);
+    float cos_l = dot(d, normal);
+    vec3 glow = vec3(texelFetch(emitters, ivec2(0, t), 0).w, texelFetch(emitters, ivec2(1, t), 0).w,
+                     texelFetch(emitters, ivec2(2, t), 0).w);
+    if (dot(d, n) > 0.0 && abs(cos_l) > 0.0 && emitter_facing(t, origin)) {
+      float emit_pdf = dot(glow, LUMA) / head.y * r2 / abs(cos_l);
+      float drawn = dot(glow * principled_glossy_reflectance(base, params.x, params.y, rough, n, v,
+                                                            d), LUMINANCE) / max(emit_pdf, 1e-30);
+      drawn_sum += drawn;
+      if (!bvh_any_hit(origin, d, dist)) {
+        seen_sum += drawn;
+      }
+    }
+  }
+  /* the unshadowed integral (exact_glossy.emitters_glossy) */
+  vec3 white_colour = principled_glossy_color(vec3(1.0), 1.0, params.y, rough, clamp(cos_ni, 0.0, 1.0));
+  vec3 unshadowed = vec3(0.0);
+  for (int k = 0; k < count; k++) {
+    if (!emitter_facing(k, p)) {
+      continue;
+    }
+    vec3 c0 = texelFetch(emitters, ivec2(0, k), 0).xyz;
+    vec3 c1 = texelFetch(emitters, ivec2(1, k), 0).xyz;
+    vec3 c2 = texelFetch(emitters, ivec2(2, k), 0).xyz;
+    vec3 towards;
+    float shape = ltc_triangle_towards(p, n, v, rough, c0, c1, c2, towards);
+    if (shape > 0.0) {
+      towards = normalize(towards + max(HORIZON_LIFT - dot(towards, n), 0.0) * n);
+      vec3 actual = principled_glossy_reflectance(base, params.x, params.y, rough, n, v, towards);
+      vec3 plain = principled_glossy_reflectance(vec3(1.0), 1.0, params.y, rough, n, v, towards);
+      vec3 fresnel = mix(vec3(0.0), actual / max(plain, vec3(1e-30)), greaterThan(plain, vec3(0.0)));
+      vec3 model = ltc_lobe_density(n, v, rough, towards) * white_colour;
+      float cover = clamp(shape, 0.0, 1.0);
+      for (int c = 0; c < 3; c++) {
+        if (model[c] > 0.0) {
+          float ratio = actual[c] / model[c];
+          fresnel[c] = (ratio > 0.0 && fresnel[c] > 0.0) ?
+                       exp((1.0 - cover) * log(ratio) + cover * log(fresnel[c])) : 0.0;
+        }
+      }
+      unshadowed += shape * fresnel * vec3(texelFetch(emitters, ivec2(0, k), 0).w,
+                                           texelFetch(emitters, ivec2(1, k), 0).w,
+                                           texelFetch(emitters, ivec2(2, k), 0).w);
+    }
+  }
+  float visible = drawn_sum > 0.0 ? seen_sum / drawn_sum : 1.0;
+  imageStore(out_image, px, vec4(unshadowed * white_colour * visible, 1.0));
+}
