@@ -165,6 +165,12 @@ def test_the_slice_sizer_fits_the_budget_from_measured_slices():
     assert fixed == pytest.approx(0.010) and per_pixel == pytest.approx(2e-6)
     assert sizer.pixels(10 ** 6) == pytest.approx(10_000, abs=2)
     assert sizer.pixels(10 ** 6) == pytest.approx(15_000, abs=3)  # every 4th: 1.5 × (explore)
+    # the smallest tile holds every slice: exploring asks for more than the last slice
+    stuck = SliceSizer(0.030, least=256)
+    stuck.fitted = (0.0, 1e-3)
+    for _ in range(20):
+        stuck.measured(2304, 0.1)
+    assert [stuck.pixels(10 ** 6) for _ in range(4)] == [256, 256, 256, 3456]
     assert sizer.pixels(5000) == 5000  # never more than the image
     sizer.measured(2000, 17.0)  # a slice that waited 17 s for a kernel compile
     fixed, per_pixel = sizer.model()

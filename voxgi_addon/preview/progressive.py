@@ -308,8 +308,9 @@ class SliceSizer:
     then the median intercept) over the last ``keep`` slices, so a slice that waited for a
     kernel compile or another process does not skew it. Until there is a measurement:
     ``first_pixels``; while the measured slices have one size, twice that (the fit needs two),
-    and after a fit the last fit, with every ``explore``-th call asking 1.5 × the fitted size
-    so the fit follows a machine whose load changes. A slice never has fewer pixels than its
+    and after a fit the last fit, with every ``explore``-th call asking 1.5 × the fitted or
+    the last measured size, whichever is larger, so the fit follows a machine whose load
+    changes even where the smallest tile holds every slice. A slice never has fewer pixels than its
     fixed cost is worth (fixed / per_pixel: at least half of it tracing), so where the fixed
     cost alone is over the budget (a slow or loaded machine) slices run over it rather than
     spend most of their time on overhead."""
@@ -352,8 +353,8 @@ class SliceSizer:
         else:
             fixed, per_pixel = fitted
             pixels = max(self.budget - fixed, fixed) / per_pixel
-            if self.explore and self.calls % self.explore == 0:
-                pixels *= 1.5
+            if self.explore and self.calls % self.explore == 0:  # another size than the last
+                pixels = 1.5 * max(pixels, self.samples[-1][0] if self.samples else 0)
         return int(max(min(self.least, most), min(most, pixels)))
 
 
