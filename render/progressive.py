@@ -41,13 +41,26 @@ from ..voxgi_addon.scene.view_camera import camera_from_view
 from .gpu_shaders import LOCAL_SIZE
 
 SLICE_BUDGET = 0.030  # seconds one view_draw's slice aims at (issue 19)
-LEAST_TILE = 16       # pixels: the smallest tile side (and coarse image side)
+LEAST_TILE = 48       # pixels: about the smallest tile side (preview.progressive.tile_side)
 
 
 def base_options(settings, width: int, height: int) -> dict:
     """The tracer's options for the viewport's ``width`` × ``height`` image: F12's for that
     size, point-sampled per slice (the samples' sub-pixel offsets anti-alias it)."""
     return {**trace_options(settings, width, height), "filter_width": 0.0}
+
+
+_sizers: dict[float, SliceSizer] = {}
+
+
+def shared_sizer(budget: float) -> SliceSizer:
+    """The process's slice sizer for ``budget``: every view measures the same machine, so a
+    3D view switched to Rendered starts from what the others measured (the first one from
+    the smallest tile)."""
+    if budget not in _sizers:
+        _sizers[budget] = SliceSizer(budget, first_pixels=LEAST_TILE * LEAST_TILE,
+                                     least=LEAST_TILE * LEAST_TILE)
+    return _sizers[budget]
 
 
 @dataclasses.dataclass
@@ -66,7 +79,7 @@ class ProgressiveImage:
     """The accumulation of one view's image and the slices still to trace."""
 
     def __init__(self, budget: float = SLICE_BUDGET):
-        self.sizer = SliceSizer(budget, first_pixels=64 * 64, least=LEAST_TILE * LEAST_TILE)
+        self.sizer = shared_sizer(budget)
         self.fixed_pixels: int | None = None  # tests: every slice this many pixels
         self.key = None
         self.accumulation: Accumulation | None = None
