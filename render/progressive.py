@@ -96,6 +96,7 @@ class ProgressiveImage:
         self.last: Slice | None = None
         self.converged = False
         self.coarse_pending = False
+        self.failed = ""
         self.image_stale = True
 
     # ------------------------------------------------------------------ planning
@@ -112,6 +113,7 @@ class ProgressiveImage:
         self.sample, self.tiles, self.tile_count = 0, [], 0
         self.started, self.elapsed, self.slices = time.perf_counter(), 0.0, 0
         self.converged, self.coarse_pending = False, bool(coarse)
+        self.failed = ""  # why a slice of this key failed ("" = none): no retry until a change
         self.last = None
         self.image_stale = True  # ``image`` is another key's: the next slice rebuilds it
 

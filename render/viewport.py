@@ -131,7 +131,7 @@ class ViewportRenderer:
         "Refining", "Converged", or "" (nothing: converged already, or it failed)."""
         settings = scene.voxgi
         progressive = self.progressive
-        if progressive.converged:
+        if progressive.converged or progressive.failed:
             return ""
         t0 = time.perf_counter()
         if settings.quality != "ACCURATE":  # Accurate traces the triangles, not the octree
@@ -202,11 +202,10 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
         gpu.state.blend_set("NONE")
         try:
             traced = renderer.refine(live, scene, view, window)
-            renderer.error = ""
+            renderer.error = progressive.failed  # "" unless this key's slice failed before
         except Exception as error:  # noqa: BLE001 - keep drawing the last image, say why
             renderer.error = f"viewport trace failed: {type(error).__name__}: {error}"
-            live.error = renderer.error
-            progressive.converged = True  # no retry loop on every redraw: a change retries
+            live.error = progressive.failed = renderer.error  # no retry until a change
         gpu.state.blend_set(blend)
         if traced and not progressive.converged and redraw is not None:
             redraw()  # the next slice on the next draw

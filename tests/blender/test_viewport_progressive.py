@@ -201,3 +201,39 @@ def test_a_change_restarts_the_samples_and_the_next_call_draws_an_image(voxgi, m
     assert renderer.shown == "Refining"
     kept = np.abs(image - before).sum(-1) <= 1e-6
     assert 0.3 < kept.mean() < 0.95  # most of the view is the previous image, not grey
+
+
+def test_a_failed_slice_keeps_the_image_says_why_and_retries_only_after_a_change(voxgi,
+                                                                                monkeypatch):
+    import voxgi.render.viewport as viewport_module
+    from voxgi.blender.viewport_session import live_gi
+
+    scene = progressive_scene()
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live_gi(scene.name_full).update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    engine = StandInEngine()
+    renderer = quarter_slices(engine)
+    engine_view(engine, scene, depsgraph, view, window)  # the coarse image
+    shown = engine_view(engine, scene, depsgraph, view, window)  # a tile over it
+    original = viewport_module.tracer
+
+    def failing(*args):
+        def trace(*_):
+            raise RuntimeError("dispatch lost")
+        return trace
+
+    monkeypatch.setattr(viewport_module, "tracer", failing)
+    dispatches = Dispatches(monkeypatch)
+    redraws = engine.redraws
+    for _ in range(2):  # the failure, then a redraw of the same key: no retry
+        image = engine_view(engine, scene, depsgraph, view, window)
+        assert np.array_equal(image, shown) and engine.redraws == redraws
+        assert engine.stats[-1] == "VoxGI | viewport trace failed: RuntimeError: dispatch lost"
+        assert renderer.shown == "Previous" and dispatches.take() == 0
+    # a change restarts: with a working tracer it draws again
+    monkeypatch.setattr(viewport_module, "tracer", original)
+    moved = engine_view(engine, scene, depsgraph, turned(view, 2.0), window)
+    assert renderer.shown == "Coarse" and renderer.error == "" and filled(moved) > 0.99
+    assert engine.stats[-1].startswith("VoxGI | Sample 0/16 | ")
