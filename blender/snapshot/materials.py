@@ -370,8 +370,12 @@ class MaterialTable:
         else:
             roughness = float(self._socket_mean(material, inputs["Roughness"], _value))
             metallic = float(self._socket_mean(material, inputs["Metallic"], _value))
-        alpha, alpha_texture, alpha_bake, alpha_uv = self._alpha(material, inputs.get("Alpha"),
-                                                                  texture)
+        alpha_socket = inputs.get("Alpha")
+        mix = _transparent_mix(node_tree, principled)
+        if mix is not None and alpha_socket is not None and not alpha_socket.is_linked and \
+                alpha_socket.default_value >= 1.0:
+            alpha_socket = mix  # Mix Shader (Transparent BSDF, this BSDF): its Fac
+        alpha, alpha_texture, alpha_bake, alpha_uv = self._alpha(material, alpha_socket, texture)
         if alpha_texture is not None and texture is None:
             uv_map = alpha_uv
         elif alpha_texture is not None and alpha_texture is not texture and alpha_uv != uv_map:
@@ -559,6 +563,10 @@ class MaterialTable:
                 return value, base_texture, None, uv_map  # one RGBA texture for both
             return value, texture, None, uv_map
         except _NeedsBake:
+            if socket.node.type != "BSDF_PRINCIPLED":  # a Mix Shader's Fac: no bake of it yet
+                self._warn(f"Material '{material.name_full}': its transparency comes from "
+                           "nodes the preview does not evaluate yet; using the Fac value")
+                return value, None, None, ""
             return value, None, ("EMIT", socket.name), ""
 
     # ------------------------------------------------------------------ bakes
@@ -640,9 +648,28 @@ def _image_channel(socket):
         return None
 
 
+def _transparent_mix(tree, principled):
+    """The Fac socket of the Mix Shader the material output shows when it mixes a Transparent
+    BSDF (first shader: Fac = 0 is transparent) with ``principled`` — the cut-out setup
+    before the Principled BSDF had an Alpha, whose Fac is the Alpha — else None."""
+    output = tree.get_output_node("ALL") if tree is not None else None
+    surface = None if output is None else output.inputs.get("Surface")
+    if surface is None or not surface.is_linked or principled is None:
+        return None
+    mix = surface.links[0].from_node
+    if mix.type != "MIX_SHADER" or not (mix.inputs[1].is_linked and mix.inputs[2].is_linked):
+        return None
+    first, second = mix.inputs[1].links[0].from_node, mix.inputs[2].links[0].from_node
+    if first.type == "BSDF_TRANSPARENT" and second == principled:
+        return mix.inputs[0]
+    return None
+
+
 def _alpha_node(principled):
     """The Image Texture node whose Alpha output feeds ``principled``'s Alpha, or None."""
     socket = principled.inputs.get("Alpha")
+    if socket is not None and not socket.is_linked:
+        socket = _transparent_mix(principled.id_data, principled)
     if socket is None or not socket.is_linked:
         return None
     try:

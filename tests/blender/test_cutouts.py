@@ -167,3 +167,29 @@ def test_numpy_and_gpu_agree_on_cutouts(voxgi):
     for name in PASSES:
         error = relative_l1(gpu[name], reference[name])
         assert error < 0.02, (name, error)
+
+
+def test_a_transparent_mix_shader_cuts_out_as_the_alpha_does(voxgi):
+    """The older cut-out setup — Mix Shader (Transparent BSDF, Principled BSDF) whose Fac is
+    the image's alpha — is Cycles' same surface: the snapshot reads the Fac as the Alpha, and
+    the preview matches the reference made with the Principled Alpha."""
+    scene = build()
+    tree = bpy.data.materials["Fence"].node_tree
+    bsdf = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
+    image = next(n for n in tree.nodes if n.type == "TEX_IMAGE")
+    tree.links.remove(bsdf.inputs["Alpha"].links[0])
+    transparent = tree.nodes.new("ShaderNodeBsdfTransparent")
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    tree.links.new(image.outputs["Alpha"], mix.inputs["Fac"])
+    tree.links.new(transparent.outputs["BSDF"], mix.inputs[1])
+    tree.links.new(bsdf.outputs["BSDF"], mix.inputs[2])
+    tree.links.new(mix.outputs["Shader"], tree.get_output_node("ALL").inputs["Surface"])
+    snapshot = snapshot_now()
+    fence = fence_material(snapshot)
+    assert fence.alpha_texture >= 0 and fence.alpha_texture == fence.base_color_texture
+    passes, lines = preview(scene)
+    reference = np.load(REFS / "fence_cards.npz")
+    mask = reference["Alpha"].astype(np.float64) > 0.5
+    for name in ("Combined", "Diffuse Color"):
+        error = relative_l1(passes[name], reference[name].astype(np.float64), mask)
+        assert error <= 0.05, (name, error, lines)
