@@ -1,6 +1,5 @@
 """The threaded BVH (voxgi_addon/bvh.py): build invariants, numpy traversal against brute force
 and the grid ray caster, packing, and the shared sample patterns (voxgi_addon/sampling.py)."""
-import time
 
 import numpy as np
 import pytest
@@ -180,14 +179,19 @@ def test_packing_layout():
     np.testing.assert_allclose(normals[TRIANGLE_TEXELS * j + 2, :3], tris.normals[bvh.order], atol=1e-6)
 
 
-def test_build_of_100k_triangles_is_fast():
+def test_build_of_100k_triangles_is_balanced():
+    """A 100k-triangle soup builds a tree a traversal can use: shallow, every triangle in
+    exactly one leaf, leaves no larger than MAX_LEAF. (Its build time is measured by ``make
+    bench``, not asserted here: the machines are shared.)"""
+    from voxgi.voxgi_addon.scene.bvh import MAX_LEAF
     rng = np.random.default_rng(0)
     tris = random_soup(rng, 100_000, spread=5.0, size=0.05)
-    t0 = time.process_time()
     bvh = build_bvh(tris)
-    seconds = time.process_time() - t0
-    assert seconds < 1.5, seconds  # ~0.35 s of CPU; the margin is for a shared machine
     assert bvh.depth < 40
+    leaves = bvh.count > 0
+    assert bvh.count[leaves].max() <= MAX_LEAF
+    np.testing.assert_array_equal(np.sort(bvh.order), np.arange(100_000))
+    assert bvh.count[leaves].sum() == 100_000
 
 
 def test_sample_patterns():
