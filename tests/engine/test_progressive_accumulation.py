@@ -80,7 +80,7 @@ def test_tile_shapes_hold_whole_work_groups_of_one_texture_kind():
         w, h = tile_shape(pixels, 320, 180, 16, 2)
         assert w % 16 == 0 and h % 16 == 0
         assert not any(power_of_two(n) for n in (w, h, w // 2, h // 2)), (w, h)
-        assert w * h <= max(pixels, 48 * 48)
+        assert 0.6 * max(pixels, 48 * 48) <= w * h <= 1.3 * max(pixels, 48 * 48)  # about
     assert tile_shape(10 ** 6, 320, 180, 16, 2) == (320, 180)  # the whole image fits
     assert tile_shape(1, 320, 180, 16, 2) == (48, 48)  # the smallest: 3 groups (16, 32: 2ⁿ)
     assert tile_shape(40000, 320, 180, 16, 2) == (192, 192)  # one row of tiles: 180 px high
@@ -164,13 +164,14 @@ def test_the_slice_sizer_fits_the_budget_from_measured_slices():
     fixed, per_pixel = sizer.model()
     assert fixed == pytest.approx(0.010) and per_pixel == pytest.approx(2e-6)
     assert sizer.pixels(10 ** 6) == pytest.approx(10_000, abs=2)
-    assert sizer.pixels(10 ** 6) == pytest.approx(15_000, abs=3)  # every 4th: 1.5 × (explore)
+    assert sizer.pixels(10 ** 6) == pytest.approx(20_000, abs=4)  # every 4th: 2 × (explore)
     # the smallest tile holds every slice: exploring asks for more than the last slice
     stuck = SliceSizer(0.030, least=256)
     stuck.fitted = (0.0, 1e-3)
     for _ in range(20):
         stuck.measured(2304, 0.1)
-    assert [stuck.pixels(10 ** 6) for _ in range(4)] == [256, 256, 256, 3456]
+    assert [stuck.pixels(10 ** 6) for _ in range(4)] == [256, 256, 256, 4608]
+    assert tile_shape(4608, 320, 180, 16, 2) != tile_shape(2304, 320, 180, 16, 2)
     assert sizer.pixels(5000) == 5000  # never more than the image
     sizer.measured(2000, 17.0)  # a slice that waited 17 s for a kernel compile
     fixed, per_pixel = sizer.model()

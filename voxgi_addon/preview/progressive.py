@@ -308,12 +308,12 @@ class SliceSizer:
     then the median intercept) over the last ``keep`` slices, so a slice that waited for a
     kernel compile or another process does not skew it. Until there is a measurement:
     ``first_pixels``; while the measured slices have one size, twice that (the fit needs two),
-    and after a fit the last fit, with every ``explore``-th call asking 1.5 × the fitted or
-    the last measured size, whichever is larger, so the fit follows a machine whose load
-    changes even where the smallest tile holds every slice. A slice never has fewer pixels than its
-    fixed cost is worth (fixed / per_pixel: at least half of it tracing), so where the fixed
-    cost alone is over the budget (a slow or loaded machine) slices run over it rather than
-    spend most of their time on overhead."""
+    and after a fit the last fit, with every ``explore``-th call asking 2 × the fitted or the
+    last measured size, whichever is larger (a tile of another size: ``tile_side``), so the
+    fit follows a machine whose load changes even where the smallest tile holds every slice.
+    A slice never has fewer pixels than its fixed cost is worth (fixed / per_pixel: at least
+    half of it tracing), so where the fixed cost alone is over the budget (a slow or loaded
+    machine) slices run over it rather than spend most of their time on overhead."""
 
     def __init__(self, budget: float, first_pixels: int = 4096, least: int = 256,
                  keep: int = 48, explore: int = 4):
@@ -354,12 +354,12 @@ class SliceSizer:
             fixed, per_pixel = fitted
             pixels = max(self.budget - fixed, fixed) / per_pixel
             if self.explore and self.calls % self.explore == 0:  # another size than the last
-                pixels = 1.5 * max(pixels, self.samples[-1][0] if self.samples else 0)
+                pixels = 2.0 * max(pixels, self.samples[-1][0] if self.samples else 0)
         return int(max(min(self.least, most), min(most, pixels)))
 
 
 def tile_side(target: float, multiple: int, stride: int) -> int:
-    """The allowed tile side nearest below ``target`` (at least the smallest): a multiple of
+    """The allowed tile side nearest ``target`` (at least the smallest): a multiple of
     ``multiple`` that is no power of two, in pixels nor in gather cells (pixels / stride), so
     every tile's textures are of one kind (llvmpipe compiles a kernel variant per
     power-of-two-ness of its textures' sizes: 5–20 s each for the BVH kernels under load)."""
@@ -367,12 +367,9 @@ def tile_side(target: float, multiple: int, stride: int) -> int:
         cells = side // stride
         return side & (side - 1) != 0 and cells & (cells - 1) != 0
 
-    k = max(1, int(target // multiple))
-    while k > 1 and not allowed(k * multiple):
-        k -= 1
-    if not allowed(k * multiple):
-        k = next(j for j in range(2, 64) if allowed(j * multiple))
-    return k * multiple
+    sides = [k * multiple for k in range(1, max(4, int(target // multiple) + 3))
+             if allowed(k * multiple)]
+    return min(sides, key=lambda side: (abs(side - target), side))
 
 
 def tile_shape(pixels: int, width: int, height: int, multiple: int = 1,
