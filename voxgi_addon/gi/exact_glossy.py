@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..scene.snapshot import RAY_GLOSSY
 from .exact_indirect import LUMINANCE, SURFACE_EPSILON, ray_radiance
 from .principled import ROUGHNESS_SQ_THRESHOLD, glossy_color, glossy_reflectance
 from .sampling import hammersley, perpendicular_basis
@@ -177,7 +178,7 @@ def _glossy_indirect(p, n, views, materials, ids, tris, lights, principled, emis
         hit_ids = ids.repeat(rays) * np.uint32(rays) + np.tile(np.arange(rays, dtype=np.uint32), count)
     radiance, _ = ray_radiance(origins, dirs.reshape(-1, 3), hit_ids, tris, lights,
                                (base_table, param_table), emission, seed, world, hit_samples,
-                               hit_glossy)
+                               hit_glossy, ray=RAY_GLOSSY)
     safe_colour = np.where(colour > 0.0, colour, 1.0)
     per_ray = np.where(colour[:, None] > 0.0,
                        weight * radiance.reshape(count, rays, 3) / safe_colour[:, None], 0.0)
@@ -218,7 +219,8 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
     def nearest(dirs, useful):  # (N, K) the rays' nearest triangle (-1: they leave the scene)
         out = np.full(useful.shape, -1)
         if useful.any():
-            t, tri, _, _ = closest_hits(tris, origins[useful.ravel()], dirs[useful], 0.0, np.inf)
+            t, tri, _, _ = closest_hits(tris, origins[useful.ravel()], dirs[useful], 0.0, np.inf,
+                                        RAY_GLOSSY)
             out[useful] = np.where(np.isfinite(t), tri, -1)
         return out
 

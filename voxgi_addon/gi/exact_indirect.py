@@ -30,6 +30,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..scene.raycast import closest_hits
+from ..scene.snapshot import RAY_DIFFUSE
 from .direct_light import concentric_disk, diffuse_direct, light_directions
 from .principled import diffuse_weight, glossy_reflectance
 from .sampling import hammersley, perpendicular_basis
@@ -67,12 +68,13 @@ def _hit_normals(tris, tri, u, v, d):
 
 def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
                  world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
-                 emission_seen: bool | None = None):
+                 emission_seen: bool | None = None, ray: int = RAY_DIFFUSE):
     """((K, 3) radiance arriving back along each ray, (K,) distance of its nearest hit, inf on
     a miss): what a bounce ray of the gathers sees — ``world`` on a miss, else the hit's
     emission plus its exact direct light reflected toward the ray's origin (see
-    ``indirect_and_ao``; ``hit_ids`` (K,) uint32 are the hits' light-sample ids)."""
-    t, tri, u, v = closest_hits(tris, origins, dirs, 0.0, np.inf)
+    ``indirect_and_ao``; ``hit_ids`` (K,) uint32 are the hits' light-sample ids). ray : the
+    kind of ray (``snapshot.RAY_DIFFUSE`` / ``RAY_GLOSSY``: the triangles it sees)."""
+    t, tri, u, v = closest_hits(tris, origins, dirs, 0.0, np.inf, ray)
     radiance = np.tile(np.asarray(world, dtype=np.float64), (len(dirs), 1))
     # With the emissive triangles among the lights their light reaches the origin as direct
     # light (next-event estimation, gi/emitters.py): a ray landing on one adds no emission
