@@ -94,7 +94,8 @@ class MaterialData:
 
     base_color : (3,) float32 linear RGB (the input's value, or the mean of its texture: what
         a per-material table uses).
-    emission : (3,) float32 linear RGB, colour × strength.
+    emission : (3,) float32 linear RGB, colour × strength (with an emission texture, its mean ×
+        the strength: what a per-material table uses).
     base_color_texture : index into ``SceneSnapshot.textures`` of the texture giving the Base
         Color per texel through the meshes' ``uvs``, or -1 (the value is uniform).
     alpha : the Alpha socket's value (1 opaque); alpha_texture : index of the texture whose
@@ -107,6 +108,9 @@ class MaterialData:
     normal_texture : index of a tangent-space normal map's texture (its Normal Map node's Color
         input) perturbing the shading normal of what the camera sees, ``normal_strength`` its
         Strength; -1: none.
+    emission_texture : index of the texture giving the Emission Color per texel through the
+        meshes' ``uvs`` (its RGB × ``emission_strength`` is the emission there); -1: none
+        (``emission`` everywhere).
     """
 
     name: str
@@ -122,6 +126,8 @@ class MaterialData:
     param_variants: int = -1
     normal_texture: int = -1
     normal_strength: float = 1.0
+    emission_texture: int = -1
+    emission_strength: float = 1.0
 
 
 @dataclass(frozen=True)
