@@ -26,6 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..scene.textures import sample_texture
+
 __all__ = ["EmitterLight", "emitter_light", "emitters_direct", "clipped_form_factors",
            "sample_points", "emitter_table", "EMITTER_TEXELS", "MAX_EMITTER_TRIANGLES"]
 
@@ -35,6 +37,10 @@ EMITTER_TEXELS = 4
 # invocation's loops would pass llvmpipe's limit, docs/blender_facts.md): such scenes keep the
 # emission seen by the gathers' rays instead (emitter_light returns None).
 MAX_EMITTER_TRIANGLES = 1024
+# Triangles with an emission texture are split into at most this many pieces in all (each
+# emitting the texture's mean over it), at most 4^MAX_SPLIT_LEVEL per triangle.
+TEXTURED_EMITTER_TRIANGLES = 512
+MAX_SPLIT_LEVEL = 5
 _CHUNK = 8  # emissive triangles per step of the exact sum (memory: points × 8 × 6 corners)
 
 
@@ -79,11 +85,82 @@ def emitting_sides(corners, objects) -> np.ndarray:
     return sides
 
 
+def subdivision(level: int) -> np.ndarray:
+    """(4^level, 3, 3) barycentric weights of the corners of a triangle's regular subdivision
+    into n² = 4^level triangles (n = 2^level; row k, corner i: the weights of the triangle's
+    corners 0, 1, 2)."""
+    n = 1 << level
+    out = []
+    for i in range(n):
+        for j in range(n - i):
+            out.append([(i, j), (i + 1, j), (i, j + 1)])
+            if i + j < n - 1:
+                out.append([(i + 1, j), (i + 1, j + 1), (i, j + 1)])
+    ij = np.array(out, np.float64) / n                           # (n², 3 corners, (b1, b2))
+    return np.concatenate([1.0 - ij.sum(axis=-1, keepdims=True), ij], axis=-1)
+
+
+def _textured_split(tris, keep, corners, radiance):
+    """The kept emissive triangles with their emission per texel (``SurfaceTextures
+    .emission_slots``): each textured one split into 4^L pieces (``subdivision``, one level L
+    for all: the most within TEXTURED_EMITTER_TRIANGLES in all, and no finer than its texels),
+    each piece emitting the texture's mean over its UV footprint (16 points at the level of
+    their share of it) × the strength. Returns (corners (E', 3, 3), radiance (E', 3), index
+    (E',) of the triangle among ``keep``'s each piece comes from); the untextured ones as they
+    are, one piece each."""
+    surface = getattr(tris, "textures", None)
+    kept = np.flatnonzero(keep)
+    same = (corners[kept], radiance[kept], np.arange(len(kept)))
+    if surface is None or getattr(surface, "emission_slots", None) is None:
+        return same
+    materials = np.asarray(tris.materials)[kept]
+    row = surface.row_of(materials)
+    slot = surface.emission_slots[row]
+    textured = slot >= 0
+    if not textured.any():
+        return same
+    area = 0.5 * np.linalg.norm(np.cross(corners[kept, 1] - corners[kept, 0],
+                                         corners[kept, 2] - corners[kept, 0]), axis=1)
+    texels = float(np.max((surface.emission_density[kept] ** 2 * area)[textured], initial=0.0))
+    level = 0
+    while (level < MAX_SPLIT_LEVEL and (~textured).sum() + textured.sum() * 4 ** (level + 1)
+           <= TEXTURED_EMITTER_TRIANGLES and 4 ** (level + 1) <= max(texels, 1.0)):
+        level += 1
+    pieces = subdivision(level)                                  # (P, 3, 3)
+    probes = subdivision(2)                                      # 16 points per piece
+    points = probes.mean(axis=1)                                 # (16, 3) barycentrics
+    out_corners, out_radiance, out_index = [same[0][~textured]], [same[1][~textured]], \
+        [np.flatnonzero(~textured)]
+    at = np.flatnonzero(textured)
+    tri = kept[at]
+    piece_corners = np.einsum("pik,tkc->tpic", pieces, corners[tri])       # (T, P, 3, 3)
+    # the probes' barycentrics in the whole triangle: piece corners weighted by the probe's
+    weights = np.einsum("qi,pik->pqk", points, pieces)                     # (P, 16, 3)
+    uv = np.einsum("pqk,tkc->tpqc", weights, np.asarray(surface.uvs, np.float64)[tri])
+    share = area[at] * surface.emission_density[tri] ** 2 / (len(pieces) * len(points))
+    lod = np.repeat(0.5 * np.log2(np.maximum(share, 1.0)), len(pieces) * len(points))
+    glow = np.zeros((len(at), len(pieces), 3))
+    flat_uv = uv.reshape(-1, 2)
+    owner = np.repeat(np.arange(len(at)), len(pieces) * len(points))
+    for s in np.unique(slot[at]):
+        mine = np.flatnonzero(slot[at] == s)
+        rows = np.isin(owner, mine)
+        value = np.maximum(sample_texture(surface.textures[s], flat_uv[rows], lod[rows]), 0.0)
+        glow[mine] = value.reshape(len(mine), len(pieces), len(points), 3).mean(axis=2)
+    glow *= surface.emission_strength[row[at]][:, None, None]
+    out_corners.append(piece_corners.reshape(-1, 3, 3))
+    out_radiance.append(glow.reshape(-1, 3))
+    out_index.append(np.repeat(at, len(pieces)))
+    return (np.concatenate(out_corners), np.concatenate(out_radiance),
+            np.concatenate(out_index))
+
+
 def emitter_light(tris, emission) -> EmitterLight | None:
     """The emissive triangles of ``tris`` (``SceneTriangles``) with ``emission`` (M + 1, 3) per
     material (``preview.passes.material_table``, the last row for none); None when nothing
-    emits or more than ``MAX_EMITTER_TRIANGLES`` do. float32-rounded as the GPU table holds
-    them."""
+    emits or more than ``MAX_EMITTER_TRIANGLES`` do. Triangles whose material has an emission
+    texture are split and emit the texture per piece (``_textured_split``). float32-rounded as
+    the GPU table holds them."""
     emission = np.maximum(np.nan_to_num(np.asarray(emission, np.float64)), 0.0)
     materials = np.asarray(tris.materials)
     last = len(emission) - 1
@@ -96,13 +173,19 @@ def emitter_light(tris, emission) -> EmitterLight | None:
     if not keep.any() or keep.sum() > MAX_EMITTER_TRIANGLES:
         return None
     sides = emitting_sides(corners[keep], np.asarray(tris.objects)[keep])
+    corners, radiance, index = _textured_split(tris, keep, corners, radiance)
+    sides = sides[index]
+    lit = radiance @ LUMINANCE > 0  # pieces of a texture's black parts light nothing
+    if not lit.any():
+        return None
+    corners, radiance, sides = corners[lit], radiance[lit], sides[lit]
     # a canonical order (by centroid), so that the samples do not depend on the order in which
     # the meshes list their triangles
-    centroid = corners[keep].mean(axis=1)
+    centroid = corners.mean(axis=1)
     order = np.lexsort((centroid[:, 2], centroid[:, 1], centroid[:, 0]))
     sides = sides[order]
-    corners = corners[keep][order].astype(np.float32).astype(np.float64)
-    radiance = radiance[keep][order].astype(np.float32).astype(np.float64)
+    corners = corners[order].astype(np.float32).astype(np.float64)
+    radiance = radiance[order].astype(np.float32).astype(np.float64)
     area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
                                          corners[:, 2] - corners[:, 0]), axis=1)
     power = area * (radiance @ LUMINANCE)

@@ -30,7 +30,7 @@ from ..gi.world_light import scene_lights, world_light
 from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, filter_offsets
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
-from ..scene.textures import primary_base
+from ..scene.textures import primary_base, texel_emission
 from .gather import GatherSettings, gather_gi, gather_glossy, gather_glossy_world
 from .upsample import PLANE_TOLERANCE, STRIDES, sample_pixels, upsample
 
@@ -246,7 +246,7 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
         "Glossy Color": glossy_colour,
         "Ambient Occlusion": np.repeat(np.asarray(ao)[:, None], 3, axis=1),
     }
-    values["Combined"] = (diffuse_colour * (direct + indirect) + emission[mat]
+    values["Combined"] = (diffuse_colour * (direct + indirect) + texel_emission(base, emission[mat])
                           + glossy_colour * glossy + shine)
     passes = {}
     for name in PASS_NAMES:
@@ -408,7 +408,7 @@ def accumulate_pass(sums, snapshot, hit, mat, normals, views, direct, indirect, 
     light = np.asarray(shine, np.float64)
     if glossy_world is not None:
         light = light + glossy_colour * glossy_world
-    for name, value in (("emission", emission[mat]), ("coverage", 1.0),
+    for name, value in (("emission", texel_emission(base, emission[mat])), ("coverage", 1.0),
                         ("diffuse_color", diffuse_colour), ("ao", ao),
                         ("glossy_color", glossy_colour),
                         ("diffuse_direct", diffuse_colour * direct),

@@ -228,6 +228,29 @@ class SurfaceTextures:
     normal_slots: np.ndarray = field(default=None)
     normal_strength: np.ndarray = field(default=None)
     tangents: np.ndarray = field(default=None)
+    emission_slots: np.ndarray = field(default=None)
+    emission_strength: np.ndarray = field(default=None)
+    emission_density: np.ndarray = field(default=None)
+
+    def emission_at(self, triangles, materials, b1, b2, lod=None):
+        """((N, 3) float64 emission per texel — the texture × the material's strength, negative
+        values kept at 0 — where the point's material has an emission texture, else 0; (N,)
+        bool which points have one): triangles (N,) indices, materials (N,) their material
+        indices, b1, b2 (N,) barycentrics, lod (N,) the emission texture's level of detail or
+        None (level 0)."""
+        triangles = np.asarray(triangles)
+        out = np.zeros((len(triangles), 3))
+        if self.emission_slots is None:
+            return out, np.zeros(len(triangles), bool)
+        row = self.row_of(materials)
+        slots = self.emission_slots[row]
+        for slot in np.unique(slots[slots >= 0]):
+            at = np.flatnonzero(slots == slot)
+            value = sample_texture(self.textures[slot], self._uv(
+                triangles[at], np.asarray(b1)[at], np.asarray(b2)[at]),
+                None if lod is None else np.asarray(lod)[at])
+            out[at] = np.maximum(value, 0.0) * self.emission_strength[row[at], None]
+        return out, slots >= 0
 
     def normal_at(self, triangles, materials, b1, b2, normals) -> np.ndarray:
         """(N, 3) unit shading normals ``normals`` (N, 3) (interpolated, unit) perturbed by
@@ -337,7 +360,13 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
     variants = np.full(count, -1, np.int64)
     normal_slots = np.full(count, -1, np.int32)
     normal_strength = np.ones(count, np.float32)
+    emission_slots = np.full(count, -1, np.int32)
+    emission_strength = np.ones(count, np.float32)
     for i, m in enumerate(snapshot.materials):
+        index = int(getattr(m, "emission_texture", -1))
+        if 0 <= index < len(textures):
+            emission_slots[i] = index
+            emission_strength[i] = float(getattr(m, "emission_strength", 1.0))
         index = int(getattr(m, "normal_texture", -1))
         if 0 <= index < len(textures):
             normal_slots[i] = index
@@ -355,9 +384,14 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
         alpha_values[i] = np.clip(float(getattr(m, "alpha", 1.0)), 0.0, 1.0)
     transparent = (alpha_slots >= 0) | (alpha_values < 1.0)
     if not (slots >= 0).any() and not transparent.any() and not (param_slots >= 0).any() and \
-            not (normal_slots >= 0).any():
+            not (normal_slots >= 0).any() and not (emission_slots >= 0).any():
         return None
     out = SurfaceTextures(textures, slots, np.asarray(uvs, np.float32))
+    scale = np.array([texture_texels(t) for t in textures] + [0.0], np.float64)
+    if (emission_slots >= 0).any():
+        out.emission_slots, out.emission_strength = emission_slots, emission_strength
+        out.emission_density = (texel_density(positions, uvs) *
+                                scale[emission_slots[out.row_of(materials)]]).astype(np.float32)
     if (normal_slots >= 0).any():
         out.normal_slots, out.normal_strength = normal_slots, normal_strength
         out.tangents = face_tangents(positions, uvs)
@@ -367,7 +401,6 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
         out.alpha_slots, out.alpha_values = alpha_slots, alpha_values
         out.cutout = transparent[out.row_of(materials)]
     slot = out.slot_of(materials)
-    scale = np.array([texture_texels(t) for t in textures] + [0.0], np.float64)
     out.density = (texel_density(positions, uvs) * scale[slot]).astype(np.float32)
     return out
 
@@ -537,13 +570,38 @@ def pack_atlas(textures, width: int | None = None):
     return atlas, table
 
 
+class TexelBase(np.ndarray):
+    """The (N, 3) Base Color ``primary_base`` returns, carrying what the same pixels' camera
+    hits emit per texel: ``emission`` (N, 3) and ``emissive`` (N,) bool, the pixels whose
+    material has an emission texture (the others emit their material's ``emission``). Arrays
+    derived from it (slices, arithmetic) carry neither (None): they are other pixels."""
+
+    emission = None
+    emissive = None
+
+    def __array_finalize__(self, obj):
+        self.emission = self.emissive = None
+
+
+def texel_emission(base, emission: np.ndarray) -> np.ndarray:
+    """(N, 3) what the camera hits emit: the material table's ``emission`` (N, 3) rows, and
+    where ``base`` (``primary_base``'s ``TexelBase``, else anything) says so the emission per
+    texel."""
+    texels, emissive = getattr(base, "emission", None), getattr(base, "emissive", None)
+    if texels is None or emissive is None or not np.any(emissive):
+        return emission
+    return np.where(np.asarray(emissive)[:, None], texels, emission)
+
+
 def primary_base(tris, seen, pixels, base, camera, width: int, height: int,
                  filter_width: float = DEFAULT_FILTER_WIDTH):
     """(N, 3) float64 Base Color of the pixels ``pixels`` (N,) flat indices that see a
     surface in ``seen`` (``raycast.PrimaryHits`` with barycentrics): ``base`` (N, 3) (the
     material table's rows) with textured materials sampled per texel at the pixel's
     ``primary_lod`` for Filter Size ``filter_width``; None when the triangles carry no
-    textures (use ``base``)."""
+    textures (use ``base``). A ``TexelBase``: materials with an emission texture give their
+    emission per texel there too, at the emission texture's own ``primary_lod``
+    (``texel_emission``)."""
     tex = getattr(tris, "textures", None)
     if tex is None or seen.barycentric is None:
         return None
@@ -559,5 +617,10 @@ def primary_base(tris, seen, pixels, base, camera, width: int, height: int,
                     seen.direction.reshape(-1, 3)[pixels])
     spread = pixel_spread(camera, width, height) * filter_footprint(filter_width)
     lod = primary_lod(tex.density[triangle], distance, cos, spread)
-    return tex.base_at(triangle, np.asarray(tris.materials)[triangle], bary[:, 0], bary[:, 1],
-                       base, lod)
+    materials = np.asarray(tris.materials)[triangle]
+    out = tex.base_at(triangle, materials, bary[:, 0], bary[:, 1], base, lod).view(TexelBase)
+    if tex.emission_slots is not None:
+        lod = primary_lod(tex.emission_density[triangle], distance, cos, spread)
+        out.emission, out.emissive = tex.emission_at(triangle, materials, bary[:, 0],
+                                                     bary[:, 1], lod)
+    return out

@@ -1,0 +1,131 @@
+"""Emission Color per texel (issue 18 point 2, issue 22 point 3): what the camera sees of a
+material with an emission texture (``scene.textures.primary_base`` / ``texel_emission``, the
+Combined pass's emission term) and the emissive triangles as a light (``gi.emitters``: a
+textured emitter is split into pieces, each emitting the texture's mean over it)."""
+import numpy as np
+
+from voxgi.voxgi_addon.gi.conetrace import ConeSettings
+from voxgi.voxgi_addon.gi.emitters import emitter_light, subdivision
+from voxgi.voxgi_addon.preview.passes import material_table, render_passes
+from voxgi.voxgi_addon.scene.geometry import world_triangles
+from voxgi.voxgi_addon.scene.snapshot import (
+    CameraData,
+    MaterialData,
+    MeshData,
+    ObjectData,
+    SceneSnapshot,
+    TextureData,
+)
+
+RED, BLUE = np.array([1.0, 0.1, 0.05]), np.array([0.05, 0.2, 1.0])
+STRENGTH = 4.0
+
+
+def two_colour_pixels(size=8):
+    """Left half (u < 0.5) red, right half blue."""
+    out = np.zeros((size, size, 3), np.float32)
+    out[:, : size // 2] = RED
+    out[:, size // 2:] = BLUE
+    return out
+
+
+def panel_snapshot(textured=True):
+    """A 2 × 2 m panel at z = 1 facing down (emission per texel, or the texture's mean) over a
+    grey floor at z = 0, seen from the front and above (an orthographic camera)."""
+    panel = np.array([[-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], np.float32)
+    floor = np.array([[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0]], np.float32)
+    quad = np.array([[0, 2, 1], [0, 3, 2]], np.int32)  # facing −z
+    up = np.array([[0, 1, 2], [0, 2, 3]], np.int32)
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)
+    meshes = {"panel": MeshData("panel", panel, quad, np.zeros(2, np.int32), uvs=uv[quad]),
+              "floor": MeshData("floor", floor, up, np.ones(2, np.int32), uvs=uv[up])}
+    pixels = two_colour_pixels()
+    mean = pixels.reshape(-1, 3).mean(axis=0)
+    glow = MaterialData("glow", np.zeros(3, np.float32), roughness=1.0, specular=0.0,
+                        emission=(mean * STRENGTH).astype(np.float32),
+                        emission_texture=0 if textured else -1, emission_strength=STRENGTH)
+    grey = MaterialData("grey", np.full(3, 0.5, np.float32), roughness=1.0, specular=0.0)
+    eye, target = np.array([0.0, -7.0, 5.0]), np.array([0.0, 0.0, 0.3])
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    world = np.eye(4)
+    world[:3, 0], world[:3, 1], world[:3, 2], world[:3, 3] = \
+        right, np.cross(right, forward), -forward, eye
+    camera = CameraData("cam", world, np.eye(4), (32, 24), type="ORTHO", ortho_scale=7.0,
+                        clip_start=0.1, clip_end=30.0)
+    texture = TextureData("two colours", pixels, interpolation="Closest", extension="EXTEND",
+                          key="two colours")
+    return SceneSnapshot(meshes=meshes, materials=[glow, grey],
+                         objects=[ObjectData("panel", "panel", np.eye(4)),
+                                  ObjectData("floor", "floor", np.eye(4))],
+                         camera=camera, textures=(texture,))
+
+
+def test_subdivision_tiles_the_triangle():
+    for level in range(4):
+        pieces = subdivision(level)
+        assert pieces.shape == (4 ** level, 3, 3)
+        np.testing.assert_allclose(pieces.sum(axis=-1), 1.0)
+        corners = pieces[..., 1:]  # (b1, b2) in the unit right triangle: areas sum to 1/2
+        e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+        area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+        np.testing.assert_allclose(area, 0.5 / 4 ** level)
+
+
+def test_textured_emitters_emit_each_half_its_colour():
+    snapshot = panel_snapshot()
+    tris = world_triangles(snapshot)
+    light = emitter_light(tris, material_table(snapshot)[3])
+    assert len(light.corners) > 2  # split
+    centroid = light.corners.mean(axis=1)
+    left, right = centroid[:, 0] < -0.1, centroid[:, 0] > 0.1
+    # pieces inside one half emit that half's colour × the strength
+    inside_left = left & (light.corners[..., 0].max(axis=1) <= 0.0)
+    inside_right = right & (light.corners[..., 0].min(axis=1) >= 0.0)
+    assert inside_left.sum() > 4 and inside_right.sum() > 4
+    np.testing.assert_allclose(light.radiance[inside_left], np.tile(RED * STRENGTH, (inside_left.sum(), 1)),
+                               rtol=2e-3)
+    np.testing.assert_allclose(light.radiance[inside_right],
+                               np.tile(BLUE * STRENGTH, (inside_right.sum(), 1)), rtol=2e-3)
+    # the pieces' power is the panel's: area × the texture's mean × the strength
+    power = (light.area[:, None] * light.radiance).sum(axis=0)
+    np.testing.assert_allclose(power, 4.0 * snapshot.materials[0].emission, rtol=0.01)
+
+
+def test_the_floor_under_each_half_takes_its_colour_and_the_camera_sees_the_texels():
+    from voxgi.voxgi_addon.scene.raycast import primary_visibility
+
+    cones = ConeSettings()
+    snapshot = panel_snapshot(True)
+    textured, _ = render_passes(snapshot, None, 32, 24, cones, light_samples=4, filter_width=0.0)
+    mean, _ = render_passes(panel_snapshot(False), None, 32, 24, cones, light_samples=4,
+                            filter_width=0.0)
+    seen = primary_visibility(world_triangles(snapshot), snapshot.camera, 32, 24)
+    x = seen.position[..., 0]
+    floor = seen.hit & (seen.material == 1) & (seen.position[..., 1] < 1.0)
+    left, right = floor & (x < -0.3) & (x > -1.5), floor & (x > 0.3) & (x < 1.5)
+    assert left.sum() > 5 and right.sum() > 5
+
+    def redness(passes, where):
+        light = passes["Diffuse Direct"][where]
+        return light[:, 0].mean() / light[:, 2].mean()
+
+    # the red half lights the floor under it redder; the mean lights both sides alike
+    assert redness(textured, left) > 1.5 * redness(textured, right)
+    assert abs(redness(mean, left) / redness(mean, right) - 1.0) < 0.1
+    # the same light on the floor in all
+    np.testing.assert_allclose(textured["Diffuse Direct"][floor].sum(axis=0),
+                               mean["Diffuse Direct"][floor].sum(axis=0), rtol=0.05)
+    # what the camera sees of the panel: each half its texels × the strength, as Combined
+    panel = seen.hit & (seen.material == 0)
+    px = seen.position[..., 0]
+    seen_left, seen_right = panel & (px < -0.1), panel & (px > 0.1)
+    assert seen_left.sum() > 3 and seen_right.sum() > 3
+    np.testing.assert_allclose(textured["Combined"][seen_left],
+                               np.tile(RED * STRENGTH, (seen_left.sum(), 1)), rtol=1e-3)
+    np.testing.assert_allclose(textured["Combined"][seen_right],
+                               np.tile(BLUE * STRENGTH, (seen_right.sum(), 1)), rtol=1e-3)
+    np.testing.assert_allclose(mean["Combined"][seen_left],
+                               np.tile(snapshot.materials[0].emission, (seen_left.sum(), 1)),
+                               rtol=1e-3)
