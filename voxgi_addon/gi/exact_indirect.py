@@ -33,6 +33,7 @@ from ..scene.raycast import closest_hits
 from ..scene.snapshot import RAY_DIFFUSE
 from .direct_light import concentric_disk, diffuse_direct, light_directions
 from .principled import diffuse_weight, glossy_reflectance
+from .radiance_cache import lookup
 from .sampling import hammersley, perpendicular_basis
 
 __all__ = ["RAY_STREAM", "SURFACE_EPSILON", "cosine_directions", "indirect_and_ao", "ray_radiance"]
@@ -68,12 +69,14 @@ def _hit_normals(tris, tri, u, v, d):
 
 def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
                  world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
-                 emission_seen: bool | None = None, ray: int = RAY_DIFFUSE):
+                 emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, cache=None):
     """((K, 3) radiance arriving back along each ray, (K,) distance of its nearest hit, inf on
     a miss): what a bounce ray of the gathers sees — ``world`` on a miss, else the hit's
     emission plus its exact direct light reflected toward the ray's origin (see
     ``indirect_and_ao``; ``hit_ids`` (K,) uint32 are the hits' light-sample ids). ray : the
-    kind of ray (``snapshot.RAY_DIFFUSE`` / ``RAY_GLOSSY``: the triangles it sees)."""
+    kind of ray (``snapshot.RAY_DIFFUSE`` / ``RAY_GLOSSY``: the triangles it sees).
+    cache : a ``radiance_cache.RadianceCache`` (None: none): the hit also reflects, by its
+    diffuse weight, the indirect light the cache holds at it (bounces beyond the first)."""
     t, tri, u, v = closest_hits(tris, origins, dirs, 0.0, np.inf, ray)
     radiance = np.tile(np.asarray(world, dtype=np.float64), (len(dirs), 1))
     # With the emissive triangles among the lights their light reaches the origin as direct
@@ -114,9 +117,11 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
         if reflect is not None:  # the world's and emitters' light off the hit's glossy lobe
             lit, reflected = lit
         radiance[hit] = np.asarray(emission, np.float64)[material] if emission_seen else 0.0
+        # the light of the later bounces arriving at the hit (0 without a cache)
+        arriving = lit.sum(axis=0) + (lookup(cache, x, ns) if cache is not None else 0.0)
         if principled:
             mu = np.clip(-np.einsum("ij,ij->i", ns, dirs[hit]), 0.0, 1.0)
-            radiance[hit] += diffuse_weight(*shading, mu) * lit.sum(axis=0)
+            radiance[hit] += diffuse_weight(*shading, mu) * arriving
             if reflect is not None:
                 radiance[hit] += reflected.sum(axis=0)
             for direct, towards in zip(lit if hit_glossy else (), light_directions(lights, x)):
@@ -125,13 +130,14 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
                     glossy_reflectance(*shading, ns, -dirs[hit], towards)
                 radiance[hit] += np.where(cos[:, None] > 1e-4, shine, 0.0)
         else:
-            radiance[hit] += np.asarray(albedo, np.float64)[material] * lit.sum(axis=0)
+            radiance[hit] += np.asarray(albedo, np.float64)[material] * arriving
     return radiance, t
 
 
 def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission, rays: int = 16,
                     ao_distance: float = 1.0, seed: int = 0, world=(0.0, 0.0, 0.0),
-                    hit_samples: int = 1, statistics: bool = False, hit_glossy: bool = False):
+                    hit_samples: int = 1, statistics: bool = False, hit_glossy: bool = False,
+                    cache=None):
     """(Diffuse Indirect (N, 3) float32, Ambient Occlusion (N,) float32) — see the module doc;
     with ``statistics`` also (N, 2) float32: the variance of the indirect light's luminance mean
     (unbiased sample variance / rays) and of the AO mean (from the share of unoccluded rays
@@ -149,6 +155,8 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
         glossy lobe's reflection of each light toward the receiver (the light at its centre
         direction): the path diffuse → glossy, which Cycles' light sampling at the hit keeps
         whatever the glossy bounce limit.
+    cache : a ``radiance_cache.RadianceCache`` whose indirect light the hits reflect too (the
+        bounces beyond the first); None: one bounce.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -162,7 +170,7 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
     with np.errstate(over="ignore"):
         hit_ids = ids.repeat(rays) * np.uint32(rays) + np.tile(np.arange(rays, dtype=np.uint32), count)
     radiance, t = ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed,
-                               world, hit_samples, hit_glossy)
+                               world, hit_samples, hit_glossy, cache=cache)
     unoccluded = (t >= ao_distance).reshape(count, rays).mean(axis=1)
     per_ray = radiance.reshape(count, rays, 3)
     indirect = per_ray.mean(axis=1)

@@ -36,7 +36,11 @@ class GatherSettings:
     hit evaluates every closure, docs/gi_pipeline.md "What one bounce means in Cycles");
     hit_samples : shadow rays per light at each bounce hit; denoise_iterations : à-trous passes
     (taps 1, 2, 4, … cells apart); seed : the sequences' seed; world : RGB radiance of a miss
-    (0 gives Cycles' pass split, where the world seen from a receiver is direct light)."""
+    (0 gives Cycles' pass split, where the world seen from a receiver is direct light).
+    bounces : diffuse bounces of the Diffuse Indirect gather (Cycles' Light Paths): 1 is the
+    exact one-bounce gather and builds no cache; N > 1 adds at each bounce hit the light of
+    bounces 2 … N from a radiance cache of N − 1 iterations (``gi.radiance_cache``, with
+    ``cache_rays`` rays per voxel face on a ``cache_resolution``³ grid)."""
 
     rays: int = 64
     glossy_rays: int = 8
@@ -46,6 +50,20 @@ class GatherSettings:
     denoise_iterations: int = 4
     seed: int = 0
     world: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    bounces: int = 1
+    cache_rays: int = 16
+    cache_resolution: int = 32
+
+
+def radiance_cache(tris, lights, albedo, emission, settings: GatherSettings):
+    """The radiance cache the diffuse gather reads at its bounce hits for ``settings.bounces``
+    (None for one bounce; ``gi.radiance_cache.cached_cache``, kept between calls)."""
+    if settings.bounces <= 1:
+        return None
+    from ..gi.radiance_cache import cached_cache
+    return cached_cache(tris, lights, albedo, emission, settings.bounces, settings.cache_rays,
+                        settings.cache_resolution, settings.world, settings.hit_samples,
+                        settings.hit_glossy)
 
 
 VIEW_BACKOFF = 2e-4  # metres: gather points step back along the camera ray (see gather_gi)
@@ -75,7 +93,8 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     indirect, ao, var = indirect_and_ao(
         cell_p[valid], cell_n[valid], ids, tris, lights, albedo, emission, rays=settings.rays,
         ao_distance=settings.ao_distance, seed=settings.seed, world=settings.world,
-        hit_samples=settings.hit_samples, statistics=True, hit_glossy=settings.hit_glossy)
+        hit_samples=settings.hit_samples, statistics=True, hit_glossy=settings.hit_glossy,
+        cache=radiance_cache(tris, lights, albedo, emission, settings))
     values[valid] = np.concatenate([indirect, ao[:, None]], axis=1)
     variance[valid] = var
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,

@@ -1,0 +1,242 @@
+"""A multi-bounce radiance cache in voxels: the light that reaches a surface after two or more
+bounces, for the Accurate gathers' bounce hits (docs/gi_pipeline.md "Multi-bounce radiance
+cache").
+
+The Accurate gather shades each bounce hit with its exact direct light (one bounce). With
+*Bounces* N > 1 it also adds, at the hit, the hit's diffuse weight × the **indirect** light
+arriving there, looked up in this cache. The cache holds, per voxel of its grids (the cells the
+scene's triangles touch, ``voxelize_triangles``), the indirect light (Cycles' units: E/π, what a
+white Lambertian surface would reflect) arriving through each of the six axis faces of the voxel
+(an "ambient cube": +x, −x, +y, −y, +z, −z). A surface point with unit normal n reads
+Σ_a n_a² · face(a, sign n_a), trilinear over the eight nearest present voxels of the finest grid
+holding it (absent voxels carry no weight).
+
+Iteration k (``iterate``) gathers face f of every voxel with ``rays`` cosine-distributed exact
+rays about the face's axis, starting ``FACE_OFFSET`` voxels out of the voxel centre along it, and
+shades each with ``exact_indirect.ray_radiance`` — the hit's exact direct light (every light:
+lamps, world, emitters) reflected by its albedo — *plus* the hit's diffuse weight × iteration
+k − 1's cache at the hit. So iteration 1 holds the two-bounce light, iteration k the light of
+bounces 2 … k + 1, and the gather with a cache of N − 1 iterations returns bounces 1 … N: the
+first bounce exact, the rest cached. Bounces = 1 builds no cache at all.
+
+Numpy only; the GPU reads the same values from ``cache_texels`` (``render/gpu_gather.py``,
+``shaders/bvh_shade.glsl`` ``cache_indirect``) and looks them up as ``lookup`` does.
+"""
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import VoxGIError
+from ..voxelize.surface import voxelize_triangles
+from .cascades import CascadeGrid
+from .sampling import hammersley
+
+__all__ = ["CACHE_STREAM", "FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids",
+           "cache_texels", "cached_cache", "iterate", "lookup"]
+
+CACHE_STREAM = 0xCAC4E   # hash stream of the cache's face rays
+FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin
+FACES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
+
+
+@dataclass(frozen=True, eq=False)
+class RadianceCache:
+    """grids : the cache's ``CascadeGrid`` list, finest first (a point reads the finest that
+    holds it). cells : per grid the (N_i, 3) int32 voxels (sorted, unique). faces : per grid
+    (N_i, 6, 3) float32 indirect light (E/π) through each face (+x, −x, +y, −y, +z, −z).
+    iterations : bounces beyond the first that it carries (0: an empty cache, all zeros)."""
+
+    grids: tuple
+    cells: tuple
+    faces: tuple
+    iterations: int = 0
+
+    @property
+    def voxel_count(self) -> int:
+        return sum(len(c) for c in self.cells)
+
+    @property
+    def nbytes(self) -> int:
+        return sum(f.nbytes + c.nbytes for f, c in zip(self.faces, self.cells))
+
+
+def cache_grids(tris, resolution: int = 32, count: int = 1) -> list:
+    """``count`` nested grids of ``resolution``³ voxels (finest first), the coarsest a cube over
+    the triangles' bounding box (2% margin), each finer one the middle half of the next
+    (cascades' layout, docs/gi_pipeline.md "Conventions")."""
+    if resolution < 2 or resolution & (resolution - 1):
+        raise VoxGIError(f"the radiance cache's resolution must be a power of two ≥ 2, "
+                         f"not {resolution}")
+    if count < 1:
+        raise VoxGIError(f"the radiance cache needs at least one grid, not {count}")
+    corners = np.asarray(tris.positions, np.float64).reshape(-1, 3)
+    if len(corners) == 0:
+        raise VoxGIError("the radiance cache needs triangles")
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    size = max(float((hi - lo).max()) * 1.02, 1e-3)
+    centre = 0.5 * (lo + hi)
+    grids = []
+    for index in range(count):
+        span = size / 2 ** (count - 1 - index) / resolution
+        grids.append(CascadeGrid(index, span, resolution, centre - 0.5 * resolution * span))
+    return grids
+
+
+def _sites(tris, grids) -> list:
+    """Per grid the (N_i, 3) int32 cells its triangles touch, a coarser grid leaving out the
+    cells a finer grid covers entirely."""
+    corners = np.asarray(tris.positions, np.float64)
+    triangles = np.arange(len(corners) * 3).reshape(-1, 3)
+    out = []
+    for index, grid in enumerate(grids):
+        local = (corners - np.asarray(grid.origin)).reshape(-1, 3)
+        cells = voxelize_triangles(local, triangles, float(grid.span)).cells.astype(np.int64)
+        res = grid.resolution
+        cells = cells[((cells >= 0) & (cells < res)).all(axis=1)]
+        if index > 0:  # the finer grid is cells [res/4, 3 res/4) of this one
+            inner = ((cells >= res // 4) & (cells < 3 * res // 4)).all(axis=1)
+            cells = cells[~inner]
+        out.append(cells.astype(np.int32))
+    return out
+
+
+def _dense_index(grid, cells) -> np.ndarray:
+    res = grid.resolution
+    index = np.full(res ** 3, -1, np.int64)
+    c = np.asarray(cells, np.int64)
+    index[(c[:, 0] * res + c[:, 1]) * res + c[:, 2]] = np.arange(len(c))
+    return index
+
+
+def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
+    """(K, 3) float64 indirect light (E/π) at ``points`` (K, 3) for unit ``normals`` (K, 3):
+    the faces blended by n², trilinear (node-centred) over the present voxels of the finest
+    grid holding each point; 0 outside every grid or where no neighbour is present."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    n = np.asarray(normals, np.float64).reshape(-1, 3)
+    out = np.zeros((len(p), 3))
+    if cache is None or cache.iterations == 0 or len(p) == 0:
+        return out
+    face = np.where(n < 0, 1, 0) + np.array([0, 2, 4])  # (K, 3) face per axis
+    blend = n ** 2
+    todo = np.ones(len(p), bool)
+    for grid, cells, faces in zip(cache.grids, cache.cells, cache.faces):
+        if not todo.any():
+            break
+        g = (p - np.asarray(grid.origin)) / grid.span
+        res = grid.resolution
+        inside = todo & ((g >= 0) & (g < res)).all(axis=1)
+        todo &= ~inside
+        rows = np.flatnonzero(inside)
+        if len(rows) == 0 or len(cells) == 0:
+            continue
+        index = _dense_index(grid, cells)
+        gg = g[rows] - 0.5
+        base = np.floor(gg).astype(np.int64)
+        frac = gg - base
+        total = np.zeros((len(rows), 3))
+        weight = np.zeros(len(rows))
+        for corner in range(8):
+            offset = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
+            c = base + offset
+            w = np.prod(np.where(offset == 1, frac, 1.0 - frac), axis=1)
+            ok = ((c >= 0) & (c < res)).all(axis=1)
+            key = np.where(ok, (c[:, 0] * res + c[:, 1]) * res + c[:, 2], 0)
+            site = np.where(ok, index[key], -1)
+            present = site >= 0
+            value = faces[np.maximum(site, 0)[:, None], face[rows]]  # (k, 3 axes, 3 rgb)
+            value = (value * blend[rows][:, :, None]).sum(axis=1)
+            w = np.where(present, w, 0.0)
+            total += w[:, None] * value
+            weight += w
+        out[rows] = np.where(weight[:, None] > 1e-6, total / np.maximum(weight, 1e-6)[:, None], 0.0)
+    return out
+
+
+def build_cache(tris, resolution: int = 32, count: int = 1) -> RadianceCache:
+    """An empty cache (iteration 0, all zeros) on ``cache_grids`` of ``tris``."""
+    grids = cache_grids(tris, resolution, count)
+    cells = _sites(tris, grids)
+    faces = tuple(np.zeros((len(c), 6, 3), np.float32) for c in cells)
+    return RadianceCache(tuple(grids), tuple(cells), faces, 0)
+
+
+def iterate(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 16, seed: int = 0,
+            world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = True) -> RadianceCache:
+    """One more bounce: every voxel face gathers ``rays`` exact rays shaded by
+    ``exact_indirect.ray_radiance`` with ``cache`` at their hits (see the module doc).
+    lights, albedo, emission, world, hit_samples, hit_glossy : as the gather's
+    (``exact_indirect.indirect_and_ao``)."""
+    from .exact_indirect import cosine_directions, ray_radiance
+
+    faces = []
+    offset = 0
+    for grid, cells in zip(cache.grids, cache.cells):
+        count = len(cells)
+        if count == 0:
+            faces.append(np.zeros((0, 6, 3), np.float32))
+            continue
+        centres = np.asarray(grid.origin) + (cells.astype(np.float64) + 0.5) * grid.span
+        axes = np.tile(FACES, (count, 1))                          # (6 count, 3)
+        origins = np.repeat(centres, 6, axis=0) + FACE_OFFSET * grid.span * axes
+        ids = (offset + np.arange(6 * count)).astype(np.uint32)
+        dirs = cosine_directions(axes, hammersley(ids, CACHE_STREAM, rays, seed)).reshape(-1, 3)
+        with np.errstate(over="ignore"):
+            hit_ids = np.repeat(ids, rays) * np.uint32(rays) + \
+                np.tile(np.arange(rays, dtype=np.uint32), 6 * count)
+        radiance, _ = ray_radiance(np.repeat(origins, rays, axis=0), dirs, hit_ids, tris, lights,
+                                   albedo, emission, seed + 7, world, hit_samples, hit_glossy,
+                                   cache=cache)
+        faces.append(radiance.reshape(count, 6, rays, 3).mean(axis=2).astype(np.float32))
+        offset += 6 * count
+    return RadianceCache(cache.grids, cache.cells, tuple(faces), cache.iterations + 1)
+
+
+_MEMO: dict = {}
+
+
+def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
+                 resolution: int = 32, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
+                 hit_glossy: bool = True) -> RadianceCache | None:
+    """The cache of ``bounces`` − 1 iterations for these triangles, lights and materials (None
+    for ``bounces`` ≤ 1), kept for the next call with the same inputs (the viewport's slices and
+    the GPU and numpy gathers of one render ask for the same cache)."""
+    if bounces <= 1:
+        return None
+    albedo_key = tuple(np.asarray(a, np.float64).tobytes() for a in
+                       (albedo if isinstance(albedo, tuple) else (albedo,)))
+    key = (tuple(id(light) for light in lights), albedo_key,
+           np.asarray(emission, np.float64).tobytes(), bounces, rays, resolution,
+           tuple(float(w) for w in world), hit_samples, hit_glossy)
+    held = _MEMO.get("entry")
+    if held is not None and held[0]() is tris and held[1] == key:
+        return held[2]
+    cache = build_cache(tris, resolution)
+    for _ in range(bounces - 1):
+        cache = iterate(cache, tris, lights, albedo, emission, rays, world=world,
+                        hit_samples=hit_samples, hit_glossy=hit_glossy)
+    _MEMO["entry"] = (weakref.ref(tris), key, cache, tuple(lights))
+    return cache
+
+
+def cache_texels(cache: RadianceCache) -> np.ndarray:
+    """(H, W, 4) float32 texels of ``cache`` for the GPU (``shaders/bvh_shade.glsl``
+    ``cache_indirect``): W = res² (texel x + y·res), row 0 the header — texel i = (origin xyz,
+    span) of grid i, the last texel (res, grid count, 0, 0) — then per grid g, z and face f the
+    row 1 + (g·res + z)·6 + f of (rgb, 1 where the voxel is present)."""
+    res = cache.grids[0].resolution
+    count = len(cache.grids)
+    width = max(res * res, count + 1)
+    texels = np.zeros((1 + count * res * 6, width, 4), np.float32)
+    for g, (grid, cells, faces) in enumerate(zip(cache.grids, cache.cells, cache.faces)):
+        texels[0, g] = (*grid.origin, grid.span)
+        c = np.asarray(cells, np.int64)
+        for f in range(6):
+            rows = 1 + (g * res + c[:, 2]) * 6 + f
+            texels[rows, c[:, 0] + c[:, 1] * res, :3] = faces[:, f]
+            texels[rows, c[:, 0] + c[:, 1] * res, 3] = 1.0
+    texels[0, width - 1] = (res, count, 0.0, 0.0)
+    return texels
