@@ -21,6 +21,7 @@ from ..voxgi_addon.scene.textures import (
     ROUGHNESS_LEVELS,
     filter_footprint,
     pixel_spread,
+    unpack_emission,
 )
 from .gpu_shaders import SHADER_DIR
 from .gpu_tracer import read_texture
@@ -44,6 +45,8 @@ def gbuffer_shader():
     varying.flat("VEC2", "surface_params")
     varying.flat("VEC2", "surface_normal_map")
     varying.flat("VEC4", "surface_tangent")
+    varying.flat("VEC4", "surface_glow")
+    varying.flat("VEC3", "surface_base")
     info = gpu.types.GPUShaderCreateInfo()
     info.vertex_in(0, "VEC3", "position")
     info.vertex_in(1, "VEC3", "normal")
@@ -55,6 +58,8 @@ def gbuffer_shader():
     info.vertex_in(7, "VEC2", "params")
     info.vertex_in(8, "VEC2", "normal_map")
     info.vertex_in(9, "VEC4", "tangent")
+    info.vertex_in(10, "VEC4", "glow")
+    info.vertex_in(11, "VEC3", "material_base")
     info.vertex_out(varying)
     info.sampler(0, "FLOAT_2D", "texture_table")
     info.sampler(1, "FLOAT_2D", "texture_atlas")
@@ -78,7 +83,9 @@ def gbuffer_shader():
 
 class GBuffer:
     """position, normal, view : RGBA32F textures (see module doc) of width × height; base :
-    (Base Color sampled per texel, 1) where the pixel's material has a texture, else 0."""
+    (Base Color sampled per texel, 1) where the pixel's material has a texture, else 0; where
+    it has an emission texture, (its Base Color, the emission per texel packed into one float
+    ≥ 2: ``scene.textures.pack_emission``)."""
 
     def __init__(self, width: int, height: int):
         self.width, self.height = width, height
@@ -111,7 +118,10 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
     rays pass them in ``raycast``. A material with Roughness / Metallic per texel writes the
     material variant of the fragment's texel (``textures.SurfaceTextures.variant_at``) and its
     roughness; a normal map perturbs the fragment's shading normal
-    (``textures.SurfaceTextures.normal_at``).
+    (``textures.SurfaceTextures.normal_at``). A material with an emission texture writes its
+    Base Color (per texel or its value) and its emission per texel at its own
+    ``primary_lod``, packed into base's 4th channel (``textures.pack_emission``: a float ≥ 2,
+    so kernels that test w > 0.5 for a textured Base Color read it as before).
     """
     out = GBuffer(width, height)
     framebuffer = gpu.types.GPUFrameBuffer(depth_slot=out.depth,
@@ -154,6 +164,10 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
             # (normal map texture, Strength) and the triangle's tangent (textures.normal_at)
             normal_map = np.tile(np.float32([-1.0, 1.0]), (len(corners), 1))
             tangent = np.zeros((len(corners), 4), np.float32)
+            # (emission texture, Strength, its texels per metre × the footprint, 0) and the
+            # material's Base Color value (textures.SurfaceTextures.emission_at), -1: none
+            glow = np.tile(np.float32([-1.0, 0.0, 0.0, 0.0]), (len(corners), 1))
+            material_base = np.zeros((len(corners), 3), np.float32)
             if textures is None or surface_textures is None:
                 uv = np.zeros((len(corners), 2), np.float32)
                 texel = np.tile(np.float32([-1.0, 0.0]), (len(corners), 1))
@@ -183,12 +197,22 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
                         axis=1).astype(np.float32), 3, axis=0)
                     tangent = np.repeat(np.asarray(surface_textures.tangents, np.float32), 3,
                                         axis=0)
+                if surface_textures.emission_slots is not None:
+                    row = surface_textures.row_of(tris.materials)
+                    glow = np.repeat(np.stack(
+                        [surface_textures.emission_slots[row],
+                         surface_textures.emission_strength[row],
+                         surface_textures.emission_density * spread,
+                         np.zeros(len(row))], axis=1).astype(np.float32), 3, axis=0)
+                    material_base = np.repeat(np.asarray(
+                        surface_textures.material_base, np.float32)[row], 3, axis=0)
             batch = batch_for_shader(shader, "TRIS", {"position": corners, "normal": smooth,
                                                       "face_normal": face, "material": surface,
                                                       "uv": uv, "texel": texel,
                                                       "cutout": cutout, "params": params,
                                                       "normal_map": normal_map,
-                                                      "tangent": tangent})
+                                                      "tangent": tangent, "glow": glow,
+                                                      "material_base": material_base})
             shader.bind()
             shader.uniform_sampler("texture_table", textures[0])
             shader.uniform_sampler("texture_atlas", textures[1])
@@ -211,7 +235,9 @@ def _no_textures():
 
 def read_gbuffer(gbuffer: GBuffer) -> dict[str, np.ndarray]:
     """The G-buffer as top-row-first numpy arrays: hit (H, W) bool, position, normal,
-    direction (H, W, 3) float32, roughness (H, W) float32, material (H, W) int32."""
+    direction (H, W, 3) float32, roughness (H, W) float32, material (H, W) int32, base
+    (H, W, 3) and textured (H, W) bool, emission (H, W, 3) per texel where emissive (H, W)
+    bool (``textures.unpack_emission``)."""
     position = np.flipud(read_texture(gbuffer.position))
     normal = np.flipud(read_texture(gbuffer.normal))
     view = np.flipud(read_texture(gbuffer.view))
@@ -220,4 +246,5 @@ def read_gbuffer(gbuffer: GBuffer) -> dict[str, np.ndarray]:
     return {"hit": hit, "position": position[..., :3], "normal": normal[..., :3],
             "roughness": normal[..., 3], "direction": view[..., :3],
             "material": np.where(hit, np.rint(view[..., 3]), -1).astype(np.int32),
-            "base": base[..., :3], "textured": base[..., 3] > 0.5}
+            "base": base[..., :3], "textured": base[..., 3] > 0.5,
+            "emission": unpack_emission(base[..., 3]), "emissive": base[..., 3] > 1.5}

@@ -32,6 +32,11 @@ metallic), and the material is followed in the list by its ``textures.PARAM_VARI
 variants at quantized values, which surface points shade with per texel. Both sockets from
 two different images, or from other nodes: the images' means / the value, with a warning.
 
+Emission Color (a Principled BSDF's, or an Emission shader's Color) likewise: a value, an Image
+Texture's Color per texel (``emission_texture``, times ``emission_strength``), anything else
+baked by Cycles as the Base Color is (Principled BSDF only); ``emission`` is the mean × the
+strength.
+
 Normal: a tangent-space Normal Map node fed by an Image Texture's Color (as the glTF importer
 builds normal maps) gives ``normal_texture`` and ``normal_strength``; other normal inputs
 (Bump, object- or world-space maps) are left out with a note.
@@ -337,10 +342,15 @@ class MaterialTable:
         glow = None if node_tree is None or principled is not None else \
             _surface_node(node_tree, "EMISSION")
         if glow is not None:  # an Emission shader: light, and nothing reflected (Cycles)
-            emission = _rgb(glow.inputs["Color"]) * np.float32(glow.inputs["Strength"].default_value)
+            strength = np.float32(glow.inputs["Strength"].default_value)
+            colour, texture, _, uv_map = self._emission(material, glow.inputs["Color"],
+                                                        bakeable=False)
             return MaterialData(name=material.name_full, base_color=np.zeros(3, np.float32),
                                 roughness=1.0, metallic=0.0, specular=0.0,
-                                emission=emission.astype(np.float32)), None, ""
+                                emission=(colour * strength).astype(np.float32),
+                                emission_texture=-1 if texture is None else
+                                self._add_texture(texture),
+                                emission_strength=float(strength)), None, uv_map
         if principled is None:
             data = MaterialData(
                 name=material.name_full,
@@ -359,8 +369,9 @@ class MaterialTable:
                 return data, (("DIFFUSE", "Surface"),), ""
             return data, None, ""
         inputs = principled.inputs
-        strength = np.float32(inputs["Emission Strength"].default_value)
-        emission = self._socket_mean(material, inputs["Emission Color"], _rgb) * strength
+        glow_strength = np.float32(inputs["Emission Strength"].default_value)
+        glow, glow_texture, glow_bake, glow_uv = self._emission(material, inputs["Emission Color"])
+        emission = glow * glow_strength
         base, texture, bake, uv_map = self._base_color(material, inputs["Base Color"])
         params, params_uv = self._params(material, inputs)
         if params is not None:
@@ -384,7 +395,13 @@ class MaterialTable:
         normal, strength, normal_uv = self._normal_map(material, inputs.get("Normal"))
         if normal is not None and texture is None and params is None and alpha_texture is None:
             uv_map = normal_uv
-        bakes = tuple(b for b in (bake, alpha_bake) if b is not None)
+        if glow_texture is not None and texture is None and params is None and \
+                alpha_texture is None and normal is None:
+            uv_map = glow_uv
+        elif glow_texture is not None and glow_uv != uv_map:
+            self._warn(f"Material '{material.name_full}': its Emission Color image reads another "
+                       "UV map than its other images; it is read through theirs")
+        bakes = tuple(b for b in (bake, alpha_bake, glow_bake) if b is not None)
         data = MaterialData(
             name=material.name_full,
             base_color=base,
@@ -398,11 +415,45 @@ class MaterialTable:
             param_texture=-1 if params is None else self._add_texture(params),
             normal_texture=-1 if normal is None else self._add_texture(normal),
             normal_strength=strength,
+            emission_texture=-1 if glow_texture is None else self._add_texture(glow_texture),
+            emission_strength=float(glow_strength),
         )
         return data, bakes or None, uv_map
 
+    def _emission(self, material, socket, bakeable: bool = True):
+        """(mean colour (3,), TextureData or None, what to bake or None, UV map) of an Emission
+        Color socket: its value when unlinked; an Image Texture's Color (directly or through
+        Mapping nodes) per texel; anything else baked by Cycles (an Emit bake of the socket, as
+        the Base Color's) where ``bakeable``, else its value with a warning."""
+        if not socket.is_linked:
+            return _rgb(socket), None, None, ""
+        name = material.name_full
+        try:
+            node, output = _follow(socket)
+            if node is None:
+                return _rgb(socket), None, None, ""
+            if node.type != "TEX_IMAGE" or output.identifier != "Color":
+                raise _NeedsBake(f"{socket.name} comes from '{node.name}'")
+            if node.image is None:
+                self._warn(f"Material '{name}': the Image Texture node '{node.name}' has no "
+                           f"image; using the {socket.name} value instead")
+                return _rgb(socket), None, None, ""
+            texture, uv_map = _image_texture(node)
+            if texture is None:
+                self._warn(f"Material '{name}': image '{node.image.name_full}' has no pixels "
+                           f"(missing or unreadable file?); using the {socket.name} value instead")
+                return _rgb(socket), None, None, ""
+            mean = texture.pixels[..., :3].reshape(-1, 3).mean(axis=0).astype(np.float32)
+            return mean, texture, None, uv_map
+        except _NeedsBake as why:
+            if not bakeable:
+                self._warn(f"Material '{name}': {why}, which the preview does not evaluate "
+                           f"for an Emission shader yet; using its value")
+                return _rgb(socket), None, None, ""
+            return _rgb(socket), None, ("EMIT", socket.name), ""
+
     def _socket_mean(self, material, socket, value):
-        """A Roughness, Metallic or Emission Color socket's value: its own when unlinked; the
+        """A Roughness or Metallic socket's value: its own when unlinked; the
         mean of the image feeding it (directly, or one channel through a Separate Color node,
         as the glTF importer builds them) with a warning that it is not read per texel yet;
         else its own value with a warning."""
@@ -430,8 +481,8 @@ class MaterialTable:
             if rgb is not None:
                 mean = rgb.reshape(-1, 3).mean(axis=0)
                 self._warn(f"{name} comes from the image '{node.image.name_full}': the "
-                           "preview uses its mean (Emission Color is not read per texel yet, nor "
-                           "Roughness / Metallic from two images)")
+                           "preview uses its mean (Roughness / Metallic from two images are not "
+                           "read per texel yet)")
                 if np.ndim(value(socket)) == 0:
                     return np.float32(mean[channel] if channel is not None else mean.mean())
                 return mean.astype(np.float32)
@@ -619,6 +670,10 @@ class MaterialTable:
                 extension="EXTEND", key=f"{key}+alpha")
             return dataclasses.replace(data, alpha_texture=self._add_texture(alpha))
         mean = texture.pixels.reshape(-1, 3).mean(axis=0).astype(np.float32)
+        if socket == "Emission Color":  # the emission per texel, × the material's strength
+            return dataclasses.replace(
+                data, emission=(mean * np.float32(data.emission_strength)).astype(np.float32),
+                emission_texture=self._add_texture(texture))
         return dataclasses.replace(data, base_color=mean,
                                    base_color_texture=self._add_texture(texture))
 

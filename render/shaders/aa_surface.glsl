@@ -10,7 +10,8 @@
  *   f = (glossy light, 0) += Glossy Color × centre_world.
  * out_colour = (Diffuse Color, 0) of this pass, for aa_light.glsl. Samplers: materials (base,
  * emission, (metallic, level, roughness) rows), principled_lut, gbuffer_base (the Base Color
- * sampled per texel where w = 1). */
+ * sampled per texel where w > 0.5; where w > 1.5 also the emission per texel, packed by
+ * textures.glsl's pack_emission). */
 
 void main()
 {
@@ -35,6 +36,11 @@ void main()
     vec4 texel = texelFetch(gbuffer_base, px, 0);  /* Base Color per texel (G-buffer) */
     vec3 base = texel.w > 0.5 ? texel.rgb : texelFetch(materials, ivec2(material, 0), 0).rgb;
     vec3 emission = texelFetch(materials, ivec2(material, 1), 0).rgb;
+    if (texel.w > 1.5) {  /* emission per texel (textures.glsl pack_emission) */
+      uint bits = floatBitsToUint(texel.w) - 0x40000000u;
+      emission = vec3(uvec3(bits >> 16, bits >> 8, bits) & uvec3(255u)) *
+                 exp2(float(int(bits >> 24) - 15) - 8.0);
+    }
     vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
     float mu = clamp(dot(n, -ray.xyz), 0.0, 1.0);
     diffuse_colour = principled_diffuse_weight(base, params.x, params.y, params.z, mu);

@@ -10,7 +10,10 @@
  * material written is its texel's variant (textures.SurfaceTextures.variant_at).
  * surface_normal_map = (normal map texture or -1, Strength), surface_tangent = the triangle's
  * textures.face_tangents row: the shading normal is perturbed as
- * textures.SurfaceTextures.normal_at. */
+ * textures.SurfaceTextures.normal_at. surface_glow = (emission texture or -1, Strength, its
+ * texels per metre × a pixel's footprint at unit distance, 0), surface_base = the material's
+ * Base Color value: out_base = (Base Color, the emission per texel × Strength packed by
+ * pack_emission, textures.glsl: a float >= 2) where the material has an emission texture. */
 void main()
 {
   vec3 view = camera_ortho > 0.5 ? camera_forward : normalize(world_position - camera_position);
@@ -64,5 +67,15 @@ void main()
     float lod = log2(max(footprint, 1.0));
     out_base = vec4(clamp(surface_texture(int(surface_slot.x + 0.5), surface_uv, lod), 0.0,
                           1.0), 1.0);
+  }
+  if (surface_glow.x > -0.5) {
+    if (surface_slot.x < -0.5) {
+      out_base.rgb = surface_base;
+    }
+    float distance = camera_ortho > 0.5 ? 1.0 : length(world_position - camera_position);
+    float c = max(abs(dot(flat_normal, view)), FOOTPRINT_COS_MIN);
+    float lod = log2(max(surface_glow.z * distance / sqrt(c), 1.0));
+    vec3 glow = max(surface_texture(int(surface_glow.x + 0.5), surface_uv, lod), vec3(0.0));
+    out_base.w = pack_emission(glow * surface_glow.y);
   }
 }

@@ -11,5 +11,7 @@ void main()
   surface_params = params;
   surface_normal_map = normal_map;
   surface_tangent = tangent;
+  surface_glow = glow;
+  surface_base = material_base;
   gl_Position = view_projection * vec4(position, 1.0);
 }

@@ -77,6 +77,30 @@ vec3 surface_texture(int slot, vec2 uv, float lod)
   return value;
 }
 
+/* textures.pack_emission: an RGB emission (clamped to [0, 65280]) as one float >= 2 (bits
+ * 0x40000000 + payload, payload = a shared exponent E (5 bits, 2^(E - 15)) and three 8-bit
+ * mantissas; 0 for no emission): the G-buffer's base.w, which kernels testing w > 0.5 for a
+ * textured Base Color read as before. unpack_emission inverts it. */
+float pack_emission(vec3 e)
+{
+  e = clamp(e, vec3(0.0), vec3(65280.0));
+  float m = max(max(e.r, e.g), e.b);
+  uint payload = 0u;
+  if (m >= exp2(-15.0)) {
+    int x = clamp(int(floor(log2(m))) + 1, -14, 16);
+    uvec3 c = uvec3(clamp(floor(e * exp2(8.0 - float(x)) + 0.5), vec3(0.0), vec3(255.0)));
+    payload = (uint(x + 15) << 24) | (c.r << 16) | (c.g << 8) | c.b;
+  }
+  return uintBitsToFloat(0x40000000u + payload);
+}
+
+vec3 unpack_emission(float w)
+{
+  uint bits = floatBitsToUint(w) - 0x40000000u;
+  return vec3(uvec3(bits >> 16, bits >> 8, bits) & uvec3(255u)) *
+         exp2(float(int(bits >> 24) - 15) - 8.0);
+}
+
 /* Texture `slot`'s four channels at surface UV `uv`, level 0 (textures.sample_rgba). */
 vec4 surface_texel(int slot, vec2 uv)
 {

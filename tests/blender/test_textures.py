@@ -252,7 +252,7 @@ def test_roughness_from_an_image_channel_is_read_per_texel(voxgi):
     """Roughness through a Separate Color node from an image (as the glTF importer builds a
     metallic-roughness map): a parameter texture holding the channel (its mean as the
     material's roughness) and the material's variants after it, without a warning; an
-    Emission Color from an image still takes its mean, with a warning."""
+    Emission Color from an image is read per texel too (``emission_texture``)."""
     from voxgi.blender.snapshot.scene import take_snapshot
     from voxgi.voxgi_addon.scene.textures import PARAM_VARIANTS
 
@@ -275,10 +275,14 @@ def test_roughness_from_an_image_channel_is_read_per_texel(voxgi):
     assert len(snapshot.materials) >= index + 1 + PARAM_VARIANTS
     assert not any("Roughness" in w for w in snapshot.warnings), snapshot.warnings
     tree.links.new(image_node.outputs["Color"], bsdf.inputs["Emission Color"])
-    bsdf.inputs["Emission Strength"].default_value = 1.0
+    bsdf.inputs["Emission Strength"].default_value = 2.0
     snapshot = take_snapshot(bpy.context.scene)
-    assert any("Emission Color comes from the image" in w for w in snapshot.warnings), \
-        snapshot.warnings
+    assert not any("Emission" in w for w in snapshot.warnings), snapshot.warnings
+    floor = next(m for m in snapshot.materials if m.name == "Checker Floor")
+    # the same image node: the same texture, per texel × the strength (its mean × it per material)
+    assert floor.emission_texture == floor.base_color_texture >= 0
+    assert floor.emission_strength == 2.0
+    np.testing.assert_allclose(floor.emission, 2.0 * floor.base_color, rtol=1e-5)
 
 
 def test_a_procedural_material_on_a_mesh_without_uvs_warns(voxgi):

@@ -129,3 +129,18 @@ def test_the_floor_under_each_half_takes_its_colour_and_the_camera_sees_the_texe
     np.testing.assert_allclose(mean["Combined"][seen_left],
                                np.tile(snapshot.materials[0].emission, (seen_left.sum(), 1)),
                                rtol=1e-3)
+
+
+def test_packed_emission_round_trips_within_its_precision():
+    from voxgi.voxgi_addon.scene.textures import EMISSION_MAX, pack_emission, unpack_emission
+
+    rng = np.random.default_rng(5)
+    values = rng.random((2000, 3)) * np.exp2(rng.integers(-12, 15, (2000, 1)))
+    values[:5] = [[0, 0, 0], [1, 0, 0], [0.5, 0.5, 0.5], [EMISSION_MAX, 1, 0], [4.0, 0.4, 0.2]]
+    packed = pack_emission(values)
+    assert (packed >= 2.0).all() and np.isfinite(packed).all()
+    back = unpack_emission(packed)
+    brightest = values.max(axis=1, keepdims=True)
+    assert (np.abs(back - values) <= brightest * 2.0 ** -8 + 1e-12).all()
+    assert (back[0] == 0).all()
+    np.testing.assert_allclose(unpack_emission(np.float32([0.0, 1.0])), 0.0)  # no emission texture

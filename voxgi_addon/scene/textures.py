@@ -231,6 +231,7 @@ class SurfaceTextures:
     emission_slots: np.ndarray = field(default=None)
     emission_strength: np.ndarray = field(default=None)
     emission_density: np.ndarray = field(default=None)
+    material_base: np.ndarray = field(default=None)
 
     def emission_at(self, triangles, materials, b1, b2, lod=None):
         """((N, 3) float64 emission per texel — the texture × the material's strength, negative
@@ -337,6 +338,34 @@ class SurfaceTextures:
         return out
 
 
+EMISSION_MAX = 65280.0  # the largest emission pack_emission holds (255/256 × 2^16)
+
+
+def pack_emission(emission) -> np.ndarray:
+    """(...) float32 ≥ 2: RGB emissions (..., 3) packed as the G-buffer holds them
+    (``textures.glsl`` ``pack_emission``): bits 0x40000000 + a shared exponent E (5 bits,
+    2^(E − 15)) and three 8-bit mantissas (0 for no emission), clamped to [0, EMISSION_MAX];
+    relative precision 2^-8 of the brightest channel."""
+    e = np.clip(np.asarray(emission, np.float32), 0.0, EMISSION_MAX)
+    m = e.max(axis=-1)
+    lit = m >= np.float32(2.0 ** -15)
+    x = np.clip(np.floor(np.log2(np.where(lit, m, 1.0))).astype(np.int64) + 1, -14, 16)
+    c = np.clip(np.floor(e * np.exp2(8.0 - x)[..., None] + 0.5), 0, 255).astype(np.uint32)
+    payload = ((x + 15).astype(np.uint32) << 24) | (c[..., 0] << 16) | (c[..., 1] << 8) | c[..., 2]
+    bits = np.uint32(0x40000000) + np.where(lit, payload, 0).astype(np.uint32)
+    return bits.view(np.float32)
+
+
+def unpack_emission(packed) -> np.ndarray:
+    """(..., 3) float32 emissions of ``pack_emission``'s floats (...); 0 where a value is
+    below 1.5 (no emission texture there)."""
+    w = np.asarray(packed, np.float32)
+    bits = w.view(np.uint32).astype(np.int64) - 0x40000000
+    bits = np.where(w > 1.5, bits, 0)
+    c = np.stack([(bits >> 16) & 255, (bits >> 8) & 255, bits & 255], axis=-1)
+    return (c * np.exp2((bits >> 24) - 15.0 - 8.0)[..., None]).astype(np.float32)
+
+
 def texel_density(positions: np.ndarray, uvs: np.ndarray) -> np.ndarray:
     """(T,) float32 UV units per metre of each triangle: sqrt(UV area / world area)."""
     p = np.asarray(positions, np.float64)
@@ -390,6 +419,9 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
     scale = np.array([texture_texels(t) for t in textures] + [0.0], np.float64)
     if (emission_slots >= 0).any():
         out.emission_slots, out.emission_strength = emission_slots, emission_strength
+        out.material_base = np.zeros((count, 3), np.float32)  # principled_table's base rows
+        out.material_base[:-1] = [np.clip(np.nan_to_num(np.asarray(m.base_color[:3], np.float64)),
+                                          0, 1) for m in snapshot.materials]
         out.emission_density = (texel_density(positions, uvs) *
                                 scale[emission_slots[out.row_of(materials)]]).astype(np.float32)
     if (normal_slots >= 0).any():
