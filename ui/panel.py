@@ -6,6 +6,7 @@ import bpy
 from ..blender import jobs as engine_jobs
 from ..blender.reports import MEGABYTE, cascade_cover_rows, panel_lines
 from ..blender.session import peek_session
+from ..blender.snapshot.left_out import MARK, is_left_out
 
 LEVEL_ICONS = {"ERROR": "CANCEL", "WARNING": "ERROR", "INFO": "INFO"}
 
@@ -77,8 +78,19 @@ def _draw_results(layout, session) -> None:
         row.label(text="Total")
         row.label(text=f"{result.total_voxels:,} voxels")
         row.label(text=f"{result.total_bytes / MEGABYTE:.2f} MB")
+    # What the preview leaves out, each object once (blender/snapshot/left_out.py), in its
+    # own box so that other messages do not push it out.
+    missing = list(dict.fromkeys(m for _, m in session.last_report if is_left_out(m)))
+    if missing:
+        box = layout.box()
+        box.label(text="Not rendered by the preview yet", icon="ERROR")
+        for message in missing:  # the object, then what of it (the sidebar is narrow)
+            name, what = message.split(MARK, 1)
+            box.label(text=f"{name}:")
+            box.label(text=f"    {what}")
     # Background runs cannot reach the Info editor: the last run's messages are shown here.
-    lines, left_out = panel_lines(session.last_report)
+    lines, left_out = panel_lines([(level, m) for level, m in session.last_report
+                                   if not is_left_out(m)])
     if lines:
         column = layout.column(align=True)
         for level, message in lines:

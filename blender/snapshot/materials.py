@@ -52,6 +52,7 @@ import numpy as np
 
 from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
 from ...voxgi_addon.scene.textures import PARAM_VARIANTS, variant_values, within_max_size
+from .left_out import material_notes
 from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _NeedsBake, _tree_key
 
 MAX_VARIANT_MATERIALS = 96  # materials with Roughness / Metallic per texel (each adds 64 rows)
@@ -254,7 +255,9 @@ class MaterialTable:
     Color Cycles must bake gets one entry per mesh (``surface``). ``textures`` collects the
     ``TextureData`` the materials sample; ``uv_map(index)`` names the UV map a material's
     texture reads ("" = the active render one). Warnings about approximations (unreadable
-    images, what cannot be baked) go to ``warnings``.
+    images, what cannot be baked) go to ``warnings``; what of a material the preview leaves
+    out (transmission, volumes …) goes to ``notes`` by material name, which the snapshot says
+    per object (``left_out``).
     """
 
     def __init__(self, warnings: list[str], bake: bool | None = None):
@@ -268,6 +271,7 @@ class MaterialTable:
         self._texture_index: dict[str, int] = {}
         self._warned: set[str] = set()
         self._variant_materials = 0
+        self.notes: dict[str, list[str]] = {}  # material name → what the preview leaves out
 
     def _warn(self, text: str) -> None:
         if text not in self._warned:
@@ -316,29 +320,16 @@ class MaterialTable:
             self.textures.append(texture)
         return self._texture_index[key]
 
-    def _left_out(self, material, principled) -> None:
-        """Say, once per material, what of it the preview does not render yet."""
-        tree = material.node_tree
-        notes = []
-        output = tree.get_output_node("ALL") if tree is not None else None
-        if output is not None:
-            for socket, what in (("Volume", "its volume shader"), ("Displacement", "displacement")):
-                if output.inputs.get(socket) is not None and output.inputs[socket].is_linked:
-                    notes.append(what)
-        if principled is not None:
-            inputs = principled.inputs
-            transmission = inputs.get("Transmission Weight")
-            if transmission is not None and (transmission.is_linked or transmission.default_value > 0):
-                notes.append("transmission (it renders opaque)")
-        if notes:
-            self.warnings.append(f"Material '{material.name}': the preview leaves out "
-                                 f"{', '.join(notes)} for now")
+    def _left_out(self, material) -> None:
+        """Note what of ``material`` the preview does not render yet (``left_out
+        .material_notes``), said per object that uses it (``notes``)."""
+        self.notes[material.name_full] = material_notes(material)
 
     def _read(self, material) -> tuple[MaterialData, object, str]:
         """(MaterialData, what to bake per mesh (None, or (mode, socket name)), UV map)."""
         node_tree = material.node_tree
         principled = None if node_tree is None else _surface_node(node_tree, "BSDF_PRINCIPLED")
-        self._left_out(material, principled)
+        self._left_out(material)
         glow = None if node_tree is None or principled is not None else \
             _surface_node(node_tree, "EMISSION")
         if glow is not None:  # an Emission shader: light, and nothing reflected (Cycles)

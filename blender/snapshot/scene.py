@@ -29,6 +29,7 @@ from ...voxgi_addon.scene.snapshot import (
     SceneSnapshot,
 )
 from .environment import read_camera, read_light, read_world
+from .left_out import left_out_line, notes_of, type_note
 from .materials import MaterialTable, Surface, _digest
 from .mesh import (
     material_lookup,
@@ -180,8 +181,8 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
 
 # Object types whose evaluated geometry is a mesh (what Cycles renders of them).
 RENDERABLE = ("MESH", "CURVE", "FONT", "SURFACE", "META")
-# Types Cycles renders that the preview does not (yet), said in the report.
-LEFT_OUT = {"CURVES": "hair curves", "POINTCLOUD": "point clouds", "VOLUME": "volumes"}
+# Types Cycles renders that the preview does not (yet) are said in the report
+# (left_out.type_note).
 
 
 def renders(obj, view_layer) -> bool:
@@ -195,9 +196,8 @@ def renders(obj, view_layer) -> bool:
 def _visible_mesh_entries(view_layer, warnings: list[str], depsgraph=None) -> list[_Entry]:
     entries, used = [], {}
     for obj in view_layer.objects:
-        if obj.type in LEFT_OUT and renders(obj, view_layer):
-            warnings.append(f"Object '{obj.name}': {LEFT_OUT[obj.type]} are not previewed yet; "
-                            "it is left out")
+        if type_note(obj) is not None and renders(obj, view_layer):
+            warnings.append(left_out_line(obj.name, [type_note(obj)]))
         if obj.type not in RENDERABLE or not renders(obj, view_layer):
             continue
         kind, armature = object_kind(obj, depsgraph)
@@ -246,7 +246,8 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
     meshes: dict[str, MeshData] = {}
     read_keys: set[str] = set()
     holdouts: dict[str, int] = {}
-    instances = _instances(depsgraph, table, warnings, meshes, read_keys, holdouts)
+    origins: dict[str, object] = {}  # instanced mesh key → the instanced object
+    instances = _instances(depsgraph, table, warnings, meshes, read_keys, holdouts, origins)
     with temporary_weight_attributes(skinned, depsgraph):
         for entry in entries:
             if entry.key not in read_keys:  # linked duplicates are read once
@@ -268,6 +269,16 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
         )
         for e in entries if e.key in meshes
     ] + [o for o in instances if o.mesh in meshes]
+    # what of each object (each instanced object once) the preview leaves out, once per object
+    named = [(e.obj.name, e.obj, e.key) for e in entries if e.key in meshes] + \
+        [(f"{origin.name} (instanced)", origin, key) for key, origin in origins.items()
+         if key in meshes]
+    for name, obj, key in named:
+        used = np.unique(meshes[key].triangle_materials)
+        notes = notes_of(obj, [table.materials[i].name for i in used
+                               if 0 <= i < len(table.materials)], table.notes)
+        if notes:
+            warnings.append(left_out_line(name, notes))
     armatures = {}
     for e in entries:
         if e.armature is not None and e.key in meshes and e.armature.name_full not in armatures:
@@ -294,13 +305,14 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
 
 
 def _instances(depsgraph, table: MaterialTable, warnings: list[str], meshes: dict,
-               read_keys: set, holdouts: dict[str, int]) -> list[ObjectData]:
+               read_keys: set, holdouts: dict[str, int], origins: dict | None = None
+               ) -> list[ObjectData]:
     """The depsgraph's instances (collection instances, geometry-nodes and particle instances)
     of renderable objects: one ObjectData per instance with its own world matrix, their meshes
     read once per instanced object (``meshes`` / ``read_keys`` are filled). An instance of a
     plain mesh shares the mesh datablock's key with its other users. Ray visibility is the
     instanced object's and its instancer's together, holdout the instancer's (or the object's),
-    as Cycles syncs instances."""
+    as Cycles syncs instances. ``origins`` gets each instanced mesh key's original object."""
     out, used = [], {}
     for inst in depsgraph.object_instances:
         if not inst.is_instance:
@@ -320,6 +332,8 @@ def _instances(depsgraph, table: MaterialTable, warnings: list[str], meshes: dic
             mesh = _read_mesh(entry, depsgraph, table, warnings, holdouts, obj_eval)
             if mesh is not None:
                 meshes[key] = mesh
+                if origins is not None:
+                    origins[key] = original
         parent = inst.parent.original.name_full if inst.parent is not None else "?"
         base = f"{parent} › {original.name_full}"
         name, n = base, 1

@@ -1,0 +1,132 @@
+"""What the preview cannot render yet, named per object (issue 22 point 4; main thread).
+
+Cycles renders things the preview leaves out or approximates: refraction and transmission,
+volumes, hair, displacement, subsurface scattering, the Principled BSDF's coat, sheen,
+anisotropy and thin film. Rather than dropping them silently, the snapshot says, once per
+object, what of it is left out: one report line per object,
+``Object 'Name': the preview leaves out A, B`` (``left_out_line``), which the operators'
+reports and the sidebar panel show (``ui/panel.py`` lists them in their own box).
+
+Read from the materials (``material_notes``: the active output's Volume and Displacement, the
+Principled BSDF's inputs, the shader nodes feeding the surface) and from the object
+(``object_notes``: hair particle systems; ``type_note``: object types the preview does not
+render at all — hair curves, point clouds, volume objects).
+"""
+from __future__ import annotations
+
+MARK = ": the preview leaves out "
+TYPE_NOTES = {"CURVES": "its hair curves (not rendered at all)",
+              "POINTCLOUD": "its point cloud (not rendered at all)",
+              "VOLUME": "its volume (not rendered at all)"}
+# Principled BSDF inputs whose lobe the preview does not model (gi/principled.py): the
+# weight or value socket, what to call it, the value at which the lobe is off.
+PRINCIPLED_INPUTS = (
+    ("Transmission Weight", "transmission and refraction (it renders opaque)", 0.0),
+    ("Subsurface Weight", "subsurface scattering (it renders as diffuse)", 0.0),
+    ("Coat Weight", "the coat layer", 0.0),
+    ("Sheen Weight", "sheen", 0.0),
+    ("Anisotropic", "anisotropy", 0.0),
+    ("Thin Film Thickness", "thin film", 0.0),
+)
+# Shader nodes feeding the surface that the preview does not model (other surfaces are read
+# by their baked diffuse colour).
+SHADER_NODES = {
+    "BSDF_GLASS": "refraction (Glass BSDF)",
+    "BSDF_REFRACTION": "refraction (Refraction BSDF)",
+    "BSDF_TRANSLUCENT": "translucency",
+    "SUBSURFACE_SCATTERING": "subsurface scattering",
+    "BSDF_HAIR": "hair shading",
+    "BSDF_HAIR_PRINCIPLED": "hair shading",
+    "BSDF_SHEEN": "sheen",
+    "BSDF_TOON": "toon shading",
+}
+
+
+def left_out_line(name: str, notes) -> str:
+    """The report line naming object ``name`` and what of it is left out."""
+    return f"Object '{name}'{MARK}{', '.join(dict.fromkeys(notes))}"
+
+
+def is_left_out(message: str) -> bool:
+    """Is a report message a ``left_out_line``?"""
+    return message.startswith("Object '") and MARK in message
+
+
+def _upstream(socket, depth: int = 0, seen=None) -> list:
+    """The nodes feeding ``socket`` (through links, not into groups), nearest first."""
+    seen = set() if seen is None else seen
+    out = []
+    if socket is None or depth > 32:
+        return out
+    for link in socket.links:
+        if getattr(link, "is_muted", False):
+            continue
+        node = link.from_node
+        if node.name in seen:
+            continue
+        seen.add(node.name)
+        out.append(node)
+        for inp in node.inputs:
+            if inp.is_linked:
+                out += _upstream(inp, depth + 1, seen)
+    return out
+
+
+def material_notes(material) -> list[str]:
+    """What of ``material`` (a ``bpy.types.Material`` or None) the preview leaves out."""
+    tree = getattr(material, "node_tree", None)
+    if tree is None:
+        return []
+    notes = []
+    output = tree.get_output_node("CYCLES") or tree.get_output_node("ALL")
+    if output is None:
+        return notes
+    volume = output.inputs.get("Volume")
+    if volume is not None and volume.is_linked:
+        notes.append("its volume shader")
+    surface = output.inputs.get("Surface")
+    for node in _upstream(surface):
+        if node.type == "BSDF_PRINCIPLED":
+            for name, what, off in PRINCIPLED_INPUTS:
+                socket = node.inputs.get(name)
+                if socket is not None and (socket.is_linked or socket.default_value > off):
+                    notes.append(what)
+        elif node.type in SHADER_NODES:
+            notes.append(SHADER_NODES[node.type])
+    displacement = output.inputs.get("Displacement")
+    if displacement is not None and displacement.is_linked and \
+            getattr(material, "displacement_method", "BUMP") != "BUMP":
+        notes.append("displacement")
+    elif displacement is not None and displacement.is_linked:
+        notes.append("bump from its displacement output")
+    return list(dict.fromkeys(notes))
+
+
+def object_notes(obj) -> list[str]:
+    """What of ``obj`` itself (not its materials) the preview leaves out: hair particle systems
+    Cycles renders (their modifier enabled for renders, the system rendered as paths)."""
+    notes = []
+    for modifier in getattr(obj, "modifiers", ()):
+        if modifier.type != "PARTICLE_SYSTEM" or not modifier.show_render:
+            continue
+        settings = modifier.particle_system.settings
+        if settings.type == "HAIR" and settings.render_type == "PATH":
+            notes.append("its hair particles")
+    return notes
+
+
+def type_note(obj) -> str | None:
+    """The note for an object type the preview does not render at all, else None."""
+    return TYPE_NOTES.get(obj.type)
+
+
+def notes_of(obj, material_names, notes_by_material: dict) -> list[str]:
+    """What of an object the preview leaves out: ``object_notes`` of ``obj`` (None: none) and
+    the notes of each of its materials (``material_names``, by ``notes_by_material``), each
+    material's named after them."""
+    notes = [] if obj is None else object_notes(obj)
+    for name in dict.fromkeys(material_names):
+        found = notes_by_material.get(name)
+        if found:
+            notes.append(f"{', '.join(found)} [material '{name}']")
+    return notes

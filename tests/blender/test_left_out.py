@@ -1,0 +1,145 @@
+"""Say what is left out (issue 22 point 4): what the preview cannot render yet — refraction /
+transmission, volumes, hair curves … — is named per object, once, in the operators' reports
+and in the sidebar panel (blender/snapshot/left_out.py), not dropped silently."""
+from __future__ import annotations
+
+import math
+
+import bpy
+import gi_scenes
+
+
+class _Layout:
+    """Records the labels a panel draws; every container call returns itself."""
+
+    def __init__(self):
+        self.labels = []
+
+    def box(self, **_kwargs):
+        return self
+
+    row = column = box
+
+    def label(self, text="", icon="NONE"):
+        self.labels.append(text)
+
+    def operator(self, *_args, **_kwargs):
+        pass
+
+    def prop(self, *_args, **_kwargs):
+        pass
+
+
+def _node_material(name):
+    material = bpy.data.materials.new(name)
+    if material.node_tree is None:
+        material.use_nodes = True
+    return material
+
+
+def build(scene):
+    """A floor with a glass pane (Principled Transmission), a glass sphere (Glass BSDF), a
+    cube of smoke (a Principled Volume, no surface), a hair curves object, a plain box; a sun
+    and a camera."""
+    white = gi_scenes._material("White", (0.7, 0.7, 0.7))
+    gi_scenes._mesh(scene, "Floor", [(-3, -3, 0), (3, -3, 0), (3, 3, 0), (-3, 3, 0)],
+                    [(0, 1, 2, 3)], (white,))
+    gi_scenes._block(scene, "Plain Box", (0.5, 0.5, 0.5), (1.5, 1.0, 0.0), 0.0, white)
+    glass = gi_scenes._material("Window Glass", (0.9, 0.9, 0.9))
+    glass.node_tree.nodes["Principled BSDF"].inputs["Transmission Weight"].default_value = 1.0
+    gi_scenes._mesh(scene, "Glass Pane", [(-1, 0, 0), (1, 0, 0), (1, 0, 1.5), (-1, 0, 1.5)],
+                    [(0, 1, 2, 3)], (glass,))
+    crystal = _node_material("Crystal")
+    tree = crystal.node_tree
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    glass_bsdf = tree.nodes.new("ShaderNodeBsdfGlass")
+    tree.links.new(glass_bsdf.outputs["BSDF"], tree.nodes["Material Output"].inputs["Surface"])
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=12, ring_count=6, radius=0.4,
+                                         location=(-1.5, 1.0, 0.4))
+    sphere = bpy.context.active_object
+    sphere.name = "Crystal Ball"
+    sphere.data.materials.append(crystal)
+    smoke = _node_material("Smoke")
+    tree = smoke.node_tree
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    volume = tree.nodes.new("ShaderNodeVolumePrincipled")
+    tree.links.new(volume.outputs["Volume"], tree.nodes["Material Output"].inputs["Volume"])
+    gi_scenes._block(scene, "Smoke Cube", (0.8, 0.8, 0.8), (0.0, 1.5, 0.0), 0.0, smoke)
+    hair = bpy.data.objects.new("Fur", bpy.data.hair_curves.new("Fur"))
+    scene.collection.objects.link(hair)
+    gi_scenes._light(scene, "Sun", "SUN", (0, -6, 6), direction=(0.3, 0.8, -0.45), energy=2.0,
+                     angle=math.radians(1.0))
+    gi_scenes._camera(scene, "Camera", (0.0, -6.0, 2.5), (0.0, 0.5, 0.5), lens=30.0)
+    gi_scenes._finish(scene, {})
+
+
+EXPECTED = {"Glass Pane": "transmission and refraction", "Crystal Ball": "refraction (Glass BSDF)",
+            "Smoke Cube": "its volume shader", "Fur": "hair curves"}
+
+
+def _named(report):
+    """{object name: [its left-out lines]} of a report's WARNING lines."""
+    out = {}
+    for level, line in report:
+        for name in (*EXPECTED, "Floor", "Plain Box"):
+            if level == "WARNING" and line.startswith(f"Object '{name}'"):
+                out.setdefault(name, []).append(line)
+    return out
+
+
+def test_the_report_and_the_panel_name_each_object_and_what_is_left_out(voxgi, tmp_path):
+    from voxgi.blender.session import scene_session
+
+    scene = bpy.context.scene
+    build(scene)
+    for run in range(2):  # a second render says it again, once
+        assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / f"p{run}.exr"),
+                                            resolution_x=32, resolution_y=24) == {"FINISHED"}
+        report = scene_session(scene.name_full).last_report
+        named = _named(report)
+        assert set(named) == set(EXPECTED), report  # the floor and the plain box: nothing
+        for name, what in EXPECTED.items():
+            assert len(named[name]) == 1, (name, named[name])
+            assert "the preview leaves out" in named[name][0] and what in named[name][0], named[name]
+        assert "'Window Glass'" in named["Glass Pane"][0]  # the material is named too
+        assert "'Smoke'" in named["Smoke Cube"][0]
+    layout = _Layout()
+    bpy.types.VOXGI_PT_main.draw(type("PanelStub", (), {"layout": layout})(), bpy.context)
+    assert "Not rendered by the preview yet" in layout.labels
+    for name, what in EXPECTED.items():
+        at = layout.labels.index(f"Object '{name}':")
+        assert what in layout.labels[at + 1], layout.labels
+    assert sum(text.startswith("Object 'Glass Pane'") for text in layout.labels) == 1
+
+
+def test_voxelize_says_it_too(voxgi):
+    from voxgi.blender.session import scene_session
+
+    scene = bpy.context.scene
+    build(scene)
+    assert bpy.ops.voxgi.voxelize() == {"FINISHED"}
+    named = _named(scene_session(scene.name_full).last_report)
+    assert set(named) == set(EXPECTED)
+    assert all(len(lines) == 1 for lines in named.values())
+
+
+def test_hair_particles_and_displacement_are_named(voxgi):
+    """A mesh with a hair particle system rendered as paths, and a material whose output has
+    a Displacement linked (as Bump, Cycles' default), are named too."""
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    scene = bpy.context.scene
+    build(scene)
+    box = bpy.data.objects["Plain Box"]
+    box.modifiers.new("Hair", "PARTICLE_SYSTEM")
+    box.particle_systems[0].settings.type = "HAIR"
+    tree = bpy.data.materials["White"].node_tree
+    noise = tree.nodes.new("ShaderNodeTexNoise")
+    displace = tree.nodes.new("ShaderNodeDisplacement")
+    tree.links.new(noise.outputs["Fac"], displace.inputs["Height"])
+    tree.links.new(displace.outputs["Displacement"], tree.nodes["Material Output"].inputs["Displacement"])
+    warnings = take_snapshot(scene).warnings
+    box_lines = [w for w in warnings if w.startswith("Object 'Plain Box'")]
+    assert len(box_lines) == 1 and "hair particles" in box_lines[0], warnings
+    assert "displacement" in box_lines[0] and "'White'" in box_lines[0]
+    assert any(w.startswith("Object 'Floor'") and "displacement" in w for w in warnings)
