@@ -28,6 +28,7 @@ from ..voxgi_addon.preview.passes import (
     principled_table,
 )
 from ..voxgi_addon.preview.upsample import low_shape
+from ..voxgi_addon.scene.textures import TexelBase
 from .gbuffer import rasterize, read_gbuffer
 from .gpu_bvh import direct_light_texture
 from .gpu_gather import glossy_direct_texture
@@ -142,6 +143,9 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     base = None
     if scene.textured:  # the textured pixels' colour, the others their material's
         base = np.where(seen["textured"].ravel()[hit, None], seen["base"].reshape(-1, 3)[hit],
-                        principled_table(snapshot)[0][mat])
+                        principled_table(snapshot)[0][mat]).view(TexelBase)
+        # the camera's emission per texel where a material has an emission texture
+        base.emission = seen["emission"].reshape(-1, 3)[hit].astype(np.float64)
+        base.emissive = seen["emissive"].ravel()[hit]
     return compose_passes(snapshot, width, height, hit, mat, *terms, n, views, shine,
                           base=base), timings

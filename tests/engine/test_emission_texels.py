@@ -144,3 +144,28 @@ def test_packed_emission_round_trips_within_its_precision():
     assert (np.abs(back - values) <= brightest * 2.0 ** -8 + 1e-12).all()
     assert (back[0] == 0).all()
     np.testing.assert_allclose(unpack_emission(np.float32([0.0, 1.0])), 0.0)  # no emission texture
+
+
+def test_the_panels_voxels_glow_with_each_halfs_colour():
+    """Fast quality's voxels take the emission of the emitters' pieces (light_injection): the
+    panel's voxels over its left half glow red, over its right half blue; the mean's glow
+    alike on both."""
+    from voxgi.voxgi_addon.gi.light_injection import voxel_centres
+    from voxgi.voxgi_addon.gi.update import GISettings, update_gi
+    from voxgi.voxgi_addon.voxelize.scene_caches import build_scene_caches
+
+    def halves(textured):
+        snap = panel_snapshot(textured)
+        state = update_gi(snap, build_scene_caches(snap, 0.125, 1), GISettings(resolution=64),
+                          anchor=np.zeros(3))
+        glow = np.asarray(state.radiance.emission[0], np.float64)
+        centres = voxel_centres(state.cascades[0])
+        lit = glow.max(axis=1) > 0
+        left, right = lit & (centres[:, 0] < -0.2), lit & (centres[:, 0] > 0.2)
+        assert left.sum() > 10 and right.sum() > 10
+        return glow[left].mean(axis=0), glow[right].mean(axis=0)
+
+    left, right = halves(True)
+    assert left[0] > 5 * left[2] and right[2] > 5 * right[0]
+    left, right = halves(False)  # the same colour (the halves' coverage of their voxels differs)
+    np.testing.assert_allclose(left / left.sum(), right / right.sum(), rtol=1e-3)

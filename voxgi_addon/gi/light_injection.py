@@ -6,7 +6,8 @@ occupancy instead of the triangles). The lights are every light of the scene: th
 world map (``world_light``) and the emissive triangles (``emitters``; their shadow rays' plain
 estimate, as at the Accurate gathers' bounce hits). The emission is the material's Emission
 Color × Strength of the emissive triangles that cross the voxel, weighted by how much of the
-voxel they cover (``voxel_emission``). The octree then averages it upward.
+voxel they cover (``voxel_emission``); with an emission texture, of the emitters' pieces
+(``emitters.emitter_light``: each the texture's mean over it). The octree then averages it upward.
 
 ``inject_direct_light`` returns the radiance as an ``InjectedRadiance`` list whose
 ``emission`` holds the emission part alone, so that ``svo.build_octree`` can keep an emission
@@ -140,6 +141,10 @@ def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None =
         tris = world_triangles(snapshot)
         corners, glow = emissive_triangles(tris, emission)
         emitters = emitter_light(tris, emission)
+        if emitters is not None and getattr(getattr(tris, "textures", None), "emission_slots",
+                                            None) is not None:
+            # emission per texel: the emitters' pieces, each the texture's mean over it
+            corners, glow = emitters.corners, emitters.radiance
         if emitters is not None:  # the shadow rays' plain estimate: no exact sum per voxel
             emitters = dataclasses.replace(emitters, exact=False)
     emitted = voxel_emission(cascades, corners, glow) if len(corners) else None
