@@ -44,6 +44,13 @@ c.y B + c.z N) for c = 2 · texel − 1 (level 0), B = sign · N × T, then blen
 the Strength — with T the triangle's tangent from its UV map (``face_tangents``: the UV
 gradient of a flat triangle, which MikkTSpace equals on flat surfaces; curved low-poly meshes
 differ by the per-vertex smoothing MikkTSpace adds). Bounce hits keep the interpolated normal.
+
+Emission per texel (``MaterialData.emission_texture`` × ``emission_strength``): what the camera
+sees emits its texel at the emission texture's own ``primary_lod`` (``SurfaceTextures
+.emission_at``; ``primary_base`` returns a ``TexelBase`` carrying it, which the passes' emission
+term reads through ``texel_emission``). The GPU G-buffer packs it into one float of its base
+texture (``pack_emission``). The emissive triangles as a light are split into pieces that each
+emit the texture's mean over them (``gi.emitters``).
 """
 from __future__ import annotations
 
