@@ -118,3 +118,25 @@ def test_emission_panel_room_against_cycles(voxgi):
         # the floor in front of the panel (rows 70–80): orange light on the left, blue on the right
         left, right = image[70:80, 30:70], image[70:80, 90:130]
         assert left[..., 0].mean() / left[..., 2].mean() > 3.0 * right[..., 0].mean() / right[..., 2].mean()
+
+
+def test_a_repainted_emission_image_relights_the_room(voxgi):
+    """The emitters follow the image's content, not only its mean: the halves swapped (the same
+    mean) re-send the GPU's emitter table and the floor's orange and blue sides swap too."""
+    from voxgi.render.gpu_scene import peek_scene
+
+    scene = build()
+    first, _ = preview(scene, "AUTO", 48, 36)
+    image = bpy.data.images["Panel Pattern"]
+    image.pixels.foreach_set(np.ascontiguousarray(emission_scenes.panel_pixels()[:, ::-1]).ravel())
+    image.update()
+    second, _ = preview(scene, "AUTO", 48, 36)
+    assert "emitters" in peek_scene().uploaded, peek_scene().uploaded
+
+    def redness(passes, columns):  # the floor in front of the panel (rows 21–24 at 48 × 36)
+        light = passes["Diffuse Direct"][21:24, columns]
+        return light[..., 0].mean() / light[..., 2].mean()
+
+    left, right = slice(9, 21), slice(27, 39)
+    assert redness(first, left) > 2.0 * redness(first, right)
+    assert redness(second, right) > 2.0 * redness(second, left)
