@@ -334,6 +334,9 @@ class MaterialTable:
             _surface_node(node_tree, "EMISSION")
         if glow is not None:  # an Emission shader: light, and nothing reflected (Cycles)
             strength = np.float32(glow.inputs["Strength"].default_value)
+            if glow.inputs["Strength"].is_linked:
+                self._warn(f"Material '{material.name_full}': its Emission Strength comes from "
+                           "nodes the preview does not evaluate yet; using its value")
             colour, texture, _, uv_map = self._emission(material, glow.inputs["Color"],
                                                         bakeable=False)
             return MaterialData(name=material.name_full, base_color=np.zeros(3, np.float32),
@@ -361,6 +364,9 @@ class MaterialTable:
             return data, None, ""
         inputs = principled.inputs
         glow_strength = np.float32(inputs["Emission Strength"].default_value)
+        if inputs["Emission Strength"].is_linked:
+            self._warn(f"Material '{material.name_full}': its Emission Strength comes from nodes "
+                       "the preview does not evaluate yet; using its value")
         glow, glow_texture, glow_bake, glow_uv = self._emission(material, inputs["Emission Color"])
         emission = glow * glow_strength
         base, texture, bake, uv_map = self._base_color(material, inputs["Base Color"])

@@ -52,6 +52,24 @@ def test_the_snapshot_reads_the_emission_image_per_texel(voxgi):
     np.testing.assert_allclose(glow.emission, linear.reshape(-1, 3).mean(axis=0) *
                                emission_scenes.STRENGTH, rtol=1e-3)
     assert snapshot.meshes["Panel"].uvs is not None
+    # an Emission shader fed by the same image: per texel too, × its Strength
+    tree = bpy.data.materials["Panel Glow"].node_tree
+    shader = tree.nodes.new("ShaderNodeEmission")
+    shader.inputs["Strength"].default_value = 3.0
+    image = next(n for n in tree.nodes if n.type == "TEX_IMAGE")
+    tree.links.new(image.outputs["Color"], shader.inputs["Color"])
+    tree.links.new(shader.outputs["Emission"], tree.get_output_node("ALL").inputs["Surface"])
+    tree.nodes.remove(next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"))
+    snapshot = take_snapshot(bpy.context.scene)
+    glow = next(m for m in snapshot.materials if m.name == "Panel Glow")
+    assert glow.emission_texture >= 0 and glow.emission_strength == 3.0
+    np.testing.assert_allclose(snapshot.textures[glow.emission_texture].pixels[..., :3], linear,
+                               atol=2e-3)
+    # a Strength from nodes: its value, said
+    value = tree.nodes.new("ShaderNodeValue")
+    tree.links.new(value.outputs["Value"], shader.inputs["Strength"])
+    warnings = take_snapshot(bpy.context.scene).warnings
+    assert any("Panel Glow" in w and "Emission Strength" in w for w in warnings), warnings
 
 
 def test_a_procedural_emission_color_is_baked(voxgi):
