@@ -19,6 +19,7 @@ import numpy as np
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.preview.gather import GatherSettings
 from ..voxgi_addon.preview.passes import (
+    add_tails,
     centre_pass,
     check_request,
     edge_pixels,
@@ -26,6 +27,8 @@ from ..voxgi_addon.preview.passes import (
     lamp_light,
     light_edge_pixels,
     material_indices,
+    new_sums,
+    pass_tail_weights,
     subpixel_passes,
     subpixel_reach,
 )
@@ -139,6 +142,16 @@ def _compact(kernel, inputs, size):
 def release() -> None:
     """Drop the cached sub-pixel pass shaders."""
     _aa_shaders.clear()
+
+
+def _sums_of(texel):
+    """preview.passes.SUMS by name from the sum textures' texels (name → (N, 4))."""
+    return {
+        "emission": texel["sum_a"][:, :3], "coverage": texel["sum_a"][:, 3],
+        "diffuse_color": texel["sum_b"][:, :3], "ao": texel["sum_b"][:, 3],
+        "glossy_color": texel["sum_c"][:, :3], "diffuse_indirect": texel["sum_d"][:, :3],
+        "glossy_indirect": texel["sum_e"][:, :3], "glossy_direct": texel["sum_f"][:, :3],
+        "diffuse_direct": texel["sum_g"][:, :3]}
 
 
 def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_settings,
@@ -290,8 +303,9 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         terms = tuple(_compact("aa_list_raw", {
             "gbuffer_position": diffuse_ao, "gbuffer_normal": glossy,
             "gbuffer_view": glossy_world, "pixels": pixels}, list_size).values())
-        edge_sums = {name: blank for name in names}
-        for offset, block in plan:
+        own = {name: np.zeros((len(listed), 4)) for name in names}
+        tails = new_sums(width * height)
+        for (offset, block), weights in zip(plan, pass_tail_weights(plan, filter_width)):
             gbuffer = rasterize(tris, snapshot.camera, rough, width, height, offset,
                                 shader=raster, textures=scene.raster_textures(),
                                 filter_width=filter_width)
@@ -300,19 +314,23 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
                 "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,
                                 "gbuffer_view": gbuffer.base, "pixels": pixels},
                 list_size)["gbuffer_position"]
-            edge_sums = shade(inputs, edge_sums, terms, blank, list_size, block)
-        for name, texture in edge_sums.items():
-            texel[name][listed] = read_texture(texture).reshape(-1, 4)[:len(listed)]
+            # this pass's samples, read back to count in the neighbours by the filter at
+            # their own place (preview.passes.add_tails)
+            one = {name: read_texture(texture).reshape(-1, 4)[:len(listed)].astype(np.float64)
+                   for name, texture in shade(inputs, {name: blank for name in names}, terms,
+                                              blank, list_size, block).items()}
+            for name in names:
+                own[name] += one[name]
+            add_tails(tails, {key: value / len(plan) for key, value in _sums_of(one).items()},
+                      listed, weights, width, height)
+        for name in names:
+            texel[name][listed] = own[name]
+    else:
+        tails = new_sums(width * height)
     count = np.where(edge.ravel(), len(plan), 1)
     timings["sub-pixel passes (GPU)" if len(plan) > 1 else "direct (GPU)"] = \
         time.perf_counter() - t0
     t0 = time.perf_counter()
-    accumulated = {
-        "emission": texel["sum_a"][:, :3], "coverage": texel["sum_a"][:, 3],
-        "diffuse_color": texel["sum_b"][:, :3], "ao": texel["sum_b"][:, 3],
-        "glossy_color": texel["sum_c"][:, :3], "diffuse_indirect": texel["sum_d"][:, :3],
-        "glossy_indirect": texel["sum_e"][:, :3], "glossy_direct": texel["sum_f"][:, :3],
-        "diffuse_direct": texel["sum_g"][:, :3]}
-    passes = finish_passes(accumulated, count, width, height, filter_width)
+    passes = finish_passes(_sums_of(texel), count, width, height, filter_width, tails)
     timings["read-back"] = time.perf_counter() - t0
     return passes, timings

@@ -93,12 +93,15 @@ void main()
       vec3 plain = principled_glossy_reflectance(vec3(1.0), 1.0, params.y, rough, n, v, towards);
       vec3 fresnel = mix(vec3(0.0), actual / max(plain, vec3(1e-30)), greaterThan(plain, vec3(0.0)));
       vec3 model = ltc_lobe_density(n, v, rough, towards) * white_colour;
-      float cover = clamp(shape, 0.0, 1.0);
+      /* the ratio trusted as far as the triangle is narrow (exact_glossy._narrow) */
+      vec3 d0 = normalize(c0 - p), d1 = normalize(c1 - p), d2 = normalize(c2 - p);
+      float spread = acos(clamp(min(min(dot(d0, d1), dot(d1, d2)), dot(d0, d2)), -1.0, 1.0));
+      float trust = (1.0 - clamp(shape, 0.0, 1.0)) * clamp(1.0 - spread / (0.5 * M_PI_F), 0.0, 1.0);
       for (int c = 0; c < 3; c++) {
         if (model[c] > 0.0) {
           float ratio = actual[c] / model[c];
           fresnel[c] = (ratio > 0.0 && fresnel[c] > 0.0) ?
-                       exp((1.0 - cover) * log(ratio) + cover * log(fresnel[c])) : 0.0;
+                       exp(trust * log(ratio) + (1.0 - trust) * log(fresnel[c])) : 0.0;
         }
       }
       unshadowed += shape * fresnel * vec3(texelFetch(emitters, ivec2(0, k), 0).w,

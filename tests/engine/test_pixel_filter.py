@@ -102,3 +102,52 @@ def test_the_sub_pixel_offsets_sample_the_filter_inside_the_pixel(size):
     f = blackman_harris(x, size)
     cdf = np.cumsum(f) / f.sum()
     assert np.allclose(np.interp(along, x, cdf), (np.arange(4) + 0.5) / 4, atol=2e-3)
+
+
+def _sub_pixel_film(lit, width=3, height=3, size=1.5):
+    """Diffuse Direct of the centre pixel of a ``width`` × ``height`` diffuse surface (colour 1
+    everywhere) whose samples are lit where ``lit(column, row, ox, oy)``, every pixel drawn
+    by the 16 sub-pixel passes: (with each sample's own filter weight in the neighbours, with
+    the neighbours' means)."""
+    from voxgi.voxgi_addon.preview.passes import (
+        SUMS,
+        add_tails,
+        finish_passes,
+        new_sums,
+        pass_tail_weights,
+        subpixel_passes,
+    )
+    plan = subpixel_passes(size, 16)
+    sums, tails = new_sums(width * height), new_sums(width * height)
+    pixels = np.arange(width * height)
+    for ((ox, oy), _), weights in zip(plan, pass_tail_weights(plan, size)):
+        one = new_sums(width * height)
+        one["diffuse_color"][:] = 1.0
+        one["coverage"][:] = 1.0
+        row, column = np.divmod(pixels, width)
+        one["diffuse_direct"][lit(column, row, ox, oy)] = 1.0
+        for name in SUMS:
+            sums[name] += one[name]
+        add_tails(tails, {name: one[name] / len(plan) for name in SUMS}, pixels, weights,
+                  width, height)
+    exact = finish_passes(sums, len(plan), width, height, size, tails)["Diffuse Direct"]
+    means = finish_passes(sums, len(plan), width, height, size)["Diffuse Direct"]
+    return exact[height // 2, width // 2, 0], means[height // 2, width // 2, 0]
+
+
+def test_a_neighbours_samples_count_by_the_filter_at_their_own_place():
+    """Light on the near half of the left neighbour only (a 1-pixel slot beside a lit edge):
+    Cycles' pixel takes ∫ of its filter over that half over the whole window (0.112 at Filter
+    Size 1.5); the neighbour's mean × its share gives half the neighbour's share (0.059) —
+    the samples' own weights give Cycles' value."""
+    exact, means = _sub_pixel_film(lambda column, row, ox, oy: (column == 0) & (ox > 0.0))
+    x = np.linspace(-1.5, 1.5, 30001)
+    f = blackman_harris(x, 1.5)
+    truth = f[(x > -1.0) & (x <= -0.5)].sum() / f.sum()
+    assert exact == pytest.approx(truth, rel=0.02)
+    assert abs(means - truth) > 0.4 * truth
+
+
+def test_sample_weights_keep_an_evenly_lit_surface_even():
+    exact, _ = _sub_pixel_film(lambda column, row, ox, oy: np.ones_like(column, bool))
+    assert exact == pytest.approx(1.0, rel=1e-6)

@@ -135,9 +135,10 @@ class _Lobe:
 
 def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights, principled,
                     emission, rays: int = 16, seed: int = 0, world=(0.0, 0.0, 0.0),
-                    hit_samples: int = 1, hit_glossy: bool = True):
+                    hit_samples: int = 1, hit_glossy: bool = True, cache=None):
     """(Glossy Indirect (N, 3) float32, variance of its luminance mean (N,) float32) — see the
-    module doc. ``rays`` per point, ``METAL_RAY_FACTOR`` × that at metallic ≥ 0.5.
+    module doc. ``rays`` per point, ``METAL_RAY_FACTOR`` × that at metallic ≥ 0.5. cache : the
+    radiance cache the hits reflect too (``exact_indirect.ray_radiance``; None: one bounce).
 
     points, normals, views : (N, 3) surface points, unit normals facing the viewer and unit
     directions to the viewer; materials : (N,) material index per point (the last row of the
@@ -160,12 +161,12 @@ def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights,
         if group.any():
             value[group], variance[group] = _glossy_indirect(
                 p[group], n[group], views[group], materials[group], ids[group], tris, lights,
-                principled, emission, group_rays, seed, world, hit_samples, hit_glossy)
+                principled, emission, group_rays, seed, world, hit_samples, hit_glossy, cache)
     return value, variance
 
 
 def _glossy_indirect(p, n, views, materials, ids, tris, lights, principled, emission, rays,
-                     seed, world, hit_samples, hit_glossy):
+                     seed, world, hit_samples, hit_glossy, cache=None):
     """``glossy_indirect`` with ``rays`` rays at every point."""
     count = len(p)
     lobe = _Lobe(n, views, materials, principled)
@@ -178,7 +179,7 @@ def _glossy_indirect(p, n, views, materials, ids, tris, lights, principled, emis
         hit_ids = ids.repeat(rays) * np.uint32(rays) + np.tile(np.arange(rays, dtype=np.uint32), count)
     radiance, _ = ray_radiance(origins, dirs.reshape(-1, 3), hit_ids, tris, lights,
                                (base_table, param_table), emission, seed, world, hit_samples,
-                               hit_glossy, ray=RAY_GLOSSY)
+                               hit_glossy, ray=RAY_GLOSSY, cache=cache)
     safe_colour = np.where(colour > 0.0, colour, 1.0)
     per_ray = np.where(colour[:, None] > 0.0,
                        weight * radiance.reshape(count, rays, 3) / safe_colour[:, None], 0.0)
@@ -335,14 +336,33 @@ def emitters_glossy(lobe: _Lobe, emitters, tris, points, origins, ids, rays: int
     model = ltc_lobe_density(n, v, rough[:, 0], towards)[..., None] * white_colour[:, None]
     ratio = np.divide(actual, model, out=np.zeros_like(actual), where=model > 0.0)
     fresnel = np.divide(actual, plain, out=np.zeros_like(actual), where=plain > 0.0)
-    cover = np.clip(shape, 0.0, 1.0)[..., None]
-    fresnel = np.where(model > 0.0, ratio ** (1.0 - cover) * fresnel ** cover, fresnel)
+    trust = (1.0 - np.clip(shape, 0.0, 1.0)) * _narrow(emitters.corners, p)
+    trust = trust[..., None]
+    fresnel = np.where(model > 0.0, ratio ** trust * fresnel ** (1.0 - trust), fresnel)
     unshadowed = np.einsum("gt,gtc->gc", shape, fresnel * emitters.radiance[None]) * white_colour
     seen, drawn = _emitter_weights(lobe, emitters, tris, origins, ids, rays, seed)
     total, lit = drawn[glossy].sum(axis=1), seen[glossy].sum(axis=1)
     visible = np.divide(lit, total, out=np.ones_like(lit), where=total > 0.0)
     out[glossy] = unshadowed * visible[:, None]
     return out
+
+
+def _narrow(corners, points) -> np.ndarray:
+    """(G, T) how narrow each triangle ``corners`` (T, 3, 3) looks from each point (G, 3):
+    1 − its spread / (π/2), clipped to [0, 1], where the spread is the largest angle between
+    the directions to its corners. ``emitters_glossy`` lets the lobe over the LTC's density at
+    one direction stand for a triangle only as far as the triangle is narrow: that ratio swings
+    across a lobe (toward the horizon above all), and over a triangle whose corners lie a
+    quarter turn apart or more — a ceiling panel 5 cm under a grazingly seen ceiling, spanning
+    150° of it — one direction's ratio was 2–3× off brute force
+    (tests/engine/test_exact_glossy.py)."""
+    d = corners[None] - points[:, None, None]                     # (G, T, 3, 3)
+    d /= np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-30)
+    cosines = np.minimum(np.minimum(np.einsum("gtc,gtc->gt", d[:, :, 0], d[:, :, 1]),
+                                    np.einsum("gtc,gtc->gt", d[:, :, 1], d[:, :, 2])),
+                         np.einsum("gtc,gtc->gt", d[:, :, 0], d[:, :, 2]))
+    spread = np.arccos(np.clip(cosines, -1.0, 1.0))
+    return np.clip(1.0 - spread / (0.5 * np.pi), 0.0, 1.0)
 
 
 def _emitter_weights(lobe: _Lobe, emitters, tris, origins, ids, rays: int, seed: int):
