@@ -154,6 +154,20 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
                     "noise before denoising",
         default=64, min=1, max=1024,
     )
+    bounce_source: bpy.props.EnumProperty(
+        name="Bounces",
+        description="How many bounces of diffuse light the Accurate preview carries",
+        items=(("CYCLES", "Follow Cycles", "As many as Cycles' Light Paths allow (Diffuse "
+                "bounces, capped by Total): the preview predicts the final render"),
+               ("MANUAL", "Manual", "The Bounces count below")),
+        default="CYCLES",
+    )
+    bounces: bpy.props.IntProperty(
+        name="Bounces",
+        description="Diffuse bounces of the Accurate preview: 1 is the exact one-bounce "
+                    "gather; more add the later bounces from a radiance cache in voxels",
+        default=4, min=1, max=16,
+    )
     seed: bpy.props.IntProperty(
         name="Seed",
         description="Seed of the sampling patterns (shadow rays and gathers), as Cycles' Seed: "
@@ -296,6 +310,17 @@ def pixel_filter_width(scene) -> float:
     return DEFAULT_FILTER_WIDTH if width is None else float(width)
 
 
+def diffuse_bounces(settings: VoxGISceneSettings) -> int:
+    """The preview's diffuse bounces: the Manual count, or Cycles' Light Paths (Diffuse bounces
+    capped by Total, at least 1) when it follows Cycles."""
+    if settings.bounce_source == "MANUAL":
+        return int(settings.bounces)
+    cycles = getattr(settings.id_data, "cycles", None)
+    diffuse = getattr(cycles, "diffuse_bounces", 4)
+    total = getattr(cycles, "max_bounces", 12)
+    return max(1, min(int(diffuse), int(total)))
+
+
 def trace_options(settings: VoxGISceneSettings, width: int, height: int, frame: int = 0) -> dict:
     """Keyword arguments of both tracers (``preview.passes.render_passes``,
     ``render.gpu_preview.render_passes_gpu``) for a ``width`` × ``height`` image of ``frame``."""
@@ -308,7 +333,8 @@ def trace_options(settings: VoxGISceneSettings, width: int, height: int, frame: 
             "gather_settings": GatherSettings(rays=settings.gi_rays,
                                               glossy_rays=max(1, settings.gi_rays // 8),
                                               ao_distance=settings.ao_distance,
-                                              seed=sampling_seed(settings, frame))}
+                                              seed=sampling_seed(settings, frame),
+                                              bounces=diffuse_bounces(settings))}
 
 
 def gi_settings(settings: VoxGISceneSettings):

@@ -69,7 +69,8 @@ KERNELS = {
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials",
                            "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "principled_lut", "partial_image",
-                           "partial_variance", "texture_table", "texture_atlas"),
+                           "partial_variance", "texture_table", "texture_atlas",
+                           "radiance_cache"),
                    ("sampling", "world", "grid", "chunk")),
 }
 # The glossy gather reads the same inputs as the diffuse one.
@@ -98,7 +99,9 @@ def _blank_texture():
 # Samplers that hold constants of the code, not of the scene: bound when a dispatch's inputs
 # leave them out (the texture samplers of a BVH without cut-outs are never read).
 CONSTANT_SAMPLERS = {"ltc_table": ltc_texture, "texture_table": _blank_texture,
-                     "texture_atlas": _blank_texture}
+                     "texture_atlas": _blank_texture,
+                     # no multi-bounce cache (gpu_gather.cache_texture): one bounce
+                     "radiance_cache": _blank_texture}
 # Kernels with more than one output image (the others write ``out_image``).
 OUTPUTS = {"bvh_gather": ("out_image", "out_variance"),
            "bvh_glossy": ("out_image", "out_variance")}
@@ -195,6 +198,11 @@ class GPUBVH:
         self.uploaded_bytes = self.resident_bytes = packed.nbytes
         self._tris = tris
         return self
+
+    @property
+    def scene_triangles(self):
+        """The ``SceneTriangles`` of the uploaded BVH (None before the first update)."""
+        return self._tris
 
     @property
     def inputs(self) -> dict[str, object]:

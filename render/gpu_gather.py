@@ -10,17 +10,21 @@ rays. Needs a GPU context.
 from __future__ import annotations
 
 import math
+import weakref
+from dataclasses import replace
 
 import gpu
 import numpy as np
 
 from ..voxgi_addon.gi.exact_glossy import METAL_RAY_FACTOR
+from ..voxgi_addon.gi.radiance_cache import build_cache, cache_key, cache_texels, face_points, with_faces
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import low_shape
 from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, scene_light_textures, strata_side
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
 from .gpu_shaders import LOCAL_SIZE, build_compute
+from .gpu_tracer import read_texture
 from .gpu_volume import float_texture
 
 _DENOISE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "low_image", "low_variance")
@@ -80,6 +84,60 @@ def no_texture_inputs() -> dict[str, object]:
     return {name: float_texture(blank, (1, 1)) for name in ("texture_table", "texture_atlas")}
 
 
+_cache_upload: dict[str, object] = {}
+CACHE_IMAGE_WIDTH = 256  # voxel faces per row of the cache's gather "image"
+
+
+def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
+    """The radiance cache of ``settings.bounces`` − 1 iterations (``gi.radiance_cache``)
+    gathered on the GPU: the voxel faces (``radiance_cache.face_points``) laid out as the
+    pixels of a ``CACHE_IMAGE_WIDTH``-wide G-buffer (sample id = the face's row, as numpy's
+    ``radiance_cache.iterate``), each iteration one run of ``gather`` with
+    ``settings.cache_rays`` rays and the previous iteration's texels bound; seed 0, as numpy."""
+    tris = bvh.scene_triangles
+    cache = build_cache(tris, settings.cache_resolution)
+    points, axes = face_points(cache)
+    count = len(points)
+    if count == 0:  # nothing to light: an empty cache of the iterations asked
+        cache = with_faces(cache, np.zeros((0, 3)))
+        texels = cache_texels(cache)
+        return cache, float_texture(texels, (texels.shape[1], texels.shape[0]))
+    width = CACHE_IMAGE_WIDTH
+    height = -(-count // width)
+    image = np.zeros((3, height * width, 4), np.float32)
+    image[0, :count, :3], image[0, :count, 3] = points, 1.0
+    image[1, :count, :3] = axes
+    # rows top first in the arrays, bottom first in the textures
+    gbuffer = {name: float_texture(layer.reshape(height, width, 4)[::-1], (width, height))
+               for name, layer in zip(("gbuffer_position", "gbuffer_normal", "gbuffer_view"),
+                                      image)}
+    step = replace(settings, rays=settings.cache_rays, bounces=1, seed=0)
+    previous = None
+    for _ in range(settings.bounces - 1):
+        values, _ = gather(bvh, gbuffer, lights, principled, emission, step, 1, width, height,
+                           tables=tables, cache=previous)
+        faces = read_texture(values)[::-1].reshape(-1, 4)[:count, :3]
+        cache = with_faces(cache, faces)
+        texels = cache_texels(cache)
+        previous = float_texture(texels, (texels.shape[1], texels.shape[0]))
+    return cache, previous
+
+
+def cache_texture(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
+    """The texture of the radiance cache the diffuse gather reads at its bounce hits for
+    ``settings.bounces`` (``cache_gpu``), kept for the next gather with the same triangles,
+    lights, materials and cache settings (the viewport's slices)."""
+    key = cache_key(lights, principled, emission, settings.bounces, settings.cache_rays,
+                    settings.cache_resolution, tuple(float(w) for w in settings.world),
+                    settings.hit_samples, settings.hit_glossy)
+    held = _cache_upload.get("entry")
+    if held is None or held[0]() is not bvh.scene_triangles or held[1] != key:
+        cache, texture = cache_gpu(bvh, lights, principled, emission, settings, tables)
+        held = (weakref.ref(bvh.scene_triangles), key, cache, texture)
+        _cache_upload["entry"] = held
+    return held[3]
+
+
 # Ray traversals (a bounce ray or a shadow ray) one gather invocation may make per dispatch.
 # llvmpipe ends an invocation's loops after 65535 iterations in all (docs/blender_facts.md
 # "llvmpipe's loop limit"); 32 traversals leave each one about 2000 loop iterations (BVH nodes
@@ -96,7 +154,7 @@ def rays_per_dispatch(light_count: int, hit_samples: int = 1) -> int:
 
 def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
            width: int, height: int, kernel: str = "bvh_gather", world_mode: bool = False,
-           tables=None):
+           tables=None, cache=None):
     """The raw gather: (values, variance) RGBA32F textures of the low-resolution grid, the
     rays split over dispatches of ``rays_per_dispatch``. kernel : "bvh_gather" (Diffuse
     Indirect and AO, ``settings.rays``) or "bvh_glossy" (Glossy Indirect,
@@ -105,7 +163,9 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
     settings : ``voxgi_addon.preview.gather.GatherSettings``; world_mode : "bvh_glossy"
     gathers the world's Glossy Direct instead (``exact_glossy.glossy_world_direct``).
     tables : the light and material textures of ``lights``, ``principled`` and ``emission``
-    made already (``gpu_scene.GPUScene.gather_tables``); None: made here."""
+    made already (``gpu_scene.GPUScene.gather_tables``); None: made here.
+    cache : the radiance cache texture the bounce hits read (``cache_texels``); None: the
+    ``cache_texture`` of ``settings.bounces`` (none for one bounce and in ``world_mode``)."""
     low_h, low_w = low_shape(height, width, stride)
     placeholder = gpu.types.GPUTexture((1, 1), format="RGBA32F")
     partial = (placeholder, placeholder)
@@ -116,6 +176,11 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
     inputs = {**bvh.inputs, **gbuffer_inputs, **tables}
     if "texture_atlas" not in inputs:
         inputs.update(no_texture_inputs())
+    if cache is not None:
+        inputs["radiance_cache"] = cache
+    elif settings.bounces > 1 and not world_mode:  # bounces 2 … N from the cache
+        inputs["radiance_cache"] = cache_texture(bvh, lights, principled, emission, settings,
+                                                 tables)
     assert OUTPUTS[kernel] == ("out_image", "out_variance")
     rays = settings.rays if kernel == "bvh_gather" else settings.glossy_rays
     # metals take METAL_RAY_FACTOR × the glossy rays (exact_glossy.glossy_indirect): the
@@ -230,5 +295,7 @@ def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: 
 
 
 def release() -> None:
-    """Drop the cached shaders (docs/gi_pipeline.md, "GPU resources at exit")."""
+    """Drop the cached shaders and the cache's texture (docs/gi_pipeline.md, "GPU resources at
+    exit")."""
     _shaders.clear()
+    _cache_upload.clear()

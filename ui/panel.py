@@ -119,7 +119,7 @@ class VOXGI_PT_gi(_SidebarPanel, bpy.types.Panel):
         manual = ("view_ahead",) if settings.span_mode == "MANUAL" else ()
         # Accurate traces exact rays for every pass: the cone and voxel settings apply to Fast
         # only.
-        trace = (("gi_rays",) if settings.quality == "ACCURATE"
+        trace = (("gi_rays", "bounce_source", "bounces") if settings.quality == "ACCURATE"
                  else ("diffuse_cones", "falloff", "gi_intensity", "ao_intensity", "shadows",
                        *manual, "dense_depth", "cone_angle", "sample_factor", "max_distance"))
         _settings_column(layout, context, (

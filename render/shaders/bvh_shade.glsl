@@ -7,11 +7,58 @@
  * Samplers: bvh_* (bvh_common.glsl), lights and world_map (bvh_lights.glsl), materials ((M + 1) × 3 texels:
  * base colour, emission, (metallic, Specular IOR Level, roughness), (Base Color texture slot,
  * Roughness / Metallic texture slot, first variant)),
- * principled_lut, texture_table, texture_atlas (textures.glsl). */
+ * principled_lut, texture_table, texture_atlas (textures.glsl), radiance_cache (cache_indirect). */
 
 vec4 bvh_texel_normals(int k)
 {
   return texelFetch(bvh_normals, ivec2(k & (BVH_WIDTH - 1), k >> BVH_WIDTH_LOG2), 0);
+}
+
+/* The multi-bounce radiance cache's indirect light (E/π) at `x` for unit normal `n`
+ * (voxgi_addon/gi/radiance_cache.py lookup; texels: radiance_cache.cache_texels): the six axis
+ * faces blended by n², trilinear over the present voxels of the finest grid holding `x`; 0
+ * outside every grid and for the 1 × 1 blank texture (no cache: one bounce). */
+vec3 cache_indirect(vec3 x, vec3 n)
+{
+  ivec2 size = textureSize(radiance_cache, 0);
+  vec4 info = texelFetch(radiance_cache, ivec2(size.x - 1, 0), 0);
+  int res = int(info.x + 0.5);
+  int count = int(info.y + 0.5);
+  ivec3 face = ivec3(n.x < 0.0 ? 1 : 0, n.y < 0.0 ? 3 : 2, n.z < 0.0 ? 5 : 4);
+  vec3 blend = n * n;
+  for (int g = 0; g < count; g++) {
+    vec4 grid = texelFetch(radiance_cache, ivec2(g, 0), 0);
+    vec3 at = (x - grid.xyz) / grid.w;
+    if (any(lessThan(at, vec3(0.0))) || any(greaterThanEqual(at, vec3(float(res))))) {
+      continue;
+    }
+    vec3 gg = at - 0.5;
+    ivec3 base = ivec3(floor(gg));
+    vec3 f = gg - vec3(base);
+    vec3 total = vec3(0.0);
+    float weight = 0.0;
+    for (int corner = 0; corner < 8; corner++) {
+      ivec3 o = ivec3((corner >> 2) & 1, (corner >> 1) & 1, corner & 1);
+      ivec3 cell = base + o;
+      if (any(lessThan(cell, ivec3(0))) || any(greaterThanEqual(cell, ivec3(res)))) {
+        continue;
+      }
+      int column = cell.x + cell.y * res;
+      int row = 1 + (g * res + cell.z) * 6;
+      vec4 fx = texelFetch(radiance_cache, ivec2(column, row + face.x), 0);
+      if (fx.w < 0.5) {
+        continue;  /* no voxel there */
+      }
+      vec3 fy = texelFetch(radiance_cache, ivec2(column, row + face.y), 0).rgb;
+      vec3 fz = texelFetch(radiance_cache, ivec2(column, row + face.z), 0).rgb;
+      vec3 wv = mix(1.0 - f, f, vec3(o));
+      float w = wv.x * wv.y * wv.z;
+      total += w * (blend.x * fx.rgb + blend.y * fy + blend.z * fz);
+      weight += w;
+    }
+    return weight > 1e-6 ? total / weight : vec3(0.0);
+  }
+  return vec3(0.0);
 }
 
 vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
@@ -89,10 +136,12 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
   /* the world and the emitters light the hit too: its diffuse weight and, when `hit_glossy`,
    * its glossy lobe from the same shadow rays (exact_indirect.ray_radiance) */
   vec3 world_glossy, emitter_glossy;
+  /* ... and the radiance cache's indirect light at the hit: bounces 2 … N (cache_indirect) */
   radiance += weight * (world_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, hit_glossy, -d,
                                          base, params, world_glossy) +
                         emitters_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, false,
-                                            hit_glossy, -d, base, params, emitter_glossy));
+                                            hit_glossy, -d, base, params, emitter_glossy) +
+                        cache_indirect(x, ns));
   return radiance + world_glossy + emitter_glossy;
 }
 

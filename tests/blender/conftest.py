@@ -15,10 +15,24 @@ import pytest
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[2]
 
 
+def one_bounce_by_default() -> None:
+    """Scenes of the tests start at Bounces = 1 (Manual) instead of following Cycles' Light
+    Paths: the tests written before the multi-bounce cache compare with one-bounce Cycles
+    references and keep their limits; tests of several bounces set ``bounce_source`` back to
+    'CYCLES' (test_multibounce.py). Patches the property defaults before registration."""
+    settings = importlib.import_module("voxgi.blender.settings").VoxGISceneSettings
+    annotations = settings.__annotations__
+    for name, default in (("bounce_source", "MANUAL"), ("bounces", 1)):
+        prop = annotations[name]
+        annotations[name] = prop.function(**{**prop.keywords, "default": default})
+
+
 @pytest.fixture(scope="session")
 def voxgi():
-    """The registered add-on package; unregistered after the session."""
+    """The registered add-on package (one bounce by default, ``one_bounce_by_default``);
+    unregistered after the session."""
     package = importlib.import_module("voxgi")
+    one_bounce_by_default()
     package.register()
     try:
         yield package

@@ -12,8 +12,9 @@ white Lambertian surface would reflect) arriving through each of the six axis fa
 holding it (absent voxels carry no weight).
 
 Iteration k (``iterate``) gathers face f of every voxel with ``rays`` cosine-distributed exact
-rays about the face's axis, starting ``FACE_OFFSET`` voxels out of the voxel centre along it, and
-shades each with ``exact_indirect.ray_radiance`` — the hit's exact direct light (every light:
+rays about the face's axis, starting ``FACE_OFFSET`` voxels out of the voxel centre along it
+(the diffuse gather itself, at those points: the GPU runs ``shaders/bvh_gather.glsl`` on them),
+and shades each with ``exact_indirect.ray_radiance`` — the hit's exact direct light (every light:
 lamps, world, emitters) reflected by its albedo — *plus* the hit's diffuse weight × iteration
 k − 1's cache at the hit. So iteration 1 holds the two-bounce light, iteration k the light of
 bounces 2 … k + 1, and the gather with a cache of N − 1 iterations returns bounces 1 … N: the
@@ -32,12 +33,10 @@ import numpy as np
 from ..errors import VoxGIError
 from ..voxelize.surface import voxelize_triangles
 from .cascades import CascadeGrid
-from .sampling import hammersley
 
-__all__ = ["CACHE_STREAM", "FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids",
-           "cache_texels", "cached_cache", "iterate", "lookup"]
+__all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
+           "cache_texels", "cached_cache", "face_points", "iterate", "lookup", "with_faces"]
 
-CACHE_STREAM = 0xCAC4E   # hash stream of the cache's face rays
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin
 FACES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
 
@@ -164,35 +163,62 @@ def build_cache(tris, resolution: int = 32, count: int = 1) -> RadianceCache:
     return RadianceCache(tuple(grids), tuple(cells), faces, 0)
 
 
+def face_points(cache: RadianceCache) -> tuple[np.ndarray, np.ndarray]:
+    """((6 N, 3) ray origins, (6 N, 3) unit axes) of every voxel face of ``cache``, voxel by
+    voxel (grids finest first), faces in the order +x, −x, +y, −y, +z, −z: the gather points
+    of ``iterate``, whose sample id is the row (the GPU lays them out as the pixels of an
+    image, ``render/gpu_gather.py`` ``cache_gpu``)."""
+    points, axes = [np.zeros((0, 3))], [np.zeros((0, 3))]
+    for grid, cells in zip(cache.grids, cache.cells):
+        centres = np.asarray(grid.origin) + (np.asarray(cells, np.float64) + 0.5) * grid.span
+        points.append(np.repeat(centres, 6, axis=0) +
+                      FACE_OFFSET * grid.span * np.tile(FACES, (len(cells), 1)))
+        axes.append(np.tile(FACES, (len(cells), 1)))
+    return np.concatenate(points), np.concatenate(axes)
+
+
+def with_faces(cache: RadianceCache, values) -> RadianceCache:
+    """The next iteration of ``cache`` holding ``values`` ((6 N, 3), ``face_points``' order)."""
+    values = np.asarray(values, np.float32).reshape(-1, 6, 3)
+    faces, start = [], 0
+    for cells in cache.cells:
+        faces.append(values[start:start + len(cells)].copy())
+        start += len(cells)
+    return RadianceCache(cache.grids, cache.cells, tuple(faces), cache.iterations + 1)
+
+
 def iterate(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 16, seed: int = 0,
             world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = True) -> RadianceCache:
     """One more bounce: every voxel face gathers ``rays`` exact rays shaded by
-    ``exact_indirect.ray_radiance`` with ``cache`` at their hits (see the module doc).
-    lights, albedo, emission, world, hit_samples, hit_glossy : as the gather's
-    (``exact_indirect.indirect_and_ao``)."""
-    from .exact_indirect import cosine_directions, ray_radiance
+    ``exact_indirect.ray_radiance`` with ``cache`` at their hits (see the module doc) — the
+    diffuse gather (``exact_indirect.indirect_and_ao``) at ``face_points``, sample id = the
+    face's row. lights, albedo, emission, world, hit_samples, hit_glossy : as the gather's."""
+    from .exact_indirect import indirect_and_ao
 
-    faces = []
-    offset = 0
-    for grid, cells in zip(cache.grids, cache.cells):
-        count = len(cells)
-        if count == 0:
-            faces.append(np.zeros((0, 6, 3), np.float32))
-            continue
-        centres = np.asarray(grid.origin) + (cells.astype(np.float64) + 0.5) * grid.span
-        axes = np.tile(FACES, (count, 1))                          # (6 count, 3)
-        origins = np.repeat(centres, 6, axis=0) + FACE_OFFSET * grid.span * axes
-        ids = (offset + np.arange(6 * count)).astype(np.uint32)
-        dirs = cosine_directions(axes, hammersley(ids, CACHE_STREAM, rays, seed)).reshape(-1, 3)
-        with np.errstate(over="ignore"):
-            hit_ids = np.repeat(ids, rays) * np.uint32(rays) + \
-                np.tile(np.arange(rays, dtype=np.uint32), 6 * count)
-        radiance, _ = ray_radiance(np.repeat(origins, rays, axis=0), dirs, hit_ids, tris, lights,
-                                   albedo, emission, seed + 7, world, hit_samples, hit_glossy,
-                                   cache=cache)
-        faces.append(radiance.reshape(count, 6, rays, 3).mean(axis=2).astype(np.float32))
-        offset += 6 * count
-    return RadianceCache(cache.grids, cache.cells, tuple(faces), cache.iterations + 1)
+    points, axes = face_points(cache)
+    values = np.zeros((len(points), 3), np.float32)
+    if len(points):
+        values, _ = indirect_and_ao(points, axes, np.arange(len(points)), tris, lights, albedo,
+                                    emission, rays=rays, seed=seed, world=world,
+                                    hit_samples=hit_samples, hit_glossy=hit_glossy, cache=cache)
+    return with_faces(cache, values)
+
+
+def _value_key(value):
+    if isinstance(value, np.ndarray):
+        return (value.dtype.str, value.shape, hash(value.tobytes()))
+    if isinstance(value, (list, tuple)):
+        return tuple(_value_key(v) for v in value)
+    if hasattr(value, "__dataclass_fields__"):
+        return tuple((name, _value_key(getattr(value, name))) for name in value.__dataclass_fields__)
+    return value if isinstance(value, (int, float, str, bool, type(None))) else id(value)
+
+
+def cache_key(lights, albedo, emission, *settings) -> tuple:
+    """What a cache of the same triangles depends on besides them, by content (lights are
+    rebuilt for every viewport slice; hashing their arrays costs far less than a cache)."""
+    return (_value_key(list(lights)), _value_key(albedo), _value_key(np.asarray(emission)),
+            settings)
 
 
 _MEMO: dict = {}
@@ -202,15 +228,12 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
                  resolution: int = 32, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
                  hit_glossy: bool = True) -> RadianceCache | None:
     """The cache of ``bounces`` − 1 iterations for these triangles, lights and materials (None
-    for ``bounces`` ≤ 1), kept for the next call with the same inputs (the viewport's slices and
-    the GPU and numpy gathers of one render ask for the same cache)."""
+    for ``bounces`` ≤ 1), kept for the next call with the same inputs (the viewport's slices
+    ask for the same cache)."""
     if bounces <= 1:
         return None
-    albedo_key = tuple(np.asarray(a, np.float64).tobytes() for a in
-                       (albedo if isinstance(albedo, tuple) else (albedo,)))
-    key = (tuple(id(light) for light in lights), albedo_key,
-           np.asarray(emission, np.float64).tobytes(), bounces, rays, resolution,
-           tuple(float(w) for w in world), hit_samples, hit_glossy)
+    key = cache_key(lights, albedo, emission, bounces, rays, resolution,
+                    tuple(float(w) for w in world), hit_samples, hit_glossy)
     held = _MEMO.get("entry")
     if held is not None and held[0]() is tris and held[1] == key:
         return held[2]
@@ -218,7 +241,7 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
     for _ in range(bounces - 1):
         cache = iterate(cache, tris, lights, albedo, emission, rays, world=world,
                         hit_samples=hit_samples, hit_glossy=hit_glossy)
-    _MEMO["entry"] = (weakref.ref(tris), key, cache, tuple(lights))
+    _MEMO["entry"] = (weakref.ref(tris), key, cache)
     return cache
 
 

@@ -114,8 +114,9 @@ def gather_glossy(tris, lights, principled, emission, hit, position, normal, dir
     """
     return _glossy_cells(glossy_indirect, (tris, lights, principled, emission), {
         "world": settings.world, "hit_samples": settings.hit_samples,
-        "hit_glossy": settings.hit_glossy}, hit, position, normal, direction, material, settings,
-        stride)
+        "hit_glossy": settings.hit_glossy,
+        "cache": radiance_cache(tris, lights, principled, emission, settings)},
+        hit, position, normal, direction, material, settings, stride)
 
 
 def gather_glossy_world(tris, world, principled, hit, position, normal, direction, material,
