@@ -141,12 +141,14 @@ def test_texels_hold_every_voxel_face():
     assert texels.shape == (1 + res * 6, res * res, 4)
     np.testing.assert_allclose(texels[0, 0], [*cache.grids[0].origin, cache.grids[0].span])
     np.testing.assert_array_equal(texels[0, -1], [res, 1, 0, 0])
-    c = cache.cells[0]
-    assert texels[1:, :, 3].sum() == 6 * len(c)
-    i = len(c) // 2
-    for f in range(6):
-        np.testing.assert_allclose(texels[1 + c[i, 2] * 6 + f, c[i, 0] + c[i, 1] * res, :3],
-                                   cache.faces[0][i, f])
+    c, present = cache.cells[0], cache.present[0]
+    assert texels[1:, :, 3].sum() == present.sum()
+    assert present.any(axis=1).all() and not present.all()  # a room's voxels face 1–3 axes
+    for i in (0, len(c) // 2, len(c) - 1):
+        for f in range(6):
+            texel = texels[1 + c[i, 2] * 6 + f, c[i, 0] + c[i, 1] * res]
+            assert texel[3] == present[i, f]
+            np.testing.assert_allclose(texel[:3], cache.faces[0][i, f])
 
 
 def test_bad_settings_raise_clear_errors():

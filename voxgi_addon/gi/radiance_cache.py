@@ -7,9 +7,10 @@ The Accurate gather shades each bounce hit with its exact direct light (one boun
 arriving there, looked up in this cache. The cache holds, per voxel of its grids (the cells the
 scene's triangles touch, ``voxelize_triangles``), the indirect light (Cycles' units: E/π, what a
 white Lambertian surface would reflect) arriving through each of the six axis faces of the voxel
-(an "ambient cube": +x, −x, +y, −y, +z, −z). A surface point with unit normal n reads
-Σ_a n_a² · face(a, sign n_a), trilinear over the eight nearest present voxels of the finest grid
-holding it (absent voxels carry no weight).
+(an "ambient cube": +x, −x, +y, −y, +z, −z; a voxel holds the axes its triangles face). A
+surface point with unit normal n reads Σ_a n_a² · face(a, sign n_a), each face trilinear over
+the eight nearest voxels of the finest grid holding the point that hold it (the others carry no
+weight).
 
 Iteration k (``iterate``) gathers face f of every voxel with ``rays`` cosine-distributed exact
 rays about the face's axis, starting ``FACE_OFFSET`` voxels out of the voxel centre along it
@@ -38,6 +39,7 @@ __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_
            "cache_texels", "cached_cache", "face_points", "iterate", "lookup", "with_faces"]
 
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin
+FACE_AXIS_COSINE = 0.2   # a voxel holds the faces of the axes its triangles' normals reach
 FACES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
 
 
@@ -46,12 +48,16 @@ class RadianceCache:
     """grids : the cache's ``CascadeGrid`` list, finest first (a point reads the finest that
     holds it). cells : per grid the (N_i, 3) int32 voxels (sorted, unique). faces : per grid
     (N_i, 6, 3) float32 indirect light (E/π) through each face (+x, −x, +y, −y, +z, −z).
-    iterations : bounces beyond the first that it carries (0: an empty cache, all zeros)."""
+    iterations : bounces beyond the first that it carries (0: an empty cache, all zeros).
+    present : per grid (N_i, 6) bool, the faces it holds: both faces of every axis along which
+    a triangle touching the voxel faces by more than ``FACE_AXIS_COSINE`` (a floor's voxels hold
+    ±z only); a lookup blends each axis over the voxels that hold it."""
 
     grids: tuple
     cells: tuple
     faces: tuple
     iterations: int = 0
+    present: tuple = ()
 
     @property
     def voxel_count(self) -> int:
@@ -84,22 +90,26 @@ def cache_grids(tris, resolution: int = 32, count: int = 1) -> list:
     return grids
 
 
-def _sites(tris, grids) -> list:
-    """Per grid the (N_i, 3) int32 cells its triangles touch, a coarser grid leaving out the
-    cells a finer grid covers entirely."""
+def _sites(tris, grids) -> tuple[list, list]:
+    """Per grid the (N_i, 3) int32 cells its triangles touch (a coarser grid leaving out the
+    cells a finer grid covers entirely) and their (N_i, 6) present faces (``RadianceCache``)."""
     corners = np.asarray(tris.positions, np.float64)
+    normals = np.abs(np.asarray(tris.normals, np.float64))
     triangles = np.arange(len(corners) * 3).reshape(-1, 3)
-    out = []
+    out, present = [], []
     for index, grid in enumerate(grids):
         local = (corners - np.asarray(grid.origin)).reshape(-1, 3)
-        cells = voxelize_triangles(local, triangles, float(grid.span)).cells.astype(np.int64)
+        surface = voxelize_triangles(local, triangles, float(grid.span))
+        cells = surface.cells.astype(np.int64)
+        reach = np.zeros((len(cells), 3))
+        np.maximum.at(reach, surface.cell_of_pair, normals[surface.triangle_of_pair])
         res = grid.resolution
-        cells = cells[((cells >= 0) & (cells < res)).all(axis=1)]
+        keep = ((cells >= 0) & (cells < res)).all(axis=1)
         if index > 0:  # the finer grid is cells [res/4, 3 res/4) of this one
-            inner = ((cells >= res // 4) & (cells < 3 * res // 4)).all(axis=1)
-            cells = cells[~inner]
-        out.append(cells.astype(np.int32))
-    return out
+            keep &= ~((cells >= res // 4) & (cells < 3 * res // 4)).all(axis=1)
+        out.append(cells[keep].astype(np.int32))
+        present.append(np.repeat(reach[keep] > FACE_AXIS_COSINE, 2, axis=1))
+    return out, present
 
 
 def _dense_index(grid, cells) -> np.ndarray:
@@ -112,8 +122,9 @@ def _dense_index(grid, cells) -> np.ndarray:
 
 def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
     """(K, 3) float64 indirect light (E/π) at ``points`` (K, 3) for unit ``normals`` (K, 3):
-    the faces blended by n², trilinear (node-centred) over the present voxels of the finest
-    grid holding each point; 0 outside every grid or where no neighbour is present."""
+    per axis the face n faces, trilinear (node-centred) over the voxels of the finest grid
+    holding the point that hold that face, then the axes blended by n² (over the axes some
+    neighbour holds); 0 outside every grid or where no neighbour holds a face n faces."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     out = np.zeros((len(p), 3))
@@ -122,7 +133,7 @@ def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
     face = np.where(n < 0, 1, 0) + np.array([0, 2, 4])  # (K, 3) face per axis
     blend = n ** 2
     todo = np.ones(len(p), bool)
-    for grid, cells, faces in zip(cache.grids, cache.cells, cache.faces):
+    for grid, cells, faces, present in zip(cache.grids, cache.cells, cache.faces, cache.present):
         if not todo.any():
             break
         g = (p - np.asarray(grid.origin)) / grid.span
@@ -136,8 +147,8 @@ def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
         gg = g[rows] - 0.5
         base = np.floor(gg).astype(np.int64)
         frac = gg - base
-        total = np.zeros((len(rows), 3))
-        weight = np.zeros(len(rows))
+        total = np.zeros((len(rows), 3, 3))  # (k, axis, rgb)
+        weight = np.zeros((len(rows), 3))
         for corner in range(8):
             offset = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
             c = base + offset
@@ -145,46 +156,54 @@ def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
             ok = ((c >= 0) & (c < res)).all(axis=1)
             key = np.where(ok, (c[:, 0] * res + c[:, 1]) * res + c[:, 2], 0)
             site = np.where(ok, index[key], -1)
-            present = site >= 0
-            value = faces[np.maximum(site, 0)[:, None], face[rows]]  # (k, 3 axes, 3 rgb)
-            value = (value * blend[rows][:, :, None]).sum(axis=1)
-            w = np.where(present, w, 0.0)
-            total += w[:, None] * value
-            weight += w
-        out[rows] = np.where(weight[:, None] > 1e-6, total / np.maximum(weight, 1e-6)[:, None], 0.0)
+            safe = np.maximum(site, 0)[:, None]
+            held = (site >= 0)[:, None] & present[safe, face[rows]]      # (k, 3 axes)
+            wa = np.where(held, w[:, None], 0.0)
+            total += wa[:, :, None] * faces[safe, face[rows]]
+            weight += wa
+        axis_ok = weight > 1e-6
+        mean = total / np.maximum(weight, 1e-6)[:, :, None]
+        share = np.where(axis_ok, blend[rows], 0.0)
+        norm = share.sum(axis=1)
+        value = (share[:, :, None] * mean).sum(axis=1) / np.maximum(norm, 1e-12)[:, None]
+        out[rows] = np.where(norm[:, None] > 1e-6, value, 0.0)
     return out
 
 
 def build_cache(tris, resolution: int = 32, count: int = 1) -> RadianceCache:
     """An empty cache (iteration 0, all zeros) on ``cache_grids`` of ``tris``."""
     grids = cache_grids(tris, resolution, count)
-    cells = _sites(tris, grids)
+    cells, present = _sites(tris, grids)
     faces = tuple(np.zeros((len(c), 6, 3), np.float32) for c in cells)
-    return RadianceCache(tuple(grids), tuple(cells), faces, 0)
+    return RadianceCache(tuple(grids), tuple(cells), faces, 0, tuple(present))
 
 
 def face_points(cache: RadianceCache) -> tuple[np.ndarray, np.ndarray]:
-    """((6 N, 3) ray origins, (6 N, 3) unit axes) of every voxel face of ``cache``, voxel by
-    voxel (grids finest first), faces in the order +x, −x, +y, −y, +z, −z: the gather points
-    of ``iterate``, whose sample id is the row (the GPU lays them out as the pixels of an
-    image, ``render/gpu_gather.py`` ``cache_gpu``)."""
+    """((F, 3) ray origins, (F, 3) unit axes) of the present faces of ``cache``, voxel by voxel
+    (grids finest first), faces in the order +x, −x, +y, −y, +z, −z: the gather points of
+    ``iterate``, whose sample id is the row (the GPU lays them out as the pixels of an image,
+    ``render/gpu_gather.py`` ``cache_gpu``)."""
     points, axes = [np.zeros((0, 3))], [np.zeros((0, 3))]
-    for grid, cells in zip(cache.grids, cache.cells):
+    for grid, cells, present in zip(cache.grids, cache.cells, cache.present):
         centres = np.asarray(grid.origin) + (np.asarray(cells, np.float64) + 0.5) * grid.span
-        points.append(np.repeat(centres, 6, axis=0) +
-                      FACE_OFFSET * grid.span * np.tile(FACES, (len(cells), 1)))
-        axes.append(np.tile(FACES, (len(cells), 1)))
+        voxel, face = np.nonzero(present)
+        points.append(centres[voxel] + FACE_OFFSET * grid.span * FACES[face])
+        axes.append(FACES[face])
     return np.concatenate(points), np.concatenate(axes)
 
 
 def with_faces(cache: RadianceCache, values) -> RadianceCache:
-    """The next iteration of ``cache`` holding ``values`` ((6 N, 3), ``face_points``' order)."""
-    values = np.asarray(values, np.float32).reshape(-1, 6, 3)
+    """The next iteration of ``cache`` holding ``values`` ((F, 3), ``face_points``' order)."""
+    values = np.asarray(values, np.float32).reshape(-1, 3)
     faces, start = [], 0
-    for cells in cache.cells:
-        faces.append(values[start:start + len(cells)].copy())
-        start += len(cells)
-    return RadianceCache(cache.grids, cache.cells, tuple(faces), cache.iterations + 1)
+    for cells, present in zip(cache.cells, cache.present):
+        grid_faces = np.zeros((len(cells), 6, 3), np.float32)
+        count = int(present.sum())
+        grid_faces[present] = values[start:start + count]
+        faces.append(grid_faces)
+        start += count
+    return RadianceCache(cache.grids, cache.cells, tuple(faces), cache.iterations + 1,
+                         cache.present)
 
 
 def iterate(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 16, seed: int = 0,
@@ -249,17 +268,18 @@ def cache_texels(cache: RadianceCache) -> np.ndarray:
     """(H, W, 4) float32 texels of ``cache`` for the GPU (``shaders/bvh_shade.glsl``
     ``cache_indirect``): W = res² (texel x + y·res), row 0 the header — texel i = (origin xyz,
     span) of grid i, the last texel (res, grid count, 0, 0) — then per grid g, z and face f the
-    row 1 + (g·res + z)·6 + f of (rgb, 1 where the voxel is present)."""
+    row 1 + (g·res + z)·6 + f of (rgb, 1 where the voxel holds the face)."""
     res = cache.grids[0].resolution
     count = len(cache.grids)
     width = max(res * res, count + 1)
     texels = np.zeros((1 + count * res * 6, width, 4), np.float32)
-    for g, (grid, cells, faces) in enumerate(zip(cache.grids, cache.cells, cache.faces)):
+    for g, (grid, cells, faces, present) in enumerate(zip(cache.grids, cache.cells, cache.faces,
+                                                           cache.present)):
         texels[0, g] = (*grid.origin, grid.span)
         c = np.asarray(cells, np.int64)
         for f in range(6):
             rows = 1 + (g * res + c[:, 2]) * 6 + f
             texels[rows, c[:, 0] + c[:, 1] * res, :3] = faces[:, f]
-            texels[rows, c[:, 0] + c[:, 1] * res, 3] = 1.0
+            texels[rows, c[:, 0] + c[:, 1] * res, 3] = present[:, f]
     texels[0, width - 1] = (res, count, 0.0, 0.0)
     return texels
