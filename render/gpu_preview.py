@@ -44,12 +44,31 @@ from .gpu_tracer import read_texture
 from .gpu_volume import GPUVolume, float_texture
 
 
-def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_samples: int = 16,
-                      volume: GPUVolume | None = None, shadows: str = "RAYS", gi_stride: int = 1,
-                      quality: str = "ACCURATE", gather_settings: GatherSettings | None = None,
-                      glossy_indirect: bool = True, filter_width: float = DEFAULT_FILTER_WIDTH,
-                      gpu_scene: GPUScene | None = None, gather_hook=None):
-    """(passes, timings) like ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
+def render_passes_gpu(*args, **kwargs):
+    """(passes, timings): ``render_passes_stages`` run to its end in one call (F12,
+    ``render_preview``, probe previews)."""
+    return finish(render_passes_stages(*args, **kwargs))
+
+
+def finish(stages):
+    """Run a ``render_passes_stages`` generator to its end: its result."""
+    while True:
+        try:
+            next(stages)
+        except StopIteration as end:
+            return end.value
+
+
+def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
+                         light_samples: int = 16, volume: GPUVolume | None = None,
+                         shadows: str = "RAYS", gi_stride: int = 1, quality: str = "ACCURATE",
+                         gather_settings: GatherSettings | None = None,
+                         glossy_indirect: bool = True,
+                         filter_width: float = DEFAULT_FILTER_WIDTH,
+                         gpu_scene: GPUScene | None = None, gather_hook=None, raster=None):
+    """A generator that yields between the GPU stages (G-buffer, each gather, each light's
+    direct light, each sub-pixel pass, …) and returns (passes, timings) like
+    ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
     between calls so an unchanged octree is not uploaded again (a new one when None); Fast
     quality only: Accurate uses neither it nor ``gi_state`` (None is fine).
     quality "ACCURATE": exact direct light and the exact-ray final gather (``gpu_gather``);
@@ -60,12 +79,17 @@ def render_passes_gpu(snapshot, gi_state, width: int, height: int, cones, light_
     each gather's raw low-resolution textures before the à-trous filter (kind: "diffuse",
     "glossy", "world glossy") and returns what is filtered instead: the viewport's
     progressive accumulation adds them to its sums and returns the sums' mean (None: the
-    gather's own, as F12)."""
+    gather's own, as F12).
+    raster : the G-buffer raster shader (``gbuffer.gbuffer_shader``) of the current GPU
+    context, kept by the caller between calls in that context (the viewport); None: a new one.
+    The viewport's slices run the stages over several draws (``progressive``); the textures
+    live in the generator between them, so nothing but its own next stage runs in a draw."""
     check_request(snapshot, width, height, gi_stride, quality)
     if quality == "ACCURATE":
-        return _accurate_passes(snapshot, width, height, light_samples, gi_stride,
-                                gather_settings or GatherSettings(ao_distance=cones.ao_distance),
-                                glossy_indirect, filter_width, gpu_scene, gather_hook)
+        return (yield from _accurate_stages(
+            snapshot, width, height, light_samples, gi_stride,
+            gather_settings or GatherSettings(ao_distance=cones.ao_distance), glossy_indirect,
+            filter_width, gpu_scene, gather_hook, raster))
     return fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
                        gi_stride, gather_settings or GatherSettings(ao_distance=cones.ao_distance),
                        glossy_indirect)
@@ -154,8 +178,8 @@ def _sums_of(texel):
         "diffuse_direct": texel["sum_g"][:, :3]}
 
 
-def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_settings,
-                     glossy_indirect, filter_width, scene=None, gather_hook=None):
+def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_settings,
+                     glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None):
     """Accurate quality on the GPU: the gathers from the pixel centres' G-buffer, then one
     rasterized G-buffer, direct light (``bvh_direct``, a block of the shadow-ray strata) and
     glossy light of the lights per sub-pixel pass (``preview.passes.subpixel_passes``),
@@ -172,10 +196,11 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         timings["scene build + upload"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     plan = subpixel_passes(filter_width, light_samples)
-    raster = gbuffer_shader()  # this render's, for its G-buffers (gbuffer.gbuffer_shader)
+    raster = raster or gbuffer_shader()  # this context's, for its G-buffers
     centre = rasterize(tris, snapshot.camera, rough, width, height, shader=raster,
                        textures=scene.raster_textures(), filter_width=filter_width)
     timings["visibility (GPU)"] = time.perf_counter() - t0
+    yield
 
     t0 = time.perf_counter()
     bvh, principled, lights = scene.bvh, scene.principled, scene.lights
@@ -196,11 +221,13 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
 
     low_diffuse = low("diffuse")
     timings["diffuse+ao gather (GPU)"] = time.perf_counter() - t0
+    yield
     t0 = time.perf_counter()
     zero = scene.zeros(width, height)
     low_glossy = low("glossy", "bvh_glossy") if glossy_indirect else None
     if glossy_indirect:
         timings["glossy gather (GPU)"] = time.perf_counter() - t0
+        yield
     t0 = time.perf_counter()
     full = upsample(low_diffuse, centre.inputs, gi_stride, width, height, low_glossy)
     diffuse_ao, glossy = full if glossy_indirect else (full, zero)
@@ -211,6 +238,7 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
         low_world = low("world glossy", "bvh_glossy", world_mode=True)
         glossy_world = upsample(low_world, centre.inputs, gi_stride, width, height)
         timings["world glossy gather (GPU)"] = time.perf_counter() - t0
+        yield
 
     t0 = time.perf_counter()
     materials, lut = scene.materials, scene.lut
@@ -230,9 +258,10 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
     t0 = time.perf_counter()
 
     def shade(inputs, sums, terms, blank, size, block, lamps=None):
-        """``sums`` + one pass over ``inputs``, a G-buffer of ``size`` (the image's or the edge
-        pixels' list's): terms = the centre's gathered (Diffuse Indirect, AO), Glossy
-        Indirect and world glossy light at the same texels; blank : zeros of ``size``.
+        """(Stages, one per light's dispatches, returning) ``sums`` + one pass over
+        ``inputs``, a G-buffer of ``size`` (the image's or the edge pixels' list's): terms =
+        the centre's gathered (Diffuse Indirect, AO), Glossy Indirect and world glossy light
+        at the same texels; blank : zeros of ``size``.
         lamps : a dict that gets the lamps' sum_g texture before the world's and emitters'
         dispatch adds to it, when it does (their sum_f is the final one: that dispatch adds
         no glossy light), for light_edge_pixels."""
@@ -255,6 +284,7 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
                 "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
                 ("out_f", "out_g"), *size)
             sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
+            yield
         if lamps is not None and extra:
             lamps["sum_g"], lamps["sum_f"] = sums["sum_g"], sums["sum_f"]
         if extra:  # the world's and emitters' own dispatch (streams after the lamps)
@@ -270,6 +300,7 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
                 "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
                 ("out_f", "out_g"), *size)
             sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
+            yield
         return sums
 
     # The centre pass over the image off the geometry's edges (preview.passes.edge_pixels on
@@ -286,8 +317,9 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
             ("out_position",), width, height)["out_position"]
     names = (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")
     lamps = {}
-    sums = shade(inputs, {name: zero for name in names}, (diffuse_ao, glossy, glossy_world),
-                 zero, (width, height), centre_pass(light_samples)[1], lamps if reach else None)
+    sums = yield from shade(inputs, {name: zero for name in names},
+                            (diffuse_ao, glossy, glossy_world), zero, (width, height),
+                            centre_pass(light_samples)[1], lamps if reach else None)
     read = {name: np.flipud(read_texture(texture)) for name, texture in sums.items()}
     texel = {name: image.reshape(-1, 4).astype(np.float64) for name, image in read.items()}
     if reach:  # the centre pass's lamp light, from the same read-back (no read per light)
@@ -316,9 +348,10 @@ def _accurate_passes(snapshot, width, height, light_samples, gi_stride, gather_s
                 list_size)["gbuffer_position"]
             # this pass's samples, read back to count in the neighbours by the filter at
             # their own place (preview.passes.add_tails)
+            textures = yield from shade(inputs, {name: blank for name in names}, terms, blank,
+                                        list_size, block)
             one = {name: read_texture(texture).reshape(-1, 4)[:len(listed)].astype(np.float64)
-                   for name, texture in shade(inputs, {name: blank for name in names}, terms,
-                                              blank, list_size, block).items()}
+                   for name, texture in textures.items()}
             for name in names:
                 own[name] += one[name]
             add_tails(tails, {key: value / len(plan) for key, value in _sums_of(one).items()},

@@ -22,6 +22,7 @@ dispatched work groups).
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import time
 
 import numpy as np
@@ -33,6 +34,7 @@ from ..voxgi_addon.preview.progressive import (
     SliceSizer,
     sample_offset,
     sample_settings,
+    sample_tail_weights,
     tile_camera,
     tile_grid,
     tile_shape,
@@ -41,6 +43,7 @@ from ..voxgi_addon.scene.view_camera import camera_from_view
 from .gpu_shaders import LOCAL_SIZE
 
 SLICE_BUDGET = 0.030  # seconds one view_draw's slice aims at (issue 19)
+STAGE_SHARE = 0.5     # of it, what a call's stages run until, and what the longest stage aims at
 LEAST_TILE = 48       # pixels: about the smallest tile side (preview.progressive.tile_side)
 
 
@@ -73,13 +76,22 @@ class Slice:
     size: tuple[int, int]
     sample: int
     seconds: float = 0.0
+    finished: bool = True  # False: a stage of a slice that goes on in the next call
 
 
 class ProgressiveImage:
     """The accumulation of one view's image and the slices still to trace."""
 
     def __init__(self, budget: float = SLICE_BUDGET):
-        self.sizer = shared_sizer(budget)
+        # A slice runs over as many calls as its stages need: each call runs stages until it
+        # has spent STAGE_SHARE of the budget, and the tiles are sized so that the longest
+        # stage takes about that much (so a call stays within the budget)
+        self.budget = budget
+        self.sizer = shared_sizer(budget * STAGE_SHARE)
+        self.stage_budget: float | None = budget * STAGE_SHARE  # None: a whole slice a call
+        self.running = None        # the slice under way: a generator of its stages
+        self.running_started = 0.0
+        self.longest_stage = 0.0
         self.fixed_pixels: int | None = None  # tests: every slice this many pixels
         self.key = None
         self.accumulation: Accumulation | None = None
@@ -106,6 +118,9 @@ class ProgressiveImage:
         """A new key: start over; the last estimate (scaled) stays the backdrop until the
         coarse image or the tiles replace it."""
         previous = self.image
+        if self.running is not None:
+            self.running.close()  # the old key's slice: its textures go with it
+            self.running = None
         self.key, self.target = key, max(1, int(target))
         self.accumulation = Accumulation(pass_name, width, height)
         self.gathers = None
@@ -151,22 +166,66 @@ class ProgressiveImage:
 
     # ------------------------------------------------------------------ tracing
 
-    def step(self, trace, view, window, settings, filter_width: float) -> Slice | None:
-        """Trace one slice of the current key with ``trace(camera, width, height, options)``
-        → passes (PASS_NAMES → (h, w, 3)); None when the image has converged."""
+    def step(self, trace, view, window, settings, filter_width: float,
+             whole: bool = False) -> Slice | None:
+        """Run the current key's slice on: its next stages while this call has spent less than
+        ``stage_budget`` (all of it when None), ``trace(camera, width, height, options)`` →
+        passes (PASS_NAMES → (h, w, 3)), or a generator of the tracer's stages returning them
+        (``gpu_preview.render_passes_stages``). Returns the Slice when it finished in this
+        call, a Slice with ``finished`` False while it goes on in the next call, None when the
+        image has converged. whole: run the slice to its end (nothing is shown yet)."""
         if self.converged or self.accumulation is None:
             return None
+        t0 = time.perf_counter()
+        if self.running is None:
+            self.running = self._slice(trace, view, window, settings, filter_width)
+            self.running_started, self.longest_stage = t0, 0.0
+        while True:
+            s0 = time.perf_counter()
+            try:
+                next(self.running)
+            except StopIteration as end:
+                self.running = None
+                done = end.value
+                self.longest_stage = max(self.longest_stage, time.perf_counter() - s0)
+                done.seconds = time.perf_counter() - self.running_started
+                # the sizer fits what one call costs: the slice, or its longest stage
+                staged = self.stage_budget is not None
+                self.sizer.measured(done.size[0] * done.size[1],
+                                    self.longest_stage if staged else done.seconds)
+                self.slices += 1
+                self.elapsed = time.perf_counter() - self.started
+                self.last = done
+                return done
+            except BaseException:
+                self.running = None
+                raise
+            self.longest_stage = max(self.longest_stage, time.perf_counter() - s0)
+            if self.stage_budget is not None and not whole and \
+                    time.perf_counter() - t0 >= self.stage_budget:
+                return Slice("stage", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
+
+    def _slice(self, trace, view, window, settings, filter_width: float):
+        """The next slice — the coarse image or one tile — as a generator of stages: the
+        tracer's, then adding it to the samples and the estimate; returns its Slice."""
         acc = self.accumulation
         width, height = acc.width, acc.height
         options = base_options(settings, width, height)
-        t0 = time.perf_counter()
+
+        def traced(camera, w, h, opts):
+            result = trace(camera, w, h, opts)
+            if inspect.isgenerator(result):
+                result = yield from result
+            return result
+
         if self.coarse_pending:
             size = self.coarse_size(options["gi_stride"])
             gather, lights = sample_settings(options["gather_settings"],
                                              options["light_samples"], self.target, 0)
             camera = camera_from_view(view, window, *size)
-            passes = trace(camera, *size, {**options, "gather_settings": gather,
-                                           "light_samples": lights})
+            passes = yield from traced(camera, *size, {**options, "gather_settings": gather,
+                                                      "light_samples": lights})
+            yield  # the estimate is a stage of its own
             self.backdrop = np.asarray(passes[acc.pass_name], np.float32)
             self.coarse_pending = False
             done = Slice("coarse", (0, 0, width, height), size, 0)
@@ -186,8 +245,10 @@ class ProgressiveImage:
                     self.gathers = GatherSums(width, height, options["gi_stride"])
                 tile_options["gather_hook"] = gather_hook(self.gathers, rect, gather)
                 weight = float(self.sample + 1)  # the samples behind the tile's gathers
-            passes = trace(camera, rect[2], rect[3], tile_options)
-            acc.add(rect, passes, gather_weight=weight)
+            passes = yield from traced(camera, rect[2], rect[3], tile_options)
+            yield  # the estimate is a stage of its own
+            acc.add(rect, passes, gather_weight=weight,
+                    tails=sample_tail_weights(filter_width, self.target, self.sample))
             done = Slice("tile", rect, (rect[2], rect[3]), self.sample)
             if not self.tiles:
                 self.sample += 1
@@ -200,11 +261,6 @@ class ProgressiveImage:
         else:  # the backdrop (scaled) where no tile landed yet
             self.image = acc.estimate(self.backdrop)
         self.image_stale = False
-        done.seconds = time.perf_counter() - t0
-        self.sizer.measured(done.size[0] * done.size[1], done.seconds)
-        self.slices += 1
-        self.elapsed = time.perf_counter() - self.started
-        self.last = done
         return done
 
     @property
@@ -239,16 +295,23 @@ def gather_hook(sums: GatherSums, rect, gather):
     return hook
 
 
-def tracer(live, volume, settings):
+def tracer(live, volume, settings, staged: bool = False, raster=None):
     """``trace(camera, width, height, options)`` → passes: the GPU tracer on ``live``'s
-    applied results (F12's ``render_passes_gpu``)."""
-    from .gpu_preview import render_passes_gpu
+    applied results (F12's ``render_passes_gpu``); staged: a generator of its stages that
+    returns them (``render_passes_stages``, what ``ProgressiveImage.step`` runs over several
+    calls). raster : the G-buffer shader the caller keeps for its GPU context."""
+    from .gpu_preview import render_passes_stages
 
     cones = cone_settings(settings)
 
-    def trace(camera, width, height, options):
+    def stages(camera, width, height, options):
         snapshot = dataclasses.replace(live.snapshot, camera=camera)
-        passes, _ = render_passes_gpu(snapshot, live.staged.state, width, height, cones,
-                                      volume=volume, **options)
+        passes, _ = yield from render_passes_stages(snapshot, live.staged.state, width, height,
+                                                    cones, volume=volume, raster=raster,
+                                                    **options)
         return passes
-    return trace
+
+    def trace(camera, width, height, options):
+        from .gpu_preview import finish
+        return finish(stages(camera, width, height, options))
+    return stages if staged else trace

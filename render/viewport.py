@@ -82,12 +82,14 @@ class ViewportRenderer:
         #                            "Converged" (traced this draw), "Cached", "Previous", ""
         self.status = ""           # the status line (header, sidebar)
         self.error = ""
+        self.raster = None         # the G-buffer shader, made in this view's GPU context
         _renderers.add(self)
 
     def free(self) -> None:
         self.texture = None
-        self.progressive = ProgressiveImage(self.progressive.sizer.budget)
+        self.progressive = ProgressiveImage(self.progressive.budget)
         self.volume = GPUVolume()
+        self.raster = None
 
     # ------------------------------------------------------------------ tracing
 
@@ -138,10 +140,20 @@ class ViewportRenderer:
             self.volume.update(live.staged.state.octree, cone_settings(settings),
                                atlas=live.atlas)
         upload = time.perf_counter() - t0
-        done = progressive.step(tracer(live, self.volume, settings), view, window, settings,
-                                pixel_filter_width(scene))
+        if self.raster is None:
+            from .gbuffer import gbuffer_shader
+            self.raster = gbuffer_shader()
+        done = progressive.step(tracer(live, self.volume, settings, staged=True,
+                                       raster=self.raster),
+                                view, window, settings, pixel_filter_width(scene),
+                                whole=self.texture is None)  # a first image at once
         if done is None:
             return ""
+        if not done.finished:  # a stage of the slice: the next draw goes on with it
+            self.timings = {"atlas upload": upload, "stage": time.perf_counter() - t0 - upload,
+                            "view_draw work": time.perf_counter() - t0}
+            return "Coarse" if progressive.coarse_pending else (
+                "Converged" if progressive.converged else "Refining")
         self.upload(progressive.image)
         self.traces += 1
         self.timings = {"atlas upload": upload, f"slice ({done.kind})": done.seconds,

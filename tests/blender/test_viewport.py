@@ -60,6 +60,7 @@ def one_shot(renderer=None):
 
     renderer = renderer or ViewportRenderer()
     renderer.progressive.fixed_pixels = 1 << 30
+    renderer.progressive.stage_budget = None  # the whole slice in one draw
     bpy.context.scene.voxgi_viewport.samples = 1
     return renderer
 

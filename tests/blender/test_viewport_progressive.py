@@ -47,6 +47,7 @@ def quarter_slices(engine):
 
     renderer = engine.voxgi_viewport = ViewportRenderer()
     renderer.progressive.fixed_pixels = WIDTH * HEIGHT // 4
+    renderer.progressive.stage_budget = None  # a whole slice per draw (staged: its own test)
     return renderer
 
 
@@ -219,7 +220,7 @@ def test_a_failed_slice_keeps_the_image_says_why_and_retries_only_after_a_change
     shown = engine_view(engine, scene, depsgraph, view, window)  # a tile over it
     original = viewport_module.tracer
 
-    def failing(*args):
+    def failing(*args, **kwargs):
         def trace(*_):
             raise RuntimeError("dispatch lost")
         return trace
@@ -237,3 +238,38 @@ def test_a_failed_slice_keeps_the_image_says_why_and_retries_only_after_a_change
     moved = engine_view(engine, scene, depsgraph, turned(view, 2.0), window)
     assert renderer.shown == "Coarse" and renderer.error == "" and filled(moved) > 0.99
     assert engine.stats[-1].startswith("VoxGI | Sample 0/16 | ")
+
+
+def test_a_slice_runs_over_several_draws_stage_by_stage_to_the_same_image(voxgi, monkeypatch):
+    """Staged (the default): a draw runs a slice's stages — the G-buffer, each gather, each
+    light's dispatches, the estimate — until it has spent its share of the budget and the
+    next draw goes on where it stopped. With a budget of 0 every draw runs one stage: it
+    dispatches a few kernels, not a slice's ~20; the view shows the last image meanwhile;
+    and the samples converge to the very image whole slices give."""
+    from voxgi.blender.viewport_session import live_gi
+
+    scene = progressive_scene()
+    scene.voxgi_viewport.samples = 4
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live_gi(scene.name_full).update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    dispatches = Dispatches(monkeypatch)
+    images, most = {}, {}
+    for staged in (False, True):
+        engine = StandInEngine()
+        renderer = quarter_slices(engine)
+        renderer.progressive.stage_budget = 0.0 if staged else None
+        draws = draw_until_converged(engine, scene, depsgraph, view, window, dispatches,
+                                     1 << 40)
+        assert renderer.progressive.converged
+        images[staged] = draws[-1][0]
+        # the first draw of a view with nothing to show runs its slice whole (a first image)
+        most[staged] = max(calls for _, _, calls in draws[1:])
+        if staged:
+            slices = renderer.progressive.slices
+            assert len(draws) > 3 * slices  # every slice over several draws
+            assert all(filled(image) > 0.99 for image, _, _ in draws)
+    print(f"dispatches per draw: whole slices {most[False]}, staged {most[True]}")
+    assert most[True] <= 6 < most[False]
+    np.testing.assert_allclose(images[True], images[False], atol=1e-5)

@@ -248,3 +248,29 @@ def test_refreshing_the_estimate_where_a_tile_landed_equals_a_new_estimate():
         acc.add(rect, sample(6, 6), gather_weight=2.0)
         acc.estimate_into(image, rect)
     assert np.allclose(image, acc.estimate(), atol=1e-6)
+
+
+def test_samples_count_in_the_neighbours_by_the_filter_at_their_own_offsets():
+    """The viewport's samples, each a whole image at one sub-pixel offset, add into the
+    neighbours by the filter there (``sample_tail_weights``), as F12's sub-pixel passes do:
+    light on the near half of the left neighbour only gives the centre pixel the filter's
+    integral over that half (0.112 at Filter Size 1.5), and an even light stays even."""
+    from voxgi.voxgi_addon.preview.progressive import sample_offset, sample_tail_weights
+    from voxgi.voxgi_addon.scene.camera import blackman_harris
+
+    samples, size = 16, 1.5
+    acc, even = Accumulation("Diffuse Direct", 3, 3), Accumulation("Diffuse Direct", 3, 3)
+    for k in range(samples):
+        ox, _ = sample_offset(size, samples, k)
+        passes = {name: np.zeros((3, 3, 3)) for name in PASS_NAMES}
+        passes["Diffuse Color"][:] = 1.0
+        passes["Diffuse Direct"][:, 0] = 1.0 if ox > 0.0 else 0.0
+        weights = sample_tail_weights(size, samples, k)
+        acc.add((0, 0, 3, 3), passes, tails=weights)
+        passes["Diffuse Direct"][:] = 2.0
+        even.add((0, 0, 3, 3), passes, tails=weights)
+    x = np.linspace(-1.5, 1.5, 30001)
+    f = blackman_harris(x, 1.5)
+    truth = f[(x > -1.0) & (x <= -0.5)].sum() / f.sum()
+    assert acc.finished(size)[1, 1, 0] == pytest.approx(truth, rel=0.02)
+    assert np.allclose(even.finished(size), 2.0, rtol=1e-5)

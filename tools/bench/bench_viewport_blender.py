@@ -102,6 +102,7 @@ def view_draw_rows(scene, depsgraph, quick: bool) -> list:
         engine.voxgi_viewport = ViewportRenderer()
         if one_shot:
             engine.voxgi_viewport.progressive.fixed_pixels = 1 << 30
+            engine.voxgi_viewport.progressive.stage_budget = None
         return engine
 
     def converge(engine, view_matrix):

@@ -448,13 +448,19 @@ def pass_tail_weights(plan, filter_width: float) -> np.ndarray:
     density ∝ f inside q's square, so its weight there is f(o + e) / f(o) — scaled per e so
     that the passes' mean is ``neighbour_weights`` (a flat image stays flat). At ≤ 0.5 (the
     filter inside the pixel): the own pixel alone."""
+    return tail_weights([offset for offset, _ in plan], filter_width)
+
+
+def tail_weights(offsets, filter_width: float) -> np.ndarray:
+    """(P, 3, 3) ``pass_tail_weights`` of the sub-pixel ``offsets`` (P, 2) (x right, y down)
+    drawn as ``camera.filter_offsets`` draws them; normalised over these offsets."""
     base = neighbour_weights(filter_width)
-    out = np.zeros((len(plan), 3, 3))
+    out = np.zeros((len(offsets), 3, 3))
     if base.sum() <= 1.0:
         out[:, 1, 1] = 1.0
         return out
     steps = np.array([-1.0, 0.0, 1.0])
-    for k, ((ox, oy), _) in enumerate(plan):
+    for k, (ox, oy) in enumerate(offsets):
         gx = blackman_harris(ox + steps, filter_width) / blackman_harris(ox, filter_width)
         gy = blackman_harris(oy + steps, filter_width) / blackman_harris(oy, filter_width)
         out[k] = np.outer(gy, gx)

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..scene.camera import filter_offsets
 from .gather import GatherSettings
-from .passes import PASS_NAMES, filter_passes
+from .passes import PASS_NAMES, filter_passes, tail_weights
 from .upsample import low_shape
 
 # The passes made of the gathers: their samples are weighted by the samples behind the
@@ -80,6 +80,16 @@ def sample_offset(filter_width: float, samples: int, index: int) -> tuple[float,
     a, b = np.argwhere(ranks == index % (side * side))[0]
     x, y = offsets[a * side + b]  # offset k is stratum (k // side, k % side) in (x, y)
     return float(x), float(y)
+
+
+def sample_tail_weights(filter_width: float, samples: int, index: int) -> np.ndarray:
+    """(3, 3) the weights in its neighbours of sample ``index``'s offset (``sample_offset``),
+    ``passes.tail_weights`` over the side × side offsets the samples visit."""
+    side = max(1, math.ceil(math.sqrt(samples)))
+    offsets = filter_offsets(filter_width, side)
+    x, y = sample_offset(filter_width, samples, index)
+    k = int(np.argmin(np.abs(offsets[:, 0] - x) + np.abs(offsets[:, 1] - y)))
+    return tail_weights(offsets, filter_width)[k]
 
 
 def _frustum(camera) -> tuple[float, float, float, float]:
@@ -160,10 +170,27 @@ class Accumulation:
         # the colour's sum, for the filter over the neighbours (``finished``)
         self.colour = np.zeros((height, width, 3), np.float32) if self.colour_name else None
         self.counts = np.zeros((height, width), np.int32)
+        # the filter's tails: the samples' sums and weights added into the neighbours by the
+        # filter at their own offsets (``add``'s tails; None until a sample brings them)
+        self.tails: dict[str, np.ndarray] | None = None
 
-    def add(self, rect, passes, gather_weight: float = 1.0) -> None:
+    def _sums(self) -> dict[str, np.ndarray]:
+        """The sums a sample adds to, by name (those the tails mirror)."""
+        out = {"sums": self.sums, "weights": self.weights}
+        if self.gathered is not None:
+            out.update(gathered=self.gathered, gather_weights=self.gather_weights)
+        return out
+
+    def add(self, rect, passes, gather_weight: float = 1.0, tails=None) -> None:
         """Add one sample's ``passes`` (PASS_NAMES → (h, w, 3), row 0 on top) of the tile
-        ``rect`` (x0, y0, w, h); gather_weight : the weight of its gathered light."""
+        ``rect`` (x0, y0, w, h); gather_weight : the weight of its gathered light. tails :
+        (3, 3) the weights of the sample's offset in the neighbours (``sample_tail_weights``):
+        each of its pixels' sums also goes into the 8 neighbours by them, as Cycles' film
+        weighs a sample over its whole filter window (``finished``)."""
+        before = None
+        if tails is not None:
+            window0, _ = inside(rect, self.width, self.height)
+            before = {name: array[window0].copy() for name, array in self._sums().items()}
         x0, y0, w, h = rect
         if np.shape(passes[self.pass_name])[:2] != (h, w):
             shape = np.shape(passes[self.pass_name])
@@ -188,6 +215,31 @@ class Accumulation:
             self.sums[window] += weight * value
             self.weights[window] += weight
         self.counts[window] += 1
+        if before is not None:
+            self._add_tails(window, {name: array[window] - before[name]
+                                     for name, array in self._sums().items()}, tails)
+
+    def _add_tails(self, window, added, weights) -> None:
+        """Add a sample's sums ``added`` (name → (h, w, C) at ``window``) into the tails of
+        the pixels e before them by weights[ey + 1, ex + 1] (``passes.add_tails``)."""
+        if self.tails is None:
+            self.tails = {name: np.zeros_like(array) for name, array in self._sums().items()}
+        rows, cols = window
+        for ey in (-1, 0, 1):
+            for ex in (-1, 0, 1):
+                w = float(weights[ey + 1, ex + 1])
+                if (ey, ex) == (0, 0) or w == 0.0:
+                    continue
+                # source pixel (y, x) → target (y − ey, x − ex), inside the image
+                y0, y1 = max(rows.start, ey), min(rows.stop, self.height + ey)
+                x0, x1 = max(cols.start, ex), min(cols.stop, self.width + ex)
+                if y0 >= y1 or x0 >= x1:
+                    continue
+                source = (slice(y0 - rows.start, y1 - rows.start),
+                          slice(x0 - cols.start, x1 - cols.start))
+                target = (slice(y0 - ey, y1 - ey), slice(x0 - ex, x1 - ex))
+                for name, value in added.items():
+                    self.tails[name][target] += w * value[source]
 
     @property
     def samples(self) -> int:
@@ -226,8 +278,20 @@ class Accumulation:
 
     def finished(self, filter_width: float) -> np.ndarray:
         """(H, W, 3) float32: the mean with Cycles' pixel filter over the neighbours, as the
-        one-shot image gets it (``passes.filter_passes``): the samples cover the pixel's own
-        square, the filter's tails the neighbours'."""
+        one-shot image gets it: with the samples' tails (``add``'s), each pixel's sums and
+        weights plus the neighbours' samples by the filter at their own offsets
+        (``passes.filtered_sums``); without, the neighbours' means by their share of the
+        filter (``passes.filter_passes``)."""
+        if self.tails is not None:
+            own = self._sums()
+            total = {name: own[name] + self.tails[name] for name in own}
+            out = np.divide(total["sums"], total["weights"],
+                            out=np.zeros_like(total["sums"]), where=total["weights"] > 0.0)
+            if self.gathered is not None:
+                out += np.divide(total["gathered"], total["gather_weights"],
+                                 out=np.zeros_like(total["gathered"]),
+                                 where=total["gather_weights"] > 0.0)
+            return out.astype(np.float32)
         mean = self.mean()
         passes = {name: np.zeros_like(mean) for name in PASS_NAMES}  # not read for this pass
         passes[self.pass_name] = mean
