@@ -144,12 +144,18 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
   /* the world and the emitters light the hit too: its diffuse weight and, when `hit_glossy`,
    * its glossy lobe from the same shadow rays (exact_indirect.ray_radiance) */
   vec3 world_glossy, emitter_glossy;
-  /* ... and the radiance cache's indirect light at the hit: bounces 2 … N (cache_indirect) */
+  /* ... and the radiance cache's indirect light at the hit: bounces 2 … N (cache_indirect),
+   * off the diffuse weight and, as if uniform, the glossy lobes' albedo */
+  vec3 cached = cache_indirect(x, ns);
   radiance += weight * (world_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, hit_glossy, -d,
                                          base, params, world_glossy) +
                         emitters_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, false,
                                             hit_glossy, -d, base, params, emitter_glossy) +
-                        cache_indirect(x, ns));
+                        cached);
+  if (dot(cached, vec3(1.0)) > 0.0) {
+    radiance += cached * principled_glossy_color(base, params.x, params.y, params.z,
+                                                 clamp(-dot(ns, d), 0.0, 1.0));
+  }
   return radiance + world_glossy + emitter_glossy;
 }
 

@@ -32,7 +32,7 @@ import numpy as np
 from ..scene.raycast import closest_hits
 from ..scene.snapshot import RAY_DIFFUSE
 from .direct_light import concentric_disk, diffuse_direct, light_directions
-from .principled import diffuse_weight, glossy_reflectance
+from .principled import diffuse_weight, glossy_color, glossy_reflectance
 from .radiance_cache import lookup
 from .sampling import hammersley, perpendicular_basis
 
@@ -75,8 +75,11 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
     emission plus its exact direct light reflected toward the ray's origin (see
     ``indirect_and_ao``; ``hit_ids`` (K,) uint32 are the hits' light-sample ids). ray : the
     kind of ray (``snapshot.RAY_DIFFUSE`` / ``RAY_GLOSSY``: the triangles it sees).
-    cache : a ``radiance_cache.RadianceCache`` (None: none): the hit also reflects, by its
-    diffuse weight, the indirect light the cache holds at it (bounces beyond the first)."""
+    cache : a ``radiance_cache.RadianceCache`` (None: none): the hit also reflects the indirect
+    light the cache holds at it (bounces beyond the first) by its diffuse weight and, taking
+    that light as uniform over the hemisphere, its glossy lobes' albedo (Cycles' Glossy Color):
+    the paths that bounce glossily in between (Cycles' default light paths allow 4 glossy
+    bounces)."""
     t, tri, u, v = closest_hits(tris, origins, dirs, 0.0, np.inf, ray)
     radiance = np.tile(np.asarray(world, dtype=np.float64), (len(dirs), 1))
     # With the emissive triangles among the lights their light reaches the origin as direct
@@ -118,10 +121,13 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
             lit, reflected = lit
         radiance[hit] = np.asarray(emission, np.float64)[material] if emission_seen else 0.0
         # the light of the later bounces arriving at the hit (0 without a cache)
-        arriving = lit.sum(axis=0) + (lookup(cache, x, ns) if cache is not None else 0.0)
+        cached = lookup(cache, x, ns) if cache is not None else 0.0
+        arriving = lit.sum(axis=0) + cached
         if principled:
             mu = np.clip(-np.einsum("ij,ij->i", ns, dirs[hit]), 0.0, 1.0)
             radiance[hit] += diffuse_weight(*shading, mu) * arriving
+            if cache is not None:  # the glossy lobe's albedo reflects it too (as if uniform)
+                radiance[hit] += glossy_color(*shading, mu) * cached
             if reflect is not None:
                 radiance[hit] += reflected.sum(axis=0)
             for direct, towards in zip(lit if hit_glossy else (), light_directions(lights, x)):
