@@ -2,15 +2,15 @@
 
 Cycles renders things the preview leaves out or approximates: refraction and transmission,
 volumes, hair, displacement, subsurface scattering, the Principled BSDF's coat, sheen,
-anisotropy and thin film. Rather than dropping them silently, the snapshot says, once per
-object, what of it is left out: one report line per object,
-``Object 'Name': the preview leaves out A, B`` (``left_out_line``), which the operators'
-reports and the sidebar panel show (``ui/panel.py`` lists them in their own box).
+anisotropy, thin film, diffuse roughness and specular tint, shadow catchers. Rather than
+dropping them silently, the snapshot says, once per object, what of it is left out: one report
+line per object, ``Object 'Name': the preview leaves out A, B`` (``left_out_line``), which the
+operators' reports and the sidebar panel show (``ui/panel.py`` lists them in their own box).
 
 Read from the materials (``material_notes``: the active output's Volume and Displacement, the
 Principled BSDF's inputs, the shader nodes feeding the surface) and from the object
-(``object_notes``: hair particle systems; ``type_note``: object types the preview does not
-render at all — hair curves, point clouds, volume objects).
+(``object_notes``: shadow catchers, hair particle systems; ``type_note``: object types the
+preview does not render at all — hair curves, point clouds, volume objects).
 """
 from __future__ import annotations
 
@@ -19,7 +19,8 @@ TYPE_NOTES = {"CURVES": "its hair curves (not rendered at all)",
               "POINTCLOUD": "its point cloud (not rendered at all)",
               "VOLUME": "its volume (not rendered at all)"}
 # Principled BSDF inputs whose lobe the preview does not model (gi/principled.py): the
-# weight or value socket, what to call it, the value at which the lobe is off.
+# weight or value socket, what to call it, the value at or below which the lobe is off (None:
+# a colour, off when white).
 PRINCIPLED_INPUTS = (
     ("Transmission Weight", "transmission and refraction (it renders opaque)", 0.0),
     ("Subsurface Weight", "subsurface scattering (it renders as diffuse)", 0.0),
@@ -27,6 +28,8 @@ PRINCIPLED_INPUTS = (
     ("Sheen Weight", "sheen", 0.0),
     ("Anisotropic", "anisotropy", 0.0),
     ("Thin Film Thickness", "thin film", 0.0),
+    ("Diffuse Roughness", "diffuse roughness (it renders Lambertian)", 0.0),
+    ("Specular Tint", "the specular tint (it renders white)", None),
 )
 # Shader nodes feeding the surface that the preview does not model (other surfaces are read
 # by their baked diffuse colour).
@@ -89,7 +92,13 @@ def material_notes(material) -> list[str]:
         if node.type == "BSDF_PRINCIPLED":
             for name, what, off in PRINCIPLED_INPUTS:
                 socket = node.inputs.get(name)
-                if socket is not None and (socket.is_linked or socket.default_value > off):
+                if socket is None:
+                    continue
+                if off is None:
+                    on = min(socket.default_value[:3]) < 1.0
+                else:
+                    on = socket.default_value > off
+                if socket.is_linked or on:
                     notes.append(what)
         elif node.type in SHADER_NODES:
             notes.append(SHADER_NODES[node.type])
@@ -103,9 +112,11 @@ def material_notes(material) -> list[str]:
 
 
 def object_notes(obj) -> list[str]:
-    """What of ``obj`` itself (not its materials) the preview leaves out: hair particle systems
-    Cycles renders (their modifier enabled for renders, the system rendered as paths)."""
-    notes = []
+    """What of ``obj`` itself (not its materials) the preview leaves out: a shadow catcher
+    (rendered as an ordinary surface), hair particle systems Cycles renders (their modifier
+    enabled for renders, the system rendered as paths)."""
+    notes = ["its shadow catcher (it renders as an ordinary surface)"] \
+        if getattr(obj, "is_shadow_catcher", False) else []
     for modifier in getattr(obj, "modifiers", ()):
         if modifier.type != "PARTICLE_SYSTEM" or not modifier.show_render:
             continue

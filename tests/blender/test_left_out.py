@@ -123,9 +123,9 @@ def test_voxelize_says_it_too(voxgi):
     assert all(len(lines) == 1 for lines in named.values())
 
 
-def test_hair_particles_and_displacement_are_named(voxgi):
-    """A mesh with a hair particle system rendered as paths, and a material whose output has
-    a Displacement linked (as Bump, Cycles' default), are named too."""
+def test_hair_particles_displacement_and_shadow_catchers_are_named(voxgi):
+    """A mesh with a hair particle system rendered as paths, a material whose output has a
+    Displacement linked (as Bump, Cycles' default) and a shadow catcher are named too."""
     from voxgi.blender.snapshot.scene import take_snapshot
 
     scene = bpy.context.scene
@@ -138,8 +138,10 @@ def test_hair_particles_and_displacement_are_named(voxgi):
     displace = tree.nodes.new("ShaderNodeDisplacement")
     tree.links.new(noise.outputs["Fac"], displace.inputs["Height"])
     tree.links.new(displace.outputs["Displacement"], tree.nodes["Material Output"].inputs["Displacement"])
+    bpy.data.objects["Floor"].is_shadow_catcher = True
     warnings = take_snapshot(scene).warnings
     box_lines = [w for w in warnings if w.startswith("Object 'Plain Box'")]
     assert len(box_lines) == 1 and "hair particles" in box_lines[0], warnings
     assert "displacement" in box_lines[0] and "'White'" in box_lines[0]
-    assert any(w.startswith("Object 'Floor'") and "displacement" in w for w in warnings)
+    floor = [w for w in warnings if w.startswith("Object 'Floor'")]
+    assert len(floor) == 1 and "displacement" in floor[0] and "shadow catcher" in floor[0]
