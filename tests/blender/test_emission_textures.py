@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import pathlib
+import tempfile
 
 import bpy
 import emission_scenes
@@ -158,3 +159,40 @@ def test_a_repainted_emission_image_relights_the_room(voxgi):
     left, right = slice(9, 21), slice(27, 39)
     assert redness(first, left) > 2.0 * redness(first, right)
     assert redness(second, right) > 2.0 * redness(second, left)
+
+
+def build_through_gltf():
+    """The panel room exported by Blender's glTF exporter and imported back (issue 22 point 3:
+    the importer's emissive texture with its strength: Image Texture → Emission Color, the
+    strength from KHR_materials_emissive_strength)."""
+    import gltf_scenes
+
+    scene = build()
+    with tempfile.TemporaryDirectory() as folder:
+        glb = pathlib.Path(folder) / "panel.glb"
+        assert bpy.ops.export_scene.gltf(filepath=str(glb), export_format="GLB",
+                                         export_cameras=True) == {"FINISHED"}
+        gltf_scenes._clear_file(scene)
+        assert bpy.ops.import_scene.gltf(filepath=str(glb)) == {"FINISHED"}
+    for image in bpy.data.images:  # what the importer read from the GLB stays in the file
+        if image.packed_file is None and image.source == "FILE":
+            image.pack()
+    scene.camera = next(o for o in scene.objects if o.type == "CAMERA")
+    bpy.context.view_layer.update()
+    return scene
+
+
+def test_the_gltf_round_trip_keeps_the_emissive_texture_and_its_strength(voxgi):
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    scene = build_through_gltf()
+    snapshot = take_snapshot(scene)
+    glow = next(m for m in snapshot.materials if m.name == "Panel Glow")
+    assert glow.emission_texture >= 0 and glow.emission_strength == emission_scenes.STRENGTH
+    assert not any("Emission" in w for w in snapshot.warnings), snapshot.warnings
+    ours, _ = preview(scene)
+    with np.load(REFS / "emission_panel_room.npz") as data:
+        reference = {key: data[key].astype(np.float64) for key in data.files}
+    error = relative_l1(ours["Combined"], reference["Combined"], reference["Alpha"] > 0.5)
+    print("glTF round trip: Combined", round(error, 4))
+    assert error <= 0.05
