@@ -10,6 +10,7 @@ from ..blender.operator_poll import VoxGISceneOperator
 from ..blender.reports import coverage_lines, octree_text, timing_text
 from ..blender.session import scene_session
 from ..blender.snapshot import snapshot_or_error
+from ..blender.snapshot.left_out import is_left_out
 from ..render.pipeline import gi_inputs, view_shares
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.update import update_gi
@@ -51,7 +52,10 @@ class VOXGI_OT_update(VoxGISceneOperator, bpy.types.Operator):
                                    ("INFO", f"octree: {octree_text(state.octree)}"),
                                    ("INFO", timing_text(session.gi_timings)),
                                    *[("WARNING", w) for w in (*(fit.warnings if fit else ()),
-                                                              *state.warnings)]]
+                                                              *state.warnings)],
+                                   # what the preview leaves out, once per object
+                                   *[("WARNING", w) for w in dict.fromkeys(snapshot.warnings)
+                                     if is_left_out(w)]]
 
         def failed(error):
             scene_session(scene_name).last_report = [("ERROR", str(error))]

@@ -112,15 +112,16 @@ def test_the_report_and_the_panel_name_each_object_and_what_is_left_out(voxgi, t
     assert sum(text.startswith("Object 'Glass Pane'") for text in layout.labels) == 1
 
 
-def test_voxelize_says_it_too(voxgi):
+def test_voxelize_and_update_say_it_too(voxgi):
     from voxgi.blender.session import scene_session
 
     scene = bpy.context.scene
     build(scene)
-    assert bpy.ops.voxgi.voxelize() == {"FINISHED"}
-    named = _named(scene_session(scene.name_full).last_report)
-    assert set(named) == set(EXPECTED)
-    assert all(len(lines) == 1 for lines in named.values())
+    for operator in (bpy.ops.voxgi.voxelize, bpy.ops.voxgi.update):
+        assert operator() == {"FINISHED"}
+        named = _named(scene_session(scene.name_full).last_report)
+        assert set(named) == set(EXPECTED), operator
+        assert all(len(lines) == 1 for lines in named.values())
 
 
 def test_hair_particles_displacement_and_shadow_catchers_are_named(voxgi):
