@@ -10,7 +10,6 @@ rays. Needs a GPU context.
 from __future__ import annotations
 
 import math
-import weakref
 from dataclasses import replace
 
 import gpu
@@ -131,9 +130,11 @@ def cache_texture(bvh: GPUBVH, lights, principled, emission, settings, tables=No
                     settings.cache_resolution, tuple(float(w) for w in settings.world),
                     settings.hit_samples, settings.hit_glossy)
     held = _cache_upload.get("entry")
-    if held is None or held[0]() is not bvh.scene_triangles or held[1] != key:
+    # the BVH's node texture is replaced whenever other triangles are uploaded (the same
+    # triangles snapshotted again keep it: a viewport slice's)
+    if held is None or held[0] is not bvh.nodes or held[1] != key:
         cache, texture = cache_gpu(bvh, lights, principled, emission, settings, tables)
-        held = (weakref.ref(bvh.scene_triangles), key, cache, texture)
+        held = (bvh.nodes, key, cache, texture)
         _cache_upload["entry"] = held
     return held[3]
 

@@ -112,6 +112,12 @@ def test_gpu_cache_equals_numpy_cache(voxgi):
     a, b = (np.concatenate(c.faces).astype(np.float64) for c in (gpu, numpy))
     assert b.mean() > 0.01
     assert np.abs(a - b).sum() / np.abs(b).sum() <= 0.02
+    # the same triangles snapshotted again (a viewport slice) keep the uploaded cache
+    texture = gpu_gather.cache_texture(shared_bvh(), lights, principled, emission, settings)
+    again = world_triangles(snapshot)
+    assert again is not tris
+    assert gpu_gather.cache_texture(shared_bvh().update(again), scene_lights(snapshot, again,
+                                    emission), principled, emission, settings) is texture
 
 
 def test_numpy_and_gpu_previews_agree(voxgi, tmp_path):

@@ -127,10 +127,17 @@ def test_one_bounce_builds_no_cache_and_changes_nothing():
 
 
 def test_cache_is_kept_for_the_same_inputs():
+    """The same scene snapshotted again (new arrays, new lights: a viewport slice) reuses the
+    cache; other bounces or lights build a new one."""
     tris, lights, albedo, emission = lit_room()
     a = rc.cached_cache(tris, lights, albedo, emission, 2, rays=4, resolution=8)
-    assert rc.cached_cache(tris, lights, albedo, emission, 2, rays=4, resolution=8) is a
+    again = lit_room()
+    assert again[0] is not tris and again[1][0] is not lights[0]
+    assert rc.cached_cache(*again, 2, rays=4, resolution=8) is a
     assert rc.cached_cache(tris, lights, albedo, emission, 3, rays=4, resolution=8) is not a
+    brighter = [LightData("P", "POINT", np.ones(3, np.float32), 900.0, frame((-1.0, 0.5, 2.2)),
+                          radius=0.05)]
+    assert rc.cached_cache(tris, brighter, albedo, emission, 3, rays=4, resolution=8) is not a
 
 
 def test_texels_hold_every_voxel_face():

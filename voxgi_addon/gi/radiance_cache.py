@@ -26,7 +26,6 @@ Numpy only; the GPU reads the same values from ``cache_texels`` (``render/gpu_ga
 """
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -243,6 +242,12 @@ def cache_key(lights, albedo, emission, *settings) -> tuple:
 _MEMO: dict = {}
 
 
+def _triangles_key(tris) -> tuple:
+    """The triangles by content (a snapshot taken again makes new arrays of the same values)."""
+    return tuple(_value_key(getattr(tris, name, None)) for name in
+                 ("positions", "materials", "corner_normals", "visibility"))
+
+
 def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
                  resolution: int = 32, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
                  hit_glossy: bool = True) -> RadianceCache | None:
@@ -251,16 +256,17 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
     ask for the same cache)."""
     if bounces <= 1:
         return None
-    key = cache_key(lights, albedo, emission, bounces, rays, resolution,
-                    tuple(float(w) for w in world), hit_samples, hit_glossy)
+    key = (_triangles_key(tris), cache_key(lights, albedo, emission, bounces, rays, resolution,
+                                           tuple(float(w) for w in world), hit_samples,
+                                           hit_glossy))
     held = _MEMO.get("entry")
-    if held is not None and held[0]() is tris and held[1] == key:
-        return held[2]
+    if held is not None and held[0] == key:
+        return held[1]
     cache = build_cache(tris, resolution)
     for _ in range(bounces - 1):
         cache = iterate(cache, tris, lights, albedo, emission, rays, world=world,
                         hit_samples=hit_samples, hit_glossy=hit_glossy)
-    _MEMO["entry"] = (weakref.ref(tris), key, cache)
+    _MEMO["entry"] = (key, cache)
     return cache
 
 
