@@ -132,3 +132,47 @@ def test_numpy_and_gpu_previews_agree(voxgi, tmp_path):
     assert reference["Diffuse Indirect"].mean() > 0.01
     for name in PASSES:
         assert relative_l1(gpu[name], reference[name], everywhere) <= 0.02, name
+
+
+class _Layout:
+    """Records the properties a panel draws; every container call returns itself."""
+
+    def __init__(self):
+        self.props = []
+
+    def box(self, **_kwargs):
+        return self
+
+    row = column = split = box
+
+    def label(self, *_args, **_kwargs):
+        pass
+
+    operator = label
+
+    def prop(self, _data, name, **_kwargs):
+        self.props.append(name)
+
+
+def test_bounces_setting_follows_cycles_and_is_drawn(voxgi):
+    """Follow Cycles reads the scene's Light Paths (Diffuse capped by Total, at least 1);
+    Manual its own count; both panels draw the setting in Accurate quality (Fast's cones do
+    not read the cache)."""
+    from voxgi.blender.settings import diffuse_bounces
+
+    scene = bpy.context.scene
+    settings = scene.voxgi
+    settings.bounce_source = "CYCLES"
+    scene.cycles.diffuse_bounces, scene.cycles.max_bounces = 6, 3
+    assert diffuse_bounces(settings) == 3
+    scene.cycles.diffuse_bounces, scene.cycles.max_bounces = 0, 12
+    assert diffuse_bounces(settings) == 1
+    settings.bounce_source, settings.bounces = "MANUAL", 7
+    assert diffuse_bounces(settings) == 7
+    for quality, shown in (("ACCURATE", True), ("FAST", False)):
+        settings.quality = quality
+        layout = _Layout()
+        bpy.types.VOXGI_PT_gi.draw(type("PanelStub", (), {"layout": layout})(), bpy.context)
+        assert ({"bounce_source", "bounces"} <= set(layout.props)) == shown, layout.props
+    from voxgi.ui.render_properties import CONE_SETTINGS
+    assert {"bounce_source", "bounces"} <= set(CONE_SETTINGS)
