@@ -91,6 +91,16 @@ def view_draw_rows(scene, depsgraph, quick: bool) -> list:
             seconds = time.perf_counter() - t0
         return seconds, engine.voxgi_viewport.shown
 
+    def new_image(engine, view_matrix):
+        """view_draw until a slice of the current key has finished and its image is shown (a
+        draw may run only some stages of a slice): (seconds in view_draw, draws)."""
+        traces = engine.voxgi_viewport.traces
+        total, draws = 0.0, 0
+        while engine.voxgi_viewport.traces == traces and draws < 1000:
+            total += call(engine, view_matrix)[0]
+            draws += 1
+        return total, draws
+
     def orbit(k):
         return view @ Matrix.Rotation(math.radians(2.0 * k), 4, "Z")
 
@@ -146,7 +156,7 @@ def view_draw_rows(scene, depsgraph, quick: bool) -> list:
         settle(engine, view)
         for r in range(repeats):
             # a view change (the view jumps 10° further): its first image, then converged
-            seconds, _ = call(engine, orbit(5 * (r + 1)))
+            seconds, _ = new_image(engine, orbit(5 * (r + 1)))
             first.append(seconds)
             total, wall, draws, longest = converge(engine, orbit(5 * (r + 1)))
             converged.append(seconds + total)
@@ -176,7 +186,7 @@ def view_draw_rows(scene, depsgraph, quick: bool) -> list:
                 if live.error:
                     raise RuntimeError(live.error)
                 time.sleep(0.001)
-            call(engine, orbit(steps))
+            new_image(engine, orbit(steps))
             move_first.append(time.perf_counter() - t0)
         if one_shot:  # the one whole trace was the converged image
             move_converged = move_first
@@ -322,7 +332,10 @@ def main(argv=None) -> int:
                     raise RuntimeError(live.error)
                 time.sleep(0.001)
             t_applied = time.perf_counter()
-            draw()
+            traces, draws = renderer.traces, 0
+            while renderer.traces == traces and draws < 1000:  # the slice's stages
+                draw()
+                draws += 1
             t_drawn = time.perf_counter()
             results.append((t_drawn - t0, t_submit - t0, t_applied - t_submit, t_drawn - t_applied,
                             dict(live.stats.timings), dict(renderer.timings)))
