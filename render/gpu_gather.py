@@ -94,7 +94,7 @@ def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
     ``radiance_cache.iterate``), each iteration one run of ``gather`` with
     ``settings.cache_rays`` rays and the previous iteration's texels bound; seed 0, as numpy."""
     tris = bvh.scene_triangles
-    cache = build_cache(tris, settings.cache_resolution)
+    cache = build_cache(tris, settings.cache_resolution, rays=settings.cache_rays)
     points, axes = face_points(cache)
     count = len(points)
     if count == 0:  # nothing to light: an empty cache of the iterations asked

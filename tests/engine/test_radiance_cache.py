@@ -197,3 +197,18 @@ def test_light_through_a_thin_wall_stays_out():
     radiance, _ = ray_radiance(dark_floor + 1e-3 * up, d, np.arange(9, dtype=np.uint32), tris,
                                [light], albedo, np.zeros((2, 3)))
     np.testing.assert_array_equal(radiance, 0.0)
+
+
+def test_auto_resolution_keeps_an_iteration_within_half_a_gather():
+    """Resolution 0 picks the finest grid whose faces × rays fit RAYS_PER_ITERATION (the next
+    finer one would not), and the coarsest when none fits."""
+    tris, _, _, _ = lit_room()
+    for rays in (4, 16, 64):
+        cache = rc.build_cache(tris, 0, rays=rays)
+        res = cache.grids[0].resolution
+        faces = sum(int(p.sum()) for p in cache.present)
+        assert faces * rays <= rc.RAYS_PER_ITERATION
+        if res < max(rc.AUTO_RESOLUTIONS):
+            finer = rc.build_cache(tris, 2 * res)
+            assert sum(int(p.sum()) for p in finer.present) * rays > rc.RAYS_PER_ITERATION
+    assert rc.build_cache(tris, 0, rays=10 ** 6).grids[0].resolution == min(rc.AUTO_RESOLUTIONS)

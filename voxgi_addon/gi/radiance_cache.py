@@ -169,8 +169,24 @@ def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
     return out
 
 
-def build_cache(tris, resolution: int = 32, count: int = 1) -> RadianceCache:
-    """An empty cache (iteration 0, all zeros) on ``cache_grids`` of ``tris``."""
+# Auto resolution (``build_cache(resolution=0)``): the finest of these whose iteration traces at
+# most RAYS_PER_ITERATION rays — half the rays of a diffuse gather at GI Resolution Auto (about
+# 160 × 120 points) and the default 64 GI Rays, so that each bounce beyond the first costs at
+# most half a gather.
+AUTO_RESOLUTIONS = (64, 32, 16)
+RAYS_PER_ITERATION = 160 * 120 * 64 // 2
+
+
+def build_cache(tris, resolution: int = 32, count: int = 1, rays: int = 16) -> RadianceCache:
+    """An empty cache (iteration 0, all zeros) on ``cache_grids`` of ``tris``. resolution 0:
+    Auto, the finest of ``AUTO_RESOLUTIONS`` whose faces × ``rays`` (rays per face) stay within
+    ``RAYS_PER_ITERATION`` (the coarsest otherwise)."""
+    if resolution == 0:
+        for choice in AUTO_RESOLUTIONS:
+            cache = build_cache(tris, choice, count)
+            if sum(int(p.sum()) for p in cache.present) * rays <= RAYS_PER_ITERATION:
+                break
+        return cache
     grids = cache_grids(tris, resolution, count)
     cells, present = _sites(tris, grids)
     faces = tuple(np.zeros((len(c), 6, 3), np.float32) for c in cells)
@@ -249,7 +265,7 @@ def _triangles_key(tris) -> tuple:
 
 
 def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
-                 resolution: int = 32, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
+                 resolution: int = 0, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
                  hit_glossy: bool = True) -> RadianceCache | None:
     """The cache of ``bounces`` − 1 iterations for these triangles, lights and materials (None
     for ``bounces`` ≤ 1), kept for the next call with the same inputs (the viewport's slices
@@ -262,7 +278,7 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
     held = _MEMO.get("entry")
     if held is not None and held[0] == key:
         return held[1]
-    cache = build_cache(tris, resolution)
+    cache = build_cache(tris, resolution, rays=rays)
     for _ in range(bounces - 1):
         cache = iterate(cache, tris, lights, albedo, emission, rays, world=world,
                         hit_samples=hit_samples, hit_glossy=hit_glossy)

@@ -40,7 +40,8 @@ class GatherSettings:
     bounces : diffuse bounces of the Diffuse Indirect gather (Cycles' Light Paths): 1 is the
     exact one-bounce gather and builds no cache; N > 1 adds at each bounce hit the light of
     bounces 2 … N from a radiance cache of N − 1 iterations (``gi.radiance_cache``, with
-    ``cache_rays`` rays per voxel face on a ``cache_resolution``³ grid)."""
+    ``cache_rays`` rays per voxel face on a ``cache_resolution``³ grid; 0: Auto,
+    ``radiance_cache.build_cache``)."""
 
     rays: int = 64
     glossy_rays: int = 8
@@ -52,7 +53,7 @@ class GatherSettings:
     world: tuple[float, float, float] = (0.0, 0.0, 0.0)
     bounces: int = 1
     cache_rays: int = 16
-    cache_resolution: int = 32
+    cache_resolution: int = 0
 
 
 def radiance_cache(tris, lights, albedo, emission, settings: GatherSettings):
