@@ -169,3 +169,30 @@ def test_the_panels_voxels_glow_with_each_halfs_colour():
     assert left[0] > 5 * left[2] and right[2] > 5 * right[0]
     left, right = halves(False)  # the same colour (the halves' coverage of their voxels differs)
     np.testing.assert_allclose(left / left.sum(), right / right.sum(), rtol=1e-3)
+
+
+def test_a_repainted_emission_texture_relights_the_voxels():
+    """An emission texture repainted with the same mean (its halves swapped) is a change of
+    light: the next update does not reuse the voxels' light, and they glow swapped."""
+    import dataclasses
+
+    from voxgi.voxgi_addon.gi.light_injection import voxel_centres
+    from voxgi.voxgi_addon.gi.update import GISettings, update_gi
+    from voxgi.voxgi_addon.voxelize.scene_caches import build_scene_caches
+
+    snap = panel_snapshot()
+    caches = build_scene_caches(snap, 0.125, 1)
+    settings = GISettings(resolution=64)
+    first = update_gi(snap, caches, settings, anchor=np.zeros(3))
+    texture = snap.textures[0]
+    swapped = dataclasses.replace(texture, pixels=np.ascontiguousarray(texture.pixels[:, ::-1]),
+                                  key="two colours, swapped")
+    again = update_gi(dataclasses.replace(snap, textures=(swapped,)), caches, settings,
+                      anchor=np.zeros(3), previous=first)
+    assert again.reused != "all"
+    centres = voxel_centres(again.cascades[0])
+    glow = np.asarray(again.radiance.emission[0], np.float64)
+    left = (glow.max(axis=1) > 0) & (centres[:, 0] < -0.2)
+    assert glow[left, 2].mean() > 5 * glow[left, 0].mean()  # the left half is blue now
+    same = update_gi(snap, caches, settings, anchor=np.zeros(3), previous=first)
+    assert same.reused == "all"

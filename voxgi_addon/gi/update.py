@@ -86,8 +86,8 @@ def _value_key(value):
 
 def light_key(snapshot, settings: GISettings) -> tuple:
     """Everything the injection and the octree read besides the cascades: lights, world, the
-    materials' emission (voxels glow with it and are lit by it) and the settings (plain values
-    and array bytes, comparable with ``==``)."""
+    materials' emission and their emission textures' content (voxels glow with it and are lit
+    by it) and the settings (plain values and array bytes, comparable with ``==``)."""
     def fields(item):
         return tuple((f.name, _value_key(getattr(item, f.name))) for f in dataclasses.fields(item))
 
@@ -95,7 +95,15 @@ def light_key(snapshot, settings: GISettings) -> tuple:
     # a world map is known by its content key (hashing megabytes of radiance every update
     # would cost more than what it saves)
     world_key = (world.key, _value_key(world.color), world.strength) if world.key else fields(world)
-    emission = tuple(_value_key(m.emission) for m in snapshot.materials)
+    textures = getattr(snapshot, "textures", ())
+
+    def texture_key(index):  # an emission texture's content (its mean is in ``emission``)
+        texture = textures[index] if 0 <= index < len(textures) else None
+        return None if texture is None else (texture.key or _value_key(texture.pixels),
+                                             _value_key(np.asarray(texture.uv_transform)))
+
+    emission = tuple((_value_key(m.emission), texture_key(getattr(m, "emission_texture", -1)),
+                      getattr(m, "emission_strength", 1.0)) for m in snapshot.materials)
     return (tuple(fields(light) for light in snapshot.lights), world_key, emission,
             fields(settings))
 
