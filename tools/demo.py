@@ -129,7 +129,8 @@ def run(args: argparse.Namespace, tmp: str) -> int:
 
 
 def gi_section(scene, args) -> int:
-    """Render the GI preview (and Cycles' one-bounce reference) and print errors and timings."""
+    """Render the GI preview (and Cycles' reference at the light paths it predicts) and print
+    errors and timings."""
     sys.path.insert(0, str(REPO_ROOT / "tools"))
     import gi_compare
 
@@ -154,7 +155,9 @@ def gi_section(scene, args) -> int:
     errors = gi_compare.pass_errors(ours, cycles)
     print(f"\nstrips: {args.out / 'preview_strip.png'} and {args.out / 'cycles_strip.png'} "
           f"({', '.join(gi_compare.STRIP_PASSES)})")
-    print(f"preview {seconds:.2f} s vs Cycles {args.cycles_samples} spp, one bounce "
+    diffuse, glossy = gi_compare.reference_bounces(scene)
+    paths = "one bounce" if diffuse == 1 else f"{diffuse} diffuse / {glossy} glossy bounces"
+    print(f"preview {seconds:.2f} s vs Cycles {args.cycles_samples} spp, {paths} "
           f"{cycles_seconds:.2f} s; relative L1 error vs Cycles:")
     print("\n".join(f"  {name:<18} {value:.3f}" for name, value in errors.items()))
     return 0

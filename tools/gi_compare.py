@@ -1,8 +1,9 @@
 """GI preview vs Cycles for the demo and the benchmark (run inside Blender / the bpy module).
 
 ``preview_and_cycles`` renders the scene camera with ``voxgi.render_preview`` (EXR) and with
-Cycles (one bounce), writes PNG strips (Combined, Diffuse Indirect, Ambient
-Occlusion) of both, and returns the per-pass relative L1 errors over geometry pixels.
+Cycles (at the light paths the preview predicts, ``reference_bounces``, and the scene's pixel
+filter), writes PNG strips (Combined, Diffuse Indirect, Ambient Occlusion) of both, and returns
+the per-pass relative L1 errors over geometry pixels.
 """
 from __future__ import annotations
 
@@ -51,12 +52,27 @@ def render_preview(scene, path, width, height) -> tuple[dict, float]:
     return read_passes(path), time.perf_counter() - start
 
 
+def reference_bounces(scene) -> tuple[int, int]:
+    """(diffuse, glossy) bounces of the Cycles render a preview of ``scene`` predicts: the
+    preview's Bounces (``settings.diffuse_bounces``: Cycles' Light Paths when it follows them,
+    else its Manual count); one glossy bounce for a one-bounce preview, else the scene's."""
+    from voxgi.blender.settings import diffuse_bounces
+
+    diffuse = diffuse_bounces(scene.voxgi)
+    if diffuse <= 1:
+        return 1, 1
+    return diffuse, int(getattr(scene.cycles, "glossy_bounces", 4))
+
+
 def render_cycles(scene, width, height, samples, ao_distance) -> tuple[dict, float]:
+    """Cycles' passes at the light paths the preview predicts (``reference_bounces``) and the
+    scene's pixel filter (Cycles' default 1.5 px), as the preview renders them."""
     from cycles_passes import render_cycles_passes  # tools/ is the script's folder
 
+    diffuse, glossy = reference_bounces(scene)
     start = time.perf_counter()
-    passes = render_cycles_passes(scene, width, height, samples, diffuse_bounces=1,
-                                  ao_distance=ao_distance, filter_width=0.01)
+    passes = render_cycles_passes(scene, width, height, samples, diffuse_bounces=diffuse,
+                                  glossy_bounces=glossy, ao_distance=ao_distance)
     return passes, time.perf_counter() - start
 
 
