@@ -3,8 +3,10 @@ paths (tools/make_bounce_references.py) and by the preview at its default Bounce
 (tests/blender/test_multibounce.py). Built from the scenes of earlier tests, at 160 × 120 with
 Cycles' default pixel filter."""
 import bpy
+import gi_scenes
 import light_scenes
 import scenes
+import texture_scenes
 
 WIDTH, HEIGHT = 160, 120
 
@@ -20,7 +22,19 @@ def build_emissive_room(scene):
     light_scenes.build_emissive_room(scene)
 
 
-SCENES = {"cornell_box": build_cornell_box, "emissive_room": build_emissive_room}
+def build_columned_hall(scene):
+    """The closed hall lit by the sun through a roof opening (gi_scenes)."""
+    gi_scenes.build_columned_hall(scene)
+
+
+def build_textured_room(scene):
+    """The room with an image-textured floor and a procedural wall, an area light and the sun
+    through a window (texture_scenes)."""
+    texture_scenes.build_textured_room(scene)
+
+
+SCENES = {"cornell_box": build_cornell_box, "emissive_room": build_emissive_room,
+          "columned_hall": build_columned_hall, "textured_room": build_textured_room}
 
 
 def build(name, scene=None):
