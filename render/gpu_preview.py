@@ -10,6 +10,7 @@ the unshadowed light (numpy, cheap) times one soft-shadow cone per light traced 
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -65,7 +66,8 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                          gather_settings: GatherSettings | None = None,
                          glossy_indirect: bool = True,
                          filter_width: float = DEFAULT_FILTER_WIDTH,
-                         gpu_scene: GPUScene | None = None, gather_hook=None, raster=None):
+                         gpu_scene: GPUScene | None = None, gather_hook=None, raster=None,
+                         cache_source=None):
     """A generator that yields between the GPU stages (G-buffer, each gather, each light's
     direct light, each sub-pixel pass, …) and returns (passes, timings) like
     ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
@@ -82,6 +84,9 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     gather's own, as F12).
     raster : the G-buffer raster shader (``gbuffer.gbuffer_shader``) of the current GPU
     context, kept by the caller between calls in that context (the viewport); None: a new one.
+    cache_source : the viewport's ``viewport_cache.ViewportCache`` (its radiance cache built a
+    stage at a time, the last complete one read meanwhile); None: the whole cache is built
+    before the gathers (``gpu_gather.cache_texture``, F12).
     The viewport's slices run the stages over several draws (``progressive``); the textures
     live in the generator between them, so nothing but its own next stage runs in a draw."""
     check_request(snapshot, width, height, gi_stride, quality)
@@ -89,7 +94,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
         return (yield from _accurate_stages(
             snapshot, width, height, light_samples, gi_stride,
             gather_settings or GatherSettings(ao_distance=cones.ao_distance), glossy_indirect,
-            filter_width, gpu_scene, gather_hook, raster))
+            filter_width, gpu_scene, gather_hook, raster, cache_source))
     return fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
                        gi_stride, gather_settings or GatherSettings(ao_distance=cones.ao_distance),
                        glossy_indirect)
@@ -179,7 +184,8 @@ def _sums_of(texel):
 
 
 def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_settings,
-                     glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None):
+                     glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
+                     cache_source=None):
     """Accurate quality on the GPU: the gathers from the pixel centres' G-buffer, then one
     rasterized G-buffer, direct light (``bvh_direct``, a block of the shadow-ray strata) and
     glossy light of the lights per sub-pixel pass (``preview.passes.subpixel_passes``),
@@ -204,18 +210,28 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
 
     t0 = time.perf_counter()
     bvh, principled, lights = scene.bvh, scene.principled, scene.lights
+    tables = scene.gather_tables()
+    cache = None
+    if cache_source is not None and gather_settings.bounces > 1:
+        # the viewport's cache: one stage of its build, the last complete one read meanwhile
+        cache = yield from cache_source.stage(bvh, lights, principled, emission,
+                                              gather_settings, tables)
+        if cache is None:  # none complete yet: one bounce until there is
+            gather_settings = dataclasses.replace(gather_settings, bounces=1)
+        timings["radiance cache stage"] = time.perf_counter() - t0
     gathered = (bvh, centre.inputs, lights, principled, emission, gather_settings, gi_stride,
                 width, height)
-    tables = scene.gather_tables()
 
     def low(kind, kernel="bvh_gather", world_mode=False):
         """One gather's filtered low-resolution texture (``gpu_gather.gather_low``), its raw
         result replaced by ``gather_hook``'s when there is one."""
-        if gather_hook is None:
+        given = {"cache": cache} if cache is not None and not world_mode else {}
+        if gather_hook is None and not given:
             return gather_low(*gathered, kernel=kernel, world_mode=world_mode, tables=tables)
         values, variance = gather(*gathered, kernel=kernel, world_mode=world_mode,
-                                  tables=tables)
-        values, variance = gather_hook(kind, values, variance)
+                                  tables=tables, **given)
+        if gather_hook is not None:
+            values, variance = gather_hook(kind, values, variance)
         return denoise(values, variance, centre.inputs, gi_stride, width, height,
                        gather_settings.denoise_iterations)[0]
 

@@ -295,11 +295,12 @@ def gather_hook(sums: GatherSums, rect, gather):
     return hook
 
 
-def tracer(live, volume, settings, staged: bool = False, raster=None):
+def tracer(live, volume, settings, staged: bool = False, raster=None, cache_source=None):
     """``trace(camera, width, height, options)`` → passes: the GPU tracer on ``live``'s
     applied results (F12's ``render_passes_gpu``); staged: a generator of its stages that
     returns them (``render_passes_stages``, what ``ProgressiveImage.step`` runs over several
-    calls). raster : the G-buffer shader the caller keeps for its GPU context."""
+    calls). raster : the G-buffer shader the caller keeps for its GPU context; cache_source :
+    the view's radiance cache built in stages (``viewport_cache.ViewportCache``)."""
     from .gpu_preview import render_passes_stages
 
     cones = cone_settings(settings)
@@ -308,7 +309,7 @@ def tracer(live, volume, settings, staged: bool = False, raster=None):
         snapshot = dataclasses.replace(live.snapshot, camera=camera)
         passes, _ = yield from render_passes_stages(snapshot, live.staged.state, width, height,
                                                     cones, volume=volume, raster=raster,
-                                                    **options)
+                                                    cache_source=cache_source, **options)
         return passes
 
     def trace(camera, width, height, options):

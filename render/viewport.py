@@ -45,6 +45,7 @@ from ..blender.viewport_settings import VIEWPORT_PASSES
 from ..voxgi_addon.scene.view_camera import camera_from_view
 from .gpu_volume import GPUVolume
 from .progressive import SLICE_BUDGET, ProgressiveImage, base_options, tracer
+from .viewport_cache import ViewportCache
 
 _renderers: "weakref.WeakSet[ViewportRenderer]" = weakref.WeakSet()
 
@@ -83,6 +84,7 @@ class ViewportRenderer:
         self.status = ""           # the status line (header, sidebar)
         self.error = ""
         self.raster = None         # the G-buffer shader, made in this view's GPU context
+        self.cache = ViewportCache()  # the radiance cache, built a stage at a time
         _renderers.add(self)
 
     def free(self) -> None:
@@ -90,6 +92,7 @@ class ViewportRenderer:
         self.progressive = ProgressiveImage(self.progressive.budget)
         self.volume = GPUVolume()
         self.raster = None
+        self.cache.free()
 
     # ------------------------------------------------------------------ tracing
 
@@ -133,8 +136,17 @@ class ViewportRenderer:
         "Refining", "Converged", or "" (nothing: converged already, or it failed)."""
         settings = scene.voxgi
         progressive = self.progressive
-        if progressive.converged or progressive.failed:
+        if progressive.failed:
             return ""
+        if progressive.converged:
+            if self.cache.building is None:
+                return ""
+            # converged on the last cache while a new one is built: build on (a chunk per
+            # draw); its completion changes the image key and the image restarts
+            t0 = time.perf_counter()
+            self.cache.advance()
+            self.timings = {"radiance cache stage": time.perf_counter() - t0}
+            return "Refining"
         t0 = time.perf_counter()
         if settings.quality != "ACCURATE":  # Accurate traces the triangles, not the octree
             self.volume.update(live.staged.state.octree, cone_settings(settings),
@@ -144,7 +156,7 @@ class ViewportRenderer:
             from .gbuffer import gbuffer_shader
             self.raster = gbuffer_shader()
         done = progressive.step(tracer(live, self.volume, settings, staged=True,
-                                       raster=self.raster),
+                                       raster=self.raster, cache_source=self.cache),
                                 view, window, settings, pixel_filter_width(scene),
                                 whole=self.texture is None)  # a first image at once
         if done is None:
@@ -203,8 +215,11 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
     traced = ""
     progressive = renderer.progressive
     if live.staged is not None and live.snapshot is not None:
+        # a completed radiance cache restarts the image (viewport_cache: the gathers read the
+        # last complete cache while a new one is built)
         key = renderer.trace_key(live, camera_key, scene, pass_name,
-                                 base_options(scene.voxgi, width, height))
+                                 base_options(scene.voxgi, width, height)) \
+            + (renderer.cache.generation,)
         if key != progressive.key:
             progressive.restart(key, pass_name, width, height, view_settings.samples,
                                 view_settings.coarse_first)
@@ -219,7 +234,11 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
             renderer.error = f"viewport trace failed: {type(error).__name__}: {error}"
             live.error = progressive.failed = renderer.error  # no retry until a change
         gpu.state.blend_set(blend)
-        if traced and not progressive.converged and redraw is not None:
+        # "Refining" after convergence: a chunk of the radiance cache's build ran (its
+        # completion restarts the image on the next draw)
+        if traced and redraw is not None and (not progressive.converged
+                                              or traced == "Refining"
+                                              or renderer.cache.building is not None):
             redraw()  # the next slice on the next draw
     if traced:
         renderer.shown = traced

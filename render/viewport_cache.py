@@ -1,0 +1,144 @@
+"""The viewport's radiance cache, built a few voxel faces at a time between its slices.
+
+F12 and ``render_preview`` build the multi-bounce radiance cache whole before their gathers
+(``gpu_gather.cache_texture``: every iteration's gather over all voxel faces, seconds on
+llvmpipe). Inside ``view_draw`` that froze Blender for the whole build on every object move
+(12 s in the viewport benchmark under load). Here the same build (``cache_gpu``'s layout,
+rays and sample ids) runs as a generator of stages — one chunk of face rows of one
+iteration per stage (the other rows masked, so every face keeps the sample id, and the
+result is the whole build's) — sized to the slice's stage budget from the last chunk's
+time. Until it completes the gathers read the last complete cache (bounces that lag an edit,
+as the live engines' caches do), or none (one bounce) before the first; a completed build
+bumps ``generation``, which is part of the viewport's image key, so the image restarts with
+the new cache.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from ..voxgi_addon.gi.radiance_cache import (
+    build_cache,
+    cache_key,
+    cache_texels,
+    face_points,
+    with_faces,
+)
+from .gpu_gather import CACHE_IMAGE_WIDTH, gather
+from .gpu_tracer import read_texture
+from .gpu_volume import float_texture
+
+STAGE_SECONDS = 0.015  # what one chunk aims at (progressive.STAGE_SHARE of the 30 ms budget)
+
+
+def cache_stages(bvh, lights, principled, emission, settings, tables=None,
+                 budget: float = STAGE_SECONDS, first_rows: int = 1):
+    """Generator of the radiance cache of ``settings.bounces`` − 1 iterations, yielding after
+    each chunk of face rows; returns (cache, texture) as ``gpu_gather.cache_gpu`` does (the
+    same faces, rays and ids, so the same values). Chunks start at ``first_rows`` rows of
+    ``CACHE_IMAGE_WIDTH`` faces and are resized to ``budget`` seconds by the last one's time."""
+    cache = build_cache(bvh.scene_triangles, settings.cache_resolution, rays=settings.cache_rays)
+    points, axes = face_points(cache)
+    count = len(points)
+    if count == 0:  # nothing to light
+        cache = with_faces(cache, np.zeros((0, 3)))
+        texels = cache_texels(cache)
+        return cache, float_texture(texels, (texels.shape[1], texels.shape[0]))
+    width = CACHE_IMAGE_WIDTH
+    height = -(-count // width)
+    image = np.zeros((3, height * width, 4), np.float32)
+    image[0, :count, :3], image[0, :count, 3] = points, 1.0
+    image[1, :count, :3] = axes
+    layers = image.reshape(3, height, width, 4)
+    fixed = {name: float_texture(layer[::-1], (width, height))
+             for name, layer in zip(("gbuffer_normal", "gbuffer_view"), layers[1:])}
+    step = replace(settings, rays=settings.cache_rays, bounces=1, seed=0)
+    previous = None
+    rows = max(1, int(first_rows))
+    for _ in range(settings.bounces - 1):
+        faces = np.zeros((height, width, 3), np.float32)
+        top = 0
+        while top < height:
+            t0 = time.perf_counter()
+            end = min(height, top + rows)
+            position = layers[0].copy()
+            position[:top, :, 3] = 0.0  # masked: those cells return at once
+            position[end:, :, 3] = 0.0
+            gbuffer = {"gbuffer_position": float_texture(position[::-1], (width, height)),
+                       **fixed}
+            values, _ = gather(bvh, gbuffer, lights, principled, emission, step, 1, width,
+                               height, tables=tables, cache=previous)
+            faces[top:end] = read_texture(values)[::-1][top:end, :, :3]
+            seconds = time.perf_counter() - t0
+            top = end
+            rows = max(1, min(height, int(rows * min(4.0, budget / max(seconds, 1e-4)))))
+            yield
+        cache = with_faces(cache, faces.reshape(-1, 3)[:count])
+        texels = cache_texels(cache)
+        previous = float_texture(texels, (texels.shape[1], texels.shape[0]))
+    return cache, previous
+
+
+class ViewportCache:
+    """One view's radiance cache: the last complete one, the build under way, a generation
+    that counts completed builds (``module doc``)."""
+
+    def __init__(self, budget: float = STAGE_SECONDS):
+        self.budget = budget
+        self.texture = None    # the last complete cache's texture
+        self.key = None        # what it was built for
+        self.building = None   # (key, generator) of the build under way
+        self.generation = 0
+
+    def stage(self, bvh, lights, principled, emission, settings, tables=None):
+        """A generator of at most one stage (one chunk of the build the current scene needs),
+        returning the cache texture the gathers read now — the complete one for the current
+        scene, else the last complete one — or None when there is none yet (one bounce)."""
+        if settings.bounces <= 1:
+            return None
+        # the BVH's node texture is replaced whenever other triangles are uploaded
+        key = (bvh.nodes, cache_key(lights, principled, emission, settings.bounces,
+                                    settings.cache_rays, settings.cache_resolution,
+                                    tuple(float(w) for w in settings.world),
+                                    settings.hit_samples, settings.hit_glossy))
+        if _same(key, self.key):
+            return self.texture
+        if self.building is None or not _same(self.building[0], key):
+            if self.building is not None:
+                self.building[1].close()
+            self.building = (key, cache_stages(bvh, lights, principled, emission, settings,
+                                               tables, self.budget))
+        if self.advance():
+            return self.texture
+        yield
+        return self.texture
+
+    def advance(self) -> bool:
+        """Run one chunk of the build under way (if any); True when it completed the cache.
+        The viewport calls this on its own while the image has converged on the old cache."""
+        if self.building is None:
+            return False
+        key, stages = self.building
+        try:
+            next(stages)
+        except StopIteration as end:
+            _, self.texture = end.value
+            self.key, self.building = key, None
+            self.generation += 1
+            return True
+        except BaseException:
+            self.building = None
+            raise
+        return False
+
+    def free(self) -> None:
+        if self.building is not None:
+            self.building[1].close()
+        self.__init__(self.budget)
+
+
+def _same(a, b) -> bool:
+    """Keys (node texture, cache_key) equal: the same texture object and the same key."""
+    return a is not None and b is not None and a[0] is b[0] and a[1] == b[1]

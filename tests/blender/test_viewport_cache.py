@@ -1,0 +1,127 @@
+"""The viewport's radiance cache is built a chunk of voxel faces per stage
+(``render/viewport_cache.py``): the staged build gives the whole build's cache, no stage runs
+more than one chunk's gather, and the viewport reads the last complete cache (or one bounce)
+while a new one is built, restarting its image when it completes."""
+from __future__ import annotations
+
+import bounce_scenes
+import bpy
+import numpy as np
+
+
+def cornell_inputs(settings):
+    from voxgi.blender.snapshot import snapshot_or_error
+    from voxgi.render import gpu_context
+    from voxgi.render.gpu_bvh import shared_bvh
+    from voxgi.voxgi_addon.gi.light_injection import material_emission
+    from voxgi.voxgi_addon.gi.world_light import scene_lights
+    from voxgi.voxgi_addon.preview.passes import principled_table
+    from voxgi.voxgi_addon.scene.geometry import world_triangles
+
+    bounce_scenes.build("cornell_box", bpy.context.scene)
+    assert gpu_context.ensure_gpu_context()[0]
+    snapshot, _ = snapshot_or_error(bpy.context, bpy.context.evaluated_depsgraph_get())
+    tris = world_triangles(snapshot)
+    emission = material_emission(snapshot)
+    return (shared_bvh().update(tris), scene_lights(snapshot, tris, emission),
+            principled_table(snapshot), emission, settings)
+
+
+def test_the_staged_build_is_the_whole_build_a_chunk_per_stage(voxgi, monkeypatch):
+    import gpu
+
+    from voxgi.render import gpu_gather
+    from voxgi.render.viewport_cache import cache_stages
+    from voxgi.voxgi_addon.preview.gather import GatherSettings
+
+    inputs = cornell_inputs(GatherSettings(bounces=3, cache_resolution=16, cache_rays=8))
+    calls = []
+    original = gpu.compute.dispatch
+    monkeypatch.setattr(gpu.compute, "dispatch",
+                        lambda *a, **k: (calls.append(1), original(*a, **k))[1])
+    whole, _ = gpu_gather.cache_gpu(*inputs)
+    per_iteration = len(calls) / 2  # two iterations, each one gather over every face
+    calls.clear()
+    stages, per_stage = cache_stages(*inputs, budget=0.0), []
+    while True:  # budget 0: one face row per stage
+        try:
+            next(stages)
+        except StopIteration as end:
+            staged, _ = end.value
+            break
+        per_stage.append(len(calls))
+        calls.clear()
+    print(f"{len(per_stage)} stages, at most {max(per_stage)} dispatches each "
+          f"(one gather over every face: {per_iteration:g})")
+    # every stage one chunk of rows of one iteration: never more than one gather's dispatches
+    assert len(per_stage) > 2 and max(per_stage) <= per_iteration
+    a, b = (np.concatenate(c.faces).astype(np.float64) for c in (staged, whole))
+    assert b.mean() > 0.01
+    np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-7)
+
+
+def test_the_viewport_reads_one_bounce_then_the_cache_and_restarts_when_it_completes(voxgi):
+    from voxgi.render.viewport_cache import ViewportCache
+    from voxgi.voxgi_addon.preview.gather import GatherSettings
+
+    inputs = cornell_inputs(GatherSettings(bounces=3, cache_resolution=16, cache_rays=8))
+    cache = ViewportCache(budget=0.0)
+    got, stages = [], 0
+    while cache.generation == 0 and stages < 10000:
+        stage = cache.stage(*inputs)
+        while True:
+            try:
+                next(stage)
+                stages += 1
+            except StopIteration as end:
+                got.append(end.value)
+                break
+    assert cache.generation == 1 and stages > 1
+    assert all(texture is None for texture in got[:-1])  # one bounce until complete
+    assert got[-1] is not None
+    # the same scene again: the complete cache at once, no stage
+    stage = cache.stage(*inputs)
+    try:
+        next(stage)
+        raise AssertionError("a complete cache ran another stage")
+    except StopIteration as end:
+        assert end.value is got[-1]
+
+
+def test_the_view_shows_more_bounces_once_its_cache_is_built(voxgi):
+    """Bounces 3 in the Rendered view: draws run the cache's build a chunk at a time (one
+    bounce meanwhile), the completed cache restarts the image, and the converged view is
+    brighter than the one-bounce view, as F12's is."""
+    from stand_in_engine import StandInEngine
+    from test_viewport import camera_matrices, cornell, engine_view, gpu_ready
+
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render.viewport import ViewportRenderer
+
+    scene = cornell()
+    scene.voxgi_viewport.resolution_fraction = 1.0
+    scene.voxgi_viewport.samples = 2
+    scene.voxgi.bounce_source = "MANUAL"
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live_gi(scene.name_full).update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    means = {}
+    for bounces in (1, 3):
+        scene.voxgi.bounces = bounces
+        engine = StandInEngine()
+        renderer = engine.voxgi_viewport = ViewportRenderer()
+        image, draws = None, 0
+        while draws < 5000:
+            redraws = engine.redraws
+            image = engine_view(engine, scene, depsgraph, view, window)
+            draws += 1
+            if engine.redraws == redraws:
+                break
+        assert renderer.progressive.converged, f"not converged after {draws} draws"
+        assert renderer.cache.generation == (1 if bounces > 1 else 0)
+        assert image is not None
+        means[bounces] = float(renderer.progressive.image.mean())  # linear, before display
+        print(f"bounces {bounces}: {draws} draws, mean {means[bounces]:.4f}, "
+              f"quality {scene.voxgi.quality}")
+    assert means[3] > 1.05 * means[1]
