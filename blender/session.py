@@ -45,6 +45,7 @@ class SceneSession:
     gi_timings: dict[str, float] = field(default_factory=dict)
     gpu_volume: Any = None  # render.gpu_volume.GPUVolume: the octree atlas on the GPU
     tracer_used: str = ""   # "GPU" or "numpy": who traced the last preview
+    snapshot: Any = None    # the last render's SceneSnapshot (world, camera, Film › Transparent)
     probes: Any = None      # list[voxgi_addon.probes.grid.ProbeGrid], see blender/probe_store.py
 
 

@@ -9,9 +9,11 @@ import bpy
 
 from ..blender.operator_poll import VoxGISceneOperator
 from ..blender.session import scene_session
+from ..blender.settings import pixel_filter_width
 from ..render.pipeline import render_scene_passes
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.files.exr import write_exr
+from ..voxgi_addon.preview.film import snapshot_combined
 
 
 class VOXGI_OT_render_preview(VoxGISceneOperator, bpy.types.Operator):
@@ -43,8 +45,15 @@ class VOXGI_OT_render_preview(VoxGISceneOperator, bpy.types.Operator):
         try:
             source = None if self.indirect_source == "SCENE" else self.indirect_source
             passes, lines = render_scene_passes(context, scene, None, width, height, source)
+            # the film: Combined RGBA with the world behind the geometry (or alpha with
+            # Film › Transparent); the other passes as traced
+            combined = snapshot_combined(scene_session(scene.name_full).snapshot, passes,
+                                         pixel_filter_width(scene))
+            images = {name: image for name, image in passes.items()
+                      if name != "Alpha" and not name.startswith("_")}
+            images["Combined"] = combined
             os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
-            write_exr(path, passes)
+            write_exr(path, images)
         except (VoxGIError, OSError) as error:
             self.report({"ERROR"}, f"GI preview failed: {error}")
             return {"CANCELLED"}

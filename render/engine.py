@@ -15,7 +15,10 @@ import traceback
 import bpy
 import numpy as np
 
+from ..blender.session import scene_session
+from ..blender.settings import pixel_filter_width
 from ..voxgi_addon.errors import VoxGIError
+from ..voxgi_addon.preview.film import snapshot_combined
 from ..voxgi_addon.preview.passes import PASS_NAMES
 from . import gpu_context
 from .pipeline import render_scene_passes
@@ -71,6 +74,9 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
         width, height = frame_size(scene)
         try:
             passes, report = render_scene_passes(bpy.context, scene, depsgraph, width, height)
+            # the film: the world behind the geometry, or alpha with Film › Transparent
+            combined = snapshot_combined(scene_session(scene.name_full).snapshot, passes,
+                                         pixel_filter_width(scene))
         except VoxGIError as error:
             self.report({"ERROR"}, f"VoxGI render failed: {error}")
             return
@@ -86,9 +92,12 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
             render_pass = layer.passes.get(name)
             if render_pass is None:
                 continue
-            image = np.flipud(passes[name])  # Blender's rows go bottom to top
-            if render_pass.channels == 4:
+            image = combined if name == "Combined" else passes[name]
+            image = np.flipud(image)  # Blender's rows go bottom to top
+            if render_pass.channels == 4 and image.shape[2] == 3:
                 image = np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=2)
+            elif render_pass.channels == 3:
+                image = image[:, :, :3]
             render_pass.rect = np.ascontiguousarray(image, np.float32).reshape(-1, render_pass.channels)
         self.end_result(result)
 

@@ -135,6 +135,7 @@ def render_scene_passes(context, scene, depsgraph, width, height, indirect_sourc
     start = time.perf_counter()
     snapshot, snap_seconds = snapshot_or_error(context, depsgraph)
     session = scene_session(scene.name_full)
+    session.snapshot = snapshot  # the film (preview.film) reads its world, camera and film
     voxels = {}
     state = fit = None
     if scene.voxgi.quality != "ACCURATE":  # the cones need this update's voxel cascades

@@ -301,6 +301,7 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
         frame=int(scene.frame_current),
         warnings=tuple(warnings),
         holdout_materials=tuple(sorted(holdouts.values())),
+        film_transparent=bool(scene.render.film_transparent),
     )
 
 

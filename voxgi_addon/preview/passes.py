@@ -253,6 +253,9 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
         image = np.zeros((height * width, 3), np.float32)
         image[hit] = values[name]
         passes[name] = image.reshape(height, width, 3)
+    alpha = np.zeros(height * width, np.float32)
+    alpha[hit] = 1.0  # the pixel centre's ray met a surface (see ``filter_coverage``)
+    passes["Alpha"] = alpha.reshape(height, width)
     return passes
 
 
@@ -577,8 +580,26 @@ def finish_passes(sums, count, width: int, height: int,
         "Glossy Color": sums["glossy_color"] / per_pixel,
         "Ambient Occlusion": np.repeat((sums["ao"] / count)[:, None], 3, axis=1),
     }
-    return filter_passes({name: values[name].reshape(height, width, 3) for name in PASS_NAMES},
-                         filter_width)
+    passes = filter_passes({name: values[name].reshape(height, width, 3) for name in PASS_NAMES},
+                           filter_width)
+    passes["Alpha"] = filter_coverage((sums["coverage"] / count).reshape(height, width),
+                                      filter_width)
+    return passes
+
+
+def filter_coverage(coverage: np.ndarray, filter_width: float) -> np.ndarray:
+    """(H, W) or (H, W, C) float32: per-pixel means over the sub-pixel passes (the share of
+    camera samples that met a surface; the world seen along them) through Cycles' pixel
+    filter as ``filter_passes`` takes Combined — the film's alpha and background
+    (``preview.film``)."""
+    weights = neighbour_weights(filter_width)
+    image = np.asarray(coverage, np.float64)
+    flat = image.ndim == 2
+    image = image[..., None] if flat else image
+    if weights.sum() > 1.0:
+        norm = weights[1, 1] + _neighbour_sum(np.ones(image.shape[:2] + (1,)), weights)
+        image = (image + _neighbour_sum(image, weights)) / norm
+    return (image[..., 0] if flat else image).astype(np.float32)
 
 
 def filtered_sums(sums, count, tails, width: int, height: int, filter_width: float):
@@ -615,8 +636,10 @@ def filtered_sums(sums, count, tails, width: int, height: int, filter_width: flo
         "Glossy Color": full["glossy_color"] / norm,
         "Ambient Occlusion": np.repeat(full["ao"] / norm, 3, axis=1),
     }
-    return {name: values[name].reshape(height, width, 3).astype(np.float32)
-            for name in PASS_NAMES}
+    passes = {name: values[name].reshape(height, width, 3).astype(np.float32)
+              for name in PASS_NAMES}
+    passes["Alpha"] = (full["coverage"] / norm).reshape(height, width).astype(np.float32)
+    return passes
 
 
 def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,

@@ -244,6 +244,8 @@ class SceneSnapshot:
 
     holdout_materials : indices into ``materials`` of Holdout shaders (black to every ray; a
     camera ray that meets one sees nothing, as at a holdout object).
+    film_transparent : Render › Film › Transparent (``preview.film``: alpha instead of the
+    world behind the geometry).
     """
 
     meshes: dict[str, MeshData]
@@ -257,3 +259,4 @@ class SceneSnapshot:
     warnings: tuple[str, ...] = ()
     textures: tuple[TextureData, ...] = ()
     holdout_materials: tuple[int, ...] = ()
+    film_transparent: bool = False  # Film › Transparent: no world behind the geometry
