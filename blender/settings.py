@@ -273,7 +273,7 @@ def probe_settings(settings: VoxGISceneSettings, resolution=None):
                          use_masks=settings.probe_masks,
                          mask_threshold=settings.probe_mask_threshold,
                          validity_threshold=settings.probe_validity,
-                         relocate=settings.probe_relocate)
+                         relocate=settings.probe_relocate, bounces=diffuse_bounces(settings))
 
 
 def cone_settings(settings: VoxGISceneSettings):

@@ -47,7 +47,9 @@ class ProbeSettings:
     along ``directions × radiance_factor`` directions: the validity test's (from the probes'
     final places) and radiance_factor − 1 more sets of as many, each under its own rotation.
     A shaded probe beside a sunlit floor sees a sharp-edged patch of bounce light that 256
-    directions sample coarsely (docs/probes.md "Lights at the probe")."""
+    directions sample coarsely (docs/probes.md "Lights at the probe"). bounces : the diffuse
+    bounces the probes carry (the preview's Bounces): beyond the first, each hit also reflects
+    the multi-bounce radiance cache's light there (``gi.radiance_cache``, the preview's)."""
 
     resolution: int | tuple[int, int, int] = 8
     directions: int = 256
@@ -59,6 +61,7 @@ class ProbeSettings:
     light_samples: int = 1
     direct_samples: int = 64
     radiance_factor: int = 2
+    bounces: int = 1
 
 
 @dataclass
@@ -79,13 +82,15 @@ def material_colours(snapshot) -> tuple[np.ndarray, np.ndarray]:
 
 def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
                  light_samples: int = 4, seed: int = 0, seen_world: bool = True,
-                 seen_emission: bool = True) -> np.ndarray:
+                 seen_emission: bool = True, cache=None) -> np.ndarray:
     """(N, 3) radiance arriving along rays: one diffuse bounce of direct light at the hit (every
     light: lamps, the world, emissive triangles — ``world_light.scene_lights``) plus its
     emission, or for a miss (tri = -1) the world in that direction (its map; its colour when it
     has none). Hits are shaded on the side the ray came from. ``seen_world`` / ``seen_emission``
     False leave out the world's map on a miss / the emission of a hit (the bake estimates those
-    by next-event estimation at the probe, ``direct``)."""
+    by next-event estimation at the probe, ``direct``). cache : a ``radiance_cache.RadianceCache``
+    whose light (bounces 2 … N) the hits reflect too, by their albedo (None: one bounce)."""
+    from ..gi.radiance_cache import lookup
     from ..gi.world_light import scene_lights, world_light, world_radiance
 
     dirs = np.asarray(dirs, np.float64).reshape(-1, 3)
@@ -121,7 +126,8 @@ def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
     m = len(snapshot.materials)
     mat = np.asarray(tris.materials, np.int64)[k]
     mat = np.where((mat >= 0) & (mat < m), mat, m)
-    out[hit] = albedo[mat] * direct + (emission[mat] if seen_emission else 0.0)
+    arriving = direct + (lookup(cache, points, normal) if cache is not None else 0.0)
+    out[hit] = albedo[mat] * arriving + (emission[mat] if seen_emission else 0.0)
     return out
 
 
@@ -167,6 +173,21 @@ def _box(tris, box):
         return scene_box(tris.positions)
     lo, hi = (np.asarray(b, np.float64).reshape(3) for b in box)
     return lo, hi
+
+
+def _bounce_cache(snapshot, tris, bounces: int):
+    """The preview's radiance cache of ``bounces`` − 1 iterations for the snapshot (None for
+    one bounce): the same cache the Accurate gathers read, kept between calls."""
+    if bounces <= 1:
+        return None
+    from ..gi.light_injection import material_emission
+    from ..gi.radiance_cache import cached_cache
+    from ..gi.world_light import scene_lights
+    from ..preview.passes import principled_table
+
+    emission = material_emission(snapshot)
+    return cached_cache(tris, scene_lights(snapshot, tris, emission), principled_table(snapshot),
+                        emission, bounces)
 
 
 def bake_probe_grid(snapshot, settings: ProbeSettings = ProbeSettings(), box=None,
@@ -224,6 +245,7 @@ def bake_probe_grid(snapshot, settings: ProbeSettings = ProbeSettings(), box=Non
         sh += sh_fn(positions, dirs)
         p_count = 0  # nothing left for the exact stage
     # the validity rays (from the final places) and (factor − 1) more rotated sets: near-uniform
+    cache = _bounce_cache(snapshot, tris, settings.bounces) if p_count else None
     factor = max(1, int(settings.radiance_factor))
     extra = [sample_directions(len(dirs), settings.seed + 1 + i) for i in range(factor - 1)]
     radiance_dirs = np.concatenate([dirs, *extra])
@@ -240,7 +262,8 @@ def bake_probe_grid(snapshot, settings: ProbeSettings = ProbeSettings(), box=Non
         radiance = hit_radiance(snapshot, tris, origins, np.tile(radiance_dirs, (b - a, 1)),
                                 chunk.t.ravel(), chunk.triangle.ravel(), chunk.u.ravel(),
                                 chunk.v.ravel(), settings.light_samples, settings.seed + a,
-                                seen_world=not by_world, seen_emission=not by_emitters)
+                                seen_world=not by_world, seen_emission=not by_emitters,
+                                cache=cache)
         sh[a:b] = direct + project(radiance.reshape(b - a, n, 3), radiance_dirs)
         if progress is not None:
             progress(b / p_count)
