@@ -178,7 +178,8 @@ def _sums_of(texel):
     return {
         "emission": texel["sum_a"][:, :3], "coverage": texel["sum_a"][:, 3],
         "diffuse_color": texel["sum_b"][:, :3], "ao": texel["sum_b"][:, 3],
-        "glossy_color": texel["sum_c"][:, :3], "diffuse_indirect": texel["sum_d"][:, :3],
+        "glossy_color": texel["sum_c"][:, :3], "holdout": texel["sum_c"][:, 3],
+        "diffuse_indirect": texel["sum_d"][:, :3],
         "glossy_indirect": texel["sum_e"][:, :3], "glossy_direct": texel["sum_f"][:, :3],
         "diffuse_direct": texel["sum_g"][:, :3]}
 

@@ -25,7 +25,7 @@ void main()
   ivec2 px = ivec2(pixel.xy + 0.5);
   vec4 position = texelFetch(gbuffer_position, px, 0);
 #ifndef RAW
-  position.w = position.w > 0.5 ? 2.0 + pixel.z : 0.0;
+  position.w = position.w > 0.5 ? 2.0 + pixel.z : min(position.w, 0.0); /* -1: a holdout */
 #endif
   imageStore(out_position, t, position);
   imageStore(out_normal, t, texelFetch(gbuffer_normal, px, 0));

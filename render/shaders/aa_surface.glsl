@@ -5,7 +5,8 @@
  * same pixel (centre_diffuse = (Diffuse Indirect, AO), centre_glossy = Glossy Indirect,
  * centre_world = the world's glossy light without the glossy colour) are added to the sums
  * (sum_* in, out_* out; the pass count divides them at the end):
- *   a = (emission, coverage), b = (Diffuse Color, AO), c = (Glossy Color, 0),
+ *   a = (emission, coverage), b = (Diffuse Color, AO), c = (Glossy Color, holdout: the
+ *   G-buffer's w = -1, a camera ray that met a holdout and shows nothing, gbuffer_frag.glsl),
  *   d = (Diffuse Color × Diffuse Indirect, 0), e = (Glossy Color × Glossy Indirect, 0),
  *   f = (glossy light, 0) += Glossy Color × centre_world.
  * out_colour = (Diffuse Color, 0) of this pass, for aa_light.glsl. Samplers: materials (base,
@@ -27,7 +28,11 @@ void main()
   vec4 e = texelFetch(sum_e, px, 0);
   vec4 f = texelFetch(sum_f, px, 0);
   vec3 diffuse_colour = vec3(0.0);
-  if (texelFetch(gbuffer_position, px, 0).w > 0.5) {
+  float w = texelFetch(gbuffer_position, px, 0).w;
+  if (w < -0.5) {
+    c.w += 1.0;
+  }
+  if (w > 0.5) {
     vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
     vec4 ray = texelFetch(gbuffer_view, px, 0);
     int last_material = textureSize(materials, 0).x - 1;

@@ -27,7 +27,8 @@ void main()
     }
   }
   if (surface.x < -1.5) { /* a holdout (gbuffer.rasterize): hides what is behind, shows nothing */
-    out_position = out_normal = out_view = out_base = vec4(0.0);
+    out_normal = out_view = out_base = vec4(0.0);
+    out_position = vec4(0.0, 0.0, 0.0, -1.0); /* w = -1: no surface, but the film's holdout */
     return;
   }
   float facing = dot(flat_normal, view) > 0.0 ? -1.0 : 1.0;

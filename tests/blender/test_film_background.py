@@ -115,3 +115,38 @@ def test_numpy_and_gpu_agree_on_coverage(courtyard):
         assert alphas[tracer].shape == (48, 64)
     assert 0.1 < alphas["NUMPY"].mean() < 0.95
     assert np.abs(alphas["AUTO"] - alphas["NUMPY"]).mean() < 0.005
+
+
+def test_a_holdout_object_gives_alpha_0_as_in_cycles(courtyard, tmp_path):
+    """The pillar made a holdout (Object › Visibility › Holdout): where the camera sees it,
+    neither it nor the sky behind it, Combined 0 and alpha 0 with the opaque film too."""
+    bpy.data.objects["Pillar"].is_holdout = True
+    reference = cycles_rgba(courtyard, tmp_path / "cycles.exr", transparent=False)
+    ours = voxgi_rgba(courtyard, tmp_path / "voxgi.exr", transparent=False)
+    held = reference[..., 3] < 0.01
+    assert held.sum() > 30, "the camera should see the pillar"
+    assert ours[held, 3].max() < 0.05
+    # nothing but the filter's tails of the surfaces and sky beside it, as in Cycles
+    print("held Combined mean", ours[held, :3].mean(), "Cycles", reference[held, :3].mean())
+    assert np.abs(ours[held, :3] - reference[held, :3]).mean() < 0.01
+    assert ours[held, :3].mean() < 0.01
+    alpha_error = np.abs(ours[..., 3] - reference[..., 3])
+    edges = (reference[..., 3] > 0.01) & (reference[..., 3] < 0.99)
+    print("holdout alpha mean abs", round(alpha_error.mean(), 4), "at its edges",
+          round(alpha_error[edges].mean(), 4))
+    assert alpha_error.mean() < 0.02 and alpha_error[edges].mean() < 0.05
+    print("Combined relative L1 with the holdout", round(rel(ours[..., :3], reference[..., :3]), 4))
+
+
+def test_numpy_and_gpu_agree_on_the_holdout_share(courtyard):
+    from voxgi.render.pipeline import render_scene_passes
+
+    bpy.data.objects["Pillar"].is_holdout = True
+    held = {}
+    for tracer in ("AUTO", "NUMPY"):
+        courtyard.voxgi.tracer = tracer
+        passes, _ = render_scene_passes(bpy.context, courtyard, None, 64, 48)
+        held[tracer] = np.asarray(passes["_holdout"], np.float64)
+        assert np.asarray(passes["Combined"])[held[tracer] > 0.999].max() < 0.02
+    assert held["NUMPY"].max() > 0.99 and held["NUMPY"].sum() > 20
+    assert np.abs(held["AUTO"] - held["NUMPY"]).mean() < 0.005

@@ -47,3 +47,15 @@ def test_a_sky_map_is_seen_up_and_the_ground_down_and_a_black_world_is_black():
     assert np.all(background(WorldData(), camera, 16, 12) == 0.0)
     with pytest.raises(ValueError, match="size"):
         background(world, camera, 0, 12)
+
+
+def test_a_holdout_shows_neither_surface_nor_world():
+    combined = np.zeros((1, 3, 3), np.float32)
+    alpha = np.array([[0.0, 0.5, 0.0]], np.float32)
+    holdout = np.array([[1.0, 0.5, 0.25]], np.float32)
+    back = np.full((1, 3, 3), 2.0, np.float32)
+    opaque = film_combined(combined, alpha, back, False, holdout)
+    assert np.allclose(opaque[0, :, 3], [0.0, 0.5, 0.75])
+    assert np.allclose(opaque[0, :, 0], [0.0, 0.0, 1.5])
+    transparent = film_combined(combined, alpha, back, True, holdout)
+    assert np.allclose(transparent[0, :, 3], alpha[0])

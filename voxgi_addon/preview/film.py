@@ -8,8 +8,10 @@ surface (``passes.filter_coverage``). Cycles' Combined shows the world behind th
   anti-aliased preview's sub-pixel offsets (``camera.filter_offsets``, bilinear in the map so
   the sky is not blurred beyond its own pixels) and taken through the same pixel filter as the
   passes — the background a pixel's filter window sees.
-* ``film_combined``: RGBA Combined. Opaque film: RGB + (1 − coverage) × background, alpha 1;
-  Film › Transparent: RGB as traced (premultiplied) and alpha = coverage.
+* ``film_combined``: RGBA Combined. Opaque film: RGB + (1 − coverage − holdout) × background,
+  alpha 1 − holdout; Film › Transparent: RGB as traced (premultiplied) and alpha = coverage.
+  ``holdout`` (``passes["_holdout"]``) is the filtered share of camera samples that met a
+  holdout (object Holdout, Holdout shader): they show nothing, neither surface nor world.
 
 Only images that leave the add-on go through it (F12's Combined, ``voxgi.render_preview``'s
 Combined.A); the passes the tests compare against film-transparent references do not.
@@ -42,22 +44,27 @@ def background(world, camera, width: int, height: int,
     return filter_coverage((total / len(offsets)).reshape(height, width, 3), filter_width)
 
 
-def film_combined(combined, alpha, back, transparent: bool) -> np.ndarray:
+def film_combined(combined, alpha, back, transparent: bool, holdout=None) -> np.ndarray:
     """(H, W, 4) float32 RGBA Combined from the traced (H, W, 3) ``combined``, the (H, W)
-    surface coverage ``alpha`` and the (H, W, 3) ``back`` (``background``); ``transparent``:
-    Film › Transparent (no background, alpha = coverage), else background behind the
-    uncovered share and alpha 1."""
+    surface coverage ``alpha``, the (H, W, 3) ``back`` (``background``) and the (H, W)
+    ``holdout`` share (None: no holdouts); ``transparent``: Film › Transparent (no background,
+    alpha = coverage), else background behind the share no surface or holdout covers and
+    alpha 1 − holdout."""
     combined = np.asarray(combined, np.float32)
     alpha = np.clip(np.asarray(alpha, np.float32), 0.0, 1.0)
     if combined.ndim != 3 or combined.shape[2] != 3 or alpha.shape != combined.shape[:2]:
         raise ValueError(f"film: Combined {combined.shape} and Alpha {alpha.shape} do not match")
+    held = np.zeros_like(alpha) if holdout is None else \
+        np.clip(np.asarray(holdout, np.float32), 0.0, 1.0 - alpha)
+    if held.shape != alpha.shape:
+        raise ValueError(f"film: holdout {held.shape} does not match Alpha {alpha.shape}")
     if transparent:
         return np.concatenate([combined, alpha[..., None]], axis=2)
     back = np.asarray(back, np.float32)
     if back.shape != combined.shape:
         raise ValueError(f"film: background {back.shape} does not match Combined {combined.shape}")
-    rgb = combined + (1.0 - alpha)[..., None] * back
-    return np.concatenate([rgb, np.ones_like(alpha)[..., None]], axis=2)
+    rgb = combined + (1.0 - alpha - held)[..., None] * back
+    return np.concatenate([rgb, (1.0 - held)[..., None]], axis=2)
 
 
 def snapshot_combined(snapshot, passes, filter_width: float = DEFAULT_FILTER_WIDTH) -> np.ndarray:
@@ -73,4 +80,4 @@ def snapshot_combined(snapshot, passes, filter_width: float = DEFAULT_FILTER_WID
         background(snapshot.world, snapshot.camera, width, height, filter_width)
     if back is None:
         back = np.zeros((height, width, 3), np.float32)
-    return film_combined(combined, passes["Alpha"], back, transparent)
+    return film_combined(combined, passes["Alpha"], back, transparent, passes.get("_holdout"))

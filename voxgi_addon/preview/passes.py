@@ -395,7 +395,8 @@ def light_edge_pixels(light, computed, reach: int, passes: int) -> np.ndarray:
 # Diffuse/Glossy Direct/Indirect passes by Diffuse/Glossy Color (measured: a surface's edge
 # pixels keep its full Diffuse Direct while their Diffuse Color falls with the coverage).
 SUMS = ("emission", "coverage", "diffuse_color", "ao", "glossy_color", "diffuse_direct",
-        "diffuse_indirect", "glossy_direct", "glossy_indirect")
+        "diffuse_indirect", "glossy_direct", "glossy_indirect", "holdout")
+_SCALAR_SUMS = ("coverage", "ao", "holdout")  # (H·W,); "holdout": the rays that met a holdout
 
 
 def accumulate_pass(sums, snapshot, hit, mat, normals, views, direct, indirect, ao, glossy,
@@ -422,7 +423,7 @@ def accumulate_pass(sums, snapshot, hit, mat, normals, views, direct, indirect, 
 
 def new_sums(pixels: int):
     """Zero ``SUMS`` for ``pixels`` pixels (see ``accumulate_pass``)."""
-    return {name: np.zeros(pixels if name in ("coverage", "ao") else (pixels, 3))
+    return {name: np.zeros(pixels if name in _SCALAR_SUMS else (pixels, 3))
             for name in SUMS}
 
 
@@ -525,7 +526,8 @@ def filter_passes(passes, filter_width: float):
     pixel with no colour of its own (a metal beside a diffuse wall, the background beside an
     object) takes the light of the neighbours at least half covered by a coloured surface
     (their colour at least half the largest around them: that surface is at their border with
-    the pixel, inside its filter; a sliver may lie beyond its reach)."""
+    the pixel, inside its filter; a sliver may lie beyond its reach). The film's (H, W)
+    ``Alpha`` and ``_holdout`` shares, when given, are weighted means as Combined."""
     weights = neighbour_weights(filter_width)
     if weights.sum() <= 1.0:
         return passes
@@ -547,7 +549,11 @@ def filter_passes(passes, filter_width: float):
         bottom = colour + np.where(own, _neighbour_sum(colour, weights),
                                    _neighbour_sum(np.where(solid, colour, 0.0), weights))
         out[name] = np.divide(top, bottom, out=np.zeros_like(top), where=bottom > 0.0)
-    return {name: out[name].astype(np.float32) for name in PASS_NAMES}
+    out = {name: out[name].astype(np.float32) for name in PASS_NAMES}
+    for name in ("Alpha", "_holdout"):  # the film's (H, W) shares, filtered like Combined
+        if name in passes:
+            out[name] = filter_coverage(passes[name], filter_width)
+    return out
 
 
 def finish_passes(sums, count, width: int, height: int,
@@ -580,11 +586,11 @@ def finish_passes(sums, count, width: int, height: int,
         "Glossy Color": sums["glossy_color"] / per_pixel,
         "Ambient Occlusion": np.repeat((sums["ao"] / count)[:, None], 3, axis=1),
     }
-    passes = filter_passes({name: values[name].reshape(height, width, 3) for name in PASS_NAMES},
-                           filter_width)
-    passes["Alpha"] = filter_coverage((sums["coverage"] / count).reshape(height, width),
-                                      filter_width)
-    return passes
+    images = {name: values[name].reshape(height, width, 3) for name in PASS_NAMES}
+    images["Alpha"] = (sums["coverage"] / count).reshape(height, width)
+    if np.any(sums["holdout"]):  # the share of rays that met a holdout (preview.film)
+        images["_holdout"] = (sums["holdout"] / count).reshape(height, width)
+    return filter_passes(images, filter_width)
 
 
 def filter_coverage(coverage: np.ndarray, filter_width: float) -> np.ndarray:
@@ -639,6 +645,8 @@ def filtered_sums(sums, count, tails, width: int, height: int, filter_width: flo
     passes = {name: values[name].reshape(height, width, 3).astype(np.float32)
               for name in PASS_NAMES}
     passes["Alpha"] = (full["coverage"] / norm).reshape(height, width).astype(np.float32)
+    if np.any(full["holdout"]):  # the share of rays that met a holdout (preview.film)
+        passes["_holdout"] = (full["holdout"] / norm).reshape(height, width).astype(np.float32)
     return passes
 
 
@@ -842,6 +850,8 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
                         per_light.sum(axis=0),
                         indirect[hit], ao[hit], glossy[hit], shine + glow, glossy_world[hit],
                         base)
+        if seen.holdout is not None:  # the film's alpha: these rays show nothing, not the world
+            (sums if into is None else into)["holdout"][seen.holdout.ravel() & pixels] += 1.0
         if lamps is not None:  # the lamps' light as the GPU's sums hold it after the lamps
             only = new_sums(height * width)
             accumulate_pass(only, snapshot, hit, mat, n, views,

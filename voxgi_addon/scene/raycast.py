@@ -334,6 +334,7 @@ class PrimaryHits:
     material: np.ndarray
     object: np.ndarray
     barycentric: np.ndarray | None = None
+    holdout: np.ndarray | None = None  # (H, W) bool: the ray met a holdout (the film's alpha 0)
 
 
 def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | None = None,
@@ -348,8 +349,10 @@ def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | No
     t, tri, u, v = closest_hits(tris, origins, directions, 0.0, camera_ray_lengths(camera, directions),
                                 RAY_CAMERA)
     holdout = getattr(tris, "holdout", None)
+    held = np.zeros(len(tri), bool)
     if holdout is not None:
-        tri = np.where((tri >= 0) & np.asarray(holdout)[np.maximum(tri, 0)], -1, tri)
+        held = (tri >= 0) & np.asarray(holdout)[np.maximum(tri, 0)]
+        tri = np.where(held, -1, tri)
     hit = tri >= 0
     index = np.where(hit, tri, 0)
     position = np.where(hit[:, None], origins + directions * np.where(hit, t, 0.0)[:, None], 0.0)
@@ -392,4 +395,5 @@ def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | No
         material=material,
         object=per_pixel(tris.objects),
         barycentric=np.where(hit[:, None], np.stack([u, v], axis=1), 0.0).reshape(height, width, 2),
+        holdout=held.reshape(height, width),
     )
