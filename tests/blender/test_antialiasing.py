@@ -169,7 +169,7 @@ def test_only_edge_pixels_take_sub_pixel_passes(voxgi):
     # there the whole 3 x 3 window took the centre pass: the point-sampled passes under Cycles'
     # filter over the neighbours (filter_passes)
     filtered = filter_passes(point, 1.5)
-    for name in point:
+    for name in filtered:  # the 8 passes (not the film's coverage beside them)
         assert np.allclose(smooth[name][interior], filtered[name][interior], rtol=1e-4,
                            atol=1e-6), name
     # Pixels along a change of coverage or material (both sides of it in their 3 × 3 window):
