@@ -237,7 +237,8 @@ def read_gbuffer(gbuffer: GBuffer) -> dict[str, np.ndarray]:
     """The G-buffer as top-row-first numpy arrays: hit (H, W) bool, position, normal,
     direction (H, W, 3) float32, roughness (H, W) float32, material (H, W) int32, base
     (H, W, 3) and textured (H, W) bool, emission (H, W, 3) per texel where emissive (H, W)
-    bool (``textures.unpack_emission``)."""
+    bool (``textures.unpack_emission``), holdout (H, W) bool: a holdout hides what is behind
+    (position.w = -1, ``gbuffer_frag.glsl``)."""
     position = np.flipud(read_texture(gbuffer.position))
     normal = np.flipud(read_texture(gbuffer.normal))
     view = np.flipud(read_texture(gbuffer.view))
@@ -247,4 +248,5 @@ def read_gbuffer(gbuffer: GBuffer) -> dict[str, np.ndarray]:
             "roughness": normal[..., 3], "direction": view[..., :3],
             "material": np.where(hit, np.rint(view[..., 3]), -1).astype(np.int32),
             "base": base[..., :3], "textured": base[..., 3] > 0.5,
-            "emission": unpack_emission(base[..., 3]), "emissive": base[..., 3] > 1.5}
+            "emission": unpack_emission(base[..., 3]), "emissive": base[..., 3] > 1.5,
+            "holdout": position[..., 3] < -0.5}

@@ -148,4 +148,4 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
         base.emission = seen["emission"].reshape(-1, 3)[hit].astype(np.float64)
         base.emissive = seen["emissive"].ravel()[hit]
     return compose_passes(snapshot, width, height, hit, mat, *terms, n, views, shine,
-                          base=base), timings
+                          base=base, holdout=seen["holdout"].ravel()), timings

@@ -150,3 +150,23 @@ def test_numpy_and_gpu_agree_on_the_holdout_share(courtyard):
         assert np.asarray(passes["Combined"])[held[tracer] > 0.999].max() < 0.02
     assert held["NUMPY"].max() > 0.99 and held["NUMPY"].sum() > 20
     assert np.abs(held["AUTO"] - held["NUMPY"]).mean() < 0.005
+
+
+def test_fast_quality_gives_the_film_its_coverage_and_holdouts(courtyard):
+    """Fast quality (cones; the pixel centres' hits, no sub-pixel passes): the same Alpha and
+    holdout share from the GPU G-buffer and the numpy rays."""
+    from voxgi.render.pipeline import render_scene_passes
+
+    bpy.data.objects["Pillar"].is_holdout = True
+    courtyard.voxgi.quality = "FAST"
+    out = {}
+    for tracer in ("AUTO", "NUMPY"):
+        courtyard.voxgi.tracer = tracer
+        passes, _ = render_scene_passes(bpy.context, courtyard, None, 64, 48)
+        out[tracer] = (np.asarray(passes["Alpha"], np.float64),
+                       np.asarray(passes["_holdout"], np.float64))
+    alpha, held = out["NUMPY"]
+    assert 0.1 < alpha.mean() < 0.95 and held.sum() > 20
+    assert not np.any((alpha > 0) & (held > 0))  # one ray per pixel: a surface or a holdout
+    for gpu, numpy_ in zip(out["AUTO"], out["NUMPY"]):
+        assert np.abs(gpu - numpy_).mean() < 0.01

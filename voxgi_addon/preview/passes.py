@@ -210,7 +210,8 @@ def principled_colours(snapshot, mat, cos_view, base=None):
 
 
 def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glossy,
-                   normals=None, views=None, glossy_direct=None, glossy_world=None, base=None):
+                   normals=None, views=None, glossy_direct=None, glossy_world=None, base=None,
+                   holdout=None):
     """The PASS_NAMES images (H, W, 3) float32 (row 0 = top) from the per-hit-pixel terms.
 
     hit : (H·W,) indices of the pixels that see a surface; mat : their material indices;
@@ -223,6 +224,8 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
     glossy_world : (N, 3) the world's glossy light without the glossy colour (part of Glossy
     Direct, ``gather.gather_glossy_world``).
     base : (N, 3) Base Color per texel (``scene.textures.primary_base``) or None.
+    holdout : (H·W,) bool, the pixels whose camera ray met a holdout (the film's ``_holdout``),
+    or None. ``Alpha`` (H, W) is 1 at the hit pixels.
     """
     albedo, _, spec, emission = material_table(snapshot)
     diffuse_colour, glossy_colour = albedo[mat], spec[mat]
@@ -256,6 +259,8 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
     alpha = np.zeros(height * width, np.float32)
     alpha[hit] = 1.0  # the pixel centre's ray met a surface (see ``filter_coverage``)
     passes["Alpha"] = alpha.reshape(height, width)
+    if holdout is not None and np.any(holdout):
+        passes["_holdout"] = np.asarray(holdout, np.float32).reshape(height, width)
     return passes
 
 
@@ -804,7 +809,9 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
                             snapshot.camera, width, height)  # None: untextured
         shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_lamp, hit, base)
         return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao,
-                              glossy, n, views, shine, base=base), timings
+                              glossy, n, views, shine, base=base,
+                              holdout=None if seen.holdout is None else seen.holdout.ravel()), \
+            timings
     t0 = time.perf_counter()
     emitting = any(light.type == "EMITTERS" for light in lights)
     emitters = next((light for light in lights if light.type == "EMITTERS"), None)
