@@ -35,7 +35,8 @@ def render_preview(tmp_path, scene, tracer="AUTO"):
     assert bpy.ops.voxgi.render_preview(filepath=str(path), resolution_x=WIDTH,
                                         resolution_y=HEIGHT) == {"FINISHED"}
     channels = read_exr(path)
-    assert sorted(channels) == sorted(f"{p}.{c}" for p in PASSES for c in "RGB")
+    # Combined is RGBA (the film's alpha, preview/film.py), the other passes RGB
+    assert sorted(channels) == sorted([*(f"{p}.{c}" for p in PASSES for c in "RGB"), "Combined.A"])
     return {p: np.stack([channels[f"{p}.{c}"] for c in "RGB"], axis=-1) for p in PASSES}
 
 
