@@ -53,17 +53,18 @@ def base_options(settings, width: int, height: int) -> dict:
     return {**trace_options(settings, width, height), "filter_width": 0.0}
 
 
-_sizers: dict[float, SliceSizer] = {}
+_sizers: dict[tuple[float, bool], SliceSizer] = {}
 
 
-def shared_sizer(budget: float) -> SliceSizer:
+def shared_sizer(budget: float, amortize: bool = True) -> SliceSizer:
     """The process's slice sizer for ``budget``: every view measures the same machine, so a
     3D view switched to Rendered starts from what the others measured (the first one from
-    the smallest tile)."""
-    if budget not in _sizers:
-        _sizers[budget] = SliceSizer(budget, first_pixels=LEAST_TILE * LEAST_TILE,
-                                     least=LEAST_TILE * LEAST_TILE)
-    return _sizers[budget]
+    the smallest tile). amortize : as ``SliceSizer``'s (False for staged slices)."""
+    if (budget, amortize) not in _sizers:
+        _sizers[budget, amortize] = SliceSizer(budget, first_pixels=LEAST_TILE * LEAST_TILE,
+                                               least=LEAST_TILE * LEAST_TILE,
+                                               amortize=amortize)
+    return _sizers[budget, amortize]
 
 
 @dataclasses.dataclass
@@ -87,7 +88,7 @@ class ProgressiveImage:
         # has spent STAGE_SHARE of the budget, and the tiles are sized so that the longest
         # stage takes about that much (so a call stays within the budget)
         self.budget = budget
-        self.sizer = shared_sizer(budget * STAGE_SHARE)
+        self.sizer = shared_sizer(budget * STAGE_SHARE, amortize=False)
         self.stage_budget: float | None = budget * STAGE_SHARE  # None: a whole slice a call
         self.running = None        # the slice under way: a generator of its stages
         self.running_started = 0.0

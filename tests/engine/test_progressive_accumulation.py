@@ -274,3 +274,19 @@ def test_samples_count_in_the_neighbours_by_the_filter_at_their_own_offsets():
     truth = f[(x > -1.0) & (x <= -0.5)].sum() / f.sum()
     assert acc.finished(size)[1, 1, 0] == pytest.approx(truth, rel=0.02)
     assert np.allclose(even.finished(size), 2.0, rtol=1e-5)
+
+
+def test_a_staged_sizer_keeps_the_least_tile_where_the_fixed_cost_is_over_the_budget():
+    """Whole slices grow past the budget where their fixed cost alone is over it (overhead
+    amortized); staged slices are sized by their longest stage, which a bigger tile only
+    makes longer: they keep the smallest tile."""
+    from voxgi.voxgi_addon.preview.progressive import SliceSizer
+
+    whole, staged = SliceSizer(0.015, least=2304), SliceSizer(0.015, least=2304,
+                                                                 amortize=False)
+    for sizer in (whole, staged):  # 20 ms fixed + 2 µs per pixel, two sizes
+        for pixels in (2304, 4608, 2304, 4608):
+            sizer.measured(pixels, 0.020 + 2e-6 * pixels)
+        sizer.explore = 0
+    assert whole.pixels(10**6) == 10000  # fixed / per pixel: half of it tracing
+    assert staged.pixels(10**6) == 2304

@@ -377,14 +377,16 @@ class SliceSizer:
     fit follows a machine whose load changes even where the smallest tile holds every slice.
     A slice never has fewer pixels than its fixed cost is worth (fixed / per_pixel: at least
     half of it tracing), so where the fixed cost alone is over the budget (a slow or loaded
-    machine) slices run over it rather than spend most of their time on overhead."""
+    machine) slices run over it rather than spend most of their time on overhead — unless
+    ``amortize`` is False (the viewport's staged slices, sized by their longest stage: a
+    bigger slice would only make that stage longer), where such a machine gets ``least``."""
 
     def __init__(self, budget: float, first_pixels: int = 4096, least: int = 256,
-                 keep: int = 48, explore: int = 4):
+                 keep: int = 48, explore: int = 4, amortize: bool = True):
         if budget <= 0.0:
             raise ValueError(f"the slice budget must be positive, not {budget}")
         self.budget, self.first_pixels, self.least, self.keep = budget, first_pixels, least, keep
-        self.explore = explore
+        self.explore, self.amortize = explore, amortize
         self.samples: list[tuple[int, float]] = []
         self.fitted: tuple[float, float] | None = None  # the last fit from two sizes
         self.calls = 0
@@ -416,7 +418,8 @@ class SliceSizer:
             pixels = 2 * self.samples[-1][0] if self.samples else self.first_pixels
         else:
             fixed, per_pixel = fitted
-            pixels = max(self.budget - fixed, fixed) / per_pixel
+            spare = max(self.budget - fixed, fixed if self.amortize else 0.0)
+            pixels = spare / per_pixel
             if self.explore and self.calls % self.explore == 0:  # another size than the last
                 pixels = 2.0 * max(pixels, self.samples[-1][0] if self.samples else 0)
         return int(max(min(self.least, most), min(most, pixels)))
