@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from voxgi_addon.preview.film import background, film_combined
-from voxgi_addon.scene.snapshot import CameraData, WorldData
+from voxgi.voxgi_addon.preview.film import background, film_combined
+from voxgi.voxgi_addon.scene.snapshot import CameraData, WorldData
 
 
 def test_opaque_film_fills_the_uncovered_share_with_the_background():
@@ -31,7 +31,7 @@ def test_mismatched_shapes_are_refused():
 
 
 def test_a_sky_map_is_seen_up_and_the_ground_down_and_a_black_world_is_black():
-    from voxgi_addon.scene.equirect import pixel_directions
+    from voxgi.voxgi_addon.scene.equirect import pixel_directions
 
     dirs = pixel_directions(32, 64)  # a map bright above the horizon, dark below
     radiance = (np.where(dirs[..., 2:3] > 0.0, 3.0, 0.5) * np.ones((1, 1, 3))).astype(np.float32)
