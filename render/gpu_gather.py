@@ -10,6 +10,7 @@ rays. Needs a GPU context.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import replace
 
 import gpu
@@ -85,6 +86,7 @@ def no_texture_inputs() -> dict[str, object]:
 
 _cache_upload: dict[str, object] = {}
 CACHE_IMAGE_WIDTH = 256  # voxel faces per row of the cache's gather "image"
+CACHE_STAGE_SECONDS = 0.015  # a chunk of the viewport's staged build (progressive.STAGE_SHARE)
 
 
 def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
@@ -92,12 +94,28 @@ def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
     gathered on the GPU: the voxel faces (``radiance_cache.face_points``) laid out as the
     pixels of a ``CACHE_IMAGE_WIDTH``-wide G-buffer (sample id = the face's row, as numpy's
     ``radiance_cache.iterate``), each iteration one run of ``gather`` with
-    ``settings.cache_rays`` rays and the previous iteration's texels bound; seed 0, as numpy."""
-    tris = bvh.scene_triangles
-    cache = build_cache(tris, settings.cache_resolution, rays=settings.cache_rays)
+    ``settings.cache_rays`` rays and the previous iteration's texels bound; seed 0, as numpy.
+    ``cache_stages`` with every face in one chunk."""
+    stages = cache_stages(bvh, lights, principled, emission, settings, tables,
+                          budget=math.inf, first_rows=1 << 30)
+    while True:
+        try:
+            next(stages)
+        except StopIteration as end:
+            return end.value
+
+
+def cache_stages(bvh, lights, principled, emission, settings, tables=None,
+                 budget: float = CACHE_STAGE_SECONDS, first_rows: int = 1):
+    """Generator of the radiance cache of ``settings.bounces`` − 1 iterations, yielding after
+    each chunk of face rows; returns (cache, texture) as ``gpu_gather.cache_gpu`` does (the
+    same faces, rays and ids, so the same values; the viewport's, ``viewport_cache``). Chunks
+    start at ``first_rows`` rows of
+    ``CACHE_IMAGE_WIDTH`` faces and are resized to ``budget`` seconds by the last one's time."""
+    cache = build_cache(bvh.scene_triangles, settings.cache_resolution, rays=settings.cache_rays)
     points, axes = face_points(cache)
     count = len(points)
-    if count == 0:  # nothing to light: an empty cache of the iterations asked
+    if count == 0:  # nothing to light
         cache = with_faces(cache, np.zeros((0, 3)))
         texels = cache_texels(cache)
         return cache, float_texture(texels, (texels.shape[1], texels.shape[0]))
@@ -106,17 +124,31 @@ def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
     image = np.zeros((3, height * width, 4), np.float32)
     image[0, :count, :3], image[0, :count, 3] = points, 1.0
     image[1, :count, :3] = axes
-    # rows top first in the arrays, bottom first in the textures
-    gbuffer = {name: float_texture(layer.reshape(height, width, 4)[::-1], (width, height))
-               for name, layer in zip(("gbuffer_position", "gbuffer_normal", "gbuffer_view"),
-                                      image)}
+    layers = image.reshape(3, height, width, 4)
+    fixed = {name: float_texture(layer[::-1], (width, height))
+             for name, layer in zip(("gbuffer_normal", "gbuffer_view"), layers[1:])}
     step = replace(settings, rays=settings.cache_rays, bounces=1, seed=0)
     previous = None
+    rows = max(1, int(first_rows))
     for _ in range(settings.bounces - 1):
-        values, _ = gather(bvh, gbuffer, lights, principled, emission, step, 1, width, height,
-                           tables=tables, cache=previous)
-        faces = read_texture(values)[::-1].reshape(-1, 4)[:count, :3]
-        cache = with_faces(cache, faces)
+        faces = np.zeros((height, width, 3), np.float32)
+        top = 0
+        while top < height:
+            t0 = time.perf_counter()
+            end = min(height, top + rows)
+            position = layers[0].copy()
+            position[:top, :, 3] = 0.0  # masked: those cells return at once
+            position[end:, :, 3] = 0.0
+            gbuffer = {"gbuffer_position": float_texture(position[::-1], (width, height)),
+                       **fixed}
+            values, _ = gather(bvh, gbuffer, lights, principled, emission, step, 1, width,
+                               height, tables=tables, cache=previous)
+            faces[top:end] = read_texture(values)[::-1][top:end, :, :3]
+            seconds = time.perf_counter() - t0
+            top = end
+            rows = max(1, min(height, int(rows * min(4.0, budget / max(seconds, 1e-4)))))
+            yield
+        cache = with_faces(cache, faces.reshape(-1, 3)[:count])
         texels = cache_texels(cache)
         previous = float_texture(texels, (texels.shape[1], texels.shape[0]))
     return cache, previous

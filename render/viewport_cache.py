@@ -14,71 +14,10 @@ the new cache.
 """
 from __future__ import annotations
 
-import time
-from dataclasses import replace
+from ..voxgi_addon.gi.radiance_cache import cache_key
+from .gpu_gather import CACHE_STAGE_SECONDS, cache_stages
 
-import numpy as np
-
-from ..voxgi_addon.gi.radiance_cache import (
-    build_cache,
-    cache_key,
-    cache_texels,
-    face_points,
-    with_faces,
-)
-from .gpu_gather import CACHE_IMAGE_WIDTH, gather
-from .gpu_tracer import read_texture
-from .gpu_volume import float_texture
-
-STAGE_SECONDS = 0.015  # what one chunk aims at (progressive.STAGE_SHARE of the 30 ms budget)
-
-
-def cache_stages(bvh, lights, principled, emission, settings, tables=None,
-                 budget: float = STAGE_SECONDS, first_rows: int = 1):
-    """Generator of the radiance cache of ``settings.bounces`` − 1 iterations, yielding after
-    each chunk of face rows; returns (cache, texture) as ``gpu_gather.cache_gpu`` does (the
-    same faces, rays and ids, so the same values). Chunks start at ``first_rows`` rows of
-    ``CACHE_IMAGE_WIDTH`` faces and are resized to ``budget`` seconds by the last one's time."""
-    cache = build_cache(bvh.scene_triangles, settings.cache_resolution, rays=settings.cache_rays)
-    points, axes = face_points(cache)
-    count = len(points)
-    if count == 0:  # nothing to light
-        cache = with_faces(cache, np.zeros((0, 3)))
-        texels = cache_texels(cache)
-        return cache, float_texture(texels, (texels.shape[1], texels.shape[0]))
-    width = CACHE_IMAGE_WIDTH
-    height = -(-count // width)
-    image = np.zeros((3, height * width, 4), np.float32)
-    image[0, :count, :3], image[0, :count, 3] = points, 1.0
-    image[1, :count, :3] = axes
-    layers = image.reshape(3, height, width, 4)
-    fixed = {name: float_texture(layer[::-1], (width, height))
-             for name, layer in zip(("gbuffer_normal", "gbuffer_view"), layers[1:])}
-    step = replace(settings, rays=settings.cache_rays, bounces=1, seed=0)
-    previous = None
-    rows = max(1, int(first_rows))
-    for _ in range(settings.bounces - 1):
-        faces = np.zeros((height, width, 3), np.float32)
-        top = 0
-        while top < height:
-            t0 = time.perf_counter()
-            end = min(height, top + rows)
-            position = layers[0].copy()
-            position[:top, :, 3] = 0.0  # masked: those cells return at once
-            position[end:, :, 3] = 0.0
-            gbuffer = {"gbuffer_position": float_texture(position[::-1], (width, height)),
-                       **fixed}
-            values, _ = gather(bvh, gbuffer, lights, principled, emission, step, 1, width,
-                               height, tables=tables, cache=previous)
-            faces[top:end] = read_texture(values)[::-1][top:end, :, :3]
-            seconds = time.perf_counter() - t0
-            top = end
-            rows = max(1, min(height, int(rows * min(4.0, budget / max(seconds, 1e-4)))))
-            yield
-        cache = with_faces(cache, faces.reshape(-1, 3)[:count])
-        texels = cache_texels(cache)
-        previous = float_texture(texels, (texels.shape[1], texels.shape[0]))
-    return cache, previous
+STAGE_SECONDS = CACHE_STAGE_SECONDS  # what one chunk aims at (half the 30 ms budget)
 
 
 class ViewportCache:

@@ -31,7 +31,7 @@ def test_the_staged_build_is_the_whole_build_a_chunk_per_stage(voxgi, monkeypatc
     import gpu
 
     from voxgi.render import gpu_gather
-    from voxgi.render.viewport_cache import cache_stages
+    from voxgi.render.gpu_gather import cache_stages
     from voxgi.voxgi_addon.preview.gather import GatherSettings
 
     inputs = cornell_inputs(GatherSettings(bounces=3, cache_resolution=16, cache_rays=8))
