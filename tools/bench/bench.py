@@ -25,7 +25,8 @@ if str(TOOLS) not in sys.path:
 SECTIONS = {
     "voxelize": ("bench_voxelize", "surface voxelization vs trimesh and Open3D"),
     "gfg": ("bench_gfg", "GFG file write/read throughput vs numpy.save/numpy.load"),
-    "gi": ("bench_gi", "per-update time, preview time and Cycles time/error (runs in .venv)"),
+    "gi": ("bench_gi", "per-update time, preview time and Cycles time/error; multi-bounce "
+                       "interiors vs Cycles 16/64 spp ± OIDN at its default light paths (.venv)"),
     "gpu": ("bench_gpu", "GPU tracer: filtered samples/s and preview times vs numpy and Cycles"),
     "viewport": ("bench_viewport", "live viewport GI: main-thread stall, move → GI latency, cancel, "
                                    "debug-view draw of 1M voxels"),
@@ -35,6 +36,8 @@ SECTIONS = {
                                "with and without OIDN"),
     "scale": ("bench_scale", "a 1.06M-triangle city block of instanced domes: snapshot, BVH build, "
                              "upload, trace, peak memory vs Cycles 16 spp + OIDN"),
+    "imported": ("bench_imported", "the glTF round-trip scene: voxelize, update, preview and its "
+                                   "error vs Cycles 16 spp + OIDN"),
 }
 
 

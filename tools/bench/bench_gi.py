@@ -9,11 +9,14 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def run(quick: bool = False, out=print, script: str | None = None) -> str:
-    """Section "gi": per-update times (bench_gi_blender.py), then the issue scenes against
-    Cycles 16/64/256 spp and the default preview times (bench_scenes_blender.py)."""
+    """Section "gi": per-update times (bench_gi_blender.py), the issue scenes against
+    Cycles 16/64/256 spp and the default preview times (bench_scenes_blender.py), then the
+    multi-bounce interiors at the default Bounces and at 1 against Cycles 16/64 spp with and
+    without OIDN at its default light paths (bench_bounces_blender.py)."""
     if script is None:
         return "\n".join(run(quick, out, name)
-                         for name in ("bench_gi_blender.py", "bench_scenes_blender.py"))
+                         for name in ("bench_gi_blender.py", "bench_scenes_blender.py",
+                                      "bench_bounces_blender.py"))
     python = ROOT / ".venv" / "bin" / "python"
     if not python.exists():
         raise RuntimeError("the bpy venv .venv is missing: run `make venv` (make bench does)")
@@ -22,6 +25,6 @@ def run(quick: bool = False, out=print, script: str | None = None) -> str:
     if done.returncode != 0:
         raise RuntimeError(f"{script} failed:\n{done.stderr[-2000:]}")
     table = "\n".join(line for line in done.stdout.splitlines()
-                      if line.startswith(("|", "###")) or not line.strip())
+                      if line.startswith(("|", "###", "Note:", "Goal")) or not line.strip())
     out(table.strip() + "\n")
     return table
