@@ -11,7 +11,11 @@ one-shot GPU tracer (``gpu_preview.render_passes_gpu``, F12's kernels) over a sm
    traced through its own off-axis camera (``preview.progressive.tile_camera``) with sample k's
    sub-pixel offset, seed and share of the rays (``sample_settings``), and added to the
    per-pixel sums (``Accumulation``); the tile grid moves from sample to sample;
-3. **converged** after ``target`` samples: the mean gets the pixel filter's tails over the
+3. **the film** (Combined): every slice also looks the world up along its camera rays
+   (``preview.film.world_along``) and the samples' coverage and holdout shares are summed
+   with it (``Accumulation(film=True)``), so the image shows the world behind the geometry —
+   or, with Film › Transparent, alpha = coverage — as F12's film does (``preview.film``);
+4. **converged** after ``target`` samples: the mean gets the pixel filter's tails over the
    neighbours as F12's image does; nothing more is traced until the key changes.
 
 The slice's pixels come from measured slice times (``SliceSizer``: a fixed cost per slice
@@ -28,6 +32,7 @@ import time
 import numpy as np
 
 from ..blender.settings import cone_settings, trace_options
+from ..voxgi_addon.preview.film import world_along
 from ..voxgi_addon.preview.progressive import (
     Accumulation,
     GatherSums,
@@ -98,7 +103,9 @@ class ProgressiveImage:
         self.accumulation: Accumulation | None = None
         self.gathers: GatherSums | None = None  # Accurate: the samples' raw gathers
         self.backdrop = None       # (h, w, 3): what shows where no tile landed yet
-        self.image = None          # (H, W, 3) float32: the current estimate
+        self.image = None          # (H, W, 4) float32: the current estimate, RGBA on the film
+        self.film = False          # the image shows the film (Combined): the world, alpha
+        self.world = None          # its WorldData (the applied snapshot's)
         self.target = 1
         self.sample = 0            # the sample being traced
         self.tiles: list = []      # its tiles still to trace
@@ -115,15 +122,19 @@ class ProgressiveImage:
     # ------------------------------------------------------------------ planning
 
     def restart(self, key, pass_name: str, width: int, height: int, target: int,
-                coarse: bool) -> None:
+                coarse: bool, film: bool = False, transparent: bool = False,
+                world=None) -> None:
         """A new key: start over; the last estimate (scaled) stays the backdrop until the
-        coarse image or the tiles replace it."""
+        coarse image or the tiles replace it. film : show the film (``preview.film``: the
+        ``WorldData`` ``world`` behind the geometry, or alpha = coverage when
+        ``transparent``), as F12's Combined does."""
         previous = self.image
         if self.running is not None:
             self.running.close()  # the old key's slice: its textures go with it
             self.running = None
         self.key, self.target = key, max(1, int(target))
-        self.accumulation = Accumulation(pass_name, width, height)
+        self.accumulation = Accumulation(pass_name, width, height, film, transparent)
+        self.film, self.world = bool(film), world
         self.gathers = None
         self.backdrop = previous
         self.sample, self.tiles, self.tile_count = 0, [], 0
@@ -213,6 +224,9 @@ class ProgressiveImage:
         width, height = acc.width, acc.height
         options = base_options(settings, width, height)
 
+        def world(camera, w, h):  # the world along the slice's camera rays (the film's)
+            return world_along(self.world, camera, w, h) if self.film else None
+
         def traced(camera, w, h, opts):
             result = trace(camera, w, h, opts)
             if inspect.isgenerator(result):
@@ -227,7 +241,9 @@ class ProgressiveImage:
             passes = yield from traced(camera, *size, {**options, "gather_settings": gather,
                                                       "light_samples": lights})
             yield  # the estimate is a stage of its own
-            self.backdrop = np.asarray(passes[acc.pass_name], np.float32)
+            coarse = Accumulation(acc.pass_name, *size, self.film, acc.transparent)
+            coarse.add((0, 0, *size), passes, world=world(camera, *size))
+            self.backdrop = coarse.film_rgba(passes[acc.pass_name])
             self.coarse_pending = False
             done = Slice("coarse", (0, 0, width, height), size, 0)
         else:
@@ -249,18 +265,19 @@ class ProgressiveImage:
             passes = yield from traced(camera, rect[2], rect[3], tile_options)
             yield  # the estimate is a stage of its own
             acc.add(rect, passes, gather_weight=weight,
-                    tails=sample_tail_weights(filter_width, self.target, self.sample))
+                    tails=sample_tail_weights(filter_width, self.target, self.sample),
+                    world=world(camera, rect[2], rect[3]))
             done = Slice("tile", rect, (rect[2], rect[3]), self.sample)
             if not self.tiles:
                 self.sample += 1
                 self.converged = self.sample >= self.target
         if self.converged:
-            self.image = acc.finished(filter_width)
+            self.image = acc.film_rgba(acc.finished(filter_width), filter_width=filter_width)
         elif done.kind == "tile" and self.image is not None \
                 and self.image.shape[:2] == (height, width) and not self.image_stale:
             acc.estimate_into(self.image, done.rect)  # only the tile's pixels changed
         else:  # the backdrop (scaled) where no tile landed yet
-            self.image = acc.estimate(self.backdrop)
+            self.image = acc.estimate_rgba(self.backdrop)
         self.image_stale = False
         return done
 

@@ -100,11 +100,11 @@ class ViewportRenderer:
     def trace_key(live, camera_key, scene, pass_name, options) -> tuple:
         """Everything the image depends on: the applied results, the view (view and
         projection matrices, traced size), the pass, the cones, every tracer option and the
-        sample target."""
+        sample target, the film (Film › Transparent)."""
         s = scene.voxgi
         return (live.generation, camera_key, pass_name, cone_settings(s), s.tracer, s.quality,
                 tuple(sorted(options.items())), scene.voxgi_viewport.samples,
-                pixel_filter_width(scene))
+                pixel_filter_width(scene), bool(scene.render.film_transparent))
 
     def trace(self, live, scene, camera, key, pass_name: str) -> bool:
         """One-shot: trace ``live``'s applied results seen by ``camera`` whole (its
@@ -124,9 +124,11 @@ class ViewportRenderer:
         return True
 
     def upload(self, image) -> None:
-        """Make ``image`` ((H, W, 3), row 0 on top) the shown texture."""
+        """Make ``image`` ((H, W, 3) opaque, or (H, W, 4) RGBA; row 0 on top) the shown
+        texture."""
         height, width = image.shape[:2]
-        rgba = np.concatenate([image, np.ones((height, width, 1), np.float32)], axis=2)
+        rgba = image if image.shape[2] == 4 else \
+            np.concatenate([image, np.ones((height, width, 1), np.float32)], axis=2)
         flat = np.ascontiguousarray(np.flipud(rgba)).ravel()  # GPU rows go bottom to top
         self.texture = gpu.types.GPUTexture((width, height), format="RGBA32F",
                                             data=gpu.types.Buffer("FLOAT", flat.size, flat))
@@ -221,8 +223,11 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
                                  base_options(scene.voxgi, width, height)) \
             + (renderer.cache.generation,)
         if key != progressive.key:
+            # Combined on the film, as F12's: the world behind the geometry (preview.film)
             progressive.restart(key, pass_name, width, height, view_settings.samples,
-                                view_settings.coarse_first)
+                                view_settings.coarse_first, film=pass_name == "Combined",
+                                transparent=bool(scene.render.film_transparent),
+                                world=live.snapshot.world)
         blend = gpu.state.blend_get()
         # The trace rasterizes its G-buffer: with the caller's blending on (view_draw's state)
         # its triangles blended into the cleared targets and the image was 3% off F12's.

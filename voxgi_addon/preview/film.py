@@ -24,7 +24,19 @@ from ..scene.camera import DEFAULT_FILTER_WIDTH, camera_rays, filter_offsets
 from ..scene.equirect import sample_bilinear
 from .passes import AA_SIDE, filter_coverage
 
-__all__ = ["background", "film_combined"]
+__all__ = ["background", "film_combined", "world_along"]
+
+
+def world_along(world, camera, width: int, height: int, offset=(0.0, 0.0)):
+    """(H, W, 3) float32: the ``WorldData`` ``world`` along ``camera``'s ray through each
+    pixel at ``offset`` (``camera.camera_rays``; bilinear in the map), or None for a black
+    world (radiance None). ``background`` is this over the filter's sub-pixel offsets; the
+    viewport adds one offset per sample (``preview.progressive.Accumulation``)."""
+    radiance = getattr(world, "radiance", None)
+    if radiance is None:
+        return None
+    _, directions = camera_rays(camera, width, height, offset)
+    return sample_bilinear(radiance, directions)[:, :3].reshape(height, width, 3)
 
 
 def background(world, camera, width: int, height: int,
@@ -33,15 +45,13 @@ def background(world, camera, width: int, height: int,
     filter (row 0 = top); zeros for a black world (radiance None)."""
     if width < 1 or height < 1:
         raise ValueError(f"image size must be positive, got {width}×{height}")
-    radiance = getattr(world, "radiance", None)
-    if radiance is None:
+    if getattr(world, "radiance", None) is None:
         return np.zeros((height, width, 3), np.float32)
     offsets = filter_offsets(filter_width, AA_SIDE)
-    total = np.zeros((height * width, 3))
+    total = np.zeros((height, width, 3))
     for offset in offsets:
-        _, directions = camera_rays(camera, width, height, offset)
-        total += sample_bilinear(radiance, directions)[:, :3]
-    return filter_coverage((total / len(offsets)).reshape(height, width, 3), filter_width)
+        total += world_along(world, camera, width, height, offset)
+    return filter_coverage(total / len(offsets), filter_width)
 
 
 def film_combined(combined, alpha, back, transparent: bool, holdout=None) -> np.ndarray:

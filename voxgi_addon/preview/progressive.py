@@ -16,6 +16,9 @@ drawing (``render/progressive.py``) splits a full image into *samples* and each 
   as Cycles' film divides them) and per-pixel counts; ``estimate`` fills the pixels no sample
   reached yet from a coarse image; ``finished`` adds the filter's tails over the neighbours
   as the one-shot image does (``passes.filter_passes``).
+* the film (``film=True``): per pixel the samples' world along their camera rays, their
+  coverage (``Alpha``) and holdout shares, with the same tails, so ``film_rgba`` composes the
+  world behind the geometry as F12's film does (``preview.film``).
 * ``SliceSizer`` — the tile size that fits a time budget, from measured slices (a fixed
   cost per slice plus a cost per pixel, fitted by least squares).
 """
@@ -27,8 +30,9 @@ import math
 import numpy as np
 
 from ..scene.camera import filter_offsets
+from .film import film_combined
 from .gather import GatherSettings
-from .passes import PASS_NAMES, filter_passes, tail_weights
+from .passes import PASS_NAMES, filter_coverage, filter_passes, tail_weights
 from .upsample import low_shape
 
 # The passes made of the gathers: their samples are weighted by the samples behind the
@@ -152,9 +156,14 @@ class Accumulation:
     pass (× its colour for a light pass), of the weights (the colour, or 1) and the count.
     A gathered pass's samples (``GATHERED``) are weighted by ``add``'s ``gather_weight``;
     Combined keeps its gathered light (Diffuse Color × Diffuse Indirect + Glossy Color ×
-    Glossy Indirect) apart, weighted so, and the rest with weight 1."""
+    Glossy Indirect) apart, weighted so, and the rest with weight 1.
+    film : also sum the film's (``preview.film``) world along the samples' camera rays, their
+    coverage and holdout shares (``add``'s ``world``, the passes' ``Alpha`` / ``_holdout``),
+    each with weight 1 and the same tails (``film_rgba``); transparent : Film › Transparent
+    (alpha = coverage, no world)."""
 
-    def __init__(self, pass_name: str, width: int, height: int):
+    def __init__(self, pass_name: str, width: int, height: int, film: bool = False,
+                 transparent: bool = False):
         # float32 sums: 16 bytes a pixel per buffer (a 1280 × 720 view at full resolution
         # keeps about 60 MB), exact enough for Viewport Samples' 4096 at most
         if pass_name not in PASS_NAMES:
@@ -170,6 +179,10 @@ class Accumulation:
         # the colour's sum, for the filter over the neighbours (``finished``)
         self.colour = np.zeros((height, width, 3), np.float32) if self.colour_name else None
         self.counts = np.zeros((height, width), np.int32)
+        # the film: world rgb, coverage, holdout; and the samples' weights (1 each)
+        self.film = np.zeros((height, width, 5), np.float32) if film else None
+        self.film_weights = np.zeros((height, width, 1), np.float32) if film else None
+        self.transparent = bool(transparent)
         # the filter's tails: the samples' sums and weights added into the neighbours by the
         # filter at their own offsets (``add``'s tails; None until a sample brings them)
         self.tails: dict[str, np.ndarray] | None = None
@@ -179,14 +192,18 @@ class Accumulation:
         out = {"sums": self.sums, "weights": self.weights}
         if self.gathered is not None:
             out.update(gathered=self.gathered, gather_weights=self.gather_weights)
+        if self.film is not None:
+            out.update(film=self.film, film_weights=self.film_weights)
         return out
 
-    def add(self, rect, passes, gather_weight: float = 1.0, tails=None) -> None:
+    def add(self, rect, passes, gather_weight: float = 1.0, tails=None, world=None) -> None:
         """Add one sample's ``passes`` (PASS_NAMES → (h, w, 3), row 0 on top) of the tile
         ``rect`` (x0, y0, w, h); gather_weight : the weight of its gathered light. tails :
         (3, 3) the weights of the sample's offset in the neighbours (``sample_tail_weights``):
         each of its pixels' sums also goes into the 8 neighbours by them, as Cycles' film
-        weighs a sample over its whole filter window (``finished``)."""
+        weighs a sample over its whole filter window (``finished``).
+        world : (h, w, 3) the world along the sample's camera rays (``film.world_along``;
+        None: black), for the film (an Accumulation made with ``film``)."""
         before = None
         if tails is not None:
             window0, _ = inside(rect, self.width, self.height)
@@ -196,7 +213,19 @@ class Accumulation:
             shape = np.shape(passes[self.pass_name])
             raise ValueError(f"a {shape[1]}×{shape[0]} sample for a {w}×{h} tile")
         window, part = inside(rect, self.width, self.height)
-        passes = {name: np.asarray(image, np.float32)[part] for name, image in passes.items()}
+        if self.film is not None:
+            if "Alpha" not in passes:
+                raise ValueError("the film needs the passes' Alpha (surface coverage)")
+            film = np.zeros((h, w, 5), np.float32)
+            if world is not None:
+                film[..., :3] = world
+            film[..., 3] = passes["Alpha"]
+            if "_holdout" in passes:
+                film[..., 4] = passes["_holdout"]
+            self.film[window] += film[part]
+            self.film_weights[window] += 1.0
+        passes = {name: np.asarray(image, np.float32)[part] for name, image in passes.items()
+                  if name in PASS_NAMES}
         value = passes[self.pass_name]
         weight = gather_weight if self.pass_name in GATHERED else 1.0
         if self.gathered is not None:
@@ -256,8 +285,8 @@ class Accumulation:
         return mean
 
     def estimate_into(self, image, rect) -> None:
-        """Refresh ``image`` ((H, W, 3), the last ``estimate``) where the tile ``rect`` landed:
-        only its pixels changed."""
+        """Refresh ``image`` ((H, W, 3), the last ``estimate``; (H, W, 4): ``estimate_rgba``'s)
+        where the tile ``rect`` landed: only its pixels changed."""
         window, _ = inside(rect, self.width, self.height)
         sums, weights = self.sums[window], self.weights[window]
         mean = np.divide(sums, weights, out=np.zeros_like(sums), where=weights > 0.0)
@@ -265,7 +294,34 @@ class Accumulation:
             gathered, gweights = self.gathered[window], self.gather_weights[window]
             mean += np.divide(gathered, gweights, out=np.zeros_like(gathered),
                               where=gweights > 0.0)
-        image[window] = mean
+        image[window] = mean if image.shape[2] == 3 else self.film_rgba(mean, window)
+
+    def film_rgba(self, rgb, window=np.s_[:, :], filter_width: float | None = None):
+        """(h, w, 4) float32: ``rgb`` (this pass's estimate over ``window`` of the image) on
+        the film (``preview.film.film_combined``) with the samples' world, coverage and
+        holdout shares there — alpha 1 without the film. filter_width : the finished image's
+        (``finished``): the shares with the samples' tails (else through the filter)."""
+        rgb = np.asarray(rgb, np.float32)
+        if self.film is None:
+            return np.concatenate([rgb, np.ones(rgb.shape[:2] + (1,), np.float32)], axis=2)
+        film, weights = self.film[window], self.film_weights[window]
+        if filter_width is not None and self.tails is not None:
+            film = film + self.tails["film"][window]
+            weights = weights + self.tails["film_weights"][window]
+        shares = np.divide(film, weights, out=np.zeros_like(film), where=weights > 0.0)
+        if filter_width is not None and self.tails is None:
+            shares = filter_coverage(shares, filter_width)
+        return film_combined(rgb, shares[..., 3], shares[..., :3], self.transparent,
+                             shares[..., 4])
+
+    def estimate_rgba(self, coarse=None) -> np.ndarray:
+        """(H, W, 4) float32: ``estimate`` on the film (``film_rgba``); ``coarse`` (h, w, 4)
+        RGBA where no sample landed yet."""
+        out = self.film_rgba(self.mean())
+        empty = self.counts == 0
+        if coarse is not None and empty.any():
+            out[empty] = scale_nearest(coarse, self.width, self.height)[empty]
+        return out
 
     def estimate(self, coarse=None) -> np.ndarray:
         """(H, W, 3) float32: the mean where a pixel has samples, elsewhere ``coarse`` ((h, w,
