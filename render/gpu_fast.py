@@ -16,12 +16,14 @@ Diffuse Direct), and the colours are the Principled BSDF's for the view.
 from __future__ import annotations
 
 import time
+import weakref
 
 import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.cone_shadows import cone_shadowed_direct, shadow_cone
 from ..voxgi_addon.gi.conetrace import world_mips
+from ..voxgi_addon.gi.ray_views import view_octree
 from ..voxgi_addon.preview.passes import (
     compose_passes,
     material_indices,
@@ -36,6 +38,10 @@ from .gpu_scene import current_scene
 from .gpu_tracer import dispatch, read_texture
 from .gpu_volume import GPUVolume, float_texture
 
+# per GPUVolume of the diffuse cones (the caller's, kept between calls) the GPUVolumes of the
+# other kinds of cones whose voxels differ (gi/ray_views.py), released with it
+_view_volumes: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
 
 def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
                 gi_stride, gather_settings, glossy_indirect):
@@ -44,7 +50,20 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     timings = {}
     t0 = time.perf_counter()
     volume = volume or GPUVolume()
-    volume.update(gi_state.octree, cones, world=world_mips(getattr(snapshot.world, "radiance", None)))
+    world = world_mips(getattr(snapshot.world, "radiance", None))
+    volume.update(gi_state.octree, cones, world=world)
+    # Cycles' ray visibility (gi/ray_views.py): the glossy and shadow cones march through the
+    # octree of what their rays see, uploaded beside the diffuse one only when it differs
+    views = _view_volumes.setdefault(volume, {})
+    kinds = {}
+    for kind in ("glossy", "shadow"):
+        octree = view_octree(gi_state, kind)
+        if octree is gi_state.octree:
+            views.pop(kind, None)
+            kinds[kind] = volume
+            continue
+        kinds[kind] = views.setdefault(kind, GPUVolume())
+        kinds[kind].update(octree, cones, world=world)
     timings["upload"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -72,14 +91,15 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     def visibility(light, lit):  # shaders/shadow.glsl, one dispatch per light
         target, size, is_sun = shadow_cone(light)
         constants = {"light_position": (*target, float(is_sun)), "light_size": (size, 0, 0, 0)}
-        image = read_texture(dispatch("shadow", volume, gbuffer.inputs, width, height, constants))
+        image = read_texture(dispatch("shadow", kinds["shadow"], gbuffer.inputs, width, height,
+                                      constants))
         return np.flipud(image)[..., 0].ravel()[hit[lit]]
 
     low_h, low_w = low_shape(height, width, gi_stride)
 
-    def traced(kernel, mode=0):
+    def traced(kernel, mode=0, through=volume):
         sampling = {"sampling": (gi_stride, width, height, mode)}
-        low = dispatch(kernel, volume, gbuffer.inputs, low_w, low_h, sampling)
+        low = dispatch(kernel, through, gbuffer.inputs, low_w, low_h, sampling)
         if gi_stride > 1:  # shaders/upsample.glsl, the port of gi_upsample.upsample
             low = dispatch("upsample", volume, {**gbuffer.inputs, "low_image": low}, width,
                            height, sampling)
@@ -111,7 +131,8 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     else:
         world_seen = None
         if any(light.type == "WORLD" for light in lights):  # the cones' view of the world
-            world_seen = traced("diffuse_ao", 1).reshape(-1, 4)[hit].astype(np.float64).__getitem__
+            world_seen = traced("diffuse_ao", 1, kinds["shadow"]).reshape(-1, 4)[hit].astype(
+                np.float64).__getitem__
         lamps = len(snapshot.lights)
         direct = cone_shadowed_direct(None, p, n, lights[lamps:], cones, light_samples,
                                       visibility, world_seen).astype(np.float64)
@@ -133,7 +154,7 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     timings["diffuse+ao cones (GPU)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     if glossy_indirect:
-        glossy = traced("glossy")
+        glossy = traced("glossy", through=kinds["glossy"])
         timings["glossy cones (GPU)"] = time.perf_counter() - t0
     else:  # as Cycles with no glossy bounces
         glossy = np.zeros((height, width, 4), np.float32)

@@ -12,8 +12,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import VoxGICancelled, VoxGIError
-from .cascades import grids_key, merge_placement, place_cascades, place_objects
+from ..scene.snapshot import RAY_ALL
+from .cascades import grids_key, place_cascades, place_objects
 from .light_injection import inject_direct_light
+from .ray_views import view_cascades, view_octrees
 from .svo import build_octree
 from .voxel_shadows import CascadeOccupancy
 
@@ -59,6 +61,10 @@ class GIState:
     # the per-object placed voxels (cascades.Placement) and the light inputs, for the next update
     placement: object = None
     light_key: tuple = ()
+    # Cycles' ray visibility (gi/ray_views.py): ``cascades``/``octree`` are what diffuse rays
+    # see; per kind ("glossy", "shadow") whose objects differ, its own ``VoxelView``
+    ray_views: dict = field(default_factory=dict)
+    settings: object = None  # the GISettings it was made with
 
     @property
     def voxel_counts(self) -> list[int]:
@@ -87,7 +93,8 @@ def _value_key(value):
 def light_key(snapshot, settings: GISettings) -> tuple:
     """Everything the injection and the octree read besides the cascades: lights, world, the
     materials' emission and their emission textures' content (voxels glow with it and are lit
-    by it) and the settings (plain values and array bytes, comparable with ``==``)."""
+    by it), the objects' ray visibility (``ray_views``) and the settings (plain values and
+    array bytes, comparable with ``==``)."""
     def fields(item):
         return tuple((f.name, _value_key(getattr(item, f.name))) for f in dataclasses.fields(item))
 
@@ -104,8 +111,11 @@ def light_key(snapshot, settings: GISettings) -> tuple:
 
     emission = tuple((_value_key(m.emission), texture_key(getattr(m, "emission_texture", -1)),
                       getattr(m, "emission_strength", 1.0)) for m in snapshot.materials)
+    # Cycles' ray visibility chooses what casts shadows and what each kind of cone sees
+    seen_by = {o.name: int(getattr(o, "visibility", RAY_ALL)) for o in snapshot.objects}
+    hidden = tuple(sorted((name, bits) for name, bits in seen_by.items() if bits != RAY_ALL))
     return (tuple(fields(light) for light in snapshot.lights), world_key, emission,
-            fields(settings))
+            fields(settings), hidden)
 
 
 def update_gi(snapshot, caches, settings: GISettings = GISettings(), cancel=None,
@@ -150,13 +160,22 @@ def update_gi(snapshot, caches, settings: GISettings = GISettings(), cancel=None
     if reused and not placement.placed and placement.objects.keys() == before.objects.keys() \
             and previous.light_key == lights and grids_key(previous.grids) == grids_key(grids):
         return GIState(previous.grids, previous.cascades, previous.radiance, previous.octree,
-                       timings, warnings, reused="all", placement=placement, light_key=lights)
-    cascades = stage("merge", merge_placement, placement, grids)
-    occupancy = stage("occupancy", CascadeOccupancy, cascades)
+                       timings, warnings, reused="all", placement=placement, light_key=lights,
+                       ray_views=previous.ray_views, settings=previous.settings)
+    views = stage("merge", view_cascades, placement, grids, snapshot)
+    cascades = views["diffuse"]
+    occupancy = stage("occupancy", CascadeOccupancy, views["shadow"])  # what casts shadows
     radiance = stage("inject", inject_direct_light, cascades, snapshot, occupancy,
                      settings.light_samples)
     depth = int(np.log2(settings.resolution)) + len(grids) - 1
-    octree = stage("svo", build_octree, cascades, radiance, min(settings.dense_depth, depth),
-                   one_sided_leaves=settings.one_sided_leaves)
+
+    def octree_of(voxels, light):
+        return build_octree(voxels, light, min(settings.dense_depth, depth),
+                            one_sided_leaves=settings.one_sided_leaves)
+
+    octree = stage("svo", octree_of, cascades, radiance)
+    ray_views = stage("ray views", view_octrees, views, snapshot, occupancy, lambda c, s, o:
+                      inject_direct_light(c, s, o, settings.light_samples), octree_of)
     return GIState(grids, cascades, radiance, octree, timings, warnings, reused=reused,
-                   placed_objects=placement.placed, placement=placement, light_key=lights)
+                   placed_objects=placement.placed, placement=placement, light_key=lights,
+                   ray_views=ray_views, settings=settings)

@@ -25,12 +25,14 @@ from ..gi.conetrace import (
 from ..gi.direct_light import concentric_disk, diffuse_direct, light_directions, light_frame
 from ..gi.exact_glossy import emitters_shine
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
+from ..gi.ray_views import view_octree
 from ..gi.sampling import hashed_square
 from ..gi.world_light import scene_lights, world_light
 from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, filter_offsets
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
 from ..scene.textures import primary_base, texel_emission
+from . import transmission
 from .gather import GatherSettings, gather_gi, gather_glossy, gather_glossy_world
 from .upsample import PLANE_TOLERANCE, STRIDES, sample_pixels, upsample
 
@@ -744,15 +746,42 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     image (row 0 = top); timings maps stage names to seconds.
     """
     check_request(snapshot, width, height, gi_stride, quality)
+    t0 = time.perf_counter()
+    tris = world_triangles(snapshot)
+    if len(tris) == 0:
+        raise VoxGIError("the scene has no triangles to render")
+    layer = (gi_state, width, height, cones, light_samples, shadows, gi_stride, quality,
+             gather_settings, glossy_indirect, filter_width)
+    front, timings = _render_layer(snapshot, tris, tris, *layer)
+    timings["visibility"] += time.perf_counter() - t0
+    glass = transmission.glass_materials(snapshot, tris)
+    if glass is None:
+        return front, timings
+    # glass in view: what is behind it, seen through it (preview.transmission)
+    t0 = time.perf_counter()
+    behind, _ = _render_layer(snapshot, tris, transmission.behind_glass(tris, glass), *layer)
+
+    def hits_at(offset):
+        seen = primary_visibility(tris, snapshot.camera, width, height, offset)
+        return seen.material, np.einsum("hwi,hwi->hw", seen.normal, seen.direction)
+
+    from .film import background
+    weight = transmission.glass_weight(snapshot.materials, hits_at, width, height, filter_width)
+    world = background(snapshot.world, snapshot.camera, width, height, filter_width)
+    timings["behind glass"] = time.perf_counter() - t0
+    return transmission.composite(front, behind, weight, world), timings
+
+
+def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, light_samples,
+                  shadows, gi_stride, quality, gather_settings, glossy_indirect, filter_width):
+    """``render_passes`` of one layer: camera rays see ``camera_tris`` (``tris``, or them with
+    glass hidden from the camera: ``transmission.behind_glass``), every other ray ``tris``."""
     if quality == "ACCURATE":
         shadows = "RAYS"
     gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
     timings = {}
     t0 = time.perf_counter()
-    tris = world_triangles(snapshot)
-    if len(tris) == 0:
-        raise VoxGIError("the scene has no triangles to render")
-    seen = primary_visibility(tris, snapshot.camera, width, height)
+    seen = primary_visibility(camera_tris, snapshot.camera, width, height)
     hit = np.flatnonzero(seen.hit.ravel())
     dirs = seen.direction.reshape(-1, 3)
     timings["visibility"] = time.perf_counter() - t0
@@ -765,8 +794,9 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     lights = scene_lights(snapshot, tris, material_table(snapshot)[3])
     if quality != "ACCURATE":  # Accurate: per sub-pixel pass, below
         t0 = time.perf_counter()
-        direct, per_lamp = fast_direct(gi_state.octree, seen, gi_stride, hit, lights, tris,
-                                       cones, light_samples, shadows, len(snapshot.lights))
+        direct, per_lamp = fast_direct(view_octree(gi_state, "shadow"), seen, gi_stride, hit,
+                                       lights, tris, cones, light_samples, shadows,
+                                       len(snapshot.lights))
         timings["direct"] = time.perf_counter() - t0
     positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
 
@@ -776,8 +806,8 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         return np.concatenate([indirect, ao[:, None]], axis=1)
 
     def glossy_cones(pixels):  # Fast: the cones see the world where they leave the voxels
-        return trace_glossy(gi_state.octree, positions[pixels], normals[pixels], dirs[pixels],
-                            rough[materials[pixels]], cones,
+        return trace_glossy(view_octree(gi_state, "glossy"), positions[pixels], normals[pixels],
+                            dirs[pixels], rough[materials[pixels]], cones,
                             world_mips(getattr(snapshot.world, "radiance", None)))
 
     t0 = time.perf_counter()
@@ -883,8 +913,8 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     if len(listed):
         for (offset, block), weights in zip(plan, pass_tail_weights(plan, filter_width)):
             one = new_sums(height * width)
-            shade(primary_visibility(tris, snapshot.camera, width, height, offset), edge, block,
-                  into=one)
+            shade(primary_visibility(camera_tris, snapshot.camera, width, height, offset), edge,
+                  block, into=one)
             for name in SUMS:
                 sums[name][listed] += one[name][listed]
             add_tails(tails, {name: one[name][listed] / len(plan) for name in SUMS}, listed,
