@@ -8,9 +8,22 @@ faces a cube shows are drawn and the three it hides never reach the rasterizer (
 vertices of a full cube and no culling needed). Shaders are built once per process; the
 instance texture and the bounds batch are rebuilt only when what they show changes
 (``DebugDrawer.key``). ``gpu.state`` is restored after drawing.
+
+**In slices, kept between draws** (issue 19 point 3): 250 000 cubes took 0.6–1 s per draw on
+llvmpipe, every redraw. The cubes are drawn into the drawer's own *layer* (a colour and a
+depth texture of the view's size) a slice of instances per draw (``draw_instances``:
+``instance_start`` … ``+ count``, one batch), sized from measured times toward
+``SLICE_BUDGET`` (``SliceSizer``, its per-instance cost measured with the slice's pixels
+read); every draw puts the layer over the view with its depth (``gl_FragDepth``, so the
+scene's own surfaces still hide cubes behind them). The layer is keyed by the instances, the
+view's matrices and its size: an unchanged view draws no cube at all, only the layer; a
+changed one clears it and fills it again slice by slice (``draw_debug`` says whether more
+slices are to come, the caller asks for a redraw). The slices' depth test keeps the one
+batch's order, so the full layer is the image one batch draws.
 """
 from __future__ import annotations
 
+import time
 import weakref
 
 import gpu
@@ -23,11 +36,16 @@ from ..voxgi_addon.preview.debug_instances import (
     octree_instances,
     pack_instances,
 )
+from ..voxgi_addon.preview.progressive import SliceSizer
+
+SLICE_BUDGET = 0.020  # seconds of cubes one draw aims at (of issue 19's 30 ms a draw)
+FIRST_SLICE = 4096    # instances of the first slice, before any was measured
+LEAST_SLICE = 4096    # the fewest instances a slice draws
 
 _VERTEX = """
 void main()
 {
-  int texel = 2 * gl_InstanceID;
+  int texel = 2 * (first + gl_InstanceID); /* gl_InstanceID does not count instance_start */
   ivec2 at = ivec2(texel % columns, texel / columns);
   vec4 place = texelFetch(instances, at, 0);
   vec4 colour = texelFetch(instances, at + ivec2(1, 0), 0);
@@ -50,7 +68,28 @@ void main()
 }
 """
 
+_LAYER_VERTEX = """
+void main()
+{
+  uv = position * 0.5 + 0.5;
+  gl_Position = vec4(position, 0.0, 1.0);
+}
+"""
+_LAYER_FRAGMENT = """
+void main()
+{
+  ivec2 at = ivec2(uv * vec2(textureSize(layer_depth, 0)));
+  float depth = texelFetch(layer_depth, at, 0).r;
+  if (depth >= 1.0) {
+    discard; /* no cube here: the view as it is */
+  }
+  out_colour = texelFetch(layer_colour, at, 0);
+  gl_FragDepth = depth;
+}
+"""
+
 _shader = None
+_layer_shader = None
 _drawers: "weakref.WeakSet[DebugDrawer]" = weakref.WeakSet()
 
 
@@ -68,11 +107,39 @@ def cube_shader():
         info.push_constant("MAT4", "view_projection")
         info.push_constant("VEC4", "eye")
         info.push_constant("INT", "columns")
+        info.push_constant("INT", "first")
         info.fragment_out(0, "VEC4", "out_colour")
         info.vertex_source(_VERTEX)
         info.fragment_source(_FRAGMENT)
         _shader = gpu.shader.create_from_info(info)
     return _shader
+
+
+def layer_shader():
+    """The shader that puts a layer (colour + depth textures) over the view (built once)."""
+    global _layer_shader
+    if _layer_shader is None:
+        varying = gpu.types.GPUStageInterfaceInfo("voxgi_debug_layer")
+        varying.smooth("VEC2", "uv")
+        info = gpu.types.GPUShaderCreateInfo()
+        info.vertex_in(0, "VEC2", "position")
+        info.vertex_out(varying)
+        info.sampler(0, "FLOAT_2D", "layer_colour")
+        info.sampler(1, "FLOAT_2D", "layer_depth")
+        info.fragment_out(0, "VEC4", "out_colour")
+        info.depth_write("ANY")
+        info.vertex_source(_LAYER_VERTEX)
+        info.fragment_source(_LAYER_FRAGMENT)
+        _layer_shader = gpu.shader.create_from_info(info)
+    return _layer_shader
+
+
+def draw_instances(batch, shader, start: int, count: int) -> None:
+    """Draw ``count`` instances of ``batch`` from instance ``start`` (one GPU draw; tests count
+    them). The shader's ``first`` is the start: ``gl_InstanceID`` counts from 0 whatever
+    ``instance_start`` is."""
+    shader.uniform_int("first", int(start))
+    batch.draw_instanced(shader, instance_start=0, instance_count=count)
 
 
 def _three_faces():
@@ -108,12 +175,22 @@ class DebugDrawer:
         self.builds = 0           # how many times the instance texture was rebuilt
         self._cube = None
         self._state = None
+        # the layer: the cubes drawn so far for one view (colour, depth, framebuffer)
+        self.layer = None
+        self.layer_key = None
+        self.layer_drawn = 0      # instances in the layer
+        self.sizer = SliceSizer(SLICE_BUDGET, first_pixels=FIRST_SLICE, least=LEAST_SLICE)
+        self.fixed_slice: int | None = None  # tests: every slice this many instances
+        self.last_slice = 0       # instances the last draw drew
+        self._quad = None
         _drawers.add(self)
 
     def free(self) -> None:
         self.instances = self.bounds_batch = self._cube = self._state = None
         self.key = self.bounds_key = None
         self.count = 0
+        self.layer = self.layer_key = self._quad = None
+        self.layer_drawn = 0
 
     def _cube_batch(self):
         if self._cube is None:
@@ -141,10 +218,12 @@ class DebugDrawer:
         self.builds += 1
         return self.count
 
-    def draw_cubes(self, view_projection, eye) -> None:
-        """Draw the prepared cubes. view_projection : (4, 4) world → clip; eye : (4,) the eye's
+    def draw_cubes(self, view_projection, eye, start: int = 0, count: int | None = None) -> None:
+        """Draw the prepared cubes (``count`` of them from ``start``; all when None) into the
+        bound framebuffer. view_projection : (4, 4) world → clip; eye : (4,) the eye's
         position with w = 1 (perspective) or the direction to it with w = 0 (orthographic)."""
-        if not self.count:
+        count = self.count - start if count is None else min(count, self.count - start)
+        if count <= 0:
             return
         shader = cube_shader()
         shader.bind()
@@ -152,7 +231,56 @@ class DebugDrawer:
         shader.uniform_float("view_projection", _gl_matrix(view_projection))
         shader.uniform_float("eye", tuple(float(v) for v in eye))
         shader.uniform_int("columns", self.columns)
-        self._cube_batch().draw_instanced(shader, instance_start=0, instance_count=self.count)
+        draw_instances(self._cube_batch(), shader, start, count)
+
+    def slice_size(self) -> int:
+        """Instances the next slice draws (measured: ``SliceSizer``)."""
+        if self.fixed_slice is not None:
+            return max(1, self.fixed_slice)
+        return self.sizer.pixels(self.count)
+
+    def draw_layer(self, view_projection, eye) -> bool:
+        """Add the next slice of the prepared cubes to the layer of this view (a new view,
+        size or set of cubes clears it first), then put the layer over the bound framebuffer
+        with its depth. Returns True while cubes are still to be drawn into it."""
+        x, y, width, height = gpu.state.viewport_get()
+        key = (self.key, id(self._state), self.builds, np.asarray(view_projection).tobytes(),
+               tuple(eye), width, height)
+        if self.layer is None or self.layer[0].width != width or self.layer[0].height != height:
+            colour = gpu.types.GPUTexture((width, height), format="RGBA16F")
+            depth = gpu.types.GPUTexture((width, height), format="DEPTH_COMPONENT32F")
+            self.layer = (colour, depth,
+                          gpu.types.GPUFrameBuffer(depth_slot=depth, color_slots=colour))
+            self.layer_key = None
+        colour, depth, framebuffer = self.layer
+        if key != self.layer_key:
+            self.layer_key, self.layer_drawn = key, 0
+            with framebuffer.bind():
+                framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+        self.last_slice = 0
+        if self.layer_drawn < self.count:
+            count = min(self.slice_size(), self.count - self.layer_drawn)
+            t0 = time.perf_counter()
+            with framebuffer.bind():
+                gpu.state.viewport_set(0, 0, width, height)
+                self.draw_cubes(view_projection, eye, self.layer_drawn, count)
+                # one pixel read: the slice's rasterization is done (llvmpipe defers it), so
+                # the time measured is the slice's
+                framebuffer.read_color(0, 0, 1, 1, 4, 0, "FLOAT")
+            gpu.state.viewport_set(x, y, width, height)
+            if self.fixed_slice is None:
+                self.sizer.measured(count, time.perf_counter() - t0)
+            self.layer_drawn += count
+            self.last_slice = count
+        shader = layer_shader()
+        if self._quad is None:
+            self._quad = batch_for_shader(shader, "TRI_STRIP",
+                                          {"position": ((-1, -1), (1, -1), (-1, 1), (1, 1))})
+        shader.bind()
+        shader.uniform_sampler("layer_colour", colour)
+        shader.uniform_sampler("layer_depth", depth)
+        self._quad.draw(shader)
+        return self.layer_drawn < self.count
 
     def draw_bounds(self, grids, view_projection) -> None:
         key = tuple((g.index, g.span, g.resolution, tuple(g.origin)) for g in grids)
@@ -177,9 +305,13 @@ def _gl_matrix(m) -> list[float]:
     return np.asarray(m, np.float32).T.ravel().tolist()
 
 
-def draw_debug(drawer: DebugDrawer, state, settings, view_projection, eye) -> int:
+def draw_debug(drawer: DebugDrawer, state, settings, view_projection, eye,
+               redraw=None) -> int:
     """Draw ``state`` as ``settings`` (``Scene.voxgi_viewport``) ask, with depth testing,
-    restoring ``gpu.state``; returns the number of cubes drawn."""
+    restoring ``gpu.state``: the cubes a slice per call into the drawer's layer, which is put
+    over the view (``DebugDrawer.draw_layer``); ``redraw()`` is called while slices are to
+    come (None: the area being drawn is tagged). Returns the number of cubes shown when
+    complete."""
     view = settings.debug_view
     if state is None or (view == "NONE" and not settings.show_bounds):
         return 0
@@ -193,7 +325,8 @@ def draw_debug(drawer: DebugDrawer, state, settings, view_projection, eye) -> in
         if view != "NONE":
             count = drawer.prepare(state, view, settings.debug_cascade, settings.debug_level,
                                    settings.debug_colour)
-            drawer.draw_cubes(view_projection, eye)
+            if drawer.draw_layer(view_projection, eye):
+                _ask_redraw(redraw)
         if settings.show_bounds:
             drawer.draw_bounds(state.grids, view_projection)
     finally:
@@ -201,6 +334,17 @@ def draw_debug(drawer: DebugDrawer, state, settings, view_projection, eye) -> in
         gpu.state.depth_test_set(depth_test)
         gpu.state.depth_mask_set(depth_mask)
     return count
+
+
+def _ask_redraw(redraw) -> None:
+    if redraw is not None:
+        redraw()
+        return
+    import bpy
+
+    area = getattr(bpy.context, "area", None)  # the draw handler's 3D view
+    if area is not None:
+        area.tag_redraw()
 
 
 def eye_of(view_matrix, window_matrix) -> tuple[float, float, float, float]:
@@ -214,7 +358,7 @@ def eye_of(view_matrix, window_matrix) -> tuple[float, float, float, float]:
 def release() -> None:
     """Free every drawer's textures and batches and drop the cached shader (unregister, exit:
     docs/gi_pipeline.md "GPU resources at exit")."""
-    global _shader
+    global _shader, _layer_shader
     for drawer in list(_drawers):
         drawer.free()
-    _shader = None
+    _shader = _layer_shader = None

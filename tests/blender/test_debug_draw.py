@@ -168,3 +168,84 @@ def test_octree_levels_and_cascade_bounds(red_cube_state):
     lines = bounds[drawn][:, :3]
     for cascade in range(len(state.grids)):  # each cascade's box in its colour
         assert np.any(np.all(np.abs(lines - BOUND_COLOURS[cascade][:3]) < 0.01, axis=1)), cascade
+
+
+class Instanced:
+    """Counts the instances of every cube draw (``debug_draw.draw_instances``)."""
+
+    def __init__(self, monkeypatch):
+        import voxgi.render.debug_draw as debug_draw
+
+        self.calls: list[int] = []
+        original = debug_draw.draw_instances
+
+        def counted(batch, shader, start, count):
+            self.calls.append(count)
+            original(batch, shader, start, count)
+        monkeypatch.setattr(debug_draw, "draw_instances", counted)
+
+    def take(self) -> list[int]:
+        calls, self.calls = self.calls, []
+        return calls
+
+
+def sliced_draw(drawer, state, chosen, view=VIEW, depth=1.0):
+    """``draw_debug`` into a fresh offscreen cleared to ``depth``: (image, redraw asked)."""
+    from voxgi.render.debug_draw import draw_debug, eye_of
+    from voxgi.render.gpu_tracer import read_texture
+
+    asked = []
+    offscreen = gpu.types.GPUOffScreen(SIZE, SIZE, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            gpu.state.active_framebuffer_get().clear(color=BACKGROUND, depth=depth)
+            draw_debug(drawer, state, chosen, WINDOW @ view, eye_of(view, WINDOW),
+                       redraw=lambda: asked.append(1))
+        return np.flipud(read_texture(offscreen.texture_color)), bool(asked)
+    finally:
+        offscreen.free()
+
+
+def test_cubes_are_drawn_a_slice_per_draw_and_kept_for_an_unchanged_view(red_cube_state,
+                                                                         monkeypatch):
+    """Issue 19 point 3: each draw issues at most one slice of instances (counted, not timed),
+    asks for a redraw until all are in, shows the one-batch image then, and an unchanged view
+    draws no cube again; a new view starts over."""
+    from voxgi.render.debug_draw import DebugDrawer
+
+    _, state = red_cube_state
+    whole = DebugDrawer()
+    whole.fixed_slice = 1 << 30  # every cube in one draw: the image before slicing
+    instanced = Instanced(monkeypatch)
+    one_batch, asked = sliced_draw(whole, state, settings())
+    count = state.cascades[0].voxel_count
+    assert instanced.take() == [count] and not asked
+
+    drawer = DebugDrawer()
+    drawer.fixed_slice = -(-count // 6)
+    images, slices = [], []
+    while True:
+        image, asked = sliced_draw(drawer, state, settings())
+        images.append(image)
+        slices.append(instanced.take())
+        if not asked:
+            break
+        assert len(images) < 20, "the slices never completed"
+    assert len(images) == 6 and all(len(s) == 1 and s[0] <= drawer.fixed_slice for s in slices)
+    assert sum(s[0] for s in slices) == count
+    drawn = [np.any(np.abs(img - BACKGROUND) > 1e-3, axis=-1).sum() for img in images]
+    print("pixels drawn per draw", drawn)
+    assert 0 < drawn[0] < drawn[-1] and drawn == sorted(drawn)  # the cubes fill in
+    assert np.array_equal(images[-1], one_batch)
+
+    # unchanged: the kept layer, no cube drawn
+    again, asked = sliced_draw(drawer, state, settings())
+    assert instanced.take() == [] and not asked and np.array_equal(again, one_batch)
+    # the view's own depth still hides cubes behind it (the layer carries its depth)
+    hidden, _ = sliced_draw(drawer, state, settings(), depth=0.0)
+    assert instanced.take() == [] and np.allclose(hidden, BACKGROUND)
+    # a new view starts over with one slice, and shows it on that very draw
+    other = look_at((-3.0, -4.0, 2.0))
+    moved, asked = sliced_draw(drawer, state, settings(), view=other)
+    assert instanced.take() == [drawer.fixed_slice] and asked
+    assert np.any(np.abs(moved - BACKGROUND) > 1e-3)
