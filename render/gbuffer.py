@@ -157,6 +157,8 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
             if getattr(tris, "holdout", None) is not None:
                 surface[np.repeat(np.asarray(tris.holdout), 3), 0] = -2.0
             surface_textures = getattr(tris, "textures", None)
+            if surface_textures is not None:  # glass: opaque to camera rays (scene.glass)
+                surface_textures = surface_textures.for_camera()
             # (alpha texture, alpha value) of cut-outs (textures.cutout_hits), -2: opaque
             cutout = np.tile(np.float32([-2.0, 1.0]), (len(corners), 1))
             # (parameter texture, first variant) of Roughness / Metallic per texel, -1: none

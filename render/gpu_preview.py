@@ -18,6 +18,8 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
+from ..voxgi_addon.preview import transmission
+from ..voxgi_addon.preview.film import background
 from ..voxgi_addon.preview.gather import GatherSettings
 from ..voxgi_addon.preview.passes import (
     add_tails,
@@ -91,10 +93,36 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     live in the generator between them, so nothing but its own next stage runs in a draw."""
     check_request(snapshot, width, height, gi_stride, quality)
     if quality == "ACCURATE":
-        return (yield from _accurate_stages(
-            snapshot, width, height, light_samples, gi_stride,
-            gather_settings or GatherSettings(ao_distance=cones.ao_distance), glossy_indirect,
-            filter_width, gpu_scene, gather_hook, raster, cache_source))
+        scene = gpu_scene or current_scene()
+        raster = raster or gbuffer_shader()
+        layer = (width, height, light_samples, gi_stride,
+                 gather_settings or GatherSettings(ao_distance=cones.ao_distance),
+                 glossy_indirect, filter_width, scene)
+        front, timings = yield from _accurate_stages(snapshot, *layer, gather_hook, raster,
+                                                     cache_source)
+        glass = transmission.glass_materials(snapshot, scene.tris)
+        if glass is None:
+            return front, timings
+        # glass in view: what is behind it, seen through it (preview.transmission); the
+        # viewport's accumulation keeps the behind layer's gathers apart from the front's
+        t0 = time.perf_counter()
+        hook = None if gather_hook is None else \
+            (lambda kind, values, variance: gather_hook(f"behind {kind}", values, variance))
+        behind, _ = yield from _accurate_stages(
+            snapshot, *layer, hook, raster, cache_source,
+            camera_tris=transmission.behind_glass(scene.tris, glass))
+
+        def hits_at(offset):
+            seen = read_gbuffer(rasterize(scene.tris, snapshot.camera, scene.rough, width, height,
+                                          offset, shader=raster, textures=scene.raster_textures(),
+                                          filter_width=filter_width))
+            return seen["material"], np.einsum("hwi,hwi->hw", seen["normal"], seen["direction"])
+
+        weight = transmission.glass_weight(snapshot.materials, hits_at, width, height,
+                                           filter_width)
+        world = background(snapshot.world, snapshot.camera, width, height, filter_width)
+        timings["behind glass"] = time.perf_counter() - t0
+        return transmission.composite(front, behind, weight, world), timings
     return fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
                        gi_stride, gather_settings or GatherSettings(ao_distance=cones.ao_distance),
                        glossy_indirect)
@@ -186,13 +214,14 @@ def _sums_of(texel):
 
 def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_settings,
                      glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
-                     cache_source=None):
+                     cache_source=None, camera_tris=None):
     """Accurate quality on the GPU: the gathers from the pixel centres' G-buffer, then one
     rasterized G-buffer, direct light (``bvh_direct``, a block of the shadow-ray strata) and
     glossy light of the lights per sub-pixel pass (``preview.passes.subpixel_passes``),
     summed on the GPU (``shaders/aa_surface.glsl``, ``aa_light.glsl``) and read back once.
     Triangles, BVH, materials and light tables come from ``scene`` (a ``GPUScene``, updated
-    here: only what changed is uploaded)."""
+    here: only what changed is uploaded). camera_tris : what the G-buffers draw (None: the
+    scene's triangles; ``transmission.behind_glass`` hides glass from them)."""
     timings = {}
     t0 = time.perf_counter()
     scene = (scene or current_scene()).update(snapshot)
@@ -204,7 +233,8 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     t0 = time.perf_counter()
     plan = subpixel_passes(filter_width, light_samples)
     raster = raster or gbuffer_shader()  # this context's, for its G-buffers
-    centre = rasterize(tris, snapshot.camera, rough, width, height, shader=raster,
+    seen_tris = tris if camera_tris is None else camera_tris
+    centre = rasterize(seen_tris, snapshot.camera, rough, width, height, shader=raster,
                        textures=scene.raster_textures(), filter_width=filter_width)
     timings["visibility (GPU)"] = time.perf_counter() - t0
     yield
@@ -355,7 +385,7 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
         own = {name: np.zeros((len(listed), 4)) for name in names}
         tails = new_sums(width * height)
         for (offset, block), weights in zip(plan, pass_tail_weights(plan, filter_width)):
-            gbuffer = rasterize(tris, snapshot.camera, rough, width, height, offset,
+            gbuffer = rasterize(seen_tris, snapshot.camera, rough, width, height, offset,
                                 shader=raster, textures=scene.raster_textures(),
                                 filter_width=filter_width)
             inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": pixels}, list_size)

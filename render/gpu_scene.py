@@ -44,6 +44,7 @@ from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
 from ..voxgi_addon.preview.passes import material_table, principled_table
 from ..voxgi_addon.scene.bvh import TEXTURE_WIDTH
 from ..voxgi_addon.scene.geometry import world_triangles
+from ..voxgi_addon.scene.glass import ray_alpha
 from ..voxgi_addon.scene.textures import pack_atlas
 from .gpu_bvh import GPUBVH, shared_bvh
 from .gpu_gather import no_texture_inputs, principled_materials_texture
@@ -186,7 +187,8 @@ class GPUScene:
              np.asarray(a.pose_matrices), np.asarray(a.world_matrix))
             for name, a in sorted(snapshot.armatures.items()))
         textures = (tuple((getattr(m, "base_color_texture", -1), getattr(m, "alpha_texture", -1),
-                           float(getattr(m, "alpha", 1.0))) for m in snapshot.materials),
+                           float(getattr(m, "alpha", 1.0)), ray_alpha(m))
+                          for m in snapshot.materials),
                     tuple(_texture_key(t) for t in getattr(snapshot, "textures", ())))
         return digest(objects, armatures, textures, tuple(getattr(snapshot, "holdout_materials", ())))
 

@@ -22,7 +22,8 @@ TYPE_NOTES = {"CURVES": "its hair curves (not rendered at all)",
 # weight or value socket, what to call it, the value at or below which the lobe is off (None:
 # a colour, off when white).
 PRINCIPLED_INPUTS = (
-    ("Transmission Weight", "transmission and refraction (it renders opaque)", 0.0),
+    ("Transmission Weight", "refraction (glass renders as a thin surface: the view and light "
+                            "pass straight through, tinted)", 0.0),
     ("Subsurface Weight", "subsurface scattering (it renders as diffuse)", 0.0),
     ("Coat Weight", "the coat layer", 0.0),
     ("Sheen Weight", "sheen", 0.0),

@@ -398,6 +398,19 @@ class MaterialTable:
         elif glow_texture is not None and glow_uv != uv_map:
             self._warn(f"Material '{material.name_full}': its Emission Color image reads another "
                        "UV map than its other images; it is read through theirs")
+        transmission, ior = np.zeros(3, np.float32), 1.5
+        socket = inputs.get("Transmission Weight")
+        weight = 0.0 if socket is None else \
+            float(np.clip(self._socket_mean(material, socket, _value), 0.0, 1.0)) * (1.0 - metallic)
+        if weight > 0.0:  # the glass lobe (preview.transmission: a thin surface)
+            transmission = (np.asarray(base, np.float32) * weight).astype(np.float32)
+            base = (np.asarray(base, np.float32) * (1.0 - weight)).astype(np.float32)
+            ior = float(inputs["IOR"].default_value) if "IOR" in inputs else 1.5
+            if texture is not None:
+                self._warn(f"Material '{material.name_full}': its transmission tint is its Base "
+                           "Color image's mean colour")
+                if weight >= 1.0 - 1e-6:  # nothing diffuse left to texture
+                    texture, bake = None, None
         bakes = tuple(b for b in (bake, alpha_bake, glow_bake) if b is not None)
         data = MaterialData(
             name=material.name_full,
@@ -414,6 +427,8 @@ class MaterialTable:
             normal_strength=strength,
             emission_texture=-1 if glow_texture is None else self._add_texture(glow_texture),
             emission_strength=float(glow_strength),
+            transmission=transmission,
+            ior=ior,
         )
         return data, bakes or None, uv_map
 

@@ -10,6 +10,7 @@ current cell and stops once its best hit lies before the cell's exit. Results eq
 """
 from __future__ import annotations
 
+import dataclasses
 import weakref
 from dataclasses import dataclass
 
@@ -60,9 +61,12 @@ class TriangleGrid:
     cutout: tuple | None = None
 
 
-def cutouts_of(tris):
-    """(``SurfaceTextures``, materials) of ``tris`` when some triangle is a cut-out, else None."""
+def cutouts_of(tris, camera: bool = False):
+    """(``SurfaceTextures``, materials) of ``tris`` when some triangle is a cut-out, else None;
+    ``camera``: as camera rays meet them (glass at its own Alpha, ``SurfaceTextures.for_camera``)."""
     surface = getattr(tris, "textures", None)
+    if surface is not None and camera:
+        surface = surface.for_camera()
     if surface is None or surface.cutout is None or not np.any(surface.cutout):
         return None
     return surface, np.asarray(tris.materials)
@@ -250,6 +254,9 @@ def _trace_chunk(grid: TriangleGrid, o, d, t_min, t_max, any_hit: bool, accept=N
 
 def _trace(tris, origins, directions, t_min, t_max, any_hit, ray):
     grid = _grid_of(tris)
+    surface = getattr(tris, "textures", None)
+    if ray == RAY_CAMERA and getattr(surface, "camera_alpha_values", None) is not None:
+        grid = dataclasses.replace(grid, cutout=cutouts_of(tris, camera=True))  # glass: opaque
     accept = tris.accepted(ray) if hasattr(tris, "accepted") else None
     o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)

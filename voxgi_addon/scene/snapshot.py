@@ -111,6 +111,11 @@ class MaterialData:
     emission_texture : index of the texture giving the Emission Color per texel through the
         meshes' ``uvs`` (its RGB × ``emission_strength`` is the emission there); -1: none
         (``emission`` everywhere).
+    transmission : (3,) float32 the Principled BSDF's transmission lobe, Transmission Weight ×
+        (1 − Metallic) × its Base Color (the glass' tint); zeros for opaque materials. Such a
+        material's ``base_color`` is its diffuse part only (Base Color × (1 − that weight)),
+        as Cycles mixes the lobes. ``ior`` : its IOR (the glass' Fresnel reflection).
+        ``preview.transmission`` renders it as a thin surface.
     """
 
     name: str
@@ -128,6 +133,8 @@ class MaterialData:
     normal_strength: float = 1.0
     emission_texture: int = -1
     emission_strength: float = 1.0
+    transmission: np.ndarray = field(default_factory=lambda: np.zeros(3, np.float32))
+    ior: float = 1.5
 
 
 @dataclass(frozen=True)

@@ -54,12 +54,14 @@ emit the texture's mean over them (``gi.emitters``).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .camera import DEFAULT_FILTER_WIDTH, _frustum, blackman_harris, camera_frame
+from .glass import ray_alpha
 from .snapshot import SceneSnapshot, TextureData
 
 MAX_LEVELS = 12              # mip levels kept per texture (level 0 = the image)
@@ -221,7 +223,9 @@ class SurfaceTextures:
     level-0 texels per metre of each triangle's texture (0 without one). alpha_slots : (M + 1,)
     int32 the texture whose 4th channel is each material's Alpha (-1: ``alpha_values``);
     alpha_values : (M + 1,) float32 the Alpha of materials without an alpha texture; cutout :
-    (T,) bool triangles whose material is not opaque (rays test their Alpha, ``cutout_hits``)."""
+    (T,) bool triangles whose material is not opaque (rays test their Alpha, ``cutout_hits``).
+    Glass (``glass.ray_alpha``) lowers the Alpha rays meet; camera rays meet the material's own
+    (``camera_alpha_values``, ``camera_cutout``; None without glass): ``for_camera``."""
 
     textures: tuple
     slots: np.ndarray
@@ -239,6 +243,17 @@ class SurfaceTextures:
     emission_strength: np.ndarray = field(default=None)
     emission_density: np.ndarray = field(default=None)
     material_base: np.ndarray = field(default=None)
+    camera_alpha_values: np.ndarray = field(default=None)
+    camera_cutout: np.ndarray = field(default=None)
+
+    def for_camera(self) -> "SurfaceTextures":
+        """These textures as camera rays meet them: glass at its own Alpha (opaque, unless a
+        cut-out), not at the Alpha other rays meet (``glass.ray_alpha``)."""
+        if self.camera_alpha_values is None:
+            return self
+        return dataclasses.replace(self, alpha_values=self.camera_alpha_values,
+                                   cutout=self.camera_cutout, camera_alpha_values=None,
+                                   camera_cutout=None)
 
     def emission_at(self, triangles, materials, b1, b2, lod=None):
         """((N, 3) float64 emission per texel — the texture × the material's strength, negative
@@ -392,6 +407,7 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
     slots = np.full(count, -1, np.int32)
     alpha_slots = np.full(count, -1, np.int32)
     alpha_values = np.ones(count, np.float32)
+    camera_alpha = np.ones(count, np.float32)
     param_slots = np.full(count, -1, np.int32)
     variants = np.full(count, -1, np.int64)
     normal_slots = np.full(count, -1, np.int32)
@@ -418,6 +434,9 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
         if 0 <= index < len(textures):
             alpha_slots[i] = index
         alpha_values[i] = np.clip(float(getattr(m, "alpha", 1.0)), 0.0, 1.0)
+        camera_alpha[i] = alpha_values[i]
+        if alpha_slots[i] < 0:  # glass lets rays through (an alpha texture's glass: not yet)
+            alpha_values[i] = ray_alpha(m)
     transparent = (alpha_slots >= 0) | (alpha_values < 1.0)
     if not (slots >= 0).any() and not transparent.any() and not (param_slots >= 0).any() and \
             not (normal_slots >= 0).any() and not (emission_slots >= 0).any():
@@ -439,6 +458,9 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
     if transparent.any():
         out.alpha_slots, out.alpha_values = alpha_slots, alpha_values
         out.cutout = transparent[out.row_of(materials)]
+        if (camera_alpha != alpha_values).any():
+            out.camera_alpha_values = camera_alpha
+            out.camera_cutout = ((alpha_slots >= 0) | (camera_alpha < 1.0))[out.row_of(materials)]
     slot = out.slot_of(materials)
     out.density = (texel_density(positions, uvs) * scale[slot]).astype(np.float32)
     return out

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import VoxGICancelled, VoxGIError
+from ..scene.glass import ray_alpha
 from ..scene.snapshot import MeshData, SceneSnapshot
 from ..scene.textures import (
     cutout_random,
@@ -217,7 +218,7 @@ def texel_alpha(snapshot: SceneSnapshot, mesh: MeshData, positions, keep=None):
     values = np.ones(count + 1)
     slots = np.full(count + 1, -1, np.int64)
     for i, m in enumerate(snapshot.materials):
-        values[i] = np.clip(float(getattr(m, "alpha", 1.0)), 0.0, 1.0)
+        values[i] = ray_alpha(m)  # glass lets the cones through as other rays (scene.glass)
         index = int(getattr(m, "alpha_texture", -1))
         if 0 <= index < len(textures) and mesh.uvs is not None:
             slots[i] = index
