@@ -307,7 +307,8 @@ def gather_hook(sums: GatherSums, rect, gather):
     def hook(kind, values, variance):
         # the low-resolution textures' rows go bottom to top
         mean, pooled = sums.add(kind, rect, np.flipud(read_texture(values)),
-                                np.flipud(read_texture(variance)), rays[kind])
+                                np.flipud(read_texture(variance)),
+                                rays[kind.removeprefix("behind ")])  # behind glass: its own
         size = (values.width, values.height)
         return (float_texture(np.flipud(mean), size), float_texture(np.flipud(pooled), size))
     return hook
