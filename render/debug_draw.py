@@ -336,15 +336,31 @@ def draw_debug(drawer: DebugDrawer, state, settings, view_projection, eye,
     return count
 
 
+_redraw_pending = False
+
+
 def _ask_redraw(redraw) -> None:
+    """``redraw()``, or (None) tag the 3D views for a redraw from a timer: a region being
+    drawn ignores a redraw tagged from its own draw handler."""
+    global _redraw_pending
     if redraw is not None:
         redraw()
         return
+    if _redraw_pending:
+        return
     import bpy
 
-    area = getattr(bpy.context, "area", None)  # the draw handler's 3D view
-    if area is not None:
-        area.tag_redraw()
+    def tag():
+        global _redraw_pending
+        _redraw_pending = False
+        for window in bpy.context.window_manager.windows:
+            for area in window.screen.areas:
+                if area.type == "VIEW_3D":
+                    area.tag_redraw()
+        return None  # once
+
+    _redraw_pending = True
+    bpy.app.timers.register(tag, first_interval=0.0)
 
 
 def eye_of(view_matrix, window_matrix) -> tuple[float, float, float, float]:
