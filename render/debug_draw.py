@@ -18,7 +18,8 @@ read); every draw puts the layer over the view with its depth (``gl_FragDepth``,
 scene's own surfaces still hide cubes behind them). The layer is keyed by the instances, the
 view's matrices and its size: an unchanged view draws no cube at all, only the layer; a
 changed one clears it and fills it again slice by slice (``draw_debug`` says whether more
-slices are to come, the caller asks for a redraw). The slices' depth test keeps the one
+slices are to come, the caller asks for a redraw); the instances are in ``spread`` order, so a
+view still filling in shows a thinner cloud of all of them, not one corner. The slices' depth test keeps the one
 batch's order, so the full layer is the image one batch draws.
 """
 from __future__ import annotations
@@ -35,6 +36,7 @@ from ..voxgi_addon.preview.debug_instances import (
     cascade_instances,
     octree_instances,
     pack_instances,
+    spread,
 )
 from ..voxgi_addon.preview.progressive import SliceSizer
 
@@ -210,7 +212,7 @@ class DebugDrawer:
             inst = cascade_instances(state, cascade, colour)
         else:
             inst = octree_instances(state.octree, level, colour)
-        texels, self.columns = pack_instances(inst)
+        texels, self.columns = pack_instances(spread(inst))  # every slice over all of them
         flat = texels.ravel()
         self.instances = gpu.types.GPUTexture((self.columns, texels.shape[0]), format="RGBA32F",
                                               data=gpu.types.Buffer("FLOAT", flat.size, flat))

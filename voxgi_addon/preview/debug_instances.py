@@ -3,7 +3,10 @@
 * ``cascade_instances`` — the voxels of one cascade of a ``GIState``: cube centres, edge and
   colour;
 * ``octree_instances`` — the present nodes of one octree level, likewise;
-* ``cascade_bounds`` — every cascade's box as 12 line segments.
+* ``cascade_bounds`` — every cascade's box as 12 line segments;
+* ``spread`` — the instances in an order whose every prefix is spread over all of them: the
+  debug view draws them a slice per draw (``render/debug_draw.py``), so a view that is still
+  filling in shows a thinner cloud of every part rather than one corner.
 
 Colour modes: ALBEDO (surface colour), NORMAL (0.5 + 0.5·n), OCCLUSION (grey: how much of the
 node is filled; leaves 1) and LIGHT (the injected direct light, tone-mapped x / (1 + x) so
@@ -16,7 +19,7 @@ import numpy as np
 from ..gi.morton import morton_decode
 
 __all__ = ["COLOUR_MODES", "Instances", "cascade_instances", "octree_instances", "cascade_bounds",
-           "pack_instances"]
+           "pack_instances", "spread"]
 
 COLOUR_MODES = ("ALBEDO", "NORMAL", "OCCLUSION", "LIGHT")
 
@@ -72,6 +75,14 @@ def octree_instances(octree, level: int, mode: str = "ALBEDO") -> Instances:
     size = float(octree.node_size(level))
     centres = np.asarray(octree.root_origin, np.float64) + (nodes + 0.5) * size
     return Instances(centres, size, _colours(mode, albedo, normal, occlusion, radiance))
+
+
+def spread(instances: Instances, seed: int = 0) -> Instances:
+    """The same instances in a fixed pseudo-random order (the same for the same count and
+    ``seed``): any prefix is a uniform sample of all of them."""
+    order = np.random.default_rng(seed).permutation(len(instances))
+    return Instances(instances.centres[order], instances.size[order],
+                     instances.colours[order])
 
 
 _EDGES = np.array([(0, 1), (1, 3), (3, 2), (2, 0), (4, 5), (5, 7), (7, 6), (6, 4),
