@@ -106,11 +106,6 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
         # glass in view: what is behind it, seen through it (preview.transmission); the
         # viewport's accumulation keeps the behind layer's gathers apart from the front's
         t0 = time.perf_counter()
-        hook = None if gather_hook is None else \
-            (lambda kind, values, variance: gather_hook(f"behind {kind}", values, variance))
-        behind, _ = yield from _accurate_stages(
-            snapshot, *layer, hook, raster, cache_source,
-            camera_tris=transmission.behind_glass(scene.tris, glass))
 
         def hits_at(offset):
             seen = read_gbuffer(rasterize(scene.tris, snapshot.camera, scene.rough, width, height,
@@ -120,6 +115,12 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
 
         weight = transmission.glass_weight(snapshot.materials, hits_at, width, height,
                                            filter_width)
+        hook = None if gather_hook is None else \
+            (lambda kind, values, variance: gather_hook(f"behind {kind}", values, variance))
+        behind, _ = yield from _accurate_stages(
+            snapshot, *layer, hook, raster, cache_source,
+            camera_tris=transmission.behind_glass(scene.tris, glass),
+            only=transmission.behind_pixels(weight))
         world = background(snapshot.world, snapshot.camera, width, height, filter_width)
         timings["behind glass"] = time.perf_counter() - t0
         return transmission.composite(front, behind, weight, world), timings
@@ -214,14 +215,15 @@ def _sums_of(texel):
 
 def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_settings,
                      glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
-                     cache_source=None, camera_tris=None):
+                     cache_source=None, camera_tris=None, only=None):
     """Accurate quality on the GPU: the gathers from the pixel centres' G-buffer, then one
     rasterized G-buffer, direct light (``bvh_direct``, a block of the shadow-ray strata) and
     glossy light of the lights per sub-pixel pass (``preview.passes.subpixel_passes``),
     summed on the GPU (``shaders/aa_surface.glsl``, ``aa_light.glsl``) and read back once.
     Triangles, BVH, materials and light tables come from ``scene`` (a ``GPUScene``, updated
     here: only what changed is uploaded). camera_tris : what the G-buffers draw (None: the
-    scene's triangles; ``transmission.behind_glass`` hides glass from them)."""
+    scene's triangles; ``transmission.behind_glass`` hides glass from them); only : (H, W)
+    bool the pixels to shade (None: all; the others are background to every kernel)."""
     timings = {}
     t0 = time.perf_counter()
     scene = (scene or current_scene()).update(snapshot)
@@ -236,6 +238,11 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     seen_tris = tris if camera_tris is None else camera_tris
     centre = rasterize(seen_tris, snapshot.camera, rough, width, height, shader=raster,
                        textures=scene.raster_textures(), filter_width=filter_width)
+    if only is not None:  # the other pixels' coverage 0: background to every kernel
+        centre.position = _run("aa_mask", _MASK_SAMPLERS, {
+            "gbuffer_position": centre.position,
+            "pixels": float_texture(np.flipud(only).astype(np.float32), (width, height), "R32F")},
+            ("out_position",), width, height)["out_position"]
     timings["visibility (GPU)"] = time.perf_counter() - t0
     yield
 

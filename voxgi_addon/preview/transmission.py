@@ -15,7 +15,8 @@ A camera sample on glass therefore shows two things, summed:
 weight is the transmittance of what each camera sample meets, through the pixel filter
 (``glass_weight``: the pixel centres everywhere, and the anti-aliased preview's sub-pixel
 offsets where the glass' edge crosses a pixel, so that its silhouette is filtered as the front
-layer's is). Only Combined carries the light seen through glass (Cycles has it in its
+layer's is). The behind layer shades only the pixels that glass covers (``behind_pixels``),
+so it costs in proportion to them. Only Combined carries the light seen through glass (Cycles has it in its
 Transmission passes); the others are the front layer's, as Cycles' are at glass (no diffuse).
 Both tracers (numpy ``passes.render_passes``, GPU ``render.gpu_preview``) render the layers
 with the same code; a scene without glass in view renders one layer, as before.
@@ -30,7 +31,7 @@ from ..scene.camera import DEFAULT_FILTER_WIDTH, filter_offsets
 from ..scene.glass import camera_transmittance, is_glass
 from ..scene.snapshot import RAY_ALL, RAY_CAMERA
 
-__all__ = ["glass_materials", "behind_glass", "glass_weight", "composite"]
+__all__ = ["glass_materials", "behind_glass", "glass_weight", "behind_pixels", "composite"]
 
 
 def glass_materials(snapshot, tris) -> np.ndarray | None:
@@ -91,6 +92,19 @@ def glass_weight(materials, hits_at, width: int, height: int,
             total += weight_at(tuple(offset))[edge]
         weight[edge] = total / len(offsets)
     return filter_coverage(weight, filter_width).astype(np.float32)
+
+
+def behind_pixels(weight: np.ndarray) -> np.ndarray:
+    """(H, W) bool the pixels whose behind layer counts: some camera sample sees glass there
+    (weight > 0), grown by a pixel so that the behind layer's own edge tests and filter see
+    their neighbours. The behind layer shades only these (the rest of the image as background)."""
+    seen = np.asarray(weight).max(axis=2) > 0.0
+    grown = seen.copy()
+    grown[1:] |= seen[:-1]
+    grown[:-1] |= seen[1:]
+    grown[:, 1:] |= grown[:, :-1].copy()
+    grown[:, :-1] |= grown[:, 1:].copy()
+    return grown
 
 
 def composite(front: dict, behind: dict, weight: np.ndarray, background=None) -> dict:
