@@ -21,9 +21,10 @@ import weakref
 import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
+from ..voxgi_addon.gi.cone_bounces import cone_octrees
 from ..voxgi_addon.gi.cone_shadows import cone_shadowed_direct, shadow_cone
 from ..voxgi_addon.gi.conetrace import world_mips
-from ..voxgi_addon.gi.ray_views import view_octree
+from ..voxgi_addon.gi.radiance_cache import cache_key
 from ..voxgi_addon.preview.passes import (
     compose_passes,
     material_indices,
@@ -33,7 +34,7 @@ from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.textures import TexelBase
 from .gbuffer import rasterize, read_gbuffer
 from .gpu_bvh import direct_light_texture
-from .gpu_gather import glossy_direct_texture
+from .gpu_gather import cache_gpu, glossy_direct_texture
 from .gpu_scene import current_scene
 from .gpu_tracer import dispatch, read_texture
 from .gpu_volume import GPUVolume, float_texture
@@ -41,6 +42,26 @@ from .gpu_volume import GPUVolume, float_texture
 # per GPUVolume of the diffuse cones (the caller's, kept between calls) the GPUVolumes of the
 # other kinds of cones whose voxels differ (gi/ray_views.py), released with it
 _view_volumes: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_held_cache: dict = {}  # the last radiance cache (_radiance_cache)
+
+
+def _radiance_cache(scene, settings):
+    """The radiance cache of ``settings.bounces`` (``gi.radiance_cache``; None for one
+    bounce) gathered on the GPU (``gpu_gather.cache_gpu``) for the GPU scene ``scene``, kept
+    while its triangles (the BVH's node texture), lights, materials and cache settings stay."""
+    if settings.bounces <= 1:
+        return None
+    key = cache_key(scene.lights, scene.principled, scene.emission, settings.bounces,
+                    settings.cache_rays, settings.cache_resolution,
+                    tuple(float(w) for w in settings.world), settings.hit_samples,
+                    settings.hit_glossy)
+    held = _held_cache.get("entry")
+    if held is None or held[0] is not scene.bvh.nodes or held[1] != key:
+        cache, _ = cache_gpu(scene.bvh, scene.lights, scene.principled, scene.emission,
+                             settings, scene.gather_tables())
+        held = (scene.bvh.nodes, key, cache)
+        _held_cache["entry"] = held
+    return held[2]
 
 
 def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
@@ -48,24 +69,6 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     """(passes, timings) of Fast quality; ``volume`` a ``GPUVolume`` kept between calls (a new
     one when None) so that an unchanged octree is not uploaded again."""
     timings = {}
-    t0 = time.perf_counter()
-    volume = volume or GPUVolume()
-    world = world_mips(getattr(snapshot.world, "radiance", None))
-    volume.update(gi_state.octree, cones, world=world)
-    # Cycles' ray visibility (gi/ray_views.py): the glossy and shadow cones march through the
-    # octree of what their rays see, uploaded beside the diffuse one only when it differs
-    views = _view_volumes.setdefault(volume, {})
-    kinds = {}
-    for kind in ("glossy", "shadow"):
-        octree = view_octree(gi_state, kind)
-        if octree is gi_state.octree:
-            views.pop(kind, None)
-            kinds[kind] = volume
-            continue
-        kinds[kind] = views.setdefault(kind, GPUVolume())
-        kinds[kind].update(octree, cones, world=world)
-    timings["upload"] = time.perf_counter() - t0
-
     t0 = time.perf_counter()
     # the session's GPU scene (gpu_scene.GPUScene, as Accurate's): triangles, BVH, material
     # and light tables, uploaded only where they changed
@@ -75,7 +78,28 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
         raise VoxGIError("the scene has no triangles to render")
     if scene.uploaded:
         timings["scene update (GPU)"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
+    # the octree of each kind of cone (Cycles' ray visibility, gi/ray_views.py), with
+    # Bounces > 1 the voxels also reflecting the radiance cache (gi/cone_bounces.py), the
+    # cache gathered on the GPU as Accurate's
+    t0 = time.perf_counter()
+    octrees = cone_octrees(gi_state, _radiance_cache(scene, gather_settings))
+    timings["radiance cache"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    volume = volume or GPUVolume()
+    world = world_mips(getattr(snapshot.world, "radiance", None))
+    volume.update(octrees["diffuse"], cones, world=world)
+    # the glossy and shadow cones' octrees are uploaded beside the diffuse one where they differ
+    views = _view_volumes.setdefault(volume, {})
+    kinds = {}
+    for kind in ("glossy", "shadow"):
+        if octrees[kind] is octrees["diffuse"]:
+            views.pop(kind, None)
+            kinds[kind] = volume
+            continue
+        kinds[kind] = views.setdefault(kind, GPUVolume())
+        kinds[kind].update(octrees[kind], cones, world=world)
+    timings["upload"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     gbuffer = rasterize(tris, snapshot.camera, rough, width, height,
                         textures=scene.raster_textures())  # Base Color per texel: seen["base"]
     seen = read_gbuffer(gbuffer)

@@ -8,13 +8,13 @@ albedo, ``Diffuse Color`` is the albedo, ``Combined`` = albedo × (direct + indi
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 
 import numpy as np
 
 from ..errors import VoxGIError
+from ..gi.cone_bounces import cone_octrees
 from ..gi.cone_shadows import cone_shadowed_direct
 from ..gi.conetrace import (
     ConeSettings,
@@ -26,7 +26,6 @@ from ..gi.conetrace import (
 from ..gi.direct_light import concentric_disk, diffuse_direct, light_directions, light_frame
 from ..gi.exact_glossy import emitters_shine
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
-from ..gi.ray_views import view_octree
 from ..gi.sampling import hashed_square
 from ..gi.world_light import scene_lights, world_light
 from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, filter_offsets
@@ -34,7 +33,7 @@ from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
 from ..scene.textures import primary_base, texel_emission
 from . import transmission
-from .gather import GatherSettings, gather_gi, gather_glossy, gather_glossy_world
+from .gather import GatherSettings, gather_gi, gather_glossy, gather_glossy_world, radiance_cache
 from .upsample import PLANE_TOLERANCE, STRIDES, sample_pixels, upsample
 
 PASS_NAMES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color",
@@ -760,6 +759,7 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         return front, timings
     # glass in view: what is behind it, seen through it (preview.transmission)
     t0 = time.perf_counter()
+    behind, _ = _render_layer(snapshot, tris, transmission.behind_glass(tris, glass), *layer)
 
     def hits_at(offset):
         seen = primary_visibility(tris, snapshot.camera, width, height, offset)
@@ -767,27 +767,21 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
 
     from .film import background
     weight = transmission.glass_weight(snapshot.materials, hits_at, width, height, filter_width)
-    behind, _ = _render_layer(snapshot, tris, transmission.behind_glass(tris, glass), *layer,
-                              only=transmission.behind_pixels(weight))
     world = background(snapshot.world, snapshot.camera, width, height, filter_width)
     timings["behind glass"] = time.perf_counter() - t0
     return transmission.composite(front, behind, weight, world), timings
 
 
 def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, light_samples,
-                  shadows, gi_stride, quality, gather_settings, glossy_indirect, filter_width,
-                  only=None):
+                  shadows, gi_stride, quality, gather_settings, glossy_indirect, filter_width):
     """``render_passes`` of one layer: camera rays see ``camera_tris`` (``tris``, or them with
-    glass hidden from the camera: ``transmission.behind_glass``), every other ray ``tris``;
-    only : (H, W) bool the pixels to shade (None: all; the others as background)."""
+    glass hidden from the camera: ``transmission.behind_glass``), every other ray ``tris``."""
     if quality == "ACCURATE":
         shadows = "RAYS"
     gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
     timings = {}
     t0 = time.perf_counter()
     seen = primary_visibility(camera_tris, snapshot.camera, width, height)
-    if only is not None:
-        seen = dataclasses.replace(seen, hit=seen.hit & only)
     hit = np.flatnonzero(seen.hit.ravel())
     dirs = seen.direction.reshape(-1, 3)
     timings["visibility"] = time.perf_counter() - t0
@@ -799,20 +793,27 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     # the lamps, then the world and the emissive triangles
     lights = scene_lights(snapshot, tris, material_table(snapshot)[3])
     if quality != "ACCURATE":  # Accurate: per sub-pixel pass, below
+        # the octree each kind of cone reads (Cycles' ray visibility), with Bounces > 1 the
+        # voxels also reflecting the radiance cache's light (gi/cone_bounces.py)
         t0 = time.perf_counter()
-        direct, per_lamp = fast_direct(view_octree(gi_state, "shadow"), seen, gi_stride, hit,
+        octrees = cone_octrees(gi_state, radiance_cache(tris, lights, principled_table(snapshot),
+                                                        material_table(snapshot)[3],
+                                                        gather_settings))
+        timings["radiance cache"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        direct, per_lamp = fast_direct(octrees["shadow"], seen, gi_stride, hit,
                                        lights, tris, cones, light_samples, shadows,
                                        len(snapshot.lights))
         timings["direct"] = time.perf_counter() - t0
     positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
 
     def diffuse_and_ao(pixels):
-        indirect, ao = trace_diffuse_and_ao(gi_state.octree, positions[pixels], normals[pixels],
-                                            cones)
+        indirect, ao = trace_diffuse_and_ao(octrees["diffuse"], positions[pixels],
+                                            normals[pixels], cones)
         return np.concatenate([indirect, ao[:, None]], axis=1)
 
     def glossy_cones(pixels):  # Fast: the cones see the world where they leave the voxels
-        return trace_glossy(view_octree(gi_state, "glossy"), positions[pixels], normals[pixels],
+        return trace_glossy(octrees["glossy"], positions[pixels], normals[pixels],
                             dirs[pixels], rough[materials[pixels]], cones,
                             world_mips(getattr(snapshot.world, "radiance", None)))
 
@@ -919,8 +920,8 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     if len(listed):
         for (offset, block), weights in zip(plan, pass_tail_weights(plan, filter_width)):
             one = new_sums(height * width)
-            shade(primary_visibility(camera_tris, snapshot.camera, width, height, offset),
-                  edge, block, into=one)
+            shade(primary_visibility(camera_tris, snapshot.camera, width, height, offset), edge,
+                  block, into=one)
             for name in SUMS:
                 sums[name][listed] += one[name][listed]
             add_tails(tails, {name: one[name][listed] / len(plan) for name in SUMS}, listed,
