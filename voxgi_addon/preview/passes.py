@@ -8,6 +8,7 @@ albedo, ``Diffuse Color`` is the albedo, ``Combined`` = albedo × (direct + indi
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -759,7 +760,6 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         return front, timings
     # glass in view: what is behind it, seen through it (preview.transmission)
     t0 = time.perf_counter()
-    behind, _ = _render_layer(snapshot, tris, transmission.behind_glass(tris, glass), *layer)
 
     def hits_at(offset):
         seen = primary_visibility(tris, snapshot.camera, width, height, offset)
@@ -767,21 +767,27 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
 
     from .film import background
     weight = transmission.glass_weight(snapshot.materials, hits_at, width, height, filter_width)
+    behind, _ = _render_layer(snapshot, tris, transmission.behind_glass(tris, glass), *layer,
+                              only=transmission.behind_pixels(weight))
     world = background(snapshot.world, snapshot.camera, width, height, filter_width)
     timings["behind glass"] = time.perf_counter() - t0
     return transmission.composite(front, behind, weight, world), timings
 
 
 def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, light_samples,
-                  shadows, gi_stride, quality, gather_settings, glossy_indirect, filter_width):
+                  shadows, gi_stride, quality, gather_settings, glossy_indirect, filter_width,
+                  only=None):
     """``render_passes`` of one layer: camera rays see ``camera_tris`` (``tris``, or them with
-    glass hidden from the camera: ``transmission.behind_glass``), every other ray ``tris``."""
+    glass hidden from the camera: ``transmission.behind_glass``), every other ray ``tris``;
+    only : (H, W) bool the pixels to shade (None: all; the others as background)."""
     if quality == "ACCURATE":
         shadows = "RAYS"
     gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
     timings = {}
     t0 = time.perf_counter()
     seen = primary_visibility(camera_tris, snapshot.camera, width, height)
+    if only is not None:
+        seen = dataclasses.replace(seen, hit=seen.hit & only)
     hit = np.flatnonzero(seen.hit.ravel())
     dirs = seen.direction.reshape(-1, 3)
     timings["visibility"] = time.perf_counter() - t0
@@ -920,8 +926,8 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     if len(listed):
         for (offset, block), weights in zip(plan, pass_tail_weights(plan, filter_width)):
             one = new_sums(height * width)
-            shade(primary_visibility(camera_tris, snapshot.camera, width, height, offset), edge,
-                  block, into=one)
+            shade(primary_visibility(camera_tris, snapshot.camera, width, height, offset),
+                  edge, block, into=one)
             for name in SUMS:
                 sums[name][listed] += one[name][listed]
             add_tails(tails, {name: one[name][listed] / len(plan) for name in SUMS}, listed,
