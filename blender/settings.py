@@ -156,7 +156,7 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
     )
     bounce_source: bpy.props.EnumProperty(
         name="Bounces",
-        description="How many bounces of diffuse light the Accurate preview carries",
+        description="How many bounces of diffuse light the preview carries",
         items=(("CYCLES", "Follow Cycles", "As many as Cycles' Light Paths allow (Diffuse "
                 "bounces, capped by Total): the preview predicts the final render"),
                ("MANUAL", "Manual", "The Bounces count below")),
@@ -164,8 +164,8 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
     )
     bounces: bpy.props.IntProperty(
         name="Bounces",
-        description="Diffuse bounces of the Accurate preview: 1 is the exact one-bounce "
-                    "gather; more add the later bounces from a radiance cache in voxels",
+        description="Diffuse bounces of the preview: 1 is the one-bounce gather (or cones); "
+                    "more add the later bounces from a radiance cache in voxels",
         default=4, min=1, max=16,
     )
     seed: bpy.props.IntProperty(

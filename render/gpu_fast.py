@@ -12,6 +12,12 @@ sampling.w = 1) and one shadow cone per connected emitter; the glossy cones see 
 where they leave the voxels (``GPUVolume`` packs the world's prefiltered maps). The lamps'
 glossy light is Accurate's centre pass's (``gpu_gather.glossy_direct_texture`` of each lamp's
 Diffuse Direct), and the colours are the Principled BSDF's for the view.
+
+Cycles' ray visibility (docs/gi_pipeline.md "Ray visibility and holdouts"): the glossy and
+shadow cones read the octrees of what their rays see (``gi.ray_views``), each uploaded in its
+own ``GPUVolume`` beside the diffuse cones' where it differs. Bounces > 1 (docs/gi_pipeline.md
+"Fast quality's cones"): the radiance cache is gathered on the GPU as Accurate's
+(``gpu_gather.cache_gpu``) and the voxels reflect it (``gi.cone_bounces``) before the upload.
 """
 from __future__ import annotations
 

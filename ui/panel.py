@@ -118,10 +118,11 @@ class VOXGI_PT_gi(_SidebarPanel, bpy.types.Panel):
         settings = context.scene.voxgi
         manual = ("view_ahead",) if settings.span_mode == "MANUAL" else ()
         # Accurate traces exact rays for every pass: the cone and voxel settings apply to Fast
-        # only.
+        # only. Both read the radiance cache (Bounces).
         trace = (("gi_rays", "bounce_source", "bounces") if settings.quality == "ACCURATE"
-                 else ("diffuse_cones", "falloff", "gi_intensity", "ao_intensity", "shadows",
-                       *manual, "dense_depth", "cone_angle", "sample_factor", "max_distance"))
+                 else ("bounce_source", "bounces", "diffuse_cones", "falloff", "gi_intensity",
+                       "ao_intensity", "shadows", *manual, "dense_depth", "cone_angle",
+                       "sample_factor", "max_distance"))
         _settings_column(layout, context, (
             "quality", *trace, "glossy_indirect", "ao_distance", "light_samples", "gi_resolution",
             "seed", "use_animated_seed", "tracer"))
