@@ -27,7 +27,7 @@ import weakref
 import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
-from ..voxgi_addon.gi.cone_bounces import cone_octrees
+from ..voxgi_addon.gi.cone_bounces import cone_octrees, fast_cache_settings
 from ..voxgi_addon.gi.cone_shadows import cone_shadowed_direct, shadow_cone
 from ..voxgi_addon.gi.conetrace import world_mips
 from ..voxgi_addon.gi.radiance_cache import cache_key
@@ -88,7 +88,7 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     # Bounces > 1 the voxels also reflecting the radiance cache (gi/cone_bounces.py), the
     # cache gathered on the GPU as Accurate's
     t0 = time.perf_counter()
-    octrees = cone_octrees(gi_state, _radiance_cache(scene, gather_settings))
+    octrees = cone_octrees(gi_state, _radiance_cache(scene, fast_cache_settings(gather_settings)))
     timings["radiance cache"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     volume = volume or GPUVolume()

@@ -16,14 +16,14 @@ import pytest
 from test_multibounce import REFS, follow_cycles, relative_l1
 
 # measured (GPU, 160 × 120) at the default Bounces (one bounce in brackets), Combined /
-# Diffuse Indirect: cornell_box 0.130 (0.307) / 0.213 (0.530); emissive_room 0.326 (0.364) /
-# 0.633 (0.717); columned_hall 0.275 (0.399) / 0.464 (0.714); textured_room 0.214 (0.301) /
-# 0.401 (0.601)
+# Diffuse Indirect: cornell_box 0.122 (0.307) / 0.199 (0.530); emissive_room 0.230 (0.364) /
+# 0.408 (0.717); columned_hall 0.241 (0.399) / 0.396 (0.714); textured_room 0.154 (0.301) /
+# 0.264 (0.601)
 FAST_LIMITS = {
-    "cornell_box": {"Combined": 0.149, "Diffuse Indirect": 0.245},
-    "emissive_room": {"Combined": 0.375, "Diffuse Indirect": 0.728},
-    "columned_hall": {"Combined": 0.316, "Diffuse Indirect": 0.534},
-    "textured_room": {"Combined": 0.246, "Diffuse Indirect": 0.461},
+    "cornell_box": {"Combined": 0.140, "Diffuse Indirect": 0.229},
+    "emissive_room": {"Combined": 0.264, "Diffuse Indirect": 0.469},
+    "columned_hall": {"Combined": 0.278, "Diffuse Indirect": 0.456},
+    "textured_room": {"Combined": 0.177, "Diffuse Indirect": 0.304},
 }
 
 

@@ -6,10 +6,16 @@ import dataclasses
 import numpy as np
 from snapshots import MaterialData, mesh, snapshot, translation
 
-from voxgi.voxgi_addon.gi.cone_bounces import bounced_radiance, cone_octrees
+from voxgi.voxgi_addon.gi.cone_bounces import (
+    FAST_CACHE_RESOLUTION,
+    bounced_radiance,
+    cone_octrees,
+    fast_cache_settings,
+)
 from voxgi.voxgi_addon.gi.conetrace import ConeSettings, trace_diffuse_and_ao, trace_shadow
 from voxgi.voxgi_addon.gi.radiance_cache import build_cache, face_points, with_faces
 from voxgi.voxgi_addon.gi.update import GISettings, update_gi
+from voxgi.voxgi_addon.preview.gather import GatherSettings
 from voxgi.voxgi_addon.scene.geometry import world_triangles
 from voxgi.voxgi_addon.scene.snapshot import RAY_ALL, RAY_SHADOW, LightData
 from voxgi.voxgi_addon.voxelize.scene_caches import build_scene_caches
@@ -91,3 +97,8 @@ def test_a_shadow_view_keeps_its_own_octree():
     octrees = cone_octrees(state, uniform_cache(snap, 0.5))
     assert octrees["shadow"] is state.ray_views["shadow"].octree
     assert octrees["diffuse"] is not state.octree
+
+
+def test_fast_takes_the_coarse_cache_where_the_resolution_is_auto():
+    assert fast_cache_settings(GatherSettings(bounces=4)).cache_resolution == FAST_CACHE_RESOLUTION
+    assert fast_cache_settings(GatherSettings(bounces=4, cache_resolution=32)).cache_resolution == 32

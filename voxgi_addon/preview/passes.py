@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from ..errors import VoxGIError
-from ..gi.cone_bounces import cone_octrees
+from ..gi.cone_bounces import cone_octrees, fast_cache_settings
 from ..gi.cone_shadows import cone_shadowed_direct
 from ..gi.conetrace import (
     ConeSettings,
@@ -804,7 +804,7 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         t0 = time.perf_counter()
         octrees = cone_octrees(gi_state, radiance_cache(tris, lights, principled_table(snapshot),
                                                         material_table(snapshot)[3],
-                                                        gather_settings))
+                                                        fast_cache_settings(gather_settings)))
         timings["radiance cache"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         direct, per_lamp = fast_direct(octrees["shadow"], seen, gi_stride, hit,
