@@ -61,20 +61,25 @@ def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: i
     return values, variance
 
 
-def principled_materials_texture(principled, emission, slots=None, variants=None):
-    """(M + 1) × 4 texture of the hits' materials: row 0 base colour, row 1 emission, row 2
+def principled_materials_texture(principled, emission, slots=None, variants=None, glow=None):
+    """(M + 1) × 5 texture of the hits' materials: row 0 base colour, row 1 emission, row 2
     (metallic, Specular IOR Level, roughness) (``preview.passes.principled_table``), row 3
     (Base Color texture slot, Roughness / Metallic texture slot, first variant, 0): ``slots``
     (M + 1,) and ``variants`` ((M + 1,) parameter slots, (M + 1,) first variants) of
-    ``scene.textures.SurfaceTextures``, -1 (none) without."""
+    ``scene.textures.SurfaceTextures``, -1 (none) without; row 4 (Emission Color texture slot,
+    Strength, 0, 0): ``glow`` ((M + 1,) ``emission_slots``, (M + 1,) ``emission_strength``),
+    -1 without (``bvh_shade.glsl`` ``hit_emission``)."""
     base, params = principled
-    rows = np.zeros((4, len(base), 4), np.float32)
+    rows = np.zeros((5, len(base), 4), np.float32)
     rows[0, :, :3], rows[1, :, :3], rows[2, :, :3] = base, emission, params
     rows[3, :, 0] = -1.0 if slots is None else np.asarray(slots, np.float32)
     rows[3, :, 1] = -1.0
     if variants is not None and variants[0] is not None:
         rows[3, :, 1], rows[3, :, 2] = variants
-    return float_texture(rows, (len(base), 4))
+    rows[4, :, 0] = -1.0
+    if glow is not None and glow[0] is not None:
+        rows[4, :, 0], rows[4, :, 1] = glow
+    return float_texture(rows, (len(base), 5))
 
 
 def no_texture_inputs() -> dict[str, object]:

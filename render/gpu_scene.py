@@ -224,13 +224,15 @@ class GPUScene:
         t0 = time.perf_counter()
         surface = getattr(self.tris, "textures", None)
         variants = (None, None) if surface is None else (surface.param_slots, surface.variants)
-        materials = digest(rough, emission, *principled, self.slots, *variants)
+        glow = (None, None) if surface is None else \
+            (surface.emission_slots, surface.emission_strength)
+        materials = digest(rough, emission, *principled, self.slots, *variants, *glow)
         materials_changed = materials != self.keys.get("materials")
         if materials_changed:
             self.rough, self.emission, self.principled = rough, emission, principled
             self.materials = principled_materials_texture(principled, emission, self.slots,
-                                                          variants)
-            self._sent("materials", 3 * len(principled[0]) * 16)
+                                                          variants, glow)
+            self._sent("materials", 5 * len(principled[0]) * 16)
             self.keys["materials"] = materials
             self.seconds["materials"] = time.perf_counter() - t0
         lut = lut_texture()  # constant; cached by gpu_principled

@@ -120,7 +120,7 @@ void main()
             int hit_material = bvh_triangle_material(slot);
             hit_material = (hit_material >= 0 && hit_material < last_material) ? hit_material
                                                                                : last_material;
-            value += texelFetch(materials, ivec2(hit_material, 1), 0).rgb * weight;
+            value += hit_emission(hit_material, triangle, uv) * weight;
           }
         }
         else if (sky_on) {

@@ -69,6 +69,25 @@ vec3 cache_indirect(vec3 x, vec3 n)
   return vec3(0.0);
 }
 
+/* The emission where a ray hits `triangle` of `material` at barycentrics `uv`: per texel
+ * (level 0, as the Base Color at bounce hits) where the material has an Emission Color texture
+ * (materials row 4: (slot, Strength); textures.SurfaceTextures.emission_at), else its value
+ * (row 1) — exact_indirect.hit_emission. */
+vec3 hit_emission(int material, int triangle, vec2 uv)
+{
+  vec4 glow = texelFetch(materials, ivec2(material, 4), 0);
+  if (glow.x < -0.5) {
+    return texelFetch(materials, ivec2(material, 1), 0).rgb;
+  }
+  int k = 2 * triangle;
+  int row = int(texelFetch(texture_table, ivec2(BVH_WIDTH - 1, 0), 0).x + 0.5);
+  vec4 c01 = texelFetch(texture_table, ivec2(k & (BVH_WIDTH - 1), row + (k >> BVH_WIDTH_LOG2)), 0);
+  vec4 c2 = texelFetch(texture_table,
+                       ivec2((k + 1) & (BVH_WIDTH - 1), row + ((k + 1) >> BVH_WIDTH_LOG2)), 0);
+  vec2 at = (1.0 - uv.x - uv.y) * c01.xy + uv.x * c01.zw + uv.y * c2.xy;
+  return max(surface_texture(int(glow.x + 0.5), at, 0.0), vec3(0.0)) * glow.y;
+}
+
 vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
                   vec3 world_rgb, bool emission_seen, out float th)
 {
@@ -89,6 +108,7 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
   ns *= dot(face, d) > 0.0 ? -1.0 : 1.0;
   int material = bvh_triangle_material(slot);
   material = (material >= 0 && material < last_material) ? material : last_material;
+  vec3 glow = hit_emission(material, triangle, uv);
   /* Roughness / Metallic per texel (textures.SurfaceTextures.variant_at, level 0): row 3's
    * (.y, .z) = (parameter texture, first variant), -1 none */
   vec4 variant = texelFetch(materials, ivec2(material, 3), 0);
@@ -106,7 +126,7 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
     material = int(variant.z + 0.5) + int(m) * ROUGHNESS_LEVELS + int(r);
   }
   vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
-  vec3 emission = texelFetch(materials, ivec2(material, 1), 0).rgb;
+  vec3 emission = glow;
   vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
   /* Base Color per texel (textures.glsl; level 0, as exact_indirect.ray_radiance): the
    * hit's UV from its triangle's corner UVs, 2 texels per triangle index in texture_table's

@@ -196,3 +196,31 @@ def test_the_gltf_round_trip_keeps_the_emissive_texture_and_its_strength(voxgi):
     error = relative_l1(ours["Combined"], reference["Combined"], reference["Alpha"] > 0.5)
     print("glTF round trip: Combined", round(error, 4))
     assert error <= 0.05
+
+
+def test_a_mirror_floor_reflects_the_panel_per_texel(voxgi):
+    """A mirror sees an emissive texture per texel at its ray's hit (exact_indirect.hit_emission,
+    bvh_shade.glsl hit_emission), not the texture's mean colour: the panel's orange half and
+    blue half in the floor's reflection, numpy and GPU alike."""
+    def scene():
+        built = build()
+        bsdf = bpy.data.materials["White"].node_tree.nodes["Principled BSDF"]
+        bsdf.inputs["Metallic"].default_value = 1.0
+        bsdf.inputs["Roughness"].default_value = 0.0
+        return built
+
+    gpu, _ = preview(scene(), "AUTO", 64, 48)
+    reference, _ = preview(scene(), "NUMPY", 64, 48)
+    # the panel stands at x in [-1, 1]; its reflection in the floor below it in the image
+    glossy = reference["Glossy Direct"]
+    seen = glossy.sum(axis=2) > 1.0  # the bright panel, not the walls' dim reflections
+    rows = np.flatnonzero(seen[24:].any(axis=1)) + 24
+    cols = np.flatnonzero(seen[rows].any(axis=0))
+    left = glossy[rows][:, cols[0]:(cols[0] + cols[-1]) // 2]
+    right = glossy[rows][:, (cols[0] + cols[-1]) // 2 + 1:cols[-1] + 1]
+    warmth = [float(part[..., 0].sum() / max(part[..., 2].sum(), 1e-9)) for part in (left, right)]
+    print(f"reflection red/blue: left {warmth[0]:.2f}, right {warmth[1]:.2f}")
+    assert warmth[0] > 2.0 * warmth[1], warmth
+    everywhere = np.ones((48, 64), bool)
+    for name in ("Glossy Direct", "Combined"):
+        assert relative_l1(gpu[name], reference[name], everywhere) <= 0.02, name

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..scene.snapshot import RAY_GLOSSY
-from .exact_indirect import LUMINANCE, SURFACE_EPSILON, ray_radiance
+from .exact_indirect import LUMINANCE, SURFACE_EPSILON, hit_emission, ray_radiance
 from .principled import ROUGHNESS_SQ_THRESHOLD, glossy_color, glossy_reflectance
 from .sampling import hammersley, perpendicular_basis
 
@@ -217,28 +217,31 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
     lobe = _Lobe(n, views, materials, principled)
     origins = np.repeat(p + SURFACE_EPSILON * n, rays, axis=0)
 
-    def nearest(dirs, useful):  # (N, K) the rays' nearest triangle (-1: they leave the scene)
+    def nearest(dirs, useful, uv=None):  # (N, K) the rays' nearest triangle (-1: none)
         out = np.full(useful.shape, -1)
         if useful.any():
-            t, tri, _, _ = closest_hits(tris, origins[useful.ravel()], dirs[useful], 0.0, np.inf,
+            t, tri, u, v = closest_hits(tris, origins[useful.ravel()], dirs[useful], 0.0, np.inf,
                                         RAY_GLOSSY)
             out[useful] = np.where(np.isfinite(t), tri, -1)
+            if uv is not None:
+                uv[useful] = np.stack([u, v], axis=-1)
         return out
 
     dirs, weight = lobe.sample(ids, rays, seed)
     weight = np.where(lobe.mirror[:, None, None], 1.0, weight)
     useful = (weight.sum(-1) > 0) & (np.einsum("nkc,nc->nk", dirs, n) > 0)
-    hit = nearest(dirs, useful)
+    uv = np.zeros(useful.shape + (2,))
+    hit = nearest(dirs, useful, uv)
     value = np.zeros(dirs.shape)
     if emission is not None:
-        table = np.asarray(emission, np.float64)
-        last = len(table) - 1
-        material = np.asarray(tris.materials)[np.maximum(hit, 0)]
-        material = np.where((material >= 0) & (material < last), material, last)
+        landed = useful & (hit >= 0)
+        glow = hit_emission(tris, emission, hit[landed], uv[landed][:, 0], uv[landed][:, 1])
         # with the emitters as lights a glossy lobe gets them from emitters_shine, per sub-pixel
         # pass (noise-free); a mirror's one reflected ray still sees them
         share = 1.0 if emitters is None else lobe.mirror[:, None, None].astype(np.float64)
-        value += np.where((useful & (hit >= 0))[..., None], table[material] * weight * share, 0.0)
+        seen = np.zeros(dirs.shape)
+        seen[landed] = glow
+        value += seen * weight * share
     if world is None:
         return _glossy_mean(lobe, value)
     lobe_pdf, map_pdf = lobe.pdf(dirs), world_pdf(world, dirs)

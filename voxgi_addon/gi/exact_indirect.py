@@ -67,6 +67,23 @@ def _hit_normals(tris, tri, u, v, d):
     return shading * sign
 
 
+def hit_emission(tris, emission, triangles, b1, b2) -> np.ndarray:
+    """(N, 3) float64 the emission where rays hit ``triangles`` (N,) at barycentrics (b1, b2):
+    per texel where the material has an emission texture (``SurfaceTextures.emission_at``,
+    level 0, as the Base Color at bounce hits), else the material's ``emission`` (M + 1, 3)
+    row."""
+    table = np.asarray(emission, np.float64)
+    last = len(table) - 1
+    material = np.asarray(tris.materials)[np.asarray(triangles, np.int64)]
+    material = np.where((material >= 0) & (material < last), material, last)
+    out = table[material]
+    surface = getattr(tris, "textures", None)
+    if surface is not None and surface.emission_slots is not None and len(out):
+        texel, textured = surface.emission_at(triangles, material, b1, b2)
+        out = np.where(textured[:, None], texel, out)
+    return out
+
+
 def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
                  world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
                  emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, cache=None):
@@ -119,7 +136,9 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
                              reflect=reflect)
         if reflect is not None:  # the world's and emitters' light off the hit's glossy lobe
             lit, reflected = lit
-        radiance[hit] = np.asarray(emission, np.float64)[material] if emission_seen else 0.0
+        # the emission per texel where the material has an emission texture (level 0)
+        radiance[hit] = hit_emission(tris, emission, tri[hit], u[hit], v[hit]) \
+            if emission_seen else 0.0
         # the light of the later bounces arriving at the hit (0 without a cache)
         cached = lookup(cache, x, ns) if cache is not None else 0.0
         arriving = lit.sum(axis=0) + cached
