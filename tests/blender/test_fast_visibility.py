@@ -63,6 +63,9 @@ def region(corners):
 # name -> (the pass the toggle shows in, the screen box where it shows, the colour channel of the
 # hidden object's light there: what must drop (-1: light that must rise, its shadow))
 CASES = {
+    # the orange pillar camera rays do not see: the G-buffer shows the wall behind it
+    "Ghost": ("Diffuse Color", [(-2.3, 0.3, 0.0), (-1.7, 0.9, 0.0), (-2.3, 0.3, 2.2),
+                                (-1.7, 0.9, 2.2)], 0),
     # the blue block's shadow on the floor, away from the sun (direction (0.45, 0.75, -0.5))
     # (a 0.8 × 0.8 × 1 m block at (0.5, −0.3): its shadow reaches 0.9 m along x, 1.5 m along y)
     "Shadowless": ("Diffuse Direct", [(0.1, 0.1, 0.0), (1.8, 0.1, 0.0), (0.1, 1.6, 0.0),
@@ -78,9 +81,10 @@ CASES = {
 
 @pytest.mark.parametrize("name", list(CASES))
 def test_toggle_moves_fast_towards_cycles(voxgi, toggled, reference, name):
-    """With the toggle undone the hidden object's voxels are back: its shadow (visible_shadow),
-    its bounce light (visible_diffuse) or its reflection (visible_glossy) returns in Fast, and
-    where it changes the image the room with the toggle is closer to Cycles."""
+    """With the toggle undone the hidden object is back: itself (visible_camera, Fast's
+    G-buffer), its shadow (visible_shadow), its bounce light (visible_diffuse) or its reflection
+    (visible_glossy, the voxels), and where it changes the image the room with the toggle is
+    closer to Cycles."""
     pass_name, corners, channel = CASES[name]
     scene = build()
     prop, value = visibility_scenes.TOGGLES[name]
