@@ -196,3 +196,50 @@ def test_a_repainted_emission_texture_relights_the_voxels():
     assert glow[left, 2].mean() > 5 * glow[left, 0].mean()  # the left half is blue now
     same = update_gi(snap, caches, settings, anchor=np.zeros(3), previous=first)
     assert same.reused == "all"
+
+
+def test_bounce_hits_and_probe_rays_see_the_emission_per_texel():
+    """A ray landing on the panel sees the texel it lands on (exact_indirect.hit_emission), in
+    the gathers' bounce hits and the probe bakes' rays (probes.bake.hit_radiance), not the
+    texture's mean: upward rays under the left half see red, under the right half blue."""
+    from voxgi.voxgi_addon.gi.exact_indirect import hit_emission
+    from voxgi.voxgi_addon.probes.bake import hit_radiance
+    from voxgi.voxgi_addon.scene.raycast import closest_hits
+
+    snapshot = panel_snapshot()
+    tris = world_triangles(snapshot)
+    origins = np.array([[-0.5, 0.0, 0.5], [0.5, 0.0, 0.5]])
+    up = np.tile([0.0, 0.0, 1.0], (2, 1))
+    t, tri, u, v = closest_hits(tris, origins, up)
+    assert (tri >= 0).all()
+    glow = hit_emission(tris, material_table(snapshot)[3], tri, u, v)
+    np.testing.assert_allclose(glow, [RED * STRENGTH, BLUE * STRENGTH], rtol=1e-3)
+    probe = hit_radiance(snapshot, tris, origins, up, t, tri, u, v, light_samples=1)
+    np.testing.assert_allclose(probe, [RED * STRENGTH, BLUE * STRENGTH], rtol=1e-3)
+    flat = panel_snapshot(textured=False)  # without the texture: the mean, both sides
+    mean = hit_emission(world_triangles(flat), material_table(flat)[3], tri, u, v)
+    np.testing.assert_allclose(mean[0], mean[1])
+
+
+def test_probe_rays_see_the_base_color_per_texel():
+    """probes.bake.hit_radiance reflects the light by the Base Color texel the ray lands on
+    (as the gathers' bounce hits), not the material's mean colour."""
+    import dataclasses
+
+    from voxgi.voxgi_addon.probes.bake import hit_radiance
+    from voxgi.voxgi_addon.scene.raycast import closest_hits
+
+    flat = panel_snapshot(textured=False)  # a uniform panel: the floor's light is symmetric
+    grey = dataclasses.replace(flat.materials[1], base_color_texture=0,
+                               base_color=two_colour_pixels().reshape(-1, 3).mean(axis=0))
+    snapshot = dataclasses.replace(flat, materials=[flat.materials[0], grey])
+    tris = world_triangles(snapshot)
+    origins = np.array([[-1.5, 0.0, 0.5], [1.5, 0.0, 0.5]])
+    down = np.tile([0.0, 0.0, -1.0], (2, 1))
+    t, tri, u, v = closest_hits(tris, origins, down)
+    probe = hit_radiance(snapshot, tris, origins, down, t, tri, u, v, light_samples=16)
+    ratio = probe / np.maximum(probe.sum(axis=1, keepdims=True), 1e-12)
+    light = (RED + BLUE) / 2  # the panel's mean colour, on both sides
+    expected = np.array([RED, BLUE]) * light
+    expected /= expected.sum(axis=1, keepdims=True)
+    np.testing.assert_allclose(ratio, expected, atol=0.02)

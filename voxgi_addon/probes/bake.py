@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import VoxGICancelled, VoxGIError
 from ..gi.direct_light import diffuse_direct
+from ..gi.exact_indirect import hit_emission
 from ..scene.geometry import SceneTriangles, world_triangles
 from .direct import emissive_sides, emitter_probe_sh, world_probe_sh
 from .grid import DISABLED, RELOCATED, ProbeGrid
@@ -127,7 +128,16 @@ def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
     mat = np.asarray(tris.materials, np.int64)[k]
     mat = np.where((mat >= 0) & (mat < m), mat, m)
     arriving = direct + (lookup(cache, points, normal) if cache is not None else 0.0)
-    out[hit] = albedo[mat] * arriving + (emission[mat] if seen_emission else 0.0)
+    colour = albedo[mat]
+    surface = getattr(tris, "textures", None)
+    if surface is not None:  # Base Color per texel (level 0, as the gathers' bounce hits)
+        metallic = np.array([float(getattr(x, "metallic", 0.0)) for x in snapshot.materials] +
+                            [0.0])[mat]
+        base = surface.base_at(k, mat, u[hit], v[hit], colour / np.maximum(
+            1.0 - metallic[:, None], 1e-6))
+        colour = np.clip(base, 0.0, 1.0) * (1.0 - metallic[:, None])
+    glow = hit_emission(tris, emission, k, u[hit], v[hit]) if seen_emission else 0.0
+    out[hit] = colour * arriving + glow  # emission per texel too (exact_indirect.hit_emission)
     return out
 
 
