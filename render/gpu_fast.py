@@ -71,9 +71,10 @@ def _radiance_cache(scene, settings):
 
 
 def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
-                gi_stride, gather_settings, glossy_indirect):
+                gi_stride, gather_settings, glossy_indirect, camera_tris=None):
     """(passes, timings) of Fast quality; ``volume`` a ``GPUVolume`` kept between calls (a new
-    one when None) so that an unchanged octree is not uploaded again."""
+    one when None) so that an unchanged octree is not uploaded again. camera_tris : what the
+    G-buffer draws (None: the scene's triangles; ``transmission.behind_glass`` hides glass)."""
     timings = {}
     t0 = time.perf_counter()
     # the session's GPU scene (gpu_scene.GPUScene, as Accurate's): triangles, BVH, material
@@ -106,7 +107,8 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
         kinds[kind].update(octrees[kind], cones, world=world)
     timings["upload"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    gbuffer = rasterize(tris, snapshot.camera, rough, width, height,
+    gbuffer = rasterize(tris if camera_tris is None else camera_tris, snapshot.camera, rough,
+                        width, height,
                         textures=scene.raster_textures())  # Base Color per texel: seen["base"]
     seen = read_gbuffer(gbuffer)
     hit = np.flatnonzero(seen["hit"].ravel())

@@ -106,15 +106,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
         # glass in view: what is behind it, seen through it (preview.transmission); the
         # viewport's accumulation keeps the behind layer's gathers apart from the front's
         t0 = time.perf_counter()
-
-        def hits_at(offset):
-            seen = read_gbuffer(rasterize(scene.tris, snapshot.camera, scene.rough, width, height,
-                                          offset, shader=raster, textures=scene.raster_textures(),
-                                          filter_width=filter_width))
-            return seen["material"], np.einsum("hwi,hwi->hw", seen["normal"], seen["direction"])
-
-        weight = transmission.glass_weight(snapshot.materials, hits_at, width, height,
-                                           filter_width)
+        weight = _glass_weight(snapshot, scene, raster, width, height, filter_width)
         hook = None if gather_hook is None else \
             (lambda kind, values, variance: gather_hook(f"behind {kind}", values, variance))
         behind, _ = yield from _accurate_stages(
@@ -124,9 +116,30 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
         world = background(snapshot.world, snapshot.camera, width, height, filter_width)
         timings["behind glass"] = time.perf_counter() - t0
         return transmission.composite(front, behind, weight, world), timings
-    return fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
-                       gi_stride, gather_settings or GatherSettings(ao_distance=cones.ao_distance),
-                       glossy_indirect)
+    fast = (snapshot, gi_state, width, height, cones, light_samples, volume, shadows, gi_stride,
+            gather_settings or GatherSettings(ao_distance=cones.ao_distance), glossy_indirect)
+    front, timings = fast_passes(*fast)
+    scene = current_scene(snapshot)
+    glass = transmission.glass_materials(snapshot, scene.tris)
+    if glass is None:
+        return front, timings
+    t0 = time.perf_counter()  # Fast is point-sampled: the glass' weight at pixel centres
+    weight = _glass_weight(snapshot, scene, raster or gbuffer_shader(), width, height, 0.0)
+    behind, _ = fast_passes(*fast, camera_tris=transmission.behind_glass(scene.tris, glass))
+    world = background(snapshot.world, snapshot.camera, width, height, 0.0)
+    timings["behind glass"] = time.perf_counter() - t0
+    return transmission.composite(front, behind, weight, world), timings
+
+
+def _glass_weight(snapshot, scene, raster, width, height, filter_width):
+    """``transmission.glass_weight`` from the G-buffer raster of ``scene``'s triangles."""
+    def hits_at(offset):
+        seen = read_gbuffer(rasterize(scene.tris, snapshot.camera, scene.rough, width, height,
+                                      offset, shader=raster, textures=scene.raster_textures(),
+                                      filter_width=filter_width))
+        return seen["material"], np.einsum("hwi,hwi->hw", seen["normal"], seen["direction"])
+
+    return transmission.glass_weight(snapshot.materials, hits_at, width, height, filter_width)
 
 
 # ---------------------------------------------------------------- Accurate: sub-pixel passes

@@ -766,10 +766,11 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
         return seen.material, np.einsum("hwi,hwi->hw", seen.normal, seen.direction)
 
     from .film import background
-    weight = transmission.glass_weight(snapshot.materials, hits_at, width, height, filter_width)
+    sampled = filter_width if quality == "ACCURATE" else 0.0  # Fast: pixel centres
+    weight = transmission.glass_weight(snapshot.materials, hits_at, width, height, sampled)
     behind, _ = _render_layer(snapshot, tris, transmission.behind_glass(tris, glass), *layer,
                               only=transmission.behind_pixels(weight))
-    world = background(snapshot.world, snapshot.camera, width, height, filter_width)
+    world = background(snapshot.world, snapshot.camera, width, height, sampled)
     timings["behind glass"] = time.perf_counter() - t0
     return transmission.composite(front, behind, weight, world), timings
 
