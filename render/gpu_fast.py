@@ -89,7 +89,8 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     # Bounces > 1 the voxels also reflecting the radiance cache (gi/cone_bounces.py), the
     # cache gathered on the GPU as Accurate's
     t0 = time.perf_counter()
-    octrees = cone_octrees(gi_state, _radiance_cache(scene, fast_cache_settings(gather_settings)))
+    settings = fast_cache_settings(gather_settings, scene.bvh.scene_triangles)
+    octrees = cone_octrees(gi_state, _radiance_cache(scene, settings))
     timings["radiance cache"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     volume = volume or GPUVolume()

@@ -7,7 +7,7 @@ import numpy as np
 from snapshots import MaterialData, mesh, snapshot, translation
 
 from voxgi.voxgi_addon.gi.cone_bounces import (
-    FAST_CACHE_RESOLUTION,
+    FAST_CACHE_RESOLUTIONS,
     bounced_radiance,
     cone_octrees,
     fast_cache_settings,
@@ -99,6 +99,15 @@ def test_a_shadow_view_keeps_its_own_octree():
     assert octrees["diffuse"] is not state.octree
 
 
-def test_fast_takes_the_coarse_cache_where_the_resolution_is_auto():
-    assert fast_cache_settings(GatherSettings(bounces=4)).cache_resolution == FAST_CACHE_RESOLUTION
-    assert fast_cache_settings(GatherSettings(bounces=4, cache_resolution=32)).cache_resolution == 32
+def test_fast_takes_a_coarse_cache_where_the_resolution_is_auto():
+    """Auto: the finest of FAST_CACHE_RESOLUTIONS within Auto's ray budget (never Accurate's
+    64³); a set resolution and one bounce are kept."""
+    snap, _ = box_state()
+    tris = world_triangles(snap)
+    auto = fast_cache_settings(GatherSettings(bounces=4), tris)
+    assert auto.cache_resolution == FAST_CACHE_RESOLUTIONS[0]  # two 4 m planes: few faces
+    assert fast_cache_settings(GatherSettings(bounces=4, cache_resolution=64), tris
+                               ).cache_resolution == 64
+    assert fast_cache_settings(GatherSettings(bounces=1), tris).cache_resolution == 0
+    heavy = fast_cache_settings(GatherSettings(bounces=4, cache_rays=4096), tris)
+    assert heavy.cache_resolution == FAST_CACHE_RESOLUTIONS[-1]  # over the budget: the coarsest

@@ -23,11 +23,11 @@ import dataclasses
 import numpy as np
 
 from .light_injection import InjectedRadiance, voxel_centres
-from .radiance_cache import lookup
+from .radiance_cache import RAYS_PER_ITERATION, build_cache, lookup
 from .ray_views import KINDS, view_octree
 from .svo import build_octree
 
-__all__ = ["FAST_CACHE_RESOLUTION", "LOOKUP_STEPS", "bounced_radiance", "cone_octrees",
+__all__ = ["FAST_CACHE_RESOLUTIONS", "LOOKUP_STEPS", "bounced_radiance", "cone_octrees",
            "fast_cache_settings", "voxel_indirect"]
 
 # Where a voxel reads the cache: at its centre, else (no cache voxel holding the face among
@@ -73,19 +73,27 @@ def voxel_indirect(cascade, cache) -> np.ndarray:
     return out
 
 
-# Fast's cache resolution when the settings say Auto (``GatherSettings.cache_resolution`` 0):
-# the coarsest of ``radiance_cache.AUTO_RESOLUTIONS``. Fast's error is its cones' own: against
-# Cycles' default light paths the four bounce scenes' Combined moved by −0.017 … +0.008 from
-# Accurate's Auto (32³–64³) to 16³, while the cache took 1–4 s instead of 11–22 s (under load).
-FAST_CACHE_RESOLUTION = 16
+# Fast's cache resolutions when the settings say Auto (``GatherSettings.cache_resolution`` 0):
+# the finest of these whose iteration stays within Auto's ray budget
+# (``radiance_cache.RAYS_PER_ITERATION``), the coarsest otherwise — Accurate's Auto without its
+# 64³. Fast's error is its cones' own: against Cycles' default light paths the four bounce
+# scenes' Combined at 32³ is within −0.026 … +0.018 of Accurate's Auto (32³–64³ there) and
+# −0.031 … +0.005 of 16³'s, the cache taking 1.4–3.7 s; 16³ let the thin-wall room's dark side
+# reach 2.3% of the lit side's light (32³: 1.9%; the one-bounce cones 1.3%).
+FAST_CACHE_RESOLUTIONS = (32, 16)
 
 
-def fast_cache_settings(settings):
-    """``settings`` (``preview.gather.GatherSettings``) with Fast's cache resolution where it
-    is Auto (``FAST_CACHE_RESOLUTION``); a set resolution is kept."""
-    if getattr(settings, "cache_resolution", 0):
+def fast_cache_settings(settings, tris):
+    """``settings`` (``preview.gather.GatherSettings``) with Fast's cache resolution for the
+    triangles ``tris`` where it is Auto (``FAST_CACHE_RESOLUTIONS``); a set resolution, or
+    one bounce (no cache), keeps them as they are."""
+    if getattr(settings, "cache_resolution", 0) or settings.bounces <= 1:
         return settings
-    return dataclasses.replace(settings, cache_resolution=FAST_CACHE_RESOLUTION)
+    for resolution in FAST_CACHE_RESOLUTIONS:
+        faces = sum(int(p.sum()) for p in build_cache(tris, resolution).present)
+        if faces * settings.cache_rays <= RAYS_PER_ITERATION:
+            break
+    return dataclasses.replace(settings, cache_resolution=resolution)
 
 
 _HELD: dict = {}

@@ -805,7 +805,8 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         t0 = time.perf_counter()
         octrees = cone_octrees(gi_state, radiance_cache(tris, lights, principled_table(snapshot),
                                                         material_table(snapshot)[3],
-                                                        fast_cache_settings(gather_settings)))
+                                                        fast_cache_settings(gather_settings,
+                                                                            tris)))
         timings["radiance cache"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         direct, per_lamp = fast_direct(octrees["shadow"], seen, gi_stride, hit,
