@@ -10,7 +10,8 @@ import argparse
 import pathlib
 import sys
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+sys.path[:0] = [str(pathlib.Path(__file__).resolve().parent),
+                str(pathlib.Path(__file__).resolve().parents[1])]  # tools/: gi_compare, cycles_passes
 from bench_blender import demo_snapshot, load_addon, median_seconds, print_table  # noqa: E402
 
 
