@@ -187,7 +187,8 @@ class GPUScene:
              np.asarray(a.pose_matrices), np.asarray(a.world_matrix))
             for name, a in sorted(snapshot.armatures.items()))
         textures = (tuple((getattr(m, "base_color_texture", -1), getattr(m, "alpha_texture", -1),
-                           float(getattr(m, "alpha", 1.0)), ray_alpha(m))
+                           float(getattr(m, "alpha", 1.0)),
+                           ray_alpha(m, getattr(snapshot, "refractive_caustics", True)))
                           for m in snapshot.materials),
                     tuple(_texture_key(t) for t in getattr(snapshot, "textures", ())))
         return digest(objects, armatures, textures, tuple(getattr(snapshot, "holdout_materials", ())))

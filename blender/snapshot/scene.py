@@ -302,6 +302,8 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
         warnings=tuple(warnings),
         holdout_materials=tuple(sorted(holdouts.values())),
         film_transparent=bool(scene.render.film_transparent),
+        refractive_caustics=bool(getattr(getattr(scene, "cycles", None), "caustics_refractive",
+                                         True)),
     )
 
 

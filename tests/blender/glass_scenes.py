@@ -8,7 +8,8 @@ Principled BSDF at Transmission Weight 1, Roughness 0 and Blender's default IOR:
 Base Color), one tinted green. Cycles renders the wall and the block through the panes, a little
 dimmed by the glass' Fresnel reflection, the green pane tinting them; a one-bounce reference has
 no transmission bounce, so the references are made at Cycles' default light paths
-(tools/make_glass_references.py). Built from code, deterministic, background-safe.
+(tools/make_glass_references.py). ``glass_panes_no_caustics``: the same with Refractive
+Caustics off. Built from code, deterministic, background-safe.
 """
 from __future__ import annotations
 
@@ -61,7 +62,15 @@ def build_glass_panes(scene):
     gi_scenes._finish(scene, {})
 
 
-SCENES = {"glass_panes": build_glass_panes}
+def build_glass_panes_no_caustics(scene):
+    """``glass_panes`` with Cycles' Light Paths › Caustics › Refractive off: no light reaches
+    a diffuse surface through glass, so the panes cast full shadows."""
+    build_glass_panes(scene)
+    scene.cycles.caustics_refractive = False
+
+
+SCENES = {"glass_panes": build_glass_panes,
+          "glass_panes_no_caustics": build_glass_panes_no_caustics}
 
 
 def build(name, scene=None):

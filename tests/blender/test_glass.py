@@ -19,10 +19,10 @@ def relative_l1(ours, reference, mask):
     return float(np.abs(ours[mask] - reference[mask]).sum() / max(np.abs(reference[mask]).sum(), 1e-12))
 
 
-def build(bounces="CYCLES"):
+def build(bounces="CYCLES", name="glass_panes"):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
-    glass_scenes.build("glass_panes", scene)
+    glass_scenes.build(name, scene)
     scene.voxgi.bounce_source = bounces
     if bounces == "MANUAL":
         scene.voxgi.bounces = 1
@@ -146,3 +146,25 @@ def test_fast_quality_sees_through_glass(voxgi):
     ratio = gpu["Combined"][panes].mean(axis=0) / combined[panes].mean(axis=0)
     print("Fast, through the panes vs Cycles:", ratio.round(3))
     assert np.all((ratio > 0.7) & (ratio < 1.4)), (ratio, lines)
+
+
+def test_without_refractive_caustics_glass_stops_the_light(voxgi):
+    """Cycles' Light Paths › Caustics › Refractive off: no light reaches a diffuse surface
+    through glass (its shadow rays stop there, and its paths may not pass glass after a diffuse
+    bounce), so the panes cast full shadows — the preview follows the setting as it follows
+    the bounces (SceneSnapshot.refractive_caustics)."""
+    name = "glass_panes_no_caustics"
+    scene = build(name=name)
+    off, lines = preview(scene)
+    reference = np.load(REFS / f"{name}.npz")
+    limits = json.loads((REFS / "limits.json").read_text())[name]
+    alpha = reference["Alpha"].astype(np.float64) > 0.5
+    errors = {k: relative_l1(off[k], reference[k].astype(np.float64), alpha) for k in limits}
+    print(f"{name} vs Cycles:", {k: round(v, 4) for k, v in errors.items()})
+    for k, limit in limits.items():
+        assert errors[k] <= limit, (k, errors, lines)
+    scene.cycles.caustics_refractive = True  # the same scene with the setting on
+    on, _ = preview(scene)
+    darker = off["Combined"].sum() / on["Combined"].sum()
+    print(f"whole image, caustics off / on: {darker:.3f}")
+    assert darker < 0.95

@@ -19,7 +19,9 @@ voxelizer's coverage — meets it as a cut-out whose Alpha is lowered by the sha
 through at normal incidence, the tint's mean (``ray_alpha``): rays pass it in that proportion,
 as they pass alpha cut-outs (``textures.cutout_hits``). Cycles itself reaches lights through
 glass only by caustic paths (its shadow rays stop at glass); at its default Light Paths
-(Caustics on, Filter Glossy 1) those carry about the same light, noisily.
+(Caustics on, Filter Glossy 1) those carry light through, noisily (about half the sun's for
+a clear pane: docs/gi_pipeline.md "Thin glass"). With Refractive Caustics off they do not,
+and neither do these rays.
 """
 from __future__ import annotations
 
@@ -61,12 +63,14 @@ def is_glass(material) -> bool:
     return bool(transmission_of(material).max() > 0.0)
 
 
-def ray_alpha(material) -> float:
+def ray_alpha(material, caustics: bool = True) -> float:
     """The Alpha shadow, bounce and voxel rays meet on ``material``: its own Alpha × (1 − the
-    share of light its glass passes at normal incidence, the tint's mean)."""
+    share of light its glass passes at normal incidence, the tint's mean). caustics : Cycles'
+    Refractive Caustics (``SceneSnapshot.refractive_caustics``); off, Cycles' paths do not pass
+    glass after a diffuse bounce, and shadow rays never do: glass stops them (its own Alpha)."""
     alpha = float(np.clip(float(getattr(material, "alpha", 1.0)), 0.0, 1.0))
     through = transmission_of(material)
-    if through.max() <= 0.0:
+    if through.max() <= 0.0 or not caustics:
         return alpha
     passed = float(through.mean() * slab_transmittance(1.0, getattr(material, "ior", 1.5)))
     return alpha * float(np.clip(1.0 - passed, 0.0, 1.0))

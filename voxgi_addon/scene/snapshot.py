@@ -253,6 +253,8 @@ class SceneSnapshot:
     camera ray that meets one sees nothing, as at a holdout object).
     film_transparent : Render › Film › Transparent (``preview.film``: alpha instead of the
     world behind the geometry).
+    refractive_caustics : Cycles' Light Paths › Caustics › Refractive: light reaches diffuse
+    surfaces through glass (``scene.glass.ray_alpha``); off, glass stops it, as in Cycles.
     """
 
     meshes: dict[str, MeshData]
@@ -267,3 +269,4 @@ class SceneSnapshot:
     textures: tuple[TextureData, ...] = ()
     holdout_materials: tuple[int, ...] = ()
     film_transparent: bool = False  # Film › Transparent: no world behind the geometry
+    refractive_caustics: bool = True  # Cycles' Caustics › Refractive: light through glass

@@ -408,6 +408,7 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
     alpha_slots = np.full(count, -1, np.int32)
     alpha_values = np.ones(count, np.float32)
     camera_alpha = np.ones(count, np.float32)
+    caustics = bool(getattr(snapshot, "refractive_caustics", True))
     param_slots = np.full(count, -1, np.int32)
     variants = np.full(count, -1, np.int64)
     normal_slots = np.full(count, -1, np.int32)
@@ -436,7 +437,7 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
         alpha_values[i] = np.clip(float(getattr(m, "alpha", 1.0)), 0.0, 1.0)
         camera_alpha[i] = alpha_values[i]
         if alpha_slots[i] < 0:  # glass lets rays through (an alpha texture's glass: not yet)
-            alpha_values[i] = ray_alpha(m)
+            alpha_values[i] = ray_alpha(m, caustics)
     transparent = (alpha_slots >= 0) | (alpha_values < 1.0)
     if not (slots >= 0).any() and not transparent.any() and not (param_slots >= 0).any() and \
             not (normal_slots >= 0).any() and not (emission_slots >= 0).any():

@@ -218,7 +218,8 @@ def texel_alpha(snapshot: SceneSnapshot, mesh: MeshData, positions, keep=None):
     values = np.ones(count + 1)
     slots = np.full(count + 1, -1, np.int64)
     for i, m in enumerate(snapshot.materials):
-        values[i] = ray_alpha(m)  # glass lets the cones through as other rays (scene.glass)
+        # glass lets the cones through as other rays (scene.glass)
+        values[i] = ray_alpha(m, bool(getattr(snapshot, "refractive_caustics", True)))
         index = int(getattr(m, "alpha_texture", -1))
         if 0 <= index < len(textures) and mesh.uvs is not None:
             slots[i] = index
