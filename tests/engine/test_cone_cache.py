@@ -24,7 +24,7 @@ SUN = LightData("Sun", "SUN", np.ones(3, np.float32), 3.0, np.eye(4))  # straigh
 ALBEDO = 0.6
 
 
-def box_state(roof_visibility=RAY_ALL):
+def box_scene(roof_visibility=RAY_ALL):
     """A floor and a roof 1 m above it (the roof's underside faces the floor), a sun above."""
     floor = ([(-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0)], [(0, 1, 2), (0, 2, 3)])
     roof = ([(-2, -2, 1), (2, -2, 1), (2, 2, 1), (-2, 2, 1)], [(0, 2, 1), (0, 3, 2)])
@@ -34,7 +34,11 @@ def box_state(roof_visibility=RAY_ALL):
     objects = [dataclasses.replace(o, visibility=roof_visibility) if o.name == "Roof" else o
                for o in snap.objects]
     snap = dataclasses.replace(snap, objects=objects, lights=[SUN])
-    caches = build_scene_caches(snap, 0.0625, 2)
+    return snap, build_scene_caches(snap, 0.0625, 2)
+
+
+def box_state(roof_visibility=RAY_ALL):
+    snap, caches = box_scene(roof_visibility)
     return snap, update_gi(snap, caches, GISettings(resolution=64), anchor=np.zeros(3))
 
 
@@ -68,12 +72,16 @@ def test_diffuse_cones_see_the_cached_light_and_shadow_cones_the_same_occluders(
     """Under the roof a floor point's diffuse cones see the roof's underside (lit by nothing
     but the floor's light: 0 direct); with the cache's light E/π = c on it they see ≈ albedo ×
     c × the share of the hemisphere the roof covers. Shadow cones are unchanged."""
-    snap, state = box_state()
+    snap, caches = box_scene()
+    state = update_gi(snap, caches, GISettings(resolution=64), anchor=np.zeros(3))
     cache = uniform_cache(snap, 0.5)
     octrees = cone_octrees(state, cache)
     assert octrees["diffuse"] is not state.octree and octrees["glossy"] is octrees["diffuse"]
     assert octrees["shadow"] is octrees["diffuse"]  # the same voxels: one octree
     assert cone_octrees(state, cache) is octrees  # kept for the same update and cache
+    again = update_gi(snap, caches, GISettings(resolution=64), anchor=np.zeros(3),
+                      previous=state)
+    assert again.reused == "all" and cone_octrees(again, cache) is octrees  # same octrees
     points = np.c_[np.linspace(-0.3, 0.3, 5), np.zeros(5), np.zeros(5)]
     normals = np.tile([0.0, 0.0, 1.0], (5, 1))
     cones = ConeSettings()

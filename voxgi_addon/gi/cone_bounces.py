@@ -13,8 +13,8 @@ and numpy and the GPU trace the same octree. Shadow cones read occlusion only: t
 is left as it is.
 
 ``cone_octrees`` gives the octree of each kind of cone (``ray_views``) for one update and one
-cache, built once and kept while both are the same objects (one render's passes, and the next
-render of an unchanged scene).
+cache, built once and kept while the update's octrees and the cache are the same objects (one
+render's passes, and the next render of an unchanged scene).
 """
 from __future__ import annotations
 
@@ -103,13 +103,15 @@ def cone_octrees(state, cache) -> dict:
     """{kind: octree} of ``ray_views.KINDS`` for the update ``state`` (``update.GIState``): the
     update's own octrees when ``cache`` is None (one bounce), else the diffuse and glossy ones
     rebuilt from ``bounced_radiance`` with the update's octree settings (kinds that share an
-    octree share the rebuilt one). The last result is kept for the same state and cache."""
+    octree share the rebuilt one). The last result is kept for the same octrees and cache."""
     own = {kind: view_octree(state, kind) for kind in KINDS}
     if cache is None:
         return own
+    # an update that reused everything is a new state holding the same octrees
+    key = (*own.values(), cache)
     held = _HELD.get("entry")
-    if held is not None and held[0] is state and held[1] is cache:
-        return held[2]
+    if held is not None and len(held[0]) == len(key) and all(a is b for a, b in zip(held[0], key)):
+        return held[1]
     one_sided = getattr(getattr(state, "settings", None), "one_sided_leaves", True)
     views = getattr(state, "ray_views", None) or {}
     rebuilt: dict = {}
@@ -125,5 +127,5 @@ def cone_octrees(state, cache) -> dict:
             rebuilt[id(octree)] = build_octree(cascades, bounced_radiance(cascades, radiance, cache),
                                                octree.dense_depth, one_sided_leaves=one_sided)
         out[kind] = rebuilt[id(octree)]
-    _HELD["entry"] = (state, cache, out)
+    _HELD["entry"] = (key, out)
     return out
