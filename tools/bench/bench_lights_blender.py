@@ -51,6 +51,7 @@ def main(argv=None) -> int:
         bpy.ops.wm.read_factory_settings(use_empty=True)
         scene = bpy.context.scene
         light_scenes.build(name, scene)
+        scene.voxgi.bounce_source, scene.voxgi.bounces = "MANUAL", 1  # one-bounce references
         with np.load(ROOT / "tests" / "data" / "light_refs" / f"{name}.npz") as data:
             reference = data["Combined"].astype(np.float64)
             mask = data["Alpha"].astype(np.float64) > 0.5
