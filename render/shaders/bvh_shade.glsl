@@ -69,6 +69,19 @@ vec3 cache_indirect(vec3 x, vec3 n)
   return vec3(0.0);
 }
 
+/* The surface UV at barycentrics `uv` of `triangle` (a SceneTriangles index): its corner UVs,
+ * 2 texels per triangle index in texture_table's rows from the one its last texel of row 0
+ * names (gpu_scene._update_textures). */
+vec2 triangle_uv(int triangle, vec2 uv)
+{
+  int k = 2 * triangle;
+  int row = int(texelFetch(texture_table, ivec2(BVH_WIDTH - 1, 0), 0).x + 0.5);
+  vec4 c01 = texelFetch(texture_table, ivec2(k & (BVH_WIDTH - 1), row + (k >> BVH_WIDTH_LOG2)), 0);
+  vec4 c2 = texelFetch(texture_table,
+                       ivec2((k + 1) & (BVH_WIDTH - 1), row + ((k + 1) >> BVH_WIDTH_LOG2)), 0);
+  return (1.0 - uv.x - uv.y) * c01.xy + uv.x * c01.zw + uv.y * c2.xy;
+}
+
 /* The emission where a ray hits `triangle` of `material` at barycentrics `uv`: per texel
  * (level 0, as the Base Color at bounce hits) where the material has an Emission Color texture
  * (materials row 4: (slot, Strength); textures.SurfaceTextures.emission_at), else its value
@@ -79,13 +92,8 @@ vec3 hit_emission(int material, int triangle, vec2 uv)
   if (glow.x < -0.5) {
     return texelFetch(materials, ivec2(material, 1), 0).rgb;
   }
-  int k = 2 * triangle;
-  int row = int(texelFetch(texture_table, ivec2(BVH_WIDTH - 1, 0), 0).x + 0.5);
-  vec4 c01 = texelFetch(texture_table, ivec2(k & (BVH_WIDTH - 1), row + (k >> BVH_WIDTH_LOG2)), 0);
-  vec4 c2 = texelFetch(texture_table,
-                       ivec2((k + 1) & (BVH_WIDTH - 1), row + ((k + 1) >> BVH_WIDTH_LOG2)), 0);
-  vec2 at = (1.0 - uv.x - uv.y) * c01.xy + uv.x * c01.zw + uv.y * c2.xy;
-  return max(surface_texture(int(glow.x + 0.5), at, 0.0), vec3(0.0)) * glow.y;
+  return max(surface_texture(int(glow.x + 0.5), triangle_uv(triangle, uv), 0.0), vec3(0.0)) *
+         glow.y;
 }
 
 vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
@@ -113,14 +121,7 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
    * (.y, .z) = (parameter texture, first variant), -1 none */
   vec4 variant = texelFetch(materials, ivec2(material, 3), 0);
   if (variant.y > -0.5) {
-    int k = 2 * triangle;
-    int row = int(texelFetch(texture_table, ivec2(BVH_WIDTH - 1, 0), 0).x + 0.5);
-    vec4 c01 = texelFetch(texture_table,
-                          ivec2(k & (BVH_WIDTH - 1), row + (k >> BVH_WIDTH_LOG2)), 0);
-    vec4 c2 = texelFetch(texture_table,
-                         ivec2((k + 1) & (BVH_WIDTH - 1), row + ((k + 1) >> BVH_WIDTH_LOG2)), 0);
-    vec4 p = surface_texel(int(variant.y + 0.5),
-                           (1.0 - uv.x - uv.y) * c01.xy + uv.x * c01.zw + uv.y * c2.xy);
+    vec4 p = surface_texel(int(variant.y + 0.5), triangle_uv(triangle, uv));
     float r = roundEven(clamp(p.x, 0.0, 1.0) * float(ROUGHNESS_LEVELS - 1));
     float m = roundEven(clamp(p.y, 0.0, 1.0) * float(METALLIC_LEVELS - 1));
     material = int(variant.z + 0.5) + int(m) * ROUGHNESS_LEVELS + int(r);
@@ -128,19 +129,10 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
   vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
   vec3 emission = glow;
   vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
-  /* Base Color per texel (textures.glsl; level 0, as exact_indirect.ray_radiance): the
-   * hit's UV from its triangle's corner UVs, 2 texels per triangle index in texture_table's
-   * rows from the one its last texel of row 0 names (gpu_scene._update_textures) */
+  /* Base Color per texel (textures.glsl; level 0, as exact_indirect.ray_radiance) */
   int texture_slot = int(texelFetch(materials, ivec2(material, 3), 0).x);
   if (texture_slot >= 0) {
-    int k = 2 * triangle;
-    int row = int(texelFetch(texture_table, ivec2(BVH_WIDTH - 1, 0), 0).x + 0.5);
-    vec4 c01 = texelFetch(texture_table,
-                          ivec2(k & (BVH_WIDTH - 1), row + (k >> BVH_WIDTH_LOG2)), 0);
-    vec4 c2 = texelFetch(texture_table,
-                         ivec2((k + 1) & (BVH_WIDTH - 1), row + ((k + 1) >> BVH_WIDTH_LOG2)), 0);
-    vec2 at = (1.0 - uv.x - uv.y) * c01.xy + uv.x * c01.zw + uv.y * c2.xy;
-    base = clamp(surface_texture(texture_slot, at, 0.0), 0.0, 1.0);
+    base = clamp(surface_texture(texture_slot, triangle_uv(triangle, uv), 0.0), 0.0, 1.0);
   }
   /* The Principled diffuse weight seen from the receiver (docs/gi_pipeline.md "The Accurate
    * integrator"). */
