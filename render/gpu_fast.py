@@ -70,11 +70,17 @@ def _radiance_cache(scene, settings):
     return held[2]
 
 
+_BUILD = object()  # fast_passes' radiance: build (or keep) the whole cache here
+
+
 def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
-                gi_stride, gather_settings, glossy_indirect, camera_tris=None):
+                gi_stride, gather_settings, glossy_indirect, camera_tris=None, radiance=_BUILD):
     """(passes, timings) of Fast quality; ``volume`` a ``GPUVolume`` kept between calls (a new
     one when None) so that an unchanged octree is not uploaded again. camera_tris : what the
-    G-buffer draws (None: the scene's triangles; ``transmission.behind_glass`` hides glass)."""
+    G-buffer draws (None: the scene's triangles; ``transmission.behind_glass`` hides glass).
+    radiance : the radiance cache the voxels reflect at Bounces > 1 — by default built whole
+    here (F12); the viewport passes its ``ViewportCache``'s last complete one (None: one
+    bounce until there is one)."""
     timings = {}
     t0 = time.perf_counter()
     # the session's GPU scene (gpu_scene.GPUScene, as Accurate's): triangles, BVH, material
@@ -89,8 +95,10 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     # Bounces > 1 the voxels also reflecting the radiance cache (gi/cone_bounces.py), the
     # cache gathered on the GPU as Accurate's
     t0 = time.perf_counter()
-    settings = fast_cache_settings(gather_settings, scene.bvh.scene_triangles)
-    octrees = cone_octrees(gi_state, _radiance_cache(scene, settings))
+    if radiance is _BUILD:
+        radiance = _radiance_cache(scene, fast_cache_settings(gather_settings,
+                                                              scene.bvh.scene_triangles))
+    octrees = cone_octrees(gi_state, radiance)
     timings["radiance cache"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     volume = volume or GPUVolume()

@@ -18,6 +18,7 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
+from ..voxgi_addon.gi.cone_bounces import fast_cache_settings
 from ..voxgi_addon.preview import transmission
 from ..voxgi_addon.preview.film import background
 from ..voxgi_addon.preview.gather import GatherSettings
@@ -116,16 +117,27 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
         world = background(snapshot.world, snapshot.camera, width, height, filter_width)
         timings["behind glass"] = time.perf_counter() - t0
         return transmission.composite(front, behind, weight, world), timings
+    gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
     fast = (snapshot, gi_state, width, height, cones, light_samples, volume, shadows, gi_stride,
-            gather_settings or GatherSettings(ao_distance=cones.ao_distance), glossy_indirect)
-    front, timings = fast_passes(*fast)
+            gather_settings, glossy_indirect)
+    given = {}
+    if cache_source is not None and gather_settings.bounces > 1:
+        # the viewport: its cache built a stage at a time, the last complete one reflected
+        # meanwhile (one bounce before the first), never the whole build in one draw
+        scene = current_scene(snapshot)
+        settings = fast_cache_settings(gather_settings, scene.bvh.scene_triangles)
+        texture = yield from cache_source.stage(scene.bvh, scene.lights, scene.principled,
+                                                scene.emission, settings, scene.gather_tables())
+        given["radiance"] = cache_source.cache if texture is not None else None
+    front, timings = fast_passes(*fast, **given)
     scene = current_scene(snapshot)
     glass = transmission.glass_materials(snapshot, scene.tris)
     if glass is None:
         return front, timings
     t0 = time.perf_counter()  # Fast is point-sampled: the glass' weight at pixel centres
     weight = _glass_weight(snapshot, scene, raster or gbuffer_shader(), width, height, 0.0)
-    behind, _ = fast_passes(*fast, camera_tris=transmission.behind_glass(scene.tris, glass))
+    behind, _ = fast_passes(*fast, camera_tris=transmission.behind_glass(scene.tris, glass),
+                            **given)
     world = background(snapshot.world, snapshot.camera, width, height, 0.0)
     timings["behind glass"] = time.perf_counter() - t0
     return transmission.composite(front, behind, weight, world), timings

@@ -27,6 +27,7 @@ class ViewportCache:
     def __init__(self, budget: float = STAGE_SECONDS):
         self.budget = budget
         self.texture = None    # the last complete cache's texture
+        self.cache = None      # ... and its RadianceCache (Fast's voxels reflect it)
         self.key = None        # what it was built for
         self.building = None   # (key, generator) of the build under way
         self.generation = 0
@@ -63,7 +64,7 @@ class ViewportCache:
         try:
             next(stages)
         except StopIteration as end:
-            _, self.texture = end.value
+            self.cache, self.texture = end.value
             self.key, self.building = key, None
             self.generation += 1
             return True

@@ -19,6 +19,7 @@ render's passes, and the next render of an unchanged scene).
 from __future__ import annotations
 
 import dataclasses
+import weakref
 
 import numpy as np
 
@@ -89,11 +90,16 @@ def fast_cache_settings(settings, tris):
     one bounce (no cache), keeps them as they are."""
     if getattr(settings, "cache_resolution", 0) or settings.bounces <= 1:
         return settings
+    counts = _FACE_COUNTS.setdefault(tris, {})  # kept per triangles: the viewport asks per slice
     for resolution in FAST_CACHE_RESOLUTIONS:
-        faces = sum(int(p.sum()) for p in build_cache(tris, resolution).present)
-        if faces * settings.cache_rays <= RAYS_PER_ITERATION:
+        if resolution not in counts:
+            counts[resolution] = sum(int(p.sum()) for p in build_cache(tris, resolution).present)
+        if counts[resolution] * settings.cache_rays <= RAYS_PER_ITERATION:
             break
     return dataclasses.replace(settings, cache_resolution=resolution)
+
+
+_FACE_COUNTS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 _HELD: dict = {}
