@@ -103,9 +103,16 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     t0 = time.perf_counter()
     volume = volume or GPUVolume()
     world = world_mips(getattr(snapshot.world, "radiance", None))
+    views = _view_volumes.setdefault(volume, {})
+    if octrees["diffuse"] is not getattr(gi_state, "octree", None):
+        # rebuilt with the cache's bounces: its own volume, so that the caller's keeps the
+        # update's octree (the viewport uploads that one between its slices) and neither is
+        # uploaded again at every call
+        volume = views.setdefault("bounced", GPUVolume())
+    else:
+        views.pop("bounced", None)
     volume.update(octrees["diffuse"], cones, world=world)
     # the glossy and shadow cones' octrees are uploaded beside the diffuse one where they differ
-    views = _view_volumes.setdefault(volume, {})
     kinds = {}
     for kind in ("glossy", "shadow"):
         if octrees[kind] is octrees["diffuse"]:
