@@ -98,6 +98,6 @@ def test_what_the_preview_leaves_out_is_said_once(voxgi, tmp_path):
                                         resolution_y=24) == {"FINISHED"}
     warnings = [line for level, line in scene_session(scene.name_full).last_report
                 if level == "WARNING"]
-    said = [w for w in warnings if "Glass" in w and "transmission" in w]
+    said = [w for w in warnings if "Glass" in w and "thin surface" in w]
     assert len(said) == 1
     assert any("Hair" in w and "hair curves" in w for w in warnings)
