@@ -48,24 +48,29 @@ def render(scene, samples, seed, denoise=False):
     return passes, cycles_passes.last_render_seconds()
 
 
-def main(argv=None):
-    load_addon()
-    import bounce_scenes
+def make_references(argv, scenes, out_name: str, render, checked, light_paths, description,
+                    samples: int = 2048):
+    """The command line of a default-light-path reference maker: build each scene of the test
+    module ``scenes`` (its SCENES, build, WIDTH, HEIGHT), store ``render``'s reference
+    (``render(scene, samples, seed, denoise=False)`` → (passes, seconds)) in
+    tests/data/``out_name``/<scene>.npz and, in cycles_spp.json there, its time, the light paths
+    it used (``light_paths(scene)`` → dict) and the relative L1 of the ``checked`` passes of
+    Cycles 16 spp + OIDN and 64 spp (another seed)."""
     import bpy
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", nargs="*", default=list(bounce_scenes.SCENES))
-    parser.add_argument("--samples", type=int, default=2048)
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--scenes", nargs="*", default=list(scenes.SCENES))
+    parser.add_argument("--samples", type=int, default=samples)
     parser.add_argument("--no-checks", action="store_true", help="skip 16 + OIDN and 64 spp")
-    parser.add_argument("--out", type=pathlib.Path,
-                        default=REPO_ROOT / "tests" / "data" / "bounce_refs")
+    parser.add_argument("--out", type=pathlib.Path, default=REPO_ROOT / "tests" / "data" / out_name)
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     summary_path = args.out / "cycles_spp.json"
     for name in args.scenes:
         bpy.ops.wm.read_factory_settings(use_empty=True)
         scene = bpy.context.scene
-        bounce_scenes.build(name, scene)
+        scenes.build(name, scene)
+        paths = light_paths(scene)
         reference, seconds = render(scene, args.samples, seed=0)
         stored = {n: reference[n].astype(np.float16) for n in STORED_LIGHT}
         stored["Alpha"] = reference["Alpha"].astype(np.float16)
@@ -75,18 +80,27 @@ def main(argv=None):
               f"({path.stat().st_size / 1024:.0f} KB)", flush=True)
         mask = reference["Alpha"] > 0.5
         checks = {}
-        for label, samples, denoise in (() if args.no_checks else
-                                        (("16+OIDN", 16, True), ("64", 64, False))):
-            passes, t = render(scene, samples, seed=1, denoise=denoise)
+        for label, count, denoise in (() if args.no_checks else
+                                      (("16+OIDN", 16, True), ("64", 64, False))):
+            passes, t = render(scene, count, seed=1, denoise=denoise)
             checks[label] = {"seconds": round(t, 2), "relative_l1": {
-                n: round(relative_l1(passes[n], reference[n], mask), 4) for n in CHECKED}}
+                n: round(relative_l1(passes[n], reference[n], mask), 4) for n in checked}}
         summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
         summary[name] = {"reference_samples": args.samples, "reference_seconds": round(seconds, 2),
-                         "light_paths": {"total": MAX_BOUNCES, "diffuse": DIFFUSE_BOUNCES,
-                                         "glossy": GLOSSY_BOUNCES},
-                         "size": [bounce_scenes.WIDTH, bounce_scenes.HEIGHT], "checks": checks}
+                         "light_paths": paths, "size": [scenes.WIDTH, scenes.HEIGHT],
+                         "checks": checks}
         summary_path.write_text(json.dumps(summary, indent=1, sort_keys=True) + "\n")
         print(f"  {checks}", flush=True)
+
+
+def main(argv=None):
+    load_addon()
+    import bounce_scenes
+
+    make_references(argv, bounce_scenes, "bounce_refs", render, CHECKED,
+                    lambda scene: {"total": MAX_BOUNCES, "diffuse": DIFFUSE_BOUNCES,
+                                   "glossy": GLOSSY_BOUNCES},
+                    __doc__.splitlines()[0])
 
 
 if __name__ == "__main__":
