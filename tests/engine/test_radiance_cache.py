@@ -212,3 +212,22 @@ def test_auto_resolution_keeps_an_iteration_within_half_a_gather():
             finer = rc.build_cache(tris, 2 * res)
             assert sum(int(p.sum()) for p in finer.present) * rays > rc.RAYS_PER_ITERATION
     assert rc.build_cache(tris, 0, rays=10 ** 6).grids[0].resolution == min(rc.AUTO_RESOLUTIONS)
+
+
+def test_rays_traced_once_give_every_iteration():
+    """``cached_cache`` traces the faces' rays once and relaxes the cache over their hits
+    (``relax``): the same cache, bounce by bounce, as tracing every iteration again
+    (``iterate``), for plain albedo and for the Principled pair (whose glossy albedo reflects
+    the cached light too)."""
+    tris, lights, albedo, emission = lit_room()
+    principled = (albedo, np.tile([[0.0, 0.5, 0.4]], (len(albedo), 1)))
+    for materials in (albedo, principled):
+        traced = rc.build_cache(tris, 8)
+        for _ in range(3):
+            traced = rc.iterate(traced, tris, lights, materials, emission, rays=8)
+        kept = rc.cached_cache(tris, lights, materials, emission, 4, rays=8, resolution=8)
+        assert kept.iterations == traced.iterations == 3
+        assert np.abs(kept.faces[0]).max() > 0.01
+        np.testing.assert_allclose(kept.faces[0], traced.faces[0], rtol=1e-5, atol=1e-7)
+        once = rc.face_paths(kept, tris, lights, materials, emission, rays=8)
+        assert len(once.radiance) == 8 * sum(int(p.sum()) for p in kept.present)

@@ -25,7 +25,7 @@ scenes have black worlds, where both agree).
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -36,7 +36,8 @@ from .principled import diffuse_weight, glossy_color, glossy_reflectance
 from .radiance_cache import lookup
 from .sampling import hammersley, perpendicular_basis
 
-__all__ = ["RAY_STREAM", "SURFACE_EPSILON", "cosine_directions", "indirect_and_ao", "ray_radiance"]
+__all__ = ["RAY_STREAM", "SURFACE_EPSILON", "RayPaths", "cosine_directions", "gather_rays",
+           "indirect_and_ao", "ray_paths", "ray_radiance"]
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 weights of R, G, B
 RAY_STREAM = 0x5EED   # hash stream of the diffuse rays' rotation
@@ -84,19 +85,39 @@ def hit_emission(tris, emission, triangles, b1, b2) -> np.ndarray:
     return out
 
 
-def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
-                 world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
-                 emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, cache=None):
-    """((K, 3) radiance arriving back along each ray, (K,) distance of its nearest hit, inf on
-    a miss): what a bounce ray of the gathers sees — ``world`` on a miss, else the hit's
-    emission plus its exact direct light reflected toward the ray's origin (see
-    ``indirect_and_ao``; ``hit_ids`` (K,) uint32 are the hits' light-sample ids). ray : the
-    kind of ray (``snapshot.RAY_DIFFUSE`` / ``RAY_GLOSSY``: the triangles it sees).
-    cache : a ``radiance_cache.RadianceCache`` (None: none): the hit also reflects the indirect
-    light the cache holds at it (bounces beyond the first) by its diffuse weight and, taking
-    that light as uniform over the hemisphere, its glossy lobes' albedo (Cycles' Glossy Color):
-    the paths that bounce glossily in between (Cycles' default light paths allow 4 glossy
-    bounces)."""
+@dataclass(frozen=True, eq=False)
+class RayPaths:
+    """What bounce rays see, apart from the radiance cache (``ray_paths``). radiance : (K, 3)
+    ``world`` on a miss, else the hit's emission plus its exact direct light reflected toward
+    the ray's origin; distance : (K,) of the nearest hit, inf on a miss; hit : (H,) the rays
+    that hit; points, normals : (H, 3) their hit points and shading normals (turned toward the
+    origin); weight : (H, 3) what each hit reflects toward the origin of light arriving
+    uniformly: its diffuse weight plus, Principled, its glossy lobes' albedo (Cycles' Glossy
+    Color), else its albedo. What a ray returns with a cache is linear in it (``with_cache``),
+    so the radiance cache traces its rays once and iterates by lookups alone
+    (``radiance_cache.relax``)."""
+
+    radiance: np.ndarray
+    distance: np.ndarray
+    hit: np.ndarray
+    points: np.ndarray
+    normals: np.ndarray
+    weight: np.ndarray
+
+    def with_cache(self, cache) -> np.ndarray:
+        """(K, 3) float64: the radiance with the hits also reflecting the indirect light
+        ``cache`` holds at them (None or an empty cache: ``radiance``)."""
+        out = self.radiance.copy()
+        if cache is not None and cache.iterations and len(self.hit):
+            out[self.hit] += self.weight * lookup(cache, self.points, self.normals)
+        return out
+
+
+def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
+              world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
+              emission_seen: bool | None = None, ray: int = RAY_DIFFUSE) -> RayPaths:
+    """The ``RayPaths`` of bounce rays (``ray_radiance`` without a cache, plus what a cache
+    would add to: the hits, their normals and weights)."""
     t, tri, u, v = closest_hits(tris, origins, dirs, 0.0, np.inf, ray)
     radiance = np.tile(np.asarray(world, dtype=np.float64), (len(dirs), 1))
     # With the emissive triangles among the lights their light reaches the origin as direct
@@ -105,6 +126,7 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
     if emission_seen is None:
         emission_seen = not any(light.type == "EMITTERS" for light in lights)
     hit = np.flatnonzero(tri >= 0)
+    x = ns = weight = np.zeros((0, 3))
     if len(hit):
         x = origins[hit] + t[hit, None] * dirs[hit]
         ns = _hit_normals(tris, tri[hit], u[hit], v[hit], dirs[hit])
@@ -139,14 +161,13 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
         # the emission per texel where the material has an emission texture (level 0)
         radiance[hit] = hit_emission(tris, emission, tri[hit], u[hit], v[hit]) \
             if emission_seen else 0.0
-        # the light of the later bounces arriving at the hit (0 without a cache)
-        cached = lookup(cache, x, ns) if cache is not None else 0.0
-        arriving = lit.sum(axis=0) + cached
+        arriving = lit.sum(axis=0)
         if principled:
             mu = np.clip(-np.einsum("ij,ij->i", ns, dirs[hit]), 0.0, 1.0)
-            radiance[hit] += diffuse_weight(*shading, mu) * arriving
-            if cache is not None:  # the glossy lobe's albedo reflects it too (as if uniform)
-                radiance[hit] += glossy_color(*shading, mu) * cached
+            diffuse = diffuse_weight(*shading, mu)
+            radiance[hit] += diffuse * arriving
+            # uniform light (the cache's) is also reflected by the glossy lobe's albedo
+            weight = diffuse + glossy_color(*shading, mu)
             if reflect is not None:
                 radiance[hit] += reflected.sum(axis=0)
             for direct, towards in zip(lit if hit_glossy else (), light_directions(lights, x)):
@@ -155,8 +176,41 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
                     glossy_reflectance(*shading, ns, -dirs[hit], towards)
                 radiance[hit] += np.where(cos[:, None] > 1e-4, shine, 0.0)
         else:
-            radiance[hit] += np.asarray(albedo, np.float64)[material] * arriving
-    return radiance, t
+            weight = np.asarray(albedo, np.float64)[material]
+            radiance[hit] += weight * arriving
+    return RayPaths(radiance, t, hit, x, ns, weight)
+
+
+def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
+                 world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
+                 emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, cache=None):
+    """((K, 3) radiance arriving back along each ray, (K,) distance of its nearest hit, inf on
+    a miss): what a bounce ray of the gathers sees — ``world`` on a miss, else the hit's
+    emission plus its exact direct light reflected toward the ray's origin (see
+    ``indirect_and_ao``; ``hit_ids`` (K,) uint32 are the hits' light-sample ids). ray : the
+    kind of ray (``snapshot.RAY_DIFFUSE`` / ``RAY_GLOSSY``: the triangles it sees).
+    cache : a ``radiance_cache.RadianceCache`` (None: none): the hit also reflects the indirect
+    light the cache holds at it (bounces beyond the first) by its diffuse weight and, taking
+    that light as uniform over the hemisphere, its glossy lobes' albedo (Cycles' Glossy Color):
+    the paths that bounce glossily in between (Cycles' default light paths allow 4 glossy
+    bounces)."""
+    paths = ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed, world,
+                      hit_samples, hit_glossy, emission_seen, ray)
+    return paths.with_cache(cache), paths.distance
+
+
+def gather_rays(points, normals, sample_ids, rays: int, seed: int = 0):
+    """((N·rays, 3) origins, (N·rays, 3) unit directions, (N·rays,) uint32 hit sample ids) of
+    the gathers' ``rays`` cosine rays per point (module doc), point by point."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    ids = np.asarray(sample_ids).reshape(-1).astype(np.uint32)
+    dirs = cosine_directions(n, hammersley(ids, RAY_STREAM, rays, seed)).reshape(-1, 3)
+    origins = np.repeat(p + SURFACE_EPSILON * n, rays, axis=0)
+    with np.errstate(over="ignore"):
+        hit_ids = ids.repeat(rays) * np.uint32(rays) + np.tile(np.arange(rays, dtype=np.uint32),
+                                                              len(p))
+    return origins, dirs, hit_ids
 
 
 def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission, rays: int = 16,
@@ -190,10 +244,7 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
     if count == 0:
         empty = (np.zeros((0, 3), np.float32), np.zeros(0, np.float32))
         return (*empty, np.zeros((0, 2), np.float32)) if statistics else empty
-    dirs = cosine_directions(n, hammersley(ids, RAY_STREAM, rays, seed)).reshape(-1, 3)
-    origins = np.repeat(p + SURFACE_EPSILON * n, rays, axis=0)
-    with np.errstate(over="ignore"):
-        hit_ids = ids.repeat(rays) * np.uint32(rays) + np.tile(np.arange(rays, dtype=np.uint32), count)
+    origins, dirs, hit_ids = gather_rays(p, n, ids, rays, seed)
     radiance, t = ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed,
                                world, hit_samples, hit_glossy, cache=cache)
     unoccluded = (t >= ao_distance).reshape(count, rays).mean(axis=1)

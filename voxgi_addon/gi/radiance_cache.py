@@ -35,7 +35,8 @@ from ..voxelize.surface import voxelize_triangles
 from .cascades import CascadeGrid
 
 __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
-           "cache_texels", "cached_cache", "face_points", "iterate", "lookup", "with_faces"]
+           "cache_texels", "cached_cache", "face_paths", "face_points", "iterate", "lookup", "relax",
+           "with_faces"]
 
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin
 FACE_AXIS_COSINE = 0.2   # a voxel holds the faces of the axes its triangles' normals reach
@@ -221,21 +222,43 @@ def with_faces(cache: RadianceCache, values) -> RadianceCache:
                          cache.present)
 
 
+def face_paths(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 16,
+               seed: int = 0, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
+               hit_glossy: bool = True):
+    """The ``exact_indirect.RayPaths`` of every face's ``rays`` gather rays (``face_points``,
+    sample id = the face's row; the diffuse gather's rays, ``exact_indirect.gather_rays``),
+    face by face: traced and lit once, then every iteration only looks the cache up at their
+    hits (``relax``). lights, albedo, emission, world, hit_samples, hit_glossy : as the
+    gather's."""
+    from .exact_indirect import gather_rays, ray_paths
+
+    points, axes = face_points(cache)
+    origins, dirs, ids = gather_rays(points, axes, np.arange(len(points)), rays, seed)
+    return ray_paths(origins, dirs, ids, tris, lights, albedo, emission, seed, world,
+                     hit_samples, hit_glossy)
+
+
+def relax(cache: RadianceCache, paths, rays: int) -> RadianceCache:
+    """One more bounce: each face's value is the mean over its ``rays`` ``paths`` of what they
+    return with ``cache`` at their hits (``RayPaths.with_cache``) — the hit's exact direct
+    light plus its weight × the cache there. From the empty cache this is iteration 1 (the
+    two-bounce light); each relaxation adds a bounce."""
+    count = len(paths.radiance) // max(rays, 1)
+    values = np.zeros((count, 3))
+    if count:
+        values = paths.with_cache(cache).reshape(count, rays, 3).mean(axis=1)
+    return with_faces(cache, values)
+
+
 def iterate(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 16, seed: int = 0,
             world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = True) -> RadianceCache:
     """One more bounce: every voxel face gathers ``rays`` exact rays shaded by
     ``exact_indirect.ray_radiance`` with ``cache`` at their hits (see the module doc) — the
-    diffuse gather (``exact_indirect.indirect_and_ao``) at ``face_points``, sample id = the
-    face's row. lights, albedo, emission, world, hit_samples, hit_glossy : as the gather's."""
-    from .exact_indirect import indirect_and_ao
-
-    points, axes = face_points(cache)
-    values = np.zeros((len(points), 3), np.float32)
-    if len(points):
-        values, _ = indirect_and_ao(points, axes, np.arange(len(points)), tris, lights, albedo,
-                                    emission, rays=rays, seed=seed, world=world,
-                                    hit_samples=hit_samples, hit_glossy=hit_glossy, cache=cache)
-    return with_faces(cache, values)
+    diffuse gather at ``face_points``, sample id = the face's row (``face_paths`` then
+    ``relax``; ``cached_cache`` traces the paths once for all its iterations)."""
+    paths = face_paths(cache, tris, lights, albedo, emission, rays, seed, world, hit_samples,
+                       hit_glossy)
+    return relax(cache, paths, rays)
 
 
 def _value_key(value):
@@ -279,9 +302,10 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
     if held is not None and held[0] == key:
         return held[1]
     cache = build_cache(tris, resolution, rays=rays)
-    for _ in range(bounces - 1):
-        cache = iterate(cache, tris, lights, albedo, emission, rays, world=world,
-                        hit_samples=hit_samples, hit_glossy=hit_glossy)
+    paths = face_paths(cache, tris, lights, albedo, emission, rays, world=world,
+                       hit_samples=hit_samples, hit_glossy=hit_glossy)
+    for _ in range(bounces - 1):  # the same rays every iteration: traced once
+        cache = relax(cache, paths, rays)
     _MEMO["entry"] = (key, cache)
     return cache
 
