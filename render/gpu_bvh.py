@@ -65,7 +65,8 @@ KERNELS = {
     "bvh_direct": (("textures", "bvh_lights", "bvh_direct"),
                    _BVH + ("lights", "world_map", "emitters", "gbuffer_position",
                            "gbuffer_normal") + _TEXTURES, ("sampling", "strata")),
-    "bvh_gather": (("pixels", "principled", "bvh_lights", "textures", "bvh_shade", "bvh_gather"),
+    "bvh_gather": (("pixels", "principled", "bvh_lights", "textures", "cache_lookup", "bvh_shade",
+                    "gather_point", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials",
                            "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "principled_lut", "partial_image",
@@ -74,12 +75,19 @@ KERNELS = {
                    ("sampling", "world", "grid", "chunk")),
 }
 # The glossy gather reads the same inputs as the diffuse one.
-KERNELS["bvh_glossy"] = (("pixels", "principled", "bvh_lights", "textures", "bvh_shade",
-                          "bvh_glossy"),
+KERNELS["bvh_glossy"] = (("pixels", "principled", "bvh_lights", "textures", "cache_lookup",
+                          "bvh_shade", "gather_point", "bvh_glossy"),
                          *KERNELS["bvh_gather"][1:])
 # The world-mode glossy gather integrates the lobe over the emitters by LTC (shaders/ltc.glsl).
 KERNELS["bvh_glossy"] = (KERNELS["bvh_glossy"][0][:-1] + ("ltc", "bvh_glossy"),
                          KERNELS["bvh_glossy"][1] + ("ltc_table",), KERNELS["bvh_glossy"][2])
+# The radiance cache's rays, traced and lit once (gpu_gather.cache_stages): the gather's inputs.
+KERNELS["bvh_cache_paths"] = (
+    ("principled", "bvh_lights", "textures", "cache_lookup", "bvh_shade", "cache_paths"),
+    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials", "gbuffer_position",
+            "gbuffer_normal", "principled_lut", "texture_table", "texture_atlas",
+            "radiance_cache"),
+    ("sampling", "world", "chunk"))
 # The emitters' glossy light per sub-pixel pass (exact_glossy.emitters_shine).
 KERNELS["bvh_emitter_glossy"] = (
     ("principled", "bvh_lights", "textures", "ltc", "bvh_emitter_glossy"),
@@ -104,6 +112,7 @@ CONSTANT_SAMPLERS = {"ltc_table": ltc_texture, "texture_table": _blank_texture,
                      "radiance_cache": _blank_texture}
 # Kernels with more than one output image (the others write ``out_image``).
 OUTPUTS = {"bvh_gather": ("out_image", "out_variance"),
+           "bvh_cache_paths": ("out_image", "out_variance", "out_points", "out_normals"),
            "bvh_glossy": ("out_image", "out_variance")}
 _shaders: dict[str, object] = {}
 
@@ -128,7 +137,7 @@ def bvh_shader(kernel: str):
             defines["METALLIC_LEVELS"] = str(METALLIC_LEVELS)
         if kernel == "bvh_direct":
             defines["STRATA_BLOCK"] = "ivec3(strata.xyz)"
-        if kernel in ("bvh_gather", "bvh_glossy"):
+        if kernel in ("bvh_gather", "bvh_glossy", "bvh_cache_paths"):
             defines["VIEW_BACKOFF"] = repr(float(VIEW_BACKOFF))
             defines["GLOSSY_STREAM"] = f"{GLOSSY_STREAM}u"
             defines["WORLD_GLOSSY_STREAM"] = f"{WORLD_GLOSSY_STREAM}u"
@@ -229,13 +238,15 @@ def shared_bvh() -> GPUBVH:
 
 
 def dispatch_bvh(kernel: str, inputs: dict[str, object], width: int, height: int,
-                 constants: dict[str, tuple] | None = None):
+                 constants: dict[str, tuple] | None = None, images=None):
     """Run ``kernel`` over width × height RGBA32F output texture(s) and return it (a tuple for
-    the kernels of ``OUTPUTS``)."""
+    the kernels of ``OUTPUTS``). images : the output textures to write (kept from an earlier
+    dispatch; None: new ones of width × height)."""
     shader = bvh_shader(kernel)
     _, samplers, names = KERNELS[kernel]
     outputs = OUTPUTS.get(kernel, ("out_image",))
-    images = [gpu.types.GPUTexture((width, height), format="RGBA32F") for _ in outputs]
+    if images is None:
+        images = [gpu.types.GPUTexture((width, height), format="RGBA32F") for _ in outputs]
     shader.bind()
     for name in samplers:
         shader.uniform_sampler(name, inputs[name] if name in inputs else CONSTANT_SAMPLERS[name]())

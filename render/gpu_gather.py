@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import replace
 
 import gpu
 import numpy as np
@@ -96,11 +95,7 @@ CACHE_STAGE_SECONDS = 0.015  # a chunk of the viewport's staged build (progressi
 
 def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
     """The radiance cache of ``settings.bounces`` − 1 iterations (``gi.radiance_cache``)
-    gathered on the GPU: the voxel faces (``radiance_cache.face_points``) laid out as the
-    pixels of a ``CACHE_IMAGE_WIDTH``-wide G-buffer (sample id = the face's row, as numpy's
-    ``radiance_cache.iterate``), each iteration one run of ``gather`` with
-    ``settings.cache_rays`` rays and the previous iteration's texels bound; seed 0, as numpy.
-    ``cache_stages`` with every face in one chunk."""
+    gathered on the GPU: ``cache_stages`` with every ray in one chunk."""
     stages = cache_stages(bvh, lights, principled, emission, settings, tables,
                           budget=math.inf, first_rows=1 << 30)
     while True:
@@ -110,13 +105,41 @@ def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
             return end.value
 
 
+RECORD_WIDTH = 2048  # rays per row of the cache's ray records (cache_paths.glsl)
+_RELAX_SAMPLERS = ("radiance_cache", "paths_radiance", "paths_weight", "paths_points",
+                   "paths_normals")
+
+
+def _relax_shader():
+    if "relax" not in _shaders:
+        _shaders["relax"] = build_compute(("cache_lookup", "cache_relax"), _RELAX_SAMPLERS,
+                                          ("sampling",), ("out_image",))
+    return _shaders["relax"]
+
+
+def relax_gpu(cache_texture, records, rays: int, count: int, width: int, height: int):
+    """One iteration over the ray ``records`` (``cache_paths.glsl``'s four textures):
+    ``cache_relax.glsl``, (height, width, 3) float32 face values (face f at row f // width)."""
+    shader = _relax_shader()
+    out = gpu.types.GPUTexture((width, height), format="RGBA32F")
+    shader.bind()
+    for name, texture in zip(_RELAX_SAMPLERS, (cache_texture, *records)):
+        shader.uniform_sampler(name, texture)
+    shader.uniform_float("sampling", (float(rays), float(count), 0.0, 0.0))
+    shader.image("out_image", out)
+    gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
+    return read_texture(out)[..., :3]
+
+
 def cache_stages(bvh, lights, principled, emission, settings, tables=None,
                  budget: float = CACHE_STAGE_SECONDS, first_rows: int = 1):
     """Generator of the radiance cache of ``settings.bounces`` − 1 iterations, yielding after
-    each chunk of face rows; returns (cache, texture) as ``gpu_gather.cache_gpu`` does (the
-    same faces, rays and ids, so the same values; the viewport's, ``viewport_cache``). Chunks
-    start at ``first_rows`` rows of
-    ``CACHE_IMAGE_WIDTH`` faces and are resized to ``budget`` seconds by the last one's time."""
+    each stage; returns (cache, texture). As numpy's ``radiance_cache.cached_cache``: every
+    voxel face's ``settings.cache_rays`` rays (``face_points``, sample id = the face's row,
+    seed 0) are traced and lit once (``cache_paths.glsl``, records ``RECORD_WIDTH`` to a row,
+    in chunks of rows that start at ``first_rows`` and are resized to ``budget`` seconds by
+    the last one's time: the viewport's stages, ``viewport_cache``), then each iteration is one
+    lookup pass over the records (``relax_gpu``) whose faces become the next cache texture."""
     cache = build_cache(bvh.scene_triangles, settings.cache_resolution, rays=settings.cache_rays)
     points, axes = face_points(cache)
     count = len(points)
@@ -126,37 +149,51 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
         return cache, float_texture(texels, (texels.shape[1], texels.shape[0]))
     width = CACHE_IMAGE_WIDTH
     height = -(-count // width)
-    image = np.zeros((3, height * width, 4), np.float32)
-    image[0, :count, :3], image[0, :count, 3] = points, 1.0
-    image[1, :count, :3] = axes
-    layers = image.reshape(3, height, width, 4)
-    fixed = {name: float_texture(layer[::-1], (width, height))
-             for name, layer in zip(("gbuffer_normal", "gbuffer_view"), layers[1:])}
-    step = replace(settings, rays=settings.cache_rays, bounces=1, seed=0)
+    faces = np.zeros((2, height * width, 4), np.float32)
+    faces[0, :count, :3], faces[0, :count, 3] = points, 1.0
+    faces[1, :count, :3] = axes
+    blank = np.zeros((1, 1, 4), np.float32)
+    inputs = {**bvh.inputs, **(tables if tables is not None else gather_tables(
+        lights, principled, emission)),
+              "gbuffer_position": float_texture(faces[0].reshape(height, width, 4),
+                                                (width, height)),
+              "gbuffer_normal": float_texture(faces[1].reshape(height, width, 4),
+                                              (width, height))}
+    if "texture_atlas" not in inputs:
+        inputs.update(no_texture_inputs())
+    rays = settings.cache_rays
+    record_rows = -(-count * rays // RECORD_WIDTH)
+    records = tuple(gpu.types.GPUTexture((RECORD_WIDTH, record_rows), format="RGBA32F")
+                    for _ in range(4))
+    constants = {"sampling": (0.0, rays, count, strata_side(settings.hit_samples)),
+                 "world": (*settings.world, float(settings.hit_glossy))}
+    top, rows = 0, max(1, int(first_rows))
+    while top < record_rows:
+        t0 = time.perf_counter()
+        end = min(record_rows, top + rows)
+        dispatch_bvh("bvh_cache_paths", inputs, RECORD_WIDTH, end - top,
+                     {**constants, "chunk": (top, end, 0.0, 0.0)}, images=records)
+        seconds = time.perf_counter() - t0
+        top = end
+        rows = max(1, min(record_rows, int(rows * min(4.0, budget / max(seconds, 1e-4)))))
+        yield
     previous = None
-    rows = max(1, int(first_rows))
     for _ in range(settings.bounces - 1):
-        faces = np.zeros((height, width, 3), np.float32)
-        top = 0
-        while top < height:
-            t0 = time.perf_counter()
-            end = min(height, top + rows)
-            position = layers[0].copy()
-            position[:top, :, 3] = 0.0  # masked: those cells return at once
-            position[end:, :, 3] = 0.0
-            gbuffer = {"gbuffer_position": float_texture(position[::-1], (width, height)),
-                       **fixed}
-            values, _ = gather(bvh, gbuffer, lights, principled, emission, step, 1, width,
-                               height, tables=tables, cache=previous)
-            faces[top:end] = read_texture(values)[::-1][top:end, :, :3]
-            seconds = time.perf_counter() - t0
-            top = end
-            rows = max(1, min(height, int(rows * min(4.0, budget / max(seconds, 1e-4)))))
-            yield
-        cache = with_faces(cache, faces.reshape(-1, 3)[:count])
+        if previous is None:  # the empty cache: the records' own radiance
+            previous = float_texture(blank, (1, 1))
+        values = relax_gpu(previous, records, rays, count, width, height)
+        cache = with_faces(cache, values.reshape(-1, 3)[:count])
         texels = cache_texels(cache)
         previous = float_texture(texels, (texels.shape[1], texels.shape[0]))
+        yield
     return cache, previous
+
+
+def gather_tables(lights, principled, emission) -> dict:
+    """The light and material textures a gather binds (``gather``'s ``tables``)."""
+    return {"lights": lights_texture(lights), **scene_light_textures(lights),
+            "materials": principled_materials_texture(principled, emission),
+            "principled_lut": lut_texture()}
 
 
 def cache_texture(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
@@ -208,9 +245,7 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
     placeholder = gpu.types.GPUTexture((1, 1), format="RGBA32F")
     partial = (placeholder, placeholder)
     if tables is None:
-        tables = {"lights": lights_texture(lights), **scene_light_textures(lights),
-                  "materials": principled_materials_texture(principled, emission),
-                  "principled_lut": lut_texture()}
+        tables = gather_tables(lights, principled, emission)
     inputs = {**bvh.inputs, **gbuffer_inputs, **tables}
     if "texture_atlas" not in inputs:
         inputs.update(no_texture_inputs())

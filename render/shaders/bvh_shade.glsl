@@ -7,66 +7,12 @@
  * Samplers: bvh_* (bvh_common.glsl), lights and world_map (bvh_lights.glsl), materials ((M + 1) × 3 texels:
  * base colour, emission, (metallic, Specular IOR Level, roughness), (Base Color texture slot,
  * Roughness / Metallic texture slot, first variant)),
- * principled_lut, texture_table, texture_atlas (textures.glsl), radiance_cache (cache_indirect). */
+ * principled_lut, texture_table, texture_atlas (textures.glsl), radiance_cache (cache_lookup.glsl
+ * cache_indirect). */
 
 vec4 bvh_texel_normals(int k)
 {
   return texelFetch(bvh_normals, ivec2(k & (BVH_WIDTH - 1), k >> BVH_WIDTH_LOG2), 0);
-}
-
-/* The multi-bounce radiance cache's indirect light (E/π) at `x` for unit normal `n`
- * (voxgi_addon/gi/radiance_cache.py lookup; texels: radiance_cache.cache_texels): per axis the
- * face n faces, trilinear over the voxels of the finest grid holding `x` that hold that face
- * (texel .a), the axes blended by n² over those some neighbour holds; 0 outside every grid and
- * for the 1 × 1 blank texture (no cache: one bounce). */
-vec3 cache_indirect(vec3 x, vec3 n)
-{
-  ivec2 size = textureSize(radiance_cache, 0);
-  vec4 info = texelFetch(radiance_cache, ivec2(size.x - 1, 0), 0);
-  int res = int(info.x + 0.5);
-  int count = int(info.y + 0.5);
-  ivec3 face = ivec3(n.x < 0.0 ? 1 : 0, n.y < 0.0 ? 3 : 2, n.z < 0.0 ? 5 : 4);
-  vec3 blend = n * n;
-  for (int g = 0; g < count; g++) {
-    vec4 grid = texelFetch(radiance_cache, ivec2(g, 0), 0);
-    vec3 at = (x - grid.xyz) / grid.w;
-    if (any(lessThan(at, vec3(0.0))) || any(greaterThanEqual(at, vec3(float(res))))) {
-      continue;
-    }
-    vec3 gg = at - 0.5;
-    ivec3 base = ivec3(floor(gg));
-    vec3 f = gg - vec3(base);
-    vec3 tx = vec3(0.0), ty = vec3(0.0), tz = vec3(0.0);
-    vec3 weight = vec3(0.0);
-    for (int corner = 0; corner < 8; corner++) {
-      ivec3 o = ivec3((corner >> 2) & 1, (corner >> 1) & 1, corner & 1);
-      ivec3 cell = base + o;
-      if (any(lessThan(cell, ivec3(0))) || any(greaterThanEqual(cell, ivec3(res)))) {
-        continue;
-      }
-      int column = cell.x + cell.y * res;
-      int row = 1 + (g * res + cell.z) * 6;
-      vec4 fx = texelFetch(radiance_cache, ivec2(column, row + face.x), 0);
-      vec4 fy = texelFetch(radiance_cache, ivec2(column, row + face.y), 0);
-      vec4 fz = texelFetch(radiance_cache, ivec2(column, row + face.z), 0);
-      vec3 wv = mix(1.0 - f, f, vec3(o));
-      float w = wv.x * wv.y * wv.z;
-      vec3 held = w * vec3(fx.w > 0.5 ? 1.0 : 0.0, fy.w > 0.5 ? 1.0 : 0.0, fz.w > 0.5 ? 1.0 : 0.0);
-      tx += held.x * fx.rgb;
-      ty += held.y * fy.rgb;
-      tz += held.z * fz.rgb;
-      weight += held;
-    }
-    vec3 share = vec3(weight.x > 1e-6 ? blend.x : 0.0, weight.y > 1e-6 ? blend.y : 0.0,
-                      weight.z > 1e-6 ? blend.z : 0.0);
-    float norm = share.x + share.y + share.z;
-    if (norm <= 1e-6) {
-      return vec3(0.0);
-    }
-    vec3 safe = max(weight, vec3(1e-6));
-    return (share.x * tx / safe.x + share.y * ty / safe.y + share.z * tz / safe.z) / norm;
-  }
-  return vec3(0.0);
 }
 
 /* The surface UV at barycentrics `uv` of `triangle` (a SceneTriangles index): its corner UVs,
@@ -96,23 +42,30 @@ vec3 hit_emission(int material, int triangle, vec2 uv)
          glow.y;
 }
 
-vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
-                  vec3 world_rgb, bool emission_seen, out float th)
+/* ray_radiance without the radiance cache (voxgi_addon/gi/exact_indirect.py ray_paths): also
+ * the hit `x`, its shading normal `ns` (turned toward the origin) and `cache_weight`, what the
+ * hit reflects toward the origin of light arriving uniformly (the diffuse weight + the glossy
+ * lobes' albedo); 0 on a miss. What the ray returns with a cache is linear in it, so the cache
+ * traces its rays once (cache_paths.glsl) and iterates by lookups (cache_relax.glsl). */
+vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
+               vec3 world_rgb, bool emission_seen, out float th, out vec3 x, out vec3 ns,
+               out vec3 cache_weight)
 {
   int triangle, slot;
   vec2 uv;
+  x = ns = cache_weight = vec3(0.0);
   if (!bvh_closest_hit(origin, d, 0.0, BVH_FAR, th, triangle, slot, uv)) {
     th = BVH_FAR;
     return world_rgb;
   }
   int last_material = textureSize(materials, 0).x - 1;
-  vec3 x = origin + th * d;
+  x = origin + th * d;
   vec3 face = bvh_triangle_face_normal(slot);
   vec3 smooth_n = (1.0 - uv.x - uv.y) * bvh_texel_normals(3 * slot).xyz +
                   uv.x * bvh_texel_normals(3 * slot + 1).xyz +
                   uv.y * bvh_texel_normals(3 * slot + 2).xyz;
   float len = length(smooth_n);
-  vec3 ns = len > 1e-12 ? smooth_n / len : face;
+  ns = len > 1e-12 ? smooth_n / len : face;
   ns *= dot(face, d) > 0.0 ? -1.0 : 1.0;
   int material = bvh_triangle_material(slot);
   material = (material >= 0 && material < last_material) ? material : last_material;
@@ -156,47 +109,25 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
   /* the world and the emitters light the hit too: its diffuse weight and, when `hit_glossy`,
    * its glossy lobe from the same shadow rays (exact_indirect.ray_radiance) */
   vec3 world_glossy, emitter_glossy;
-  /* ... and the radiance cache's indirect light at the hit: bounces 2 … N (cache_indirect),
-   * off the diffuse weight and, as if uniform, the glossy lobes' albedo */
-  vec3 cached = cache_indirect(x, ns);
   radiance += weight * (world_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, hit_glossy, -d,
                                          base, params, world_glossy) +
                         emitters_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, false,
-                                            hit_glossy, -d, base, params, emitter_glossy) +
-                        cached);
-  if (dot(cached, vec3(1.0)) > 0.0) {
-    radiance += cached * principled_glossy_color(base, params.x, params.y, params.z,
-                                                 clamp(-dot(ns, d), 0.0, 1.0));
-  }
+                                            hit_glossy, -d, base, params, emitter_glossy));
+  /* uniform light (the radiance cache's) is also reflected by the glossy lobes' albedo */
+  cache_weight = weight + principled_glossy_color(base, params.x, params.y, params.z,
+                                                  clamp(-dot(ns, d), 0.0, 1.0));
   return radiance + world_glossy + emitter_glossy;
 }
 
-/* The gather point of low-resolution cell `cell` of the gathers (bvh_gather.glsl,
- * bvh_glossy.glsl; grid = (stride, full width, full height, ·)): false for a cell outside the
- * grid, or whose G-buffer pixel sees no surface (its outputs are then written 0). Otherwise
- * the surface point stepped back along the camera ray by VIEW_BACKOFF (preview/gather.py), its
- * normal, the G-buffer's view texel (camera ray direction, material) and the sample id (the
- * pixel index, row 0 on top). */
-bool gather_point(ivec2 cell, out vec3 position, out vec3 n, out vec4 ray, out uint id)
+vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
+                  vec3 world_rgb, bool emission_seen, out float th)
 {
-  position = n = vec3(0.0);
-  ray = vec4(0.0);
-  id = 0u;
-  ivec2 size = imageSize(out_image);
-  if (cell.x >= size.x || cell.y >= size.y) {
-    return false;
+  vec3 x, ns, cache_weight;
+  vec3 radiance = ray_paths(origin, d, hit_id, seed, strata, hit_glossy, world_rgb,
+                            emission_seen, th, x, ns, cache_weight);
+  /* ... and the radiance cache's indirect light at the hit: bounces 2 … N (cache_indirect) */
+  if (th < BVH_FAR) {
+    radiance += cache_weight * cache_indirect(x, ns);
   }
-  ivec2 full = ivec2(grid.yz);
-  ivec2 px = traced_pixel(size.y - 1 - cell.y, cell.x, int(grid.x), full);
-  vec4 p = texelFetch(gbuffer_position, px, 0);
-  if (p.w < 0.5) {
-    imageStore(out_image, cell, vec4(0.0));
-    imageStore(out_variance, cell, vec4(0.0));
-    return false;
-  }
-  n = texelFetch(gbuffer_normal, px, 0).xyz;
-  ray = texelFetch(gbuffer_view, px, 0);
-  position = p.xyz - VIEW_BACKOFF * ray.xyz;
-  id = uint((full.y - 1 - px.y) * full.x + px.x);
-  return true;
+  return radiance;
 }

@@ -1,0 +1,54 @@
+/* The multi-bounce radiance cache's indirect light (E/π) at `x` for unit normal `n`
+ * (voxgi_addon/gi/radiance_cache.py lookup; texels: radiance_cache.cache_texels): per axis the
+ * face n faces, trilinear over the voxels of the finest grid holding `x` that hold that face
+ * (texel .a), the axes blended by n² over those some neighbour holds; 0 outside every grid and
+ * for the 1 × 1 blank texture (no cache: one bounce). */
+vec3 cache_indirect(vec3 x, vec3 n)
+{
+  ivec2 size = textureSize(radiance_cache, 0);
+  vec4 info = texelFetch(radiance_cache, ivec2(size.x - 1, 0), 0);
+  int res = int(info.x + 0.5);
+  int count = int(info.y + 0.5);
+  ivec3 face = ivec3(n.x < 0.0 ? 1 : 0, n.y < 0.0 ? 3 : 2, n.z < 0.0 ? 5 : 4);
+  vec3 blend = n * n;
+  for (int g = 0; g < count; g++) {
+    vec4 grid = texelFetch(radiance_cache, ivec2(g, 0), 0);
+    vec3 at = (x - grid.xyz) / grid.w;
+    if (any(lessThan(at, vec3(0.0))) || any(greaterThanEqual(at, vec3(float(res))))) {
+      continue;
+    }
+    vec3 gg = at - 0.5;
+    ivec3 base = ivec3(floor(gg));
+    vec3 f = gg - vec3(base);
+    vec3 tx = vec3(0.0), ty = vec3(0.0), tz = vec3(0.0);
+    vec3 weight = vec3(0.0);
+    for (int corner = 0; corner < 8; corner++) {
+      ivec3 o = ivec3((corner >> 2) & 1, (corner >> 1) & 1, corner & 1);
+      ivec3 cell = base + o;
+      if (any(lessThan(cell, ivec3(0))) || any(greaterThanEqual(cell, ivec3(res)))) {
+        continue;
+      }
+      int column = cell.x + cell.y * res;
+      int row = 1 + (g * res + cell.z) * 6;
+      vec4 fx = texelFetch(radiance_cache, ivec2(column, row + face.x), 0);
+      vec4 fy = texelFetch(radiance_cache, ivec2(column, row + face.y), 0);
+      vec4 fz = texelFetch(radiance_cache, ivec2(column, row + face.z), 0);
+      vec3 wv = mix(1.0 - f, f, vec3(o));
+      float w = wv.x * wv.y * wv.z;
+      vec3 held = w * vec3(fx.w > 0.5 ? 1.0 : 0.0, fy.w > 0.5 ? 1.0 : 0.0, fz.w > 0.5 ? 1.0 : 0.0);
+      tx += held.x * fx.rgb;
+      ty += held.y * fy.rgb;
+      tz += held.z * fz.rgb;
+      weight += held;
+    }
+    vec3 share = vec3(weight.x > 1e-6 ? blend.x : 0.0, weight.y > 1e-6 ? blend.y : 0.0,
+                      weight.z > 1e-6 ? blend.z : 0.0);
+    float norm = share.x + share.y + share.z;
+    if (norm <= 1e-6) {
+      return vec3(0.0);
+    }
+    vec3 safe = max(weight, vec3(1e-6));
+    return (share.x * tx / safe.x + share.y * ty / safe.y + share.z * tz / safe.z) / norm;
+  }
+  return vec3(0.0);
+}

@@ -1,0 +1,29 @@
+/* The gather point of low-resolution cell `cell` of the gathers (bvh_gather.glsl,
+ * bvh_glossy.glsl; grid = (stride, full width, full height, ·)): false for a cell outside the
+ * grid, or whose G-buffer pixel sees no surface (its outputs are then written 0). Otherwise
+ * the surface point stepped back along the camera ray by VIEW_BACKOFF (preview/gather.py), its
+ * normal, the G-buffer's view texel (camera ray direction, material) and the sample id (the
+ * pixel index, row 0 on top). */
+bool gather_point(ivec2 cell, out vec3 position, out vec3 n, out vec4 ray, out uint id)
+{
+  position = n = vec3(0.0);
+  ray = vec4(0.0);
+  id = 0u;
+  ivec2 size = imageSize(out_image);
+  if (cell.x >= size.x || cell.y >= size.y) {
+    return false;
+  }
+  ivec2 full = ivec2(grid.yz);
+  ivec2 px = traced_pixel(size.y - 1 - cell.y, cell.x, int(grid.x), full);
+  vec4 p = texelFetch(gbuffer_position, px, 0);
+  if (p.w < 0.5) {
+    imageStore(out_image, cell, vec4(0.0));
+    imageStore(out_variance, cell, vec4(0.0));
+    return false;
+  }
+  n = texelFetch(gbuffer_normal, px, 0).xyz;
+  ray = texelFetch(gbuffer_view, px, 0);
+  position = p.xyz - VIEW_BACKOFF * ray.xyz;
+  id = uint((full.y - 1 - px.y) * full.x + px.x);
+  return true;
+}
