@@ -15,7 +15,9 @@ A newer change supersedes the queued or running job; its plan is merged into the
 no work is lost. Results are applied on the main thread (``jobs.drain``), become the scene's
 results for F12 and the panels too (``session.py``), and tag the 3D views for redraw;
 ``view_draw`` traces and draws them (``render/viewport.py``). A cancelled or failing job leaves
-the previous results in use; the error is kept for the panel.
+the previous results in use; the error is kept for the panel. Accurate quality traces the
+scene's triangles, not the voxels: the view traces the snapshot as soon as it is taken
+(``image_source``), while the worker still builds the voxels for Fast, F12 and the panels.
 
 Undo/redo and file loads: a file load clears every ``LiveGI``; after undo/redo the next update
 re-reads the whole scene, and cache fingerprints decide what is voxelized again
@@ -105,6 +107,7 @@ class LiveGI:
         self.generation = 0        # bumped per applied result: view_draw traces again
         self.index: SceneIndex | None = None  # of the last snapshot taken
         self.latest_snapshot = None  # the last snapshot taken (maybe not applied yet)
+        self.snapshots = 0         # bumped per new snapshot taken (Accurate's image key)
         self.planned = StageCounter()  # every plan scheduled
         self.plans: list[UpdatePlan] = []  # the same, in order (tests, panel)
         self.pending: UpdatePlan | None = None  # the plan of the running job
@@ -164,6 +167,20 @@ class LiveGI:
             self._count(plan)
         return plan
 
+    def image_source(self, quality: str):
+        """(snapshot, GI state, version) the 3D view traces in ``quality``, or None while there
+        is nothing to trace; a new version restarts the view's image. Accurate traces the
+        scene's triangles, not the voxels: the latest snapshot taken (on the main thread, right
+        after the change), without waiting for the worker (the state may be an older one, or
+        None; Accurate does not read it). Fast cone-traces the worker's octree: the applied
+        result."""
+        if quality == "ACCURATE" and self.latest_snapshot is not None:
+            state = None if self.staged is None else self.staged.state
+            return self.latest_snapshot, state, ("snapshot", self.snapshots)
+        if self.staged is None or self.snapshot is None:
+            return None
+        return self.snapshot, self.staged.state, ("applied", self.generation)
+
     def _count(self, plan: UpdatePlan) -> None:
         self.planned.count(plan)
         self.plans.append(plan)
@@ -190,6 +207,8 @@ class LiveGI:
         except VoxGIError as error:
             self.error = str(error)
             return None
+        if snapshot is not self.latest_snapshot:
+            self.snapshots += 1
         self.latest_snapshot = snapshot
         self.skin = skin_states(snapshot, depsgraph)
         self.index = scene_index(snapshot, depsgraph.view_layer)

@@ -144,20 +144,22 @@ class ProgressiveImage:
         self.last = None
         self.image_stale = True  # ``image`` is another key's: the next slice rebuilds it
 
-    def slice_pixels(self) -> int:
-        """Pixels of the next slice (at most the image's)."""
+    def slice_pixels(self, explore: bool = True) -> int:
+        """Pixels of the next slice (at most the image's); explore : as ``SliceSizer.pixels``'
+        (False for the coarse image: the view waits for it, so never a larger size to
+        measure)."""
         acc = self.accumulation
         most = acc.width * acc.height
         if self.fixed_pixels is not None:
             return max(1, min(most, self.fixed_pixels))
-        return self.sizer.pixels(most)
+        return self.sizer.pixels(most, explore)
 
     def coarse_size(self, stride: int) -> tuple[int, int]:
         """The coarse image: the whole view in one slice's tile (``tile_shape``: textures of
         the tiles' kind, its pixels stretched over the view's aspect), or half the width and
         height when one slice holds more than a quarter of the image."""
         acc = self.accumulation
-        tile_w, tile_h = tile_shape(self.slice_pixels(), acc.width, acc.height,
+        tile_w, tile_h = tile_shape(self.slice_pixels(explore=False), acc.width, acc.height,
                                     LOCAL_SIZE * stride, stride)
         if 2 * tile_w > acc.width or 2 * tile_h > acc.height:
             return max(1, (acc.width + 1) // 2), max(1, (acc.height + 1) // 2)
@@ -315,8 +317,9 @@ def gather_hook(sums: GatherSums, rect, gather):
 
 
 def tracer(live, volume, settings, staged: bool = False, raster=None, cache_source=None):
-    """``trace(camera, width, height, options)`` → passes: the GPU tracer on ``live``'s
-    applied results (F12's ``render_passes_gpu``); staged: a generator of its stages that
+    """``trace(camera, width, height, options)`` → passes: the GPU tracer on what ``live``
+    has for the view (``LiveGI.image_source``: Accurate the latest snapshot, Fast the applied
+    results) with F12's kernels (``render_passes_gpu``); staged: a generator of its stages that
     returns them (``render_passes_stages``, what ``ProgressiveImage.step`` runs over several
     calls). raster : the G-buffer shader the caller keeps for its GPU context; cache_source :
     the view's radiance cache built in stages (``viewport_cache.ViewportCache``)."""
@@ -325,8 +328,9 @@ def tracer(live, volume, settings, staged: bool = False, raster=None, cache_sour
     cones = cone_settings(settings)
 
     def stages(camera, width, height, options):
-        snapshot = dataclasses.replace(live.snapshot, camera=camera)
-        passes, _ = yield from render_passes_stages(snapshot, live.staged.state, width, height,
+        snapshot, state, _ = live.image_source(settings.quality)
+        snapshot = dataclasses.replace(snapshot, camera=camera)
+        passes, _ = yield from render_passes_stages(snapshot, state, width, height,
                                                     cones, volume=volume, raster=raster,
                                                     cache_source=cache_source, **options)
         return passes

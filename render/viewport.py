@@ -9,8 +9,10 @@
    (``voxgi_addon/scene/view_camera.py``: perspective or orthographic, camera or free view);
    a new view is reported to ``LiveGI.view_changed`` (trace again; the cascades move when the
    view leaves their anchor cell);
-2. the image is keyed by everything it depends on (``trace_key``): the applied results'
-   generation (bumped by every depsgraph change the session acted on), the view and
+2. the image is keyed by everything it depends on (``trace_key``): what it traces
+   (``LiveGI.image_source``: in Accurate the latest snapshot, taken on the main thread right
+   after a change, so the view does not wait for the worker's voxels; in Fast the applied
+   results' generation, bumped by every depsgraph change the session acted on), the view and
    projection matrices, the traced size (region size × fraction), the pass, the cone
    settings, every tracer option (``trace_options``), the Viewport Samples and the pixel
    filter. A new key restarts the progressive accumulation (``progressive.py``); in Fast
@@ -97,22 +99,22 @@ class ViewportRenderer:
     # ------------------------------------------------------------------ tracing
 
     @staticmethod
-    def trace_key(live, camera_key, scene, pass_name, options) -> tuple:
-        """Everything the image depends on: the applied results, the view (view and
-        projection matrices, traced size), the pass, the cones, every tracer option and the
-        sample target, the film (Film › Transparent)."""
+    def trace_key(version, camera_key, scene, pass_name, options) -> tuple:
+        """Everything the image depends on: what it traces (``LiveGI.image_source``'s
+        version), the view (view and projection matrices, traced size), the pass, the cones,
+        every tracer option and the sample target, the film (Film › Transparent)."""
         s = scene.voxgi
-        return (live.generation, camera_key, pass_name, cone_settings(s), s.tracer, s.quality,
+        return (version, camera_key, pass_name, cone_settings(s), s.tracer, s.quality,
                 tuple(sorted(options.items())), scene.voxgi_viewport.samples,
                 pixel_filter_width(scene), bool(scene.render.film_transparent))
 
     def trace(self, live, scene, camera, key, pass_name: str) -> bool:
-        """One-shot: trace ``live``'s applied results seen by ``camera`` whole (its
-        resolution) into the texture, outside the progressive accumulation; True when it
-        traced."""
-        if live.staged is None or live.snapshot is None:
-            return False
+        """One-shot: trace what ``live`` has for the view (``LiveGI.image_source``) seen by
+        ``camera`` whole (its resolution) into the texture, outside the progressive
+        accumulation; True when it traced."""
         settings = scene.voxgi
+        if live.image_source(settings.quality) is None:
+            return False
         width, height = camera.resolution
         if settings.quality != "ACCURATE":
             self.volume.update(live.staged.state.octree, cone_settings(settings),
@@ -216,10 +218,11 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
         live.view_changed(camera_from_view(view, window, width, height), scene, depsgraph)
     traced = ""
     progressive = renderer.progressive
-    if live.staged is not None and live.snapshot is not None:
+    source = live.image_source(scene.voxgi.quality)
+    if source is not None:
         # a completed radiance cache restarts the image (viewport_cache: the gathers read the
         # last complete cache while a new one is built)
-        key = renderer.trace_key(live, camera_key, scene, pass_name,
+        key = renderer.trace_key(source[2], camera_key, scene, pass_name,
                                  base_options(scene.voxgi, width, height)) \
             + (renderer.cache.generation,)
         if key != progressive.key:
@@ -227,7 +230,7 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
             progressive.restart(key, pass_name, width, height, view_settings.samples,
                                 view_settings.coarse_first, film=pass_name == "Combined",
                                 transparent=bool(scene.render.film_transparent),
-                                world=live.snapshot.world)
+                                world=source[0].world)
         blend = gpu.state.blend_get()
         # The trace rasterizes its G-buffer: with the caller's blending on (view_draw's state)
         # its triangles blended into the cleared targets and the image was 3% off F12's.

@@ -189,6 +189,21 @@ def test_the_slice_sizer_fits_the_budget_from_measured_slices():
         SliceSizer(0.0)
 
 
+def test_a_slice_the_view_waits_for_is_never_a_size_to_explore():
+    """The coarse first image asks with explore=False: the fitted size every time (an
+    exploring call asked twice it, and a coarse image of half the view took 40% longer)."""
+    sizer = SliceSizer(0.030, first_pixels=4096, least=256)
+    assert sizer.pixels(10 ** 6, explore=False) == 4096
+    sizer.measured(4096, 0.010 + 2e-6 * 4096)
+    assert sizer.pixels(10 ** 6, explore=False) == 4096  # no fit yet: not twice the last
+    for pixels in (1000, 8000, 2000):
+        sizer.measured(pixels, 0.010 + 2e-6 * pixels)
+    asked = [sizer.pixels(10 ** 6, explore=False) for _ in range(8)]
+    assert asked == [pytest.approx(10_000, abs=2)] * 8
+    # the exploring calls still explore every 4th time, whatever was asked between them
+    assert [sizer.pixels(10 ** 6) for _ in range(4)][-1] == pytest.approx(20_000, abs=4)
+
+
 def test_the_gathers_are_accumulated_per_cell_of_the_images_grid():
     from voxgi.voxgi_addon.preview.progressive import LUMINANCE, GatherSums
 

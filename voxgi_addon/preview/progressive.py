@@ -466,17 +466,20 @@ class SliceSizer:
             self.fitted = max(float(np.median(t - slope * p)), 0.0), slope
         return self.fitted
 
-    def pixels(self, most: int) -> int:
-        """Pixels of the next slice, between ``least`` and ``most``."""
+    def pixels(self, most: int, explore: bool = True) -> int:
+        """Pixels of the next slice, between ``least`` and ``most``. explore False: the fitted
+        size only, never a larger one to measure (a slice the view waits for: the coarse
+        first image)."""
         fitted = self.model()
-        self.calls += 1
+        if explore:
+            self.calls += 1
         if fitted is None:
-            pixels = 2 * self.samples[-1][0] if self.samples else self.first_pixels
+            pixels = 2 * self.samples[-1][0] if self.samples and explore else self.first_pixels
         else:
             fixed, per_pixel = fitted
             spare = max(self.budget - fixed, fixed if self.amortize else 0.0)
             pixels = spare / per_pixel
-            if self.explore and self.calls % self.explore == 0:  # another size than the last
+            if explore and self.explore and self.calls % self.explore == 0:  # another size
                 pixels = 2.0 * max(pixels, self.samples[-1][0] if self.samples else 0)
         return int(max(min(self.least, most), min(most, pixels)))
 
