@@ -31,6 +31,7 @@ from ..voxgi_addon.gi.cone_bounces import cone_octrees, fast_cache_settings
 from ..voxgi_addon.gi.cone_shadows import cone_shadowed_direct, shadow_cone
 from ..voxgi_addon.gi.conetrace import world_mips
 from ..voxgi_addon.gi.radiance_cache import cache_key
+from ..voxgi_addon.preview.gather import cache_settings
 from ..voxgi_addon.preview.passes import (
     compose_passes,
     material_indices,
@@ -57,10 +58,7 @@ def _radiance_cache(scene, settings):
     while its triangles (the BVH's node texture), lights, materials and cache settings stay."""
     if settings.bounces <= 1:
         return None
-    key = cache_key(scene.lights, scene.principled, scene.emission, settings.bounces,
-                    settings.cache_rays, settings.cache_resolution,
-                    tuple(float(w) for w in settings.world), settings.hit_samples,
-                    settings.hit_glossy)
+    key = cache_key(scene.lights, scene.principled, scene.emission, *cache_settings(settings))
     held = _held_cache.get("entry")
     if held is None or held[0] is not scene.bvh.nodes or held[1] != key:
         cache, _ = cache_gpu(scene.bvh, scene.lights, scene.principled, scene.emission,

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..voxgi_addon.gi.exact_glossy import METAL_RAY_FACTOR
 from ..voxgi_addon.gi.radiance_cache import build_cache, cache_key, cache_texels, face_points, with_faces
+from ..voxgi_addon.preview.gather import cache_settings
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import low_shape
 from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, scene_light_textures, strata_side
@@ -140,7 +141,8 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     in chunks of rows that start at ``first_rows`` and are resized to ``budget`` seconds by
     the last one's time: the viewport's stages, ``viewport_cache``), then each iteration is one
     lookup pass over the records (``relax_gpu``) whose faces become the next cache texture."""
-    cache = build_cache(bvh.scene_triangles, settings.cache_resolution, rays=settings.cache_rays)
+    cache = build_cache(bvh.scene_triangles, settings.cache_resolution, rays=settings.cache_rays,
+                        focus=settings.cache_focus)
     points, axes = face_points(cache)
     count = len(points)
     if count == 0:  # nothing to light
@@ -200,9 +202,7 @@ def cache_texture(bvh: GPUBVH, lights, principled, emission, settings, tables=No
     """The texture of the radiance cache the diffuse gather reads at its bounce hits for
     ``settings.bounces`` (``cache_gpu``), kept for the next gather with the same triangles,
     lights, materials and cache settings (the viewport's slices)."""
-    key = cache_key(lights, principled, emission, settings.bounces, settings.cache_rays,
-                    settings.cache_resolution, tuple(float(w) for w in settings.world),
-                    settings.hit_samples, settings.hit_glossy)
+    key = cache_key(lights, principled, emission, *cache_settings(settings))
     held = _cache_upload.get("entry")
     # the BVH's node texture is replaced whenever other triangles are uploaded (the same
     # triangles snapshotted again keep it: a viewport slice's)

@@ -21,7 +21,7 @@ from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.cone_bounces import fast_cache_settings
 from ..voxgi_addon.preview import transmission
 from ..voxgi_addon.preview.film import background
-from ..voxgi_addon.preview.gather import GatherSettings
+from ..voxgi_addon.preview.gather import GatherSettings, focused
 from ..voxgi_addon.preview.passes import (
     add_tails,
     centre_pass,
@@ -255,6 +255,8 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     tris, rough, emission = scene.tris, scene.rough, scene.emission
     if len(tris) == 0:
         raise VoxGIError("the scene has no triangles to render")
+    # the radiance cache nests finer grids around the camera (a tile's camera: the view's)
+    gather_settings = focused(gather_settings, snapshot.camera, tris)
     if scene.uploaded:  # rebuilt and uploaded only what changed
         timings["scene build + upload"] = time.perf_counter() - t0
     t0 = time.perf_counter()

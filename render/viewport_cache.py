@@ -15,6 +15,7 @@ the new cache.
 from __future__ import annotations
 
 from ..voxgi_addon.gi.radiance_cache import cache_key
+from ..voxgi_addon.preview.gather import cache_settings
 from .gpu_gather import CACHE_STAGE_SECONDS, cache_stages
 
 STAGE_SECONDS = CACHE_STAGE_SECONDS  # what one chunk aims at (half the 30 ms budget)
@@ -39,10 +40,7 @@ class ViewportCache:
         if settings.bounces <= 1:
             return None
         # the BVH's node texture is replaced whenever other triangles are uploaded
-        key = (bvh.nodes, cache_key(lights, principled, emission, settings.bounces,
-                                    settings.cache_rays, settings.cache_resolution,
-                                    tuple(float(w) for w in settings.world),
-                                    settings.hit_samples, settings.hit_glossy))
+        key = (bvh.nodes, cache_key(lights, principled, emission, *cache_settings(settings)))
         if _same(key, self.key):
             return self.texture
         if self.building is None or not _same(self.building[0], key):

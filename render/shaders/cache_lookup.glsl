@@ -1,8 +1,8 @@
 /* The multi-bounce radiance cache's indirect light (E/π) at `x` for unit normal `n`
  * (voxgi_addon/gi/radiance_cache.py lookup; texels: radiance_cache.cache_texels): per axis the
  * face n faces, trilinear over the voxels of the finest grid holding `x` that hold that face
- * (texel .a), the axes blended by n² over those some neighbour holds; 0 outside every grid and
- * for the 1 × 1 blank texture (no cache: one bounce). */
+ * (texel .a), the axes blended by n² over those some neighbour holds (else the next coarser
+ * grid holding `x`); 0 outside every grid and for the 1 × 1 blank texture (no cache). */
 vec3 cache_indirect(vec3 x, vec3 n)
 {
   ivec2 size = textureSize(radiance_cache, 0);
@@ -45,7 +45,7 @@ vec3 cache_indirect(vec3 x, vec3 n)
                       weight.z > 1e-6 ? blend.z : 0.0);
     float norm = share.x + share.y + share.z;
     if (norm <= 1e-6) {
-      return vec3(0.0);
+      continue; /* no voxel here holds a face n faces: the next coarser grid */
     }
     vec3 safe = max(weight, vec3(1e-6));
     return (share.x * tx / safe.x + share.y * ty / safe.y + share.z * tz / safe.z) / norm;

@@ -84,8 +84,8 @@ def test_thin_wall_dark_room_stays_dark(voxgi, tmp_path):
 
 
 def test_gpu_cache_equals_numpy_cache(voxgi):
-    """Two iterations (Bounces 3) of the cache on the Cornell box: the GPU's voxel faces (the
-    gather kernel run on them) equal numpy's ``radiance_cache.iterate`` within 2%."""
+    """Two iterations (Bounces 3) of the cache on the Cornell box, one grid and Auto's grids
+    nested around a camera: the GPU's voxel faces equal numpy's within 2%."""
     from voxgi.blender.snapshot import snapshot_or_error
     from voxgi.render import gpu_context, gpu_gather
     from voxgi.render.gpu_bvh import shared_bvh
@@ -111,6 +111,17 @@ def test_gpu_cache_equals_numpy_cache(voxgi):
     assert gpu.iterations == numpy.iterations == 2
     a, b = (np.concatenate(c.faces).astype(np.float64) for c in (gpu, numpy))
     assert b.mean() > 0.01
+    assert np.abs(a - b).sum() / np.abs(b).sum() <= 0.02
+    # Auto's grids nested around a camera inside the box (issue 20: the finest that holds a
+    # point is read): the GPU's faces and lookups (cache_lookup.glsl) still equal numpy's
+    inside = radiance_cache.snap_focus(tris, (0.0, 0.0, 1.0))
+    nested = GatherSettings(bounces=3, cache_rays=16, cache_focus=inside)
+    gpu_nested, _ = gpu_gather.cache_gpu(shared_bvh().update(tris), lights, principled, emission,
+                                         nested)
+    numpy_nested = radiance_cache.cached_cache(tris, lights, principled, emission, 3, 16, 0,
+                                               focus=inside)
+    assert len(gpu_nested.grids) == len(numpy_nested.grids) > 1
+    a, b = (np.concatenate(c.faces).astype(np.float64) for c in (gpu_nested, numpy_nested))
     assert np.abs(a - b).sum() / np.abs(b).sum() <= 0.02
     # the same triangles snapshotted again (a viewport slice) keep the uploaded cache
     texture = gpu_gather.cache_texture(shared_bvh(), lights, principled, emission, settings)

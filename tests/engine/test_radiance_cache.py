@@ -231,3 +231,100 @@ def test_rays_traced_once_give_every_iteration():
         np.testing.assert_allclose(kept.faces[0], traced.faces[0], rtol=1e-5, atol=1e-7)
         once = rc.face_paths(kept, tris, lights, materials, emission, rays=8)
         assert len(once.radiance) == 8 * sum(int(p.sum()) for p in kept.present)
+
+
+def test_nested_grids_around_the_camera():
+    """With a focus (the camera) the finer grids sit around it on the coarser grid's lattice
+    (each voxel splits a coarser one in eight), inside the coarser grid, and the coarser grid
+    leaves out exactly the cells the finer covers; a point reads the finest grid holding it."""
+    tris, lights, albedo, emission = lit_room()
+    focus = (1.6, -1.2, 0.5)  # near a corner of the room
+    grids = rc.cache_grids(tris, 16, 3, focus)
+    for fine, coarse in zip(grids, grids[1:]):
+        assert fine.span == pytest.approx(coarse.span / 2)
+        start = (np.asarray(fine.origin) - coarse.origin) / coarse.span
+        np.testing.assert_allclose(start, np.round(start), atol=1e-9)
+        assert (start >= 0).all() and (start <= 8).all()
+    lo, hi = grids[0].extent
+    inside = (np.asarray(focus) >= lo) & (np.asarray(focus) < hi)
+    assert inside.all()
+    centred = rc.cache_grids(tris, 16, 2)  # no focus: the middle half, as before
+    np.testing.assert_allclose(centred[0].origin, centred[1].origin + 4 * centred[1].span)
+    cache = rc.build_cache(tris, 16, 2, focus=focus)
+    fine, coarse = cache.grids
+    start = np.round((fine.origin - coarse.origin) / coarse.span)
+    held = ((cache.cells[1] >= start) & (cache.cells[1] < start + 8)).all(axis=1)
+    assert not held.any() and len(cache.cells[0]) > 0
+    # a uniform field (the glowing box) is read the same through either grid
+    box = inward_box(2.0)
+    glow_albedo = np.array([[0.5, 0.5, 0.5], [0.8, 0.8, 0.8]])
+    glow = np.array([[0.2, 0.2, 0.2], [0.0, 0.0, 0.0]])
+    nested = rc.build_cache(box, 8, 2, focus=(0.7, 0.7, -0.7))
+    nested = rc.relax(nested, rc.face_paths(nested, box, [], glow_albedo, glow, rays=8), 8)
+    p = np.array([[0.9, 0.9, -0.99], [-0.9, -0.9, 0.99]])  # in the fine grid; in the coarse only
+    n = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    np.testing.assert_allclose(rc.lookup(nested, p, n), np.full((2, 3), 0.2), rtol=1e-5)
+
+
+def test_auto_nests_grids_around_the_camera_within_the_ray_budget():
+    """Auto with a focus keeps the single grid's resolution and adds nested grids while the
+    rays stay within the budget: finer voxels near the camera, none coarser elsewhere."""
+    tris, _, _, _ = lit_room()
+    focus = rc.snap_focus(tris, (1.0, -1.0, 1.2))
+    rays = 32  # the room's single grid is then 32³, with room for nested grids
+    flat = rc.build_cache(tris, 0, rays=rays)
+    nested = rc.build_cache(tris, 0, rays=rays, focus=focus)
+    assert nested.grids[-1].span == flat.grids[0].span
+    assert len(nested.grids) > 1 and nested.grids[0].span < flat.grids[0].span
+    assert rc._rays(nested, rays) <= rc.RAYS_PER_ITERATION
+    if len(nested.grids) < rc.AUTO_GRIDS:
+        more = rc.build_cache(tris, nested.grids[0].resolution, len(nested.grids) + 1,
+                              focus=focus)
+        assert rc._rays(more, rays) > rc.RAYS_PER_ITERATION
+    # the camera moving within a step of the lattice keeps the grids (and the cache)
+    assert rc.snap_focus(tris, (1.01, -1.02, 1.19)) == focus
+
+
+def street(length=96.0):
+    """A street ``length`` m long between two rows of 6 m blocks on a ground plane, lit by a
+    point light above it: a camera at street level sees surfaces a few metres away in a
+    scene a hundred metres wide."""
+    meshes, objects = [], []
+    ground, tri = box((length, 14.0, 0.2), (0.0, 0.0, -0.1))
+    meshes.append(mesh("ground", ground, tri))
+    objects.append(ObjectData("Ground", "ground", np.eye(4)))
+    for i, x in enumerate(np.arange(-length / 2 + 3, length / 2, 8.0)):
+        for side in (-1, 1):
+            name = f"b{i}{side}"
+            block, tri = box((6.0, 4.0, 6.0), (x, side * 5.0, 3.0))
+            meshes.append(mesh(name, block, tri))
+            objects.append(ObjectData(name.upper(), name, np.eye(4)))
+    tris = world_triangles(snapshot(meshes, objects))
+    light = LightData("P", "POINT", np.ones(3, np.float32), 4.0e5, frame((-40.0, 0.0, 20.0)),
+                      radius=0.1)
+    return tris, [light], np.array([[0.7, 0.7, 0.7]]), np.zeros((1, 3))
+
+
+def test_nested_grids_follow_exact_light_near_the_camera_in_a_large_scene():
+    """A camera at street level in a 100 m street: on the walls of the 2 m gap between the
+    blocks beside it (voxels of one grid over the street are 1.5 m), the cache with Auto's
+    grids nested around the camera matches exact gathers of the one-bounce light far more
+    closely than one grid (measured 0.09 against 0.47)."""
+    tris, lights, albedo, emission = street()
+    camera = (-42.0, 0.0, 1.7)
+    gap = [(x, y, z) for x in (-42.0, -40.0) for y in (3.5, 5.0, 6.5, -3.5, -5.0, -6.5)
+           for z in (0.5, 2.0, 4.0)]
+    points = np.array(gap)
+    normals = np.array([[1.0 if x == -42.0 else -1.0, 0.0, 0.0] for x, _, _ in gap])
+    exact, _ = indirect_and_ao(points, normals, np.arange(len(points)), tris, lights, albedo,
+                               emission, rays=1024)
+    errors = {}
+    for focus in (None, rc.snap_focus(tris, camera)):
+        cache = rc.build_cache(tris, 0, rays=16, focus=focus)
+        cache = rc.relax(cache, rc.face_paths(cache, tris, lights, albedo, emission, rays=16), 16)
+        got = rc.lookup(cache, points, normals)
+        errors[len(cache.grids)] = np.abs(got - exact).sum() / np.abs(exact).sum()
+    print({grids: round(float(e), 3) for grids, e in errors.items()})
+    one, nested = errors[1], errors[max(errors)]
+    assert max(errors) > 1
+    assert nested < 0.5 * one and nested < 0.15

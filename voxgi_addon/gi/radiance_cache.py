@@ -36,7 +36,7 @@ from .cascades import CascadeGrid
 
 __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
            "cache_texels", "cached_cache", "face_paths", "face_points", "iterate", "lookup", "relax",
-           "with_faces"]
+           "snap_focus", "with_faces"]
 
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin
 FACE_AXIS_COSINE = 0.2   # a voxel holds the faces of the axes its triangles' normals reach
@@ -68,31 +68,56 @@ class RadianceCache:
         return sum(f.nbytes + c.nbytes for f, c in zip(self.faces, self.cells))
 
 
-def cache_grids(tris, resolution: int = 32, count: int = 1) -> list:
+def cache_grids(tris, resolution: int = 32, count: int = 1, focus=None) -> list:
     """``count`` nested grids of ``resolution``³ voxels (finest first), the coarsest a cube over
-    the triangles' bounding box (2% margin), each finer one the middle half of the next
+    the triangles' bounding box (2% margin), each finer one half the size of the next, on its
+    lattice (so its voxels split the coarser ones in eight): centred on ``focus`` (a world
+    point: the camera), kept inside the coarser grid; without one, its middle half
     (cascades' layout, docs/gi_pipeline.md "Conventions")."""
     if resolution < 2 or resolution & (resolution - 1):
         raise VoxGIError(f"the radiance cache's resolution must be a power of two ≥ 2, "
                          f"not {resolution}")
     if count < 1:
         raise VoxGIError(f"the radiance cache needs at least one grid, not {count}")
+    lo, hi = _bounds(tris)
+    size = max(float((hi - lo).max()) * 1.02, 1e-3)
+    centre = 0.5 * (lo + hi)
+    span = size / resolution
+    grids = [CascadeGrid(count - 1, span, resolution, centre - 0.5 * resolution * span)]
+    for index in range(count - 2, -1, -1):
+        outer = grids[0]
+        if focus is None:
+            start = np.full(3, resolution // 4)
+        else:
+            at = (np.asarray(focus, np.float64).reshape(3) - outer.origin) / outer.span
+            start = np.clip(np.round(at - resolution / 4), 0, resolution // 2)
+        grids.insert(0, CascadeGrid(index, outer.span / 2, resolution,
+                                    outer.origin + start * outer.span))
+    return grids
+
+
+def _bounds(tris) -> tuple[np.ndarray, np.ndarray]:
     corners = np.asarray(tris.positions, np.float64).reshape(-1, 3)
     if len(corners) == 0:
         raise VoxGIError("the radiance cache needs triangles")
-    lo, hi = corners.min(axis=0), corners.max(axis=0)
-    size = max(float((hi - lo).max()) * 1.02, 1e-3)
-    centre = 0.5 * (lo + hi)
-    grids = []
-    for index in range(count):
-        span = size / 2 ** (count - 1 - index) / resolution
-        grids.append(CascadeGrid(index, span, resolution, centre - 0.5 * resolution * span))
-    return grids
+    return corners.min(axis=0), corners.max(axis=0)
+
+
+def snap_focus(tris, focus, resolution: int = 32):
+    """``focus`` (a world point, the camera; None: none) on a lattice of a sixteenth of the
+    cache's coarsest grid's size (a quarter of its third nested grid): the nested grids of
+    ``cache_grids`` move in those steps, so a camera moving within one step keeps the cache
+    (the viewport's orbit)."""
+    if focus is None:
+        return None
+    lo, hi = _bounds(tris)
+    step = max(float((hi - lo).max()) * 1.02, 1e-3) / 16
+    return tuple(float(v) for v in (np.floor(np.asarray(focus, np.float64) / step) + 0.5) * step)
 
 
 def _sites(tris, grids) -> tuple[list, list]:
     """Per grid the (N_i, 3) int32 cells its triangles touch (a coarser grid leaving out the
-    cells a finer grid covers entirely) and their (N_i, 6) present faces (``RadianceCache``)."""
+    cells the next finer grid covers) and their (N_i, 6) present faces (``RadianceCache``)."""
     corners = np.asarray(tris.positions, np.float64)
     normals = np.abs(np.asarray(tris.normals, np.float64))
     triangles = np.arange(len(corners) * 3).reshape(-1, 3)
@@ -105,8 +130,11 @@ def _sites(tris, grids) -> tuple[list, list]:
         np.maximum.at(reach, surface.cell_of_pair, normals[surface.triangle_of_pair])
         res = grid.resolution
         keep = ((cells >= 0) & (cells < res)).all(axis=1)
-        if index > 0:  # the finer grid is cells [res/4, 3 res/4) of this one
-            keep &= ~((cells >= res // 4) & (cells < 3 * res // 4)).all(axis=1)
+        if index > 0:  # the finer grid covers cells [start, start + res/2) of this one
+            finer = grids[index - 1]
+            start = np.round((np.asarray(finer.origin) - np.asarray(grid.origin))
+                             / grid.span).astype(np.int64)
+            keep &= ~((cells >= start) & (cells < start + res // 2)).all(axis=1)
         out.append(cells[keep].astype(np.int32))
         present.append(np.repeat(reach[keep] > FACE_AXIS_COSINE, 2, axis=1))
     return out, present
@@ -124,7 +152,8 @@ def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
     """(K, 3) float64 indirect light (E/π) at ``points`` (K, 3) for unit ``normals`` (K, 3):
     per axis the face n faces, trilinear (node-centred) over the voxels of the finest grid
     holding the point that hold that face, then the axes blended by n² (over the axes some
-    neighbour holds); 0 outside every grid or where no neighbour holds a face n faces."""
+    neighbour holds); where no neighbour there holds a face n faces, the next coarser grid
+    holding the point; 0 where none does."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     out = np.zeros((len(p), 3))
@@ -139,7 +168,6 @@ def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
         g = (p - np.asarray(grid.origin)) / grid.span
         res = grid.resolution
         inside = todo & ((g >= 0) & (g < res)).all(axis=1)
-        todo &= ~inside
         rows = np.flatnonzero(inside)
         if len(rows) == 0 or len(cells) == 0:
             continue
@@ -166,32 +194,57 @@ def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
         share = np.where(axis_ok, blend[rows], 0.0)
         norm = share.sum(axis=1)
         value = (share[:, :, None] * mean).sum(axis=1) / np.maximum(norm, 1e-12)[:, None]
-        out[rows] = np.where(norm[:, None] > 1e-6, value, 0.0)
+        found = norm > 1e-6  # else the next coarser grid (a point off its finer grid's voxels)
+        out[rows[found]] = value[found]
+        todo[rows[found]] = False
     return out
 
 
-# Auto resolution (``build_cache(resolution=0)``): the finest of these whose iteration traces at
-# most RAYS_PER_ITERATION rays — half the rays of a diffuse gather at GI Resolution Auto (about
-# 160 × 120 points) and the default 64 GI Rays, so that each bounce beyond the first costs at
-# most half a gather.
+# Auto resolution (``build_cache(resolution=0)``): the finest of these whose faces' rays (traced
+# once for all iterations, ``face_paths``) are at most RAYS_PER_ITERATION — half the rays of a
+# diffuse gather at GI Resolution Auto (about 160 × 120 points) and the default 64 GI Rays, so
+# the whole cache costs at most half a gather.
 AUTO_RESOLUTIONS = (64, 32, 16)
 RAYS_PER_ITERATION = 160 * 120 * 64 // 2
+# With a focus (the camera) inside the scene, Auto also nests up to this many grids around it
+# while the rays stay within the budget (``build_cache``).
+AUTO_GRIDS = 3
 
 
-def build_cache(tris, resolution: int = 32, count: int = 1, rays: int = 16) -> RadianceCache:
+def build_cache(tris, resolution: int = 32, count: int = 1, rays: int = 16,
+                focus=None) -> RadianceCache:
     """An empty cache (iteration 0, all zeros) on ``cache_grids`` of ``tris``. resolution 0:
     Auto, the finest of ``AUTO_RESOLUTIONS`` whose faces × ``rays`` (rays per face) stay within
-    ``RAYS_PER_ITERATION`` (the coarsest otherwise)."""
+    ``RAYS_PER_ITERATION`` (the coarsest otherwise), then, with a ``focus`` inside the scene's
+    grid (a camera among the geometry: an interior, a street), as many nested grids around it
+    (up to ``AUTO_GRIDS``) as stay within that budget: finer voxels near the camera, the whole
+    scene at least as fine as one grid would be. A camera outside (an object or a room seen
+    from outside) keeps one grid."""
     if resolution == 0:
         for choice in AUTO_RESOLUTIONS:
-            cache = build_cache(tris, choice, count)
-            if sum(int(p.sum()) for p in cache.present) * rays <= RAYS_PER_ITERATION:
+            cache = build_cache(tris, choice, count, focus=focus)
+            if _rays(cache, rays) <= RAYS_PER_ITERATION:
                 break
+        if focus is not None and _inside(cache.grids[-1], focus):
+            for nested in range(count + 1, AUTO_GRIDS + 1):
+                finer = build_cache(tris, choice, nested, focus=focus)
+                if _rays(finer, rays) > RAYS_PER_ITERATION:
+                    break
+                cache = finer
         return cache
-    grids = cache_grids(tris, resolution, count)
+    grids = cache_grids(tris, resolution, count, focus)
     cells, present = _sites(tris, grids)
     faces = tuple(np.zeros((len(c), 6, 3), np.float32) for c in cells)
     return RadianceCache(tuple(grids), tuple(cells), faces, 0, tuple(present))
+
+
+def _inside(grid, point) -> bool:
+    lo, hi = grid.extent
+    return bool(((np.asarray(point, np.float64) >= lo) & (np.asarray(point) < hi)).all())
+
+
+def _rays(cache: RadianceCache, rays: int) -> int:
+    return sum(int(p.sum()) for p in cache.present) * rays
 
 
 def face_points(cache: RadianceCache) -> tuple[np.ndarray, np.ndarray]:
@@ -289,19 +342,21 @@ def _triangles_key(tris) -> tuple:
 
 def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
                  resolution: int = 0, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
-                 hit_glossy: bool = True) -> RadianceCache | None:
+                 hit_glossy: bool = True, focus=None) -> RadianceCache | None:
     """The cache of ``bounces`` − 1 iterations for these triangles, lights and materials (None
     for ``bounces`` ≤ 1), kept for the next call with the same inputs (the viewport's slices
-    ask for the same cache)."""
+    ask for the same cache). focus : the camera (Auto nests grids around it, ``build_cache``;
+    ``snap_focus``'d here)."""
     if bounces <= 1:
         return None
+    focus = snap_focus(tris, focus)
     key = (_triangles_key(tris), cache_key(lights, albedo, emission, bounces, rays, resolution,
                                            tuple(float(w) for w in world), hit_samples,
-                                           hit_glossy))
+                                           hit_glossy, focus))
     held = _MEMO.get("entry")
     if held is not None and held[0] == key:
         return held[1]
-    cache = build_cache(tris, resolution, rays=rays)
+    cache = build_cache(tris, resolution, rays=rays, focus=focus)
     paths = face_paths(cache, tris, lights, albedo, emission, rays, world=world,
                        hit_samples=hit_samples, hit_glossy=hit_glossy)
     for _ in range(bounces - 1):  # the same rays every iteration: traced once

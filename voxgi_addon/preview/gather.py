@@ -16,7 +16,7 @@ cost is one dispatch per pass.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -41,7 +41,8 @@ class GatherSettings:
     exact one-bounce gather and builds no cache; N > 1 adds at each bounce hit the light of
     bounces 2 … N from a radiance cache of N − 1 iterations (``gi.radiance_cache``, with
     ``cache_rays`` rays per voxel face on a ``cache_resolution``³ grid; 0: Auto,
-    ``radiance_cache.build_cache``)."""
+    ``radiance_cache.build_cache``). cache_focus : the camera's position on the cache's
+    lattice (``focused``; None: none), around which Auto nests finer grids."""
 
     rays: int = 64
     glossy_rays: int = 8
@@ -54,6 +55,25 @@ class GatherSettings:
     bounces: int = 1
     cache_rays: int = 16
     cache_resolution: int = 0
+    cache_focus: tuple | None = None
+
+
+def focused(settings: GatherSettings, camera, tris) -> GatherSettings:
+    """``settings`` with the ``camera``'s position as the radiance cache's focus (snapped:
+    ``radiance_cache.snap_focus``), where there is a cache whose grids Auto lays out."""
+    if settings.bounces <= 1 or settings.cache_resolution or camera is None or \
+            len(getattr(tris, "positions", ())) == 0:
+        return settings
+    from ..gi.radiance_cache import snap_focus
+    focus = snap_focus(tris, np.asarray(camera.world_matrix, np.float64)[:3, 3])
+    return replace(settings, cache_focus=focus)
+
+
+def cache_settings(settings: GatherSettings) -> tuple:
+    """What the radiance cache depends on among ``settings`` (its key beside the scene's)."""
+    return (settings.bounces, settings.cache_rays, settings.cache_resolution,
+            tuple(float(w) for w in settings.world), settings.hit_samples, settings.hit_glossy,
+            settings.cache_focus)
 
 
 def radiance_cache(tris, lights, albedo, emission, settings: GatherSettings):
@@ -64,7 +84,7 @@ def radiance_cache(tris, lights, albedo, emission, settings: GatherSettings):
     from ..gi.radiance_cache import cached_cache
     return cached_cache(tris, lights, albedo, emission, settings.bounces, settings.cache_rays,
                         settings.cache_resolution, settings.world, settings.hit_samples,
-                        settings.hit_glossy)
+                        settings.hit_glossy, settings.cache_focus)
 
 
 VIEW_BACKOFF = 2e-4  # metres: gather points step back along the camera ray (see gather_gi)

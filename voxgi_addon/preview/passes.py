@@ -34,7 +34,14 @@ from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
 from ..scene.textures import primary_base, texel_emission
 from . import transmission
-from .gather import GatherSettings, gather_gi, gather_glossy, gather_glossy_world, radiance_cache
+from .gather import (
+    GatherSettings,
+    focused,
+    gather_gi,
+    gather_glossy,
+    gather_glossy_world,
+    radiance_cache,
+)
 from .upsample import PLANE_TOLERANCE, STRIDES, sample_pixels, upsample
 
 PASS_NAMES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color",
@@ -784,6 +791,8 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     if quality == "ACCURATE":
         shadows = "RAYS"
     gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
+    if quality == "ACCURATE":  # the radiance cache nests finer grids around the camera
+        gather_settings = focused(gather_settings, snapshot.camera, tris)
     timings = {}
     t0 = time.perf_counter()
     seen = primary_visibility(camera_tris, snapshot.camera, width, height)
