@@ -328,3 +328,16 @@ def test_nested_grids_follow_exact_light_near_the_camera_in_a_large_scene():
     one, nested = errors[1], errors[max(errors)]
     assert max(errors) > 1
     assert nested < 0.5 * one and nested < 0.15
+
+
+def test_a_camera_outside_the_scene_has_no_focus():
+    """Outside the scene's grid no grids nest, so the camera sets no focus (a camera orbiting
+    an object from outside keeps its cache); inside, nearby points share one snapped focus
+    that lies in the grid."""
+    tris, _, _, _ = lit_room()
+    assert rc.snap_focus(tris, (0.0, -9.0, 1.2)) is None
+    assert rc.snap_focus(tris, None) is None
+    inside = rc.snap_focus(tris, (0.3, 0.2, 1.0))
+    lo, hi = rc.cache_grids(tris, 32)[0].extent
+    assert ((np.asarray(inside) > lo) & (np.asarray(inside) < hi)).all()
+    assert rc.snap_focus(tris, (0.31, 0.21, 1.01)) == inside

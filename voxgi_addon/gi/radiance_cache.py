@@ -103,16 +103,22 @@ def _bounds(tris) -> tuple[np.ndarray, np.ndarray]:
     return corners.min(axis=0), corners.max(axis=0)
 
 
-def snap_focus(tris, focus, resolution: int = 32):
+def snap_focus(tris, focus):
     """``focus`` (a world point, the camera; None: none) on a lattice of a sixteenth of the
     cache's coarsest grid's size (a quarter of its third nested grid): the nested grids of
     ``cache_grids`` move in those steps, so a camera moving within one step keeps the cache
-    (the viewport's orbit)."""
+    (the viewport's orbit). None outside the scene's grid (no grids nest there, and a camera
+    orbiting outside keeps the cache)."""
     if focus is None:
         return None
     lo, hi = _bounds(tris)
-    step = max(float((hi - lo).max()) * 1.02, 1e-3) / 16
-    return tuple(float(v) for v in (np.floor(np.asarray(focus, np.float64) / step) + 0.5) * step)
+    size = max(float((hi - lo).max()) * 1.02, 1e-3)
+    centre = 0.5 * (lo + hi)
+    point = np.asarray(focus, np.float64).reshape(3)
+    if (np.abs(point - centre) >= size / 2).any():
+        return None  # outside the scene's grid: one grid, whatever the camera does
+    step, origin = size / 16, centre - size / 2
+    return tuple(float(v) for v in origin + (np.floor((point - origin) / step) + 0.5) * step)
 
 
 def _sites(tris, grids) -> tuple[list, list]:
@@ -219,7 +225,7 @@ def build_cache(tris, resolution: int = 32, count: int = 1, rays: int = 16,
     grid (a camera among the geometry: an interior, a street), as many nested grids around it
     (up to ``AUTO_GRIDS``) as stay within that budget: finer voxels near the camera, the whole
     scene at least as fine as one grid would be. A camera outside (an object or a room seen
-    from outside) keeps one grid."""
+    from outside) keeps one grid (``snap_focus`` gives no focus there)."""
     if resolution == 0:
         for choice in AUTO_RESOLUTIONS:
             cache = build_cache(tris, choice, count, focus=focus)
