@@ -10,6 +10,8 @@ submits one job to the worker (``jobs.py``):
     refresh_caches (voxelize only keys whose fingerprint changed; ``voxelize/incremental``)
     → update_gi_stages (cascades, injection, octree; cascades reused for light-only changes)
     → volume_atlas (the octree's GPU layout, so the main thread only uploads it)
+    → Fast at Bounces > 1: bounced_volumes (the octrees rebuilt with the view's radiance
+      cache and their layouts; ``bounce_cache``, ``render/viewport_bounces.py``)
 
 A newer change supersedes the queued or running job; its plan is merged into the newer one so
 no work is lost. Results are applied on the main thread (``jobs.drain``), become the scene's
@@ -34,6 +36,7 @@ import bpy
 
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.incremental import StagedGI, cascade_grids, grids_equal, update_gi_stages
+from ..voxgi_addon.preview.bounced_volumes import bounced_volumes
 from ..voxgi_addon.preview.volume_textures import volume_atlas
 from ..voxgi_addon.scene.changes import (
     SceneIndex,
@@ -72,6 +75,7 @@ class LiveResult:
     voxelized: list[str]
     reused: list[str]
     timings: dict[str, float]
+    bounced: object = None  # BouncedVolumes of the new state with ``LiveGI.bounce_cache``
 
 
 @dataclass
@@ -122,6 +126,12 @@ class LiveGI:
         self.settings = None
         self.rescan = ""           # why everything must be read again next time ("" = no need)
         self.skin: dict[str, tuple[bytes, bytes]] = {}  # skinned objects' states (``update``)
+        # Fast quality at Bounces > 1: the radiance cache the view's voxels reflect (set by the
+        # view, render/viewport_bounces.py; None otherwise): a job submitted while it is set
+        # also rebuilds the new state's octrees with it on the worker, so the view shows the
+        # moved scene with its bounces at once (``bounced``: those of the applied result)
+        self.bounce_cache = None
+        self.bounced = None
 
     # ------------------------------------------------------------------ planning
 
@@ -217,6 +227,7 @@ class LiveGI:
         settings = scene.voxgi
         base_span, count, gi = settings.base_span, settings.cascade_count, gi_settings(settings)
         store, previous, progress = self.store, self.staged, self.progress
+        bounce_cache = self.bounce_cache
         stages = plan.stages
         progress(0.0, "starting")
 
@@ -231,12 +242,19 @@ class LiveGI:
             progress(0.9, "octree layout for the GPU")
             atlas = volume_atlas(staged.state.octree)
             t3 = time.perf_counter()
+            bounced = None
+            if bounce_cache is not None:  # Fast's cones: the octrees with the cache's bounces
+                progress(0.95, "voxels with the radiance cache's bounces")
+                bounced = bounced_volumes(staged.state, bounce_cache)
+            t4 = time.perf_counter()
             progress(1.0, "done")
             timings = {"caches": t1 - t0, **{f"  {k}": v for k, v in refreshed.caches.timings.items()},
                        "gi": t2 - t1, **{f"  {k}": v for k, v in staged.state.timings.items()},
                        "atlas": t3 - t2}
+            if bounced is not None:
+                timings["bounced octrees + atlases"] = t4 - t3
             return LiveResult(snapshot, refreshed.caches, staged, atlas, refreshed.voxelized,
-                              refreshed.reused, timings)
+                              refreshed.reused, timings, bounced)
 
         self.pending = plan
         return jobs.submit(self.scene_name, job, label=JOB_LABEL,
@@ -247,6 +265,7 @@ class LiveGI:
     def _apply(self, plan: UpdatePlan, result: LiveResult) -> None:
         self.pending = None
         self.snapshot, self.staged, self.atlas = result.snapshot, result.staged, result.atlas
+        self.bounced = result.bounced
         self.generation += 1
         self.error = ""
         state = result.staged.state

@@ -31,6 +31,7 @@ from ..voxgi_addon.gi.cone_bounces import cone_octrees, fast_cache_settings
 from ..voxgi_addon.gi.cone_shadows import cone_shadowed_direct, shadow_cone
 from ..voxgi_addon.gi.conetrace import world_mips
 from ..voxgi_addon.gi.radiance_cache import cache_key
+from ..voxgi_addon.preview.bounced_volumes import BouncedVolumes
 from ..voxgi_addon.preview.gather import cache_settings
 from ..voxgi_addon.preview.passes import (
     compose_passes,
@@ -71,14 +72,58 @@ def _radiance_cache(scene, settings):
 _BUILD = object()  # fast_passes' radiance: build (or keep) the whole cache here
 
 
+def cone_volumes(volume, gi_state, radiance, cones, world_radiance, timings=None):
+    """(the diffuse cones' ``GPUVolume``, {"glossy" / "shadow": ``GPUVolume``}) holding the
+    octree of each kind of cone (``cone_bounces.cone_octrees``: with Bounces > 1 rebuilt with
+    the radiance cache's bounces), uploaded where they changed. ``volume`` : the caller's,
+    kept between calls (it keeps the update's own octree: the viewport uploads that one
+    between its slices); rebuilt octrees get their own volumes beside it, so neither is
+    uploaded again at every call. radiance : None (one bounce), a ``RadianceCache`` (the
+    octrees rebuilt here), or ``bounced_volumes.BouncedVolumes`` made off the main thread:
+    when made for ``gi_state``, its octrees and atlases are used and nothing is rebuilt.
+    world_radiance : the world's equirect map (``WorldData.radiance``) or None. timings : a
+    dict that gets "radiance cache" (the rebuild) and "upload" seconds."""
+    t0 = time.perf_counter()
+    made = None
+    if isinstance(radiance, BouncedVolumes):
+        made = radiance if radiance.fits(gi_state) else None
+        radiance = radiance.cache
+    octrees = made.octrees if made is not None else cone_octrees(gi_state, radiance)
+
+    def atlas(octree):  # the worker's layout when it made them, else built at the upload
+        return None if made is None else made.atlas(octree)
+
+    t1 = time.perf_counter()
+    world = world_mips(world_radiance)
+    views = _view_volumes.setdefault(volume, {})
+    if octrees["diffuse"] is not getattr(gi_state, "octree", None):
+        volume = views.setdefault("bounced", GPUVolume())  # rebuilt with the cache's bounces
+    else:
+        views.pop("bounced", None)
+    volume.update(octrees["diffuse"], cones, atlas=atlas(octrees["diffuse"]), world=world)
+    # the glossy and shadow cones' octrees are uploaded beside the diffuse one where they differ
+    kinds = {}
+    for kind in ("glossy", "shadow"):
+        if octrees[kind] is octrees["diffuse"]:
+            views.pop(kind, None)
+            kinds[kind] = volume
+            continue
+        kinds[kind] = views.setdefault(kind, GPUVolume())
+        kinds[kind].update(octrees[kind], cones, atlas=atlas(octrees[kind]), world=world)
+    if timings is not None:
+        timings["radiance cache"], timings["upload"] = t1 - t0, time.perf_counter() - t1
+    return volume, kinds
+
+
 def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
                 gi_stride, gather_settings, glossy_indirect, camera_tris=None, radiance=_BUILD):
     """(passes, timings) of Fast quality; ``volume`` a ``GPUVolume`` kept between calls (a new
     one when None) so that an unchanged octree is not uploaded again. camera_tris : what the
     G-buffer draws (None: the scene's triangles; ``transmission.behind_glass`` hides glass).
     radiance : the radiance cache the voxels reflect at Bounces > 1 — by default built whole
-    here (F12); the viewport passes its ``ViewportCache``'s last complete one (None: one
-    bounce until there is one)."""
+    here (F12); the viewport passes the ``BouncedVolumes`` its worker made from its
+    ``ViewportCache``'s last complete one (None: one bounce until there is one;
+    ``cone_volumes``)."""
     timings = {}
     t0 = time.perf_counter()
     # the session's GPU scene (gpu_scene.GPUScene, as Accurate's): triangles, BVH, material
@@ -92,34 +137,12 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     # the octree of each kind of cone (Cycles' ray visibility, gi/ray_views.py), with
     # Bounces > 1 the voxels also reflecting the radiance cache (gi/cone_bounces.py), the
     # cache gathered on the GPU as Accurate's
-    t0 = time.perf_counter()
     if radiance is _BUILD:
         radiance = _radiance_cache(scene, fast_cache_settings(gather_settings,
                                                               scene.bvh.scene_triangles))
-    octrees = cone_octrees(gi_state, radiance)
-    timings["radiance cache"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
     volume = volume or GPUVolume()
-    world = world_mips(getattr(snapshot.world, "radiance", None))
-    views = _view_volumes.setdefault(volume, {})
-    if octrees["diffuse"] is not getattr(gi_state, "octree", None):
-        # rebuilt with the cache's bounces: its own volume, so that the caller's keeps the
-        # update's octree (the viewport uploads that one between its slices) and neither is
-        # uploaded again at every call
-        volume = views.setdefault("bounced", GPUVolume())
-    else:
-        views.pop("bounced", None)
-    volume.update(octrees["diffuse"], cones, world=world)
-    # the glossy and shadow cones' octrees are uploaded beside the diffuse one where they differ
-    kinds = {}
-    for kind in ("glossy", "shadow"):
-        if octrees[kind] is octrees["diffuse"]:
-            views.pop(kind, None)
-            kinds[kind] = volume
-            continue
-        kinds[kind] = views.setdefault(kind, GPUVolume())
-        kinds[kind].update(octrees[kind], cones, world=world)
-    timings["upload"] = time.perf_counter() - t0
+    volume, kinds = cone_volumes(volume, gi_state, radiance, cones,
+                                 getattr(snapshot.world, "radiance", None), timings)
     t0 = time.perf_counter()
     gbuffer = rasterize(tris if camera_tris is None else camera_tris, snapshot.camera, rough,
                         width, height,

@@ -45,8 +45,10 @@ from ..blender.settings import cone_settings, gi_stride, pixel_filter_width
 from ..blender.viewport_session import live_gi
 from ..blender.viewport_settings import VIEWPORT_PASSES
 from ..voxgi_addon.scene.view_camera import camera_from_view
+from .gpu_fast import cone_volumes
 from .gpu_volume import GPUVolume
 from .progressive import SLICE_BUDGET, ProgressiveImage, base_options, tracer
+from .viewport_bounces import FastCacheSource, ViewportBounces
 from .viewport_cache import ViewportCache
 
 _renderers: "weakref.WeakSet[ViewportRenderer]" = weakref.WeakSet()
@@ -87,6 +89,8 @@ class ViewportRenderer:
         self.error = ""
         self.raster = None         # the G-buffer shader, made in this view's GPU context
         self.cache = ViewportCache()  # the radiance cache, built a stage at a time
+        self.bounces = ViewportBounces()  # Fast: the voxels with its bounces, made on the worker
+        self.bounced = None        # ... those this key's image reflects (None: one bounce)
         _renderers.add(self)
 
     def free(self) -> None:
@@ -95,6 +99,8 @@ class ViewportRenderer:
         self.volume = GPUVolume()
         self.raster = None
         self.cache.free()
+        self.bounces.free()
+        self.bounced = None
 
     # ------------------------------------------------------------------ tracing
 
@@ -152,15 +158,29 @@ class ViewportRenderer:
             self.timings = {"radiance cache stage": time.perf_counter() - t0}
             return "Refining"
         t0 = time.perf_counter()
+        cache_source = self.cache
         if settings.quality != "ACCURATE":  # Accurate traces the triangles, not the octree
-            self.volume.update(live.staged.state.octree, cone_settings(settings),
-                               atlas=live.atlas)
+            cones = cone_settings(settings)
+            self.volume.update(live.staged.state.octree, cones, atlas=live.atlas)
+            cache_source = FastCacheSource(self.cache, self.bounced)
+            if self.bounced is not None:  # the worker's bounced octrees: their atlases
+                volume, kinds = cone_volumes(self.volume, live.staged.state, self.bounced,
+                                             cones, getattr(live.snapshot.world, "radiance",
+                                                            None))
+                uploaded = sum(v.uploaded_bytes for v in {volume, *kinds.values()})
+                if uploaded and self.texture is not None:  # the upload is this draw's work
+                    self.timings = {"atlas upload": time.perf_counter() - t0,
+                                    "view_draw work": time.perf_counter() - t0}
+                    return "Refining"
         upload = time.perf_counter() - t0
         if self.raster is None:
             from .gbuffer import gbuffer_shader
             self.raster = gbuffer_shader()
+        # the coarse first image reads the last complete radiance cache; a new one's build
+        # starts with the tiles (viewport_cache.ViewportCache.hold)
+        self.cache.hold = progressive.coarse_pending
         done = progressive.step(tracer(live, self.volume, settings, staged=True,
-                                       raster=self.raster, cache_source=self.cache),
+                                       raster=self.raster, cache_source=cache_source),
                                 view, window, settings, pixel_filter_width(scene),
                                 whole=self.texture is None)  # a first image at once
         if done is None:
@@ -220,11 +240,19 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
     progressive = renderer.progressive
     source = live.image_source(scene.voxgi.quality)
     if source is not None:
-        # a completed radiance cache restarts the image (viewport_cache: the gathers read the
-        # last complete cache while a new one is built)
-        key = renderer.trace_key(source[2], camera_key, scene, pass_name,
-                                 base_options(scene.voxgi, width, height)) \
-            + (renderer.cache.generation,)
+        options = base_options(scene.voxgi, width, height)
+        if scene.voxgi.quality != "ACCURATE" and options["gather_settings"].bounces > 1:
+            # Fast's voxels with the last complete cache's bounces, made on the worker: the
+            # image restarts when they are there (viewport_bounces), not when the cache is
+            renderer.bounced = renderer.bounces.current(live, renderer.cache.cache)
+            cache_version = ("bounced voxels", renderer.bounces.version)
+        else:
+            # a completed radiance cache restarts the image (viewport_cache: the gathers read
+            # the last complete cache while a new one is built)
+            live.bounce_cache = renderer.bounced = None
+            cache_version = ("cache", renderer.cache.generation)
+        key = renderer.trace_key(source[2], camera_key, scene, pass_name, options) \
+            + (cache_version,)
         if key != progressive.key:
             # Combined on the film, as F12's: the world behind the geometry (preview.film)
             progressive.restart(key, pass_name, width, height, view_settings.samples,

@@ -32,6 +32,10 @@ class ViewportCache:
         self.key = None        # what it was built for
         self.building = None   # (key, generator) of the build under way
         self.generation = 0
+        # set by the viewport while it traces a coarse first image: a new build does not start
+        # (nor go on) in it, so the image of a change is not held up by the build's first
+        # chunk (its layout alone 0.3 s); the tiles after it start the build
+        self.hold = False
 
     def stage(self, bvh, lights, principled, emission, settings, tables=None):
         """A generator of at most one stage (one chunk of the build the current scene needs),
@@ -41,7 +45,7 @@ class ViewportCache:
             return None
         # the BVH's node texture is replaced whenever other triangles are uploaded
         key = (bvh.nodes, cache_key(lights, principled, emission, *cache_settings(settings)))
-        if _same(key, self.key):
+        if _same(key, self.key) or self.hold:
             return self.texture
         if self.building is None or not _same(self.building[0], key):
             if self.building is not None:

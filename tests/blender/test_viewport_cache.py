@@ -149,3 +149,116 @@ def test_fast_quality_in_the_view_builds_its_cache_in_stages_too(voxgi, monkeypa
     monkeypatch.setattr(gpu_fast, "_radiance_cache", whole_build)
     means = converged_means("FAST")
     assert means[3] > 1.05 * means[1]
+
+
+def test_fast_bounces_are_made_on_the_worker_while_the_view_keeps_its_image(voxgi, interactive,
+                                                                            monkeypatch):
+    """Fast quality at Bounces 3, as in a UI session: no draw rebuilds an octree
+    (``cone_octrees`` with a cache never runs on the main thread; the worker runs it). The
+    draw after the cache completes hands the rebuild to the worker and the view keeps its
+    image (same key, no trace restarted) until the worker is done; then the image restarts
+    with the bounces and converges brighter than the one-bounce image before. An object
+    moved afterwards comes with its bounced voxels from the update job: no second job, no
+    one-bounce image between."""
+    import threading
+
+    from stand_in_engine import StandInEngine
+    from test_viewport import camera_matrices, cornell, engine_view, gpu_ready
+
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render import gpu_fast, viewport_bounces
+    from voxgi.render.viewport import ViewportRenderer
+    from voxgi.voxgi_addon.gi import cone_bounces
+    from voxgi.voxgi_addon.scene.changes import UpdateRecord
+
+    jobs = interactive
+    builds = []  # (on the main thread?) per octree rebuilt with a cache
+    original_build, original_cones = cone_bounces.build_octree, gpu_fast.cone_octrees
+
+    def build_octree(*args, **kwargs):
+        builds.append(threading.current_thread() is threading.main_thread())
+        return original_build(*args, **kwargs)
+
+    def cone_octrees(state, cache):
+        assert cache is None, "a draw rebuilt the bounced octrees on the main thread"
+        return original_cones(state, cache)
+
+    monkeypatch.setattr(cone_bounces, "build_octree", build_octree)
+    monkeypatch.setattr(gpu_fast, "cone_octrees", cone_octrees)
+    gate = threading.Event()  # holds the worker's rebuild until the test has looked
+    original_volumes = viewport_bounces.bounced_volumes
+
+    def gated(state, cache):
+        assert gate.wait(60)
+        return original_volumes(state, cache)
+
+    monkeypatch.setattr(viewport_bounces, "bounced_volumes", gated)
+
+    scene = cornell()
+    scene.voxgi.quality = "FAST"
+    scene.voxgi_viewport.resolution_fraction = 1.0
+    scene.voxgi_viewport.samples = 2
+    scene.voxgi.bounce_source = "MANUAL"
+    scene.voxgi.bounces = 3
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    jobs.synchronous = True
+    live.update(scene, depsgraph)
+    jobs.synchronous = False
+    view, window = camera_matrices(scene, depsgraph)
+    engine = StandInEngine()
+    renderer = engine.voxgi_viewport = ViewportRenderer()
+
+    def draw():
+        redraws = engine.redraws
+        image = engine_view(engine, scene, depsgraph, view, window)
+        jobs.drain()
+        return image, engine.redraws > redraws
+
+    # one bounce (no cache yet) converges while the cache is built a chunk per draw
+    one_bounce = None
+    for _ in range(5000):
+        key = renderer.progressive.key
+        image, more = draw()
+        if renderer.progressive.converged and renderer.cache.generation == 0:
+            one_bounce = renderer.progressive.image[..., :3].mean()
+        if renderer.cache.generation == 1:
+            break
+    assert renderer.cache.generation == 1 and one_bounce is not None
+    # the cache is complete: the next draw hands its octrees to the worker, and the view
+    # keeps its image meanwhile
+    assert renderer.progressive.key == key
+    kept = image
+    for _ in range(3):
+        image, more = draw()
+        assert renderer.progressive.key == key and np.array_equal(image, kept)
+        assert renderer.bounces.pending
+    assert builds == []  # nothing rebuilt yet: the worker waits at the gate
+    gate.set()
+    assert renderer.bounces.job.wait(60) and jobs.drain()  # the timer's drain: a redraw
+    traces = renderer.traces
+    for draws in range(5000):
+        image, more = draw()
+        if not more:
+            break
+    assert renderer.progressive.key != key and renderer.traces > traces
+    assert renderer.progressive.converged and renderer.bounced is not None
+    bounced = renderer.progressive.image[..., :3].mean()
+    print(f"Fast in the view: one bounce {one_bounce:.4f}, Bounces 3 {bounced:.4f}; octree "
+          f"builds {builds}")
+    assert bounced > 1.05 * one_bounce
+    assert builds and not any(builds)  # rebuilt, and never on the main thread
+
+    # an object moves: the update job makes the new state's bounced voxels beside its octree
+    box = bpy.data.objects["Test Box"]
+    box.location.x += 0.1
+    depsgraph.update()
+    job = live.update(scene, depsgraph, [UpdateRecord("OBJECT", box.name, transform=True,
+                                                      object_type="MESH")])
+    assert jobs.wait_idle(60)
+    assert live.bounced is not None and live.bounced.fits(live.staged.state)
+    before = renderer.bounces.job
+    draw()
+    assert renderer.bounced is live.bounced and renderer.bounces.job is before
+    assert not any(builds), job
