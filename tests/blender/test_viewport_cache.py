@@ -262,3 +262,48 @@ def test_fast_bounces_are_made_on_the_worker_while_the_view_keeps_its_image(voxg
     draw()
     assert renderer.bounced is live.bounced and renderer.bounces.job is before
     assert not any(builds), job
+
+
+def test_the_first_image_of_a_change_does_not_start_the_new_cache(voxgi):
+    """An object moves under a complete cache (Accurate, Bounces 3): the coarse first image
+    of the change reads the last complete cache and starts no build (its first chunk, the
+    layout, took 0.3 s of the first image on the demo scene); the tiles after it do."""
+    from stand_in_engine import StandInEngine
+    from test_viewport import camera_matrices, cornell, engine_view, gpu_ready
+
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render.viewport import ViewportRenderer
+    from voxgi.voxgi_addon.scene.changes import UpdateRecord
+
+    scene = cornell()
+    scene.voxgi_viewport.resolution_fraction = 1.0
+    scene.voxgi_viewport.samples = 2
+    scene.voxgi_viewport.coarse_first = True
+    scene.voxgi.bounce_source = "MANUAL"
+    scene.voxgi.bounces = 3
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    live.update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    engine = StandInEngine()
+    renderer = engine.voxgi_viewport = ViewportRenderer()
+    renderer.progressive.stage_budget = None  # a whole slice per draw
+    for _ in range(5000):
+        redraws = engine.redraws
+        engine_view(engine, scene, depsgraph, view, window)
+        if engine.redraws == redraws:
+            break
+    assert renderer.cache.generation == 1 and renderer.cache.building is None
+    complete = renderer.cache.texture
+
+    box = bpy.data.objects["Test Box"]
+    box.location.x += 0.1
+    depsgraph.update()
+    live.update(scene, depsgraph, [UpdateRecord("OBJECT", box.name, transform=True,
+                                                object_type="MESH")])
+    engine_view(engine, scene, depsgraph, view, window)
+    assert renderer.shown == "Coarse"
+    assert renderer.cache.building is None and renderer.cache.texture is complete
+    engine_view(engine, scene, depsgraph, view, window)
+    assert renderer.shown == "Refining" and renderer.cache.building is not None
