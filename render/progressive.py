@@ -116,6 +116,9 @@ class ProgressiveImage:
         self.last: Slice | None = None
         self.converged = False
         self.coarse_pending = False
+        # the key before this one was replaced before its coarse image was shown (an orbit, a
+        # slider drag: a new key every draw): the first draw of this key traces nothing
+        self.skip_first = False
         self.failed = ""
         self.image_stale = True
 
@@ -129,6 +132,11 @@ class ProgressiveImage:
         ``WorldData`` ``world`` behind the geometry, or alpha = coverage when
         ``transparent``), as F12's Combined does."""
         previous = self.image
+        # every draw a new key: a coarse image started in a draw would be dropped by the next
+        # one (the view shows the last image either way), so a key that replaces one whose
+        # coarse image never showed waits one draw: the view is still when that draw's
+        # redraw comes with the same key
+        self.skip_first = bool(coarse) and self.key is not None and self.coarse_pending
         if self.running is not None:
             self.running.close()  # the old key's slice: its textures go with it
             self.running = None
@@ -190,6 +198,9 @@ class ProgressiveImage:
         image has converged. whole: run the slice to its end (nothing is shown yet)."""
         if self.converged or self.accumulation is None:
             return None
+        if self.skip_first and self.stage_budget is not None and not whole:
+            self.skip_first = False  # (``restart``) the next draw of this key starts it
+            return Slice("wait", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
         t0 = time.perf_counter()
         if self.running is None:
             self.running = self._slice(trace, view, window, settings, filter_width)

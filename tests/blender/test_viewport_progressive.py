@@ -273,3 +273,53 @@ def test_a_slice_runs_over_several_draws_stage_by_stage_to_the_same_image(voxgi,
     print(f"dispatches per draw: whole slices {most[False]}, staged {most[True]}")
     assert most[True] <= 6 < most[False]
     np.testing.assert_allclose(images[True], images[False], atol=1e-5)
+
+
+def test_while_every_draw_is_a_new_view_the_dropped_coarse_images_are_not_started(voxgi,
+                                                                                  monkeypatch):
+    """Orbiting (a new view every draw) with staged slices: the first draw of the orbit starts
+    the coarse image of its view; the next views would drop theirs before it could show, so
+    their draws trace nothing (no G-buffer, no dispatch) and keep the last image on screen;
+    the first draw with the view held still starts the coarse image, which then shows."""
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render import gpu_preview
+
+    scene = progressive_scene()
+    scene.voxgi_viewport.samples = 2
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live_gi(scene.name_full).update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    dispatches = Dispatches(monkeypatch)
+    rasters = []
+    original = gpu_preview.rasterize
+    monkeypatch.setattr(gpu_preview, "rasterize",
+                        lambda *a, **k: (rasters.append(1), original(*a, **k))[1])
+    engine = StandInEngine()
+    renderer = quarter_slices(engine)
+    renderer.progressive.stage_budget = 0.0  # one stage per draw: no draw shows a coarse image
+    draw_until_converged(engine, scene, depsgraph, view, window, dispatches, 1 << 40)
+    still = engine_view(engine, scene, depsgraph, view, window)
+
+    def work():
+        done = len(rasters) + dispatches.take()
+        rasters.clear()
+        return done
+
+    work()
+    images = []
+    for step in range(1, 5):  # the orbit
+        redraws = engine.redraws
+        images.append(engine_view(engine, scene, depsgraph, turned(view, 2.0 * step), window))
+        assert engine.redraws == redraws + 1 and filled(images[-1]) > 0.99
+        assert work() > 0 if step == 1 else work() == 0, f"orbit draw {step}"
+        assert renderer.progressive.coarse_pending
+    assert all(np.array_equal(image, still) for image in images)  # the last image stays
+    # held still: the next draws start the coarse image and show it
+    for draws in range(1, 50):
+        image = engine_view(engine, scene, depsgraph, turned(view, 8.0), window)
+        if draws == 1:
+            assert work() > 0
+        if not renderer.progressive.coarse_pending:
+            break
+    assert renderer.shown == "Coarse" and not np.array_equal(image, still)
