@@ -11,12 +11,20 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 import gpu
 import numpy as np
 
 from ..voxgi_addon.gi.exact_glossy import METAL_RAY_FACTOR
-from ..voxgi_addon.gi.radiance_cache import build_cache, cache_key, cache_texels, face_points, with_faces
+from ..voxgi_addon.gi.radiance_cache import (
+    build_cache,
+    cache_key,
+    cache_texels,
+    face_points,
+    texel_places,
+    with_faces,
+)
 from ..voxgi_addon.preview.gather import cache_settings
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import low_shape
@@ -107,8 +115,8 @@ def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
 
 
 RECORD_WIDTH = 2048  # rays per row of the cache's ray records (cache_paths.glsl)
-_RELAX_SAMPLERS = ("radiance_cache", "paths_radiance", "paths_weight", "paths_points",
-                   "paths_normals")
+_RELAX_SAMPLERS = ("cache_layout", "radiance_cache", "paths_radiance", "paths_weight",
+                   "paths_points", "paths_normals")
 
 
 def _relax_shader():
@@ -118,18 +126,21 @@ def _relax_shader():
     return _shaders["relax"]
 
 
-def relax_gpu(cache_texture, records, rays: int, count: int, width: int, height: int):
+def relax_gpu(layout, cache_texture, records, rays: int):
     """One iteration over the ray ``records`` (``cache_paths.glsl``'s four textures):
-    ``cache_relax.glsl``, (height, width, 3) float32 face values (face f at row f // width)."""
+    ``cache_relax.glsl`` writes the next iteration's cache texture (``cache_texels``' layout)
+    from ``layout`` (``cache_texels(layout=True)``) and ``cache_texture``, the previous one —
+    nothing read back or built on the CPU between iterations."""
     shader = _relax_shader()
-    out = gpu.types.GPUTexture((width, height), format="RGBA32F")
+    out = gpu.types.GPUTexture((layout.width, layout.height), format="RGBA32F")
     shader.bind()
-    for name, texture in zip(_RELAX_SAMPLERS, (cache_texture, *records)):
+    for name, texture in zip(_RELAX_SAMPLERS, (layout, cache_texture, *records)):
         shader.uniform_sampler(name, texture)
-    shader.uniform_float("sampling", (float(rays), float(count), 0.0, 0.0))
+    shader.uniform_float("sampling", (float(rays), 0.0, 0.0, 0.0))
     shader.image("out_image", out)
-    gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
-    return read_texture(out)[..., :3]
+    gpu.compute.dispatch(shader, math.ceil(layout.width / LOCAL_SIZE),
+                         math.ceil(layout.height / LOCAL_SIZE), 1)
+    return out
 
 
 def cache_stages(bvh, lights, principled, emission, settings, tables=None,
@@ -140,7 +151,8 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     seed 0) are traced and lit once (``cache_paths.glsl``, records ``RECORD_WIDTH`` to a row,
     in chunks of rows that start at ``first_rows`` and are resized to ``budget`` seconds by
     the last one's time: the viewport's stages, ``viewport_cache``), then each iteration is one
-    lookup pass over the records (``relax_gpu``) whose faces become the next cache texture."""
+    lookup pass over the records writing the next cache texture (``relax_gpu``); the faces
+    are read back once, at the end."""
     cache = build_cache(bvh.scene_triangles, settings.cache_resolution, rays=settings.cache_rays,
                         focus=settings.cache_focus)
     points, axes = face_points(cache)
@@ -179,15 +191,16 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
         top = end
         rows = max(1, min(record_rows, int(rows * min(4.0, budget / max(seconds, 1e-4)))))
         yield
-    previous = None
+    texels = cache_texels(cache, layout=True)
+    layout = float_texture(texels, (texels.shape[1], texels.shape[0]))
+    yield
+    previous = float_texture(blank, (1, 1))  # the empty cache: the records' own radiance
     for _ in range(settings.bounces - 1):
-        if previous is None:  # the empty cache: the records' own radiance
-            previous = float_texture(blank, (1, 1))
-        values = relax_gpu(previous, records, rays, count, width, height)
-        cache = with_faces(cache, values.reshape(-1, 3)[:count])
-        texels = cache_texels(cache)
-        previous = float_texture(texels, (texels.shape[1], texels.shape[0]))
+        previous = relax_gpu(layout, previous, records, rays)
         yield
+    places = texel_places(cache)  # the numpy cache's faces, read back once
+    cache = replace(with_faces(cache, read_texture(previous)[places][:, :3]),
+                    iterations=settings.bounces - 1)
     return cache, previous
 
 

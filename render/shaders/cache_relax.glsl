@@ -1,17 +1,24 @@
-/* One iteration of the radiance cache (voxgi_addon/gi/radiance_cache.py relax): voxel face f
- * (texel (f mod W, f div W) of out_image) gets the mean over its rays' records
- * (cache_paths.glsl, record i = f · rays + j at texel (i mod Wr, i div Wr) of paths_*) of
- * radiance + cache weight × the previous iteration's cache at the hit (cache_lookup.glsl).
- * sampling = (rays per face, faces, 0, 0). */
+/* One iteration of the radiance cache (voxgi_addon/gi/radiance_cache.py relax), written as the
+ * next iteration's texels (radiance_cache.cache_texels) from `cache_layout` (the same texels
+ * with (face row, 0, 0, held) in place of the light: cache_texels(layout=True)): row 0 (the
+ * header) is copied; a held face f gets (the mean over its rays' records (cache_paths.glsl,
+ * record i = f · rays + j at texel (i mod Wr, i div Wr) of paths_*) of radiance + cache weight
+ * × the previous iteration's cache at the hit (cache_lookup.glsl), 1); the other texels 0.
+ * sampling = (rays per face, 0, 0, 0). */
 
 void main()
 {
   ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
   ivec2 size = imageSize(out_image);
-  int face = texel.y * size.x + texel.x;
-  if (texel.x >= size.x || texel.y >= size.y || face >= int(sampling.y)) {
+  if (texel.x >= size.x || texel.y >= size.y) {
     return;
   }
+  vec4 held = texelFetch(cache_layout, texel, 0);
+  if (texel.y == 0 || held.w < 0.5) {
+    imageStore(out_image, texel, held);  /* the header, or an empty texel */
+    return;
+  }
+  int face = int(held.x + 0.5);
   int rays = int(sampling.x);
   int width = textureSize(paths_radiance, 0).x;
   vec3 sum = vec3(0.0);
@@ -26,5 +33,5 @@ void main()
                             texelFetch(paths_normals, at, 0).xyz);
     }
   }
-  imageStore(out_image, texel, vec4(sum / float(rays), 0.0));
+  imageStore(out_image, texel, vec4(sum / float(rays), 1.0));
 }

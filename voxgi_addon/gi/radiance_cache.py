@@ -36,7 +36,7 @@ from .cascades import CascadeGrid
 
 __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
            "cache_texels", "cached_cache", "face_paths", "face_points", "iterate", "lookup", "relax",
-           "snap_focus", "with_faces"]
+           "snap_focus", "texel_places", "with_faces"]
 
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin
 FACE_AXIS_COSINE = 0.2   # a voxel holds the faces of the axes its triangles' normals reach
@@ -371,22 +371,38 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
     return cache
 
 
-def cache_texels(cache: RadianceCache) -> np.ndarray:
-    """(H, W, 4) float32 texels of ``cache`` for the GPU (``shaders/bvh_shade.glsl``
+def texel_places(cache: RadianceCache) -> tuple[np.ndarray, np.ndarray]:
+    """((F,) rows, (F,) columns) of each present face (``face_points``' order) in the texels of
+    ``cache_texels``."""
+    res = cache.grids[0].resolution
+    rows, columns = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+    for g, (cells, present) in enumerate(zip(cache.cells, cache.present)):
+        c = np.asarray(cells, np.int64)
+        voxel, face = np.nonzero(present)
+        rows.append(1 + (g * res + c[voxel, 2]) * 6 + face)
+        columns.append(c[voxel, 0] + c[voxel, 1] * res)
+    return np.concatenate(rows), np.concatenate(columns)
+
+
+def cache_texels(cache: RadianceCache, layout: bool = False) -> np.ndarray:
+    """(H, W, 4) float32 texels of ``cache`` for the GPU (``shaders/cache_lookup.glsl``
     ``cache_indirect``): W = res² (texel x + y·res), row 0 the header — texel i = (origin xyz,
     span) of grid i, the last texel (res, grid count, 0, 0) — then per grid g, z and face f the
-    row 1 + (g·res + z)·6 + f of (rgb, 1 where the voxel holds the face)."""
+    row 1 + (g·res + z)·6 + f of (rgb, 1 where the voxel holds the face). layout : instead of
+    the rgb, (the face's row in ``face_points``, 0, 0) — what ``cache_relax.glsl`` writes each
+    iteration's texels from, on the GPU."""
     res = cache.grids[0].resolution
     count = len(cache.grids)
     width = max(res * res, count + 1)
     texels = np.zeros((1 + count * res * 6, width, 4), np.float32)
-    for g, (grid, cells, faces, present) in enumerate(zip(cache.grids, cache.cells, cache.faces,
-                                                           cache.present)):
+    for g, grid in enumerate(cache.grids):
         texels[0, g] = (*grid.origin, grid.span)
-        c = np.asarray(cells, np.int64)
-        for f in range(6):
-            rows = 1 + (g * res + c[:, 2]) * 6 + f
-            texels[rows, c[:, 0] + c[:, 1] * res, :3] = faces[:, f]
-            texels[rows, c[:, 0] + c[:, 1] * res, 3] = present[:, f]
     texels[0, width - 1] = (res, count, 0.0, 0.0)
+    rows, columns = texel_places(cache)
+    if layout:
+        texels[rows, columns, 0] = np.arange(len(rows))
+    else:
+        texels[rows, columns, :3] = np.concatenate(
+            [faces[present] for faces, present in zip(cache.faces, cache.present)])
+    texels[rows, columns, 3] = 1.0
     return texels
