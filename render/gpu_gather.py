@@ -144,7 +144,8 @@ def relax_gpu(layout, cache_texture, records, rays: int):
 
 
 def cache_stages(bvh, lights, principled, emission, settings, tables=None,
-                 budget: float = CACHE_STAGE_SECONDS, first_rows: int = 1):
+                 budget: float = CACHE_STAGE_SECONDS, first_rows: int = 1,
+                 read_back: bool = True):
     """Generator of the radiance cache of ``settings.bounces`` − 1 iterations, yielding after
     each stage; returns (cache, texture). As numpy's ``radiance_cache.cached_cache``: every
     voxel face's ``settings.cache_rays`` rays (``face_points``, sample id = the face's row,
@@ -152,7 +153,9 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     in chunks of rows that start at ``first_rows`` and are resized to ``budget`` seconds by
     the last one's time: the viewport's stages, ``viewport_cache``), then each iteration is one
     lookup pass over the records writing the next cache texture (``relax_gpu``); the faces
-    are read back once, at the end."""
+    are read back once, at the end — or, read_back False (the viewport, whose Accurate
+    gathers read the texture only), the cache is returned as a function that reads them
+    back when called (Fast's voxels reflect the numpy cache)."""
     cache = build_cache(bvh.scene_triangles, settings.cache_resolution, rays=settings.cache_rays,
                         focus=settings.cache_focus)
     points, axes = face_points(cache)
@@ -160,7 +163,8 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     if count == 0:  # nothing to light
         cache = with_faces(cache, np.zeros((0, 3)))
         texels = cache_texels(cache)
-        return cache, float_texture(texels, (texels.shape[1], texels.shape[0]))
+        return (cache if read_back else lambda: cache), \
+            float_texture(texels, (texels.shape[1], texels.shape[0]))
     width = CACHE_IMAGE_WIDTH
     height = -(-count // width)
     faces = np.zeros((2, height * width, 4), np.float32)
@@ -198,10 +202,10 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     for _ in range(settings.bounces - 1):
         previous = relax_gpu(layout, previous, records, rays)
         yield
-    places = texel_places(cache)  # the numpy cache's faces, read back once
-    cache = replace(with_faces(cache, read_texture(previous)[places][:, :3]),
-                    iterations=settings.bounces - 1)
-    return cache, previous
+    def faces():  # the numpy cache with its faces, read back once
+        return replace(with_faces(cache, read_texture(previous)[texel_places(cache)][:, :3]),
+                       iterations=settings.bounces - 1)
+    return (faces() if read_back else faces), previous
 
 
 def gather_tables(lights, principled, emission) -> dict:

@@ -37,7 +37,9 @@ from ..voxgi_addon.preview.passes import (
     subpixel_reach,
 )
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
+from ..voxgi_addon.scene.glass import is_glass
 from .gbuffer import gbuffer_shader, rasterize, read_gbuffer
+from .gpu_accumulation import SUM_NAMES, GPUSums
 from .gpu_bvh import direct_light_texture, emitter_glossy_texture
 from .gpu_fast import fast_passes
 from .gpu_gather import denoise, gather, gather_low, glossy_direct_texture, upsample
@@ -70,7 +72,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                          glossy_indirect: bool = True,
                          filter_width: float = DEFAULT_FILTER_WIDTH,
                          gpu_scene: GPUScene | None = None, gather_hook=None, raster=None,
-                         cache_source=None):
+                         cache_source=None, on_gpu: bool = False):
     """A generator that yields between the GPU stages (G-buffer, each gather, each light's
     direct light, each sub-pixel pass, …) and returns (passes, timings) like
     ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
@@ -90,6 +92,10 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     cache_source : the viewport's ``viewport_cache.ViewportCache`` (its radiance cache built a
     stage at a time, the last complete one read meanwhile); None: the whole cache is built
     before the gathers (``gpu_gather.cache_texture``, F12).
+    on_gpu : Accurate, point-sampled (Filter Size 0) and no glass in the scene: return the
+    pass's sums as textures (``gpu_accumulation.GPUSums``, read by nothing on the CPU) instead
+    of the passes: the viewport's slices, which add them to their sums on the GPU. Otherwise
+    the passes, as always.
     The viewport's slices run the stages over several draws (``progressive``); the textures
     live in the generator between them, so nothing but its own next stage runs in a draw."""
     check_request(snapshot, width, height, gi_stride, quality)
@@ -99,8 +105,9 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
         layer = (width, height, light_samples, gi_stride,
                  gather_settings or GatherSettings(ao_distance=cones.ao_distance),
                  glossy_indirect, filter_width, scene)
+        keep = on_gpu and not any(is_glass(m) for m in snapshot.materials)
         front, timings = yield from _accurate_stages(snapshot, *layer, gather_hook, raster,
-                                                     cache_source)
+                                                     cache_source, on_gpu=keep)
         glass = transmission.glass_materials(snapshot, scene.tris)
         if glass is None:
             return front, timings
@@ -240,7 +247,7 @@ def _sums_of(texel):
 
 def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_settings,
                      glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
-                     cache_source=None, camera_tris=None, only=None):
+                     cache_source=None, camera_tris=None, only=None, on_gpu=False):
     """Accurate quality on the GPU: the gathers from the pixel centres' G-buffer, then one
     rasterized G-buffer, direct light (``bvh_direct``, a block of the shadow-ray strata) and
     glossy light of the lights per sub-pixel pass (``preview.passes.subpixel_passes``),
@@ -248,7 +255,9 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     Triangles, BVH, materials and light tables come from ``scene`` (a ``GPUScene``, updated
     here: only what changed is uploaded). camera_tris : what the G-buffers draw (None: the
     scene's triangles; ``transmission.behind_glass`` hides glass from them); only : (H, W)
-    bool the pixels to shade (None: all; the others are background to every kernel)."""
+    bool the pixels to shade (None: all; the others are background to every kernel).
+    on_gpu : return the centre pass's sums as textures (``GPUSums``) when there are no edge
+    pixels (point-sampled), nothing read back."""
     timings = {}
     t0 = time.perf_counter()
     scene = (scene or current_scene()).update(snapshot)
@@ -401,6 +410,9 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     sums = yield from shade(inputs, {name: zero for name in names},
                             (diffuse_ao, glossy, glossy_world), zero, (width, height),
                             centre_pass(light_samples)[1], lamps if reach else None)
+    if on_gpu and not reach:  # the viewport adds them to its sums on the GPU
+        timings["direct (GPU)"] = time.perf_counter() - t0
+        return GPUSums({name: sums[name] for name in SUM_NAMES}, width, height), timings
     read = {name: np.flipud(read_texture(texture)) for name, texture in sums.items()}
     texel = {name: image.reshape(-1, 4).astype(np.float64) for name, image in read.items()}
     if reach:  # the centre pass's lamp light, from the same read-back (no read per light)

@@ -63,9 +63,11 @@ def compute_shader(kernel: str):
 
 
 def build_compute(files: tuple[str, ...], samplers: tuple[str, ...], constants: tuple[str, ...],
-                  outputs: tuple[str, ...] = ("out_image",), defines: dict[str, str] | None = None):
+                  outputs: tuple[str, ...] = ("out_image",), defines: dict[str, str] | None = None,
+                  read_write: tuple[str, ...] = ()):
     """A compute shader from ``shaders/<file>.glsl`` sources in order: 2D float ``samplers``,
-    VEC4 push ``constants``, write-only RGBA32F 2D images ``outputs``, ``defines``; work groups
+    VEC4 push ``constants``, write-only RGBA32F 2D images ``outputs``, ``defines``, and
+    read-write RGBA32F 2D images ``read_write`` (image slots after the outputs'); work groups
     of LOCAL_SIZE × LOCAL_SIZE."""
     info = gpu.types.GPUShaderCreateInfo()
     info.local_group_size(LOCAL_SIZE, LOCAL_SIZE, 1)
@@ -77,6 +79,8 @@ def build_compute(files: tuple[str, ...], samplers: tuple[str, ...], constants: 
         info.push_constant("VEC4", name)
     for slot, name in enumerate(outputs):
         info.image(slot, "RGBA32F", "FLOAT_2D", name, qualifiers={"WRITE"})
+    for slot, name in enumerate(read_write, start=len(outputs)):
+        info.image(slot, "RGBA32F", "FLOAT_2D", name, qualifiers={"READ", "WRITE"})
     info.compute_source("".join((SHADER_DIR / f"{name}.glsl").read_text() for name in files))
     return gpu.shader.create_from_info(info)
 

@@ -34,8 +34,6 @@ import numpy as np
 from ..blender.settings import cone_settings, trace_options
 from ..voxgi_addon.preview.film import world_along
 from ..voxgi_addon.preview.progressive import (
-    Accumulation,
-    GatherSums,
     SliceSizer,
     sample_offset,
     sample_settings,
@@ -45,6 +43,8 @@ from ..voxgi_addon.preview.progressive import (
     tile_shape,
 )
 from ..voxgi_addon.scene.view_camera import camera_from_view
+from .gpu_accumulation import GPUAccumulation, read_rgba
+from .gpu_gather_sums import GPUGatherSums
 from .gpu_shaders import LOCAL_SIZE
 
 SLICE_BUDGET = 0.030  # seconds one view_draw's slice aims at (issue 19)
@@ -100,10 +100,12 @@ class ProgressiveImage:
         self.longest_stage = 0.0
         self.fixed_pixels: int | None = None  # tests: every slice this many pixels
         self.key = None
-        self.accumulation: Accumulation | None = None
-        self.gathers: GatherSums | None = None  # Accurate: the samples' raw gathers
-        self.backdrop = None       # (h, w, 3): what shows where no tile landed yet
-        self.image = None          # (H, W, 4) float32: the current estimate, RGBA on the film
+        # the samples' sums and the shown image live on the GPU (gpu_accumulation): a slice
+        # reads nothing back (issue 19)
+        self.accumulation = None   # a GPUAccumulation
+        self.gathers = None        # Accurate: the samples' raw gathers (a GPUGatherSums)
+        self.backdrop = None       # a texture: what shows where no tile landed yet
+        self.image = None          # the current estimate: an RGBA32F texture on the film
         self.film = False          # the image shows the film (Combined): the world, alpha
         self.world = None          # its WorldData (the applied snapshot's)
         self.target = 1
@@ -141,8 +143,10 @@ class ProgressiveImage:
             self.running.close()  # the old key's slice: its textures go with it
             self.running = None
         self.key, self.target = key, max(1, int(target))
-        self.accumulation = Accumulation(pass_name, width, height, film, transparent)
+        self.accumulation = GPUAccumulation(pass_name, width, height, film, transparent)
         self.film, self.world = bool(film), world
+        if self.gathers is not None:
+            self.gathers.free()
         self.gathers = None
         self.backdrop = previous
         self.sample, self.tiles, self.tile_count = 0, [], 0
@@ -254,9 +258,9 @@ class ProgressiveImage:
             passes = yield from traced(camera, *size, {**options, "gather_settings": gather,
                                                       "light_samples": lights})
             yield  # the estimate is a stage of its own
-            coarse = Accumulation(acc.pass_name, *size, self.film, acc.transparent)
+            coarse = GPUAccumulation(acc.pass_name, *size, self.film, acc.transparent)
             coarse.add((0, 0, *size), passes, world=world(camera, *size))
-            self.backdrop = coarse.film_rgba(passes[acc.pass_name])
+            self.backdrop = coarse.estimate()
             self.coarse_pending = False
             done = Slice("coarse", (0, 0, width, height), size, 0)
         else:
@@ -272,7 +276,7 @@ class ProgressiveImage:
             weight = 1.0
             if settings.quality == "ACCURATE":  # the filter runs on the accumulated gathers
                 if self.gathers is None:
-                    self.gathers = GatherSums(width, height, options["gi_stride"])
+                    self.gathers = GPUGatherSums(width, height, options["gi_stride"])
                 tile_options["gather_hook"] = gather_hook(self.gathers, rect, gather)
                 weight = float(self.sample + 1)  # the samples behind the tile's gathers
             passes = yield from traced(camera, rect[2], rect[3], tile_options)
@@ -284,15 +288,21 @@ class ProgressiveImage:
             if not self.tiles:
                 self.sample += 1
                 self.converged = self.sample >= self.target
-        if self.converged:
-            self.image = acc.film_rgba(acc.finished(filter_width), filter_width=filter_width)
+        if self.converged:  # with the samples' tails: the pixel filter, as F12's
+            self.image = acc.estimate(finished=True)
         elif done.kind == "tile" and self.image is not None \
-                and self.image.shape[:2] == (height, width) and not self.image_stale:
+                and (self.image.width, self.image.height) == (width, height) \
+                and not self.image_stale:
             acc.estimate_into(self.image, done.rect)  # only the tile's pixels changed
         else:  # the backdrop (scaled) where no tile landed yet
-            self.image = acc.estimate_rgba(self.backdrop)
+            self.image = acc.estimate(backdrop=self.backdrop)
         self.image_stale = False
         return done
+
+    def read_image(self) -> np.ndarray | None:
+        """(H, W, 4) float32 of the current estimate, row 0 on top: a read-back for tests and
+        tools (the view draws the texture itself)."""
+        return None if self.image is None else read_rgba(self.image)
 
     @property
     def samples_done(self) -> int:
@@ -308,22 +318,16 @@ class ProgressiveImage:
         return f"Tile {done}/{self.tile_count}"
 
 
-def gather_hook(sums: GatherSums, rect, gather):
-    """``render_passes_gpu``'s gather_hook for one tile: read the tile's raw gather back, add
-    it to ``sums`` and hand the filter the mean over all samples so far (``GatherSums``)."""
-    from .gpu_tracer import read_texture
-    from .gpu_volume import float_texture
-
+def gather_hook(sums, rect, gather):
+    """``render_passes_gpu``'s gather_hook for one tile: add the tile's raw gather to ``sums``
+    (a ``gpu_gather_sums.GPUGatherSums``, on the GPU) and hand the filter the mean over all
+    samples so far."""
     rays = {"diffuse": gather.rays, "glossy": gather.glossy_rays,
             "world glossy": gather.glossy_rays}
 
     def hook(kind, values, variance):
-        # the low-resolution textures' rows go bottom to top
-        mean, pooled = sums.add(kind, rect, np.flipud(read_texture(values)),
-                                np.flipud(read_texture(variance)),
-                                rays[kind.removeprefix("behind ")])  # behind glass: its own
-        size = (values.width, values.height)
-        return (float_texture(np.flipud(mean), size), float_texture(np.flipud(pooled), size))
+        # behind glass: its own sums, with the front's rays
+        return sums.add(kind, rect, values, variance, rays[kind.removeprefix("behind ")])
     return hook
 
 
@@ -332,18 +336,22 @@ def tracer(live, volume, settings, staged: bool = False, raster=None, cache_sour
     has for the view (``LiveGI.image_source``: Accurate the latest snapshot, Fast the applied
     results) with F12's kernels (``render_passes_gpu``); staged: a generator of its stages that
     returns them (``render_passes_stages``, what ``ProgressiveImage.step`` runs over several
-    calls). raster : the G-buffer shader the caller keeps for its GPU context; cache_source :
+    calls; in Accurate they return the pass's sums as textures where they can,
+    ``gpu_accumulation.GPUSums``, which ``GPUAccumulation.add`` takes as it takes passes).
+    raster : the G-buffer shader the caller keeps for its GPU context; cache_source :
     the view's radiance cache built in stages (``viewport_cache.ViewportCache``)."""
     from .gpu_preview import render_passes_stages
 
     cones = cone_settings(settings)
+    gpu_sums = staged  # the slices' sums stay on the GPU (gpu_accumulation.GPUSums)
 
     def stages(camera, width, height, options):
         snapshot, state, _ = live.image_source(settings.quality)
         snapshot = dataclasses.replace(snapshot, camera=camera)
         passes, _ = yield from render_passes_stages(snapshot, state, width, height,
                                                     cones, volume=volume, raster=raster,
-                                                    cache_source=cache_source, **options)
+                                                    cache_source=cache_source, on_gpu=gpu_sums,
+                                                    **options)
         return passes
 
     def trace(camera, width, height, options):

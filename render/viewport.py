@@ -190,7 +190,7 @@ class ViewportRenderer:
                             "view_draw work": time.perf_counter() - t0}
             return "Coarse" if progressive.coarse_pending else (
                 "Converged" if progressive.converged else "Refining")
-        self.upload(progressive.image)
+        self.texture = progressive.image  # on the GPU: drawn as it is, nothing read back
         self.traces += 1
         self.timings = {"atlas upload": upload, f"slice ({done.kind})": done.seconds,
                         "view_draw work": time.perf_counter() - t0}

@@ -28,7 +28,8 @@ class ViewportCache:
     def __init__(self, budget: float = STAGE_SECONDS):
         self.budget = budget
         self.texture = None    # the last complete cache's texture
-        self.cache = None      # ... and its RadianceCache (Fast's voxels reflect it)
+        self._read = None      # ... a function reading its RadianceCache back (``cache``)
+        self._cache = None
         self.key = None        # what it was built for
         self.building = None   # (key, generator) of the build under way
         self.generation = 0
@@ -51,7 +52,7 @@ class ViewportCache:
             if self.building is not None:
                 self.building[1].close()
             self.building = (key, cache_stages(bvh, lights, principled, emission, settings,
-                                               tables, self.budget))
+                                               tables, self.budget, read_back=False))
         if self.advance():
             return self.texture
         yield
@@ -66,7 +67,7 @@ class ViewportCache:
         try:
             next(stages)
         except StopIteration as end:
-            self.cache, self.texture = end.value
+            (self._read, self.texture), self._cache = end.value, None
             self.key, self.building = key, None
             self.generation += 1
             return True
@@ -74,6 +75,15 @@ class ViewportCache:
             self.building = None
             raise
         return False
+
+    @property
+    def cache(self):
+        """The last complete cache as a ``RadianceCache`` (Fast's voxels reflect it): its
+        faces read back from the texture the first time it is asked for — Accurate's gathers
+        read the texture only, so its view reads nothing back."""
+        if self._cache is None and self._read is not None:
+            self._cache = self._read()
+        return self._cache
 
     def free(self) -> None:
         if self.building is not None:

@@ -122,7 +122,7 @@ def converged_means(quality: str) -> dict:
         assert renderer.progressive.converged, f"not converged after {draws} draws"
         assert renderer.cache.generation == (1 if bounces > 1 else 0)
         assert image is not None
-        means[bounces] = float(renderer.progressive.image[..., :3].mean())  # linear, before display
+        means[bounces] = float(renderer.progressive.read_image()[..., :3].mean())  # linear, before display
         print(f"{quality}, bounces {bounces}: {draws} draws, mean {means[bounces]:.4f}")
     return means
 
@@ -222,7 +222,7 @@ def test_fast_bounces_are_made_on_the_worker_while_the_view_keeps_its_image(voxg
         key = renderer.progressive.key
         image, more = draw()
         if renderer.progressive.converged and renderer.cache.generation == 0:
-            one_bounce = renderer.progressive.image[..., :3].mean()
+            one_bounce = renderer.progressive.read_image()[..., :3].mean()
         if renderer.cache.generation == 1:
             break
     assert renderer.cache.generation == 1 and one_bounce is not None
@@ -244,7 +244,7 @@ def test_fast_bounces_are_made_on_the_worker_while_the_view_keeps_its_image(voxg
             break
     assert renderer.progressive.key != key and renderer.traces > traces
     assert renderer.progressive.converged and renderer.bounced is not None
-    bounced = renderer.progressive.image[..., :3].mean()
+    bounced = renderer.progressive.read_image()[..., :3].mean()
     print(f"Fast in the view: one bounce {one_bounce:.4f}, Bounces 3 {bounced:.4f}; octree "
           f"builds {builds}")
     assert bounced > 1.05 * one_bounce

@@ -99,13 +99,13 @@ def test_the_rendered_view_shows_the_world_behind_the_geometry_as_f12(voxgi, tmp
           f"(a black sky {black_sky:.2f}); first draw sky {rel(first[sky], f12[sky, :3]):.4f}")
     assert sky_error < 0.02 and whole < 0.03
     assert np.all(images[-1][..., 3] == 1.0)
-    assert np.allclose(renderer.progressive.image[..., 3], 1.0)
+    assert np.allclose(renderer.progressive.read_image()[..., 3], 1.0)
 
     # Film › Transparent restarts the image: no world, the view's own background shows
     # through by the coverage, which is F12's alpha
     scene.render.film_transparent = True
     images = converge(engine, scene, depsgraph, view, window)
-    alpha = renderer.progressive.image[..., 3]
+    alpha = renderer.progressive.read_image()[..., 3]
     alpha_error = np.abs(alpha - f12_clear[..., 3])
     print(f"transparent: alpha vs F12 mean abs {alpha_error.mean():.4f}")
     assert alpha_error.mean() < 0.02
@@ -113,4 +113,4 @@ def test_the_rendered_view_shows_the_world_behind_the_geometry_as_f12(voxgi, tmp
     print(f"transparent: sky off the clear colour mean {through.mean():.4f}, "
           f"max {through.max():.4f}")
     assert through.mean() < 0.005  # the clear colour, no sky (but edge tails)
-    assert rel(renderer.progressive.image[..., :3], f12_clear[..., :3]) < 0.03
+    assert rel(renderer.progressive.read_image()[..., :3], f12_clear[..., :3]) < 0.03

@@ -101,8 +101,10 @@ def test_each_view_draw_traces_one_slice_and_the_samples_converge_to_f12(voxgi, 
     renderer = quarter_slices(engine)
 
     # a slice is a quarter of one sample's pixels: a quarter of its work groups, plus the
-    # small dispatches (light tables) every tracer call makes
-    limit = int(0.3 * full)
+    # small dispatches (light tables) every tracer call makes, plus one per-pixel pass over
+    # the image that makes the shown image from the sums on the GPU (gpu_accumulation: the
+    # converged image's pixel filter touches every pixel)
+    limit = int(0.3 * full) + -(-WIDTH // 8) * -(-HEIGHT // 8)
     draws = draw_until_converged(engine, scene, depsgraph, view, window, dispatches, limit)
     slices = len(draws)
     progressive = renderer.progressive
@@ -165,7 +167,9 @@ def test_a_change_restarts_the_samples_and_the_next_call_draws_an_image(voxgi, m
         groups = dispatches.take_groups()
         dispatches.take()
         assert engine.redraws == redraws + 1  # more slices follow
-        assert 0 < groups <= first_groups  # one slice, not the image
+        # one slice, not the image (plus at most one per-pixel pass that makes the shown image
+        # from the sums, gpu_accumulation)
+        assert 0 < groups <= first_groups + -(-WIDTH // 8) * -(-HEIGHT // 8)
         assert filled(image) > 0.99
         return image
 
@@ -323,3 +327,58 @@ def test_while_every_draw_is_a_new_view_the_dropped_coarse_images_are_not_starte
         if not renderer.progressive.coarse_pending:
             break
     assert renderer.shown == "Coarse" and not np.array_equal(image, still)
+
+
+def test_the_frame_stays_on_the_gpu_no_draw_reads_anything_back(voxgi, monkeypatch):
+    """Issue 19 point 5: in Accurate quality the slices' G-buffer, direct light, gathers, their
+    sums (gpu_gather_sums), the denoiser, the pass's sums (gpu_accumulation) and the shown
+    image pass from dispatch to dispatch as textures: from the first draw to convergence, with
+    one bounce and with the radiance cache's bounces (built in stages), no ``view_draw``
+    reads a texture back."""
+    import sys
+
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render import gpu_tracer, viewport
+
+    scene = progressive_scene()
+    scene.voxgi_viewport.samples = 4
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    live.update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    reads, inside = [], [False]
+    original_read, original_draw = gpu_tracer.read_texture, viewport.view_draw
+
+    def counted_read(texture):
+        if inside[0]:
+            reads.append((texture.width, texture.height))
+        return original_read(texture)
+
+    def counted_draw(*args, **kwargs):
+        inside[0] = True
+        try:
+            return original_draw(*args, **kwargs)
+        finally:
+            inside[0] = False
+
+    for name, module in list(sys.modules.items()):
+        if name.startswith("voxgi.render") and getattr(module, "read_texture", None) \
+                is original_read:
+            monkeypatch.setattr(module, "read_texture", counted_read)
+    monkeypatch.setattr(viewport, "view_draw", counted_draw)
+    dispatches = Dispatches(monkeypatch)
+    for bounces in (1, 3):
+        scene.voxgi.bounce_source = "MANUAL"
+        scene.voxgi.bounces = bounces
+        engine = StandInEngine()
+        renderer = quarter_slices(engine)
+        renderer.progressive.stage_budget = 0.005  # staged, as the view runs
+        draws = draw_until_converged(engine, scene, depsgraph, view, window, dispatches, 1 << 40)
+        if bounces > 1:  # the cache completes, the image restarts on it and converges again
+            while renderer.cache.generation == 0 or not renderer.progressive.converged:
+                draws += draw_until_converged(engine, scene, depsgraph, view, window,
+                                              dispatches, 1 << 40)
+        assert renderer.progressive.converged and len(draws) > 4
+        assert reads == [], f"Bounces {bounces}: {len(reads)} read-backs in view_draw"
+    assert renderer.cache.texture is not None and renderer.cache._cache is None

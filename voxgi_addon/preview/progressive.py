@@ -151,6 +151,28 @@ def tile_grid(width: int, height: int, tile_w: int, tile_h: int, shift=(0, 0)):
     return [(x0, y0, tile_w, tile_h) for y0 in ys for x0 in xs]
 
 
+def sample_terms(passes, pass_name: str) -> dict[str, np.ndarray]:
+    """What one sample of ``pass_name`` adds per pixel (``Accumulation.add``; the GPU's
+    ``render/gpu_accumulation.py`` the same from the tracer's sums), (h, w, 3) float32 each:
+    ``value`` and ``weight`` — the pass and 1, or for a light pass light × colour and the
+    colour (Cycles' film divides the sums), or for Combined the pass without its gathered
+    light and 1 — and ``light``, Combined's gathered light (Diffuse Color × Diffuse Indirect
+    + Glossy Color × Glossy Indirect; zeros for the other passes)."""
+    value = np.asarray(passes[pass_name], np.float32)
+    ones = np.ones_like(value)
+    if pass_name == "Combined":
+        light = (np.asarray(passes["Diffuse Color"], np.float32)
+                 * np.asarray(passes["Diffuse Indirect"], np.float32)
+                 + np.asarray(passes["Glossy Color"], np.float32)
+                 * np.asarray(passes["Glossy Indirect"], np.float32))
+        return {"value": value - light, "weight": ones, "light": light}
+    colour_name = LIGHT_COLOURS.get(pass_name)
+    if colour_name:
+        colour = np.asarray(passes[colour_name], np.float32)
+        return {"value": value * colour, "weight": colour, "light": np.zeros_like(value)}
+    return {"value": value, "weight": ones, "light": np.zeros_like(value)}
+
+
 class Accumulation:
     """The samples of one pass of a ``width`` × ``height`` image: per pixel the sum of the
     pass (× its colour for a light pass), of the weights (the colour, or 1) and the count.
@@ -224,25 +246,19 @@ class Accumulation:
                 film[..., 4] = passes["_holdout"]
             self.film[window] += film[part]
             self.film_weights[window] += 1.0
-        passes = {name: np.asarray(image, np.float32)[part] for name, image in passes.items()
-                  if name in PASS_NAMES}
-        value = passes[self.pass_name]
+        terms = sample_terms(passes, self.pass_name)
+        value, weights = terms["value"][part], terms["weight"][part]
         weight = gather_weight if self.pass_name in GATHERED else 1.0
         if self.gathered is not None:
-            light = (passes["Diffuse Color"] * passes["Diffuse Indirect"]
-                     + passes["Glossy Color"] * passes["Glossy Indirect"])
-            self.sums[window] += value - light
-            self.weights[window] += 1.0
-            self.gathered[window] += gather_weight * light
+            self.sums[window] += value
+            self.weights[window] += weights
+            self.gathered[window] += gather_weight * terms["light"][part]
             self.gather_weights[window] += gather_weight
-        elif self.colour_name:
-            colour = passes[self.colour_name]
-            self.sums[window] += weight * value * colour
-            self.weights[window] += weight * colour
-            self.colour[window] += colour
         else:
             self.sums[window] += weight * value
-            self.weights[window] += weight
+            self.weights[window] += weight * weights
+            if self.colour_name:
+                self.colour[window] += weights
         self.counts[window] += 1
         if before is not None:
             self._add_tails(window, {name: array[window] - before[name]

@@ -1,0 +1,118 @@
+"""The viewport's sums on the GPU (render/gpu_accumulation.py) against the numpy reference
+(voxgi_addon/preview/progressive.Accumulation): the same images after the same samples, for
+every pass, on the film and off it, with the pixel filter's tails, a backdrop where no sample
+landed, and tiles that reach past the image; and the GPU tracer's sums (GPUSums) giving the
+same samples as the passes made from them on the CPU (preview.passes.finish_passes)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_viewport import gpu_ready
+
+W, H = 37, 23  # not a multiple of the tiles: border tiles reach past the image
+
+
+def random_passes(rng, w, h, with_holdout=True):
+    from voxgi.voxgi_addon.preview.passes import PASS_NAMES
+
+    passes = {name: rng.uniform(0.0, 2.0, (h, w, 3)).astype(np.float32) for name in PASS_NAMES}
+    for colour in ("Diffuse Color", "Glossy Color"):  # colours of 0 (the background)
+        passes[colour][rng.random((h, w)) < 0.2] = 0.0
+    passes["Alpha"] = rng.uniform(0.0, 1.0, (h, w)).astype(np.float32)
+    if with_holdout:
+        passes["_holdout"] = rng.uniform(0.0, 0.3, (h, w)).astype(np.float32)
+    return passes
+
+
+def tiles():
+    from voxgi.voxgi_addon.preview.progressive import tile_grid
+
+    return [tile_grid(W, H, 16, 10, shift) for shift in ((0, 0), (5, 3), (11, 7))]
+
+
+@pytest.mark.parametrize("pass_name,film,transparent", [
+    ("Combined", True, False), ("Combined", True, True), ("Combined", False, False),
+    ("Diffuse Indirect", False, False), ("Glossy Direct", False, False),
+    ("Diffuse Color", False, False), ("Ambient Occlusion", False, False)])
+def test_gpu_sums_equal_the_numpy_accumulation(voxgi, pass_name, film, transparent):
+    from voxgi.render.gpu_accumulation import GPUAccumulation, read_rgba
+    from voxgi.render.gpu_volume import float_texture
+    from voxgi.voxgi_addon.preview.progressive import (
+        Accumulation,
+        sample_tail_weights,
+        scale_nearest,
+    )
+
+    gpu_ready()
+    rng = np.random.default_rng(7)
+    ours = GPUAccumulation(pass_name, W, H, film, transparent)
+    reference = Accumulation(pass_name, W, H, film, transparent)
+    backdrop = rng.uniform(0.0, 1.0, (5, 8, 4)).astype(np.float32)
+    backdrop_texture = float_texture(np.flipud(backdrop).copy(), (8, 5))
+    image = ours.estimate(backdrop=backdrop_texture)
+    assert np.allclose(read_rgba(image), scale_nearest(backdrop, W, H))  # nothing landed yet
+    for sample, grid in enumerate(tiles()):
+        tails = sample_tail_weights(1.5, 4, sample)
+        for rect in grid:
+            passes = random_passes(rng, rect[2], rect[3], with_holdout=sample != 1)
+            world = rng.uniform(0.0, 1.0, (rect[3], rect[2], 3)).astype(np.float32)
+            weight = float(sample + 1)
+            ours.add(rect, passes, gather_weight=weight, tails=tails, world=world)
+            reference.add(rect, passes, gather_weight=weight, tails=tails, world=world)
+            ours.estimate_into(image, rect)
+        if sample == 0:  # part of the image: the estimate where tiles landed
+            ours_image = read_rgba(ours.estimate(backdrop=backdrop_texture))
+            expected = reference.estimate_rgba(backdrop)
+            assert np.allclose(ours_image, expected, rtol=1e-4, atol=1e-5)
+    assert np.allclose(read_rgba(image), reference.estimate_rgba(backdrop), rtol=1e-4, atol=1e-5)
+    finished = read_rgba(ours.estimate(finished=True))
+    expected = reference.film_rgba(reference.finished(1.5), filter_width=1.5)
+    assert np.allclose(finished, expected, rtol=1e-4, atol=1e-5)
+    assert not np.allclose(finished, read_rgba(image), atol=1e-3)  # the tails count
+
+
+def test_the_tracers_sums_give_the_passes_samples(voxgi):
+    """A GPUSums (the tracer's sums, on the GPU) and the passes finish_passes makes of the same
+    sums on the CPU add the same sample, for every pass."""
+    from voxgi.render.gpu_accumulation import SUM_NAMES, GPUAccumulation, GPUSums, read_rgba
+    from voxgi.render.gpu_volume import float_texture
+    from voxgi.voxgi_addon.preview.passes import PASS_NAMES, finish_passes
+
+    gpu_ready()
+    rng = np.random.default_rng(3)
+    w, h = 19, 13
+    texels = {name: rng.uniform(0.0, 1.0, (h, w, 4)).astype(np.float32) for name in SUM_NAMES}
+    for name in ("sum_b", "sum_c"):  # colours of 0 (the background)
+        texels[name][rng.random((h, w)) < 0.25, :3] = 0.0
+    textures = {name: float_texture(np.flipud(t).copy(), (w, h)) for name, t in texels.items()}
+    flat = {name: t.reshape(-1, 4).astype(np.float64) for name, t in texels.items()}
+    sums = {"emission": flat["sum_a"][:, :3], "coverage": flat["sum_a"][:, 3],
+            "diffuse_color": flat["sum_b"][:, :3], "ao": flat["sum_b"][:, 3],
+            "glossy_color": flat["sum_c"][:, :3], "holdout": flat["sum_c"][:, 3],
+            "diffuse_indirect": flat["sum_d"][:, :3], "glossy_indirect": flat["sum_e"][:, :3],
+            "glossy_direct": flat["sum_f"][:, :3], "diffuse_direct": flat["sum_g"][:, :3]}
+    passes = finish_passes(sums, 1, w, h, filter_width=0.0)
+    for pass_name in PASS_NAMES:
+        film = pass_name == "Combined"
+        on_gpu = GPUAccumulation(pass_name, w, h, film)
+        on_cpu = GPUAccumulation(pass_name, w, h, film)
+        on_gpu.add((0, 0, w, h), GPUSums(textures, w, h), gather_weight=2.0)
+        on_cpu.add((0, 0, w, h), passes, gather_weight=2.0)
+        assert np.allclose(read_rgba(on_gpu.estimate()), read_rgba(on_cpu.estimate()),
+                           rtol=1e-5, atol=1e-6), pass_name
+
+
+def test_bad_samples_are_refused_with_a_clear_error(voxgi):
+    from voxgi.render.gpu_accumulation import GPUAccumulation
+
+    gpu_ready()
+    rng = np.random.default_rng(1)
+    with pytest.raises(ValueError, match="unknown pass"):
+        GPUAccumulation("Beauty", W, H)
+    acc = GPUAccumulation("Combined", W, H, film=True)
+    with pytest.raises(ValueError, match="sample for a"):
+        acc.add((0, 0, 16, 10), random_passes(rng, 8, 8))
+    passes = random_passes(rng, 16, 10)
+    del passes["Alpha"]
+    with pytest.raises(ValueError, match="Alpha"):
+        acc.add((0, 0, 16, 10), passes)
