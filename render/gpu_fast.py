@@ -239,3 +239,61 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
         base.emissive = seen["emissive"].ravel()[hit]
     return compose_passes(snapshot, width, height, hit, mat, *terms, n, views, shine,
                           base=base, holdout=seen["holdout"].ravel()), timings
+
+
+def fast_sums(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
+              gi_stride, gather_settings, glossy_indirect, radiance=_BUILD, raster=None):
+    """Fast quality's pass through the pixel centres as ``fast_passes`` makes it with shadow
+    rays (``shadows`` "RAYS"), composed on the GPU instead of on the CPU: a generator of its
+    stages returning (``gpu_accumulation.GPUSums``, timings), nothing read back (the
+    viewport's slices). The cones' terms (Diffuse Indirect + AO, Glossy Indirect) stay
+    textures and ``gpu_compose.shade_stages`` adds the colours and every light's direct and
+    glossy light over the G-buffer, as Accurate's passes do (``preview.passes.
+    accumulate_pass``, the numpy statement of ``compose_passes``' sums); the glossy cones see
+    the world and the emission, so no world or emitters' glossy light is added. raster : the
+    G-buffer shader of this GPU context (None: a new one)."""
+    from .gpu_accumulation import SUM_NAMES, GPUSums
+    from .gpu_compose import shade_stages
+
+    if shadows != "RAYS":
+        raise ValueError("Fast quality's GPU composition takes shadow rays; cone shadows are "
+                         "composed on the CPU (fast_passes)")
+    timings = {}
+    t0 = time.perf_counter()
+    scene = current_scene(snapshot)
+    if len(scene.tris) == 0:
+        raise VoxGIError("the scene has no triangles to render")
+    if radiance is _BUILD:
+        radiance = _radiance_cache(scene, fast_cache_settings(gather_settings,
+                                                              scene.bvh.scene_triangles))
+    volume = volume or GPUVolume()
+    volume, kinds = cone_volumes(volume, gi_state, radiance, cones,
+                                 getattr(snapshot.world, "radiance", None), timings)
+    gbuffer = rasterize(scene.tris, snapshot.camera, scene.rough, width, height, shader=raster,
+                        textures=scene.raster_textures())
+    timings["visibility (GPU)"] = time.perf_counter() - t0
+    yield
+    low_h, low_w = low_shape(height, width, gi_stride)
+
+    def traced(kernel, through=volume):  # full-resolution textures, as fast_passes' traced
+        sampling = {"sampling": (gi_stride, width, height, 0)}
+        low = dispatch(kernel, through, gbuffer.inputs, low_w, low_h, sampling)
+        if gi_stride > 1:
+            low = dispatch("upsample", volume, {**gbuffer.inputs, "low_image": low}, width,
+                           height, sampling)
+        return low
+
+    t0 = time.perf_counter()
+    zero = scene.zeros(width, height)
+    diffuse_ao = traced("diffuse_ao")
+    glossy = traced("glossy", kinds["glossy"]) if glossy_indirect else zero
+    timings["cones (GPU)"] = time.perf_counter() - t0
+    yield
+    t0 = time.perf_counter()
+    sums = yield from shade_stages(scene, snapshot, dict(gbuffer.inputs),
+                                   {name: zero for name in SUM_NAMES},
+                                   (diffuse_ao, glossy, zero), zero, (width, height),
+                                   light_samples, gather_settings.seed,
+                                   gather_settings.glossy_rays, emitters_glossy=False)
+    timings["direct + composition (GPU)"] = time.perf_counter() - t0
+    return GPUSums(sums, width, height), timings

@@ -14,7 +14,6 @@ import dataclasses
 import math
 import time
 
-import gpu
 import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
@@ -40,12 +39,15 @@ from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
 from ..voxgi_addon.scene.glass import is_glass
 from .gbuffer import gbuffer_shader, rasterize, read_gbuffer
 from .gpu_accumulation import SUM_NAMES, GPUSums
-from .gpu_bvh import direct_light_texture, emitter_glossy_texture
-from .gpu_fast import fast_passes
-from .gpu_gather import denoise, gather, gather_low, glossy_direct_texture, upsample
-from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
+from .gpu_compose import COMPACT_SAMPLERS as _COMPACT_SAMPLERS
+from .gpu_compose import MASK_SAMPLERS as _MASK_SAMPLERS
+from .gpu_compose import SURFACE_SUMS as _SURFACE_SUMS
+from .gpu_compose import run as _run
+from .gpu_compose import shade_stages
+from .gpu_fast import fast_passes, fast_sums
+from .gpu_gather import denoise, gather, gather_low, upsample
 from .gpu_scene import GPUScene, current_scene
-from .gpu_shaders import LOCAL_SIZE, build_compute
+from .gpu_shaders import LOCAL_SIZE
 from .gpu_tracer import read_texture
 from .gpu_volume import GPUVolume, float_texture
 
@@ -92,10 +94,11 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     cache_source : the viewport's ``viewport_cache.ViewportCache`` (its radiance cache built a
     stage at a time, the last complete one read meanwhile); None: the whole cache is built
     before the gathers (``gpu_gather.cache_texture``, F12).
-    on_gpu : Accurate, point-sampled (Filter Size 0) and no glass in the scene: return the
-    pass's sums as textures (``gpu_accumulation.GPUSums``, read by nothing on the CPU) instead
-    of the passes: the viewport's slices, which add them to their sums on the GPU. Otherwise
-    the passes, as always.
+    on_gpu : no glass in the scene and Accurate point-sampled (Filter Size 0), or Fast with
+    shadow rays (``gpu_fast.fast_sums``): return the pass's sums as textures
+    (``gpu_accumulation.GPUSums``, read by nothing on the CPU) instead of the passes: the
+    viewport's slices, which add them to their sums on the GPU. Otherwise the passes, as
+    always.
     The viewport's slices run the stages over several draws (``progressive``); the textures
     live in the generator between them, so nothing but its own next stage runs in a draw."""
     check_request(snapshot, width, height, gi_stride, quality)
@@ -136,6 +139,9 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
         texture = yield from cache_source.stage(scene.bvh, scene.lights, scene.principled,
                                                 scene.emission, settings, scene.gather_tables())
         given["radiance"] = cache_source.cache if texture is not None else None
+    if on_gpu and shadows == "RAYS" and not any(is_glass(m) for m in snapshot.materials):
+        # the viewport's slices: composed on the GPU, nothing read back
+        return (yield from fast_sums(*fast, raster=raster, **given))
     front, timings = fast_passes(*fast, **given)
     scene = current_scene(snapshot)
     glass = transmission.glass_materials(snapshot, scene.tris)
@@ -163,51 +169,6 @@ def _glass_weight(snapshot, scene, raster, width, height, filter_width):
 
 # ---------------------------------------------------------------- Accurate: sub-pixel passes
 
-# The sums of preview.passes.accumulate_pass as textures: name → (texture, channels) where
-# channels name what its rgb and alpha hold (see shaders/aa_surface.glsl).
-_SURFACE_SUMS = ("a", "b", "c", "d", "e", "f")
-_SURFACE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "gbuffer_base",
-                     "centre_diffuse",
-                     "centre_glossy", "centre_world", "materials", "principled_lut",
-                     *(f"sum_{k}" for k in _SURFACE_SUMS))
-_LIGHT_SAMPLERS = ("colour", "direct_image", "shine_image", "sum_f", "sum_g")
-_MASK_SAMPLERS = ("gbuffer_position", "pixels")
-_COMPACT_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "pixels")
-_aa_shaders: dict[str, object] = {}
-
-
-def _aa_shader(kernel: str):
-    if kernel not in _aa_shaders:
-        if kernel == "aa_surface":
-            _aa_shaders[kernel] = build_compute(
-                ("principled", "aa_surface"), _SURFACE_SAMPLERS, (),
-                (*(f"out_{k}" for k in _SURFACE_SUMS), "out_colour"), PRINCIPLED_DEFINES)
-        elif kernel in ("aa_list", "aa_list_raw"):
-            _aa_shaders[kernel] = build_compute(
-                ("aa_compact",), _COMPACT_SAMPLERS, (), ("out_position", "out_normal", "out_view"),
-                {"RAW": "1"} if kernel == "aa_list_raw" else None)
-        elif kernel == "aa_mask":
-            _aa_shaders[kernel] = build_compute(("aa_mask",), _MASK_SAMPLERS, (),
-                                                ("out_position",))
-        else:
-            _aa_shaders[kernel] = build_compute(("aa_light",), _LIGHT_SAMPLERS, (),
-                                                ("out_f", "out_g"))
-    return _aa_shaders[kernel]
-
-
-def _run(kernel, samplers, inputs, outputs, width, height):
-    """Dispatch ``kernel`` over width × height; returns its new output textures by name."""
-    shader = _aa_shader(kernel)
-    images = {name: gpu.types.GPUTexture((width, height), format="RGBA32F") for name in outputs}
-    shader.bind()
-    for name in samplers:
-        shader.uniform_sampler(name, inputs[name])
-    for name, image in images.items():
-        shader.image(name, image)
-    gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
-    return images
-
-
 def _pixel_list(listed, width: int, height: int):
     """(texture, (w, h)) of the edge pixels' list (aa_compact.glsl): texel t (row-major from
     the texture's first row) = (x, y, id, 1) of pixel id = listed[t] (flat, row 0 on top; GL
@@ -227,11 +188,6 @@ def _compact(kernel, inputs, size):
                *size)
     return {"gbuffer_position": out["out_position"], "gbuffer_normal": out["out_normal"],
             "gbuffer_view": out["out_view"]}
-
-
-def release() -> None:
-    """Drop the cached sub-pixel pass shaders."""
-    _aa_shaders.clear()
 
 
 def _sums_of(texel):
@@ -331,9 +287,6 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
         yield
 
     t0 = time.perf_counter()
-    materials, lut = scene.materials, scene.lut
-    extra = scene.has_scene_lights
-    emitting = any(light.type == "EMITTERS" for light in scene.lights)
     # The edge pixels (preview.passes.edge_pixels on the read-back centre G-buffer, the numpy
     # tracer's test) get the sub-pixel passes, over a list of them (aa_compact.glsl); the
     # others the centre pass with all strata, over the image.
@@ -348,50 +301,9 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     t0 = time.perf_counter()
 
     def shade(inputs, sums, terms, blank, size, block, lamps=None):
-        """(Stages, one per light's dispatches, returning) ``sums`` + one pass over
-        ``inputs``, a G-buffer of ``size`` (the image's or the edge pixels' list's): terms =
-        the centre's gathered (Diffuse Indirect, AO), Glossy Indirect and world glossy light
-        at the same texels; blank : zeros of ``size``.
-        lamps : a dict that gets the lamps' sum_g texture before the world's and emitters'
-        dispatch adds to it, when it does (their sum_f is the final one: that dispatch adds
-        no glossy light), for light_edge_pixels."""
-        out = _run("aa_surface", _SURFACE_SAMPLERS, {
-            **inputs, **sums, "centre_diffuse": terms[0], "centre_glossy": terms[1],
-            "centre_world": terms[2], "materials": materials, "principled_lut": lut},
-            (*(f"out_{k}" for k in _SURFACE_SUMS), "out_colour"), *size)
-        sums = {**sums, **{f"sum_{k}": out[f"out_{k}"] for k in _SURFACE_SUMS}}
-        colour = out["out_colour"]
-        # Light by light: each lamp's light feeds the glossy lobe, and one dispatch stays
-        # within llvmpipe's loop limit (docs/blender_facts.md "llvmpipe's loop limit").
-        for index, table in enumerate(scene.lamp_tables):
-            direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples,
-                                          seed=gather_settings.seed, world=scene.no_world,
-                                          emitters=scene.no_emitters, strata_block=block,
-                                          table=table)
-            shine = glossy_direct_texture(inputs, direct, table, index, principled, emission,
-                                          materials=materials)
-            out = _run("aa_light", _LIGHT_SAMPLERS, {
-                "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
-                ("out_f", "out_g"), *size)
-            sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
-            yield
-        if lamps is not None and extra:
-            lamps["sum_g"], lamps["sum_f"] = sums["sum_g"], sums["sum_f"]
-        if extra:  # the world's and emitters' own dispatch (streams after the lamps)
-            direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples,
-                                          seed=gather_settings.seed, world=scene.world_map,
-                                          emitters=scene.emitters, strata_block=block,
-                                          table=scene.no_lamp)
-            # the emitters' glossy light at this pass's own points (emitters_shine)
-            shine = emitter_glossy_texture(bvh, inputs, scene.emitters, materials,
-                                           gather_settings.glossy_rays, gather_settings.seed,
-                                           scene.no_lamp, scene.world_map) if emitting else blank
-            out = _run("aa_light", _LIGHT_SAMPLERS, {
-                "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
-                ("out_f", "out_g"), *size)
-            sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
-            yield
-        return sums
+        """``gpu_compose.shade`` of this scene and snapshot."""
+        return shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples,
+                            gather_settings.seed, gather_settings.glossy_rays, block, lamps)
 
     # The centre pass over the image off the geometry's edges (preview.passes.edge_pixels on
     # the read-back centre G-buffer, the numpy tracer's test; the edge pixels as background, so

@@ -116,3 +116,45 @@ def test_bad_samples_are_refused_with_a_clear_error(voxgi):
     del passes["Alpha"]
     with pytest.raises(ValueError, match="Alpha"):
         acc.add((0, 0, 16, 10), passes)
+
+
+@pytest.mark.parametrize("quality", ["FAST", "ACCURATE"])
+def test_the_viewports_gpu_composition_equals_the_cpu_passes(voxgi, quality):
+    """A viewport slice's sums composed on the GPU (``render_passes_stages(on_gpu=True)``: Fast's
+    cones' terms through gpu_compose, Accurate's gathers) add the same sample as the passes the
+    one-shot path composes (Fast: on the CPU, ``compose_passes``) from the same camera."""
+    import bpy
+    from test_viewport import HEIGHT, WIDTH, camera_matrices, cornell
+
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render.gpu_accumulation import GPUAccumulation, GPUSums, read_rgba
+    from voxgi.render.gpu_preview import finish
+    from voxgi.render.gpu_volume import GPUVolume
+    from voxgi.render.progressive import base_options, tracer
+    from voxgi.voxgi_addon.preview.passes import PASS_NAMES
+    from voxgi.voxgi_addon.scene.view_camera import camera_from_view
+
+    scene = cornell()
+    scene.voxgi.quality = quality
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    live.update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    camera = camera_from_view(np.array(view), np.array(window), WIDTH, HEIGHT)
+    options = base_options(scene.voxgi, WIDTH, HEIGHT)
+    volume = GPUVolume()
+    on_gpu = finish(tracer(live, volume, scene.voxgi, staged=True)(camera, WIDTH, HEIGHT,
+                                                                    options))
+    on_cpu = tracer(live, volume, scene.voxgi)(camera, WIDTH, HEIGHT, options)
+    assert isinstance(on_gpu, GPUSums) and isinstance(on_cpu, dict)
+    for pass_name in PASS_NAMES:
+        film = pass_name == "Combined"
+        images = []
+        for sample in (on_gpu, on_cpu):
+            acc = GPUAccumulation(pass_name, WIDTH, HEIGHT, film)
+            acc.add((0, 0, WIDTH, HEIGHT), sample)
+            images.append(read_rgba(acc.estimate()))
+        error = np.abs(images[0] - images[1]).sum() / max(np.abs(images[1]).sum(), 1e-9)
+        assert error < 2e-3, (pass_name, error)
+        assert images[1][..., :3].max() > 0.0 or pass_name.startswith("Glossy"), pass_name

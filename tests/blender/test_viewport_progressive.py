@@ -330,11 +330,12 @@ def test_while_every_draw_is_a_new_view_the_dropped_coarse_images_are_not_starte
 
 
 def test_the_frame_stays_on_the_gpu_no_draw_reads_anything_back(voxgi, monkeypatch):
-    """Issue 19 point 5: in Accurate quality the slices' G-buffer, direct light, gathers, their
-    sums (gpu_gather_sums), the denoiser, the pass's sums (gpu_accumulation) and the shown
-    image pass from dispatch to dispatch as textures: from the first draw to convergence, with
-    one bounce and with the radiance cache's bounces (built in stages), no ``view_draw``
-    reads a texture back."""
+    """Issue 19 point 5: the slices' G-buffer, direct light, gathers (Accurate) or cones (Fast),
+    the gathers' sums (gpu_gather_sums), the denoiser, the composition (gpu_compose), the
+    pass's sums (gpu_accumulation) and the shown image pass from dispatch to dispatch as
+    textures: from the first draw to convergence — Accurate with one bounce and with the
+    radiance cache's bounces (built in stages), Fast with shadow rays (the default) — no
+    ``view_draw`` reads a texture back."""
     import sys
 
     from voxgi.blender.viewport_session import live_gi
@@ -367,18 +368,22 @@ def test_the_frame_stays_on_the_gpu_no_draw_reads_anything_back(voxgi, monkeypat
                 is original_read:
             monkeypatch.setattr(module, "read_texture", counted_read)
     monkeypatch.setattr(viewport, "view_draw", counted_draw)
-    dispatches = Dispatches(monkeypatch)
-    for bounces in (1, 3):
+    for quality, bounces in (("ACCURATE", 1), ("ACCURATE", 3), ("FAST", 1)):
+        scene.voxgi.quality = quality
         scene.voxgi.bounce_source = "MANUAL"
         scene.voxgi.bounces = bounces
         engine = StandInEngine()
         renderer = quarter_slices(engine)
         renderer.progressive.stage_budget = 0.005  # staged, as the view runs
-        draws = draw_until_converged(engine, scene, depsgraph, view, window, dispatches, 1 << 40)
-        if bounces > 1:  # the cache completes, the image restarts on it and converges again
-            while renderer.cache.generation == 0 or not renderer.progressive.converged:
-                draws += draw_until_converged(engine, scene, depsgraph, view, window,
-                                              dispatches, 1 << 40)
-        assert renderer.progressive.converged and len(draws) > 4
-        assert reads == [], f"Bounces {bounces}: {len(reads)} read-backs in view_draw"
-    assert renderer.cache.texture is not None and renderer.cache._cache is None
+        draws, redraws = 0, -1
+        # until converged (with Bounces 3: on the completed cache, built in chunks sized by
+        # their measured time, so their count depends on the machine's load)
+        while draws < 20000 and not (renderer.progressive.converged and engine.redraws == redraws
+                                     and (bounces == 1 or renderer.cache.generation > 0)):
+            redraws = engine.redraws
+            engine_view(engine, scene, depsgraph, view, window)
+            draws += 1
+        assert renderer.progressive.converged and draws > 4 and not renderer.error
+        assert reads == [], f"{quality}, Bounces {bounces}: {len(reads)} read-backs in view_draw"
+        if bounces > 1:
+            assert renderer.cache.texture is not None and renderer.cache._cache is None

@@ -1,0 +1,120 @@
+"""One pass of the GPU tracer's composition over a G-buffer: the surfaces' colours, the
+gathered terms and every light's direct and glossy light summed into textures
+(``shaders/aa_surface.glsl``, ``aa_light.glsl``; the readable reference:
+``voxgi_addon/preview/passes.accumulate_pass``). Accurate's passes (``gpu_preview``) run it
+over the pixel centres and each sub-pixel pass; Fast quality's viewport slices over its cones'
+terms (``gpu_fast.fast_sums``), so their frame stays on the GPU too. Needs a GPU context.
+"""
+from __future__ import annotations
+
+import math
+
+import gpu
+
+from .gpu_bvh import direct_light_texture, emitter_glossy_texture
+from .gpu_gather import glossy_direct_texture
+from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
+from .gpu_shaders import LOCAL_SIZE, build_compute
+
+# The sums of preview.passes.accumulate_pass as textures: name → (texture, channels) where
+# channels name what its rgb and alpha hold (see shaders/aa_surface.glsl).
+SURFACE_SUMS = ("a", "b", "c", "d", "e", "f")
+SURFACE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "gbuffer_base",
+                     "centre_diffuse",
+                     "centre_glossy", "centre_world", "materials", "principled_lut",
+                     *(f"sum_{k}" for k in SURFACE_SUMS))
+LIGHT_SAMPLERS = ("colour", "direct_image", "shine_image", "sum_f", "sum_g")
+MASK_SAMPLERS = ("gbuffer_position", "pixels")
+COMPACT_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "pixels")
+_aa_shaders: dict[str, object] = {}
+
+
+def _aa_shader(kernel: str):
+    if kernel not in _aa_shaders:
+        if kernel == "aa_surface":
+            _aa_shaders[kernel] = build_compute(
+                ("principled", "aa_surface"), SURFACE_SAMPLERS, (),
+                (*(f"out_{k}" for k in SURFACE_SUMS), "out_colour"), PRINCIPLED_DEFINES)
+        elif kernel in ("aa_list", "aa_list_raw"):
+            _aa_shaders[kernel] = build_compute(
+                ("aa_compact",), COMPACT_SAMPLERS, (), ("out_position", "out_normal", "out_view"),
+                {"RAW": "1"} if kernel == "aa_list_raw" else None)
+        elif kernel == "aa_mask":
+            _aa_shaders[kernel] = build_compute(("aa_mask",), MASK_SAMPLERS, (),
+                                                ("out_position",))
+        else:
+            _aa_shaders[kernel] = build_compute(("aa_light",), LIGHT_SAMPLERS, (),
+                                                ("out_f", "out_g"))
+    return _aa_shaders[kernel]
+
+
+def run(kernel, samplers, inputs, outputs, width, height):
+    """Dispatch ``kernel`` over width × height; returns its new output textures by name."""
+    shader = _aa_shader(kernel)
+    images = {name: gpu.types.GPUTexture((width, height), format="RGBA32F") for name in outputs}
+    shader.bind()
+    for name in samplers:
+        shader.uniform_sampler(name, inputs[name])
+    for name, image in images.items():
+        shader.image(name, image)
+    gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
+    return images
+
+
+def release() -> None:
+    """Drop the cached composition shaders."""
+    _aa_shaders.clear()
+
+
+def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples: int,
+                 seed: int, glossy_rays: int, block=None, lamps=None,
+                 emitters_glossy: bool = True):
+    """(Stages, one per light's dispatches, returning) ``sums`` + one pass over ``inputs``, a
+    G-buffer of ``size`` (an image's or the edge pixels' list's) of ``scene`` (a ``GPUScene``
+    updated to ``snapshot``): terms = the gathered (Diffuse Indirect, AO), Glossy Indirect and
+    world glossy light at the same texels; blank : zeros of ``size``; block : the shadow
+    rays' strata block (``direct_light_texture``; None: all).
+    lamps : a dict that gets the lamps' sum_g texture before the world's and emitters'
+    dispatch adds to it, when it does (their sum_f is the final one: that dispatch adds no
+    glossy light), for light_edge_pixels.
+    emitters_glossy : add the emitters' glossy light at the pass's points (Accurate; Fast's
+    glossy cones see the emission themselves)."""
+    bvh, principled, emission = scene.bvh, scene.principled, scene.emission
+    materials, lut = scene.materials, scene.lut
+    extra = scene.has_scene_lights
+    emitting = emitters_glossy and any(light.type == "EMITTERS" for light in scene.lights)
+    out = run("aa_surface", SURFACE_SAMPLERS, {
+        **inputs, **sums, "centre_diffuse": terms[0], "centre_glossy": terms[1],
+        "centre_world": terms[2], "materials": materials, "principled_lut": lut},
+        (*(f"out_{k}" for k in SURFACE_SUMS), "out_colour"), *size)
+    sums = {**sums, **{f"sum_{k}": out[f"out_{k}"] for k in SURFACE_SUMS}}
+    colour = out["out_colour"]
+    # Light by light: each lamp's light feeds the glossy lobe, and one dispatch stays within
+    # llvmpipe's loop limit (docs/blender_facts.md "llvmpipe's loop limit").
+    for index, table in enumerate(scene.lamp_tables):
+        direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
+                                      world=scene.no_world, emitters=scene.no_emitters,
+                                      strata_block=block, table=table)
+        shine = glossy_direct_texture(inputs, direct, table, index, principled, emission,
+                                      materials=materials)
+        out = run("aa_light", LIGHT_SAMPLERS, {
+            "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
+            ("out_f", "out_g"), *size)
+        sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
+        yield
+    if lamps is not None and extra:
+        lamps["sum_g"], lamps["sum_f"] = sums["sum_g"], sums["sum_f"]
+    if extra:  # the world's and emitters' own dispatch (streams after the lamps)
+        direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
+                                      world=scene.world_map, emitters=scene.emitters,
+                                      strata_block=block, table=scene.no_lamp)
+        # the emitters' glossy light at this pass's own points (emitters_shine)
+        shine = emitter_glossy_texture(bvh, inputs, scene.emitters, materials, glossy_rays,
+                                       seed, scene.no_lamp, scene.world_map) \
+            if emitting else blank
+        out = run("aa_light", LIGHT_SAMPLERS, {
+            "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
+            ("out_f", "out_g"), *size)
+        sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
+        yield
+    return sums
