@@ -60,7 +60,8 @@ def _shader(name: str):
             "estimate": (("acc", "tails", "backdrop"), ("window", "info", "mode"),
                          ("out_image",), ()),
         }[name]
-        _shaders[name] = build_compute((name,), samplers, constants, outputs,
+        files = (name,) if name == "pass_sample" else ("accumulation_common", name)
+        _shaders[name] = build_compute(files, samplers, constants, outputs,
                                        read_write=read_write)
     return _shaders[name]
 

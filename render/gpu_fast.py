@@ -115,6 +115,27 @@ def cone_volumes(volume, gi_state, radiance, cones, world_radiance, timings=None
     return volume, kinds
 
 
+def _cone_scene(snapshot, gi_state, cones, volume, gather_settings, radiance, timings):
+    """(GPU scene, volume, kinds) Fast quality traces: the session's GPU scene
+    (``gpu_scene.GPUScene``, as Accurate's: triangles, BVH, material and light tables,
+    uploaded only where they changed) and the octree of each kind of cone (Cycles' ray
+    visibility, gi/ray_views.py) — with Bounces > 1 the voxels also reflecting the radiance
+    cache (gi/cone_bounces.py; ``radiance`` as ``fast_passes`` takes it, built here by
+    default, gathered on the GPU as Accurate's)."""
+    t0 = time.perf_counter()
+    scene = current_scene(snapshot)
+    if len(scene.tris) == 0:
+        raise VoxGIError("the scene has no triangles to render")
+    if scene.uploaded:
+        timings["scene update (GPU)"] = time.perf_counter() - t0
+    if radiance is _BUILD:
+        radiance = _radiance_cache(scene, fast_cache_settings(gather_settings,
+                                                              scene.bvh.scene_triangles))
+    volume, kinds = cone_volumes(volume or GPUVolume(), gi_state, radiance, cones,
+                                 getattr(snapshot.world, "radiance", None), timings)
+    return scene, volume, kinds
+
+
 def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume, shadows,
                 gi_stride, gather_settings, glossy_indirect, camera_tris=None, radiance=_BUILD):
     """(passes, timings) of Fast quality; ``volume`` a ``GPUVolume`` kept between calls (a new
@@ -125,24 +146,9 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
     ``ViewportCache``'s last complete one (None: one bounce until there is one;
     ``cone_volumes``)."""
     timings = {}
-    t0 = time.perf_counter()
-    # the session's GPU scene (gpu_scene.GPUScene, as Accurate's): triangles, BVH, material
-    # and light tables, uploaded only where they changed
-    scene = current_scene(snapshot)
+    scene, volume, kinds = _cone_scene(snapshot, gi_state, cones, volume, gather_settings,
+                                       radiance, timings)
     tris, rough, emission, lights = scene.tris, scene.rough, scene.emission, scene.lights
-    if len(tris) == 0:
-        raise VoxGIError("the scene has no triangles to render")
-    if scene.uploaded:
-        timings["scene update (GPU)"] = time.perf_counter() - t0
-    # the octree of each kind of cone (Cycles' ray visibility, gi/ray_views.py), with
-    # Bounces > 1 the voxels also reflecting the radiance cache (gi/cone_bounces.py), the
-    # cache gathered on the GPU as Accurate's
-    if radiance is _BUILD:
-        radiance = _radiance_cache(scene, fast_cache_settings(gather_settings,
-                                                              scene.bvh.scene_triangles))
-    volume = volume or GPUVolume()
-    volume, kinds = cone_volumes(volume, gi_state, radiance, cones,
-                                 getattr(snapshot.world, "radiance", None), timings)
     t0 = time.perf_counter()
     gbuffer = rasterize(tris if camera_tris is None else camera_tris, snapshot.camera, rough,
                         width, height,
@@ -259,16 +265,9 @@ def fast_sums(snapshot, gi_state, width, height, cones, light_samples, volume, s
         raise ValueError("Fast quality's GPU composition takes shadow rays; cone shadows are "
                          "composed on the CPU (fast_passes)")
     timings = {}
+    scene, volume, kinds = _cone_scene(snapshot, gi_state, cones, volume, gather_settings,
+                                       radiance, timings)
     t0 = time.perf_counter()
-    scene = current_scene(snapshot)
-    if len(scene.tris) == 0:
-        raise VoxGIError("the scene has no triangles to render")
-    if radiance is _BUILD:
-        radiance = _radiance_cache(scene, fast_cache_settings(gather_settings,
-                                                              scene.bvh.scene_triangles))
-    volume = volume or GPUVolume()
-    volume, kinds = cone_volumes(volume, gi_state, radiance, cones,
-                                 getattr(snapshot.world, "radiance", None), timings)
     gbuffer = rasterize(scene.tris, snapshot.camera, scene.rough, width, height, shader=raster,
                         textures=scene.raster_textures())
     timings["visibility (GPU)"] = time.perf_counter() - t0

@@ -17,20 +17,12 @@
  * info: (W, H, has world, 0); tail_a, tail_b, tail_c: the 3 × 3 tail weights row-major
  * (w[ey + 1][ex + 1], ey down), the centre's unused. */
 
-#define LAYERS 5
-
 bool in_tile(ivec2 s)
 {
   ivec2 image = ivec2(info.xy);
   ivec4 r = ivec4(rect);
   return s.x >= max(r.x, 0) && s.x < min(r.x + r.z, image.x) && s.y >= max(r.y, 0) &&
          s.y < min(r.y + r.w, image.y);
-}
-
-ivec2 layer_texel(ivec2 p, int layer)
-{
-  int height = int(info.y);
-  return ivec2(p.x, layer * height + height - 1 - p.y);
 }
 
 void sample_at(ivec2 s, out vec4 c[LAYERS])
@@ -57,12 +49,10 @@ float tail_weight(int k)
 
 void main()
 {
-  ivec2 g = ivec2(gl_GlobalInvocationID.xy);
-  ivec4 w = ivec4(window);
-  if (g.x >= w.z || g.y >= w.w) {
+  ivec2 p;
+  if (!window_pixel(p)) {
     return;
   }
-  ivec2 p = ivec2(w.x + g.x, w.y + g.y);
   vec4 c[LAYERS];
   if (in_tile(p)) {
     sample_at(p, c);

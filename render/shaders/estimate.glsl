@@ -9,14 +9,6 @@
  * w, h) only.
  * info: (W, H, backdrop w, backdrop h); mode: (film, transparent, finished, has backdrop). */
 
-#define LAYERS 5
-
-ivec2 layer_texel(ivec2 p, int layer)
-{
-  int height = int(info.y);
-  return ivec2(p.x, layer * height + height - 1 - p.y);
-}
-
 float safe_ratio(float a, float b)
 {
   return b > 0.0 ? a / b : 0.0;
@@ -24,12 +16,10 @@ float safe_ratio(float a, float b)
 
 void main()
 {
-  ivec2 g = ivec2(gl_GlobalInvocationID.xy);
-  ivec4 w = ivec4(window);
-  if (g.x >= w.z || g.y >= w.w) {
+  ivec2 p;
+  if (!window_pixel(p)) {
     return;
   }
-  ivec2 p = ivec2(w.x + g.x, w.y + g.y);
   ivec2 image = ivec2(info.xy);
   ivec2 out_texel = ivec2(p.x, image.y - 1 - p.y);
   vec4 L[LAYERS];
