@@ -123,10 +123,8 @@ def test_the_viewports_gpu_composition_equals_the_cpu_passes(voxgi, quality):
     """A viewport slice's sums composed on the GPU (``render_passes_stages(on_gpu=True)``: Fast's
     cones' terms through gpu_compose, Accurate's gathers) add the same sample as the passes the
     one-shot path composes (Fast: on the CPU, ``compose_passes``) from the same camera."""
-    import bpy
-    from test_viewport import HEIGHT, WIDTH, camera_matrices, cornell
+    from test_viewport import HEIGHT, WIDTH, cornell, live_view
 
-    from voxgi.blender.viewport_session import live_gi
     from voxgi.render.gpu_accumulation import GPUAccumulation, GPUSums, read_rgba
     from voxgi.render.gpu_preview import finish
     from voxgi.render.gpu_volume import GPUVolume
@@ -136,11 +134,7 @@ def test_the_viewports_gpu_composition_equals_the_cpu_passes(voxgi, quality):
 
     scene = cornell()
     scene.voxgi.quality = quality
-    gpu_ready()
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    live = live_gi(scene.name_full)
-    live.update(scene, depsgraph)
-    view, window = camera_matrices(scene, depsgraph)
+    _, live, view, window = live_view(scene)
     camera = camera_from_view(np.array(view), np.array(window), WIDTH, HEIGHT)
     options = base_options(scene.voxgi, WIDTH, HEIGHT)
     volume = GPUVolume()

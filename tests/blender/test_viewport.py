@@ -31,6 +31,18 @@ def gpu_ready():
     assert ready, f"no GPU context in background mode: {why}"
 
 
+def live_view(scene):
+    """(depsgraph, live, view, window): ``scene``'s evaluated depsgraph, its ``LiveGI``
+    updated to it, and its camera's view and window matrices (a GPU context made first)."""
+    from voxgi.blender.viewport_session import live_gi
+
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    live.update(scene, depsgraph)
+    return (depsgraph, live, *camera_matrices(scene, depsgraph))
+
+
 def cornell(camera_type="PERSP"):
     scene = bpy.context.scene
     scenes.build_test_cornell_box(scene, light="POINT")

@@ -19,6 +19,7 @@ from test_viewport import (
     engine_view,
     f12_combined,
     gpu_ready,
+    live_view,
     relative_l1,
     turned,
 )
@@ -338,16 +339,11 @@ def test_the_frame_stays_on_the_gpu_no_draw_reads_anything_back(voxgi, monkeypat
     ``view_draw`` reads a texture back."""
     import sys
 
-    from voxgi.blender.viewport_session import live_gi
     from voxgi.render import gpu_tracer, viewport
 
     scene = progressive_scene()
     scene.voxgi_viewport.samples = 4
-    gpu_ready()
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    live = live_gi(scene.name_full)
-    live.update(scene, depsgraph)
-    view, window = camera_matrices(scene, depsgraph)
+    depsgraph, _, view, window = live_view(scene)
     reads, inside = [], [False]
     original_read, original_draw = gpu_tracer.read_texture, viewport.view_draw
 
