@@ -10,10 +10,12 @@ one-shot GPU tracer (``gpu_preview.render_passes_gpu``, F12's kernels) over a sm
 2. **tiles**: sample k of the full image, tile by tile: a tile is a rectangle of the image
    traced through its own off-axis camera (``preview.progressive.tile_camera``) with sample k's
    sub-pixel offset, seed and share of the rays (``sample_settings``), and added to the
-   per-pixel sums (``Accumulation``); the tile grid moves from sample to sample;
+   per-pixel sums on the GPU (``gpu_accumulation.GPUAccumulation``; numpy's
+   ``preview.progressive.Accumulation`` is the reference it is tested against); the tile
+   grid moves from sample to sample;
 3. **the film** (Combined): every slice also looks the world up along its camera rays
    (``preview.film.world_along``) and the samples' coverage and holdout shares are summed
-   with it (``Accumulation(film=True)``), so the image shows the world behind the geometry —
+   with it (``film=True``), so the image shows the world behind the geometry —
    or, with Film › Transparent, alpha = coverage — as F12's film does (``preview.film``);
 4. **converged** after ``target`` samples: the mean gets the pixel filter's tails over the
    neighbours as F12's image does; nothing more is traced until the key changes.
@@ -21,7 +23,9 @@ one-shot GPU tracer (``gpu_preview.render_passes_gpu``, F12's kernels) over a sm
 The slice's pixels come from measured slice times (``SliceSizer``: a fixed cost per slice
 plus a cost per pixel) so that one slice stays near ``SLICE_BUDGET``. The work one slice
 dispatches is one tracer call over at most ``slice_pixels`` pixels (tests count the
-dispatched work groups).
+dispatched work groups). The frame stays on the GPU: the tracer hands its sums over as
+textures, the gathers are summed on the GPU (``gpu_gather_sums``) and the shown image is a
+texture made from the sums (docs/gi_pipeline.md "The frame on the GPU").
 """
 from __future__ import annotations
 
