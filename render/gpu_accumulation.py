@@ -25,9 +25,11 @@ import numpy as np
 
 from ..voxgi_addon.preview.passes import PASS_NAMES
 from ..voxgi_addon.preview.progressive import GATHERED, LIGHT_COLOURS, inside, sample_terms
+from .gpu_scene import GPUScene
 from .gpu_shaders import LOCAL_SIZE, build_compute
 from .gpu_volume import float_texture
 
+zeros = GPUScene.zeros  # cleared on the GPU: nothing uploaded (an upload cost 4 ms a restart)
 LAYERS = 5  # accumulate.glsl's layers: sums, weights, gathered light, film, holdout
 # pass_sample.glsl's kind per pass
 PASS_KINDS = {"Combined": 0, "Diffuse Direct": 1, "Diffuse Indirect": 2, "Glossy Direct": 3,
@@ -74,11 +76,6 @@ def release() -> None:
 def _dispatch(shader, width: int, height: int) -> None:
     gpu.compute.dispatch(shader, max(1, math.ceil(width / LOCAL_SIZE)),
                          max(1, math.ceil(height / LOCAL_SIZE)), 1)
-
-
-def zeros(width: int, height: int):
-    """An RGBA32F texture of zeros."""
-    return float_texture(np.zeros((height, width, 4), np.float32), (width, height))
 
 
 def _upload(image) -> object:
@@ -137,8 +134,7 @@ class GPUAccumulation:
             raise ValueError(f"an image of {width}×{height} pixels has nothing to accumulate")
         self.pass_name, self.width, self.height = pass_name, int(width), int(height)
         self.film, self.transparent = bool(film), bool(transparent)
-        self.acc = zeros(self.width, LAYERS * self.height)
-        self.tails = zeros(self.width, LAYERS * self.height)
+        self._acc = self._tails = None  # made at the first use (an orbit restarts every draw)
         self.kind = 2 if pass_name == "Combined" else (1 if pass_name in LIGHT_COLOURS else 0)
         self.added = 0  # samples added (tiles of all samples)
         self._black = None
@@ -188,6 +184,20 @@ class GPUAccumulation:
         shader.image("tails", self.tails)
         _dispatch(shader, grown[2], grown[3])
         self.added += 1
+
+    @property
+    def acc(self):
+        """The sums: LAYERS layers of the image (``shaders/accumulate.glsl``)."""
+        if self._acc is None:
+            self._acc = zeros(self.width, LAYERS * self.height)
+        return self._acc
+
+    @property
+    def tails(self):
+        """The sums' tails over the neighbours, in the same layers."""
+        if self._tails is None:
+            self._tails = zeros(self.width, LAYERS * self.height)
+        return self._tails
 
     def _blank(self):
         """A 1 × 1 texture of zeros bound where a sampler has nothing to read."""
