@@ -53,6 +53,9 @@ from .gpu_shaders import LOCAL_SIZE
 
 SLICE_BUDGET = 0.030  # seconds one view_draw's slice aims at (issue 19)
 STAGE_SHARE = 0.5     # of it, what a call's stages run until, and what the longest stage aims at
+# of it, what a call's stages may reach with the next one, predicted by that stage's time in
+# the last slice of its kind: the rest is view_draw's own work (key, texture draw, status)
+WORK_SHARE = 0.75
 LEAST_TILE = 48       # pixels: about the smallest tile side (preview.progressive.tile_side)
 
 
@@ -102,6 +105,10 @@ class ProgressiveImage:
         self.running = None        # the slice under way: a generator of its stages
         self.running_started = 0.0
         self.longest_stage = 0.0
+        # (slice kind, stage index) → its seconds in the last slice of that kind: a slice's
+        # stages come in the same order each time, so they predict the next one's
+        self.stage_seconds: dict[tuple[str, int], float] = {}
+        self.running_kind, self.running_stage = "", 0
         self.fixed_pixels: int | None = None  # tests: every slice this many pixels
         self.key = None
         # the samples' sums and the shown image live on the GPU (gpu_accumulation): a slice
@@ -199,8 +206,10 @@ class ProgressiveImage:
     def step(self, trace, view, window, settings, filter_width: float,
              whole: bool = False) -> Slice | None:
         """Run the current key's slice on: its next stages while this call has spent less than
-        ``stage_budget`` (all of it when None), ``trace(camera, width, height, options)`` →
-        passes (PASS_NAMES → (h, w, 3)), or a generator of the tracer's stages returning them
+        ``stage_budget`` and the next stage — as long as it was in the last slice of this kind
+        — would end within WORK_SHARE of the budget (all of them when ``stage_budget`` is
+        None); ``trace(camera, width, height, options)`` → passes (PASS_NAMES → (h, w, 3)), or
+        a generator of the tracer's stages returning them
         (``gpu_preview.render_passes_stages``). Returns the Slice when it finished in this
         call, a Slice with ``finished`` False while it goes on in the next call, None when the
         image has converged. whole: run the slice to its end (nothing is shown yet)."""
@@ -211,8 +220,9 @@ class ProgressiveImage:
             return Slice("wait", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
         t0 = time.perf_counter()
         if self.running is None:
+            self.running_kind = "coarse" if self.coarse_pending else "tile"
             self.running = self._slice(trace, view, window, settings, filter_width)
-            self.running_started, self.longest_stage = t0, 0.0
+            self.running_started, self.longest_stage, self.running_stage = t0, 0.0, 0
         while True:
             s0 = time.perf_counter()
             try:
@@ -233,10 +243,18 @@ class ProgressiveImage:
             except BaseException:
                 self.running = None
                 raise
-            self.longest_stage = max(self.longest_stage, time.perf_counter() - s0)
-            if self.stage_budget is not None and not whole and \
-                    time.perf_counter() - t0 >= self.stage_budget:
-                return Slice("stage", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
+            seconds = time.perf_counter() - s0
+            self.longest_stage = max(self.longest_stage, seconds)
+            self.stage_seconds[self.running_kind, self.running_stage] = seconds
+            self.running_stage += 1
+            if self.stage_budget is not None and not whole:
+                # stop at the stage budget, or before a next stage that took the last slice of
+                # this kind so long that this call would end past the work share of the budget
+                spent = time.perf_counter() - t0
+                upcoming = self.stage_seconds.get((self.running_kind, self.running_stage), 0.0)
+                if spent >= self.stage_budget or \
+                        spent + upcoming > WORK_SHARE * max(self.budget, self.stage_budget):
+                    return Slice("stage", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
 
     def _slice(self, trace, view, window, settings, filter_width: float):
         """The next slice — the coarse image or one tile — as a generator of stages: the
