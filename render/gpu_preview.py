@@ -102,15 +102,16 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     The viewport's slices run the stages over several draws (``progressive``); the textures
     live in the generator between them, so nothing but its own next stage runs in a draw."""
     check_request(snapshot, width, height, gi_stride, quality)
+    # glass' two layers are composed on the CPU: the sums stay on the GPU only without it
+    on_gpu = on_gpu and not any(is_glass(m) for m in snapshot.materials)
     if quality == "ACCURATE":
         scene = gpu_scene or current_scene()
         raster = raster or gbuffer_shader()
         layer = (width, height, light_samples, gi_stride,
                  gather_settings or GatherSettings(ao_distance=cones.ao_distance),
                  glossy_indirect, filter_width, scene)
-        keep = on_gpu and not any(is_glass(m) for m in snapshot.materials)
         front, timings = yield from _accurate_stages(snapshot, *layer, gather_hook, raster,
-                                                     cache_source, on_gpu=keep)
+                                                     cache_source, on_gpu=on_gpu)
         glass = transmission.glass_materials(snapshot, scene.tris)
         if glass is None:
             return front, timings
@@ -139,7 +140,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
         texture = yield from cache_source.stage(scene.bvh, scene.lights, scene.principled,
                                                 scene.emission, settings, scene.gather_tables())
         given["radiance"] = cache_source.cache if texture is not None else None
-    if on_gpu and shadows == "RAYS" and not any(is_glass(m) for m in snapshot.materials):
+    if on_gpu and shadows == "RAYS":
         # the viewport's slices: composed on the GPU, nothing read back
         return (yield from fast_sums(*fast, raster=raster, **given))
     front, timings = fast_passes(*fast, **given)

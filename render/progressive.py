@@ -358,21 +358,21 @@ def tracer(live, volume, settings, staged: bool = False, raster=None, cache_sour
     has for the view (``LiveGI.image_source``: Accurate the latest snapshot, Fast the applied
     results) with F12's kernels (``render_passes_gpu``); staged: a generator of its stages that
     returns them (``render_passes_stages``, what ``ProgressiveImage.step`` runs over several
-    calls; in Accurate they return the pass's sums as textures where they can,
-    ``gpu_accumulation.GPUSums``, which ``GPUAccumulation.add`` takes as it takes passes).
+    calls; they return the pass's sums as textures where they can — Accurate, Fast with
+    shadow rays, no glass: ``gpu_accumulation.GPUSums``, which ``GPUAccumulation.add`` takes
+    as it takes passes).
     raster : the G-buffer shader the caller keeps for its GPU context; cache_source :
     the view's radiance cache built in stages (``viewport_cache.ViewportCache``)."""
     from .gpu_preview import render_passes_stages
 
     cones = cone_settings(settings)
-    gpu_sums = staged  # the slices' sums stay on the GPU (gpu_accumulation.GPUSums)
 
     def stages(camera, width, height, options):
         snapshot, state, _ = live.image_source(settings.quality)
         snapshot = dataclasses.replace(snapshot, camera=camera)
         passes, _ = yield from render_passes_stages(snapshot, state, width, height,
                                                     cones, volume=volume, raster=raster,
-                                                    cache_source=cache_source, on_gpu=gpu_sums,
+                                                    cache_source=cache_source, on_gpu=staged,
                                                     **options)
         return passes
 
