@@ -23,6 +23,8 @@ if str(TOOLS) not in sys.path:
 
 # name -> (module in tools/, one-line description)
 SECTIONS = {
+    "preview": ("bench_preview", "one preview vs Cycles 16/64 spp + OIDN on six scenes at two sizes "
+                                 "(first and warm), split into stages against the machine's floor"),
     "voxelize": ("bench_voxelize", "surface voxelization vs trimesh and Open3D"),
     "gfg": ("bench_gfg", "GFG file write/read throughput vs numpy.save/numpy.load"),
     "gi": ("bench_gi", "per-update time, preview time and Cycles time/error; multi-bounce "

@@ -1,0 +1,123 @@
+"""Bench section "preview" (issue 31): what one preview costs beside Cycles 16 and 64 spp +
+OpenImageDenoise, and where its time goes against this machine's floor.
+
+Each scene and size runs in a fresh process (``bench_preview_blender.py``, the bpy venv) with
+Mesa's on-disk shader cache off, so "first" is the first preview on a new machine and
+"warm" the next ones (the radiance cache built again each time, as after any edit). Tables:
+
+1. per scene and size: first and warm preview time, Combined error against Cycles at its
+   default light paths, Cycles 16 / 64 spp + OIDN's time and error in the same process, and
+   the issue's goal (error ≤ Cycles 16 + OIDN's, warm ≤ ⅓ of its time, first ≤ warm + its
+   time);
+2. per scene at each size: the warm preview split into its stages (each dispatch timed to its
+   completion), each stage's rays (BVH traversals) and texel fetches, and its floor — that
+   work at the rates trivial kernels reach on the same BVH in the same process — and what the
+   stage cost more in the first preview (shader compiles and first dispatches).
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENES = ("cornell_box", "columned_hall", "textured_room", "emissive_room", "hdri_courtyard",
+          "city")
+SIZES = ((160, 120), (640, 480))
+LABELS = {"cornell_box": "Cornell box (area light)", "columned_hall": "columned hall (sun)",
+          "textured_room": "textured room", "emissive_room": "emissive room",
+          "hdri_courtyard": "HDRI courtyard (exterior)",
+          "city": "city block, instanced domes"}
+STAGE_ORDER = ("G-buffers", "radiance cache", "diffuse+AO gather", "glossy gather",
+               "world glossy gather", "denoise + upsample", "direct light", "compose", "other")
+
+
+def _row(scene: str, width: int, height: int, quick: bool) -> dict:
+    python = ROOT / ".venv" / "bin" / "python"
+    if not python.exists():
+        raise RuntimeError("the bpy venv .venv is missing: run `make venv` (make bench does)")
+    cmd = [str(python), str(ROOT / "tools" / "bench" / "bench_preview_blender.py"), scene,
+           str(width), str(height)] + (["--quick"] if quick else [])
+    env = {**os.environ, "MESA_SHADER_CACHE_DISABLE": "true"}
+    done = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT, env=env)
+    for line in done.stdout.splitlines():
+        if line.startswith("RESULT "):
+            return json.loads(line[len("RESULT "):])
+    raise RuntimeError(f"{scene} {width}×{height} failed:\n{done.stderr[-2000:]}")
+
+
+def _goal(row) -> str:
+    c16_time, c16_error = row["cycles16"]
+    parts = [("error" if row["error"] <= c16_error else f"error ×{row['error'] / c16_error:.1f}"),
+             ("time" if row["warm"] <= c16_time / 3 else
+              f"time ×{row['warm'] / (c16_time / 3):.1f}"),
+             ("cold" if row["first"] <= row["warm"] + c16_time else
+              f"cold +{row['first'] - row['warm'] - c16_time:.1f} s")]
+    met = all(" " not in p for p in parts)
+    return "met" if met else "; ".join(p if " " in p else f"{p} met" for p in parts)
+
+
+def run(quick: bool = False, out=print) -> str:
+    scenes = ("cornell_box",) if quick else SCENES
+    sizes = ((80, 60),) if quick else SIZES
+    rows, failed = [], []
+    for width, height in sizes:
+        for scene in scenes:
+            try:
+                rows.append(_row(scene, width, height, quick))
+            except RuntimeError as exc:
+                failed.append(str(exc))
+                out(f"**{scene} {width}×{height} failed** (the section goes on): "
+                    f"{str(exc)[-600:]}\n")
+    lines = ["### Preview vs Cycles 16 / 64 spp + OIDN (issue 31): first preview on a new "
+             "machine, warm preview (median, radiance cache rebuilt), Combined relative L1 "
+             "against Cycles at its default light paths" +
+             (" — quick: a check of the tooling, not the measurement" if quick else ""), "",
+             "| scene | size | triangles | VoxGI first | VoxGI warm | error | Cycles 16 + OIDN "
+             "| Cycles 64 + OIDN | warm ÷ C16 | goal (error ≤ C16's, warm ≤ ⅓ C16, first ≤ "
+             "warm + C16) | reference |",
+             "|---|---|---:|---:|---:|---:|---|---|---:|---|---|"]
+    for row in rows:
+        c16, c64 = row["cycles16"], row["cycles64"]
+        lines.append(
+            f"| {LABELS.get(row['scene'], row['scene'])} | {row['width']}×{row['height']} | "
+            f"{row['triangles']:,} | {row['first']:.2f} s | {row['warm']:.2f} s | "
+            f"{row['error']:.3f} | {c16[0]:.2f} s, {c16[1]:.3f} | {c64[0]:.2f} s, {c64[1]:.3f} | "
+            f"{row['warm'] / c16[0]:.1f} | {_goal(row)} | {row['reference']} |")
+    lines += ["", "### Where a warm preview's time goes, against the floor (issue 31 point 1): "
+              "each stage's dispatches timed to completion; floor = its rays at the ray rate "
+              "and its texel fetches at the fetch rate that trivial kernels reach on the same "
+              "BVH in the same process; first extra = what the stage cost more in the first "
+              "preview (shader compiles, first dispatches)", "",
+              "| scene | size | stage | time | rays | fetches | floor | time ÷ floor "
+              "| first extra |", "|---|---|---|---:|---:|---:|---:|---:|---:|"]
+    for row in rows:
+        stages = row["stages"]
+        where = f"{LABELS.get(row['scene'], row['scene'])} | {row['width']}×{row['height']}"
+        for stage in sorted(stages, key=lambda s: STAGE_ORDER.index(s)
+                            if s in STAGE_ORDER else len(STAGE_ORDER)):
+            s = stages[stage]
+            ratio = f"{s['seconds'] / s['floor']:.1f}" if s["floor"] > 0 else "—"
+            lines.append(f"| {where} | {stage} | {s['seconds'] * 1000:.0f} ms | "
+                         f"{s['rays'] / 1e6:.2f} M | {s['fetches'] / 1e6:.1f} M | "
+                         f"{s['floor'] * 1000:.0f} ms | {ratio} | "
+                         f"{max(s['first'] - s['seconds'], 0.0) * 1000:.0f} ms |")
+        traced = sum(s["seconds"] for s in stages.values())
+        lines.append(f"| {where} | **all stages** | {traced * 1000:.0f} ms | "
+                     f"{sum(s['rays'] for s in stages.values()) / 1e6:.2f} M | "
+                     f"{sum(s['fetches'] for s in stages.values()) / 1e6:.1f} M | "
+                     f"{sum(s['floor'] for s in stages.values()) * 1000:.0f} ms | "
+                     f"{traced / max(sum(s['floor'] for s in stages.values()), 1e-9):.1f} | "
+                     f"shaders created: {row['compiles']} in {row['compile_seconds']:.2f} s |")
+    lines += ["", "| scene | size | closest-hit rays/s | any-hit rays/s | texel fetches/s |",
+              "|---|---|---:|---:|---:|"]
+    for row in rows:
+        lines.append(f"| {LABELS.get(row['scene'], row['scene'])} | {row['width']}×"
+                     f"{row['height']} | {row['closest_rate'] / 1e6:.2f} M | "
+                     f"{row['any_rate'] / 1e6:.2f} M | {row['fetch_rate'] / 1e6:.0f} M |")
+    table = "\n".join(lines)
+    out(table + "\n")
+    if failed:
+        raise RuntimeError("; ".join(f.splitlines()[0] for f in failed))
+    return table
