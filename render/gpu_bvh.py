@@ -117,9 +117,30 @@ OUTPUTS = {"bvh_gather": ("out_image", "out_variance"),
 _shaders: dict[str, object] = {}
 
 
-def bvh_shader(kernel: str):
-    """The cached compute shader of ``kernel`` (see ``KERNELS``)."""
-    if kernel not in _shaders:
+# The kinds of light a kernel can leave out (bvh_lights.glsl BVH_NO_*), by the snapshot's
+# light types that need them.
+LIGHT_FEATURES = {"SUN": ("SUN",), "AREA": ("AREA",), "POINT": ("POINT", "SPOT"),
+                  "WORLD": ("WORLD",), "EMITTERS": ("EMITTERS",)}
+
+
+def absent_lights(lights) -> tuple[str, ...]:
+    """The ``LIGHT_FEATURES`` no light of ``lights`` (``Light``s with a ``type``) needs."""
+    types = {light.type for light in lights}
+    return tuple(sorted(k for k, needs in LIGHT_FEATURES.items() if not types & set(needs)))
+
+
+def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
+               absent: tuple[str, ...] = ()):
+    """The cached compute shader of ``kernel`` (see ``KERNELS``) with only the code the scene
+    needs: cutouts : trace through cut-outs (``BVH_CUTOUTS``); textures : the bounce hits'
+    materials sample textures (``BVH_TEXTURES``, bvh_shade.glsl); absent : the kinds of light
+    the scene has none of (``absent_lights``: ``BVH_NO_<kind>``, bvh_lights.glsl). A variant
+    built without them has no Alpha lookup in its traversal's triangle loop and no texture
+    sampling or unused light model at its hits: llvmpipe pays for a branch's code whether a
+    lane takes it or not (the cut-out test alone made every ray 3–4× slower,
+    docs/gi_pipeline.md "Where a preview's time goes")."""
+    key = (kernel, cutouts, textures, tuple(absent))
+    if key not in _shaders:
         files, samplers, constants = KERNELS[kernel]
         defines = {"BVH_WIDTH_LOG2": str(int(math.log2(TEXTURE_WIDTH))),
                    "SHADOW_EPSILON": repr(float(SHADOW_EPSILON)),
@@ -132,9 +153,14 @@ def bvh_shader(kernel: str):
         if "principled" in files:
             defines.update(PRINCIPLED_DEFINES)
         if "textures" in files:
-            defines["BVH_CUTOUTS"] = "1"
+            if cutouts:
+                defines["BVH_CUTOUTS"] = "1"
+            if textures:
+                defines["BVH_TEXTURES"] = "1"
             defines["ROUGHNESS_LEVELS"] = str(ROUGHNESS_LEVELS)
             defines["METALLIC_LEVELS"] = str(METALLIC_LEVELS)
+        for kind in absent:
+            defines[f"BVH_NO_{kind}"] = "1"
         if kernel == "bvh_direct":
             defines["STRATA_BLOCK"] = "ivec3(strata.xyz)"
         if kernel in ("bvh_gather", "bvh_glossy", "bvh_cache_paths"):
@@ -148,9 +174,9 @@ def bvh_shader(kernel: str):
         if "ltc" in files:
             defines.update(LTC_DEFINES)
             defines["HORIZON_LIFT"] = repr(float(HORIZON_LIFT))
-        _shaders[kernel] = build_compute(("sampling", "bvh_common") + files, samplers, constants,
-                                         OUTPUTS.get(kernel, ("out_image",)), defines)
-    return _shaders[kernel]
+        _shaders[key] = build_compute(("sampling", "bvh_common") + files, samplers, constants,
+                                      OUTPUTS.get(kernel, ("out_image",)), defines)
+    return _shaders[key]
 
 
 def _same(a, b) -> bool:
@@ -167,6 +193,8 @@ class GPUBVH:
     ``texture_atlas``: ``gpu_scene.GPUScene`` sets them with the triangles'; empty: none).
     uploaded_bytes : bytes the last ``update`` sent (0 = unchanged); resident_bytes : bytes of
     the textures on the GPU; build_seconds : the last BVH build's time.
+    cutouts : some triangle is a cut-out; ``inputs`` carries it as "bvh_cutouts", from which
+    ``dispatch_bvh`` picks the kernels' variant (``bvh_shader``).
     """
 
     def __init__(self):
@@ -175,6 +203,7 @@ class GPUBVH:
         self.uploaded_bytes = 0
         self.resident_bytes = 0
         self.build_seconds = 0.0
+        self.cutouts = True
         self._tris = None
 
     def _unchanged(self, tris) -> bool:
@@ -205,6 +234,8 @@ class GPUBVH:
         self.triangles = upload(packed.triangles)
         self.normals = upload(packed.normals)
         self.uploaded_bytes = self.resident_bytes = packed.nbytes
+        cutout = _cutout(tris)
+        self.cutouts = cutout is not None and bool(np.any(cutout))
         self._tris = tris
         return self
 
@@ -216,7 +247,7 @@ class GPUBVH:
     @property
     def inputs(self) -> dict[str, object]:
         return {"bvh_nodes": self.nodes, "bvh_triangles": self.triangles,
-                "bvh_normals": self.normals, **self.surface}
+                "bvh_normals": self.normals, **self.surface, "bvh_cutouts": self.cutouts}
 
 
 def _cutout(tris):
@@ -242,7 +273,9 @@ def dispatch_bvh(kernel: str, inputs: dict[str, object], width: int, height: int
     """Run ``kernel`` over width × height RGBA32F output texture(s) and return it (a tuple for
     the kernels of ``OUTPUTS``). images : the output textures to write (kept from an earlier
     dispatch; None: new ones of width × height)."""
-    shader = bvh_shader(kernel)
+    # the variant of the scene's features (GPUBVH.inputs, GPUScene.gather_tables; unknown: all)
+    shader = bvh_shader(kernel, bool(inputs.get("bvh_cutouts", True)),
+                        bool(inputs.get("bvh_textures", True)), inputs.get("bvh_absent", ()))
     _, samplers, names = KERNELS[kernel]
     outputs = OUTPUTS.get(kernel, ("out_image",))
     if images is None:

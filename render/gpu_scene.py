@@ -46,7 +46,7 @@ from ..voxgi_addon.scene.bvh import TEXTURE_WIDTH
 from ..voxgi_addon.scene.geometry import world_triangles
 from ..voxgi_addon.scene.glass import ray_alpha
 from ..voxgi_addon.scene.textures import pack_atlas
-from .gpu_bvh import GPUBVH, shared_bvh
+from .gpu_bvh import GPUBVH, absent_lights, shared_bvh
 from .gpu_gather import no_texture_inputs, principled_materials_texture
 from .gpu_principled import lut_texture
 from .gpu_volume import float_texture
@@ -367,10 +367,13 @@ class GPUScene:
 
     def gather_tables(self) -> dict[str, object]:
         """The light and material textures of the gathers (``gpu_gather.gather``'s
-        ``tables``)."""
+        ``tables``), and what picks the kernels' variant (``gpu_bvh.bvh_shader``):
+        "bvh_textures", whether their hits sample textures, and "bvh_absent", the kinds of
+        light the scene has none of."""
         return {"lights": self.lamp_table, "world_map": self.world_map,
                 "emitters": self.emitters, "materials": self.materials,
-                "principled_lut": self.lut, **self.textures}
+                "principled_lut": self.lut, **self.textures, "bvh_textures": self.textured,
+                "bvh_absent": absent_lights(self.lights)}
 
     @staticmethod
     def zeros(width: int, height: int):

@@ -149,16 +149,25 @@ vec3 light_direct(int light, vec3 p, vec3 n, uint id, uint seed, int m)
     return vec3(0.0);
   }
   uint state = point_stream(id, uint(head.w), seed);
-  float value;
+  /* a kernel built for a scene without a kind of light leaves its code out (BVH_NO_SUN,
+   * BVH_NO_AREA, BVH_NO_POINT: gpu_bvh.bvh_shader); llvmpipe pays for a branch whether a lane
+   * takes it or not */
+  float value = 0.0;
+#ifndef BVH_NO_SUN
   if (kind == 0) {
     value = sun_light(light, p, n, state, m);
   }
-  else if (kind == 3) {
+#endif
+#ifndef BVH_NO_AREA
+  if (kind == 3) {
     value = area_light(light, head, p, n, state, m);
   }
-  else {
+#endif
+#ifndef BVH_NO_POINT
+  if (kind == 1 || kind == 2) {
     value = point_light(light, kind, p, n, state, m);
   }
+#endif
   return value * light_texel(light, 1).rgb;
 }
 
@@ -340,12 +349,16 @@ vec3 world_light_lobe(vec3 p, vec3 n, uint id, uint seed, int m, bool lobe, vec3
                       vec3 params, out vec3 glossy)
 {
   glossy = vec3(0.0);
+#ifdef BVH_NO_WORLD
+  return vec3(0.0);
+#else
   if (!world_on()) {
     return vec3(0.0);
   }
   uint stream = uint(texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).y);
   return world_direct_lobe(p, n, point_stream(id, stream, seed), m, lobe, v, base, params,
                            glossy);
+#endif
 }
 
 vec3 world_light_direct(vec3 p, vec3 n, uint id, uint seed, int m)
@@ -524,12 +537,16 @@ vec3 emitters_light_lobe(vec3 p, vec3 n, uint id, uint seed, int m, bool exact, 
                          vec3 v, vec3 base, vec3 params, out vec3 glossy)
 {
   glossy = vec3(0.0);
+#ifdef BVH_NO_EMITTERS
+  return vec3(0.0);
+#else
   vec4 head = emitter_header();
   if (head.w < 0.5) {
     return vec3(0.0);
   }
   return emitters_direct_lobe(p, n, point_stream(id, uint(head.z), seed), m, exact, lobe, v,
                               base, params, glossy);
+#endif
 }
 
 vec3 emitters_light_direct(vec3 p, vec3 n, uint id, uint seed, int m, bool exact)

@@ -34,12 +34,14 @@ vec2 triangle_uv(int triangle, vec2 uv)
  * (row 1) — exact_indirect.hit_emission. */
 vec3 hit_emission(int material, int triangle, vec2 uv)
 {
+#ifdef BVH_TEXTURES
   vec4 glow = texelFetch(materials, ivec2(material, 4), 0);
-  if (glow.x < -0.5) {
-    return texelFetch(materials, ivec2(material, 1), 0).rgb;
+  if (glow.x >= -0.5) {
+    return max(surface_texture(int(glow.x + 0.5), triangle_uv(triangle, uv), 0.0), vec3(0.0)) *
+           glow.y;
   }
-  return max(surface_texture(int(glow.x + 0.5), triangle_uv(triangle, uv), 0.0), vec3(0.0)) *
-         glow.y;
+#endif
+  return texelFetch(materials, ivec2(material, 1), 0).rgb;
 }
 
 /* ray_radiance without the radiance cache (voxgi_addon/gi/exact_indirect.py ray_paths): also
@@ -71,7 +73,10 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
   material = (material >= 0 && material < last_material) ? material : last_material;
   vec3 glow = hit_emission(material, triangle, uv);
   /* Roughness / Metallic per texel (textures.SurfaceTextures.variant_at, level 0): row 3's
-   * (.y, .z) = (parameter texture, first variant), -1 none */
+   * (.y, .z) = (parameter texture, first variant), -1 none. Without BVH_TEXTURES (no material
+   * of the scene samples a texture: gpu_bvh.bvh_shader) the texture code is left out, since
+   * llvmpipe pays for a branch's code at every hit whether a lane takes it or not. */
+#ifdef BVH_TEXTURES
   vec4 variant = texelFetch(materials, ivec2(material, 3), 0);
   if (variant.y > -0.5) {
     vec4 p = surface_texel(int(variant.y + 0.5), triangle_uv(triangle, uv));
@@ -87,6 +92,11 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
   if (texture_slot >= 0) {
     base = clamp(surface_texture(texture_slot, triangle_uv(triangle, uv), 0.0), 0.0, 1.0);
   }
+#else
+  vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
+  vec3 emission = glow;
+  vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
+#endif
   /* The Principled diffuse weight seen from the receiver (docs/gi_pipeline.md "The Accurate
    * integrator"). */
   vec3 weight = principled_diffuse_weight(base, params.x, params.y, params.z,

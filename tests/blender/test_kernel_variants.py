@@ -1,0 +1,89 @@
+"""Kernels built for what the scene has (issue 31, render/gpu_bvh.py ``bvh_shader``): a scene
+without cut-outs, textures or some kind of light traces with kernels that leave that code out
+(llvmpipe pays for a branch's code at every triangle test and hit whether a lane takes it or
+not: the cut-out test alone made every ray 3–4× slower), and its passes are exactly those of
+the kernels with every feature; a scene with cut-outs or textures gets the kernels that read
+them.
+"""
+from __future__ import annotations
+
+import bpy
+import cutout_scenes
+import light_scenes
+import numpy as np
+import scenes
+from test_gpu_scene import HEIGHT, WIDTH, gpu_ready, render, snapshot_now
+
+
+def traced_variants(fn, every_feature=False):
+    """(result of ``fn``, the (kernel, cut-outs, textures, absent lights) variants it
+    dispatched); every_feature: build every kernel with all the code, as before variants."""
+    from voxgi.render import gpu_bvh
+
+    original = gpu_bvh.bvh_shader
+    used = set()
+
+    def shader(kernel, cutouts=True, textures=True, absent=()):
+        if every_feature:
+            cutouts, textures, absent = True, True, ()
+        used.add((kernel, cutouts, textures, tuple(absent)))
+        return original(kernel, cutouts, textures, absent)
+
+    gpu_bvh.bvh_shader = shader
+    try:
+        return fn(), used
+    finally:
+        gpu_bvh.bvh_shader = original
+
+
+def fresh_render():
+    from voxgi.render.gpu_bvh import GPUBVH
+    from voxgi.render.gpu_scene import GPUScene
+
+    snapshot = snapshot_now()
+    return render(snapshot, GPUScene(bvh=GPUBVH()), WIDTH, HEIGHT)
+
+
+def gathers(used):
+    return {v for v in used if v[0] == "bvh_gather"}
+
+
+def test_a_plain_scene_traces_lean_kernels_and_the_same_image(voxgi):
+    """The test Cornell box (an area light, no textures, no cut-outs, no world light): its
+    gathers run the variant without cut-outs, textures, sun, point lights, world or
+    emitters, and every pass equals the one of the kernels with all the code."""
+    gpu_ready()
+    scenes.build_test_cornell_box(bpy.context.scene, light="AREA")
+    lean, used = traced_variants(fresh_render)
+    full, used_full = traced_variants(fresh_render, every_feature=True)
+    assert gathers(used) == {("bvh_gather", False, False,
+                              ("EMITTERS", "POINT", "SUN", "WORLD"))}
+    assert gathers(used_full) == {("bvh_gather", True, True, ())}
+    for name, image in full.items():
+        assert np.array_equal(lean[name], image), name
+
+
+def test_a_scene_with_emitters_keeps_their_code(voxgi):
+    """The room lit by a spot and emissive surfaces: its gathers keep the point-light and
+    emitter code, leave the sun, area lights and world out, and give the same passes."""
+    gpu_ready()
+    light_scenes.build("emissive_room", bpy.context.scene)
+    lean, used = traced_variants(fresh_render)
+    full, _ = traced_variants(fresh_render, every_feature=True)
+    absent = {v[3] for v in gathers(used)}
+    assert absent == {("AREA", "SUN", "WORLD")}
+    for name, image in full.items():
+        assert np.allclose(lean[name], image, rtol=0, atol=1e-6 * max(np.abs(image).max(), 1)), \
+            name
+
+
+def test_cut_outs_get_the_kernels_that_read_their_alpha(voxgi):
+    """The fence cards (image-textured cut-outs): every BVH kernel is built with the cut-out
+    test and the texture code, and the slats still let light through as before."""
+    gpu_ready()
+    cutout_scenes.build("fence_cards", bpy.context.scene)
+    lean, used = traced_variants(fresh_render)
+    assert used and all(cutouts and textures for _, cutouts, textures, _ in used)
+    full, _ = traced_variants(fresh_render, every_feature=True)
+    for name, image in full.items():
+        assert np.array_equal(lean[name], image), name
