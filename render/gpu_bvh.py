@@ -45,7 +45,7 @@ from ..voxgi_addon.scene.bvh import (
     pack_bvh,
 )
 from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
-from ..voxgi_addon.scene.snapshot import RAY_DIFFUSE, RAY_GLOSSY, RAY_SHADOW
+from ..voxgi_addon.scene.snapshot import RAY_ALL, RAY_DIFFUSE, RAY_GLOSSY, RAY_SHADOW
 from ..voxgi_addon.scene.textures import METALLIC_LEVELS, ROUGHNESS_LEVELS
 from .gpu_ltc import DEFINES as LTC_DEFINES
 from .gpu_ltc import ltc_texture
@@ -130,16 +130,17 @@ def absent_lights(lights) -> tuple[str, ...]:
 
 
 def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
-               absent: tuple[str, ...] = ()):
+               absent: tuple[str, ...] = (), hidden: bool = True):
     """The cached compute shader of ``kernel`` (see ``KERNELS``) with only the code the scene
     needs: cutouts : trace through cut-outs (``BVH_CUTOUTS``); textures : the bounce hits'
     materials sample textures (``BVH_TEXTURES``, bvh_shade.glsl); absent : the kinds of light
-    the scene has none of (``absent_lights``: ``BVH_NO_<kind>``, bvh_lights.glsl). A variant
+    the scene has none of (``absent_lights``: ``BVH_NO_<kind>``, bvh_lights.glsl); hidden :
+    some triangle is hidden from a kind of ray (``BVH_HIDDEN``, ray visibility). A variant
     built without them has no Alpha lookup in its traversal's triangle loop and no texture
     sampling or unused light model at its hits: llvmpipe pays for a branch's code whether a
     lane takes it or not (the cut-out test alone made every ray 3–4× slower,
     docs/gi_pipeline.md "Where a preview's time goes")."""
-    key = (kernel, cutouts, textures, tuple(absent))
+    key = (kernel, cutouts, textures, tuple(absent), hidden)
     if key not in _shaders:
         files, samplers, constants = KERNELS[kernel]
         defines = {"BVH_WIDTH_LOG2": str(int(math.log2(TEXTURE_WIDTH))),
@@ -161,6 +162,8 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
             defines["METALLIC_LEVELS"] = str(METALLIC_LEVELS)
         for kind in absent:
             defines[f"BVH_NO_{kind}"] = "1"
+        if hidden:
+            defines["BVH_HIDDEN"] = "1"
         if kernel == "bvh_direct":
             defines["STRATA_BLOCK"] = "ivec3(strata.xyz)"
         if kernel in ("bvh_gather", "bvh_glossy", "bvh_cache_paths"):
@@ -193,7 +196,8 @@ class GPUBVH:
     ``texture_atlas``: ``gpu_scene.GPUScene`` sets them with the triangles'; empty: none).
     uploaded_bytes : bytes the last ``update`` sent (0 = unchanged); resident_bytes : bytes of
     the textures on the GPU; build_seconds : the last BVH build's time.
-    cutouts : some triangle is a cut-out; ``inputs`` carries it as "bvh_cutouts", from which
+    cutouts, hidden : some triangle is a cut-out / is hidden from some kind of ray (ray
+    visibility); ``inputs`` carries them as "bvh_cutouts" and "bvh_hidden", from which
     ``dispatch_bvh`` picks the kernels' variant (``bvh_shader``).
     """
 
@@ -203,7 +207,7 @@ class GPUBVH:
         self.uploaded_bytes = 0
         self.resident_bytes = 0
         self.build_seconds = 0.0
-        self.cutouts = True
+        self.cutouts = self.hidden = True
         self._tris = None
 
     def _unchanged(self, tris) -> bool:
@@ -236,6 +240,9 @@ class GPUBVH:
         self.uploaded_bytes = self.resident_bytes = packed.nbytes
         cutout = _cutout(tris)
         self.cutouts = cutout is not None and bool(np.any(cutout))
+        visibility = getattr(tris, "visibility", None)
+        self.hidden = visibility is not None and bool(
+            np.any(~np.asarray(visibility, np.int64) & RAY_ALL))
         self._tris = tris
         return self
 
@@ -247,7 +254,8 @@ class GPUBVH:
     @property
     def inputs(self) -> dict[str, object]:
         return {"bvh_nodes": self.nodes, "bvh_triangles": self.triangles,
-                "bvh_normals": self.normals, **self.surface, "bvh_cutouts": self.cutouts}
+                "bvh_normals": self.normals, **self.surface, "bvh_cutouts": self.cutouts,
+                "bvh_hidden": self.hidden}
 
 
 def _cutout(tris):
@@ -275,7 +283,8 @@ def dispatch_bvh(kernel: str, inputs: dict[str, object], width: int, height: int
     dispatch; None: new ones of width × height)."""
     # the variant of the scene's features (GPUBVH.inputs, GPUScene.gather_tables; unknown: all)
     shader = bvh_shader(kernel, bool(inputs.get("bvh_cutouts", True)),
-                        bool(inputs.get("bvh_textures", True)), inputs.get("bvh_absent", ()))
+                        bool(inputs.get("bvh_textures", True)), inputs.get("bvh_absent", ()),
+                        bool(inputs.get("bvh_hidden", True)))
     _, samplers, names = KERNELS[kernel]
     outputs = OUTPUTS.get(kernel, ("out_image",))
     if images is None:

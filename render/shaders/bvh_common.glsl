@@ -12,7 +12,10 @@
  * SHADOW_EPSILON < t < tmax − SHADOW_EPSILON, as raycast.occluded. The hashed sample patterns
  * are in sampling.glsl, which comes first. A triangle packed with a negative |e1|·|e2| is a
  * cut-out: kernels that define BVH_CUTOUTS (and include textures.glsl, which defines
- * bvh_cutout_counts) count its hits by its Alpha, as textures.cutout_hits; others as opaque. */
+ * bvh_cutout_counts) count its hits by its Alpha, as textures.cutout_hits; others as opaque.
+ * Kernels that define BVH_HIDDEN skip the triangles the ray's kind does not see (ray
+ * visibility); render/gpu_bvh.py leaves both out of scenes that have none: llvmpipe runs a
+ * branch's code in the triangle loop whether a lane takes it or not. */
 
 #define BVH_WIDTH (1 << BVH_WIDTH_LOG2)
 bool bvh_hidden(int slot, int ray);
@@ -97,9 +100,11 @@ int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_
         float t;
         vec2 tuv;
         if (bvh_triangle(slot, o, d, dlen, t, tuv) && t > tmin && t < best) {
+#ifdef BVH_HIDDEN
           if (bvh_hidden(slot, any_hit ? BVH_RAY_SHADOW : BVH_CLOSEST_RAY)) {
             continue;
           }
+#endif
 #ifdef BVH_CUTOUTS
           if (bvh_texel_triangles(3 * slot + 2).w < 0.0 &&
               !bvh_cutout_counts(int(bvh_texel_triangles(3 * slot + 1).w), tuv, o, d)) {

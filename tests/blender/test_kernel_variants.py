@@ -1,5 +1,6 @@
 """Kernels built for what the scene has (issue 31, render/gpu_bvh.py ``bvh_shader``): a scene
-without cut-outs, textures or some kind of light traces with kernels that leave that code out
+without cut-outs, textures, triangles hidden from some rays or some kind of light traces with
+kernels that leave that code out
 (llvmpipe pays for a branch's code at every triangle test and hit whether a lane takes it or
 not: the cut-out test alone made every ray 3–4× slower), and its passes are exactly those of
 the kernels with every feature; a scene with cut-outs or textures gets the kernels that read
@@ -16,18 +17,18 @@ from test_gpu_scene import HEIGHT, WIDTH, gpu_ready, render, snapshot_now
 
 
 def traced_variants(fn, every_feature=False):
-    """(result of ``fn``, the (kernel, cut-outs, textures, absent lights) variants it
-    dispatched); every_feature: build every kernel with all the code, as before variants."""
+    """(result of ``fn``, the (kernel, cut-outs, textures, absent lights, hidden triangles)
+    variants it dispatched); every_feature: build every kernel with all the code."""
     from voxgi.render import gpu_bvh
 
     original = gpu_bvh.bvh_shader
     used = set()
 
-    def shader(kernel, cutouts=True, textures=True, absent=()):
+    def shader(kernel, cutouts=True, textures=True, absent=(), hidden=True):
         if every_feature:
-            cutouts, textures, absent = True, True, ()
-        used.add((kernel, cutouts, textures, tuple(absent)))
-        return original(kernel, cutouts, textures, absent)
+            cutouts, textures, absent, hidden = True, True, (), True
+        used.add((kernel, cutouts, textures, tuple(absent), hidden))
+        return original(kernel, cutouts, textures, absent, hidden)
 
     gpu_bvh.bvh_shader = shader
     try:
@@ -57,8 +58,8 @@ def test_a_plain_scene_traces_lean_kernels_and_the_same_image(voxgi):
     lean, used = traced_variants(fresh_render)
     full, used_full = traced_variants(fresh_render, every_feature=True)
     assert gathers(used) == {("bvh_gather", False, False,
-                              ("EMITTERS", "POINT", "SUN", "WORLD"))}
-    assert gathers(used_full) == {("bvh_gather", True, True, ())}
+                              ("EMITTERS", "POINT", "SUN", "WORLD"), False)}
+    assert gathers(used_full) == {("bvh_gather", True, True, (), True)}
     for name, image in full.items():
         assert np.array_equal(lean[name], image), name
 
@@ -83,7 +84,23 @@ def test_cut_outs_get_the_kernels_that_read_their_alpha(voxgi):
     gpu_ready()
     cutout_scenes.build("fence_cards", bpy.context.scene)
     lean, used = traced_variants(fresh_render)
-    assert used and all(cutouts and textures for _, cutouts, textures, _ in used)
+    assert used and all(cutouts and textures for _, cutouts, textures, _, _ in used)
+    full, _ = traced_variants(fresh_render, every_feature=True)
+    for name, image in full.items():
+        assert np.array_equal(lean[name], image), name
+
+
+def test_ray_visibility_keeps_the_hidden_test(voxgi):
+    """A wall hidden from shadow rays (Object › Visibility): the kernels keep the hidden-triangle
+    test (so the wall casts no shadow), the plain box leaves it out."""
+    gpu_ready()
+    scenes.build_test_cornell_box(bpy.context.scene, light="AREA")
+    _, plain = traced_variants(fresh_render)
+    wall = next(o for o in bpy.context.scene.objects if o.type == "MESH")
+    wall.visible_shadow = False
+    lean, used = traced_variants(fresh_render)
+    assert all(not hidden for *_, hidden in plain)
+    assert used and all(hidden for *_, hidden in used)
     full, _ = traced_variants(fresh_render, every_feature=True)
     for name, image in full.items():
         assert np.array_equal(lean[name], image), name
