@@ -37,6 +37,7 @@ from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
 from ..voxgi_addon.gi.world_light import world_table
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
+from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE
 from ..voxgi_addon.scene.bvh import (
     DET_EPSILON,
     LEAF_BIAS,
@@ -88,11 +89,13 @@ KERNELS["bvh_cache_paths"] = (
             "gbuffer_normal", "principled_lut", "texture_table", "texture_atlas",
             "radiance_cache"),
     ("sampling", "world", "chunk"))
-# The emitters' glossy light per sub-pixel pass (exact_glossy.emitters_shine).
+# The emitters' glossy light at the pixel centres, and per sub-pixel pass where it sees another
+# surface than its pixel's centre (exact_glossy.emitters_shine).
+_CENTRE = ("centre_position", "centre_normal", "centre_view", "centre_shine")
 KERNELS["bvh_emitter_glossy"] = (
     ("principled", "bvh_lights", "textures", "ltc", "bvh_emitter_glossy"),
     _BVH + ("lights", "world_map", "emitters", "materials", "principled_lut", "gbuffer_position",
-            "gbuffer_normal", "gbuffer_view", "gbuffer_base", "ltc_table") + _TEXTURES,
+            "gbuffer_normal", "gbuffer_view", "gbuffer_base", "ltc_table") + _CENTRE + _TEXTURES,
     ("sampling",))
 _BLANK: dict[str, object] = {}
 
@@ -174,6 +177,7 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
             defines["METAL_RAY_FACTOR"] = str(METAL_RAY_FACTOR)
         if kernel == "bvh_emitter_glossy":
             defines["EMITTER_GLOSSY_STREAM"] = f"{EMITTER_GLOSSY_STREAM}u"
+            defines["PLANE_TOLERANCE"] = repr(float(PLANE_TOLERANCE))
         if "ltc" in files:
             defines.update(LTC_DEFINES)
             defines["HORIZON_LIFT"] = repr(float(HORIZON_LIFT))
@@ -363,21 +367,29 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
 
 
 def emitter_glossy_texture(bvh: GPUBVH, gbuffer_inputs, emitters, materials, rays: int,
-                           seed: int = 0, lights=None, world=None):
+                           seed: int = 0, lights=None, world=None, centre=None):
     """The glossy light the emissive triangles send toward the viewer over a G-buffer
     (``shaders/bvh_emitter_glossy.glsl``, the port of ``exact_glossy.emitters_shine``): an
     RGBA32F texture of the G-buffer's size (bottom row first), rgb = Glossy Color × their
     Glossy Direct. emitters : an ``emitters_texture``; materials : the
     ``principled_materials_texture``; rays : shadow rays per pixel for the visible share;
     lights, world : the scene's ``lights_texture`` / ``world_texture`` (read by no code path
-    here; bound because bvh_lights.glsl declares them; None: empty ones)."""
+    here; bound because bvh_lights.glsl declares them; None: empty ones).
+    centre : a sub-pixel pass over the edge pixels' list: {"gbuffer_position",
+    "gbuffer_normal", "gbuffer_view"} of the pixel centres' G-buffer at the same texels and
+    "shine", this function's texture there; the texels whose pass sees the surface their
+    centre sees take the centre's value, the others are evaluated (None: all are)."""
     position = gbuffer_inputs["gbuffer_position"]
+    given = centre or {"shine": position, **gbuffer_inputs}  # not read without centre
     inputs = {**bvh.inputs, **gbuffer_inputs, "emitters": emitters, "materials": materials,
               "principled_lut": lut_texture(),
               "lights": lights if lights is not None else lights_texture([], None),
-              "world_map": world if world is not None else world_texture(None)}
+              "world_map": world if world is not None else world_texture(None),
+              "centre_position": given["gbuffer_position"],
+              "centre_normal": given["gbuffer_normal"], "centre_view": given["gbuffer_view"],
+              "centre_shine": given["shine"]}
     return dispatch_bvh("bvh_emitter_glossy", inputs, position.width, position.height,
-                        {"sampling": (seed, max(1, int(rays)), 0, 0)})
+                        {"sampling": (seed, max(1, int(rays)), 0 if centre is None else 1, 0)})
 
 
 def trace_rays(bvh: GPUBVH, origins, directions, t_min=0.0, t_max=np.inf, any_hit=False,

@@ -11,7 +11,7 @@ import math
 
 import gpu
 
-from .gpu_bvh import direct_light_texture, emitter_glossy_texture
+from .gpu_bvh import direct_light_texture
 from .gpu_gather import glossy_direct_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_shaders import LOCAL_SIZE, build_compute
@@ -67,8 +67,7 @@ def release() -> None:
 
 
 def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples: int,
-                 seed: int, glossy_rays: int, block=None, lamps=None,
-                 emitters_glossy: bool = True):
+                 seed: int, block=None, lamps=None, glow=None):
     """(Stages, one per light's dispatches, returning) ``sums`` + one pass over ``inputs``, a
     G-buffer of ``size`` (an image's or the edge pixels' list's) of ``scene`` (a ``GPUScene``
     updated to ``snapshot``): terms = the gathered (Diffuse Indirect, AO), Glossy Indirect and
@@ -77,12 +76,12 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     lamps : a dict that gets the lamps' sum_g texture before the world's and emitters'
     dispatch adds to it, when it does (their sum_f is the final one: that dispatch adds no
     glossy light), for light_edge_pixels.
-    emitters_glossy : add the emitters' glossy light at the pass's points (Accurate; Fast's
-    glossy cones see the emission themselves)."""
+    glow : the emitters' glossy light at the pass's texels (``gpu_bvh.emitter_glossy_texture``),
+    which the world's and emitters' dispatch adds; None: none (Fast's glossy cones see the
+    emission themselves)."""
     bvh, principled, emission = scene.bvh, scene.principled, scene.emission
     materials, lut = scene.materials, scene.lut
     extra = scene.has_scene_lights
-    emitting = emitters_glossy and any(light.type == "EMITTERS" for light in scene.lights)
     out = run("aa_surface", SURFACE_SAMPLERS, {
         **inputs, **sums, "centre_diffuse": terms[0], "centre_glossy": terms[1],
         "centre_world": terms[2], "materials": materials, "principled_lut": lut},
@@ -108,12 +107,9 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
         direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
                                       world=scene.world_map, emitters=scene.emitters,
                                       strata_block=block, table=scene.no_lamp)
-        # the emitters' glossy light at this pass's own points (emitters_shine)
-        shine = emitter_glossy_texture(bvh, inputs, scene.emitters, materials, glossy_rays,
-                                       seed, scene.no_lamp, scene.world_map) \
-            if emitting else blank
         out = run("aa_light", LIGHT_SAMPLERS, {
-            "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
+            "colour": colour, "direct_image": direct,
+            "shine_image": blank if glow is None else glow, **sums},
             ("out_f", "out_g"), *size)
         sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
         yield

@@ -292,7 +292,6 @@ def fast_sums(snapshot, gi_state, width, height, cones, light_samples, volume, s
     sums = yield from shade_stages(scene, snapshot, dict(gbuffer.inputs),
                                    {name: zero for name in SUM_NAMES},
                                    (diffuse_ao, glossy, zero), zero, (width, height),
-                                   light_samples, gather_settings.seed,
-                                   gather_settings.glossy_rays, emitters_glossy=False)
+                                   light_samples, gather_settings.seed)
     timings["direct + composition (GPU)"] = time.perf_counter() - t0
     return GPUSums(sums, width, height), timings

@@ -115,8 +115,8 @@ void main()
         int triangle, slot;
         vec2 uv;
         if (bvh_closest_hit(origin, l, 0.0, BVH_FAR, th, triangle, slot, uv)) {
-          if (emitting && mirror) { /* a glossy lobe gets the emitters per sub-pixel pass
-                                     * (bvh_emitter_glossy.glsl) */
+          if (emitting && mirror) { /* a glossy lobe gets the emitters from
+                                     * bvh_emitter_glossy.glsl */
             int hit_material = bvh_triangle_material(slot);
             hit_material = (hit_material >= 0 && hit_material < last_material) ? hit_material
                                                                                : last_material;

@@ -104,3 +104,62 @@ def test_an_emission_shader_lights_like_principled_emission(voxgi):
     # the panel's pixels: less diffuse colour than the Principled panel had, and they glow
     panel = shader["Diffuse Color"].sum(-1) < principled["Diffuse Color"].sum(-1) - 0.5
     assert panel.sum() > 3 and shader["Combined"][panel].mean() > 2.0
+
+
+def test_the_emitters_glossy_light_is_evaluated_at_the_pixel_centres(voxgi, monkeypatch):
+    """The emitters' glossy light (the LTC integral over every emissive triangle and shadow
+    rays, shaders/bvh_emitter_glossy.glsl) is evaluated once at the pixel centres; a sub-pixel
+    pass takes the centre's value wherever it sees the surface its pixel's centre sees and
+    evaluates only the rest (evaluated per pass at every edge pixel it was over half of the
+    emissive room's render). numpy splits the passes alike and draws the same light."""
+    from voxgi.render import gpu_preview
+    from voxgi.render.gpu_tracer import read_texture
+    from voxgi.voxgi_addon.preview import passes
+    from voxgi.voxgi_addon.preview.passes import same_surface
+
+    calls = []
+    evaluate = gpu_preview.emitter_glossy_texture
+
+    def recorded(bvh, inputs, *args, centre=None, **kwargs):
+        out = evaluate(bvh, inputs, *args, centre=centre, **kwargs)
+        calls.append((inputs, centre, out))
+        return out
+
+    monkeypatch.setattr(gpu_preview, "emitter_glossy_texture", recorded)
+    gpu = preview("emissive_room", "AUTO", 64, 48)
+    assert [centre is None for _, centre, _ in calls] == [True] + [False] * 16  # no glass
+    reused = seen = 0
+    for inputs, centre, out in calls[1:]:
+        texels = {name: read_texture(texture).reshape(-1, 4) for name, texture in
+                  (("position", inputs["gbuffer_position"]), ("normal", inputs["gbuffer_normal"]),
+                   ("view", inputs["gbuffer_view"]), ("centre", centre["gbuffer_position"]),
+                   ("centre normal", centre["gbuffer_normal"]),
+                   ("centre view", centre["gbuffer_view"]), ("shine", centre["shine"]),
+                   ("out", out))}
+        hit = texels["position"][:, 3] > 0.5
+        same = hit & same_surface(hit, np.rint(texels["view"][:, 3]), texels["position"][:, :3],
+                                  texels["normal"][:, :3], texels["centre"][:, 3] > 0.5,
+                                  np.rint(texels["centre view"][:, 3]),
+                                  texels["centre"][:, :3], texels["centre normal"][:, :3])
+        # the centre's value itself where the pass sees its surface (evaluated, it would differ)
+        equal = np.all(texels["out"][same, :3] == texels["shine"][same, :3], axis=1)
+        assert equal.mean() > 0.99 and (texels["shine"][same, :3] > 0).any()
+        reused, seen = reused + same.sum(), seen + hit.sum()
+    assert reused > 0.75 * seen, (reused, seen)
+
+    points = []
+    shine = passes.emitters_shine
+
+    def counted(p, *args, **kwargs):
+        points.append(len(p))
+        return shine(p, *args, **kwargs)
+
+    monkeypatch.setattr(passes, "emitters_shine", counted)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    reference = preview("emissive_room", "NUMPY", 64, 48)
+    # the pixel centres once, then only the points of the passes that see another surface
+    assert len(points) == 1 + 1 + 16 and points[1] == 0, points  # the centre pass: none
+    assert sum(points[2:]) < 0.25 * seen, (points, seen)  # the GPU's passes' hits
+    everywhere = np.ones((48, 64), bool)
+    for pass_name in ("Combined", "Glossy Direct"):
+        assert relative_l1(gpu[pass_name], reference[pass_name], everywhere) <= 0.02, pass_name

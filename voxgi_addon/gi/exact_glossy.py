@@ -203,8 +203,8 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
     material, a lobe ray landing on an emissive triangle adds its emission × the ray's weight
     (``glossy_indirect`` then leaves it out); with ``emitters`` (``emitters.EmitterLight``, the
     same triangles) only a mirror's ray does: a glossy lobe gets them from ``emitters_shine``
-    per sub-pixel pass (the LTC integral of the lobe over each triangle, noise-free, times the
-    visible share of rays drawn on them). world : ``world_light.WorldLight`` or None."""
+    (the LTC integral of the lobe over each triangle, noise-free, times the visible share of
+    rays drawn on them). world : ``world_light.WorldLight`` or None."""
     from ..scene.raycast import closest_hits
     from .world_light import sample_world, world_pdf, world_radiance
 
@@ -236,8 +236,8 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
     if emission is not None:
         landed = useful & (hit >= 0)
         glow = hit_emission(tris, emission, hit[landed], uv[landed][:, 0], uv[landed][:, 1])
-        # with the emitters as lights a glossy lobe gets them from emitters_shine, per sub-pixel
-        # pass (noise-free); a mirror's one reflected ray still sees them
+        # with the emitters as lights a glossy lobe gets them from emitters_shine
+        # (noise-free); a mirror's one reflected ray still sees them
         share = 1.0 if emitters is None else lobe.mirror[:, None, None].astype(np.float64)
         seen = np.zeros(dirs.shape)
         seen[landed] = glow
@@ -277,10 +277,12 @@ def emitters_shine(points, normals, views, materials, sample_ids, tris, principl
     (``principled`` as ``glossy_indirect``'s; base : (N, 3) Base Color per texel, None: the
     table's), at the points lifted by SURFACE_EPSILON (off an emitter's own plane), as are its
     ``rays`` shadow rays. The preview
-    evaluates it per sub-pixel pass at the pass's own points, as the lamps' glossy light: a
+    evaluates it once at the pixel centres, and in a sub-pixel pass again at the pass's own
+    points where it sees another surface than its pixel's centre (``passes.same_surface``): a
     one-pixel slot between a ceiling and a panel 5 cm under it has its reflection in a few of a
-    pixel's passes, which the gather's value at the pixel's centre cannot show. 0 for a
-    mirror (its reflected ray in ``glossy_world_direct`` sees the emitters). The GLSL port is
+    pixel's passes, which the value at the pixel's centre cannot show (per pass everywhere it
+    was over half of an anti-aliased render of the emissive room). 0 for a mirror (its
+    reflected ray in ``glossy_world_direct`` sees the emitters). The GLSL port is
     shaders/bvh_emitter_glossy.glsl."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)

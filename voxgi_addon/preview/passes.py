@@ -312,13 +312,32 @@ def subpixel_reach(plan) -> int:
     return int(math.ceil(largest - 1e-12)) if largest > 0.0 else 0
 
 
+def same_surface(hit_a, material_a, position_a, normal_a, hit_b, material_b, position_b,
+                 normal_b) -> np.ndarray:
+    """(…) bool: whether two G-buffer samples (hit (…) bool, material (…) int, position,
+    normal (…, 3)) see one surface: both see nothing, or both see the same material with
+    either point on the other's tangent plane within ``upsample.PLANE_TOLERANCE`` × their
+    distance (the joint-bilateral upsample's test; depth steps and creases are not).
+    ``edge_pixels`` tests neighbouring pixel centres with it; the sub-pixel passes a pass's
+    sample against its pixel's centre (the emitters' glossy light, ``render_passes``); the
+    GLSL port is in shaders/bvh_emitter_glossy.glsl."""
+    hit_a, hit_b = np.asarray(hit_a, bool), np.asarray(hit_b, bool)
+    step = np.asarray(position_b, np.float64) - np.asarray(position_a, np.float64)
+    off_plane = np.maximum(np.abs(np.einsum("...i,...i->...", normal_a, step)),
+                           np.abs(np.einsum("...i,...i->...", normal_b, step)))
+    apart = off_plane > PLANE_TOLERANCE * np.linalg.norm(step, axis=-1)
+    differ = (hit_a != hit_b) | (hit_a & hit_b & ((np.asarray(material_a) !=
+                                                   np.asarray(material_b)) | apart))
+    return ~differ
+
+
 def edge_pixels(hit, material, position, normal, reach: int) -> np.ndarray:
     """(H, W) bool: the pixels that need sub-pixel passes, from the pixel-centre G-buffer
     (hit (H, W) bool, material (H, W) int, position, normal (H, W, 3); row 0 on top). A pixel is
     an edge pixel when a pixel within ``reach`` (``subpixel_reach``; a square window) differs
     from it in coverage or material, or does not lie on the same surface: either point is off
-    the other's tangent plane by more than ``upsample.PLANE_TOLERANCE`` × their distance (the
-    joint-bilateral upsample's same-surface test; depth steps and creases). Pixels within
+    the other's tangent plane by more than ``upsample.PLANE_TOLERANCE`` × their distance
+    (``same_surface``; depth steps and creases). Pixels within
     ``reach`` of the image border are edge pixels too (their passes' rays leave the G-buffer).
     Everything else is one smooth surface under every camera ray of the pixel: it keeps the
     pixel-centre pass with all strata. reach 0: no edge pixels. The numpy and GPU tracers both
@@ -339,12 +358,8 @@ def edge_pixels(hit, material, position, normal, reach: int) -> np.ndarray:
                 continue  # every unordered pair once
             a = (slice(0, height - dy), slice(max(0, -dx), width - max(0, dx)))
             b = (slice(dy, height), slice(max(0, dx), width - max(0, -dx)))
-            both = hit[a] & hit[b]
-            step = p[b] - p[a]
-            off_plane = np.maximum(np.abs(np.einsum("...i,...i->...", n[a], step)),
-                                   np.abs(np.einsum("...i,...i->...", n[b], step)))
-            apart = off_plane > PLANE_TOLERANCE * np.linalg.norm(step, axis=-1)
-            differ = (hit[a] != hit[b]) | (both & ((material[a] != material[b]) | apart))
+            differ = ~same_surface(hit[a], material[a], p[a], n[a], hit[b], material[b], p[b],
+                                   n[b])
             edge[a] |= differ
             edge[b] |= differ
     return edge
@@ -747,8 +762,10 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
 
     filter_width : Cycles' pixel Filter Size (Blackman-Harris, pixels). Accurate quality
     anti-aliases with it: ``subpixel_passes`` camera passes, each with its own visibility,
-    direct light, glossy light of the lights and colours, averaged (``accumulate_pass``); the
-    gathers come from the pixel centres. ≤ 0, or Fast quality: pixel centres only.
+    direct light, glossy light of the lamps and colours, averaged (``accumulate_pass``); the
+    gathers come from the pixel centres, and so does the emitters' glossy light except in the
+    passes that see another surface than their pixel's centre (``same_surface``). ≤ 0, or
+    Fast quality: pixel centres only.
 
     Returns (passes, timings): passes maps each name of PASS_NAMES to an (H, W, 3) float32
     image (row 0 = top); timings maps stage names to seconds.
@@ -874,6 +891,15 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
                                        materials.reshape(height, width), gather_settings,
                                        gi_stride, emission if emitting else None).reshape(-1, 3)
     timings["world glossy gather"] = time.perf_counter() - t0
+    centre_glow = np.zeros((height * width, 3))
+    if emitters is not None:  # the emitters' glossy light at every pixel centre
+        t0 = time.perf_counter()
+        centre_glow[hit] = emitters_shine(
+            positions[hit], normals[hit], -dirs[hit], mat, hit, tris, principled_table(snapshot),
+            emitters, gather_settings.glossy_rays, gather_settings.seed,
+            primary_base(tris, seen, hit, principled_table(snapshot)[0][mat], snapshot.camera,
+                         width, height, filter_width))
+        timings["emitters' glossy light"] = time.perf_counter() - t0
     t0 = time.perf_counter()
 
     def centre(values, channels):  # the gathered terms over every pixel (0 off the centre hits)
@@ -904,9 +930,18 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
                                  strata_block=block)
         shine = glossy_direct_radiance(snapshot, p, n, views, mat,
                                        per_light[:len(snapshot.lights)], hit, base)
-        glow = 0.0 if emitters is None else emitters_shine(
-            p, n, views, mat, hit, tris, principled_table(snapshot), emitters,
-            gather_settings.glossy_rays, gather_settings.seed, base)  # at this pass's points
+        # the emitters' glossy light: the centre's where this pass sees the surface its pixel's
+        # centre sees, at the pass's own points where it sees another (a 1-pixel slot between
+        # a ceiling and a panel under it)
+        glow = centre_glow[hit]
+        if emitters is not None:  # (materials, positions, normals: the centre's)
+            other = np.flatnonzero(~same_surface(
+                True, mat, p, n, centre_seen.hit.ravel()[hit], materials[hit],
+                positions[hit], normals[hit]))
+            glow[other] = emitters_shine(
+                p[other], n[other], views[other], mat[other], hit[other], tris,
+                principled_table(snapshot), emitters, gather_settings.glossy_rays,
+                gather_settings.seed, None if base is None else base[other])
         accumulate_pass(sums if into is None else into, snapshot, hit, mat, n, views,
                         per_light.sum(axis=0),
                         indirect[hit], ao[hit], glossy[hit], shine + glow, glossy_world[hit],
