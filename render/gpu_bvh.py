@@ -347,21 +347,23 @@ def strata_side(samples: int) -> int:
 
 def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0,
                          only: int | None = None, world=None, emitters=None, strata_block=None,
-                         table=None):
+                         table=None, absent: tuple[str, ...] = ()):
     """Diffuse Direct over a G-buffer (``shaders/bvh_direct.glsl``), an RGBA32F texture of the
     G-buffer's size (bottom row first), rgb in Cycles' units; ``only`` : of that lamp alone
     (``lights_texture``; -1: none); world, emitters : a ``world_texture`` / ``emitters_texture``
     to add their light (None: not). strata_block : (M, row, column, m) — draw only the m × m
     block at (row, column) of the M × M strata (``direct_light.diffuse_direct``'s
     ``strata_block``); None: all ``strata_side(samples)``². table : a
-    ``lights_texture(lights, only)`` made already."""
+    ``lights_texture(lights, only)`` made already. absent : the kinds of light this dispatch
+    has none of (``absent_lights``; the kernel's variant leaves their code out)."""
     position = gbuffer_inputs["gbuffer_position"]
     side = strata_side(samples)
     block = strata_block or (side, 0, 0, side)
     inputs = {**bvh.inputs, **gbuffer_inputs,
               "lights": table if table is not None else lights_texture(lights, only),
               "world_map": world if world is not None else world_texture(None),
-              "emitters": emitters if emitters is not None else emitters_texture(None)}
+              "emitters": emitters if emitters is not None else emitters_texture(None),
+              "bvh_absent": tuple(absent)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
                         {"sampling": (seed, block[3], 0, 0), "strata": (*block[:3], 0)})
 
@@ -387,7 +389,8 @@ def emitter_glossy_texture(bvh: GPUBVH, gbuffer_inputs, emitters, materials, ray
               "world_map": world if world is not None else world_texture(None),
               "centre_position": given["gbuffer_position"],
               "centre_normal": given["gbuffer_normal"], "centre_view": given["gbuffer_view"],
-              "centre_shine": given["shine"]}
+              "centre_shine": given["shine"],
+              "bvh_absent": ("AREA", "POINT", "SUN", "WORLD")}  # the emitters' code only
     return dispatch_bvh("bvh_emitter_glossy", inputs, position.width, position.height,
                         {"sampling": (seed, max(1, int(rays)), 0 if centre is None else 1, 0)})
 

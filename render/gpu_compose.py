@@ -11,7 +11,7 @@ import math
 
 import gpu
 
-from .gpu_bvh import direct_light_texture
+from .gpu_bvh import absent_lights, direct_light_texture
 from .gpu_gather import glossy_direct_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_shaders import LOCAL_SIZE, build_compute
@@ -93,7 +93,8 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     for index, table in enumerate(scene.lamp_tables):
         direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
                                       world=scene.no_world, emitters=scene.no_emitters,
-                                      strata_block=block, table=table)
+                                      strata_block=block, table=table,
+                                      absent=absent_lights(scene.lights[index:index + 1]))
         shine = glossy_direct_texture(inputs, direct, table, index, principled, emission,
                                       materials=materials)
         out = run("aa_light", LIGHT_SAMPLERS, {
@@ -106,7 +107,8 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     if extra:  # the world's and emitters' own dispatch (streams after the lamps)
         direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
                                       world=scene.world_map, emitters=scene.emitters,
-                                      strata_block=block, table=scene.no_lamp)
+                                      strata_block=block, table=scene.no_lamp,
+                                      absent=absent_lights(scene.lights[len(scene.lamp_tables):]))
         out = run("aa_light", LIGHT_SAMPLERS, {
             "colour": colour, "direct_image": direct,
             "shine_image": blank if glow is None else glow, **sums},
