@@ -31,7 +31,8 @@ SECTIONS = {
                        "interiors vs Cycles 16/64 spp ± OIDN at its default light paths (.venv)"),
     "gpu": ("bench_gpu", "GPU tracer: filtered samples/s and preview times vs numpy and Cycles"),
     "viewport": ("bench_viewport", "live viewport GI: main-thread stall, move → GI latency, cancel, "
-                                   "debug-view draw of 1M voxels"),
+                                   "debug-view draw of 1M voxels; time until the view is within "
+                                   "Cycles 16 spp + OIDN's error of F12's image"),
     "probes": ("bench_probes", "light-probe bake time/memory (numpy, GPU), queries, EEVEE, Cycles"),
     "animation": ("bench_animation", "F12 animation render of a walking rig vs Cycles 16 spp + OIDN"),
     "lights": ("bench_lights", "HDRI, sky, emissive and metal scenes: preview vs Cycles 16/64 spp "
