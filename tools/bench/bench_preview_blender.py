@@ -40,7 +40,7 @@ import numpy as np
 HERE = pathlib.Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path[:0] = [str(HERE), str(ROOT / "tools"), str(ROOT / "tests" / "blender")]
-from bench_blender import load_addon  # noqa: E402
+from bench_blender import load_addon, median_seconds  # noqa: E402
 
 STORED_REFS = ROOT / "tests" / "data" / "bounce_refs"
 KEPT_REFS = ROOT / "out" / "bench_refs"
@@ -116,13 +116,8 @@ def _fetch_rate(repeats: int) -> float:
         gpu.compute.dispatch(shader, width // LOCAL_SIZE, height // LOCAL_SIZE, 1)
         read_texture(out)
 
-    once()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        once()
-        times.append(time.perf_counter() - t0)
-    return width * height * per / statistics.median(times)
+    once()  # compiled and bound
+    return width * height * per / median_seconds(once, repeats)
 
 
 def _ray_rates(bvh, tris, repeats: int) -> tuple[float, float]:
@@ -157,13 +152,8 @@ def _ray_rates(bvh, tris, repeats: int) -> tuple[float, float]:
         def once():
             read_texture(dispatch_bvh("bvh_probe", inputs, side, side, {"mode": (mode, RAY_DIFFUSE, 0, 0)}))
 
-        once()
-        times = []
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            once()
-            times.append(time.perf_counter() - t0)
-        rates.append(count / statistics.median(times))
+        once()  # compiled
+        rates.append(count / median_seconds(once, repeats))
     return rates[0], rates[1]
 
 

@@ -9,14 +9,5 @@ SCRIPTS = ("bench_viewport_blender.py", "bench_viewport_converge_blender.py")
 
 
 def run(quick: bool = False, out=print) -> str:
-    """Every script runs; one that fails does not hide the others' tables (as bench_gi)."""
-    tables, failed = [], []
-    for name in SCRIPTS:
-        try:
-            tables.append(bench_gi.run(quick, out, script=name))
-        except RuntimeError as exc:
-            failed.append(str(exc))
-            out(f"**{name} failed** (the section goes on): {str(exc)[-600:]}\n")
-    if failed:
-        raise RuntimeError("; ".join(f.splitlines()[0] for f in failed))
-    return "\n".join(tables)
+    """Both scripts (``bench_gi.run_scripts``)."""
+    return bench_gi.run_scripts(SCRIPTS, quick, out)

@@ -49,11 +49,29 @@ BEFORE = {"first": "0.82–0.88 s (issue 19); 1.67 s coarse under load (first sl
           "move": "1.4 s (issue 19); 1.67 s under load (first slice)"}
 
 
+def timed_view_draw(engine, view_matrix, window_matrix, offscreen, depsgraph) -> float:
+    """Seconds of one ``view_draw`` of ``engine`` into ``offscreen`` (a region of its size)
+    seen through ``view_matrix`` / ``window_matrix``, to the GPU's finish (a 1-pixel read)."""
+    import types
+
+    import gpu
+
+    from voxgi.render.viewport import view_draw
+
+    context = types.SimpleNamespace(
+        region=types.SimpleNamespace(width=offscreen.width, height=offscreen.height),
+        region_data=types.SimpleNamespace(view_matrix=view_matrix, window_matrix=window_matrix))
+    with offscreen.bind():
+        t0 = time.perf_counter()
+        view_draw(engine, context, depsgraph)
+        gpu.state.active_framebuffer_get().read_color(0, 0, 1, 1, 4, 0, "FLOAT")  # finish
+        return time.perf_counter() - t0
+
+
 def view_draw_rows(scene, depsgraph, quick: bool) -> list:
     """Each ``view_draw`` call timed (see the module doc); medians over repeats. The same
     rows with one whole-image trace per change (one sample in one slice, no coarse image:
     what every draw cost before progressive drawing) are measured in the same run."""
-    import types
 
     import bpy
     import gpu
@@ -62,7 +80,7 @@ def view_draw_rows(scene, depsgraph, quick: bool) -> list:
     from voxgi.blender import jobs
     from voxgi.blender.updates import records_from_depsgraph
     from voxgi.blender.viewport_session import live_gi
-    from voxgi.render.viewport import ViewportRenderer, view_draw
+    from voxgi.render.viewport import ViewportRenderer
 
     width, height = VIEW_REGION
     camera = scene.camera
@@ -82,14 +100,7 @@ def view_draw_rows(scene, depsgraph, quick: bool) -> list:
 
     def call(engine, view_matrix):
         """One view_draw of ``view_matrix``: (seconds, what it showed)."""
-        context = types.SimpleNamespace(
-            region=types.SimpleNamespace(width=width, height=height),
-            region_data=types.SimpleNamespace(view_matrix=view_matrix, window_matrix=window))
-        with offscreen.bind():
-            t0 = time.perf_counter()
-            view_draw(engine, context, depsgraph)
-            gpu.state.active_framebuffer_get().read_color(0, 0, 1, 1, 4, 0, "FLOAT")  # finish
-            seconds = time.perf_counter() - t0
+        seconds = timed_view_draw(engine, view_matrix, window, offscreen, depsgraph)
         return seconds, engine.voxgi_viewport.shown
 
     def new_image(engine, view_matrix):

@@ -46,6 +46,7 @@ ROOT = HERE.parents[1]
 sys.path[:0] = [str(HERE), str(ROOT / "tools"), str(ROOT / "tests" / "blender")]
 from bench_blender import load_addon  # noqa: E402
 from bench_bounces_blender import REFS, cycles_default_paths, relative_l1  # noqa: E402
+from bench_viewport_blender import timed_view_draw  # noqa: E402
 
 REGION = (640, 480)  # at the default Viewport Resolution (¼): a 160 × 120 traced image
 SCENES = ("cornell_box", "columned_hall")
@@ -82,7 +83,6 @@ class ViewRun:
 
 def view_runs(scene, depsgraph, f12, mask, repeats):
     """The fresh-view and view-change runs (module doc), ``repeats`` of each."""
-    import types
 
     import gpu
     from mathutils import Matrix
@@ -90,7 +90,7 @@ def view_runs(scene, depsgraph, f12, mask, repeats):
 
     from voxgi.blender import jobs
     from voxgi.blender.viewport_session import live_gi
-    from voxgi.render.viewport import ViewportRenderer, view_draw, viewport_size
+    from voxgi.render.viewport import ViewportRenderer, viewport_size
 
     width, height = REGION
     traced = viewport_size(width, height, scene.voxgi_viewport.resolution_fraction)
@@ -106,14 +106,7 @@ def view_runs(scene, depsgraph, f12, mask, repeats):
     offscreen = gpu.types.GPUOffScreen(width, height)
 
     def call(engine, view_matrix):
-        context = types.SimpleNamespace(
-            region=types.SimpleNamespace(width=width, height=height),
-            region_data=types.SimpleNamespace(view_matrix=view_matrix, window_matrix=window))
-        with offscreen.bind():
-            t0 = time.perf_counter()
-            view_draw(engine, context, depsgraph)
-            gpu.state.active_framebuffer_get().read_color(0, 0, 1, 1, 4, 0, "FLOAT")  # finish
-            return time.perf_counter() - t0
+        return timed_view_draw(engine, view_matrix, window, offscreen, depsgraph)
 
     def run(engine, view_matrix, measure=True):
         """view_draw until no redraw is asked for (module doc)."""
