@@ -8,7 +8,8 @@ time). Kernels (``shaders/``, each prefixed with ``bvh_common.glsl``):
 
 * ``bvh_probe`` — one ray per texel (closest hit, any hit) and the sample patterns (tests).
 * ``bvh_direct`` — Diffuse Direct over a G-buffer, every light of the snapshot, shadow rays
-  (``bvh_lights.glsl``, the port of ``direct_light.diffuse_direct``).
+  (``bvh_lights.glsl``, the port of ``direct_light.diffuse_direct``); or the emitters' exact
+  unshadowed sum alone, which an anti-aliased preview's passes take from their pixel centres.
 * ``bvh_gather`` — the Accurate final gather: exact AO and the one-bounce diffuse-indirect
   estimate with their variances (``voxgi_addon.gi.exact_indirect``; run by ``gpu_gather``).
 * ``bvh_glossy`` — the glossy gather: exact one-bounce Glossy Indirect and its variance
@@ -63,9 +64,11 @@ _TEXTURES = ("texture_table", "texture_atlas")
 KERNELS = {
     "bvh_probe": (("textures", "bvh_probe"), _BVH + ("ray_origin", "ray_direction") + _TEXTURES,
                   ("mode",)),
-    "bvh_direct": (("textures", "bvh_lights", "bvh_direct"),
+    "bvh_direct": (("textures", "bvh_lights", "same_surface", "bvh_direct"),
                    _BVH + ("lights", "world_map", "emitters", "gbuffer_position",
-                           "gbuffer_normal") + _TEXTURES, ("sampling", "strata")),
+                           "gbuffer_normal", "gbuffer_view", "centre_position", "centre_normal",
+                           "centre_view", "centre_unshadowed") + _TEXTURES,
+                   ("sampling", "strata")),
     "bvh_gather": (("pixels", "principled", "bvh_lights", "textures", "cache_lookup", "bvh_shade",
                     "gather_point", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials",
@@ -93,7 +96,7 @@ KERNELS["bvh_cache_paths"] = (
 # surface than its pixel's centre (exact_glossy.emitters_shine).
 _CENTRE = ("centre_position", "centre_normal", "centre_view", "centre_shine")
 KERNELS["bvh_emitter_glossy"] = (
-    ("principled", "bvh_lights", "textures", "ltc", "bvh_emitter_glossy"),
+    ("principled", "bvh_lights", "textures", "ltc", "same_surface", "bvh_emitter_glossy"),
     _BVH + ("lights", "world_map", "emitters", "materials", "principled_lut", "gbuffer_position",
             "gbuffer_normal", "gbuffer_view", "gbuffer_base", "ltc_table") + _CENTRE + _TEXTURES,
     ("sampling",))
@@ -169,6 +172,8 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
             defines["BVH_HIDDEN"] = "1"
         if kernel == "bvh_direct":
             defines["STRATA_BLOCK"] = "ivec3(strata.xyz)"
+        if "same_surface" in files:
+            defines["PLANE_TOLERANCE"] = repr(float(PLANE_TOLERANCE))
         if kernel in ("bvh_gather", "bvh_glossy", "bvh_cache_paths"):
             defines["VIEW_BACKOFF"] = repr(float(VIEW_BACKOFF))
             defines["GLOSSY_STREAM"] = f"{GLOSSY_STREAM}u"
@@ -177,7 +182,6 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
             defines["METAL_RAY_FACTOR"] = str(METAL_RAY_FACTOR)
         if kernel == "bvh_emitter_glossy":
             defines["EMITTER_GLOSSY_STREAM"] = f"{EMITTER_GLOSSY_STREAM}u"
-            defines["PLANE_TOLERANCE"] = repr(float(PLANE_TOLERANCE))
         if "ltc" in files:
             defines.update(LTC_DEFINES)
             defines["HORIZON_LIFT"] = repr(float(HORIZON_LIFT))
@@ -347,7 +351,7 @@ def strata_side(samples: int) -> int:
 
 def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0,
                          only: int | None = None, world=None, emitters=None, strata_block=None,
-                         table=None, absent: tuple[str, ...] = ()):
+                         table=None, absent: tuple[str, ...] = (), centre=None):
     """Diffuse Direct over a G-buffer (``shaders/bvh_direct.glsl``), an RGBA32F texture of the
     G-buffer's size (bottom row first), rgb in Cycles' units; ``only`` : of that lamp alone
     (``lights_texture``; -1: none); world, emitters : a ``world_texture`` / ``emitters_texture``
@@ -355,17 +359,45 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
     block at (row, column) of the M × M strata (``direct_light.diffuse_direct``'s
     ``strata_block``); None: all ``strata_side(samples)``². table : a
     ``lights_texture(lights, only)`` made already. absent : the kinds of light this dispatch
-    has none of (``absent_lights``; the kernel's variant leaves their code out)."""
+    has none of (``absent_lights``; the kernel's variant leaves their code out).
+    centre : a pass of the anti-aliased preview: {"gbuffer_position", "gbuffer_normal",
+    "gbuffer_view"} of the pixel centres' G-buffer at the same texels and "unshadowed",
+    ``emitters_unshadowed_texture`` there; the texels whose pass sees the surface their centre
+    sees take the emitters' exact unshadowed sum from it, the others evaluate it (None: all
+    do); the shadow rays are the pass's own everywhere."""
     position = gbuffer_inputs["gbuffer_position"]
     side = strata_side(samples)
     block = strata_block or (side, 0, 0, side)
+    given = centre or {"unshadowed": position, **gbuffer_inputs}  # not read without centre
     inputs = {**bvh.inputs, **gbuffer_inputs,
               "lights": table if table is not None else lights_texture(lights, only),
               "world_map": world if world is not None else world_texture(None),
               "emitters": emitters if emitters is not None else emitters_texture(None),
-              "bvh_absent": tuple(absent)}
+              "centre_position": given["gbuffer_position"],
+              "centre_normal": given["gbuffer_normal"], "centre_view": given["gbuffer_view"],
+              "centre_unshadowed": given["unshadowed"], "bvh_absent": tuple(absent)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
-                        {"sampling": (seed, block[3], 0, 0), "strata": (*block[:3], 0)})
+                        {"sampling": (seed, block[3], 0 if centre is None else 1, 0),
+                         "strata": (*block[:3], 0)})
+
+
+def emitters_unshadowed_texture(bvh: GPUBVH, gbuffer_inputs, emitters, lights=None, world=None):
+    """The emissive triangles' exact unshadowed Diffuse Direct over a G-buffer (``bvh_direct``'s
+    mode 2, ``bvh_lights.glsl`` emitters_unshadowed, the port of ``emitters.unshadowed_sum``):
+    an RGBA32F texture of the G-buffer's size (bottom row first), at the points
+    ``direct_light_texture`` lights — its ``centre``'s "unshadowed". emitters : an
+    ``emitters_texture``; lights, world : the scene's ``lights_texture`` / ``world_texture``
+    (read by no code path here; bound because bvh_lights.glsl declares them; None: empty
+    ones)."""
+    position = gbuffer_inputs["gbuffer_position"]
+    inputs = {**bvh.inputs, **gbuffer_inputs, "emitters": emitters,
+              "lights": lights if lights is not None else lights_texture([], None),
+              "world_map": world if world is not None else world_texture(None),
+              "centre_position": position, "centre_normal": position, "centre_view": position,
+              "centre_unshadowed": position,  # not read
+              "bvh_absent": ("AREA", "POINT", "SUN", "WORLD")}  # the emitters' code only
+    return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
+                        {"sampling": (0, 1, 2, 0), "strata": (1, 0, 0, 0)})
 
 
 def emitter_glossy_texture(bvh: GPUBVH, gbuffer_inputs, emitters, materials, rays: int,

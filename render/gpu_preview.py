@@ -39,7 +39,7 @@ from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
 from ..voxgi_addon.scene.glass import is_glass
 from .gbuffer import gbuffer_shader, rasterize, read_gbuffer
 from .gpu_accumulation import SUM_NAMES, GPUSums
-from .gpu_bvh import emitter_glossy_texture
+from .gpu_bvh import emitter_glossy_texture, emitters_unshadowed_texture
 from .gpu_compose import COMPACT_SAMPLERS as _COMPACT_SAMPLERS
 from .gpu_compose import MASK_SAMPLERS as _MASK_SAMPLERS
 from .gpu_compose import SURFACE_SUMS as _SURFACE_SUMS
@@ -206,12 +206,12 @@ def _sums_of(texel):
 def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_settings,
                      glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
                      cache_source=None, camera_tris=None, only=None, on_gpu=False):
-    """Accurate quality on the GPU: the gathers and the emitters' glossy light from the pixel
-    centres' G-buffer, then one rasterized G-buffer, direct light (``bvh_direct``, a block of
-    the shadow-ray strata) and glossy light of the lamps per sub-pixel pass
-    (``preview.passes.subpixel_passes``; the emitters' where the pass sees another surface
-    than its pixel's centre), summed on the GPU (``shaders/aa_surface.glsl``,
-    ``aa_light.glsl``) and read back once.
+    """Accurate quality on the GPU: the gathers and the emitters' glossy light and exact
+    unshadowed Diffuse Direct from the pixel centres' G-buffer, then one rasterized G-buffer,
+    direct light (``bvh_direct``, a block of the shadow-ray strata) and glossy light of the
+    lamps per sub-pixel pass (``preview.passes.subpixel_passes``; the emitters' glossy light
+    and unshadowed sum where the pass sees another surface than its pixel's centre), summed on
+    the GPU (``shaders/aa_surface.glsl``, ``aa_light.glsl``) and read back once.
     Triangles, BVH, materials and light tables come from ``scene`` (a ``GPUScene``, updated
     here: only what changed is uploaded). camera_tris : what the G-buffers draw (None: the
     scene's triangles; ``transmission.behind_glass`` hides glass from them); only : (H, W)
@@ -289,15 +289,21 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
         glossy_world = upsample(low_world, centre.inputs, gi_stride, width, height)
         timings["world glossy gather (GPU)"] = time.perf_counter() - t0
         yield
-    centre_glow = None
+    centres = None  # the pixel centres with the emitters' light there
     if any(light.type == "EMITTERS" for light in lights):
-        # the emitters' glossy light at every pixel centre (exact_glossy.emitters_shine): the
-        # centre pass's, and the sub-pixel passes' where they see their centre's surface
+        # the emitters' glossy light (exact_glossy.emitters_shine) and exact unshadowed
+        # Diffuse Direct (emitters.unshadowed_sum) at every pixel centre: the centre pass's,
+        # and the sub-pixel passes' where they see their centre's surface
         t0 = time.perf_counter()
-        centre_glow = emitter_glossy_texture(
+        centres = {**centre.inputs, "shine": emitter_glossy_texture(
             bvh, centre.inputs, scene.emitters, scene.materials, gather_settings.glossy_rays,
-            gather_settings.seed, scene.no_lamp, scene.world_map)
+            gather_settings.seed, scene.no_lamp, scene.world_map)}
         timings["emitters' glossy light (GPU)"] = time.perf_counter() - t0
+        yield
+        t0 = time.perf_counter()
+        centres["unshadowed"] = emitters_unshadowed_texture(
+            bvh, centre.inputs, scene.emitters, scene.no_lamp, scene.world_map)
+        timings["emitters' unshadowed light (GPU)"] = time.perf_counter() - t0
         yield
 
     t0 = time.perf_counter()
@@ -314,10 +320,10 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     timings["edge pixels"] = time.perf_counter() - t0
     t0 = time.perf_counter()
 
-    def shade(inputs, sums, terms, blank, size, block, lamps=None, glow=None):
+    def shade(inputs, sums, terms, blank, size, block, lamps=None, glow=None, centre=None):
         """``gpu_compose.shade_stages`` of this scene and snapshot."""
         return shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples,
-                            gather_settings.seed, block, lamps, glow)
+                            gather_settings.seed, block, lamps, glow, centre)
 
     # The centre pass over the image off the geometry's edges (preview.passes.edge_pixels on
     # the read-back centre G-buffer, the numpy tracer's test; the edge pixels as background, so
@@ -336,7 +342,7 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     sums = yield from shade(inputs, {name: zero for name in names},
                             (diffuse_ao, glossy, glossy_world), zero, (width, height),
                             centre_pass(light_samples)[1], lamps if reach else None,
-                            centre_glow)
+                            None if centres is None else centres["shine"], centres)
     if on_gpu and not reach:  # the viewport adds them to its sums on the GPU
         timings["direct (GPU)"] = time.perf_counter() - t0
         return GPUSums({name: sums[name] for name in SUM_NAMES}, width, height), timings
@@ -355,11 +361,14 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
         terms = tuple(_compact("aa_list_raw", {
             "gbuffer_position": diffuse_ao, "gbuffer_normal": glossy,
             "gbuffer_view": glossy_world, "pixels": pixels}, list_size).values())
-        if centre_glow is not None:  # the centres' G-buffer and emitters' glossy light there
-            listed_centre = _compact("aa_list", {**centre.inputs, "pixels": pixels}, list_size)
-            listed_centre["shine"] = _compact("aa_list_raw", {
-                "gbuffer_position": centre_glow, "gbuffer_normal": centre_glow,
-                "gbuffer_view": centre_glow, "pixels": pixels}, list_size)["gbuffer_position"]
+        listed_centres = None
+        if centres is not None:  # the centres' G-buffer and emitters' light there
+            listed_centres = _compact("aa_list", {**centre.inputs, "pixels": pixels}, list_size)
+            raw = _compact("aa_list_raw", {
+                "gbuffer_position": centres["shine"], "gbuffer_normal": centres["unshadowed"],
+                "gbuffer_view": centres["unshadowed"], "pixels": pixels}, list_size)
+            listed_centres["shine"] = raw["gbuffer_position"]
+            listed_centres["unshadowed"] = raw["gbuffer_normal"]
         own = {name: np.zeros((len(listed), 4)) for name in names}
         tails = new_sums(width * height)
         for (offset, block), weights in zip(plan, pass_tail_weights(plan, filter_width)):
@@ -371,14 +380,15 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                 "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,
                                 "gbuffer_view": gbuffer.base, "pixels": pixels},
                 list_size)["gbuffer_position"]
-            # the emitters' glossy light: the centre's where this pass sees its surface
-            glow = None if centre_glow is None else emitter_glossy_texture(
+            # the emitters' glossy light and exact unshadowed sum: the centre's where this
+            # pass sees its surface
+            glow = None if centres is None else emitter_glossy_texture(
                 bvh, inputs, scene.emitters, scene.materials, gather_settings.glossy_rays,
-                gather_settings.seed, scene.no_lamp, scene.world_map, centre=listed_centre)
+                gather_settings.seed, scene.no_lamp, scene.world_map, centre=listed_centres)
             # this pass's samples, read back to count in the neighbours by the filter at
             # their own place (preview.passes.add_tails)
             textures = yield from shade(inputs, {name: blank for name in names}, terms, blank,
-                                        list_size, block, glow=glow)
+                                        list_size, block, glow=glow, centre=listed_centres)
             one = {name: read_texture(texture).reshape(-1, 4)[:len(listed)].astype(np.float64)
                    for name, texture in textures.items()}
             for name in names:

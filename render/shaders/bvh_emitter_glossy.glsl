@@ -6,28 +6,14 @@
  * x a white metal's glossy colour, x the visible share of `rays` points drawn on the emitters
  * by power (stream EMITTER_GLOSSY_STREAM), each weighted by the luminance of L f |cos_l| /
  * (r^2 p_area); 0 for a mirror (its reflected ray sees the emitters in the glossy gather).
- * Samplers as bvh_direct.glsl's plus materials, principled_lut, gbuffer_view = (ray direction,
- * material), gbuffer_base = (Base Color per texel, 1) where textured, ltc_table.
+ * Samplers as bvh_direct.glsl's (centre_shine for its centre_unshadowed) plus materials,
+ * principled_lut, gbuffer_base = (Base Color per texel, 1) where textured, ltc_table.
  * Push constants: sampling = (seed, rays, reuse, 0). out = (rgb, 1).
  * reuse 1 (a sub-pixel pass over the edge pixels' list): centre_position, centre_normal,
  * centre_view hold the pixel centres' G-buffer at the same texels (aa_compact.glsl) and
  * centre_shine this kernel's value there; a texel whose pass sees the surface its centre sees
- * (same_surface: preview/passes.same_surface) takes centre_shine, the others are evaluated
- * at the pass's own point (a 1-pixel slot between a ceiling and a panel under it). */
-
-/* whether the pass's point (position, normal, material: it sees a surface) lies on the surface
- * the centre sees at texel px */
-bool same_surface(vec4 position, vec3 normal, float material, ivec2 px)
-{
-  vec4 centre = texelFetch(centre_position, px, 0);
-  if (centre.w < 0.5 || int(material + 0.5) != int(texelFetch(centre_view, px, 0).w + 0.5)) {
-    return false;
-  }
-  vec3 step = position.xyz - centre.xyz;
-  float off_plane = max(abs(dot(texelFetch(centre_normal, px, 0).xyz, step)),
-                        abs(dot(normal, step)));
-  return off_plane <= PLANE_TOLERANCE * length(step);
-}
+ * (same_surface.glsl) takes centre_shine, the others are evaluated at the pass's own point
+ * (a 1-pixel slot between a ceiling and a panel under it). */
 
 void main()
 {

@@ -457,20 +457,17 @@ vec3 emitter_sample(vec2 u, int count, out int t)
          (s * u.y) * texelFetch(emitters, ivec2(2, t), 0).xyz;
 }
 
-/* Diffuse Direct of the emissive triangles (emitters.emitters_direct): the exact unshadowed
- * sum times the per-channel visible share of one point per stratum, sampled by power; not
- * `exact` (bounce hits): the shadow rays' plain estimate. With `lobe` (kernels with
- * principled.glsl) `glossy` gets what a bounce hit's glossy lobe reflects of them toward `v`
- * from the same rays (mean of L V f |cos_l| / (r² p_area)). */
-vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, bool lobe, vec3 v,
-                          vec3 base, vec3 params, out vec3 glossy)
+/* The emitters' exact unshadowed Diffuse Direct at p lifted by NORMAL_OFFSET, as
+ * emitters_direct_lobe lifts it (emitters.unshadowed_sum): Σ_t L_t clipped_form_factor over
+ * the triangles lighting p's side, O(triangles); a sub-pixel pass takes its pixel centre's
+ * where it sees the centre's surface (bvh_direct.glsl). `evaluate` false: 0, no triangle
+ * visited. */
+vec3 emitters_unshadowed(vec3 p, vec3 n, bool evaluate)
 {
-  glossy = vec3(0.0);
-  vec4 head = emitter_header();
-  int count = int(head.x);
-  p += NORMAL_OFFSET * n; /* as direct_light._emitters lifts the point */
-  vec3 value = exact ? vec3(0.0) : vec3(1.0);
-  for (int t = 0; t < count && exact; t++) {
+  int count = int(emitter_header().x);
+  p += NORMAL_OFFSET * n;
+  vec3 value = vec3(0.0);
+  for (int t = 0; t < count && evaluate; t++) {
     float factor = emitter_facing(t, p) ? clipped_form_factor(t, p, n) : 0.0;
     if (factor > 0.0) {
       value += factor * vec3(texelFetch(emitters, ivec2(0, t), 0).w,
@@ -478,6 +475,25 @@ vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, bool lo
                              texelFetch(emitters, ivec2(2, t), 0).w);
     }
   }
+  return value;
+}
+
+/* Diffuse Direct of the emissive triangles (emitters.emitters_direct): the exact unshadowed
+ * sum (emitters_unshadowed; known.rgb where known.w > 0.5, a pixel centre's) times the
+ * per-channel visible share of one point per stratum, sampled by power; not `exact` (bounce
+ * hits): the shadow rays' plain estimate. With `lobe` (kernels with principled.glsl) `glossy`
+ * gets what a bounce hit's glossy lobe reflects of them toward `v` from the same rays (mean of
+ * L V f |cos_l| / (r² p_area)). */
+vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, vec4 known, bool lobe,
+                          vec3 v, vec3 base, vec3 params, out vec3 glossy)
+{
+  glossy = vec3(0.0);
+  vec4 head = emitter_header();
+  int count = int(head.x);
+  bool given = known.w > 0.5;
+  vec3 sum = emitters_unshadowed(p, n, exact && !given); /* else no triangle visited */
+  vec3 value = exact ? (given ? known.rgb : sum) : vec3(1.0);
+  p += NORMAL_OFFSET * n; /* as direct_light._emitters lifts the point */
   if (max(value.r, max(value.g, value.b)) <= 0.0) {
     return value;
   }
@@ -530,11 +546,12 @@ vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, bool lo
 vec3 emitters_direct(vec3 p, vec3 n, uint state, int m, bool exact)
 {
   vec3 unused;
-  return emitters_direct_lobe(p, n, state, m, exact, false, n, vec3(0.0), vec3(0.0), unused);
+  return emitters_direct_lobe(p, n, state, m, exact, vec4(0.0), false, n, vec3(0.0), vec3(0.0),
+                              unused);
 }
 
-vec3 emitters_light_lobe(vec3 p, vec3 n, uint id, uint seed, int m, bool exact, bool lobe,
-                         vec3 v, vec3 base, vec3 params, out vec3 glossy)
+vec3 emitters_light_lobe(vec3 p, vec3 n, uint id, uint seed, int m, bool exact, vec4 known,
+                         bool lobe, vec3 v, vec3 base, vec3 params, out vec3 glossy)
 {
   glossy = vec3(0.0);
 #ifdef BVH_NO_EMITTERS
@@ -544,20 +561,22 @@ vec3 emitters_light_lobe(vec3 p, vec3 n, uint id, uint seed, int m, bool exact, 
   if (head.w < 0.5) {
     return vec3(0.0);
   }
-  return emitters_direct_lobe(p, n, point_stream(id, uint(head.z), seed), m, exact, lobe, v,
-                              base, params, glossy);
+  return emitters_direct_lobe(p, n, point_stream(id, uint(head.z), seed), m, exact, known,
+                              lobe, v, base, params, glossy);
 #endif
 }
 
-vec3 emitters_light_direct(vec3 p, vec3 n, uint id, uint seed, int m, bool exact)
+vec3 emitters_light_direct(vec3 p, vec3 n, uint id, uint seed, int m, bool exact, vec4 known)
 {
   vec3 unused;
-  return emitters_light_lobe(p, n, id, seed, m, exact, false, n, vec3(0.0), vec3(0.0), unused);
+  return emitters_light_lobe(p, n, id, seed, m, exact, known, false, n, vec3(0.0), vec3(0.0),
+                             unused);
 }
 
 /* Diffuse Direct of all lights at p (normal n facing the viewer), `id` the point's sample id
- * and `m` × `m` strata per light with an extent, the world and the emitters included. */
-vec3 diffuse_direct(vec3 p, vec3 n, uint id, uint seed, int m)
+ * and `m` × `m` strata per light with an extent, the world and the emitters included; known :
+ * the emitters' exact unshadowed sum at p when known.w > 0.5 (emitters_direct_lobe). */
+vec3 diffuse_direct(vec3 p, vec3 n, uint id, uint seed, int m, vec4 known)
 {
   vec3 sum = vec3(0.0);
   int count = textureSize(lights, 0).y;
@@ -565,5 +584,5 @@ vec3 diffuse_direct(vec3 p, vec3 n, uint id, uint seed, int m)
     sum += light_direct(light, p, n, id, seed, m);
   }
   return sum + world_light_direct(p, n, id, seed, m) +
-         emitters_light_direct(p, n, id, seed, m, true);
+         emitters_light_direct(p, n, id, seed, m, true, known);
 }

@@ -122,7 +122,8 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
   radiance += weight * (world_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, hit_glossy, -d,
                                          base, params, world_glossy) +
                         emitters_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, false,
-                                            hit_glossy, -d, base, params, emitter_glossy));
+                                            vec4(0.0), hit_glossy, -d, base, params,
+                                            emitter_glossy));
   /* uniform light (the radiance cache's) is also reflected by the glossy lobes' albedo */
   cache_weight = weight + principled_glossy_color(base, params.x, params.y, params.z,
                                                   clamp(-dot(ns, d), 0.0, 1.0));

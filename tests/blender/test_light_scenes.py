@@ -163,3 +163,80 @@ def test_the_emitters_glossy_light_is_evaluated_at_the_pixel_centres(voxgi, monk
     everywhere = np.ones((48, 64), bool)
     for pass_name in ("Combined", "Glossy Direct"):
         assert relative_l1(gpu[pass_name], reference[pass_name], everywhere) <= 0.02, pass_name
+
+
+def test_the_emitters_unshadowed_light_is_evaluated_at_the_pixel_centres(voxgi, monkeypatch):
+    """The exact unshadowed sum of the emitters' Diffuse Direct (Lambert's formula over every
+    emissive triangle: emitters.unshadowed_sum, bvh_lights.glsl emitters_unshadowed) is
+    evaluated once at the pixel centres; a pass takes its centre's sum wherever it sees the
+    surface its pixel's centre sees and evaluates only the rest, and keeps its own shadow rays
+    (evaluated in every pass at every texel, the emitters' dispatches were a quarter of the
+    emissive room's render). numpy splits the passes alike and draws the same light."""
+    from voxgi.render import gpu_compose, gpu_preview
+    from voxgi.render.gpu_scene import GPUScene
+    from voxgi.render.gpu_tracer import read_texture
+    from voxgi.voxgi_addon.preview import passes
+    from voxgi.voxgi_addon.preview.passes import same_surface
+
+    centres, calls = [], []
+    unshadowed = gpu_preview.emitters_unshadowed_texture
+    direct = gpu_compose.direct_light_texture
+
+    def summed(bvh, inputs, *args, **kwargs):
+        centres.append(inputs)
+        return unshadowed(bvh, inputs, *args, **kwargs)
+
+    def recorded(bvh, inputs, *args, **kwargs):
+        out = direct(bvh, inputs, *args, **kwargs)
+        if kwargs.get("centre") is not None:  # the world's and emitters' dispatch
+            calls.append((bvh, inputs, args, kwargs, out))
+        return out
+
+    monkeypatch.setattr(gpu_preview, "emitters_unshadowed_texture", summed)
+    monkeypatch.setattr(gpu_compose, "direct_light_texture", recorded)
+    gpu = preview("emissive_room", "AUTO", 64, 48)
+    assert len(centres) == 1 and len(calls) == 1 + 16  # the centre pass, the sub-pixel passes
+    reused = seen = 0
+    for index, (bvh, inputs, args, kwargs, out) in enumerate(calls):
+        # with a centre sum of zeros the texels that take their centre's go dark, the others
+        # evaluate theirs as the pass did (the scene has no world: the emitters' light alone)
+        centre = kwargs["centre"]
+        size = (out.width, out.height)
+        dark = direct(bvh, inputs, *args, **{**kwargs, "centre": {
+            **centre, "unshadowed": GPUScene.zeros(*size)}})
+        texels = {name: read_texture(texture).reshape(-1, 4) for name, texture in
+                  (("position", inputs["gbuffer_position"]), ("normal", inputs["gbuffer_normal"]),
+                   ("view", inputs["gbuffer_view"]), ("centre", centre["gbuffer_position"]),
+                   ("centre normal", centre["gbuffer_normal"]),
+                   ("centre view", centre["gbuffer_view"]), ("out", out), ("dark", dark))}
+        hit = texels["position"][:, 3] > 0.5
+        same = hit & same_surface(hit, np.rint(texels["view"][:, 3]), texels["position"][:, :3],
+                                  texels["normal"][:, :3], texels["centre"][:, 3] > 0.5,
+                                  np.rint(texels["centre view"][:, 3]),
+                                  texels["centre"][:, :3], texels["centre normal"][:, :3])
+        if index == 0:  # the centre pass over the image: its own centres, no sum evaluated
+            assert same.sum() == hit.sum() > 0 and not texels["dark"][:, :3].any()
+            continue
+        other = hit & ~same
+        assert (texels["dark"][same, :3] == 0).all(axis=1).mean() > 0.99
+        assert (texels["out"][same, :3] > 0).any() and other.any()
+        assert (texels["dark"][other, :3] == texels["out"][other, :3]).all(axis=1).mean() > 0.99
+        reused, seen = reused + same.sum(), seen + hit.sum()
+    assert reused > 0.75 * seen, (reused, seen)
+
+    points = []
+    evaluate = passes.emitters_unshadowed_at
+
+    def counted(emitters, p, *args):
+        points.append(len(p))
+        return evaluate(emitters, p, *args)
+
+    monkeypatch.setattr(passes, "emitters_unshadowed_at", counted)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    reference = preview("emissive_room", "NUMPY", 64, 48)
+    # the pixel centres once, then only the points of the passes that see another surface
+    assert len(points) == 1 + 1 + 16 and points[1] == 0, points  # the centre pass: none
+    assert sum(points[2:]) < 0.25 * seen, (points, seen)  # the GPU's passes' hits
+    everywhere = np.ones((48, 64), bool)
+    for pass_name in ("Combined", "Diffuse Direct"):
+        assert relative_l1(gpu[pass_name], reference[pass_name], everywhere) <= 0.02, pass_name

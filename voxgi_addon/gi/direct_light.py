@@ -32,7 +32,8 @@ from ..scene import raycast
 from ..scene.snapshot import LightData
 from .sampling import hashed_square
 
-__all__ = ["diffuse_direct", "light_directions", "light_frame", "stratified_square", "concentric_disk"]
+__all__ = ["diffuse_direct", "emitters_unshadowed", "light_directions", "light_frame",
+           "stratified_square", "concentric_disk"]
 
 _NORMAL_OFFSET = 1e-5  # metres: shadow rays start this far off the surface, towards the light
 _POINT_CHUNK = 16384
@@ -241,12 +242,24 @@ def _world(world, p, n, tris, strata, reflect=None):
     return world_direct(world, p + origins_offset, n, occluded, strata, reflect)
 
 
-def _emitters(emitters, p, n, tris, strata, reflect=None):
+def _emitters(emitters, p, n, tris, strata, reflect=None, unshadowed=None):
     from .emitters import emitters_direct
 
     occluded = None if tris is None else (
         lambda origins, dirs, lengths: _occluded(tris, origins, dirs, lengths))
-    return emitters_direct(emitters, p + _NORMAL_OFFSET * n, n, occluded, strata, reflect)
+    return emitters_direct(emitters, p + _NORMAL_OFFSET * n, n, occluded, strata, reflect,
+                           unshadowed)
+
+
+def emitters_unshadowed(emitters, points, normals) -> np.ndarray:
+    """(N, 3) the exact unshadowed Diffuse Direct of ``emitters`` (``emitters.EmitterLight``)
+    at surface points (N, 3) with unit normals (N, 3), at the points ``diffuse_direct`` lifts
+    them to (``emitters.unshadowed_sum``): what its ``unshadowed`` takes."""
+    from .emitters import unshadowed_sum
+
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    n = np.asarray(normals, np.float64).reshape(-1, 3)
+    return unshadowed_sum(emitters, p + _NORMAL_OFFSET * n, n)
 
 
 _BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD": _world,
@@ -254,7 +267,8 @@ _BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD"
 
 
 def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
-                   sample_ids=None, per_light: bool = False, strata_block=None, reflect=None):
+                   sample_ids=None, per_light: bool = False, strata_block=None, reflect=None,
+                   unshadowed=None):
     """Cycles' ``Diffuse Direct`` (irradiance / π, no albedo) at surface points.
 
     Parameters
@@ -283,6 +297,9 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
         BSDF × cos at the points (``world_light.world_direct``): then also returns, for the
         world and the emitters, the radiance it reflects from the same shadow rays — a bounce
         hit's glossy lobe lit by them (the lamps' is the caller's, at their centre direction).
+    unshadowed : (N, 3) the emissive triangles' exact unshadowed light at the points
+        (``emitters_unshadowed``; the anti-aliased preview's sub-pixel passes take their pixel
+        centre's where they see its surface); None: evaluated here.
 
     Returns
     -------
@@ -314,12 +331,14 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
                     square = hashed_square(chunk_ids[points_of_chunk], stream, side * side, seed)
                     i, j = np.divmod(np.arange(m * m), m)
                     return square[:, (row + i) * side + column + j]
+            given = {} if unshadowed is None or light.type != "EMITTERS" else {
+                "unshadowed": np.asarray(unshadowed, np.float64).reshape(-1, 3)[a:b]}
             if reflect is not None and light.type in ("WORLD", "EMITTERS"):
                 value, glossy = shade(light, p[a:b], n[a:b], tris, strata,
-                                      lambda lit, dirs, a=a: reflect(a + lit, dirs))
+                                      lambda lit, dirs, a=a: reflect(a + lit, dirs), **given)
                 shine[index, a:b] += glossy * color
             else:
-                value = shade(light, p[a:b], n[a:b], tris, strata)
+                value = shade(light, p[a:b], n[a:b], tris, strata, **given)
             out[index, a:b] += (value[:, None] if value.ndim == 1 else value) * color
     result = (out if per_light else out.sum(axis=0)).astype(np.float32)
     if reflect is None:

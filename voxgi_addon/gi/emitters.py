@@ -28,8 +28,9 @@ import numpy as np
 
 from ..scene.textures import sample_texture
 
-__all__ = ["EmitterLight", "emitter_light", "emitters_direct", "clipped_form_factors",
-           "sample_points", "emitter_table", "EMITTER_TEXELS", "MAX_EMITTER_TRIANGLES"]
+__all__ = ["EmitterLight", "emitter_light", "emitters_direct", "unshadowed_sum",
+           "clipped_form_factors", "sample_points", "emitter_table", "EMITTER_TEXELS",
+           "MAX_EMITTER_TRIANGLES"]
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 EMITTER_TEXELS = 4
@@ -259,7 +260,14 @@ def sample_points(light: EmitterLight, square) -> tuple[np.ndarray, np.ndarray]:
     return k, point
 
 
-def _unshadowed(light: EmitterLight, p, n) -> np.ndarray:
+def unshadowed_sum(light: EmitterLight, p, n) -> np.ndarray:
+    """(N, 3) the exact unshadowed Diffuse Direct of the emissive triangles at points p (N, 3)
+    with unit normals n: Σ_t L_t × ``clipped_form_factors`` over the triangles lighting p's
+    side, O(N × triangles). The anti-aliased preview evaluates it once per pixel centre and
+    again only where a sub-pixel pass sees another surface (``emitters_direct``'s
+    ``unshadowed``). GLSL: emitters_unshadowed in render/shaders/bvh_lights.glsl."""
+    p = np.asarray(p, np.float64).reshape(-1, 3)
+    n = np.asarray(n, np.float64).reshape(-1, 3)
     out = np.zeros((len(p), 3))
     facing = _facing(light, p)
     for a in range(0, len(light.corners), _CHUNK):
@@ -268,11 +276,15 @@ def _unshadowed(light: EmitterLight, p, n) -> np.ndarray:
     return out
 
 
-def emitters_direct(light: EmitterLight, p, n, occluded, strata, reflect=None):
+def emitters_direct(light: EmitterLight, p, n, occluded, strata, reflect=None,
+                    unshadowed=None):
     """(N, 3) Diffuse Direct of the emissive triangles at points p with unit normals n (facing
     the viewer). occluded : callable(origins (M, 3), unit directions (M, 3), lengths (M,)) ->
     (M,) bool, the shadow test (None: no shadows); strata : callable(point indices) -> (N, K, 2)
     the points' hashed strata.
+    unshadowed : (N, 3) the exact unshadowed sum to take for the points' (an exact light's;
+    ``unshadowed_sum``, in a sub-pixel pass its pixel centre's where it sees the centre's
+    surface); None: evaluated here. The visible share is the points' own either way.
     reflect : callable(point indices (M,), unit directions (M, K, 3)) -> (M, K, 3), a BSDF ×
     cos toward the light (a bounce hit's glossy lobe, ``world_light.world_direct``'s): then
     also returns the (N, 3) radiance it reflects of the emitters, the same shadow rays' plain
@@ -280,7 +292,8 @@ def emitters_direct(light: EmitterLight, p, n, occluded, strata, reflect=None):
     p = np.asarray(p, np.float64)
     n = np.asarray(n, np.float64)
     if light.exact or occluded is None:
-        value = _unshadowed(light, p, n)
+        value = unshadowed_sum(light, p, n) if unshadowed is None else \
+            np.array(unshadowed, np.float64).reshape(len(p), 3)
         lit = np.flatnonzero((value > 0).any(axis=1))
     else:  # the shadow rays' own estimate, mean of f V
         value, lit = np.ones((len(p), 3)), np.arange(len(p))

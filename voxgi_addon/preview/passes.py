@@ -24,7 +24,13 @@ from ..gi.conetrace import (
     trace_world_visibility,
     world_mips,
 )
-from ..gi.direct_light import concentric_disk, diffuse_direct, light_directions, light_frame
+from ..gi.direct_light import (
+    concentric_disk,
+    diffuse_direct,
+    emitters_unshadowed,
+    light_directions,
+    light_frame,
+)
 from ..gi.exact_glossy import emitters_shine
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.sampling import hashed_square
@@ -319,8 +325,8 @@ def same_surface(hit_a, material_a, position_a, normal_a, hit_b, material_b, pos
     either point on the other's tangent plane within ``upsample.PLANE_TOLERANCE`` × their
     distance (the joint-bilateral upsample's test; depth steps and creases are not).
     ``edge_pixels`` tests neighbouring pixel centres with it; the sub-pixel passes a pass's
-    sample against its pixel's centre (the emitters' glossy light, ``render_passes``); the
-    GLSL port is in shaders/bvh_emitter_glossy.glsl."""
+    sample against its pixel's centre (the emitters' glossy light and unshadowed sum,
+    ``render_passes``); the GLSL port is render/shaders/same_surface.glsl."""
     hit_a, hit_b = np.asarray(hit_a, bool), np.asarray(hit_b, bool)
     step = np.asarray(position_b, np.float64) - np.asarray(position_a, np.float64)
     off_plane = np.maximum(np.abs(np.einsum("...i,...i->...", normal_a, step)),
@@ -681,19 +687,28 @@ def filtered_sums(sums, count, tails, width: int, height: int, filter_width: flo
 
 
 def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
-                 visibility=None, sample_ids=None, per_light=False, seed=0, strata_block=None):
+                 visibility=None, sample_ids=None, per_light=False, seed=0, strata_block=None,
+                 unshadowed=None):
     """(N, 3) Diffuse Direct at surface points: exact shadow rays against ``tris`` (shadows
     "RAYS") or one soft-shadow cone per light through ``octree`` ("CONES"; ``visibility``
     as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own).
     sample_ids : the points' pixel indices: shadow rays then use the hashed strata that the
     GPU kernel ``render/shaders/bvh_direct.glsl`` draws (``direct_light.diffuse_direct``);
     seed : the strata's seed (the scene's Seed, ``GatherSettings.seed``); strata_block : one
-    sub-pixel pass's block of them (``subpixel_passes``)."""
+    sub-pixel pass's block of them (``subpixel_passes``); unshadowed : the emitters' exact
+    unshadowed light at the points ("RAYS"; ``emitters_unshadowed_at``), None: evaluated."""
     if shadows == "CONES":
         return cone_shadowed_direct(octree, points, normals, lights, cones, samples, visibility)
     return diffuse_direct(points + normals * SURFACE_EPSILON, normals, lights, tris,
                           samples=samples, sample_ids=sample_ids, per_light=per_light, seed=seed,
-                          strata_block=strata_block)
+                          strata_block=strata_block, unshadowed=unshadowed)
+
+
+def emitters_unshadowed_at(emitters, points, normals) -> np.ndarray:
+    """(N, 3) the emitters' exact unshadowed Diffuse Direct at surface points as
+    ``direct_light`` evaluates it (``direct_light.emitters_unshadowed`` at the points lifted
+    by SURFACE_EPSILON; the GPU's ``gpu_bvh.emitters_unshadowed_texture``)."""
+    return emitters_unshadowed(emitters, points + normals * SURFACE_EPSILON, normals)
 
 
 def fast_direct(octree, seen, stride, hit, lights, tris, cones, samples, shadows, lamps=0):
@@ -763,7 +778,8 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     filter_width : Cycles' pixel Filter Size (Blackman-Harris, pixels). Accurate quality
     anti-aliases with it: ``subpixel_passes`` camera passes, each with its own visibility,
     direct light, glossy light of the lamps and colours, averaged (``accumulate_pass``); the
-    gathers come from the pixel centres, and so does the emitters' glossy light except in the
+    gathers come from the pixel centres, and so do the emitters' glossy light and the exact
+    unshadowed sum of their Diffuse Direct (its shadow rays are each pass's own) except in the
     passes that see another surface than their pixel's centre (``same_surface``). ≤ 0, or
     Fast quality: pixel centres only.
 
@@ -892,7 +908,8 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
                                        gi_stride, emission if emitting else None).reshape(-1, 3)
     timings["world glossy gather"] = time.perf_counter() - t0
     centre_glow = np.zeros((height * width, 3))
-    if emitters is not None:  # the emitters' glossy light at every pixel centre
+    centre_unshadowed = np.zeros((height * width, 3))
+    if emitters is not None:  # the emitters' glossy light and unshadowed sum at the centres
         t0 = time.perf_counter()
         centre_glow[hit] = emitters_shine(
             positions[hit], normals[hit], -dirs[hit], mat, hit, tris, principled_table(snapshot),
@@ -900,6 +917,9 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
             primary_base(tris, seen, hit, principled_table(snapshot)[0][mat], snapshot.camera,
                          width, height, filter_width))
         timings["emitters' glossy light"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        centre_unshadowed[hit] = emitters_unshadowed_at(emitters, positions[hit], normals[hit])
+        timings["emitters' unshadowed light"] = time.perf_counter() - t0
     t0 = time.perf_counter()
 
     def centre(values, channels):  # the gathered terms over every pixel (0 off the centre hits)
@@ -925,15 +945,10 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         views = -seen.direction.reshape(-1, 3)[hit]
         base = primary_base(tris, seen, hit, principled_table(snapshot)[0][mat],
                             snapshot.camera, width, height, filter_width)  # None: untextured
-        per_light = direct_light(None, p, n, lights, tris, cones, light_samples, shadows,
-                                 sample_ids=hit, per_light=True, seed=gather_settings.seed,
-                                 strata_block=block)
-        shine = glossy_direct_radiance(snapshot, p, n, views, mat,
-                                       per_light[:len(snapshot.lights)], hit, base)
-        # the emitters' glossy light: the centre's where this pass sees the surface its pixel's
-        # centre sees, at the pass's own points where it sees another (a 1-pixel slot between
-        # a ceiling and a panel under it)
-        glow = centre_glow[hit]
+        # the emitters' glossy light and exact unshadowed Diffuse Direct: the centre's where
+        # this pass sees the surface its pixel's centre sees, at the pass's own points where it
+        # sees another (a 1-pixel slot between a ceiling and a panel under it)
+        glow, unshadowed = centre_glow[hit], None
         if emitters is not None:  # (materials, positions, normals: the centre's)
             other = np.flatnonzero(~same_surface(
                 True, mat, p, n, centre_seen.hit.ravel()[hit], materials[hit],
@@ -942,6 +957,14 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
                 p[other], n[other], views[other], mat[other], hit[other], tris,
                 principled_table(snapshot), emitters, gather_settings.glossy_rays,
                 gather_settings.seed, None if base is None else base[other])
+            unshadowed = centre_unshadowed[hit]
+            unshadowed[other] = emitters_unshadowed_at(emitters, p[other], n[other])
+        # (the shadow rays are the pass's own: its block of the strata)
+        per_light = direct_light(None, p, n, lights, tris, cones, light_samples, shadows,
+                                 sample_ids=hit, per_light=True, seed=gather_settings.seed,
+                                 strata_block=block, unshadowed=unshadowed)
+        shine = glossy_direct_radiance(snapshot, p, n, views, mat,
+                                       per_light[:len(snapshot.lights)], hit, base)
         accumulate_pass(sums if into is None else into, snapshot, hit, mat, n, views,
                         per_light.sum(axis=0),
                         indirect[hit], ao[hit], glossy[hit], shine + glow, glossy_world[hit],
