@@ -162,3 +162,30 @@ def test_f12_after_a_file_load_draws_the_new_files_scene(voxgi, tmp_path):
         a, b = (np.asarray(p[name])[..., :3] for p in (ours, theirs))
         error = np.abs(a - b).sum() / np.abs(b).sum()
         assert error < 1e-3, (name, error)
+
+
+def test_the_passes_g_buffers_share_one_vertex_batch(voxgi, monkeypatch):
+    """The anti-aliased preview rasterizes a G-buffer per sub-pixel pass: the triangles'
+    vertex batch is built once for all of a render's G-buffers, and the passes equal those of
+    batches built for every G-buffer (as before)."""
+    from voxgi.render import gbuffer
+
+    gpu_ready()
+    light_scenes.build("emissive_room", bpy.context.scene)
+    built = []
+    original = gbuffer._new_batch
+
+    def counted(*args):
+        built.append(1)
+        return original(*args)
+
+    monkeypatch.setattr(gbuffer, "_new_batch", counted)
+    gbuffer.release()
+    snapshot = snapshot_now()
+    kept = fresh(snapshot)
+    assert len(built) == 1
+    monkeypatch.setattr(gbuffer, "BATCHES_KEPT", 0)  # a batch per G-buffer
+    gbuffer.release()
+    every = fresh(snapshot)
+    assert len(built) > 3
+    assert_same_passes(kept, every)
