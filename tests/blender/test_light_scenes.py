@@ -114,7 +114,6 @@ def test_the_emitters_glossy_light_is_evaluated_at_the_pixel_centres(voxgi, monk
     emissive room's render). numpy splits the passes alike and draws the same light."""
     from voxgi.render import gpu_preview
     from voxgi.render.gpu_tracer import read_texture
-    from voxgi.voxgi_addon.preview import passes
     from voxgi.voxgi_addon.preview.passes import same_surface
 
     calls = []
@@ -147,22 +146,8 @@ def test_the_emitters_glossy_light_is_evaluated_at_the_pixel_centres(voxgi, monk
         reused, seen = reused + same.sum(), seen + hit.sum()
     assert reused > 0.75 * seen, (reused, seen)
 
-    points = []
-    shine = passes.emitters_shine
-
-    def counted(p, *args, **kwargs):
-        points.append(len(p))
-        return shine(p, *args, **kwargs)
-
-    monkeypatch.setattr(passes, "emitters_shine", counted)
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    reference = preview("emissive_room", "NUMPY", 64, 48)
-    # the pixel centres once, then only the points of the passes that see another surface
-    assert len(points) == 1 + 1 + 16 and points[1] == 0, points  # the centre pass: none
-    assert sum(points[2:]) < 0.25 * seen, (points, seen)  # the GPU's passes' hits
-    everywhere = np.ones((48, 64), bool)
-    for pass_name in ("Combined", "Glossy Direct"):
-        assert relative_l1(gpu[pass_name], reference[pass_name], everywhere) <= 0.02, pass_name
+    assert_numpy_evaluates_centres_once(monkeypatch, "emitters_shine", 0, seen, gpu,
+                                        "Glossy Direct")
 
 
 def test_the_emitters_unshadowed_light_is_evaluated_at_the_pixel_centres(voxgi, monkeypatch):
@@ -175,7 +160,6 @@ def test_the_emitters_unshadowed_light_is_evaluated_at_the_pixel_centres(voxgi, 
     from voxgi.render import gpu_compose, gpu_preview
     from voxgi.render.gpu_scene import GPUScene
     from voxgi.render.gpu_tracer import read_texture
-    from voxgi.voxgi_addon.preview import passes
     from voxgi.voxgi_addon.preview.passes import same_surface
 
     centres, calls = [], []
@@ -224,19 +208,30 @@ def test_the_emitters_unshadowed_light_is_evaluated_at_the_pixel_centres(voxgi, 
         reused, seen = reused + same.sum(), seen + hit.sum()
     assert reused > 0.75 * seen, (reused, seen)
 
+    assert_numpy_evaluates_centres_once(monkeypatch, "emitters_unshadowed_at", 1, seen, gpu,
+                                        "Diffuse Direct")
+
+
+def assert_numpy_evaluates_centres_once(monkeypatch, function, point_arg, seen, gpu, pass_name):
+    """The numpy tracer's emissive room (64 × 48) with ``passes.<function>`` counted (its
+    points are argument ``point_arg``): evaluated at the pixel centres once, never in the
+    centre pass, and in the sub-pixel passes at fewer than a quarter of the GPU's ``seen``
+    pass hits; Combined and ``pass_name`` within 0.02 of the ``gpu`` passes."""
+    from voxgi.voxgi_addon.preview import passes
+
     points = []
-    evaluate = passes.emitters_unshadowed_at
+    evaluate = getattr(passes, function)
 
-    def counted(emitters, p, *args):
-        points.append(len(p))
-        return evaluate(emitters, p, *args)
+    def counted(*args, **kwargs):
+        points.append(len(args[point_arg]))
+        return evaluate(*args, **kwargs)
 
-    monkeypatch.setattr(passes, "emitters_unshadowed_at", counted)
+    monkeypatch.setattr(passes, function, counted)
     bpy.ops.wm.read_factory_settings(use_empty=True)
     reference = preview("emissive_room", "NUMPY", 64, 48)
     # the pixel centres once, then only the points of the passes that see another surface
     assert len(points) == 1 + 1 + 16 and points[1] == 0, points  # the centre pass: none
     assert sum(points[2:]) < 0.25 * seen, (points, seen)  # the GPU's passes' hits
     everywhere = np.ones((48, 64), bool)
-    for pass_name in ("Combined", "Diffuse Direct"):
-        assert relative_l1(gpu[pass_name], reference[pass_name], everywhere) <= 0.02, pass_name
+    for name in ("Combined", pass_name):
+        assert relative_l1(gpu[name], reference[name], everywhere) <= 0.02, name
