@@ -25,7 +25,7 @@ def release_gpu_resources() -> None:
     exit handler (docs/gi_pipeline.md, "GPU resources at exit")."""
     for name in ("viewport", "debug_draw", "gpu_shaders", "gpu_bvh", "gpu_gather",
                  "gpu_principled", "gpu_compose", "gpu_accumulation",
-                 "gpu_gather_sums", "gbuffer"):
+                 "gpu_gather_sums"):
         module = sys.modules.get(f"{__name__}.{name}")  # not imported: nothing cached
         if module is not None:
             module.release()

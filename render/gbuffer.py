@@ -9,8 +9,6 @@ row first (OpenGL); ``read_gbuffer`` flips them to the passes' top-first order.
 """
 from __future__ import annotations
 
-import weakref
-
 import gpu
 import numpy as np
 from gpu_extras.batch import batch_for_shader
@@ -106,8 +104,10 @@ class GBuffer:
 
 def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
               offset=(0.0, 0.0), shader=None, textures=None,
-              filter_width: float = DEFAULT_FILTER_WIDTH) -> GBuffer:
+              filter_width: float = DEFAULT_FILTER_WIDTH, batch=None) -> GBuffer:
     """Draw ``tris`` (``SceneTriangles``) seen by ``camera`` into a new ``GBuffer``.
+    batch : ``vertex_batch(tris, roughness, shader, textures is not None)`` made already by a
+    render that draws them again (None: made here).
 
     roughness : (M + 1,) per material index (last = no material), as ``preview`` tables it.
     offset : (x, y) pixels (x right, y down): every pixel sees what the camera ray that far
@@ -140,7 +140,8 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
             gpu.state.depth_test_set("LESS")
             gpu.state.depth_mask_set(True)
             gpu.state.face_culling_set("NONE")
-            batch = _batch(tris, roughness, shader, textures is not None)
+            if batch is None:
+                batch = _new_batch(tris, roughness, shader, textures is not None)
             if textures is None or getattr(tris, "textures", None) is None:
                 textures = _no_textures()
             shader.bind()
@@ -158,27 +159,18 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
     return out
 
 
-_BATCHES: list = []  # (weakref to the triangles, shader, roughness bytes, textured, batch)
-BATCHES_KEPT = 4
 
-
-def _batch(tris, roughness, shader, textured: bool):
-    """The vertex batch of ``tris`` for ``shader``: built once and kept while the same
-    triangles are drawn again (the sub-pixel passes, the viewport's slices: rebuilding and
-    uploading it for each of a preview's 17 G-buffers took 0.45 s each on a 0.45 M-triangle
-    scene), at most ``BATCHES_KEPT`` of them."""
-    key = (shader, np.asarray(roughness, np.float32).tobytes(), bool(textured))
-    for entry in _BATCHES:
-        if entry[0]() is tris and entry[1:4] == key:
-            return entry[4]
-    batch = _new_batch(tris, roughness, shader, textured)
-    _BATCHES.insert(0, (weakref.ref(tris), *key, batch))
-    del _BATCHES[BATCHES_KEPT:]
-    return batch
-
+def vertex_batch(tris, roughness, shader, textured: bool = True):
+    """The vertex batch ``rasterize`` draws ``tris`` with, for ``shader``: a render that draws
+    the same triangles several times (the sub-pixel passes' G-buffers) makes it once and
+    hands it to each ``rasterize`` (rebuilding and uploading it for each of a preview's 17
+    G-buffers took 0.45 s each on a 0.45 M-triangle scene). It lives as long as the render
+    holds it: kept across renders, a batch drawn after its GPU context had changed crashed
+    Blender."""
+    return _new_batch(tris, roughness, shader, textured)
 
 def _new_batch(tris, roughness, shader, textured: bool):
-    """``_batch``'s vertex batch, built: per corner its position, normals, (material,
+    """``vertex_batch``, built: per corner its position, normals, (material,
     roughness), and the texture attributes of ``textured`` triangles (level-0 densities per
     metre; the camera's footprint is the shader's ``pixel_spread``)."""
     material = np.asarray(tris.materials)
@@ -256,11 +248,6 @@ def _new_batch(tris, roughness, shader, textured: bool):
                                               "normal_map": normal_map,
                                               "tangent": tangent, "glow": glow,
                                               "material_base": material_base})
-
-
-def release() -> None:
-    """Drop the kept vertex batches (their GPU buffers)."""
-    _BATCHES.clear()
 
 
 def _no_textures():

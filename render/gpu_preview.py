@@ -37,7 +37,7 @@ from ..voxgi_addon.preview.passes import (
 )
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
 from ..voxgi_addon.scene.glass import is_glass
-from .gbuffer import gbuffer_shader, rasterize, read_gbuffer
+from .gbuffer import gbuffer_shader, rasterize, read_gbuffer, vertex_batch
 from .gpu_accumulation import SUM_NAMES, GPUSums
 from .gpu_bvh import emitter_glossy_texture, emitters_unshadowed_texture
 from .gpu_compose import COMPACT_SAMPLERS as _COMPACT_SAMPLERS
@@ -232,8 +232,10 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     plan = subpixel_passes(filter_width, light_samples)
     raster = raster or gbuffer_shader()  # this context's, for its G-buffers
     seen_tris = tris if camera_tris is None else camera_tris
+    # one vertex batch for every G-buffer of this render (gbuffer.vertex_batch)
+    batch = vertex_batch(seen_tris, rough, raster, scene.raster_textures() is not None)
     centre = rasterize(seen_tris, snapshot.camera, rough, width, height, shader=raster,
-                       textures=scene.raster_textures(), filter_width=filter_width)
+                       textures=scene.raster_textures(), filter_width=filter_width, batch=batch)
     if only is not None:  # the other pixels' coverage 0: background to every kernel
         centre.position = _run("aa_mask", _MASK_SAMPLERS, {
             "gbuffer_position": centre.position,
@@ -374,7 +376,7 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
         for (offset, block), weights in zip(plan, pass_tail_weights(plan, filter_width)):
             gbuffer = rasterize(seen_tris, snapshot.camera, rough, width, height, offset,
                                 shader=raster, textures=scene.raster_textures(),
-                                filter_width=filter_width)
+                                filter_width=filter_width, batch=batch)
             inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": pixels}, list_size)
             inputs["gbuffer_base"] = blank if not scene.textured else _compact(
                 "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,

@@ -166,9 +166,9 @@ def test_f12_after_a_file_load_draws_the_new_files_scene(voxgi, tmp_path):
 
 def test_the_passes_g_buffers_share_one_vertex_batch(voxgi, monkeypatch):
     """The anti-aliased preview rasterizes a G-buffer per sub-pixel pass: the triangles'
-    vertex batch is built once for all of a render's G-buffers, and the passes equal those of
-    batches built for every G-buffer (as before)."""
-    from voxgi.render import gbuffer
+    vertex batch is built once for all of a render's G-buffers (gbuffer.vertex_batch), and
+    the passes equal those of a batch built for every G-buffer (as before)."""
+    from voxgi.render import gbuffer, gpu_preview
 
     gpu_ready()
     light_scenes.build("emissive_room", bpy.context.scene)
@@ -180,12 +180,10 @@ def test_the_passes_g_buffers_share_one_vertex_batch(voxgi, monkeypatch):
         return original(*args)
 
     monkeypatch.setattr(gbuffer, "_new_batch", counted)
-    gbuffer.release()
     snapshot = snapshot_now()
-    kept = fresh(snapshot)
+    shared = fresh(snapshot)
     assert len(built) == 1
-    monkeypatch.setattr(gbuffer, "BATCHES_KEPT", 0)  # a batch per G-buffer
-    gbuffer.release()
+    monkeypatch.setattr(gpu_preview, "vertex_batch", lambda *args: None)  # one per G-buffer
     every = fresh(snapshot)
     assert len(built) > 3
-    assert_same_passes(kept, every)
+    assert_same_passes(shared, every)
