@@ -1,10 +1,9 @@
-"""Kernels built for what the scene has (issue 31, render/gpu_bvh.py ``bvh_shader``): a scene
-without cut-outs, textures, triangles hidden from some rays or some kind of light traces with
-kernels that leave that code out
-(llvmpipe pays for a branch's code at every triangle test and hit whether a lane takes it or
-not: the cut-out test alone made every ray 3–4× slower), and its passes are exactly those of
-the kernels with every feature; a scene with cut-outs or textures gets the kernels that read
-them.
+"""Kernels built for what the scene has (render/gpu_bvh.py ``bvh_shader``; docs/gi_pipeline.md
+"Where a preview's time goes"): a scene without cut-outs, textures, triangles hidden from some
+rays or some kind of light traces with kernels that leave that code out (llvmpipe pays for a
+branch's code at every triangle test and hit whether a lane takes it or not: the cut-out test
+alone made every ray 3–4× slower), and its passes are exactly those of the kernels with every
+feature; a scene with cut-outs or textures gets the kernels that read them.
 """
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""Bench section "preview" (issue 31): what one preview costs beside Cycles 16 and 64 spp +
+"""Bench section "preview" (docs/gi_pipeline.md "Where a preview's time goes"): what one
+preview costs beside Cycles 16 and 64 spp +
 OpenImageDenoise, and where its time goes against this machine's floor.
 
 Each scene and size runs in a fresh process (``bench_preview_blender.py``, the bpy venv) with
@@ -7,7 +8,7 @@ Mesa's on-disk shader cache off, so "first" is the first preview on a new machin
 
 1. per scene and size: first and warm preview time, Combined error against Cycles at its
    default light paths, Cycles 16 / 64 spp + OIDN's time and error in the same process, and
-   the issue's goal (error ≤ Cycles 16 + OIDN's, warm ≤ ⅓ of its time, first ≤ warm + its
+   the goal (error ≤ Cycles 16 + OIDN's, warm ≤ ⅓ of its time, first ≤ warm + its
    time);
 2. per scene at each size: the warm preview split into its stages (each dispatch timed to its
    completion), each stage's rays (BVH traversals) and texel fetches, and its floor — that
@@ -70,7 +71,7 @@ def run(quick: bool = False, out=print) -> str:
                 failed.append(str(exc))
                 out(f"**{scene} {width}×{height} failed** (the section goes on): "
                     f"{str(exc)[-600:]}\n")
-    lines = ["### Preview vs Cycles 16 / 64 spp + OIDN (issue 31): first preview on a new "
+    lines = ["### Preview vs Cycles 16 / 64 spp + OIDN: first preview on a new "
              "machine, warm preview (median, radiance cache rebuilt), Combined relative L1 "
              "against Cycles at its default light paths" +
              (" — quick: a check of the tooling, not the measurement" if quick else ""), "",
@@ -85,7 +86,7 @@ def run(quick: bool = False, out=print) -> str:
             f"{row['triangles']:,} | {row['first']:.2f} s | {row['warm']:.2f} s | "
             f"{row['error']:.3f} | {c16[0]:.2f} s, {c16[1]:.3f} | {c64[0]:.2f} s, {c64[1]:.3f} | "
             f"{row['warm'] / c16[0]:.1f} | {_goal(row)} | {row['reference']} |")
-    lines += ["", "### Where a warm preview's time goes, against the floor (issue 31 point 1): "
+    lines += ["", "### Where a warm preview's time goes, against the floor: "
               "each stage's dispatches timed to completion; floor = its rays at the ray rate "
               "and its texel fetches at the fetch rate that trivial kernels reach on the same "
               "BVH in the same process; first extra = what the stage cost more in the first "

@@ -1,4 +1,5 @@
-"""One row of the ``preview`` benchmark (issue 31), run in a fresh process per scene and size
+"""One row of the ``preview`` benchmark (docs/gi_pipeline.md "Where a preview's time goes"),
+run in a fresh process per scene and size
 with the bpy venv: ``.venv/bin/python tools/bench/bench_preview_blender.py SCENE WIDTH HEIGHT
 [--quick]``. Prints one ``RESULT {json}`` line that ``bench_preview.py`` turns into tables.
 

@@ -1,6 +1,6 @@
 """Bench section "viewport": runs tools/bench/bench_viewport_blender.py (view_draw, jobs, cancel,
 debug view) and tools/bench/bench_viewport_converge_blender.py (the view's time to Cycles 16 spp
-+ OIDN's error against Cycles', issue 31) with the bpy venv."""
++ OIDN's error against Cycles', docs/gi_pipeline.md "Where a preview's time goes") with the bpy venv."""
 from __future__ import annotations
 
 import bench_gi

@@ -1,4 +1,5 @@
-"""Viewport convergence against Cycles 16 spp + OIDN (issue 31 point 5), run with the bpy venv:
+"""Viewport convergence against Cycles 16 spp + OIDN (docs/gi_pipeline.md "Where a preview's
+time goes"), run with the bpy venv:
 ``.venv/bin/python tools/bench/bench_viewport_converge_blender.py [--quick]``.
 
 "The viewport converges as fast": per interior scene of ``tests/blender/bounce_scenes.py``
@@ -24,7 +25,7 @@ paths, 2048 spp):
    until the view stops asking for redraws (converged: the Viewport Samples in, the radiance
    cache built) and its error then.
 
-Goal (issue 31): the viewport's time to that error at most Cycles 16 spp + OIDN's F12 time at
+Goal: the viewport's time to that error at most Cycles 16 spp + OIDN's F12 time at
 the view's size. Medians of 2 runs (``--quick``: 1) after a warm-up (shaders compiled, the
 slice sizer measured). Prints a markdown table; with VOXGI_BENCH_TRACE=1 each run's draws,
 restarts, slices and errors over time go to stderr.
@@ -234,7 +235,7 @@ def main(argv=None) -> int:
                    f"{'met' if reach <= cycles_seconds else 'not met'} "
                    f"({reach / cycles_seconds:.2f}×)") + " |")
             print(rows[-1], file=sys.stderr, flush=True)
-    print(f"### Viewport convergence vs Cycles 16 spp + OIDN (issue 31): view_draw at the "
+    print(f"### Viewport convergence vs Cycles 16 spp + OIDN: view_draw at the "
           f"default settings (Accurate, Follow Cycles bounces, {scene.voxgi_viewport.samples} "
           f"Viewport Samples), Mesa llvmpipe ({os.cpu_count()} CPUs, load average "
           f"{os.getloadavg()[0]:.1f} at the end); medians of {repeats}\n")
