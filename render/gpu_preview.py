@@ -22,7 +22,7 @@ from ..voxgi_addon.preview import transmission
 from ..voxgi_addon.preview.film import background
 from ..voxgi_addon.preview.gather import GatherSettings, focused
 from ..voxgi_addon.preview.passes import (
-    add_tails,
+    add_pass_tails,
     centre_pass,
     check_request,
     edge_pixels,
@@ -32,6 +32,7 @@ from ..voxgi_addon.preview.passes import (
     material_indices,
     new_sums,
     pass_tail_weights,
+    scatter_tails,
     subpixel_passes,
     subpixel_reach,
 )
@@ -372,7 +373,7 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
             listed_centres["shine"] = raw["gbuffer_position"]
             listed_centres["unshadowed"] = raw["gbuffer_normal"]
         own = {name: np.zeros((len(listed), 4)) for name in names}
-        tails = new_sums(width * height)
+        tails, weighted = new_sums(width * height), {}
         for (offset, block), weights in zip(plan, pass_tail_weights(plan, filter_width)):
             gbuffer = rasterize(seen_tris, snapshot.camera, rough, width, height, offset,
                                 shader=raster, textures=scene.raster_textures(),
@@ -395,8 +396,9 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                    for name, texture in textures.items()}
             for name in names:
                 own[name] += one[name]
-            add_tails(tails, {key: value / len(plan) for key, value in _sums_of(one).items()},
-                      listed, weights, width, height)
+            add_pass_tails(weighted, {key: value / len(plan)
+                                      for key, value in _sums_of(one).items()}, weights)
+        scatter_tails(tails, weighted, listed, width, height)
         for name in names:
             texel[name][listed] = own[name]
     else:

@@ -151,3 +151,33 @@ def test_a_neighbours_samples_count_by_the_filter_at_their_own_place():
 def test_sample_weights_keep_an_evenly_lit_surface_even():
     exact, _ = _sub_pixel_film(lambda column, row, ox, oy: np.ones_like(column, bool))
     assert exact == pytest.approx(1.0, rel=1e-6)
+
+
+def test_passes_summed_before_one_scatter_give_the_tails_of_a_scatter_per_pass():
+    """The sub-pixel passes' tails are linear in their samples: summing the passes' weighted
+    samples and scattering once (``add_pass_tails`` + ``scatter_tails``, what the preview
+    does) gives the tails of one scatter per pass (``add_tails``), pixels at the border
+    included."""
+    from voxgi.voxgi_addon.preview.passes import (
+        SUMS,
+        add_pass_tails,
+        add_tails,
+        new_sums,
+        pass_tail_weights,
+        scatter_tails,
+        subpixel_passes,
+    )
+    rng = np.random.default_rng(3)
+    width, height = 13, 7
+    listed = np.sort(rng.choice(width * height, 40, replace=False))
+    listed[0] = 0  # a corner: its neighbours beyond the image are dropped
+    plan = subpixel_passes(1.5, 16)
+    per_pass, once, weighted = new_sums(width * height), new_sums(width * height), {}
+    for weights in pass_tail_weights(plan, 1.5):
+        values = {name: rng.random((len(listed),) + per_pass[name].shape[1:]) for name in SUMS}
+        add_tails(per_pass, values, listed, weights, width, height)
+        add_pass_tails(weighted, values, weights)
+    scatter_tails(once, weighted, listed, width, height)
+    for name in SUMS:
+        assert np.any(once[name] != 0.0)
+        np.testing.assert_allclose(once[name], per_pass[name], rtol=1e-12, atol=1e-12)
