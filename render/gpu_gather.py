@@ -25,6 +25,7 @@ from ..voxgi_addon.gi.radiance_cache import (
     texel_places,
     with_faces,
 )
+from ..voxgi_addon.preview.denoise import NOISE_TARGET
 from ..voxgi_addon.preview.gather import cache_settings
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import low_shape
@@ -43,7 +44,8 @@ _shaders: dict[str, object] = {}
 def _denoise_shader():
     if "denoise" not in _shaders:
         _shaders["denoise"] = build_compute(("pixels", "denoise"), _DENOISE_SAMPLERS, ("grid",),
-                                            ("out_image", "out_variance"))
+                                            ("out_image", "out_variance"),
+                                            {"NOISE_TARGET": repr(float(NOISE_TARGET))})
     return _shaders["denoise"]
 
 

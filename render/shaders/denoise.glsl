@@ -4,7 +4,8 @@
  * B3-spline weights × same-surface terms (normal^32, plane) × per signal
  * exp(−|Δ| / (4·√(var_p + var_q) + 1e-6)), var_p the centre's variance prefiltered over 3 × 3
  * valid cells, var_q the tap's own (why both: denoise.py).
- * Variances are filtered with squared weights.
+ * Variances are filtered with squared weights. A cell whose prefiltered standard error is
+ * within NOISE_TARGET of its value is settled: kept as it is (denoise.py NOISE_TARGET).
  * grid = (stride, full width, full height, tap step); low-resolution rows count from the bottom. */
 const float KERNEL[5] = float[5](1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0);
 const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
@@ -48,6 +49,7 @@ void main()
     }
   }
   blurred /= max(blur_weight, 1e-30);
+  bvec2 settled = lessThanEqual(sqrt(max(blurred, vec2(0.0))), NOISE_TARGET * abs(signal));
   vec4 total = vec4(0.0);
   vec2 total_var = vec2(0.0);
   vec2 weight = vec2(0.0);
@@ -79,11 +81,11 @@ void main()
   }
   vec4 result = centre;
   vec2 result_var = centre_var.xy;
-  if (weight.x > 0.0) {
+  if (weight.x > 0.0 && !settled.x) {
     result.rgb = total.rgb / weight.x;
     result_var.x = total_var.x / (weight.x * weight.x);
   }
-  if (weight.y > 0.0) {
+  if (weight.y > 0.0 && !settled.y) {
     result.a = total.a / weight.y;
     result_var.y = total_var.y / (weight.y * weight.y);
   }
