@@ -15,6 +15,19 @@ def _packages():
     return (blender, operators, render, ui)
 
 
+# Blender's glTF exporter and importer look these names up on the enabled add-on's top module
+# (docs/gltf_probes.md "Blender"); they are imported on first use, so the engine needs no bpy.
+_GLTF_HOOKS = ("glTF2ExportUserExtension", "glTF2ImportUserExtension", "draw_import")
+
+
+def __getattr__(name):
+    if name in _GLTF_HOOKS:
+        from .blender import gltf_probes
+
+        return getattr(gltf_probes, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def register() -> None:
     for package in _packages():
         package.register()

@@ -7,6 +7,7 @@ the panels share, and nothing that registers an operator or a panel.
   viewport_session live viewport GI: plans depsgraph updates, runs them on the worker
   updates          depsgraph updates as records, transform-only snapshots
   probe_store      baked probe grids kept with the .blend (a Text datablock), bake progress
+  gltf_probes      the probe grids in Blender's glTF exporter/importer (VOXGI_irradiance_volumes)
   jobs             the engine worker thread, its queue, timer and progress
   snapshot/        reading the scene into the engine's ``SceneSnapshot``
   reports          report lines and tables of results
@@ -18,13 +19,14 @@ the panels share, and nothing that registers an operator or a panel.
 from __future__ import annotations
 
 from ..registration import register_modules, unregister_modules
-from . import jobs, session, settings, viewport_session, viewport_settings
+from . import gltf_probes, jobs, session, settings, viewport_session, viewport_settings
 from .snapshot import materials as snapshot_materials
 from .snapshot import world_map
 
 # Registered in this order (settings first), unregistered in reverse (jobs stop before the
 # sessions are cleared; the world maps' cache goes last).
-modules = (world_map, snapshot_materials, settings, viewport_settings, session, viewport_session, jobs)
+modules = (world_map, snapshot_materials, settings, viewport_settings, session, viewport_session,
+           jobs, gltf_probes)
 
 
 def register() -> None:

@@ -33,7 +33,8 @@ SECTIONS = {
     "viewport": ("bench_viewport", "live viewport GI: main-thread stall, move → GI latency, cancel, "
                                    "debug-view draw of 1M voxels; time until the view is within "
                                    "Cycles 16 spp + OIDN's error of F12's image"),
-    "probes": ("bench_probes", "light-probe bake time/memory (numpy, GPU), queries, EEVEE, Cycles"),
+    "probes": ("bench_probes", "light-probe bake time/memory (numpy, GPU), queries, EEVEE, Cycles; "
+                               "glTF (VOXGI_irradiance_volumes) vs GFG export time and size"),
     "animation": ("bench_animation", "F12 animation render of a walking rig vs Cycles 16 spp + OIDN"),
     "lights": ("bench_lights", "HDRI, sky, emissive and metal scenes: preview vs Cycles 16/64 spp "
                                "with and without OIDN"),
