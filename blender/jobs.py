@@ -7,7 +7,11 @@ idle) or by calling ``drain()``; the job's callbacks (``on_done``, ``on_cancel``
 ``on_error``) run there, on the main thread, and may use bpy.
 
 * One job per scene counts: a newer submission for the same scene supersedes the older one
-  (its cancel event is set and whatever it returns is discarded without callbacks).
+  (its cancel event is set and whatever it returns is discarded without callbacks). A
+  submission that lets the running job finish (``finish_running``: short jobs, such as the
+  frames of a playing animation) supersedes only a job still waiting in the queue: the
+  running one is applied, then the newest waiting one runs — frames are dropped, never
+  queued (docs/gi_pipeline.md "Posed updates").
 * ``cancel(scene_name)`` sets the job's cancel event; the job becomes 'cancelled' once the
   worker has let go of it (next ``drain``), and even a result it still returns is dropped.
 * In background mode (``bpy.app.background``: scripts, tests) ``submit`` waits for the job
@@ -104,6 +108,7 @@ class Job:
         self.result: Any = None
         self.error: BaseException | None = None
         self.submitted_at = time.perf_counter()
+        self.started = False  # written by the worker when it begins the job
         self.finished_at: float | None = None  # written by the worker
         self.superseded = False  # discarded without callbacks
         self._cancel = threading.Event()
@@ -135,6 +140,7 @@ class Job:
 def _run_job(job: Job, results: queue.Queue) -> None:
     """Worker side: run ``job.fn`` unless cancelled and post the outcome. No bpy here."""
     outcome, value = "cancelled", None
+    job.started = True
     if not job._cancel.is_set():
         try:
             value, outcome = job.fn(job._cancel.is_set), "done"
@@ -173,9 +179,11 @@ class JobRunner:
     def latest(self, scene_name: str) -> Job | None:
         return self._latest.get(scene_name)
 
-    def submit(self, scene_name, fn, label, on_done, on_cancel, on_error, progress=None) -> Job:
+    def submit(self, scene_name, fn, label, on_done, on_cancel, on_error, progress=None,
+               finish_running: bool = False) -> Job:
         old = self._latest.get(scene_name)
-        if old is not None and old.state == "running":
+        if old is not None and old.state == "running" and not (
+                finish_running and old.started and not old.superseded):
             old.superseded = True
             old._cancel.set()
         job = Job(scene_name, fn, label, on_done, on_cancel, on_error, progress)
@@ -263,17 +271,20 @@ def submit(scene_name: str, fn: Callable[[Callable[[], bool]], Any], *, label: s
            on_done: Callable[[Any], None] | None = None,
            on_cancel: Callable[[], None] | None = None,
            on_error: Callable[[BaseException], None] | None = None,
-           progress: Progress | None = None) -> Job:
+           progress: Progress | None = None, finish_running: bool = False) -> Job:
     """Run ``fn(cancel)`` on the worker for the scene named ``scene_name``; main thread only.
 
     ``fn`` must not touch bpy; ``cancel()`` returns True once the job should stop (raise
     ``VoxGICancelled`` or return; the result is discarded either way). The callbacks run
     on the main thread when the outcome is applied. A running job of the same scene is
-    superseded. When ``runs_synchronously()`` the job is finished and applied on return (with
-    progress lines for long jobs, see ``ProgressPrinter``).
+    superseded, or with ``finish_running`` left to finish and be applied (only a job of the
+    scene still waiting to start is superseded: latest wins, nothing queues up). When
+    ``runs_synchronously()`` the job is finished and applied on return (with progress lines
+    for long jobs, see ``ProgressPrinter``).
     """
     runner = _require_runner()
-    job = runner.submit(scene_name, fn, label, on_done, on_cancel, on_error, progress)
+    job = runner.submit(scene_name, fn, label, on_done, on_cancel, on_error, progress,
+                        finish_running)
     if runs_synchronously():
         printer = ProgressPrinter(label)
         while not job.wait(0.1):

@@ -58,6 +58,8 @@ from .updates import (
     skin_states,
     transform_snapshot,
     without_skin_echo,
+    world_state,
+    world_touched,
 )
 
 JOB_LABEL = "Updating viewport GI"
@@ -126,6 +128,8 @@ class LiveGI:
         self.settings = None
         self.rescan = ""           # why everything must be read again next time ("" = no need)
         self.skin: dict[str, tuple[bytes, bytes]] = {}  # skinned objects' states (``update``)
+        self.world = None          # updates.world_state at the last snapshot
+        self.world_changed = True  # the next posed snapshot reads the world again
         # Fast quality at Bounces > 1: the radiance cache the view's voxels reflect (set by the
         # view, render/viewport_bounces.py; None otherwise): a job submitted while it is set
         # also rebuilds the new state's octrees with it on the worker, so the view shows the
@@ -143,6 +147,7 @@ class LiveGI:
         # (snapshot/skin.py), which Blender reports as a geometry update of it: our own echo,
         # told apart from edits and poses by the mesh's rest shape and pose fingerprints.
         records = without_skin_echo(records, self.skin, depsgraph)
+        self.world_changed = self.world_changed or world_touched(records, scene, self.world)
         key = settings_key(scene)
         if self.index is None or self.rescan:
             plan = full_plan(self.rescan or "first update")
@@ -208,7 +213,10 @@ class LiveGI:
         depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
         snapshot = None
         if not plan.full_snapshot and "snapshot" in plan.stages and self.latest_snapshot is not None:
-            snapshot = transform_snapshot(self.latest_snapshot, scene, depsgraph)
+            # a pose or a move: matrices only, the world only when it changed
+            # (docs/gi_pipeline.md "Posed updates")
+            snapshot = transform_snapshot(self.latest_snapshot, scene, depsgraph,
+                                          world=self.world_changed)
         elif "snapshot" not in plan.stages and self.latest_snapshot is not None:
             snapshot = self.latest_snapshot
         try:
@@ -217,9 +225,12 @@ class LiveGI:
         except VoxGIError as error:
             self.error = str(error)
             return None
+        waits = ()
         if snapshot is not self.latest_snapshot:
             self.snapshots += 1
+            waits = announce_snapshot(self, snapshot, scene)
         self.latest_snapshot = snapshot
+        self.world, self.world_changed = world_state(scene), False
         self.skin = skin_states(snapshot, depsgraph)
         self.index = scene_index(snapshot, depsgraph.view_layer)
         if self.view_camera is not None:
@@ -232,6 +243,7 @@ class LiveGI:
         progress(0.0, "starting")
 
         def job(cancel):  # worker thread: engine code on plain data only
+            wait_for(waits, cancel)  # the view's own preparation of the snapshot goes first
             t0 = time.perf_counter()
             refreshed = refresh_caches(store, snapshot, base_span, count, cancel,
                                        lambda f, text: progress(0.6 * f, text))
@@ -256,14 +268,19 @@ class LiveGI:
             return LiveResult(snapshot, refreshed.caches, staged, atlas, refreshed.voxelized,
                               refreshed.reused, timings, bounced)
 
+        # A running job that voxelizes nothing is left to finish (the frames of a playing
+        # animation, a drag): its image is shown and only the newest change waits after it.
+        short = all(p is not None and not p.full_snapshot and not p.stages & {"voxelize", "albedo"}
+                    for p in (plan, self.pending))
         self.pending = plan
         return jobs.submit(self.scene_name, job, label=JOB_LABEL,
                            on_done=lambda result: self._apply(plan, result),
                            on_cancel=self._cancelled, on_error=self._failed,
-                           progress=progress)
+                           progress=progress, finish_running=short)
 
     def _apply(self, plan: UpdatePlan, result: LiveResult) -> None:
-        self.pending = None
+        if self.pending is plan:  # else a newer job is still to come
+            self.pending = None
         self.snapshot, self.staged, self.atlas = result.snapshot, result.staged, result.atlas
         self.bounced = result.bounced
         self.generation += 1
@@ -298,6 +315,40 @@ class LiveGI:
     @property
     def running(self) -> jobs.Job | None:
         return jobs.running_job(self.scene_name)
+
+
+# Functions called with (live, snapshot, scene) for every new snapshot ``LiveGI.schedule``
+# takes, before it submits the update job: the 3D view prepares its GPU scene from it at once,
+# on a thread of its own (render/viewport_prepare.py, docs/gi_pipeline.md "Entering Rendered
+# mode"). A hook may return a ``threading.Event`` the update job waits for before it starts:
+# on 2 cores the two would halve each other, and the view's image is what the user waits for.
+SNAPSHOT_HOOKS: list = []
+HOOK_WAIT = 10.0  # seconds an update job waits at most for the hooks' work
+
+
+def announce_snapshot(live: LiveGI, snapshot, scene) -> list:
+    """Hand a new snapshot to ``SNAPSHOT_HOOKS``; the events they returned. A hook that fails
+    is reported and skipped."""
+    waits = []
+    for hook in list(SNAPSHOT_HOOKS):
+        try:
+            event = hook(live, snapshot, scene)
+        except Exception:  # noqa: BLE001 - the update job must still be submitted
+            traceback.print_exc()
+            continue
+        if event is not None:
+            waits.append(event)
+    return waits
+
+
+def wait_for(events, cancel) -> None:
+    """Worker: wait for ``events`` (``announce_snapshot``'s), at most ``HOOK_WAIT`` seconds in
+    all, and no longer once the job is cancelled."""
+    deadline = time.perf_counter() + HOOK_WAIT
+    for event in events:
+        while not event.wait(0.05):
+            if cancel() or time.perf_counter() > deadline:
+                return
 
 
 def _cascade_bytes(cascade_voxels) -> int:

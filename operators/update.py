@@ -1,7 +1,11 @@
 """``voxgi.update``: transform the voxel caches into cascades, inject direct light, rebuild the
-octree, on the engine worker (snapshot and, in Auto mode, the view fit on the main thread; the
-caches of the span are reused, voxelizing first when there are none)."""
+octree, on the engine worker. The main thread takes the snapshot — a posed one when only
+matrices, poses, lights, camera or world changed since the last (docs/gi_pipeline.md "Posed
+updates") — and, in Auto mode, the first view fit; later fits run on the worker. The caches of
+the span are reused, voxelizing first when there are none."""
 from __future__ import annotations
+
+import time
 
 import bpy
 
@@ -11,7 +15,7 @@ from ..blender.reports import coverage_lines, octree_text, timing_text
 from ..blender.session import scene_session
 from ..blender.snapshot import snapshot_or_error
 from ..blender.snapshot.left_out import is_left_out
-from ..render.pipeline import gi_inputs, view_shares
+from ..render.pipeline import gi_inputs, keep_caches, refit_on_worker, refitted_inputs, view_shares
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.update import update_gi
 
@@ -27,8 +31,12 @@ class VOXGI_OT_update(VoxGISceneOperator, bpy.types.Operator):
         scene_name = context.scene.name_full
         view_ahead = context.scene.voxgi.view_ahead
         try:
-            snapshot, snap_seconds = snapshot_or_error(context)
-            caches, settings, anchor, fit = gi_inputs(context, snapshot)
+            # Only what moved is read when nothing else changed, and after a first fit the view
+            # is fitted again on the worker: the main thread's share is the snapshot
+            # (docs/gi_pipeline.md "Posed updates").
+            snapshot, snap_seconds = snapshot_or_error(context, posed=True)
+            refit = refit_on_worker(context.scene, snapshot)
+            inputs = gi_inputs(context, snapshot) if refit is None else None
         except VoxGIError as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
@@ -36,13 +44,22 @@ class VOXGI_OT_update(VoxGISceneOperator, bpy.types.Operator):
         previous = scene_session(scene_name).gi_state
 
         def job(cancel):  # worker thread: engine code only
+            start = time.perf_counter()
+            caches, settings, anchor, fit = inputs or refitted_inputs(snapshot, *refit)
+            fitted = time.perf_counter() - start
             state = update_gi(snapshot, caches, settings, cancel=cancel, anchor=anchor,
                               previous=previous)
+            if refit is not None:
+                state.timings = {"view fit": fitted, **state.timings}
             state.view_shares = view_shares(snapshot, state.grids, fit)
-            return state
+            return state, caches, fit
 
-        def done(state):
+        def done(result):
+            state, caches, fit = result
             session = scene_session(scene_name)
+            if refit is not None:  # what gi_inputs keeps on the main thread
+                session.view_fit = fit
+                keep_caches(session, caches)
             session.gi_state = state
             session.gi_timings = {"snapshot": snap_seconds, **state.timings}
             counts = ", ".join(f"{n:,}" for n in state.voxel_counts)

@@ -23,7 +23,7 @@ from ..voxgi_addon.scene.textures import (
     pixel_spread,
     unpack_emission,
 )
-from .gpu_shaders import SHADER_DIR
+from .gpu_shaders import SHADER_DIR, create_shader
 from .gpu_tracer import read_texture
 
 
@@ -79,7 +79,7 @@ def gbuffer_shader():
     info.fragment_source((SHADER_DIR / "sampling.glsl").read_text() +
                          (SHADER_DIR / "textures.glsl").read_text() +
                          (SHADER_DIR / "gbuffer_frag.glsl").read_text())
-    return gpu.shader.create_from_info(info)
+    return create_shader(info, "gbuffer raster")
 
 
 class GBuffer:
@@ -104,10 +104,11 @@ class GBuffer:
 
 def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
               offset=(0.0, 0.0), shader=None, textures=None,
-              filter_width: float = DEFAULT_FILTER_WIDTH, batch=None) -> GBuffer:
+              filter_width: float = DEFAULT_FILTER_WIDTH, batch=None, out=None) -> GBuffer:
     """Draw ``tris`` (``SceneTriangles``) seen by ``camera`` into a new ``GBuffer``.
     batch : ``vertex_batch(tris, roughness, shader, textures is not None)`` made already by a
-    render that draws them again (None: made here).
+    render that draws them again, or a ``ChunkedBatch`` of them (the viewport's: only its
+    chunks inside the view are drawn); None: made here.
 
     roughness : (M + 1,) per material index (last = no material), as ``preview`` tables it.
     offset : (x, y) pixels (x right, y down): every pixel sees what the camera ray that far
@@ -125,8 +126,11 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
     Base Color (per texel or its value) and its emission per texel at its own
     ``primary_lod``, packed into base's 4th channel (``textures.pack_emission``: a float ≥ 2,
     so kernels that test w > 0.5 for a textured Base Color read it as before).
+    out : a GBuffer of this size drawn before with the same camera: drawn into, not cleared
+    (the viewport's quick image, a part of its chunks per draw).
     """
-    out = GBuffer(width, height)
+    fresh = out is None
+    out = GBuffer(width, height) if fresh else out
     framebuffer = gpu.types.GPUFrameBuffer(depth_slot=out.depth,
                                            color_slots=(out.position, out.normal, out.view,
                                                         out.base))
@@ -134,7 +138,8 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
     matrix = view_projection(camera, width, height, offset)
     shader = shader or gbuffer_shader()
     with framebuffer.bind():
-        framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+        if fresh:
+            framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
         if len(tris):
             gpu.state.viewport_set(0, 0, width, height)
             gpu.state.depth_test_set("LESS")
@@ -153,11 +158,72 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
             shader.uniform_float("camera_ortho", 1.0 if camera.type == "ORTHO" else 0.0)
             shader.uniform_float("pixel_spread", float(pixel_spread(camera, width, height) *
                                                       filter_footprint(filter_width)))
-            batch.draw(shader)
+            if isinstance(batch, ChunkedBatch):
+                batch.draw_visible(shader, matrix)
+            else:
+                batch.draw(shader)
             gpu.state.depth_test_set("NONE")
             gpu.state.depth_mask_set(False)
     return out
 
+
+
+class ChunkedBatch:
+    """``vertex_batch``'s triangles as several batches of consecutive triangles (``batches``)
+    with their world-space bounds ((lo, hi) each, ``bounds``): ``rasterize`` draws only the
+    chunks whose bounds reach into its view, so a tile of the view draws what it can see
+    (the same fragments: a triangle in view is in a chunk in view). The viewport fills one a
+    chunk per draw (``viewport_prepare``)."""
+
+    def __init__(self, batches=(), bounds=()):
+        self.batches, self.bounds = list(batches), list(bounds)
+
+    def part(self, first: int, end: int) -> ChunkedBatch:
+        """The chunks first … end − 1."""
+        return ChunkedBatch(self.batches[first:end], self.bounds[first:end])
+
+    def visible(self, matrix) -> list[int]:
+        """The chunks inside the clip volume of ``matrix`` (view-projection, (4, 4)): a chunk
+        is left out when all 8 corners of its box lie outside one clip plane."""
+        matrix = np.asarray(matrix, np.float64)
+        inside = []
+        for index, (lo, hi) in enumerate(self.bounds):
+            corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                                for z in (lo[2], hi[2])])
+            clip = corners @ matrix.T
+            w = clip[:, 3]
+            if not any(np.all(clip[:, axis] > w) or np.all(clip[:, axis] < -w)
+                       for axis in range(3)):
+                inside.append(index)
+        return inside
+
+    def draw_visible(self, shader, matrix) -> int:
+        """Draw the chunks inside the clip volume of ``matrix`` (``visible``); how many."""
+        inside = self.visible(matrix)
+        for index in inside:
+            self.batches[index].draw(shader)
+        return len(inside)
+
+
+def rasterize_stages(tris, camera, roughness, width: int, height: int, offset=(0.0, 0.0),
+                     shader=None, textures=None, filter_width: float = DEFAULT_FILTER_WIDTH,
+                     batch=None):
+    """``rasterize`` as a generator of stages returning the ``GBuffer``: with a
+    ``ChunkedBatch`` (the viewport's) it yields after each chunk in view is drawn, so a
+    scene's G-buffer goes over several draws (140k triangles: 60–80 ms of llvmpipe's vertex
+    work in one); any other batch is drawn in the one call."""
+    if not isinstance(batch, ChunkedBatch) or len(batch.batches) <= 1:
+        return rasterize(tris, camera, roughness, width, height, offset, shader, textures,
+                         filter_width, batch)
+    inside = batch.visible(view_projection(camera, width, height, offset))
+    out = rasterize(tris, camera, roughness, width, height, offset, shader, textures,
+                    filter_width, batch.part(inside[0], inside[0] + 1) if inside
+                    else ChunkedBatch())  # cleared, and the first chunk
+    for index in inside[1:]:
+        yield
+        rasterize(tris, camera, roughness, width, height, offset, shader, textures,
+                  filter_width, batch.part(index, index + 1), out=out)
+    return out
 
 
 def vertex_batch(tris, roughness, shader, textured: bool = True):
@@ -170,9 +236,15 @@ def vertex_batch(tris, roughness, shader, textured: bool = True):
     return _new_batch(tris, roughness, shader, textured)
 
 def _new_batch(tris, roughness, shader, textured: bool):
-    """``vertex_batch``, built: per corner its position, normals, (material,
-    roughness), and the texture attributes of ``textured`` triangles (level-0 densities per
-    metre; the camera's footprint is the shader's ``pixel_spread``)."""
+    """``vertex_batch``, built from ``vertex_arrays``."""
+    return batch_for_shader(shader, "TRIS", vertex_arrays(tris, roughness, textured))
+
+
+def vertex_arrays(tris, roughness, textured: bool) -> dict[str, np.ndarray]:
+    """The attributes of ``vertex_batch`` by name (numpy only, any thread: the viewport makes
+    them on the worker and fills its batch an attribute per draw): per corner its position,
+    normals, (material, roughness), and the texture attributes of ``textured`` triangles
+    (level-0 densities per metre; the camera's footprint is the shader's ``pixel_spread``)."""
     material = np.asarray(tris.materials)
     material = np.where((material >= 0) & (material < len(roughness) - 1), material,
                         len(roughness) - 1)
@@ -241,13 +313,10 @@ def _new_batch(tris, roughness, shader, textured: bool):
                  np.zeros(len(row))], axis=1).astype(np.float32), 3, axis=0)
             material_base = np.repeat(np.asarray(
                 surface_textures.material_base, np.float32)[row], 3, axis=0)
-    return batch_for_shader(shader, "TRIS", {"position": corners, "normal": smooth,
-                                              "face_normal": face, "material": surface,
-                                              "uv": uv, "texel": texel,
-                                              "cutout": cutout, "params": params,
-                                              "normal_map": normal_map,
-                                              "tangent": tangent, "glow": glow,
-                                              "material_base": material_base})
+    return {"position": corners, "normal": smooth, "face_normal": face, "material": surface,
+            "uv": uv, "texel": texel, "cutout": cutout, "params": params,
+            "normal_map": normal_map, "tangent": tangent, "glow": glow,
+            "material_base": material_base}
 
 
 def _no_textures():

@@ -53,7 +53,7 @@ from .gpu_ltc import DEFINES as LTC_DEFINES
 from .gpu_ltc import ltc_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
-from .gpu_shaders import LOCAL_SIZE, build_compute
+from .gpu_shaders import LOCAL_SIZE, build_compute, note_upload
 from .gpu_tracer import read_texture
 from .gpu_volume import float_texture
 
@@ -231,28 +231,44 @@ class GPUBVH:
 
     def update(self, tris) -> GPUBVH:
         """Upload the BVH of ``tris`` unless the uploaded one is of the same triangles."""
-        self.uploaded_bytes = 0
+        for _ in self.upload_steps(tris, self.pack(tris)):
+            pass
+        return self
+
+    def pack(self, tris):
+        """(the packed BVH textures of ``tris``, ``scene.bvh.pack_bvh``; seconds to build
+        them), or None when the uploaded BVH is of the same triangles. CPU only (numpy): the
+        viewport packs on the worker thread and uploads with ``upload_steps``."""
         if self._unchanged(tris):
-            self._tris = tris
-            return self
+            return None
         t0 = time.perf_counter()
         packed = pack_bvh(build_scene_bvh(tris), tris)  # built once per instanced mesh
-        self.build_seconds = time.perf_counter() - t0
+        return packed, time.perf_counter() - t0
 
-        def upload(texels):
+    def upload_steps(self, tris, packed):
+        """Upload ``packed`` (``pack(tris)``) a texture per step (a generator: nodes, triangles,
+        normals), the BVH switching to them at the last; None (unchanged): only remember
+        ``tris``. Main thread."""
+        self.uploaded_bytes = 0
+        if packed is None:
+            self._tris = tris
+            return
+        packed, seconds = packed
+
+        def upload(texels, part):
+            note_upload(part)
             return float_texture(texels, (texels.shape[1], texels.shape[0]))
 
-        self.nodes = upload(packed.nodes)
-        self.triangles = upload(packed.triangles)
-        self.normals = upload(packed.normals)
+        nodes = upload(packed.nodes, "bvh nodes")
+        yield
+        triangles = upload(packed.triangles, "bvh triangles")
+        yield
+        self.normals = upload(packed.normals, "bvh normals")
+        self.nodes, self.triangles = nodes, triangles
+        self.build_seconds = seconds
         self.uploaded_bytes = self.resident_bytes = packed.nbytes
-        cutout = _cutout(tris)
-        self.cutouts = cutout is not None and bool(np.any(cutout))
-        visibility = getattr(tris, "visibility", None)
-        self.hidden = visibility is not None and bool(
-            np.any(~np.asarray(visibility, np.int64) & RAY_ALL))
+        self.cutouts, self.hidden = bvh_features(tris)
         self._tris = tris
-        return self
 
     @property
     def scene_triangles(self):
@@ -264,6 +280,15 @@ class GPUBVH:
         return {"bvh_nodes": self.nodes, "bvh_triangles": self.triangles,
                 "bvh_normals": self.normals, **self.surface, "bvh_cutouts": self.cutouts,
                 "bvh_hidden": self.hidden}
+
+
+def bvh_features(tris) -> tuple[bool, bool]:
+    """(cutouts, hidden) of ``tris``: some triangle is a cut-out / is hidden from some kind of
+    ray — what ``GPUBVH.inputs`` carries to pick the kernels' variant (``bvh_shader``)."""
+    cutout = _cutout(tris)
+    visibility = getattr(tris, "visibility", None)
+    return (cutout is not None and bool(np.any(cutout)),
+            visibility is not None and bool(np.any(~np.asarray(visibility, np.int64) & RAY_ALL)))
 
 
 def _cutout(tris):

@@ -145,9 +145,19 @@ def relax_gpu(layout, cache_texture, records, rays: int):
     return out
 
 
+def cache_layout(tris, settings):
+    """The CPU half of ``cache_stages`` (numpy only, any thread: the viewport makes it on its
+    preparing thread): (the cache's voxels ``build_cache``, its face points and axes ``face_points``, its
+    layout texels ``cache_texels(layout=True)``) for ``tris`` (``SceneTriangles``)."""
+    cache = build_cache(tris, settings.cache_resolution, rays=settings.cache_rays,
+                        focus=settings.cache_focus)
+    points, axes = face_points(cache)
+    return cache, points, axes, cache_texels(cache, layout=True) if len(points) else None
+
+
 def cache_stages(bvh, lights, principled, emission, settings, tables=None,
                  budget: float = CACHE_STAGE_SECONDS, first_rows: int = 1,
-                 read_back: bool = True):
+                 read_back: bool = True, layout=None):
     """Generator of the radiance cache of ``settings.bounces`` − 1 iterations, yielding after
     each stage; returns (cache, texture). As numpy's ``radiance_cache.cached_cache``: every
     voxel face's ``settings.cache_rays`` rays (``face_points``, sample id = the face's row,
@@ -157,10 +167,9 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     lookup pass over the records writing the next cache texture (``relax_gpu``); the faces
     are read back once, at the end — or, read_back False (the viewport, whose Accurate
     gathers read the texture only), the cache is returned as a function that reads them
-    back when called (Fast's voxels reflect the numpy cache)."""
-    cache = build_cache(bvh.scene_triangles, settings.cache_resolution, rays=settings.cache_rays,
-                        focus=settings.cache_focus)
-    points, axes = face_points(cache)
+    back when called (Fast's voxels reflect the numpy cache). layout : ``cache_layout`` of the
+    BVH's triangles made already (None: made here)."""
+    cache, points, axes, texels = layout or cache_layout(bvh.scene_triangles, settings)
     count = len(points)
     if count == 0:  # nothing to light
         cache = with_faces(cache, np.zeros((0, 3)))
@@ -197,7 +206,6 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
         top = end
         rows = max(1, min(record_rows, int(rows * min(4.0, budget / max(seconds, 1e-4)))))
         yield
-    texels = cache_texels(cache, layout=True)
     layout = float_texture(texels, (texels.shape[1], texels.shape[0]))
     yield
     previous = float_texture(blank, (1, 1))  # the empty cache: the records' own radiance
@@ -303,13 +311,9 @@ def upsample(values, gbuffer_inputs, stride: int, width: int, height: int, secon
     if stride == 1:
         return values if second is None else (values, second)
     pair = second is not None
-    key = "upsample_pair" if pair else "upsample"
     samplers = _UPSAMPLE_SAMPLERS + (("low_image2",) if pair else ())
     outputs = ("out_image", "out_image2") if pair else ("out_image",)
-    if key not in _shaders:
-        _shaders[key] = build_compute(("pixels", "upsample"), samplers, ("sampling",), outputs,
-                                      {"UPSAMPLE_PAIR": "1"} if pair else None)
-    shader = _shaders[key]
+    shader = _upsample_shader(pair)
     out = [gpu.types.GPUTexture((width, height), format="RGBA32F") for _ in outputs]
     inputs = {**gbuffer_inputs, "low_image": values, "low_image2": second}
     shader.bind()
@@ -320,6 +324,16 @@ def upsample(values, gbuffer_inputs, stride: int, width: int, height: int, secon
         shader.image(name, texture)
     gpu.compute.dispatch(shader, math.ceil(width / LOCAL_SIZE), math.ceil(height / LOCAL_SIZE), 1)
     return tuple(out) if pair else out[0]
+
+
+def _upsample_shader(pair: bool):
+    key = "upsample_pair" if pair else "upsample"
+    if key not in _shaders:
+        samplers = _UPSAMPLE_SAMPLERS + (("low_image2",) if pair else ())
+        outputs = ("out_image", "out_image2") if pair else ("out_image",)
+        _shaders[key] = build_compute(("pixels", "upsample"), samplers, ("sampling",), outputs,
+                                      {"UPSAMPLE_PAIR": "1"} if pair else None, name=key)
+    return _shaders[key]
 
 
 def gather_low(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
@@ -365,12 +379,7 @@ def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: 
     direct : that light's Diffuse Direct texture; an RGBA32F texture (bottom row first).
     materials : the ``principled_materials_texture`` of ``principled`` and ``emission`` made
     already (None: made here)."""
-    if "glossy" not in _shaders:
-        defines = {**PRINCIPLED_DEFINES, "AREA_GLOSSY_GRID": str(AREA_GLOSSY_GRID),
-                   "GLOSSY_LIGHT_STREAM": f"{GLOSSY_LIGHT_STREAM}u"}
-        _shaders["glossy"] = build_compute(("sampling", "principled", "glossy_direct"),
-                                           _GLOSSY_SAMPLERS, ("light",), ("out_image",), defines)
-    shader = _shaders["glossy"]
+    shader = _glossy_shader()
     out = gpu.types.GPUTexture((direct.width, direct.height), format="RGBA32F")
     inputs = {**gbuffer_inputs, "direct_image": direct, "lights": lights_texture_,
               "materials": materials if materials is not None else
@@ -384,6 +393,15 @@ def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: 
     gpu.compute.dispatch(shader, math.ceil(direct.width / LOCAL_SIZE),
                          math.ceil(direct.height / LOCAL_SIZE), 1)
     return out
+
+
+def _glossy_shader():
+    if "glossy" not in _shaders:
+        defines = {**PRINCIPLED_DEFINES, "AREA_GLOSSY_GRID": str(AREA_GLOSSY_GRID),
+                   "GLOSSY_LIGHT_STREAM": f"{GLOSSY_LIGHT_STREAM}u"}
+        _shaders["glossy"] = build_compute(("sampling", "principled", "glossy_direct"),
+                                           _GLOSSY_SAMPLERS, ("light",), ("out_image",), defines)
+    return _shaders["glossy"]
 
 
 def release() -> None:

@@ -38,7 +38,7 @@ from ..voxgi_addon.preview.passes import (
 )
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
 from ..voxgi_addon.scene.glass import is_glass
-from .gbuffer import gbuffer_shader, rasterize, read_gbuffer, vertex_batch
+from .gbuffer import gbuffer_shader, rasterize, rasterize_stages, read_gbuffer, vertex_batch
 from .gpu_accumulation import SUM_NAMES, GPUSums
 from .gpu_bvh import emitter_glossy_texture, emitters_unshadowed_texture
 from .gpu_compose import COMPACT_SAMPLERS as _COMPACT_SAMPLERS
@@ -76,7 +76,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                          glossy_indirect: bool = True,
                          filter_width: float = DEFAULT_FILTER_WIDTH,
                          gpu_scene: GPUScene | None = None, gather_hook=None, raster=None,
-                         cache_source=None, on_gpu: bool = False):
+                         cache_source=None, on_gpu: bool = False, batch=None):
     """A generator that yields between the GPU stages (G-buffer, each gather, each light's
     direct light, each sub-pixel pass, …) and returns (passes, timings) like
     ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
@@ -101,6 +101,9 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     (``gpu_accumulation.GPUSums``, read by nothing on the CPU) instead of the passes: the
     viewport's slices, which add them to their sums on the GPU. Otherwise the passes, as
     always.
+    batch : Accurate: the vertex batch of the scene's triangles for ``raster`` that the caller
+    keeps (the viewport's ``gbuffer.ChunkedBatch``, sent a chunk per draw); None: made here for
+    this render (``gbuffer.vertex_batch``).
     The viewport's slices run the stages over several draws (``progressive``); the textures
     live in the generator between them, so nothing but its own next stage runs in a draw."""
     check_request(snapshot, width, height, gi_stride, quality)
@@ -113,7 +116,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                  gather_settings or GatherSettings(ao_distance=cones.ao_distance),
                  glossy_indirect, filter_width, scene)
         front, timings = yield from _accurate_stages(snapshot, *layer, gather_hook, raster,
-                                                     cache_source, on_gpu=on_gpu)
+                                                     cache_source, on_gpu=on_gpu, batch=batch)
         glass = transmission.glass_materials(snapshot, scene.tris)
         if glass is None:
             return front, timings
@@ -206,7 +209,8 @@ def _sums_of(texel):
 
 def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_settings,
                      glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
-                     cache_source=None, camera_tris=None, only=None, on_gpu=False):
+                     cache_source=None, camera_tris=None, only=None, on_gpu=False,
+                     batch=None):
     """Accurate quality on the GPU: the gathers and the emitters' glossy light and exact
     unshadowed Diffuse Direct from the pixel centres' G-buffer, then one rasterized G-buffer,
     direct light (``bvh_direct``, a block of the shadow-ray strata) and glossy light of the
@@ -233,10 +237,14 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     plan = subpixel_passes(filter_width, light_samples)
     raster = raster or gbuffer_shader()  # this context's, for its G-buffers
     seen_tris = tris if camera_tris is None else camera_tris
-    # one vertex batch for every G-buffer of this render (gbuffer.vertex_batch)
-    batch = vertex_batch(seen_tris, rough, raster, scene.raster_textures() is not None)
-    centre = rasterize(seen_tris, snapshot.camera, rough, width, height, shader=raster,
-                       textures=scene.raster_textures(), filter_width=filter_width, batch=batch)
+    # one vertex batch for every G-buffer of this render (gbuffer.vertex_batch), or the
+    # caller's of the scene's triangles
+    if batch is None or camera_tris is not None:
+        batch = vertex_batch(seen_tris, rough, raster, scene.raster_textures() is not None)
+    # (the viewport's chunked batch: a stage per chunk in view, gbuffer.rasterize_stages)
+    centre = yield from rasterize_stages(seen_tris, snapshot.camera, rough, width, height,
+                                         shader=raster, textures=scene.raster_textures(),
+                                         filter_width=filter_width, batch=batch)
     if only is not None:  # the other pixels' coverage 0: background to every kernel
         centre.position = _run("aa_mask", _MASK_SAMPLERS, {
             "gbuffer_position": centre.position,

@@ -31,7 +31,9 @@ at exit. Needs a GPU context; main thread only.
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
+import threading
 import time
 
 import bpy
@@ -39,7 +41,7 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.gi.emitters import emitter_table
-from ..voxgi_addon.gi.world_light import scene_lights, world_table
+from ..voxgi_addon.gi.world_light import scene_lights, world_light, world_table
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
 from ..voxgi_addon.preview.passes import material_table, principled_table
 from ..voxgi_addon.scene.bvh import TEXTURE_WIDTH
@@ -48,7 +50,9 @@ from ..voxgi_addon.scene.glass import ray_alpha
 from ..voxgi_addon.scene.textures import pack_atlas
 from .gpu_bvh import GPUBVH, absent_lights, shared_bvh
 from .gpu_gather import no_texture_inputs, principled_materials_texture
+from .gpu_ltc import ltc_texture
 from .gpu_principled import lut_texture
+from .gpu_shaders import note_upload
 from .gpu_volume import float_texture
 
 # What ``uploaded`` names: the parts of a scene.
@@ -129,6 +133,39 @@ def lamp_tables(lights) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
     return only(None), [only(i) for i in range(len(lights))], only(-1)
 
 
+@dataclasses.dataclass
+class ScenePlan:
+    """What ``GPUScene.prepare`` made of a snapshot on the CPU for ``GPUScene.upload_steps``:
+    the scene's keys it was made against (``base``) and its keys after it (``keys``), and for
+    each part whose key changed its tables (None: unchanged)."""
+
+    base: dict
+    keys: dict
+    seconds: dict
+    meshes: dict = dataclasses.field(default_factory=dict)
+    tris: object = None
+    bvh: tuple | None = None          # (GPUBVH, its ``pack``: None when unchanged)
+    rough: object = None
+    emission: object = None
+    principled: object = None
+    textures: str | None = None       # "none": the 1 × 1 stand-ins
+    atlas: object = None
+    texture_table: tuple | None = None  # (texels, rows)
+    materials: tuple | None = None    # principled_materials_texture's arguments
+    lamps: tuple | None = None        # lamp_tables
+    lights: list = dataclasses.field(default_factory=list)
+    world: object = None              # world_table
+    emitters: object = None           # emitter_table
+
+    @property
+    def parts(self) -> int:
+        """Scene parts ``upload_steps`` will send at most (the BVH's three textures each)."""
+        return (sum(x is not None for x in (self.textures, self.atlas, self.texture_table,
+                                            self.materials, self.lamps, self.world,
+                                            self.emitters))
+                + (3 if self.bvh is not None and self.bvh[1] is not None else 0) + 1)
+
+
 class GPUScene:
     """The GPU-side scene of the latest snapshot (see the module doc).
 
@@ -153,6 +190,7 @@ class GPUScene:
         self.uploaded: dict[str, int] = {}
         self.seconds: dict[str, float] = {}
         self._meshes: dict[int, tuple[object, str]] = {}  # id(MeshData) → (it, its digest)
+        self.serial = 0  # bumped by every upload_steps: an older one still running then stops
 
     @property
     def uploaded_bytes(self) -> int:
@@ -168,6 +206,12 @@ class GPUScene:
         kind, armature, matrix), their meshes' arrays (UVs included) and the armatures, and
         the materials' per-texel textures (``SceneTriangles.textures``, where the snapshot
         has them). Whatever ``world_triangles`` reads must be in here."""
+        key, self._meshes = self._geometry_key(snapshot)  # only this snapshot's meshes stay
+        return key
+
+    def _geometry_key(self, snapshot) -> tuple[str, dict]:
+        """(``geometry_key``, the meshes' digests to keep): reads ``_meshes``, changes
+        nothing (``prepare`` runs it on the worker)."""
         meshes = {}
         for obj in snapshot.objects:
             mesh = snapshot.meshes.get(obj.mesh)
@@ -176,7 +220,6 @@ class GPUScene:
             known = self._meshes.get(id(mesh))
             meshes[id(mesh)] = known if known is not None and known[0] is mesh else \
                 (mesh, _mesh_digest(mesh))
-        self._meshes = meshes  # only this snapshot's meshes stay referenced
         objects = tuple(
             (o.name, o.mesh, o.kind, o.armature, np.asarray(o.world_matrix, np.float64),
              getattr(o, "visibility", None), getattr(o, "holdout", None),
@@ -191,141 +234,158 @@ class GPUScene:
                            ray_alpha(m, getattr(snapshot, "refractive_caustics", True)))
                           for m in snapshot.materials),
                     tuple(_texture_key(t) for t in getattr(snapshot, "textures", ())))
-        return digest(objects, armatures, textures, tuple(getattr(snapshot, "holdout_materials", ())))
+        return digest(objects, armatures, textures,
+                      tuple(getattr(snapshot, "holdout_materials", ()))), meshes
+
+    def cheap(self, snapshot) -> bool:
+        """Whether ``prepare(snapshot)`` is cheap (about a millisecond): the triangles and
+        the world are the uploaded ones (a lamp, a material or the view changed), so no
+        triangles, BVH, texture atlas or world table are built. Main thread (it reads the
+        meshes' digests)."""
+        if self.tris is None or "world" not in self.keys:
+            return False
+        if self._geometry_key(snapshot)[0] != self.keys.get("geometry"):
+            return False
+        world = snapshot.world
+        key = None if world.radiance is None else (world.key or digest(world.radiance))
+        return key == self.keys["world"][0]
 
     # ------------------------------------------------------------------ update
 
     def update(self, snapshot) -> GPUScene:
         """Make the scene ``snapshot``'s: rebuild and upload the parts whose content changed
         (``uploaded`` says which). The triangles may be empty (nothing is then built for them;
-        the caller decides what an empty scene means)."""
-        self.uploaded = {}
-        self.bvh = self._own_bvh or shared_bvh()  # gpu_bvh.release may have made a new one
-        t0 = time.perf_counter()
-        geometry = self.geometry_key(snapshot)
-        geometry_changed = geometry != self.keys.get("geometry") or self.tris is None
-        if geometry_changed:
-            self.tris = world_triangles(snapshot)
-            self.keys["geometry"] = geometry
-        if len(self.tris):
-            # identity check first (free); another user of the shared BVH (the Fast path) may
-            # have uploaded other triangles since, which a content comparison then catches
-            self.bvh.update(self.tris)
-            self.bvh.surface = {}
-            if self.bvh.uploaded_bytes:
-                self._sent("bvh", self.bvh.uploaded_bytes)
-                self.seconds["bvh"] = time.perf_counter() - t0
+        the caller decides what an empty scene means). ``prepare`` and ``upload_steps`` in
+        one call."""
+        for _ in self.upload_steps(self.prepare(snapshot)):
+            pass
+        return self
 
+    def prepare(self, snapshot, on_geometry=None) -> ScenePlan:
+        """The CPU half of ``update``: the content keys of ``snapshot``'s parts and, for those
+        that differ from the uploaded ones, their tables (world-space triangles, packed BVH,
+        texture atlas, material, light, world and emitter tables) — numpy only, nothing sent to
+        the GPU and nothing of the scene changed, so it may run on the worker thread while the
+        main thread draws (the viewport: docs/gi_pipeline.md "Entering Rendered mode").
+        on_geometry : called with (triangles, roughness table, textured, ``principled_table``)
+        as soon as those are known, before the BVH is built (the viewport's vertex arrays)."""
+        keys, seconds = dict(self.keys), {}
+        plan = ScenePlan(base=dict(self.keys), keys=keys, seconds=seconds)
+        world = snapshot.world
+        world_key = None if world.radiance is None else (world.key or digest(world.radiance))
+        lighting = None
+        if world_key is not None and world_key != (keys.get("tail") or (None,) * 3)[2]:
+            # a new world's light (its irradiance table: 0.5–0.9 s of numpy) is built on a
+            # second thread meanwhile; scene_lights below finds it in world_light's cache
+            lighting = threading.Thread(target=world_light, args=(world,), daemon=True)
+            lighting.start()
         t0 = time.perf_counter()
+        geometry, plan.meshes = self._geometry_key(snapshot)
+        tris = self.tris
+        if geometry != keys.get("geometry") or tris is None:
+            tris = world_triangles(snapshot)
+            keys["geometry"] = geometry
+        plan.tris = tris
         _, rough, _, emission = material_table(snapshot)
         principled = principled_table(snapshot)
-        self._update_textures(geometry)
-        if getattr(self.tris.textures, "cutout", None) is not None:
-            self.bvh.surface = dict(self.textures)  # cut-outs read their Alpha there
-        t0 = time.perf_counter()
-        surface = getattr(self.tris, "textures", None)
+        surface = getattr(tris, "textures", None)
+        if on_geometry is not None:
+            on_geometry(tris, rough, surface is not None, principled)
+        seconds["geometry"] = time.perf_counter() - t0
+        if len(tris):
+            # identity check first (free); another user of the shared BVH (the Fast path) may
+            # have uploaded other triangles since, which a content comparison then catches
+            t0 = time.perf_counter()
+            bvh = self._own_bvh or shared_bvh()  # gpu_bvh.release may have made a new one
+            plan.bvh = (bvh, bvh.pack(tris))
+            if plan.bvh[1] is not None:
+                seconds["bvh"] = time.perf_counter() - t0
+        self._prepare_textures(plan, tris, geometry)
+        slots = None if surface is None else surface.slots
         variants = (None, None) if surface is None else (surface.param_slots, surface.variants)
         glow = (None, None) if surface is None else \
             (surface.emission_slots, surface.emission_strength)
-        materials = digest(rough, emission, *principled, self.slots, *variants, *glow)
-        materials_changed = materials != self.keys.get("materials")
-        if materials_changed:
-            self.rough, self.emission, self.principled = rough, emission, principled
-            self.materials = principled_materials_texture(principled, emission, self.slots,
-                                                          variants, glow)
-            self._sent("materials", 5 * len(principled[0]) * 16)
-            self.keys["materials"] = materials
-            self.seconds["materials"] = time.perf_counter() - t0
-        lut = lut_texture()  # constant; cached by gpu_principled
-        if lut is not self.lut:
-            self.lut = lut
-            self._sent("constants", lut.width * lut.height * 16)
-        if self.no_world is None:
-            none = (world_table(None, 0), emitter_table(None, 0))
-            self.no_world, self.no_emitters = (_table_texture(table) for table in none)
-            self._sent("constants", sum(_texture_bytes(table) for table in none))
+        materials = digest(rough, emission, *principled, slots, *variants, *glow)
+        plan.rough, plan.emission, plan.principled = rough, emission, principled
+        if materials != keys.get("materials"):
+            plan.materials = (principled, emission, slots, variants, glow)
+            keys["materials"] = materials
 
         t0 = time.perf_counter()
         lamps = list(snapshot.lights)
         every, each, none = lamp_tables(lamps)
         lamp_key = digest(len(lamps), every)
-        if lamp_key != self.keys.get("lights"):
-            self.lamp_table = _table_texture(every)
-            self.lamp_tables = [_table_texture(table) for table in each]
-            self.no_lamp = _table_texture(none)
-            self._sent("lights", sum(_texture_bytes(t) for t in (every, *each, none)))
-            self.keys["lights"] = lamp_key
-            self.seconds["lights"] = time.perf_counter() - t0
+        if lamp_key != keys.get("lights"):
+            plan.lamps = (every, each, none)
+            keys["lights"] = lamp_key
+            seconds["lights"] = time.perf_counter() - t0
 
         # the world and the emitters follow the lamps in the lights list; their streams are
         # their indices there
         t0 = time.perf_counter()
-        world = snapshot.world
-        world_key = None if world.radiance is None else (world.key or digest(world.radiance))
         tail_key = (geometry, materials, world_key)
-        if tail_key != self.keys.get("tail"):
-            self._tail = scene_lights(snapshot, self.tris, emission)[len(lamps):]
-            self.keys["tail"] = tail_key
-        self.lights = lamps + self._tail
-        found = {light.type: (light, index) for index, light in enumerate(self.lights)
+        tail = self._tail
+        if lighting is not None:
+            lighting.join()
+        if tail_key != keys.get("tail"):
+            tail = scene_lights(snapshot, tris, emission)[len(lamps):]
+            keys["tail"] = tail_key
+        plan.lights = lamps + tail
+        found = {light.type: (light, index) for index, light in enumerate(plan.lights)
                  if light.type in ("WORLD", "EMITTERS")}
-        world_light, stream = found.get("WORLD", (None, 0))
+        sky, stream = found.get("WORLD", (None, 0))
         key = (world_key, stream)
-        if key != self.keys.get("world"):
-            table = world_table(world_light, stream)
-            self.world_map = _table_texture(table)
-            self._sent("world", _texture_bytes(table))
-            self.keys["world"] = key
-            self.seconds["world"] = time.perf_counter() - t0
+        if key != keys.get("world"):
+            plan.world = world_table(sky, stream)
+            keys["world"] = key
+            seconds["world"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         emitters, stream = found.get("EMITTERS", (None, 0))
         key = (geometry, materials, stream)
-        if key != self.keys.get("emitters_source"):
+        if key != keys.get("emitters_source"):
             table = emitter_table(emitters, stream)
             content = digest(table)
-            if content != self.keys.get("emitters"):  # e.g. a non-emissive object moved
-                self.emitters = _table_texture(table)
-                self._sent("emitters", _texture_bytes(table))
-                self.keys["emitters"] = content
-                self.seconds["emitters"] = time.perf_counter() - t0
-            self.keys["emitters_source"] = key
-        return self
+            if content != keys.get("emitters"):  # e.g. a non-emissive object moved
+                plan.emitters = table
+                keys["emitters"] = content
+                seconds["emitters"] = time.perf_counter() - t0
+            keys["emitters_source"] = key
+        return plan
 
-    def _update_textures(self, geometry: str) -> None:
-        """The ``textures`` part, two textures (the gathers' kernels have one sampler to spare
-        per stage, not three): ``texture_atlas``, every level of every texture
-        (``scene.textures.pack_atlas``; RGBA16F, as the numpy pyramids hold half floats), and
-        ``texture_table``, RGBA32F BVH_WIDTH wide: row s = texture s's table row, then from
-        the row its texel (BVH_WIDTH − 1, 0) names, the triangles' corner UVs (2 texels per
-        triangle index: (uv0, uv1), (uv2, alpha texture or -1, alpha value): ``textures.glsl``
-        ``bvh_cutout_counts``). Keyed by the textures' content and the geometry (which holds
-        the materials' texture indices and alphas); 1 × 1 stand-ins without textures."""
+    def _prepare_textures(self, plan: ScenePlan, tris, geometry: str) -> None:
+        """The ``textures`` part's tables for ``plan``, two textures (the gathers' kernels
+        have one sampler to spare per stage, not three): ``texture_atlas``, every level of
+        every texture (``scene.textures.pack_atlas``; RGBA16F, as the numpy pyramids hold half
+        floats), and ``texture_table``, RGBA32F BVH_WIDTH wide: row s = texture s's table row,
+        then from the row its texel (BVH_WIDTH − 1, 0) names, the triangles' corner UVs (2
+        texels per triangle index: (uv0, uv1), (uv2, alpha texture or -1, alpha value):
+        ``textures.glsl`` ``bvh_cutout_counts``). Keyed by the textures' content and the
+        geometry (which holds the materials' texture indices and alphas); 1 × 1 stand-ins
+        without textures."""
         t0 = time.perf_counter()
-        surface = getattr(self.tris, "textures", None) if self.tris is not None else None
+        keys = plan.keys
+        surface = getattr(tris, "textures", None) if tris is not None else None
         if surface is None:
-            if self.keys.get("textures") != "none":
-                self.textures, self.slots = no_texture_inputs(), None
-                self.keys["textures"] = "none"
-                self.keys.pop("texture_table", None)
+            if keys.get("textures") != "none":
+                plan.textures = "none"
+                keys["textures"] = "none"
+                keys.pop("texture_table", None)
             return
-        self.slots = surface.slots
         key = digest(tuple((t.key or digest(t.pixels), t.interpolation, t.extension,
                             np.asarray(t.uv_transform, np.float64)) for t in surface.textures))
         atlas = table = None
-        if key != self.keys.get("textures"):
+        if key != keys.get("textures"):
             atlas, table = pack_atlas(surface.textures)
-            self.textures = {**self.textures, "texture_atlas": float_texture(
-                atlas, (atlas.shape[1], atlas.shape[0]), "RGBA16F")}
-            self._sent("textures", atlas.size * 2)
-            self.keys["textures"] = key
-        if (key, geometry) != self.keys.get("texture_table"):
+            plan.atlas = atlas
+            keys["textures"] = key
+        if (key, geometry) != keys.get("texture_table"):
             if table is None:
                 table = pack_atlas(surface.textures)[1]
             uvs = np.asarray(surface.uvs, np.float32).reshape(-1, 6)
             texels = np.zeros((len(uvs), 2, 4), np.float32)
             texels[:, 0], texels[:, 1, :2] = uvs[:, :4], uvs[:, 4:]
             if surface.alpha_slots is not None:
-                row = surface.row_of(self.tris.materials)
+                row = surface.row_of(tris.materials)
                 texels[:, 1, 2] = surface.alpha_slots[row]
                 texels[:, 1, 3] = surface.alpha_values[row]
             flat = texels.reshape(-1, 4)
@@ -336,11 +396,124 @@ class GPUScene:
             grid[:head, :table.shape[1]] = table
             grid[0, TEXTURE_WIDTH - 1, 0] = head
             out[head * TEXTURE_WIDTH:head * TEXTURE_WIDTH + len(flat)] = flat
-            self.textures = {**self.textures,
-                             "texture_table": float_texture(out, (TEXTURE_WIDTH, rows))}
-            self._sent("textures", out.nbytes)
-            self.keys["texture_table"] = (key, geometry)
-        self.seconds["textures"] = time.perf_counter() - t0
+            plan.texture_table = (out, rows)
+            keys["texture_table"] = (key, geometry)
+        plan.seconds["textures"] = time.perf_counter() - t0
+
+    def upload_steps(self, plan: ScenePlan):
+        """The GPU half of ``update``: send what ``plan`` (``prepare``) rebuilt, a part per
+        step (a generator: the texture atlas, the texture table, the materials, the constants,
+        the BVH's three textures, the lamps' tables, the world, the emitters; each counted by
+        ``gpu_shaders.note_upload``), then make the scene the plan's at once, so a scene left
+        between two steps is still the previous one throughout. Main thread. A plan prepared
+        against other keys than the scene's (another update came first) is dropped, and so is
+        this one when another ``upload_steps`` (F12's update) starts before it ends:
+        ``keys == plan.keys`` afterwards says whether it went in."""
+        self.serial += 1
+        serial = self.serial
+        self.uploaded = {}
+        if plan.base != self.keys:
+            return  # stale: prepared against another state of the scene
+        seconds = plan.seconds
+        new: dict[str, object] = {}
+        sent: dict[str, int] = {}
+
+        def send(part: str, nbytes: int) -> None:
+            note_upload(part)
+            sent[part] = sent.get(part, 0) + int(nbytes)
+
+        textures = dict(self.textures)
+        if plan.textures == "none":
+            textures = no_texture_inputs()
+            send("textures", 32)
+            yield
+        if plan.atlas is not None:
+            atlas = plan.atlas
+            textures["texture_atlas"] = float_texture(atlas, (atlas.shape[1], atlas.shape[0]),
+                                                      "RGBA16F")
+            send("textures", atlas.size * 2)
+            yield
+        if plan.texture_table is not None:
+            if serial != self.serial:
+                return
+            out, rows = plan.texture_table
+            textures["texture_table"] = float_texture(out, (TEXTURE_WIDTH, rows))
+            send("textures", out.nbytes)
+            yield
+        if plan.materials is not None:
+            if serial != self.serial:
+                return
+            t0 = time.perf_counter()
+            principled, emission, slots, variants, glow = plan.materials
+            new["materials"] = principled_materials_texture(principled, emission, slots,
+                                                            variants, glow)
+            send("materials", 5 * len(principled[0]) * 16)
+            seconds["materials"] = seconds.get("materials", 0.0) + time.perf_counter() - t0
+            yield
+        lut = lut_texture()  # constant; cached by gpu_principled
+        if lut is not self.lut or self.no_world is None:
+            if serial != self.serial:
+                return
+            new["lut"] = lut
+            nbytes = lut.width * lut.height * 16
+            if self.no_world is None:
+                none = (world_table(None, 0), emitter_table(None, 0))
+                new["no_world"], new["no_emitters"] = (_table_texture(table) for table in none)
+                nbytes += sum(_texture_bytes(table) for table in none)
+            ltc_texture()  # the glossy kernels' constant table (cached by gpu_ltc)
+            send("constants", nbytes)
+            yield
+        bvh = self._own_bvh or shared_bvh()  # gpu_bvh.release may have made a new one
+        if plan.bvh is not None:
+            t0 = time.perf_counter()
+            bvh, packed = plan.bvh
+            # the BVH knows its own triangles (a content check): it may go in on its own
+            for _ in bvh.upload_steps(plan.tris, packed):
+                yield
+                if serial != self.serial:
+                    return
+            if bvh.uploaded_bytes:
+                sent["bvh"] = bvh.uploaded_bytes
+                seconds["bvh"] = seconds.get("bvh", 0.0) + time.perf_counter() - t0
+                yield
+        if plan.lamps is not None:
+            if serial != self.serial:
+                return
+            every, each, none = plan.lamps
+            new["lamp_table"] = _table_texture(every)
+            new["lamp_tables"] = [_table_texture(table) for table in each]
+            new["no_lamp"] = _table_texture(none)
+            send("lights", sum(_texture_bytes(t) for t in (every, *each, none)))
+            yield
+        if plan.world is not None:
+            if serial != self.serial:
+                return
+            new["world_map"] = _table_texture(plan.world)
+            send("world", _texture_bytes(plan.world))
+            yield
+        if plan.emitters is not None:
+            if serial != self.serial:
+                return
+            new["emitters"] = _table_texture(plan.emitters)
+            send("emitters", _texture_bytes(plan.emitters))
+        if serial != self.serial:
+            return
+        # the plan's scene, all at once
+        for name, value in new.items():
+            setattr(self, name, value)
+        self.textures = textures
+        self.bvh = bvh
+        self.tris, self._meshes = plan.tris, plan.meshes
+        self.rough, self.emission, self.principled = plan.rough, plan.emission, plan.principled
+        surface = getattr(self.tris, "textures", None)
+        self.slots = None if surface is None else surface.slots
+        self.bvh.surface = dict(textures) if getattr(surface, "cutout", None) is not None \
+            else {}  # cut-outs read their Alpha there
+        self.lights = plan.lights
+        self._tail = plan.lights[len(self.lamp_tables):]
+        self.keys = dict(plan.keys)
+        self.uploaded = sent
+        self.seconds.update(seconds)
 
     @property
     def textured(self) -> bool:

@@ -3,10 +3,18 @@
 Sources live in ``shaders/``: ``cone_common.glsl`` (the march, a port of
 ``voxgi_addon/conetrace.py``) is prepended to each kernel; the parameter-table rows of
 ``voxgi_addon/trace_params`` come in as defines. Needs a GPU context.
+
+Every shader of the add-on is made through ``create_shader`` (the compute kernels here, the
+G-buffer raster in ``gbuffer.py``), and every scene part sent to the GPU is noted with
+``note_upload``: ``counters`` counts both, so the viewport can keep to one compile and one scene
+part per draw and the tests can count them per draw (docs/gi_pipeline.md "Entering Rendered
+mode").
 """
 from __future__ import annotations
 
+import dataclasses
 import pathlib
+import time
 
 import gpu
 
@@ -30,6 +38,51 @@ PUSH_CONSTANTS = {"shadow": ("light_position", "light_size"), "diffuse_ao": ("sa
                   "glossy": ("sampling",), "upsample": ("sampling",),
                   "probe_bake": ("sampling", "world"), "probe_sh": ("sampling",)}
 _cache: dict[str, object] = {}
+
+
+@dataclasses.dataclass
+class Counters:
+    """Shader compiles and scene-part uploads since the process started (``compiles``,
+    ``uploads``), the names of the last ones (``compiled``, ``uploaded``: tests and the
+    benchmark read the deltas around a draw) and each compile's seconds by name."""
+
+    compiles: int = 0
+    uploads: int = 0
+    compiled: list = dataclasses.field(default_factory=list)
+    uploaded: list = dataclasses.field(default_factory=list)
+    compile_seconds: dict = dataclasses.field(default_factory=dict)
+
+    def mark(self) -> tuple[int, int]:
+        """(compiles, uploads) now: ``since`` gives what happened after."""
+        return self.compiles, self.uploads
+
+    def since(self, mark: tuple[int, int]) -> tuple[list, list]:
+        """(shader names compiled, scene parts uploaded) after ``mark``."""
+        return (self.compiled[len(self.compiled) - (self.compiles - mark[0]):],
+                self.uploaded[len(self.uploaded) - (self.uploads - mark[1]):])
+
+
+counters = Counters()
+_KEEP = 4096  # names kept in ``counters`` (the counts go on)
+
+
+def create_shader(info, name: str):
+    """``gpu.shader.create_from_info(info)``, counted in ``counters`` as ``name``."""
+    t0 = time.perf_counter()
+    shader = gpu.shader.create_from_info(info)
+    counters.compile_seconds[name] = time.perf_counter() - t0
+    counters.compiles += 1
+    counters.compiled.append(name)
+    del counters.compiled[:-_KEEP]
+    return shader
+
+
+def note_upload(part: str) -> None:
+    """Count one scene part sent to the GPU (``gpu_scene``, ``gpu_bvh``, the viewport's vertex
+    batch)."""
+    counters.uploads += 1
+    counters.uploaded.append(part)
+    del counters.uploaded[:-_KEEP]
 
 
 def kernel_source(kernel: str) -> str:
@@ -58,17 +111,17 @@ def compute_shader(kernel: str):
             info.push_constant("VEC4", name)
         info.image(0, "RGBA32F", "FLOAT_2D", "out_image", qualifiers={"WRITE"})
         info.compute_source(kernel_source(kernel))
-        _cache[key] = gpu.shader.create_from_info(info)
+        _cache[key] = create_shader(info, f"cone {kernel}")
     return _cache[key]
 
 
 def build_compute(files: tuple[str, ...], samplers: tuple[str, ...], constants: tuple[str, ...],
                   outputs: tuple[str, ...] = ("out_image",), defines: dict[str, str] | None = None,
-                  read_write: tuple[str, ...] = ()):
+                  read_write: tuple[str, ...] = (), name: str | None = None):
     """A compute shader from ``shaders/<file>.glsl`` sources in order: 2D float ``samplers``,
     VEC4 push ``constants``, write-only RGBA32F 2D images ``outputs``, ``defines``, and
     read-write RGBA32F 2D images ``read_write`` (image slots after the outputs'); work groups
-    of LOCAL_SIZE × LOCAL_SIZE."""
+    of LOCAL_SIZE × LOCAL_SIZE. name : what ``counters`` calls it (the last file's name)."""
     info = gpu.types.GPUShaderCreateInfo()
     info.local_group_size(LOCAL_SIZE, LOCAL_SIZE, 1)
     for name, value in (defines or {}).items():
@@ -81,8 +134,8 @@ def build_compute(files: tuple[str, ...], samplers: tuple[str, ...], constants: 
         info.image(slot, "RGBA32F", "FLOAT_2D", name, qualifiers={"WRITE"})
     for slot, name in enumerate(read_write, start=len(outputs)):
         info.image(slot, "RGBA32F", "FLOAT_2D", name, qualifiers={"READ", "WRITE"})
-    info.compute_source("".join((SHADER_DIR / f"{name}.glsl").read_text() for name in files))
-    return gpu.shader.create_from_info(info)
+    info.compute_source("".join((SHADER_DIR / f"{file}.glsl").read_text() for file in files))
+    return create_shader(info, name or files[-1])
 
 
 def release() -> None:

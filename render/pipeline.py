@@ -55,17 +55,50 @@ def caches_for(context, snapshot, scene=None, fit=None):
     base_span, count = (fit.base_span, fit.cascade_count) if fit is not None else \
         (settings.base_span, settings.cascade_count)
     known = [c for c in (*session.span_caches, session.caches) if c is not None]
+    caches = pick_caches(known, snapshot, base_span, count)
+    keep_caches(session, caches)
+    return caches
+
+
+def pick_caches(known, snapshot, base_span, count):
+    """The newest of ``known`` caches of that span and count binding every object of
+    ``snapshot``, else new ones voxelized (engine code: safe on the worker)."""
     caches = next((c for c in reversed(known) if _spans_match(c, base_span, count)), None)
-    missing = caches is not None and any(o.name not in caches.bindings for o in snapshot.objects)
-    if caches is None or missing:
+    if caches is None or any(o.name not in caches.bindings for o in snapshot.objects):
         caches = build_scene_caches(snapshot, base_span, count)
+    return caches
+
+
+def keep_caches(session, caches) -> None:
+    """Make ``caches`` the session's current ones, keeping up to ``MAX_SPAN_CACHES`` spans."""
+    known = [c for c in (*session.span_caches, session.caches) if c is not None]
+    stats = caches.cascade_stats
     kept = []
     for c in known:  # other spans, each once (by identity), oldest first
-        if not _spans_match(c, base_span, count) and all(c is not k for k in kept):
+        if not _spans_match(c, stats[0].span, len(stats)) and all(c is not k for k in kept):
             kept.append(c)
     session.span_caches = [*kept, caches][-MAX_SPAN_CACHES:]
     session.caches = caches
-    return caches
+
+
+def refit_on_worker(scene, snapshot):
+    """Auto mode after a first fit: what the worker needs to fit the view again
+    (``refitted_inputs``), so that an update's main-thread share is its snapshot
+    (docs/gi_pipeline.md "Posed updates": the probe rays alone cost tens of ms); None in
+    Manual mode or before any fit (``gi_inputs`` then, on the main thread)."""
+    session = scene_session(scene.name_full)
+    if not is_auto(scene.voxgi) or session.view_fit is None:
+        return None
+    known = tuple(c for c in (*session.span_caches, session.caches) if c is not None)
+    return known, fit_settings(scene.voxgi), session.view_fit, gi_settings(scene.voxgi)
+
+
+def refitted_inputs(snapshot, known, settings, previous, gi):
+    """``gi_inputs`` of Auto mode from ``refit_on_worker``'s values (engine code only: the
+    worker runs it): (caches, GISettings, anchor, fit)."""
+    fit = fit_view(snapshot, settings, previous=previous)
+    caches = pick_caches(known, snapshot, fit.base_span, fit.cascade_count)
+    return caches, replace(gi, resolution=fit.resolution), fit.centre, fit
 
 
 def gi_inputs(context, snapshot, scene=None):

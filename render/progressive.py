@@ -49,7 +49,7 @@ from ..voxgi_addon.preview.progressive import (
 from ..voxgi_addon.scene.view_camera import camera_from_view
 from .gpu_accumulation import GPUAccumulation, read_rgba
 from .gpu_gather_sums import GPUGatherSums
-from .gpu_shaders import LOCAL_SIZE
+from .gpu_shaders import LOCAL_SIZE, counters
 
 SLICE_BUDGET = 0.030  # seconds one view_draw's slice aims at (issue 19)
 STAGE_SHARE = 0.5     # of it, what a call's stages run until, and what the longest stage aims at
@@ -204,7 +204,7 @@ class ProgressiveImage:
     # ------------------------------------------------------------------ tracing
 
     def step(self, trace, view, window, settings, filter_width: float,
-             whole: bool = False) -> Slice | None:
+             whole: bool = False, spent: float = 0.0) -> Slice | None:
         """Run the current key's slice on: its next stages while this call has spent less than
         ``stage_budget`` and the next stage — as long as it was in the last slice of this kind
         — would end within WORK_SHARE of the budget (all of them when ``stage_budget`` is
@@ -212,19 +212,34 @@ class ProgressiveImage:
         a generator of the tracer's stages returning them
         (``gpu_preview.render_passes_stages``). Returns the Slice when it finished in this
         call, a Slice with ``finished`` False while it goes on in the next call, None when the
-        image has converged. whole: run the slice to its end (nothing is shown yet)."""
+        image has converged. whole: run the slice to its end. spent : seconds the draw has
+        spent already (``viewport_prepare``'s steps): a first stage that took the last slice of
+        its kind so long that the draw would end past the work share — or one never timed, past
+        half of it — waits for the next draw.
+        A stage that compiled a shader (``gpu_shaders.counters``: one the kernel warm-up had
+        not) ends the draw's stages."""
         if self.converged or self.accumulation is None:
             return None
-        if self.skip_first and self.stage_budget is not None and not whole:
+        staged = self.stage_budget is not None and not whole
+        if self.skip_first and staged:
             self.skip_first = False  # (``restart``) the next draw of this key starts it
             return Slice("wait", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
-        t0 = time.perf_counter()
+        t0 = time.perf_counter() - spent  # the draw's start
+        kind = "coarse" if self.coarse_pending else "tile"
+        upcoming = self.stage_seconds.get(
+            (kind, self.running_stage if self.running is not None else 0))
+        share = WORK_SHARE * max(self.budget, self.stage_budget or 0.0)
+        if staged and spent > 0.0 and (spent + upcoming > share if upcoming is not None
+                                       else spent > 0.5 * share):
+            return Slice("stage", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
         if self.running is None:
-            self.running_kind = "coarse" if self.coarse_pending else "tile"
+            self.running_kind = kind
             self.running = self._slice(trace, view, window, settings, filter_width)
-            self.running_started, self.longest_stage, self.running_stage = t0, 0.0, 0
+            self.running_started, self.longest_stage, self.running_stage = \
+                time.perf_counter(), 0.0, 0
         while True:
             s0 = time.perf_counter()
+            compiles = counters.compiles
             try:
                 next(self.running)
             except StopIteration as end:
@@ -247,12 +262,13 @@ class ProgressiveImage:
             self.longest_stage = max(self.longest_stage, seconds)
             self.stage_seconds[self.running_kind, self.running_stage] = seconds
             self.running_stage += 1
-            if self.stage_budget is not None and not whole:
+            if staged:
                 # stop at the stage budget, or before a next stage that took the last slice of
-                # this kind so long that this call would end past the work share of the budget
+                # this kind so long that this call would end past the work share of the budget,
+                # or after a stage that compiled a kernel
                 spent = time.perf_counter() - t0
                 upcoming = self.stage_seconds.get((self.running_kind, self.running_stage), 0.0)
-                if spent >= self.stage_budget or \
+                if spent >= self.stage_budget or counters.compiles != compiles or \
                         spent + upcoming > WORK_SHARE * max(self.budget, self.stage_budget):
                     return Slice("stage", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
 
@@ -353,7 +369,8 @@ def gather_hook(sums, rect, gather):
     return hook
 
 
-def tracer(live, volume, settings, staged: bool = False, raster=None, cache_source=None):
+def tracer(live, volume, settings, staged: bool = False, raster=None, cache_source=None,
+           batch=None):
     """``trace(camera, width, height, options)`` → passes: the GPU tracer on what ``live``
     has for the view (``LiveGI.image_source``: Accurate the latest snapshot, Fast the applied
     results) with F12's kernels (``render_passes_gpu``); staged: a generator of its stages that
@@ -362,7 +379,9 @@ def tracer(live, volume, settings, staged: bool = False, raster=None, cache_sour
     shadow rays, no glass: ``gpu_accumulation.GPUSums``, which ``GPUAccumulation.add`` takes
     as it takes passes).
     raster : the G-buffer shader the caller keeps for its GPU context; cache_source :
-    the view's radiance cache built in stages (``viewport_cache.ViewportCache``)."""
+    the view's radiance cache built in stages (``viewport_cache.ViewportCache``); batch : the
+    caller's vertex batch of the scene's triangles for ``raster`` (Accurate; None: one per
+    slice)."""
     from .gpu_preview import render_passes_stages
 
     cones = cone_settings(settings)
@@ -373,7 +392,7 @@ def tracer(live, volume, settings, staged: bool = False, raster=None, cache_sour
         passes, _ = yield from render_passes_stages(snapshot, state, width, height,
                                                     cones, volume=volume, raster=raster,
                                                     cache_source=cache_source, on_gpu=staged,
-                                                    **options)
+                                                    batch=batch, **options)
         return passes
 
     def trace(camera, width, height, options):

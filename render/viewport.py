@@ -1,8 +1,14 @@
 """The VoxGI engine in the 3D view's Rendered mode: ``view_update`` and ``view_draw``.
 
 ``view_update`` hands the depsgraph's updates to the scene's ``LiveGI``
-(``blender/viewport_session.py``), which plans them and runs the CPU stages on the worker.
+(``blender/viewport_session.py``), which plans them and runs the CPU stages on the worker; a
+new snapshot's GPU scene is prepared at once on the view's own thread (``viewport_prepare``).
 ``view_draw`` runs on every redraw and calls ``draw_view``:
+
+0. until the view can trace what it shows — the snapshot's GPU scene sent a part per draw,
+   the vertex batch a chunk per draw, the kernels compiled one per draw (``viewport_prepare``,
+   docs/gi_pipeline.md "Entering Rendered mode") — a draw runs those steps within the budget,
+   shows the quick image (entering Rendered mode) or the last image, and asks for a redraw;
 
 1. the view's camera from ``RegionView3D.view_matrix`` / ``window_matrix`` at
    ``Scene.voxgi_viewport.resolution_fraction`` of the region's size
@@ -42,14 +48,18 @@ import numpy as np
 from gpu_extras.batch import batch_for_shader
 
 from ..blender.settings import cone_settings, gi_stride, pixel_filter_width
-from ..blender.viewport_session import live_gi
+from ..blender.viewport_session import SNAPSHOT_HOOKS, live_gi
 from ..blender.viewport_settings import VIEWPORT_PASSES
 from ..voxgi_addon.scene.view_camera import camera_from_view
+from . import viewport_prepare
 from .gpu_fast import cone_volumes
+from .gpu_scene import current_scene
+from .gpu_shaders import note_upload
 from .gpu_volume import GPUVolume
 from .progressive import SLICE_BUDGET, ProgressiveImage, base_options, tracer
 from .viewport_bounces import FastCacheSource, ViewportBounces
 from .viewport_cache import ViewportCache
+from .viewport_prepare import ViewPreparation
 
 _renderers: "weakref.WeakSet[ViewportRenderer]" = weakref.WeakSet()
 
@@ -87,7 +97,10 @@ class ViewportRenderer:
         #                            "Converged" (traced this draw), "Cached", "Previous", ""
         self.status = ""           # the status line (header, sidebar)
         self.error = ""
-        self.raster = None         # the G-buffer shader, made in this view's GPU context
+        # the G-buffer shader and vertex batch of this view's GPU context, the scene and the
+        # kernels made ready a step per draw, the quick image (viewport_prepare)
+        self.prepare = ViewPreparation()
+        self.quick_key = None      # the view of the quick image shown (None: a GI image)
         self.cache = ViewportCache()  # the radiance cache, built a stage at a time
         self.bounces = ViewportBounces()  # Fast: the voxels with its bounces, made on the worker
         self.bounced = None        # ... those this key's image reflects (None: one bounce)
@@ -97,7 +110,8 @@ class ViewportRenderer:
         self.texture = None
         self.progressive = ProgressiveImage(self.progressive.budget)
         self.volume = GPUVolume()
-        self.raster = None
+        self.prepare.free()
+        self.quick_key = None
         self.cache.free()
         self.bounces.free()
         self.bounced = None
@@ -141,13 +155,55 @@ class ViewportRenderer:
         self.texture = gpu.types.GPUTexture((width, height), format="RGBA32F",
                                             data=gpu.types.Buffer("FLOAT", flat.size, flat))
 
+    @property
+    def raster(self):
+        """The G-buffer raster shader of this view's GPU context (``viewport_prepare``)."""
+        return self.prepare.raster
+
+    def _prepared(self, live, scene, view, window, started: float) -> str:
+        """The steps of this draw toward tracing ``live``'s image source (``viewport_prepare``:
+        the scene, the vertex batch and the kernels, a bounded step per draw; the quick image
+        meanwhile when the view shows no image yet): "" when the view can trace, else
+        "Quick" (the quick image was drawn) or "Preparing"."""
+        settings = scene.voxgi
+        progressive = self.progressive
+        snapshot = live.image_source(settings.quality)[0]
+        drew = []
+
+        def quick():  # a part of the quick image of this key (viewport_prepare.quick_step)
+            acc = progressive.accumulation
+            key = progressive.key
+            if self.quick_key == key:
+                return
+            camera = camera_from_view(view, window, acc.width, acc.height)
+            texture = self.prepare.quick_step(key, snapshot, camera, acc.width, acc.height,
+                                              progressive.film and acc.transparent,
+                                              progressive.budget, started)
+            if texture is not None:
+                self.texture, self.quick_key = texture, key
+                drew.append(1)
+
+        showing_quick = self.texture is None or self.quick_key is not None
+        ready = self.prepare.advance(live.scene_name, snapshot, settings, progressive.budget,
+                                     started, quick=quick if showing_quick else None,
+                                     whole=progressive.stage_budget is None)
+        if ready:
+            return ""
+        self.timings = {**self.prepare.timings, "view_draw work": time.perf_counter() - started}
+        return "Quick" if drew else "Preparing"
+
     def refine(self, live, scene, view, window) -> str:
         """One slice of the current key (``ProgressiveImage.step``); what it traced: "Coarse",
-        "Refining", "Converged", or "" (nothing: converged already, or it failed)."""
+        "Refining", "Converged", "Quick" / "Preparing" (the view is being made ready:
+        ``viewport_prepare``), or "" (nothing: converged already, or it failed)."""
         settings = scene.voxgi
         progressive = self.progressive
         if progressive.failed:
             return ""
+        t0 = time.perf_counter()
+        preparing = self._prepared(live, scene, view, window, t0)
+        if preparing:
+            return preparing
         if progressive.converged:
             if self.cache.building is None:
                 return ""
@@ -157,32 +213,46 @@ class ViewportRenderer:
             self.cache.advance()
             self.timings = {"radiance cache stage": time.perf_counter() - t0}
             return "Refining"
-        t0 = time.perf_counter()
+        if not progressive.coarse_pending:
+            # the tiles' and the radiance cache's kernels, one per draw before they are used
+            # (all at once without a budget: the tests' whole slices)
+            snapshot = live.image_source(settings.quality)[0]
+            whole = progressive.stage_budget is None
+            while self.prepare.later_kernels(snapshot, settings, progressive.budget, t0, whole):
+                if not whole:
+                    self.timings = {**self.prepare.timings,
+                                    "view_draw work": time.perf_counter() - t0}
+                    return "Refining"
         cache_source = self.cache
         if settings.quality != "ACCURATE":  # Accurate traces the triangles, not the octree
             cones = cone_settings(settings)
             self.volume.update(live.staged.state.octree, cones, atlas=live.atlas)
+            if self.volume.uploaded_bytes:
+                note_upload("octree atlas")
             cache_source = FastCacheSource(self.cache, self.bounced)
             if self.bounced is not None:  # the worker's bounced octrees: their atlases
                 volume, kinds = cone_volumes(self.volume, live.staged.state, self.bounced,
                                              cones, getattr(live.snapshot.world, "radiance",
                                                             None))
                 uploaded = sum(v.uploaded_bytes for v in {volume, *kinds.values()})
+                if uploaded:
+                    note_upload("bounced octree atlases")
                 if uploaded and self.texture is not None:  # the upload is this draw's work
                     self.timings = {"atlas upload": time.perf_counter() - t0,
                                     "view_draw work": time.perf_counter() - t0}
                     return "Refining"
         upload = time.perf_counter() - t0
-        if self.raster is None:
-            from .gbuffer import gbuffer_shader
-            self.raster = gbuffer_shader()
         # the coarse first image reads the last complete radiance cache; a new one's build
         # starts with the tiles (viewport_cache.ViewportCache.hold)
         self.cache.hold = progressive.coarse_pending
+        # the slices draw the view's vertex batch of the scene's triangles (viewport_prepare)
+        batch = self.prepare.batch_for(current_scene())
         done = progressive.step(tracer(live, self.volume, settings, staged=True,
-                                       raster=self.raster, cache_source=cache_source),
+                                       raster=self.raster, cache_source=cache_source,
+                                       batch=batch),
                                 view, window, settings, pixel_filter_width(scene),
-                                whole=self.texture is None)  # a first image at once
+                                # the preparation's last steps ran in this draw
+                                spent=time.perf_counter() - t0 if self.prepare.timings else 0.0)
         if done is None:
             return ""
         if not done.finished:  # a stage of the slice: the next draw goes on with it
@@ -191,6 +261,7 @@ class ViewportRenderer:
             return "Coarse" if progressive.coarse_pending else (
                 "Converged" if progressive.converged else "Refining")
         self.texture = progressive.image  # on the GPU: drawn as it is, nothing read back
+        self.quick_key = None  # a GI image from now on: no quick image over it
         self.traces += 1
         self.timings = {"atlas upload": upload, f"slice ({done.kind})": done.seconds,
                         "view_draw work": time.perf_counter() - t0}
@@ -309,7 +380,9 @@ def status_line(renderer: ViewportRenderer, scene, live) -> str:
     progressive = renderer.progressive
     shown = renderer.shown
     samples = f"Sample {progressive.samples_done}/{progressive.target}"
-    if shown == "":
+    if shown in ("Preparing", "Quick"):  # viewport_prepare: the scene, the batch, the kernels
+        line = f"VoxGI | {renderer.prepare.status} | {quality}"
+    elif shown == "":
         line = "VoxGI | Waiting for the first GI update"
     elif shown == "Previous":
         line = f"VoxGI | Previous image | {quality}"
@@ -327,6 +400,11 @@ def view_update(engine, context, depsgraph) -> None:
     """``RenderEngine.view_update``: plan and schedule the depsgraph's updates."""
     scene = depsgraph.scene_eval.original
     live = live_gi(scene.name_full)
+    # a new snapshot's GPU scene is prepared on the worker at once, ahead of the update job
+    # (viewport_prepare; removed by ``release``)
+    if viewport_prepare.prepare_snapshot not in SNAPSHOT_HOOKS:
+        SNAPSHOT_HOOKS.append(viewport_prepare.prepare_snapshot)
+        np.linalg.inv(np.eye(4))  # the process's first LAPACK call (28 ms): not in a draw
     region_data = getattr(context, "region_data", None)
     region = getattr(context, "region", None)
     if live.view_camera is None and region_data is not None and region is not None:
@@ -359,6 +437,10 @@ def view_draw(engine, context, depsgraph) -> None:
 
 
 def release() -> None:
-    """Free every viewport's textures and atlas (unregister, exit)."""
+    """Free every viewport's textures and atlas, and the prepared scene (unregister, exit)."""
     for renderer in list(_renderers):
         renderer.free()
+    viewport_prepare.release()
+    if viewport_prepare.prepare_snapshot in SNAPSHOT_HOOKS:
+        SNAPSHOT_HOOKS.remove(viewport_prepare.prepare_snapshot)
+

@@ -10,13 +10,16 @@ result is the whole build's) — sized to the slice's stage budget from the last
 time. Until it completes the gathers read the last complete cache (bounces that lag an edit,
 as the live engines' caches do), or none (one bounce) before the first; a completed build
 bumps ``generation``, which is part of the viewport's image key, so the image restarts with
-the new cache.
+the new cache. The build's CPU half — the cache's voxels, face points and layout
+(``gpu_gather.cache_layout``, 0.15 s of numpy on the demo box, more on larger scenes) — is
+made on the viewport's preparing thread first (``viewport_prepare.PrepWorker``), never in a
+draw (docs/gi_pipeline.md "Entering Rendered mode").
 """
 from __future__ import annotations
 
 from ..voxgi_addon.gi.radiance_cache import cache_key
 from ..voxgi_addon.preview.gather import cache_settings
-from .gpu_gather import CACHE_STAGE_SECONDS, cache_stages
+from .gpu_gather import CACHE_STAGE_SECONDS, cache_layout, cache_stages
 
 STAGE_SECONDS = CACHE_STAGE_SECONDS  # what one chunk aims at (half the 30 ms budget)
 
@@ -31,7 +34,10 @@ class ViewportCache:
         self._read = None      # ... a function reading its RadianceCache back (``cache``)
         self._cache = None
         self.key = None        # what it was built for
-        self.building = None   # (key, generator) of the build under way
+        self.building = None   # (key, generator) of the build under way; generator None
+        #                        while the worker makes its layout (``layout``)
+        self.layout = None     # (tris, cache settings, holder) of the layout asked for
+        self._inputs = None    # the build's arguments (``stage``)
         self.generation = 0
         # set by the viewport while it traces a coarse first image: a new build does not start
         # (nor go on) in it, so the image of a change is not held up by the build's first
@@ -49,20 +55,53 @@ class ViewportCache:
         if _same(key, self.key) or self.hold:
             return self.texture
         if self.building is None or not _same(self.building[0], key):
-            if self.building is not None:
+            if self.building is not None and self.building[1] is not None:
                 self.building[1].close()
-            self.building = (key, cache_stages(bvh, lights, principled, emission, settings,
-                                               tables, self.budget, read_back=False))
+            self.building = (key, None)
+            self._inputs = (bvh, lights, principled, emission, settings, tables)
+        if self.building[1] is None and not self._start():
+            return self.texture  # its layout is being made: no stage yet
         if self.advance():
             return self.texture
         yield
         return self.texture
+
+    def _start(self) -> bool:
+        """Start the build under way once its layout is made (asked for here, on the
+        viewport's preparing thread; at once in background mode); whether it started."""
+        bvh, lights, principled, emission, settings, tables = self._inputs
+        tris, wanted = bvh.scene_triangles, cache_settings(settings)
+        if self.layout is None or self.layout[0] is not tris or self.layout[1] != wanted:
+            from .viewport_prepare import worker
+
+            holder = {}
+            self.layout = (tris, wanted, holder)
+
+            def make():  # the viewport's preparing thread: numpy only
+                try:
+                    holder["layout"] = cache_layout(tris, settings)
+                except Exception as error:  # noqa: BLE001 - raised by the next draw's stage
+                    holder["error"] = error
+
+            worker.submit(f"radiance cache {id(self)}", make)
+        if "error" in self.layout[2]:
+            error, self.layout = self.layout[2]["error"], None
+            raise error
+        layout = self.layout[2].get("layout")
+        if layout is None:
+            return False
+        key = self.building[0]
+        self.building = (key, cache_stages(bvh, lights, principled, emission, settings, tables,
+                                           self.budget, read_back=False, layout=layout))
+        return True
 
     def advance(self) -> bool:
         """Run one chunk of the build under way (if any); True when it completed the cache.
         The viewport calls this on its own while the image has converged on the old cache."""
         if self.building is None:
             return False
+        if self.building[1] is None and not self._start():
+            return False  # its layout is still being made
         key, stages = self.building
         try:
             next(stages)
@@ -86,7 +125,7 @@ class ViewportCache:
         return self._cache
 
     def free(self) -> None:
-        if self.building is not None:
+        if self.building is not None and self.building[1] is not None:
             self.building[1].close()
         self.__init__(self.budget)
 

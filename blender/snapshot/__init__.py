@@ -1,7 +1,8 @@
 """Reading a Blender scene into the engine's ``SceneSnapshot`` (main thread only).
 
 ``scene.take_snapshot`` is the entry; ``mesh``, ``skin``, ``materials`` and ``environment``
-read one kind of datablock each with ``foreach_get``.
+read one kind of datablock each with ``foreach_get``; ``pose.posed_snapshot`` re-reads only what
+a pose or a move changes (docs/gi_pipeline.md "Posed updates"), ``reads`` counts what was read.
 """
 from __future__ import annotations
 
@@ -17,14 +18,28 @@ NO_MESH_MESSAGE = (
     "(add one, or unhide it)"
 )
 
-def snapshot_or_error(context, depsgraph=None):
+def snapshot_or_error(context, depsgraph=None, posed: bool = False):
     """(snapshot, seconds) of the context's scene (or of ``depsgraph``'s scene and view layer);
-    VoxGIError when it has nothing to voxelize."""
+    VoxGIError when it has nothing to voxelize.
+
+    posed : when only matrices, poses, lights, camera or world changed since the last snapshot
+        of this view layer, that snapshot posed at this frame (``updates.posed_since``: no
+        mesh evaluated, no material read; docs/gi_pipeline.md "Posed updates"); a full
+        snapshot otherwise.
+    """
+    from ..updates import posed_since, remember  # updates reads snapshots: imported late
+
     start = time.perf_counter()
     if depsgraph is None:
-        snapshot = take_snapshot(context, context.evaluated_depsgraph_get())
+        depsgraph = context.evaluated_depsgraph_get()  # evaluates (and logs) pending changes
+        scene = context.scene
     else:
-        snapshot = take_snapshot(depsgraph.scene_eval.original, depsgraph)
+        scene = depsgraph.scene_eval.original
+    snapshot = posed_since(scene, depsgraph) if posed else None
+    if snapshot is None:
+        snapshot = take_snapshot(scene, depsgraph)
+    if snapshot.objects:
+        remember(snapshot, scene, depsgraph)
     seconds = time.perf_counter() - start
     if not snapshot.objects:
         details = "; ".join(snapshot.warnings)

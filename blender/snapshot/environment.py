@@ -9,6 +9,7 @@ import numpy as np
 
 from ...voxgi_addon.scene.snapshot import LIGHT_TYPES, CameraData, LightData, WorldData
 from . import world_map
+from .reads import count
 
 
 def _matrix(matrix) -> np.ndarray:
@@ -76,4 +77,5 @@ def read_world(scene, warnings: list[str], bake: bool | None = None) -> WorldDat
     """The scene's world as an equirect radiance map (``world_map.read_world``): uniform
     colours and Environment Textures are read from the nodes, anything else is evaluated by
     Cycles (``bake``: allow that here; None: where a nested render can run)."""
+    count("worlds")
     return world_map.read_world(scene.world, warnings, bake)

@@ -53,6 +53,7 @@ import numpy as np
 from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
 from ...voxgi_addon.scene.textures import PARAM_VARIANTS, variant_values, within_max_size
 from .left_out import material_notes
+from .reads import count
 from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _NeedsBake, _tree_key
 
 MAX_VARIANT_MATERIALS = 96  # materials with Roughness / Metallic per texel (each adds 64 rows)
@@ -327,6 +328,7 @@ class MaterialTable:
 
     def _read(self, material) -> tuple[MaterialData, object, str]:
         """(MaterialData, what to bake per mesh (None, or (mode, socket name)), UV map)."""
+        count("materials")
         node_tree = material.node_tree
         principled = None if node_tree is None else _surface_node(node_tree, "BSDF_PRINCIPLED")
         self._left_out(material)

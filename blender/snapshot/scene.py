@@ -40,6 +40,7 @@ from .mesh import (
     read_triangles,
     triangle_materials,
 )
+from .reads import count
 from .skin import (
     armature_modifiers,
     deform_bone_names,
@@ -143,6 +144,7 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
     only exists while the depsgraph's instances are iterated); ``holdouts`` : Holdout-shader
     materials' indices (``_holdout_index``)."""
     obj_eval = obj_eval or entry.obj.evaluated_get(depsgraph)
+    count("meshes")
     mesh = obj_eval.to_mesh()
     try:
         triangles, corners, slots = read_triangles(mesh)
@@ -151,7 +153,10 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
                 warnings.append(f"Object '{entry.obj.name}' has no faces; it is left out")
             return None
         slot_materials = _slot_materials(obj_eval, mesh)
-        positions = read_positions(mesh)
+        skinned = entry.kind == "skinned"
+        # a skinned mesh is kept in its rest shape, which the skinning matrices pose: its bakes
+        # are keyed by it too, so that a new pose bakes nothing again
+        positions = rest_positions(mesh) if skinned else read_positions(mesh)
         uvs = read_corner_uvs(mesh, corners)
         surface = Surface(entry.key, obj_eval, mesh, slot_materials,
                           _digest(*(None if a is None else
@@ -163,9 +168,9 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
         uvs = named_uvs(mesh, corners, materials, table, uvs)
         skin = None
         normals = None
-        if entry.kind == "skinned":  # the rest shape, which the skinning matrices pose
+        if skinned:  # the rest shape's weights and normals
             skin = top_weights(mesh, entry.layers, entry.armature.name_full)
-            positions, normals = rest_positions(mesh), rest_corner_normals(mesh, corners)
+            normals = rest_corner_normals(mesh, corners)
         return MeshData(
             name=entry.key,
             positions=positions,
@@ -247,7 +252,17 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
     read_keys: set[str] = set()
     holdouts: dict[str, int] = {}
     origins: dict[str, object] = {}  # instanced mesh key → the instanced object
-    instances = _instances(depsgraph, table, warnings, meshes, read_keys, holdouts, origins)
+
+    def read_instanced(key, original, obj_eval):  # each instanced mesh once
+        if key not in read_keys:
+            read_keys.add(key)
+            mesh = _read_mesh(_Entry(original, key, "static"), depsgraph, table, warnings,
+                              holdouts, obj_eval)
+            if mesh is not None:
+                meshes[key] = mesh
+                origins[key] = original
+
+    instances = instance_objects(depsgraph, read_instanced)
     with temporary_weight_attributes(skinned, depsgraph):
         for entry in entries:
             if entry.key not in read_keys:  # linked duplicates are read once
@@ -257,18 +272,8 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
                     meshes[entry.key] = mesh
 
     # Matrices are read after the temporary modifiers are gone.
-    objects = [
-        ObjectData(
-            name=e.obj.name_full,
-            mesh=e.key,
-            world_matrix=_world_matrix(e.obj, depsgraph),
-            kind=e.kind,
-            armature=e.armature.name_full if e.armature is not None else None,
-            visibility=ray_visibility(e.obj),
-            holdout=bool(e.obj.holdout_get(view_layer=view_layer)),
-        )
-        for e in entries if e.key in meshes
-    ] + [o for o in instances if o.mesh in meshes]
+    objects = mesh_objects([e for e in entries if e.key in meshes], depsgraph) + \
+        [o for o in instances if o.mesh in meshes]
     # what of each object (each instanced object once) the preview leaves out, once per object
     named = [(e.obj.name, e.obj, e.key) for e in entries if e.key in meshes] + \
         [(f"{origin.name} (instanced)", origin, key) for key, origin in origins.items()
@@ -279,43 +284,71 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
                                if 0 <= i < len(table.materials)], table.notes)
         if notes:
             warnings.append(left_out_line(name, notes))
-    armatures = {}
-    for e in entries:
-        if e.armature is not None and e.key in meshes and e.armature.name_full not in armatures:
-            armatures[e.armature.name_full] = read_armature(e.armature, e.armature.evaluated_get(depsgraph))
-    lights = []
-    for obj in view_layer.objects:
-        if obj.type == "LIGHT" and obj.visible_get(view_layer=view_layer):
-            light = read_light(obj, obj.evaluated_get(depsgraph))
-            if light is not None:
-                lights.append(light)
     return SceneSnapshot(
         meshes=meshes,
         materials=table.materials,
         textures=tuple(table.textures),
         objects=objects,
-        armatures=armatures,
-        lights=lights,
+        armatures=read_armatures([e for e in entries if e.key in meshes], depsgraph),
+        lights=read_lights(depsgraph),
         camera=read_camera(scene, depsgraph),
         world=read_world(scene, warnings),
         frame=int(scene.frame_current),
         warnings=tuple(warnings),
         holdout_materials=tuple(sorted(holdouts.values())),
-        film_transparent=bool(scene.render.film_transparent),
-        refractive_caustics=bool(getattr(getattr(scene, "cycles", None), "caustics_refractive",
-                                         True)),
+        **scene_flags(scene),
     )
 
 
-def _instances(depsgraph, table: MaterialTable, warnings: list[str], meshes: dict,
-               read_keys: set, holdouts: dict[str, int], origins: dict | None = None
-               ) -> list[ObjectData]:
+def mesh_objects(entries: list[_Entry], depsgraph) -> list[ObjectData]:
+    """The ``ObjectData`` of visible mesh objects (``_visible_mesh_entries``) at the
+    depsgraph's frame: matrix, kind, armature, ray visibility, holdout."""
+    view_layer = depsgraph.view_layer
+    return [ObjectData(name=e.obj.name_full, mesh=e.key, world_matrix=_world_matrix(e.obj, depsgraph),
+                       kind=e.kind,
+                       armature=e.armature.name_full if e.armature is not None else None,
+                       visibility=ray_visibility(e.obj),
+                       holdout=bool(e.obj.holdout_get(view_layer=view_layer)))
+            for e in entries]
+
+
+def read_armatures(entries: list[_Entry], depsgraph) -> dict:
+    """The ``ArmatureData`` (rest and pose matrices of the deform bones) of every armature
+    deforming one of ``entries``, by name."""
+    armatures = {}
+    for e in entries:
+        if e.armature is not None and e.armature.name_full not in armatures:
+            armatures[e.armature.name_full] = read_armature(e.armature,
+                                                            e.armature.evaluated_get(depsgraph))
+    return armatures
+
+
+def read_lights(depsgraph) -> list:
+    """The ``LightData`` of the view layer's visible lights at the depsgraph's frame."""
+    view_layer, lights = depsgraph.view_layer, []
+    for obj in view_layer.objects:
+        if obj.type == "LIGHT" and obj.visible_get(view_layer=view_layer):
+            light = read_light(obj, obj.evaluated_get(depsgraph))
+            if light is not None:
+                lights.append(light)
+    return lights
+
+
+def scene_flags(scene) -> dict:
+    """The scene settings a snapshot carries besides its objects (``SceneSnapshot`` fields)."""
+    return {"film_transparent": bool(scene.render.film_transparent),
+            "refractive_caustics": bool(getattr(getattr(scene, "cycles", None),
+                                                "caustics_refractive", True))}
+
+
+def instance_objects(depsgraph, read=None) -> list[ObjectData]:
     """The depsgraph's instances (collection instances, geometry-nodes and particle instances)
-    of renderable objects: one ObjectData per instance with its own world matrix, their meshes
-    read once per instanced object (``meshes`` / ``read_keys`` are filled). An instance of a
-    plain mesh shares the mesh datablock's key with its other users. Ray visibility is the
+    of renderable objects: one ObjectData per instance with its own world matrix. An instance
+    of a plain mesh shares the mesh datablock's key with its other users. Ray visibility is the
     instanced object's and its instancer's together, holdout the instancer's (or the object's),
-    as Cycles syncs instances. ``origins`` gets each instanced mesh key's original object."""
+    as Cycles syncs instances. ``read(key, original object, evaluated object)`` is called for
+    each instance (the evaluated object only exists while the instances are iterated): the
+    full snapshot reads each key's mesh there, a posed one nothing (None)."""
     out, used = [], {}
     for inst in depsgraph.object_instances:
         if not inst.is_instance:
@@ -329,14 +362,8 @@ def _instances(depsgraph, table: MaterialTable, warnings: list[str], meshes: dic
         plain = obj_eval.type == "MESH" and _shares_mesh(original, depsgraph) and \
             obj_eval.data is not None and obj_eval.data.name_full == original.data.name_full
         key = original.data.name_full if plain else f"{original.name_full} (instanced)"
-        if key not in read_keys:
-            read_keys.add(key)
-            entry = _Entry(original, key, "static")
-            mesh = _read_mesh(entry, depsgraph, table, warnings, holdouts, obj_eval)
-            if mesh is not None:
-                meshes[key] = mesh
-                if origins is not None:
-                    origins[key] = original
+        if read is not None:
+            read(key, original, obj_eval)
         parent = inst.parent.original.name_full if inst.parent is not None else "?"
         base = f"{parent} › {original.name_full}"
         name, n = base, 1

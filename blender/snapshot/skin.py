@@ -25,6 +25,18 @@ WEIGHT_ATTRIBUTE_PREFIX = "__voxgi_weight_"
 REST_POSITION = "__voxgi_rest_position"  # POINT FLOAT_VECTOR: the shape before the Armature modifier
 REST_NORMAL = "__voxgi_rest_normal"      # CORNER FLOAT_VECTOR: its corner normals
 _TEMP_NAME = "VoxGI weights (temporary)"
+_EVALUATING = [0]  # > 0 while the temporary modifiers are added, evaluated and removed
+
+
+def evaluating_own_changes() -> bool:
+    """Is the depsgraph being evaluated for the temporary modifiers of a snapshot (its updates
+    are the snapshot's own, not the user's: ``blender/updates.py`` leaves them out)?"""
+    return _EVALUATING[0] > 0
+
+
+def is_temporary_group(name: str) -> bool:
+    """Is ``name`` a node group the snapshot adds for a moment (``_skin_node_group``)?"""
+    return name.startswith(_TEMP_NAME)
 
 
 def modifier_enabled(modifier, depsgraph=None) -> bool:
@@ -152,6 +164,7 @@ def temporary_weight_attributes(skinned: dict, depsgraph):
     reverse order, whatever happened, and the depsgraph re-evaluated.
     """
     undo = []
+    _EVALUATING[0] += 1
     try:
         for obj, layers in skinned.items():
             active = obj.modifiers.active
@@ -170,10 +183,13 @@ def temporary_weight_attributes(skinned: dict, depsgraph):
             depsgraph.update()
         yield
     finally:
-        for restore in reversed(undo):
-            restore()
-        if undo:
-            depsgraph.update()
+        try:
+            for restore in reversed(undo):
+                restore()
+            if undo:
+                depsgraph.update()
+        finally:
+            _EVALUATING[0] -= 1
 
 
 def rest_positions(mesh) -> np.ndarray:

@@ -107,7 +107,11 @@ def _image_key(image) -> tuple:
     mtime = os.path.getmtime(path) if path and os.path.exists(path) else None
     key = ("image", image.name_full, path, mtime, image.source, tuple(image.size), image.is_float,
            image.colorspace_settings.name, image.alpha_mode, image.packed_file is not None)
-    if image.source != "FILE" or image.is_dirty or image.packed_file is not None:
+    packed = image.packed_file
+    if packed is not None and image.source == "FILE" and not image.is_dirty:
+        # its file's bytes, packed: a tenth of its decoded pixels to hash, and no decoding
+        key += (hashlib.blake2b(bytes(packed.data), digest_size=16).hexdigest(),)
+    elif image.source != "FILE" or image.is_dirty or packed is not None:
         pixels = _image_pixels(image)  # its content is only in memory: hash it
         key += (hashlib.blake2b(pixels.tobytes(), digest_size=16).hexdigest() if pixels is not None else None,)
     return key
@@ -158,6 +162,22 @@ def _tree_key(tree, depth: int = 0) -> tuple:
     links = sorted((link.from_node.name, link.from_socket.identifier, link.to_node.name,
                     link.to_socket.identifier, link.is_muted) for link in tree.links)
     return ("tree", tuple(nodes), tuple(links))
+
+
+def world_objects(world) -> frozenset[str]:
+    """Names of the objects whose matrices a world's nodes read (Texture Coordinate's Object,
+    in its node groups too): moving one changes the world (``world_key``)."""
+    names: set[str] = set()
+
+    def walk(tree, depth):
+        for node in tree.nodes if tree is not None and depth < 8 else ():
+            if node.type == "TEX_COORD" and node.object is not None:
+                names.add(node.object.name_full)
+            elif node.type == "GROUP":
+                walk(node.node_tree, depth + 1)
+
+    walk(None if world is None else world.node_tree, 0)
+    return frozenset(names)
 
 
 def world_key(world) -> str:

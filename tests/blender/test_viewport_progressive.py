@@ -72,13 +72,17 @@ def one_sample_groups(scene, live, dispatches) -> int:
 
 
 def draw_until_converged(engine, scene, depsgraph, view, window, dispatches, limit):
-    """view_draw until the engine stops asking for redraws: [(image, groups, calls)]."""
+    """view_draw until the engine stops asking for redraws: [(image, groups, calls)]. Only
+    the draws before the view's first image — those that make it ready
+    (render/viewport_prepare.py: the scene, the vertex batch, the kernels, a step a draw when
+    staged) and the first slice's stages — may leave it blank."""
     draws = []
     for _ in range(400):
         redraws = engine.redraws
         image = engine_view(engine, scene, depsgraph, view, window)
         draws.append((image, dispatches.take_groups(), dispatches.take()))
-        assert filled(image) > 0.99, f"draw {len(draws)} left the view blank"
+        assert filled(image) > 0.99 or engine.voxgi_viewport.texture is None, \
+            f"draw {len(draws)} left the view blank"
         assert draws[-1][1] <= limit, f"draw {len(draws)} dispatched {draws[-1][1]} groups"
         if engine.redraws == redraws:
             return draws
@@ -269,12 +273,14 @@ def test_a_slice_runs_over_several_draws_stage_by_stage_to_the_same_image(voxgi,
                                      1 << 40)
         assert renderer.progressive.converged
         images[staged] = draws[-1][0]
-        # the first draw of a view with nothing to show runs its slice whole (a first image)
-        most[staged] = max(calls for _, _, calls in draws[1:])
+        # staged, the first image is staged too (render/viewport_prepare.py): no draw runs a
+        # slice whole
+        most[staged] = max(calls for _, _, calls in draws)
         if staged:
             slices = renderer.progressive.slices
             assert len(draws) > 3 * slices  # every slice over several draws
-            assert all(filled(image) > 0.99 for image, _, _ in draws)
+            first = next(i for i, (image, _, _) in enumerate(draws) if filled(image) > 0.99)
+            assert all(filled(image) > 0.99 for image, _, _ in draws[first:])
     print(f"dispatches per draw: whole slices {most[False]}, staged {most[True]}")
     assert most[True] <= 6 < most[False]
     np.testing.assert_allclose(images[True], images[False], atol=1e-5)
@@ -287,7 +293,7 @@ def test_while_every_draw_is_a_new_view_the_dropped_coarse_images_are_not_starte
     their draws trace nothing (no G-buffer, no dispatch) and keep the last image on screen;
     the first draw with the view held still starts the coarse image, which then shows."""
     from voxgi.blender.viewport_session import live_gi
-    from voxgi.render import gpu_preview
+    from voxgi.render import gbuffer
 
     scene = progressive_scene()
     scene.voxgi_viewport.samples = 2
@@ -297,8 +303,8 @@ def test_while_every_draw_is_a_new_view_the_dropped_coarse_images_are_not_starte
     view, window = camera_matrices(scene, depsgraph)
     dispatches = Dispatches(monkeypatch)
     rasters = []
-    original = gpu_preview.rasterize
-    monkeypatch.setattr(gpu_preview, "rasterize",
+    original = gbuffer.rasterize  # the slices' G-buffers (gbuffer.rasterize_stages)
+    monkeypatch.setattr(gbuffer, "rasterize",
                         lambda *a, **k: (rasters.append(1), original(*a, **k))[1])
     engine = StandInEngine()
     renderer = quarter_slices(engine)

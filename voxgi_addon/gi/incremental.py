@@ -89,7 +89,8 @@ def update_gi_stages(snapshot, caches, settings: GISettings, previous: StagedGI 
     previous = previous.state
     occupancy = stage("occupancy", 0.0, CascadeOccupancy, previous.cascades)
     radiance = stage("inject", 0.0, inject_direct_light, previous.cascades, snapshot, occupancy,
-                     settings.light_samples)
+                     settings.light_samples, rays=getattr(previous.radiance, "rays", None),
+                     keep_rays=True)
     depth = int(np.log2(settings.resolution)) + len(previous.grids) - 1
     octree = stage("svo", 0.6, build_octree, previous.cascades, radiance,
                    min(settings.dense_depth, depth), one_sided_leaves=settings.one_sided_leaves)

@@ -12,6 +12,13 @@ voxel they cover (``voxel_emission``); with an emission texture, of the emitters
 ``inject_direct_light`` returns the radiance as an ``InjectedRadiance`` list whose
 ``emission`` holds the emission part alone, so that ``svo.build_octree`` can keep an emission
 octree beside the radiance one (docs/gi_pipeline.md "Fast quality: world and emission").
+
+What an injection leaves for the next is kept (docs/gi_pipeline.md "Posed updates",
+``kept_rays``): a voxel's shadow rays are drawn from its cell (``voxel_ids``: the strata are
+hashed from it, not drawn in voxel order), so a voxel that stays where it was casts the same
+rays as before; a ray that meets no cell whose occupancy changed ends as it did, and a voxel
+none of whose rays does, under the same lights, keeps its light. Only the rest is marched and
+lit again, with the result of doing it all.
 """
 from __future__ import annotations
 
@@ -20,6 +27,7 @@ import dataclasses
 import numpy as np
 
 from .direct_light import diffuse_direct
+from .kept_rays import KeptRays, ShadowRays, ray_origins
 from .voxel_shadows import CascadeOccupancy
 
 # Shadow rays start this many voxels off the surface so a voxel does not shadow itself.
@@ -31,9 +39,25 @@ EMITTER_STOP_VOXELS = 2.0
 
 class InjectedRadiance(list):
     """Per cascade (N_i, 3) float32 outgoing radiance (emission included), with ``emission``:
-    per cascade the (N_i, 3) float32 emission part (None when nothing emits)."""
+    per cascade the (N_i, 3) float32 emission part (None when nothing emits), and ``rays``:
+    what it cast (``kept_rays.ShadowRays``, for the next injection; None when not kept).
+    ``marched`` / ``reused``: how many shadow rays were marched and taken from before;
+    ``relit``: how many voxels were lit (the others kept their light)."""
 
     emission: list | None = None
+    rays: object = None
+    marched: int = 0
+    reused: int = 0
+    relit: int = 0
+
+
+def voxel_ids(cascade) -> np.ndarray:
+    """(N,) int64 ids of a CascadeVoxels' cells, unique over every cascade of a set (its index
+    and its cell): a voxel's shadow rays are drawn from its id (``direct_light``'s
+    ``sample_ids``), so a voxel that stays in its cell draws the same ones."""
+    res = int(cascade.grid.resolution)
+    cells = np.asarray(cascade.cells, np.int64).reshape(-1, 3)
+    return ((int(cascade.grid.index) * res + cells[:, 0]) * res + cells[:, 1]) * res + cells[:, 2]
 
 
 def voxel_centres(cascade) -> np.ndarray:
@@ -103,9 +127,10 @@ def voxel_emission(cascades, corners, radiance) -> list[np.ndarray]:
 
 class _StopShort:
     """An occluder that ends each finite shadow ray EMITTER_STOP_VOXELS voxels before its end
-    (rays to points on emissive triangles, whose own voxels would block them)."""
+    (rays to points on emissive triangles, whose own voxels would block them). ``occupancy``:
+    a ``CascadeOccupancy`` or anything with its ``local_span`` and ``occluded``."""
 
-    def __init__(self, occupancy: CascadeOccupancy):
+    def __init__(self, occupancy):
         self.occupancy = occupancy
 
     def occluded(self, origins, dirs, max_t):
@@ -117,12 +142,29 @@ class _StopShort:
         return self.occupancy.occluded(origins, dirs, short)
 
 
+def lights_key(snapshot, samples: int) -> tuple:
+    """What the voxels' direct light depends on besides the voxels and their shadow rays: the
+    lamps, the world and the samples (plain values and array bytes, comparable with ``==``)."""
+    def value(v):
+        return (v.dtype.str, v.shape, v.tobytes()) if isinstance(v, np.ndarray) else v
+
+    world = snapshot.world
+    world_key = (world.key, value(np.asarray(world.color)), world.strength) if world.key else \
+        tuple(value(getattr(world, f.name)) for f in dataclasses.fields(world))
+    return (tuple(tuple(value(getattr(light, f.name)) for f in dataclasses.fields(light))
+                  for light in snapshot.lights), world_key, int(samples))
+
+
 def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None = None,
-                        samples: int = 4) -> InjectedRadiance:
+                        samples: int = 4, rays: ShadowRays | None = None,
+                        keep_rays: bool = False) -> InjectedRadiance:
     """Outgoing radiance (N_i, 3) float32 of every cascade's voxels (``InjectedRadiance``).
 
     cascades : list of CascadeVoxels (finest first); snapshot : for lights, world, materials.
     occupancy : shadow casters (defaults to the cascades' own voxels).
+    rays : the ``InjectedRadiance.rays`` of an earlier injection: what meets nothing changed
+        is not marched or lit again (the module doc); keep_rays : keep what this injection
+        cast in the result's ``rays`` (on when ``rays`` is given).
     """
     from ..scene.geometry import world_triangles
     from .emitters import emitter_light
@@ -148,7 +190,12 @@ def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None =
         if emitters is not None:  # the shadow rays' plain estimate: no exact sum per voxel
             emitters = dataclasses.replace(emitters, exact=False)
     emitted = voxel_emission(cascades, corners, glow) if len(corners) else None
-    out = InjectedRadiance()
+    kept = None
+    if rays is not None or keep_rays:  # emitters move with their objects: lit every time
+        kept = KeptRays(occupancy, rays, None if emitters is not None else
+                        lights_key(snapshot, samples))
+    occluder = occupancy if kept is None else kept
+    out, carried, relit = InjectedRadiance(), [], 0
     for index, cv in enumerate(cascades):
         if cv.voxel_count == 0:
             out.append(np.zeros((0, 3), np.float32))
@@ -156,14 +203,31 @@ def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None =
         normals = np.asarray(cv.normal, np.float64)
         normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
         start = voxel_centres(cv) + normals * (SHADOW_START_VOXELS * cv.grid.span)
-        direct = diffuse_direct(start, normals, lights, occupancy, samples=samples)
+        ids = voxel_ids(cv)
+        if kept is None:
+            direct = diffuse_direct(start, normals, lights, occupancy, samples=samples,
+                                    sample_ids=ids)
+        else:
+            origins = ray_origins(start, normals)
+            same, direct = kept.light_of(ids, normals, origins)
+            lit = ~same
+            relit += int(lit.sum())
+            if lit.any():
+                direct[lit] = diffuse_direct(start[lit], normals[lit], lights, kept,
+                                             samples=samples, sample_ids=ids[lit])
+            kept.keep_light(ids, normals, direct)
+            carried.append(origins[same])
         if emitters is not None:
-            direct = direct + diffuse_direct(start, normals, [emitters], _StopShort(occupancy),
-                                             samples=samples)
+            direct = direct + diffuse_direct(start, normals, [emitters], _StopShort(occluder),
+                                             samples=samples, seed=1, sample_ids=ids)
         value = np.asarray(cv.albedo, np.float64) * (direct + ambient)
         if emitted is not None:
             value = value + emitted[index]
         out.append(value.astype(np.float32))
     if emitted is not None:
         out.emission = emitted
+    if kept is not None:
+        out.rays = kept.kept(np.concatenate(carried) if carried else None)
+        out.marched, out.reused = kept.marched, kept.reused
+        out.relit = relit
     return out

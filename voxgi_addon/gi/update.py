@@ -165,8 +165,11 @@ def update_gi(snapshot, caches, settings: GISettings = GISettings(), cancel=None
     views = stage("merge", view_cascades, placement, grids, snapshot)
     cascades = views["diffuse"]
     occupancy = stage("occupancy", CascadeOccupancy, views["shadow"])  # what casts shadows
+    # the previous injection's shadow rays: those that meet nothing that moved are not
+    # marched again (light_injection, docs/gi_pipeline.md "Posed updates")
+    rays = getattr(previous.radiance, "rays", None) if previous is not None else None
     radiance = stage("inject", inject_direct_light, cascades, snapshot, occupancy,
-                     settings.light_samples)
+                     settings.light_samples, rays=rays, keep_rays=True)
     depth = int(np.log2(settings.resolution)) + len(grids) - 1
 
     def octree_of(voxels, light):

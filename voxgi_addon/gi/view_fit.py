@@ -36,7 +36,7 @@ import numpy as np
 
 from ..errors import VoxGIError
 from ..scene.geometry import world_triangles
-from ..scene.raycast import primary_visibility
+from ..scene.raycast import few_rays_grid, primary_visibility
 from ..voxelize.packing import MAX_CELLS_PER_AXIS
 from .cascades import MAX_CASCADES, CascadeGrid, place_cascades
 
@@ -104,6 +104,40 @@ class ViewProbe:
     height: int = 0
     # digest of what it was cast from (``view_key``): a fit of an unchanged view reuses it
     key: bytes = b""
+    # what the objects other than the skinned ones showed the rays (``_StillView``): the next
+    # probe of a pose traces only the skinned ones (docs/gi_pipeline.md "Posed updates")
+    still: object = None
+
+
+@dataclass(frozen=True, eq=False)
+class _StillView:
+    """The probe rays' first hits on a snapshot's objects other than its skinned ones: the
+    camera and width, those objects' placements, meshes and materials they were cast
+    against (``same_as``), and per ray the hit distance, point and whether it shows a point
+    (not the background or a holdout)."""
+
+    camera: tuple
+    objects: tuple
+    meshes: tuple
+    materials: object
+    textures: object
+    depth: np.ndarray
+    position: np.ndarray
+    hit: np.ndarray
+
+    @staticmethod
+    def inputs(snapshot, width, still):
+        camera = tuple(_value_bytes(getattr(snapshot.camera, f.name))
+                       for f in dataclasses.fields(snapshot.camera)) + (int(width),)
+        objects = tuple((o.name, o.mesh, o.kind, _value_bytes(o.world_matrix), o.visibility,
+                         o.holdout) for o in still)
+        return camera, objects, tuple(snapshot.meshes.get(o.mesh) for o in still)
+
+    def same_as(self, snapshot, width, still) -> bool:
+        camera, objects, meshes = self.inputs(snapshot, width, still)
+        return (camera == self.camera and objects == self.objects
+                and all(a is b for a, b in zip(meshes, self.meshes, strict=True))
+                and snapshot.materials is self.materials and snapshot.textures is self.textures)
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,16 +208,66 @@ def view_key(snapshot, width: int) -> bytes:
     return digest.digest()
 
 
-def probe_view(snapshot, width: int = PROBE_WIDTH, triangles=None) -> ViewProbe:
+def _value_bytes(value):
+    return np.asarray(value).tobytes() if isinstance(value, np.ndarray) else value
+
+
+def _first_hits(snapshot, objects, camera, width, height):
+    """(depth (N,), point (N, 3), shows a point (N,)) of the probe rays on ``objects`` only."""
+    tris = world_triangles(dataclasses.replace(snapshot, objects=objects), shading=False)
+    few_rays_grid(tris)
+    hits = primary_visibility(tris, camera, width, height)
+    return hits.depth.reshape(-1), hits.position.reshape(-1, 3), hits.hit.reshape(-1)
+
+
+def _split_hits(snapshot, width, height, previous: ViewProbe | None):
+    """The probe rays' hit points and a ``_StillView``, tracing the skinned objects and the
+    others apart: the others' hits are taken from ``previous`` when it was cast against the
+    same of them from the same camera. The nearer of the two hits along a ray is the one a
+    single trace of every triangle finds (same distances, same point), so the probe is the
+    same either way."""
+    moving = [o for o in snapshot.objects if o.kind == "skinned"]
+    still = [o for o in snapshot.objects if o.kind != "skinned"]
+    camera = snapshot.camera
+    kept = None if previous is None else previous.still
+    if kept is None or not kept.same_as(snapshot, width, still):
+        depth, position, hit = _first_hits(snapshot, still, camera, width, height)
+        kept = _StillView(*_StillView.inputs(snapshot, width, still), snapshot.materials,
+                          snapshot.textures, depth, position, hit)
+    depth, position, hit = _first_hits(snapshot, moving, camera, width, height)
+    nearer = depth < kept.depth
+    hit = np.where(nearer, hit, kept.hit)
+    position = np.where(nearer[:, None], position, kept.position)
+    return position[hit], kept
+
+
+def probe_view(snapshot, width: int = PROBE_WIDTH, triangles=None,
+               previous: ViewProbe | None = None, key: bytes | None = None) -> ViewProbe:
     """Hit points of a ``width``-column grid of exact primary rays of the snapshot's camera (the
     rows follow its aspect), or, without a camera or hits, the area-weighted triangle centres.
+    previous : an earlier probe: what its rays showed of the objects that are not skinned is
+    reused when they, the camera and the materials are the same (a pose traces only the
+    skinned objects; ``_split_hits``).
+    key : the snapshot's ``view_key`` when the caller has it.
     Raises VoxGIError when the snapshot has no triangles at all."""
-    key = view_key(snapshot, width) if triangles is None else b""
-    tris = world_triangles(snapshot) if triangles is None else triangles
+    if key is None:
+        key = view_key(snapshot, width) if triangles is None else b""
+    camera = snapshot.camera
+    seen = camera is not None and camera.type in ("PERSP", "ORTHO")
+    if seen and triangles is None and any(o.kind == "skinned" for o in snapshot.objects) and \
+            any(o.kind != "skinned" for o in snapshot.objects):
+        w0, h0 = camera.resolution
+        height = max(1, int(round(width * h0 / max(w0, 1))))
+        points, still = _split_hits(snapshot, width, height, previous)
+        if len(points):
+            return ViewProbe(points, np.full(len(points), 1.0 / len(points)), "camera",
+                             width, height, key, still)
+    tris = world_triangles(snapshot, shading=False) if triangles is None else triangles
     if len(tris) == 0:
         raise VoxGIError("the scene has no triangles to fit the cascades to")
-    camera = snapshot.camera
-    if camera is not None and camera.type in ("PERSP", "ORTHO"):
+    if triangles is None:
+        few_rays_grid(tris)
+    if seen:
         w0, h0 = camera.resolution
         height = max(1, int(round(width * h0 / max(w0, 1))))
         hits = primary_visibility(tris, camera, width, height)
@@ -329,10 +413,13 @@ def fit_view(snapshot, settings: FitSettings = FitSettings(), previous: ViewFit 
     if not 1 <= count <= MAX_CASCADES:
         raise VoxGIError(f"cascade count must be between 1 and {MAX_CASCADES}, got {count!r}")
     warnings: list[str] = []
-    if probe is None and previous is not None and previous.probe.key and \
-            previous.probe.key == view_key(snapshot, settings.probe_width):
-        probe = previous.probe
-    probe = probe or probe_view(snapshot, settings.probe_width)
+    if probe is None:
+        key = view_key(snapshot, settings.probe_width)
+        if previous is not None and previous.probe.key and previous.probe.key == key:
+            probe = previous.probe
+        else:
+            probe = probe_view(snapshot, settings.probe_width, key=key,
+                               previous=None if previous is None else previous.probe)
     res, memory = _pick_resolution(settings, warnings)
     margin = int(settings.margin_cells)
     largest, area = _mesh_sizes(snapshot)

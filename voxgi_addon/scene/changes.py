@@ -12,15 +12,21 @@ object / bone (pose) moved             snapshot, transform, inject, octree, trac
 light moved or edited, world edited    snapshot, inject, octree, trace (cascades reused)
 mesh geometry edited                   snapshot, voxelize that mesh key only, transform, …
 material edited                        snapshot, albedo of the mesh keys using it, transform, …
+node group or image edited             snapshot (full), transform, …; voxelizing follows the
+                                       caches' fingerprints
 object added / removed / hidden        snapshot, transform, inject, octree, trace; new keys are
   (a VISIBILITY record)                voxelized (``voxelize/incremental`` finds them)
 view moved                             trace only (``view_plan``; plus the cascade stages when
                                        the view leaves the cascades' anchor cell)
 =====================================  ==========================================================
 
-Object records flagged for shading only and Collection records are ignored: Blender sends them
-for many things that change no voxel (a snapshot's own temporary modifier, for one); material
-slots and colours arrive as Mesh / Material records.
+Object records flagged for shading only and Collection and Action records are ignored: Blender
+sends them for many things that change no voxel (a snapshot's own temporary modifier, for one);
+material slots and colours arrive as Mesh / Material records. Only a full snapshot reads meshes,
+modifiers and materials: a bone, object, light or camera change needs a posed one
+(docs/gi_pipeline.md "Posed updates"). The geometry updates of a skinned object whose rest
+shape may animate (its modifiers, mesh or shape keys animated: ``ObjectEntry.rest_animated``)
+are not taken for poses.
 
 "albedo" is carried out by re-voxelizing the mesh's attributes (``voxelize/incremental``:
 the key's fingerprint includes its triangles' albedo, so its caches are rebuilt); the plan
@@ -44,7 +50,7 @@ _MOVE_STAGES = frozenset({"snapshot"}) | _CASCADE_STAGES
 # VISIBILITY is not Blender's: the set of visible mesh objects differs from the last snapshot
 # (hiding an object reaches the depsgraph as a bare Scene update; blender/updates.py adds it).
 ID_TYPES = ("OBJECT", "MESH", "MATERIAL", "LIGHT", "ARMATURE", "WORLD", "SCENE", "COLLECTION",
-            "CAMERA", "NODETREE", "VISIBILITY", "OTHER")
+            "CAMERA", "NODETREE", "IMAGE", "ACTION", "VISIBILITY", "OTHER")
 
 
 @dataclass(frozen=True)
@@ -65,7 +71,9 @@ class UpdateRecord:
 
 @dataclass(frozen=True)
 class ObjectEntry:
-    """A mesh object of the last snapshot: its cache key, mesh datablock, materials, armature."""
+    """A mesh object of the last snapshot: its cache key, mesh datablock, materials, armature;
+    rest_animated: a skinned object whose rest shape a frame change may alter (animated
+    modifiers, mesh or shape keys)."""
 
     key: str
     mesh: str = ""
@@ -73,6 +81,7 @@ class ObjectEntry:
     kind: str = "static"
     armature: str | None = None        # the deforming armature object's name
     armature_data: str | None = None   # that object's Armature datablock name
+    rest_animated: bool = False
 
 
 @dataclass(frozen=True)
@@ -146,8 +155,8 @@ def plan_updates(records, index: SceneIndex | None) -> UpdatePlan:
     armature_data = {r.name for r in records if r.id_type == "ARMATURE"}
 
     def posed(entry: ObjectEntry) -> bool:
-        return entry.kind == "skinned" and (entry.armature in armature_objects
-                                            or entry.armature_data in armature_data)
+        return entry.kind == "skinned" and not entry.rest_animated and (
+            entry.armature in armature_objects or entry.armature_data in armature_data)
 
     def add(work, why):
         stages.update(work)
@@ -197,6 +206,12 @@ def plan_updates(records, index: SceneIndex | None) -> UpdatePlan:
                 add(_MOVE_STAGES, f"armature '{r.name}' posed")
         elif r.id_type == "WORLD":
             add(_LIGHT_STAGES, "world edited")
+        elif r.id_type in ("NODETREE", "IMAGE") and index.objects:
+            # a node group (a material's, a modifier's) or an image (a texture): whoever uses
+            # it is read again, and the caches' fingerprints say what to voxelize
+            full = True
+            add(_MOVE_STAGES, f"{'node group' if r.id_type == 'NODETREE' else 'image'} "
+                f"'{r.name}' edited")
         elif r.id_type == "VISIBILITY":
             full = rescan = True
             add(_MOVE_STAGES, "objects added, removed, hidden or shown")

@@ -109,15 +109,15 @@ def _is_rigid(obj: ObjectData, mesh: MeshData, snapshot: SceneSnapshot) -> bool:
 _PLACED_CHUNK = 1 << 18  # triangles placed together (bounds the (K, T, 3, 3) temporaries)
 
 
-def _place_rigid(matrices: np.ndarray, mesh: MeshData):
-    """(K, T, 3, 3) world corners and shading normals (None without ``corner_normals``) of the
-    K placements ``matrices`` (K, 4, 4) of ``mesh``: ``object_vertices_world`` and
-    ``_corner_normals_world`` of many objects in one pass."""
+def _place_rigid(matrices: np.ndarray, mesh: MeshData, shading: bool = True):
+    """(K, T, 3, 3) world corners and shading normals (None without ``corner_normals``, or
+    unless ``shading``) of the K placements ``matrices`` (K, 4, 4) of ``mesh``:
+    ``object_vertices_world`` and ``_corner_normals_world`` of many objects in one pass."""
     linear, offset = matrices[:, :3, :3], matrices[:, :3, 3]
     corners = np.asarray(mesh.positions, np.float64)[np.asarray(mesh.triangles, np.int64)]
     world = (np.matmul(corners.reshape(1, -1, 3), linear.transpose(0, 2, 1))
              + offset[:, None, :]).reshape(len(matrices), -1, 3, 3)
-    if getattr(mesh, "corner_normals", None) is None:
+    if not shading or getattr(mesh, "corner_normals", None) is None:
         return world, None
     a, b, c = linear[..., :, 0], linear[..., :, 1], linear[..., :, 2]
     cofactor = np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=-1)
@@ -129,12 +129,14 @@ def _place_rigid(matrices: np.ndarray, mesh: MeshData):
     return world, np.divide(normals, length, out=np.zeros_like(normals), where=length > 1e-12)
 
 
-def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
+def world_triangles(snapshot: SceneSnapshot, shading: bool = True) -> SceneTriangles:
     """Every triangle of every object in ``snapshot`` in world space (see ``SceneTriangles``).
 
     Objects whose mesh is missing from the snapshot are skipped. Triangles keep the order of
     ``snapshot.objects`` then of each mesh's triangles. The objects that place one mesh by
     their world matrices (linked duplicates, instances) are transformed together.
+    shading : False leaves the shading normals out (``corner_normals`` None: face normals),
+    for rays that only need where they hit (the view fit's probe).
     """
     placed = [(index, obj, snapshot.meshes.get(obj.mesh)) for index, obj in enumerate(snapshot.objects)]
     placed = [(index, obj, mesh) for index, obj, mesh in placed
@@ -145,8 +147,9 @@ def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
     counts = np.array([len(mesh.triangles) for _, _, mesh in placed], np.int64)
     starts = np.cumsum(counts) - counts
     tri = np.empty((int(counts.sum()), 3, 3))
-    smooth = any(getattr(mesh, "corner_normals", None) is not None for _, _, mesh in placed)
-    shading = np.empty_like(tri) if smooth else None
+    smooth = shading and any(getattr(mesh, "corner_normals", None) is not None
+                             for _, _, mesh in placed)
+    normals = np.empty_like(tri) if smooth else None
     flat = np.zeros(len(tri), bool)  # rows whose mesh has no corner normals
     kept = [index for index, _, _ in placed]  # the objects whose triangles are in, in order
     rigid: dict[str, list[int]] = {}
@@ -159,23 +162,23 @@ def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
         triangles = np.asarray(mesh.triangles, dtype=np.int64)
         tri[rows] = object_vertices_world(obj, mesh, snapshot)[triangles]
         if smooth and not flat[rows.start]:
-            shading[rows] = _corner_normals_world(obj, mesh, snapshot, triangles)
+            normals[rows] = _corner_normals_world(obj, mesh, snapshot, triangles)
     for name, group in rigid.items():
         mesh = snapshot.meshes[name]
         step = max(1, _PLACED_CHUNK // len(mesh.triangles))
         for at in range(0, len(group), step):
             ks = np.asarray(group[at:at + step])
             matrices = np.stack([np.asarray(placed[k][1].world_matrix, np.float64) for k in ks])
-            world, normals = _place_rigid(matrices, mesh)
+            world, placed_normals = _place_rigid(matrices, mesh, smooth)
             rows = (starts[ks][:, None] + np.arange(len(mesh.triangles))).ravel()
             tri[rows] = world.reshape(-1, 3, 3)
-            if normals is not None:
-                shading[rows] = normals.reshape(-1, 3, 3)
+            if placed_normals is not None:
+                normals[rows] = placed_normals.reshape(-1, 3, 3)
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     length = np.linalg.norm(normal, axis=1, keepdims=True)
     normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
     if smooth and flat.any():  # meshes without corner normals shade flat
-        shading[flat] = normal[flat][:, None]
+        normals[flat] = normal[flat][:, None]
     materials = [np.asarray(mesh.triangle_materials, dtype=np.int32) for _, _, mesh in placed]
     objects = [np.full(count, index, np.int32) for (index, _, _), count in zip(placed, counts)]
     uvs = [np.zeros((len(mesh.triangles), 3, 2), np.float32) if mesh.uvs is None else
@@ -189,7 +192,7 @@ def world_triangles(snapshot: SceneSnapshot) -> SceneTriangles:
     placed = np.full(len(snapshot.objects), -1, np.int32)
     for index in kept:
         placed[index] = ids.setdefault(snapshot.objects[index].mesh, len(ids))
-    return SceneTriangles(tri, normal, materials, objects, shading, textures, visibility, holdout,
+    return SceneTriangles(tri, normal, materials, objects, normals, textures, visibility, holdout,
                           placed)
 
 

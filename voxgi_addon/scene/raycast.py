@@ -89,13 +89,39 @@ def counted_hits(cutout, good, tri, u, v, origins, directions) -> np.ndarray:
     return good
 
 
-def build_grid(tris: SceneTriangles) -> TriangleGrid:
-    """A ``TriangleGrid`` with about ``_CELLS_PER_TRIANGLE`` cells per triangle."""
+def _box_pairs(positions, origin, span, dims) -> tuple[np.ndarray, np.ndarray]:
+    """(cell (P, 3), triangle (P,)) pairs of every triangle with each cell its bounding box
+    overlaps: more cells than the triangle crosses, found without testing any. A triangle
+    with a non-finite corner is in none (no ray hits it)."""
+    a, b, c = positions[:, 0], positions[:, 1], positions[:, 2]
+    smallest, largest = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+    finite = np.isfinite(smallest).all(axis=1) & np.isfinite(largest).all(axis=1)
+    with np.errstate(invalid="ignore"):  # a grid of non-finite bounds lists nothing useful
+        low = np.clip(np.floor((smallest - origin) / span + LATTICE_OFFSET)
+                      .astype(np.int64), 0, dims - 1)
+        high = np.clip(np.floor((largest - origin) / span + LATTICE_OFFSET)
+                       .astype(np.int64), 0, dims - 1)
+    size = high - low + 1
+    count = np.where(finite, size.prod(axis=1), 0)
+    triangle = np.repeat(np.arange(len(positions)), count)
+    k = np.arange(len(triangle)) - np.repeat(np.cumsum(count) - count, count)  # index in the box
+    sx, sy = size[triangle, 0], size[triangle, 1]
+    cell = low[triangle] + np.stack([k % sx, (k // sx) % sy, k // (sx * sy)], axis=1)
+    return cell, triangle
+
+
+def build_grid(tris: SceneTriangles, cells_per_triangle: float = _CELLS_PER_TRIANGLE,
+               exact: bool = True) -> TriangleGrid:
+    """A ``TriangleGrid`` with about ``cells_per_triangle`` cells per triangle: fewer cells
+    are quicker to build (each triangle is tested against fewer of them) and slower to trace
+    through (more triangles per cell), which pays for a few rays (``few_rays_grid``). exact :
+    a triangle is listed in the cells it crosses (``voxelize_triangles``); False: in every
+    cell its bounding box overlaps (no test; the hits are the same)."""
     positions = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)
     count = len(positions)
     lo, hi = tris.bounds
     extent = np.maximum(hi - lo, 1e-9)
-    target = float(np.clip(_CELLS_PER_TRIANGLE * count, 1.0, _MAX_CELLS_PER_AXIS**3))
+    target = float(np.clip(cells_per_triangle * count, 1.0, _MAX_CELLS_PER_AXIS**3))
     span = float(np.cbrt(np.prod(extent) / target))
     span = max(span, float(extent.max()) / _MAX_CELLS_PER_AXIS, 1e-6)
     origin = lo - 0.5 * span
@@ -107,19 +133,35 @@ def build_grid(tris: SceneTriangles) -> TriangleGrid:
     if count == 0:
         return TriangleGrid(origin, span, dims, np.zeros(int(dims.prod()) + 2, np.int64),
                             np.zeros(0, np.int32), corners, cutouts_of(tris))
-    surface = voxelize_triangles(
-        (positions - origin).reshape(-1, 3), np.arange(3 * count).reshape(count, 3), span
-    )
-    cells = surface.cells.astype(np.int64)[surface.cell_of_pair]
+    if exact:
+        surface = voxelize_triangles(
+            (positions - origin).reshape(-1, 3), np.arange(3 * count).reshape(count, 3), span
+        )
+        cells = surface.cells.astype(np.int64)[surface.cell_of_pair]
+        triangles = surface.triangle_of_pair
+    else:
+        cells, triangles = _box_pairs(positions, origin, span, dims)
+        triangles = triangles.astype(np.int32)
     keys = (cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2]
     order = np.argsort(keys, kind="stable")
     counts = np.bincount(keys, minlength=int(dims.prod()) + 1)  # + the empty sentinel cell
     cell_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    return TriangleGrid(origin, span, dims, cell_start, surface.triangle_of_pair[order], corners,
+    return TriangleGrid(origin, span, dims, cell_start, triangles[order], corners,
                         cutouts_of(tris))
 
 
 _GRIDS: "weakref.WeakKeyDictionary[SceneTriangles, TriangleGrid]" = weakref.WeakKeyDictionary()
+
+
+FEW_RAYS_CELLS_PER_TRIANGLE = 0.1
+
+
+def few_rays_grid(tris: SceneTriangles) -> None:
+    """Build the grid ``tris`` will be traced through with ``FEW_RAYS_CELLS_PER_TRIANGLE``: for
+    a few thousand rays (the view fit's probe) building the usual grid costs more than the
+    tracing it saves. The hits are the same (every triangle a ray crosses is tested)."""
+    if tris not in _GRIDS:
+        _GRIDS[tris] = build_grid(tris, FEW_RAYS_CELLS_PER_TRIANGLE, exact=False)
 
 
 def _grid_of(tris) -> TriangleGrid:

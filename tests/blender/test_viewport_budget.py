@@ -1,0 +1,196 @@
+"""Entering Rendered mode without a freeze (render/viewport_prepare.py; docs/gi_pipeline.md
+"Entering Rendered mode"): counted, not timed.
+
+``view_update`` / ``view_draw`` are driven headless with the stand-in engine, as the other
+viewport tests do, from cold caches (no shader compiled, no GPU scene): from entering Rendered
+mode to the converged image no draw compiles more than one shader (``gpu.shader.create_from_info``
+calls, counted beside ``gpu_shaders.counters``) or sends more than one scene part
+(``gpu_shaders.counters``: the GPU scene's parts, the BVH's three textures one by one, the
+vertex batch a chunk at a time); the quick image shows before the first GI image; the first GI
+image arrives; and the converged image is the one the view converged to before the change
+(every step of it in one draw: a whole slice per draw, no budget), traced in the same test.
+An object move and an orbit then keep to the same counts.
+"""
+from __future__ import annotations
+
+import types
+
+import bpy
+import gpu
+import numpy as np
+from stand_in_engine import StandInEngine
+from test_viewport import HEIGHT, WIDTH, camera_matrices, gpu_ready, turned
+
+SAMPLES = 3
+
+
+class Compiles:
+    """Counts ``gpu.shader.create_from_info`` calls: every shader the add-on makes."""
+
+    def __init__(self, monkeypatch):
+        self.count = 0
+        original = gpu.shader.create_from_info
+
+        def counted(info):
+            self.count += 1
+            return original(info)
+
+        monkeypatch.setattr(gpu.shader, "create_from_info", counted)
+
+    def take(self) -> int:
+        count, self.count = self.count, 0
+        return count
+
+
+def demo_scene():
+    """The demo scene (the viewport benchmark's box: a textured floor, a skinned tube, a
+    sphere, a point lamp, a world), Accurate with the radiance cache's bounces."""
+    from voxgi.blender.demo_scene import build_demo_scene
+
+    scene = bpy.context.scene
+    build_demo_scene(scene)
+    scene.render.engine = "VOXGI"
+    scene.render.resolution_x, scene.render.resolution_y = WIDTH, HEIGHT
+    scene.render.resolution_percentage = 100
+    scene.voxgi.quality = "ACCURATE"
+    scene.voxgi.bounce_source, scene.voxgi.bounces = "MANUAL", 3
+    # small voxels for the session's update jobs (Accurate traces the triangles)
+    scene.voxgi.base_span, scene.voxgi.cascade_count, scene.voxgi.grid_resolution = 0.2, 2, "32"
+    scene.voxgi_viewport.resolution_fraction = 1.0
+    scene.voxgi_viewport.samples = SAMPLES
+    return scene
+
+
+def cold_caches():
+    """Forget every compiled shader, the GPU scene and the prepared one: as a fresh session."""
+    from voxgi.render import gpu_scene, release_gpu_resources
+
+    release_gpu_resources()
+    gpu_scene.release()
+
+
+def context(view, window):
+    return types.SimpleNamespace(
+        region=types.SimpleNamespace(width=WIDTH, height=HEIGHT),
+        region_data=types.SimpleNamespace(view_matrix=view, window_matrix=window))
+
+
+def draw(engine, depsgraph, view, window):
+    """``view_draw`` into a float offscreen: (H, W, 4), top row first."""
+    from voxgi.render.gpu_tracer import read_texture
+    from voxgi.render.viewport import view_draw
+
+    offscreen = gpu.types.GPUOffScreen(WIDTH, HEIGHT, format="RGBA32F")
+    try:
+        with offscreen.bind():
+            gpu.state.active_framebuffer_get().clear(color=(0.5, 0.5, 0.5, 1.0))
+            view_draw(engine, context(view, window), depsgraph)
+        return np.flipud(read_texture(offscreen.texture_color))
+    finally:
+        offscreen.free()
+
+
+def renderer_for(engine, whole: bool):
+    """The engine's renderer with quarter-image slices (the sizes do not depend on the
+    machine); whole: no budget — every preparation step and a whole slice in one draw, the
+    view as it converged before the preparation was spread over draws."""
+    from voxgi.render.viewport import ViewportRenderer
+
+    renderer = engine.voxgi_viewport = ViewportRenderer()
+    renderer.progressive.fixed_pixels = WIDTH * HEIGHT // 4
+    if whole:
+        renderer.progressive.stage_budget = None
+    return renderer
+
+
+def draw_to_the_end(engine, depsgraph, view, window, compiles, limit=3000):
+    """view_draw until the view has converged on the completed radiance cache and asks for no
+    more draws: [(image, shader compiles, scene parts sent, what it showed)]."""
+    from voxgi.render.gpu_shaders import counters
+
+    renderer = engine.voxgi_viewport
+    draws = []
+    for _ in range(limit):
+        redraws = engine.redraws
+        mark = counters.mark()
+        image = draw(engine, depsgraph, view, window)
+        compiled, sent = counters.since(mark)
+        draws.append((image, compiles.take(), len(compiled), len(sent), renderer.shown,
+                      compiled, sent, renderer.traces))
+        if engine.redraws == redraws and renderer.progressive.converged \
+                and renderer.cache.generation > 0:
+            return draws
+    raise AssertionError(f"the view did not converge in {limit} draws: {renderer.status}")
+
+
+def assert_bounded(draws, what):
+    for index, (_, compiles, counted, sent, _, names, parts, _) in enumerate(draws):
+        assert compiles == counted, f"{what} draw {index}: a compile bypassed create_shader"
+        assert compiles <= 1, f"{what} draw {index} compiled {compiles} shaders: {names}"
+        assert sent <= 1, f"{what} draw {index} sent {sent} scene parts: {parts}"
+
+
+def test_no_draw_compiles_or_uploads_more_than_one_thing_and_the_image_is_the_same(
+        voxgi, monkeypatch):
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render import viewport_prepare
+    from voxgi.render.viewport import view_update
+    from voxgi.voxgi_addon.scene.changes import UpdateRecord
+
+    scene = demo_scene()
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    view, window = camera_matrices(scene, depsgraph)
+    compiles = Compiles(monkeypatch)
+
+    # before: every step in one draw, the triangles in one vertex batch, converged
+    monkeypatch.setattr(viewport_prepare, "CHUNK_TRIANGLES", 1 << 30)
+    cold_caches()
+    engine = StandInEngine()
+    view_update(engine, context(view, window), depsgraph)
+    renderer_for(engine, whole=True)
+    before = draw_to_the_end(engine, depsgraph, view, window, compiles)
+    assert max(d[1] for d in before) > 1  # (the first draw compiles all the kernels)
+    reference = before[-1][0]
+
+    # entering Rendered mode from cold caches, spread over draws; the vertex batch in several
+    # chunks on this small scene, as on a large one
+    monkeypatch.setattr(viewport_prepare, "CHUNK_TRIANGLES", 512)
+    cold_caches()
+    live_gi(scene.name_full).rescan = "entering Rendered mode again"
+    engine = StandInEngine()
+    compiles.take()
+    view_update(engine, context(view, window), depsgraph)  # the snapshot; the scene prepared
+    entering = compiles.take()
+    assert entering == 0, f"view_update compiled {entering} shaders"
+    renderer_for(engine, whole=False)
+    draws = draw_to_the_end(engine, depsgraph, view, window, compiles)
+    assert_bounded(draws, "entering")
+    shown = [d[4] for d in draws]
+    first_quick = shown.index("Quick")
+    first_gi = next(i for i, d in enumerate(draws) if d[7])  # its first slice done
+    print(f"{len(draws)} draws: quick image at draw {first_quick}, first GI image at draw "
+          f"{first_gi}; {sum(d[1] for d in draws)} compiles, {sum(d[3] for d in draws)} parts")
+    assert first_quick < first_gi  # the quick image shows while the kernels come in
+    assert sum(d[1] for d in draws) >= 15  # every kernel compiled, one per draw
+    assert sum(d[3] for d in draws) >= 6   # the scene's parts and the vertex batch's chunks
+    # the image the view converged to before, within float rounding
+    np.testing.assert_allclose(draws[-1][0], reference, atol=1e-5)
+
+    # an object moves: a new snapshot, its changed parts a draw each, nothing compiled
+    sphere = bpy.data.objects["Rotating Sphere"]
+    sphere.location.x += 0.3
+    depsgraph.update()
+    live_gi(scene.name_full).update(scene, depsgraph, [UpdateRecord(
+        "OBJECT", sphere.name, transform=True, object_type="MESH")])
+    moved = draw_to_the_end(engine, depsgraph, view, window, compiles)
+    assert_bounded(moved, "object move")
+    assert sum(d[1] for d in moved) == 0
+    assert any("bvh" in part for d in moved for part in d[6])
+    assert not np.allclose(moved[-1][0], draws[-1][0], atol=1e-3)
+
+    # an orbit: a new view every draw, nothing compiled or sent
+    for step in range(1, 6):
+        mark = compiles.take()
+        draw(engine, depsgraph, turned(view, 2.0 * step), window)
+        assert compiles.take() == 0 and mark == 0
