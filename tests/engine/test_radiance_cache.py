@@ -341,3 +341,19 @@ def test_a_camera_outside_the_scene_has_no_focus():
     lo, hi = rc.cache_grids(tris, 32)[0].extent
     assert ((np.asarray(inside) > lo) & (np.asarray(inside) < hi)).all()
     assert rc.snap_focus(tris, (0.31, 0.21, 1.01)) == inside
+
+
+def test_the_scene_bounds_are_kept_per_positions_array_and_follow_new_triangles():
+    """The cache's bounds (asked at every viewport slice) are computed once per triangles'
+    positions array; a new array (the scene changed) gets its own."""
+    from types import SimpleNamespace
+
+    first = SimpleNamespace(positions=np.array([[[0, 0, 0], [1, 2, 3], [0, 1, 0]]], float))
+    lo, hi = rc._bounds(first)
+    assert rc._bounds(first)[0] is lo
+    np.testing.assert_array_equal(hi, [1, 2, 3])
+    moved = SimpleNamespace(positions=first.positions + 5.0)
+    np.testing.assert_array_equal(rc._bounds(moved)[0], [5, 5, 5])
+    key = id(moved.positions)
+    del moved
+    assert key not in rc._BOUNDS
