@@ -129,3 +129,21 @@ def test_a_reused_key_does_not_return_another_worlds_light():
     second = unshadowed(world_light(WorldData(np.full(3, 0.5, np.float32), 1.0, blue, "same")), up)
     np.testing.assert_allclose(first[0], [0.5, 0.5, 0.5], rtol=1e-3)
     np.testing.assert_allclose(second[0], [0.2, 0.4, 0.9], rtol=1e-3)
+
+
+def test_a_uniform_worlds_irradiance_is_its_radiance_and_the_quadrature_agrees():
+    """A plain Background colour's unshadowed irradiance / π is its radiance at every normal
+    (∫ L max(0, n·ω) dω = πL): the table takes it at once, and the quadrature that every
+    other map goes through gives the same for a map a hair away from uniform."""
+    from voxgi.voxgi_addon.gi.world_light import build_world_light
+
+    colour = np.array([0.35, 0.5, 0.8])
+    flat = build_world_light(np.tile(colour, (16, 32, 1)))
+    assert flat.uniform
+    np.testing.assert_allclose(flat.irradiance, np.broadcast_to(colour, flat.irradiance.shape),
+                               rtol=1e-7)
+    nearly = np.tile(colour, (16, 32, 1))
+    nearly[0, 0] *= 1.0 + 1e-6
+    quadrature = build_world_light(nearly)
+    assert not quadrature.uniform
+    np.testing.assert_allclose(quadrature.irradiance, flat.irradiance, rtol=2e-3)
