@@ -288,3 +288,18 @@ def test_corner_normals_follow_the_object_and_default_to_flat():
     tris = world_triangles(snap)
     np.testing.assert_allclose(tris.corner_normals[0], np.tile(tris.normals[0], (3, 1)))  # flat fallback
     np.testing.assert_allclose(tris.corner_normals[1], np.tile([0, -1.0, 0], (3, 1)), atol=1e-12)
+
+
+def test_a_nan_triangle_leaves_the_bounds_and_the_grid_finite():
+    """A triangle with a NaN corner (the voxelizer drops and counts it) must not make the
+    scene's bounds NaN, nor the ray grid built over them; rays still hit the good triangle."""
+    good = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
+    bad = np.array([[[np.nan, 0.0, 0.0], [1.0, 0.0, 5.0], [0.0, 1.0, 5.0]]])
+    tris = soup(np.concatenate([good, bad]))
+    lo, hi = tris.bounds
+    np.testing.assert_array_equal(lo, [0, 0, 0])
+    np.testing.assert_array_equal(hi, [1, 1, 0])
+    grid = build_grid(tris)
+    assert np.all(np.isfinite(grid.origin)) and np.all((grid.dims > 0) & (grid.dims < 1000))
+    t, tri, _, _ = closest_hits(tris, np.array([[0.2, 0.2, 1.0]]), np.array([[0.0, 0.0, -1.0]]))
+    assert tri[0] == 0 and t[0] == pytest.approx(1.0)

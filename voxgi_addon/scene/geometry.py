@@ -65,10 +65,14 @@ class SceneTriangles:
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """(3,) min and max corner of all triangles (zeros when empty)."""
-        if len(self.positions) == 0:
+        """(3,) min and max corner of the triangles whose corners are all finite (zeros when
+        none: a triangle with a NaN corner, which the voxelizer drops and counts, must not make
+        the bounds NaN)."""
+        corners = np.asarray(self.positions).reshape(-1, 3, 3)
+        finite = np.isfinite(corners).all(axis=(1, 2))
+        flat = (corners if finite.all() else corners[finite]).reshape(-1, 3)
+        if len(flat) == 0:
             return np.zeros(3), np.zeros(3)
-        flat = self.positions.reshape(-1, 3)
         return flat.min(axis=0), flat.max(axis=0)
 
 

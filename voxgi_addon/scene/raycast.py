@@ -134,11 +134,14 @@ def build_grid(tris: SceneTriangles, cells_per_triangle: float = _CELLS_PER_TRIA
         return TriangleGrid(origin, span, dims, np.zeros(int(dims.prod()) + 2, np.int64),
                             np.zeros(0, np.int32), corners, cutouts_of(tris))
     if exact:
+        # triangles with a non-finite corner are in no cell (no ray can hit them)
+        finite = np.flatnonzero(np.isfinite(positions).all(axis=(1, 2)))
         surface = voxelize_triangles(
-            (positions - origin).reshape(-1, 3), np.arange(3 * count).reshape(count, 3), span
+            (positions[finite] - origin).reshape(-1, 3),
+            np.arange(3 * len(finite)).reshape(-1, 3), span
         )
         cells = surface.cells.astype(np.int64)[surface.cell_of_pair]
-        triangles = surface.triangle_of_pair
+        triangles = finite[surface.triangle_of_pair].astype(surface.triangle_of_pair.dtype)
     else:
         cells, triangles = _box_pairs(positions, origin, span, dims)
         triangles = triangles.astype(np.int32)
