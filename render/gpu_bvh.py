@@ -9,7 +9,10 @@ time). Kernels (``shaders/``, each prefixed with ``bvh_common.glsl``):
 * ``bvh_probe`` — one ray per texel (closest hit, any hit) and the sample patterns (tests).
 * ``bvh_direct`` — Diffuse Direct over a G-buffer, every light of the snapshot, shadow rays
   (``bvh_lights.glsl``, the port of ``direct_light.diffuse_direct``); or the emitters' exact
-  unshadowed sum alone, which an anti-aliased preview's passes take from their pixel centres.
+  unshadowed sum alone, which the preview evaluates at its gather points and brings to the
+  pixels as a field (``gpu_gather.upsample_field``).
+* ``bvh_emitter_glossy`` — the emitters' glossy light (``exact_glossy.emitters_shine``): its
+  unshadowed field at the gather points, and from that field at the pixels.
 * ``bvh_gather`` — the Accurate final gather: exact AO and the one-bounce diffuse-indirect
   estimate with their variances (``voxgi_addon.gi.exact_indirect``; run by ``gpu_gather``).
 * ``bvh_glossy`` — the glossy gather: exact one-bounce Glossy Indirect and its variance
@@ -26,7 +29,7 @@ import time
 import gpu
 import numpy as np
 
-from ..voxgi_addon.gi.emitters import emitter_table
+from ..voxgi_addon.gi.emitters import NEAR_STEP, emitter_table
 from ..voxgi_addon.gi.exact_glossy import (
     EMITTER_GLOSSY_STREAM,
     GLOSSY_STREAM,
@@ -67,7 +70,7 @@ KERNELS = {
     "bvh_direct": (("textures", "bvh_lights", "same_surface", "bvh_direct"),
                    _BVH + ("lights", "world_map", "emitters", "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "centre_position", "centre_normal",
-                           "centre_view", "centre_unshadowed") + _TEXTURES,
+                           "centre_view", "centre_unshadowed", "emitter_field") + _TEXTURES,
                    ("sampling", "strata")),
     "bvh_gather": (("pixels", "principled", "bvh_lights", "textures", "cache_lookup", "bvh_shade",
                     "gather_point", "bvh_gather"),
@@ -92,13 +95,14 @@ KERNELS["bvh_cache_paths"] = (
             "gbuffer_normal", "principled_lut", "texture_table", "texture_atlas",
             "radiance_cache"),
     ("sampling", "world", "chunk"))
-# The emitters' glossy light at the pixel centres, and per sub-pixel pass where it sees another
-# surface than its pixel's centre (exact_glossy.emitters_shine).
+# The emitters' glossy light: its unshadowed field at the gather points, and from the field at
+# the pixel centres and the sub-pixel passes' points (exact_glossy.emitters_shine).
 _CENTRE = ("centre_position", "centre_normal", "centre_view", "centre_shine")
 KERNELS["bvh_emitter_glossy"] = (
     ("principled", "bvh_lights", "textures", "ltc", "same_surface", "bvh_emitter_glossy"),
     _BVH + ("lights", "world_map", "emitters", "materials", "principled_lut", "gbuffer_position",
-            "gbuffer_normal", "gbuffer_view", "gbuffer_base", "ltc_table") + _CENTRE + _TEXTURES,
+            "gbuffer_normal", "gbuffer_view", "gbuffer_base", "ltc_table") + _CENTRE
+    + ("emitter_field",) + _TEXTURES,
     ("sampling",))
 _BLANK: dict[str, object] = {}
 
@@ -174,6 +178,7 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
             defines["STRATA_BLOCK"] = "ivec3(strata.xyz)"
         if "same_surface" in files:
             defines["PLANE_TOLERANCE"] = repr(float(PLANE_TOLERANCE))
+            defines["NEAR_STEP"] = repr(float(NEAR_STEP))
         if kernel in ("bvh_gather", "bvh_glossy", "bvh_cache_paths"):
             defines["VIEW_BACKOFF"] = repr(float(VIEW_BACKOFF))
             defines["GLOSSY_STREAM"] = f"{GLOSSY_STREAM}u"
@@ -376,7 +381,7 @@ def strata_side(samples: int) -> int:
 
 def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0,
                          only: int | None = None, world=None, emitters=None, strata_block=None,
-                         table=None, absent: tuple[str, ...] = (), centre=None):
+                         table=None, absent: tuple[str, ...] = (), centre=None, field=None):
     """Diffuse Direct over a G-buffer (``shaders/bvh_direct.glsl``), an RGBA32F texture of the
     G-buffer's size (bottom row first), rgb in Cycles' units; ``only`` : of that lamp alone
     (``lights_texture``; -1: none); world, emitters : a ``world_texture`` / ``emitters_texture``
@@ -386,10 +391,13 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
     ``lights_texture(lights, only)`` made already. absent : the kinds of light this dispatch
     has none of (``absent_lights``; the kernel's variant leaves their code out).
     centre : a pass of the anti-aliased preview: {"gbuffer_position", "gbuffer_normal",
-    "gbuffer_view"} of the pixel centres' G-buffer at the same texels and "unshadowed",
-    ``emitters_unshadowed_texture`` there; the texels whose pass sees the surface their centre
-    sees take the emitters' exact unshadowed sum from it, the others evaluate it (None: all
-    do); the shadow rays are the pass's own everywhere."""
+    "gbuffer_view"} of the pixel centres' G-buffer at the same texels and "unshadowed", the
+    emitters' unshadowed field there (``gpu_gather.upsample_field``'s second); the texels whose
+    pass sees the surface their centre sees take the emitters' unshadowed sum from it where
+    the field holds (bvh_direct.glsl), the others from ``field`` (the field at the pass's own
+    points, ``gpu_gather.upsample_field_list``'s second; None: none) where it holds, and
+    evaluate it elsewhere (centre None: all do); the shadow rays are the pass's own
+    everywhere."""
     position = gbuffer_inputs["gbuffer_position"]
     side = strata_side(samples)
     block = strata_block or (side, 0, 0, side)
@@ -400,33 +408,43 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
               "emitters": emitters if emitters is not None else emitters_texture(None),
               "centre_position": given["gbuffer_position"],
               "centre_normal": given["gbuffer_normal"], "centre_view": given["gbuffer_view"],
-              "centre_unshadowed": given["unshadowed"], "bvh_absent": tuple(absent)}
+              "centre_unshadowed": given["unshadowed"],
+              "emitter_field": position if field is None else field,  # not read without
+              "bvh_absent": tuple(absent)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
-                        {"sampling": (seed, block[3], 0 if centre is None else 1, 0),
+                        {"sampling": (seed, block[3], 0 if centre is None else 1,
+                                      0 if field is None else 1),
                          "strata": (*block[:3], 0)})
 
 
-def emitters_unshadowed_texture(bvh: GPUBVH, gbuffer_inputs, emitters, lights=None, world=None):
+def emitters_unshadowed_texture(bvh: GPUBVH, gbuffer_inputs, emitters, lights=None, world=None,
+                                field=None):
     """The emissive triangles' exact unshadowed Diffuse Direct over a G-buffer (``bvh_direct``'s
     mode 2, ``bvh_lights.glsl`` emitters_unshadowed, the port of ``emitters.unshadowed_sum``):
-    an RGBA32F texture of the G-buffer's size (bottom row first), at the points
-    ``direct_light_texture`` lights — its ``centre``'s "unshadowed". emitters : an
-    ``emitters_texture``; lights, world : the scene's ``lights_texture`` / ``world_texture``
-    (read by no code path here; bound because bvh_lights.glsl declares them; None: empty
-    ones)."""
+    an RGBA32F texture of the G-buffer's size (bottom row first), (sum, the distance to the
+    nearest emissive triangle that can light the point), at the points
+    ``direct_light_texture`` lights: the field ``gpu_gather.upsample_field`` brings from the
+    gather points to every pixel. field : that field over this G-buffer: (its sum where it
+    holds, else the exact one, 0) instead — the pixel centres' sums, ``direct_light_texture``'s
+    centre "unshadowed". emitters : an ``emitters_texture``; lights, world : the scene's
+    ``lights_texture`` / ``world_texture`` (read by no code path here; bound because
+    bvh_lights.glsl declares them; None: empty ones)."""
     position = gbuffer_inputs["gbuffer_position"]
     inputs = {**bvh.inputs, **gbuffer_inputs, "emitters": emitters,
               "lights": lights if lights is not None else lights_texture([], None),
               "world_map": world if world is not None else world_texture(None),
               "centre_position": position, "centre_normal": position, "centre_view": position,
               "centre_unshadowed": position,  # not read
+              "emitter_field": position if field is None else field,
               "bvh_absent": ("AREA", "POINT", "SUN", "WORLD")}  # the emitters' code only
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
-                        {"sampling": (0, 1, 2, 0), "strata": (1, 0, 0, 0)})
+                        {"sampling": (0, 1, 2, 0 if field is None else 1),
+                         "strata": (1, 0, 0, 0)})
 
 
 def emitter_glossy_texture(bvh: GPUBVH, gbuffer_inputs, emitters, materials, rays: int,
-                           seed: int = 0, lights=None, world=None, centre=None):
+                           seed: int = 0, lights=None, world=None, centre=None, field=None,
+                           unshadowed: bool = False):
     """The glossy light the emissive triangles send toward the viewer over a G-buffer
     (``shaders/bvh_emitter_glossy.glsl``, the port of ``exact_glossy.emitters_shine``): an
     RGBA32F texture of the G-buffer's size (bottom row first), rgb = Glossy Color × their
@@ -434,10 +452,14 @@ def emitter_glossy_texture(bvh: GPUBVH, gbuffer_inputs, emitters, materials, ray
     ``principled_materials_texture``; rays : shadow rays per pixel for the visible share;
     lights, world : the scene's ``lights_texture`` / ``world_texture`` (read by no code path
     here; bound because bvh_lights.glsl declares them; None: empty ones).
+    unshadowed : the field at the gather points instead (mode 2): (the unshadowed light over
+    the point's Glossy Color, 0), no rays. field : the field at these texels
+    (``gpu_gather.upsample_field``'s first, or ``upsample_field_list``'s): the unshadowed light
+    is taken from it where it holds and evaluated elsewhere (None: everywhere).
     centre : a sub-pixel pass over the edge pixels' list: {"gbuffer_position",
     "gbuffer_normal", "gbuffer_view"} of the pixel centres' G-buffer at the same texels and
     "shine", this function's texture there; the texels whose pass sees the surface their
-    centre sees take the centre's value, the others are evaluated (None: all are)."""
+    centre sees take the centre's value, the others are as without (None: all are)."""
     position = gbuffer_inputs["gbuffer_position"]
     given = centre or {"shine": position, **gbuffer_inputs}  # not read without centre
     inputs = {**bvh.inputs, **gbuffer_inputs, "emitters": emitters, "materials": materials,
@@ -447,9 +469,11 @@ def emitter_glossy_texture(bvh: GPUBVH, gbuffer_inputs, emitters, materials, ray
               "centre_position": given["gbuffer_position"],
               "centre_normal": given["gbuffer_normal"], "centre_view": given["gbuffer_view"],
               "centre_shine": given["shine"],
+              "emitter_field": position if field is None else field,  # not read without
               "bvh_absent": ("AREA", "POINT", "SUN", "WORLD")}  # the emitters' code only
+    mode = 2 if unshadowed else 0 if centre is None else 1
     return dispatch_bvh("bvh_emitter_glossy", inputs, position.width, position.height,
-                        {"sampling": (seed, max(1, int(rays)), 0 if centre is None else 1, 0)})
+                        {"sampling": (seed, max(1, int(rays)), mode, 0 if field is None else 1)})
 
 
 def trace_rays(bvh: GPUBVH, origins, directions, t_min=0.0, t_max=np.inf, any_hit=False,

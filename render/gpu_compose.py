@@ -67,7 +67,7 @@ def release() -> None:
 
 
 def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples: int,
-                 seed: int, block=None, lamps=None, glow=None, centre=None):
+                 seed: int, block=None, lamps=None, glow=None, centre=None, field=None):
     """(Stages, one per light's dispatches, returning) ``sums`` + one pass over ``inputs``, a
     G-buffer of ``size`` (an image's or the edge pixels' list's) of ``scene`` (a ``GPUScene``
     updated to ``snapshot``): terms = the gathered (Diffuse Indirect, AO), Glossy Indirect and
@@ -78,9 +78,10 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     glossy light), for light_edge_pixels.
     glow : the emitters' glossy light at the pass's texels (``gpu_bvh.emitter_glossy_texture``),
     which the world's and emitters' dispatch adds; None: none (Fast's glossy cones see the
-    emission themselves). centre : the pass's pixel centres with the emitters' exact
-    unshadowed sum there, for that dispatch (``direct_light_texture``'s; None: it evaluates
-    the sum at every texel)."""
+    emission themselves). centre : the pass's pixel centres with the emitters'
+    unshadowed field there, for that dispatch (``direct_light_texture``'s; None: it evaluates
+    the sum at every texel); field : the field at the pass's own points
+    (``direct_light_texture``'s)."""
     bvh, principled, emission = scene.bvh, scene.principled, scene.emission
     materials, lut = scene.materials, scene.lut
     extra = scene.has_scene_lights
@@ -111,7 +112,7 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
                                       world=scene.world_map, emitters=scene.emitters,
                                       strata_block=block, table=scene.no_lamp,
                                       absent=absent_lights(scene.lights[len(scene.lamp_tables):]),
-                                      centre=centre)
+                                      centre=centre, field=field)
         out = run("aa_light", LIGHT_SAMPLERS, {
             "colour": colour, "direct_image": direct,
             "shine_image": blank if glow is None else glow, **sums},

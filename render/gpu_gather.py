@@ -326,6 +326,68 @@ def upsample(values, gbuffer_inputs, stride: int, width: int, height: int, secon
     return tuple(out) if pair else out[0]
 
 
+_FIELD_SAMPLERS = _UPSAMPLE_SAMPLERS + ("low_image2",)
+_LIST_SAMPLERS = _FIELD_SAMPLERS + ("pixels", "point_position", "point_normal")
+
+
+def upsample_field(glossy, diffuse, gbuffer_inputs, stride: int, width: int, height: int, eye):
+    """The emitters' light from the gather points to every pixel (``shaders/upsample.glsl``
+    UPSAMPLE_FIELD; docs/gi_pipeline.md "Where a preview's time goes"): (glossy, diffuse)
+    full-resolution textures of ``glossy`` (``gpu_bvh.emitter_glossy_texture``'s field: the
+    unshadowed light over the Glossy Color) and ``diffuse`` (``emitters_unshadowed_texture``:
+    the unshadowed sum, the distance to the emitters) at the gather points, each with w = how
+    far the light's direction turns across the taps (−1: no tap; 0 at stride 1, every pixel's
+    own). eye : (camera position, 1), or zeros for an orthographic camera."""
+    return _field(_FIELD_SAMPLERS, {**gbuffer_inputs, "low_image": glossy,
+                                    "low_image2": diffuse}, stride, width, height, eye,
+                  (width, height))
+
+
+def upsample_field_list(glossy, diffuse, gbuffer_inputs, points, pixels, size, stride: int,
+                        width: int, height: int, eye, offset):
+    """``upsample_field`` at one sub-pixel pass's points over the edge pixels' list
+    (UPSAMPLE_LIST): points = the pass's compacted G-buffer ({"gbuffer_position",
+    "gbuffer_normal"} of ``size``), pixels = the list (``gpu_preview._pixel_list``), offset =
+    the pass's (x right, y down, pixels); the taps are the pixel centres' ``gbuffer_inputs``."""
+    inputs = {**gbuffer_inputs, "low_image": glossy, "low_image2": diffuse, "pixels": pixels,
+              "point_position": points["gbuffer_position"],
+              "point_normal": points["gbuffer_normal"]}
+    return _field(_LIST_SAMPLERS, inputs, stride, width, height, eye, size, offset)
+
+
+def _field_shader(listed: bool):
+    """The compiled ``upsample.glsl`` of ``upsample_field`` (``listed``: of
+    ``upsample_field_list``)."""
+    key = "upsample_field_list" if listed else "upsample_field"
+    if key not in _shaders:
+        defines = {"UPSAMPLE_PAIR": "1", "UPSAMPLE_FIELD": "1"}
+        if listed:
+            defines["UPSAMPLE_LIST"] = "1"
+        _shaders[key] = build_compute(("pixels", "upsample"),
+                                      _LIST_SAMPLERS if listed else _FIELD_SAMPLERS,
+                                      ("sampling", "eye") + (("shift",) if listed else ()),
+                                      ("out_image", "out_image2"), defines, name=key)
+    return _shaders[key]
+
+
+def _field(samplers, inputs, stride, width, height, eye, size, offset=None):
+    listed = offset is not None
+    shader = _field_shader(listed)
+    out = [gpu.types.GPUTexture(size, format="RGBA32F") for _ in range(2)]
+    shader.bind()
+    for name in samplers:
+        shader.uniform_sampler(name, inputs[name])
+    shader.uniform_float("sampling", (float(stride), float(width), float(height), 0.0))
+    shader.uniform_float("eye", tuple(float(v) for v in eye))
+    if listed:
+        shader.uniform_float("shift", (float(offset[0]), float(offset[1]), 0.0, 0.0))
+    shader.image("out_image", out[0])
+    shader.image("out_image2", out[1])
+    gpu.compute.dispatch(shader, math.ceil(size[0] / LOCAL_SIZE), math.ceil(size[1] / LOCAL_SIZE),
+                         1)
+    return out[0], out[1]
+
+
 def _upsample_shader(pair: bool):
     key = "upsample_pair" if pair else "upsample"
     if key not in _shaders:

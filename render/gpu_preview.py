@@ -36,7 +36,8 @@ from ..voxgi_addon.preview.passes import (
     subpixel_passes,
     subpixel_reach,
 )
-from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH
+from ..voxgi_addon.preview.upsample import sample_pixels
+from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame
 from ..voxgi_addon.scene.glass import is_glass
 from .gbuffer import gbuffer_shader, rasterize, rasterize_stages, read_gbuffer, vertex_batch
 from .gpu_accumulation import SUM_NAMES, GPUSums
@@ -47,7 +48,7 @@ from .gpu_compose import SURFACE_SUMS as _SURFACE_SUMS
 from .gpu_compose import run as _run
 from .gpu_compose import shade_stages
 from .gpu_fast import fast_passes, fast_sums
-from .gpu_gather import denoise, gather, gather_low, upsample
+from .gpu_gather import denoise, gather, gather_low, upsample, upsample_field, upsample_field_list
 from .gpu_scene import GPUScene, current_scene
 from .gpu_shaders import LOCAL_SIZE
 from .gpu_tracer import read_texture
@@ -187,6 +188,54 @@ def _pixel_list(listed, width: int, height: int):
     return float_texture(texels.reshape(rows, side, 4), (side, rows)), (side, rows)
 
 
+def _gather_list(stride: int, width: int, height: int):
+    """(texture, (wl, hl)) of the gather points as a pixel list (aa_compact.glsl's ``pixels``):
+    texel (i, r) = (x, y, id, 1) of the pixel ``upsample.sample_pixels`` traces for cell (row
+    hl − 1 − r from the top, column i), so a kernel over the list writes a low-resolution
+    texture in the gathers' layout (rows from the bottom, ``upsample.glsl``'s low_image)."""
+    rows, cols = sample_pixels(height, width, stride)
+    rows = rows[::-1]  # texture row r: cell row hl − 1 − r
+    texels = np.empty((len(rows), len(cols), 4), np.float32)
+    texels[..., 0] = cols[None, :]
+    texels[..., 1] = (height - 1 - rows)[:, None]
+    texels[..., 2] = rows[:, None] * width + cols[None, :]
+    texels[..., 3] = 1.0
+    return float_texture(texels, (len(cols), len(rows))), (len(cols), len(rows))
+
+
+def _eye(camera):
+    """upsample.glsl's eye: (camera position, 1), zeros for an orthographic camera."""
+    if camera.type == "ORTHO":
+        return (0.0, 0.0, 0.0, 0.0)
+    return (*camera_frame(camera)[1], 1.0)
+
+
+def emitter_fields(scene, gbuffer_inputs, gi_stride: int, width: int, height: int, eye):
+    """The emitters' unshadowed glossy light and Diffuse Direct at the gather points — the
+    only place their per-triangle sums are evaluated everywhere (docs/gi_pipeline.md "Where a
+    preview's time goes") — as (low glossy, low diffuse, full glossy, full diffuse) textures:
+    the gather points' (``emitter_glossy_texture(unshadowed=True)``,
+    ``emitters_unshadowed_texture``) and ``upsample_field``'s at every pixel. eye : ``_eye``
+    of the camera."""
+    bvh = scene.bvh
+    if gi_stride == 1:
+        points = gbuffer_inputs
+    else:
+        pixels, size = _gather_list(gi_stride, width, height)
+        points = _compact("aa_list", {**gbuffer_inputs, "pixels": pixels}, size)
+        points["gbuffer_base"] = scene.zeros(*size) if not scene.textured else _compact(
+            "aa_list_raw", {"gbuffer_position": gbuffer_inputs["gbuffer_base"],
+                            "gbuffer_normal": gbuffer_inputs["gbuffer_base"],
+                            "gbuffer_view": gbuffer_inputs["gbuffer_base"], "pixels": pixels},
+            size)["gbuffer_position"]
+    glossy = emitter_glossy_texture(bvh, points, scene.emitters, scene.materials, 1, 0,
+                                    scene.no_lamp, scene.world_map, unshadowed=True)
+    diffuse = emitters_unshadowed_texture(bvh, points, scene.emitters, scene.no_lamp,
+                                          scene.world_map)
+    return (glossy, diffuse,
+            *upsample_field(glossy, diffuse, gbuffer_inputs, gi_stride, width, height, eye))
+
+
 def _compact(kernel, inputs, size):
     """The G-buffer (or the three centre terms, kernel "aa_list_raw") at the edge pixels' list
     (aa_compact.glsl), as G-buffer inputs of the list's ``size``."""
@@ -211,12 +260,14 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                      glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
                      cache_source=None, camera_tris=None, only=None, on_gpu=False,
                      batch=None):
-    """Accurate quality on the GPU: the gathers and the emitters' glossy light and exact
-    unshadowed Diffuse Direct from the pixel centres' G-buffer, then one rasterized G-buffer,
-    direct light (``bvh_direct``, a block of the shadow-ray strata) and glossy light of the
-    lamps per sub-pixel pass (``preview.passes.subpixel_passes``; the emitters' glossy light
-    and unshadowed sum where the pass sees another surface than its pixel's centre), summed on
-    the GPU (``shaders/aa_surface.glsl``, ``aa_light.glsl``) and read back once.
+    """Accurate quality on the GPU: the gathers and the emitters' unshadowed glossy light and
+    Diffuse Direct at the gather points of the pixel centres' G-buffer (``emitter_fields``),
+    the latter upsampled to the centres, then one rasterized G-buffer, direct light
+    (``bvh_direct``, a block of the shadow-ray strata) and glossy light of the lamps per
+    sub-pixel pass (``preview.passes.subpixel_passes``; the emitters' glossy light and
+    unshadowed sum from their field at the pass's own points where the pass sees another
+    surface than its pixel's centre), summed on the GPU (``shaders/aa_surface.glsl``,
+    ``aa_light.glsl``) and read back once.
     Triangles, BVH, materials and light tables come from ``scene`` (a ``GPUScene``, updated
     here: only what changed is uploaded). camera_tris : what the G-buffers draw (None: the
     scene's triangles; ``transmission.behind_glass`` hides glass from them); only : (H, W)
@@ -302,18 +353,25 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
         yield
     centres = None  # the pixel centres with the emitters' light there
     if any(light.type == "EMITTERS" for light in lights):
-        # the emitters' glossy light (exact_glossy.emitters_shine) and exact unshadowed
-        # Diffuse Direct (emitters.unshadowed_sum) at every pixel centre: the centre pass's,
-        # and the sub-pixel passes' where they see their centre's surface
+        # the emitters' unshadowed glossy light (exact_glossy.emitters_shine) and Diffuse
+        # Direct (emitters.unshadowed_sum) at the gather points, upsampled to every pixel
+        # (evaluated where the field does not hold: near the emitters); the centres' glossy
+        # light from it with their own visible share, for the centre pass and the sub-pixel
+        # passes that see their centre's surface
+        t0 = time.perf_counter()
+        eye = _eye(snapshot.camera)
+        fields = emitter_fields(scene, centre.inputs, gi_stride, width, height, eye)
+        timings["emitters' light field (GPU)"] = time.perf_counter() - t0
+        yield
         t0 = time.perf_counter()
         centres = {**centre.inputs, "shine": emitter_glossy_texture(
             bvh, centre.inputs, scene.emitters, scene.materials, gather_settings.glossy_rays,
-            gather_settings.seed, scene.no_lamp, scene.world_map)}
+            gather_settings.seed, scene.no_lamp, scene.world_map, field=fields[2])}
         timings["emitters' glossy light (GPU)"] = time.perf_counter() - t0
         yield
         t0 = time.perf_counter()
         centres["unshadowed"] = emitters_unshadowed_texture(
-            bvh, centre.inputs, scene.emitters, scene.no_lamp, scene.world_map)
+            bvh, centre.inputs, scene.emitters, scene.no_lamp, scene.world_map, field=fields[3])
         timings["emitters' unshadowed light (GPU)"] = time.perf_counter() - t0
         yield
 
@@ -331,10 +389,11 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     timings["edge pixels"] = time.perf_counter() - t0
     t0 = time.perf_counter()
 
-    def shade(inputs, sums, terms, blank, size, block, lamps=None, glow=None, centre=None):
+    def shade(inputs, sums, terms, blank, size, block, lamps=None, glow=None, centre=None,
+              field=None):
         """``gpu_compose.shade_stages`` of this scene and snapshot."""
         return shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples,
-                            gather_settings.seed, block, lamps, glow, centre)
+                            gather_settings.seed, block, lamps, glow, centre, field)
 
     # The centre pass over the image off the geometry's edges (preview.passes.edge_pixels on
     # the read-back centre G-buffer, the numpy tracer's test; the edge pixels as background, so
@@ -391,15 +450,22 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                 "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,
                                 "gbuffer_view": gbuffer.base, "pixels": pixels},
                 list_size)["gbuffer_position"]
-            # the emitters' glossy light and exact unshadowed sum: the centre's where this
-            # pass sees its surface
-            glow = None if centres is None else emitter_glossy_texture(
-                bvh, inputs, scene.emitters, scene.materials, gather_settings.glossy_rays,
-                gather_settings.seed, scene.no_lamp, scene.world_map, centre=listed_centres)
+            # the emitters' glossy light and unshadowed sum: the centre's where this pass
+            # sees its surface, else the field at the pass's own point (evaluated where it
+            # does not hold)
+            glow = field = None
+            if centres is not None:
+                field = upsample_field_list(fields[0], fields[1], centre.inputs, inputs, pixels,
+                                            list_size, gi_stride, width, height, eye, offset)
+                glow = emitter_glossy_texture(
+                    bvh, inputs, scene.emitters, scene.materials, gather_settings.glossy_rays,
+                    gather_settings.seed, scene.no_lamp, scene.world_map,
+                    centre=listed_centres, field=field[0])
             # this pass's samples, read back to count in the neighbours by the filter at
             # their own place (preview.passes.add_tails)
             textures = yield from shade(inputs, {name: blank for name in names}, terms, blank,
-                                        list_size, block, glow=glow, centre=listed_centres)
+                                        list_size, block, glow=glow, centre=listed_centres,
+                                        field=None if field is None else field[1])
             one = {name: read_texture(texture).reshape(-1, 4)[:len(listed)].astype(np.float64)
                    for name, texture in textures.items()}
             for name in names:

@@ -360,6 +360,7 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
             only = ("AREA", "POINT", "SUN", "WORLD")
             bvh("bvh_emitter_glossy", 1, True, only)
             bvh("bvh_direct", 1, True, only)
+            add("upsample field", 1, lambda: gpu_gather._field_shader(False))
     else:
         add("cone diffuse_ao", 1, lambda: compute_shader("diffuse_ao"))
         if glossy_indirect:

@@ -1,19 +1,27 @@
 /* Diffuse Direct per G-buffer pixel with shadow rays through the BVH (bvh_lights.glsl): what
  * preview.direct_light computes with shadows "RAYS" — diffuse_direct at the point lifted by
  * SURFACE_EPSILON along its normal, sample id = pixel index (row 0 on top).
- * Push constants: sampling = (seed, strata side m of this dispatch, mode, 0); strata = (M, row,
- * column, 0): the dispatch draws the m × m block at (row, column) of each light's M × M strata
- * (sampling.glsl STRATA_BLOCK; the whole set when m = M), so the anti-aliased preview's
- * sub-pixel passes share one stratified set of shadow rays. out = (rgb, 1).
+ * Push constants: sampling = (seed, strata side m of this dispatch, mode, emitter_field
+ * given); strata = (M, row, column, 0): the dispatch draws the m × m block at (row, column)
+ * of each light's M × M strata (sampling.glsl STRATA_BLOCK; the whole set when m = M), so the
+ * anti-aliased preview's sub-pixel passes share one stratified set of shadow rays.
+ * out = (rgb, 1).
  * gbuffer_view = (ray direction, material). sampling.z, the mode:
  * 0: Diffuse Direct, the emitters' exact unshadowed sum evaluated at every texel
  * (O(emissive triangles), bvh_lights.glsl emitters_unshadowed);
  * 1, the same in a pass of the anti-aliased preview: centre_position, centre_normal,
- * centre_view hold the pixel centres' G-buffer at the same texels and centre_unshadowed mode
- * 2's output there; a texel whose pass sees the surface its centre sees (same_surface.glsl)
- * takes the centre's sum, the others evaluate it at their own point (the shadow rays are the
- * pass's own);
- * 2: out = (the emitters' exact unshadowed sum alone, emitters_unshadowed, 1), no rays. */
+ * centre_view hold the pixel centres' G-buffer at the same texels and centre_unshadowed
+ * mode 2's sums there (from the emitters' field, docs/gi_pipeline.md "Where a preview's time
+ * goes"); a texel whose pass sees the surface its centre sees (same_surface.glsl) takes the
+ * centre's sum, the others emitter_field's at their own point (sampling.w = 1;
+ * upsample.glsl UPSAMPLE_LIST: (sum, the angle the emitters turn across its taps, < 0 where
+ * none fits)) where its angle is within NEAR_STEP, and evaluate it elsewhere (the shadow
+ * rays are the pass's own);
+ * 2: out = (the emitters' exact unshadowed sum alone, emitters_unshadowed, the distance to
+ * the nearest emissive triangle that can light the point, bvh_lights.glsl
+ * emitters_distance), no rays: the field at the gather points; with emitter_field given
+ * (sampling.w = 1), (the field's sum where it holds, else the exact one, 0): the pixel
+ * centres' sums, which mode 1 reads as its centre_unshadowed. */
 
 void main()
 {
@@ -30,13 +38,26 @@ void main()
   vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
   vec3 p = position.xyz + n * SURFACE_EPSILON;
   int mode = int(sampling.z + 0.5);
+  if (mode == 2 && sampling.w > 0.5) {  /* the field where it holds, else the sum, w = 0 */
+    vec4 field = texelFetch(emitter_field, px, 0);
+    bool held = field.w >= 0.0 && field.w <= NEAR_STEP;
+    imageStore(out_image, px, vec4(held ? field.rgb : emitters_unshadowed(p, n, true), 0.0));
+    return;
+  }
   if (mode == 2) {
-    imageStore(out_image, px, vec4(emitters_unshadowed(p, n, true), 1.0));
+    imageStore(out_image, px, vec4(emitters_unshadowed(p, n, true),
+                                   emitters_distance(p, n)));
     return;
   }
   vec4 known = vec4(0.0); /* w = 0: evaluated here */
-  if (mode == 1 && same_surface(position, n, texelFetch(gbuffer_view, px, 0).w, px)) {
-    known = vec4(texelFetch(centre_unshadowed, px, 0).rgb, 1.0);
+  if (mode == 1) {
+    vec4 field = sampling.w > 0.5 ? texelFetch(emitter_field, px, 0) : vec4(-1.0);
+    if (same_surface(position, n, texelFetch(gbuffer_view, px, 0).w, px)) {
+      known = vec4(texelFetch(centre_unshadowed, px, 0).rgb, 1.0);
+    }
+    else if (field.w >= 0.0 && field.w <= NEAR_STEP) {
+      known = vec4(field.rgb, 1.0);
+    }
   }
   uint id = position.w > 1.5 ? uint(position.w) - 2u  /* a listed pixel: aa_compact.glsl */
                              : uint((size.y - 1 - px.y) * size.x + px.x);

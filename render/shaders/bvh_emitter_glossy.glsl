@@ -3,17 +3,67 @@
  * emitters_glossy. For each emitting triangle facing the point, the LTC integral of the GGX lobe
  * over it (ltc.glsl) x the Principled lobe's reflectance where the lobe meets it over the fitted
  * lobe's (full lobe for small triangles, Fresnel for those that fill it) x its radiance, summed,
- * x a white metal's glossy colour, x the visible share of `rays` points drawn on the emitters
- * by power (stream EMITTER_GLOSSY_STREAM), each weighted by the luminance of L f |cos_l| /
- * (r^2 p_area); 0 for a mirror (its reflected ray sees the emitters in the glossy gather).
+ * x a white metal's glossy colour (the unshadowed light, emitter_glossy_unshadowed), x the
+ * visible share of `rays` points drawn on the emitters by power (stream
+ * EMITTER_GLOSSY_STREAM), each weighted by the luminance of L f |cos_l| / (r^2 p_area); 0 for
+ * a mirror (its reflected ray sees the emitters in the glossy gather).
  * Samplers as bvh_direct.glsl's (centre_shine for its centre_unshadowed) plus materials,
- * principled_lut, gbuffer_base = (Base Color per texel, 1) where textured, ltc_table.
- * Push constants: sampling = (seed, rays, reuse, 0). out = (rgb, 1).
- * reuse 1 (a sub-pixel pass over the edge pixels' list): centre_position, centre_normal,
+ * principled_lut, gbuffer_base = (Base Color per texel, 1) where textured, ltc_table and
+ * emitter_field. Push constants: sampling = (seed, rays, mode, field given).
+ * The unshadowed light is a smooth field (docs/gi_pipeline.md "Where a preview's time goes"):
+ * mode 2 writes it at the gather points, out = (the unshadowed light over this point's Glossy
+ * Color, 0), no rays; the preview upsamples it (upsample.glsl UPSAMPLE_FIELD: emitter_field =
+ * (that light, the angle the lobe turns across the taps, < 0 where none fits)). Modes 0 and 1,
+ * given the field, take field x this point's Glossy Color where the field's angle is within
+ * NEAR_STEP of the lobe's width (min(1, 2 alpha)) and evaluate the sum only elsewhere; the
+ * visible share is always this point's own. out = (rgb, 1).
+ * mode 1 (a sub-pixel pass over the edge pixels' list): centre_position, centre_normal,
  * centre_view hold the pixel centres' G-buffer at the same texels (aa_compact.glsl) and
  * centre_shine this kernel's value there; a texel whose pass sees the surface its centre sees
- * (same_surface.glsl) takes centre_shine, the others are evaluated at the pass's own point
- * (a 1-pixel slot between a ceiling and a panel under it). */
+ * (same_surface.glsl) takes centre_shine, the others read the field at the pass's own point
+ * (upsample.glsl UPSAMPLE_LIST) as mode 0 does. */
+
+/* Σ over the emitting triangles facing p of the LTC integral × the lobe's reflectance ×
+ * radiance, × white_colour (exact_glossy.emitters_glossy's unshadowed part); v above the
+ * horizon of n. */
+vec3 emitter_glossy_unshadowed(vec3 p, vec3 n, vec3 v, vec3 base, vec3 params, float rough,
+                               vec3 white_colour, int count)
+{
+  vec3 unshadowed = vec3(0.0);
+  LtcLobe lobe = ltc_lobe(n, v, rough);  /* the same for every triangle */
+  for (int k = 0; k < count; k++) {
+    if (!emitter_facing(k, p)) {
+      continue;
+    }
+    vec3 c0 = texelFetch(emitters, ivec2(0, k), 0).xyz;
+    vec3 c1 = texelFetch(emitters, ivec2(1, k), 0).xyz;
+    vec3 c2 = texelFetch(emitters, ivec2(2, k), 0).xyz;
+    vec3 towards;
+    float shape = ltc_triangle_at(lobe, p, c0, c1, c2, towards);
+    if (shape > 0.0) {
+      towards = normalize(towards + max(HORIZON_LIFT - dot(towards, n), 0.0) * n);
+      vec3 actual = principled_glossy_reflectance(base, params.x, params.y, rough, n, v, towards);
+      vec3 plain = principled_glossy_reflectance(vec3(1.0), 1.0, params.y, rough, n, v, towards);
+      vec3 fresnel = mix(vec3(0.0), actual / max(plain, vec3(1e-30)), greaterThan(plain, vec3(0.0)));
+      vec3 model = ltc_lobe_density_at(lobe, towards) * white_colour;
+      /* the ratio trusted as far as the triangle is narrow (exact_glossy._narrow) */
+      vec3 d0 = normalize(c0 - p), d1 = normalize(c1 - p), d2 = normalize(c2 - p);
+      float spread = acos(clamp(min(min(dot(d0, d1), dot(d1, d2)), dot(d0, d2)), -1.0, 1.0));
+      float trust = (1.0 - clamp(shape, 0.0, 1.0)) * clamp(1.0 - spread / (0.5 * M_PI_F), 0.0, 1.0);
+      for (int c = 0; c < 3; c++) {
+        if (model[c] > 0.0) {
+          float ratio = actual[c] / model[c];
+          fresnel[c] = (ratio > 0.0 && fresnel[c] > 0.0) ?
+                       exp(trust * log(ratio) + (1.0 - trust) * log(fresnel[c])) : 0.0;
+        }
+      }
+      unshadowed += shape * fresnel * vec3(texelFetch(emitters, ivec2(0, k), 0).w,
+                                           texelFetch(emitters, ivec2(1, k), 0).w,
+                                           texelFetch(emitters, ivec2(2, k), 0).w);
+    }
+  }
+  return unshadowed * white_colour;
+}
 
 void main()
 {
@@ -28,9 +78,10 @@ void main()
     imageStore(out_image, px, vec4(0.0));
     return;
   }
+  int mode = int(sampling.z + 0.5);
   vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
   vec4 ray = texelFetch(gbuffer_view, px, 0);
-  if (sampling.z > 0.5 && same_surface(position, n, ray.w, px)) {
+  if (mode == 1 && same_surface(position, n, ray.w, px)) {
     imageStore(out_image, px, texelFetch(centre_shine, px, 0));
     return;
   }
@@ -49,10 +100,22 @@ void main()
     imageStore(out_image, px, vec4(0.0));
     return;
   }
+  int count = int(head.x);
+  vec3 white_colour = principled_glossy_color(vec3(1.0), 1.0, params.y, rough, clamp(cos_ni, 0.0, 1.0));
+  vec3 colour = principled_glossy_color(base, params.x, params.y, rough, clamp(cos_ni, 0.0, 1.0));
+  if (mode == 2) {  /* the field at a gather point: the light over the point's Glossy Color */
+    vec3 light = emitter_glossy_unshadowed(p, n, v, base, params, rough, white_colour, count);
+    imageStore(out_image, px, vec4(mix(vec3(0.0), light / max(colour, vec3(1e-30)),
+                                       greaterThan(colour, vec3(0.0))), 0.0));
+    return;
+  }
+  vec4 field = sampling.w > 0.5 ? texelFetch(emitter_field, px, 0) : vec4(-1.0);
+  vec3 unshadowed = (field.w >= 0.0 && field.w <= NEAR_STEP * min(1.0, 2.0 * alpha)) ?
+                    field.rgb * colour :
+                    emitter_glossy_unshadowed(p, n, v, base, params, rough, white_colour, count);
   uint id = position.w > 1.5 ? uint(position.w) - 2u  /* a listed pixel: aa_compact.glsl */
                              : uint((size.y - 1 - px.y) * size.x + px.x);
   const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
-  int count = int(head.x);
   int rays = int(sampling.y);
   uint state = point_stream(id, EMITTER_GLOSSY_STREAM, uint(sampling.x));
   vec3 origin = p;
@@ -84,40 +147,6 @@ void main()
       }
     }
   }
-  /* the unshadowed integral (exact_glossy.emitters_glossy) */
-  vec3 white_colour = principled_glossy_color(vec3(1.0), 1.0, params.y, rough, clamp(cos_ni, 0.0, 1.0));
-  vec3 unshadowed = vec3(0.0);
-  for (int k = 0; k < count; k++) {
-    if (!emitter_facing(k, p)) {
-      continue;
-    }
-    vec3 c0 = texelFetch(emitters, ivec2(0, k), 0).xyz;
-    vec3 c1 = texelFetch(emitters, ivec2(1, k), 0).xyz;
-    vec3 c2 = texelFetch(emitters, ivec2(2, k), 0).xyz;
-    vec3 towards;
-    float shape = ltc_triangle_towards(p, n, v, rough, c0, c1, c2, towards);
-    if (shape > 0.0) {
-      towards = normalize(towards + max(HORIZON_LIFT - dot(towards, n), 0.0) * n);
-      vec3 actual = principled_glossy_reflectance(base, params.x, params.y, rough, n, v, towards);
-      vec3 plain = principled_glossy_reflectance(vec3(1.0), 1.0, params.y, rough, n, v, towards);
-      vec3 fresnel = mix(vec3(0.0), actual / max(plain, vec3(1e-30)), greaterThan(plain, vec3(0.0)));
-      vec3 model = ltc_lobe_density(n, v, rough, towards) * white_colour;
-      /* the ratio trusted as far as the triangle is narrow (exact_glossy._narrow) */
-      vec3 d0 = normalize(c0 - p), d1 = normalize(c1 - p), d2 = normalize(c2 - p);
-      float spread = acos(clamp(min(min(dot(d0, d1), dot(d1, d2)), dot(d0, d2)), -1.0, 1.0));
-      float trust = (1.0 - clamp(shape, 0.0, 1.0)) * clamp(1.0 - spread / (0.5 * M_PI_F), 0.0, 1.0);
-      for (int c = 0; c < 3; c++) {
-        if (model[c] > 0.0) {
-          float ratio = actual[c] / model[c];
-          fresnel[c] = (ratio > 0.0 && fresnel[c] > 0.0) ?
-                       exp(trust * log(ratio) + (1.0 - trust) * log(fresnel[c])) : 0.0;
-        }
-      }
-      unshadowed += shape * fresnel * vec3(texelFetch(emitters, ivec2(0, k), 0).w,
-                                           texelFetch(emitters, ivec2(1, k), 0).w,
-                                           texelFetch(emitters, ivec2(2, k), 0).w);
-    }
-  }
   float visible = drawn_sum > 0.0 ? seen_sum / drawn_sum : 1.0;
-  imageStore(out_image, px, vec4(unshadowed * white_colour * visible, 1.0));
+  imageStore(out_image, px, vec4(unshadowed * visible, 1.0));
 }

@@ -478,6 +478,64 @@ vec3 emitters_unshadowed(vec3 p, vec3 n, bool evaluate)
   return value;
 }
 
+/* The distance from p to the nearest point of emissive triangle t (emitters.triangle_distances;
+ * Ericson's closest point on a triangle): the field of the emitters' light is trusted between
+ * gather points only as far as they lie well inside it (upsample.glsl UPSAMPLE_FIELD). */
+float emitter_distance(int t, vec3 p)
+{
+  vec3 a = texelFetch(emitters, ivec2(0, t), 0).xyz;
+  vec3 b = texelFetch(emitters, ivec2(1, t), 0).xyz;
+  vec3 c = texelFetch(emitters, ivec2(2, t), 0).xyz;
+  vec3 ab = b - a, ac = c - a, ap = p - a;
+  float d1 = dot(ab, ap), d2 = dot(ac, ap);
+  if (d1 <= 0.0 && d2 <= 0.0) {
+    return length(ap);
+  }
+  vec3 bp = p - b;
+  float d3 = dot(ab, bp), d4 = dot(ac, bp);
+  if (d3 >= 0.0 && d4 <= d3) {
+    return length(bp);
+  }
+  float vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0) {
+    return length(ap - d1 / (d1 - d3) * ab);
+  }
+  vec3 cp = p - c;
+  float d5 = dot(ab, cp), d6 = dot(ac, cp);
+  if (d6 >= 0.0 && d5 <= d6) {
+    return length(cp);
+  }
+  float vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0) {
+    return length(ap - d2 / (d2 - d6) * ac);
+  }
+  float va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0) {
+    return length(bp - (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b));
+  }
+  float denom = 1.0 / max(va + vb + vc, 1e-30);
+  return length(ap - ab * (vb * denom) - ac * (vc * denom));
+}
+
+/* The distance from p to the nearest emissive triangle that can light it: facing p (a closed
+ * emitter's outside, emitter_facing) with a corner above p's tangent plane (normal n). An
+ * emitter's own points (the panel, the glowing sphere) are not near themselves
+ * (emitters.emitter_distances). */
+float emitters_distance(vec3 p, vec3 n)
+{
+  int count = int(emitter_header().x);
+  float nearest = 1e30;
+  for (int t = 0; t < count; t++) {
+    float above = max(max(dot(texelFetch(emitters, ivec2(0, t), 0).xyz - p, n),
+                          dot(texelFetch(emitters, ivec2(1, t), 0).xyz - p, n)),
+                      dot(texelFetch(emitters, ivec2(2, t), 0).xyz - p, n));
+    if (above > 0.0 && emitter_facing(t, p)) {
+      nearest = min(nearest, emitter_distance(t, p));
+    }
+  }
+  return nearest;
+}
+
 /* Diffuse Direct of the emissive triangles (emitters.emitters_direct): the exact unshadowed
  * sum (emitters_unshadowed; known.rgb where known.w > 0.5, a pixel centre's) times the
  * per-channel visible share of one point per stratum, sampled by power; not `exact` (bounce

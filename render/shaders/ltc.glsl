@@ -145,6 +145,43 @@ mat3 ltc_frame(vec3 n, vec3 v)
   return transpose(mat3(t, cross(n, t), n));
 }
 
+/* What ltc_triangle_at and ltc_lobe_density_at need of a point's lobe, whatever the triangle:
+ * its local frame, M^-1 (a table lookup through eight transcendental functions), the
+ * hemisphere's norm and M. Computed once per point, not per triangle (the emitters' loops of
+ * bvh_emitter_glossy.glsl; the same arithmetic, so the same values). */
+struct LtcLobe {
+  mat3 to_local;
+  vec4 m;
+  float norm;
+  mat3 back;  /* M = inverse of M^-1 = [[a, 0, b], [0, c, 0], [d, 0, 1]] */
+};
+
+/* The lobe of the point with unit normal n, unit direction to the viewer v (above its
+ * horizon) and Principled roughness. */
+LtcLobe ltc_lobe(vec3 n, vec3 v, float roughness)
+{
+  LtcLobe lobe;
+  lobe.to_local = ltc_frame(n, v);
+  lobe.m = ltc_inverse_x(roughness, ltc_view_x(n, v));
+  lobe.norm = ltc_hemisphere_norm(lobe.m);
+  lobe.back = inverse(mat3(lobe.m.x, 0.0, lobe.m.w, 0.0, lobe.m.z, 0.0, lobe.m.y, 0.0, 1.0));
+  return lobe;
+}
+
+/* ltc_lobe_density of a point's LtcLobe at the world unit direction w. */
+float ltc_lobe_density_at(LtcLobe lobe, vec3 w)
+{
+  vec3 local = lobe.to_local * w;
+  if (!(local.z > 0.0)) {
+    return 0.0;
+  }
+  vec4 m = lobe.m;
+  vec3 wo = ltc_apply(m, local);
+  float len = length(wo);
+  float det = abs(m.z * (m.x - m.y * m.w));
+  return max(wo.z / len, 0.0) / LTC_PI * det / (len * len * len) / lobe.norm;
+}
+
 /* rho(w) of the fitted lobe (ltc.py ltc_lobe_density): the LTC's density over its hemisphere
  * integral at the world unit direction w; 0 below the horizon or where v is. */
 float ltc_lobe_density(vec3 n, vec3 v, float roughness, vec3 w)
@@ -152,15 +189,38 @@ float ltc_lobe_density(vec3 n, vec3 v, float roughness, vec3 w)
   if (!(dot(n, v) > 0.0)) {
     return 0.0;
   }
-  vec3 local = ltc_frame(n, v) * w;
-  if (!(local.z > 0.0)) {
+  return ltc_lobe_density_at(ltc_lobe(n, v, roughness), w);
+}
+
+/* ltc_triangle_towards of a point p whose LtcLobe is given. */
+float ltc_triangle_at(LtcLobe lobe, vec3 p, vec3 c0, vec3 c1, vec3 c2, out vec3 towards)
+{
+  towards = transpose(lobe.to_local)[2];  /* n */
+  vec3 poly[5];
+  poly[0] = lobe.to_local * (c0 - p);
+  poly[1] = lobe.to_local * (c1 - p);
+  poly[2] = lobe.to_local * (c2 - p);
+  poly[3] = vec3(0.0);
+  poly[4] = vec3(0.0);
+  /* the surface's horizon (rho is 0 below it), then the cosine's (z >= 0 after M^-1: the local
+   * plane d x + z >= 0), both in the local frame */
+  int count = ltc_clip(poly, 3, vec3(0.0, 0.0, 1.0));
+  if (count == 0) {
     return 0.0;
   }
-  vec4 m = ltc_inverse_x(roughness, ltc_view_x(n, v));
-  vec3 wo = ltc_apply(m, local);
-  float len = length(wo);
-  float det = abs(m.z * (m.x - m.y * m.w));
-  return max(wo.z / len, 0.0) / LTC_PI * det / (len * len * len) / ltc_hemisphere_norm(m);
+  vec4 m = lobe.m;
+  count = ltc_clip(poly, count, vec3(m.w, 0.0, 1.0));
+  if (count == 0) {
+    return 0.0;
+  }
+  vec3 mean;
+  float value = ltc_edge_integral(poly, count, m, mean) / lobe.norm;
+  vec3 local = lobe.back * mean;
+  vec3 world = transpose(lobe.to_local) * local;
+  if (value > 0.0 && dot(world, world) > 0.0) {
+    towards = normalize(world);
+  }
+  return value;
 }
 
 /* ltc_triangle, and in `towards` the world unit direction where the lobe meets the triangle:
@@ -174,33 +234,7 @@ float ltc_triangle_towards(vec3 p, vec3 n, vec3 v, float roughness, vec3 c0, vec
   if (!(cos_view > 0.0)) {
     return 0.0;
   }
-  mat3 to_local = ltc_frame(n, v);
-  vec3 poly[5];
-  poly[0] = to_local * (c0 - p);
-  poly[1] = to_local * (c1 - p);
-  poly[2] = to_local * (c2 - p);
-  poly[3] = vec3(0.0);
-  poly[4] = vec3(0.0);
-  /* the surface's horizon (rho is 0 below it), then the cosine's (z >= 0 after M^-1: the local
-   * plane d x + z >= 0), both in the local frame */
-  int count = ltc_clip(poly, 3, vec3(0.0, 0.0, 1.0));
-  if (count == 0) {
-    return 0.0;
-  }
-  vec4 m = ltc_inverse_x(roughness, ltc_view_x(n, v));
-  count = ltc_clip(poly, count, vec3(m.w, 0.0, 1.0));
-  if (count == 0) {
-    return 0.0;
-  }
-  vec3 mean;
-  float value = ltc_edge_integral(poly, count, m, mean) / ltc_hemisphere_norm(m);
-  /* M = inverse of M^-1 = [[a, 0, b], [0, c, 0], [d, 0, 1]] (columns in GLSL's order) */
-  vec3 local = inverse(mat3(m.x, 0.0, m.w, 0.0, m.z, 0.0, m.y, 0.0, 1.0)) * mean;
-  vec3 world = transpose(to_local) * local;
-  if (value > 0.0 && dot(world, world) > 0.0) {
-    towards = normalize(world);
-  }
-  return value;
+  return ltc_triangle_at(ltc_lobe(n, v, roughness), p, c0, c1, c2, towards);
 }
 
 float ltc_triangle(vec3 p, vec3 n, vec3 v, float roughness, vec3 c0, vec3 c1, vec3 c2)

@@ -5,27 +5,68 @@
  * no usable neighbour takes the nearest traced cell within two cells.
  * sampling = (stride, full width, full height); low_image rows count from the bottom.
  * With UPSAMPLE_PAIR defined a second image (low_image2 → out_image2) is upsampled with the
- * same weights, its geometry fetched once. Taps of zero B-spline weight are skipped. */
+ * same weights, its geometry fetched once. Taps of zero B-spline weight are skipped.
+ *
+ * UPSAMPLE_FIELD (with UPSAMPLE_PAIR): the emitters' light (docs/gi_pipeline.md "Where a
+ * preview's time goes"; preview/upsample.py EmitterField): low_image = their glossy light
+ * over the Glossy Color, low_image2 = (their unshadowed Diffuse Direct, the distance from the
+ * gather point to the nearest emissive triangle that can light it). The outputs' w is how far
+ * the light's direction turns across the taps, in radians, the root mean square over them by
+ * their weights: out_image2.w of the step to a tap over the distance left to the emitters
+ * beyond it (the distance is 1-Lipschitz, so they lie at least d_k − |p_k − p| away) + the
+ * normal's turn (|n − n_k|), for the cosine lobe; out_image.w of that + the view direction's
+ * turn (|p_k − p| / the camera's distance, eye = (camera position, 1), or (0, 0, 0, 0)
+ * orthographic) + the normal's again (a mirror turns its reflection twice as far), for the
+ * glossy lobe; −1 where no tap weighs (then the rgb is 0). The kernels that read it
+ * evaluate the light themselves where the angle is beyond NEAR_STEP of their lobe's width. At
+ * stride 1 (no UPSAMPLE_LIST) the field is copied with w = 0: it is every pixel's own.
+ * UPSAMPLE_LIST (with UPSAMPLE_FIELD): the points are a sub-pixel pass's samples over the edge
+ * pixels' list (aa_compact.glsl): texel t reads pixels[t] = (x, y, id, 1) and the pass's
+ * compacted G-buffer point_position, point_normal, and sits at that pixel + shift.xy (the
+ * pass's offset, x right, y down); the taps stay the pixel centres' G-buffer. */
 void main()
 {
   ivec2 px = ivec2(gl_GlobalInvocationID.xy);
   ivec2 full = ivec2(sampling.yz);
+  int stride = int(sampling.x);
+#ifdef UPSAMPLE_LIST
+  ivec2 size = imageSize(out_image);
+  if (px.x >= size.x || px.y >= size.y) {
+    return;
+  }
+  vec4 pixel = texelFetch(pixels, px, 0);
+  vec4 position = texelFetch(point_position, px, 0);
+  if (pixel.w < 0.5 || position.w < 0.5) {
+#else
   if (px.x >= full.x || px.y >= full.y) {
     return;
   }
   vec4 position = texelFetch(gbuffer_position, px, 0);
   if (position.w < 0.5) {
+#endif
     imageStore(out_image, px, vec4(0.0));
 #ifdef UPSAMPLE_PAIR
     imageStore(out_image2, px, vec4(0.0));
 #endif
     return;
   }
-  int stride = int(sampling.x);
+#if defined(UPSAMPLE_FIELD) && !defined(UPSAMPLE_LIST)
+  if (stride == 1) {
+    imageStore(out_image, px, vec4(texelFetch(low_image, px, 0).rgb, 0.0));
+    imageStore(out_image2, px, vec4(texelFetch(low_image2, px, 0).rgb, 0.0));
+    return;
+  }
+#endif
   ivec2 low = textureSize(low_image, 0);
+#ifdef UPSAMPLE_LIST
+  vec3 n = texelFetch(point_normal, px, 0).xyz;
+  float u = (pixel.x + shift.x - float(stride / 2)) / float(stride);
+  float v = (float(full.y - 1) - pixel.y + shift.y - float(stride / 2)) / float(stride);
+#else
   vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
   float u = float(px.x - stride / 2) / float(stride);
   float v = float(full.y - 1 - px.y - stride / 2) / float(stride);
+#endif
   int i0 = clamp(int(floor(u)), 0, low.x - 1);
   int j0 = clamp(int(floor(v)), 0, low.y - 1);
   /* Quadratic B-spline weights over the 3 × 3 cells around the nearest one. */
@@ -38,6 +79,11 @@ void main()
   vec4 total = vec4(0.0);
   vec4 total2 = vec4(0.0);
   float weight = 0.0;
+#ifdef UPSAMPLE_FIELD
+  float turn2 = 0.0;       /* Σ weight × the emitters' turn² over the taps */
+  float glossy_turn2 = 0.0; /* the same with the view's and the normal's turn */
+  float eye_distance = max(length(position.xyz - eye.xyz), 1e-6);
+#endif
   for (int dj = -1; dj <= 1; dj++) {
     for (int di = -1; di <= 1; di++) {
       float w = wu[di + 1] * wv[dj + 1];
@@ -59,13 +105,35 @@ void main()
       w *= facing4 * facing4 * exp(-(plane / scale) * (plane / scale));
       total += w * texelFetch(low_image, ivec2(i, low.y - 1 - j), 0);
 #ifdef UPSAMPLE_PAIR
-      total2 += w * texelFetch(low_image2, ivec2(i, low.y - 1 - j), 0);
+      vec4 second = texelFetch(low_image2, ivec2(i, low.y - 1 - j), 0);
+      total2 += w * second;
+#endif
+#ifdef UPSAMPLE_FIELD
+      if (w > 0.0) {
+        float step = length(offset);
+        float room = second.w - step;
+        float bend = length(n - nk);
+        float turn = (room > 0.0 ? min(step / room, 1e15) : 1e15) + bend;
+        turn2 += w * turn * turn;
+        turn += eye.w * step / eye_distance + bend;
+        glossy_turn2 += w * turn * turn;
+      }
 #endif
       weight += w;
     }
   }
   vec4 result = total / max(weight, 1e-30);
   vec4 result2 = total2 / max(weight, 1e-30);
+#ifdef UPSAMPLE_FIELD
+  if (weight <= 1e-8) {
+    result = vec4(0.0, 0.0, 0.0, -1.0);
+    result2 = vec4(0.0, 0.0, 0.0, -1.0);
+  }
+  else {  /* the turns' root mean square over the taps, by their weights */
+    result.w = sqrt(glossy_turn2 / weight);
+    result2.w = sqrt(turn2 / weight);
+  }
+#else
   if (weight <= 1e-8) {
     float best = 1e30;
     result = vec4(0.0);
@@ -85,6 +153,7 @@ void main()
       }
     }
   }
+#endif
   imageStore(out_image, px, result);
 #ifdef UPSAMPLE_PAIR
   imageStore(out_image2, px, result2);

@@ -6,10 +6,12 @@ import pytest
 
 from voxgi.voxgi_addon.gi.emitters import (
     clipped_form_factors,
+    emitter_distances,
     emitter_light,
     emitter_table,
     emitters_direct,
     emitting_sides,
+    triangle_distances,
 )
 from voxgi.voxgi_addon.gi.sampling import hashed_square
 from voxgi.voxgi_addon.scene.geometry import SceneTriangles
@@ -127,3 +129,31 @@ def test_a_glowing_cube_seen_from_outside_is_counted_once():
 def test_nothing_emits_gives_no_light_and_an_empty_table():
     assert emitter_light(triangles(panel()), np.zeros((2, 3))) is None
     assert emitter_table(None).shape == (1, 4, 4) and not emitter_table(None).any()
+
+
+def test_triangle_distances_are_the_nearest_points_of_the_triangles():
+    """Ericson's closest point (the GLSL's emitter_distance) against a dense sampling of each
+    triangle: never farther, and within the sampling's spacing."""
+    rng = np.random.default_rng(5)
+    corners = rng.normal(size=(20, 3, 3))
+    points = rng.normal(size=(100, 3)) * 2.0
+    u = rng.random((40_000, 2))
+    u[u.sum(1) > 1] = 1 - u[u.sum(1) > 1]
+    samples = corners[:, None, 0] + u[None, :, :1] * (corners[:, None, 1] - corners[:, None, 0]) \
+        + u[None, :, 1:] * (corners[:, None, 2] - corners[:, None, 0])          # (T, S, 3)
+    sampled = np.linalg.norm(points[:, None, None] - samples[None], axis=-1).min(-1)
+    exact = triangle_distances(points, corners)
+    assert (exact <= sampled + 1e-9).all() and (sampled - exact).max() < 0.05
+
+
+def test_the_emitters_distance_counts_only_triangles_that_light_the_point():
+    """A point on a glowing panel is not near it (its own triangles lie in its horizon), a point
+    5 cm over the panel's back is (an open panel lights both sides), and a point outside a
+    glowing cube is as far as the cube's nearest face that faces it."""
+    light = emitter_light(triangles(panel(3.0)), np.array([[1.0] * 3, [0.0] * 3]))
+    z = light.corners[0, 0, 2]
+    up = np.array([[0.0, 0.0, 1.0]])
+    assert emitter_distances(light, [[0.0, 0.0, z + 1e-4]], up)[0] > 1e29
+    assert emitter_distances(light, [[0.0, 0.0, z + 0.05]], -up)[0] == pytest.approx(0.05)
+    cube = emitter_light(triangles(box((0, 0, 0), (1, 1, 1))), np.array([[1.0] * 3, [0.0] * 3]))
+    assert emitter_distances(cube, [[0.5, 0.5, 1.3]], -up)[0] == pytest.approx(0.3)

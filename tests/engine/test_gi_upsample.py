@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from voxgi.voxgi_addon.preview.upsample import sample_pixels, upsample
+from voxgi.voxgi_addon.preview.upsample import EmitterField, sample_pixels, upsample
 
 
 def two_walls(height=24, width=32):
@@ -88,3 +88,44 @@ def test_cell_noise_does_not_show_the_grid_of_traced_pixels(stride):
     inner = out[stride:-stride, stride:-stride]
     phase = inner.reshape(-1, stride, inner.shape[1] // stride, stride).var(axis=(0, 2))
     assert phase.min() > 0.6 * phase.max(), phase  # bilinear: 0.25 at stride 2
+
+
+def test_the_emitters_field_reproduces_a_linear_light_and_tells_where_it_turns():
+    """``EmitterField`` (the GLSL's UPSAMPLE_FIELD): on a floor seen head-on, a light linear in
+    position comes back exact at every pixel and at sub-pixel samples; the turn is the taps' steps
+    over the distance left to the emitters (1-Lipschitz), so it grows as they come near, and
+    is −1 where no tap lies on the point's surface."""
+    height, width, stride = 24, 32, 4
+    ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
+    position = np.stack([xs * 0.01, ys * 0.01, 0 * xs], -1).astype(np.float32)
+    normal = np.broadcast_to(np.array([0, 0, 1], np.float32), position.shape).copy()
+    rows, cols = sample_pixels(height, width, stride)
+    cells = position[rows][:, cols]
+    light = (1.0 + cells[..., :1] + 2.0 * cells[..., 1:2]) * np.ones(3, np.float32)
+    valid = np.ones((len(rows), len(cols)), bool)
+
+    def field(distance):
+        return EmitterField(light, light, np.full(valid.shape, distance), valid, position, normal,
+                            stride, np.array([0.16, 0.12, 5.0]))
+
+    far, near = field(10.0), field(0.1)
+    # away from the image's border, where the taps surround the point
+    inner = (ys >= stride) & (ys < height - stride) & (xs >= stride) & (xs < width - stride)
+    pick = np.flatnonzero(inner.ravel())
+    expected = 1.0 + position.reshape(-1, 3)[pick, 0] + 2.0 * position.reshape(-1, 3)[pick, 1]
+    glossy, glossy_turn, diffuse, turn = far.at_centres(pick)
+    assert np.allclose(diffuse[:, 0], expected, atol=1e-5)
+    assert np.allclose(glossy[:, 0], expected, atol=1e-5)
+    r, c = np.divmod(pick, width)
+    moved = position.reshape(-1, 3)[pick] + np.array([0.003, 0.002, 0.0], np.float32)
+    _, _, at, _ = far.at(r, c, moved, normal.reshape(-1, 3)[pick], offset=(0.3, 0.2))
+    assert np.allclose(at[:, 0], 1.0 + moved[:, 0] + 2.0 * moved[:, 1], atol=1e-5)
+    assert (turn > 0).all() and (glossy_turn > turn).all() and (turn < 0.01).all()
+    assert (near.at_centres(pick)[3] > 10 * turn).all()
+    # a point on a wall across the floor's taps: none on its surface
+    wall = np.array([[0.0, 1.0, 0.0]] * len(pick), np.float32)
+    assert (far.at(r, c, position.reshape(-1, 3)[pick], wall)[3] == -1).all()
+    # at stride 1 every pixel reads its own gather point, turn 0
+    own = EmitterField(position, position, np.ones((height, width)), np.ones((height, width), bool),
+                       position, normal, 1, None).at_centres(pick)
+    assert np.array_equal(own[2], position.reshape(-1, 3)[pick]) and not own[3].any()

@@ -167,12 +167,15 @@ STAGES = {"bvh_gather": "diffuse+AO gather", "bvh_glossy": "glossy gather",
           "upsample": "denoise + upsample", "bvh_direct": "direct light",
           "glossy_direct": "direct light", "bvh_emitter_glossy": "direct light",
           "aa_surface": "compose", "aa_light": "compose", "aa_mask": "compose",
-          "aa_list": "compose", "aa_list_raw": "compose", "gbuffer": "G-buffers"}
+          "aa_list": "compose", "aa_list_raw": "compose", "gbuffer": "G-buffers",
+          "upsample_field": "direct light", "upsample_field_list": "direct light"}
 # Texel fetches per invocation of the kernels that trace no ray, read off their shaders: the
 # à-trous filter's 25 taps × (value, variance, position, normal) plus its 3 × 3 variance
-# prefilter, the upsample's 16 cells × 3, the composition's G-buffer, terms and sums.
+# prefilter, the upsample's 16 cells × 3, the composition's G-buffer, terms and sums; the
+# emitters' field's 9 taps × 4 and its point (and list entry).
 FETCHES = {"denoise": 25 * 4 + 9, "upsample": 16 * 3, "aa_surface": 16, "aa_light": 5,
-           "aa_mask": 2, "aa_list": 4, "aa_list_raw": 4, "relax": 16 * 8}
+           "aa_mask": 2, "aa_list": 4, "aa_list_raw": 4, "relax": 16 * 8,
+           "upsample_field": 9 * 4 + 2, "upsample_field_list": 9 * 4 + 3}
 
 
 def _traversals(kernel, width, height, constants, lights) -> tuple[float, float]:
@@ -189,6 +192,8 @@ def _traversals(kernel, width, height, constants, lights) -> tuple[float, float]
         return invocations * max(rays, 1.0) * per_hit, 0.0
     if kernel == "bvh_cache_paths":
         return invocations * per_hit, 0.0
+    if kernel in ("bvh_direct", "bvh_emitter_glossy") and int(sampling[2] + 0.5) == 2:
+        return 0.0, 0.0  # the emitters' sums alone (their field, the centres'): no ray
     if kernel == "bvh_direct":
         block = float(sampling[1])  # an m × m block of strata: a shadow ray each
         return invocations * block * block, 0.0
@@ -270,6 +275,8 @@ def profiled(fn, profile: Profile):
                     passes = 1 if kernel == "upsample" else \
                         kwargs.get("iterations", args[6] if len(args) > 6 else 4)
                     count = cells * FETCHES[kernel] * passes
+                elif kernel in ("upsample_field", "upsample_field_list"):
+                    count = first.width * first.height * FETCHES[kernel]
                 profile.add(kernel, time.perf_counter() - t0, 0.0, float(count))
                 return out
             return call
@@ -284,6 +291,9 @@ def profiled(fn, profile: Profile):
         patch(module, "denoise", timed("denoise"))
     for module in _importers("upsample"):
         patch(module, "upsample", timed("upsample"))
+    for name in ("upsample_field", "upsample_field_list"):
+        for module in _importers(name):
+            patch(module, name, timed(name))
     for module in _importers("rasterize"):
         patch(module, "rasterize", timed("gbuffer"))
     try:
@@ -297,7 +307,8 @@ def _importers(name):
     """The tracer's modules that hold a function ``name`` imported by name."""
     from voxgi.render import gbuffer, gpu_gather, gpu_preview
 
-    owner = {"denoise": gpu_gather, "upsample": gpu_gather, "rasterize": gbuffer}[name]
+    owner = {"denoise": gpu_gather, "upsample": gpu_gather, "rasterize": gbuffer,
+             "upsample_field": gpu_gather, "upsample_field_list": gpu_gather}[name]
     function = getattr(owner, name)
     return [m for m in (gpu_gather, gpu_preview, gbuffer) if getattr(m, name, None) is function]
 

@@ -31,7 +31,8 @@ from .principled import ROUGHNESS_SQ_THRESHOLD, glossy_color, glossy_reflectance
 from .sampling import hammersley, perpendicular_basis
 
 __all__ = ["GLOSSY_STREAM", "WORLD_GLOSSY_STREAM", "EMITTER_GLOSSY_STREAM", "glossy_indirect",
-           "emitters_shine", "glossy_world_direct", "vndf_half_vectors"]
+           "emitters_shine", "emitters_glossy_field", "glossy_world_direct",
+           "vndf_half_vectors"]
 
 GLOSSY_STREAM = 0x6105  # hash stream of the glossy rays' rotation
 WORLD_GLOSSY_STREAM = 0x6107  # hash stream of the map-importance rays of glossy_world_direct
@@ -271,17 +272,17 @@ def _emitter_pdf(emitters, radiance, distance2, cos_l):
 
 
 def emitters_shine(points, normals, views, materials, sample_ids, tris, principled, emitters,
-                   rays: int = 16, seed: int = 0, base=None) -> np.ndarray:
+                   rays: int = 16, seed: int = 0, base=None, field=None) -> np.ndarray:
     """(N, 3) the glossy light the emissive triangles send toward the viewer (Glossy Color ×
     their Glossy Direct) at surface points: ``emitters_glossy`` of the points' Principled lobes
     (``principled`` as ``glossy_indirect``'s; base : (N, 3) Base Color per texel, None: the
     table's), at the points lifted by SURFACE_EPSILON (off an emitter's own plane), as are its
-    ``rays`` shadow rays. The preview
-    evaluates it once at the pixel centres, and in a sub-pixel pass again at the pass's own
-    points where it sees another surface than its pixel's centre (``passes.same_surface``): a
-    one-pixel slot between a ceiling and a panel 5 cm under it has its reflection in a few of a
-    pixel's passes, which the value at the pixel's centre cannot show (per pass everywhere it
-    was over half of an anti-aliased render of the emissive room). 0 for a mirror (its
+    ``rays`` shadow rays. field : (N, 3) the unshadowed light over the Glossy Color
+    (``emitters_glossy_field``, brought from the gather points by
+    ``preview.upsample.EmitterField``) and (N,) its turn: where that is within
+    ``emitters.NEAR_STEP`` of the lobe's width it stands for the unshadowed sum, which is
+    evaluated only at the others (docs/gi_pipeline.md "Where a preview's time goes"); the
+    visible share is every point's own. 0 for a mirror (its
     reflected ray in ``glossy_world_direct`` sees the emitters). The GLSL port is
     shaders/bvh_emitter_glossy.glsl."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
@@ -293,15 +294,63 @@ def emitters_shine(points, normals, views, materials, sample_ids, tris, principl
     lobe = _Lobe(n, views, materials, principled, base)
     lifted = p + SURFACE_EPSILON * n  # off its own plane (an emitter's point sees none of it)
     origins = np.repeat(lifted, rays, axis=0).reshape(len(p), rays, 3)
-    return emitters_glossy(lobe, emitters, tris, lifted, origins, ids, rays, seed)
+    return emitters_glossy(lobe, emitters, tris, lifted, origins, ids, rays, seed, field)
 
 
-def emitters_glossy(lobe: _Lobe, emitters, tris, points, origins, ids, rays: int, seed: int):
+def emitters_glossy_field(points, normals, views, materials, principled, emitters,
+                          base=None) -> np.ndarray:
+    """(N, 3) the emitters' unshadowed glossy light over the points' Glossy Color
+    (``emitters_glossy``'s unshadowed sum, 0 where the colour is): the field the preview
+    evaluates at its gather points only and brings to every pixel (``emitters_shine``'s
+    ``field``; GLSL: bvh_emitter_glossy.glsl's mode 2). Arguments as ``emitters_shine``'s."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    n = np.asarray(normals, np.float64).reshape(-1, 3)
+    out = np.zeros((len(p), 3))
+    if emitters is None or len(p) == 0:
+        return out
+    lobe = _Lobe(n, views, materials, principled, base)
+    glossy = np.flatnonzero(~lobe.mirror & (lobe.cos_ni > 0.0))
+    light = _emitters_unshadowed(lobe, emitters, (p + SURFACE_EPSILON * n)[glossy], glossy)
+    colour = lobe.colour[glossy]
+    out[glossy] = np.divide(light, colour, out=np.zeros_like(light), where=colour > 0.0)
+    return out
+
+
+def emitters_glossy(lobe: _Lobe, emitters, tris, points, origins, ids, rays: int, seed: int,
+                    field=None):
     """(N, 3) the glossy radiance the lobes reflect of the emissive triangles: the unshadowed
-    integral, noise-free, times the visible share of ``rays`` points drawn on the emitters by
-    power (stream ``EMITTER_GLOSSY_STREAM``), each weighted by its luminance L f |cos_l| /
-    (r² p_area) — a ratio estimator, as the diffuse light's; 1 where no drawn point reaches
-    the lobe. 0 for a mirror (its reflected ray sees the emitters).
+    integral, noise-free (``_emitters_unshadowed``; where ``field`` = (values, turn) holds —
+    the turn within ``emitters.NEAR_STEP`` of the lobe's width min(1, 2α) — values × the
+    lobe's colour instead), times the visible share of ``rays`` points drawn on the emitters
+    by power (stream ``EMITTER_GLOSSY_STREAM``), each weighted by its luminance
+    L f |cos_l| / (r² p_area) — a ratio estimator, as the diffuse light's; 1 where no drawn
+    point reaches the lobe. 0 for a mirror (its reflected ray sees the emitters)."""
+    out = np.zeros((len(points), 3))
+    glossy = np.flatnonzero(~lobe.mirror & (lobe.cos_ni > 0.0))
+    if len(glossy) == 0:
+        return out
+    unshadowed = np.zeros((len(glossy), 3))
+    held = np.zeros(len(glossy), bool)
+    if field is not None:  # within NEAR_STEP of the lobe's width
+        from .emitters import NEAR_STEP
+
+        values, turn = field
+        turn = np.asarray(turn, np.float64).reshape(-1)[glossy]
+        held = (turn >= 0.0) & (turn <= NEAR_STEP * np.minimum(1.0, 2.0 * lobe.alpha[glossy]))
+        unshadowed[held] = np.asarray(values, np.float64).reshape(-1, 3)[glossy[held]] \
+            * lobe.colour[glossy[held]]
+    evaluated = glossy[~held]
+    unshadowed[~held] = _emitters_unshadowed(lobe, emitters, points[evaluated], evaluated)
+    seen, drawn = _emitter_weights(lobe, emitters, tris, origins, ids, rays, seed)
+    total, lit = drawn[glossy].sum(axis=1), seen[glossy].sum(axis=1)
+    visible = np.divide(lit, total, out=np.ones_like(lit), where=total > 0.0)
+    out[glossy] = unshadowed * visible[:, None]
+    return out
+
+
+def _emitters_unshadowed(lobe: _Lobe, emitters, p, glossy) -> np.ndarray:
+    """(G, 3) the unshadowed glossy light of the emissive triangles at points ``p`` (G, 3) of
+    the lobes ``glossy`` (indices into ``lobe``'s, not mirrors, v above the horizon).
 
     The unshadowed integral of triangle t (facing the point) is L_t × the LTC integral of the
     GGX lobe over it (``ltc.ltc_polygon_integral``, fitted with F = 1) × the Fresnel the
@@ -317,11 +366,9 @@ def emitters_glossy(lobe: _Lobe, emitters, tris, points, origins, ids, rays: int
     from .emitters import _facing
     from .ltc import ltc_lobe_density, ltc_polygon_integral
 
-    out = np.zeros((len(points), 3))
-    glossy = np.flatnonzero(~lobe.mirror & (lobe.cos_ni > 0.0))
     if len(glossy) == 0:
-        return out
-    p, n, v = points[glossy], lobe.n[glossy], lobe.v[glossy]
+        return np.zeros((0, 3))
+    n, v = lobe.n[glossy], lobe.v[glossy]
     base, metallic, level, rough = (a[glossy] for a in lobe.shading)  # (G, 1, 3), (G, 1) …
     shape, towards = ltc_polygon_integral(p, n, v, rough[:, 0], emitters.corners,
                                           directions=True)                 # (G, T), (G, T, 3)
@@ -344,12 +391,7 @@ def emitters_glossy(lobe: _Lobe, emitters, tris, points, origins, ids, rays: int
     trust = (1.0 - np.clip(shape, 0.0, 1.0)) * _narrow(emitters.corners, p)
     trust = trust[..., None]
     fresnel = np.where(model > 0.0, ratio ** trust * fresnel ** (1.0 - trust), fresnel)
-    unshadowed = np.einsum("gt,gtc->gc", shape, fresnel * emitters.radiance[None]) * white_colour
-    seen, drawn = _emitter_weights(lobe, emitters, tris, origins, ids, rays, seed)
-    total, lit = drawn[glossy].sum(axis=1), seen[glossy].sum(axis=1)
-    visible = np.divide(lit, total, out=np.ones_like(lit), where=total > 0.0)
-    out[glossy] = unshadowed * visible[:, None]
-    return out
+    return np.einsum("gt,gtc->gc", shape, fresnel * emitters.radiance[None]) * white_colour
 
 
 def _narrow(corners, points) -> np.ndarray:

@@ -31,11 +31,12 @@ from ..gi.direct_light import (
     light_directions,
     light_frame,
 )
-from ..gi.exact_glossy import emitters_shine
+from ..gi.emitters import NEAR_STEP, emitter_distances
+from ..gi.exact_glossy import emitters_glossy_field, emitters_shine
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.sampling import hashed_square
 from ..gi.world_light import scene_lights, world_light
-from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, filter_offsets
+from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, camera_frame, filter_offsets
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
 from ..scene.textures import primary_base, texel_emission
@@ -48,7 +49,7 @@ from .gather import (
     gather_glossy_world,
     radiance_cache,
 )
-from .upsample import PLANE_TOLERANCE, STRIDES, sample_pixels, upsample
+from .upsample import PLANE_TOLERANCE, STRIDES, EmitterField, sample_pixels, upsample
 
 PASS_NAMES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color",
               "Glossy Direct", "Glossy Indirect", "Glossy Color", "Ambient Occlusion")
@@ -736,6 +737,49 @@ def emitters_unshadowed_at(emitters, points, normals) -> np.ndarray:
     return emitters_unshadowed(emitters, points + normals * SURFACE_EPSILON, normals)
 
 
+def emitter_field(snapshot, tris, seen, materials, emitters, stride: int,
+                  filter_width: float) -> EmitterField:
+    """The emitters' unshadowed glossy light (``exact_glossy.emitters_glossy_field``) and
+    Diffuse Direct (``emitters_unshadowed_at``) with their distance to the emitters
+    (``emitters.emitter_distances``) at the gather points of ``seen`` (one per stride × stride
+    block, ``upsample.sample_pixels``): the only points where their per-triangle sums are
+    evaluated everywhere (docs/gi_pipeline.md "Where a preview's time goes"; the GPU's
+    ``gpu_preview.emitter_fields``). materials : (H·W,) the pixels' material indices."""
+    height, width = seen.hit.shape
+    rows, cols = sample_pixels(height, width, stride)
+    valid = seen.hit[rows][:, cols]
+    cells = (rows[:, None] * width + cols[None, :])[valid]
+    p = seen.position.reshape(-1, 3)[cells]
+    n = seen.normal.reshape(-1, 3)[cells]
+    mat = materials[cells]
+    principled = principled_table(snapshot)
+    base = primary_base(tris, seen, cells, principled[0][mat], snapshot.camera, width, height,
+                        filter_width)  # None: untextured
+    glossy = np.zeros(valid.shape + (3,))
+    diffuse = np.zeros(valid.shape + (3,))
+    distance = np.zeros(valid.shape)
+    glossy[valid] = emitters_glossy_field(p, n, -seen.direction.reshape(-1, 3)[cells], mat,
+                                          principled, emitters, base)
+    diffuse[valid] = emitters_unshadowed_at(emitters, p, n)
+    distance[valid] = emitter_distances(emitters, p + n * SURFACE_EPSILON, n)
+    eye = None if snapshot.camera.type == "ORTHO" else camera_frame(snapshot.camera)[1]
+    return EmitterField(glossy, diffuse, distance, valid, seen.position, seen.normal, stride,
+                        eye)
+
+
+def emitters_unshadowed_held(emitters, points, normals, values, turn) -> np.ndarray:
+    """(N, 3) the emitters' unshadowed Diffuse Direct at surface points: the field's
+    ``values`` where its ``turn`` is within NEAR_STEP (``upsample.EmitterField``), else
+    ``emitters_unshadowed_at`` the point (GLSL: bvh_direct.glsl)."""
+    out = np.array(values, np.float64).reshape(-1, 3)
+    turn = np.asarray(turn).reshape(-1)
+    own = np.flatnonzero(~((turn >= 0.0) & (turn <= NEAR_STEP)))
+    if len(own):
+        out[own] = emitters_unshadowed_at(emitters, np.asarray(points)[own],
+                                          np.asarray(normals)[own])
+    return out
+
+
 def fast_direct(octree, seen, stride, hit, lights, tris, cones, samples, shadows, lamps=0):
     """Fast quality's Diffuse Direct at the ``hit`` pixels of ``seen`` from every light
     (``world_light.scene_lights``: lamps, world, emissive triangles): (N, 3) in all and
@@ -803,10 +847,11 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     filter_width : Cycles' pixel Filter Size (Blackman-Harris, pixels). Accurate quality
     anti-aliases with it: ``subpixel_passes`` camera passes, each with its own visibility,
     direct light, glossy light of the lamps and colours, averaged (``accumulate_pass``); the
-    gathers come from the pixel centres, and so do the emitters' glossy light and the exact
-    unshadowed sum of their Diffuse Direct (its shadow rays are each pass's own) except in the
-    passes that see another surface than their pixel's centre (``same_surface``). ≤ 0, or
-    Fast quality: pixel centres only.
+    gathers come from the pixel centres, and so do the emitters' glossy light and the
+    unshadowed sum of their Diffuse Direct — read there from their field, evaluated at the
+    gather points (``emitter_field``) — except in the passes that see another surface than
+    their pixel's centre (``same_surface``), which read the field at their own points (the
+    shadow rays are each pass's own). ≤ 0, or Fast quality: pixel centres only.
 
     Returns (passes, timings): passes maps each name of PASS_NAMES to an (H, W, 3) float32
     image (row 0 = top); timings maps stage names to seconds.
@@ -934,16 +979,25 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     timings["world glossy gather"] = time.perf_counter() - t0
     centre_glow = np.zeros((height * width, 3))
     centre_unshadowed = np.zeros((height * width, 3))
-    if emitters is not None:  # the emitters' glossy light and unshadowed sum at the centres
+    if emitters is not None:
+        # the emitters' unshadowed glossy light and Diffuse Direct at the gather points, read
+        # at the centres (evaluated where the field does not hold: near the emitters), the
+        # glossy light with each centre's own visible share
+        t0 = time.perf_counter()
+        field = emitter_field(snapshot, tris, seen, materials, emitters, gi_stride,
+                              filter_width)
+        glossy_field, glossy_turn, diffuse_field, diffuse_turn = field.at_centres(hit)
+        timings["emitters' light field"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         centre_glow[hit] = emitters_shine(
             positions[hit], normals[hit], -dirs[hit], mat, hit, tris, principled_table(snapshot),
             emitters, gather_settings.glossy_rays, gather_settings.seed,
             primary_base(tris, seen, hit, principled_table(snapshot)[0][mat], snapshot.camera,
-                         width, height, filter_width))
+                         width, height, filter_width), field=(glossy_field, glossy_turn))
         timings["emitters' glossy light"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        centre_unshadowed[hit] = emitters_unshadowed_at(emitters, positions[hit], normals[hit])
+        centre_unshadowed[hit] = emitters_unshadowed_held(emitters, positions[hit], normals[hit],
+                                                          diffuse_field, diffuse_turn)
         timings["emitters' unshadowed light"] = time.perf_counter() - t0
     t0 = time.perf_counter()
 
@@ -960,9 +1014,9 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
                        reach).ravel()
     centre_seen = seen
 
-    def shade(seen, pixels, block, lamps=None, into=None):
+    def shade(seen, pixels, block, lamps=None, into=None, offset=(0.0, 0.0)):
         """Add one pass at ``pixels`` (H·W,) bool to ``into`` (the sums if None); lamps : gets
-        the lamps' light there."""
+        the lamps' light there; offset : the pass's (``subpixel_passes``)."""
         hit = np.flatnonzero(seen.hit.ravel() & pixels)
         p = seen.position.reshape(-1, 3)[hit]
         n = seen.normal.reshape(-1, 3)[hit]
@@ -970,20 +1024,25 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         views = -seen.direction.reshape(-1, 3)[hit]
         base = primary_base(tris, seen, hit, principled_table(snapshot)[0][mat],
                             snapshot.camera, width, height, filter_width)  # None: untextured
-        # the emitters' glossy light and exact unshadowed Diffuse Direct: the centre's where
-        # this pass sees the surface its pixel's centre sees, at the pass's own points where it
-        # sees another (a 1-pixel slot between a ceiling and a panel under it)
+        # the emitters' glossy light and unshadowed Diffuse Direct: the centre's where this
+        # pass sees the surface its pixel's centre sees, the field at the pass's own points
+        # where it sees another (a 1-pixel slot between a ceiling and a panel under it)
         glow, unshadowed = centre_glow[hit], None
         if emitters is not None:  # (materials, positions, normals: the centre's)
             other = np.flatnonzero(~same_surface(
                 True, mat, p, n, centre_seen.hit.ravel()[hit], materials[hit],
                 positions[hit], normals[hit]))
+            rows, cols = np.divmod(hit[other], width)
+            glossy_at, glossy_turn, diffuse_at, diffuse_turn = field.at(
+                rows, cols, p[other], n[other], offset)
             glow[other] = emitters_shine(
                 p[other], n[other], views[other], mat[other], hit[other], tris,
                 principled_table(snapshot), emitters, gather_settings.glossy_rays,
-                gather_settings.seed, None if base is None else base[other])
+                gather_settings.seed, None if base is None else base[other],
+                field=(glossy_at, glossy_turn))
             unshadowed = centre_unshadowed[hit]
-            unshadowed[other] = emitters_unshadowed_at(emitters, p[other], n[other])
+            unshadowed[other] = emitters_unshadowed_held(emitters, p[other], n[other],
+                                                         diffuse_at, diffuse_turn)
         # (the shadow rays are the pass's own: its block of the strata)
         per_light = direct_light(None, p, n, lights, tris, cones, light_samples, shadows,
                                  sample_ids=hit, per_light=True, seed=gather_settings.seed,
@@ -1022,7 +1081,7 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         for (offset, block), weights in zip(plan, pass_tail_weights(plan, filter_width)):
             one = new_sums(height * width)
             shade(primary_visibility(camera_tris, snapshot.camera, width, height, offset),
-                  edge, block, into=one)
+                  edge, block, into=one, offset=offset)
             for name in SUMS:
                 sums[name][listed] += one[name][listed]
             add_pass_tails(weighted, {name: one[name][listed] / len(plan) for name in SUMS},

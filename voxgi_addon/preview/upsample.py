@@ -113,3 +113,94 @@ def _nearest_valid(values, valid, j0, i0, reach: int = 2) -> np.ndarray:
             out[better] = values[j[better], i[better]]
             best[better] = d
     return out
+
+
+class EmitterField:
+    """The emitters' unshadowed light at the gather points, read anywhere on the image (the
+    numpy twin of ``shaders/upsample.glsl`` UPSAMPLE_FIELD and UPSAMPLE_LIST; docs/gi_pipeline.md
+    "Where a preview's time goes"): the emissive triangles' per-triangle sums are evaluated at
+    one point per stride × stride block and brought to a pixel's or a sub-pixel sample's point
+    with ``upsample``'s weights, together with how far the light's direction turns across the
+    taps that bring it (``gi.emitters.NEAR_STEP`` says where that is too far).
+
+    glossy, diffuse : (Hl, Wl, 3) the unshadowed glossy light over the Glossy Color
+    (``exact_glossy.emitters_glossy_field``) and Diffuse Direct (``emitters.unshadowed_sum``)
+    at the gather points; distance : (Hl, Wl) their distance to the nearest emissive triangle
+    that can light them (``emitters.emitter_distances``); valid : (Hl, Wl) bool their pixel
+    sees a surface; position, normal : (H, W, 3) the pixel centres' G-buffer (row 0 on top);
+    eye : (3,) the camera's position, None for an orthographic camera."""
+
+    def __init__(self, glossy, diffuse, distance, valid, position, normal, stride: int, eye):
+        self.glossy = np.asarray(glossy, np.float32)
+        self.diffuse = np.asarray(diffuse, np.float32)
+        self.distance = np.asarray(distance, np.float32)
+        self.valid = np.asarray(valid, bool)
+        self.position, self.normal = position, normal
+        self.stride = stride
+        self.eye = None if eye is None else np.asarray(eye, np.float32)
+
+    def at_centres(self, pixels):
+        """``at`` the centres of ``pixels`` (N,) (flat indices, row 0 on top, seeing a
+        surface); at stride 1 their own gather points' values, turn 0."""
+        height, width = self.position.shape[:2]
+        rows, cols = np.divmod(np.asarray(pixels), width)
+        if self.stride == 1:
+            zero = np.zeros(len(rows), np.float32)
+            return (self.glossy[rows, cols], zero, self.diffuse[rows, cols], zero)
+        return self.at(rows, cols, self.position[rows, cols], self.normal[rows, cols])
+
+    def at(self, rows, cols, points, normals, offset=(0.0, 0.0)):
+        """(glossy (N, 3), its turn (N,), diffuse (N, 3), its turn (N,)) at surface points
+        (N, 3) with unit normals, seen through pixels (rows from the top, cols) moved by
+        ``offset`` (x right, y down, pixels; a sub-pixel pass's). The turn is the root mean
+        square over the taps, by their weights, of the step to the tap over the distance left
+        to the emitters beyond it (the distance is 1-Lipschitz) + |n − n_k|; the glossy one
+        adds the view direction's turn (step / the camera's distance) and |n − n_k| again; −1
+        where no tap weighs (the light 0 there)."""
+        height, width = self.position.shape[:2]
+        stride = self.stride
+        tap_rows, tap_cols = sample_pixels(height, width, stride)
+        hl, wl = len(tap_rows), len(tap_cols)
+        p = np.asarray(points, np.float32).reshape(-1, 3)
+        n = np.asarray(normals, np.float32).reshape(-1, 3)
+        u = ((np.asarray(cols) + np.float32(offset[0]) - stride // 2) / stride).astype(np.float32)
+        v = ((np.asarray(rows) + np.float32(offset[1]) - stride // 2) / stride).astype(np.float32)
+        ci, cj = np.floor(u + 0.5).astype(np.int64), np.floor(v + 0.5).astype(np.int64)
+        wu, wv = _bspline(u - ci), _bspline(v - cj)
+        glossy = np.zeros((len(p), 3), np.float32)
+        diffuse = np.zeros((len(p), 3), np.float32)
+        weight = np.zeros(len(p), np.float32)
+        turn2 = np.zeros(len(p), np.float32)
+        glossy_turn2 = np.zeros(len(p), np.float32)
+        eye_distance = None if self.eye is None else \
+            np.maximum(np.linalg.norm(p - self.eye, axis=1), np.float32(1e-6))
+        for dj in (-1, 0, 1):
+            for di in (-1, 0, 1):
+                j, i = np.clip(cj + dj, 0, hl - 1), np.clip(ci + di, 0, wl - 1)
+                pk = self.position[tap_rows[j], tap_cols[i]].astype(np.float32)
+                nk = self.normal[tap_rows[j], tap_cols[i]].astype(np.float32)
+                offset_k = pk - p
+                facing = np.maximum(np.einsum("ij,ij->i", n, nk), 0.0)
+                plane = np.abs(np.einsum("ij,ij->i", n, offset_k))
+                step = np.sqrt(np.einsum("ij,ij->i", offset_k, offset_k))
+                scale = PLANE_TOLERANCE * step + np.float32(1e-4)
+                w = (wu[di + 1] * wv[dj + 1] * self.valid[j, i] * facing ** NORMAL_POWER
+                     * np.exp(-(plane / scale) ** 2)).astype(np.float32)
+                glossy += w[:, None] * self.glossy[j, i]
+                diffuse += w[:, None] * self.diffuse[j, i]
+                weight += w
+                room = self.distance[j, i] - step
+                bend = np.linalg.norm(n - nk, axis=1)
+                turn = np.where(room > 0.0, np.minimum(step / np.where(room > 0.0, room, 1.0),
+                                                       np.float32(1e15)), np.float32(1e15)) + bend
+                turn2 += np.where(w > 0.0, w * turn * turn, 0.0)
+                if eye_distance is not None:
+                    turn = turn + step / eye_distance
+                turn = turn + bend
+                glossy_turn2 += np.where(w > 0.0, w * turn * turn, 0.0)
+        lonely = weight <= 1e-8
+        safe = np.where(lonely, 1.0, weight)
+        glossy = np.where(lonely[:, None], 0.0, glossy / safe[:, None])
+        diffuse = np.where(lonely[:, None], 0.0, diffuse / safe[:, None])
+        return (glossy, np.where(lonely, -1.0, np.sqrt(glossy_turn2 / safe)),
+                diffuse, np.where(lonely, -1.0, np.sqrt(turn2 / safe)))
