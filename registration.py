@@ -22,3 +22,19 @@ def unregister_modules(modules) -> None:
             module.unregister()
         for cls in reversed(module.classes):
             bpy.utils.unregister_class(cls)
+
+
+def add_handlers(pairs) -> None:
+    """Append each (``bpy.app.handlers`` list name, function) of ``pairs`` once."""
+    for name, fn in pairs:
+        handlers = getattr(bpy.app.handlers, name)
+        if fn not in handlers:
+            handlers.append(fn)
+
+
+def remove_handlers(pairs) -> None:
+    """Remove every occurrence of each (list name, function) of ``pairs``."""
+    for name, fn in pairs:
+        handlers = getattr(bpy.app.handlers, name)
+        while fn in handlers:
+            handlers.remove(fn)

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from ..registration import add_handlers, remove_handlers
 from ..voxgi_addon.scene.changes import ObjectEntry, SceneIndex, UpdateRecord, plan_updates
 from .snapshot.pose import posed_snapshot, slot_materials
 from .snapshot.scene import RENDERABLE, renders
@@ -215,17 +216,11 @@ classes = ()
 
 
 def register() -> None:
-    for name, fn in HANDLERS:
-        handlers = getattr(bpy.app.handlers, name)
-        if fn not in handlers:
-            handlers.append(fn)
+    add_handlers(HANDLERS)
 
 
 def unregister() -> None:
-    for name, fn in HANDLERS:
-        handlers = getattr(bpy.app.handlers, name)
-        while fn in handlers:
-            handlers.remove(fn)
+    remove_handlers(HANDLERS)
     forget()
 
 

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import bpy
 
+from ..registration import add_handlers, remove_handlers
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.incremental import StagedGI, cascade_grids, grids_equal, update_gi_stages
 from ..voxgi_addon.preview.bounced_volumes import bounced_volumes
@@ -410,15 +411,9 @@ classes = ()
 
 
 def register() -> None:
-    for name, fn in HANDLERS:
-        handlers = getattr(bpy.app.handlers, name)
-        if fn not in handlers:
-            handlers.append(fn)
+    add_handlers(HANDLERS)
 
 
 def unregister() -> None:
-    for name, fn in HANDLERS:
-        handlers = getattr(bpy.app.handlers, name)
-        if fn in handlers:
-            handlers.remove(fn)
+    remove_handlers(HANDLERS)
     clear()
