@@ -22,7 +22,6 @@ from ..voxgi_addon.preview import transmission
 from ..voxgi_addon.preview.film import background
 from ..voxgi_addon.preview.gather import GatherSettings, focused
 from ..voxgi_addon.preview.passes import (
-    add_pass_tails,
     centre_pass,
     check_request,
     edge_pixels,
@@ -32,7 +31,7 @@ from ..voxgi_addon.preview.passes import (
     material_indices,
     new_sums,
     pass_tail_weights,
-    scatter_tails,
+    stacked_tails,
     subpixel_passes,
     subpixel_reach,
 )
@@ -439,9 +438,9 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                 "gbuffer_view": centres["unshadowed"], "pixels": pixels}, list_size)
             listed_centres["shine"] = raw["gbuffer_position"]
             listed_centres["unshadowed"] = raw["gbuffer_normal"]
-        own = {name: np.zeros((len(listed), 4)) for name in names}
-        tails, weighted = new_sums(width * height), {}
-        for (offset, block), weights in zip(plan, pass_tail_weights(plan, filter_width)):
+        # every pass's samples, the sum textures' texels side by side (names' order)
+        samples = np.empty((len(plan), len(listed), 4 * len(names)), np.float32)
+        for index, (offset, block) in enumerate(plan):
             gbuffer = rasterize(seen_tris, snapshot.camera, rough, width, height, offset,
                                 shader=raster, textures=scene.raster_textures(),
                                 filter_width=filter_width, batch=batch)
@@ -466,15 +465,16 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
             textures = yield from shade(inputs, {name: blank for name in names}, terms, blank,
                                         list_size, block, glow=glow, centre=listed_centres,
                                         field=None if field is None else field[1])
-            one = {name: read_texture(texture).reshape(-1, 4)[:len(listed)].astype(np.float64)
-                   for name, texture in textures.items()}
-            for name in names:
-                own[name] += one[name]
-            add_pass_tails(weighted, {key: value / len(plan)
-                                      for key, value in _sums_of(one).items()}, weights)
-        scatter_tails(tails, weighted, listed, width, height)
-        for name in names:
-            texel[name][listed] = own[name]
+            for k, name in enumerate(names):
+                samples[index, :, 4 * k:4 * k + 4] = \
+                    read_texture(textures[name]).reshape(-1, 4)[:len(listed)]
+        own = samples.sum(axis=0, dtype=np.float64)
+        samples /= len(plan)
+        tail = stacked_tails(samples, pass_tail_weights(plan, filter_width), listed, width,
+                             height)
+        tails = _sums_of({name: tail[:, 4 * k:4 * k + 4] for k, name in enumerate(names)})
+        for k, name in enumerate(names):
+            texel[name][listed] = own[:, 4 * k:4 * k + 4]
     else:
         tails = new_sums(width * height)
     count = np.where(edge.ravel(), len(plan), 1)

@@ -155,29 +155,31 @@ def test_sample_weights_keep_an_evenly_lit_surface_even():
 
 def test_passes_summed_before_one_scatter_give_the_tails_of_a_scatter_per_pass():
     """The sub-pixel passes' tails are linear in their samples: summing the passes' weighted
-    samples and scattering once (``add_pass_tails`` + ``scatter_tails``, what the preview
-    does) gives the tails of one scatter per pass (``add_tails``), pixels at the border
+    samples and scattering once (``stacked_tails`` over ``pack_sums``, what the previews do)
+    gives the tails of one scatter per pass (``add_tails``), pixels at the border
     included."""
     from voxgi.voxgi_addon.preview.passes import (
         SUMS,
-        add_pass_tails,
         add_tails,
         new_sums,
+        pack_sums,
         pass_tail_weights,
-        scatter_tails,
+        stacked_tails,
         subpixel_passes,
+        unpack_sums,
     )
     rng = np.random.default_rng(3)
     width, height = 13, 7
     listed = np.sort(rng.choice(width * height, 40, replace=False))
     listed[0] = 0  # a corner: its neighbours beyond the image are dropped
     plan = subpixel_passes(1.5, 16)
-    per_pass, once, weighted = new_sums(width * height), new_sums(width * height), {}
-    for weights in pass_tail_weights(plan, 1.5):
+    weights = pass_tail_weights(plan, 1.5)
+    per_pass, samples = new_sums(width * height), []
+    for row in weights:
         values = {name: rng.random((len(listed),) + per_pass[name].shape[1:]) for name in SUMS}
-        add_tails(per_pass, values, listed, weights, width, height)
-        add_pass_tails(weighted, values, weights)
-    scatter_tails(once, weighted, listed, width, height)
+        add_tails(per_pass, values, listed, row, width, height)
+        samples.append(pack_sums(values))
+    once = unpack_sums(stacked_tails(np.stack(samples), weights, listed, width, height))
     for name in SUMS:
         assert np.any(once[name] != 0.0)
         np.testing.assert_allclose(once[name], per_pass[name], rtol=1e-12, atol=1e-12)

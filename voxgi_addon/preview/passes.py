@@ -513,55 +513,88 @@ def add_tails(tails, values, pixels, weights: np.ndarray, width: int, height: in
     """Add one pass's samples at the flat ``pixels`` (values: name of SUMS → (N, C) or (N,)
     there) to the neighbours' ``tails`` (name → (H·W, C) or (H·W,)), by ``weights`` (3, 3)
     (``pass_tail_weights``' row for this pass): pixel p takes weights[e] × the sample of the
-    pixel p + e, as ``_neighbour_sum`` does with pixel means. Passes over the same pixels
-    sum their samples first (``add_pass_tails``) and scatter once (``scatter_tails``)."""
-    weighted = {}
-    add_pass_tails(weighted, values, weights)
-    scatter_tails(tails, weighted, pixels, width, height)
-
-
-def add_pass_tails(weighted, values, weights: np.ndarray) -> None:
-    """Add one pass's samples (name → (N, C) or (N,), at the pixels every pass lists) into
-    ``weighted`` ((ey, ex) → name → the same shape) by its ``weights`` (3, 3), without
-    scattering: the tails are linear in the samples, so the passes' weighted sums scatter
-    once at the end (``scatter_tails``) instead of 8 scatters per name per pass — which took
-    2.9 of a 640 × 480 preview's 7.6 s (docs/gi_pipeline.md "Anti-aliasing")."""
+    pixel p + e, as ``_neighbour_sum`` does with pixel means. The readable reference of
+    ``stacked_tails``, which the previews use: all passes at once."""
+    y, x = np.divmod(np.asarray(pixels), width)
     for ey in (-1, 0, 1):
         for ex in (-1, 0, 1):
             w = weights[ey + 1, ex + 1]
             if (ey, ex) == (0, 0) or w == 0.0:
                 continue
-            slot = weighted.setdefault((ey, ex), {})
+            ty, tx = y - ey, x - ex
+            ok = (ty >= 0) & (ty < height) & (tx >= 0) & (tx < width)
             for name, value in values.items():
-                term = w * np.asarray(value, np.float64)
-                if name in slot:
-                    slot[name] += term
-                else:
-                    slot[name] = term
+                tails[name][ty[ok] * width + tx[ok]] += w * np.asarray(value, np.float64)[ok]
 
 
-def scatter_tails(tails, weighted, pixels, width: int, height: int) -> None:
-    """Add ``weighted`` (``add_pass_tails``) at the flat ``pixels`` into ``tails``: pixel p
-    takes the weighted samples of pixel p + e."""
-    y, x = np.divmod(np.asarray(pixels), width)
-    for (ey, ex), slot in weighted.items():
-        ty, tx = y - ey, x - ex
-        ok = (ty >= 0) & (ty < height) & (tx >= 0) & (tx < width)
-        target = ty[ok] * width + tx[ok]  # distinct: a shift
-        for name, value in slot.items():
-            tails[name][target] += value[ok]
+def pack_sums(values) -> np.ndarray:
+    """(N, 24) float64: the SUMS (name → (N, 3) or (N,)) side by side in SUMS'
+    order (``unpack_sums`` takes them apart)."""
+    return np.concatenate([np.asarray(values[name], np.float64).reshape(len(values[name]), -1)
+                           for name in SUMS], axis=1)
+
+
+def unpack_sums(packed: np.ndarray) -> dict:
+    """name of SUMS → (N, 3) or (N,) views of a ``pack_sums`` array."""
+    out, at = {}, 0
+    for name in SUMS:
+        if name in _SCALAR_SUMS:
+            out[name], at = packed[:, at], at + 1
+        else:
+            out[name], at = packed[:, at:at + 3], at + 3
+    return out
+
+
+def stacked_tails(samples: np.ndarray, weights: np.ndarray, pixels, width: int,
+                  height: int) -> np.ndarray:
+    """(H·W, C) float64: the neighbours' tails of P sub-pixel passes' samples ``samples`` (P,
+    N, C) at the flat ``pixels`` (N,), pass k weighted by ``weights[k]`` (3, 3)
+    (``pass_tail_weights``): pixel p takes Σ_k weights[k][e] × the pass k sample of the pixel
+    p + e — ``add_tails`` pass by pass. The tails are linear in the samples, so each
+    neighbour's weighted sum over the passes is one matrix product and is scattered once
+    (docs/gi_pipeline.md "Anti-aliasing": 8 scatters per name per pass took 2.9 of a 640 ×
+    480 preview's 7.6 s, summing them name by name pass by pass another 0.2)."""
+    samples = np.asarray(samples)
+    passes, count, channels = samples.shape
+    weights = np.asarray(weights, np.float64).reshape(passes, 9)
+    # on an image one pixel wider on every side, cropped at the end: no target falls outside
+    tails = np.zeros(((height + 2) * (width + 2), channels), samples.dtype)
+    used = [k for k in range(9) if k != 4 and np.any(weights[:, k] != 0.0)]
+    if count and used:
+        summed = np.tensordot(weights[:, used].T.astype(samples.dtype),
+                              samples.reshape(passes, count * channels), 1)
+        y, x = np.divmod(np.asarray(pixels), width)
+        at = (y + 1) * (width + 2) + x + 1
+        for row, k in enumerate(used):
+            shift = (k // 3 - 1) * (width + 2) + k % 3 - 1
+            tails[at - shift] += summed[row].reshape(count, channels)
+    tails = tails.reshape(height + 2, width + 2, channels)[1:-1, 1:-1]
+    return tails.reshape(width * height, channels).astype(np.float64)
 
 
 def _neighbour_sum(image: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """(H, W, C): Σ weights[dy + 1, dx + 1] × image[y + dy, x + dx] over the 8 neighbours
-    (the centre left out; outside the image counts as 0)."""
-    padded = np.pad(image, ((1, 1), (1, 1), (0, 0)))
-    height, width = image.shape[:2]
-    out = np.zeros_like(image)
-    for dy in range(3):
-        for dx in range(3):
-            if (dy, dx) != (1, 1) and weights[dy, dx] > 0.0:
-                out += weights[dy, dx] * padded[dy:dy + height, dx:dx + width]
+    (the centre left out; outside the image counts as 0). ``neighbour_weights`` are separable
+    (the filter's share along x times along y, 1 at the centre): a row pass and a column pass
+    of 3 taps, less the centre."""
+    along = weights[1]
+    if weights[1, 1] != 1.0 or not np.allclose(weights, np.outer(weights[:, 1], along)):
+        padded = np.pad(image, ((1, 1), (1, 1), (0, 0)))
+        height, width = image.shape[:2]
+        out = np.zeros_like(image)
+        for dy in range(3):
+            for dx in range(3):
+                if (dy, dx) != (1, 1) and weights[dy, dx] > 0.0:
+                    out += weights[dy, dx] * padded[dy:dy + height, dx:dx + width]
+        return out
+    rows = image.copy()
+    rows[:, 1:] += along[0] * image[:, :-1]
+    rows[:, :-1] += along[2] * image[:, 1:]
+    column = weights[:, 1]
+    out = rows.copy()
+    out[1:] += column[0] * rows[:-1]
+    out[:-1] += column[2] * rows[1:]
+    out -= image
     return out
 
 
@@ -1077,16 +1110,16 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     tails = new_sums(height * width)
     listed = np.flatnonzero(edge)
     if len(listed):
-        weighted = {}
-        for (offset, block), weights in zip(plan, pass_tail_weights(plan, filter_width)):
+        samples = []
+        for offset, block in plan:
             one = new_sums(height * width)
             shade(primary_visibility(camera_tris, snapshot.camera, width, height, offset),
                   edge, block, into=one, offset=offset)
             for name in SUMS:
                 sums[name][listed] += one[name][listed]
-            add_pass_tails(weighted, {name: one[name][listed] / len(plan) for name in SUMS},
-                           weights)
-        scatter_tails(tails, weighted, listed, width, height)
+            samples.append(pack_sums({name: one[name][listed] for name in SUMS}) / len(plan))
+        tails = unpack_sums(stacked_tails(np.stack(samples), pass_tail_weights(plan, filter_width),
+                                          listed, width, height))
     count = np.where(edge, len(plan), 1)
     timings["sub-pixel passes" if len(plan) > 1 else "direct + compose"] = \
         time.perf_counter() - t0
