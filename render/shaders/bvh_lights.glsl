@@ -82,19 +82,53 @@ float point_light(int light, int kind, vec3 p, vec3 n, uint state, int m)
   return value * visible / float(m * m);
 }
 
-/* Lambert's formula over the outline, whole polygon above the horizon (∫ cosθ/π dω). */
-float polygon_irradiance(int light, int count, vec3 p, vec3 n)
+/* Lambert's formula's term of the edge a → b (directions from the point) for its normal n. */
+float edge_term(vec3 a, vec3 b, vec3 n)
+{
+  a = normalize(a);
+  b = normalize(b);
+  vec3 c = cross(a, b);
+  float s = length(c);
+  return atan(s, dot(a, b)) * dot(c, n) / max(s, 1e-30);
+}
+
+/* Lambert's formula (∫ cosθ/π dω) over the part of the convex outline above the horizon of
+ * (p, n): the outline clipped by the tangent plane, the cut along the horizon from where it
+ * leaves to where it comes back (direct_light._polygon_irradiance); aim = the mean of the
+ * clipped outline's corners. */
+float polygon_irradiance(int light, int count, vec3 p, vec3 n, out vec3 aim)
 {
   float sum = 0.0;
-  vec3 first = normalize(light_texel(light, 8).xyz - p);
-  vec3 a = first;
+  vec3 corners = vec3(0.0);
+  float kept = 0.0;
+  vec3 a = light_texel(light, 8).xyz - p;
+  float ha = dot(a, n);
+  vec3 exit_at = vec3(0.0), entry_at = vec3(0.0);
+  bool left = false, entered = false;
   for (int k = 0; k < count; k++) {
-    vec3 b = k + 1 < count ? normalize(light_texel(light, 8 + k + 1).xyz - p) : first;
-    vec3 c = cross(a, b);
-    float s = length(c);
-    sum += atan(s, dot(a, b)) * dot(c / max(s, 1e-30), n);
+    vec3 b = light_texel(light, 8 + (k + 1 < count ? k + 1 : 0)).xyz - p;
+    float hb = dot(b, n);
+    if (ha > 0.0 || hb > 0.0) {
+      vec3 cut = a + (ha / (ha - hb)) * (b - a); /* used only where the edge crosses */
+      if (ha > 0.0 && !(hb > 0.0)) {
+        exit_at = cut;
+        left = true;
+      }
+      if (!(ha > 0.0) && hb > 0.0) {
+        entry_at = cut;
+        entered = true;
+      }
+      sum += edge_term(ha > 0.0 ? a : cut, hb > 0.0 ? b : cut, n);
+      corners += (ha > 0.0 ? a : vec3(0.0)) + ((ha > 0.0) != (hb > 0.0) ? cut : vec3(0.0));
+      kept += (ha > 0.0 ? 1.0 : 0.0) + ((ha > 0.0) != (hb > 0.0) ? 1.0 : 0.0);
+    }
     a = b;
+    ha = hb;
   }
+  if (left && entered) {
+    sum += edge_term(exit_at, entry_at, n);
+  }
+  aim = p + corners / max(kept, 1.0);
   return abs(sum) / (2.0 * M_PI_F);
 }
 
@@ -106,14 +140,9 @@ float area_light(int light, vec4 head, vec3 p, vec3 n, uint state, int m)
     return 0.0;
   }
   int count = int(head.z);
-  bool full = true;
-  bool any_above = false;
-  for (int k = 0; k < count; k++) {
-    float h = dot(light_texel(light, 8 + k).xyz - p, n);
-    full = full && h > 0.0;
-    any_above = any_above || h > 0.0;
-  }
-  if (!any_above) {
+  vec3 aim;
+  float unshadowed = polygon_irradiance(light, count, p, n, aim);
+  if (unshadowed <= 0.0) {
     return 0.0;
   }
   vec3 ex = light_texel(light, 3).xyz;
@@ -134,9 +163,9 @@ float area_light(int light, vec4 head, vec3 p, vec3 n, uint state, int m)
       f_lit += f * visible_to(origin, target);
     }
   }
-  float unshadowed = full ? polygon_irradiance(light, count, p, n)
-                          : f_sum / float(m * m) * area.x / M_PI_F;
-  return f_sum > 0.0 ? area.y * unshadowed * f_lit / f_sum : 0.0;
+  /* no sample above the horizon (one sample at a bounce hit): one ray to the middle of the
+   * part above (direct_light._area) */
+  return area.y * unshadowed * (f_sum > 0.0 ? f_lit / f_sum : visible_to(origin, aim));
 }
 
 /* Diffuse Direct of light `light` alone at p (0 for a padding row), with the samples

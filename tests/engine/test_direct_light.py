@@ -139,20 +139,25 @@ def test_area_light_is_one_sided_and_handles_the_horizon():
     light = LightData("a", "AREA", WHITE, 50.0, frame((0, 0, 1.0), rot_x(math.radians(60))),
                       size=1.0, size_y=0.5, shape="RECTANGLE")
     assert diffuse_direct([[0, 0, 2.0]], [[0, 0, -1.0]], [light], None)[0, 0] == 0  # behind it
-    # A wall point whose horizon cuts the light: Monte Carlo vs a dense quadrature
-    p = np.array([[0.0, 0.0, 1.05], [0.2, -1.0, 0.5]])
-    n = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])
-    got = diffuse_direct(p, n, [light], None, samples=4096)[:, 0]
+    # Points whose horizon cuts the light: exact (the light clipped by the horizon), with no
+    # noise whatever the samples or seed, against a dense quadrature
+    p = np.array([[0.0, 0.0, 1.05], [0.2, 1.0, 1.1], [0.0, 0.6, 1.0]])
+    n = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.8, 0.0, 0.6]])
+    got = diffuse_direct(p, n, [light], None, samples=1)[:, 0]
+    for samples, seed in ((16, 0), (16, 7), (4, 3)):
+        np.testing.assert_allclose(diffuse_direct(p, n, [light], None, samples=samples,
+                                                  seed=seed)[:, 0], got, rtol=1e-12)
     u, v = np.meshgrid((np.arange(400) + 0.5) / 400 - 0.5, (np.arange(200) + 0.5) / 200 - 0.5)
     m = light.world_matrix
     y = m[:3, 3] + u.reshape(-1, 1) * m[:3, 0] * 1.0 + v.reshape(-1, 1) * m[:3, 1] * 0.5
     emit = -m[:3, 2]
     radiance = 50.0 / (math.pi * 0.5)
-    for i in range(2):
+    for i in range(3):
         w = y - p[i]
         r2 = (w * w).sum(1)
         f = np.maximum(w @ n[i], 0) * np.maximum(-(w @ emit), 0) / r2**2
-        assert got[i] == pytest.approx(radiance * f.mean() * 0.5 / math.pi, rel=0.01)
+        assert got[i] == pytest.approx(radiance * f.mean() * 0.5 / math.pi, rel=2e-3)
+    assert got[0] == 0.0 and got[1:].min() > 0.0  # the first behind the one-sided light
 
 
 def test_hard_shadows_and_soft_shadows_against_brute_force():

@@ -15,8 +15,8 @@ checked against Cycles 5.0 renders of a white plane (agreement 0.1–0.3 %; docs
 * AREA (SQUARE, RECTANGLE, DISK, ELLIPSE; ``size`` × ``size_y`` in the light's X/Y, diameters for
   the round shapes), power P: a one-sided Lambertian emitter of radiance P / (π · area) facing
   the light's −Z. The unshadowed irradiance is exact (Lambert's polygon formula; round shapes as
-  a 64-gon of the same area) when the whole light is above the point's horizon, otherwise the
-  Monte Carlo estimate; the shadowed fraction is estimated from ``samples`` stratified points
+  a 64-gon of the same area), the light clipped by the point's horizon where it straddles it;
+  the shadowed fraction is estimated from ``samples`` stratified points
   on the light, weighted by their share of the irradiance (a ratio estimator: no noise where
   the light is fully visible).
 
@@ -177,16 +177,52 @@ def area_outline(light: LightData) -> tuple[np.ndarray, float]:
     return outline, float(area)
 
 
-def _polygon_irradiance(p: np.ndarray, n: np.ndarray, outline: np.ndarray) -> np.ndarray:
-    """Lambert's formula: ∫ cosθ / π dω over a polygon fully above each point's horizon (N,)."""
-    a = outline[None] - p[:, None]  # (N, K, 3)
-    a /= np.linalg.norm(a, axis=2, keepdims=True)
-    b = np.roll(a, -1, axis=1)
+def _edge_terms(a: np.ndarray, b: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Lambert's formula's term of the edges a → b (…, 3) of a polygon seen from a point
+    (directions from it, any length) for its unit normal n (broadcast): the angle the edge
+    spans times the cosine of its great circle's pole with n."""
+    a = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-30)
+    b = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-30)
     cross = np.cross(a, b)
-    sin = np.linalg.norm(cross, axis=2)
-    angle = np.arctan2(sin, np.einsum("nkc,nkc->nk", a, b))
-    gamma = cross / np.maximum(sin, 1e-30)[..., None]
-    return np.abs((angle * np.einsum("nkc,nc->nk", gamma, n)).sum(axis=1)) / (2.0 * math.pi)
+    sin = np.linalg.norm(cross, axis=-1)
+    angle = np.arctan2(sin, np.einsum("...c,...c->...", a, b))
+    return angle * np.einsum("...c,...c->...", cross, n) / np.maximum(sin, 1e-30)
+
+
+def _polygon_irradiance(p: np.ndarray, n: np.ndarray, outline: np.ndarray,
+                        centroid: bool = False):
+    """Lambert's formula: ∫ cosθ / π dω over the part of a convex polygon above each point's
+    horizon (N,): the polygon clipped by the point's tangent plane, whose cut runs along the
+    horizon from where the outline leaves it to where it comes back (0 where none of it is
+    above). Exact, so a light that straddles a surface's horizon (a box's side under a ceiling
+    light) is as smooth as one above it, as Cycles' converged render. centroid : also return
+    the mean (N, 3) of the clipped polygon's corners (world space), where ``_area`` aims a
+    shadow ray when none of its light samples fell above the horizon."""
+    a = outline[None] - p[:, None]  # (N, K, 3)
+    b = np.roll(a, -1, axis=1)
+    ha = np.einsum("nkc,nc->nk", a, n)
+    hb = np.roll(ha, -1, axis=1)
+    above_a, above_b = ha > 0.0, hb > 0.0
+    # where each edge crosses the horizon (used only on the edges that do)
+    t = np.divide(ha, ha - hb, out=np.zeros_like(ha), where=above_a != above_b)
+    cut = a + t[..., None] * (b - a)
+    start = np.where(above_a[..., None], a, cut)
+    end = np.where(above_b[..., None], b, cut)
+    terms = np.where(above_a | above_b, _edge_terms(start, end, n[:, None]), 0.0)
+    total = terms.sum(axis=1)
+    leaves, enters = above_a & ~above_b, ~above_a & above_b
+    crossed = leaves.any(axis=1) & enters.any(axis=1)
+    if crossed.any():  # the horizon's stretch of the clipped outline: leave → enter
+        rows = np.flatnonzero(crossed)
+        exit_at = cut[rows, leaves[rows].argmax(axis=1)]
+        entry_at = cut[rows, enters[rows].argmax(axis=1)]
+        total[rows] += _edge_terms(exit_at, entry_at, n[rows])
+    irradiance = np.abs(total) / (2.0 * math.pi)
+    if not centroid:
+        return irradiance
+    corners = (above_a[..., None] * a + (above_a != above_b)[..., None] * cut).sum(axis=1)
+    count = (above_a.astype(int) + (above_a != above_b)).sum(axis=1)
+    return irradiance, p + corners / np.maximum(count, 1)[:, None]
 
 
 def _area(light, p, n, tris, strata):
@@ -200,16 +236,10 @@ def _area(light, p, n, tris, strata):
     if len(in_front) == 0:
         return value
     p, n = p[in_front], n[in_front]
-    # Unshadowed Diffuse Direct (= irradiance / π): exact above the horizon, else Monte Carlo.
-    heights = np.einsum("nkc,nc->nk", outline[None] - p[:, None], n)
-    full = (heights > 0).all(axis=1)
-    unshadowed = np.zeros(len(p))
-    if full.any():
-        unshadowed[full] = _polygon_irradiance(p[full], n[full], outline)
-    # Light samples: for the shadow rays, or (without occluders) only where the light
-    # straddles the horizon.
-    sampled = np.arange(len(p)) if tris is not None else np.flatnonzero(
-        ~full & (heights > 0).any(axis=1))
+    # Unshadowed Diffuse Direct (= irradiance / π): exact, the light clipped by the horizon.
+    unshadowed, aim = _polygon_irradiance(p, n, outline, centroid=True)
+    # Light samples, for the shadow rays.
+    sampled = np.arange(len(p)) if tris is not None else np.zeros(0, int)
     if len(sampled):
         unit = strata(in_front[sampled]) * 2.0 - 1.0
         if light.shape in ("DISK", "ELLIPSE"):
@@ -222,13 +252,18 @@ def _area(light, p, n, tris, strata):
         cos_x = np.einsum("nkc,nc->nk", w, n[sampled])
         cos_l = -(w @ emit)
         f = np.maximum(cos_x, 0.0) * np.maximum(cos_l, 0.0) / np.maximum(r2, 1e-30) ** 2
-        partial = ~full[sampled]
-        unshadowed[sampled[partial]] = f[partial].mean(axis=1) * area / math.pi
-    unshadowed[(heights <= 0).all(axis=1)] = 0.0
     lit = np.flatnonzero(unshadowed > 0)
     if len(lit) and tris is not None:  # here sampled = every point, so rows line up
         origins = p[lit] + _NORMAL_OFFSET * n[lit]
-        unshadowed[lit] *= _visible_share_of_points(tris, origins, targets[lit], f[lit])
+        # the samples above the horizon, each by its share of the irradiance; where none is
+        # (a light mostly below it, one sample at a bounce hit), one ray to the middle of its
+        # part above, so the share is never taken as 0 for want of a sample
+        none = f[lit].sum(axis=1) <= 0.0
+        share = _visible_share_of_points(tris, origins, targets[lit], f[lit])
+        if none.any():
+            share[none] = _visible_share_of_points(tris, origins[none],
+                                                   aim[lit][none][:, None])
+        unshadowed[lit] *= share
     value[in_front] = radiance * unshadowed
     return value
 
