@@ -56,6 +56,7 @@ from .gpu_shaders import note_upload
 from .gpu_volume import float_texture
 
 # What ``uploaded`` names: the parts of a scene.
+WAITING = "waiting"  # what an ``upload_steps`` step that sent nothing (the BVH building) yields
 PARTS = ("bvh", "materials", "textures", "constants", "lights", "world", "emitters")
 
 
@@ -156,14 +157,19 @@ class ScenePlan:
     lights: list = dataclasses.field(default_factory=list)
     world: object = None              # world_table
     emitters: object = None           # emitter_table
+    # set once ``bvh`` is in (``prepare``'s on_tables: it is built on a thread meanwhile)
+    bvh_ready: threading.Event = dataclasses.field(default_factory=threading.Event)
+    bvh_error: BaseException | None = None
 
     @property
     def parts(self) -> int:
         """Scene parts ``upload_steps`` will send at most (the BVH's three textures each)."""
+        building = not self.bvh_ready.is_set()
         return (sum(x is not None for x in (self.textures, self.atlas, self.texture_table,
                                             self.materials, self.lamps, self.world,
                                             self.emitters))
-                + (3 if self.bvh is not None and self.bvh[1] is not None else 0) + 1)
+                + (3 if building or self.bvh is not None and self.bvh[1] is not None else 0)
+                + 1)
 
 
 class GPUScene:
@@ -261,16 +267,21 @@ class GPUScene:
             pass
         return self
 
-    def prepare(self, snapshot, on_geometry=None) -> ScenePlan:
+    def prepare(self, snapshot, on_geometry=None, on_tables=None) -> ScenePlan:
         """The CPU half of ``update``: the content keys of ``snapshot``'s parts and, for those
         that differ from the uploaded ones, their tables (world-space triangles, packed BVH,
         texture atlas, material, light, world and emitter tables) — numpy only, nothing sent to
         the GPU and nothing of the scene changed, so it may run on the worker thread while the
         main thread draws (the viewport: docs/gi_pipeline.md "Entering Rendered mode").
         on_geometry : called with (triangles, roughness table, textured, ``principled_table``)
-        as soon as those are known, before the BVH is built (the viewport's vertex arrays)."""
+        as soon as those are known, before the BVH is built (the viewport's vertex arrays).
+        on_tables : called with the plan once every part but the BVH is in it (its lights
+        list, so the kernels' variants, included); the BVH is then built on a thread of its own
+        meanwhile (``ScenePlan.bvh_ready``), so the caller can send the other parts and compile
+        the kernels while it builds (docs/gi_pipeline.md "Entering Rendered mode")."""
         keys, seconds = dict(self.keys), {}
         plan = ScenePlan(base=dict(self.keys), keys=keys, seconds=seconds)
+        plan.bvh_ready.set()  # (cleared while a thread builds it)
         world = snapshot.world
         world_key = None if world.radiance is None else (world.key or digest(world.radiance))
         lighting = None
@@ -292,14 +303,30 @@ class GPUScene:
         if on_geometry is not None:
             on_geometry(tris, rough, surface is not None, principled)
         seconds["geometry"] = time.perf_counter() - t0
+        building = None
         if len(tris):
             # identity check first (free); another user of the shared BVH (the Fast path) may
             # have uploaded other triangles since, which a content comparison then catches
-            t0 = time.perf_counter()
             bvh = self._own_bvh or shared_bvh()  # gpu_bvh.release may have made a new one
-            plan.bvh = (bvh, bvh.pack(tris))
-            if plan.bvh[1] is not None:
-                seconds["bvh"] = time.perf_counter() - t0
+
+            def build():
+                t0 = time.perf_counter()
+                try:
+                    packed = bvh.pack(tris)
+                    if packed is not None:
+                        seconds["bvh"] = time.perf_counter() - t0
+                    plan.bvh = (bvh, packed)
+                except BaseException as error:  # noqa: BLE001 - raised by prepare below
+                    plan.bvh_error = error
+                finally:
+                    plan.bvh_ready.set()
+
+            if on_tables is None:
+                build()
+            else:  # built beside the other tables (on_tables)
+                plan.bvh_ready.clear()
+                building = threading.Thread(target=build, name="VoxGI BVH build", daemon=True)
+                building.start()
         self._prepare_textures(plan, tris, geometry)
         slots = None if surface is None else surface.slots
         variants = (None, None) if surface is None else (surface.param_slots, surface.variants)
@@ -350,6 +377,12 @@ class GPUScene:
                 keys["emitters"] = content
                 seconds["emitters"] = time.perf_counter() - t0
             keys["emitters_source"] = key
+        if on_tables is not None:
+            on_tables(plan)
+        if building is not None:
+            building.join()
+        if plan.bvh_error is not None:
+            raise plan.bvh_error
         return plan
 
     def _prepare_textures(self, plan: ScenePlan, tris, geometry: str) -> None:
@@ -403,7 +436,8 @@ class GPUScene:
     def upload_steps(self, plan: ScenePlan):
         """The GPU half of ``update``: send what ``plan`` (``prepare``) rebuilt, a part per
         step (a generator: the texture atlas, the texture table, the materials, the constants,
-        the BVH's three textures, the lamps' tables, the world, the emitters; each counted by
+        the lamps' tables, the world, the emitters, the BVH's three textures — a step while the
+        BVH is still building yields ``WAITING`` and sends nothing; each counted by
         ``gpu_shaders.note_upload``), then make the scene the plan's at once, so a scene left
         between two steps is still the previous one throughout. Main thread. A plan prepared
         against other keys than the scene's (another update came first) is dropped, and so is
@@ -463,19 +497,6 @@ class GPUScene:
             ltc_texture()  # the glossy kernels' constant table (cached by gpu_ltc)
             send("constants", nbytes)
             yield
-        bvh = self._own_bvh or shared_bvh()  # gpu_bvh.release may have made a new one
-        if plan.bvh is not None:
-            t0 = time.perf_counter()
-            bvh, packed = plan.bvh
-            # the BVH knows its own triangles (a content check): it may go in on its own
-            for _ in bvh.upload_steps(plan.tris, packed):
-                yield
-                if serial != self.serial:
-                    return
-            if bvh.uploaded_bytes:
-                sent["bvh"] = bvh.uploaded_bytes
-                seconds["bvh"] = seconds.get("bvh", 0.0) + time.perf_counter() - t0
-                yield
         if plan.lamps is not None:
             if serial != self.serial:
                 return
@@ -496,6 +517,27 @@ class GPUScene:
                 return
             new["emitters"] = _table_texture(plan.emitters)
             send("emitters", _texture_bytes(plan.emitters))
+            yield
+        # the BVH last: it may still be building (``prepare``'s on_tables) while the other
+        # parts go in; a step that finds it building sends nothing
+        while not plan.bvh_ready.is_set() or plan.bvh_error is not None:
+            yield WAITING  # (a failed build: ``prepare`` raises it, the caller drops the plan)
+            if serial != self.serial:
+                return
+        bvh = self._own_bvh or shared_bvh()  # gpu_bvh.release may have made a new one
+        if plan.bvh is not None:
+            if serial != self.serial:
+                return
+            t0 = time.perf_counter()
+            bvh, packed = plan.bvh
+            # the BVH knows its own triangles (a content check): it may go in on its own
+            for _ in bvh.upload_steps(plan.tris, packed):
+                yield
+                if serial != self.serial:
+                    return
+            if bvh.uploaded_bytes:
+                sent["bvh"] = bvh.uploaded_bytes
+                seconds["bvh"] = seconds.get("bvh", 0.0) + time.perf_counter() - t0
         if serial != self.serial:
             return
         # the plan's scene, all at once

@@ -13,7 +13,8 @@ into steps of which a draw takes at most one of each kind:
   takes the snapshot (``prepare_snapshot``, called by ``LiveGI.schedule``), or at once when it
   is cheap (``GPUScene.cheap``: a lamp or a material changed, about a millisecond);
   ``GPUScene.upload_steps`` then sends one part per draw (the BVH's three textures one at a
-  time);
+  time) — the other parts, and the kernels of the scene's features, while the BVH still
+  builds beside them (``GPUScene.prepare``'s on_tables hands the plan over before it);
 * **the vertex batch** of the G-buffer raster (``ViewPreparation``, one per view, since a
   batch belongs to its GPU context): its attributes are made on the preparing thread with the
   scene (``gbuffer.vertex_arrays``) and sent a chunk of ``CHUNK_TRIANGLES`` triangles per draw
@@ -53,7 +54,7 @@ from . import (
 )
 from .gbuffer import ChunkedBatch, gbuffer_shader, rasterize, vertex_arrays
 from .gpu_bvh import absent_lights, bvh_features, bvh_shader
-from .gpu_scene import current_scene
+from .gpu_scene import WAITING, current_scene
 from .gpu_shaders import LOCAL_SIZE, build_compute, compute_shader, counters, note_upload
 from .gpu_volume import float_texture
 from .progressive import base_options
@@ -206,10 +207,15 @@ class ScenePreparation:
             if self.job is job:
                 self.arrays = arrays
 
+        def tables(plan):
+            # every part but the BVH (built meanwhile): the view sends them and compiles the
+            # kernels of the scene's features while it builds
+            job.plan = plan
+
         def run():  # the preparing thread: numpy on the snapshot and the scene's keys only
             try:
                 if self.job is job:  # (else a newer snapshot came first)
-                    job.plan = scene.prepare(snapshot, on_geometry=geometry)
+                    job.plan = scene.prepare(snapshot, on_geometry=geometry, on_tables=tables)
                 else:
                     job.error = "superseded"
             except VoxGIError as error:
@@ -237,7 +243,9 @@ class ScenePreparation:
         step, or "stale": prepared against another state of the scene — or the same content
         from other triangles than the vertex arrays were made of — asked again)."""
         job = self.job
-        if job is None or job.snapshot is not snapshot or not job.done or job.plan is None:
+        # the plan is there before the BVH is built (``GPUScene.prepare``'s on_tables): its
+        # other parts go in meanwhile
+        if job is None or job.snapshot is not snapshot or job.plan is None or job.error:
             return ""
         scene = current_scene()
         if self.steps is None:
@@ -245,7 +253,8 @@ class ScenePreparation:
                 return ""
             self.steps, self.sent = scene.upload_steps(job.plan), 0
         try:
-            next(self.steps)
+            if next(self.steps) == WAITING:
+                return ""  # the BVH is still building: nothing sent
             self.sent += 1
             return "uploaded"
         except StopIteration:

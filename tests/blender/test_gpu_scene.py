@@ -187,3 +187,73 @@ def test_the_passes_g_buffers_share_one_vertex_batch(voxgi, monkeypatch):
     every = fresh(snapshot)
     assert len(built) > 3
     assert_same_passes(shared, every)
+
+
+def test_the_other_parts_go_in_while_the_bvh_builds(voxgi, monkeypatch):
+    """``GPUScene.prepare``'s on_tables (the viewport, docs/gi_pipeline.md "Entering Rendered
+    mode"): the plan comes with every part but the BVH, whose build is held here; its upload
+    sends those parts a step each, then steps that send nothing while the BVH builds, then the
+    BVH's three textures; the scene is then the plan's and renders as one built in one go."""
+    import threading
+
+    from voxgi.render import gpu_bvh
+    from voxgi.render.gpu_bvh import GPUBVH
+    from voxgi.render.gpu_scene import WAITING, GPUScene
+    from voxgi.render.gpu_shaders import counters
+
+    gpu_ready()
+    light_scenes.build("emissive_room", bpy.context.scene)
+    snapshot = snapshot_now()
+    release = threading.Event()
+    pack = GPUBVH.pack
+
+    def held(self, tris):
+        assert release.wait(60.0)
+        return pack(self, tris)
+
+    monkeypatch.setattr(gpu_bvh.GPUBVH, "pack", held)
+    scene = GPUScene(bvh=GPUBVH())
+    plans = []
+    done = threading.Event()
+    worker = threading.Thread(target=lambda: (scene.prepare(snapshot, on_tables=plans.append),
+                                              done.set()))
+    worker.start()
+    try:
+        for _ in range(600):
+            if plans:
+                break
+            done.wait(0.05)
+        assert plans and not done.is_set(), "the plan came only with its BVH"
+        plan = plans[0]
+        assert plan.lights and not plan.bvh_ready.is_set()
+        steps = scene.upload_steps(plan)
+        before = []
+        for _ in range(50):  # the other parts, one per step, then nothing while it builds
+            mark = counters.mark()
+            step = next(steps)
+            sent = counters.since(mark)[1]
+            if step == WAITING:
+                assert sent == []
+                break
+            assert len(sent) == 1
+            before += sent
+        assert before and not any(part.startswith("bvh") for part in before)
+        assert next(steps) == WAITING  # still building: still nothing
+    finally:
+        release.set()
+        worker.join(60.0)
+    assert done.is_set()
+    after = []
+    for _ in range(50):
+        mark = counters.mark()
+        try:
+            next(steps)
+        except StopIteration:
+            after += counters.since(mark)[1]
+            break
+        sent = counters.since(mark)[1]
+        assert len(sent) <= 1
+        after += sent
+    assert after == ["bvh nodes", "bvh triangles", "bvh normals"]
+    assert scene.keys == plan.keys and scene.tris is plan.tris
+    assert_same_passes(render(snapshot, scene), fresh(snapshot))

@@ -106,44 +106,56 @@ def _ranges(start, count):
     return np.repeat(start - offsets, count) + np.arange(int(count.sum())), offsets
 
 
-def _split_level(order, tlo, thi, cen, start, count, bins=BINS, max_leaf=MAX_LEAF):
+def _running(values, op):
+    """``op.accumulate(values, axis=1)`` of (A, bins, 3) values, a bin at a time (a few
+    ops over (A, 3) rows: the ufunc's accumulate along a middle axis loops per row)."""
+    out = np.empty_like(values)
+    out[:, 0] = values[:, 0]
+    for k in range(1, values.shape[1]):
+        op(out[:, k - 1], values[:, k], out=out[:, k])
+    return out
+
+
+def _split_level(order, lo3, hi3, cen3, start, count, bins=BINS, max_leaf=MAX_LEAF):
     """Choose splits for a level's nodes with ``bins`` SAH bins. Returns (split (A,) bool,
     left count (A,)) and reorders ``order`` in place so that each split node's left part
-    comes first."""
+    comes first. lo3, hi3, cen3 : (3, T) the triangles' boxes and centroids, a row per axis
+    (contiguous: every gather below is of one 1D row)."""
     a = len(start)
     pos, offsets = _ranges(start, count)
     tri = order[pos]
     seg = np.repeat(np.arange(a), count)
-    c = cen[tri]
-    cmin = np.minimum.reduceat(c, offsets, axis=0)
-    cmax = np.maximum.reduceat(c, offsets, axis=0)
+    c = [row[tri] for row in cen3]
+    cmin = np.stack([np.minimum.reduceat(x, offsets) for x in c], axis=1)
+    cmax = np.stack([np.maximum.reduceat(x, offsets) for x in c], axis=1)
     ext = cmax - cmin
     axis = np.argmax(ext, axis=1)
     rows = np.arange(a)
     e = ext[rows, axis]
-    value = c[np.arange(len(tri)), axis[seg]] - cmin[seg, axis[seg]]
     scale = np.divide(bins, e, out=np.zeros_like(e), where=e > 0)
-    b = np.clip((value * scale[seg]).astype(np.int64), 0, bins - 1)
+    # per triangle: its centroid along its node's axis, from the node's low end, in bins
+    axis_t, lo_c, scale_t = axis[seg], cmin[rows, axis][seg], scale[seg]
+    value = np.where(axis_t == 0, c[0], np.where(axis_t == 1, c[1], c[2])) - lo_c
+    b = np.clip((value * scale_t).astype(np.int64), 0, bins - 1)
     key = seg * bins + b
     counts = np.bincount(key, minlength=a * bins).reshape(a, bins)
-    blo = np.full((3, a * bins), np.inf, tlo.dtype)
-    bhi = np.full((3, a * bins), -np.inf, thi.dtype)
-    lo_t, hi_t = tlo[tri].T, thi[tri].T
+    blo = np.full((3, a * bins), np.inf, lo3.dtype)
+    bhi = np.full((3, a * bins), -np.inf, hi3.dtype)
     for k in range(3):  # ufunc.at is fast on contiguous 1D arrays of the values' dtype
-        np.minimum.at(blo[k], key, np.ascontiguousarray(lo_t[k]))
-        np.maximum.at(bhi[k], key, np.ascontiguousarray(hi_t[k]))
+        np.minimum.at(blo[k], key, lo3[k][tri])
+        np.maximum.at(bhi[k], key, hi3[k][tri])
     blo, bhi = blo.T.reshape(a, bins, 3), bhi.T.reshape(a, bins, 3)
     left_n = np.cumsum(counts, axis=1)[:, :-1]
     right_n = count[:, None] - left_n
-    left_area = _area(np.minimum.accumulate(blo, axis=1), np.maximum.accumulate(bhi, axis=1))[:, :-1]
-    right_area = _area(np.minimum.accumulate(blo[:, ::-1], axis=1),
-                       np.maximum.accumulate(bhi[:, ::-1], axis=1))[:, ::-1][:, 1:]
+    left_area = _area(_running(blo, np.minimum), _running(bhi, np.maximum))[:, :-1]
+    right_area = _area(_running(blo[:, ::-1], np.minimum),
+                       _running(bhi[:, ::-1], np.maximum))[:, ::-1][:, 1:]
     with np.errstate(invalid="ignore"):
         cost = np.where((left_n > 0) & (right_n > 0),
                         left_area * left_n + right_area * right_n, np.inf)
     best = np.argmin(cost, axis=1)
     best_cost = cost[rows, best]
-    parent = np.maximum(_area(blo.min(axis=1), bhi.max(axis=1)), 1e-30)
+    parent = np.maximum(_area(_bounds_min(blo), _bounds_max(bhi)), 1e-30)
     sah = np.isfinite(best_cost)
     leaf = (count <= 1) | ((count <= max_leaf) &
                            (~sah | (count <= TRAVERSAL_COST + best_cost / parent)))
@@ -151,12 +163,30 @@ def _split_level(order, tlo, thi, cen, start, count, bins=BINS, max_leaf=MAX_LEA
     median = split & ~sah  # every centroid in one place: split the list in half
     left = np.where(sah, left_n[rows, np.minimum(best, bins - 2)], count // 2)
     # Reorder the split nodes' triangles: left side first, stable within each side.
-    side = np.where(median[seg], (np.arange(len(tri)) - offsets[seg]) >= count[seg] // 2,
-                    b > best[seg])
     moving = split[seg]
-    key2 = seg[moving] * 2 + side[moving]
+    if not moving.any():
+        return split, left
+    mseg = seg[moving]
+    side = np.where(median[mseg], (np.flatnonzero(moving) - offsets[mseg]) >= count[mseg] // 2,
+                    b[moving] > best[mseg])
+    key2 = mseg * 2 + side
     order[pos[moving]] = tri[moving][np.argsort(key2, kind="stable")]
     return split, left
+
+
+def _bounds_min(blo):
+    """(A, 3) the low corner over the bins of (A, bins, 3)."""
+    out = blo[:, 0].copy()
+    for k in range(1, blo.shape[1]):
+        np.minimum(out, blo[:, k], out=out)
+    return out
+
+
+def _bounds_max(bhi):
+    out = bhi[:, 0].copy()
+    for k in range(1, bhi.shape[1]):
+        np.maximum(out, bhi[:, k], out=out)
+    return out
 
 
 def build_bvh(tris: SceneTriangles, max_leaf: int = MAX_LEAF) -> BVH:
@@ -168,7 +198,8 @@ def build_bvh(tris: SceneTriangles, max_leaf: int = MAX_LEAF) -> BVH:
         raise ValueError(f"{t} triangles: the packed BVH holds at most {_MAX_TRIANGLES}")
     tlo, thi = positions.min(axis=1), positions.max(axis=1)
     # The split search works in float32 (half the memory traffic); bounds are float64.
-    blo32, bhi32 = tlo.astype(np.float32), thi.astype(np.float32)
+    blo32 = np.ascontiguousarray(tlo.T, np.float32)  # (3, T): a row per axis
+    bhi32 = np.ascontiguousarray(thi.T, np.float32)
     cen = 0.5 * (blo32 + bhi32)
     order = np.arange(t, dtype=np.int64)
     # Nodes in creation (breadth-first) order.

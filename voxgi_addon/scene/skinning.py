@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import VoxGIError
 from .snapshot import ArmatureData
 
-__all__ = ["skin_matrices", "blend_matrices", "skin_points", "transform_points",
+__all__ = ["skin_matrices", "inverse", "blend_matrices", "skin_points", "transform_points",
            "transform_normals"]
 
 
@@ -40,11 +40,35 @@ def skin_matrices(armature: ArmatureData, object_world: np.ndarray) -> np.ndarra
     if arm_world.shape != (4, 4) or obj.shape != (4, 4):
         raise VoxGIError("armature and object world matrices must be 4x4")
     try:
-        inv_rest = np.linalg.inv(rest)
-        inv_arm = np.linalg.inv(arm_world)
+        inv_rest = inverse(rest)
+        inv_arm = inverse(arm_world)
     except np.linalg.LinAlgError as error:
         raise VoxGIError(f"armature '{armature.name}' has a singular rest or world matrix") from error
     return arm_world @ pose @ inv_rest @ (inv_arm @ obj)
+
+
+def inverse(matrices: np.ndarray) -> np.ndarray:
+    """``np.linalg.inv`` of (..., 4, 4) float64 matrices, in closed form where they are
+    affine (last row 0, 0, 0, 1: every bone and object matrix): the 3 × 3 part's adjugate
+    over its determinant. No LAPACK call: on the worker of a busy 2-core machine
+    OpenBLAS's thread pool made each ``inv`` of a rig's bones take 5–40 ms (a posed
+    update does four). Raises ``np.linalg.LinAlgError`` for a singular matrix, as ``inv``."""
+    m = np.asarray(matrices, np.float64)
+    if not np.array_equal(m[..., 3, :], np.broadcast_to([0.0, 0.0, 0.0, 1.0], m.shape[:-2] + (4,))):
+        return np.linalg.inv(m)
+    r = m[..., :3, :3]
+    a, b, c = r[..., 0, :], r[..., 1, :], r[..., 2, :]
+    # rows of the adjugate's transpose: the cofactors (cross products of the other rows)
+    cof = np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=-2)
+    det = np.einsum("...i,...i->...", a, cof[..., 0, :])
+    if not np.all(np.isfinite(det)) or np.any(det == 0.0):
+        raise np.linalg.LinAlgError("Singular matrix")
+    inv_r = np.swapaxes(cof, -1, -2) / det[..., None, None]
+    out = np.zeros_like(m)
+    out[..., :3, :3] = inv_r
+    out[..., :3, 3] = -np.einsum("...ij,...j->...i", inv_r, m[..., :3, 3])
+    out[..., 3, 3] = 1.0
+    return out
 
 
 def blend_matrices(matrices: np.ndarray, weights: np.ndarray, indices: np.ndarray,
