@@ -25,7 +25,7 @@ from ..voxgi_addon.gi.radiance_cache import (
     texel_places,
     with_faces,
 )
-from ..voxgi_addon.preview.denoise import NOISE_TARGET
+from ..voxgi_addon.preview.denoise import NOISE_TARGET, RIDGE
 from ..voxgi_addon.preview.gather import cache_settings
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import low_shape
@@ -43,17 +43,20 @@ _shaders: dict[str, object] = {}
 
 def _denoise_shader():
     if "denoise" not in _shaders:
-        _shaders["denoise"] = build_compute(("pixels", "denoise"), _DENOISE_SAMPLERS, ("grid",),
+        _shaders["denoise"] = build_compute(("pixels", "denoise"), _DENOISE_SAMPLERS,
+                                            ("grid", "options"),
                                             ("out_image", "out_variance"),
-                                            {"NOISE_TARGET": repr(float(NOISE_TARGET))})
+                                            {"NOISE_TARGET": repr(float(NOISE_TARGET)),
+                                             "RIDGE": repr(float(RIDGE))})
     return _shaders["denoise"]
 
 
 def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: int,
-            iterations: int = 4):
+            iterations: int = 4, fit: bool = True):
     """``iterations`` passes of the à-trous filter over the low-resolution ``values`` (light rgb,
     AO) and ``variance`` textures whose cells trace the pixels ``traced_pixel`` picks in the
-    ``width`` × ``height`` G-buffer; returns the filtered (values, variance) textures."""
+    ``width`` × ``height`` G-buffer; returns the filtered (values, variance) textures. fit :
+    the local linear fit, else the weighted mean (``preview.denoise.atrous_filter``'s)."""
     shader = _denoise_shader()
     for it in range(iterations):
         out = [gpu.types.GPUTexture((values.width, values.height), format="RGBA32F")
@@ -63,6 +66,7 @@ def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: i
         for name in _DENOISE_SAMPLERS:
             shader.uniform_sampler(name, inputs[name])
         shader.uniform_float("grid", (float(stride), float(width), float(height), float(1 << it)))
+        shader.uniform_float("options", (1.0 if fit else 0.0, 0.0, 0.0, 0.0))
         shader.image("out_image", out[0])
         shader.image("out_variance", out[1])
         gpu.compute.dispatch(shader, math.ceil(values.width / LOCAL_SIZE),
@@ -408,7 +412,7 @@ def gather_low(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settin
                               stride, width, height, kernel=kernel, world_mode=world_mode,
                               tables=tables)
     values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
-                        settings.denoise_iterations)
+                        settings.denoise_iterations, fit=kernel == "bvh_gather")
     return values
 
 

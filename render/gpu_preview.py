@@ -328,7 +328,7 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
         if gather_hook is not None:
             values, variance = gather_hook(kind, values, variance)
         return denoise(values, variance, centre.inputs, gi_stride, width, height,
-                       gather_settings.denoise_iterations)[0]
+                       gather_settings.denoise_iterations, fit=kind.endswith("diffuse"))[0]
 
     low_diffuse = low("diffuse")
     timings["diffuse+ao gather (GPU)"] = time.perf_counter() - t0

@@ -4,9 +4,12 @@
  * B3-spline weights × same-surface terms (normal^32, plane) × per signal
  * exp(−|Δ| / (4·√(var_p + var_q) + 1e-6)), var_p the centre's variance prefiltered over 3 × 3
  * valid cells, var_q the tap's own (why both: denoise.py).
- * Variances are filtered with squared weights. A cell whose prefiltered standard error is
+ * The value is a weighted local linear fit through the taps (denoise.py _fit): the weighted
+ * mean where the taps surround the cell, corrected by the slope where they lie on one side.
+ * Variances are filtered with squared weights (the fit's own weights). A cell whose prefiltered standard error is
  * within NOISE_TARGET of its value is settled: kept as it is (denoise.py NOISE_TARGET).
- * grid = (stride, full width, full height, tap step); low-resolution rows count from the bottom. */
+ * grid = (stride, full width, full height, tap step); low-resolution rows count from the bottom;
+ * options.x = 1: the local linear fit, 0: the weighted mean. */
 const float KERNEL[5] = float[5](1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0);
 const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
 
@@ -50,23 +53,31 @@ void main()
   }
   blurred /= max(blur_weight, 1e-30);
   bvec2 settled = lessThanEqual(sqrt(max(blurred, vec2(0.0))), NOISE_TARGET * abs(signal));
-  vec4 total = vec4(0.0);
-  vec2 total_var = vec2(0.0);
-  vec2 weight = vec2(0.0);
+  /* The local linear fit (denoise.py _fit): per signal the weighted sums of (1, s, u) ⊗ (1,
+   * s, u) over the taps, (s, u) the tap's place in the 5 × 5 window, those of w²·var
+   * for the variance, and Σ w·(1, s, u)·value. */
+  float m[12];  /* Σ w·(1, s, u, s², su, u²): light then scalar */
+  float q[12];  /* the same of w²·var_q */
+  for (int k = 0; k < 12; k++) {
+    m[k] = 0.0;
+    q[k] = 0.0;
+  }
+  vec3 light0 = vec3(0.0), light1 = vec3(0.0), light2 = vec3(0.0);
+  vec3 scalar = vec3(0.0);
   for (int a = 0; a < 5; a++) {
     for (int b = 0; b < 5; b++) {
-      ivec2 q = cell + ivec2(b - 2, a - 2) * step;
-      if (q.x < 0 || q.y < 0 || q.x >= low.x || q.y >= low.y) {
+      ivec2 qc = cell + ivec2(b - 2, a - 2) * step;
+      if (qc.x < 0 || qc.y < 0 || qc.x >= low.x || qc.y >= low.y) {
         continue;
       }
-      ivec2 qpx = traced_pixel(low.y - 1 - q.y, q.x, stride, full);
+      ivec2 qpx = traced_pixel(low.y - 1 - qc.y, qc.x, stride, full);
       vec4 pq = texelFetch(gbuffer_position, qpx, 0);
       if (pq.w < 0.5) {
         continue;
       }
       vec3 nq = texelFetch(gbuffer_normal, qpx, 0).xyz;
-      vec4 vq = texelFetch(low_image, q, 0);
-      vec2 varq = texelFetch(low_variance, q, 0).xy;
+      vec4 vq = texelFetch(low_image, qc, 0);
+      vec2 varq = texelFetch(low_variance, qc, 0).xy;
       vec3 offset = pq.xyz - position.xyz;
       float facing = pow(max(dot(n, nq), 0.0), 32.0);
       float plane = abs(dot(n, offset));
@@ -74,20 +85,47 @@ void main()
       float geometry = KERNEL[a] * KERNEL[b] * facing * exp(-(plane / tol) * (plane / tol));
       vec2 scale = 4.0 * sqrt(max(blurred + varq, vec2(0.0))) + 1e-6;
       vec2 w = geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);
-      total += vec4(w.x * vq.rgb, w.y * vq.a);
-      total_var += w * w * varq;
-      weight += w;
+      float s = float(b - 2); /* the tap's place in the window */
+      float u = float(a - 2);
+      float quad[6] = float[6](1.0, s, u, s * s, s * u, u * u);
+      for (int k = 0; k < 6; k++) {
+        m[k] += w.x * quad[k];
+        m[6 + k] += w.y * quad[k];
+        q[k] += w.x * w.x * varq.x * quad[k];
+        q[6 + k] += w.y * w.y * varq.y * quad[k];
+      }
+      light0 += w.x * vq.rgb;
+      light1 += w.x * s * vq.rgb;
+      light2 += w.x * u * vq.rgb;
+      scalar += w.y * vec3(1.0, s, u) * vq.a;
     }
   }
   vec4 result = centre;
   vec2 result_var = centre_var.xy;
-  if (weight.x > 0.0 && !settled.x) {
-    result.rgb = total.rgb / weight.x;
-    result_var.x = total_var.x / (weight.x * weight.x);
-  }
-  if (weight.y > 0.0 && !settled.y) {
-    result.a = total.a / weight.y;
-    result_var.y = total_var.y / (weight.y * weight.y);
+  for (int k = 0; k < 2; k++) {
+    int o = 6 * k;
+    if (m[o] <= 0.0 || (k == 0 ? settled.x : settled.y)) {
+      continue;
+    }
+    float damp = RIDGE * (m[o + 3] + m[o + 5]) * 0.5 + 1e-30;
+    float ma = m[o + 3] + damp, mb = m[o + 4], mc = m[o + 5] + damp;
+    vec3 row = vec3(ma * mc - mb * mb, m[o + 2] * mb - m[o + 1] * mc, m[o + 1] * mb - m[o + 2] * ma);
+    float det = m[o] * row.x + m[o + 1] * row.y + m[o + 2] * row.z;
+    row /= det > 0.0 ? det : 1.0;
+    if (options.x < 0.5) { /* the weighted mean (denoise.py fit=False) */
+      row = vec3(1.0 / m[o], 0.0, 0.0);
+    }
+    float variance = row.x * row.x * q[o] + row.y * row.y * q[o + 3] + row.z * row.z * q[o + 5] +
+                     2.0 * (row.x * row.y * q[o + 1] + row.x * row.z * q[o + 2] +
+                            row.y * row.z * q[o + 4]);
+    if (k == 0) {
+      result.rgb = max(row.x * light0 + row.y * light1 + row.z * light2, vec3(0.0));
+      result_var.x = max(variance, 0.0);
+    }
+    else {
+      result.a = max(dot(row, scalar), 0.0);
+      result_var.y = max(variance, 0.0);
+    }
   }
   imageStore(out_image, cell, result);
   imageStore(out_variance, cell, vec4(result_var, 0.0, 0.0));

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 
 def _gbuffer_textures(position, normal, hit):
@@ -36,7 +37,8 @@ def _scene(h=30, w=40, seed=3):
     return values, variance * rng.uniform(0.5, 1.5, (h, w, 1)), hit, position, normal
 
 
-def test_gpu_denoise_equals_numpy(voxgi):
+@pytest.mark.parametrize("fit", [True, False])
+def test_gpu_denoise_equals_numpy(voxgi, fit):
     from voxgi.render.gpu_context import ensure_gpu_context
     from voxgi.render.gpu_gather import denoise
     from voxgi.render.gpu_tracer import read_texture
@@ -50,9 +52,10 @@ def test_gpu_denoise_equals_numpy(voxgi):
     var4 = np.concatenate([variance, np.zeros((h, w, 2))], axis=-1)
     out, out_var = denoise(float_texture(np.flipud(values), (w, h)),
                            float_texture(np.flipud(var4), (w, h)),
-                           _gbuffer_textures(position, normal, hit), 1, w, h, iterations=4)
+                           _gbuffer_textures(position, normal, hit), 1, w, h, iterations=4,
+                           fit=fit)
     out, out_var = np.flipud(read_texture(out)), np.flipud(read_texture(out_var))
-    ref, ref_var = atrous_filter(values, variance, hit, position, normal, iterations=4)
+    ref, ref_var = atrous_filter(values, variance, hit, position, normal, iterations=4, fit=fit)
     assert np.allclose(out[hit], ref[hit], rtol=1e-3, atol=1e-4)
     assert np.allclose(out_var[hit][:, :2], ref_var[hit], rtol=1e-2, atol=1e-9)
     # and the filter did something: the noise is mostly gone

@@ -87,3 +87,23 @@ def test_background_pixels_are_untouched_and_never_read():
     out, _ = atrous_filter(values, np.full(wall.shape + (2,), 0.01), valid, position, normal)
     assert np.all(out[:, :10] == 1e6)
     assert np.allclose(out[:, 10:], 0.3, atol=1e-5)
+
+
+def test_light_sloping_into_a_corner_keeps_its_level_at_the_corner():
+    """Light that falls linearly towards the corner where a floor meets a wall (a darkening
+    into a corner): at the floor's last columns the taps lie on one side only, and their mean
+    is the light a few cells away — brighter. The filter's local linear fit keeps the level
+    closer there (the band under the box's ceiling was this bias)."""
+    position, normal, wall = _floor_and_wall()
+    xs = np.mgrid[0:wall.shape[0], 0:wall.shape[1]][1].astype(np.float64)
+    level = np.where(wall, 0.4, 0.1 + 0.02 * (wall.shape[1] // 2 - 1 - xs))  # 0.1 at the corner
+    clean = np.repeat(level[..., None], 3, axis=-1)
+    noisy, variance = _noisy(clean, 0.05, seed=4)
+    out, _ = atrous_filter(noisy, variance, np.ones(wall.shape, bool), position, normal)
+    corner = wall.shape[1] // 2 - 1  # the floor's column beside the wall
+    # (the weighted mean read +34%, +21%, +11% on the last three columns)
+    for column, limit in ((corner, 0.25), (corner - 1, 0.15), (corner - 2, 0.09)):
+        got = out[:, column, :3].mean()
+        assert abs(got / clean[:, column, 0].mean() - 1.0) < limit, (column, got)
+    # and the noise is still averaged away along the slope
+    assert np.abs(out[..., :3] - clean)[~wall].mean() < np.abs(noisy[..., :3] - clean)[~wall].mean() / 3

@@ -174,5 +174,5 @@ def _glossy_cells(estimator, scene, options, hit, position, normal, direction, m
     values[valid, :3] = glossy
     variance[valid, 0] = var
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
-                              iterations=settings.denoise_iterations)
+                              iterations=settings.denoise_iterations, fit=False)
     return upsample(values, valid, hit, position, normal, stride)[..., :3]
