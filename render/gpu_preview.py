@@ -110,13 +110,19 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     # glass' two layers are composed on the CPU: the sums stay on the GPU only without it
     on_gpu = on_gpu and not any(is_glass(m) for m in snapshot.materials)
     if quality == "ACCURATE":
-        scene = gpu_scene or current_scene()
-        raster = raster or gbuffer_shader()
+        t0 = time.perf_counter()
+        scene = (gpu_scene or current_scene()).update(snapshot)  # only what changed is sent
+        built = time.perf_counter() - t0
+        # the G-buffer's variant follows the scene's textures (gbuffer.gbuffer_shader: the
+        # plain one where no material has any)
+        raster = raster or gbuffer_shader(textured=scene.textured)
         layer = (width, height, light_samples, gi_stride,
                  gather_settings or GatherSettings(ao_distance=cones.ao_distance),
                  glossy_indirect, filter_width, scene)
         front, timings = yield from _accurate_stages(snapshot, *layer, gather_hook, raster,
                                                      cache_source, on_gpu=on_gpu, batch=batch)
+        if scene.uploaded:  # rebuilt and uploaded only what changed
+            timings = {"scene build + upload": built, **timings}
         glass = transmission.glass_materials(snapshot, scene.tris)
         if glass is None:
             return front, timings
@@ -154,7 +160,8 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     if glass is None:
         return front, timings
     t0 = time.perf_counter()  # Fast is point-sampled: the glass' weight at pixel centres
-    weight = _glass_weight(snapshot, scene, raster or gbuffer_shader(), width, height, 0.0)
+    weight = _glass_weight(snapshot, scene, raster or gbuffer_shader(scene.textured), width,
+                           height, 0.0)
     behind, _ = fast_passes(*fast, camera_tris=transmission.behind_glass(scene.tris, glass),
                             **given)
     world = background(snapshot.world, snapshot.camera, width, height, 0.0)
@@ -267,25 +274,21 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     unshadowed sum from their field at the pass's own points where the pass sees another
     surface than its pixel's centre), summed on the GPU (``shaders/aa_surface.glsl``,
     ``aa_light.glsl``) and read back once.
-    Triangles, BVH, materials and light tables come from ``scene`` (a ``GPUScene``, updated
-    here: only what changed is uploaded). camera_tris : what the G-buffers draw (None: the
+    Triangles, BVH, materials and light tables come from ``scene`` (a ``GPUScene`` updated to
+    ``snapshot``: ``render_passes_stages`` updates it). camera_tris : what the G-buffers draw (None: the
     scene's triangles; ``transmission.behind_glass`` hides glass from them); only : (H, W)
     bool the pixels to shade (None: all; the others are background to every kernel).
     on_gpu : return the centre pass's sums as textures (``GPUSums``) when there are no edge
     pixels (point-sampled), nothing read back."""
     timings = {}
-    t0 = time.perf_counter()
-    scene = (scene or current_scene()).update(snapshot)
     tris, rough, emission = scene.tris, scene.rough, scene.emission
     if len(tris) == 0:
         raise VoxGIError("the scene has no triangles to render")
     # the radiance cache nests finer grids around the camera (a tile's camera: the view's)
     gather_settings = focused(gather_settings, snapshot.camera, tris)
-    if scene.uploaded:  # rebuilt and uploaded only what changed
-        timings["scene build + upload"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     plan = subpixel_passes(filter_width, light_samples)
-    raster = raster or gbuffer_shader()  # this context's, for its G-buffers
+    raster = raster or gbuffer_shader(scene.textured)  # this context's, for its G-buffers
     seen_tris = tris if camera_tris is None else camera_tris
     # one vertex batch for every G-buffer of this render (gbuffer.vertex_batch), or the
     # caller's of the scene's triangles
