@@ -107,7 +107,7 @@ void main()
     if (m[o] <= 0.0 || (k == 0 ? settled.x : settled.y)) {
       continue;
     }
-    float damp = RIDGE * (m[o + 3] + m[o + 5]) * 0.5 + 1e-30;
+    float damp = RIDGE * (m[o + 3] + m[o + 5]) * 0.5 + 1e-4 * m[o]; /* (denoise.py _fit) */
     float ma = m[o + 3] + damp, mb = m[o + 4], mc = m[o + 5] + damp;
     vec3 row = vec3(ma * mc - mb * mb, m[o + 2] * mb - m[o + 1] * mc, m[o + 1] * mb - m[o + 2] * ma);
     float det = m[o] * row.x + m[o + 1] * row.y + m[o + 2] * row.z;

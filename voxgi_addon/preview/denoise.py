@@ -114,7 +114,8 @@ def _fit(moments, spread, light, scalar, fit: bool = True):
     out_var = np.zeros(moments.shape[:-1])
     for k in range(2):
         m0, ms, mu, mss, msu, muu = np.moveaxis(moments[..., k, :], -1, 0)
-        damp = RIDGE * (mss + muu) * 0.5 + 1e-30
+        # (+ a hair of m0: a cell whose only tap is itself keeps its value, in float32 too)
+        damp = RIDGE * (mss + muu) * 0.5 + 1e-4 * m0
         a, bb, c = mss + damp, msu, muu + damp
         # the first row of the inverse of [[m0, ms, mu], [ms, a, bb], [mu, bb, c]] (cofactors)
         c0 = a * c - bb * bb
