@@ -297,11 +297,6 @@ class GPUScene:
             tris = world_triangles(snapshot)
             keys["geometry"] = geometry
         plan.tris = tris
-        _, rough, _, emission = material_table(snapshot)
-        principled = principled_table(snapshot)
-        surface = getattr(tris, "textures", None)
-        if on_geometry is not None:
-            on_geometry(tris, rough, surface is not None, principled)
         seconds["geometry"] = time.perf_counter() - t0
         building = None
         if len(tris):
@@ -323,10 +318,17 @@ class GPUScene:
 
             if on_tables is None:
                 build()
-            else:  # built beside the other tables (on_tables)
+            else:  # built beside the other tables (on_tables), from as soon as the
+                # triangles are known: it is the longest part, the one the first image waits
+                # for (the vertex arrays of on_geometry are made meanwhile)
                 plan.bvh_ready.clear()
                 building = threading.Thread(target=build, name="VoxGI BVH build", daemon=True)
                 building.start()
+        _, rough, _, emission = material_table(snapshot)
+        principled = principled_table(snapshot)
+        surface = getattr(tris, "textures", None)
+        if on_geometry is not None:
+            on_geometry(tris, rough, surface is not None, principled)
         self._prepare_textures(plan, tris, geometry)
         slots = None if surface is None else surface.slots
         variants = (None, None) if surface is None else (surface.param_slots, surface.variants)

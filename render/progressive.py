@@ -134,6 +134,9 @@ class ProgressiveImage:
         self.skip_first = False
         self.failed = ""
         self.image_stale = True
+        # options the coarse image overrides (the viewport's first image after entering
+        # Rendered mode: ``viewport_prepare.ViewPreparation.first_image_options``)
+        self.coarse_options: dict = {}
 
     # ------------------------------------------------------------------ planning
 
@@ -267,7 +270,10 @@ class ProgressiveImage:
                 # this kind so long that this call would end past the work share of the budget,
                 # or after a stage that compiled a kernel
                 spent = time.perf_counter() - t0
-                upcoming = self.stage_seconds.get((self.running_kind, self.running_stage), 0.0)
+                # a stage never timed (the first slice of its kind: entering Rendered mode)
+                # is taken to be as long as the longest one timed
+                upcoming = self.stage_seconds.get((self.running_kind, self.running_stage),
+                                                  max(self.stage_seconds.values(), default=0.0))
                 if spent >= self.stage_budget or counters.compiles != compiles or \
                         spent + upcoming > WORK_SHARE * max(self.budget, self.stage_budget):
                     return Slice("stage", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
@@ -294,7 +300,8 @@ class ProgressiveImage:
                                              options["light_samples"], self.target, 0)
             camera = camera_from_view(view, window, *size)
             passes = yield from traced(camera, *size, {**options, "gather_settings": gather,
-                                                      "light_samples": lights})
+                                                      "light_samples": lights,
+                                                      **self.coarse_options})
             yield  # the estimate is a stage of its own
             coarse = GPUAccumulation(acc.pass_name, *size, self.film, acc.transparent)
             coarse.add((0, 0, *size), passes, world=world(camera, *size))

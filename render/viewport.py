@@ -62,6 +62,9 @@ from .viewport_cache import ViewportCache
 from .viewport_prepare import ViewPreparation
 
 _renderers: "weakref.WeakSet[ViewportRenderer]" = weakref.WeakSet()
+# the process's first LAPACK call (9–28 ms: OpenBLAS starting) made with the module, at the
+# add-on's registration (render/engine.py imports it), not in a view_update or a draw
+np.linalg.inv(np.eye(4))
 
 
 def viewport_size(region_width: int, region_height: int, fraction: float) -> tuple[int, int]:
@@ -247,6 +250,9 @@ class ViewportRenderer:
         self.cache.hold = progressive.coarse_pending
         # the slices draw the view's vertex batch of the scene's triangles (viewport_prepare)
         batch = self.prepare.batch_for(current_scene())
+        if progressive.coarse_pending and progressive.running is None:
+            progressive.coarse_options = self.prepare.first_image_options(
+                live.image_source(settings.quality)[0], settings)
         done = progressive.step(tracer(live, self.volume, settings, staged=True,
                                        raster=self.raster, cache_source=cache_source,
                                        batch=batch),
@@ -404,7 +410,6 @@ def view_update(engine, context, depsgraph) -> None:
     # (viewport_prepare; removed by ``release``)
     if viewport_prepare.prepare_snapshot not in SNAPSHOT_HOOKS:
         SNAPSHOT_HOOKS.append(viewport_prepare.prepare_snapshot)
-        np.linalg.inv(np.eye(4))  # the process's first LAPACK call (28 ms): not in a draw
     region_data = getattr(context, "region_data", None)
     region = getattr(context, "region", None)
     if live.view_camera is None and region_data is not None and region is not None:

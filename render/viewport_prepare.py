@@ -45,6 +45,7 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
+from ..voxgi_addon.gi.radiance_cache import snap_focus
 from . import (
     gpu_accumulation,
     gpu_compose,
@@ -211,6 +212,11 @@ class ScenePreparation:
             # every part but the BVH (built meanwhile): the view sends them and compiles the
             # kernels of the scene's features while it builds
             job.plan = plan
+            # the triangles' bounds, which every slice's radiance-cache focus reads
+            # (``preview.gather.focused``; kept per positions array): 24–33 ms over the
+            # diorama's 142k triangles, which the first slice stage of each new scene paid
+            if len(getattr(plan.tris, "positions", ())):
+                snap_focus(plan.tris, np.zeros(3))
 
         def run():  # the preparing thread: numpy on the snapshot and the scene's keys only
             try:
@@ -342,8 +348,11 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
     steps: list[tuple[str, int, object]] = []
 
     def add(name, phase, getter):
-        if all(name != known for known, _, _ in steps):
-            steps.append((name, phase, getter))
+        for index, (known, was, _) in enumerate(steps):
+            if name == known:  # listed already: compiled by the earlier of the two phases
+                steps[index] = (name, min(was, phase), getter)
+                return
+        steps.append((name, phase, getter))
 
     def bvh(kernel, phase, textures=None, absent=None):
         if found is None:
@@ -358,10 +367,12 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
     if quality == "ACCURATE":
         bvh("bvh_gather", 1)
         add("denoise", 1, gpu_gather._denoise_shader)
+        # the first coarse image goes without the glossy indirect gather
+        # (``first_image_options``): its kernels come in phase 2
         if glossy_indirect:
-            bvh("bvh_glossy", 1)
-        add("upsample pair" if glossy_indirect else "upsample", 1,
-            lambda: gpu_gather._upsample_shader(glossy_indirect))
+            bvh("bvh_glossy", 2)
+            add("upsample pair", 2, lambda: gpu_gather._upsample_shader(True))
+        add("upsample", 1, lambda: gpu_gather._upsample_shader(False))
         if found is not None and found.tail is not None:  # the world's and emitters' glossy
             bvh("bvh_glossy", 1)
             add("upsample", 1, lambda: gpu_gather._upsample_shader(False))
@@ -637,6 +648,21 @@ class ViewPreparation:
         if not whole and not job.done:
             worked = False
         return ready, worked
+
+    def first_image_options(self, snapshot, settings) -> dict:
+        """The tracer's options that the coarse image overrides while the tiles' kernels
+        (phase 2 of ``kernel_steps``) are not all compiled: the first GI image after entering
+        Rendered mode is traced without the glossy indirect gather (its ``bvh_glossy`` and
+        paired upsample, two draws' compiles and a slice stage: docs/gi_pipeline.md
+        "Entering Rendered mode"); {} once they are."""
+        job = preparation.job
+        if settings.quality != "ACCURATE" or job is None or job.plan is None:
+            return {}
+        key = kernel_key(features(job.plan.tris, job.plan.lights, len(snapshot.lights)),
+                         settings)
+        if not key[3] or not warmup.pending(key, kernel_steps(*key), 2):
+            return {}
+        return {"glossy_indirect": False}
 
     def later_kernels(self, snapshot, settings, budget: float, started: float,
                       whole: bool = False) -> str:

@@ -30,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -329,16 +330,39 @@ def _mesh_sizes(snapshot) -> tuple[float, float]:
         mesh = snapshot.meshes.get(obj.mesh)
         if mesh is None or len(mesh.triangles) == 0:
             continue
-        positions = np.asarray(mesh.positions, np.float64)
         scale = float(np.linalg.norm(np.asarray(obj.world_matrix, np.float64)[:3, :3], axis=0).max())
-        finite = positions[np.isfinite(positions).all(axis=1)]  # NaN vertices are dropped
-        if not np.isfinite(scale) or len(finite) == 0:
+        sizes = _local_sizes(mesh)
+        if not np.isfinite(scale) or sizes is None:
             continue
-        largest = max(largest, float((finite.max(axis=0) - finite.min(axis=0)).max()) * scale)
+        largest = max(largest, sizes[0] * scale)
+        area += sizes[1] * scale * scale
+    return largest, area
+
+
+_SIZES: dict[int, tuple] = {}
+
+
+def _local_sizes(mesh) -> tuple[float, float] | None:
+    """(largest extent, surface area) of ``mesh`` in its own space (None: no finite vertex),
+    kept per mesh while it lives: a pose or a move fits again with the same meshes
+    (docs/gi_pipeline.md "Posed updates"), 2 ms a fit on the imported rig."""
+    kept = _SIZES.get(id(mesh))
+    if kept is not None and kept[0]() is mesh and kept[1] is mesh.positions \
+            and kept[2] is mesh.triangles:
+        return kept[3]
+    positions = np.asarray(mesh.positions, np.float64)
+    finite = positions[np.isfinite(positions).all(axis=1)]  # NaN vertices are dropped
+    sizes = None
+    if len(finite):
         tri = positions[np.asarray(mesh.triangles, np.int64)]
         a = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-        area += float(np.nansum(a)) * scale * scale
-    return largest, area
+        sizes = (float((finite.max(axis=0) - finite.min(axis=0)).max()), float(np.nansum(a)))
+    try:
+        ref = weakref.ref(mesh, lambda _, key=id(mesh): _SIZES.pop(key, None))
+    except TypeError:  # not weakly referable: not kept
+        return sizes
+    _SIZES[id(mesh)] = (ref, mesh.positions, mesh.triangles, sizes)
+    return sizes
 
 
 def cache_memory_bytes(area: float, base_span: float, cascade_count: int) -> int:

@@ -119,6 +119,20 @@ def _is_rigid(obj: ObjectData, mesh: MeshData, snapshot: SceneSnapshot) -> bool:
 _PLACED_CHUNK = 1 << 18  # triangles placed together (bounds the (K, T, 3, 3) temporaries)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross(a, b)`` over the last axis (size 3), bit for bit (the same products and
+    differences in the same order), without its axis moves and broadcasting set-up: 0.1 ms a
+    call on a few rows, and twice as quick on the 142k-triangle diorama's face normals
+    (``world_triangles`` is the first step of entering Rendered mode's preparation)."""
+    a, b = np.asarray(a), np.asarray(b)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), np.result_type(a, b))
+    for k in range(3):
+        i, j = (k + 1) % 3, (k + 2) % 3
+        np.multiply(a[..., i], b[..., j], out=out[..., k])
+        out[..., k] -= a[..., j] * b[..., i]
+    return out
+
+
 def _place_rigid(matrices: np.ndarray, mesh: MeshData, shading: bool = True):
     """(K, T, 3, 3) world corners and shading normals (None without ``corner_normals``, or
     unless ``shading``) of the K placements ``matrices`` (K, 4, 4) of ``mesh``:
@@ -130,7 +144,7 @@ def _place_rigid(matrices: np.ndarray, mesh: MeshData, shading: bool = True):
     if not shading or getattr(mesh, "corner_normals", None) is None:
         return world, None
     a, b, c = linear[..., :, 0], linear[..., :, 1], linear[..., :, 2]
-    cofactor = np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=-1)
+    cofactor = np.stack([_cross(b, c), _cross(c, a), _cross(a, b)], axis=-1)
     sign = np.sign(np.einsum("ki,ki->k", a, cofactor[..., :, 0]))  # as skinning.transform_normals
     normals = np.matmul(np.asarray(mesh.corner_normals, np.float64).reshape(1, -1, 3),
                         (cofactor * sign[:, None, None]).transpose(0, 2, 1))
@@ -184,7 +198,7 @@ def world_triangles(snapshot: SceneSnapshot, shading: bool = True) -> SceneTrian
             tri[rows] = world.reshape(-1, 3, 3)
             if placed_normals is not None:
                 normals[rows] = placed_normals.reshape(-1, 3, 3)
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal = _cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     length = np.linalg.norm(normal, axis=1, keepdims=True)
     normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
     if smooth and flat.any():  # meshes without corner normals shade flat
@@ -196,7 +210,7 @@ def world_triangles(snapshot: SceneSnapshot, shading: bool = True) -> SceneTrian
            for _, _, mesh in placed]
     materials = np.concatenate(materials)
     objects = np.concatenate(objects)
-    textures = surface_textures(snapshot, tri, materials, np.concatenate(uvs))
+    textures = surface_textures(snapshot, tri, materials, np.concatenate(uvs), length)
     visibility, holdout = _ray_visibility(snapshot, kept, objects, materials)
     ids: dict[str, int] = {}
     placed = np.full(len(snapshot.objects), -1, np.int32)

@@ -388,20 +388,25 @@ def unpack_emission(packed) -> np.ndarray:
     return (c * np.exp2((bits >> 24) - 15.0 - 8.0)[..., None]).astype(np.float32)
 
 
-def texel_density(positions: np.ndarray, uvs: np.ndarray) -> np.ndarray:
-    """(T,) float32 UV units per metre of each triangle: sqrt(UV area / world area)."""
-    p = np.asarray(positions, np.float64)
+def texel_density(positions: np.ndarray, uvs: np.ndarray, world=None) -> np.ndarray:
+    """(T,) float32 UV units per metre of each triangle: sqrt(UV area / world area).
+    world : (T,) the triangles' |(p1 − p0) × (p2 − p0)| when the caller has them
+    (``geometry.world_triangles``' face normal lengths), else computed here."""
     uv = np.asarray(uvs, np.float64)
-    world = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    if world is None:
+        p = np.asarray(positions, np.float64)
+        world = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    world = np.asarray(world, np.float64).reshape(-1)
     e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     flat = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
     return np.sqrt(np.divide(flat, world, out=np.zeros_like(world), where=world > 0)).astype(np.float32)
 
 
 def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: np.ndarray,
-                     uvs: np.ndarray) -> SurfaceTextures | None:
+                     uvs: np.ndarray, areas=None) -> SurfaceTextures | None:
     """The ``SurfaceTextures`` of a snapshot's world triangles (None when no material has a
-    texture): positions (T, 3, 3), materials (T,), uvs (T, 3, 2)."""
+    texture): positions (T, 3, 3), materials (T,), uvs (T, 3, 2); areas : (T,) their
+    |(p1 − p0) × (p2 − p0)| when the caller has them (``texel_density``)."""
     textures = tuple(getattr(snapshot, "textures", ()) or ())
     count = len(snapshot.materials) + 1
     slots = np.full(count, -1, np.int32)
@@ -449,7 +454,7 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
         out.material_base = np.zeros((count, 3), np.float32)  # principled_table's base rows
         out.material_base[:-1] = [np.clip(np.nan_to_num(np.asarray(m.base_color[:3], np.float64)),
                                           0, 1) for m in snapshot.materials]
-        out.emission_density = (texel_density(positions, uvs) *
+        out.emission_density = (texel_density(positions, uvs, areas) *
                                 scale[emission_slots[out.row_of(materials)]]).astype(np.float32)
     if (normal_slots >= 0).any():
         out.normal_slots, out.normal_strength = normal_slots, normal_strength
@@ -463,7 +468,7 @@ def surface_textures(snapshot: SceneSnapshot, positions: np.ndarray, materials: 
             out.camera_alpha_values = camera_alpha
             out.camera_cutout = ((alpha_slots >= 0) | (camera_alpha < 1.0))[out.row_of(materials)]
     slot = out.slot_of(materials)
-    out.density = (texel_density(positions, uvs) * scale[slot]).astype(np.float32)
+    out.density = (texel_density(positions, uvs, areas) * scale[slot]).astype(np.float32)
     return out
 
 
