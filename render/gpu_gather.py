@@ -28,7 +28,7 @@ from ..voxgi_addon.gi.radiance_cache import (
 from ..voxgi_addon.preview.denoise import NOISE_TARGET, RIDGE
 from ..voxgi_addon.preview.gather import cache_settings
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
-from ..voxgi_addon.preview.upsample import low_shape
+from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE, low_shape
 from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, scene_light_textures, strata_side
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
@@ -132,17 +132,19 @@ def _relax_shader():
     return _shaders["relax"]
 
 
-def relax_gpu(layout, cache_texture, records, rays: int):
+def relax_gpu(layout, cache_texture, records, rays: int, keep: bool = False):
     """One iteration over the ray ``records`` (``cache_paths.glsl``'s four textures):
     ``cache_relax.glsl`` writes the next iteration's cache texture (``cache_texels``' layout)
     from ``layout`` (``cache_texels(layout=True)``) and ``cache_texture``, the previous one —
-    nothing read back or built on the CPU between iterations."""
+    nothing read back or built on the CPU between iterations. keep : ``layout`` has two parts
+    (``ahead=True``): the texture keeps the previous iteration and adds the next one as its
+    ahead part (``radiance_cache.glossy_view``)."""
     shader = _relax_shader()
     out = gpu.types.GPUTexture((layout.width, layout.height), format="RGBA32F")
     shader.bind()
     for name, texture in zip(_RELAX_SAMPLERS, (layout, cache_texture, *records)):
         shader.uniform_sampler(name, texture)
-    shader.uniform_float("sampling", (float(rays), 0.0, 0.0, 0.0))
+    shader.uniform_float("sampling", (float(rays), float(keep), 0.0, 0.0))
     shader.image("out_image", out)
     gpu.compute.dispatch(shader, math.ceil(layout.width / LOCAL_SIZE),
                          math.ceil(layout.height / LOCAL_SIZE), 1)
@@ -152,11 +154,12 @@ def relax_gpu(layout, cache_texture, records, rays: int):
 def cache_layout(tris, settings):
     """The CPU half of ``cache_stages`` (numpy only, any thread: the viewport makes it on its
     preparing thread): (the cache's voxels ``build_cache``, its face points and axes ``face_points``, its
-    layout texels ``cache_texels(layout=True)``) for ``tris`` (``SceneTriangles``)."""
+    layout texels ``cache_texels(layout=True, ahead=True)``) for ``tris`` (``SceneTriangles``)."""
     cache = build_cache(tris, settings.cache_resolution, rays=settings.cache_rays,
                         focus=settings.cache_focus)
     points, axes = face_points(cache)
-    return cache, points, axes, cache_texels(cache, layout=True) if len(points) else None
+    return cache, points, axes, \
+        cache_texels(cache, layout=True, ahead=True) if len(points) else None
 
 
 def cache_stages(bvh, lights, principled, emission, settings, tables=None,
@@ -171,8 +174,10 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     lookup pass over the records writing the next cache texture (``relax_gpu``); the faces
     are read back once, at the end — or, read_back False (the viewport, whose Accurate
     gathers read the texture only), the cache is returned as a function that reads them
-    back when called (Fast's voxels reflect the numpy cache). layout : ``cache_layout`` of the
-    BVH's triangles made already (None: made here)."""
+    back when called (Fast's voxels reflect the numpy cache). The texture also holds the next
+    iteration, which the glossy gather reads (``radiance_cache.glossy_view``; one more lookup
+    pass, ``relax_gpu(keep=True)``). layout : ``cache_layout`` of the BVH's triangles made
+    already (None: made here)."""
     cache, points, axes, texels = layout or cache_layout(bvh.scene_triangles, settings)
     count = len(points)
     if count == 0:  # nothing to light
@@ -210,15 +215,22 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
         top = end
         rows = max(1, min(record_rows, int(rows * min(4.0, budget / max(seconds, 1e-4)))))
         yield
-    layout = float_texture(texels, (texels.shape[1], texels.shape[0]))
+    # the iterations' layout: the first part alone (the rows above the ahead part's)
+    main = texels[:1 + (len(texels) - 1) // 2].copy()
+    main[0, -1, 2] = 0.0
+    layout, both = (float_texture(t, (t.shape[1], t.shape[0])) for t in (main, texels))
     yield
     previous = float_texture(blank, (1, 1))  # the empty cache: the records' own radiance
     for _ in range(settings.bounces - 1):
         previous = relax_gpu(layout, previous, records, rays)
         yield
+    previous = relax_gpu(both, previous, records, rays, keep=True)  # and the glossy gather's
+    yield
     def faces():  # the numpy cache with its faces, read back once
-        return replace(with_faces(cache, read_texture(previous)[texel_places(cache)][:, :3]),
-                       iterations=settings.bounces - 1)
+        held = read_texture(previous)
+        values = with_faces(cache, held[texel_places(cache)][:, :3])
+        return replace(values, iterations=settings.bounces - 1,
+                       ahead=with_faces(cache, held[texel_places(cache, 1)][:, :3]).faces)
     return (faces() if read_back else faces), previous
 
 
@@ -332,6 +344,11 @@ def upsample(values, gbuffer_inputs, stride: int, width: int, height: int, secon
 
 _FIELD_SAMPLERS = _UPSAMPLE_SAMPLERS + ("low_image2",)
 _LIST_SAMPLERS = _FIELD_SAMPLERS + ("pixels", "point_position", "point_normal")
+# UPSAMPLE_TERMS's: the centres' material (same_surface.glsl), the sample's, the gathers' low
+# and full-resolution textures
+_TERMS_SAMPLERS = ("gbuffer_view", "point_view", "low_diffuse", "low_glossy", "low_world",
+                   "full_diffuse", "full_glossy", "full_world")
+_TERMS_OUTPUTS = ("out_diffuse", "out_glossy", "out_world")
 
 
 def upsample_field(glossy, diffuse, gbuffer_inputs, stride: int, width: int, height: int, eye):
@@ -348,48 +365,82 @@ def upsample_field(glossy, diffuse, gbuffer_inputs, stride: int, width: int, hei
 
 
 def upsample_field_list(glossy, diffuse, gbuffer_inputs, points, pixels, size, stride: int,
-                        width: int, height: int, eye, offset):
+                        width: int, height: int, eye, offset, terms=None):
     """``upsample_field`` at one sub-pixel pass's points over the edge pixels' list
     (UPSAMPLE_LIST): points = the pass's compacted G-buffer ({"gbuffer_position",
-    "gbuffer_normal"} of ``size``), pixels = the list (``gpu_preview._pixel_list``), offset =
-    the pass's (x right, y down, pixels); the taps are the pixel centres' ``gbuffer_inputs``."""
+    "gbuffer_normal", "gbuffer_view"} of ``size``), pixels = the list
+    (``gpu_preview._pixel_list``), offset = the pass's (x right, y down, pixels); the taps are
+    the pixel centres' ``gbuffer_inputs``.
+    terms : ((low (Diffuse Indirect, AO), low Glossy Indirect, low world glossy light), the
+    same upsampled to the centres) — the gathers' textures — to bring them to the pass's
+    samples in the same dispatch (UPSAMPLE_TERMS; docs/gi_pipeline.md "Anti-aliasing"): the
+    centre's where the sample sees its centre's surface or no gather point fits, else the
+    gathers at the sample's own point. Then returns (the three terms at the samples, glossy,
+    diffuse), the field's two None when ``glossy`` is None (no emitters: no field)."""
     inputs = {**gbuffer_inputs, "low_image": glossy, "low_image2": diffuse, "pixels": pixels,
               "point_position": points["gbuffer_position"],
               "point_normal": points["gbuffer_normal"]}
-    return _field(_LIST_SAMPLERS, inputs, stride, width, height, eye, size, offset)
+    if terms is None:
+        return _field(_LIST_SAMPLERS, inputs, stride, width, height, eye, size, offset)
+    field = glossy is not None
+    inputs.update({"point_view": points["gbuffer_view"],
+                   **dict(zip(_TERMS_SAMPLERS[2:], (*terms[0], *terms[1])))})
+    samplers = (_LIST_SAMPLERS if field else
+                tuple(name for name in _LIST_SAMPLERS if not name.startswith("low_image")))
+    out = _field(samplers + _TERMS_SAMPLERS, inputs, stride, width, height, eye, size, offset,
+                 terms=True, field=field)
+    return (*out[-3:], *(out[:2] if field else (None, None)))
 
 
-def _field_shader(listed: bool):
+def _field_shader(listed: bool, terms: bool = False, field: bool = True):
     """The compiled ``upsample.glsl`` of ``upsample_field`` (``listed``: of
-    ``upsample_field_list``)."""
+    ``upsample_field_list``; ``terms``: with the gathered terms, ``field``: and the emitters'
+    field)."""
     key = "upsample_field_list" if listed else "upsample_field"
+    if terms:
+        key = "upsample_terms_list" + ("_field" if field else "")
     if key not in _shaders:
-        defines = {"UPSAMPLE_PAIR": "1", "UPSAMPLE_FIELD": "1"}
+        defines = {"UPSAMPLE_PAIR": "1", "UPSAMPLE_FIELD": "1"} if field else {}
+        samplers = _LIST_SAMPLERS if listed else _FIELD_SAMPLERS
+        outputs = ("out_image", "out_image2") if field else ()
+        files = ("pixels", "upsample")
         if listed:
             defines["UPSAMPLE_LIST"] = "1"
-        _shaders[key] = build_compute(("pixels", "upsample"),
-                                      _LIST_SAMPLERS if listed else _FIELD_SAMPLERS,
-                                      ("sampling", "eye") + (("shift",) if listed else ()),
-                                      ("out_image", "out_image2"), defines, name=key)
+        if terms:
+            defines.update({"UPSAMPLE_TERMS": "1", "PLANE_TOLERANCE": repr(float(PLANE_TOLERANCE)),
+                            "centre_position": "gbuffer_position",
+                            "centre_normal": "gbuffer_normal", "centre_view": "gbuffer_view"})
+            if not field:
+                samplers = tuple(name for name in samplers if not name.startswith("low_image"))
+            samplers += _TERMS_SAMPLERS
+            outputs += _TERMS_OUTPUTS
+            files = ("pixels", "same_surface", "upsample")
+        _shaders[key] = build_compute(files, samplers,
+                                      ("sampling",) + (("eye",) if field else ())
+                                      + (("shift",) if listed else ()),
+                                      outputs, defines, name=key)
     return _shaders[key]
 
 
-def _field(samplers, inputs, stride, width, height, eye, size, offset=None):
+def _field(samplers, inputs, stride, width, height, eye, size, offset=None, terms=False,
+           field=True):
     listed = offset is not None
-    shader = _field_shader(listed)
-    out = [gpu.types.GPUTexture(size, format="RGBA32F") for _ in range(2)]
+    shader = _field_shader(listed, terms, field)
+    outputs = (("out_image", "out_image2") if field else ()) + (_TERMS_OUTPUTS if terms else ())
+    out = [gpu.types.GPUTexture(size, format="RGBA32F") for _ in outputs]
     shader.bind()
     for name in samplers:
         shader.uniform_sampler(name, inputs[name])
     shader.uniform_float("sampling", (float(stride), float(width), float(height), 0.0))
-    shader.uniform_float("eye", tuple(float(v) for v in eye))
+    if field:  # (only the field reads the camera's position)
+        shader.uniform_float("eye", tuple(float(v) for v in eye))
     if listed:
         shader.uniform_float("shift", (float(offset[0]), float(offset[1]), 0.0, 0.0))
-    shader.image("out_image", out[0])
-    shader.image("out_image2", out[1])
+    for name, texture in zip(outputs, out):
+        shader.image(name, texture)
     gpu.compute.dispatch(shader, math.ceil(size[0] / LOCAL_SIZE), math.ceil(size[1] / LOCAL_SIZE),
                          1)
-    return out[0], out[1]
+    return tuple(out)
 
 
 def _upsample_shader(pair: bool):

@@ -41,6 +41,7 @@ float lobe_pdf(vec3 n, vec3 v, vec3 l, float alpha2, float pdf_scale)
 
 void main()
 {
+  cache_part = 1; /* the cache's next iteration, where it holds one (cache_lookup.glsl) */
   ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
   vec3 position, n;
   vec4 ray;

@@ -2,13 +2,18 @@
  * (voxgi_addon/gi/radiance_cache.py lookup; texels: radiance_cache.cache_texels): per axis the
  * face n faces, trilinear over the voxels of the finest grid holding `x` that hold that face
  * (texel .a), the axes blended by n² over those some neighbour holds (else the next coarser
- * grid holding `x`); 0 outside every grid and for the 1 × 1 blank texture (no cache). */
+ * grid holding `x`); 0 outside every grid and for the 1 × 1 blank texture (no cache).
+ * A texture with two parts (header .z = 1) also holds the next iteration, which the glossy
+ * gather reads (radiance_cache.glossy_view): its main() sets cache_part = 1. */
+int cache_part = 0;
+
 vec3 cache_indirect(vec3 x, vec3 n)
 {
   ivec2 size = textureSize(radiance_cache, 0);
   vec4 info = texelFetch(radiance_cache, ivec2(size.x - 1, 0), 0);
   int res = int(info.x + 0.5);
   int count = int(info.y + 0.5);
+  int part = (cache_part == 1 && info.z > 0.5) ? count : 0; /* grids before this part's */
   ivec3 face = ivec3(n.x < 0.0 ? 1 : 0, n.y < 0.0 ? 3 : 2, n.z < 0.0 ? 5 : 4);
   vec3 blend = n * n;
   for (int g = 0; g < count; g++) {
@@ -29,7 +34,7 @@ vec3 cache_indirect(vec3 x, vec3 n)
         continue;
       }
       int column = cell.x + cell.y * res;
-      int row = 1 + (g * res + cell.z) * 6;
+      int row = 1 + ((part + g) * res + cell.z) * 6;
       vec4 fx = texelFetch(radiance_cache, ivec2(column, row + face.x), 0);
       vec4 fy = texelFetch(radiance_cache, ivec2(column, row + face.y), 0);
       vec4 fz = texelFetch(radiance_cache, ivec2(column, row + face.z), 0);

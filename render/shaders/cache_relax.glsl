@@ -4,7 +4,9 @@
  * header) is copied; a held face f gets (the mean over its rays' records (cache_paths.glsl,
  * record i = f · rays + j at texel (i mod Wr, i div Wr) of paths_*) of radiance + cache weight
  * × the previous iteration's cache at the hit (cache_lookup.glsl), 1); the other texels 0.
- * sampling = (rays per face, 0, 0, 0). */
+ * sampling = (rays per face, 1: the layout has two parts (cache_texels(layout=True,
+ * ahead=True)): part 0's texels are the previous iteration's, copied, and part 1's the next
+ * one's, which the glossy gather reads, 0, 0). */
 
 void main()
 {
@@ -16,6 +18,10 @@ void main()
   vec4 held = texelFetch(cache_layout, texel, 0);
   if (texel.y == 0 || held.w < 0.5) {
     imageStore(out_image, texel, held);  /* the header, or an empty texel */
+    return;
+  }
+  if (sampling.y > 0.5 && held.y < 0.5) {
+    imageStore(out_image, texel, texelFetch(radiance_cache, texel, 0)); /* the previous one */
     return;
   }
   int face = int(held.x + 0.5);

@@ -308,8 +308,9 @@ def street(length=96.0):
 def test_nested_grids_follow_exact_light_near_the_camera_in_a_large_scene():
     """A camera at street level in a 100 m street: on the walls of the 2 m gap between the
     blocks beside it (voxels of one grid over the street are 1.5 m), the cache with Auto's
-    grids nested around the camera matches exact gathers of the one-bounce light far more
-    closely than one grid (measured 0.09 against 0.47)."""
+    grids nested around the camera matches exact gathers of the one-bounce light more
+    closely than one grid (measured 0.080 against 0.138; 0.09 against 0.47 when every face's
+    rays started 0.75 voxel off its voxel's centre, 1.1 m in one grid: ``_face_origins``)."""
     tris, lights, albedo, emission = street()
     camera = (-42.0, 0.0, 1.7)
     gap = [(x, y, z) for x in (-42.0, -40.0) for y in (3.5, 5.0, 6.5, -3.5, -5.0, -6.5)
@@ -327,7 +328,7 @@ def test_nested_grids_follow_exact_light_near_the_camera_in_a_large_scene():
     print({grids: round(float(e), 3) for grids, e in errors.items()})
     one, nested = errors[1], errors[max(errors)]
     assert max(errors) > 1
-    assert nested < 0.5 * one and nested < 0.15
+    assert nested < 0.75 * one and nested < 0.1 and one < 0.2
 
 
 def test_a_camera_outside_the_scene_has_no_focus():
@@ -357,3 +358,153 @@ def test_the_scene_bounds_are_kept_per_positions_array_and_follow_new_triangles(
     key = id(moved.positions)
     del moved
     assert key not in rc._BOUNDS
+
+
+def offsets_at_the_centre(cache):
+    """``cache`` with every face's rays starting ``FACE_OFFSET`` voxel off its voxel's centre
+    along its axis (the cache before ``_face_origins``)."""
+    from dataclasses import replace
+    return replace(cache, origins=tuple(
+        np.broadcast_to(rc.FACE_OFFSET * rc.FACES, (len(c), 6, 3)).astype(np.float32)
+        for c in cache.cells))
+
+
+def test_faces_start_on_their_surfaces():
+    """Each face's rays start just in front of the voxel's surfaces facing its way
+    (``_face_origins``): in the lit room at 32³ the faces facing into the room start inside
+    it, within a hair (FACE_CLEARANCE voxel) of their wall, across their axis at the voxel's
+    centre kept on the wall's part in the voxel — where a wall voxel's centre lies beyond the
+    next wall, its rays still start in the room; the faces facing out (no triangle faces
+    that way) start ``FACE_OFFSET`` off their voxel's centre, as all did before."""
+    tris, _, _, _ = lit_room()
+    cache = rc.build_cache(tris, 32)
+    span = cache.grids[0].span
+    points, axes = rc.face_points(cache)
+    half = np.array([2.0, 1.5, 1.25])
+    centre = np.array([0.0, 0.0, 1.25])
+    local = points - centre
+    axis = np.abs(axes).argmax(axis=1)
+    sign = axes[np.arange(len(axes)), axis]
+    along = local[np.arange(len(axes)), axis]
+    # a face along x is its voxel's wall at x = ±2: facing into the room (+x at x = −2), in
+    # front of the wall
+    inward = sign * along < 0
+    gap = np.abs(np.abs(along) - half[axis])
+    assert inward.sum() > 0.4 * len(axes) and (~inward).sum() > 0.4 * len(axes)
+    np.testing.assert_allclose(gap[inward], rc.FACE_CLEARANCE * span, atol=1e-5)
+    assert (np.abs(local[inward]) < half).all()  # all inside the room
+    cells = np.repeat(cache.cells[0], cache.present[0].sum(axis=1), axis=0)
+    lo = np.asarray(cache.grids[0].origin) + cells * span - centre
+    np.testing.assert_allclose(local[~inward], lo[~inward] + 0.5 * span +
+                               rc.FACE_OFFSET * span * axes[~inward], atol=1e-5)
+    local, axes, axis, lo = local[inward], axes[inward], axis[inward], lo[inward]
+    # across its axis a face starts at the voxel's centre kept on its wall's part in the voxel
+    part = np.maximum(lo, -half), np.minimum(lo + span, half)
+    margin = np.minimum(0.25 * (part[1] - part[0]), rc.FACE_CLEARANCE * span)
+    expected = np.clip(lo + 0.5 * span, part[0] + margin, part[1] - margin)
+    lateral = np.ones_like(local, bool)
+    lateral[np.arange(len(axes)), axis] = False
+    np.testing.assert_allclose(local[lateral], expected[lateral], atol=1e-5)
+
+
+def sunlit_closed_room():
+    """A closed 4 × 3 × 2.17 m room (its walls one-sided planes, white) under a 10 W/m² sun
+    from straight above: no light gets in, so every bounce inside is 0 — but the sun lights
+    the ceiling's top, a hair above the cache's rays where a voxel's centre lies above it."""
+    positions, triangles = box((4.0, 3.0, 2.17), (0.0, 0.0, 1.085))
+    tris = world_triangles(snapshot([mesh("r", positions, np.asarray(triangles)[:, ::-1])],
+                                    [ObjectData("R", "r", np.eye(4))]))
+    sun = LightData("S", "SUN", np.ones(3, np.float32), 10.0, frame((0.0, 0.0, 5.0)),
+                    angle=0.02)
+    return tris, [sun], np.array([[0.8, 0.8, 0.8]]), np.zeros((1, 3))
+
+
+def test_a_sunlit_roof_stays_out_of_a_closed_room():
+    """Faces whose voxels' centres lie outside a thin-walled room (above its sunlit ceiling)
+    once started their rays there, gathered the roof's sunlight and passed it to the walls
+    under the ceiling (a columned hall's walls read 15–40 × their light there,
+    docs/gi_pipeline.md "Multi-bounce radiance cache"): now they start on the walls inside, and
+    the closed room's cache is 0 inside."""
+    tris, lights, albedo, emission = sunlit_closed_room()
+    cache = rc.build_cache(tris, 16)
+    grid = cache.grids[0]
+    # the ceiling's voxels' centres lie above it (the setup that leaked)
+    top = (2.17 - grid.origin[2]) / grid.span
+    assert top - np.floor(top) < 0.45
+    paths = rc.face_paths(cache, tris, lights, albedo, emission, rays=32)
+    points, _ = rc.face_points(cache)
+    inside = (np.abs(points - [0.0, 0.0, 1.085]) < [2.0, 1.5, 1.085]).all(axis=1)
+    ours = rc.relax(cache, paths, 32)
+    values = np.concatenate([f[p] for f, p in zip(ours.faces, ours.present)])
+    assert inside.sum() > 0.4 * len(points)
+    assert np.abs(values[inside]).max() == 0.0
+    y = np.linspace(-1.4, 1.4, 15)
+    under = np.c_[np.full(15, 1.999), y, np.full(15, 2.15)]  # a wall just under the ceiling
+    assert np.abs(rc.lookup(ours, under, np.tile([-1.0, 0.0, 0.0], (15, 1)))).max() == 0.0
+    # the faces' rays started at the voxels' centres: the wall under the ceiling gets light
+    old = offsets_at_the_centre(cache)
+    before = rc.relax(old, rc.face_paths(old, tris, lights, albedo, emission, rays=32), 32)
+    assert rc.lookup(before, under, np.tile([-1.0, 0.0, 0.0], (15, 1))).mean() > 0.05
+
+
+def test_ceiling_near_a_wall_reads_its_one_bounce_light():
+    """The lit room's ceiling and its walls' top band, within 30 cm of where they meet: the
+    cache (32³, 13 cm voxels, 256 rays a face) against exact gathers of the one-bounce light
+    (2048 rays each) — within 6% on average (measured 1.003; 1.11 with every face's rays
+    starting 0.75 voxel off its voxel's centre, below the ceiling)."""
+    tris, lights, albedo, emission = lit_room()
+    rng = np.random.default_rng(11)
+    k = 16
+    near = rng.uniform(0.0, 0.3, k)
+    ceiling = np.c_[2.0 - near, rng.uniform(-1.3, 1.3, k), np.full(k, 2.5)]
+    wall = np.c_[np.full(k, 2.0), rng.uniform(-1.3, 1.3, k), 2.5 - near]
+    back = np.c_[rng.uniform(-1.8, 1.8, k), np.full(k, 1.5), 2.5 - near]
+    p = np.concatenate([ceiling, wall, back])
+    n = np.repeat([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]], k, axis=0)
+    exact, _ = indirect_and_ao(p, n, np.arange(len(p)), tris, lights, albedo, emission,
+                               rays=2048)
+    ratios = {}
+    for name, cache in (("ours", rc.build_cache(tris, 32)),
+                        ("centre", offsets_at_the_centre(rc.build_cache(tris, 32)))):
+        cache = rc.iterate(cache, tris, lights, albedo, emission, rays=256)
+        ratios[name] = rc.lookup(cache, p, n).sum() / exact.sum()
+    print({name: round(float(r), 3) for name, r in ratios.items()})
+    assert abs(ratios["ours"] - 1) < 0.06
+    assert abs(ratios["centre"] - 1) > abs(ratios["ours"] - 1)
+
+
+def test_glossy_gathers_read_one_bounce_more():
+    """Cycles counts glossy bounces apart from diffuse ones: a glossy gather's hits read the
+    cache one iteration ahead of the diffuse gather's (``glossy_view``) — the cache of
+    Bounces N keeps iteration N as ``ahead``, equal to Bounces N + 1's cache, and its texels
+    hold it as their second part."""
+    from voxgi.voxgi_addon.gi.exact_glossy import glossy_indirect
+
+    tris, lights, albedo, emission = lit_room()
+    principled = (albedo, np.tile([[0.0, 0.5, 0.3]], (len(albedo), 1)))
+    three = rc.cached_cache(tris, lights, principled, emission, 3, rays=8, resolution=8)
+    four = rc.cached_cache(tris, lights, principled, emission, 4, rays=8, resolution=8)
+    assert three.iterations == 2 and rc.glossy_view(three).iterations == 3
+    np.testing.assert_allclose(np.concatenate(rc.glossy_view(three).faces),
+                               np.concatenate(four.faces), rtol=1e-6, atol=1e-9)
+    assert rc.glossy_view(None) is None
+    # the glossy gather with Bounces 3 reads what Bounces 4's diffuse gather does
+    p = np.array([[0.5, -0.5, 0.0], [1.99, 0.0, 1.0]])
+    n = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]])
+    views = np.array([[0.0, -0.6, 0.8], [-0.6, 0.0, 0.8]])
+    gathered = [glossy_indirect(p, n, views, np.zeros(2, np.int32), np.arange(2), tris, lights,
+                                principled, emission, rays=64, cache=cache)[0]
+                for cache in (three, replace_ahead(four, ()))]
+    np.testing.assert_allclose(gathered[0], gathered[1], rtol=1e-5)
+    texels = rc.cache_texels(three)
+    res = three.grids[0].resolution
+    assert texels.shape[0] == 1 + 2 * res * 6 and texels[0, -1, 2] == 1.0
+    rows, columns = rc.texel_places(three, 1)
+    np.testing.assert_allclose(texels[rows, columns, :3],
+                               np.concatenate([f[q] for f, q in zip(three.ahead,
+                                                                    three.present)]))
+
+
+def replace_ahead(cache, ahead):
+    from dataclasses import replace
+    return replace(cache, ahead=ahead)

@@ -28,6 +28,7 @@ import numpy as np
 from ..scene.snapshot import RAY_GLOSSY
 from .exact_indirect import LUMINANCE, SURFACE_EPSILON, hit_emission, ray_radiance
 from .principled import ROUGHNESS_SQ_THRESHOLD, glossy_color, glossy_reflectance
+from .radiance_cache import glossy_view
 from .sampling import hammersley, perpendicular_basis
 
 __all__ = ["GLOSSY_STREAM", "WORLD_GLOSSY_STREAM", "EMITTER_GLOSSY_STREAM", "glossy_indirect",
@@ -139,7 +140,9 @@ def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights,
                     hit_samples: int = 1, hit_glossy: bool = True, cache=None):
     """(Glossy Indirect (N, 3) float32, variance of its luminance mean (N,) float32) — see the
     module doc. ``rays`` per point, ``METAL_RAY_FACTOR`` × that at metallic ≥ 0.5. cache : the
-    radiance cache the hits reflect too (``exact_indirect.ray_radiance``; None: one bounce).
+    radiance cache the hits reflect too (``exact_indirect.ray_radiance``; None: one bounce),
+    read one iteration ahead of the diffuse gather where it keeps one
+    (``radiance_cache.glossy_view``: a glossy bounce leaves every diffuse bounce to come).
 
     points, normals, views : (N, 3) surface points, unit normals facing the viewer and unit
     directions to the viewer; materials : (N,) material index per point (the last row of the
@@ -158,6 +161,7 @@ def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights,
     materials = np.asarray(materials).reshape(-1)
     metal = np.asarray(principled[1], np.float64)[materials, 0] >= 0.5
     views = np.asarray(views, np.float64).reshape(-1, 3)
+    cache = glossy_view(cache)
     for group, group_rays in ((~metal, rays), (metal, rays * METAL_RAY_FACTOR)):
         if group.any():
             value[group], variance[group] = _glossy_indirect(

@@ -27,19 +27,20 @@ Numpy only; the GPU reads the same values from ``cache_texels`` (``render/gpu_ga
 from __future__ import annotations
 
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..errors import VoxGIError
-from ..voxelize.surface import voxelize_triangles
+from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
 from .cascades import CascadeGrid
 
 __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
-           "cache_texels", "cached_cache", "face_paths", "face_points", "iterate", "lookup", "relax",
-           "snap_focus", "texel_places", "with_faces"]
+           "cache_texels", "cached_cache", "face_paths", "face_points", "glossy_view", "iterate",
+           "lookup", "relax", "snap_focus", "texel_places", "with_faces"]
 
-FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin
+FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin where it has no surface
+FACE_CLEARANCE = 0.02    # voxels in front of its surface a face's rays start (``_face_origins``)
 FACE_AXIS_COSINE = 0.2   # a voxel holds the faces of the axes its triangles' normals reach
 FACES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
 
@@ -52,13 +53,19 @@ class RadianceCache:
     iterations : bounces beyond the first that it carries (0: an empty cache, all zeros).
     present : per grid (N_i, 6) bool, the faces it holds: both faces of every axis along which
     a triangle touching the voxel faces by more than ``FACE_AXIS_COSINE`` (a floor's voxels hold
-    ±z only); a lookup blends each axis over the voxels that hold it."""
+    ±z only); a lookup blends each axis over the voxels that hold it. origins : per grid
+    (N_i, 6, 3) float32 where each face's rays start, in voxels from the voxel's centre
+    (``_face_origins``; empty: ``FACE_OFFSET`` along the face's axis). ahead : per grid the
+    faces of the next iteration (as ``faces``), which the glossy gather reads
+    (``glossy_view``); empty: none kept."""
 
     grids: tuple
     cells: tuple
     faces: tuple
     iterations: int = 0
     present: tuple = ()
+    origins: tuple = ()
+    ahead: tuple = ()
 
     @property
     def voxel_count(self) -> int:
@@ -141,13 +148,15 @@ def snap_focus(tris, focus):
     return tuple(float(v) for v in origin + (np.floor((point - origin) / step) + 0.5) * step)
 
 
-def _sites(tris, grids) -> tuple[list, list]:
+def _sites(tris, grids) -> tuple[list, list, list]:
     """Per grid the (N_i, 3) int32 cells its triangles touch (a coarser grid leaving out the
-    cells the next finer grid covers) and their (N_i, 6) present faces (``RadianceCache``)."""
+    cells the next finer grid covers), their (N_i, 6) present faces and their faces' (N_i, 6, 3)
+    ray origins (``RadianceCache``)."""
     corners = np.asarray(tris.positions, np.float64)
-    normals = np.abs(np.asarray(tris.normals, np.float64))
+    signed = np.asarray(tris.normals, np.float64)
+    normals = np.abs(signed)
     triangles = np.arange(len(corners) * 3).reshape(-1, 3)
-    out, present = [], []
+    out, present, origins = [], [], []
     for index, grid in enumerate(grids):
         local = (corners - np.asarray(grid.origin)).reshape(-1, 3)
         surface = voxelize_triangles(local, triangles, float(grid.span))
@@ -163,7 +172,100 @@ def _sites(tris, grids) -> tuple[list, list]:
             keep &= ~((cells >= start) & (cells < start + res // 2)).all(axis=1)
         out.append(cells[keep].astype(np.int32))
         present.append(np.repeat(reach[keep] > FACE_AXIS_COSINE, 2, axis=1))
-    return out, present
+        origins.append(_face_origins(cells[keep], surface, local.reshape(-1, 3, 3) / grid.span,
+                                     signed, keep))
+    return out, present, origins
+
+
+_CLIP_VERTICES = 9  # a triangle clipped by a box's six planes has at most 3 + 6 corners
+
+
+def _clip_to_cells(tris):
+    """((P, 9, 3) float32 corners, (P,) count) of triangles ``tris`` (P, 3, 3) clipped to the
+    unit cell [0, 1]³ (Sutherland–Hodgman, one plane at a time, each on the polygons it cuts
+    only)."""
+    poly = np.zeros((len(tris), _CLIP_VERTICES, 3), np.float32)
+    poly[:, :3] = tris
+    count = np.full(len(tris), 3)
+    slots = np.arange(_CLIP_VERTICES)
+    for axis in range(3):
+        for sign, bound in ((1.0, 0.0), (-1.0, 1.0)):
+            side = sign * (poly[:, :, axis] - bound)                      # (P, 9) ≥ 0: kept
+            cut = np.flatnonzero(((side < 0) & (slots[None] < count[:, None])).any(axis=1))
+            if len(cut) == 0:
+                continue
+            p, n, d = poly[cut], count[cut], side[cut]
+            following = (slots[None] + 1) % np.maximum(n, 1)[:, None]
+            nxt = np.take_along_axis(p, following[:, :, None], axis=1)
+            nd = np.take_along_axis(d, following, axis=1)
+            valid = slots[None] < n[:, None]
+            inside, ninside = d >= 0, nd >= 0
+            t = d / np.where(d != nd, d - nd, np.float32(1.0))
+            cross = p + t[:, :, None] * (nxt - p)
+            # per corner: the corner if kept, then the edge's crossing if it changes sides
+            candidates = np.stack([p, cross], axis=2).reshape(len(p), -1, 3)
+            emit = np.stack([valid & inside, valid & (inside != ninside)], axis=2)
+            emit = emit.reshape(len(p), -1)
+            order = np.argsort(~emit, axis=1, kind="stable")[:, :_CLIP_VERTICES]
+            poly[cut] = np.take_along_axis(candidates, order[:, :, None], axis=1)
+            count[cut] = np.minimum(emit.sum(axis=1), _CLIP_VERTICES)
+    return poly, count
+
+
+def _face_origins(cells, surface, corners, normals, keep) -> np.ndarray:
+    """(N, 6, 3) float32: where the rays of each face of the kept ``cells`` start, in voxels
+    from the voxel's centre (docs/gi_pipeline.md "Multi-bounce radiance cache", "Faces start
+    on their surfaces"). A face stands for the light reaching the voxel's surfaces that face
+    its way (the lookups of points with such normals), so its rays start on them: take the
+    parts, inside the voxel, of its triangles facing that way by more than
+    ``FACE_AXIS_COSINE`` and start just in front (``FACE_CLEARANCE``) of their farthest
+    corner that way, across the axis at the voxel's centre kept within their extent (a
+    hair inside it). Starting 0.75 voxel off the voxel's centre instead put a ceiling's rays
+    6 cm below it or, where its voxels' centres lie outside a room, the walls' rays above the
+    roof (a sunlit hall's walls read 15–40 × their light under the ceiling). Across the axis
+    the centre, not the parts' middle: a voxel straddling a thin wall keeps its faces on its
+    centre's side, as before. A face no triangle faces that way keeps ``FACE_OFFSET`` (a
+    thin wall's far side: starting on the wall's back, inside a 2 cm slab, let a dark room
+    read 2.5% of the lit one's light, tests/blender/test_multibounce.py).
+    cells : (N_all, 3) the grid's cells (``surface.cells``); corners : (T, 3, 3) triangles
+    in voxels from the grid's origin; normals : (T, 3) their unit normals; keep : (N_all,)
+    the cells kept."""
+    origins = np.zeros((len(cells), 6, 3))
+    for face in range(6):
+        origins[:, face] = FACE_OFFSET * FACES[face]
+    pair_cell, tri = surface.cell_of_pair, surface.triangle_of_pair
+    row = np.cumsum(keep) - 1
+    pairs = np.flatnonzero(keep[pair_cell])
+    if len(pairs) == 0:
+        return origins.astype(np.float32)
+    pairs = pairs[np.argsort(pair_cell[pairs], kind="stable")]  # cell by cell
+    pair_cell, tri = row[pair_cell[pairs]], tri[pairs]
+    # the lattice's cells are shifted by voxelize's LATTICE_OFFSET (a plane on a lattice plane
+    # lies in the cell above it)
+    lo = cells[pair_cell] - LATTICE_OFFSET
+    poly, count = _clip_to_cells(corners[tri] - lo[:, None])      # in the cell: float32 holds it
+    poly -= np.float32(0.5 + LATTICE_OFFSET)                      # from the voxel's centre
+    valid = np.arange(_CLIP_VERTICES)[None] < count[:, None]
+    high = np.where(valid[:, :, None], poly, -np.inf).max(axis=1)   # (P, 3) the part's box
+    low = np.where(valid[:, :, None], poly, np.inf).min(axis=1)
+    starts = np.flatnonzero(np.r_[True, pair_cell[1:] != pair_cell[:-1]])
+    voxels = pair_cell[starts]                                    # the cells with pairs
+    some = count > 0
+    for axis in range(3):
+        along = normals[tri, axis]
+        for sign, face in ((1.0, 2 * axis), (-1.0, 2 * axis + 1)):
+            chosen = (sign * along > FACE_AXIS_COSINE) & some
+            if not chosen.any():
+                continue
+            top = np.maximum.reduceat(np.where(chosen[:, None], high, -np.inf), starts)
+            bottom = np.minimum.reduceat(np.where(chosen[:, None], low, np.inf), starts)
+            held = np.isfinite(top[:, axis])
+            top, bottom = top[held], bottom[held]
+            margin = np.minimum(0.25 * (top - bottom), FACE_CLEARANCE)
+            point = np.clip(0.0, bottom + margin, top - margin)   # the centre, kept on them
+            point[:, axis] = sign * ((top if sign > 0 else -bottom)[:, axis] + FACE_CLEARANCE)
+            origins[voxels[held], face] = point
+    return origins.astype(np.float32)
 
 
 def _dense_index(grid, cells) -> np.ndarray:
@@ -259,9 +361,9 @@ def build_cache(tris, resolution: int = 32, count: int = 1, rays: int = 16,
                 cache = finer
         return cache
     grids = cache_grids(tris, resolution, count, focus)
-    cells, present = _sites(tris, grids)
+    cells, present, origins = _sites(tris, grids)
     faces = tuple(np.zeros((len(c), 6, 3), np.float32) for c in cells)
-    return RadianceCache(tuple(grids), tuple(cells), faces, 0, tuple(present))
+    return RadianceCache(tuple(grids), tuple(cells), faces, 0, tuple(present), tuple(origins))
 
 
 def _inside(grid, point) -> bool:
@@ -279,10 +381,12 @@ def face_points(cache: RadianceCache) -> tuple[np.ndarray, np.ndarray]:
     ``iterate``, whose sample id is the row (the GPU lays them out as the pixels of an image,
     ``render/gpu_gather.py`` ``cache_gpu``)."""
     points, axes = [np.zeros((0, 3))], [np.zeros((0, 3))]
-    for grid, cells, present in zip(cache.grids, cache.cells, cache.present):
+    origins = cache.origins or [FACE_OFFSET * np.broadcast_to(FACES, (len(c), 6, 3))
+                                for c in cache.cells]
+    for grid, cells, present, origin in zip(cache.grids, cache.cells, cache.present, origins):
         centres = np.asarray(grid.origin) + (np.asarray(cells, np.float64) + 0.5) * grid.span
         voxel, face = np.nonzero(present)
-        points.append(centres[voxel] + FACE_OFFSET * grid.span * FACES[face])
+        points.append(centres[voxel] + grid.span * np.asarray(origin, np.float64)[voxel, face])
         axes.append(FACES[face])
     return np.concatenate(points), np.concatenate(axes)
 
@@ -298,7 +402,19 @@ def with_faces(cache: RadianceCache, values) -> RadianceCache:
         faces.append(grid_faces)
         start += count
     return RadianceCache(cache.grids, cache.cells, tuple(faces), cache.iterations + 1,
-                         cache.present)
+                         cache.present, cache.origins)
+
+
+def glossy_view(cache: RadianceCache | None) -> RadianceCache | None:
+    """The cache the glossy gather's bounce hits read: its ``ahead`` iteration where it keeps
+    one (``cached_cache``), else ``cache`` itself. Cycles counts glossy and diffuse bounces
+    apart (Diffuse 4, Glossy 4 by default): a path that leaves the receiver glossily still has
+    all its diffuse bounces ahead, one more than the diffuse gather's hits read
+    (docs/gi_pipeline.md "Multi-bounce radiance cache", "Glossy bounces are not diffuse
+    ones")."""
+    if cache is None or not cache.ahead:
+        return cache
+    return replace(cache, faces=cache.ahead, iterations=cache.iterations + 1, ahead=())
 
 
 def face_paths(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 16,
@@ -370,8 +486,9 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
                  resolution: int = 0, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
                  hit_glossy: bool = True, focus=None) -> RadianceCache | None:
     """The cache of ``bounces`` − 1 iterations for these triangles, lights and materials (None
-    for ``bounces`` ≤ 1), kept for the next call with the same inputs (the viewport's slices
-    ask for the same cache). focus : the camera (Auto nests grids around it, ``build_cache``;
+    for ``bounces`` ≤ 1), with the next iteration ``ahead`` (``glossy_view``), kept for the
+    next call with the same inputs (the viewport's slices ask for the same cache). focus : the
+    camera (Auto nests grids around it, ``build_cache``;
     ``snap_focus``'d here)."""
     if bounces <= 1:
         return None
@@ -387,42 +504,49 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
                        hit_samples=hit_samples, hit_glossy=hit_glossy)
     for _ in range(bounces - 1):  # the same rays every iteration: traced once
         cache = relax(cache, paths, rays)
+    cache = replace(cache, ahead=relax(cache, paths, rays).faces)  # the glossy gather's
     _MEMO["entry"] = (key, cache)
     return cache
 
 
-def texel_places(cache: RadianceCache) -> tuple[np.ndarray, np.ndarray]:
+def texel_places(cache: RadianceCache, part: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """((F,) rows, (F,) columns) of each present face (``face_points``' order) in the texels of
-    ``cache_texels``."""
+    ``cache_texels`` (part 1: of its ``ahead`` iteration)."""
     res = cache.grids[0].resolution
+    count = len(cache.grids)
     rows, columns = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
     for g, (cells, present) in enumerate(zip(cache.cells, cache.present)):
         c = np.asarray(cells, np.int64)
         voxel, face = np.nonzero(present)
-        rows.append(1 + (g * res + c[voxel, 2]) * 6 + face)
+        rows.append(1 + ((part * count + g) * res + c[voxel, 2]) * 6 + face)
         columns.append(c[voxel, 0] + c[voxel, 1] * res)
     return np.concatenate(rows), np.concatenate(columns)
 
 
-def cache_texels(cache: RadianceCache, layout: bool = False) -> np.ndarray:
+def cache_texels(cache: RadianceCache, layout: bool = False, ahead: bool = False) -> np.ndarray:
     """(H, W, 4) float32 texels of ``cache`` for the GPU (``shaders/cache_lookup.glsl``
     ``cache_indirect``): W = res² (texel x + y·res), row 0 the header — texel i = (origin xyz,
-    span) of grid i, the last texel (res, grid count, 0, 0) — then per grid g, z and face f the
-    row 1 + (g·res + z)·6 + f of (rgb, 1 where the voxel holds the face). layout : instead of
-    the rgb, (the face's row in ``face_points``, 0, 0) — what ``cache_relax.glsl`` writes each
-    iteration's texels from, on the GPU."""
+    span) of grid i, the last texel (res, grid count, 1 with an ahead part, 0) — then per part p
+    (0: ``faces``; 1: ``ahead``, which the glossy gather reads, where the cache keeps it), grid g, z
+    and face f the row 1 + ((p·count + g)·res + z)·6 + f of (rgb, 1 where the voxel holds the
+    face). layout : instead of the rgb, (the face's row in ``face_points``, p, 0) — what
+    ``cache_relax.glsl`` writes each iteration's texels from, on the GPU — with the ahead part
+    when ``ahead``."""
     res = cache.grids[0].resolution
     count = len(cache.grids)
     width = max(res * res, count + 1)
-    texels = np.zeros((1 + count * res * 6, width, 4), np.float32)
+    parts = 2 if (ahead if layout else bool(cache.ahead)) else 1
+    texels = np.zeros((1 + parts * count * res * 6, width, 4), np.float32)
     for g, grid in enumerate(cache.grids):
         texels[0, g] = (*grid.origin, grid.span)
-    texels[0, width - 1] = (res, count, 0.0, 0.0)
-    rows, columns = texel_places(cache)
-    if layout:
-        texels[rows, columns, 0] = np.arange(len(rows))
-    else:
-        texels[rows, columns, :3] = np.concatenate(
-            [faces[present] for faces, present in zip(cache.faces, cache.present)])
-    texels[rows, columns, 3] = 1.0
+    texels[0, width - 1] = (res, count, parts - 1, 0.0)
+    for part, faces in enumerate((cache.faces, cache.ahead)[:parts]):
+        rows, columns = texel_places(cache, part)
+        if layout:
+            texels[rows, columns, 0] = np.arange(len(rows))
+            texels[rows, columns, 1] = part
+        else:
+            texels[rows, columns, :3] = np.concatenate(
+                [f[present] for f, present in zip(faces, cache.present)])
+        texels[rows, columns, 3] = 1.0
     return texels
