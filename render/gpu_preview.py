@@ -270,9 +270,10 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     Diffuse Direct at the gather points of the pixel centres' G-buffer (``emitter_fields``),
     the latter upsampled to the centres, then one rasterized G-buffer, direct light
     (``bvh_direct``, a block of the shadow-ray strata) and glossy light of the lamps per
-    sub-pixel pass (``preview.passes.subpixel_passes``; the emitters' glossy light and
-    unshadowed sum from their field at the pass's own points where the pass sees another
-    surface than its pixel's centre), summed on the GPU (``shaders/aa_surface.glsl``,
+    sub-pixel pass (``preview.passes.subpixel_passes``; the gathered terms and the emitters'
+    glossy light and unshadowed sum from the gathers and their field at the pass's own points
+    where the pass sees another surface than its pixel's centre, one ``upsample_field_list``
+    dispatch), summed on the GPU (``shaders/aa_surface.glsl``,
     ``aa_light.glsl``) and read back once.
     Triangles, BVH, materials and light tables come from ``scene`` (a ``GPUScene`` updated to
     ``snapshot``: ``render_passes_stages`` updates it). camera_tris : what the G-buffers draw (None: the
@@ -346,7 +347,7 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     full = upsample(low_diffuse, centre.inputs, gi_stride, width, height, low_glossy)
     diffuse_ao, glossy = full if glossy_indirect else (full, zero)
     timings["upsample"] = time.perf_counter() - t0
-    glossy_world = zero
+    glossy_world = low_world = zero
     if scene.has_scene_lights:  # Glossy Direct of the world and emitters
         t0 = time.perf_counter()
         low_world = low("world glossy", "bvh_glossy", world_mode=True)
@@ -430,9 +431,14 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     if len(listed):
         pixels, list_size = _pixel_list(listed, width, height)
         blank = scene.zeros(*list_size)
-        terms = tuple(_compact("aa_list_raw", {
-            "gbuffer_position": diffuse_ao, "gbuffer_normal": glossy,
-            "gbuffer_view": glossy_world, "pixels": pixels}, list_size).values())
+        # the gathers at the gather points and at the centres, for each pass's samples: the
+        # centre's where the sample sees its centre's surface, else the gathers at the sample's
+        # own point (docs/gi_pipeline.md "Anti-aliasing")
+        low_zero = zero if gi_stride == 1 else scene.zeros(low_diffuse.width, low_diffuse.height)
+        gathers = ((low_diffuse, low_glossy if glossy_indirect else low_zero,
+                    low_world if scene.has_scene_lights else low_zero),
+                   (diffuse_ao, glossy, glossy_world))
+        eye = _eye(snapshot.camera)
         listed_centres = None
         if centres is not None:  # the centres' G-buffer and emitters' light there
             listed_centres = _compact("aa_list", {**centre.inputs, "pixels": pixels}, list_size)
@@ -452,22 +458,23 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                 "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,
                                 "gbuffer_view": gbuffer.base, "pixels": pixels},
                 list_size)["gbuffer_position"]
-            # the emitters' glossy light and unshadowed sum: the centre's where this pass
-            # sees its surface, else the field at the pass's own point (evaluated where it
-            # does not hold)
-            glow = field = None
+            # the gathered terms, the emitters' glossy light and unshadowed sum: the centre's
+            # where this pass sees its surface, else the gathers and the field at the pass's
+            # own point (the field evaluated where it does not hold), in one dispatch
+            *terms, field_glossy, field_diffuse = upsample_field_list(
+                *(fields[:2] if centres is not None else (None, None)), centre.inputs, inputs,
+                pixels, list_size, gi_stride, width, height, eye, offset, terms=gathers)
+            glow = None
             if centres is not None:
-                field = upsample_field_list(fields[0], fields[1], centre.inputs, inputs, pixels,
-                                            list_size, gi_stride, width, height, eye, offset)
                 glow = emitter_glossy_texture(
                     bvh, inputs, scene.emitters, scene.materials, gather_settings.glossy_rays,
                     gather_settings.seed, scene.no_lamp, scene.world_map,
-                    centre=listed_centres, field=field[0])
+                    centre=listed_centres, field=field_glossy)
             # this pass's samples, read back to count in the neighbours by the filter at
             # their own place (preview.passes.add_tails)
             textures = yield from shade(inputs, {name: blank for name in names}, terms, blank,
                                         list_size, block, glow=glow, centre=listed_centres,
-                                        field=None if field is None else field[1])
+                                        field=field_diffuse)
             for k, name in enumerate(names):
                 samples[index, :, 4 * k:4 * k + 4] = \
                     read_texture(textures[name]).reshape(-1, 4)[:len(listed)]

@@ -1,9 +1,10 @@
 /* One sub-pixel pass of the anti-aliased preview, its light-independent part: the port of
  * voxgi_addon/preview/passes.accumulate_pass without the lights' terms. Per pixel of this
  * pass's G-buffer (gbuffer_view = (ray direction, material)), Cycles' Principled Diffuse and
- * Glossy Color for the view (principled.glsl), and the centre pass's gathered terms at the
- * same pixel (centre_diffuse = (Diffuse Indirect, AO), centre_glossy = Glossy Indirect,
- * centre_world = the world's glossy light without the glossy colour) are added to the sums
+ * Glossy Color for the view (principled.glsl), and the gathered terms at the same texel
+ * (centre_diffuse = (Diffuse Indirect, AO), centre_glossy = Glossy Indirect, centre_world =
+ * the world's glossy light without the glossy colour: the centre pass's, or for a sub-pixel
+ * pass upsample.glsl UPSAMPLE_TERMS's at its samples) are added to the sums
  * (sum_* in, out_* out; the pass count divides them at the end):
  *   a = (emission, coverage), b = (Diffuse Color, AO), c = (Glossy Color, holdout: the
  *   G-buffer's w = -1, a camera ray that met a holdout and shows nothing, gbuffer_frag.glsl),

@@ -1,7 +1,9 @@
 /* The sub-pixel passes' test against their pixel's centre (voxgi_addon/preview/passes.py
  * same_surface): samplers centre_position, centre_normal, centre_view hold the pixel centres'
  * G-buffer at the same texels as the pass's (aa_compact.glsl over the edge pixels' list, or
- * the centres' own G-buffer for the centre pass). Needs PLANE_TOLERANCE. */
+ * the centres' own G-buffer for the centre pass; upsample.glsl UPSAMPLE_TERMS defines the
+ * names as its full-resolution gbuffer_* and reads them at the list entry's pixel). Needs
+ * PLANE_TOLERANCE. */
 
 /* whether the pass's point (position, normal, material: it sees a surface) lies on the surface
  * the centre sees at texel px */

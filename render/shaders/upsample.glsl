@@ -23,20 +23,41 @@
  * UPSAMPLE_LIST (with UPSAMPLE_FIELD): the points are a sub-pixel pass's samples over the edge
  * pixels' list (aa_compact.glsl): texel t reads pixels[t] = (x, y, id, 1) and the pass's
  * compacted G-buffer point_position, point_normal, and sits at that pixel + shift.xy (the
- * pass's offset, x right, y down); the taps stay the pixel centres' G-buffer. */
+ * pass's offset, x right, y down); the taps stay the pixel centres' G-buffer.
+ * UPSAMPLE_TERMS (with UPSAMPLE_LIST, with or without UPSAMPLE_FIELD): also the gathered terms
+ * at the pass's samples (docs/gi_pipeline.md "Anti-aliasing"; preview/upsample.py upsample_at):
+ * low_diffuse, low_glossy, low_world (the gather points' (Diffuse Indirect, AO), Glossy
+ * Indirect, world glossy light; low_image's grid) → out_diffuse, out_glossy, out_world with the
+ * same weights where the sample sees another surface than its pixel's centre (same_surface.glsl
+ * against the centres' full-resolution G-buffer at pixel.xy, point_view.w = the sample's
+ * material; the centre_* names are defined as the gbuffer_* ones), else — or where no tap
+ * weighs — the centre's own full_diffuse, full_glossy, full_world at pixel.xy. */
+#if !defined(UPSAMPLE_TERMS) || defined(UPSAMPLE_FIELD)
+#  define UPSAMPLE_IMAGE /* low_image → out_image */
+#  define LOW_GRID low_image
+#  define FIRST_OUT out_image
+#else
+#  define LOW_GRID low_diffuse
+#  define FIRST_OUT out_diffuse
+#endif
 void main()
 {
   ivec2 px = ivec2(gl_GlobalInvocationID.xy);
   ivec2 full = ivec2(sampling.yz);
   int stride = int(sampling.x);
 #ifdef UPSAMPLE_LIST
-  ivec2 size = imageSize(out_image);
+  ivec2 size = imageSize(FIRST_OUT);
   if (px.x >= size.x || px.y >= size.y) {
     return;
   }
   vec4 pixel = texelFetch(pixels, px, 0);
   vec4 position = texelFetch(point_position, px, 0);
   if (pixel.w < 0.5 || position.w < 0.5) {
+#  ifdef UPSAMPLE_TERMS
+    imageStore(out_diffuse, px, vec4(0.0));
+    imageStore(out_glossy, px, vec4(0.0));
+    imageStore(out_world, px, vec4(0.0));
+#  endif
 #else
   if (px.x >= full.x || px.y >= full.y) {
     return;
@@ -44,7 +65,9 @@ void main()
   vec4 position = texelFetch(gbuffer_position, px, 0);
   if (position.w < 0.5) {
 #endif
+#ifdef UPSAMPLE_IMAGE
     imageStore(out_image, px, vec4(0.0));
+#endif
 #ifdef UPSAMPLE_PAIR
     imageStore(out_image2, px, vec4(0.0));
 #endif
@@ -57,9 +80,21 @@ void main()
     return;
   }
 #endif
-  ivec2 low = textureSize(low_image, 0);
+  ivec2 low = textureSize(LOW_GRID, 0);
 #ifdef UPSAMPLE_LIST
   vec3 n = texelFetch(point_normal, px, 0).xyz;
+#  ifdef UPSAMPLE_TERMS
+  ivec2 centre_px = ivec2(pixel.xy + 0.5);
+  bool own = !same_surface(position, n, texelFetch(point_view, px, 0).w, centre_px);
+#    ifndef UPSAMPLE_FIELD
+  if (!own) {  /* the centre's surface: its terms */
+    imageStore(out_diffuse, px, texelFetch(full_diffuse, centre_px, 0));
+    imageStore(out_glossy, px, texelFetch(full_glossy, centre_px, 0));
+    imageStore(out_world, px, texelFetch(full_world, centre_px, 0));
+    return;
+  }
+#    endif
+#  endif
   float u = (pixel.x + shift.x - float(stride / 2)) / float(stride);
   float v = (float(full.y - 1) - pixel.y + shift.y - float(stride / 2)) / float(stride);
 #else
@@ -78,6 +113,11 @@ void main()
   vec3 wv = vec3(0.5 * (0.5 - tv) * (0.5 - tv), 0.75 - tv * tv, 0.5 * (0.5 + tv) * (0.5 + tv));
   vec4 total = vec4(0.0);
   vec4 total2 = vec4(0.0);
+#ifdef UPSAMPLE_TERMS
+  vec4 total_diffuse = vec4(0.0);
+  vec4 total_glossy = vec4(0.0);
+  vec4 total_world = vec4(0.0);
+#endif
   float weight = 0.0;
 #ifdef UPSAMPLE_FIELD
   float turn2 = 0.0;       /* Σ weight × the emitters' turn² over the taps */
@@ -103,9 +143,17 @@ void main()
       float plane = abs(dot(n, offset));
       float scale = 0.1 * length(offset) + 1e-4;
       w *= facing4 * facing4 * exp(-(plane / scale) * (plane / scale));
-      total += w * texelFetch(low_image, ivec2(i, low.y - 1 - j), 0);
+      ivec2 cell = ivec2(i, low.y - 1 - j);
+#ifdef UPSAMPLE_IMAGE
+      total += w * texelFetch(low_image, cell, 0);
+#endif
+#ifdef UPSAMPLE_TERMS
+      total_diffuse += w * texelFetch(low_diffuse, cell, 0);
+      total_glossy += w * texelFetch(low_glossy, cell, 0);
+      total_world += w * texelFetch(low_world, cell, 0);
+#endif
 #ifdef UPSAMPLE_PAIR
-      vec4 second = texelFetch(low_image2, ivec2(i, low.y - 1 - j), 0);
+      vec4 second = texelFetch(low_image2, cell, 0);
       total2 += w * second;
 #endif
 #ifdef UPSAMPLE_FIELD
@@ -124,6 +172,18 @@ void main()
   }
   vec4 result = total / max(weight, 1e-30);
   vec4 result2 = total2 / max(weight, 1e-30);
+#ifdef UPSAMPLE_TERMS
+  if (own && weight > 1e-8) {  /* another surface, and gather points on it */
+    imageStore(out_diffuse, px, total_diffuse / weight);
+    imageStore(out_glossy, px, total_glossy / weight);
+    imageStore(out_world, px, total_world / weight);
+  }
+  else {
+    imageStore(out_diffuse, px, texelFetch(full_diffuse, centre_px, 0));
+    imageStore(out_glossy, px, texelFetch(full_glossy, centre_px, 0));
+    imageStore(out_world, px, texelFetch(full_world, centre_px, 0));
+  }
+#endif
 #ifdef UPSAMPLE_FIELD
   if (weight <= 1e-8) {
     result = vec4(0.0, 0.0, 0.0, -1.0);
@@ -133,7 +193,7 @@ void main()
     result.w = sqrt(glossy_turn2 / weight);
     result2.w = sqrt(turn2 / weight);
   }
-#else
+#elif !defined(UPSAMPLE_TERMS)
   if (weight <= 1e-8) {
     float best = 1e30;
     result = vec4(0.0);
@@ -154,7 +214,9 @@ void main()
     }
   }
 #endif
+#ifdef UPSAMPLE_IMAGE
   imageStore(out_image, px, result);
+#endif
 #ifdef UPSAMPLE_PAIR
   imageStore(out_image2, px, result2);
 #endif

@@ -2,7 +2,12 @@
 import numpy as np
 import pytest
 
-from voxgi.voxgi_addon.preview.upsample import EmitterField, sample_pixels, upsample
+from voxgi.voxgi_addon.preview.upsample import (
+    EmitterField,
+    sample_pixels,
+    upsample,
+    upsample_at,
+)
 
 
 def two_walls(height=24, width=32):
@@ -129,3 +134,25 @@ def test_the_emitters_field_reproduces_a_linear_light_and_tells_where_it_turns()
     own = EmitterField(position, position, np.ones((height, width)), np.ones((height, width), bool),
                        position, normal, 1, None).at_centres(pick)
     assert np.array_equal(own[2], position.reshape(-1, 3)[pick]) and not own[3].any()
+
+
+@pytest.mark.parametrize("stride", [1, 2])
+def test_a_sub_pixel_sample_reads_the_gathers_of_the_surface_it_sees(stride):
+    """``upsample_at`` (the GLSL's UPSAMPLE_TERMS): a sample of a pixel on the floor's side of
+    the crease that sees the wall (half a pixel right) takes the wall's gathered value, not the
+    floor's; a point on neither surface fits no gather point (its centre's value is kept)."""
+    position, normal, value = two_walls()
+    height, width = value.shape[:2]
+    hit = np.ones((height, width), bool)
+    rows, cols = sample_pixels(height, width, stride)
+    low = [value[rows][:, cols], 2.0 * value[rows][:, cols]]
+    valid = hit[rows][:, cols]
+    row, col = np.array([11, 11]), np.array([width // 2 - 1, width // 2 - 1])
+    wall = np.array([[1.0, row[0] / height, (col[0] + 0.5) / width],   # the wall, seen
+                     [0.5, 0.5, 0.5]], np.float32)                     # in the air
+    normals = np.array([[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], np.float32)
+    (first, second), fits = upsample_at(low, valid, position, normal, stride, row, col, wall,
+                                        normals, (0.5, 0.0))
+    assert fits.tolist() == [True, False]
+    assert abs(first[0, 0] - (2.0 + 0.02 * row[0])) < 0.02  # the wall's, not the floor's 0.35
+    assert np.allclose(second[0], 2.0 * first[0]) and (first[1] == 0).all()

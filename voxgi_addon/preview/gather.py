@@ -91,9 +91,11 @@ VIEW_BACKOFF = 2e-4  # metres: gather points step back along the camera ray (see
 
 
 def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: GatherSettings,
-              stride: int, direction=None) -> np.ndarray:
+              stride: int, direction=None, low: bool = False) -> np.ndarray:
     """(H, W, 4) float32: Diffuse Indirect (RGB, Cycles' units) and AO per pixel, 0 where the
-    pixel sees no surface.
+    pixel sees no surface. low : return (the filtered gather points' values (Hl, Wl, 4), their
+    valid (Hl, Wl) bool) instead, before the upsample (``upsample.upsample`` of them is the
+    image; ``upsample.upsample_at`` reads them at other points).
 
     hit : (H, W) bool; position, normal : (H, W, 3) the G-buffer (row 0 = top; normals facing
     the viewer). albedo, emission : (M + 1, 3) per material (``passes.material_table``).
@@ -120,15 +122,18 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     variance[valid] = var
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
                               iterations=settings.denoise_iterations)
+    if low:
+        return values, valid
     return upsample(values, valid, hit, position, normal, stride)
 
 
 def gather_glossy(tris, lights, principled, emission, hit, position, normal, direction, material,
-                  settings: GatherSettings, stride: int) -> np.ndarray:
+                  settings: GatherSettings, stride: int, low: bool = False) -> np.ndarray:
     """(H, W, 3) float32: Glossy Indirect (Cycles' units, without the glossy colour) per pixel,
     0 where the pixel sees no surface — ``settings.glossy_rays`` exact rays from the GGX visible
     normals of each gather point (``gi.exact_glossy``), the à-trous filter and the upsample of
-    ``gather_gi`` (the glossy light is filtered in the AO slot's place, which stays 0).
+    ``gather_gi`` (the glossy light is filtered in the AO slot's place, which stays 0); low :
+    ``gather_gi``'s (values (Hl, Wl, 4), valid) instead.
 
     direction : (H, W, 3) the camera rays' unit directions; material : (H, W) material index
     per pixel (the tables' last row for none); principled : ``passes.principled_table``.
@@ -137,26 +142,32 @@ def gather_glossy(tris, lights, principled, emission, hit, position, normal, dir
         "world": settings.world, "hit_samples": settings.hit_samples,
         "hit_glossy": settings.hit_glossy,
         "cache": radiance_cache(tris, lights, principled, emission, settings)},
-        hit, position, normal, direction, material, settings, stride)
+        hit, position, normal, direction, material, settings, stride, low)
 
 
 def gather_glossy_world(tris, world, principled, hit, position, normal, direction, material,
-                        settings: GatherSettings, stride: int, emission=None) -> np.ndarray:
+                        settings: GatherSettings, stride: int, emission=None,
+                        low: bool = False) -> np.ndarray:
     """(H, W, 3) float32: the Glossy Direct of the world and, given their ``emission`` table,
     the emissive surfaces (Cycles' units, without the glossy colour) per pixel —
     ``gi.exact_glossy.glossy_world_direct`` with ``settings.glossy_rays`` rays of each
     technique at the gather points of ``gather_glossy``, the same filter and upsample.
-    world : ``gi.world_light.WorldLight`` (None with no emission: zeros)."""
+    world : ``gi.world_light.WorldLight`` (None with no emission: zeros); low : as
+    ``gather_glossy``'s."""
     if world is None and emission is None:
+        if low:
+            rows, cols = sample_pixels(*hit.shape, stride)
+            valid = hit[rows][:, cols]
+            return np.zeros(valid.shape + (4,), np.float32), valid
         return np.zeros(hit.shape + (3,), np.float32)
     emitters = None if emission is None else emitter_light(tris, emission)
     return _glossy_cells(glossy_world_direct, (tris, world, principled),
                          {"emission": emission, "emitters": emitters},
-                         hit, position, normal, direction, material, settings, stride)
+                         hit, position, normal, direction, material, settings, stride, low)
 
 
 def _glossy_cells(estimator, scene, options, hit, position, normal, direction, material,
-                  settings: GatherSettings, stride: int) -> np.ndarray:
+                  settings: GatherSettings, stride: int, low: bool = False) -> np.ndarray:
     """``estimator(points, normals, views, materials, ids, *scene, rays, seed, **options)`` →
     (rgb, variance) at the glossy gather points (stepped back along the camera rays), filtered
     and upsampled to (H, W, 3)."""
@@ -175,4 +186,6 @@ def _glossy_cells(estimator, scene, options, hit, position, normal, direction, m
     variance[valid, 0] = var
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
                               iterations=settings.denoise_iterations, fit=False)
+    if low:
+        return values, valid
     return upsample(values, valid, hit, position, normal, stride)[..., :3]

@@ -49,7 +49,7 @@ from .gather import (
     gather_glossy_world,
     radiance_cache,
 )
-from .upsample import PLANE_TOLERANCE, STRIDES, EmitterField, sample_pixels, upsample
+from .upsample import PLANE_TOLERANCE, STRIDES, EmitterField, sample_pixels, upsample, upsample_at
 
 PASS_NAMES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color",
               "Glossy Direct", "Glossy Indirect", "Glossy Color", "Ambient Occlusion")
@@ -440,9 +440,10 @@ def accumulate_pass(sums, snapshot, hit, mat, normals, views, direct, indirect, 
                     shine, glossy_world=None, base=None):
     """Add one sub-pixel pass to ``sums`` (name of SUMS → (H·W, 3) float64, ``coverage`` and
     ``ao`` (H·W,)): hit, mat, normals, views, direct, shine as ``compose_passes`` takes them
-    for this pass's camera rays; indirect, ao, glossy, glossy_world : the centre pass's
-    gathered terms at the same pixels (the gathers are not anti-aliased); base : (N, 3) Base
-    Color per texel (``scene.textures.primary_base``) or None."""
+    for this pass's camera rays; indirect, ao, glossy, glossy_world : the gathered terms at
+    this pass's samples (``render_passes``: their centre's, or the gathers at their own points
+    where they see another surface); base : (N, 3) Base Color per texel
+    (``scene.textures.primary_base``) or None."""
     _, _, _, emission = material_table(snapshot)
     cos_view = np.clip(np.einsum("ij,ij->i", normals, views), 0.0, 1.0)
     diffuse_colour, glossy_colour = principled_colours(snapshot, mat, cos_view, base)
@@ -880,11 +881,13 @@ def render_passes(snapshot, gi_state, width: int, height: int, cones: ConeSettin
     filter_width : Cycles' pixel Filter Size (Blackman-Harris, pixels). Accurate quality
     anti-aliases with it: ``subpixel_passes`` camera passes, each with its own visibility,
     direct light, glossy light of the lamps and colours, averaged (``accumulate_pass``); the
-    gathers come from the pixel centres, and so do the emitters' glossy light and the
-    unshadowed sum of their Diffuse Direct — read there from their field, evaluated at the
-    gather points (``emitter_field``) — except in the passes that see another surface than
-    their pixel's centre (``same_surface``), which read the field at their own points (the
-    shadow rays are each pass's own). ≤ 0, or Fast quality: pixel centres only.
+    gathered terms (Diffuse Indirect, AO, Glossy Indirect, the world's glossy light: the
+    gathers upsampled to the pixel centres) come from the pixel centres, and so do the
+    emitters' glossy light and the unshadowed sum of their Diffuse Direct — read there from
+    their field, evaluated at the gather points (``emitter_field``) — except in the passes that
+    see another surface than their pixel's centre (``same_surface``), which read the gathers
+    (``upsample.upsample_at``) and the field at their own points (the shadow rays are each
+    pass's own). ≤ 0, or Fast quality: pixel centres only.
 
     Returns (passes, timings): passes maps each name of PASS_NAMES to an (H, W, 3) float32
     image (row 0 = top); timings maps stage names to seconds.
@@ -971,11 +974,18 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
                             world_mips(getattr(snapshot.world, "radiance", None)))
 
     t0 = time.perf_counter()
+    low = {}  # Accurate: the gather points' filtered values (upsample_at reads them)
+
+    def upsampled(values_valid, channels):  # the gather points' values at every centre
+        return upsample(*values_valid, seen.hit, seen.position, seen.normal,
+                        gi_stride)[..., :channels].reshape(-1, channels)[hit]
+
     if quality == "ACCURATE":
         _, _, _, emission = material_table(snapshot)
-        traced = gather_gi(tris, lights, principled_table(snapshot), emission, seen.hit,
-                           seen.position, seen.normal, gather_settings, gi_stride,
-                           seen.direction).reshape(-1, 4)[hit]
+        low["diffuse"] = gather_gi(tris, lights, principled_table(snapshot), emission, seen.hit,
+                                   seen.position, seen.normal, gather_settings, gi_stride,
+                                   seen.direction, low=True)
+        traced = upsampled(low["diffuse"], 4)
         timings["diffuse+ao gather"] = time.perf_counter() - t0
     else:
         traced = _traced(seen, gi_stride, hit, diffuse_and_ao, 4)
@@ -983,10 +993,11 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     indirect, ao = traced[:, :3], traced[:, 3]
     t0 = time.perf_counter()
     if glossy_indirect and quality == "ACCURATE":
-        glossy = gather_glossy(tris, lights, principled_table(snapshot), emission,
-                               seen.hit, seen.position, seen.normal, seen.direction,
-                               materials.reshape(height, width), gather_settings, gi_stride
-                               ).reshape(-1, 3)[hit]
+        low["glossy"] = gather_glossy(tris, lights, principled_table(snapshot), emission,
+                                      seen.hit, seen.position, seen.normal, seen.direction,
+                                      materials.reshape(height, width), gather_settings,
+                                      gi_stride, low=True)
+        glossy = upsampled(low["glossy"], 3)
         timings["glossy gather"] = time.perf_counter() - t0
     elif glossy_indirect:
         glossy = _traced(seen, gi_stride, hit, glossy_cones, 3)
@@ -1005,10 +1016,18 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     t0 = time.perf_counter()
     emitting = any(light.type == "EMITTERS" for light in lights)
     emitters = next((light for light in lights if light.type == "EMITTERS"), None)
-    glossy_world = gather_glossy_world(tris, world_light(snapshot.world), principled_table(snapshot),
-                                       seen.hit, seen.position, seen.normal, seen.direction,
+    low["world"] = gather_glossy_world(tris, world_light(snapshot.world),
+                                       principled_table(snapshot), seen.hit, seen.position,
+                                       seen.normal, seen.direction,
                                        materials.reshape(height, width), gather_settings,
-                                       gi_stride, emission if emitting else None).reshape(-1, 3)
+                                       gi_stride, emission if emitting else None, low=True)
+    glossy_world = np.zeros((height * width, 3))
+    glossy_world[hit] = upsampled(low["world"], 3)
+    valid = low["diffuse"][1]
+    # the gather points' (Diffuse Indirect, AO), Glossy Indirect and world glossy light, for
+    # the sub-pixel samples that see another surface than their centre (upsample_at)
+    gathered = [low["diffuse"][0], low.get("glossy", (np.zeros_like(low["diffuse"][0]),))[0],
+                low["world"][0]]
     timings["world glossy gather"] = time.perf_counter() - t0
     centre_glow = np.zeros((height * width, 3))
     centre_unshadowed = np.zeros((height * width, 3))
@@ -1057,15 +1076,29 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         views = -seen.direction.reshape(-1, 3)[hit]
         base = primary_base(tris, seen, hit, principled_table(snapshot)[0][mat],
                             snapshot.camera, width, height, filter_width)  # None: untextured
-        # the emitters' glossy light and unshadowed Diffuse Direct: the centre's where this
-        # pass sees the surface its pixel's centre sees, the field at the pass's own points
-        # where it sees another (a 1-pixel slot between a ceiling and a panel under it)
-        glow, unshadowed = centre_glow[hit], None
-        if emitters is not None:  # (materials, positions, normals: the centre's)
+        # The gathered terms and the emitters' glossy light and unshadowed Diffuse Direct:
+        # the centre's where this pass sees the surface its pixel's centre sees, else the
+        # gathers and the field at the pass's own points (a silhouette's samples that see the
+        # wall behind; a 1-pixel slot between a ceiling and a panel under it), the centre's
+        # terms where no gather point fits (docs/gi_pipeline.md "Anti-aliasing")
+        terms = [indirect[hit], ao[hit], glossy[hit], glossy_world[hit]]
+        other = np.zeros(0, np.int64)
+        if seen is not centre_seen:  # (materials, positions, normals: the centre's)
             other = np.flatnonzero(~same_surface(
                 True, mat, p, n, centre_seen.hit.ravel()[hit], materials[hit],
                 positions[hit], normals[hit]))
-            rows, cols = np.divmod(hit[other], width)
+        rows, cols = np.divmod(hit[other], width)
+        if len(other):
+            (di_ao, gl, world), fits = upsample_at(
+                gathered, valid, centre_seen.position, centre_seen.normal, gi_stride, rows,
+                cols, p[other], n[other], offset)
+            own = other[fits]
+            for k, value in enumerate((di_ao[fits, :3], di_ao[fits, 3], gl[fits, :3],
+                                       world[fits, :3])):
+                terms[k] = terms[k].copy()
+                terms[k][own] = value
+        glow, unshadowed = centre_glow[hit], None
+        if emitters is not None:
             glossy_at, glossy_turn, diffuse_at, diffuse_turn = field.at(
                 rows, cols, p[other], n[other], offset)
             glow[other] = emitters_shine(
@@ -1083,16 +1116,15 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         shine = glossy_direct_radiance(snapshot, p, n, views, mat,
                                        per_light[:len(snapshot.lights)], hit, base)
         accumulate_pass(sums if into is None else into, snapshot, hit, mat, n, views,
-                        per_light.sum(axis=0),
-                        indirect[hit], ao[hit], glossy[hit], shine + glow, glossy_world[hit],
-                        base)
+                        per_light.sum(axis=0), terms[0], terms[1], terms[2], shine + glow,
+                        terms[3], base)
         if seen.holdout is not None:  # the film's alpha: these rays show nothing, not the world
             (sums if into is None else into)["holdout"][seen.holdout.ravel() & pixels] += 1.0
         if lamps is not None:  # the lamps' light as the GPU's sums hold it after the lamps
             only = new_sums(height * width)
             accumulate_pass(only, snapshot, hit, mat, n, views,
-                            per_light[:len(snapshot.lights)].sum(axis=0), indirect[hit],
-                            ao[hit], glossy[hit], shine, glossy_world[hit], base)
+                            per_light[:len(snapshot.lights)].sum(axis=0), terms[0], terms[1],
+                            terms[2], shine, terms[3], base)
             lamps["light"] = lamp_light(only["diffuse_direct"], only["diffuse_color"],
                                         only["glossy_direct"], only["glossy_color"])
 

@@ -157,16 +157,8 @@ class EmitterField:
         to the emitters beyond it (the distance is 1-Lipschitz) + |n − n_k|; the glossy one
         adds the view direction's turn (step / the camera's distance) and |n − n_k| again; −1
         where no tap weighs (the light 0 there)."""
-        height, width = self.position.shape[:2]
-        stride = self.stride
-        tap_rows, tap_cols = sample_pixels(height, width, stride)
-        hl, wl = len(tap_rows), len(tap_cols)
         p = np.asarray(points, np.float32).reshape(-1, 3)
         n = np.asarray(normals, np.float32).reshape(-1, 3)
-        u = ((np.asarray(cols) + np.float32(offset[0]) - stride // 2) / stride).astype(np.float32)
-        v = ((np.asarray(rows) + np.float32(offset[1]) - stride // 2) / stride).astype(np.float32)
-        ci, cj = np.floor(u + 0.5).astype(np.int64), np.floor(v + 0.5).astype(np.int64)
-        wu, wv = _bspline(u - ci), _bspline(v - cj)
         glossy = np.zeros((len(p), 3), np.float32)
         diffuse = np.zeros((len(p), 3), np.float32)
         weight = np.zeros(len(p), np.float32)
@@ -174,33 +166,74 @@ class EmitterField:
         glossy_turn2 = np.zeros(len(p), np.float32)
         eye_distance = None if self.eye is None else \
             np.maximum(np.linalg.norm(p - self.eye, axis=1), np.float32(1e-6))
-        for dj in (-1, 0, 1):
-            for di in (-1, 0, 1):
-                j, i = np.clip(cj + dj, 0, hl - 1), np.clip(ci + di, 0, wl - 1)
-                pk = self.position[tap_rows[j], tap_cols[i]].astype(np.float32)
-                nk = self.normal[tap_rows[j], tap_cols[i]].astype(np.float32)
-                offset_k = pk - p
-                facing = np.maximum(np.einsum("ij,ij->i", n, nk), 0.0)
-                plane = np.abs(np.einsum("ij,ij->i", n, offset_k))
-                step = np.sqrt(np.einsum("ij,ij->i", offset_k, offset_k))
-                scale = PLANE_TOLERANCE * step + np.float32(1e-4)
-                w = (wu[di + 1] * wv[dj + 1] * self.valid[j, i] * facing ** NORMAL_POWER
-                     * np.exp(-(plane / scale) ** 2)).astype(np.float32)
-                glossy += w[:, None] * self.glossy[j, i]
-                diffuse += w[:, None] * self.diffuse[j, i]
-                weight += w
-                room = self.distance[j, i] - step
-                bend = np.linalg.norm(n - nk, axis=1)
-                turn = np.where(room > 0.0, np.minimum(step / np.where(room > 0.0, room, 1.0),
-                                                       np.float32(1e15)), np.float32(1e15)) + bend
-                turn2 += np.where(w > 0.0, w * turn * turn, 0.0)
-                if eye_distance is not None:
-                    turn = turn + step / eye_distance
-                turn = turn + bend
-                glossy_turn2 += np.where(w > 0.0, w * turn * turn, 0.0)
+        for j, i, w, step, nk in _taps(self.valid, self.position, self.normal, self.stride,
+                                       rows, cols, p, n, offset):
+            glossy += w[:, None] * self.glossy[j, i]
+            diffuse += w[:, None] * self.diffuse[j, i]
+            weight += w
+            room = self.distance[j, i] - step
+            bend = np.linalg.norm(n - nk, axis=1)
+            turn = np.where(room > 0.0, np.minimum(step / np.where(room > 0.0, room, 1.0),
+                                                   np.float32(1e15)), np.float32(1e15)) + bend
+            turn2 += np.where(w > 0.0, w * turn * turn, 0.0)
+            if eye_distance is not None:
+                turn = turn + step / eye_distance
+            turn = turn + bend
+            glossy_turn2 += np.where(w > 0.0, w * turn * turn, 0.0)
         lonely = weight <= 1e-8
         safe = np.where(lonely, 1.0, weight)
         glossy = np.where(lonely[:, None], 0.0, glossy / safe[:, None])
         diffuse = np.where(lonely[:, None], 0.0, diffuse / safe[:, None])
         return (glossy, np.where(lonely, -1.0, np.sqrt(glossy_turn2 / safe)),
                 diffuse, np.where(lonely, -1.0, np.sqrt(turn2 / safe)))
+
+
+def upsample_at(values, valid, position, normal, stride: int, rows, cols, points, normals,
+                offset=(0.0, 0.0)):
+    """``upsample``'s joint-bilateral weights at any surface points (the numpy twin of
+    ``shaders/upsample.glsl`` UPSAMPLE_TERMS; docs/gi_pipeline.md "Anti-aliasing"): a
+    sub-pixel pass's samples that see another surface than their pixel's centre read the
+    gathers there. values : a sequence of (Hl, Wl, C) low-resolution images of the gather
+    points (``gather.gather_gi(low=True)``'s), valid : (Hl, Wl) bool; position, normal :
+    (H, W, 3) the pixel centres' G-buffer (the taps'; row 0 on top); points, normals : (N, 3)
+    seen through pixels (rows from the top, cols) moved by ``offset`` (x right, y down,
+    pixels). Returns ([(N, C) float32 per image], fits (N,) bool): where no tap weighs the
+    values are 0 and fits False (the caller keeps the centre's there)."""
+    p = np.asarray(points, np.float32).reshape(-1, 3)
+    n = np.asarray(normals, np.float32).reshape(-1, 3)
+    totals = [np.zeros((len(p), image.shape[-1]), np.float32) for image in values]
+    weight = np.zeros(len(p), np.float32)
+    for j, i, w, _, _ in _taps(valid, position, normal, stride, rows, cols, p, n, offset):
+        for total, image in zip(totals, values):
+            total += w[:, None] * image[j, i]
+        weight += w
+    fits = weight > 1e-8
+    safe = np.where(fits, weight, 1.0)[:, None]
+    return [np.where(fits[:, None], total / safe, 0.0).astype(np.float32)
+            for total in totals], fits
+
+
+def _taps(valid, position, normal, stride: int, rows, cols, p, n, offset):
+    """``upsample``'s 3 × 3 taps around points p (N, 3) float32 with normals n seen through
+    pixels (rows, cols) moved by ``offset``: per tap (row j, column i of the gather points,
+    weight (N,) float32, the distance to its point (N,), its normal (N, 3))."""
+    height, width = position.shape[:2]
+    tap_rows, tap_cols = sample_pixels(height, width, stride)
+    hl, wl = len(tap_rows), len(tap_cols)
+    u = ((np.asarray(cols) + np.float32(offset[0]) - stride // 2) / stride).astype(np.float32)
+    v = ((np.asarray(rows) + np.float32(offset[1]) - stride // 2) / stride).astype(np.float32)
+    ci, cj = np.floor(u + 0.5).astype(np.int64), np.floor(v + 0.5).astype(np.int64)
+    wu, wv = _bspline(u - ci), _bspline(v - cj)
+    for dj in (-1, 0, 1):
+        for di in (-1, 0, 1):
+            j, i = np.clip(cj + dj, 0, hl - 1), np.clip(ci + di, 0, wl - 1)
+            pk = position[tap_rows[j], tap_cols[i]].astype(np.float32)
+            nk = normal[tap_rows[j], tap_cols[i]].astype(np.float32)
+            offset_k = pk - p
+            facing = np.maximum(np.einsum("ij,ij->i", n, nk), 0.0)
+            plane = np.abs(np.einsum("ij,ij->i", n, offset_k))
+            step = np.sqrt(np.einsum("ij,ij->i", offset_k, offset_k))
+            scale = PLANE_TOLERANCE * step + np.float32(1e-4)
+            w = (wu[di + 1] * wv[dj + 1] * valid[j, i] * facing ** NORMAL_POWER
+                 * np.exp(-(plane / scale) ** 2)).astype(np.float32)
+            yield j, i, w, step, nk
