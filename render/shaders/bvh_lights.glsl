@@ -20,6 +20,20 @@ float visible_to(vec3 origin, vec3 target)
   return bvh_any_hit(origin, ray / max(len, 1e-30), len) ? 0.0 : 1.0;
 }
 
+/* The j-th stratum a light's loop over m × m strata draws (direct_light._visible_share): the
+ * four corners of the m × m grid first, then the others in order, so that for m ≥ 3 a loop
+ * can stop after the corners when they all agree (ADAPTIVE_FROM). */
+int stratum_order(int j, int m)
+{
+  if (j < 4) {
+    return j == 0 ? 0 : (j == 1 ? m - 1 : (j == 2 ? m * (m - 1) : m * m - 1));
+  }
+  int i = j - 4;
+  return i < m - 2 ? i + 1 : (i < m * m - m - 2 ? i + 2 : i + 3);
+}
+
+#define ADAPTIVE_FROM 3 /* strata sides from which the corners may settle a light's share */
+
 float sun_light(int light, vec3 p, vec3 n, uint state, int m)
 {
   vec3 to_light = -light_texel(light, 5).xyz;
@@ -35,12 +49,17 @@ float sun_light(int light, vec3 p, vec3 n, uint state, int m)
   vec3 t, b;
   perpendicular_basis(to_light, t, b);
   float visible = 0.0;
-  for (int k = 0; k < m * m; k++) {
-    vec2 disk = concentric_disk(hashed_stratum(state, k, m)) * tan_half;
+  int drawn = 0;
+  for (int j = 0; j < m * m; j++) {
+    if (j == 4 && m >= ADAPTIVE_FROM && (visible == 0.0 || visible == 4.0)) {
+      break; /* the corners agree: the light is all seen or all hidden */
+    }
+    vec2 disk = concentric_disk(hashed_stratum(state, stratum_order(j, m), m)) * tan_half;
     vec3 dir = normalize(to_light + disk.x * t + disk.y * b);
     visible += bvh_any_hit(origin, dir, BVH_FAR) ? 0.0 : 1.0;
+    drawn++;
   }
-  return value * visible / float(m * m);
+  return value * visible / float(drawn);
 }
 
 float point_light(int light, int kind, vec3 p, vec3 n, uint state, int m)
@@ -75,11 +94,16 @@ float point_light(int light, int kind, vec3 p, vec3 n, uint state, int m)
   vec3 t, b;
   perpendicular_basis(w, t, b);
   float visible = 0.0;
-  for (int k = 0; k < m * m; k++) {
-    vec2 disk = concentric_disk(hashed_stratum(state, k, m)) * radius;
+  int drawn = 0;
+  for (int j = 0; j < m * m; j++) {
+    if (j == 4 && m >= ADAPTIVE_FROM && (visible == 0.0 || visible == 4.0)) {
+      break; /* the corners agree */
+    }
+    vec2 disk = concentric_disk(hashed_stratum(state, stratum_order(j, m), m)) * radius;
     visible += visible_to(origin, centre.xyz + disk.x * t + disk.y * b);
+    drawn++;
   }
-  return value * visible / float(m * m);
+  return value * visible / float(drawn);
 }
 
 /* Lambert's formula's term of the edge a → b (directions from the point) for its normal n. */
@@ -151,8 +175,11 @@ float area_light(int light, vec4 head, vec3 p, vec3 n, uint state, int m)
   vec3 origin = p + NORMAL_OFFSET * n;
   float f_sum = 0.0;
   float f_lit = 0.0;
-  for (int k = 0; k < m * m; k++) {
-    vec2 s = hashed_stratum(state, k, m);
+  for (int j = 0; j < m * m; j++) {
+    if (j == 4 && m >= ADAPTIVE_FROM && f_sum > 0.0 && (f_lit == 0.0 || f_lit == f_sum)) {
+      break; /* the corners above the horizon agree */
+    }
+    vec2 s = hashed_stratum(state, stratum_order(j, m), m);
     vec2 unit = head.y > 0.5 ? concentric_disk(s) : s * 2.0 - 1.0;
     vec3 target = centre + unit.x * ex + unit.y * ey;
     vec3 w = target - p;

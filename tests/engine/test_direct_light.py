@@ -216,3 +216,42 @@ def test_sampling_patterns_are_stratified_and_on_the_disc():
     assert (np.linalg.norm(d, axis=-1) <= 1 + 1e-12).all()
     many = concentric_disk(rng.random((200000, 2)))
     assert (np.linalg.norm(many, axis=1) < 0.5).mean() == pytest.approx(0.25, abs=0.005)  # uniform
+
+
+def test_corners_that_agree_settle_a_lights_share():
+    """At 4 × 4 strata the four corner strata are traced first; where those that count agree
+    (a point that sees all of a light, or none of it) the other 12 are not traced and the
+    share is theirs — the same as tracing all 16 there. Points in a penumbra trace all 16."""
+    from voxgi.voxgi_addon.gi import direct_light
+
+    class Counting:
+        def __init__(self, inner):
+            self.inner, self.rays = inner, 0
+
+        def occluded(self, origins, dirs, max_t):
+            self.rays += len(origins)
+            return direct_light.raycast.occluded(self.inner, origins, dirs, max_t)
+
+    p, n = floor_points(12, 1.5)
+    blocker = quad_soup([[(-3, -3, 0.5), (0, -3, 0.5), (0, 3, 0.5), (-3, 3, 0.5)]])  # x < 0
+    lights = [LightData("a", "AREA", WHITE, 50.0, frame((0, 0, 1.0)), size=0.6),
+              LightData("p", "POINT", WHITE, 50.0, frame((0.3, 0.2, 1.2)), radius=0.2),
+              LightData("s", "SUN", WHITE, 3.0, frame((0, 0, 5.0), rot_x(0.3)),
+                        angle=math.radians(8.0))]
+    for light in lights:
+        counted = Counting(blocker)
+        got = diffuse_direct(p, n, [light], counted, samples=16, seed=2)
+        saved = direct_light.ADAPTIVE_FROM
+        direct_light.ADAPTIVE_FROM = 99  # every stratum traced
+        try:
+            every = Counting(blocker)
+            full = diffuse_direct(p, n, [light], every, samples=16, seed=2)
+        finally:
+            direct_light.ADAPTIVE_FROM = saved
+        # the same wherever the corners disagree (all 16 traced) or all 16 agree; a point whose
+        # corners agree but not all of its strata (the edge of a penumbra) may differ a little
+        same = np.isclose(got[:, 0], full[:, 0], rtol=1e-12, atol=0.0)
+        assert same.mean() > 0.8, light.type
+        assert np.abs(got - full).max() <= 0.25 * full.max(), light.type
+        assert full[:, 0].min() < 0.5 * full[:, 0].max(), light.type  # some shadow, some light
+        assert counted.rays < 0.6 * every.rays, (light.type, counted.rays, every.rays)

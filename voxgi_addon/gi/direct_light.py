@@ -20,6 +20,11 @@ checked against Cycles 5.0 renders of a white plane (agreement 0.1–0.3 %; docs
   on the light, weighted by their share of the irradiance (a ratio estimator: no noise where
   the light is fully visible).
 
+At 3 × 3 strata and more, a light's four corner strata are traced first; where those that
+count (above the horizon) agree, the point sees all of the light or none of it and the other
+strata are not traced (``_visible_share``): the preview's pixel centres trace 4 shadow rays a
+light outside penumbrae instead of 16.
+
 Normals should face the viewer (Cycles flips back-facing normals before shading).
 """
 from __future__ import annotations
@@ -38,6 +43,7 @@ __all__ = ["diffuse_direct", "emitters_unshadowed", "light_directions", "light_f
 _NORMAL_OFFSET = 1e-5  # metres: shadow rays start this far off the surface, towards the light
 _POINT_CHUNK = 16384
 _ROUND_SIDES = 64
+ADAPTIVE_FROM = 3  # strata sides from which the corners' agreement settles a light's share
 
 
 def stratified_square(count: int, samples: int, rng: np.random.Generator) -> np.ndarray:
@@ -90,13 +96,41 @@ def _visible_share(occluder, origins, directions, lengths, weights=None) -> np.n
     weights : (N, K) importance of each ray, or None for equal weights.
     """
     n, k, _ = directions.shape
-    blocked = _occluded(occluder, np.repeat(origins, k, axis=0), directions.reshape(-1, 3),
-                        lengths.reshape(-1)).reshape(n, k)
-    if weights is None:
-        return 1.0 - blocked.mean(axis=1)
-    total = weights.sum(axis=1)
-    lit = (weights * ~blocked).sum(axis=1)
+    w = np.ones((n, k)) if weights is None else np.asarray(weights, np.float64)
+    side = int(round(math.sqrt(k)))
+    if side >= ADAPTIVE_FROM and side * side == k:
+        # the four corners of the side × side strata first: where those that count agree,
+        # the light is all seen or all hidden and the other rays are not traced
+        # (bvh_lights.glsl stratum_order; docs/gi_pipeline.md "Where a preview's time goes")
+        corners = np.array([0, side - 1, side * (side - 1), k - 1])
+        rest = np.setdiff1d(np.arange(k), corners)
+        blocked = np.zeros((n, k), bool)
+        blocked[:, corners] = _trace(occluder, origins, directions[:, corners],
+                                     lengths[:, corners])
+        counted = w[:, corners] > 0.0
+        seen = (counted & ~blocked[:, corners]).any(axis=1)
+        hidden = (counted & blocked[:, corners]).any(axis=1)
+        settled = counted.any(axis=1) & (seen != hidden)
+        open_rows = np.flatnonzero(~settled)
+        if len(open_rows):
+            blocked[np.ix_(open_rows, rest)] = _trace(
+                occluder, origins[open_rows], directions[open_rows][:, rest],
+                lengths[open_rows][:, rest])
+        w = np.where(settled[:, None], np.where(np.isin(np.arange(k), corners), w, 0.0), w)
+    else:
+        blocked = _trace(occluder, origins, directions, lengths)
+    total = w.sum(axis=1)
+    lit = (w * ~blocked).sum(axis=1)
     return np.divide(lit, total, out=np.zeros(n), where=total > 0)
+
+
+def _trace(occluder, origins, directions, lengths) -> np.ndarray:
+    """(N, K) bool: the rays (N, K, 3) from origins (N, 3) blocked within lengths (N, K)."""
+    n, k, _ = directions.shape
+    if n * k == 0:
+        return np.zeros((n, k), bool)
+    return _occluded(occluder, np.repeat(origins, k, axis=0), directions.reshape(-1, 3),
+                     lengths.reshape(-1)).reshape(n, k)
 
 
 def _visible_share_of_points(occluder, origins, targets, weights=None) -> np.ndarray:
