@@ -20,12 +20,7 @@ from ..blender.settings import pixel_filter_width
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.preview.film import snapshot_combined
 from ..voxgi_addon.preview.passes import PASS_NAMES
-
-# viewport: the 3D view's Rendered mode, imported with the engine (at the add-on's
-# registration): importing the viewport and its tracer modules (compiling them where no
-# bytecode is cached) took about 120 ms of the first view_update's main thread when it
-# imported them itself (docs/gi_pipeline.md "Entering Rendered mode")
-from . import gpu_context, viewport
+from . import gpu_context
 from .pipeline import render_scene_passes
 
 # Our passes other than Combined → (Blender's view-layer toggle, channels).
@@ -65,9 +60,11 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
     # The 3D view's Rendered mode (render/viewport.py): plan and run updates on the worker,
     # trace and draw the view on the GPU.
     def view_update(self, context, depsgraph):
+        from . import viewport
         viewport.view_update(self, context, depsgraph)
 
     def view_draw(self, context, depsgraph):
+        from . import viewport
         viewport.view_draw(self, context, depsgraph)
 
     def render(self, depsgraph):
