@@ -18,11 +18,15 @@ from test_multibounce import REFS, follow_cycles, relative_l1
 # measured (GPU, 160 × 120) at the default Bounces (one bounce in brackets), Combined /
 # Diffuse Indirect: cornell_box 0.127 (0.307) / 0.208 (0.530); emissive_room 0.231 (0.364) /
 # 0.408 (0.717); columned_hall 0.210 (0.399) / 0.337 (0.714); textured_room 0.159 (0.301) /
-# 0.276 (0.601)
+# 0.276 (0.601). The hall re-measured after the radiance cache's faces moved onto their
+# surfaces (docs/gi_pipeline.md "Faces start on their surfaces"): its faces under the roof had
+# started above it, 15–40× too bright, which made up for the cones' own darkness there;
+# Accurate's hall went 0.0575 → 0.048, Fast's 0.210 / 0.337 → 0.238 / 0.393 (the box and the
+# textured room 0.132 / 0.218 and 0.163 / 0.286, within their limits).
 FAST_LIMITS = {
     "cornell_box": {"Combined": 0.146, "Diffuse Indirect": 0.239},
     "emissive_room": {"Combined": 0.265, "Diffuse Indirect": 0.469},
-    "columned_hall": {"Combined": 0.242, "Diffuse Indirect": 0.387},
+    "columned_hall": {"Combined": 0.274, "Diffuse Indirect": 0.452},
     "textured_room": {"Combined": 0.183, "Diffuse Indirect": 0.317},
 }
 
