@@ -172,10 +172,11 @@ STAGES = {"bvh_gather": "diffuse+AO gather", "bvh_glossy": "glossy gather",
 # Texel fetches per invocation of the kernels that trace no ray, read off their shaders: the
 # à-trous filter's 25 taps × (value, variance, position, normal) plus its 3 × 3 variance
 # prefilter, the upsample's 16 cells × 3, the composition's G-buffer, terms and sums; the
-# emitters' field's 9 taps × 4 and its point (and list entry).
+# emitters' field's 9 taps × 4 and its point (and list entry); the sub-pixel passes' list
+# upsample also reads the three gathered terms at each tap (9 × 3 more) and the centre's.
 FETCHES = {"denoise": 25 * 4 + 9, "upsample": 16 * 3, "aa_surface": 16, "aa_light": 5,
            "aa_mask": 2, "aa_list": 4, "aa_list_raw": 4, "relax": 16 * 8,
-           "upsample_field": 9 * 4 + 2, "upsample_field_list": 9 * 4 + 3}
+           "upsample_field": 9 * 4 + 2, "upsample_field_list": 9 * 7 + 6}
 
 
 def _traversals(kernel, width, height, constants, lights) -> tuple[float, float]:
@@ -195,7 +196,9 @@ def _traversals(kernel, width, height, constants, lights) -> tuple[float, float]
     if kernel in ("bvh_direct", "bvh_emitter_glossy") and int(sampling[2] + 0.5) == 2:
         return 0.0, 0.0  # the emitters' sums alone (their field, the centres'): no ray
     if kernel == "bvh_direct":
-        block = float(sampling[1])  # an m × m block of strata: a shadow ray each
+        # an m × m block of strata: a shadow ray each — an upper bound from 3 × 3 on, where a
+        # lamp whose 4 corner strata agree traces those 4 alone (direct_light._visible_share)
+        block = float(sampling[1])
         return invocations * block * block, 0.0
     if kernel == "bvh_emitter_glossy":
         return invocations * float(sampling[1]), 0.0
