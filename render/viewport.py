@@ -208,7 +208,7 @@ class ViewportRenderer:
         if preparing:
             return preparing
         if progressive.converged:
-            if self.cache.building is None:
+            if not self.cache.resume():
                 return ""
             # converged on the last cache while a new one is built: build on (a chunk per
             # draw); its completion changes the image key and the image restarts

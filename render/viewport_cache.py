@@ -39,6 +39,7 @@ class ViewportCache:
         self.layout = None     # (tris, cache settings, holder) of the layout asked for
         self._inputs = None    # the build's arguments (``stage``)
         self.generation = 0
+        self._wanted = None    # (key, arguments) of a build a held stage asked for
         # set by the viewport while it traces a coarse first image: a new build does not start
         # (nor go on) in it, so the image of a change is not held up by the build's first
         # chunk (its layout alone 0.3 s); the tiles after it start the build
@@ -52,8 +53,12 @@ class ViewportCache:
             return None
         # the BVH's node texture is replaced whenever other triangles are uploaded
         key = (bvh.nodes, cache_key(lights, principled, emission, *cache_settings(settings)))
-        if _same(key, self.key) or self.hold:
+        if _same(key, self.key):
             return self.texture
+        if self.hold:  # asked for, not begun: ``resume`` begins it if the image converges first
+            self._wanted = (key, (bvh, lights, principled, emission, settings, tables))
+            return self.texture
+        self._wanted = None
         if self.building is None or not _same(self.building[0], key):
             if self.building is not None and self.building[1] is not None:
                 self.building[1].close()
@@ -94,6 +99,17 @@ class ViewportCache:
         self.building = (key, cache_stages(bvh, lights, principled, emission, settings, tables,
                                            self.budget, read_back=False, layout=layout))
         return True
+
+    def resume(self) -> bool:
+        """Begin the build a held ``stage`` asked for, when none is under way (the image
+        converged before any unheld stage ran: without this it kept one bounce for good);
+        whether a build is under way now."""
+        if self.building is None and self._wanted is not None and not self.hold:
+            key, inputs = self._wanted
+            self._wanted = None
+            if not _same(key, self.key):
+                self.building, self._inputs = (key, None), inputs
+        return self.building is not None
 
     def advance(self) -> bool:
         """Run one chunk of the build under way (if any); True when it completed the cache.
