@@ -148,15 +148,15 @@ def snap_focus(tris, focus):
     return tuple(float(v) for v in origin + (np.floor((point - origin) / step) + 0.5) * step)
 
 
-def _sites(tris, grids) -> tuple[list, list, list]:
+def _sites(tris, grids, origins: bool = True) -> tuple[list, list, list]:
     """Per grid the (N_i, 3) int32 cells its triangles touch (a coarser grid leaving out the
     cells the next finer grid covers), their (N_i, 6) present faces and their faces' (N_i, 6, 3)
-    ray origins (``RadianceCache``)."""
+    ray origins (``RadianceCache``; origins False: none, for Auto's count of the faces)."""
     corners = np.asarray(tris.positions, np.float64)
     signed = np.asarray(tris.normals, np.float64)
     normals = np.abs(signed)
     triangles = np.arange(len(corners) * 3).reshape(-1, 3)
-    out, present, origins = [], [], []
+    out, present, starts = [], [], []
     for index, grid in enumerate(grids):
         local = (corners - np.asarray(grid.origin)).reshape(-1, 3)
         surface = voxelize_triangles(local, triangles, float(grid.span))
@@ -172,9 +172,10 @@ def _sites(tris, grids) -> tuple[list, list, list]:
             keep &= ~((cells >= start) & (cells < start + res // 2)).all(axis=1)
         out.append(cells[keep].astype(np.int32))
         present.append(np.repeat(reach[keep] > FACE_AXIS_COSINE, 2, axis=1))
-        origins.append(_face_origins(cells[keep], surface, local.reshape(-1, 3, 3) / grid.span,
-                                     signed, keep))
-    return out, present, origins
+        if origins:
+            starts.append(_face_origins(cells[keep], surface,
+                                        local.reshape(-1, 3, 3) / grid.span, signed, keep))
+    return out, present, starts
 
 
 _CLIP_VERTICES = 9  # a triangle clipped by a box's six planes has at most 3 + 6 corners
@@ -348,18 +349,17 @@ def build_cache(tris, resolution: int = 32, count: int = 1, rays: int = 16,
     (up to ``AUTO_GRIDS``) as stay within that budget: finer voxels near the camera, the whole
     scene at least as fine as one grid would be. A camera outside (an object or a room seen
     from outside) keeps one grid (``snap_focus`` gives no focus there)."""
-    if resolution == 0:
-        for choice in AUTO_RESOLUTIONS:
-            cache = build_cache(tris, choice, count, focus=focus)
-            if _rays(cache, rays) <= RAYS_PER_ITERATION:
+    if resolution == 0:  # the layouts are counted without their faces' origins (the most
+        # of a layout's time), then the chosen one is built
+        def within(choice, grids):
+            return sum(int(p.sum()) for p in _sites(tris, cache_grids(
+                tris, choice, grids, focus), origins=False)[1]) * rays <= RAYS_PER_ITERATION
+        for resolution in AUTO_RESOLUTIONS:
+            if within(resolution, count):
                 break
-        if focus is not None and _inside(cache.grids[-1], focus):
-            for nested in range(count + 1, AUTO_GRIDS + 1):
-                finer = build_cache(tris, choice, nested, focus=focus)
-                if _rays(finer, rays) > RAYS_PER_ITERATION:
-                    break
-                cache = finer
-        return cache
+        if focus is not None and _inside(cache_grids(tris, resolution, count, focus)[-1], focus):
+            while count < AUTO_GRIDS and within(resolution, count + 1):
+                count += 1
     grids = cache_grids(tris, resolution, count, focus)
     cells, present, origins = _sites(tris, grids)
     faces = tuple(np.zeros((len(c), 6, 3), np.float32) for c in cells)
@@ -372,6 +372,7 @@ def _inside(grid, point) -> bool:
 
 
 def _rays(cache: RadianceCache, rays: int) -> int:
+    """The rays of one iteration of ``cache`` at ``rays`` rays per face."""
     return sum(int(p.sum()) for p in cache.present) * rays
 
 
