@@ -373,9 +373,10 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
             bvh("bvh_glossy", 2)
             add("upsample pair", 2, lambda: gpu_gather._upsample_shader(True))
         add("upsample", 1, lambda: gpu_gather._upsample_shader(False))
-        if found is not None and found.tail is not None:  # the world's and emitters' glossy
-            bvh("bvh_glossy", 1)
-            add("upsample", 1, lambda: gpu_gather._upsample_shader(False))
+        if found is not None and found.tail is not None:
+            # the world's and emitters' Glossy Direct gather: not in the first coarse image
+            # either (``first_image_options``)
+            bvh("bvh_glossy", 2)
         if found is not None and found.emitters:
             only = ("AREA", "POINT", "SUN", "WORLD")
             bvh("bvh_emitter_glossy", 1, True, only)
@@ -652,17 +653,23 @@ class ViewPreparation:
     def first_image_options(self, snapshot, settings) -> dict:
         """The tracer's options that the coarse image overrides while the tiles' kernels
         (phase 2 of ``kernel_steps``) are not all compiled: the first GI image after entering
-        Rendered mode is traced without the glossy indirect gather (its ``bvh_glossy`` and
-        paired upsample, two draws' compiles and a slice stage: docs/gi_pipeline.md
-        "Entering Rendered mode"); {} once they are."""
+        Rendered mode is traced without the glossy indirect gather and without the world's
+        and emitters' Glossy Direct gather (their ``bvh_glossy`` variants and the paired
+        upsample: compiles of 10–30 ms, 0.3 s with Mesa's cache cold, and a slice stage each:
+        docs/gi_pipeline.md "Entering Rendered mode"); {} once they are."""
         job = preparation.job
         if settings.quality != "ACCURATE" or job is None or job.plan is None:
             return {}
-        key = kernel_key(features(job.plan.tris, job.plan.lights, len(snapshot.lights)),
-                         settings)
-        if not key[3] or not warmup.pending(key, kernel_steps(*key), 2):
+        found = features(job.plan.tris, job.plan.lights, len(snapshot.lights))
+        key = kernel_key(found, settings)
+        if not warmup.pending(key, kernel_steps(*key), 2):
             return {}
-        return {"glossy_indirect": False}
+        options = {}
+        if key[3]:
+            options["glossy_indirect"] = False
+        if found.tail is not None:
+            options["world_glossy"] = False
+        return options
 
     def later_kernels(self, snapshot, settings, budget: float, started: float,
                       whole: bool = False) -> str:
