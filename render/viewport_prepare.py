@@ -58,7 +58,7 @@ from .gpu_bvh import absent_lights, bvh_features, bvh_shader
 from .gpu_scene import WAITING, current_scene
 from .gpu_shaders import LOCAL_SIZE, build_compute, compute_shader, counters, note_upload
 from .gpu_volume import float_texture
-from .progressive import base_options
+from .progressive import STAGE_SHARE, base_options
 
 STEP_SHARE = 0.75  # of the budget: a draw starts no further step predicted to end past it
 QUICK_SCALE = 4     # the quick image has a quarter of the traced image's width and height
@@ -695,7 +695,9 @@ class ViewPreparation:
                    budget: float, started: float):
         """The quick image of ``camera``'s view (module doc) at a quarter of ``width`` ×
         ``height`` (``QUICK_SCALE``), its G-buffer drawn a part of the batch's chunks per call
-        while they fit the budget: the new texture once it is complete, else None (called
+        while they fit ``STAGE_SHARE`` of the budget, as a slice's stages (their raster work
+        ends at the draw's GPU finish, after the draw's Python: at ``STEP_SHARE`` the diorama's
+        quick-image draws took 35 ms): the new texture once it is complete, else None (called
         again with the same ``key`` it goes on; another key starts over)."""
         arrays, batch = self.batch_source, self.batch
         w, h = max(1, width // QUICK_SCALE), max(1, height // QUICK_SCALE)
@@ -706,7 +708,7 @@ class ViewPreparation:
         while state[2] < len(batch.batches):
             # a chunk at least per call, more while the last one's time fits the budget
             if not first and time.perf_counter() - started + self.seconds["quick chunk"] > \
-                    STEP_SHARE * budget:
+                    STAGE_SHARE * budget:
                 return None
             first = False
             t0 = time.perf_counter()
@@ -715,7 +717,7 @@ class ViewPreparation:
             state[2] += 1
             self.seconds["quick chunk"] = time.perf_counter() - t0
         if not first and time.perf_counter() - started + \
-                self.seconds.get("quick shade", 0.0) > STEP_SHARE * budget:
+                self.seconds.get("quick shade", 0.0) > STAGE_SHARE * budget:
             return None
         t0 = time.perf_counter()
         gbuffer = state[1]
