@@ -76,7 +76,8 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                          glossy_indirect: bool = True,
                          filter_width: float = DEFAULT_FILTER_WIDTH,
                          gpu_scene: GPUScene | None = None, gather_hook=None, raster=None,
-                         cache_source=None, on_gpu: bool = False, batch=None):
+                         cache_source=None, on_gpu: bool = False, batch=None,
+                         world_glossy: bool = True):
     """A generator that yields between the GPU stages (G-buffer, each gather, each light's
     direct light, each sub-pixel pass, …) and returns (passes, timings) like
     ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
@@ -104,6 +105,9 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     batch : Accurate: the vertex batch of the scene's triangles for ``raster`` that the caller
     keeps (the viewport's ``gbuffer.ChunkedBatch``, sent a chunk per draw); None: made here for
     this render (``gbuffer.vertex_batch``).
+    world_glossy : Accurate: the world's and emitters' Glossy Direct gathered (the
+    ``bvh_glossy`` world-mode gather); False leaves it out (the viewport's first coarse image
+    while that kernel is not compiled yet: docs/gi_pipeline.md "Entering Rendered mode").
     The viewport's slices run the stages over several draws (``progressive``); the textures
     live in the generator between them, so nothing but its own next stage runs in a draw."""
     check_request(snapshot, width, height, gi_stride, quality)
@@ -120,7 +124,8 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                  gather_settings or GatherSettings(ao_distance=cones.ao_distance),
                  glossy_indirect, filter_width, scene)
         front, timings = yield from _accurate_stages(snapshot, *layer, gather_hook, raster,
-                                                     cache_source, on_gpu=on_gpu, batch=batch)
+                                                     cache_source, on_gpu=on_gpu, batch=batch,
+                                                     world_glossy=world_glossy)
         if scene.uploaded:  # rebuilt and uploaded only what changed
             timings = {"scene build + upload": built, **timings}
         glass = transmission.glass_materials(snapshot, scene.tris)
@@ -135,7 +140,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
         behind, _ = yield from _accurate_stages(
             snapshot, *layer, hook, raster, cache_source,
             camera_tris=transmission.behind_glass(scene.tris, glass),
-            only=transmission.behind_pixels(weight))
+            only=transmission.behind_pixels(weight), world_glossy=world_glossy)
         world = background(snapshot.world, snapshot.camera, width, height, filter_width)
         timings["behind glass"] = time.perf_counter() - t0
         return transmission.composite(front, behind, weight, world), timings
@@ -265,7 +270,7 @@ def _sums_of(texel):
 def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_settings,
                      glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
                      cache_source=None, camera_tris=None, only=None, on_gpu=False,
-                     batch=None):
+                     batch=None, world_glossy=True):
     """Accurate quality on the GPU: the gathers and the emitters' unshadowed glossy light and
     Diffuse Direct at the gather points of the pixel centres' G-buffer (``emitter_fields``),
     the latter upsampled to the centres, then one rasterized G-buffer, direct light
@@ -348,7 +353,8 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
     diffuse_ao, glossy = full if glossy_indirect else (full, zero)
     timings["upsample"] = time.perf_counter() - t0
     glossy_world = low_world = zero
-    if scene.has_scene_lights:  # Glossy Direct of the world and emitters
+    world_glossy = world_glossy and scene.has_scene_lights
+    if world_glossy:  # Glossy Direct of the world and emitters
         t0 = time.perf_counter()
         low_world = low("world glossy", "bvh_glossy", world_mode=True)
         glossy_world = upsample(low_world, centre.inputs, gi_stride, width, height)
@@ -436,7 +442,7 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
         # own point (docs/gi_pipeline.md "Anti-aliasing")
         low_zero = zero if gi_stride == 1 else scene.zeros(low_diffuse.width, low_diffuse.height)
         gathers = ((low_diffuse, low_glossy if glossy_indirect else low_zero,
-                    low_world if scene.has_scene_lights else low_zero),
+                    low_world if world_glossy else low_zero),
                    (diffuse_ao, glossy, glossy_world))
         eye = _eye(snapshot.camera)
         listed_centres = None

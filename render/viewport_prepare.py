@@ -58,7 +58,7 @@ from .gpu_bvh import absent_lights, bvh_features, bvh_shader
 from .gpu_scene import WAITING, current_scene
 from .gpu_shaders import LOCAL_SIZE, build_compute, compute_shader, counters, note_upload
 from .gpu_volume import float_texture
-from .progressive import base_options
+from .progressive import STAGE_SHARE, base_options
 
 STEP_SHARE = 0.75  # of the budget: a draw starts no further step predicted to end past it
 QUICK_SCALE = 4     # the quick image has a quarter of the traced image's width and height
@@ -373,9 +373,10 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
             bvh("bvh_glossy", 2)
             add("upsample pair", 2, lambda: gpu_gather._upsample_shader(True))
         add("upsample", 1, lambda: gpu_gather._upsample_shader(False))
-        if found is not None and found.tail is not None:  # the world's and emitters' glossy
-            bvh("bvh_glossy", 1)
-            add("upsample", 1, lambda: gpu_gather._upsample_shader(False))
+        if found is not None and found.tail is not None:
+            # the world's and emitters' Glossy Direct gather: not in the first coarse image
+            # either (``first_image_options``)
+            bvh("bvh_glossy", 2)
         if found is not None and found.emitters:
             only = ("AREA", "POINT", "SUN", "WORLD")
             bvh("bvh_emitter_glossy", 1, True, only)
@@ -652,17 +653,23 @@ class ViewPreparation:
     def first_image_options(self, snapshot, settings) -> dict:
         """The tracer's options that the coarse image overrides while the tiles' kernels
         (phase 2 of ``kernel_steps``) are not all compiled: the first GI image after entering
-        Rendered mode is traced without the glossy indirect gather (its ``bvh_glossy`` and
-        paired upsample, two draws' compiles and a slice stage: docs/gi_pipeline.md
-        "Entering Rendered mode"); {} once they are."""
+        Rendered mode is traced without the glossy indirect gather and without the world's
+        and emitters' Glossy Direct gather (their ``bvh_glossy`` variants and the paired
+        upsample: compiles of 10–30 ms, 0.3 s with Mesa's cache cold, and a slice stage each:
+        docs/gi_pipeline.md "Entering Rendered mode"); {} once they are."""
         job = preparation.job
         if settings.quality != "ACCURATE" or job is None or job.plan is None:
             return {}
-        key = kernel_key(features(job.plan.tris, job.plan.lights, len(snapshot.lights)),
-                         settings)
-        if not key[3] or not warmup.pending(key, kernel_steps(*key), 2):
+        found = features(job.plan.tris, job.plan.lights, len(snapshot.lights))
+        key = kernel_key(found, settings)
+        if not warmup.pending(key, kernel_steps(*key), 2):
             return {}
-        return {"glossy_indirect": False}
+        options = {}
+        if key[3]:
+            options["glossy_indirect"] = False
+        if found.tail is not None:
+            options["world_glossy"] = False
+        return options
 
     def later_kernels(self, snapshot, settings, budget: float, started: float,
                       whole: bool = False) -> str:
@@ -688,7 +695,9 @@ class ViewPreparation:
                    budget: float, started: float):
         """The quick image of ``camera``'s view (module doc) at a quarter of ``width`` ×
         ``height`` (``QUICK_SCALE``), its G-buffer drawn a part of the batch's chunks per call
-        while they fit the budget: the new texture once it is complete, else None (called
+        while they fit ``STAGE_SHARE`` of the budget, as a slice's stages (their raster work
+        ends at the draw's GPU finish, after the draw's Python: at ``STEP_SHARE`` the diorama's
+        quick-image draws took 35 ms): the new texture once it is complete, else None (called
         again with the same ``key`` it goes on; another key starts over)."""
         arrays, batch = self.batch_source, self.batch
         w, h = max(1, width // QUICK_SCALE), max(1, height // QUICK_SCALE)
@@ -699,7 +708,7 @@ class ViewPreparation:
         while state[2] < len(batch.batches):
             # a chunk at least per call, more while the last one's time fits the budget
             if not first and time.perf_counter() - started + self.seconds["quick chunk"] > \
-                    STEP_SHARE * budget:
+                    STAGE_SHARE * budget:
                 return None
             first = False
             t0 = time.perf_counter()
@@ -708,7 +717,7 @@ class ViewPreparation:
             state[2] += 1
             self.seconds["quick chunk"] = time.perf_counter() - t0
         if not first and time.perf_counter() - started + \
-                self.seconds.get("quick shade", 0.0) > STEP_SHARE * budget:
+                self.seconds.get("quick shade", 0.0) > STAGE_SHARE * budget:
             return None
         t0 = time.perf_counter()
         gbuffer = state[1]
