@@ -302,3 +302,21 @@ def test_a_procedural_material_on_a_mesh_without_uvs_warns(voxgi):
     assert sorted(m.base_color_texture >= 0 for m in variants) == [False, True]
     untextured = next(m for m in variants if m.base_color_texture < 0)
     np.testing.assert_allclose(untextured.base_color, 0.5, atol=1e-6)  # the socket's value
+
+
+def test_masked_sub_pixel_rasters_give_the_same_image(voxgi, monkeypatch):
+    """The sub-pixel passes of a textured scene rasterize only the edge pixels they list
+    (``gbuffer.PixelMask``: depth 0 elsewhere, so the textured fragments there are never
+    shaded): the preview is the one the unmasked rasters give, bit for bit, and it did mask."""
+    from voxgi.render import gbuffer
+
+    scene = build()
+    drawn = []
+    draw = gbuffer.PixelMask.draw
+    monkeypatch.setattr(gbuffer.PixelMask, "draw", lambda self: (drawn.append(1), draw(self)))
+    masked, _ = preview(scene)
+    assert len(drawn) >= 16  # each sub-pixel pass masked its raster
+    monkeypatch.setattr(gbuffer.PixelMask, "draw", lambda self: None)
+    plain, _ = preview(scene)
+    for name in PASSES:
+        assert np.array_equal(masked[name], plain[name]), name
