@@ -38,6 +38,8 @@ from ..voxgi_addon.preview.passes import (
 from ..voxgi_addon.preview.upsample import sample_pixels
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame
 from ..voxgi_addon.scene.glass import is_glass
+from .frame import Frame, Stage
+from .frame import run as run_stages
 from .gbuffer import PixelMask, gbuffer_shader, rasterize, rasterize_stages, read_gbuffer, vertex_batch
 from .gpu_accumulation import SUM_NAMES, GPUSums
 from .gpu_bvh import emitter_glossy_texture, emitters_unshadowed_texture
@@ -47,7 +49,14 @@ from .gpu_compose import SURFACE_SUMS as _SURFACE_SUMS
 from .gpu_compose import run as _run
 from .gpu_compose import shade_stages
 from .gpu_fast import fast_passes, fast_sums
-from .gpu_gather import denoise, gather, gather_low, upsample, upsample_field, upsample_field_list
+from .gpu_gather import (
+    cache_texture,
+    denoise,
+    gather,
+    upsample,
+    upsample_field,
+    upsample_field_list,
+)
 from .gpu_scene import GPUScene, current_scene
 from .gpu_shaders import LOCAL_SIZE
 from .gpu_tracer import read_texture
@@ -271,144 +280,212 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                      glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
                      cache_source=None, camera_tris=None, only=None, on_gpu=False,
                      batch=None, world_glossy=True):
-    """Accurate quality on the GPU: the gathers and the emitters' unshadowed glossy light and
-    Diffuse Direct at the gather points of the pixel centres' G-buffer (``emitter_fields``),
-    the latter upsampled to the centres, then one rasterized G-buffer, direct light
-    (``bvh_direct``, a block of the shadow-ray strata) and glossy light of the lamps per
-    sub-pixel pass (``preview.passes.subpixel_passes``; the gathered terms and the emitters'
-    glossy light and unshadowed sum from the gathers and their field at the pass's own points
-    where the pass sees another surface than its pixel's centre, one ``upsample_field_list``
-    dispatch), summed on the GPU (``shaders/aa_surface.glsl``,
-    ``aa_light.glsl``) and read back once.
+    """Accurate quality on the GPU: ``ACCURATE_STAGES`` run over one layer of the image (the
+    front one, or with ``camera_tris`` and ``only`` what glass hides), a generator returning
+    (passes, timings) — or, with ``on_gpu`` and no edge pixels (point-sampled), (``GPUSums``
+    of the centre pass, timings), nothing read back.
     Triangles, BVH, materials and light tables come from ``scene`` (a ``GPUScene`` updated to
-    ``snapshot``: ``render_passes_stages`` updates it). camera_tris : what the G-buffers draw (None: the
-    scene's triangles; ``transmission.behind_glass`` hides glass from them); only : (H, W)
-    bool the pixels to shade (None: all; the others are background to every kernel).
-    on_gpu : return the centre pass's sums as textures (``GPUSums``) when there are no edge
-    pixels (point-sampled), nothing read back."""
-    timings = {}
-    tris, rough, emission = scene.tris, scene.rough, scene.emission
-    if len(tris) == 0:
+    ``snapshot``: ``render_passes_stages`` updates it). camera_tris : what the G-buffers draw
+    (None: the scene's triangles; ``transmission.behind_glass`` hides glass from them); only :
+    (H, W) bool the pixels to shade (None: all; the others are background to every kernel).
+    The other arguments are ``render_passes_stages``' (each stage's function says what it
+    does with them)."""
+    if len(scene.tris) == 0:
         raise VoxGIError("the scene has no triangles to render")
-    # the radiance cache nests finer grids around the camera (a tile's camera: the view's)
-    gather_settings = focused(gather_settings, snapshot.camera, tris)
-    t0 = time.perf_counter()
-    plan = subpixel_passes(filter_width, light_samples)
-    raster = raster or gbuffer_shader(scene.textured)  # this context's, for its G-buffers
-    seen_tris = tris if camera_tris is None else camera_tris
+    request = {"snapshot": snapshot, "scene": scene, "width": width, "height": height,
+               "light_samples": light_samples, "gi_stride": gi_stride,
+               "settings": gather_settings, "glossy_indirect": glossy_indirect,
+               "filter_width": filter_width, "gather_hook": gather_hook, "raster": raster,
+               "cache_source": cache_source, "camera_tris": camera_tris, "only": only,
+               "on_gpu": on_gpu, "batch": batch, "world_glossy": world_glossy}
+    frame = yield from run_stages(ACCURATE_STAGES, Frame(request, given=set(request)))
+    result = frame["result"] if frame["result"] is not None else frame["passes"]
+    return result, frame.timings
+
+
+# ---- The Accurate frame's stages (docs/gi_pipeline.md "The frame's stages"), in order: each
+# takes the Frame and returns the values it declares.
+
+def _plan(f):
+    """The sub-pixel passes' plan (``preview.passes.subpixel_passes``), the G-buffer raster
+    and vertex batch of this render (the caller's, or made here), the triangles the camera sees
+    and the gathers' settings with the radiance cache focused on the camera."""
+    scene, camera_tris = f["scene"], f["camera_tris"]
+    raster = f["raster"] or gbuffer_shader(scene.textured)  # this context's, for its G-buffers
+    seen_tris = scene.tris if camera_tris is None else camera_tris
+    batch = f["batch"]
     # one vertex batch for every G-buffer of this render (gbuffer.vertex_batch), or the
-    # caller's of the scene's triangles
+    # caller's of the scene's triangles (the viewport's chunked one: rasterize_stages)
     if batch is None or camera_tris is not None:
-        batch = vertex_batch(seen_tris, rough, raster, scene.raster_textures() is not None)
-    # (the viewport's chunked batch: a stage per chunk in view, gbuffer.rasterize_stages)
-    centre = yield from rasterize_stages(seen_tris, snapshot.camera, rough, width, height,
-                                         shader=raster, textures=scene.raster_textures(),
-                                         filter_width=filter_width, batch=batch)
-    if only is not None:  # the other pixels' coverage 0: background to every kernel
+        batch = vertex_batch(seen_tris, scene.rough, raster, scene.raster_textures() is not None)
+    # the radiance cache nests finer grids around the camera (a tile's camera: the view's)
+    return {"plan": subpixel_passes(f["filter_width"], f["light_samples"]),
+            "raster_shader": raster, "vertex_batch": batch, "seen_tris": seen_tris,
+            "tables": scene.gather_tables(),
+            "focused": focused(f["settings"], f["snapshot"].camera, scene.tris)}
+
+
+def _visibility(f):
+    """The pixel centres' G-buffer (``gbuffer.rasterize_stages``: a stage per chunk of the
+    viewport's batch), the pixels outside ``only`` made background."""
+    scene, width, height = f["scene"], f["width"], f["height"]
+    centre = yield from rasterize_stages(f["seen_tris"], f["snapshot"].camera, scene.rough, width,
+                                         height, shader=f["raster_shader"],
+                                         textures=scene.raster_textures(),
+                                         filter_width=f["filter_width"], batch=f["vertex_batch"])
+    if f["only"] is not None:  # the other pixels' coverage 0: background to every kernel
         centre.position = _run("aa_mask", _MASK_SAMPLERS, {
             "gbuffer_position": centre.position,
-            "pixels": float_texture(np.flipud(only).astype(np.float32), (width, height), "R32F")},
+            "pixels": float_texture(np.flipud(f["only"]).astype(np.float32), (width, height),
+                                    "R32F")},
             ("out_position",), width, height)["out_position"]
-    timings["visibility (GPU)"] = time.perf_counter() - t0
-    yield
+    return {"centre": centre}
 
-    t0 = time.perf_counter()
-    bvh, principled, lights = scene.bvh, scene.principled, scene.lights
-    tables = scene.gather_tables()
-    cache = None
-    if cache_source is not None and gather_settings.bounces > 1:
-        # the viewport's cache: one stage of its build, the last complete one read meanwhile
-        cache = yield from cache_source.stage(bvh, lights, principled, emission,
-                                              gather_settings, tables)
-        if cache is None:  # none complete yet: one bounce until there is
-            gather_settings = dataclasses.replace(gather_settings, bounces=1)
-        timings["radiance cache stage"] = time.perf_counter() - t0
-    gathered = (bvh, centre.inputs, lights, principled, emission, gather_settings, gi_stride,
-                width, height)
 
-    def low(kind, kernel="bvh_gather", world_mode=False):
-        """One gather's filtered low-resolution texture (``gpu_gather.gather_low``), its raw
-        result replaced by ``gather_hook``'s when there is one."""
-        given = {"cache": cache} if cache is not None and not world_mode else {}
-        if gather_hook is None and not given:
-            return gather_low(*gathered, kernel=kernel, world_mode=world_mode, tables=tables)
-        values, variance = gather(*gathered, kernel=kernel, world_mode=world_mode,
-                                  tables=tables, **given)
-        if gather_hook is not None:
-            values, variance = gather_hook(kind, values, variance)
-        return denoise(values, variance, centre.inputs, gi_stride, width, height,
-                       gather_settings.denoise_iterations, fit=kind.endswith("diffuse"))[0]
+def _wants_cache(f) -> bool:
+    return f["focused"].bounces > 1
 
-    low_diffuse = low("diffuse")
-    timings["diffuse+ao gather (GPU)"] = time.perf_counter() - t0
-    yield
-    t0 = time.perf_counter()
-    zero = scene.zeros(width, height)
-    low_glossy = low("glossy", "bvh_glossy") if glossy_indirect else None
-    if glossy_indirect:
-        timings["glossy gather (GPU)"] = time.perf_counter() - t0
-        yield
-    t0 = time.perf_counter()
-    full = upsample(low_diffuse, centre.inputs, gi_stride, width, height, low_glossy)
-    diffuse_ao, glossy = full if glossy_indirect else (full, zero)
-    timings["upsample"] = time.perf_counter() - t0
-    glossy_world = low_world = zero
-    world_glossy = world_glossy and scene.has_scene_lights
-    if world_glossy:  # Glossy Direct of the world and emitters
-        t0 = time.perf_counter()
-        low_world = low("world glossy", "bvh_glossy", world_mode=True)
-        glossy_world = upsample(low_world, centre.inputs, gi_stride, width, height)
-        timings["world glossy gather (GPU)"] = time.perf_counter() - t0
-        yield
-    centres = None  # the pixel centres with the emitters' light there
-    if any(light.type == "EMITTERS" for light in lights):
-        # the emitters' unshadowed glossy light (exact_glossy.emitters_shine) and Diffuse
-        # Direct (emitters.unshadowed_sum) at the gather points, upsampled to every pixel
-        # (evaluated where the field does not hold: near the emitters); the centres' glossy
-        # light from it with their own visible share, for the centre pass and the sub-pixel
-        # passes that see their centre's surface
-        t0 = time.perf_counter()
-        eye = _eye(snapshot.camera)
-        fields = emitter_fields(scene, centre.inputs, gi_stride, width, height, eye)
-        timings["emitters' light field (GPU)"] = time.perf_counter() - t0
-        yield
-        t0 = time.perf_counter()
-        centres = {**centre.inputs, "shine": emitter_glossy_texture(
-            bvh, centre.inputs, scene.emitters, scene.materials, gather_settings.glossy_rays,
-            gather_settings.seed, scene.no_lamp, scene.world_map, field=fields[2])}
-        timings["emitters' glossy light (GPU)"] = time.perf_counter() - t0
-        yield
-        t0 = time.perf_counter()
-        centres["unshadowed"] = emitters_unshadowed_texture(
-            bvh, centre.inputs, scene.emitters, scene.no_lamp, scene.world_map, field=fields[3])
-        timings["emitters' unshadowed light (GPU)"] = time.perf_counter() - t0
-        yield
 
-    t0 = time.perf_counter()
-    # The edge pixels (preview.passes.edge_pixels on the read-back centre G-buffer, the numpy
-    # tracer's test) get the sub-pixel passes, over a list of them (aa_compact.glsl); the
-    # others the centre pass with all strata, over the image.
-    reach = subpixel_reach(plan)
-    if reach:
-        seen = read_gbuffer(centre)
-        edge = edge_pixels(seen["hit"], material_indices(snapshot, seen["material"]),
-                           seen["position"], seen["normal"], reach)
-    else:  # point-sampled (the viewport's slices): no edge pixels, nothing to read back
-        edge = np.zeros((height, width), bool)
-    timings["edge pixels"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
+def _radiance_cache(f):
+    """The radiance cache's texture for bounces 2 … N (``gpu_gather.cache_texture``: kept
+    while the triangles, lights, materials and settings are the same), or, in the viewport,
+    one stage of its build (``viewport_cache.ViewportCache``) with the last complete one —
+    none before the first is complete: one bounce until then."""
+    scene, settings = f["scene"], f["focused"]
+    source = f["cache_source"]
+    if source is None:
+        return {"cache": cache_texture(scene.bvh, scene.lights, scene.principled,
+                                       scene.emission, settings, f["tables"]),
+                "gather_settings": settings}
+    cache = yield from source.stage(scene.bvh, scene.lights, scene.principled, scene.emission,
+                                    settings, f["tables"])
+    if cache is None:  # none complete yet: one bounce until there is
+        settings = dataclasses.replace(settings, bounces=1)
+    return {"cache": cache, "gather_settings": settings}
 
-    def shade(inputs, sums, terms, blank, size, block, lamps=None, glow=None, centre=None,
-              field=None):
-        """``gpu_compose.shade_stages`` of this scene and snapshot."""
-        return shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples,
-                            gather_settings.seed, block, lamps, glow, centre, field)
 
-    # The centre pass over the image off the geometry's edges (preview.passes.edge_pixels on
-    # the read-back centre G-buffer, the numpy tracer's test; the edge pixels as background, so
-    # every kernel returns early there), then its shadow and light edges
-    # (light_edge_pixels) join them, and the sub-pixel passes render the edge pixels over a
-    # list of them (aa_compact.glsl); their sums replace the centre pass's at read-back.
+def _low(f, kind, kernel="bvh_gather", world_mode=False):
+    """One gather's filtered low-resolution texture (``gpu_gather.gather`` then ``denoise``),
+    its raw result replaced by ``gather_hook``'s when there is one (the viewport's
+    accumulation)."""
+    scene, settings = f["scene"], f["gather_settings"]
+    centre, stride, width, height = f["centre"], f["gi_stride"], f["width"], f["height"]
+    cache = None if world_mode else f["cache"]
+    values, variance = gather(scene.bvh, centre.inputs, scene.lights, scene.principled,
+                              scene.emission, settings, stride, width, height, kernel=kernel,
+                              world_mode=world_mode, tables=f["tables"],
+                              cache=cache)
+    if f["gather_hook"] is not None:
+        values, variance = f["gather_hook"](kind, values, variance)
+    return denoise(values, variance, centre.inputs, stride, width, height,
+                   settings.denoise_iterations, fit=kind.endswith("diffuse"))[0]
+
+
+def _diffuse_gather(f):
+    """Diffuse Indirect and AO at the gather points (``bvh_gather``), filtered."""
+    return {"low_diffuse": _low(f, "diffuse")}
+
+
+def _glossy_gather(f):
+    """Glossy Indirect at the gather points (``bvh_glossy``), filtered."""
+    return {"low_glossy": _low(f, "glossy", "bvh_glossy")}
+
+
+def _upsample(f):
+    """The gathers at every pixel (``upsample.glsl``; Glossy Indirect 0 without its gather)."""
+    full = upsample(f["low_diffuse"], f["centre"].inputs, f["gi_stride"], f["width"],
+                    f["height"], f["low_glossy"])
+    if f["low_glossy"] is None:
+        return {"diffuse_ao": full, "glossy": f["scene"].zeros(f["width"], f["height"])}
+    diffuse_ao, glossy = full
+    return {"diffuse_ao": diffuse_ao, "glossy": glossy}
+
+
+def _with_world_glossy(f) -> bool:
+    return f["world_glossy"] and f["scene"].has_scene_lights
+
+
+def _world_glossy(f):
+    """Glossy Direct of the world and emitters (``bvh_glossy`` in world mode), at the gather
+    points and upsampled."""
+    low = _low(f, "world glossy", "bvh_glossy", world_mode=True)
+    return {"low_world": low, "glossy_world": upsample(low, f["centre"].inputs, f["gi_stride"],
+                                                       f["width"], f["height"])}
+
+
+def _no_world_glossy(f):
+    zero = f["scene"].zeros(f["width"], f["height"])
+    return {"low_world": zero, "glossy_world": zero}
+
+
+def _has_emitters(f) -> bool:
+    return any(light.type == "EMITTERS" for light in f["scene"].lights)
+
+
+def _emitter_field(f):
+    """The emitters' unshadowed glossy light (exact_glossy.emitters_shine) and Diffuse Direct
+    (emitters.unshadowed_sum) at the gather points, upsampled to every pixel (evaluated where
+    the field does not hold: near the emitters): ``emitter_fields``."""
+    return {"fields": emitter_fields(f["scene"], f["centre"].inputs, f["gi_stride"], f["width"],
+                                     f["height"], _eye(f["snapshot"].camera))}
+
+
+def _emitter_shine(f):
+    """The pixel centres' glossy light of the emitters from the field, with their own visible
+    share (for the centre pass and the sub-pixel passes that see their centre's surface)."""
+    scene, settings, centre = f["scene"], f["gather_settings"], f["centre"]
+    return {"shine": emitter_glossy_texture(
+        scene.bvh, centre.inputs, scene.emitters, scene.materials, settings.glossy_rays,
+        settings.seed, scene.no_lamp, scene.world_map, field=f["fields"][2])}
+
+
+def _emitter_unshadowed(f):
+    """The pixel centres' unshadowed Diffuse Direct of the emitters, from the field."""
+    scene, centre = f["scene"], f["centre"]
+    return {"unshadowed": emitters_unshadowed_texture(
+        scene.bvh, centre.inputs, scene.emitters, scene.no_lamp, scene.world_map,
+        field=f["fields"][3])}
+
+
+def _edge_pixels(f):
+    """The pixels on the geometry's edges (``preview.passes.edge_pixels`` on the read-back
+    centre G-buffer, the numpy tracer's test): they get the sub-pixel passes; none when
+    point-sampled (the viewport's slices: nothing read back)."""
+    reach = subpixel_reach(f["plan"])
+    if not reach:
+        return {"edge": np.zeros((f["height"], f["width"]), bool), "seen": None}
+    seen = read_gbuffer(f["centre"])
+    return {"edge": edge_pixels(seen["hit"], material_indices(f["snapshot"], seen["material"]),
+                                seen["position"], seen["normal"], reach),
+            "seen": seen}
+
+
+_SUM_TEXTURES = (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")
+
+
+def _shade(f, inputs, sums, terms, blank, size, block, lamps=None, glow=None, centre=None,
+           field=None):
+    """``gpu_compose.shade_stages`` of this frame's scene and snapshot."""
+    return shade_stages(f["scene"], f["snapshot"], inputs, sums, terms, blank, size,
+                        f["light_samples"], f["gather_settings"].seed, block, lamps, glow,
+                        centre, field)
+
+
+def _centres(f):
+    """The pixel centres' G-buffer with the emitters' light there (None without emitters)."""
+    if f["shine"] is None:
+        return None
+    return {**f["centre"].inputs, "shine": f["shine"], "unshadowed": f["unshadowed"]}
+
+
+def _centre_pass(f):
+    """The centre pass over the image off the geometry's edges (the edge pixels background,
+    so every kernel returns early there), all strata: the sums' textures, and the lamps'
+    light apart where there are sub-pixel passes (for ``light_edge_pixels``). With
+    ``on_gpu`` and no sub-pixel passes, the frame's result: the sums as ``GPUSums``."""
+    centre, width, height, edge = f["centre"], f["width"], f["height"], f["edge"]
+    scene = f["scene"]
+    reach = subpixel_reach(f["plan"])
     inputs = dict(centre.inputs)
     if edge.any():
         keep = np.flipud(~edge).astype(np.float32)
@@ -416,91 +493,181 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
             "gbuffer_position": centre.position,
             "pixels": float_texture(keep, (width, height), "R32F")},  # aa_mask reads .x
             ("out_position",), width, height)["out_position"]
-    names = (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")
+    zero = scene.zeros(width, height)
     lamps = {}
-    sums = yield from shade(inputs, {name: zero for name in names},
-                            (diffuse_ao, glossy, glossy_world), zero, (width, height),
-                            centre_pass(light_samples)[1], lamps if reach else None,
-                            None if centres is None else centres["shine"], centres)
-    if on_gpu and not reach:  # the viewport adds them to its sums on the GPU
-        timings["direct (GPU)"] = time.perf_counter() - t0
-        return GPUSums({name: sums[name] for name in SUM_NAMES}, width, height), timings
+    centres = _centres(f)
+    sums = yield from _shade(f, inputs, {name: zero for name in _SUM_TEXTURES},
+                             (f["diffuse_ao"], f["glossy"], f["glossy_world"]), zero,
+                             (width, height), centre_pass(f["light_samples"])[1],
+                             lamps if reach else None, f["shine"], centres)
+    result = None
+    if f["on_gpu"] and not reach:  # the viewport adds them to its sums on the GPU
+        result = (GPUSums({name: sums[name] for name in SUM_NAMES}, width, height))
+    return {"sums": sums, "lamps": lamps, "result": result}
+
+
+def _reads_back(f) -> bool:
+    return f["result"] is None
+
+
+def _subpixel_passes(f):
+    """The sub-pixel passes over the edge pixels (``edge_all``), rendered over a list of them
+    (aa_compact.glsl): per pass a G-buffer (the listed pixels only where that pays:
+    ``gbuffer.PixelMask``), the gathered terms and the
+    emitters' light — the centre's where the pass sees its centre's surface, else the gathers
+    and the field at the pass's own point (docs/gi_pipeline.md "Anti-aliasing") — and the
+    pass's direct light; their sums replace the centre pass's, their filter tails reach the
+    neighbours (``preview.passes.stacked_tails``)."""
+    scene, snapshot, plan = f["scene"], f["snapshot"], f["plan"]
+    width, height, gi_stride = f["width"], f["height"], f["gi_stride"]
+    texel, edge, listed = f["centre_texel"], f["edge_all"], f["listed"]
+    if not len(listed):
+        return {"texel": texel, "tails": new_sums(width * height)}
+    pixels, list_size = _pixel_list(listed, width, height)
+    blank = scene.zeros(*list_size)
+    zero = scene.zeros(width, height)
+    centre = f["centre"]
+    # the gathers at the gather points and at the centres, for each pass's samples
+    low_diffuse = f["low_diffuse"]
+    low_zero = zero if gi_stride == 1 else scene.zeros(low_diffuse.width, low_diffuse.height)
+    gathers = ((low_diffuse, f["low_glossy"] if f["low_glossy"] is not None else low_zero,
+                f["low_world"] if _with_world_glossy(f) else low_zero),
+               (f["diffuse_ao"], f["glossy"], f["glossy_world"]))
+    eye = _eye(snapshot.camera)
+    centres = _centres(f)
+    fields = f["fields"]
+    listed_centres = None
+    if centres is not None:  # the centres' G-buffer and emitters' light there
+        listed_centres = _compact("aa_list", {**centre.inputs, "pixels": pixels}, list_size)
+        raw = _compact("aa_list_raw", {
+            "gbuffer_position": centres["shine"], "gbuffer_normal": centres["unshadowed"],
+            "gbuffer_view": centres["unshadowed"], "pixels": pixels}, list_size)
+        listed_centres["shine"] = raw["gbuffer_position"]
+        listed_centres["unshadowed"] = raw["gbuffer_normal"]
+    # every pass's samples, the sum textures' texels side by side (names' order)
+    names = _SUM_TEXTURES
+    samples = np.empty((len(plan), len(listed), 4 * len(names)), np.float32)
+    # the passes draw the listed pixels only where the raster has the texture code (its
+    # fragments cost 3× the mask's full-screen pass: 47 → 14 ms a pass, textured room at
+    # 640 × 480); the plain variant's are cheaper than the mask (9 → 10 ms, the box)
+    mask = PixelMask(edge) if scene.raster_textures() is not None else None
+    settings = f["gather_settings"]
+    for index, (offset, block) in enumerate(plan):
+        gbuffer = rasterize(f["seen_tris"], snapshot.camera, scene.rough, width, height, offset,
+                            shader=f["raster_shader"], textures=scene.raster_textures(),
+                            filter_width=f["filter_width"], batch=f["vertex_batch"], mask=mask)
+        inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": pixels}, list_size)
+        inputs["gbuffer_base"] = blank if not scene.textured else _compact(
+            "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,
+                            "gbuffer_view": gbuffer.base, "pixels": pixels},
+            list_size)["gbuffer_position"]
+        # the gathered terms, the emitters' glossy light and unshadowed sum: the centre's
+        # where this pass sees its surface, else the gathers and the field at the pass's
+        # own point (the field evaluated where it does not hold), in one dispatch
+        *terms, field_glossy, field_diffuse = upsample_field_list(
+            *(fields[:2] if centres is not None else (None, None)), centre.inputs, inputs,
+            pixels, list_size, gi_stride, width, height, eye, offset, terms=gathers)
+        glow = None
+        if centres is not None:
+            glow = emitter_glossy_texture(
+                scene.bvh, inputs, scene.emitters, scene.materials, settings.glossy_rays,
+                settings.seed, scene.no_lamp, scene.world_map, centre=listed_centres,
+                field=field_glossy)
+        # this pass's samples, read back to count in the neighbours by the filter at
+        # their own place (preview.passes.stacked_tails)
+        textures = yield from _shade(f, inputs, {name: blank for name in names}, terms, blank,
+                                     list_size, block, glow=glow, centre=listed_centres,
+                                     field=field_diffuse)
+        for k, name in enumerate(names):
+            samples[index, :, 4 * k:4 * k + 4] = \
+                read_texture(textures[name]).reshape(-1, 4)[:len(listed)]
+    own = samples.sum(axis=0, dtype=np.float64)
+    samples /= len(plan)
+    tail = stacked_tails(samples, pass_tail_weights(plan, f["filter_width"]), listed, width,
+                         height)
+    tails = _sums_of({name: tail[:, 4 * k:4 * k + 4] for k, name in enumerate(names)})
+    for k, name in enumerate(names):
+        texel[name][listed] = own[:, 4 * k:4 * k + 4]
+    return {"texel": texel, "tails": tails}
+
+
+def _read_back(f):
+    """The centre pass's sums read back; its shadow and light edges (``light_edge_pixels``,
+    from the lamps' light in the same read-back: no read per light) join the edge pixels
+    (``edge_all``, ``listed`` their flat indices)."""
+    sums, lamps, edge, seen = f["sums"], f["lamps"], f["edge"], f["seen"]
+    plan = f["plan"]
+    reach = subpixel_reach(plan)
     read = {name: np.flipud(read_texture(texture)) for name, texture in sums.items()}
     texel = {name: image.reshape(-1, 4).astype(np.float64) for name, image in read.items()}
-    if reach:  # the centre pass's lamp light, from the same read-back (no read per light)
+    if reach:
         lamp_g = np.flipud(read_texture(lamps["sum_g"])) if "sum_g" in lamps else read["sum_g"]
         lamp_f = np.flipud(read_texture(lamps["sum_f"])) if "sum_f" in lamps else read["sum_f"]
         light = lamp_light(lamp_g[..., :3], read["sum_b"][..., :3], lamp_f[..., :3],
                            read["sum_c"][..., :3])
         edge = edge | light_edge_pixels(light, seen["hit"] & ~edge, reach, len(plan))
-    listed = np.flatnonzero(edge.ravel())
-    if len(listed):
-        pixels, list_size = _pixel_list(listed, width, height)
-        blank = scene.zeros(*list_size)
-        # the gathers at the gather points and at the centres, for each pass's samples: the
-        # centre's where the sample sees its centre's surface, else the gathers at the sample's
-        # own point (docs/gi_pipeline.md "Anti-aliasing")
-        low_zero = zero if gi_stride == 1 else scene.zeros(low_diffuse.width, low_diffuse.height)
-        gathers = ((low_diffuse, low_glossy if glossy_indirect else low_zero,
-                    low_world if world_glossy else low_zero),
-                   (diffuse_ao, glossy, glossy_world))
-        eye = _eye(snapshot.camera)
-        listed_centres = None
-        if centres is not None:  # the centres' G-buffer and emitters' light there
-            listed_centres = _compact("aa_list", {**centre.inputs, "pixels": pixels}, list_size)
-            raw = _compact("aa_list_raw", {
-                "gbuffer_position": centres["shine"], "gbuffer_normal": centres["unshadowed"],
-                "gbuffer_view": centres["unshadowed"], "pixels": pixels}, list_size)
-            listed_centres["shine"] = raw["gbuffer_position"]
-            listed_centres["unshadowed"] = raw["gbuffer_normal"]
-        # every pass's samples, the sum textures' texels side by side (names' order)
-        samples = np.empty((len(plan), len(listed), 4 * len(names)), np.float32)
-        # the passes draw the listed pixels only where the raster has the texture code (its
-        # fragments cost 3× the mask's full-screen pass: 47 → 14 ms a pass, textured room at
-        # 640 × 480); the plain variant's are cheaper than the mask (9 → 10 ms, the box)
-        mask = PixelMask(edge) if scene.raster_textures() is not None else None
-        for index, (offset, block) in enumerate(plan):
-            gbuffer = rasterize(seen_tris, snapshot.camera, rough, width, height, offset,
-                                shader=raster, textures=scene.raster_textures(),
-                                filter_width=filter_width, batch=batch, mask=mask)
-            inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": pixels}, list_size)
-            inputs["gbuffer_base"] = blank if not scene.textured else _compact(
-                "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,
-                                "gbuffer_view": gbuffer.base, "pixels": pixels},
-                list_size)["gbuffer_position"]
-            # the gathered terms, the emitters' glossy light and unshadowed sum: the centre's
-            # where this pass sees its surface, else the gathers and the field at the pass's
-            # own point (the field evaluated where it does not hold), in one dispatch
-            *terms, field_glossy, field_diffuse = upsample_field_list(
-                *(fields[:2] if centres is not None else (None, None)), centre.inputs, inputs,
-                pixels, list_size, gi_stride, width, height, eye, offset, terms=gathers)
-            glow = None
-            if centres is not None:
-                glow = emitter_glossy_texture(
-                    bvh, inputs, scene.emitters, scene.materials, gather_settings.glossy_rays,
-                    gather_settings.seed, scene.no_lamp, scene.world_map,
-                    centre=listed_centres, field=field_glossy)
-            # this pass's samples, read back to count in the neighbours by the filter at
-            # their own place (preview.passes.add_tails)
-            textures = yield from shade(inputs, {name: blank for name in names}, terms, blank,
-                                        list_size, block, glow=glow, centre=listed_centres,
-                                        field=field_diffuse)
-            for k, name in enumerate(names):
-                samples[index, :, 4 * k:4 * k + 4] = \
-                    read_texture(textures[name]).reshape(-1, 4)[:len(listed)]
-        own = samples.sum(axis=0, dtype=np.float64)
-        samples /= len(plan)
-        tail = stacked_tails(samples, pass_tail_weights(plan, filter_width), listed, width,
-                             height)
-        tails = _sums_of({name: tail[:, 4 * k:4 * k + 4] for k, name in enumerate(names)})
-        for k, name in enumerate(names):
-            texel[name][listed] = own[:, 4 * k:4 * k + 4]
-    else:
-        tails = new_sums(width * height)
-    count = np.where(edge.ravel(), len(plan), 1)
-    timings["sub-pixel passes (GPU)" if len(plan) > 1 else "direct (GPU)"] = \
-        time.perf_counter() - t0
-    t0 = time.perf_counter()
-    passes = finish_passes(_sums_of(texel), count, width, height, filter_width, tails)
-    timings["read-back"] = time.perf_counter() - t0
-    return passes, timings
+    return {"centre_texel": texel, "edge_all": edge, "listed": np.flatnonzero(edge.ravel())}
+
+
+def _has_passes(f) -> bool:
+    return f["result"] is None and len(f["plan"]) > 1
+
+
+def _no_passes(f):
+    if f["result"] is not None:  # the viewport's sums stay on the GPU
+        return {"texel": None, "tails": None}
+    return {"texel": f["centre_texel"], "tails": new_sums(f["width"] * f["height"])}
+
+
+def _finish(f):
+    """The passes from the sums (``preview.passes.finish_passes``: each pixel's samples
+    averaged, the sub-pixel passes' filter tails added)."""
+    count = np.where(f["edge_all"].ravel(), len(f["plan"]), 1)
+    return {"passes": finish_passes(_sums_of(f["texel"]), count, f["width"], f["height"],
+                                    f["filter_width"], f["tails"])}
+
+
+def _skip_passes(f):
+    return {"passes": None}
+
+
+ACCURATE_STAGES = (
+    Stage("", (), ("plan", "raster_shader", "vertex_batch", "seen_tris", "tables", "focused"),
+          _plan, slice_end=False),
+    Stage("visibility (GPU)", ("seen_tris", "raster_shader", "vertex_batch"), ("centre",),
+          _visibility),
+    Stage("radiance cache", ("focused", "tables"), ("cache", "gather_settings"),
+          _radiance_cache, when=_wants_cache, slice_end=False,
+          skipped=lambda f: {"cache": None, "gather_settings": f["focused"]}),
+    Stage("diffuse+ao gather (GPU)", ("centre", "cache", "gather_settings", "tables"),
+          ("low_diffuse",), _diffuse_gather),
+    Stage("glossy gather (GPU)", ("centre", "cache", "gather_settings", "tables"),
+          ("low_glossy",), _glossy_gather, when=lambda f: f["glossy_indirect"]),
+    Stage("upsample", ("centre", "low_diffuse", "low_glossy"), ("diffuse_ao", "glossy"), _upsample,
+          slice_end=False),
+    Stage("world glossy gather (GPU)", ("centre", "gather_settings", "tables"),
+          ("low_world", "glossy_world"), _world_glossy, when=_with_world_glossy,
+          skipped=_no_world_glossy),
+    Stage("emitters' light field (GPU)", ("centre",), ("fields",), _emitter_field,
+          when=_has_emitters),
+    Stage("emitters' glossy light (GPU)", ("centre", "fields", "gather_settings"), ("shine",),
+          _emitter_shine, when=_has_emitters),
+    Stage("emitters' unshadowed light (GPU)", ("centre", "fields"), ("unshadowed",),
+          _emitter_unshadowed, when=_has_emitters),
+    Stage("edge pixels", ("centre", "plan"), ("edge", "seen"), _edge_pixels, slice_end=False),
+    Stage("direct (GPU)", ("centre", "plan", "edge", "diffuse_ao", "glossy", "glossy_world", "shine",
+                           "unshadowed", "gather_settings"),
+          ("sums", "lamps", "result"), _centre_pass, slice_end=False),
+    Stage("read-back", ("sums", "lamps", "edge", "seen", "plan", "result"),
+          ("centre_texel", "edge_all", "listed"), _read_back, when=_reads_back,
+          slice_end=False),
+    Stage("sub-pixel passes (GPU)", ("centre_texel", "edge_all", "listed", "centre", "plan",
+                                     "seen_tris", "raster_shader", "vertex_batch",
+                                     "low_diffuse", "low_glossy", "low_world", "diffuse_ao",
+                                     "glossy", "glossy_world", "fields", "shine", "unshadowed",
+                                     "gather_settings", "result"),
+          ("texel", "tails"), _subpixel_passes, when=_has_passes, skipped=_no_passes,
+          slice_end=False),
+    Stage("finish", ("texel", "tails", "edge_all", "plan", "result"), ("passes",), _finish,
+          when=_reads_back, skipped=_skip_passes, slice_end=False),
+)
