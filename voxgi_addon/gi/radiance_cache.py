@@ -42,6 +42,9 @@ __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin where it has no surface
 FACE_CLEARANCE = 0.02    # voxels in front of its surface a face's rays start (``_face_origins``)
 FACE_AXIS_COSINE = 0.2   # a voxel holds the faces of the axes its triangles' normals reach
+# an axis whose n² is under this weighs nothing in a lookup (``lookup``): the GPU then fetches
+# no texel of it (cache_lookup.glsl CACHE_AXIS_BLEND), 8 not 24 at a wall's or a floor's hit
+AXIS_BLEND = 1e-6
 FACES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
 
 
@@ -320,15 +323,16 @@ def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
     """(K, 3) float64 indirect light (E/π) at ``points`` (K, 3) for unit ``normals`` (K, 3):
     per axis the face n faces, trilinear (node-centred) over the voxels of the finest grid
     holding the point that hold that face, then the axes blended by n² (over the axes some
-    neighbour holds); where no neighbour there holds a face n faces, the next coarser grid
-    holding the point; 0 where none does."""
+    neighbour holds; an axis with n² under ``AXIS_BLEND`` weighs nothing); where no
+    neighbour there holds a face n faces, the next coarser grid holding the point; 0 where
+    none does."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     out = np.zeros((len(p), 3))
     if cache is None or cache.iterations == 0 or len(p) == 0:
         return out
     face = np.where(n < 0, 1, 0) + np.array([0, 2, 4])  # (K, 3) face per axis
-    blend = n ** 2
+    blend = np.where(n ** 2 >= AXIS_BLEND, n ** 2, 0.0)
     todo = np.ones(len(p), bool)
     for grid, cells, faces, present in zip(cache.grids, cache.cells, cache.faces, cache.present):
         if not todo.any():
