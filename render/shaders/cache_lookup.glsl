@@ -4,7 +4,11 @@
  * (texel .a), the axes blended by n² over those some neighbour holds (else the next coarser
  * grid holding `x`); 0 outside every grid and for the 1 × 1 blank texture (no cache).
  * A texture with two parts (header .z = 1) also holds the next iteration, which the glossy
- * gather reads (radiance_cache.glossy_view): its main() sets cache_part = 1. */
+ * gather reads (radiance_cache.glossy_view): its main() sets cache_part = 1.
+ * An axis whose n² is under CACHE_AXIS_BLEND weighs nothing and its faces are not fetched: a
+ * wall's or a floor's hit reads 8 texels, not 24 (docs/gi_pipeline.md "Multi-bounce radiance
+ * cache", "What the cache costs, measured again"). */
+#define CACHE_AXIS_BLEND 1e-6
 int cache_part = 0;
 
 vec3 cache_indirect(vec3 x, vec3 n)
@@ -16,6 +20,8 @@ vec3 cache_indirect(vec3 x, vec3 n)
   int part = (cache_part == 1 && info.z > 0.5) ? count : 0; /* grids before this part's */
   ivec3 face = ivec3(n.x < 0.0 ? 1 : 0, n.y < 0.0 ? 3 : 2, n.z < 0.0 ? 5 : 4);
   vec3 blend = n * n;
+  bvec3 axes = greaterThanEqual(blend, vec3(CACHE_AXIS_BLEND));
+  blend = mix(vec3(0.0), blend, axes);
   for (int g = 0; g < count; g++) {
     vec4 grid = texelFetch(radiance_cache, ivec2(g, 0), 0);
     vec3 at = (x - grid.xyz) / grid.w;
@@ -35,9 +41,9 @@ vec3 cache_indirect(vec3 x, vec3 n)
       }
       int column = cell.x + cell.y * res;
       int row = 1 + ((part + g) * res + cell.z) * 6;
-      vec4 fx = texelFetch(radiance_cache, ivec2(column, row + face.x), 0);
-      vec4 fy = texelFetch(radiance_cache, ivec2(column, row + face.y), 0);
-      vec4 fz = texelFetch(radiance_cache, ivec2(column, row + face.z), 0);
+      vec4 fx = axes.x ? texelFetch(radiance_cache, ivec2(column, row + face.x), 0) : vec4(0.0);
+      vec4 fy = axes.y ? texelFetch(radiance_cache, ivec2(column, row + face.y), 0) : vec4(0.0);
+      vec4 fz = axes.z ? texelFetch(radiance_cache, ivec2(column, row + face.z), 0) : vec4(0.0);
       vec3 wv = mix(1.0 - f, f, vec3(o));
       float w = wv.x * wv.y * wv.z;
       vec3 held = w * vec3(fx.w > 0.5 ? 1.0 : 0.0, fy.w > 0.5 ? 1.0 : 0.0, fz.w > 0.5 ? 1.0 : 0.0);

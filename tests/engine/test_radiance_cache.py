@@ -375,7 +375,8 @@ def test_faces_start_on_their_surfaces():
     it, within a hair (FACE_CLEARANCE voxel) of their wall, across their axis at the voxel's
     centre kept on the wall's part in the voxel — where a wall voxel's centre lies beyond the
     next wall, its rays still start in the room; the faces facing out (no triangle faces
-    that way) start ``FACE_OFFSET`` off their voxel's centre, as all did before."""
+    that way) start the same way on the walls' backs, outside (a one-sided plane has two
+    sides to the rays; nothing out there shows a back, so they are no solid's inside)."""
     tris, _, _, _ = lit_room()
     cache = rc.build_cache(tris, 32)
     span = cache.grids[0].span
@@ -391,13 +392,11 @@ def test_faces_start_on_their_surfaces():
     inward = sign * along < 0
     gap = np.abs(np.abs(along) - half[axis])
     assert inward.sum() > 0.4 * len(axes) and (~inward).sum() > 0.4 * len(axes)
-    np.testing.assert_allclose(gap[inward], rc.FACE_CLEARANCE * span, atol=1e-5)
+    np.testing.assert_allclose(gap, rc.FACE_CLEARANCE * span, atol=1e-5)
     assert (np.abs(local[inward]) < half).all()  # all inside the room
+    assert (np.abs(along[~inward]) > half[axis[~inward]]).all()  # outside it
     cells = np.repeat(cache.cells[0], cache.present[0].sum(axis=1), axis=0)
     lo = np.asarray(cache.grids[0].origin) + cells * span - centre
-    np.testing.assert_allclose(local[~inward], lo[~inward] + 0.5 * span +
-                               rc.FACE_OFFSET * span * axes[~inward], atol=1e-5)
-    local, axes, axis, lo = local[inward], axes[inward], axis[inward], lo[inward]
     # across its axis a face starts at the voxel's centre kept on its wall's part in the voxel
     part = np.maximum(lo, -half), np.minimum(lo + span, half)
     margin = np.minimum(0.25 * (part[1] - part[0]), rc.FACE_CLEARANCE * span)
@@ -405,6 +404,35 @@ def test_faces_start_on_their_surfaces():
     lateral = np.ones_like(local, bool)
     lateral[np.arange(len(axes)), axis] = False
     np.testing.assert_allclose(local[lateral], expected[lateral], atol=1e-5)
+
+
+def test_a_one_sided_planes_back_gathers_what_it_faces():
+    """A one-sided plane facing down 5 cm under the ceiling (an emissive panel's setup), in
+    voxels coarser than the gap: its voxels' +z faces — no triangle faces up there — start
+    on its back, in the gap, where rays meet the ceiling over it (before: ``FACE_OFFSET`` off
+    the voxel's centre, above the ceiling, where they saw the world; the emissive room's
+    cache read the gap black, docs/gi_pipeline.md "One-sided planes have backs"). The room's
+    walls' backs start outside the room; nothing there shows a back, so they stay there."""
+    room, _, _, _ = lit_room()
+    panel = np.array([[0.3, -0.6, 2.45], [1.5, -0.6, 2.45], [1.5, 0.6, 2.45], [0.3, 0.6, 2.45]])
+    positions = np.concatenate([np.asarray(room.positions).reshape(-1, 3), panel])
+    base = len(positions) - 4
+    down = [[base, base + 2, base + 1], [base, base + 3, base + 2]]  # facing −z
+    triangles = np.concatenate([np.arange(base).reshape(-1, 3), down])
+    tris = world_triangles(snapshot([mesh("r", positions, triangles)],
+                                    [ObjectData("R", "r", np.eye(4))]))
+    assert (np.asarray(tris.normals)[-2:, 2] < -0.99).all()
+    cache = rc.build_cache(tris, 32)
+    assert cache.grids[0].span > 0.05  # the gap is thinner than a voxel
+    grid = cache.grids[0]
+    points, axes = rc.face_points(cache)
+    cells = np.repeat(cache.cells[0], cache.present[0].sum(axis=1), axis=0)
+    bottom = grid.origin[2] + cells[:, 2] * grid.span  # the panel's voxels: it crosses them
+    over = (np.abs(points[:, 0] - 0.9) < 0.5) & (np.abs(points[:, 1]) < 0.5) & \
+        (bottom < 2.45) & (bottom + grid.span > 2.45) & (axes[:, 2] > 0.5)
+    assert over.sum() >= 16
+    np.testing.assert_array_less(2.45, points[over, 2])
+    np.testing.assert_array_less(points[over, 2], 2.5)
 
 
 def sunlit_closed_room():

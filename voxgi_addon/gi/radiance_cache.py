@@ -42,6 +42,9 @@ __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin where it has no surface
 FACE_CLEARANCE = 0.02    # voxels in front of its surface a face's rays start (``_face_origins``)
 FACE_AXIS_COSINE = 0.2   # a voxel holds the faces of the axes its triangles' normals reach
+# an axis whose n² is under this weighs nothing in a lookup (``lookup``): the GPU then fetches
+# no texel of it (cache_lookup.glsl CACHE_AXIS_BLEND), 8 not 24 at a wall's or a floor's hit
+AXIS_BLEND = 1e-6
 FACES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
 
 
@@ -173,9 +176,31 @@ def _sites(tris, grids, origins: bool = True) -> tuple[list, list, list]:
         out.append(cells[keep].astype(np.int32))
         present.append(np.repeat(reach[keep] > FACE_AXIS_COSINE, 2, axis=1))
         if origins:
-            starts.append(_face_origins(cells[keep], surface,
-                                        local.reshape(-1, 3, 3) / grid.span, signed, keep))
+            begin, backs = _face_origins(cells[keep], surface,
+                                         local.reshape(-1, 3, 3) / grid.span, signed, keep)
+            starts.append(_backs_in_solids(tris, grid, cells[keep], begin, backs))
     return out, present, starts
+
+
+def _backs_in_solids(tris, grid, cells, origins, backs) -> np.ndarray:
+    """``origins`` (N, 6, 3) with the faces started on triangles' backs (``backs`` (N, 6))
+    moved back to ``FACE_OFFSET`` where those backs lie inside a solid: the first triangle
+    straight out along the face's axis shows its back too (a 2 cm slab's far side). Those
+    rays would gather the slab's inside, which the trilinear lookups across it pass from the
+    lit room to the dark one (2.5% of its light, tests/blender/test_multibounce.py)."""
+    voxel, face = np.nonzero(backs)
+    if len(voxel) == 0:
+        return origins
+    from ..scene.raycast import closest_hits
+
+    centres = np.asarray(grid.origin) + (np.asarray(cells, np.float64)[voxel] + 0.5) * grid.span
+    starts = centres + grid.span * np.asarray(origins[voxel, face], np.float64)
+    _, tri, _, _ = closest_hits(tris, starts, FACES[face])
+    normals = np.asarray(tris.normals, np.float64)
+    inside = (tri >= 0) & (np.einsum("ij,ij->i", normals[np.maximum(tri, 0)], FACES[face]) > 0)
+    out = origins.copy()
+    out[voxel[inside], face[inside]] = (FACE_OFFSET * FACES[face[inside]]).astype(np.float32)
+    return out
 
 
 _CLIP_VERTICES = 9  # a triangle clipped by a box's six planes has at most 3 + 6 corners
@@ -225,20 +250,29 @@ def _face_origins(cells, surface, corners, normals, keep) -> np.ndarray:
     6 cm below it or, where its voxels' centres lie outside a room, the walls' rays above the
     roof (a sunlit hall's walls read 15–40 × their light under the ceiling). Across the axis
     the centre, not the parts' middle: a voxel straddling a thin wall keeps its faces on its
-    centre's side, as before. A face no triangle faces that way keeps ``FACE_OFFSET`` (a
-    thin wall's far side: starting on the wall's back, inside a 2 cm slab, let a dark room
-    read 2.5% of the lit one's light, tests/blender/test_multibounce.py).
+    centre's side, as before. A face no triangle faces that way starts, the same way, on the
+    backs of the triangles facing the other way (of several, those nearest the voxel's
+    centre along the axis): a one-sided plane is two-sided to the rays
+    (an emissive panel's back, lit by the ceiling a few cm above it, is what the ceiling's
+    rays meet). ``FACE_OFFSET`` off the centre instead put the panel's back face beyond the
+    ceiling where the voxels are coarser than the gap: the cavity read black, and the panel
+    and the ceiling around it read it through trilinear weights (the emissive room at 32³:
+    its cache 0.77 of path-traced light, Combined 0.077 instead of 0.047;
+    docs/gi_pipeline.md "Multi-bounce radiance cache", "One-sided planes have backs"). Only
+    a face of an axis no triangle in the voxel faces keeps ``FACE_OFFSET``, and one on backs
+    inside a solid (``_backs_in_solids``).
     cells : (N_all, 3) the grid's cells (``surface.cells``); corners : (T, 3, 3) triangles
     in voxels from the grid's origin; normals : (T, 3) their unit normals; keep : (N_all,)
-    the cells kept."""
+    the cells kept. Returns (the origins, (N, 6) bool: the faces started on backs)."""
     origins = np.zeros((len(cells), 6, 3))
+    backs = np.zeros((len(cells), 6), bool)
     for face in range(6):
         origins[:, face] = FACE_OFFSET * FACES[face]
     pair_cell, tri = surface.cell_of_pair, surface.triangle_of_pair
     row = np.cumsum(keep) - 1
     pairs = np.flatnonzero(keep[pair_cell])
     if len(pairs) == 0:
-        return origins.astype(np.float32)
+        return origins.astype(np.float32), backs
     pairs = pairs[np.argsort(pair_cell[pairs], kind="stable")]  # cell by cell
     pair_cell, tri = row[pair_cell[pairs]], tri[pairs]
     # the lattice's cells are shifted by voxelize's LATTICE_OFFSET (a plane on a lattice plane
@@ -255,18 +289,27 @@ def _face_origins(cells, surface, corners, normals, keep) -> np.ndarray:
     for axis in range(3):
         along = normals[tri, axis]
         for sign, face in ((1.0, 2 * axis), (-1.0, 2 * axis + 1)):
-            chosen = (sign * along > FACE_AXIS_COSINE) & some
-            if not chosen.any():
-                continue
-            top = np.maximum.reduceat(np.where(chosen[:, None], high, -np.inf), starts)
-            bottom = np.minimum.reduceat(np.where(chosen[:, None], low, np.inf), starts)
-            held = np.isfinite(top[:, axis])
-            top, bottom = top[held], bottom[held]
-            margin = np.minimum(0.25 * (top - bottom), FACE_CLEARANCE)
-            point = np.clip(0.0, bottom + margin, top - margin)   # the centre, kept on them
-            point[:, axis] = sign * ((top if sign > 0 else -bottom)[:, axis] + FACE_CLEARANCE)
-            origins[voxels[held], face] = point
-    return origins.astype(np.float32)
+            for facing in (-1.0, 1.0):  # the backs of those facing away, then their fronts
+                chosen = (facing * sign * along > FACE_AXIS_COSINE) & some
+                if not chosen.any():
+                    continue
+                if facing < 0:  # of several backs, the nearest the centre (a panel's, not
+                    # the ceiling's a few cm over it, whose back is the roof's outside)
+                    level = np.abs(np.where(chosen, (high if sign > 0 else low)[:, axis],
+                                            np.inf))
+                    nearest = np.minimum.reduceat(level, starts)
+                    chosen &= level <= np.repeat(nearest, np.diff(np.r_[starts, len(level)])) \
+                        + 1e-6
+                top = np.maximum.reduceat(np.where(chosen[:, None], high, -np.inf), starts)
+                bottom = np.minimum.reduceat(np.where(chosen[:, None], low, np.inf), starts)
+                held = np.isfinite(top[:, axis])
+                top, bottom = top[held], bottom[held]
+                margin = np.minimum(0.25 * (top - bottom), FACE_CLEARANCE)
+                point = np.clip(0.0, bottom + margin, top - margin)   # the centre, kept on them
+                point[:, axis] = sign * ((top if sign > 0 else -bottom)[:, axis] + FACE_CLEARANCE)
+                origins[voxels[held], face] = point
+                backs[voxels[held], face] = facing < 0
+    return origins.astype(np.float32), backs
 
 
 def _dense_index(grid, cells) -> np.ndarray:
@@ -281,15 +324,16 @@ def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
     """(K, 3) float64 indirect light (E/π) at ``points`` (K, 3) for unit ``normals`` (K, 3):
     per axis the face n faces, trilinear (node-centred) over the voxels of the finest grid
     holding the point that hold that face, then the axes blended by n² (over the axes some
-    neighbour holds); where no neighbour there holds a face n faces, the next coarser grid
-    holding the point; 0 where none does."""
+    neighbour holds; an axis with n² under ``AXIS_BLEND`` weighs nothing); where no
+    neighbour there holds a face n faces, the next coarser grid holding the point; 0 where
+    none does."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     out = np.zeros((len(p), 3))
     if cache is None or cache.iterations == 0 or len(p) == 0:
         return out
     face = np.where(n < 0, 1, 0) + np.array([0, 2, 4])  # (K, 3) face per axis
-    blend = n ** 2
+    blend = np.where(n ** 2 >= AXIS_BLEND, n ** 2, 0.0)
     todo = np.ones(len(p), bool)
     for grid, cells, faces, present in zip(cache.grids, cache.cells, cache.faces, cache.present):
         if not todo.any():
