@@ -121,7 +121,7 @@ def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
 
 
 RECORD_WIDTH = 2048  # rays per row of the cache's ray records (cache_paths.glsl)
-_RELAX_SAMPLERS = ("cache_layout", "radiance_cache", "paths_radiance", "paths_weight",
+_RELAX_SAMPLERS = ("face_places", "radiance_cache", "paths_radiance", "paths_weight",
                    "paths_points", "paths_normals")
 
 
@@ -132,22 +132,37 @@ def _relax_shader():
     return _shaders["relax"]
 
 
-def relax_gpu(layout, cache_texture, records, rays: int, keep: bool = False):
+def face_places(cache):
+    """A texture of the cache's faces (``face_points``' order), CACHE_IMAGE_WIDTH to a row:
+    face f's texel of ``cache_texels`` and of its ahead part, (column, row, column, row)
+    (``radiance_cache.texel_places``) — where ``cache_relax.glsl`` writes it."""
+    rows, columns = texel_places(cache, 0)
+    ahead_rows, ahead_columns = texel_places(cache, 1)
+    count = len(rows)
+    height = -(-count // CACHE_IMAGE_WIDTH)
+    places = np.zeros((height * CACHE_IMAGE_WIDTH, 4), np.float32)
+    places[:count] = np.stack([columns, rows, ahead_columns, ahead_rows], axis=1)
+    return float_texture(places.reshape(height, CACHE_IMAGE_WIDTH, 4), (CACHE_IMAGE_WIDTH, height))
+
+
+def relax_gpu(places, cache_texture, records, rays: int, count: int, out, keep: bool = False):
     """One iteration over the ray ``records`` (``cache_paths.glsl``'s four textures):
-    ``cache_relax.glsl`` writes the next iteration's cache texture (``cache_texels``' layout)
-    from ``layout`` (``cache_texels(layout=True)``) and ``cache_texture``, the previous one —
-    nothing read back or built on the CPU between iterations. keep : ``layout`` has two parts
-    (``ahead=True``): the texture keeps the previous iteration and adds the next one as its
-    ahead part (``radiance_cache.glossy_view``)."""
+    ``cache_relax.glsl`` writes into ``out`` each of the ``count`` faces' next value from
+    ``cache_texture``, the previous iteration, at its texel (``face_places``) — a dispatch over
+    the faces only; ``out``'s other texels (the header, the voxels' absent faces) are the
+    layout's, uploaded once (``cache_stages``). keep : ``out`` has two parts
+    (``cache_texels(ahead=True)``): each face's texel of the first keeps the previous
+    iteration, of the second gets the next one, which the glossy gather reads
+    (``radiance_cache.glossy_view``). Nothing is read back or built on the CPU between
+    iterations. Returns ``out``."""
     shader = _relax_shader()
-    out = gpu.types.GPUTexture((layout.width, layout.height), format="RGBA32F")
     shader.bind()
-    for name, texture in zip(_RELAX_SAMPLERS, (layout, cache_texture, *records)):
+    for name, texture in zip(_RELAX_SAMPLERS, (places, cache_texture, *records)):
         shader.uniform_sampler(name, texture)
-    shader.uniform_float("sampling", (float(rays), float(keep), 0.0, 0.0))
+    shader.uniform_float("sampling", (float(rays), float(keep), float(count), 0.0))
     shader.image("out_image", out)
-    gpu.compute.dispatch(shader, math.ceil(layout.width / LOCAL_SIZE),
-                         math.ceil(layout.height / LOCAL_SIZE), 1)
+    gpu.compute.dispatch(shader, math.ceil(places.width / LOCAL_SIZE),
+                         math.ceil(places.height / LOCAL_SIZE), 1)
     return out
 
 
@@ -215,16 +230,23 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
         top = end
         rows = max(1, min(record_rows, int(rows * min(4.0, budget / max(seconds, 1e-4)))))
         yield
-    # the iterations' layout: the first part alone (the rows above the ahead part's)
+    # the iterations' texels: two of the first part alone (the rows above the ahead part's)
+    # in turn, then the two parts; each holds the layout's header and absent faces, uploaded
+    # once, and a relaxation writes its faces' texels only (a dispatch over the faces, not
+    # the grid: the HDRI courtyard's 23 k faces lie in 4.7 M texels)
     main = texels[:1 + (len(texels) - 1) // 2].copy()
     main[0, -1, 2] = 0.0
-    layout, both = (float_texture(t, (t.shape[1], t.shape[0])) for t in (main, texels))
+    places = face_places(cache)
+    turns = []
     yield
     previous = float_texture(blank, (1, 1))  # the empty cache: the records' own radiance
-    for _ in range(settings.bounces - 1):
-        previous = relax_gpu(layout, previous, records, rays)
+    for k in range(settings.bounces - 1):
+        if len(turns) < 2:
+            turns.append(float_texture(main, (main.shape[1], main.shape[0])))
+        previous = relax_gpu(places, previous, records, rays, count, turns[k % 2])
         yield
-    previous = relax_gpu(both, previous, records, rays, keep=True)  # and the glossy gather's
+    both = float_texture(texels, (texels.shape[1], texels.shape[0]))
+    previous = relax_gpu(places, previous, records, rays, count, both, keep=True)  # + glossy's
     yield
     def faces():  # the numpy cache with its faces, read back once
         held = read_texture(previous)

@@ -1,30 +1,23 @@
-/* One iteration of the radiance cache (voxgi_addon/gi/radiance_cache.py relax), written as the
- * next iteration's texels (radiance_cache.cache_texels) from `cache_layout` (the same texels
- * with (face row, 0, 0, held) in place of the light: cache_texels(layout=True)): row 0 (the
- * header) is copied; a held face f gets (the mean over its rays' records (cache_paths.glsl,
- * record i = f · rays + j at texel (i mod Wr, i div Wr) of paths_*) of radiance + cache weight
- * × the previous iteration's cache at the hit (cache_lookup.glsl), 1); the other texels 0.
- * sampling = (rays per face, 1: the layout has two parts (cache_texels(layout=True,
- * ahead=True)): part 0's texels are the previous iteration's, copied, and part 1's the next
- * one's, which the glossy gather reads, 0, 0). */
+/* One iteration of the radiance cache (voxgi_addon/gi/radiance_cache.py relax), an invocation
+ * per voxel face: face f = (row · width + column) of `face_places` (render/gpu_gather.py
+ * face_places: its texel of the cache's texels, radiance_cache.cache_texels, and of their
+ * ahead part) gets (the mean over its rays' records (cache_paths.glsl, record i = f · rays + j
+ * at texel (i mod Wr, i div Wr) of paths_*) of radiance + cache weight × the previous
+ * iteration's cache at the hit (cache_lookup.glsl), 1) at its texel of out_image. The other
+ * texels of out_image (the header, the voxels' absent faces) are the layout's, uploaded once.
+ * sampling = (rays per face, 1: out_image has two parts (cache_texels(ahead=True)): the face's
+ * texel of part 0 keeps the previous iteration, of part 1 gets the next one, which the glossy
+ * gather reads, faces, 0). */
 
 void main()
 {
-  ivec2 texel = ivec2(gl_GlobalInvocationID.xy);
-  ivec2 size = imageSize(out_image);
-  if (texel.x >= size.x || texel.y >= size.y) {
+  ivec2 id = ivec2(gl_GlobalInvocationID.xy);
+  ivec2 size = textureSize(face_places, 0);
+  int face = id.y * size.x + id.x;
+  if (id.x >= size.x || id.y >= size.y || face >= int(sampling.z)) {
     return;
   }
-  vec4 held = texelFetch(cache_layout, texel, 0);
-  if (texel.y == 0 || held.w < 0.5) {
-    imageStore(out_image, texel, held);  /* the header, or an empty texel */
-    return;
-  }
-  if (sampling.y > 0.5 && held.y < 0.5) {
-    imageStore(out_image, texel, texelFetch(radiance_cache, texel, 0)); /* the previous one */
-    return;
-  }
-  int face = int(held.x + 0.5);
+  vec4 place = texelFetch(face_places, id, 0);
   int rays = int(sampling.x);
   int width = textureSize(paths_radiance, 0).x;
   vec3 sum = vec3(0.0);
@@ -39,5 +32,13 @@ void main()
                             texelFetch(paths_normals, at, 0).xyz);
     }
   }
-  imageStore(out_image, texel, vec4(sum / float(rays), 1.0));
+  vec4 value = vec4(sum / float(rays), 1.0);
+  ivec2 texel = ivec2(place.xy + 0.5);
+  if (sampling.y > 0.5) {
+    imageStore(out_image, texel, texelFetch(radiance_cache, texel, 0)); /* the previous one */
+    imageStore(out_image, ivec2(place.zw + 0.5), value);
+  }
+  else {
+    imageStore(out_image, texel, value);
+  }
 }
