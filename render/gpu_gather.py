@@ -230,12 +230,10 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
         top = end
         rows = max(1, min(record_rows, int(rows * min(4.0, budget / max(seconds, 1e-4)))))
         yield
-    # the iterations' texels: two of the first part alone (the rows above the ahead part's)
-    # in turn, then the two parts; each holds the layout's header and absent faces, uploaded
-    # once, and a relaxation writes its faces' texels only (a dispatch over the faces, not
-    # the grid: the HDRI courtyard's 23 k faces lie in 4.7 M texels)
-    main = texels[:1 + (len(texels) - 1) // 2].copy()
-    main[0, -1, 2] = 0.0
+    # the iterations' texels: two of the first part alone in turn, then the two parts; each
+    # holds the layout's header, voxel ids and absent faces, uploaded once, and a relaxation
+    # writes its faces' texels only (a dispatch over the faces)
+    main = cache_texels(cache, layout=True)
     places = face_places(cache)
     turns = []
     yield

@@ -145,15 +145,21 @@ def test_texels_hold_every_voxel_face():
     cache = rc.iterate(rc.build_cache(tris, 8), tris, lights, albedo, emission, rays=4)
     texels = rc.cache_texels(cache)
     res = 8
-    assert texels.shape == (1 + res * 6, res * res, 4)
-    np.testing.assert_allclose(texels[0, 0], [*cache.grids[0].origin, cache.grids[0].span])
-    np.testing.assert_array_equal(texels[0, -1], [res, 1, 0, 0])
     c, present = cache.cells[0], cache.present[0]
-    assert texels[1:, :, 3].sum() == present.sum()
+    # the header, a row of voxel ids per z, then 6 texels per voxel that exists (compact)
+    assert texels.shape == (1 + res + -(-len(c) * 6 // (res * res)), res * res, 4)
+    np.testing.assert_allclose(texels[0, 0], [*cache.grids[0].origin, cache.grids[0].span])
+    np.testing.assert_array_equal(texels[0, -1], [res, 1, 0, len(c)])
+    ids = texels[1:1 + res, :, 0]
+    assert (ids >= 0).sum() == len(c) and (ids[ids < 0] == -1).all()
+    faces = texels[1 + res:].reshape(-1, 4)
+    assert faces[:, 3].sum() == present.sum()
     assert present.any(axis=1).all() and not present.all()  # a room's voxels face 1–3 axes
     for i in (0, len(c) // 2, len(c) - 1):
+        voxel = int(texels[1 + c[i, 2], c[i, 0] + c[i, 1] * res, 0])
+        assert voxel == i
         for f in range(6):
-            texel = texels[1 + c[i, 2] * 6 + f, c[i, 0] + c[i, 1] * res]
+            texel = faces[voxel * 6 + f]
             assert texel[3] == present[i, f]
             np.testing.assert_allclose(texel[:3], cache.faces[0][i, f])
 
@@ -526,7 +532,9 @@ def test_glossy_gathers_read_one_bounce_more():
     np.testing.assert_allclose(gathered[0], gathered[1], rtol=1e-5)
     texels = rc.cache_texels(three)
     res = three.grids[0].resolution
-    assert texels.shape[0] == 1 + 2 * res * 6 and texels[0, -1, 2] == 1.0
+    voxels = sum(len(c) for c in three.cells)
+    assert texels.shape[0] == 1 + res + -(-2 * voxels * 6 // (res * res)) and \
+        texels[0, -1, 2] == 1.0
     rows, columns = rc.texel_places(three, 1)
     np.testing.assert_allclose(texels[rows, columns, :3],
                                np.concatenate([f[q] for f, q in zip(three.ahead,

@@ -554,37 +554,61 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
     return cache
 
 
+def _texel_width(cache: RadianceCache) -> int:
+    return max(cache.grids[0].resolution ** 2, len(cache.grids) + 1)
+
+
+def _voxel_starts(cache: RadianceCache) -> np.ndarray:
+    """(count + 1,) each grid's first voxel id in ``cache_texels``' voxel order (grids finest
+    first), and the voxels in all."""
+    return np.concatenate([[0], np.cumsum([len(c) for c in cache.cells])]).astype(np.int64)
+
+
 def texel_places(cache: RadianceCache, part: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """((F,) rows, (F,) columns) of each present face (``face_points``' order) in the texels of
     ``cache_texels`` (part 1: of its ``ahead`` iteration)."""
     res = cache.grids[0].resolution
     count = len(cache.grids)
+    width = _texel_width(cache)
+    starts = _voxel_starts(cache)
+    first_row = 1 + count * res
     rows, columns = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
-    for g, (cells, present) in enumerate(zip(cache.cells, cache.present)):
-        c = np.asarray(cells, np.int64)
+    for g, present in enumerate(cache.present):
         voxel, face = np.nonzero(present)
-        rows.append(1 + ((part * count + g) * res + c[voxel, 2]) * 6 + face)
-        columns.append(c[voxel, 0] + c[voxel, 1] * res)
+        texel = (part * starts[-1] + starts[g] + voxel) * 6 + face
+        rows.append(first_row + texel // width)
+        columns.append(texel % width)
     return np.concatenate(rows), np.concatenate(columns)
 
 
 def cache_texels(cache: RadianceCache, layout: bool = False, ahead: bool = False) -> np.ndarray:
     """(H, W, 4) float32 texels of ``cache`` for the GPU (``shaders/cache_lookup.glsl``
-    ``cache_indirect``): W = res² (texel x + y·res), row 0 the header — texel i = (origin xyz,
-    span) of grid i, the last texel (res, grid count, 1 with an ahead part, 0) — then per part p
-    (0: ``faces``; 1: ``ahead``, which the glossy gather reads, where the cache keeps it), grid g, z
-    and face f the row 1 + ((p·count + g)·res + z)·6 + f of (rgb, 1 where the voxel holds the
-    face). layout : instead of the rgb, (the face's row in ``face_points``, p, 0) — what
-    ``cache_relax.glsl`` writes each iteration's texels from, on the GPU — with the ahead part
-    when ``ahead``."""
+    ``cache_indirect``), W = res²: row 0 the header — texel i = (origin xyz, span) of grid i,
+    the last texel (res, grid count, 1 with an ahead part, voxels V in all); then per grid g
+    and z the row 1 + g·res + z of each cell's voxel id (texel x + y·res: .x, the grids' voxels
+    numbered finest grid first; -1 where the grid has no voxel); then the faces, compact:
+    face f of voxel v in part p (0: ``faces``; 1: ``ahead``, which the glossy gather reads,
+    where the cache keeps it) is texel (p·V + v)·6 + f, counted along the rows after the ids,
+    holding (rgb, 1 where the voxel holds the face). Only voxels that exist take texels (a
+    dense grid of faces put the HDRI courtyard's 23 k faces in 4.7 M texels: docs/gi_pipeline.md
+    "Multi-bounce radiance cache", "Compact texels"). layout : instead of the rgb, (the face's
+    row in ``face_points``, p, 0) — a cache's texels before its first iteration — with the
+    ahead part when ``ahead``."""
     res = cache.grids[0].resolution
     count = len(cache.grids)
-    width = max(res * res, count + 1)
+    width = _texel_width(cache)
+    starts = _voxel_starts(cache)
     parts = 2 if (ahead if layout else bool(cache.ahead)) else 1
-    texels = np.zeros((1 + parts * count * res * 6, width, 4), np.float32)
+    face_rows = -(-(parts * int(starts[-1]) * 6) // width)
+    texels = np.zeros((1 + count * res + face_rows, width, 4), np.float32)
     for g, grid in enumerate(cache.grids):
         texels[0, g] = (*grid.origin, grid.span)
-    texels[0, width - 1] = (res, count, parts - 1, 0.0)
+    texels[0, width - 1] = (res, count, parts - 1, starts[-1])
+    texels[1:1 + count * res, :res * res, 0] = -1.0
+    for g, cells in enumerate(cache.cells):
+        c = np.asarray(cells, np.int64)
+        texels[1 + g * res + c[:, 2], c[:, 0] + c[:, 1] * res, 0] = \
+            starts[g] + np.arange(len(c))
     for part, faces in enumerate((cache.faces, cache.ahead)[:parts]):
         rows, columns = texel_places(cache, part)
         if layout:
