@@ -432,45 +432,73 @@ vec4 emitter_header()
   return texelFetch(emitters, ivec2(0, textureSize(emitters, 0).y - 1), 0);
 }
 
+/* Lambert's term of the edge (a, b) (relative to the point) toward normal n added to sum:
+ * θ × the great circle's unit normal · n. */
+void form_factor_edge(vec3 a, vec3 b, vec3 n, inout float sum)
+{
+  float la = length(a);
+  float lb = length(b);
+  a = la > 0.0 ? a / la : vec3(0.0);
+  b = lb > 0.0 ? b / lb : vec3(0.0);
+  vec3 c = cross(a, b);
+  float s = length(c);
+  if (s > 1e-12) {
+    sum += atan(s, dot(a, b)) * dot(c / s, n);
+  }
+}
+
+/* The edge (a, b) of a triangle with heights ha, hb above the point's tangent plane, clipped to
+ * the part above (Sutherland-Hodgman's crossing a + t (b - a), t = h_a / (h_a - h_b)), into
+ * sum; where it leaves the part above, its crossing is the clipped polygon's exit, where it
+ * enters, its entry. */
+void form_factor_clipped_edge(vec3 a, vec3 b, float ha, float hb, vec3 n, inout float sum,
+                              inout vec3 exit, inout vec3 entry, inout int crossings)
+{
+  bool in_a = ha >= 0.0;
+  bool in_b = hb >= 0.0;
+  if (in_a != in_b) {
+    float d = ha - hb;
+    float s = d != 0.0 ? ha / d : 0.0;
+    vec3 cut = a + s * (b - a);
+    crossings++;
+    if (in_a) {
+      exit = cut;
+      b = cut;
+    }
+    else {
+      entry = cut;
+      a = cut;
+    }
+  }
+  if (in_a || in_b) {
+    form_factor_edge(a, b, n, sum);
+  }
+}
+
 /* ∫ max(n·ω, 0)/π dω over triangle t clipped to the horizon of (p, n), either side
- * (emitters.clipped_form_factors). */
+ * (emitters.clipped_form_factors): Lambert's formula over each edge's part above the horizon
+ * and the clipped polygon's chord along it (from its exit to its entry), the polygon never
+ * held in an array (a local array indexed by a running count is slow to index on llvmpipe). */
 float clipped_form_factor(int t, vec3 p, vec3 n)
 {
-  vec3 rel[3];
-  float h[3];
-  for (int i = 0; i < 3; i++) {
-    rel[i] = texelFetch(emitters, ivec2(i, t), 0).xyz - p;
-    h[i] = dot(rel[i], n);
-  }
-  vec3 poly[4];
-  int count = 0;
-  for (int i = 0; i < 3; i++) {
-    int j = (i + 1) % 3;
-    if (h[i] >= 0.0) {
-      poly[count++] = rel[i];
-    }
-    if ((h[i] >= 0.0) != (h[j] >= 0.0)) {
-      float d = h[i] - h[j];
-      float s = d != 0.0 ? h[i] / d : 0.0;
-      poly[count++] = rel[i] + s * (rel[j] - rel[i]);
-    }
-  }
-  if (count < 3) {
+  vec3 a = texelFetch(emitters, ivec2(0, t), 0).xyz - p;
+  vec3 b = texelFetch(emitters, ivec2(1, t), 0).xyz - p;
+  vec3 c = texelFetch(emitters, ivec2(2, t), 0).xyz - p;
+  float ha = dot(a, n);
+  float hb = dot(b, n);
+  float hc = dot(c, n);
+  if (ha < 0.0 && hb < 0.0 && hc < 0.0) {
     return 0.0;
   }
   float sum = 0.0;
-  for (int k = 0; k < count; k++) {
-    vec3 a = poly[k];
-    vec3 b = poly[(k + 1) % count];
-    float la = length(a);
-    float lb = length(b);
-    a = la > 0.0 ? a / la : vec3(0.0);
-    b = lb > 0.0 ? b / lb : vec3(0.0);
-    vec3 c = cross(a, b);
-    float s = length(c);
-    if (s > 1e-12) {
-      sum += atan(s, dot(a, b)) * dot(c / s, n);
-    }
+  vec3 exit = vec3(0.0);
+  vec3 entry = vec3(0.0);
+  int crossings = 0;
+  form_factor_clipped_edge(a, b, ha, hb, n, sum, exit, entry, crossings);
+  form_factor_clipped_edge(b, c, hb, hc, n, sum, exit, entry, crossings);
+  form_factor_clipped_edge(c, a, hc, ha, n, sum, exit, entry, crossings);
+  if (crossings == 2) {
+    form_factor_edge(exit, entry, n, sum);
   }
   return abs(sum) / (2.0 * M_PI_F);
 }

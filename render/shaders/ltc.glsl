@@ -81,50 +81,96 @@ float ltc_hemisphere_norm(vec4 m)
   return 0.5 * (1.0 + s * m.x / sqrt(m.x * m.x + m.w * m.w));
 }
 
-/* Sutherland-Hodgman of the polygon poly[0 .. count) against dot(plane, x) >= 0, in place
- * (at most 5 corners). */
-int ltc_clip(inout vec3 poly[5], int count, vec3 plane)
+/* One edge (x, y) of a polygon in the local frame: its term of the edge integral under M^-1
+ * (θ × the unit normal of the great circle through the transformed corners) added to total.
+ * The normal is taken as M^-1 x cross M^-1 y = cof(M^-1) (x cross y), cof = [[c, 0, -c d],
+ * [0, a - b d, 0], [-b c, 0, a c]], from the unstretched corners (a narrow lobe's M^-1
+ * stretches the polygon until its corners are nearly opposite, where a cross of the stretched
+ * corners would cancel). */
+void ltc_edge(vec3 x, vec3 y, vec4 m, inout vec3 total)
 {
-  vec3 src[5] = poly;
-  int out_count = 0;
-  for (int i = 0; i < count; i++) {
-    vec3 a = src[i];
-    vec3 b = src[(i + 1 == count) ? 0 : i + 1];
-    float ha = dot(plane, a);
-    float hb = dot(plane, b);
-    if (ha >= 0.0 && out_count < 5) {
-      poly[out_count++] = a;
-    }
-    if ((ha >= 0.0) != (hb >= 0.0) && out_count < 5) {
-      float denom = ha - hb;
-      float t = denom != 0.0 ? ha / denom : 0.0;
-      poly[out_count++] = a + t * (b - a);
-    }
+  vec3 g = cross(x, y);
+  vec3 c = vec3(m.z * (g.x - m.w * g.z), (m.x - m.y * m.w) * g.y, m.z * (m.x * g.z - m.y * g.x));
+  float s = length(c);
+  if (s > 0.0) {
+    total += atan(s, dot(ltc_apply(m, x), ltc_apply(m, y))) * c / s;
   }
-  return out_count;
 }
 
-/* |sum over edges theta_k gamma_k.z| / 2 pi of the transformed polygon M^-1 poly (poly in the
- * local frame, already clipped to both horizons). The edges' normals are taken as
- * M^-1 x cross M^-1 y = cof(M^-1) (x cross y), cof = [[c, 0, -c d], [0, a - b d, 0],
- * [-b c, 0, a c]], from the unstretched corners (a narrow lobe's M^-1 stretches the polygon
- * until its corners are nearly opposite, where a cross of the stretched corners would cancel). */
-float ltc_edge_integral(vec3 poly[5], int count, vec4 m, out vec3 mean)
+/* The piece of a polygon's edge (x, y) on the side dot(plane, ·) >= 0 of a plane through the
+ * origin (Sutherland-Hodgman's points: the crossing a + t (b - a), t = h_a / (h_a - h_b)):
+ * returns whether any is left, in (x, y); where the edge leaves the side, its crossing is the
+ * polygon's exit (`exit`, has_exit), where it enters, its entry. */
+bool ltc_clip_edge(inout vec3 x, inout vec3 y, vec3 plane, inout vec3 exit, inout bool has_exit,
+                   inout vec3 entry, inout bool has_entry)
 {
-  vec3 total = vec3(0.0);
-  for (int i = 0; i < count; i++) {
-    vec3 x = poly[i];
-    vec3 y = poly[(i + 1 == count) ? 0 : i + 1];
-    vec3 g = cross(x, y);
-    vec3 c = vec3(m.z * (g.x - m.w * g.z), (m.x - m.y * m.w) * g.y, m.z * (m.x * g.z - m.y * g.x));
-    float s = length(c);
-    if (s > 0.0) {
-      total += atan(s, dot(ltc_apply(m, x), ltc_apply(m, y))) * c / s;
+  float hx = dot(plane, x);
+  float hy = dot(plane, y);
+  bool in_x = hx >= 0.0;
+  bool in_y = hy >= 0.0;
+  if (in_x != in_y) {
+    float denom = hx - hy;
+    float t = denom != 0.0 ? hx / denom : 0.0;
+    vec3 cut = x + t * (y - x);
+    if (in_x) {
+      exit = cut;
+      has_exit = true;
+      y = cut;
+    }
+    else {
+      entry = cut;
+      has_entry = true;
+      x = cut;
     }
   }
-  /* the polygon's mean direction in the cosine's space (ltc.py _clamped_cosine_integral) */
-  mean = (total.z < 0.0 ? -total : total) / (2.0 * LTC_PI);
-  return abs(total.z) / (2.0 * LTC_PI);
+  return in_x || in_y;
+}
+
+/* An edge (x, y) of the polygon clipped to the surface's horizon: its piece above the
+ * cosine's plane (`plane`) into the edge integral, its crossings of that plane recorded. */
+void ltc_second_clip(vec3 x, vec3 y, vec3 plane, vec4 m, inout vec3 total, inout vec3 exit,
+                     inout bool has_exit, inout vec3 entry, inout bool has_entry)
+{
+  if (ltc_clip_edge(x, y, plane, exit, has_exit, entry, has_entry)) {
+    ltc_edge(x, y, m, total);
+  }
+}
+
+/* The edge integral under M^-1 of the triangle (a, b, c) in the local frame clipped to the
+ * surface's horizon (z >= 0) and then to the cosine's (the local plane d x + z >= 0), as
+ * Sutherland-Hodgman would clip it, without a polygon in an array (a local array indexed by
+ * a running count is slow to index on llvmpipe): each edge's piece inside both, the chord
+ * of the first clip from its exit to its entry clipped by the second, and the chord of the
+ * second (from its exit to its entry over the edges of the first's polygon). Returns the sum
+ * of θ × the great circles' normals (ltc_edge). */
+vec3 ltc_clipped_triangle(vec3 a, vec3 b, vec3 c, vec4 m)
+{
+  vec3 horizon = vec3(0.0, 0.0, 1.0);
+  vec3 cosine = vec3(m.w, 0.0, 1.0);
+  vec3 total = vec3(0.0);
+  vec3 exit1 = vec3(0.0), entry1 = vec3(0.0), exit2 = vec3(0.0), entry2 = vec3(0.0);
+  bool out1 = false, in1 = false, out2 = false, in2 = false;
+  vec3 x = a, y = b;
+  if (ltc_clip_edge(x, y, horizon, exit1, out1, entry1, in1)) {
+    ltc_second_clip(x, y, cosine, m, total, exit2, out2, entry2, in2);
+  }
+  x = b;
+  y = c;
+  if (ltc_clip_edge(x, y, horizon, exit1, out1, entry1, in1)) {
+    ltc_second_clip(x, y, cosine, m, total, exit2, out2, entry2, in2);
+  }
+  x = c;
+  y = a;
+  if (ltc_clip_edge(x, y, horizon, exit1, out1, entry1, in1)) {
+    ltc_second_clip(x, y, cosine, m, total, exit2, out2, entry2, in2);
+  }
+  if (out1 && in1) {
+    ltc_second_clip(exit1, entry1, cosine, m, total, exit2, out2, entry2, in2);
+  }
+  if (out2 && in2) {
+    ltc_edge(exit2, entry2, m, total);
+  }
+  return total;
 }
 
 /* Rows (t, b, n) of the local frame: t toward the view (ltc.py local_frame). */
@@ -196,25 +242,12 @@ float ltc_lobe_density(vec3 n, vec3 v, float roughness, vec3 w)
 float ltc_triangle_at(LtcLobe lobe, vec3 p, vec3 c0, vec3 c1, vec3 c2, out vec3 towards)
 {
   towards = transpose(lobe.to_local)[2];  /* n */
-  vec3 poly[5];
-  poly[0] = lobe.to_local * (c0 - p);
-  poly[1] = lobe.to_local * (c1 - p);
-  poly[2] = lobe.to_local * (c2 - p);
-  poly[3] = vec3(0.0);
-  poly[4] = vec3(0.0);
-  /* the surface's horizon (rho is 0 below it), then the cosine's (z >= 0 after M^-1: the local
-   * plane d x + z >= 0), both in the local frame */
-  int count = ltc_clip(poly, 3, vec3(0.0, 0.0, 1.0));
-  if (count == 0) {
-    return 0.0;
-  }
   vec4 m = lobe.m;
-  count = ltc_clip(poly, count, vec3(m.w, 0.0, 1.0));
-  if (count == 0) {
-    return 0.0;
-  }
-  vec3 mean;
-  float value = ltc_edge_integral(poly, count, m, mean) / lobe.norm;
+  vec3 total = ltc_clipped_triangle(lobe.to_local * (c0 - p), lobe.to_local * (c1 - p),
+                                    lobe.to_local * (c2 - p), m);
+  /* the polygon's mean direction in the cosine's space (ltc.py _clamped_cosine_integral) */
+  vec3 mean = (total.z < 0.0 ? -total : total) / (2.0 * LTC_PI);
+  float value = abs(total.z) / (2.0 * LTC_PI) / lobe.norm;
   vec3 local = lobe.back * mean;
   vec3 world = transpose(lobe.to_local) * local;
   if (value > 0.0 && dot(world, world) > 0.0) {
