@@ -49,7 +49,8 @@ def id_type(id_data) -> str:
                       (bpy.types.Armature, "ARMATURE"), (bpy.types.World, "WORLD"),
                       (bpy.types.Scene, "SCENE"), (bpy.types.Collection, "COLLECTION"),
                       (bpy.types.Camera, "CAMERA"), (bpy.types.NodeTree, "NODETREE"),
-                      (bpy.types.Image, "IMAGE"), (bpy.types.Action, "ACTION")):
+                      (bpy.types.Image, "IMAGE"), (bpy.types.Action, "ACTION"),
+                      (bpy.types.Key, "KEY")):
         if isinstance(id_data, cls):
             return name
     return "OTHER"

@@ -40,6 +40,7 @@ from .mesh import (
     read_triangles,
     triangle_materials,
 )
+from .mesh_cache import MeshArrays, MeshReads, change_key
 from .reads import count
 from .skin import (
     armature_modifiers,
@@ -139,49 +140,107 @@ def _holdout_index(material, table: MaterialTable, holdouts: dict[str, int]) -> 
 
 
 def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[str],
-               holdouts: dict[str, int], obj_eval=None) -> MeshData | None:
+               holdouts: dict[str, int], obj_eval=None, reads: MeshReads | None = None
+               ) -> MeshData | None:
     """The MeshData of an entry's evaluated object (``obj_eval``: given for an instance, which
     only exists while the depsgraph's instances are iterated); ``holdouts`` : Holdout-shader
-    materials' indices (``_holdout_index``)."""
+    materials' indices (``_holdout_index``); ``reads`` : the viewport's kept mesh reads
+    (``mesh_cache``): its arrays are taken from there when still valid, else read and kept."""
     obj_eval = obj_eval or entry.obj.evaluated_get(depsgraph)
-    count("meshes")
-    mesh = obj_eval.to_mesh()
+    change = None
+    if reads is not None and entry.kind != "skinned" and not entry.key.endswith(" (instanced)"):
+        change = change_key(entry.obj, obj_eval)
+    arrays = reads.take(entry.key, change) if change is not None else None
+    evaluated = _EvaluatedMesh(obj_eval)
     try:
-        triangles, corners, slots = read_triangles(mesh)
-        if len(triangles) == 0:
-            if entry.obj.type == "MESH":  # curves without bevel or fill have no faces, as in Cycles
-                warnings.append(f"Object '{entry.obj.name}' has no faces; it is left out")
-            return None
-        slot_materials = _slot_materials(obj_eval, mesh)
-        skinned = entry.kind == "skinned"
-        # a skinned mesh is kept in its rest shape, which the skinning matrices pose: its bakes
-        # are keyed by it too, so that a new pose bakes nothing again
-        positions = rest_positions(mesh) if skinned else read_positions(mesh)
-        uvs = read_corner_uvs(mesh, corners)
-        surface = Surface(entry.key, obj_eval, mesh, slot_materials,
-                          _digest(*(None if a is None else
-                                   hashlib.blake2b(a.tobytes(), digest_size=16).hexdigest()
-                                   for a in (positions, triangles, slots, uvs))), uvs is not None)
+        if arrays is None:
+            arrays = _read_arrays(entry, evaluated.mesh, change)
+            if arrays is None:
+                if entry.obj.type == "MESH":  # curves without bevel or fill have no faces, as in Cycles
+                    warnings.append(f"Object '{entry.obj.name}' has no faces; it is left out")
+                return None
+            if change is not None:
+                reads.put(entry.key, arrays)
+        # the slots' materials (Geometry Nodes may add some): the evaluated object's own mesh
+        # has them; ``to_mesh`` is only needed for the arrays, a bake or another UV map
+        slot_materials = _slot_materials(obj_eval, obj_eval.data if obj_eval.type == "MESH"
+                                         else evaluated.mesh)
+        surface = _LazySurface(entry.key, evaluated, slot_materials, arrays.digest,
+                               arrays.uvs is not None)
         lookup = material_lookup(slot_materials, lambda m: _holdout_index(m, table, holdouts)
                                  if is_holdout_shader(m) else table.index_of(m, surface))
-        materials = triangle_materials(slots, lookup)
-        uvs = named_uvs(mesh, corners, materials, table, uvs)
+        materials = triangle_materials(arrays.slots, lookup)
+        uvs = arrays.uvs
+        if uvs is not None and any(table.uv_map(int(i)) for i in np.unique(materials[materials >= 0])):
+            uvs = named_uvs(evaluated.mesh, arrays.corners, materials, table, uvs)
         skin = None
-        normals = None
-        if skinned:  # the rest shape's weights and normals
-            skin = top_weights(mesh, entry.layers, entry.armature.name_full)
-            normals = rest_corner_normals(mesh, corners)
+        if entry.kind == "skinned":  # the rest shape's weights
+            skin = top_weights(evaluated.mesh, entry.layers, entry.armature.name_full)
         return MeshData(
             name=entry.key,
-            positions=positions,
-            triangles=triangles,
+            positions=arrays.positions,
+            triangles=arrays.triangles,
             triangle_materials=materials,
             uvs=uvs,
             skin=skin,
-            corner_normals=read_corner_normals(mesh, corners) if normals is None else normals,
+            corner_normals=arrays.corner_normals,
         )
     finally:
-        obj_eval.to_mesh_clear()
+        evaluated.clear()
+
+
+def _read_arrays(entry: _Entry, mesh, change) -> MeshArrays | None:
+    """What of ``mesh`` (an evaluated ``to_mesh``) its geometry alone gives (``MeshArrays``);
+    None when it has no faces."""
+    triangles, corners, slots = read_triangles(mesh)
+    if len(triangles) == 0:
+        return None
+    # a skinned mesh is kept in its rest shape, which the skinning matrices pose: its bakes
+    # are keyed by it too, so that a new pose bakes nothing again
+    skinned = entry.kind == "skinned"
+    positions = rest_positions(mesh) if skinned else read_positions(mesh)
+    uvs = read_corner_uvs(mesh, corners)
+    normals = rest_corner_normals(mesh, corners) if skinned else read_corner_normals(mesh, corners)
+    digest = _digest(*(None if a is None else hashlib.blake2b(a.tobytes(), digest_size=16).hexdigest()
+                       for a in (positions, triangles, slots, uvs)))
+    data = entry.obj.data if entry.obj.type == "MESH" else None
+    # modifiers and shape keys make the evaluated mesh depend on more than its datablock
+    modified = len(entry.obj.modifiers) > 0 or getattr(data, "shape_keys", None) is not None
+    return MeshArrays(change, entry.obj.name_full, "" if data is None else data.name_full,
+                      modified, positions, triangles, corners, slots, uvs, normals, digest)
+
+
+class _EvaluatedMesh:
+    """An evaluated object's ``to_mesh``, made on first use (counted: ``reads.count``) and
+    cleared by ``clear``."""
+
+    def __init__(self, obj_eval):
+        self.obj_eval, self._mesh = obj_eval, None
+
+    @property
+    def mesh(self):
+        if self._mesh is None:
+            count("meshes")
+            self._mesh = self.obj_eval.to_mesh()
+        return self._mesh
+
+    def clear(self) -> None:
+        if self._mesh is not None:
+            self._mesh = None
+            self.obj_eval.to_mesh_clear()
+
+
+class _LazySurface(Surface):
+    """A ``Surface`` whose evaluated mesh is made only when a bake asks for it."""
+
+    def __init__(self, key: str, evaluated: _EvaluatedMesh, slot_materials: list, digest: str,
+                 has_uvs: bool):
+        self.key, self.obj_eval, self.slot_materials = key, evaluated.obj_eval, slot_materials
+        self.digest, self.has_uvs, self._evaluated = digest, has_uvs, evaluated
+
+    @property
+    def mesh(self):
+        return self._evaluated.mesh
 
 
 # Object types whose evaluated geometry is a mesh (what Cycles renders of them).
@@ -227,12 +286,16 @@ def _visible_mesh_entries(view_layer, warnings: list[str], depsgraph=None) -> li
     return entries
 
 
-def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
+def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = None
+                  ) -> SceneSnapshot:
     """Read the scene into a ``SceneSnapshot`` (main thread only).
 
     context_or_scene : a ``bpy.types.Context`` or ``bpy.types.Scene``.
     depsgraph : the evaluated depsgraph of the view layer to read; defaults to the
         context's (``Context.evaluated_depsgraph_get()``).
+    reads : the live viewport's mesh reads of its last snapshot (``mesh_cache.MeshReads``,
+        kept up to date with the depsgraph's updates by its owner): a mesh whose geometry
+        did not change is taken from there, not read again. None reads every mesh.
     Raises VoxGIError for input the engine cannot represent (e.g. > 256 deform bones).
     The scene is restored exactly (temporary modifiers and node groups removed).
     """
@@ -257,20 +320,24 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
         if key not in read_keys:
             read_keys.add(key)
             mesh = _read_mesh(_Entry(original, key, "static"), depsgraph, table, warnings,
-                              holdouts, obj_eval)
+                              holdouts, obj_eval, reads)
             if mesh is not None:
                 meshes[key] = mesh
                 origins[key] = original
 
+    if reads is not None:
+        reads.begin()
     instances = instance_objects(depsgraph, read_instanced)
     with temporary_weight_attributes(skinned, depsgraph):
         for entry in entries:
             if entry.key not in read_keys:  # linked duplicates are read once
                 read_keys.add(entry.key)
-                mesh = _read_mesh(entry, depsgraph, table, warnings, holdouts)
+                mesh = _read_mesh(entry, depsgraph, table, warnings, holdouts, reads=reads)
                 if mesh is not None:
                     meshes[entry.key] = mesh
 
+    if reads is not None:
+        reads.end()
     # Matrices are read after the temporary modifiers are gone.
     objects = mesh_objects([e for e in entries if e.key in meshes], depsgraph) + \
         [o for o in instances if o.mesh in meshes]

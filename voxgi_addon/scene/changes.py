@@ -50,7 +50,7 @@ _MOVE_STAGES = frozenset({"snapshot"}) | _CASCADE_STAGES
 # VISIBILITY is not Blender's: the set of visible mesh objects differs from the last snapshot
 # (hiding an object reaches the depsgraph as a bare Scene update; blender/updates.py adds it).
 ID_TYPES = ("OBJECT", "MESH", "MATERIAL", "LIGHT", "ARMATURE", "WORLD", "SCENE", "COLLECTION",
-            "CAMERA", "NODETREE", "IMAGE", "ACTION", "VISIBILITY", "OTHER")
+            "CAMERA", "NODETREE", "IMAGE", "ACTION", "KEY", "VISIBILITY", "OTHER")
 
 
 @dataclass(frozen=True)
