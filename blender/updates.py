@@ -78,7 +78,8 @@ def records_from_depsgraph(depsgraph, index: SceneIndex | None = None) -> list[U
             kind, original.name_full, bool(update.is_updated_transform),
             bool(update.is_updated_geometry), bool(update.is_updated_shading),
             original.type if kind == "OBJECT" else ""))
-    if index is not None and visible_mesh_names(depsgraph.view_layer) != set(index.objects):
+    if index is not None and visible_mesh_names(depsgraph.view_layer) != (
+            set(index.objects) if index.visible is None else index.visible):
         records.append(VISIBILITY_RECORD)
     return records
 
@@ -111,8 +112,11 @@ def scene_index(snapshot, view_layer) -> SceneIndex:
             obj.armature, None if armature is None else armature.data.name_full,
             obj.kind == "skinned" and rest_animated(blender_object))
     lights = [bpy.data.objects.get(light.name) for light in snapshot.lights]
+    # faceless objects (edges, points, an empty curve) are in no snapshot but are visible: kept
+    # apart, else every later update would look like an object shown (a full snapshot)
     return SceneIndex(objects, frozenset(light.name for light in snapshot.lights),
-                      frozenset(o.data.name_full for o in lights if o is not None))
+                      frozenset(o.data.name_full for o in lights if o is not None),
+                      frozenset(visible_mesh_names(view_layer)))
 
 
 def transform_snapshot(previous, scene, depsgraph, world: bool = True):

@@ -155,12 +155,12 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
     try:
         if arrays is None:
             arrays = _read_arrays(entry, evaluated.mesh, change)
-            if arrays is None:
-                if entry.obj.type == "MESH":  # curves without bevel or fill have no faces, as in Cycles
-                    warnings.append(f"Object '{entry.obj.name}' has no faces; it is left out")
-                return None
             if change is not None:
                 reads.put(entry.key, arrays)
+        if len(arrays.triangles) == 0:
+            if entry.obj.type == "MESH":  # curves without bevel or fill have no faces, as in Cycles
+                warnings.append(f"Object '{entry.obj.name}' has no faces; it is left out")
+            return None
         # the slots' materials (Geometry Nodes may add some): the evaluated object's own mesh
         # has them; ``to_mesh`` is only needed for the arrays, a bake or another UV map
         slot_materials = _slot_materials(obj_eval, obj_eval.data if obj_eval.type == "MESH"
@@ -189,12 +189,18 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
         evaluated.clear()
 
 
-def _read_arrays(entry: _Entry, mesh, change) -> MeshArrays | None:
+def _read_arrays(entry: _Entry, mesh, change) -> MeshArrays:
     """What of ``mesh`` (an evaluated ``to_mesh``) its geometry alone gives (``MeshArrays``);
-    None when it has no faces."""
+    no triangles and nothing else read when it has no faces."""
     triangles, corners, slots = read_triangles(mesh)
+    data = entry.obj.data if entry.obj.type == "MESH" else None
+    # modifiers and shape keys make the evaluated mesh depend on more than its datablock
+    modified = len(entry.obj.modifiers) > 0 or getattr(data, "shape_keys", None) is not None
+    names = (change, entry.obj.name_full, "" if data is None else data.name_full, modified)
     if len(triangles) == 0:
-        return None
+        empty = np.empty((0, 3), np.float32)
+        return MeshArrays(*names, empty, triangles, corners, slots, None,
+                          np.empty((0, 3, 3), np.float32), "")
     # a skinned mesh is kept in its rest shape, which the skinning matrices pose: its bakes
     # are keyed by it too, so that a new pose bakes nothing again
     skinned = entry.kind == "skinned"
@@ -203,11 +209,7 @@ def _read_arrays(entry: _Entry, mesh, change) -> MeshArrays | None:
     normals = rest_corner_normals(mesh, corners) if skinned else read_corner_normals(mesh, corners)
     digest = _digest(*(None if a is None else hashlib.blake2b(a.tobytes(), digest_size=16).hexdigest()
                        for a in (positions, triangles, slots, uvs)))
-    data = entry.obj.data if entry.obj.type == "MESH" else None
-    # modifiers and shape keys make the evaluated mesh depend on more than its datablock
-    modified = len(entry.obj.modifiers) > 0 or getattr(data, "shape_keys", None) is not None
-    return MeshArrays(change, entry.obj.name_full, "" if data is None else data.name_full,
-                      modified, positions, triangles, corners, slots, uvs, normals, digest)
+    return MeshArrays(*names, positions, triangles, corners, slots, uvs, normals, digest)
 
 
 class _EvaluatedMesh:

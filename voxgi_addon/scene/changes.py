@@ -87,11 +87,14 @@ class ObjectEntry:
 @dataclass(frozen=True)
 class SceneIndex:
     """Who uses what in the last snapshot. objects : mesh object name → entry; lights : light
-    object names; light_data : light datablock names."""
+    object names; light_data : light datablock names; visible : see below."""
 
     objects: dict[str, ObjectEntry] = field(default_factory=dict)
     lights: frozenset[str] = frozenset()
     light_data: frozenset[str] = frozenset()
+    # the renderable objects visible when the snapshot was taken, faceless ones included (they
+    # are in no snapshot; a VISIBILITY record is a change of this set); None: ``objects``' names
+    visible: frozenset[str] | None = None
 
     def keys_of(self, predicate) -> set[str]:
         return {e.key for e in self.objects.values() if predicate(e)}
