@@ -34,7 +34,7 @@ import numpy as np
 from ..registration import add_handlers, remove_handlers
 from ..voxgi_addon.scene.changes import ObjectEntry, SceneIndex, UpdateRecord, plan_updates
 from .snapshot.pose import posed_snapshot, slot_materials
-from .snapshot.scene import RENDERABLE, renders
+from .snapshot.scene import RENDERABLE, render_disabled, renders
 from .snapshot.skin import evaluating_own_changes, is_temporary_group
 from .snapshot.world_map import world_objects
 
@@ -58,8 +58,9 @@ def id_type(id_data) -> str:
 
 def visible_mesh_names(view_layer) -> set[str]:
     """Names of the objects a full snapshot reads from the view layer (instances aside)."""
+    disabled = render_disabled()
     return {o.name_full for o in view_layer.objects
-            if o.type in RENDERABLE and renders(o, view_layer)}
+            if o.type in RENDERABLE and renders(o, view_layer, disabled)}
 
 
 def records_from_depsgraph(depsgraph, index: SceneIndex | None = None) -> list[UpdateRecord]:
@@ -168,6 +169,12 @@ def remember(snapshot, scene, depsgraph) -> None:
     _watched[scene.name_full] = _Watch(depsgraph.view_layer.name, snapshot,
                                        scene_index(snapshot, depsgraph.view_layer),
                                        world_state(scene))
+
+
+def remembered_index(scene, snapshot) -> SceneIndex | None:
+    """The ``scene_index`` ``remember`` took of ``snapshot`` (the scene's last one), or None."""
+    watch = _watched.get(scene.name_full)
+    return watch.index if watch is not None and watch.snapshot is snapshot else None
 
 
 def forget() -> None:

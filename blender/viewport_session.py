@@ -56,6 +56,7 @@ from .snapshot import snapshot_or_error, snapshot_summary
 from .snapshot.mesh_cache import MeshReads
 from .updates import (
     records_from_depsgraph,
+    remembered_index,
     scene_index,
     skin_states,
     transform_snapshot,
@@ -241,7 +242,9 @@ class LiveGI:
         self.latest_snapshot = snapshot
         self.world, self.world_changed = world_state(scene), False
         self.skin = skin_states(snapshot, depsgraph)
-        self.index = scene_index(snapshot, depsgraph.view_layer)
+        # a full snapshot's index was just taken by ``remember`` (snapshot_or_error)
+        self.index = remembered_index(scene, snapshot) or scene_index(snapshot,
+                                                                      depsgraph.view_layer)
         if self.view_camera is not None:
             snapshot = dataclasses.replace(snapshot, camera=self.view_camera)
         settings = scene.voxgi

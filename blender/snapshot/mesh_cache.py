@@ -58,6 +58,7 @@ class MeshArrays:
     uvs: np.ndarray | None
     corner_normals: np.ndarray
     digest: str
+    used_slots: np.ndarray  # np.unique(slots): the slots the triangles use
 
 
 def change_key(original, obj_eval) -> tuple | None:
@@ -81,6 +82,9 @@ class MeshReads:
     def __init__(self):
         self._kept: dict[str, MeshArrays] = {}
         self._next: dict[str, MeshArrays] | None = None
+        # key → (arrays, slot lookup, triangle materials) of the last snapshot
+        self._materials: dict[str, tuple] = {}
+        self._next_materials: dict[str, tuple] = {}
         self.reused = 0  # meshes taken from here in the last snapshot (tests, panel)
 
     def __len__(self) -> int:
@@ -89,6 +93,7 @@ class MeshReads:
     def clear(self) -> None:
         """Forget every mesh: the next snapshot reads them all."""
         self._kept.clear()
+        self._materials.clear()
 
     def forget_updated(self, records, data_of, key_owner=None) -> None:
         """Drop the meshes ``records`` (``changes.UpdateRecord``s) may have changed.
@@ -122,7 +127,7 @@ class MeshReads:
 
     def begin(self) -> None:
         """A snapshot starts: what it reads or reuses is what the next one may reuse."""
-        self._next = {}
+        self._next, self._next_materials = {}, {}
         self.reused = 0
 
     def take(self, key: str, change: tuple | None) -> MeshArrays | None:
@@ -135,6 +140,19 @@ class MeshReads:
             self._next[key] = arrays
         return arrays
 
+    def triangle_materials(self, key: str, arrays: MeshArrays, lookup: np.ndarray,
+                           compute) -> np.ndarray:
+        """``compute()`` (the triangles' material indices from ``arrays.slots`` and the slots'
+        ``lookup``), or the same array as the last snapshot's when both were the same."""
+        last = self._materials.get(key)
+        if last is not None and last[0] is arrays and np.array_equal(last[1], lookup):
+            values = last[2]
+        else:
+            values = compute()
+        if self._next is not None:
+            self._next_materials[key] = (arrays, lookup, values)
+        return values
+
     def put(self, key: str, arrays: MeshArrays) -> None:
         """Keep what this snapshot read of ``key``."""
         if self._next is not None:
@@ -144,3 +162,4 @@ class MeshReads:
         """The snapshot is complete: keep only its meshes (an object gone is read when back)."""
         if self._next is not None:
             self._kept, self._next = self._next, None
+            self._materials, self._next_materials = self._next_materials, {}

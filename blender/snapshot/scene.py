@@ -140,12 +140,16 @@ def _holdout_index(material, table: MaterialTable, holdouts: dict[str, int]) -> 
 
 
 def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[str],
-               holdouts: dict[str, int], obj_eval=None, reads: MeshReads | None = None
+               holdouts: dict[str, int], obj_eval=None, reads: MeshReads | None = None,
+               shaders: dict[str, bool] | None = None, used: dict | None = None
                ) -> MeshData | None:
     """The MeshData of an entry's evaluated object (``obj_eval``: given for an instance, which
     only exists while the depsgraph's instances are iterated); ``holdouts`` : Holdout-shader
     materials' indices (``_holdout_index``); ``reads`` : the viewport's kept mesh reads
-    (``mesh_cache``): its arrays are taken from there when still valid, else read and kept."""
+    (``mesh_cache``): its arrays are taken from there when still valid, else read and kept;
+    ``shaders`` : material name → ``is_holdout_shader``, filled as materials are met (once
+    per snapshot, not per object); ``used`` : key → the material indices its triangles use,
+    filled here."""
     obj_eval = obj_eval or entry.obj.evaluated_get(depsgraph)
     change = None
     if reads is not None and entry.kind != "skinned" and not entry.key.endswith(" (instanced)"):
@@ -167,11 +171,27 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
                                          else evaluated.mesh)
         surface = _LazySurface(entry.key, evaluated, slot_materials, arrays.digest,
                                arrays.uvs is not None)
+        shaders = {} if shaders is None else shaders
+
+        def holdout(material) -> bool:
+            name = material.original.name_full
+            if name not in shaders:
+                shaders[name] = is_holdout_shader(material)
+            return shaders[name]
+
         lookup = material_lookup(slot_materials, lambda m: _holdout_index(m, table, holdouts)
-                                 if is_holdout_shader(m) else table.index_of(m, surface))
-        materials = triangle_materials(arrays.slots, lookup)
+                                 if holdout(m) else table.index_of(m, surface))
+        if change is not None:  # a kept mesh with the same slots' materials: the same array
+            materials = reads.triangle_materials(entry.key, arrays, lookup,
+                                                 lambda: triangle_materials(arrays.slots, lookup))
+        else:
+            materials = triangle_materials(arrays.slots, lookup)
+        # the materials used, from the few slots used (not a pass over every triangle)
+        indices = np.unique(triangle_materials(arrays.used_slots, lookup))
+        if used is not None:
+            used[entry.key] = indices
         uvs = arrays.uvs
-        if uvs is not None and any(table.uv_map(int(i)) for i in np.unique(materials[materials >= 0])):
+        if uvs is not None and any(table.uv_map(int(i)) for i in indices[indices >= 0]):
             uvs = named_uvs(evaluated.mesh, arrays.corners, materials, table, uvs)
         skin = None
         if entry.kind == "skinned":  # the rest shape's weights
@@ -200,7 +220,7 @@ def _read_arrays(entry: _Entry, mesh, change) -> MeshArrays:
     if len(triangles) == 0:
         empty = np.empty((0, 3), np.float32)
         return MeshArrays(*names, empty, triangles, corners, slots, None,
-                          np.empty((0, 3, 3), np.float32), "")
+                          np.empty((0, 3, 3), np.float32), "", np.unique(slots))
     # a skinned mesh is kept in its rest shape, which the skinning matrices pose: its bakes
     # are keyed by it too, so that a new pose bakes nothing again
     skinned = entry.kind == "skinned"
@@ -209,7 +229,8 @@ def _read_arrays(entry: _Entry, mesh, change) -> MeshArrays:
     normals = rest_corner_normals(mesh, corners) if skinned else read_corner_normals(mesh, corners)
     digest = _digest(*(None if a is None else hashlib.blake2b(a.tobytes(), digest_size=16).hexdigest()
                        for a in (positions, triangles, slots, uvs)))
-    return MeshArrays(*names, positions, triangles, corners, slots, uvs, normals, digest)
+    return MeshArrays(*names, positions, triangles, corners, slots, uvs, normals, digest,
+                      np.unique(slots))
 
 
 class _EvaluatedMesh:
@@ -251,20 +272,35 @@ RENDERABLE = ("MESH", "CURVE", "FONT", "SURFACE", "META")
 # (left_out.type_note).
 
 
-def renders(obj, view_layer) -> bool:
+def render_disabled() -> frozenset[int]:
+    """``session_uid`` of the objects in a collection disabled in renders (a collection's own
+    objects, as ``renders`` reads them), for one pass over many objects: ``Object.
+    users_collection`` scans every collection's objects for each object it is asked of (on the
+    diorama's 61 objects 2–3 ms a call, twice or three times per update)."""
+    collections = [c for c in bpy.data.collections if c.hide_render] + \
+        [s.collection for s in bpy.data.scenes if s.collection.hide_render]
+    return frozenset(o.session_uid for c in collections for o in c.objects)
+
+
+def renders(obj, view_layer, disabled: frozenset[int] | None = None) -> bool:
     """Does Blender render ``obj`` from this view layer: visible there (not hidden, its
     collections not excluded) and not disabled in renders (the object, or a collection it is
-    in)?"""
-    return (obj.visible_get(view_layer=view_layer) and not obj.hide_render
-            and not any(c.hide_render for c in obj.users_collection))
+    in)? disabled : ``render_disabled()``, taken once for many objects."""
+    if not obj.visible_get(view_layer=view_layer) or obj.hide_render:
+        return False
+    if disabled is None:
+        return not any(c.hide_render for c in obj.users_collection)
+    return obj.session_uid not in disabled
 
 
 def _visible_mesh_entries(view_layer, warnings: list[str], depsgraph=None) -> list[_Entry]:
     entries, used = [], {}
+    disabled = render_disabled()
     for obj in view_layer.objects:
-        if type_note(obj) is not None and renders(obj, view_layer):
+        shown = renders(obj, view_layer, disabled)
+        if shown and type_note(obj) is not None:
             warnings.append(left_out_line(obj.name, [type_note(obj)]))
-        if obj.type not in RENDERABLE or not renders(obj, view_layer):
+        if obj.type not in RENDERABLE or not shown:
             continue
         kind, armature = object_kind(obj, depsgraph)
         if kind == "skinned" and obj.library is not None:
@@ -316,13 +352,15 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
     meshes: dict[str, MeshData] = {}
     read_keys: set[str] = set()
     holdouts: dict[str, int] = {}
+    shaders: dict[str, bool] = {}  # material name → is_holdout_shader
+    used: dict[str, np.ndarray] = {}  # mesh key → the material indices its triangles use
     origins: dict[str, object] = {}  # instanced mesh key → the instanced object
 
     def read_instanced(key, original, obj_eval):  # each instanced mesh once
         if key not in read_keys:
             read_keys.add(key)
             mesh = _read_mesh(_Entry(original, key, "static"), depsgraph, table, warnings,
-                              holdouts, obj_eval, reads)
+                              holdouts, obj_eval, reads, shaders, used)
             if mesh is not None:
                 meshes[key] = mesh
                 origins[key] = original
@@ -334,7 +372,8 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
         for entry in entries:
             if entry.key not in read_keys:  # linked duplicates are read once
                 read_keys.add(entry.key)
-                mesh = _read_mesh(entry, depsgraph, table, warnings, holdouts, reads=reads)
+                mesh = _read_mesh(entry, depsgraph, table, warnings, holdouts, reads=reads,
+                                  shaders=shaders, used=used)
                 if mesh is not None:
                     meshes[entry.key] = mesh
 
@@ -348,8 +387,8 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
         [(f"{origin.name} (instanced)", origin, key) for key, origin in origins.items()
          if key in meshes]
     for name, obj, key in named:
-        used = np.unique(meshes[key].triangle_materials)
-        notes = notes_of(obj, [table.materials[i].name for i in used
+        used_here = used[key]
+        notes = notes_of(obj, [table.materials[i].name for i in used_here
                                if 0 <= i < len(table.materials)], table.notes)
         if notes:
             warnings.append(left_out_line(name, notes))
