@@ -26,9 +26,13 @@ only what changed").
 """
 from __future__ import annotations
 
+import functools
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
+
+from .materials import _digest
 
 __all__ = ["MeshArrays", "MeshReads", "change_key"]
 
@@ -45,7 +49,7 @@ class MeshArrays:
 
     change : ``change_key`` when read; object / data : the object's and mesh datablock's
     ``name_full``; modified : the object has modifiers or its mesh shape keys (its evaluated
-    mesh depends on more than its datablock); digest : the content key of positions, triangles, slots and UVs."""
+    mesh depends on more than its datablock)."""
 
     change: tuple
     object: str
@@ -57,8 +61,16 @@ class MeshArrays:
     slots: np.ndarray
     uvs: np.ndarray | None
     corner_normals: np.ndarray
-    digest: str
     used_slots: np.ndarray  # np.unique(slots): the slots the triangles use
+
+    @functools.cached_property
+    def digest(self) -> str:
+        """The content key of positions, triangles, slots and UVs: what a material's bake over
+        this mesh depends on besides its nodes (``materials.Surface``); hashed only when a
+        bake asks (5 ms of a full snapshot of the diorama, which bakes nothing)."""
+        return _digest(*(None if a is None else
+                         hashlib.blake2b(a.tobytes(), digest_size=16).hexdigest()
+                         for a in (self.positions, self.triangles, self.slots, self.uvs)))
 
 
 def change_key(original, obj_eval) -> tuple | None:

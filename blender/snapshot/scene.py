@@ -12,7 +12,6 @@ share one ``MeshData`` and one cache; any other object gets its own key
 """
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 
 import bpy
@@ -30,7 +29,7 @@ from ...voxgi_addon.scene.snapshot import (
 )
 from .environment import read_camera, read_light, read_world
 from .left_out import left_out_line, notes_of, type_note
-from .materials import MaterialTable, Surface, _digest
+from .materials import MaterialTable, Surface
 from .mesh import (
     material_lookup,
     named_uvs,
@@ -169,7 +168,7 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
         # has them; ``to_mesh`` is only needed for the arrays, a bake or another UV map
         slot_materials = _slot_materials(obj_eval, obj_eval.data if obj_eval.type == "MESH"
                                          else evaluated.mesh)
-        surface = _LazySurface(entry.key, evaluated, slot_materials, arrays.digest,
+        surface = _LazySurface(entry.key, evaluated, slot_materials, arrays,
                                arrays.uvs is not None)
         shaders = {} if shaders is None else shaders
 
@@ -220,16 +219,14 @@ def _read_arrays(entry: _Entry, mesh, change) -> MeshArrays:
     if len(triangles) == 0:
         empty = np.empty((0, 3), np.float32)
         return MeshArrays(*names, empty, triangles, corners, slots, None,
-                          np.empty((0, 3, 3), np.float32), "", np.unique(slots))
+                          np.empty((0, 3, 3), np.float32), np.unique(slots))
     # a skinned mesh is kept in its rest shape, which the skinning matrices pose: its bakes
     # are keyed by it too, so that a new pose bakes nothing again
     skinned = entry.kind == "skinned"
     positions = rest_positions(mesh) if skinned else read_positions(mesh)
     uvs = read_corner_uvs(mesh, corners)
     normals = rest_corner_normals(mesh, corners) if skinned else read_corner_normals(mesh, corners)
-    digest = _digest(*(None if a is None else hashlib.blake2b(a.tobytes(), digest_size=16).hexdigest()
-                       for a in (positions, triangles, slots, uvs)))
-    return MeshArrays(*names, positions, triangles, corners, slots, uvs, normals, digest,
+    return MeshArrays(*names, positions, triangles, corners, slots, uvs, normals,
                       np.unique(slots))
 
 
@@ -254,16 +251,20 @@ class _EvaluatedMesh:
 
 
 class _LazySurface(Surface):
-    """A ``Surface`` whose evaluated mesh is made only when a bake asks for it."""
+    """A ``Surface`` whose evaluated mesh and content key are made only when a bake asks."""
 
-    def __init__(self, key: str, evaluated: _EvaluatedMesh, slot_materials: list, digest: str,
-                 has_uvs: bool):
+    def __init__(self, key: str, evaluated: _EvaluatedMesh, slot_materials: list,
+                 arrays: MeshArrays, has_uvs: bool):
         self.key, self.obj_eval, self.slot_materials = key, evaluated.obj_eval, slot_materials
-        self.digest, self.has_uvs, self._evaluated = digest, has_uvs, evaluated
+        self.has_uvs, self._evaluated, self._arrays = has_uvs, evaluated, arrays
 
     @property
     def mesh(self):
         return self._evaluated.mesh
+
+    @property
+    def digest(self) -> str:
+        return self._arrays.digest
 
 
 # Object types whose evaluated geometry is a mesh (what Cycles renders of them).
