@@ -66,7 +66,7 @@ def edits(scene):
             ("one rock's vertices", vertices), ("an object hidden / shown", hide)]
 
 
-def measure(rounds: int, profile: bool) -> list:
+def measure(rounds: int, profile: bool, faceless: bool = False) -> list:
     import bpy
     from bench_entering_blender import build
 
@@ -76,6 +76,10 @@ def measure(rounds: int, profile: bool) -> list:
 
     jobs.synchronous = False
     scene = build("diorama")
+    if faceless:  # a visible mesh object without faces (a guide line, a point cloud)
+        mesh = bpy.data.meshes.new("Guide Line")
+        mesh.from_pydata([(0.0, 0.0, 0.0), (1.0, 0.0, 0.0)], [(0, 1)], [])
+        scene.collection.objects.link(bpy.data.objects.new("Guide Line", mesh))
     depsgraph = bpy.context.evaluated_depsgraph_get()
     live = live_gi(scene.name_full)
     records = []
@@ -121,12 +125,15 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--profile", action="store_true", help="print a cProfile of the edits")
+    ap.add_argument("--faceless", action="store_true",
+                    help="add a visible mesh object without faces (an edge) to the diorama")
     args = ap.parse_args(argv)
     from bench_blender import load_addon, print_table
 
     load_addon()
-    rows = measure(3 if args.quick else 9, args.profile)
-    print_table(f"### view_update on the imported diorama (main thread; {os.cpu_count()} CPUs, "
+    rows = measure(3 if args.quick else 9, args.profile, args.faceless)
+    extra = " + a faceless object" if args.faceless else ""
+    print_table(f"### view_update on the imported diorama{extra} (main thread; {os.cpu_count()} CPUs, "
                 f"load average {os.getloadavg()[0]:.1f} at the end)", rows)
     return 0
 
