@@ -8,15 +8,16 @@ numpy, never a bpy object) with the ``change_key`` it was read at; the next snap
 them when
 
 - the depsgraph reported no geometry update of the object, its mesh datablock, or anything
-  that may feed a modifier (``forget_updated``: a node group, an image, a texture, shape keys …
-  re-read every object with modifiers or shape keys) since they were read — the updates Cycles
-  re-syncs a mesh on;
+  that may feed a modifier (``forget_updated``: a Key re-reads its mesh; a node group, an
+  image, a texture … every object with modifiers or shape keys) since they were read — the
+  updates Cycles re-syncs a mesh on;
 - the object and its mesh are the same datablocks (``ID.session_uid``) under the same names,
   the evaluated mesh has the same numbers of vertices, corners and faces and the same active
   and render UV maps (``change_key``);
 - it is a mesh object of the last snapshot read as the same key (an added or shown object is
   read), not skinned (a skinned mesh's rest shape is read through temporary modifiers:
-  ``skin.py``) and not one an instancer makes of its own (``(instanced)`` keys).
+  ``skin.py``), not a curve, text or metaball and not one an instancer makes of its own
+  (``(instanced)`` keys).
 
 Anything else is read again; ``clear`` forgets everything (the first update, undo / redo, a new
 render engine: updates not seen by this one may have happened). Only the viewport
