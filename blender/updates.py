@@ -34,7 +34,7 @@ import numpy as np
 from ..registration import add_handlers, remove_handlers
 from ..voxgi_addon.scene.changes import ObjectEntry, SceneIndex, UpdateRecord, plan_updates
 from .snapshot.pose import posed_snapshot, slot_materials
-from .snapshot.scene import RENDERABLE, renders
+from .snapshot.scene import RENDERABLE, render_disabled, renders
 from .snapshot.skin import evaluating_own_changes, is_temporary_group
 from .snapshot.world_map import world_objects
 
@@ -49,7 +49,8 @@ def id_type(id_data) -> str:
                       (bpy.types.Armature, "ARMATURE"), (bpy.types.World, "WORLD"),
                       (bpy.types.Scene, "SCENE"), (bpy.types.Collection, "COLLECTION"),
                       (bpy.types.Camera, "CAMERA"), (bpy.types.NodeTree, "NODETREE"),
-                      (bpy.types.Image, "IMAGE"), (bpy.types.Action, "ACTION")):
+                      (bpy.types.Image, "IMAGE"), (bpy.types.Action, "ACTION"),
+                      (bpy.types.Key, "KEY")):
         if isinstance(id_data, cls):
             return name
     return "OTHER"
@@ -57,8 +58,9 @@ def id_type(id_data) -> str:
 
 def visible_mesh_names(view_layer) -> set[str]:
     """Names of the objects a full snapshot reads from the view layer (instances aside)."""
+    disabled = render_disabled()
     return {o.name_full for o in view_layer.objects
-            if o.type in RENDERABLE and renders(o, view_layer)}
+            if o.type in RENDERABLE and renders(o, view_layer, disabled)}
 
 
 def records_from_depsgraph(depsgraph, index: SceneIndex | None = None) -> list[UpdateRecord]:
@@ -77,7 +79,8 @@ def records_from_depsgraph(depsgraph, index: SceneIndex | None = None) -> list[U
             kind, original.name_full, bool(update.is_updated_transform),
             bool(update.is_updated_geometry), bool(update.is_updated_shading),
             original.type if kind == "OBJECT" else ""))
-    if index is not None and visible_mesh_names(depsgraph.view_layer) != set(index.objects):
+    if index is not None and visible_mesh_names(depsgraph.view_layer) != (
+            set(index.objects) if index.visible is None else index.visible):
         records.append(VISIBILITY_RECORD)
     return records
 
@@ -110,8 +113,11 @@ def scene_index(snapshot, view_layer) -> SceneIndex:
             obj.armature, None if armature is None else armature.data.name_full,
             obj.kind == "skinned" and rest_animated(blender_object))
     lights = [bpy.data.objects.get(light.name) for light in snapshot.lights]
+    # faceless objects (edges, points, an empty curve) are in no snapshot but are visible: kept
+    # apart, else every later update would look like an object shown (a full snapshot)
     return SceneIndex(objects, frozenset(light.name for light in snapshot.lights),
-                      frozenset(o.data.name_full for o in lights if o is not None))
+                      frozenset(o.data.name_full for o in lights if o is not None),
+                      frozenset(visible_mesh_names(view_layer)))
 
 
 def transform_snapshot(previous, scene, depsgraph, world: bool = True):
@@ -163,6 +169,12 @@ def remember(snapshot, scene, depsgraph) -> None:
     _watched[scene.name_full] = _Watch(depsgraph.view_layer.name, snapshot,
                                        scene_index(snapshot, depsgraph.view_layer),
                                        world_state(scene))
+
+
+def remembered_index(scene, snapshot) -> SceneIndex | None:
+    """The ``scene_index`` ``remember`` took of ``snapshot`` (the scene's last one), or None."""
+    watch = _watched.get(scene.name_full)
+    return watch.index if watch is not None and watch.snapshot is snapshot else None
 
 
 def forget() -> None:

@@ -53,8 +53,10 @@ from .redraw import tag_3d_views
 from .session import scene_session
 from .settings import gi_settings
 from .snapshot import snapshot_or_error, snapshot_summary
+from .snapshot.mesh_cache import MeshReads
 from .updates import (
     records_from_depsgraph,
+    remembered_index,
     scene_index,
     skin_states,
     transform_snapshot,
@@ -128,6 +130,9 @@ class LiveGI:
         self.progress = jobs.Progress()
         self.settings = None
         self.rescan = ""           # why everything must be read again next time ("" = no need)
+        # the last snapshot's mesh reads, reused by the next full snapshot for the meshes
+        # whose geometry no update touched (snapshot/mesh_cache.py)
+        self.mesh_reads = MeshReads()
         self.skin: dict[str, tuple[bytes, bytes]] = {}  # skinned objects' states (``update``)
         self.world = None          # updates.world_state at the last snapshot
         self.world_changed = True  # the next posed snapshot reads the world again
@@ -144,6 +149,9 @@ class LiveGI:
         """``view_update``: plan the depsgraph's updates (or ``records``) and schedule them."""
         if records is None:
             records = records_from_depsgraph(depsgraph, self.index)
+        # every update is seen here, also those that plan nothing: the kept mesh reads forget
+        # what they may have changed (before the skinned objects' echo is told apart)
+        self.mesh_reads.forget_updated(records, _mesh_data_name, _shape_keys_mesh)
         # A full snapshot of a skinned mesh adds and removes a temporary modifier
         # (snapshot/skin.py), which Blender reports as a geometry update of it: our own echo,
         # told apart from edits and poses by the mesh's rest shape and pose fingerprints.
@@ -152,6 +160,7 @@ class LiveGI:
         key = settings_key(scene)
         if self.index is None or self.rescan:
             plan = full_plan(self.rescan or "first update")
+            self.mesh_reads.clear()  # undo, a new engine: updates may have been missed
         elif key[0] != self.settings[0]:
             plan = full_plan("voxel settings changed")
         else:
@@ -222,7 +231,7 @@ class LiveGI:
             snapshot = self.latest_snapshot
         try:
             if snapshot is None:
-                snapshot, _ = snapshot_or_error(None, depsgraph)
+                snapshot, _ = snapshot_or_error(None, depsgraph, reads=self.mesh_reads)
         except VoxGIError as error:
             self.error = str(error)
             return None
@@ -233,7 +242,9 @@ class LiveGI:
         self.latest_snapshot = snapshot
         self.world, self.world_changed = world_state(scene), False
         self.skin = skin_states(snapshot, depsgraph)
-        self.index = scene_index(snapshot, depsgraph.view_layer)
+        # a full snapshot's index was just taken by ``remember`` (snapshot_or_error)
+        self.index = remembered_index(scene, snapshot) or scene_index(snapshot,
+                                                                      depsgraph.view_layer)
         if self.view_camera is not None:
             snapshot = dataclasses.replace(snapshot, camera=self.view_camera)
         settings = scene.voxgi
@@ -355,6 +366,17 @@ def wait_for(events, cancel) -> None:
 def _cascade_bytes(cascade_voxels) -> int:
     return sum(getattr(cascade_voxels, name).nbytes for name in
                ("cells", "albedo", "normal", "specular", "count", "mesh_has_finer"))
+
+
+def _mesh_data_name(object_name: str) -> str | None:
+    obj = bpy.data.objects.get(object_name)
+    return None if obj is None or obj.data is None else obj.data.name_full
+
+
+def _shape_keys_mesh(key_name: str) -> str | None:
+    key = bpy.data.shape_keys.get(key_name)
+    user = None if key is None else key.user
+    return user.name_full if isinstance(user, bpy.types.Mesh) else None
 
 
 def _scene(live: LiveGI):

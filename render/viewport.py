@@ -406,6 +406,13 @@ def view_update(engine, context, depsgraph) -> None:
     """``RenderEngine.view_update``: plan and schedule the depsgraph's updates."""
     scene = depsgraph.scene_eval.original
     live = live_gi(scene.name_full)
+    if not getattr(engine, "voxgi_entered", False):
+        # a new engine (Rendered mode entered again, another 3D view): the updates made while
+        # no engine listened were not seen, so everything is read again (the caches'
+        # fingerprints still decide what is voxelized; snapshot/mesh_cache.py)
+        engine.voxgi_entered = True
+        if live.index is not None:
+            live.rescan = live.rescan or "Rendered mode entered"
     # a new snapshot's GPU scene is prepared on the worker at once, ahead of the update job
     # (viewport_prepare; removed by ``release``)
     if viewport_prepare.prepare_snapshot not in SNAPSHOT_HOOKS:

@@ -18,7 +18,7 @@ NO_MESH_MESSAGE = (
     "(add one, or unhide it)"
 )
 
-def snapshot_or_error(context, depsgraph=None, posed: bool = False):
+def snapshot_or_error(context, depsgraph=None, posed: bool = False, reads=None):
     """(snapshot, seconds) of the context's scene (or of ``depsgraph``'s scene and view layer);
     VoxGIError when it has nothing to voxelize.
 
@@ -26,6 +26,7 @@ def snapshot_or_error(context, depsgraph=None, posed: bool = False):
         of this view layer, that snapshot posed at this frame (``updates.posed_since``: no
         mesh evaluated, no material read; docs/gi_pipeline.md "Posed updates"); a full
         snapshot otherwise.
+    reads : the live viewport's kept mesh reads (``mesh_cache.MeshReads``, ``take_snapshot``).
     """
     from ..updates import posed_since, remember  # updates reads snapshots: imported late
 
@@ -37,7 +38,7 @@ def snapshot_or_error(context, depsgraph=None, posed: bool = False):
         scene = depsgraph.scene_eval.original
     snapshot = posed_since(scene, depsgraph) if posed else None
     if snapshot is None:
-        snapshot = take_snapshot(scene, depsgraph)
+        snapshot = take_snapshot(scene, depsgraph, reads)
     if snapshot.objects:
         remember(snapshot, scene, depsgraph)
     seconds = time.perf_counter() - start

@@ -78,6 +78,17 @@ def read_triangles(mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return triangles.reshape(-1, 3), corners.reshape(-1, 3), slot_indices
 
 
+def _at_corners(values: np.ndarray, corners: np.ndarray, width: int) -> np.ndarray:
+    """``values`` (one row of ``width`` per corner, flat) at ``corners`` (T, 3): (T, 3, width).
+    Where the triangles are every corner in order (a mesh of triangles: ``read_triangles``)
+    the array itself, not a gather of it (the same values; 2–3 ms less on 142k triangles)."""
+    rows = values.reshape(-1, width)
+    if corners.size == len(rows) and np.array_equal(corners.ravel(),
+                                                     np.arange(corners.size, dtype=corners.dtype)):
+        return rows.reshape(-1, 3, width)
+    return rows[corners]
+
+
 def read_corner_uvs(mesh, corners: np.ndarray, name: str = "") -> np.ndarray | None:
     """UVs of a UV map at the given corners: the one called ``name``, else the active render
     one (what Cycles' textures read by default), else the active one.
@@ -98,7 +109,7 @@ def read_corner_uvs(mesh, corners: np.ndarray, name: str = "") -> np.ndarray | N
         attribute.data.foreach_get("vector", uv)
     else:
         layer.data.foreach_get("uv", uv)
-    return uv.reshape(-1, 2)[corners]
+    return _at_corners(uv, corners, 2)
 
 
 def named_uvs(mesh, corners: np.ndarray, materials: np.ndarray, table, uvs):
@@ -122,7 +133,7 @@ def read_corner_normals(mesh, corners: np.ndarray) -> np.ndarray:
     """
     normals = np.empty(len(mesh.loops) * 3, dtype=np.float32)
     mesh.corner_normals.foreach_get("vector", normals)
-    return normals.reshape(-1, 3)[corners]
+    return _at_corners(normals, corners, 3)
 
 
 def read_point_float(mesh, name: str) -> np.ndarray:

@@ -12,7 +12,6 @@ share one ``MeshData`` and one cache; any other object gets its own key
 """
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 
 import bpy
@@ -30,7 +29,7 @@ from ...voxgi_addon.scene.snapshot import (
 )
 from .environment import read_camera, read_light, read_world
 from .left_out import left_out_line, notes_of, type_note
-from .materials import MaterialTable, Surface, _digest
+from .materials import MaterialTable, Surface
 from .mesh import (
     material_lookup,
     named_uvs,
@@ -40,6 +39,7 @@ from .mesh import (
     read_triangles,
     triangle_materials,
 )
+from .mesh_cache import MeshArrays, MeshReads, change_key
 from .reads import count
 from .skin import (
     armature_modifiers,
@@ -139,49 +139,132 @@ def _holdout_index(material, table: MaterialTable, holdouts: dict[str, int]) -> 
 
 
 def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[str],
-               holdouts: dict[str, int], obj_eval=None) -> MeshData | None:
+               holdouts: dict[str, int], obj_eval=None, reads: MeshReads | None = None,
+               shaders: dict[str, bool] | None = None, used: dict | None = None
+               ) -> MeshData | None:
     """The MeshData of an entry's evaluated object (``obj_eval``: given for an instance, which
     only exists while the depsgraph's instances are iterated); ``holdouts`` : Holdout-shader
-    materials' indices (``_holdout_index``)."""
+    materials' indices (``_holdout_index``); ``reads`` : the viewport's kept mesh reads
+    (``mesh_cache``): its arrays are taken from there when still valid, else read and kept;
+    ``shaders`` : material name → ``is_holdout_shader``, filled as materials are met (once
+    per snapshot, not per object); ``used`` : key → the material indices its triangles use,
+    filled here."""
     obj_eval = obj_eval or entry.obj.evaluated_get(depsgraph)
-    count("meshes")
-    mesh = obj_eval.to_mesh()
+    change = None
+    if reads is not None and entry.kind != "skinned" and not entry.key.endswith(" (instanced)"):
+        change = change_key(entry.obj, obj_eval)
+    arrays = reads.take(entry.key, change) if change is not None else None
+    evaluated = _EvaluatedMesh(obj_eval)
     try:
-        triangles, corners, slots = read_triangles(mesh)
-        if len(triangles) == 0:
+        if arrays is None:
+            arrays = _read_arrays(entry, evaluated.mesh, change)
+            if change is not None:
+                reads.put(entry.key, arrays)
+        if len(arrays.triangles) == 0:
             if entry.obj.type == "MESH":  # curves without bevel or fill have no faces, as in Cycles
                 warnings.append(f"Object '{entry.obj.name}' has no faces; it is left out")
             return None
-        slot_materials = _slot_materials(obj_eval, mesh)
-        skinned = entry.kind == "skinned"
-        # a skinned mesh is kept in its rest shape, which the skinning matrices pose: its bakes
-        # are keyed by it too, so that a new pose bakes nothing again
-        positions = rest_positions(mesh) if skinned else read_positions(mesh)
-        uvs = read_corner_uvs(mesh, corners)
-        surface = Surface(entry.key, obj_eval, mesh, slot_materials,
-                          _digest(*(None if a is None else
-                                   hashlib.blake2b(a.tobytes(), digest_size=16).hexdigest()
-                                   for a in (positions, triangles, slots, uvs))), uvs is not None)
+        # the slots' materials (Geometry Nodes may add some): the evaluated object's own mesh
+        # has them; ``to_mesh`` is only needed for the arrays, a bake or another UV map
+        slot_materials = _slot_materials(obj_eval, obj_eval.data if obj_eval.type == "MESH"
+                                         else evaluated.mesh)
+        surface = _LazySurface(entry.key, evaluated, slot_materials, arrays,
+                               arrays.uvs is not None)
+        shaders = {} if shaders is None else shaders
+
+        def holdout(material) -> bool:
+            name = material.original.name_full
+            if name not in shaders:
+                shaders[name] = is_holdout_shader(material)
+            return shaders[name]
+
         lookup = material_lookup(slot_materials, lambda m: _holdout_index(m, table, holdouts)
-                                 if is_holdout_shader(m) else table.index_of(m, surface))
-        materials = triangle_materials(slots, lookup)
-        uvs = named_uvs(mesh, corners, materials, table, uvs)
+                                 if holdout(m) else table.index_of(m, surface))
+        if change is not None:  # a kept mesh with the same slots' materials: the same array
+            materials = reads.triangle_materials(entry.key, arrays, lookup,
+                                                 lambda: triangle_materials(arrays.slots, lookup))
+        else:
+            materials = triangle_materials(arrays.slots, lookup)
+        # the materials used, from the few slots used (not a pass over every triangle)
+        indices = np.unique(triangle_materials(arrays.used_slots, lookup))
+        if used is not None:
+            used[entry.key] = indices
+        uvs = arrays.uvs
+        if uvs is not None and any(table.uv_map(int(i)) for i in indices[indices >= 0]):
+            uvs = named_uvs(evaluated.mesh, arrays.corners, materials, table, uvs)
         skin = None
-        normals = None
-        if skinned:  # the rest shape's weights and normals
-            skin = top_weights(mesh, entry.layers, entry.armature.name_full)
-            normals = rest_corner_normals(mesh, corners)
+        if entry.kind == "skinned":  # the rest shape's weights
+            skin = top_weights(evaluated.mesh, entry.layers, entry.armature.name_full)
         return MeshData(
             name=entry.key,
-            positions=positions,
-            triangles=triangles,
+            positions=arrays.positions,
+            triangles=arrays.triangles,
             triangle_materials=materials,
             uvs=uvs,
             skin=skin,
-            corner_normals=read_corner_normals(mesh, corners) if normals is None else normals,
+            corner_normals=arrays.corner_normals,
         )
     finally:
-        obj_eval.to_mesh_clear()
+        evaluated.clear()
+
+
+def _read_arrays(entry: _Entry, mesh, change) -> MeshArrays:
+    """What of ``mesh`` (an evaluated ``to_mesh``) its geometry alone gives (``MeshArrays``);
+    no triangles and nothing else read when it has no faces."""
+    triangles, corners, slots = read_triangles(mesh)
+    data = entry.obj.data if entry.obj.type == "MESH" else None
+    # modifiers and shape keys make the evaluated mesh depend on more than its datablock
+    modified = len(entry.obj.modifiers) > 0 or getattr(data, "shape_keys", None) is not None
+    names = (change, entry.obj.name_full, "" if data is None else data.name_full, modified)
+    if len(triangles) == 0:
+        empty = np.empty((0, 3), np.float32)
+        return MeshArrays(*names, empty, triangles, corners, slots, None,
+                          np.empty((0, 3, 3), np.float32), np.unique(slots))
+    # a skinned mesh is kept in its rest shape, which the skinning matrices pose: its bakes
+    # are keyed by it too, so that a new pose bakes nothing again
+    skinned = entry.kind == "skinned"
+    positions = rest_positions(mesh) if skinned else read_positions(mesh)
+    uvs = read_corner_uvs(mesh, corners)
+    normals = rest_corner_normals(mesh, corners) if skinned else read_corner_normals(mesh, corners)
+    return MeshArrays(*names, positions, triangles, corners, slots, uvs, normals,
+                      np.unique(slots))
+
+
+class _EvaluatedMesh:
+    """An evaluated object's ``to_mesh``, made on first use (counted: ``reads.count``) and
+    cleared by ``clear``."""
+
+    def __init__(self, obj_eval):
+        self.obj_eval, self._mesh = obj_eval, None
+
+    @property
+    def mesh(self):
+        if self._mesh is None:
+            count("meshes")
+            self._mesh = self.obj_eval.to_mesh()
+        return self._mesh
+
+    def clear(self) -> None:
+        if self._mesh is not None:
+            self._mesh = None
+            self.obj_eval.to_mesh_clear()
+
+
+class _LazySurface(Surface):
+    """A ``Surface`` whose evaluated mesh and content key are made only when a bake asks."""
+
+    def __init__(self, key: str, evaluated: _EvaluatedMesh, slot_materials: list,
+                 arrays: MeshArrays, has_uvs: bool):
+        self.key, self.obj_eval, self.slot_materials = key, evaluated.obj_eval, slot_materials
+        self.has_uvs, self._evaluated, self._arrays = has_uvs, evaluated, arrays
+
+    @property
+    def mesh(self):
+        return self._evaluated.mesh
+
+    @property
+    def digest(self) -> str:
+        return self._arrays.digest
 
 
 # Object types whose evaluated geometry is a mesh (what Cycles renders of them).
@@ -190,20 +273,35 @@ RENDERABLE = ("MESH", "CURVE", "FONT", "SURFACE", "META")
 # (left_out.type_note).
 
 
-def renders(obj, view_layer) -> bool:
+def render_disabled() -> frozenset[int]:
+    """``session_uid`` of the objects in a collection disabled in renders (a collection's own
+    objects, as ``renders`` reads them), for one pass over many objects: ``Object.
+    users_collection`` scans every collection's objects for each object it is asked of (on the
+    diorama's 61 objects 2–3 ms a call, twice or three times per update)."""
+    collections = [c for c in bpy.data.collections if c.hide_render] + \
+        [s.collection for s in bpy.data.scenes if s.collection.hide_render]
+    return frozenset(o.session_uid for c in collections for o in c.objects)
+
+
+def renders(obj, view_layer, disabled: frozenset[int] | None = None) -> bool:
     """Does Blender render ``obj`` from this view layer: visible there (not hidden, its
     collections not excluded) and not disabled in renders (the object, or a collection it is
-    in)?"""
-    return (obj.visible_get(view_layer=view_layer) and not obj.hide_render
-            and not any(c.hide_render for c in obj.users_collection))
+    in)? disabled : ``render_disabled()``, taken once for many objects."""
+    if not obj.visible_get(view_layer=view_layer) or obj.hide_render:
+        return False
+    if disabled is None:
+        return not any(c.hide_render for c in obj.users_collection)
+    return obj.session_uid not in disabled
 
 
 def _visible_mesh_entries(view_layer, warnings: list[str], depsgraph=None) -> list[_Entry]:
     entries, used = [], {}
+    disabled = render_disabled()
     for obj in view_layer.objects:
-        if type_note(obj) is not None and renders(obj, view_layer):
+        shown = renders(obj, view_layer, disabled)
+        if shown and type_note(obj) is not None:
             warnings.append(left_out_line(obj.name, [type_note(obj)]))
-        if obj.type not in RENDERABLE or not renders(obj, view_layer):
+        if obj.type not in RENDERABLE or not shown:
             continue
         kind, armature = object_kind(obj, depsgraph)
         if kind == "skinned" and obj.library is not None:
@@ -227,12 +325,16 @@ def _visible_mesh_entries(view_layer, warnings: list[str], depsgraph=None) -> li
     return entries
 
 
-def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
+def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = None
+                  ) -> SceneSnapshot:
     """Read the scene into a ``SceneSnapshot`` (main thread only).
 
     context_or_scene : a ``bpy.types.Context`` or ``bpy.types.Scene``.
     depsgraph : the evaluated depsgraph of the view layer to read; defaults to the
         context's (``Context.evaluated_depsgraph_get()``).
+    reads : the live viewport's mesh reads of its last snapshot (``mesh_cache.MeshReads``,
+        kept up to date with the depsgraph's updates by its owner): a mesh whose geometry
+        did not change is taken from there, not read again. None reads every mesh.
     Raises VoxGIError for input the engine cannot represent (e.g. > 256 deform bones).
     The scene is restored exactly (temporary modifiers and node groups removed).
     """
@@ -251,26 +353,33 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
     meshes: dict[str, MeshData] = {}
     read_keys: set[str] = set()
     holdouts: dict[str, int] = {}
+    shaders: dict[str, bool] = {}  # material name → is_holdout_shader
+    used: dict[str, np.ndarray] = {}  # mesh key → the material indices its triangles use
     origins: dict[str, object] = {}  # instanced mesh key → the instanced object
 
     def read_instanced(key, original, obj_eval):  # each instanced mesh once
         if key not in read_keys:
             read_keys.add(key)
             mesh = _read_mesh(_Entry(original, key, "static"), depsgraph, table, warnings,
-                              holdouts, obj_eval)
+                              holdouts, obj_eval, reads, shaders, used)
             if mesh is not None:
                 meshes[key] = mesh
                 origins[key] = original
 
+    if reads is not None:
+        reads.begin()
     instances = instance_objects(depsgraph, read_instanced)
     with temporary_weight_attributes(skinned, depsgraph):
         for entry in entries:
             if entry.key not in read_keys:  # linked duplicates are read once
                 read_keys.add(entry.key)
-                mesh = _read_mesh(entry, depsgraph, table, warnings, holdouts)
+                mesh = _read_mesh(entry, depsgraph, table, warnings, holdouts, reads=reads,
+                                  shaders=shaders, used=used)
                 if mesh is not None:
                     meshes[entry.key] = mesh
 
+    if reads is not None:
+        reads.end()
     # Matrices are read after the temporary modifiers are gone.
     objects = mesh_objects([e for e in entries if e.key in meshes], depsgraph) + \
         [o for o in instances if o.mesh in meshes]
@@ -279,8 +388,8 @@ def take_snapshot(context_or_scene, depsgraph=None) -> SceneSnapshot:
         [(f"{origin.name} (instanced)", origin, key) for key, origin in origins.items()
          if key in meshes]
     for name, obj, key in named:
-        used = np.unique(meshes[key].triangle_materials)
-        notes = notes_of(obj, [table.materials[i].name for i in used
+        used_here = used[key]
+        notes = notes_of(obj, [table.materials[i].name for i in used_here
                                if 0 <= i < len(table.materials)], table.notes)
         if notes:
             warnings.append(left_out_line(name, notes))

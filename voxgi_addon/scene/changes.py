@@ -50,7 +50,7 @@ _MOVE_STAGES = frozenset({"snapshot"}) | _CASCADE_STAGES
 # VISIBILITY is not Blender's: the set of visible mesh objects differs from the last snapshot
 # (hiding an object reaches the depsgraph as a bare Scene update; blender/updates.py adds it).
 ID_TYPES = ("OBJECT", "MESH", "MATERIAL", "LIGHT", "ARMATURE", "WORLD", "SCENE", "COLLECTION",
-            "CAMERA", "NODETREE", "IMAGE", "ACTION", "VISIBILITY", "OTHER")
+            "CAMERA", "NODETREE", "IMAGE", "ACTION", "KEY", "VISIBILITY", "OTHER")
 
 
 @dataclass(frozen=True)
@@ -87,11 +87,14 @@ class ObjectEntry:
 @dataclass(frozen=True)
 class SceneIndex:
     """Who uses what in the last snapshot. objects : mesh object name → entry; lights : light
-    object names; light_data : light datablock names."""
+    object names; light_data : light datablock names; visible : see below."""
 
     objects: dict[str, ObjectEntry] = field(default_factory=dict)
     lights: frozenset[str] = frozenset()
     light_data: frozenset[str] = frozenset()
+    # the renderable objects visible when the snapshot was taken, faceless ones included (they
+    # are in no snapshot; a VISIBILITY record is a change of this set); None: ``objects``' names
+    visible: frozenset[str] | None = None
 
     def keys_of(self, predicate) -> set[str]:
         return {e.key for e in self.objects.values() if predicate(e)}
