@@ -154,6 +154,14 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
                     "noise before denoising",
         default=64, min=1, max=1024,
     )
+    sparse_gathers: bpy.props.BoolProperty(
+        name="Sparse Gathers",
+        description="F12 and Render Preview trace the diffuse indirect light at one gather "
+                    "point in four where surfaces are smooth and at every point where they "
+                    "meet; the filter fills the others (about 40% faster at 160×120, 3-18% "
+                    "more error against Cycles where indirect light is noisy)",
+        default=False,
+    )
     bounce_source: bpy.props.EnumProperty(
         name="Bounces",
         description="How many bounces of diffuse light the preview carries",
@@ -334,7 +342,8 @@ def trace_options(settings: VoxGISceneSettings, width: int, height: int, frame: 
                                               glossy_rays=max(1, settings.gi_rays // 8),
                                               ao_distance=settings.ao_distance,
                                               seed=sampling_seed(settings, frame),
-                                              bounces=diffuse_bounces(settings))}
+                                              bounces=diffuse_bounces(settings),
+                                              sparse=settings.sparse_gathers)}
 
 
 def gi_settings(settings: VoxGISceneSettings):

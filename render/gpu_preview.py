@@ -20,7 +20,7 @@ from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.cone_bounces import fast_cache_settings
 from ..voxgi_addon.preview import transmission
 from ..voxgi_addon.preview.film import background
-from ..voxgi_addon.preview.gather import GatherSettings, focused
+from ..voxgi_addon.preview.gather import VIEW_BACKOFF, GatherSettings, focused
 from ..voxgi_addon.preview.passes import (
     centre_pass,
     check_request,
@@ -35,6 +35,7 @@ from ..voxgi_addon.preview.passes import (
     subpixel_passes,
     subpixel_reach,
 )
+from ..voxgi_addon.preview.sparse_gather import sparse_plan
 from ..voxgi_addon.preview.upsample import sample_pixels
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame
 from ..voxgi_addon.scene.glass import is_glass
@@ -382,8 +383,47 @@ def _low(f, kind, kernel="bvh_gather", world_mode=False):
 
 
 def _diffuse_gather(f):
-    """Diffuse Indirect and AO at the gather points (``bvh_gather``), filtered."""
+    """Diffuse Indirect and AO at the gather points (``bvh_gather``), filtered: at one cell in
+    four where the light is smooth and at the cells where it is not (``_sparse_diffuse``), or
+    — the viewport's accumulated slices, or ``sparse`` off — at every cell."""
+    if _sparse(f):
+        return {"low_diffuse": _sparse_diffuse(f)}
     return {"low_diffuse": _low(f, "diffuse")}
+
+
+def _sparse(f) -> bool:
+    return f["gather_hook"] is None and f["focused"].sparse
+
+
+def _sparse_diffuse(f):
+    """The diffuse gather over the cells ``preview.sparse_gather.sparse_plan`` picks from the
+    read-back G-buffer (a list, ``_compact``: each point draws its pixel's samples), read back
+    into the grid, the other cells holes that the à-trous filter's first pass fills
+    (``denoise.glsl``, as the numpy tracer's ``gather_gi``)."""
+    scene, settings, centre = f["scene"], f["gather_settings"], f["centre"]
+    stride, width, height, seen = f["gi_stride"], f["width"], f["height"], f["seen"]
+    rows, cols = sample_pixels(height, width, stride)
+    valid = seen["hit"][rows][:, cols]
+    cell_p = seen["position"][rows][:, cols] - VIEW_BACKOFF * seen["direction"][rows][:, cols]
+    traced = sparse_plan(valid, cell_p, seen["normal"][rows][:, cols])
+    traced_rows, traced_cols = np.nonzero(traced)
+    if len(traced_rows) == 0:  # nothing seen: the dense gather writes its zeros
+        return _low(f, "diffuse")
+    listed = rows[traced_rows] * width + cols[traced_cols]
+    pixels, size = _pixel_list(listed, width, height)
+    inputs = _compact("aa_list", {**centre.inputs, "pixels": pixels}, size)
+    values, variance = gather(scene.bvh, inputs, scene.lights, scene.principled, scene.emission,
+                              settings, 1, size[0], size[1], tables=f["tables"],
+                              cache=f["cache"])
+    grid = []
+    for texture in (values, variance):
+        cells = np.zeros(valid.shape + (4,), np.float32)
+        cells[traced] = read_texture(texture).reshape(-1, 4)[:len(listed)]
+        grid.append(cells)
+    grid[1][..., 2] = valid & ~traced  # the holes the filter's first pass fills (denoise.glsl)
+    grid = [float_texture(np.flipud(cells), (cells.shape[1], cells.shape[0])) for cells in grid]
+    return denoise(grid[0], grid[1], centre.inputs, stride, width, height,
+                   settings.denoise_iterations, fit=True)[0]
 
 
 def _glossy_gather(f):
@@ -447,17 +487,26 @@ def _emitter_unshadowed(f):
         field=f["fields"][3])}
 
 
+def _reads_gbuffer(f) -> bool:
+    return bool(subpixel_reach(f["plan"])) or _sparse(f)
+
+
+def _read_gbuffer(f):
+    """The centre G-buffer read back (``gbuffer.read_gbuffer``): the edge test's and the
+    sparse gather's (the viewport's point-sampled slices read nothing back)."""
+    return {"seen": read_gbuffer(f["centre"])}
+
+
 def _edge_pixels(f):
     """The pixels on the geometry's edges (``preview.passes.edge_pixels`` on the read-back
     centre G-buffer, the numpy tracer's test): they get the sub-pixel passes; none when
-    point-sampled (the viewport's slices: nothing read back)."""
+    point-sampled."""
     reach = subpixel_reach(f["plan"])
     if not reach:
-        return {"edge": np.zeros((f["height"], f["width"]), bool), "seen": None}
-    seen = read_gbuffer(f["centre"])
+        return {"edge": np.zeros((f["height"], f["width"]), bool)}
+    seen = f["seen"]
     return {"edge": edge_pixels(seen["hit"], material_indices(f["snapshot"], seen["material"]),
-                                seen["position"], seen["normal"], reach),
-            "seen": seen}
+                                seen["position"], seen["normal"], reach)}
 
 
 _SUM_TEXTURES = (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")
@@ -639,7 +688,10 @@ ACCURATE_STAGES = (
     Stage("radiance cache", ("focused", "tables"), ("cache", "gather_settings"),
           _radiance_cache, when=_wants_cache, slice_end=False,
           skipped=lambda f: {"cache": None, "gather_settings": f["focused"]}),
-    Stage("diffuse+ao gather (GPU)", ("centre", "cache", "gather_settings", "tables"),
+    Stage("G-buffer read-back", ("centre", "plan", "focused"), ("seen",), _read_gbuffer,
+          when=_reads_gbuffer, slice_end=False),
+    Stage("diffuse+ao gather (GPU)", ("centre", "cache", "gather_settings", "tables", "seen",
+                                      "focused"),
           ("low_diffuse",), _diffuse_gather),
     Stage("glossy gather (GPU)", ("centre", "cache", "gather_settings", "tables"),
           ("low_glossy",), _glossy_gather, when=lambda f: f["glossy_indirect"]),
@@ -654,7 +706,7 @@ ACCURATE_STAGES = (
           _emitter_shine, when=_has_emitters),
     Stage("emitters' unshadowed light (GPU)", ("centre", "fields"), ("unshadowed",),
           _emitter_unshadowed, when=_has_emitters),
-    Stage("edge pixels", ("centre", "plan"), ("edge", "seen"), _edge_pixels, slice_end=False),
+    Stage("edge pixels", ("plan", "seen"), ("edge",), _edge_pixels, slice_end=False),
     Stage("direct (GPU)", ("centre", "plan", "edge", "diffuse_ao", "glossy", "glossy_world", "shine",
                            "unshadowed", "gather_settings"),
           ("sums", "lamps", "result"), _centre_pass, slice_end=False),

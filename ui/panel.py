@@ -124,7 +124,7 @@ class VOXGI_PT_gi(_SidebarPanel, bpy.types.Panel):
                        "ao_intensity", "shadows", *manual, "dense_depth", "cone_angle",
                        "sample_factor", "max_distance"))
         _settings_column(layout, context, (
-            "quality", *trace, "glossy_indirect", "ao_distance", "light_samples", "gi_resolution",
+            "quality", *trace, "glossy_indirect", "ao_distance", "light_samples", "gi_resolution", "sparse_gathers",
             "seed", "use_animated_seed", "tracer"))
         row = layout.row(align=True)
         row.operator("voxgi.update", icon="FILE_REFRESH")

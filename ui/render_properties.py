@@ -10,7 +10,7 @@ from .viewport_panel import draw_debug_settings, draw_job, draw_live_stats, draw
 VOXEL_SETTINGS = ("base_span", "cascade_count", "grid_resolution", "view_ahead", "dense_depth")
 CONE_SETTINGS = ("quality", "gi_rays", "bounce_source", "bounces", "glossy_indirect", "cone_angle", "diffuse_cones",
                  "sample_factor", "falloff", "max_distance", "ao_distance", "gi_intensity",
-                 "ao_intensity", "light_samples", "shadows", "gi_resolution", "seed",
+                 "ao_intensity", "light_samples", "shadows", "gi_resolution", "sparse_gathers", "seed",
                  "use_animated_seed", "tracer")
 
 

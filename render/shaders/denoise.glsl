@@ -9,7 +9,10 @@
  * Variances are filtered with squared weights (the fit's own weights). A cell whose prefiltered standard error is
  * within NOISE_TARGET of its value is settled: kept as it is (denoise.py NOISE_TARGET).
  * grid = (stride, full width, full height, tap step); low-resolution rows count from the bottom;
- * options.x = 1: the local linear fit, 0: the weighted mean. */
+ * options.x = 1: the local linear fit, 0: the weighted mean.
+ * A cell whose low_variance.z is 1 is a hole (the sparse gather left it out: denoise.py
+ * atrous_filter(holes=…)): no tap, never settled, its taps weighed by geometry alone (it has
+ * no light of its own to compare); the pass writes its fit and variance.z = 0. */
 const float KERNEL[5] = float[5](1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0);
 const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
 
@@ -33,6 +36,7 @@ void main()
     return;
   }
   vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
+  bool hole = centre_var.z > 0.5;
   vec2 signal = vec2(dot(centre.rgb, LUMINANCE), centre.a);
   /* The variance prefiltered over the valid 3 × 3 neighbours (denoise.py _blurred). */
   vec2 blurred = vec2(0.0);
@@ -46,13 +50,18 @@ void main()
       if (texelFetch(gbuffer_position, traced_pixel(low.y - 1 - q.y, q.x, stride, full), 0).w < 0.5) {
         continue;
       }
+      vec4 qvar = texelFetch(low_variance, q, 0);
+      if (qvar.z > 0.5) {
+        continue; /* a hole: no variance of its own */
+      }
       float g = (a == 0 ? 0.5 : 0.25) * (b == 0 ? 0.5 : 0.25);
-      blurred += g * texelFetch(low_variance, q, 0).xy;
+      blurred += g * qvar.xy;
       blur_weight += g;
     }
   }
-  blurred /= max(blur_weight, 1e-30);
+  blurred = blur_weight > 0.0 ? blurred / blur_weight : centre_var.xy;
   bvec2 settled = lessThanEqual(sqrt(max(blurred, vec2(0.0))), NOISE_TARGET * abs(signal));
+  settled = hole ? bvec2(false) : settled;
   /* The local linear fit (denoise.py _fit): per signal the weighted sums of (1, s, u) ⊗ (1,
    * s, u) over the taps, (s, u) the tap's place in the 5 × 5 window, those of w²·var
    * for the variance, and Σ w·(1, s, u)·value. */
@@ -77,14 +86,19 @@ void main()
       }
       vec3 nq = texelFetch(gbuffer_normal, qpx, 0).xyz;
       vec4 vq = texelFetch(low_image, qc, 0);
-      vec2 varq = texelFetch(low_variance, qc, 0).xy;
+      vec4 var4 = texelFetch(low_variance, qc, 0);
+      if (var4.z > 0.5) {
+        continue; /* a hole is no tap */
+      }
+      vec2 varq = var4.xy;
       vec3 offset = pq.xyz - position.xyz;
       float facing = pow(max(dot(n, nq), 0.0), 32.0);
       float plane = abs(dot(n, offset));
       float tol = 0.1 * length(offset) + 1e-4;
       float geometry = KERNEL[a] * KERNEL[b] * facing * exp(-(plane / tol) * (plane / tol));
       vec2 scale = 4.0 * sqrt(max(blurred + varq, vec2(0.0))) + 1e-6;
-      vec2 w = geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);
+      vec2 w = hole ? vec2(geometry) :
+               geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);
       float s = float(b - 2); /* the tap's place in the window */
       float u = float(a - 2);
       float quad[6] = float[6](1.0, s, u, s * s, s * u, u * u);
@@ -128,5 +142,6 @@ void main()
     }
   }
   imageStore(out_image, cell, result);
-  imageStore(out_variance, cell, vec4(result_var, 0.0, 0.0));
+  /* a hole stays one only where no tap could fill it (then left at 0, as numpy's) */
+  imageStore(out_variance, cell, vec4(result_var, hole && (m[0] <= 0.0 || m[6] <= 0.0) ? 1.0 : 0.0, 0.0));
 }

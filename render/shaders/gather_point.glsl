@@ -3,7 +3,7 @@
  * grid, or whose G-buffer pixel sees no surface (its outputs are then written 0). Otherwise
  * the surface point stepped back along the camera ray by VIEW_BACKOFF (preview/gather.py), its
  * normal, the G-buffer's view texel (camera ray direction, material) and the sample id (the
- * pixel index, row 0 on top). */
+ * pixel index, row 0 on top; a compacted list's point: its pixel's, sparse_gather). */
 bool gather_point(ivec2 cell, out vec3 position, out vec3 n, out vec4 ray, out uint id)
 {
   position = n = vec3(0.0);
@@ -24,6 +24,7 @@ bool gather_point(ivec2 cell, out vec3 position, out vec3 n, out vec4 ray, out u
   n = texelFetch(gbuffer_normal, px, 0).xyz;
   ray = texelFetch(gbuffer_view, px, 0);
   position = p.xyz - VIEW_BACKOFF * ray.xyz;
-  id = uint((full.y - 1 - px.y) * full.x + px.x);
+  /* a listed point (aa_compact.glsl: w = 2 + its pixel's id) draws its pixel's samples */
+  id = p.w > 1.5 ? uint(p.w + 0.5) - 2u : uint((full.y - 1 - px.y) * full.x + px.x);
   return true;
 }

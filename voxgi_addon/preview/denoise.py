@@ -140,7 +140,8 @@ def _fit(moments, spread, light, scalar, fit: bool = True):
 def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
                   position: np.ndarray, normal: np.ndarray, iterations: int = 4,
                   sigma_luminance: float = SIGMA_LUMINANCE,
-                  fit: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                  fit: bool = True, holes: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """Filter ``values`` along surfaces.
 
     Parameters
@@ -153,6 +154,9 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
     iterations : passes with tap spacing 1, 2, 4, …
     fit : the local linear fit (``_fit``); False: the taps' weighted mean (the glossy
         gathers: 8 rays a point are too noisy to extrapolate a slope from).
+    holes : (H, W) bool, valid pixels with no value of their own (the cells the sparse gather
+        left out, ``sparse_gather``): the first pass gives them the fit of their taps (no
+        tap themselves, their own light not compared), later passes filter them as the rest.
 
     Returns
     -------
@@ -163,11 +167,14 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
     ok = np.asarray(valid, bool)
     p = np.asarray(position, np.float64)
     n = np.asarray(normal, np.float64)
+    hole = np.zeros(ok.shape, bool) if holes is None else np.asarray(holes, bool) & ok
     for it in range(iterations):
         step = 1 << it
         signal = np.stack([v[..., :3] @ LUMINANCE, v[..., 3]], axis=-1)
-        blurred = _blurred(var, ok)
+        sampled = ok & ~hole  # the taps (a hole is none until the first pass fills it)
+        blurred = _blurred(var, sampled)
         settled = np.sqrt(np.maximum(blurred, 0.0)) <= NOISE_TARGET * np.abs(signal)  # (H, W, 2)
+        settled &= ~hole[..., None]
         # per signal (light, scalar): the weighted sums of the local linear fit (_fit)
         moments = np.zeros(var.shape + (6,))     # Σ w·(1, s, u, s², su, u²)
         spread = np.zeros(var.shape + (6,))      # the same moments of w²·var_q
@@ -182,12 +189,13 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
                 facing = np.maximum(np.einsum("...i,...i->...", n, _shifted(n, dy, dx, 0.0)), 0.0)
                 plane = np.abs(np.einsum("...i,...i->...", n, offset))
                 tol = PLANE_TOLERANCE * np.sqrt(np.einsum("...i,...i->...", offset, offset)) + 1e-4
-                geometry = (ky * kx * _shifted(ok, dy, dx, False) * facing ** NORMAL_POWER
+                geometry = (ky * kx * _shifted(sampled, dy, dx, False) * facing ** NORMAL_POWER
                             * np.exp(-(plane / tol) ** 2))
                 q_signal = np.stack([q_v[..., :3] @ LUMINANCE, q_v[..., 3]], axis=-1)
                 q_var = _shifted(var, dy, dx, 0.0)
                 scale = sigma_luminance * np.sqrt(np.maximum(blurred + q_var, 0.0)) + _EPSILON
-                w = geometry[..., None] * np.exp(-np.abs(q_signal - signal) / scale)  # (H, W, 2)
+                w = geometry[..., None] * np.where(hole[..., None], 1.0,
+                                                   np.exp(-np.abs(q_signal - signal) / scale))
                 s = np.full(var.shape[:2], float(b_ - 2))  # the tap's place in the window
                 u = np.full(var.shape[:2], float(a - 2))
                 x = np.stack([np.ones_like(s), s, u], axis=-1)  # (H, W, 3)
@@ -201,4 +209,5 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
         full_keep = np.concatenate([np.repeat(keep[..., :1], 3, axis=-1), keep[..., 1:]], axis=-1)
         v = np.where(full_keep, fitted, v)
         var = np.where(keep, fitted_var, var)
+        hole = hole & ~keep.all(axis=-1)  # filled
     return v.astype(np.float32), var.astype(np.float32)

@@ -24,6 +24,7 @@ from ..gi.emitters import emitter_light
 from ..gi.exact_glossy import glossy_indirect, glossy_world_direct
 from ..gi.exact_indirect import indirect_and_ao
 from .denoise import atrous_filter
+from .sparse_gather import sparse_plan
 from .upsample import sample_pixels, upsample
 
 
@@ -42,7 +43,9 @@ class GatherSettings:
     bounces 2 … N from a radiance cache of N − 1 iterations (``gi.radiance_cache``, with
     ``cache_rays`` rays per voxel face on a ``cache_resolution``³ grid; 0: Auto,
     ``radiance_cache.build_cache``). cache_focus : the camera's position on the cache's
-    lattice (``focused``; None: none), around which Auto nests finer grids."""
+    lattice (``focused``; None: none), around which Auto nests finer grids. sparse : the
+    diffuse gather traces one cell in four where the light is smooth and the cells where it
+    is not (``sparse_gather``), the others filled from them."""
 
     rays: int = 64
     glossy_rays: int = 8
@@ -56,6 +59,7 @@ class GatherSettings:
     cache_rays: int = 16
     cache_resolution: int = 0
     cache_focus: tuple | None = None
+    sparse: bool = False
 
 
 def focused(settings: GatherSettings, camera, tris) -> GatherSettings:
@@ -110,18 +114,21 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     if direction is not None:
         cell_p = cell_p - VIEW_BACKOFF * direction[rows][:, cols]
     cell_n = normal[rows][:, cols]
-    ids = (rows[:, None] * width + cols[None, :])[valid]
+    # the cells gathered: all, or with ``settings.sparse`` one in four where the light is
+    # smooth (sparse_gather), the others filled by the filter's first pass
+    traced = sparse_plan(valid, cell_p, cell_n) if settings.sparse else valid
+    ids = (rows[:, None] * width + cols[None, :])[traced]
     values = np.zeros(valid.shape + (4,), np.float32)
     variance = np.zeros(valid.shape + (2,), np.float32)
     indirect, ao, var = indirect_and_ao(
-        cell_p[valid], cell_n[valid], ids, tris, lights, albedo, emission, rays=settings.rays,
+        cell_p[traced], cell_n[traced], ids, tris, lights, albedo, emission, rays=settings.rays,
         ao_distance=settings.ao_distance, seed=settings.seed, world=settings.world,
         hit_samples=settings.hit_samples, statistics=True, hit_glossy=settings.hit_glossy,
         cache=radiance_cache(tris, lights, albedo, emission, settings))
-    values[valid] = np.concatenate([indirect, ao[:, None]], axis=1)
-    variance[valid] = var
+    values[traced] = np.concatenate([indirect, ao[:, None]], axis=1)
+    variance[traced] = var
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
-                              iterations=settings.denoise_iterations)
+                              iterations=settings.denoise_iterations, holes=valid & ~traced)
     if low:
         return values, valid
     return upsample(values, valid, hit, position, normal, stride)

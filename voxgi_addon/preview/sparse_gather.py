@@ -1,0 +1,63 @@
+"""The diffuse gather at fewer points than its cells where the light is smooth
+(docs/gi_pipeline.md "Gathers at fewer points").
+
+The gather's grid (``upsample.sample_pixels``: one cell per stride × stride pixels) is traced
+at one cell in four — the cells of odd row and odd column, each the middle of a 2 × 2 block of
+cells — and at every other cell whose traced neighbours do not see its own surface around it
+(a crease, a contact, a silhouette, a thin part). The cells not traced are holes that the
+à-trous filter's first pass fills from its taps (``denoise.atrous_filter(holes=…)``) before
+its passes run over the grid as over a dense one. Both tracers plan with ``sparse_plan``, so
+they trace the same points with the same sample ids and agree.
+
+Numpy only.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["MATCH", "sparse_plan"]
+
+# A cell is traced itself when its traced neighbours' same-surface weights come to less than
+# MATCH of what they would be all on its surface (a neighbour on the cell's plane with its
+# normal weighs 1: max(n·n_q, 0)^32 × exp(-(plane distance / (0.1 |offset| + 1e-4))²), as the
+# à-trous filter weighs its taps; a diagonal neighbour counts half): a cell at a crease or a
+# silhouette, whose fill would come from one side only, is gathered.
+MATCH = 0.5
+
+# the 8 neighbours (row, column offsets) and their share by distance (B-spline-like: the
+# diagonal ones count half)
+_OFFSETS = tuple((dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc)
+_SHARE = np.array([0.5 if dr and dc else 1.0 for dr, dc in _OFFSETS])
+
+
+def _shifted(array: np.ndarray, dr: int, dc: int, fill_value=0) -> np.ndarray:
+    """array[r + dr, c + dc] at (r, c) of its first two axes, ``fill_value`` outside."""
+    out = np.full_like(array, fill_value)
+    h, w = array.shape[:2]
+    rs, re = max(0, -dr), min(h, h - dr)
+    cs, ce = max(0, -dc), min(w, w - dc)
+    if rs < re and cs < ce:
+        out[rs:re, cs:ce] = array[rs + dr:re + dr, cs + dc:ce + dc]
+    return out
+
+
+def sparse_plan(valid: np.ndarray, position: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """(Hl, Wl) bool: the cells to gather, of the grid's ``valid`` (Hl, Wl) bool cells (those
+    seeing a surface) at ``position``, ``normal`` (Hl, Wl, 3) (the gather points and their
+    unit normals; row 0 on top)."""
+    valid = np.asarray(valid, bool)
+    position = np.asarray(position, np.float64)
+    normal = np.asarray(normal, np.float64)
+    rows, cols = np.indices(valid.shape)
+    base = valid & (rows % 2 == 1) & (cols % 2 == 1)
+    matched = np.zeros(valid.shape)
+    present = np.zeros(valid.shape)
+    for share, (dr, dc) in zip(_SHARE, _OFFSETS):
+        there = _shifted(base, dr, dc, False)
+        offset = _shifted(position, dr, dc) - position
+        facing = np.maximum((normal * _shifted(normal, dr, dc)).sum(axis=-1), 0.0) ** 32
+        plane = np.abs((normal * offset).sum(axis=-1))
+        tol = 0.1 * np.linalg.norm(offset, axis=-1) + 1e-4
+        matched += np.where(there, share * facing * np.exp(-(plane / tol) ** 2), 0.0)
+        present += share * there
+    return base | (valid & (matched < MATCH * present))
