@@ -32,7 +32,7 @@ from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE, low_shape
 from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, scene_light_textures, strata_side
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
-from .gpu_shaders import LOCAL_SIZE, build_compute
+from .gpu_shaders import LOCAL_SIZE, build_compute, size_like
 from .gpu_tracer import read_texture
 from .gpu_volume import float_texture
 
@@ -205,7 +205,6 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     faces = np.zeros((2, height * width, 4), np.float32)
     faces[0, :count, :3], faces[0, :count, 3] = points, 1.0
     faces[1, :count, :3] = axes
-    blank = np.zeros((1, 1, 4), np.float32)
     inputs = {**bvh.inputs, **(tables if tables is not None else gather_tables(
         lights, principled, emission)),
               "gbuffer_position": float_texture(faces[0].reshape(height, width, 4),
@@ -237,7 +236,9 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     places = face_places(cache)
     turns = []
     yield
-    previous = float_texture(blank, (1, 1))  # the empty cache: the records' own radiance
+    # the empty cache (the records' own radiance), of main's JIT class (gpu_shaders.size_like)
+    empty = (size_like(1, main.shape[1]), size_like(1, main.shape[0]))
+    previous = float_texture(np.zeros((empty[1], empty[0], 4), np.float32), empty)
     for k in range(settings.bounces - 1):
         if len(turns) < 2:
             turns.append(float_texture(main, (main.shape[1], main.shape[0])))
@@ -305,7 +306,8 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
     cache : the radiance cache texture the bounce hits read (``cache_texels``); None: the
     ``cache_texture`` of ``settings.bounces`` (none for one bounce and in ``world_mode``)."""
     low_h, low_w = low_shape(height, width, stride)
-    placeholder = gpu.types.GPUTexture((1, 1), format="RGBA32F")
+    placeholder = gpu.types.GPUTexture((size_like(1, low_w), size_like(1, low_h)),
+                                       format="RGBA32F")  # the partials' JIT class
     partial = (placeholder, placeholder)
     if tables is None:
         tables = gather_tables(lights, principled, emission)

@@ -59,7 +59,7 @@ from .gpu_gather import (
     upsample_field_list,
 )
 from .gpu_scene import GPUScene, current_scene
-from .gpu_shaders import LOCAL_SIZE
+from .gpu_shaders import LOCAL_SIZE, size_like
 from .gpu_tracer import read_texture
 from .gpu_volume import GPUVolume, float_texture
 
@@ -201,8 +201,9 @@ def _pixel_list(listed, width: int, height: int):
     """(texture, (w, h)) of the edge pixels' list (aa_compact.glsl): texel t (row-major from
     the texture's first row) = (x, y, id, 1) of pixel id = listed[t] (flat, row 0 on top; GL
     y = height − 1 − row), padded with zeros to w × h, w a multiple of the work group size."""
-    side = LOCAL_SIZE * max(1, math.ceil(math.sqrt(len(listed)) / LOCAL_SIZE))
-    rows = math.ceil(len(listed) / side)
+    # the sides keep the frame's power-of-two class: one JIT per kernel (gpu_shaders.size_like)
+    side = size_like(math.ceil(math.sqrt(len(listed))), width, LOCAL_SIZE)
+    rows = size_like(math.ceil(len(listed) / side), height)
     texels = np.zeros((rows * side, 4), np.float32)
     texels[:len(listed)] = np.stack([listed % width, height - 1 - listed // width, listed,
                                      np.ones(len(listed))], axis=1)

@@ -124,18 +124,35 @@ def build_compute(files: tuple[str, ...], samplers: tuple[str, ...], constants: 
     of LOCAL_SIZE × LOCAL_SIZE. name : what ``counters`` calls it (the last file's name)."""
     info = gpu.types.GPUShaderCreateInfo()
     info.local_group_size(LOCAL_SIZE, LOCAL_SIZE, 1)
-    for name, value in (defines or {}).items():
-        info.define(name, value)
-    for slot, name in enumerate(samplers):
-        info.sampler(slot, "FLOAT_2D", name)
-    for name in constants:
-        info.push_constant("VEC4", name)
-    for slot, name in enumerate(outputs):
-        info.image(slot, "RGBA32F", "FLOAT_2D", name, qualifiers={"WRITE"})
-    for slot, name in enumerate(read_write, start=len(outputs)):
-        info.image(slot, "RGBA32F", "FLOAT_2D", name, qualifiers={"READ", "WRITE"})
+    for key, value in (defines or {}).items():
+        info.define(key, value)
+    for slot, sampler in enumerate(samplers):
+        info.sampler(slot, "FLOAT_2D", sampler)
+    for constant in constants:
+        info.push_constant("VEC4", constant)
+    for slot, image in enumerate(outputs):
+        info.image(slot, "RGBA32F", "FLOAT_2D", image, qualifiers={"WRITE"})
+    for slot, image in enumerate(read_write, start=len(outputs)):
+        info.image(slot, "RGBA32F", "FLOAT_2D", image, qualifiers={"READ", "WRITE"})
     info.compute_source("".join((SHADER_DIR / f"{file}.glsl").read_text() for file in files))
     return create_shader(info, name or files[-1])
+
+
+def size_like(n: int, like: int, step: int = 1) -> int:
+    """The least multiple of ``step`` at or above ``n`` that is a power of two if and only if
+    ``like`` is one. llvmpipe keys a kernel's machine code on whether each bound texture's
+    width and height are powers of two: a kernel dispatched over a 64-wide list and a 160-wide
+    frame, or over a 1 × 1 placeholder and then a real texture, is JIT-compiled twice
+    (docs/gi_pipeline.md "Where a preview's time goes"). Textures sized here keep the class of
+    the texture they stand beside or in for."""
+    size = max(step, -(-n // step) * step)
+    while _power_of_two(size) != _power_of_two(like):
+        size += step
+    return size
+
+
+def _power_of_two(n: int) -> bool:
+    return n > 0 and n & (n - 1) == 0
 
 
 def release() -> None:
