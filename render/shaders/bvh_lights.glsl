@@ -623,8 +623,8 @@ float emitters_distance(vec3 p, vec3 n)
 }
 
 /* Diffuse Direct of the emissive triangles (emitters.emitters_direct): the exact unshadowed
- * sum (emitters_unshadowed; known.rgb where known.w > 0.5, a pixel centre's) times the
- * per-channel visible share of one point per stratum, sampled by power; not `exact` (bounce
+ * sum (emitters_unshadowed; known.rgb where known.w > 0.5, a pixel centre's) less the
+ * estimate of its hidden part from one point per stratum, sampled by power; not `exact` (bounce
  * hits): the shadow rays' plain estimate. With `lobe` (kernels with principled.glsl) `glossy`
  * gets what a bounce hit's glossy lobe reflects of them toward `v` from the same rays (mean of
  * L V f |cos_l| / (r² p_area)). */
