@@ -13,7 +13,12 @@ import gpu
 import numpy as np
 from gpu_extras.batch import batch_for_shader
 
-from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame, view_projection
+from ..voxgi_addon.scene.camera import (
+    DEFAULT_FILTER_WIDTH,
+    camera_frame,
+    filter_offsets,
+    view_projection,
+)
 from ..voxgi_addon.scene.snapshot import RAY_CAMERA
 from ..voxgi_addon.scene.textures import (
     FOOTPRINT_COS_MIN,
@@ -21,6 +26,7 @@ from ..voxgi_addon.scene.textures import (
     ROUGHNESS_LEVELS,
     filter_footprint,
     pixel_spread,
+    pixel_steps,
     unpack_emission,
 )
 from .gpu_shaders import SHADER_DIR, create_shader
@@ -76,6 +82,10 @@ def gbuffer_shader(textured: bool = True):
     info.push_constant("VEC3", "camera_forward")
     info.push_constant("FLOAT", "camera_ortho")
     info.push_constant("FLOAT", "pixel_spread")
+    info.push_constant("VEC2", "texture_taps")
+    info.push_constant("VEC4", "tap_offsets")
+    info.push_constant("VEC3", "pixel_step_x")
+    info.push_constant("VEC3", "pixel_step_y")
     info.fragment_out(0, "VEC4", "out_position")
     info.fragment_out(1, "VEC4", "out_normal")
     info.fragment_out(2, "VEC4", "out_view")
@@ -159,7 +169,8 @@ class GBuffer:
 def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
               offset=(0.0, 0.0), shader=None, textures=None,
               filter_width: float = DEFAULT_FILTER_WIDTH, batch=None, out=None,
-              mask: PixelMask | None = None) -> GBuffer:
+              mask: PixelMask | None = None, texture_taps: int = 1,
+              texture_share: int = 1) -> GBuffer:
     """Draw ``tris`` (``SceneTriangles``) seen by ``camera`` into a new ``GBuffer``.
     batch : ``vertex_batch(tris, roughness, shader, textures is not None)`` made already by a
     render that draws them again, or a ``ChunkedBatch`` of them (the viewport's: only its
@@ -184,6 +195,9 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
     out : a GBuffer of this size drawn before with the same camera: drawn into, not cleared
     (the viewport's quick image, a part of its chunks per draw).
     mask : only its pixels drawn (``PixelMask``; the others hold nothing), with a new GBuffer.
+    texture_taps, texture_share : ``textures.primary_base``'s ``taps`` (the Base Color's taps
+    per axis over each pixel's own square, 1–4: ``TEXTURE_TAPS`` for the pixel-centre pass)
+    and ``share`` (a sub-pixel pass is one of ``AA_SIDE``² samples of its pixel).
     """
     fresh = out is None
     out = GBuffer(width, height) if fresh else out
@@ -217,7 +231,9 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
                     ("camera_forward", (-rotation[:, 2]).astype(np.float32)),
                     ("camera_ortho", 1.0 if camera.type == "ORTHO" else 0.0),
                     ("pixel_spread", float(pixel_spread(camera, width, height) *
-                                           filter_footprint(filter_width)))):
+                                           filter_footprint(filter_width))),
+                    *_tap_uniforms(camera, width, height, filter_width, texture_taps,
+                                   texture_share)):
                 if _reads(shader, name):  # (the plain variant reads fewer)
                     shader.uniform_float(name, value)
             if isinstance(batch, ChunkedBatch):
@@ -228,6 +244,20 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
             gpu.state.depth_mask_set(False)
     return out
 
+
+
+def _tap_uniforms(camera, width: int, height: int, filter_width: float, taps: int, share: int):
+    """The G-buffer shader's texture_taps (taps per axis, share), tap_offsets (the offsets
+    along one axis, ``camera.filter_offsets``) and pixel steps (``textures.pixel_steps``)."""
+    taps = int(taps) if filter_width > 0.0 else 1
+    if not 1 <= taps <= 4:
+        raise ValueError(f"texture_taps {taps} outside 1-4")
+    along = np.zeros(4, np.float32)
+    if taps > 1:
+        along[:taps] = filter_offsets(filter_width, taps)[::taps, 0]
+    steps = pixel_steps(camera, width, height).astype(np.float32)
+    return (("texture_taps", (float(taps), float(max(int(share), 1)))), ("tap_offsets", along),
+            ("pixel_step_x", steps[0]), ("pixel_step_y", steps[1]))
 
 
 class ChunkedBatch:
@@ -269,22 +299,22 @@ class ChunkedBatch:
 
 def rasterize_stages(tris, camera, roughness, width: int, height: int, offset=(0.0, 0.0),
                      shader=None, textures=None, filter_width: float = DEFAULT_FILTER_WIDTH,
-                     batch=None):
+                     batch=None, texture_taps: int = 1):
     """``rasterize`` as a generator of stages returning the ``GBuffer``: with a
     ``ChunkedBatch`` (the viewport's) it yields after each chunk in view is drawn, so a
     scene's G-buffer goes over several draws (140k triangles: 60–80 ms of llvmpipe's vertex
     work in one); any other batch is drawn in the one call."""
     if not isinstance(batch, ChunkedBatch) or len(batch.batches) <= 1:
         return rasterize(tris, camera, roughness, width, height, offset, shader, textures,
-                         filter_width, batch)
+                         filter_width, batch, texture_taps=texture_taps)
     inside = batch.visible(view_projection(camera, width, height, offset))
     out = rasterize(tris, camera, roughness, width, height, offset, shader, textures,
                     filter_width, batch.part(inside[0], inside[0] + 1) if inside
-                    else ChunkedBatch())  # cleared, and the first chunk
+                    else ChunkedBatch(), texture_taps=texture_taps)  # cleared, the first chunk
     for index in inside[1:]:
         yield
         rasterize(tris, camera, roughness, width, height, offset, shader, textures,
-                  filter_width, batch.part(index, index + 1), out=out)
+                  filter_width, batch.part(index, index + 1), out=out, texture_taps=texture_taps)
     return out
 
 

@@ -22,6 +22,7 @@ from ..voxgi_addon.preview import transmission
 from ..voxgi_addon.preview.film import background
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF, GatherSettings, focused
 from ..voxgi_addon.preview.passes import (
+    AA_SIDE,
     centre_pass,
     check_request,
     edge_pixels,
@@ -39,6 +40,7 @@ from ..voxgi_addon.preview.sparse_gather import sparse_plan
 from ..voxgi_addon.preview.upsample import sample_pixels
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame
 from ..voxgi_addon.scene.glass import is_glass
+from ..voxgi_addon.scene.textures import TEXTURE_TAPS
 from .frame import Frame, Stage
 from .frame import run as run_stages
 from .gbuffer import PixelMask, gbuffer_shader, rasterize, rasterize_stages, read_gbuffer, vertex_batch
@@ -334,7 +336,8 @@ def _visibility(f):
     centre = yield from rasterize_stages(f["seen_tris"], f["snapshot"].camera, scene.rough, width,
                                          height, shader=f["raster_shader"],
                                          textures=scene.raster_textures(),
-                                         filter_width=f["filter_width"], batch=f["vertex_batch"])
+                                         filter_width=f["filter_width"], batch=f["vertex_batch"],
+                                         texture_taps=TEXTURE_TAPS)
     if f["only"] is not None:  # the other pixels' coverage 0: background to every kernel
         centre.position = _run("aa_mask", _MASK_SAMPLERS, {
             "gbuffer_position": centre.position,
@@ -605,7 +608,8 @@ def _subpixel_passes(f):
     for index, (offset, block) in enumerate(plan):
         gbuffer = rasterize(f["seen_tris"], snapshot.camera, scene.rough, width, height, offset,
                             shader=f["raster_shader"], textures=scene.raster_textures(),
-                            filter_width=f["filter_width"], batch=f["vertex_batch"], mask=mask)
+                            filter_width=f["filter_width"], batch=f["vertex_batch"], mask=mask,
+                            texture_share=AA_SIDE)
         inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": pixels}, list_size)
         inputs["gbuffer_base"] = blank if not scene.textured else _compact(
             "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,

@@ -333,8 +333,12 @@ vec3 world_sample(vec2 u, int h, int w)
   return vec3(r * cos(phi), r * sin(phi), z);
 }
 
-/* Diffuse Direct of the world (world_light.world_direct): the unshadowed table value times
- * the per-channel visible share of one map sample and one cosine sample per stratum. */
+/* Diffuse Direct of the world (world_light.world_direct): the unshadowed table value less
+ * the estimate of its hidden part from one map sample and one cosine sample per stratum
+ * (Σ over the hidden rays of L cos / (p_map + p_cos), / m² π), held at 0 or above: exact where
+ * every ray sees the world, unbiased where some are hidden (the visible share Σ seen / Σ all
+ * was a ratio of estimates, biased there: docs/gi_pipeline.md "The world's light where it is
+ * partly hidden"). */
 /* The world's Diffuse Direct at p (world_light.world_direct) and, with `lobe` (kernels with
  * principled.glsl), in `glossy` the radiance a bounce hit's glossy lobe (Principled `base`,
  * `params`) reflects of it toward `v` from the same rays: each ray's L V f / (m² (p_map +
@@ -388,9 +392,7 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
     }
   }
   glossy /= float(m * m);
-  vec3 share = vec3(f_sum.r > 0.0 ? f_lit.r / f_sum.r : 1.0, f_sum.g > 0.0 ? f_lit.g / f_sum.g : 1.0,
-                    f_sum.b > 0.0 ? f_lit.b / f_sum.b : 1.0);
-  return value * share;
+  return max(value - (f_sum - f_lit) / (float(m * m) * M_PI_F), vec3(0.0));
 }
 
 vec3 world_direct(vec3 p, vec3 n, uint state, int m)
@@ -621,8 +623,8 @@ float emitters_distance(vec3 p, vec3 n)
 }
 
 /* Diffuse Direct of the emissive triangles (emitters.emitters_direct): the exact unshadowed
- * sum (emitters_unshadowed; known.rgb where known.w > 0.5, a pixel centre's) times the
- * per-channel visible share of one point per stratum, sampled by power; not `exact` (bounce
+ * sum (emitters_unshadowed; known.rgb where known.w > 0.5, a pixel centre's) less the
+ * estimate of its hidden part from one point per stratum, sampled by power; not `exact` (bounce
  * hits): the shadow rays' plain estimate. With `lobe` (kernels with principled.glsl) `glossy`
  * gets what a bounce hit's glossy lobe reflects of them toward `v` from the same rays (mean of
  * L V f |cos_l| / (r² p_area)). */
@@ -678,9 +680,7 @@ vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, vec4 kn
   if (!exact) {
     return f_lit / (M_PI_F * float(m * m));
   }
-  vec3 share = vec3(f_sum.r > 0.0 ? f_lit.r / f_sum.r : 1.0, f_sum.g > 0.0 ? f_lit.g / f_sum.g : 1.0,
-                    f_sum.b > 0.0 ? f_lit.b / f_sum.b : 1.0);
-  return value * share;
+  return max(value - (f_sum - f_lit) / (float(m * m) * M_PI_F), vec3(0.0));
 }
 
 /* The emitters' Diffuse Direct with the samples diffuse_direct draws for them (their stream

@@ -14,11 +14,48 @@
  * texels per metre × a pixel's footprint at unit distance, 0), surface_base = the material's
  * Base Color value: out_base = (Base Color, the emission per texel × Strength packed by
  * pack_emission, textures.glsl: a float >= 2) where the material has an emission texture.
+ * The Base Color is texture_taps² taps where the camera rays at the sub-pixel offsets
+ * (tap_offsets.x … per axis: camera.filter_offsets) meet the fragment's plane (tap_point,
+ * the twin of textures.tap_points), each at the level of a tap's share of the footprint, their
+ * UVs extrapolated over the plane through the fragment's derivatives (exact: UV and position
+ * are the same affine map of the plane): texture_taps = textures.primary_base's (taps, share)
+ * (the centre pass: (4, 1); a sub-pixel pass, one of AA_SIDE² samples of its pixel: (1, 4),
+ * its Base Color's and emission's footprint a quarter of the pixel's).
  * The texture code is there only with RASTER_TEXTURES (gbuffer.gbuffer_shader(textured)): a
  * scene without textures draws with the plain variant, 4-5x faster on llvmpipe, which runs the
  * code of a branch no fragment takes. */
+#ifdef RASTER_TEXTURES
+/* Where the camera ray at sub-pixel offset o (x right, y down, pixels) meets the plane through
+ * p with normal n (textures.tap_points): p where the ray runs along the plane. */
+vec3 tap_point(vec3 p, vec3 n, vec2 o)
+{
+  vec3 start, direction;
+  if (camera_ortho > 0.5) {
+    start = p + o.x * pixel_step_x + o.y * pixel_step_y;
+    direction = camera_forward;
+  }
+  else {
+    start = camera_position;
+    vec3 rel = p - camera_position;
+    float depth = dot(rel, camera_forward);
+    direction = rel / (abs(depth) > 1e-12 ? depth : 1.0) + o.x * pixel_step_x +
+                o.y * pixel_step_y;
+  }
+  float across = dot(direction, n);
+  if (abs(across) <= 1e-9 * length(direction)) {
+    return p;
+  }
+  return start + dot(p - start, n) / across * direction;
+}
+#endif
+
 void main()
 {
+#ifdef RASTER_TEXTURES
+  /* before any discard: derivatives need the whole quad */
+  vec3 dpx = dFdx(world_position), dpy = dFdy(world_position);
+  vec2 dux = dFdx(surface_uv), duy = dFdy(surface_uv);
+#endif
   vec3 view = camera_ortho > 0.5 ? camera_forward : normalize(world_position - camera_position);
   if (surface_cutout.x > -1.5) {
     float alpha = surface_cutout.y;
@@ -73,9 +110,33 @@ void main()
     float distance = camera_ortho > 0.5 ? 1.0 : length(world_position - camera_position);
     float c = max(abs(dot(flat_normal, view)), FOOTPRINT_COS_MIN);
     float footprint = surface_slot.y * distance / sqrt(c);
-    float lod = log2(max(footprint, 1.0));
-    out_base = vec4(clamp(surface_texture(int(surface_slot.x + 0.5), surface_uv, lod), 0.0,
-                          1.0), 1.0);
+    int taps = int(texture_taps.x + 0.5);
+    footprint /= max(texture_taps.x, texture_taps.y);
+    int slot = int(surface_slot.x + 0.5);
+    if (taps <= 1) {
+      float lod = log2(max(footprint, 1.0));
+      out_base = vec4(clamp(surface_texture(slot, surface_uv, lod), 0.0, 1.0), 1.0);
+    }
+    else {
+      float lod = log2(max(footprint, 1.0));
+      float a11 = dot(dpx, dpx), a12 = dot(dpx, dpy), a22 = dot(dpy, dpy);
+      float det = a11 * a22 - a12 * a12;
+      bool solvable = abs(det) > 1e-30;
+      vec3 sum = vec3(0.0);
+      for (int i = 0; i < taps; i++) {
+        for (int j = 0; j < taps; j++) {
+          vec2 uv = surface_uv;
+          if (solvable) {
+            vec3 d = tap_point(world_position, flat_normal, vec2(tap_offsets[i], tap_offsets[j])) -
+                     world_position;
+            float r1 = dot(dpx, d), r2 = dot(dpy, d);
+            uv += ((a22 * r1 - a12 * r2) * dux + (a11 * r2 - a12 * r1) * duy) / det;
+          }
+          sum += clamp(surface_texture(slot, uv, lod), 0.0, 1.0);
+        }
+      }
+      out_base = vec4(sum / float(taps * taps), 1.0);
+    }
   }
   if (surface_glow.x > -0.5) {
     if (surface_slot.x < -0.5) {
@@ -83,7 +144,7 @@ void main()
     }
     float distance = camera_ortho > 0.5 ? 1.0 : length(world_position - camera_position);
     float c = max(abs(dot(flat_normal, view)), FOOTPRINT_COS_MIN);
-    float lod = log2(max(surface_glow.z * distance / sqrt(c), 1.0));
+    float lod = log2(max(surface_glow.z * distance / sqrt(c) / texture_taps.y, 1.0));
     vec3 glow = max(surface_texture(int(surface_glow.x + 0.5), surface_uv, lod), vec3(0.0));
     out_base.w = pack_emission(glow * surface_glow.y);
   }

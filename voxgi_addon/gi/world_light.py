@@ -254,7 +254,9 @@ def unshadowed(world: WorldLight, normals) -> np.ndarray:
 
 
 def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None):
-    """(N, 3) Diffuse Direct of the world at points p with unit normals n (facing the viewer).
+    """(N, 3) Diffuse Direct of the world at points p with unit normals n (facing the viewer):
+    the unshadowed table value less the estimate of its hidden part from one world-map and one
+    cosine ray per stratum (the balance heuristic), held at 0 or above.
 
     occluded : callable(origins (M, 3), unit directions (M, 3)) -> (M,) bool, the shadow test
         of rays to infinity (None: no shadows); strata : callable(point indices) -> (N, K, 2)
@@ -286,10 +288,15 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None):
     blocked = np.zeros(up.shape, bool)
     if up.any():
         blocked[up] = occluded(origins[up.ravel()], dirs[up])
-    total = f.sum(axis=1)
-    seen = (f * ~blocked[..., None]).sum(axis=1)
-    share = np.divide(seen, total, out=np.ones_like(seen), where=total > 0)
-    value[lit] *= share
+    # The table's exact unshadowed value less the rays' estimate of the hidden part
+    # (Σ L cos / pdf over the K rays of each technique, / K π): exact where every ray sees
+    # the world, and unbiased where some are hidden. The visible share Σ seen / Σ all it
+    # replaces is a ratio of two estimates, biased where the world is partly hidden (a floor
+    # beside a wall: its sun ray seen and its sky ray hidden read fully lit; its sky ray
+    # drawn alone, the sun's share lost), which left the HDRI courtyard's walls' bounce
+    # light 3% dark (docs/gi_pipeline.md "The world's light where it is partly hidden").
+    hidden = (f * blocked[..., None]).sum(axis=1) / (square.shape[1] * math.pi)
+    value[lit] = np.maximum(value[lit] - hidden, 0.0)
     if reflect is None:
         return value
     per_technique = square.shape[1]

@@ -39,7 +39,7 @@ from ..gi.world_light import scene_lights, world_light
 from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, camera_frame, filter_offsets
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
-from ..scene.textures import primary_base, texel_emission
+from ..scene.textures import TEXTURE_TAPS, primary_base, texel_emission
 from . import transmission
 from .gather import (
     GatherSettings,
@@ -779,7 +779,7 @@ def emitter_field(snapshot, tris, seen, materials, emitters, stride: int,
     mat = materials[cells]
     principled = principled_table(snapshot)
     base = primary_base(tris, seen, cells, principled[0][mat], snapshot.camera, width, height,
-                        filter_width)  # None: untextured
+                        filter_width, TEXTURE_TAPS)  # None: untextured (the centres' G-buffer)
     glossy = np.zeros(valid.shape + (3,))
     diffuse = np.zeros(valid.shape + (3,))
     distance = np.zeros(valid.shape)
@@ -1036,7 +1036,8 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
             positions[hit], normals[hit], -dirs[hit], mat, hit, tris, principled_table(snapshot),
             emitters, gather_settings.glossy_rays, gather_settings.seed,
             primary_base(tris, seen, hit, principled_table(snapshot)[0][mat], snapshot.camera,
-                         width, height, filter_width), field=(glossy_field, glossy_turn))
+                         width, height, filter_width, TEXTURE_TAPS),
+            field=(glossy_field, glossy_turn))
         timings["emitters' glossy light"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         centre_unshadowed[hit] = emitters_unshadowed_held(emitters, positions[hit], normals[hit],
@@ -1057,16 +1058,19 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
                        reach).ravel()
     centre_seen = seen
 
-    def shade(seen, pixels, block, lamps=None, into=None, offset=(0.0, 0.0)):
+    def shade(seen, pixels, block, lamps=None, into=None, offset=(0.0, 0.0), taps=1, share=1):
         """Add one pass at ``pixels`` (H·W,) bool to ``into`` (the sums if None); lamps : gets
-        the lamps' light there; offset : the pass's (``subpixel_passes``)."""
+        the lamps' light there; offset : the pass's (``subpixel_passes``); taps, share :
+        ``primary_base``'s (the centre pass's taps stand for the whole pixel; a sub-pixel pass
+        is one of AA_SIDE² samples)."""
         hit = np.flatnonzero(seen.hit.ravel() & pixels)
         p = seen.position.reshape(-1, 3)[hit]
         n = seen.normal.reshape(-1, 3)[hit]
         mat = material_indices(snapshot, seen.material.ravel())[hit]
         views = -seen.direction.reshape(-1, 3)[hit]
         base = primary_base(tris, seen, hit, principled_table(snapshot)[0][mat],
-                            snapshot.camera, width, height, filter_width)  # None: untextured
+                            snapshot.camera, width, height, filter_width,
+                            taps, share)  # None: untextured
         # The gathered terms and the emitters' glossy light and unshadowed Diffuse Direct:
         # the centre's where this pass sees the surface its pixel's centre sees, else the
         # gathers and the field at the pass's own points (a silhouette's samples that see the
@@ -1122,7 +1126,7 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     # The centre pass off the geometry's edges, then its shadow and light edges join them
     # (their centre pass is dropped) and the sub-pixel passes render all edges.
     lamps = {}
-    shade(centre_seen, ~edge, centre_pass(light_samples)[1], lamps)
+    shade(centre_seen, ~edge, centre_pass(light_samples)[1], lamps, taps=TEXTURE_TAPS)
     lit = light_edge_pixels(lamps["light"].reshape(height, width),
                             centre_seen.hit & ~edge.reshape(height, width), reach,
                             len(plan)).ravel()
@@ -1137,7 +1141,7 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         for offset, block in plan:
             one = new_sums(height * width)
             shade(primary_visibility(camera_tris, snapshot.camera, width, height, offset),
-                  edge, block, into=one, offset=offset)
+                  edge, block, into=one, offset=offset, share=AA_SIDE)
             for name in SUMS:
                 sums[name][listed] += one[name][listed]
             samples.append(pack_sums({name: one[name][listed] for name in SUMS}) / len(plan))

@@ -60,13 +60,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .camera import DEFAULT_FILTER_WIDTH, _frustum, blackman_harris, camera_frame
+from .camera import DEFAULT_FILTER_WIDTH, _frustum, blackman_harris, camera_frame, filter_offsets
 from .glass import ray_alpha
 from .snapshot import SceneSnapshot, TextureData
 
 MAX_LEVELS = 12              # mip levels kept per texture (level 0 = the image)
 MAX_SIZE = 2048              # larger images start at the first level within this size
 FOOTPRINT_COS_MIN = 0.05     # the footprint's cosine is held above this (grazing views)
+# The pixel-centre pass's texture taps per axis over the pixel's own square (``primary_base``):
+# off the edges one point stands for every camera ray of the pixel, and a texture is not
+# linear across it (docs/gi_pipeline.md "Textures over the pixel's own square").
+TEXTURE_TAPS = 4
 TEXTURE_TEXELS = 3 + MAX_LEVELS  # per texture in the GPU table (pack_atlas)
 ROUGHNESS_LEVELS = 16        # roughness variants: k / 15
 METALLIC_LEVELS = 4          # metallic variants: k / 3
@@ -587,6 +591,66 @@ def filter_footprint(filter_width: float = DEFAULT_FILTER_WIDTH) -> float:
     return float(2.0 * np.sqrt((weight * x * x).sum() / weight.sum()))
 
 
+def pixel_steps(camera, width: int, height: int) -> np.ndarray:
+    """(2, 3) float64 world vectors of one pixel to the right and one pixel down, at unit
+    distance (perspective) or in metres (orthographic)."""
+    rotation, _ = camera_frame(camera)
+    _, _, hx, hy = _frustum(camera, int(width), int(height))
+    return np.stack([rotation[:, 0] * (2.0 * hx / int(width)),
+                     -rotation[:, 1] * (2.0 * hy / int(height))])
+
+
+def tap_points(position, normal, camera, width: int, height: int, offsets) -> np.ndarray:
+    """(T, N, 3) float64: where the camera rays at the sub-pixel ``offsets`` (T, 2) (x right,
+    y down, pixels) of N pixels meet the plane through ``position`` (N, 3), the point each
+    pixel's centre sees, with normal ``normal`` (N, 3); a ray along the plane keeps the
+    centre's point. gbuffer_frag.glsl ``tap_point`` is its twin."""
+    position = np.asarray(position, np.float64)
+    normal = np.asarray(normal, np.float64)
+    rotation, origin = camera_frame(camera)
+    forward = -rotation[:, 2]
+    steps = pixel_steps(camera, width, height)
+    out = np.empty((len(offsets),) + position.shape)
+    if camera.type == "ORTHO":
+        for k, (ox, oy) in enumerate(offsets):
+            start = position + ox * steps[0] + oy * steps[1]
+            along = np.broadcast_to(forward, position.shape)
+            out[k] = _on_plane(start, along, position, normal)
+        return out
+    rel = position - origin
+    depth = rel @ forward
+    centre = rel / np.where(np.abs(depth) > 1e-12, depth, 1.0)[:, None]
+    for k, (ox, oy) in enumerate(offsets):
+        out[k] = _on_plane(np.broadcast_to(origin, position.shape),
+                           centre + ox * steps[0] + oy * steps[1], position, normal)
+    return out
+
+
+def _on_plane(start, direction, position, normal) -> np.ndarray:
+    """(N, 3) start + t·direction on the plane (position, normal); position where the ray runs
+    along the plane."""
+    across = np.einsum("ij,ij->i", direction, normal)
+    reach = np.einsum("ij,ij->i", position - start, normal)
+    ok = np.abs(across) > 1e-9 * np.linalg.norm(direction, axis=1)
+    t = np.divide(reach, across, out=np.zeros_like(reach), where=ok)
+    return np.where(ok[:, None], start + t[:, None] * direction, position)
+
+
+def plane_barycentrics(points, corners) -> tuple[np.ndarray, np.ndarray]:
+    """(b1, b2) (N,) of ``points`` (N, 3) in the planes of the triangles ``corners`` (N, 3, 3):
+    point = corner 0 + b1 (corner 1 − corner 0) + b2 (corner 2 − corner 0), outside the
+    triangle too."""
+    corners = np.asarray(corners, np.float64)
+    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    d = np.asarray(points, np.float64) - corners[:, 0]
+    a11, a12, a22 = (np.einsum("ij,ij->i", e1, e1), np.einsum("ij,ij->i", e1, e2),
+                     np.einsum("ij,ij->i", e2, e2))
+    r1, r2 = np.einsum("ij,ij->i", e1, d), np.einsum("ij,ij->i", e2, d)
+    det = a11 * a22 - a12 * a12
+    det = np.where(np.abs(det) > 1e-30, det, 1.0)
+    return (a22 * r1 - a12 * r2) / det, (a11 * r2 - a12 * r1) / det
+
+
 def primary_lod(density, distance, cos_view, spread: float) -> np.ndarray:
     """(N,) float32 level of detail of a pixel's hit: log2 of its footprint in level-0 texels,
     ``spread`` (``pixel_spread`` × ``filter_footprint``) × distance (1 for an orthographic
@@ -661,14 +725,24 @@ def texel_emission(base, emission: np.ndarray) -> np.ndarray:
 
 
 def primary_base(tris, seen, pixels, base, camera, width: int, height: int,
-                 filter_width: float = DEFAULT_FILTER_WIDTH):
+                 filter_width: float = DEFAULT_FILTER_WIDTH, taps: int = 1, share: int = 1):
     """(N, 3) float64 Base Color of the pixels ``pixels`` (N,) flat indices that see a
     surface in ``seen`` (``raycast.PrimaryHits`` with barycentrics): ``base`` (N, 3) (the
     material table's rows) with textured materials sampled per texel at the pixel's
     ``primary_lod`` for Filter Size ``filter_width``; None when the triangles carry no
     textures (use ``base``). A ``TexelBase``: materials with an emission texture give their
     emission per texel there too, at the emission texture's own ``primary_lod``
-    (``texel_emission``)."""
+    (``texel_emission``).
+
+    taps : the Base Color's taps per axis (``TEXTURE_TAPS`` for the pixel-centre pass; 1 for a
+    sub-pixel pass, one sample of its pixel): taps > 1 averages taps × taps samples where the
+    camera rays at ``camera.filter_offsets(filter_width, taps)`` meet the plane of the
+    surface the centre sees (``tap_points``; UVs extrapolated over the triangle's plane), each
+    at the level of a tap's share of the footprint (``spread`` / taps), as Cycles' rays
+    average the texture over the pixel. The emission per texel stays one sample.
+    share : this pass is one of share × share samples of each pixel (a sub-pixel pass:
+    ``passes.AA_SIDE``): the Base Color's and the emission's footprints are the pixel's /
+    share, so its samples together filter the texture as the centre pass's taps."""
     tex = getattr(tris, "textures", None)
     if tex is None or seen.barycentric is None:
         return None
@@ -682,12 +756,27 @@ def primary_base(tris, seen, pixels, base, camera, width: int, height: int,
         distance = np.linalg.norm(position - camera_frame(camera)[1], axis=1)
     cos = np.einsum("ij,ij->i", seen.face_normal.reshape(-1, 3)[pixels],
                     seen.direction.reshape(-1, 3)[pixels])
+    taps = int(taps) if filter_width > 0.0 else 1
+    share = max(int(share), 1)
     spread = pixel_spread(camera, width, height) * filter_footprint(filter_width)
-    lod = primary_lod(tex.density[triangle], distance, cos, spread)
+    lod = primary_lod(tex.density[triangle], distance, cos, spread / max(taps, share))
     materials = np.asarray(tris.materials)[triangle]
-    out = tex.base_at(triangle, materials, bary[:, 0], bary[:, 1], base, lod).view(TexelBase)
+    if taps > 1:
+        offsets = filter_offsets(filter_width, taps)
+        points = tap_points(position, seen.face_normal.reshape(-1, 3)[pixels], camera, width,
+                            height, offsets)
+        corners = np.asarray(tris.positions, np.float64)[triangle]
+        total = np.zeros((len(pixels), 3))
+        for point in points:
+            b1, b2 = plane_barycentrics(point, corners)
+            total += tex.base_at(triangle, materials, b1, b2, base, lod)
+        textured = (tex.slot_of(materials) >= 0)[:, None]
+        out = np.where(textured, total / len(points), np.asarray(base, np.float64))
+        out = out.view(TexelBase)
+    else:
+        out = tex.base_at(triangle, materials, bary[:, 0], bary[:, 1], base, lod).view(TexelBase)
     if tex.emission_slots is not None:
-        lod = primary_lod(tex.emission_density[triangle], distance, cos, spread)
+        lod = primary_lod(tex.emission_density[triangle], distance, cos, spread / share)
         out.emission, out.emissive = tex.emission_at(triangle, materials, bary[:, 0],
                                                      bary[:, 1], lod)
     return out
