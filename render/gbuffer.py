@@ -75,23 +75,28 @@ def gbuffer_shader(textured: bool = True):
     info.define("FOOTPRINT_COS_MIN", repr(float(FOOTPRINT_COS_MIN)))
     info.define("ROUGHNESS_LEVELS", str(ROUGHNESS_LEVELS))
     info.define("METALLIC_LEVELS", str(METALLIC_LEVELS))
-    if textured:
-        info.define("RASTER_TEXTURES", "1")
     info.push_constant("MAT4", "view_projection")
     info.push_constant("VEC3", "camera_position")
     info.push_constant("VEC3", "camera_forward")
     info.push_constant("FLOAT", "camera_ortho")
     info.push_constant("FLOAT", "pixel_spread")
-    info.push_constant("VEC2", "texture_taps")
-    info.push_constant("VEC4", "tap_offsets")
-    info.push_constant("VEC3", "pixel_step_x")
-    info.push_constant("VEC3", "pixel_step_y")
+    taps = ""
+    if textured:
+        info.define("RASTER_TEXTURES", "1")
+        # the texture taps' data in a uniform block (``_tap_block``): with them the push
+        # constants would pass the 128 bytes a GPU must allow
+        info.typedef_source("struct TapData { vec4 taps; vec4 offsets; vec4 step_x; "
+                            "vec4 step_y; };\n")
+        info.uniform_buf(0, "TapData", "tap_data")
+        taps = ("#define texture_taps (tap_data.taps.xy)\n#define tap_offsets (tap_data.offsets)\n"
+                "#define pixel_step_x (tap_data.step_x.xyz)\n"
+                "#define pixel_step_y (tap_data.step_y.xyz)\n")
     info.fragment_out(0, "VEC4", "out_position")
     info.fragment_out(1, "VEC4", "out_normal")
     info.fragment_out(2, "VEC4", "out_view")
     info.fragment_out(3, "VEC4", "out_base")
     info.vertex_source((SHADER_DIR / "gbuffer_vert.glsl").read_text())
-    info.fragment_source((SHADER_DIR / "sampling.glsl").read_text() +
+    info.fragment_source(taps + (SHADER_DIR / "sampling.glsl").read_text() +
                          (SHADER_DIR / "textures.glsl").read_text() +
                          (SHADER_DIR / "gbuffer_frag.glsl").read_text())
     return create_shader(info, "gbuffer raster" if textured else "gbuffer raster (plain)")
@@ -225,15 +230,17 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
             if _reads(shader, "texture_table"):  # (not the plain variant)
                 shader.uniform_sampler("texture_table", textures[0])
                 shader.uniform_sampler("texture_atlas", textures[1])
+                # (held until the draw: the shader keeps no reference to the block)
+                tap_block = _tap_block(camera, width, height, filter_width, texture_taps,
+                                       texture_share)
+                shader.uniform_block("tap_data", tap_block)
             for name, value in (
                     ("view_projection", matrix.T.ravel().tolist()),
                     ("camera_position", position.astype(np.float32)),
                     ("camera_forward", (-rotation[:, 2]).astype(np.float32)),
                     ("camera_ortho", 1.0 if camera.type == "ORTHO" else 0.0),
                     ("pixel_spread", float(pixel_spread(camera, width, height) *
-                                           filter_footprint(filter_width))),
-                    *_tap_uniforms(camera, width, height, filter_width, texture_taps,
-                                   texture_share)):
+                                           filter_footprint(filter_width)))):
                 if _reads(shader, name):  # (the plain variant reads fewer)
                     shader.uniform_float(name, value)
             if isinstance(batch, ChunkedBatch):
@@ -244,6 +251,17 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
             gpu.state.depth_mask_set(False)
     return out
 
+
+
+def _tap_block(camera, width: int, height: int, filter_width: float, taps: int, share: int):
+    """The textured G-buffer shader's uniform block ``tap_data`` (``TapData``): texture_taps
+    (taps per axis, share), tap_offsets (the offsets along one axis,
+    ``camera.filter_offsets``) and the pixel steps (``textures.pixel_steps``)."""
+    block = np.zeros((4, 4), np.float32)
+    for row, (_, value) in enumerate(_tap_uniforms(camera, width, height, filter_width, taps,
+                                                   share)):
+        block[row, :len(value)] = value
+    return gpu.types.GPUUniformBuf(block.ravel())
 
 
 def _tap_uniforms(camera, width: int, height: int, filter_width: float, taps: int, share: int):
