@@ -333,6 +333,17 @@ vec3 world_sample(vec2 u, int h, int w)
   return vec3(r * cos(phi), r * sin(phi), z);
 }
 
+/* A light's shadowed value from its exact unshadowed `value` and its rays' Σ f (f_sum) and
+ * Σ seen f (f_lit) over m × m strata (world_light.hidden_less): the value less the hidden
+ * rays' estimate, held at 0 from DIFFERENCE_STRATA strata (m ≥ 2: a pixel's light); a bounce
+ * hit's or a probe ray's single stratum is not held (the mean of the rays that read it
+ * counts). */
+vec3 hidden_less(vec3 value, vec3 f_sum, vec3 f_lit, int m)
+{
+  vec3 light = value - (f_sum - f_lit) / (float(m * m) * M_PI_F);
+  return m >= 2 ? max(light, vec3(0.0)) : light;
+}
+
 /* Diffuse Direct of the world (world_light.world_direct): the unshadowed table value less
  * the estimate of its hidden part from one map sample and one cosine sample per stratum
  * (Σ over the hidden rays of L cos / (p_map + p_cos), / m² π), held at 0 or above: exact where
@@ -392,7 +403,7 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
     }
   }
   glossy /= float(m * m);
-  return max(value - (f_sum - f_lit) / (float(m * m) * M_PI_F), vec3(0.0));
+  return hidden_less(value, f_sum, f_lit, m);
 }
 
 vec3 world_direct(vec3 p, vec3 n, uint state, int m)
@@ -680,6 +691,7 @@ vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, vec4 kn
   if (!exact) {
     return f_lit / (M_PI_F * float(m * m));
   }
+  /* a pixel's light: held at 0 whatever its strata (world_light.hidden_less's difference) */
   return max(value - (f_sum - f_lit) / (float(m * m) * M_PI_F), vec3(0.0));
 }
 

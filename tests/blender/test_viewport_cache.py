@@ -4,6 +4,8 @@ more than one chunk's gather, and the viewport reads the last complete cache (or
 while a new one is built, restarting its image when it completes."""
 from __future__ import annotations
 
+import time
+
 import bounce_scenes
 import bpy
 import numpy as np
@@ -218,15 +220,19 @@ def test_fast_bounces_are_made_on_the_worker_while_the_view_keeps_its_image(voxg
         jobs.drain()
         return image, engine.redraws > redraws
 
-    # one bounce (no cache yet) converges while the cache is built a chunk per draw
+    # one bounce (no cache yet) converges while the cache is built a chunk per draw (its
+    # layout made on the preparing thread: draws until it is, as a user's view goes on
+    # drawing, with a moment between them for that thread; the deadline only ends a hang)
     one_bounce = None
-    for _ in range(5000):
+    deadline = time.monotonic() + 300.0
+    while time.monotonic() < deadline:
         key = renderer.progressive.key
         image, more = draw()
         if renderer.progressive.converged and renderer.cache.generation == 0:
             one_bounce = renderer.progressive.read_image()[..., :3].mean()
         if renderer.cache.generation == 1:
             break
+        time.sleep(0.002)
     assert renderer.cache.generation == 1 and one_bounce is not None
     # the cache is complete: the next draw hands its octrees to the worker, and the view
     # keeps its image meanwhile

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..scene.textures import sample_texture
+from .world_light import hidden_less
 
 __all__ = ["EmitterLight", "emitter_light", "emitters_direct", "unshadowed_sum",
            "clipped_form_factors", "sample_points", "emitter_table", "EMITTER_TEXELS",
@@ -392,9 +393,8 @@ def emitters_direct(light: EmitterLight, p, n, occluded, strata, reflect=None,
     if not light.exact:
         value = seen / (math.pi * k.shape[1])  # E/π = mean of L cos_x cos_l / r² / p_area / π
         return value if reflect is None else (value, glossy)
-    total = f.sum(axis=1)
-    share = np.divide(seen, total, out=np.ones_like(seen), where=total > 0)
-    value[lit] *= share
+    # a pixel's light: the difference held at 0 whatever its strata (``hidden_less``)
+    value[lit] = hidden_less(value[lit], f, blocked, k.shape[1], held=True)
     return value if reflect is None else (value, glossy)
 
 

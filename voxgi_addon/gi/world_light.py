@@ -253,10 +253,31 @@ def unshadowed(world: WorldLight, normals) -> np.ndarray:
     return top * (1 - fy) + bottom * fy
 
 
+# From this many strata a light's shadowed value is held at 0 or above (``hidden_less``);
+# below, the estimate may dip under 0, as a single shadow ray's must to stay unbiased.
+DIFFERENCE_STRATA = 4
+
+
+def hidden_less(value, f, blocked, strata: int, held: bool | None = None) -> np.ndarray:
+    """(N, 3) a light's shadowed value from its exact unshadowed ``value`` (N, 3) and its
+    rays' ``f`` (N, R, 3) = L cos / pdf (per stratum and technique) and ``blocked`` (N, R): the
+    value less the hidden rays' Σ f / (strata π) — exact where no ray is hidden, unbiased
+    where some are (the visible share Σ seen f / Σ f it replaces is a ratio of two estimates,
+    biased there: docs/gi_pipeline.md "The world's light where it is partly hidden"). Held at
+    0 from DIFFERENCE_STRATA strata (a pixel's light); a bounce hit's or a probe ray's single
+    stratum is not held — the mean over the many rays that read it is what counts, and held at
+    0 a mostly hidden world read bright there (a probe's dim side 0.30 off Cycles). held :
+    hold it at 0 whatever the strata (a pixel's light that is never a bounce hit's: the
+    emitters' exact estimate)."""
+    light = value - (f * blocked[..., None]).sum(axis=1) / (strata * math.pi)
+    held = strata >= DIFFERENCE_STRATA if held is None else held
+    return np.maximum(light, 0.0) if held else light
+
+
 def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None):
     """(N, 3) Diffuse Direct of the world at points p with unit normals n (facing the viewer):
     the unshadowed table value less the estimate of its hidden part from one world-map and one
-    cosine ray per stratum (the balance heuristic), held at 0 or above.
+    cosine ray per stratum (the balance heuristic; ``hidden_less``).
 
     occluded : callable(origins (M, 3), unit directions (M, 3)) -> (M,) bool, the shadow test
         of rays to infinity (None: no shadows); strata : callable(point indices) -> (N, K, 2)
@@ -295,8 +316,7 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None):
     # beside a wall: its sun ray seen and its sky ray hidden read fully lit; its sky ray
     # drawn alone, the sun's share lost), which left the HDRI courtyard's walls' bounce
     # light 3% dark (docs/gi_pipeline.md "The world's light where it is partly hidden").
-    hidden = (f * blocked[..., None]).sum(axis=1) / (square.shape[1] * math.pi)
-    value[lit] = np.maximum(value[lit] - hidden, 0.0)
+    value[lit] = hidden_less(value[lit], f, blocked, square.shape[1])
     if reflect is None:
         return value
     per_technique = square.shape[1]
