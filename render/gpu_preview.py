@@ -375,7 +375,9 @@ def _low(f, kind, kernel="bvh_gather", world_mode=False):
     accumulation)."""
     scene, settings = f["scene"], f["gather_settings"]
     centre, stride, width, height = f["centre"], f["gi_stride"], f["width"], f["height"]
-    cache = None if world_mode else f["cache"]
+    cache = f["cache"]
+    if world_mode and cache is not None:  # reads no cache: an empty one of its JIT class
+        cache = _empty_like(cache)
     values, variance = gather(scene.bvh, centre.inputs, scene.lights, scene.principled,
                               scene.emission, settings, stride, width, height, kernel=kernel,
                               world_mode=world_mode, tables=f["tables"],
@@ -384,6 +386,14 @@ def _low(f, kind, kernel="bvh_gather", world_mode=False):
         values, variance = f["gather_hook"](kind, values, variance)
     return denoise(values, variance, centre.inputs, stride, width, height,
                    settings.denoise_iterations, fit=kind.endswith("diffuse"))[0]
+
+
+def _empty_like(texture):
+    """An empty radiance cache (zero texels: no grid) in the power-of-two class of
+    ``texture`` (``gpu_shaders.size_like``): the world-mode glossy gather reads none, and a
+    1 × 1 one made llvmpipe compile ``bvh_glossy`` a second time (0.4 s of a first preview)."""
+    size = (size_like(1, texture.width), size_like(1, texture.height))
+    return float_texture(np.zeros((size[1], size[0], 4), np.float32), size)
 
 
 def _diffuse_gather(f):
@@ -702,7 +712,7 @@ ACCURATE_STAGES = (
           ("low_glossy",), _glossy_gather, when=lambda f: f["glossy_indirect"]),
     Stage("upsample", ("centre", "low_diffuse", "low_glossy"), ("diffuse_ao", "glossy"), _upsample,
           slice_end=False),
-    Stage("world glossy gather (GPU)", ("centre", "gather_settings", "tables"),
+    Stage("world glossy gather (GPU)", ("centre", "cache", "gather_settings", "tables"),
           ("low_world", "glossy_world"), _world_glossy, when=_with_world_glossy,
           skipped=_no_world_glossy),
     Stage("emitters' light field (GPU)", ("centre",), ("fields",), _emitter_field,
