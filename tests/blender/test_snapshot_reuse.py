@@ -12,23 +12,7 @@ import bpy
 import numpy as np
 import pytest
 import scenes
-from test_posed_update import read_since, reads, same
-
-
-class Recorder:
-    """The depsgraph's updates as ``view_update`` gets them."""
-
-    def __init__(self, live):
-        from voxgi.blender.updates import records_from_depsgraph
-
-        self.live, self.records, self.read = live, [], records_from_depsgraph
-
-    def __call__(self, scene, depsgraph):
-        self.records.extend(self.read(depsgraph, self.live.index))
-
-    def take(self):
-        records, self.records = self.records, []
-        return records
+from test_posed_update import Recorder, read_since, reads, same
 
 
 def fresh_snapshot(scene):

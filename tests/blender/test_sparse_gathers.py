@@ -10,27 +10,9 @@ import pathlib
 import bounce_scenes
 import bpy
 import numpy as np
+from test_multibounce import PASSES, preview, relative_l1
 
 REFS = pathlib.Path(__file__).resolve().parents[1] / "data" / "bounce_refs"
-PASSES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Glossy Direct", "Glossy Indirect")
-
-
-def relative_l1(ours, reference, mask):
-    return float(np.abs(ours[mask] - reference[mask]).sum() / np.abs(reference[mask]).sum())
-
-
-def preview(tmp_path, scene, width, height, tracer="AUTO"):
-    from voxgi.blender.session import scene_session
-    from voxgi.voxgi_addon.files.exr import read_exr
-
-    scene.voxgi.tracer = tracer
-    path = tmp_path / f"preview_{tracer}.exr"
-    assert bpy.ops.voxgi.render_preview(filepath=str(path), resolution_x=width,
-                                        resolution_y=height) == {"FINISHED"}
-    assert scene_session(scene.name_full).tracer_used == ("GPU" if tracer == "AUTO" else "numpy")
-    channels = read_exr(path)
-    return {p: np.stack([channels[f"{p}.{c}"] for c in "RGB"], axis=-1).astype(np.float64)
-            for p in PASSES}
 
 
 def test_numpy_and_gpu_sparse_gathers_agree(voxgi, tmp_path):
