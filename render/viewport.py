@@ -336,6 +336,7 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
                                 view_settings.coarse_first, film=pass_name == "Combined",
                                 transparent=bool(scene.render.film_transparent),
                                 world=source[0].world)
+        generation = renderer.cache.generation
         blend = gpu.state.blend_get()
         # The trace rasterizes its G-buffer: with the caller's blending on (view_draw's state)
         # its triangles blended into the cleared targets and the image was 3% off F12's.
@@ -348,10 +349,13 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
             live.error = progressive.failed = renderer.error  # no retry until a change
         gpu.state.blend_set(blend)
         # "Refining" after convergence: a chunk of the radiance cache's build ran (its
-        # completion restarts the image on the next draw)
-        if traced and redraw is not None and (not progressive.converged
-                                              or traced == "Refining"
-                                              or renderer.cache.building is not None):
+        # completion restarts the image on the next draw). A build may also complete inside
+        # a slice's cache stage, the slice that converged the image with the old cache: the
+        # key is the next draw's to change, so that draw must come.
+        if redraw is not None and (traced and (not progressive.converged
+                                               or traced == "Refining"
+                                               or renderer.cache.building is not None)
+                                   or renderer.cache.generation != generation):
             redraw()  # the next slice on the next draw
     if traced:
         renderer.shown = traced
