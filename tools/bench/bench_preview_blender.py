@@ -8,8 +8,9 @@ In this one process, in this order:
 1. **The first preview in the process** (``render_scene_passes``, as F12), profiled as in 3,
    with every shader creation timed (``gpu.shader.create_from_info``; llvmpipe compiles the
    rest of a kernel at its first dispatch, which the per-stage profile shows). The section
-   runs this process with Mesa's on-disk shader cache off (``MESA_SHADER_CACHE_DISABLE``), as
-   on a new machine.
+   runs this process with an empty on-disk shader cache of its own (``MESA_SHADER_CACHE_DIR``),
+   as on a new machine; with ``--first-only`` a later process times its first preview alone
+   on the cache this one filled (every session after the first).
 2. **The warm preview**: the median of ``repeats`` more, each after the radiance cache is
    dropped (as after any edit); its Combined error against Cycles at its default light paths.
 3. **The machine's floor**, with trivial kernels on the scene's uploaded BVH: the texel-fetch
@@ -364,6 +365,9 @@ def main(argv=None) -> int:
     ap.add_argument("width", type=int)
     ap.add_argument("height", type=int)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--first-only", action="store_true",
+                    help="time the first preview only and print FIRST {json} (bench_preview.py "
+                         "runs it in a later session, Mesa's shader cache filled by the row's)")
     args = ap.parse_args(argv)
     import bpy  # noqa: F401 - gpu comes with it
     import gpu
@@ -401,6 +405,10 @@ def main(argv=None) -> int:
     passes, lines = profiled(preview, first_profile)
     first = time.perf_counter() - t0
     first_compiles = (len(compiles), sum(compiles))
+    if args.first_only:
+        print("FIRST " + json.dumps({"first": first, "compiles": first_compiles[0],
+                                     "compile_seconds": first_compiles[1]}), flush=True)
+        return 0
     first_timings = _timings(lines)
     warm_times = []
     for _ in range(repeats):
