@@ -60,7 +60,9 @@ from .gpu_shaders import LOCAL_SIZE, build_compute, compute_shader, counters, no
 from .gpu_volume import float_texture
 from .progressive import STAGE_SHARE, base_options
 
-STEP_SHARE = 0.75  # of the budget: a draw starts no further step predicted to end past it
+# of the budget: a draw starts no further step predicted to end past it (half: the draw's
+# image costs 8–25 ms at the GPU's finish; docs/gi_pipeline.md "Entering Rendered mode")
+STEP_SHARE = 0.5
 QUICK_SCALE = 4     # the quick image has a quarter of the traced image's width and height
 
 
