@@ -55,7 +55,10 @@ SLICE_BUDGET = 0.030  # seconds one view_draw's slice aims at (issue 19)
 STAGE_SHARE = 0.5     # of it, what a call's stages run until, and what the longest stage aims at
 # of it, what a call's stages may reach with the next one, predicted by that stage's time in
 # the last slice of its kind: the rest is view_draw's own work (key, texture draw, status)
-WORK_SHARE = 0.75
+# (half: every draw also pays the region's image at the GPU's finish, 8 ms idle and 12–25 ms
+# under load, and a stage's raster work lands there too; docs/gi_pipeline.md "Entering
+# Rendered mode")
+WORK_SHARE = 0.5
 LEAST_TILE = 48       # pixels: about the smallest tile side (preview.progressive.tile_side)
 
 
@@ -306,6 +309,10 @@ class ProgressiveImage:
             coarse = GPUAccumulation(acc.pass_name, *size, self.film, acc.transparent)
             coarse.add((0, 0, *size), passes, world=world(camera, *size))
             self.backdrop = coarse.estimate()
+            # the image over it (the whole view's pixels) is a stage of its own: with the
+            # add and the backdrop the coarse slice's last stage took 23–29 ms on the box
+            # (docs/gi_pipeline.md "Entering Rendered mode")
+            yield
             self.coarse_pending = False
             done = Slice("coarse", (0, 0, width, height), size, 0)
         else:

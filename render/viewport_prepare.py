@@ -60,7 +60,9 @@ from .gpu_shaders import LOCAL_SIZE, build_compute, compute_shader, counters, no
 from .gpu_volume import float_texture
 from .progressive import STAGE_SHARE, base_options
 
-STEP_SHARE = 0.75  # of the budget: a draw starts no further step predicted to end past it
+# of the budget: a draw starts no further step predicted to end past it (half: the draw's
+# image costs 8–25 ms at the GPU's finish; docs/gi_pipeline.md "Entering Rendered mode")
+STEP_SHARE = 0.5
 QUICK_SCALE = 4     # the quick image has a quarter of the traced image's width and height
 
 
@@ -462,6 +464,28 @@ def _batch_format(shader, arrays):
 
 
 CHUNK_TRIANGLES = 8192  # triangles per chunk of the view's batch (3 MB of attributes)
+_ATTR_LENGTHS = {"FLOAT": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "INT": 1, "IVEC2": 2,
+                 "IVEC3": 3, "IVEC4": 4}
+
+
+def warm_raster(shader, camera) -> None:
+    """Draw one triangle of zeros with the raster ``shader`` into an 8 × 8 G-buffer: llvmpipe
+    builds a shader's draw variant (its vertex fetch and fragment code) at its first draw,
+    20–30 ms on the 2 cores, which made the batch's first chunk the longest step of the
+    diorama's entering (37–44 ms against 10–14 ms for the others; docs/gi_pipeline.md
+    "Entering Rendered mode"). A step of its own, made while the scene is prepared."""
+    arrays = {}
+    for name, attr_type in shader.attrs_info_get():
+        length = _ATTR_LENGTHS.get(attr_type, 4)
+        dtype = np.int32 if attr_type.startswith(("INT", "IVEC")) else np.float32
+        arrays[name] = np.zeros(3 if length == 1 else (3, length), dtype)
+    vbo = gpu.types.GPUVertBuf(_batch_format(shader, arrays), 3)
+    for name, values in arrays.items():
+        vbo.attr_fill(name, values)
+    batch = gpu.types.GPUBatch(type="TRIS", buf=vbo)
+    origin = np.zeros(3, np.float32)
+    rasterize([None], camera, np.zeros(1, np.float32), 8, 8, shader=shader,
+              batch=ChunkedBatch([batch], [(origin, origin)]))
 
 
 class BatchFill:
@@ -527,6 +551,7 @@ class ViewPreparation:
 
     def __init__(self):
         self.raster = None       # the G-buffer shader of this view's GPU context
+        self.warmed = False      # the raster's first draw made (``warm_raster``)
         self.fill: BatchFill | None = None
         self.batch = None        # the filled batch and the VertexArrays it holds
         self.batch_source: VertexArrays | None = None
@@ -610,9 +635,16 @@ class ViewPreparation:
                 self.seconds["compile"] = seconds
                 self.timings[f"compile {compiled}"] = seconds
                 worked = True
-        # one upload: the batch's next chunk, else the scene's next part
+        # one upload: the raster's first draw, else the batch's next chunk, else the scene's
+        # next part
         sent = False
-        if arrays is not None and (self.batch_source is not arrays or self.batch is None):
+        if not self.warmed:  # (nothing drawn with the raster before it: its first draw)
+            if compiled != "gbuffer raster" and (whole or self._fits("warm", started, budget)):
+                self._timed("warm", "raster first draw", lambda: warm_raster(self.raster,
+                                                                            snapshot.camera))
+                self.warmed = worked = True
+            sent = True
+        if arrays is not None and not sent and (self.batch_source is not arrays or self.batch is None):
             if self.fill is None or self.fill.source is not arrays:
                 self.fill = None
                 if len(arrays.tris):

@@ -70,7 +70,8 @@ def _kind(label: str) -> str:
         return "shader compile"
     if label.startswith("scene"):
         return "scene part sent"
-    if label in ("vertex batch", "quick image", "stage", "radiance cache stage"):
+    if label in ("vertex batch", "raster first draw", "quick image", "stage",
+                 "radiance cache stage"):
         return {"stage": "slice stage"}.get(label, label)
     return ""
 
@@ -100,6 +101,7 @@ class Session:
             records_from_depsgraph(graph, self.live.index))
         bpy.app.handlers.depsgraph_update_post.append(self.handler)
         self.draws = []  # (seconds, timings, shown, traces) of every draw
+        self.started = time.perf_counter()
 
     def context(self, view):
         import types
@@ -128,7 +130,9 @@ class Session:
         from voxgi.render.viewport import view_draw
 
         time.sleep(EVENT_LOOP_SLEEP)  # Blender's main loop between two redraws
+        t0 = time.perf_counter()
         jobs.drain()
+        drained = time.perf_counter() - t0
         with self.offscreen.bind():
             t0 = time.perf_counter()
             view_draw(self.engine, self.context(view or self.view), self.depsgraph)
@@ -136,7 +140,10 @@ class Session:
             gpu.state.active_framebuffer_get().read_color(0, 0, 1, 1, 4, 0, "FLOAT")
             seconds = time.perf_counter() - t0
         renderer = self.engine.voxgi_viewport
-        self.draws.append((seconds, dict(renderer.timings), renderer.shown, renderer.traces))
+        # the timer's drain (main thread too) and the draw's start, for --trace
+        self.draws.append((seconds, {**renderer.timings, "(drain)": drained,
+                                     "(at)": t0 - self.started},
+                           renderer.shown, renderer.traces))
         return seconds, renderer
 
     def close(self):
@@ -168,9 +175,11 @@ def _steps_text(phase) -> str:
     return "; ".join(parts) or "—"
 
 
-def measure(scene, name: str, quick: bool, entering_only: bool = False) -> list:
+def measure(scene, name: str, quick: bool, entering_only: bool = False,
+            trace: list | None = None) -> list:
     """The rows (module doc) for ``scene`` (``name``: "box" or "diorama"); entering_only: up
-    to the first GI image."""
+    to the first GI image; trace: a list given every draw's (seconds, timings, shown,
+    traces)."""
     import math
 
     import bpy
@@ -184,10 +193,12 @@ def measure(scene, name: str, quick: bool, entering_only: bool = False) -> list:
         raise SystemExit(f"no GPU context: {why}")
     jobs.synchronous = False
     session = Session(scene)
+    if trace is not None:
+        session.draws = trace
     rows = []
     limit = 120.0
     # 1. entering Rendered mode: view_update, then draws until the first GI image
-    started = time.perf_counter()
+    started = session.started = time.perf_counter()
     update = session.update()
     first_quick = first_gi = None
     while time.perf_counter() - started < limit:
@@ -339,6 +350,10 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--cold", action="store_true", help="(set by cold_rows) Mesa cache off")
     ap.add_argument("--rows", action="store_true", help="print tab-separated rows only")
+    ap.add_argument("--entering", action="store_true",
+                    help="entering Rendered mode only (to the first GI image), no cold run")
+    ap.add_argument("--trace", action="store_true",
+                    help="print every draw's time and steps (renderer.timings) after the rows")
     args = ap.parse_args(argv)
     from bench_blender import load_addon, print_table
 
@@ -346,15 +361,22 @@ def main(argv=None) -> int:
     scene = build(args.scene)
     triangles = sum(len(p.vertices) - 2 for o in scene.objects if o.type == "MESH"
                     for p in o.data.polygons)
-    rows = measure(scene, args.scene, args.quick, entering_only=args.cold)
+    draws = []
+    rows = measure(scene, args.scene, args.quick, entering_only=args.cold or args.entering,
+                   trace=draws)
     if args.cold:
         rows = [(f"{what} — Mesa shader cache off (a first-ever session)", seconds, note)
                 for what, seconds, note in rows if "entering" in what]
+    if args.trace:
+        for k, (seconds, timings, shown, _) in enumerate(draws):
+            steps = ", ".join(f"{label} {value * 1000:.1f}" for label, value in timings.items())
+            print(f"draw {k:3d} {seconds * 1000:6.1f} ms {shown:10s} {steps}")
     if args.rows:
         for what, seconds, note in rows:
             print(f"ROW\t{what}\t{seconds}\t{note}")
         return 0
-    rows += cold_rows(args.scene, args.quick)
+    if not args.entering:
+        rows += cold_rows(args.scene, args.quick)
     print_table(f"### Entering Rendered mode and live edits: {args.scene} ({triangles:,} "
                 f"triangles), view_draw at {REGION[0]}×{REGION[1]}, default settings, Mesa "
                 f"llvmpipe ({os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at "
