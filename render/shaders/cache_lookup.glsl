@@ -75,6 +75,26 @@ vec3 cache_indirect(vec3 x, vec3 n)
   return vec3(0.0);
 }
 
+/* Corner `corner` of grid g's trilinear neighbourhood at `base` (fractions f): its weight
+ * times whether its voxel holds each axis' face `face` (the id row's mask .y; 0 outside the
+ * grid or where it has no voxel). */
+vec3 cache_corner_held(int corner, ivec3 base, vec3 f, int g, int res, ivec3 face)
+{
+  ivec3 o = ivec3((corner >> 2) & 1, (corner >> 1) & 1, corner & 1);
+  ivec3 cell = base + o;
+  if (any(lessThan(cell, ivec3(0))) || any(greaterThanEqual(cell, ivec3(res)))) {
+    return vec3(0.0);
+  }
+  vec4 id = texelFetch(radiance_cache, ivec2(cell.x + cell.y * res, 1 + g * res + cell.z), 0);
+  if (id.x < -0.5) {
+    return vec3(0.0); /* no voxel of the grid there */
+  }
+  int mask = int(id.y + 0.5);
+  vec3 wv = mix(1.0 - f, f, vec3(o));
+  return (wv.x * wv.y * wv.z) * vec3(float((mask >> face.x) & 1), float((mask >> face.y) & 1),
+                                     float((mask >> face.z) & 1));
+}
+
 /* The texel of one face that cache_indirect(x, n) reads, drawn by `u` in [0, 1) with the
  * lookup's own weights (voxgi_addon/gi/radiance_cache.py pick): an axis by its share of the
  * blend, then a corner voxel by its trilinear weight among those that hold the axis' face —
@@ -101,28 +121,9 @@ float cache_pick(vec3 x, vec3 n, float u)
     vec3 gg = at - 0.5;
     ivec3 base = ivec3(floor(gg));
     vec3 f = gg - vec3(base);
-    float ids[8];
-    vec3 held[8];
     vec3 weight = vec3(0.0);
     for (int corner = 0; corner < 8; corner++) {
-      ivec3 o = ivec3((corner >> 2) & 1, (corner >> 1) & 1, corner & 1);
-      ivec3 cell = base + o;
-      ids[corner] = -1.0;
-      held[corner] = vec3(0.0);
-      if (any(lessThan(cell, ivec3(0))) || any(greaterThanEqual(cell, ivec3(res)))) {
-        continue;
-      }
-      vec4 id = texelFetch(radiance_cache, ivec2(cell.x + cell.y * res, 1 + g * res + cell.z), 0);
-      if (id.x < -0.5) {
-        continue; /* no voxel of the grid there */
-      }
-      int mask = int(id.y + 0.5);
-      vec3 wv = mix(1.0 - f, f, vec3(o));
-      ids[corner] = id.x;
-      held[corner] = (wv.x * wv.y * wv.z) *
-                     vec3(float((mask >> face.x) & 1), float((mask >> face.y) & 1),
-                          float((mask >> face.z) & 1));
-      weight += held[corner];
+      weight += cache_corner_held(corner, base, f, g, res, face);
     }
     vec3 share = vec3(weight.x > 1e-6 ? blend.x : 0.0, weight.y > 1e-6 ? blend.y : 0.0,
                       weight.z > 1e-6 ? blend.z : 0.0);
@@ -142,19 +143,23 @@ float cache_pick(vec3 x, vec3 n, float u)
     }
     float before = axis == 0 ? 0.0 : (axis == 1 ? share.x : share.x + share.y);
     float v = clamp((target - before) / share[axis], 0.0, 1.0) * weight[axis];
-    /* the corner: the first whose running weight passes v (the last held one otherwise) */
+    /* the corner: the last held one whose running weight before it is within v (the ids
+     * fetched again: cheaper on llvmpipe than keeping them in an array) */
     int pick = -1;
     float run = 0.0;
     for (int corner = 0; corner < 8; corner++) {
-      float w = held[corner][axis];
+      float w = cache_corner_held(corner, base, f, g, res, face)[axis];
       if (w > 0.0) {
-        run += w;
-        if (pick < 0 || run - w <= v) {
+        if (pick < 0 || run <= v) {
           pick = corner;
         }
+        run += w;
       }
     }
-    return ids[pick] * 6.0 + float(face[axis]);
+    ivec3 cell = base + ivec3((pick >> 2) & 1, (pick >> 1) & 1, pick & 1);
+    float id = texelFetch(radiance_cache, ivec2(cell.x + cell.y * res, 1 + g * res + cell.z),
+                          0).x;
+    return id * 6.0 + float(face[axis]);
   }
   return -1.0;
 }
