@@ -23,6 +23,7 @@ from ..voxgi_addon.gi.radiance_cache import (
     cache_texels,
     face_points,
     texel_places,
+    triangles_key,
     with_faces,
 )
 from ..voxgi_addon.preview.denoise import NOISE_TARGET, RIDGE
@@ -167,15 +168,29 @@ def relax_gpu(places, cache_texture, records, rays: int, count: int, out, keep: 
     return out
 
 
+_LAYOUT: dict = {}  # the last cache_layout: (its key, the layout)
+
+
 def cache_layout(tris, settings):
     """The CPU half of ``cache_stages`` (numpy only, any thread: the viewport makes it on its
-    preparing thread): (the cache's voxels ``build_cache``, its face points and axes ``face_points``, its
-    layout texels ``cache_texels(layout=True, ahead=True)``) for ``tris`` (``SceneTriangles``)."""
+    preparing thread): (the cache's voxels ``build_cache``, its face points and axes
+    ``face_points``, its layout texels ``cache_texels(layout=True, ahead=True)``) for ``tris``
+    (``SceneTriangles``). Kept for the next call with the same triangles (by content) and
+    cache settings: an edit of the lights, the materials or the world, or the Bounces, lays
+    nothing out again (docs/gi_pipeline.md "Multi-bounce radiance cache", "What the cache
+    costs after the picks")."""
+    key = (triangles_key(tris), settings.cache_resolution, settings.cache_rays,
+           settings.cache_focus)
+    held = _LAYOUT.get("entry")
+    if held is not None and held[0] == key:
+        return held[1]
     cache = build_cache(tris, settings.cache_resolution, rays=settings.cache_rays,
                         focus=settings.cache_focus)
     points, axes = face_points(cache)
-    return cache, points, axes, \
-        cache_texels(cache, layout=True, ahead=True) if len(points) else None
+    layout = (cache, points, axes,
+              cache_texels(cache, layout=True, ahead=True) if len(points) else None)
+    _LAYOUT["entry"] = (key, layout)
+    return layout
 
 
 def cache_stages(bvh, lights, principled, emission, settings, tables=None,
@@ -547,7 +562,8 @@ def _glossy_shader():
 
 
 def release() -> None:
-    """Drop the cached shaders and the cache's texture (docs/gi_pipeline.md, "GPU resources at
-    exit")."""
+    """Drop the cached shaders, the cache's texture and its layout (docs/gi_pipeline.md, "GPU
+    resources at exit")."""
     _shaders.clear()
     _cache_upload.clear()
+    _LAYOUT.clear()

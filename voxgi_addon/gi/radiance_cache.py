@@ -38,7 +38,7 @@ from .sampling import point_streams, unit_float
 
 __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
            "cache_texels", "cached_cache", "face_paths", "face_points", "glossy_view", "iterate",
-           "lookup", "pick", "picks", "relax", "snap_focus", "texel_places", "with_faces"]
+           "lookup", "pick", "picks", "relax", "snap_focus", "texel_places", "triangles_key", "with_faces"]
 
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin where it has no surface
 FACE_CLEARANCE = 0.02    # voxels in front of its surface a face's rays start (``_face_origins``)
@@ -234,8 +234,13 @@ def _clip_to_cells(tris):
             candidates = np.stack([p, cross], axis=2).reshape(len(p), -1, 3)
             emit = np.stack([valid & inside, valid & (inside != ninside)], axis=2)
             emit = emit.reshape(len(p), -1)
-            order = np.argsort(~emit, axis=1, kind="stable")[:, :_CLIP_VERTICES]
-            poly[cut] = np.take_along_axis(candidates, order[:, :, None], axis=1)
+            # the emitted ones packed in order (a scatter: an argsort and a gather took 45 of
+            # the columned hall's 75 ms here)
+            slot = np.cumsum(emit, axis=1) - 1
+            row, column = np.nonzero(emit & (slot < _CLIP_VERTICES))
+            packed = np.zeros_like(p)
+            packed[row, slot[row, column]] = candidates[row, column]
+            poly[cut] = packed
             count[cut] = np.minimum(emit.sum(axis=1), _CLIP_VERTICES)
     return poly, count
 
@@ -612,7 +617,7 @@ def cache_key(lights, albedo, emission, *settings) -> tuple:
 _MEMO: dict = {}
 
 
-def _triangles_key(tris) -> tuple:
+def triangles_key(tris) -> tuple:
     """The triangles by content (a snapshot taken again makes new arrays of the same values)."""
     return tuple(_value_key(getattr(tris, name, None)) for name in
                  ("positions", "materials", "corner_normals", "visibility"))
@@ -629,7 +634,7 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
     if bounces <= 1:
         return None
     focus = snap_focus(tris, focus)
-    key = (_triangles_key(tris), cache_key(lights, albedo, emission, bounces, rays, resolution,
+    key = (triangles_key(tris), cache_key(lights, albedo, emission, bounces, rays, resolution,
                                            tuple(float(w) for w in world), hit_samples,
                                            hit_glossy, focus))
     held = _MEMO.get("entry")
