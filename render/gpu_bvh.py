@@ -38,6 +38,7 @@ from ..voxgi_addon.gi.exact_glossy import (
     WORLD_GLOSSY_STREAM,
 )
 from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
+from ..voxgi_addon.gi.radiance_cache import PICK_STREAM
 from ..voxgi_addon.gi.world_light import world_table
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
@@ -88,7 +89,8 @@ KERNELS["bvh_glossy"] = (("pixels", "principled", "bvh_lights", "textures", "cac
 # The world-mode glossy gather integrates the lobe over the emitters by LTC (shaders/ltc.glsl).
 KERNELS["bvh_glossy"] = (KERNELS["bvh_glossy"][0][:-1] + ("ltc", "bvh_glossy"),
                          KERNELS["bvh_glossy"][1] + ("ltc_table",), KERNELS["bvh_glossy"][2])
-# The radiance cache's rays, traced and lit once (gpu_gather.cache_stages): the gather's inputs.
+# The radiance cache's rays, traced and lit once (gpu_gather.cache_stages): the gather's inputs,
+# radiance_cache the layout's texels (each hit picks the face it reads, cache_lookup.glsl).
 KERNELS["bvh_cache_paths"] = (
     ("principled", "bvh_lights", "textures", "cache_lookup", "bvh_shade", "cache_paths"),
     _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials", "gbuffer_position",
@@ -122,7 +124,7 @@ CONSTANT_SAMPLERS = {"ltc_table": ltc_texture, "texture_table": _blank_texture,
                      "radiance_cache": _blank_texture}
 # Kernels with more than one output image (the others write ``out_image``).
 OUTPUTS = {"bvh_gather": ("out_image", "out_variance"),
-           "bvh_cache_paths": ("out_image", "out_variance", "out_points", "out_normals"),
+           "bvh_cache_paths": ("out_image", "out_pick"),
            "bvh_glossy": ("out_image", "out_variance")}
 _shaders: dict[str, object] = {}
 
@@ -185,6 +187,8 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
             defines["WORLD_GLOSSY_STREAM"] = f"{WORLD_GLOSSY_STREAM}u"
             defines["EMITTER_GLOSSY_STREAM"] = f"{EMITTER_GLOSSY_STREAM}u"
             defines["METAL_RAY_FACTOR"] = str(METAL_RAY_FACTOR)
+        if kernel == "bvh_cache_paths":
+            defines["CACHE_PICK_STREAM"] = f"{PICK_STREAM}u"
         if kernel == "bvh_emitter_glossy":
             defines["EMITTER_GLOSSY_STREAM"] = f"{EMITTER_GLOSSY_STREAM}u"
         if "ltc" in files:

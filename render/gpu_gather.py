@@ -23,6 +23,7 @@ from ..voxgi_addon.gi.radiance_cache import (
     cache_texels,
     face_points,
     texel_places,
+    triangles_key,
     with_faces,
 )
 from ..voxgi_addon.preview.denoise import NOISE_TARGET, RIDGE
@@ -121,8 +122,7 @@ def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
 
 
 RECORD_WIDTH = 2048  # rays per row of the cache's ray records (cache_paths.glsl)
-_RELAX_SAMPLERS = ("face_places", "radiance_cache", "paths_radiance", "paths_weight",
-                   "paths_points", "paths_normals")
+_RELAX_SAMPLERS = ("face_places", "radiance_cache", "paths_radiance", "paths_pick")
 
 
 def _relax_shader():
@@ -145,36 +145,52 @@ def face_places(cache):
     return float_texture(places.reshape(height, CACHE_IMAGE_WIDTH, 4), (CACHE_IMAGE_WIDTH, height))
 
 
-def relax_gpu(places, cache_texture, records, rays: int, count: int, out, keep: bool = False):
-    """One iteration over the ray ``records`` (``cache_paths.glsl``'s four textures):
+def relax_gpu(places, cache_texture, records, rays: int, count: int, out, keep: bool = False,
+              empty: bool = False):
+    """One iteration over the ray ``records`` (``cache_paths.glsl``'s two textures):
     ``cache_relax.glsl`` writes into ``out`` each of the ``count`` faces' next value from
     ``cache_texture``, the previous iteration, at its texel (``face_places``) — a dispatch over
-    the faces only; ``out``'s other texels (the header, the voxels' absent faces) are the
-    layout's, uploaded once (``cache_stages``). keep : ``out`` has two parts
+    the faces only; ``out``'s other texels (the header, the ids, the voxels' absent faces) are
+    the layout's, uploaded once (``cache_stages``). keep : ``out`` has two parts
     (``cache_texels(ahead=True)``): each face's texel of the first keeps the previous
     iteration, of the second gets the next one, which the glossy gather reads
-    (``radiance_cache.glossy_view``). Nothing is read back or built on the CPU between
-    iterations. Returns ``out``."""
+    (``radiance_cache.glossy_view``). empty : the previous iteration is the empty cache (the
+    first iteration; ``cache_texture`` is any of the cache's texels, not read but its
+    header). Nothing is read back or built on the CPU between iterations. Returns ``out``."""
     shader = _relax_shader()
     shader.bind()
     for name, texture in zip(_RELAX_SAMPLERS, (places, cache_texture, *records)):
         shader.uniform_sampler(name, texture)
-    shader.uniform_float("sampling", (float(rays), float(keep), float(count), 0.0))
+    shader.uniform_float("sampling", (float(rays), float(keep), float(count), float(empty)))
     shader.image("out_image", out)
     gpu.compute.dispatch(shader, math.ceil(places.width / LOCAL_SIZE),
                          math.ceil(places.height / LOCAL_SIZE), 1)
     return out
 
 
+_LAYOUT: dict = {}  # the last cache_layout: (its key, the layout)
+
+
 def cache_layout(tris, settings):
     """The CPU half of ``cache_stages`` (numpy only, any thread: the viewport makes it on its
-    preparing thread): (the cache's voxels ``build_cache``, its face points and axes ``face_points``, its
-    layout texels ``cache_texels(layout=True, ahead=True)``) for ``tris`` (``SceneTriangles``)."""
+    preparing thread): (the cache's voxels ``build_cache``, its face points and axes
+    ``face_points``, its layout texels ``cache_texels(layout=True, ahead=True)``) for ``tris``
+    (``SceneTriangles``). Kept for the next call with the same triangles (by content) and
+    cache settings: an edit of the lights, the materials or the world, or the Bounces, lays
+    nothing out again (docs/gi_pipeline.md "Multi-bounce radiance cache", "What the cache
+    costs after the picks")."""
+    key = (triangles_key(tris), settings.cache_resolution, settings.cache_rays,
+           settings.cache_focus)
+    held = _LAYOUT.get("entry")
+    if held is not None and held[0] == key:
+        return held[1]
     cache = build_cache(tris, settings.cache_resolution, rays=settings.cache_rays,
                         focus=settings.cache_focus)
     points, axes = face_points(cache)
-    return cache, points, axes, \
-        cache_texels(cache, layout=True, ahead=True) if len(points) else None
+    layout = (cache, points, axes,
+              cache_texels(cache, layout=True, ahead=True) if len(points) else None)
+    _LAYOUT["entry"] = (key, layout)
+    return layout
 
 
 def cache_stages(bvh, lights, principled, emission, settings, tables=None,
@@ -216,7 +232,14 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     rays = settings.cache_rays
     record_rows = -(-count * rays // RECORD_WIDTH)
     records = tuple(gpu.types.GPUTexture((RECORD_WIDTH, record_rows), format="RGBA32F")
-                    for _ in range(4))
+                    for _ in range(2))
+    # the iterations' texels: two of the first part alone in turn, then the two parts; each
+    # holds the layout's header, voxel ids and absent faces, uploaded once, and a relaxation
+    # writes its faces' texels only (a dispatch over the faces). The first is also what the
+    # rays' hits pick their faces in (its ids and the faces each voxel holds).
+    main = cache_texels(cache, layout=True)
+    turns = [float_texture(main, (main.shape[1], main.shape[0]))]
+    inputs["radiance_cache"] = turns[0]
     constants = {"sampling": (0.0, rays, count, strata_side(settings.hit_samples)),
                  "world": (*settings.world, float(settings.hit_glossy))}
     top, rows = 0, max(1, int(first_rows))
@@ -229,23 +252,18 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
         top = end
         rows = max(1, min(record_rows, int(rows * min(4.0, budget / max(seconds, 1e-4)))))
         yield
-    # the iterations' texels: two of the first part alone in turn, then the two parts; each
-    # holds the layout's header, voxel ids and absent faces, uploaded once, and a relaxation
-    # writes its faces' texels only (a dispatch over the faces)
-    main = cache_texels(cache, layout=True)
     places = face_places(cache)
-    turns = []
     yield
-    # the empty cache (the records' own radiance), of main's JIT class (gpu_shaders.size_like)
-    empty = (size_like(1, main.shape[1]), size_like(1, main.shape[0]))
-    previous = float_texture(np.zeros((empty[1], empty[0], 4), np.float32), empty)
+    previous = turns[0]  # the empty cache: its texels not read (relax_gpu empty)
     for k in range(settings.bounces - 1):
         if len(turns) < 2:
             turns.append(float_texture(main, (main.shape[1], main.shape[0])))
-        previous = relax_gpu(places, previous, records, rays, count, turns[k % 2])
+        previous = relax_gpu(places, previous, records, rays, count, turns[(k + 1) % 2],
+                             empty=k == 0)
         yield
     both = float_texture(texels, (texels.shape[1], texels.shape[0]))
-    previous = relax_gpu(places, previous, records, rays, count, both, keep=True)  # + glossy's
+    previous = relax_gpu(places, previous, records, rays, count, both, keep=True,
+                         empty=settings.bounces == 1)  # + glossy's
     yield
     def faces():  # the numpy cache with its faces, read back once
         held = read_texture(previous)
@@ -544,7 +562,8 @@ def _glossy_shader():
 
 
 def release() -> None:
-    """Drop the cached shaders and the cache's texture (docs/gi_pipeline.md, "GPU resources at
-    exit")."""
+    """Drop the cached shaders, the cache's texture and its layout (docs/gi_pipeline.md, "GPU
+    resources at exit")."""
     _shaders.clear()
     _cache_upload.clear()
+    _LAYOUT.clear()

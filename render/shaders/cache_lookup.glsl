@@ -74,3 +74,92 @@ vec3 cache_indirect(vec3 x, vec3 n)
   }
   return vec3(0.0);
 }
+
+/* Corner `corner` of grid g's trilinear neighbourhood at `base` (fractions f): its weight
+ * times whether its voxel holds each axis' face `face` (the id row's mask .y; 0 outside the
+ * grid or where it has no voxel). */
+vec3 cache_corner_held(int corner, ivec3 base, vec3 f, int g, int res, ivec3 face)
+{
+  ivec3 o = ivec3((corner >> 2) & 1, (corner >> 1) & 1, corner & 1);
+  ivec3 cell = base + o;
+  if (any(lessThan(cell, ivec3(0))) || any(greaterThanEqual(cell, ivec3(res)))) {
+    return vec3(0.0);
+  }
+  vec4 id = texelFetch(radiance_cache, ivec2(cell.x + cell.y * res, 1 + g * res + cell.z), 0);
+  if (id.x < -0.5) {
+    return vec3(0.0); /* no voxel of the grid there */
+  }
+  int mask = int(id.y + 0.5);
+  vec3 wv = mix(1.0 - f, f, vec3(o));
+  return (wv.x * wv.y * wv.z) * vec3(float((mask >> face.x) & 1), float((mask >> face.y) & 1),
+                                     float((mask >> face.z) & 1));
+}
+
+/* The texel of one face that cache_indirect(x, n) reads, drawn by `u` in [0, 1) with the
+ * lookup's own weights (voxgi_addon/gi/radiance_cache.py pick): an axis by its share of the
+ * blend, then a corner voxel by its trilinear weight among those that hold the axis' face —
+ * so the face's value at that texel has the lookup's expectation. Returns the face's compact
+ * index (voxel id · 6 + face: texel first_row · width + it of part 0), -1 where the lookup
+ * reads 0. It reads the grids' id rows only (the faces a voxel holds: .y, a mask of 6 bits),
+ * no face: the radiance cache's rays pick once, where they hit (cache_paths.glsl), and each
+ * relaxation (cache_relax.glsl) reads one texel per ray instead of a lookup's 8 to 24
+ * (docs/gi_pipeline.md "Multi-bounce radiance cache", "Each ray picks one face"). */
+float cache_pick(vec3 x, vec3 n, float u)
+{
+  vec4 info = texelFetch(radiance_cache, ivec2(textureSize(radiance_cache, 0).x - 1, 0), 0);
+  int res = int(info.x + 0.5);
+  int count = int(info.y + 0.5);
+  ivec3 face = ivec3(n.x < 0.0 ? 1 : 0, n.y < 0.0 ? 3 : 2, n.z < 0.0 ? 5 : 4);
+  vec3 blend = n * n;
+  blend = mix(vec3(0.0), blend, greaterThanEqual(blend, vec3(CACHE_AXIS_BLEND)));
+  for (int g = 0; g < count; g++) {
+    vec4 grid = texelFetch(radiance_cache, ivec2(g, 0), 0);
+    vec3 at = (x - grid.xyz) / grid.w;
+    if (any(lessThan(at, vec3(0.0))) || any(greaterThanEqual(at, vec3(float(res))))) {
+      continue;
+    }
+    vec3 gg = at - 0.5;
+    ivec3 base = ivec3(floor(gg));
+    vec3 f = gg - vec3(base);
+    vec3 weight = vec3(0.0);
+    for (int corner = 0; corner < 8; corner++) {
+      weight += cache_corner_held(corner, base, f, g, res, face);
+    }
+    vec3 share = vec3(weight.x > 1e-6 ? blend.x : 0.0, weight.y > 1e-6 ? blend.y : 0.0,
+                      weight.z > 1e-6 ? blend.z : 0.0);
+    float norm = share.x + share.y + share.z;
+    if (norm <= 1e-6) {
+      continue; /* no voxel here holds a face n faces: the next coarser grid */
+    }
+    /* the axis: the first whose running share passes u · norm (the last one that has one,
+     * should rounding leave none) */
+    float target = u * norm;
+    int axis = share.z > 0.0 ? 2 : (share.y > 0.0 ? 1 : 0);
+    if (share.x > 0.0 && target < share.x) {
+      axis = 0;
+    }
+    else if (share.y > 0.0 && target < share.x + share.y) {
+      axis = 1;
+    }
+    float before = axis == 0 ? 0.0 : (axis == 1 ? share.x : share.x + share.y);
+    float v = clamp((target - before) / share[axis], 0.0, 1.0) * weight[axis];
+    /* the corner: the last held one whose running weight before it is within v (the ids
+     * fetched again: cheaper on llvmpipe than keeping them in an array) */
+    int pick = -1;
+    float run = 0.0;
+    for (int corner = 0; corner < 8; corner++) {
+      float w = cache_corner_held(corner, base, f, g, res, face)[axis];
+      if (w > 0.0) {
+        if (pick < 0 || run <= v) {
+          pick = corner;
+        }
+        run += w;
+      }
+    }
+    ivec3 cell = base + ivec3((pick >> 2) & 1, (pick >> 1) & 1, pick & 1);
+    float id = texelFetch(radiance_cache, ivec2(cell.x + cell.y * res, 1 + g * res + cell.z),
+                          0).x;
+    return id * 6.0 + float(face[axis]);
+  }
+  return -1.0;
+}

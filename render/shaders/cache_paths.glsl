@@ -1,11 +1,13 @@
 /* The radiance cache's rays, traced and lit once (voxgi_addon/gi/radiance_cache.py face_paths,
- * exact_indirect.ray_paths): ray j of voxel face f is record i = f · rays + j, at texel
- * (i mod W, i div W) of the W-wide outputs. The faces: gbuffer_position (origin xyz, 1) and
- * gbuffer_normal (unit axis) at texel (f mod Wf, f div Wf), sample id f (face_points' row).
- * out_image    = (the ray's radiance without the cache rgb, 1 on a hit / 0 on a miss)
- * out_variance = (the hit's cache weight rgb, 0)       (bvh_shade.glsl ray_paths)
- * out_points   = (the hit point xyz, 0)
- * out_normals  = (the hit's shading normal xyz, 0)
+ * exact_indirect.ray_paths), each hit's face of the cache picked once (radiance_cache.picks):
+ * ray j of voxel face f is record i = f · rays + j, at texel (i mod W, i div W) of the W-wide
+ * outputs. The faces: gbuffer_position (origin xyz, 1) and gbuffer_normal (unit axis) at texel
+ * (f mod Wf, f div Wf), sample id f (face_points' row). radiance_cache : the layout's texels
+ * (radiance_cache.cache_texels: the grids' ids and the faces each voxel holds).
+ * out_image = (the ray's radiance without the cache rgb, 0)      (bvh_shade.glsl ray_paths)
+ * out_pick  = (the hit's cache weight rgb, the face its lookup reads: cache_pick's compact
+ *              index, drawn by the record's hash of stream CACHE_PICK_STREAM; -1 on a miss
+ *              or where the lookup reads 0)
  * Push constants:
  *   sampling = (seed, rays per face, faces, strata side m of the hit's light samples)
  *   world    = rgb radiance of a miss, w: 1 = the hit's glossy lobe reflects the lights too
@@ -42,8 +44,11 @@ void main()
   vec3 x, ns, weight;
   vec3 radiance = ray_paths(origin, d, id * uint(rays) + uint(j), seed, int(sampling.w),
                             world.w > 0.5, world.rgb, false, th, x, ns, weight);
-  imageStore(out_image, texel, vec4(radiance, th < BVH_FAR ? 1.0 : 0.0));
-  imageStore(out_variance, texel, vec4(weight, 0.0));
-  imageStore(out_points, texel, vec4(x, 0.0));
-  imageStore(out_normals, texel, vec4(ns, 0.0));
+  float picked = -1.0;
+  if (th < BVH_FAR) {
+    uint pick_state = point_stream(uint(record), CACHE_PICK_STREAM, seed);
+    picked = cache_pick(x, ns, unit_float(pick_state));
+  }
+  imageStore(out_image, texel, vec4(radiance, 0.0));
+  imageStore(out_pick, texel, vec4(picked < 0.0 ? vec3(0.0) : weight, picked));
 }

@@ -3,11 +3,14 @@
  * face_places: its texel of the cache's texels, radiance_cache.cache_texels, and of their
  * ahead part) gets (the mean over its rays' records (cache_paths.glsl, record i = f · rays + j
  * at texel (i mod Wr, i div Wr) of paths_*) of radiance + cache weight × the previous
- * iteration's cache at the hit (cache_lookup.glsl), 1) at its texel of out_image. The other
- * texels of out_image (the header, the voxels' absent faces) are the layout's, uploaded once.
- * sampling = (rays per face, 1: out_image has two parts (cache_texels(ahead=True)): the face's
- * texel of part 0 keeps the previous iteration, of part 1 gets the next one, which the glossy
- * gather reads, faces, 0). */
+ * iteration's value at the face the ray picked (paths_pick .w: a compact index, -1 none;
+ * radiance_cache.picks), 1) at its texel of out_image: one texel per ray, no lookup
+ * (docs/gi_pipeline.md "Multi-bounce radiance cache", "Each ray picks one face"). The other
+ * texels of out_image (the header, the ids, the voxels' absent faces) are the layout's,
+ * uploaded once. sampling = (rays per face, 1: out_image has two parts (cache_texels(ahead=
+ * True)): the face's texel of part 0 keeps the previous iteration, of part 1 gets the next
+ * one, which the glossy gather reads, faces, 1: radiance_cache is the empty cache (the first
+ * iteration: the records' radiance alone)). */
 
 void main()
 {
@@ -20,16 +23,21 @@ void main()
   vec4 place = texelFetch(face_places, id, 0);
   int rays = int(sampling.x);
   int width = textureSize(paths_radiance, 0).x;
+  ivec2 cache_size = textureSize(radiance_cache, 0);
+  vec4 info = texelFetch(radiance_cache, ivec2(cache_size.x - 1, 0), 0);
+  int first_row = 1 + int(info.y + 0.5) * int(info.x + 0.5);
+  bool empty = sampling.w > 0.5;
   vec3 sum = vec3(0.0);
   for (int j = 0; j < rays; j++) {
     int record = face * rays + j;
     ivec2 at = ivec2(record % width, record / width);
-    vec4 radiance = texelFetch(paths_radiance, at, 0);
-    sum += radiance.rgb;
-    if (radiance.a > 0.5) {
-      sum += texelFetch(paths_weight, at, 0).rgb *
-             cache_indirect(texelFetch(paths_points, at, 0).xyz,
-                            texelFetch(paths_normals, at, 0).xyz);
+    sum += texelFetch(paths_radiance, at, 0).rgb;
+    vec4 picked = texelFetch(paths_pick, at, 0);
+    if (!empty && picked.w > -0.5) {
+      int t = int(picked.w + 0.5);
+      sum += picked.rgb *
+             texelFetch(radiance_cache, ivec2(t % cache_size.x, first_row + t / cache_size.x),
+                        0).rgb;
     }
   }
   vec4 value = vec4(sum / float(rays), 1.0);

@@ -544,3 +544,36 @@ def test_glossy_gathers_read_one_bounce_more():
 def replace_ahead(cache, ahead):
     from dataclasses import replace
     return replace(cache, ahead=ahead)
+
+
+def test_a_picked_face_has_the_lookups_expectation():
+    """``pick`` draws, per point, the one face a relaxation reads instead of the lookup's 8–24
+    (docs/gi_pipeline.md "Each ray picks one face"): over u in [0, 1) its faces' mean is the
+    ``lookup`` there — on walls, in corners (three axes) and across two nested grids — and
+    u draws only faces the lookup weighs; -1 where the lookup reads 0."""
+    tris, lights, albedo, emission = lit_room()
+    empty = rc.build_cache(tris, 8, count=2, focus=(0.5, 0.0, 1.0))
+    paths = rc.face_paths(empty, tris, lights, albedo, emission, rays=4)
+    cache = rc.relax(empty, paths, 4)
+    assert len(cache.grids) == 2
+    rng = np.random.default_rng(3)
+    walls = np.array([[1.999, 0.3, 1.0], [-0.4, -1.499, 0.6], [0.2, 0.7, 0.001],
+                      [1.95, 1.45, 2.45], [0.5, 0.1, 1.0]])
+    normals = rng.normal(size=(len(walls), 3))
+    normals[:3] = [[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    samples = 1 << 16
+    u = (np.arange(samples) + 0.5) / samples
+    flat = np.concatenate([f.reshape(-1, 3) for f in cache.faces])
+    for p, n in zip(walls, normals):
+        chosen = rc.pick(cache, np.tile(p, (samples, 1)), np.tile(n, (samples, 1)), u)
+        exact = rc.lookup(cache, p[None], n[None])[0]
+        if not exact.any():
+            assert (chosen == -1).all()
+            continue
+        assert (chosen >= 0).all()
+        np.testing.assert_allclose(flat[chosen].mean(axis=0), exact, rtol=2e-3, atol=1e-6)
+    # the relaxation's picks are its rays' rows among the present faces, drawn once
+    rows = rc.picks(cache, paths)
+    assert len(rows) == len(paths.hit) and rows.max() <= sum(int(q.sum()) for q in cache.present)
+    np.testing.assert_array_equal(rows, rc.picks(cache, paths))

@@ -34,10 +34,11 @@ import numpy as np
 from ..errors import VoxGIError
 from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
 from .cascades import CascadeGrid
+from .sampling import point_streams, unit_float
 
 __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
            "cache_texels", "cached_cache", "face_paths", "face_points", "glossy_view", "iterate",
-           "lookup", "relax", "snap_focus", "texel_places", "with_faces"]
+           "lookup", "pick", "picks", "relax", "snap_focus", "texel_places", "triangles_key", "with_faces"]
 
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin where it has no surface
 FACE_CLEARANCE = 0.02    # voxels in front of its surface a face's rays start (``_face_origins``)
@@ -45,6 +46,7 @@ FACE_AXIS_COSINE = 0.2   # a voxel holds the faces of the axes its triangles' no
 # an axis whose n² is under this weighs nothing in a lookup (``lookup``): the GPU then fetches
 # no texel of it (cache_lookup.glsl CACHE_AXIS_BLEND), 8 not 24 at a wall's or a floor's hit
 AXIS_BLEND = 1e-6
+PICK_STREAM = 0x7C0A  # hash stream of the face a cache ray's hit reads (``pick``)
 FACES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
 
 
@@ -232,8 +234,13 @@ def _clip_to_cells(tris):
             candidates = np.stack([p, cross], axis=2).reshape(len(p), -1, 3)
             emit = np.stack([valid & inside, valid & (inside != ninside)], axis=2)
             emit = emit.reshape(len(p), -1)
-            order = np.argsort(~emit, axis=1, kind="stable")[:, :_CLIP_VERTICES]
-            poly[cut] = np.take_along_axis(candidates, order[:, :, None], axis=1)
+            # the emitted ones packed in order (a scatter: an argsort and a gather took 45 of
+            # the columned hall's 75 ms here)
+            slot = np.cumsum(emit, axis=1) - 1
+            row, column = np.nonzero(emit & (slot < _CLIP_VERTICES))
+            packed = np.zeros_like(p)
+            packed[row, slot[row, column]] = candidates[row, column]
+            poly[cut] = packed
             count[cut] = np.minimum(emit.sum(axis=1), _CLIP_VERTICES)
     return poly, count
 
@@ -478,16 +485,105 @@ def face_paths(cache: RadianceCache, tris, lights, albedo, emission, rays: int =
                      hit_samples, hit_glossy)
 
 
-def relax(cache: RadianceCache, paths, rays: int) -> RadianceCache:
+def relax(cache: RadianceCache, paths, rays: int, chosen=None) -> RadianceCache:
     """One more bounce: each face's value is the mean over its ``rays`` ``paths`` of what they
-    return with ``cache`` at their hits (``RayPaths.with_cache``) — the hit's exact direct
-    light plus its weight × the cache there. From the empty cache this is iteration 1 (the
-    two-bounce light); each relaxation adds a bounce."""
+    return with ``cache`` at their hits — the hit's exact direct light plus its weight × the
+    cache there, read at the one face the ray picks (``picks``; on average the ``lookup``).
+    From the empty cache this is iteration 1 (the two-bounce light); each relaxation adds a
+    bounce. chosen : ``picks(cache, paths)`` made already (None: made here)."""
     count = len(paths.radiance) // max(rays, 1)
     values = np.zeros((count, 3))
     if count:
-        values = paths.with_cache(cache).reshape(count, rays, 3).mean(axis=1)
+        out = np.array(paths.radiance, np.float64)
+        if cache.iterations and len(paths.hit):
+            held = np.concatenate([f[q] for f, q in zip(cache.faces, cache.present)] +
+                                  [np.zeros((1, 3), np.float32)]).astype(np.float64)
+            chosen = picks(cache, paths) if chosen is None else chosen
+            out[paths.hit] += paths.weight * held[chosen]
+        values = out.reshape(count, rays, 3).mean(axis=1)
     return with_faces(cache, values)
+
+
+def picks(cache: RadianceCache, paths) -> np.ndarray:
+    """(H,) int64 per hit of ``paths`` (the cache's rays, ``face_paths``: ray i is face
+    i // rays' ray i % rays) the row of the face it reads among the cache's present faces
+    (``face_points``' order; the row after the last: none, 0), ``pick`` drawn by the ray's
+    hash (``PICK_STREAM``, seed 0). The same for every iteration of a layout."""
+    u = unit_float(point_streams(paths.hit, PICK_STREAM))
+    compact = pick(cache, paths.points, paths.normals, u)
+    # compact index (voxel id · 6 + face) → row among the present faces
+    present = np.concatenate([np.asarray(q, bool) for q in cache.present]).reshape(-1)
+    rows = np.cumsum(present) - 1
+    return np.where(compact >= 0, rows[np.maximum(compact, 0)], int(present.sum()))
+
+
+def _masks(present) -> np.ndarray:
+    """(N,) the faces each voxel holds as Σ 2^f (``cache_texels``' id rows, .y)."""
+    return (np.asarray(present, np.int64) << np.arange(6)).sum(axis=1)
+
+
+def pick(cache: RadianceCache, points, normals, u) -> np.ndarray:
+    """(K,) int64: the face ``lookup`` reads at each point drawn by ``u`` (K,) in [0, 1) with
+    the lookup's own weights — in the finest grid holding the point where some neighbour
+    holds a face n faces, an axis by its share of the blend, then a corner voxel by its
+    trilinear weight among those holding that axis' face — as its compact index (voxel id ·
+    6 + face, the voxels numbered as ``cache_texels``'), -1 where the lookup reads 0. The
+    face's value there has the lookup's expectation over u (``cache_lookup.glsl``
+    ``cache_pick``, its twin; docs/gi_pipeline.md "Multi-bounce radiance cache", "Each ray
+    picks one face")."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    n = np.asarray(normals, np.float64).reshape(-1, 3)
+    u = np.asarray(u, np.float64).reshape(-1)
+    out = np.full(len(p), -1, np.int64)
+    face = np.where(n < 0, 1, 0) + np.array([0, 2, 4])  # (K, 3) face per axis
+    blend = np.where(n ** 2 >= AXIS_BLEND, n ** 2, 0.0)
+    todo = np.ones(len(p), bool)
+    starts = _voxel_starts(cache)
+    for g, (grid, cells, present) in enumerate(zip(cache.grids, cache.cells, cache.present)):
+        if not todo.any():
+            break
+        at = (p - np.asarray(grid.origin)) / grid.span
+        res = grid.resolution
+        rows = np.flatnonzero(todo & ((at >= 0) & (at < res)).all(axis=1))
+        if len(rows) == 0 or len(cells) == 0:
+            continue
+        index = _dense_index(grid, cells)
+        k = np.arange(len(rows))
+        gg = at[rows] - 0.5
+        base = np.floor(gg).astype(np.int64)
+        frac = gg - base
+        held = np.zeros((len(rows), 8, 3))
+        ids = np.full((len(rows), 8), -1, np.int64)
+        for corner in range(8):
+            offset = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
+            c = base + offset
+            w = np.prod(np.where(offset == 1, frac, 1.0 - frac), axis=1)
+            ok = ((c >= 0) & (c < res)).all(axis=1)
+            site = np.where(ok, index[np.where(ok, (c[:, 0] * res + c[:, 1]) * res + c[:, 2],
+                                               0)], -1)
+            holds = (site >= 0)[:, None] & present[np.maximum(site, 0)[:, None], face[rows]]
+            held[:, corner] = np.where(holds, w[:, None], 0.0)
+            ids[:, corner] = np.where(site >= 0, starts[g] + site, -1)
+        weight = held.sum(axis=1)
+        share = np.where(weight > 1e-6, blend[rows], 0.0)
+        norm = share.sum(axis=1)
+        found = norm > 1e-6  # else the next coarser grid, as ``lookup``
+        target = u[rows] * norm
+        last = np.where(share[:, 2] > 0, 2, np.where(share[:, 1] > 0, 1, 0))
+        axis = np.where((share[:, 0] > 0) & (target < share[:, 0]), 0,
+                        np.where((share[:, 1] > 0) & (target < share[:, 0] + share[:, 1]), 1,
+                                 last))
+        before = np.where(axis == 0, 0.0, np.where(axis == 1, share[:, 0],
+                                                   share[:, 0] + share[:, 1]))
+        v = np.clip((target - before) / np.maximum(share[k, axis], 1e-30), 0.0, 1.0) * \
+            weight[k, axis]
+        w = held[k, :, axis]                                     # (k, 8)
+        passed = (w > 0) & (np.cumsum(w, axis=1) - w <= v[:, None])
+        corner = 7 - np.argmax(passed[:, ::-1], axis=1)          # the last that passed
+        chosen = ids[k, corner] * 6 + face[rows][k, axis]
+        out[rows[found]] = chosen[found]
+        todo[rows[found]] = False
+    return out
 
 
 def iterate(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 16, seed: int = 0,
@@ -521,7 +617,7 @@ def cache_key(lights, albedo, emission, *settings) -> tuple:
 _MEMO: dict = {}
 
 
-def _triangles_key(tris) -> tuple:
+def triangles_key(tris) -> tuple:
     """The triangles by content (a snapshot taken again makes new arrays of the same values)."""
     return tuple(_value_key(getattr(tris, name, None)) for name in
                  ("positions", "materials", "corner_normals", "visibility"))
@@ -538,7 +634,7 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
     if bounces <= 1:
         return None
     focus = snap_focus(tris, focus)
-    key = (_triangles_key(tris), cache_key(lights, albedo, emission, bounces, rays, resolution,
+    key = (triangles_key(tris), cache_key(lights, albedo, emission, bounces, rays, resolution,
                                            tuple(float(w) for w in world), hit_samples,
                                            hit_glossy, focus))
     held = _MEMO.get("entry")
@@ -547,9 +643,10 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
     cache = build_cache(tris, resolution, rays=rays, focus=focus)
     paths = face_paths(cache, tris, lights, albedo, emission, rays, world=world,
                        hit_samples=hit_samples, hit_glossy=hit_glossy)
+    chosen = picks(cache, paths)  # and the faces their hits read: picked once
     for _ in range(bounces - 1):  # the same rays every iteration: traced once
-        cache = relax(cache, paths, rays)
-    cache = replace(cache, ahead=relax(cache, paths, rays).faces)  # the glossy gather's
+        cache = relax(cache, paths, rays, chosen)
+    cache = replace(cache, ahead=relax(cache, paths, rays, chosen).faces)  # the glossy gather's
     _MEMO["entry"] = (key, cache)
     return cache
 
@@ -586,7 +683,8 @@ def cache_texels(cache: RadianceCache, layout: bool = False, ahead: bool = False
     ``cache_indirect``), W = res²: row 0 the header — texel i = (origin xyz, span) of grid i,
     the last texel (res, grid count, 1 with an ahead part, voxels V in all); then per grid g
     and z the row 1 + g·res + z of each cell's voxel id (texel x + y·res: .x, the grids' voxels
-    numbered finest grid first; -1 where the grid has no voxel); then the faces, compact:
+    numbered finest grid first; -1 where the grid has no voxel) and the faces it holds (.y,
+    Σ 2^f over its present faces f: ``pick`` reads them without the faces); then the faces, compact:
     face f of voxel v in part p (0: ``faces``; 1: ``ahead``, which the glossy gather reads,
     where the cache keeps it) is texel (p·V + v)·6 + f, counted along the rows after the ids,
     holding (rgb, 1 where the voxel holds the face). Only voxels that exist take texels (a
@@ -605,10 +703,11 @@ def cache_texels(cache: RadianceCache, layout: bool = False, ahead: bool = False
         texels[0, g] = (*grid.origin, grid.span)
     texels[0, width - 1] = (res, count, parts - 1, starts[-1])
     texels[1:1 + count * res, :res * res, 0] = -1.0
-    for g, cells in enumerate(cache.cells):
+    for g, (cells, present) in enumerate(zip(cache.cells, cache.present)):
         c = np.asarray(cells, np.int64)
-        texels[1 + g * res + c[:, 2], c[:, 0] + c[:, 1] * res, 0] = \
-            starts[g] + np.arange(len(c))
+        at = (1 + g * res + c[:, 2], c[:, 0] + c[:, 1] * res)
+        texels[at[0], at[1], 0] = starts[g] + np.arange(len(c))
+        texels[at[0], at[1], 1] = _masks(present)
     for part, faces in enumerate((cache.faces, cache.ahead)[:parts]):
         rows, columns = texel_places(cache, part)
         if layout:
