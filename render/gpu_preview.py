@@ -36,7 +36,7 @@ from ..voxgi_addon.preview.passes import (
     subpixel_passes,
     subpixel_reach,
 )
-from ..voxgi_addon.preview.sparse_gather import sparse_plan
+from ..voxgi_addon.preview.sparse_gather import sparse_plan, sparse_settings
 from ..voxgi_addon.preview.upsample import sample_pixels
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame
 from ..voxgi_addon.scene.glass import is_glass
@@ -411,7 +411,8 @@ def _sparse(f) -> bool:
 
 def _sparse_diffuse(f):
     """The diffuse gather over the cells ``preview.sparse_gather.sparse_plan`` picks from the
-    read-back G-buffer (a list, ``_compact``: each point draws its pixel's samples), read back
+    read-back G-buffer (a list, ``_compact``: each point draws its pixel's samples, with the
+    rays of ``sparse_settings``), read back
     into the grid, the other cells holes that the à-trous filter's first pass fills
     (``denoise.glsl``, as the numpy tracer's ``gather_gi``)."""
     scene, settings, centre = f["scene"], f["gather_settings"], f["centre"]
@@ -427,8 +428,8 @@ def _sparse_diffuse(f):
     pixels, size = _pixel_list(listed, width, height)
     inputs = _compact("aa_list", {**centre.inputs, "pixels": pixels}, size)
     values, variance = gather(scene.bvh, inputs, scene.lights, scene.principled, scene.emission,
-                              settings, 1, size[0], size[1], tables=f["tables"],
-                              cache=f["cache"])
+                              sparse_settings(settings), 1, size[0], size[1],
+                              tables=f["tables"], cache=f["cache"])
     grid = []
     for texture in (values, variance):
         cells = np.zeros(valid.shape + (4,), np.float32)

@@ -24,7 +24,7 @@ from ..gi.emitters import emitter_light
 from ..gi.exact_glossy import glossy_indirect, glossy_world_direct
 from ..gi.exact_indirect import indirect_and_ao
 from .denoise import atrous_filter
-from .sparse_gather import sparse_plan
+from .sparse_gather import sparse_plan, sparse_settings
 from .upsample import sample_pixels, upsample
 
 
@@ -45,7 +45,7 @@ class GatherSettings:
     ``radiance_cache.build_cache``). cache_focus : the camera's position on the cache's
     lattice (``focused``; None: none), around which Auto nests finer grids. sparse : the
     diffuse gather traces one cell in four where the light is smooth and the cells where it
-    is not (``sparse_gather``), the others filled from them."""
+    is not (``sparse_gather``, each with ``SPARSE_RAYS`` × rays), the others filled from them."""
 
     rays: int = 64
     glossy_rays: int = 8
@@ -117,11 +117,12 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     # the cells gathered: all, or with ``settings.sparse`` one in four where the light is
     # smooth (sparse_gather), the others filled by the filter's first pass
     traced = sparse_plan(valid, cell_p, cell_n) if settings.sparse else valid
+    rays = sparse_settings(settings).rays if settings.sparse else settings.rays
     ids = (rows[:, None] * width + cols[None, :])[traced]
     values = np.zeros(valid.shape + (4,), np.float32)
     variance = np.zeros(valid.shape + (2,), np.float32)
     indirect, ao, var = indirect_and_ao(
-        cell_p[traced], cell_n[traced], ids, tris, lights, albedo, emission, rays=settings.rays,
+        cell_p[traced], cell_n[traced], ids, tris, lights, albedo, emission, rays=rays,
         ao_distance=settings.ao_distance, seed=settings.seed, world=settings.world,
         hit_samples=settings.hit_samples, statistics=True, hit_glossy=settings.hit_glossy,
         cache=radiance_cache(tris, lights, albedo, emission, settings))
