@@ -28,7 +28,9 @@ into steps of which a draw takes at most one of each kind:
 * **a quick image**: once the raster shader and the batch are there, the view shows Solid-like
   shading of the G-buffer (``shaders/quick_shade.glsl``: Base Color under a headlight) until
   the first GI image replaces it, so the view is not empty while the BVH, the lights and the
-  kernels come in.
+  kernels come in; its G-buffer, at the first coarse image's size and camera and drawn by the
+  batch's fill as each chunk is sent (``QuickGBuffer``), is that coarse image's
+  (``ViewPreparation.coarse_centre``).
 
 A draw runs a step only while it is predicted to end within ``STEP_SHARE`` of the slice
 budget by the last time of a step of its kind (the first step of a draw always runs); the

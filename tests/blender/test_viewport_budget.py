@@ -9,8 +9,9 @@ calls, counted beside ``gpu_shaders.counters``) or sends more than one scene par
 vertex batch a chunk at a time); the quick image shows before the first GI image; the kernels
 compiled before the first GI image are exactly the minimal frame's (``FIRST_IMAGE_KERNELS``);
 no slice draws a G-buffer before it (the first coarse image's is the quick image's, each chunk
-drawn into it once); the first GI image arrives; and the converged image is the one the view converged to before the change
-(every step of it in one draw: a whole slice per draw, no budget), traced in the same test.
+drawn into it once); the first GI image arrives; and the converged image is the one the view
+converged to before the change (every step of it in one draw: a whole slice per draw, no
+budget), traced in the same test.
 An object move and an orbit then keep to the same counts.
 """
 from __future__ import annotations
