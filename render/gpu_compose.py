@@ -67,7 +67,8 @@ def release() -> None:
 
 
 def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples: int,
-                 seed: int, block=None, lamps=None, glow=None, centre=None, field=None):
+                 seed: int, block=None, lamps=None, glow=None, centre=None, field=None,
+                 lamp_glossy: bool = True):
     """(Stages, one per light's dispatches, returning) ``sums`` + one pass over ``inputs``, a
     G-buffer of ``size`` (an image's or the edge pixels' list's) of ``scene`` (a ``GPUScene``
     updated to ``snapshot``): terms = the gathered (Diffuse Indirect, AO), Glossy Indirect and
@@ -81,7 +82,9 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     emission themselves). centre : the pass's pixel centres with the emitters'
     unshadowed field there, for that dispatch (``direct_light_texture``'s; None: it evaluates
     the sum at every texel); field : the field at the pass's own points
-    (``direct_light_texture``'s)."""
+    (``direct_light_texture``'s). lamp_glossy : the lamps' glossy light
+    (``glossy_direct_texture``); False: none (the viewport's first coarse image, before that
+    kernel is compiled: docs/gi_pipeline.md "Entering Rendered mode")."""
     bvh, principled, emission = scene.bvh, scene.principled, scene.emission
     materials, lut = scene.materials, scene.lut
     extra = scene.has_scene_lights
@@ -99,7 +102,7 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
                                       strata_block=block, table=table,
                                       absent=absent_lights(scene.lights[index:index + 1]))
         shine = glossy_direct_texture(inputs, direct, table, index, principled, emission,
-                                      materials=materials)
+                                      materials=materials) if lamp_glossy else blank
         out = run("aa_light", LIGHT_SAMPLERS, {
             "colour": colour, "direct_image": direct, "shine_image": shine, **sums},
             ("out_f", "out_g"), *size)

@@ -89,7 +89,8 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                          filter_width: float = DEFAULT_FILTER_WIDTH,
                          gpu_scene: GPUScene | None = None, gather_hook=None, raster=None,
                          cache_source=None, on_gpu: bool = False, batch=None,
-                         world_glossy: bool = True):
+                         world_glossy: bool = True, lamp_glossy: bool = True,
+                         denoise: bool = True, centre=None):
     """A generator that yields between the GPU stages (G-buffer, each gather, each light's
     direct light, each sub-pixel pass, …) and returns (passes, timings) like
     ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
@@ -120,6 +121,13 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     world_glossy : Accurate: the world's and emitters' Glossy Direct gathered (the
     ``bvh_glossy`` world-mode gather); False leaves it out (the viewport's first coarse image
     while that kernel is not compiled yet: docs/gi_pipeline.md "Entering Rendered mode").
+    lamp_glossy : Accurate: the lamps' glossy light (``glossy_direct.glsl``) composed; False
+    leaves it out. denoise : Accurate: the gathers filtered (``gpu_gather.denoise``); False
+    takes them raw (and dense: the sparse gather's holes are the filter's to fill). Both
+    False only in the viewport's first coarse image, while those kernels are not compiled.
+    centre : Accurate: the pixel centres' ``gbuffer.GBuffer`` of this camera and size drawn
+    already with the scene's batch, textures and Filter Size (the viewport's quick image's,
+    which is its first coarse image's: ``viewport_prepare``); None: drawn here.
     The viewport's slices run the stages over several draws (``progressive``); the textures
     live in the generator between them, so nothing but its own next stage runs in a draw."""
     check_request(snapshot, width, height, gi_stride, quality)
@@ -137,7 +145,9 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                  glossy_indirect, filter_width, scene)
         front, timings = yield from _accurate_stages(snapshot, *layer, gather_hook, raster,
                                                      cache_source, on_gpu=on_gpu, batch=batch,
-                                                     world_glossy=world_glossy)
+                                                     world_glossy=world_glossy,
+                                                     lamp_glossy=lamp_glossy, denoise=denoise,
+                                                     centre=centre)
         if scene.uploaded:  # rebuilt and uploaded only what changed
             timings = {"scene build + upload": built, **timings}
         glass = transmission.glass_materials(snapshot, scene.tris)
@@ -152,7 +162,8 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
         behind, _ = yield from _accurate_stages(
             snapshot, *layer, hook, raster, cache_source,
             camera_tris=transmission.behind_glass(scene.tris, glass),
-            only=transmission.behind_pixels(weight), world_glossy=world_glossy)
+            only=transmission.behind_pixels(weight), world_glossy=world_glossy,
+            lamp_glossy=lamp_glossy, denoise=denoise)
         world = background(snapshot.world, snapshot.camera, width, height, filter_width)
         timings["behind glass"] = time.perf_counter() - t0
         return transmission.composite(front, behind, weight, world), timings
@@ -283,7 +294,8 @@ def _sums_of(texel):
 def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_settings,
                      glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
                      cache_source=None, camera_tris=None, only=None, on_gpu=False,
-                     batch=None, world_glossy=True):
+                     batch=None, world_glossy=True, lamp_glossy=True, denoise=True,
+                     centre=None):
     """Accurate quality on the GPU: ``ACCURATE_STAGES`` run over one layer of the image (the
     front one, or with ``camera_tris`` and ``only`` what glass hides), a generator returning
     (passes, timings) — or, with ``on_gpu`` and no edge pixels (point-sampled), (``GPUSums``
@@ -301,7 +313,10 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                "settings": gather_settings, "glossy_indirect": glossy_indirect,
                "filter_width": filter_width, "gather_hook": gather_hook, "raster": raster,
                "cache_source": cache_source, "camera_tris": camera_tris, "only": only,
-               "on_gpu": on_gpu, "batch": batch, "world_glossy": world_glossy}
+               "on_gpu": on_gpu, "batch": batch, "world_glossy": world_glossy,
+               "lamp_glossy": lamp_glossy, "denoise": denoise,
+               # a given centre G-buffer is the front layer's (no glass pixels left out)
+               "given_centre": centre if camera_tris is None and only is None else None}
     frame = yield from run_stages(ACCURATE_STAGES, Frame(request, given=set(request)))
     result = frame["result"] if frame["result"] is not None else frame["passes"]
     return result, frame.timings
@@ -331,8 +346,11 @@ def _plan(f):
 
 def _visibility(f):
     """The pixel centres' G-buffer (``gbuffer.rasterize_stages``: a stage per chunk of the
-    viewport's batch), the pixels outside ``only`` made background."""
+    viewport's batch), the pixels outside ``only`` made background; the caller's when it
+    gave one (``render_passes_stages``' centre)."""
     scene, width, height = f["scene"], f["width"], f["height"]
+    if f["given_centre"] is not None:
+        return {"centre": f["given_centre"]}
     centre = yield from rasterize_stages(f["seen_tris"], f["snapshot"].camera, scene.rough, width,
                                          height, shader=f["raster_shader"],
                                          textures=scene.raster_textures(),
@@ -384,6 +402,8 @@ def _low(f, kind, kernel="bvh_gather", world_mode=False):
                               cache=cache)
     if f["gather_hook"] is not None:
         values, variance = f["gather_hook"](kind, values, variance)
+    if not f["denoise"]:  # (raw: the filter's kernel not even bound)
+        return values
     return denoise(values, variance, centre.inputs, stride, width, height,
                    settings.denoise_iterations, fit=kind.endswith("diffuse"))[0]
 
@@ -406,7 +426,8 @@ def _diffuse_gather(f):
 
 
 def _sparse(f) -> bool:
-    return f["gather_hook"] is None and f["focused"].sparse
+    # (its holes are the filter's to fill: dense without it)
+    return f["gather_hook"] is None and f["focused"].sparse and f["denoise"]
 
 
 def _sparse_diffuse(f):
@@ -532,7 +553,7 @@ def _shade(f, inputs, sums, terms, blank, size, block, lamps=None, glow=None, ce
     """``gpu_compose.shade_stages`` of this frame's scene and snapshot."""
     return shade_stages(f["scene"], f["snapshot"], inputs, sums, terms, blank, size,
                         f["light_samples"], f["gather_settings"].seed, block, lamps, glow,
-                        centre, field)
+                        centre, field, lamp_glossy=f["lamp_glossy"])
 
 
 def _centres(f):

@@ -160,6 +160,10 @@ class ScenePlan:
     # set once ``bvh`` is in (``prepare``'s on_tables: it is built on a thread meanwhile)
     bvh_ready: threading.Event = dataclasses.field(default_factory=threading.Event)
     bvh_error: BaseException | None = None
+    # the scene's textures once ``upload_steps`` has sent this plan's (name → GPU texture; the
+    # scene's own when it sends none): what the viewport's quick image draws its G-buffer
+    # with before the plan is the scene's (``viewport_prepare``)
+    textures_sent: dict | None = None
 
     @property
     def parts(self) -> int:
@@ -459,15 +463,22 @@ class GPUScene:
             sent[part] = sent.get(part, 0) + int(nbytes)
 
         textures = dict(self.textures)
+        # (known from the last texture part's step on: ``ScenePlan.textures_sent``)
+        last = "table" if plan.texture_table is not None else \
+            "atlas" if plan.atlas is not None else "none"
         if plan.textures == "none":
             textures = no_texture_inputs()
             send("textures", 32)
+            if last == "none":
+                plan.textures_sent = textures
             yield
         if plan.atlas is not None:
             atlas = plan.atlas
             textures["texture_atlas"] = float_texture(atlas, (atlas.shape[1], atlas.shape[0]),
                                                       "RGBA16F")
             send("textures", atlas.size * 2)
+            if last == "atlas":
+                plan.textures_sent = textures
             yield
         if plan.texture_table is not None:
             if serial != self.serial:
@@ -475,7 +486,9 @@ class GPUScene:
             out, rows = plan.texture_table
             textures["texture_table"] = float_texture(out, (TEXTURE_WIDTH, rows))
             send("textures", out.nbytes)
+            plan.textures_sent = textures
             yield
+        plan.textures_sent = textures
         if plan.materials is not None:
             if serial != self.serial:
                 return

@@ -140,6 +140,9 @@ class ProgressiveImage:
         # options the coarse image overrides (the viewport's first image after entering
         # Rendered mode: ``viewport_prepare.ViewPreparation.first_image_options``)
         self.coarse_options: dict = {}
+        # size → the coarse image's pixel-centre G-buffer drawn already (the viewport's quick
+        # image's) or None; None: drawn by the slice
+        self.coarse_centre = None
 
     # ------------------------------------------------------------------ planning
 
@@ -302,9 +305,13 @@ class ProgressiveImage:
             gather, lights = sample_settings(options["gather_settings"],
                                              options["light_samples"], self.target, 0)
             camera = camera_from_view(view, window, *size)
+            centre = self.coarse_centre(size) if self.coarse_centre is not None else None
+            self.coarse_centre = None
             passes = yield from traced(camera, *size, {**options, "gather_settings": gather,
                                                       "light_samples": lights,
-                                                      **self.coarse_options})
+                                                      **self.coarse_options,
+                                                      **({} if centre is None else
+                                                         {"centre": centre})})
             yield  # the estimate is a stage of its own
             coarse = GPUAccumulation(acc.pass_name, *size, self.film, acc.transparent)
             coarse.add((0, 0, *size), passes, world=world(camera, *size))

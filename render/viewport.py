@@ -172,23 +172,24 @@ class ViewportRenderer:
         progressive = self.progressive
         snapshot = live.image_source(settings.quality)[0]
         drew = []
+        acc, key = progressive.accumulation, progressive.key
+        quick = None
+        showing_quick = self.texture is None or self.quick_key is not None
+        if showing_quick and self.quick_key != key:
+            # the quick image of this key at the first coarse image's size and camera: its
+            # G-buffer is that image's (viewport_prepare.QuickView)
+            options = base_options(settings, acc.width, acc.height)
+            size = progressive.coarse_size(options["gi_stride"])
 
-        def quick():  # a part of the quick image of this key (viewport_prepare.quick_step)
-            acc = progressive.accumulation
-            key = progressive.key
-            if self.quick_key == key:
-                return
-            camera = camera_from_view(view, window, acc.width, acc.height)
-            texture = self.prepare.quick_step(key, snapshot, camera, acc.width, acc.height,
-                                              progressive.film and acc.transparent,
-                                              progressive.budget, started)
-            if texture is not None:
+            def show(texture):
                 self.texture, self.quick_key = texture, key
                 drew.append(1)
 
-        showing_quick = self.texture is None or self.quick_key is not None
+            quick = viewport_prepare.QuickView(
+                key, size, camera_from_view(view, window, *size), options["filter_width"],
+                progressive.film and acc.transparent, show)
         ready = self.prepare.advance(live.scene_name, snapshot, settings, progressive.budget,
-                                     started, quick=quick if showing_quick else None,
+                                     started, quick=quick,
                                      whole=progressive.stage_budget is None)
         if ready:
             return ""
@@ -253,6 +254,11 @@ class ViewportRenderer:
         if progressive.coarse_pending and progressive.running is None:
             progressive.coarse_options = self.prepare.first_image_options(
                 live.image_source(settings.quality)[0], settings)
+            # the quick image's G-buffer is the coarse image's when they agree (its size,
+            # camera, triangles and textures): not drawn again
+            key, prepare = progressive.key, self.prepare
+            progressive.coarse_centre = None if settings.quality != "ACCURATE" else \
+                (lambda size: prepare.coarse_centre(key, size, current_scene(), self.raster))
         done = progressive.step(tracer(live, self.volume, settings, staged=True,
                                        raster=self.raster, cache_source=cache_source,
                                        batch=batch),

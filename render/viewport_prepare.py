@@ -28,7 +28,9 @@ into steps of which a draw takes at most one of each kind:
 * **a quick image**: once the raster shader and the batch are there, the view shows Solid-like
   shading of the G-buffer (``shaders/quick_shade.glsl``: Base Color under a headlight) until
   the first GI image replaces it, so the view is not empty while the BVH, the lights and the
-  kernels come in.
+  kernels come in; its G-buffer, at the first coarse image's size and camera and drawn by the
+  batch's fill as each chunk is sent (``QuickGBuffer``), is that coarse image's
+  (``ViewPreparation.coarse_centre``).
 
 A draw runs a step only while it is predicted to end within ``STEP_SHARE`` of the slice
 budget by the last time of a step of its kind (the first step of a draw always runs); the
@@ -46,6 +48,7 @@ import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.radiance_cache import snap_focus
+from ..voxgi_addon.scene.textures import TEXTURE_TAPS
 from . import (
     gpu_accumulation,
     gpu_compose,
@@ -63,7 +66,6 @@ from .progressive import STAGE_SHARE, base_options
 # of the budget: a draw starts no further step predicted to end past it (half: the draw's
 # image costs 8–25 ms at the GPU's finish; docs/gi_pipeline.md "Entering Rendered mode")
 STEP_SHARE = 0.5
-QUICK_SCALE = 4     # the quick image has a quarter of the traced image's width and height
 
 
 # ---------------------------------------------------------------- the scene (preparing thread)
@@ -368,9 +370,9 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
     add("quick shade", 1, quick_shader)
     if quality == "ACCURATE":
         bvh("bvh_gather", 1)
-        add("denoise", 1, gpu_gather._denoise_shader)
-        # the first coarse image goes without the glossy indirect gather
-        # (``first_image_options``): its kernels come in phase 2
+        # the first coarse image takes its gathers raw (``first_image_options``)
+        add("denoise", 2, gpu_gather._denoise_shader)
+        # ... and goes without the glossy indirect gather: its kernels come in phase 2
         if glossy_indirect:
             bvh("bvh_glossy", 2)
             add("upsample pair", 2, lambda: gpu_gather._upsample_shader(True))
@@ -396,7 +398,8 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
         for absent in (found.lamps if found is not None else ()):
             bvh("bvh_direct", 1, True, absent)
         if found is not None and found.lamps:
-            add("glossy direct", 1, gpu_gather._glossy_shader)
+            # the lamps' glossy light: not in the first coarse image (``first_image_options``)
+            add("glossy direct", 2 if quality == "ACCURATE" else 1, gpu_gather._glossy_shader)
         add("aa_light", 1, lambda: gpu_compose._aa_shader("aa_light"))
         if found is not None and found.tail is not None:
             bvh("bvh_direct", 1, True, found.tail)
@@ -488,6 +491,58 @@ def warm_raster(shader, camera) -> None:
               batch=ChunkedBatch([batch], [(origin, origin)]))
 
 
+def _same(a, b) -> bool:
+    """Raster textures (None or a (table, atlas) pair of GPU textures) that are the same."""
+    if a is None or b is None:
+        return a is b
+    return all(x is y for x, y in zip(a, b))
+
+
+@dataclasses.dataclass
+class QuickView:
+    """What the view asks of the quick image: its image ``key``, the first coarse image's
+    ``size`` and ``camera`` (the quick image's G-buffer is that coarse image's: drawn once,
+    shaded for the quick image, then handed to the coarse slice, ``coarse_centre``), its
+    Filter Size (the slices' G-buffers'), Film › Transparent, and ``show(texture)``."""
+
+    key: object
+    size: tuple
+    camera: object
+    filter_width: float
+    transparent: bool
+    show: object
+
+
+@dataclasses.dataclass
+class QuickGBuffer:
+    """The quick image's G-buffer (``QuickView``'s size and camera) of ``source``'s batch
+    with the scene's raster ``textures``: its chunks drawn into it in order, ``drawn`` of them
+    so far — by the batch's fill as each chunk is sent (``BatchFill.step``), the rest by
+    ``ViewPreparation.quick_step``."""
+
+    key: object
+    size: tuple
+    camera: object
+    filter_width: float
+    source: VertexArrays
+    textures: tuple | None
+    gbuffer: object = None
+    drawn: int = 0
+
+    def matches(self, view: QuickView, source: VertexArrays, textures) -> bool:
+        return self.key == view.key and self.size == view.size and self.source is source \
+            and self.filter_width == view.filter_width and _same(self.textures, textures)
+
+    def draw(self, shader, chunk: ChunkedBatch) -> None:
+        """Draw the next chunk (``chunk``: one batch) into the G-buffer, as the coarse
+        slice's visibility stage draws it (``gpu_preview._visibility``)."""
+        self.gbuffer = rasterize(self.source.tris, self.camera, self.source.rough, *self.size,
+                                 shader=shader, textures=self.textures,
+                                 filter_width=self.filter_width, batch=chunk,
+                                 out=self.gbuffer, texture_taps=TEXTURE_TAPS)
+        self.drawn += 1
+
+
 class BatchFill:
     """The view's vertex batch of ``VertexArrays`` for a raster shader as a
     ``gbuffer.ChunkedBatch`` of ``CHUNK_TRIANGLES`` triangles a chunk, made a chunk per
@@ -522,7 +577,11 @@ class BatchFill:
         if self.filled == self.chunks:
             self.batch = self.made
 
-    def step(self, camera) -> None:
+    def step(self, camera, target: QuickGBuffer | None = None) -> None:
+        """Send the next chunk. target : the quick image's G-buffer under way
+        (``QuickGBuffer``): when every chunk before this one is in it, the chunk is drawn
+        there (its first draw, which sends its vertices, and the quick image's share of it in
+        one); else into an 8 × 8 G-buffer."""
         if self.batch is not None:
             return
         first = self.filled * CHUNK_TRIANGLES
@@ -537,8 +596,11 @@ class BatchFill:
         positions = self.source.arrays["position"][corners]
         chunk = ChunkedBatch([batch], [(positions.min(axis=0), positions.max(axis=0))])
         # drawn once, in full: its vertices go to the GPU now, not in a slice's G-buffer
-        rasterize(self.source.tris, camera, self.source.rough, 8, 8, shader=self.shader,
-                  batch=chunk.batches[0])
+        if target is not None and target.drawn == self.filled:
+            target.draw(self.shader, chunk)
+        else:
+            rasterize(self.source.tris, camera, self.source.rough, 8, 8, shader=self.shader,
+                      batch=chunk.batches[0])
         self.made.batches += chunk.batches
         self.made.bounds += chunk.bounds
         self.filled += 1
@@ -555,7 +617,8 @@ class ViewPreparation:
         self.fill: BatchFill | None = None
         self.batch = None        # the filled batch and the VertexArrays it holds
         self.batch_source: VertexArrays | None = None
-        self.quick = None        # [view key, G-buffer, chunks drawn] of the quick image
+        self.quick: QuickGBuffer | None = None  # the quick image's G-buffer under way
+        self.coarse: QuickGBuffer | None = None  # ... complete, for the first coarse image
         self.seconds: dict[str, float] = {}  # the last step of each kind
         self.timings: dict[str, float] = {}  # this draw's steps
         self.status = ""
@@ -593,8 +656,8 @@ class ViewPreparation:
                 quick=None, whole: bool = False) -> bool:
         """This draw's steps toward the first GI image of ``snapshot``: at most one scene part
         or batch attribute sent and one kernel compiled, each while it fits the budget
-        (``STEP_SHARE``), then the quick image (``quick``: a function that draws it when
-        there is none yet for the view) when its parts are there. True when the view can
+        (``STEP_SHARE``), then the quick image (``quick``: a ``QuickView`` when the view shows
+        none yet for its key) when its parts are there. True when the view can
         trace: the scene is ``snapshot``'s, the batch its triangles' and the first image's
         kernels are compiled. whole : every step at once (no budget: the tests' whole slices,
         ``ProgressiveImage.stage_budget`` None)."""
@@ -635,23 +698,33 @@ class ViewPreparation:
                 self.seconds["compile"] = seconds
                 self.timings[f"compile {compiled}"] = seconds
                 worked = True
-        # one upload: the raster's first draw, else the batch's next chunk, else the scene's
-        # next part
+        # the quick image's G-buffer (the first coarse image's, ``QuickView``): drawn with the
+        # scene's raster textures, so a textured scene's fill waits for them (its first parts)
+        known, textures = self._raster_textures(job, arrays, scene_ready)
+        target = None
+        if quick is not None and arrays is not None and known:
+            if self.quick is None or not self.quick.matches(quick, arrays, textures):
+                self.quick = QuickGBuffer(quick.key, quick.size, quick.camera,
+                                          quick.filter_width, arrays, textures)
+            target = self.quick
+        # one upload: the raster's first draw (with a scene part: it sends nothing), else the
+        # batch's next chunk, else the scene's next part
         sent = False
         if not self.warmed:  # (nothing drawn with the raster before it: its first draw)
             if compiled != "gbuffer raster" and (whole or self._fits("warm", started, budget)):
                 self._timed("warm", "raster first draw", lambda: warm_raster(self.raster,
                                                                             snapshot.camera))
                 self.warmed = worked = True
-            sent = True
-        if arrays is not None and not sent and (self.batch_source is not arrays or self.batch is None):
+        elif arrays is not None and (self.batch_source is not arrays or self.batch is None) \
+                and not (quick is not None and not known):
             if self.fill is None or self.fill.source is not arrays:
                 self.fill = None
                 if len(arrays.tris):
                     self.fill = BatchFill(self.raster, arrays, self.batch)
             if self.fill is not None and self.fill.batch is None and \
                     (whole or self._fits("batch", started, budget)):
-                self._timed("batch", "vertex batch", lambda: self.fill.step(snapshot.camera))
+                self._timed("batch", "vertex batch",
+                            lambda: self.fill.step(snapshot.camera, target))
                 worked = sent = True
             if self.fill is not None and self.fill.batch is not None:
                 self.batch, self.batch_source, self.fill = self.fill.batch, arrays, None
@@ -669,10 +742,11 @@ class ViewPreparation:
             (scene_ready and not len(gpu_scene.tris))
         ready = scene_ready and batch and found is not None and \
             not warmup.pending(key, steps, 1)
-        if not ready and quick is not None and self.batch is not None \
+        if not ready and target is not None and self.batch is not None \
                 and self.batch_source is arrays and "shader" in _QUICK \
                 and self._fits("quick chunk", started, budget):
-            self._timed("quick", "quick image", quick)
+            self._timed("quick", "quick image",
+                        lambda: self.quick_step(quick, snapshot, budget, started))
         done, total = warmup.count
         parts = f"scene part {prep.sent}/{prep.total}" if job.plan is not None else \
             "preparing the scene"
@@ -682,13 +756,49 @@ class ViewPreparation:
             worked = False
         return ready, worked
 
+    @staticmethod
+    def _raster_textures(job, arrays, scene_ready: bool):
+        """(known, textures): the raster textures (``GPUScene.raster_textures``) the scene of
+        ``arrays``' triangles will have — None when they are untextured — once they are on
+        the GPU (the plan's texture parts sent: ``ScenePlan.textures_sent``)."""
+        if arrays is None:
+            return False, None
+        if not arrays.textured:
+            return True, None
+        plan = job.plan if job is not None else None
+        if scene_ready or plan is None and current_scene().tris is arrays.tris:
+            return True, current_scene().raster_textures()
+        if plan is None:
+            return False, None
+        sent = plan.textures_sent
+        if sent is None and plan.textures is None and plan.atlas is None and \
+                plan.texture_table is None:
+            sent = current_scene().textures  # the plan sends none: the scene's are its
+        if sent is None or "texture_atlas" not in sent:
+            return False, None
+        return True, (sent["texture_table"], sent["texture_atlas"])
+
+    def coarse_centre(self, key, size, scene, raster):
+        """The quick image's G-buffer for the first coarse image of ``key`` at ``size`` (the
+        same camera, batch and textures as its own visibility stage would draw: it is not
+        drawn again; docs/gi_pipeline.md "Entering Rendered mode"), once, or None."""
+        made, self.coarse = self.coarse, None
+        if made is None or made.key != key or made.size != size or raster is not self.raster \
+                or not made.source.fits(scene) or \
+                not _same(made.textures, scene.raster_textures()):
+            return None
+        return made.gbuffer
+
     def first_image_options(self, snapshot, settings) -> dict:
         """The tracer's options that the coarse image overrides while the tiles' kernels
         (phase 2 of ``kernel_steps``) are not all compiled: the first GI image after entering
-        Rendered mode is traced without the glossy indirect gather and without the world's
-        and emitters' Glossy Direct gather (their ``bvh_glossy`` variants and the paired
-        upsample: compiles of 10–30 ms, 0.3 s with Mesa's cache cold, and a slice stage each:
-        docs/gi_pipeline.md "Entering Rendered mode"); {} once they are."""
+        Rendered mode is a minimal frame — the G-buffer, the diffuse gather unfiltered and
+        upsampled, each light's direct light, composed — without the glossy indirect gather,
+        the world's and emitters' Glossy Direct gather (their ``bvh_glossy`` variants and the
+        paired upsample: compiles of 10–30 ms, 0.3 s with Mesa's cache cold, and a slice stage
+        each), the lamps' glossy light (``glossy direct``) and the gathers' filter
+        (``denoise``): fewer kernels, one compile per draw, before it (docs/gi_pipeline.md
+        "Entering Rendered mode"); {} once they are. The tiles trace with all of them."""
         job = preparation.job
         if settings.quality != "ACCURATE" or job is None or job.plan is None:
             return {}
@@ -696,11 +806,13 @@ class ViewPreparation:
         key = kernel_key(found, settings)
         if not warmup.pending(key, kernel_steps(*key), 2):
             return {}
-        options = {}
+        options = {"denoise": False}
         if key[3]:
             options["glossy_indirect"] = False
         if found.tail is not None:
             options["world_glossy"] = False
+        if found.lamps:
+            options["lamp_glossy"] = False
         return options
 
     def later_kernels(self, snapshot, settings, budget: float, started: float,
@@ -723,36 +835,33 @@ class ViewPreparation:
             self.timings[f"compile {name}"] = self.seconds["compile"]
         return name
 
-    def quick_step(self, key, snapshot, camera, width: int, height: int, transparent: bool,
-                   budget: float, started: float):
-        """The quick image of ``camera``'s view (module doc) at a quarter of ``width`` ×
-        ``height`` (``QUICK_SCALE``), its G-buffer drawn a part of the batch's chunks per call
-        while they fit ``STAGE_SHARE`` of the budget, as a slice's stages (their raster work
-        ends at the draw's GPU finish, after the draw's Python: at ``STEP_SHARE`` the diorama's
-        quick-image draws took 35 ms): the new texture once it is complete, else None (called
-        again with the same ``key`` it goes on; another key starts over)."""
-        arrays, batch = self.batch_source, self.batch
-        w, h = max(1, width // QUICK_SCALE), max(1, height // QUICK_SCALE)
-        if self.quick is None or self.quick[0] != key:
-            self.quick = [key, None, 0]  # key, G-buffer, chunks drawn
-        state = self.quick
+    def quick_step(self, view: QuickView, snapshot, budget: float, started: float) -> None:
+        """The quick image (module doc) of ``view``: the chunks of the batch the fill did not
+        draw into its G-buffer (``QuickGBuffer``) drawn a part per call while they fit
+        ``STAGE_SHARE`` of the budget, as a slice's stages (their raster work ends at the
+        draw's GPU finish, after the draw's Python: at ``STEP_SHARE`` the diorama's
+        quick-image draws took 35 ms), then shaded and shown (``view.show``); its G-buffer is
+        kept for the first coarse image (``coarse_centre``)."""
+        state, batch = self.quick, self.batch
         first = True
-        while state[2] < len(batch.batches):
+        while state.drawn < len(batch.batches):
             # a chunk at least per call, more while the last one's time fits the budget
             if not first and time.perf_counter() - started + self.seconds["quick chunk"] > \
                     STAGE_SHARE * budget:
-                return None
+                return
             first = False
             t0 = time.perf_counter()
-            state[1] = rasterize(arrays.tris, camera, arrays.rough, w, h, shader=self.raster,
-                                 batch=batch.part(state[2], state[2] + 1), out=state[1])
-            state[2] += 1
+            state.draw(self.raster, batch.part(state.drawn, state.drawn + 1))
             self.seconds["quick chunk"] = time.perf_counter() - t0
         if not first and time.perf_counter() - started + \
                 self.seconds.get("quick shade", 0.0) > STAGE_SHARE * budget:
-            return None
+            return
         t0 = time.perf_counter()
-        gbuffer = state[1]
+        arrays, gbuffer = state.source, state.gbuffer
+        w, h = state.size
+        if gbuffer is None:  # (no triangles)
+            gbuffer = state.gbuffer = rasterize(arrays.tris, state.camera, arrays.rough, w, h,
+                                                shader=self.raster, batch=ChunkedBatch())
         palette = np.zeros((1, len(arrays.palette), 4), np.float32)
         palette[0, :, :3] = arrays.palette
         world = snapshot.world
@@ -763,12 +872,12 @@ class ViewPreparation:
         inputs = {**gbuffer.inputs, "palette": float_texture(palette, (len(arrays.palette), 1))}
         for name in QUICK_SAMPLERS:
             shader.uniform_sampler(name, inputs[name])
-        shader.uniform_float("world", (*colour.tolist(), 0.0 if transparent else 1.0))
+        shader.uniform_float("world", (*colour.tolist(), 0.0 if view.transparent else 1.0))
         shader.image("out_image", out)
         gpu.compute.dispatch(shader, -(-w // LOCAL_SIZE), -(-h // LOCAL_SIZE), 1)
         self.seconds["quick shade"] = time.perf_counter() - t0
-        self.quick = None
-        return out
+        self.quick, self.coarse = None, state
+        view.show(out)
 
 
 def release() -> None:

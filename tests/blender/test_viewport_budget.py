@@ -6,9 +6,12 @@ viewport tests do, from cold caches (no shader compiled, no GPU scene): from ent
 mode to the converged image no draw compiles more than one shader (``gpu.shader.create_from_info``
 calls, counted beside ``gpu_shaders.counters``) or sends more than one scene part
 (``gpu_shaders.counters``: the GPU scene's parts, the BVH's three textures one by one, the
-vertex batch a chunk at a time); the quick image shows before the first GI image; the first GI
-image arrives; and the converged image is the one the view converged to before the change
-(every step of it in one draw: a whole slice per draw, no budget), traced in the same test.
+vertex batch a chunk at a time); the quick image shows before the first GI image; the kernels
+compiled before the first GI image are exactly the minimal frame's (``FIRST_IMAGE_KERNELS``);
+no slice draws a G-buffer before it (the first coarse image's is the quick image's, each chunk
+drawn into it once); the first GI image arrives; and the converged image is the one the view
+converged to before the change (every step of it in one draw: a whole slice per draw, no
+budget), traced in the same test.
 An object move and an orbit then keep to the same counts.
 """
 from __future__ import annotations
@@ -22,6 +25,15 @@ from stand_in_engine import StandInEngine
 from test_viewport import HEIGHT, WIDTH, camera_matrices, gpu_ready, turned
 
 SAMPLES = 3
+# the kernels compiled from entering Rendered mode to the first GI image on the demo scene
+# (one lamp, a world): the G-buffer raster, the quick image's shade and the first coarse
+# image's minimal frame — the diffuse gather unfiltered and upsampled, the surface terms, the
+# lamp's and the world's direct light composed, and the accumulation's three — and nothing of
+# the glossy gathers, the lamps' glossy light or the filter (docs/gi_pipeline.md "Entering
+# Rendered mode")
+FIRST_IMAGE_KERNELS = sorted(["gbuffer raster", "quick shade", "bvh_gather", "upsample",
+                              "aa_surface", "bvh_direct", "aa_light", "bvh_direct",
+                              "pass_sample", "accumulate", "estimate"])
 
 
 class Compiles:
@@ -103,9 +115,10 @@ def renderer_for(engine, whole: bool):
     return renderer
 
 
-def draw_to_the_end(engine, depsgraph, view, window, compiles, limit=3000):
+def draw_to_the_end(engine, depsgraph, view, window, compiles, limit=3000, drawn=None):
     """view_draw until the view has converged on the completed radiance cache and asks for no
-    more draws: [(image, shader compiles, scene parts sent, what it showed)]."""
+    more draws: [(image, shader compiles, scene parts sent, what it showed, …, the entries
+    ``drawn`` got in the draw)]."""
     from voxgi.render.gpu_shaders import counters
 
     renderer = engine.voxgi_viewport
@@ -115,8 +128,11 @@ def draw_to_the_end(engine, depsgraph, view, window, compiles, limit=3000):
         mark = counters.mark()
         image = draw(engine, depsgraph, view, window)
         compiled, sent = counters.since(mark)
+        got = [] if drawn is None else drawn[:]
+        if drawn is not None:
+            drawn.clear()
         draws.append((image, compiles.take(), len(compiled), len(sent), renderer.shown,
-                      compiled, sent, renderer.traces, dict(renderer.timings)))
+                      compiled, sent, renderer.traces, dict(renderer.timings), got))
         if engine.redraws == redraws and renderer.progressive.converged \
                 and renderer.cache.generation > 0:
             return draws
@@ -124,7 +140,7 @@ def draw_to_the_end(engine, depsgraph, view, window, compiles, limit=3000):
 
 
 def assert_bounded(draws, what):
-    for index, (_, compiles, counted, sent, _, names, parts, _, _) in enumerate(draws):
+    for index, (_, compiles, counted, sent, _, names, parts, *_) in enumerate(draws):
         assert compiles == counted, f"{what} draw {index}: a compile bypassed create_shader"
         assert compiles <= 1, f"{what} draw {index} compiled {compiles} shaders: {names}"
         assert sent <= 1, f"{what} draw {index} sent {sent} scene parts: {parts}"
@@ -164,7 +180,16 @@ def test_no_draw_compiles_or_uploads_more_than_one_thing_and_the_image_is_the_sa
     entering = compiles.take()
     assert entering == 0, f"view_update compiled {entering} shaders"
     renderer_for(engine, whole=False)
-    draws = draw_to_the_end(engine, depsgraph, view, window, compiles)
+    # the G-buffers drawn: the quick image's chunks (viewport_prepare) and the slices' own
+    from voxgi.render import gpu_preview
+
+    drawn = []
+    for module, name in ((viewport_prepare, "rasterize"), (gpu_preview, "rasterize_stages")):
+        def counted(*args, _original=getattr(module, name), _name=name, **kwargs):
+            drawn.append((_name, args[3:5]))  # (which, (width, height))
+            return _original(*args, **kwargs)
+        monkeypatch.setattr(module, name, counted)
+    draws = draw_to_the_end(engine, depsgraph, view, window, compiles, drawn=drawn)
     assert_bounded(draws, "entering")
     shown = [d[4] for d in draws]
     first_quick = shown.index("Quick")
@@ -172,6 +197,20 @@ def test_no_draw_compiles_or_uploads_more_than_one_thing_and_the_image_is_the_sa
     print(f"{len(draws)} draws: quick image at draw {first_quick}, first GI image at draw "
           f"{first_gi}; {sum(d[1] for d in draws)} compiles, {sum(d[3] for d in draws)} parts")
     assert first_quick < first_gi  # the quick image shows while the kernels come in
+    # the kernels compiled before the first GI image: exactly the minimal frame's
+    before_gi = sorted(name for d in draws[:first_gi + 1] for name in d[5])
+    assert before_gi == FIRST_IMAGE_KERNELS, before_gi
+    later = [name for d in draws[first_gi + 1:] for name in d[5]]
+    assert "denoise" in later and "glossy_direct" in later, later  # (before the tiles use them)
+    # the first coarse image's G-buffer is the quick image's: from entering to the first GI
+    # image no slice draws one, and the quick image's chunks are drawn into it once each (by
+    # the batch's fill as each is sent, or after), at the coarse image's size
+    coarse_size = engine.voxgi_viewport.progressive.last.size  # (the first slice's)
+    entering_draws = [g for d in draws[:first_gi + 1] for g in d[9]]
+    assert not [g for g in entering_draws if g[0] == "rasterize_stages"], entering_draws
+    into = [g for g in entering_draws if g[0] == "rasterize" and g[1] == tuple(coarse_size)]
+    batch = engine.voxgi_viewport.prepare.batch
+    assert len(into) == len(batch.batches), (into, len(batch.batches), coarse_size)
     assert sum(d[1] for d in draws) >= 15  # every kernel compiled, one per draw
     assert sum(d[3] for d in draws) >= 6   # the scene's parts and the vertex batch's chunks
     # the raster shader's first draw (llvmpipe builds its draw variant there) is a step of its
