@@ -241,3 +241,33 @@ def test_no_draw_compiles_or_uploads_more_than_one_thing_and_the_image_is_the_sa
         mark = compiles.take()
         draw(engine, depsgraph, turned(view, 2.0 * step), window)
         assert compiles.take() == 0 and mark == 0
+
+
+def test_a_radiance_cache_completed_in_a_draw_asks_for_the_next_draw(voxgi, monkeypatch):
+    """A build of the radiance cache can complete inside a slice's cache stage, in the very draw
+    whose slice converges the image. The image key holds the cache's generation, so that draw
+    must ask for the next one: without it the view stayed on the one-bounce image it had
+    converged on until something else redrew it. A draw that changed nothing asks for none."""
+    from voxgi.render.viewport import ViewportRenderer, view_update
+
+    scene = demo_scene()
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    view, window = camera_matrices(scene, depsgraph)
+    engine = StandInEngine()
+    view_update(engine, context(view, window), depsgraph)
+    renderer_for(engine, whole=True)
+
+    def completes(self, live, scene, view, window):  # traced nothing more, but the build ended
+        self.cache.generation += 1
+        return ""
+
+    monkeypatch.setattr(ViewportRenderer, "refine", completes)
+    before = engine.redraws
+    draw(engine, depsgraph, view, window)
+    assert engine.redraws == before + 1
+
+    monkeypatch.setattr(ViewportRenderer, "refine", lambda self, live, scene, view, window: "")
+    before = engine.redraws
+    draw(engine, depsgraph, view, window)
+    assert engine.redraws == before
