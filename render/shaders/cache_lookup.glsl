@@ -12,6 +12,24 @@
 #define CACHE_AXIS_BLEND 1e-6
 int cache_part = 0;
 
+/* Where `x` lies in grid g of the cache (res cells a side; its origin and cell size in header
+ * texel (g, 0)): false outside it, else the lower corner `base` of the 2 × 2 × 2 voxels around
+ * x and its trilinear fractions `f` (cache_indirect and cache_pick walk the grids alike). */
+bool cache_grid_cell(vec3 x, int g, int res, out ivec3 base, out vec3 f)
+{
+  vec4 grid = texelFetch(radiance_cache, ivec2(g, 0), 0);
+  vec3 at = (x - grid.xyz) / grid.w;
+  base = ivec3(0);
+  f = vec3(0.0);
+  if (any(lessThan(at, vec3(0.0))) || any(greaterThanEqual(at, vec3(float(res))))) {
+    return false;
+  }
+  vec3 gg = at - 0.5;
+  base = ivec3(floor(gg));
+  f = gg - vec3(base);
+  return true;
+}
+
 vec3 cache_indirect(vec3 x, vec3 n)
 {
   ivec2 size = textureSize(radiance_cache, 0);
@@ -26,14 +44,11 @@ vec3 cache_indirect(vec3 x, vec3 n)
   bvec3 axes = greaterThanEqual(blend, vec3(CACHE_AXIS_BLEND));
   blend = mix(vec3(0.0), blend, axes);
   for (int g = 0; g < count; g++) {
-    vec4 grid = texelFetch(radiance_cache, ivec2(g, 0), 0);
-    vec3 at = (x - grid.xyz) / grid.w;
-    if (any(lessThan(at, vec3(0.0))) || any(greaterThanEqual(at, vec3(float(res))))) {
+    ivec3 base;
+    vec3 f;
+    if (!cache_grid_cell(x, g, res, base, f)) {
       continue;
     }
-    vec3 gg = at - 0.5;
-    ivec3 base = ivec3(floor(gg));
-    vec3 f = gg - vec3(base);
     vec3 tx = vec3(0.0), ty = vec3(0.0), tz = vec3(0.0);
     vec3 weight = vec3(0.0);
     for (int corner = 0; corner < 8; corner++) {
@@ -113,14 +128,11 @@ float cache_pick(vec3 x, vec3 n, float u)
   vec3 blend = n * n;
   blend = mix(vec3(0.0), blend, greaterThanEqual(blend, vec3(CACHE_AXIS_BLEND)));
   for (int g = 0; g < count; g++) {
-    vec4 grid = texelFetch(radiance_cache, ivec2(g, 0), 0);
-    vec3 at = (x - grid.xyz) / grid.w;
-    if (any(lessThan(at, vec3(0.0))) || any(greaterThanEqual(at, vec3(float(res))))) {
+    ivec3 base;
+    vec3 f;
+    if (!cache_grid_cell(x, g, res, base, f)) {
       continue;
     }
-    vec3 gg = at - 0.5;
-    ivec3 base = ivec3(floor(gg));
-    vec3 f = gg - vec3(base);
     vec3 weight = vec3(0.0);
     for (int corner = 0; corner < 8; corner++) {
       weight += cache_corner_held(corner, base, f, g, res, face);

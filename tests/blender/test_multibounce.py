@@ -135,12 +135,16 @@ def test_gpu_cache_equals_numpy_cache(voxgi):
                                     emission), principled, emission, settings) is texture
 
 
-def test_numpy_and_gpu_previews_agree(voxgi, tmp_path):
+@pytest.mark.parametrize("sparse", [False, True], ids=["dense", "sparse"])
+def test_numpy_and_gpu_previews_agree(voxgi, tmp_path, sparse):
     """Bounces 2 on a small Cornell box image: every pass of the GPU preview (the cache's
-    lookups in bvh_shade.glsl) within 2% of numpy's."""
+    lookups in bvh_shade.glsl) within 2% of numpy's — also with Sparse Gathers
+    (``preview.sparse_gather``: the GPU's list of gather points and its hole-filling filter
+    against numpy's)."""
     scene = bpy.context.scene
     bounce_scenes.build("cornell_box", scene)
     scene.voxgi.bounces = 2
+    scene.voxgi.sparse_gathers = sparse
     gpu = preview(tmp_path, scene, 48, 36, "AUTO")
     reference = preview(tmp_path, scene, 48, 36, "NUMPY")
     everywhere = np.ones((36, 48), bool)
