@@ -49,6 +49,7 @@ class GPUGatherSums:
         self.width, self.height, self.stride = width, height, stride
         self.shape = low_shape(height, width, stride)  # (Hl, Wl)
         self.sums: dict[str, gpu.types.GPUTexture] = {}
+        self.rays: dict[str, int] = {}  # per kind the rays of the samples summed
 
     def _storage(self, kind: str):
         texture = self.sums.get(kind)
@@ -65,7 +66,9 @@ class GPUGatherSums:
         ``variance`` RGBA32F textures of the tile's low shape (``low_shape(h, w, stride)``),
         row 0 at the bottom; rays : its rays per point. Returns new (mean, pooled) RGBA32F
         textures of that size: over every sample so far in the image's cells, the tile's own
-        gather (NaN as 0) past them. Nothing is read back."""
+        gather (NaN as 0) past them. Nothing is read back. rays 0 (a sample after the
+        gathering ones): nothing is added, ``values`` and ``variance`` only give the tile's
+        shape, and its cells past the image take the nearest cell's (``GatherSums.add``)."""
         x0, y0, w, h = rect
         s = self.stride
         if x0 % s or y0 % s:
@@ -81,7 +84,10 @@ class GPUGatherSums:
         shader.bind()
         shader.uniform_sampler("gather_values", values)
         shader.uniform_sampler("gather_variance", variance)
-        shader.uniform_float("cells", (float(x0 // s), float(y0 // s), float(rays), 0.0))
+        if rays:
+            self.rays[kind] = rays
+        shader.uniform_float("cells", (float(x0 // s), float(y0 // s),
+                                       float(rays or self.rays.get(kind, 1)), 0.0 if rays else 1.0))
         for name, texture in outputs.items():
             shader.image(name, texture)
         shader.image("sums", sums)
@@ -92,3 +98,4 @@ class GPUGatherSums:
         """Drop the kinds' sum textures (Blender frees a ``GPUTexture`` with its last
         reference); the next ``add`` of a kind starts it anew."""
         self.sums.clear()
+        self.rays.clear()

@@ -37,7 +37,7 @@ from ..voxgi_addon.preview.passes import (
     subpixel_reach,
 )
 from ..voxgi_addon.preview.sparse_gather import sparse_plan, sparse_settings
-from ..voxgi_addon.preview.upsample import sample_pixels
+from ..voxgi_addon.preview.upsample import low_shape, sample_pixels
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame
 from ..voxgi_addon.scene.glass import is_glass
 from ..voxgi_addon.scene.textures import TEXTURE_TAPS
@@ -396,10 +396,17 @@ def _low(f, kind, kernel="bvh_gather", world_mode=False):
     cache = f["cache"]
     if world_mode and cache is not None:  # reads no cache: an empty one of its JIT class
         cache = _empty_like(cache)
-    values, variance = gather(scene.bvh, centre.inputs, scene.lights, scene.principled,
-                              scene.emission, settings, stride, width, height, kernel=kernel,
-                              world_mode=world_mode, tables=f["tables"],
-                              cache=cache)
+    rays = settings.rays if kind.endswith("diffuse") else settings.glossy_rays
+    if rays == 0 and f["gather_hook"] is not None:
+        # a viewport sample after the gathering ones: the samples' sums alone
+        # (preview.progressive.sample_settings)
+        low_h, low_w = low_shape(height, width, stride)
+        values = variance = scene.zeros(low_w, low_h)
+    else:
+        values, variance = gather(scene.bvh, centre.inputs, scene.lights, scene.principled,
+                                  scene.emission, settings, stride, width, height,
+                                  kernel=kernel, world_mode=world_mode, tables=f["tables"],
+                                  cache=cache)
     if f["gather_hook"] is not None:
         values, variance = f["gather_hook"](kind, values, variance)
     if not f["denoise"]:  # (raw: the filter's kernel not even bound)

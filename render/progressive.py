@@ -39,6 +39,7 @@ from ..blender.settings import cone_settings, trace_options
 from ..voxgi_addon.preview.film import world_along
 from ..voxgi_addon.preview.progressive import (
     SliceSizer,
+    gather_samples,
     sample_offset,
     sample_settings,
     sample_tail_weights,
@@ -68,18 +69,20 @@ def base_options(settings, width: int, height: int) -> dict:
     return {**trace_options(settings, width, height), "filter_width": 0.0}
 
 
-_sizers: dict[tuple[float, bool], SliceSizer] = {}
+_sizers: dict[tuple[float, bool, str], SliceSizer] = {}
 
 
-def shared_sizer(budget: float, amortize: bool = True) -> SliceSizer:
-    """The process's slice sizer for ``budget``: every view measures the same machine, so a
-    3D view switched to Rendered starts from what the others measured (the first one from
-    the smallest tile). amortize : as ``SliceSizer``'s (False for staged slices)."""
-    if (budget, amortize) not in _sizers:
-        _sizers[budget, amortize] = SliceSizer(budget, first_pixels=LEAST_TILE * LEAST_TILE,
-                                               least=LEAST_TILE * LEAST_TILE,
-                                               amortize=amortize)
-    return _sizers[budget, amortize]
+def shared_sizer(budget: float, amortize: bool = True, kind: str = "tile") -> SliceSizer:
+    """The process's slice sizer for ``budget`` and slices of ``kind``: every view measures
+    the same machine, so a 3D view switched to Rendered starts from what the others measured
+    (the first one from the smallest tile). amortize : as ``SliceSizer``'s (False for staged
+    slices). kind : "tile" for the samples that trace the gathers, "lit tile" for the later
+    ones, which cost a fraction of a pixel's time (``sample_kind``): each its own fit."""
+    if (budget, amortize, kind) not in _sizers:
+        _sizers[budget, amortize, kind] = SliceSizer(
+            budget, first_pixels=LEAST_TILE * LEAST_TILE, least=LEAST_TILE * LEAST_TILE,
+            amortize=amortize)
+    return _sizers[budget, amortize, kind]
 
 
 @dataclasses.dataclass
@@ -103,7 +106,8 @@ class ProgressiveImage:
         # has spent STAGE_SHARE of the budget, and the tiles are sized so that the longest
         # stage takes about that much (so a call stays within the budget)
         self.budget = budget
-        self.sizer = shared_sizer(budget * STAGE_SHARE, amortize=False)
+        self.sizers = {kind: shared_sizer(budget * STAGE_SHARE, amortize=False, kind=kind)
+                       for kind in ("tile", "lit tile")}
         self.stage_budget: float | None = budget * STAGE_SHARE  # None: a whole slice a call
         self.running = None        # the slice under way: a generator of its stages
         self.running_started = 0.0
@@ -176,6 +180,17 @@ class ProgressiveImage:
         self.last = None
         self.image_stale = True  # ``image`` is another key's: the next slice rebuilds it
 
+    @property
+    def sizer(self) -> SliceSizer:
+        """The slice sizer of the sample being traced (``sample_kind``)."""
+        return self.sizers[self.sample_kind()]
+
+    def sample_kind(self) -> str:
+        """"tile" while the samples trace the gathers, then "lit tile": the later samples
+        trace none (``preview.progressive.sample_settings``), so their tiles take a fraction of
+        the time and are sized by a fit of their own."""
+        return "tile" if self.sample < gather_samples(self.target) else "lit tile"
+
     def slice_pixels(self, explore: bool = True) -> int:
         """Pixels of the next slice (at most the image's); explore : as ``SliceSizer.pixels``'
         (False for the coarse image: the view waits for it, so never a larger size to
@@ -234,7 +249,7 @@ class ProgressiveImage:
             self.skip_first = False  # (``restart``) the next draw of this key starts it
             return Slice("wait", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
         t0 = time.perf_counter() - spent  # the draw's start
-        kind = "coarse" if self.coarse_pending else "tile"
+        kind = "coarse" if self.coarse_pending else self.sample_kind()
         upcoming = self.stage_seconds.get(
             (kind, self.running_stage if self.running is not None else 0))
         share = WORK_SHARE * max(self.budget, self.stage_budget or 0.0)
@@ -258,8 +273,8 @@ class ProgressiveImage:
                 done.seconds = time.perf_counter() - self.running_started
                 # the sizer fits what one call costs: the slice, or its longest stage
                 staged = self.stage_budget is not None
-                self.sizer.measured(done.size[0] * done.size[1],
-                                    self.longest_stage if staged else done.seconds)
+                self.sizers["lit tile" if self.running_kind == "lit tile" else "tile"].measured(
+                    done.size[0] * done.size[1], self.longest_stage if staged else done.seconds)
                 self.slices += 1
                 self.elapsed = time.perf_counter() - self.started
                 self.last = done
@@ -303,7 +318,8 @@ class ProgressiveImage:
         if self.coarse_pending:
             size = self.coarse_size(options["gi_stride"])
             gather, lights = sample_settings(options["gather_settings"],
-                                             options["light_samples"], self.target, 0)
+                                             options["light_samples"], self.target, 0,
+                                             gathering=self.target)  # a quick image
             camera = camera_from_view(view, window, *size)
             centre = self.coarse_centre(size) if self.coarse_centre is not None else None
             self.coarse_centre = None
@@ -337,7 +353,8 @@ class ProgressiveImage:
                 if self.gathers is None:
                     self.gathers = GPUGatherSums(width, height, options["gi_stride"])
                 tile_options["gather_hook"] = gather_hook(self.gathers, rect, gather)
-                weight = float(self.sample + 1)  # the samples behind the tile's gathers
+                # the samples behind the tile's gathers
+                weight = float(min(self.sample + 1, gather_samples(self.target)))
             passes = yield from traced(camera, rect[2], rect[3], tile_options)
             yield  # the estimate is a stage of its own
             acc.add(rect, passes, gather_weight=weight,

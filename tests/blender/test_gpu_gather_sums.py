@@ -68,6 +68,25 @@ def test_gpu_gather_sums_equal_numpy(gpu_tools):
                                            err_msg=f"{kind} {rect} sample {sample}")
                 checked += 1
     assert checked == len(kinds) * sum(len(tile_grid(width, height, 12, 10, s)) for s in shifts)
+    # samples after the gathering ones trace no rays: every tile reads the sums (its cells past
+    # the image the nearest cell's), twice the same — nothing was added
+    for rect in tile_grid(width, height, 12, 10, (6, 4)):
+        low_h, low_w = low_shape(rect[3], rect[2], stride)
+        for kind in kinds:
+            ref_mean, ref_pooled = reference.add(kind, rect, None, None, 0)
+            assert (ref_mean.shape[0], ref_mean.shape[1]) == (low_h, low_w)
+            blank = upload(np.zeros((low_h, low_w, 4), np.float32))
+            for _ in range(2):
+                mean, pooled = (download(t) for t in sums.add(kind, rect, blank, blank, 0))
+                np.testing.assert_allclose(mean, ref_mean, rtol=RTOL, atol=ATOL)
+                np.testing.assert_allclose(pooled, ref_pooled, rtol=RTOL, atol=ATOL)
+            again, _ = reference.add(kind, rect, None, None, 0)
+            np.testing.assert_array_equal(again, ref_mean)
+            x0, y0 = rect[0] // stride, rect[1] // stride
+            row, col = min(max(y0, 0), reference.shape[0] - 1), min(max(x0, 0), reference.shape[1] - 1)
+            totals = reference.kinds[kind]
+            np.testing.assert_allclose(  # the tile's first cell: the image's nearest cell's mean
+                ref_mean[0, 0], totals["values"][row, col] / totals["n"][row, col], rtol=1e-5)
     sums.free()
     assert not sums.sums
 

@@ -10,6 +10,7 @@ import pytest
 from voxgi.voxgi_addon.preview.gather import GatherSettings
 from voxgi.voxgi_addon.preview.passes import PASS_NAMES
 from voxgi.voxgi_addon.preview.progressive import (
+    GATHER_SAMPLES,
     Accumulation,
     SliceSizer,
     sample_offset,
@@ -94,6 +95,11 @@ def test_the_samples_share_the_one_shot_images_rays():
     assert sum(p[1] for p in parts) == 16
     assert len({p[0].seed for p in parts}) == 16 and parts[0][0].seed == 3
     assert sample_settings(gather, 16, 1, 0) == (gather, 16)
+    # the gathers end early: the first GATHER_SAMPLES carry all their rays, the rest none
+    assert [p[0].rays for p in parts] == [16] * GATHER_SAMPLES + [0] * (16 - GATHER_SAMPLES)
+    assert all(p[0].glossy_rays == 0 for p in parts[GATHER_SAMPLES:])
+    assert [sample_settings(gather, 16, 16, k, gathering=16)[0].rays for k in (0, 15)] == [4, 4]
+    assert [sample_settings(gather, 16, 2, k)[0].rays for k in (0, 1)] == [32, 32]
     with pytest.raises(ValueError, match="at least 1"):
         sample_settings(gather, 16, 0, 0)
     with pytest.raises(ValueError, match="outside"):

@@ -183,7 +183,7 @@ def view_draw_rows(scene, depsgraph, quick: bool) -> list:
             longest_slice.append(longest)
             settle(engine, orbit(5 * (r + 1)))
         engine = new_engine(one_shot)
-        engine.voxgi_viewport.progressive.sizer = warm.voxgi_viewport.progressive.sizer
+        engine.voxgi_viewport.progressive.sizers = warm.voxgi_viewport.progressive.sizers
         settle(engine, view)
         for k in range(1, steps + 1):  # one drag: every draw a new view
             orbits.append(call(engine, orbit(k))[0])

@@ -43,20 +43,36 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 LIGHT_COLOURS = {"Diffuse Direct": "Diffuse Color", "Diffuse Indirect": "Diffuse Color",
                  "Glossy Direct": "Glossy Color", "Glossy Indirect": "Glossy Color"}
 SEED_STEP = 7919  # seeds of successive samples: far apart in the hashed sequences
+# The samples that trace the gathers: the first GATHER_SAMPLES share the gather rays, the later
+# ones trace none and read the gathers' sums (``GatherSums.add`` with 0 rays). Their gathers
+# are then whole after a quarter of the default 16 Viewport Samples, and the rest bring the
+# edges and the shadows' strata alone (docs/gi_pipeline.md "Viewport samples whose gathers end
+# early").
+GATHER_SAMPLES = 4
 
 
-def sample_settings(gather: GatherSettings, light_samples: int, samples: int, index: int):
-    """(GatherSettings, light samples) of sample ``index`` of ``samples``: each traces
-    ⌈rays / samples⌉ gather rays, ⌈glossy rays / samples⌉ glossy rays and ⌈light samples /
-    samples⌉ shadow rays per light with its own seed, so the samples together trace at least
-    the one-shot image's rays."""
+def gather_samples(samples: int) -> int:
+    """How many of ``samples`` trace the gathers (``GATHER_SAMPLES`` at most)."""
+    return max(1, min(samples, GATHER_SAMPLES))
+
+
+def sample_settings(gather: GatherSettings, light_samples: int, samples: int, index: int,
+                    gathering: int | None = None):
+    """(GatherSettings, light samples) of sample ``index`` of ``samples``, each with its own
+    seed: ⌈light samples / samples⌉ shadow rays per light, and the first ``gathering`` samples
+    (None: ``gather_samples``) ⌈rays / gathering⌉ gather rays and ⌈glossy rays / gathering⌉
+    glossy rays, the later ones none (they read the gathers' sums) — so the samples together
+    trace at least the one-shot image's rays."""
     if samples < 1:
         raise ValueError(f"samples must be at least 1, not {samples}")
     if not 0 <= index < samples:
         raise ValueError(f"sample index {index} is outside 0..{samples - 1}")
-    per = dataclasses.replace(gather, rays=max(1, math.ceil(gather.rays / samples)),
-                              glossy_rays=max(1, math.ceil(gather.glossy_rays / samples)),
-                              seed=gather.seed + SEED_STEP * index)
+    gathering = gather_samples(samples) if gathering is None else max(1, min(gathering, samples))
+    traced = index < gathering
+    per = dataclasses.replace(
+        gather, rays=max(1, math.ceil(gather.rays / gathering)) if traced else 0,
+        glossy_rays=max(1, math.ceil(gather.glossy_rays / gathering)) if traced else 0,
+        seed=gather.seed + SEED_STEP * index)
     return per, max(1, math.ceil(light_samples / samples))
 
 
@@ -393,40 +409,57 @@ class GatherSums:
         """Add one sample's raw gather of the tile ``rect`` (x0, y0, w, h; x0, y0 multiples
         of the stride; it may reach past the image): values, variance (h_l, w_l, 4), row 0 on
         top; rays : its rays per point. Returns the tile's (values, variance): over every
-        sample so far in the image's cells, its own past them."""
+        sample so far in the image's cells, its own past them. rays 0 (a sample after the
+        gathering ones, ``sample_settings``): nothing is added, values and variance are not
+        read, and the tile's cells past the image take the nearest cell's."""
         x0, y0, w, h = rect
         s = self.stride
         if x0 % s or y0 % s:
             raise ValueError(f"a tile at ({x0}, {y0}) does not start on a stride-{s} block")
         low_h, low_w = low_shape(h, w, s)
+        sums = self.kinds.get(kind)
+        if rays == 0:  # read only: every cell of the tile from the image's nearest cell
+            if sums is None:
+                raise ValueError(f"no {kind} gather was added before a sample without rays")
+            rows = np.clip(np.arange(low_h) + y0 // s, 0, self.shape[0] - 1)
+            cols = np.clip(np.arange(low_w) + x0 // s, 0, self.shape[1] - 1)
+            mean, pooled = self._mean(sums, np.s_[rows[:, None], cols[None, :]])
+            return mean.astype(np.float32), pooled.astype(np.float32)
         values = np.nan_to_num(np.asarray(values, np.float64))  # cells of no surface: unset
         variance = np.nan_to_num(np.asarray(variance, np.float64))
         if values.shape[:2] != (low_h, low_w) or variance.shape[:2] != (low_h, low_w):
             raise ValueError(f"a {values.shape[1]}×{values.shape[0]} gather for a tile of "
                              f"{low_w}×{low_h} cells")
-        sums = self.kinds.get(kind)
         if sums is None:
             sums = self.kinds[kind] = {
                 "values": np.zeros((*self.shape, 4)), "variance": np.zeros((*self.shape, 4)),
-                "lum2": np.zeros(self.shape), "n": np.zeros(self.shape)}
+                "lum2": np.zeros(self.shape), "n": np.zeros(self.shape), "rays": rays}
+        sums["rays"] = rays
         cells, part = inside((x0 // s, y0 // s, low_w, low_h), self.shape[1], self.shape[0])
         sums["values"][cells] += values[part]
         sums["variance"][cells] += variance[part]
         sums["lum2"][cells] += (values[part][..., :3] @ LUMINANCE) ** 2
         sums["n"][cells] += 1.0
-        n = sums["n"][cells][..., None]
-        mean = sums["values"][cells] / n
-        pooled = sums["variance"][cells] / (n * n)
-        if rays <= 1:
-            count = n[..., 0]
-            lum = mean[..., :3] @ LUMINANCE
-            spread = np.maximum(sums["lum2"][cells] / count - lum * lum, 0.0) / \
-                np.maximum(count - 1.0, 1.0)
-            pooled[..., 0] = np.where(count > 1.0, spread, pooled[..., 0])
+        mean, pooled = self._mean(sums, cells)
         # the tile's cells past the image keep their own gather
         values, variance = values.copy(), variance.copy()
         values[part], variance[part] = mean, pooled
         return values.astype(np.float32), variance.astype(np.float32)
+
+    @staticmethod
+    def _mean(sums, cells):
+        """(mean, pooled variance) of the sums at ``cells`` (0 where no sample fell yet)."""
+        n = sums["n"][cells][..., None]
+        safe = np.maximum(n, 1.0)
+        mean = sums["values"][cells] / safe
+        pooled = sums["variance"][cells] / (safe * safe)
+        if sums["rays"] <= 1:  # one ray a sample: its kernel variance is 0, take the spread
+            count = n[..., 0]
+            lum = mean[..., :3] @ LUMINANCE
+            spread = np.maximum(sums["lum2"][cells] / np.maximum(count, 1.0) - lum * lum,
+                                0.0) / np.maximum(count - 1.0, 1.0)
+            pooled[..., 0] = np.where(count > 1.0, spread, pooled[..., 0])
+        return mean, pooled
 
 
 def scale_nearest(image, width: int, height: int) -> np.ndarray:
