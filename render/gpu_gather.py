@@ -10,6 +10,7 @@ rays. Needs a GPU context.
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import replace
 
@@ -53,7 +54,7 @@ def _denoise_shader():
 
 
 def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: int,
-            iterations: int = 4, fit: bool = True):
+            iterations: int = 4, fit: bool = True, holes: bool = False):
     """``iterations`` passes of the à-trous filter over the low-resolution ``values`` (light rgb,
     AO) and ``variance`` textures whose cells trace the pixels ``traced_pixel`` picks in the
     ``width`` × ``height`` G-buffer; returns the filtered (values, variance) textures. fit :
@@ -67,7 +68,8 @@ def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: i
         for name in _DENOISE_SAMPLERS:
             shader.uniform_sampler(name, inputs[name])
         shader.uniform_float("grid", (float(stride), float(width), float(height), float(1 << it)))
-        shader.uniform_float("options", (1.0 if fit else 0.0, 0.0, 0.0, 0.0))
+        spread = float(os.environ.get("VOXGI_SPREAD", "1")) if (it == 0 and holes) else 1.0
+        shader.uniform_float("options", (1.0 if fit else 0.0, spread, 0.0, 0.0))
         shader.image("out_image", out[0])
         shader.image("out_variance", out[1])
         gpu.compute.dispatch(shader, math.ceil(values.width / LOCAL_SIZE),

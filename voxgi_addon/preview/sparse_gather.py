@@ -21,7 +21,7 @@ from dataclasses import replace
 
 import numpy as np
 
-__all__ = ["MATCH", "SPARSE_RAYS", "sparse_plan", "sparse_settings"]
+__all__ = ["EXTRA", "MATCH", "SPARSE_RAYS", "noisy_holes", "sparse_plan", "sparse_settings"]
 
 # Rays per traced point, as a multiple of the gather's (docs/gi_pipeline.md "Gathers at fewer
 # points": against the same rays per point, twice them took the test scenes' error back to
@@ -72,6 +72,32 @@ def sparse_plan(valid: np.ndarray, position: np.ndarray, normal: np.ndarray) -> 
         matched += np.where(there, share * facing * np.exp(-(plane / tol) ** 2), 0.0)
         present += share * there
     return base | (valid & (matched < MATCH * present))
+
+
+# The second list's size, as a fraction of the grid's valid cells
+EXTRA = float(__import__("os").environ.get("VOXGI_EXTRA", "0.05"))
+
+
+def noisy_holes(traced: np.ndarray, valid: np.ndarray, variance: np.ndarray) -> np.ndarray:
+    """(Hl, Wl) bool: the holes to gather too — the ``EXTRA`` × (valid cells) holes whose fill
+    would be noisiest: the variance of the mean of their traced 3 × 3 neighbours, from those
+    neighbours' ``variance`` (Hl, Wl) (of their light's luminance mean). Ties go to the first
+    in row-major order."""
+    traced = np.asarray(traced, bool)
+    var = np.where(traced, np.asarray(variance, np.float64), 0.0)
+    total = np.zeros(var.shape)
+    count = np.zeros(var.shape)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            total += _shifted(var, dr, dc)
+            count += _shifted(traced, dr, dc, False)
+    holes = np.asarray(valid, bool) & ~traced & (count > 0)
+    wanted = min(int(EXTRA * np.count_nonzero(valid)), int(np.count_nonzero(holes)))
+    out = np.zeros(traced.shape, bool)
+    if wanted > 0:
+        noise = np.where(holes, total / np.maximum(count, 1.0) ** 2, -1.0).ravel()
+        out.ravel()[np.argsort(-noise, kind="stable")[:wanted]] = True
+    return out
 
 
 def sparse_settings(settings):
