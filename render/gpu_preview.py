@@ -432,11 +432,10 @@ def _sparse(f) -> bool:
 
 def _sparse_diffuse(f):
     """The diffuse gather over the cells ``preview.sparse_gather.sparse_plan`` picks from the
-    read-back G-buffer (a list, ``_compact``: each point draws its pixel's samples, with the
-    rays of ``sparse_settings``), read back
-    into the grid, the other cells holes that the à-trous filter's first pass fills
-    (``denoise.glsl``, as the numpy tracer's ``gather_gi``)."""
-    scene, settings, centre = f["scene"], f["gather_settings"], f["centre"]
+    read-back G-buffer, then over the holes ``noisy_holes`` picks from the first list's
+    variances (``_gather_cells``), the other cells holes that the à-trous filter's first pass
+    fills (``denoise.glsl``, as the numpy tracer's ``gather_gi``)."""
+    settings, centre = f["gather_settings"], f["centre"]
     stride, width, height, seen = f["gi_stride"], f["width"], f["height"], f["seen"]
     rows, cols = sample_pixels(height, width, stride)
     valid = seen["hit"][rows][:, cols]

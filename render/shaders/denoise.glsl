@@ -9,7 +9,8 @@
  * Variances are filtered with squared weights (the fit's own weights). A cell whose prefiltered standard error is
  * within NOISE_TARGET of its value is settled: kept as it is (denoise.py NOISE_TARGET).
  * grid = (stride, full width, full height, tap step); low-resolution rows count from the bottom;
- * options.x = 1: the local linear fit, 0: the weighted mean.
+ * options.x = 1: the local linear fit, 0: the weighted mean; options.y: the kernel stretched over
+ * that many times its width (2 in the first pass over a grid with holes: denoise.py HOLE_SPREAD).
  * A cell whose low_variance.z is 1 is a hole (the sparse gather left it out: denoise.py
  * atrous_filter(holes=…)): no tap, never settled, its taps weighed by geometry alone (it has
  * no light of its own to compare); the pass writes its fit and variance.z = 0. */
