@@ -184,7 +184,7 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
     for it in range(iterations):
         step = 1 << it
         # the first pass over a grid with holes spans the traced lattice's spacing
-        spread = HOLE_SPREAD if it == 0 and hole.any() else 1
+        stretch = HOLE_SPREAD if it == 0 and hole.any() else 1
         signal = np.stack([v[..., :3] @ LUMINANCE, v[..., 3]], axis=-1)
         sampled = ok & ~hole  # the taps (a hole is none until the first pass fills it)
         blurred = _blurred(var, sampled)
@@ -195,8 +195,8 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
         spread = np.zeros(var.shape + (6,))      # the same moments of w²·var_q
         light = np.zeros(var.shape[:2] + (3, 3))  # Σ w·(1, s, u)·rgb_q
         scalar = np.zeros(var.shape[:2] + (3,))   # Σ w·(1, s, u)·scalar_q
-        taps = _kernel(spread)
-        reach = 2 * spread
+        taps = _kernel(stretch)
+        reach = 2 * stretch
         for a, ky in enumerate(taps):
             for b_, kx in enumerate(taps):
                 dy, dx = (a - reach) * step, (b_ - reach) * step
@@ -213,8 +213,8 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
                 scale = sigma_luminance * np.sqrt(np.maximum(blurred + q_var, 0.0)) + _EPSILON
                 w = geometry[..., None] * np.where(hole[..., None], 1.0,
                                                    np.exp(-np.abs(q_signal - signal) / scale))
-                s = np.full(var.shape[:2], (b_ - reach) / spread)  # the tap's place in the window
-                u = np.full(var.shape[:2], (a - reach) / spread)
+                s = np.full(var.shape[:2], (b_ - reach) / stretch)  # the tap's place in the window
+                u = np.full(var.shape[:2], (a - reach) / stretch)
                 x = np.stack([np.ones_like(s), s, u], axis=-1)  # (H, W, 3)
                 quad = np.stack([x[..., 0], s, u, s * s, s * u, u * u], axis=-1)  # (H, W, 6)
                 moments += w[..., None] * quad[..., None, :]
