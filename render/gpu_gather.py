@@ -26,7 +26,7 @@ from ..voxgi_addon.gi.radiance_cache import (
     triangles_key,
     with_faces,
 )
-from ..voxgi_addon.preview.denoise import NOISE_TARGET, RIDGE
+from ..voxgi_addon.preview.denoise import HOLE_SPREAD, NOISE_TARGET, RIDGE
 from ..voxgi_addon.preview.gather import cache_settings
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE, low_shape
@@ -53,11 +53,13 @@ def _denoise_shader():
 
 
 def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: int,
-            iterations: int = 4, fit: bool = True):
+            iterations: int = 4, fit: bool = True, holes: bool = False):
     """``iterations`` passes of the à-trous filter over the low-resolution ``values`` (light rgb,
     AO) and ``variance`` textures whose cells trace the pixels ``traced_pixel`` picks in the
     ``width`` × ``height`` G-buffer; returns the filtered (values, variance) textures. fit :
-    the local linear fit, else the weighted mean (``preview.denoise.atrous_filter``'s)."""
+    the local linear fit, else the weighted mean (``preview.denoise.atrous_filter``'s). holes :
+    the values have holes (the sparse gather's): the first pass's kernel stretched over
+    ``HOLE_SPREAD`` × its width, as numpy's."""
     shader = _denoise_shader()
     for it in range(iterations):
         out = [gpu.types.GPUTexture((values.width, values.height), format="RGBA32F")
@@ -67,7 +69,8 @@ def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: i
         for name in _DENOISE_SAMPLERS:
             shader.uniform_sampler(name, inputs[name])
         shader.uniform_float("grid", (float(stride), float(width), float(height), float(1 << it)))
-        shader.uniform_float("options", (1.0 if fit else 0.0, 0.0, 0.0, 0.0))
+        spread = float(HOLE_SPREAD) if it == 0 and holes else 1.0  # (denoise.py HOLE_SPREAD)
+        shader.uniform_float("options", (1.0 if fit else 0.0, spread, 0.0, 0.0))
         shader.image("out_image", out[0])
         shader.image("out_variance", out[1])
         gpu.compute.dispatch(shader, math.ceil(values.width / LOCAL_SIZE),

@@ -36,7 +36,7 @@ from ..voxgi_addon.preview.passes import (
     subpixel_passes,
     subpixel_reach,
 )
-from ..voxgi_addon.preview.sparse_gather import sparse_plan, sparse_settings
+from ..voxgi_addon.preview.sparse_gather import noisy_holes, sparse_plan, sparse_settings
 from ..voxgi_addon.preview.upsample import low_shape, sample_pixels
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame
 from ..voxgi_addon.scene.glass import is_glass
@@ -439,34 +439,45 @@ def _sparse(f) -> bool:
 
 def _sparse_diffuse(f):
     """The diffuse gather over the cells ``preview.sparse_gather.sparse_plan`` picks from the
-    read-back G-buffer (a list, ``_compact``: each point draws its pixel's samples, with the
-    rays of ``sparse_settings``), read back
-    into the grid, the other cells holes that the à-trous filter's first pass fills
-    (``denoise.glsl``, as the numpy tracer's ``gather_gi``)."""
-    scene, settings, centre = f["scene"], f["gather_settings"], f["centre"]
+    read-back G-buffer, then over the holes ``noisy_holes`` picks from the first list's
+    variances (``_gather_cells``), the other cells holes that the à-trous filter's first pass
+    fills (``denoise.glsl``, as the numpy tracer's ``gather_gi``)."""
+    settings, centre = f["gather_settings"], f["centre"]
     stride, width, height, seen = f["gi_stride"], f["width"], f["height"], f["seen"]
     rows, cols = sample_pixels(height, width, stride)
     valid = seen["hit"][rows][:, cols]
     cell_p = seen["position"][rows][:, cols] - VIEW_BACKOFF * seen["direction"][rows][:, cols]
     traced = sparse_plan(valid, cell_p, seen["normal"][rows][:, cols])
-    traced_rows, traced_cols = np.nonzero(traced)
-    if len(traced_rows) == 0:  # nothing seen: the dense gather writes its zeros
+    if not traced.any():  # nothing seen: the dense gather writes its zeros
         return _low(f, "diffuse")
-    listed = rows[traced_rows] * width + cols[traced_cols]
-    pixels, size = _pixel_list(listed, width, height)
-    inputs = _compact("aa_list", {**centre.inputs, "pixels": pixels}, size)
-    values, variance = gather(scene.bvh, inputs, scene.lights, scene.principled, scene.emission,
-                              sparse_settings(settings), 1, size[0], size[1],
-                              tables=f["tables"], cache=f["cache"])
-    grid = []
-    for texture in (values, variance):
-        cells = np.zeros(valid.shape + (4,), np.float32)
-        cells[traced] = read_texture(texture).reshape(-1, 4)[:len(listed)]
-        grid.append(cells)
+    grid = [np.zeros(valid.shape + (4,), np.float32) for _ in range(2)]
+    _gather_cells(f, traced, grid)
+    extra = noisy_holes(traced, valid, grid[1][..., 0])
+    if extra.any():
+        _gather_cells(f, extra, grid)
+        traced = traced | extra
     grid[1][..., 2] = valid & ~traced  # the holes the filter's first pass fills (denoise.glsl)
     grid = [float_texture(np.flipud(cells), (cells.shape[1], cells.shape[0])) for cells in grid]
     return denoise(grid[0], grid[1], centre.inputs, stride, width, height,
-                   settings.denoise_iterations, fit=True)[0]
+                   settings.denoise_iterations, fit=True, holes=bool((valid & ~traced).any()))[0]
+
+
+def _gather_cells(f, cells, grid):
+    """The diffuse gather at the grid's ``cells`` (a list, ``_compact``: each point draws its
+    pixel's samples, with the rays of ``sparse_settings``), read back into ``grid`` (values,
+    variance) there."""
+    scene, settings, centre = f["scene"], f["gather_settings"], f["centre"]
+    width, height = f["width"], f["height"]
+    rows, cols = sample_pixels(height, width, f["gi_stride"])
+    cell_rows, cell_cols = np.nonzero(cells)
+    listed = rows[cell_rows] * width + cols[cell_cols]
+    pixels, size = _pixel_list(listed, width, height)
+    inputs = _compact("aa_list", {**centre.inputs, "pixels": pixels}, size)
+    textures = gather(scene.bvh, inputs, scene.lights, scene.principled, scene.emission,
+                      sparse_settings(settings), 1, size[0], size[1],
+                      tables=f["tables"], cache=f["cache"])
+    for cells_of, texture in zip(grid, textures):
+        cells_of[cells] = read_texture(texture).reshape(-1, 4)[:len(listed)]
 
 
 def _glossy_gather(f):

@@ -9,12 +9,21 @@
  * Variances are filtered with squared weights (the fit's own weights). A cell whose prefiltered standard error is
  * within NOISE_TARGET of its value is settled: kept as it is (denoise.py NOISE_TARGET).
  * grid = (stride, full width, full height, tap step); low-resolution rows count from the bottom;
- * options.x = 1: the local linear fit, 0: the weighted mean.
+ * options.x = 1: the local linear fit, 0: the weighted mean; options.y: the kernel stretched over
+ * that many times its width (2 in the first pass over a grid with holes: denoise.py HOLE_SPREAD).
  * A cell whose low_variance.z is 1 is a hole (the sparse gather left it out: denoise.py
  * atrous_filter(holes=…)): no tap, never settled, its taps weighed by geometry alone (it has
  * no light of its own to compare); the pass writes its fit and variance.z = 0. */
 const float KERNEL[5] = float[5](1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0);
 const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
+
+/* KERNEL at t ∈ [−2, 2] taps from the centre, linearly interpolated between its taps */
+float kernel_at(float t)
+{
+  float x = t + 2.0;
+  int i = min(int(floor(x)), 3);
+  return mix(KERNEL[i], KERNEL[i + 1], x - float(i));
+}
 
 void main()
 {
@@ -73,9 +82,11 @@ void main()
   }
   vec3 light0 = vec3(0.0), light1 = vec3(0.0), light2 = vec3(0.0);
   vec3 scalar = vec3(0.0);
-  for (int a = 0; a < 5; a++) {
-    for (int b = 0; b < 5; b++) {
-      ivec2 qc = cell + ivec2(b - 2, a - 2) * step;
+  int spread = int(options.y); /* the kernel stretched over spread × its width (holes: 2) */
+  int reach = 2 * spread;
+  for (int a = -reach; a <= reach; a++) {
+    for (int b = -reach; b <= reach; b++) {
+      ivec2 qc = cell + ivec2(b, a) * step;
       if (qc.x < 0 || qc.y < 0 || qc.x >= low.x || qc.y >= low.y) {
         continue;
       }
@@ -95,12 +106,13 @@ void main()
       float facing = pow(max(dot(n, nq), 0.0), 32.0);
       float plane = abs(dot(n, offset));
       float tol = 0.1 * length(offset) + 1e-4;
-      float geometry = KERNEL[a] * KERNEL[b] * facing * exp(-(plane / tol) * (plane / tol));
+      float geometry = kernel_at(float(a) / float(spread)) * kernel_at(float(b) / float(spread)) *
+                       facing * exp(-(plane / tol) * (plane / tol));
       vec2 scale = 4.0 * sqrt(max(blurred + varq, vec2(0.0))) + 1e-6;
       vec2 w = hole ? vec2(geometry) :
                geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);
-      float s = float(b - 2); /* the tap's place in the window */
-      float u = float(a - 2);
+      float s = float(b) / float(spread); /* the tap's place in the window */
+      float u = float(a) / float(spread);
       float quad[6] = float[6](1.0, s, u, s * s, s * u, u * u);
       for (int k = 0; k < 6; k++) {
         m[k] += w.x * quad[k];

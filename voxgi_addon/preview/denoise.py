@@ -66,6 +66,11 @@ SIGMA_LUMINANCE = 4.0
 NOISE_TARGET = 0.02  # a cell is settled when its mean's standard error is within 2% of it
 RIDGE = 0.25  # the local fit's slope damping, × the taps' mean squared distance
 _EPSILON = 1e-6
+# The first pass over a grid with holes stretches KERNEL over HOLE_SPREAD × its width: the
+# sparse gather traces a lattice of every other cell, so the pass reaches as many traced taps
+# as a dense pass reaches cells, and each hole is filled from the 16-20 traced cells of a
+# 9 × 9 window instead of the 4-6 of a 5 × 5 (docs/gi_pipeline.md "Gathers at fewer points")
+HOLE_SPREAD = 2
 
 
 def _shifted(image: np.ndarray, dy: int, dx: int, fill) -> np.ndarray:
@@ -83,6 +88,12 @@ def _shifted(image: np.ndarray, dy: int, dx: int, fill) -> np.ndarray:
 
 
 GAUSS_3 = np.array([0.25, 0.5, 0.25])
+
+
+def _kernel(spread: int) -> np.ndarray:
+    """KERNEL stretched over ``spread`` × its width: (4 spread + 1,) taps, KERNEL linearly
+    interpolated at (tap − 2 spread) / spread (denoise.glsl ``kernel_at``)."""
+    return np.interp(np.arange(-2 * spread, 2 * spread + 1) / spread, np.arange(-2, 3), KERNEL)
 
 
 def _blurred(variance: np.ndarray, ok: np.ndarray) -> np.ndarray:
@@ -157,6 +168,8 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
     holes : (H, W) bool, valid pixels with no value of their own (the cells the sparse gather
         left out, ``sparse_gather``): the first pass gives them the fit of their taps (no
         tap themselves, their own light not compared), later passes filter them as the rest.
+        With any hole the first pass's kernel is stretched over HOLE_SPREAD × its width
+        (``_kernel``), for every cell.
 
     Returns
     -------
@@ -170,6 +183,8 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
     hole = np.zeros(ok.shape, bool) if holes is None else np.asarray(holes, bool) & ok
     for it in range(iterations):
         step = 1 << it
+        # the first pass over a grid with holes spans the traced lattice's spacing
+        stretch = HOLE_SPREAD if it == 0 and hole.any() else 1
         signal = np.stack([v[..., :3] @ LUMINANCE, v[..., 3]], axis=-1)
         sampled = ok & ~hole  # the taps (a hole is none until the first pass fills it)
         blurred = _blurred(var, sampled)
@@ -180,9 +195,11 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
         spread = np.zeros(var.shape + (6,))      # the same moments of w²·var_q
         light = np.zeros(var.shape[:2] + (3, 3))  # Σ w·(1, s, u)·rgb_q
         scalar = np.zeros(var.shape[:2] + (3,))   # Σ w·(1, s, u)·scalar_q
-        for a, ky in enumerate(KERNEL):
-            for b_, kx in enumerate(KERNEL):
-                dy, dx = (a - 2) * step, (b_ - 2) * step
+        taps = _kernel(stretch)
+        reach = 2 * stretch
+        for a, ky in enumerate(taps):
+            for b_, kx in enumerate(taps):
+                dy, dx = (a - reach) * step, (b_ - reach) * step
                 q_p = _shifted(p, dy, dx, 0.0)
                 q_v = _shifted(v, dy, dx, 0.0)
                 offset = q_p - p
@@ -196,8 +213,8 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
                 scale = sigma_luminance * np.sqrt(np.maximum(blurred + q_var, 0.0)) + _EPSILON
                 w = geometry[..., None] * np.where(hole[..., None], 1.0,
                                                    np.exp(-np.abs(q_signal - signal) / scale))
-                s = np.full(var.shape[:2], float(b_ - 2))  # the tap's place in the window
-                u = np.full(var.shape[:2], float(a - 2))
+                s = np.full(var.shape[:2], (b_ - reach) / stretch)  # the tap's place in the window
+                u = np.full(var.shape[:2], (a - reach) / stretch)
                 x = np.stack([np.ones_like(s), s, u], axis=-1)  # (H, W, 3)
                 quad = np.stack([x[..., 0], s, u, s * s, s * u, u * u], axis=-1)  # (H, W, 6)
                 moments += w[..., None] * quad[..., None, :]

@@ -24,7 +24,7 @@ from ..gi.emitters import emitter_light
 from ..gi.exact_glossy import glossy_indirect, glossy_world_direct
 from ..gi.exact_indirect import indirect_and_ao
 from .denoise import atrous_filter
-from .sparse_gather import sparse_plan, sparse_settings
+from .sparse_gather import noisy_holes, sparse_plan, sparse_settings
 from .upsample import sample_pixels, upsample
 
 
@@ -118,16 +118,26 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     # smooth (sparse_gather), the others filled by the filter's first pass
     traced = sparse_plan(valid, cell_p, cell_n) if settings.sparse else valid
     rays = sparse_settings(settings).rays if settings.sparse else settings.rays
-    ids = (rows[:, None] * width + cols[None, :])[traced]
     values = np.zeros(valid.shape + (4,), np.float32)
     variance = np.zeros(valid.shape + (2,), np.float32)
-    indirect, ao, var = indirect_and_ao(
-        cell_p[traced], cell_n[traced], ids, tris, lights, albedo, emission, rays=rays,
-        ao_distance=settings.ao_distance, seed=settings.seed, world=settings.world,
-        hit_samples=settings.hit_samples, statistics=True, hit_glossy=settings.hit_glossy,
-        cache=radiance_cache(tris, lights, albedo, emission, settings))
-    values[traced] = np.concatenate([indirect, ao[:, None]], axis=1)
-    variance[traced] = var
+    cache = radiance_cache(tris, lights, albedo, emission, settings)
+
+    def trace(cells):
+        ids = (rows[:, None] * width + cols[None, :])[cells]
+        indirect, ao, var = indirect_and_ao(
+            cell_p[cells], cell_n[cells], ids, tris, lights, albedo, emission, rays=rays,
+            ao_distance=settings.ao_distance, seed=settings.seed, world=settings.world,
+            hit_samples=settings.hit_samples, statistics=True, hit_glossy=settings.hit_glossy,
+            cache=cache)
+        values[cells] = np.concatenate([indirect, ao[:, None]], axis=1)
+        variance[cells] = var
+
+    trace(traced)
+    if settings.sparse:  # the second list: the holes whose fill would be noisiest
+        extra = noisy_holes(traced, valid, variance[..., 0])
+        if extra.any():
+            trace(extra)
+            traced = traced | extra
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
                               iterations=settings.denoise_iterations, holes=valid & ~traced)
     if low:
