@@ -398,10 +398,13 @@ def _low(f, kind, kernel="bvh_gather", world_mode=False):
         cache = _empty_like(cache)
     rays = settings.rays if kind.endswith("diffuse") else settings.glossy_rays
     if rays == 0 and f["gather_hook"] is not None:
-        # a viewport sample after the gathering ones: the samples' sums alone
-        # (preview.progressive.sample_settings)
+        # a viewport sample after the gathering ones (preview.progressive.sample_settings):
+        # its gathered light is not added (its gather weight is 0), the world's glossy light,
+        # direct light, is the samples' sums
         low_h, low_w = low_shape(height, width, stride)
         values = variance = scene.zeros(low_w, low_h)
+        if not kind.endswith("world glossy"):
+            return values
     else:
         values, variance = gather(scene.bvh, centre.inputs, scene.lights, scene.principled,
                                   scene.emission, settings, stride, width, height,

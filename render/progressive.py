@@ -65,8 +65,12 @@ LEAST_TILE = 48       # pixels: about the smallest tile side (preview.progressiv
 
 def base_options(settings, width: int, height: int) -> dict:
     """The tracer's options for the viewport's ``width`` × ``height`` image: F12's for that
-    size, point-sampled per slice (the samples' sub-pixel offsets anti-alias it)."""
-    return {**trace_options(settings, width, height), "filter_width": 0.0}
+    size, point-sampled per slice (the samples' sub-pixel offsets anti-alias it), every
+    gather point traced (the samples accumulate the gathers; the sparse plan would read the
+    G-buffer back in a slice's stage)."""
+    options = trace_options(settings, width, height)
+    return {**options, "filter_width": 0.0,
+            "gather_settings": dataclasses.replace(options["gather_settings"], sparse=False)}
 
 
 _sizers: dict[tuple[float, bool, str], SliceSizer] = {}
@@ -353,8 +357,10 @@ class ProgressiveImage:
                 if self.gathers is None:
                     self.gathers = GPUGatherSums(width, height, options["gi_stride"])
                 tile_options["gather_hook"] = gather_hook(self.gathers, rect, gather)
-                # the samples behind the tile's gathers
-                weight = float(min(self.sample + 1, gather_samples(self.target)))
+                # the samples behind the tile's gathers; none after the gathering samples,
+                # which add no gathered light (``sample_settings``)
+                weight = float(self.sample + 1) if self.sample < gather_samples(self.target) \
+                    else 0.0
             passes = yield from traced(camera, rect[2], rect[3], tile_options)
             yield  # the estimate is a stage of its own
             acc.add(rect, passes, gather_weight=weight,
