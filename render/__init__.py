@@ -9,6 +9,7 @@ GPU can be used and falls back to the numpy tracer otherwise.
 from __future__ import annotations
 
 import atexit
+import importlib
 import sys
 
 from ..registration import register_modules, unregister_modules
@@ -33,6 +34,11 @@ def release_gpu_resources() -> None:
 
 def register() -> None:
     register_modules(modules)
+    # The viewport's modules now rather than on a view's first view_update, which they held
+    # 60-65 ms more on the main thread (docs/gi_pipeline.md "Entering Rendered mode"). Only
+    # sys.modules holds them, as after that first call: the engine's globals, which Blender
+    # keeps to its exit, would keep their GPU objects alive past its GPU's teardown.
+    importlib.import_module(f"{__name__}.viewport")
     atexit.unregister(release_gpu_resources)
     atexit.register(release_gpu_resources)
 

@@ -20,7 +20,7 @@ from ..blender.settings import pixel_filter_width
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.preview.film import snapshot_combined
 from ..voxgi_addon.preview.passes import PASS_NAMES
-from . import gpu_context, viewport
+from . import gpu_context
 from .pipeline import render_scene_passes
 
 # Our passes other than Combined → (Blender's view-layer toggle, channels).
@@ -58,13 +58,13 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
             self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
 
     # The 3D view's Rendered mode (render/viewport.py): plan and run updates on the worker,
-    # trace and draw the view on the GPU. The module is imported with the add-on: imported
-    # on the first view_update it held the main thread 60-65 ms more when a view entered
-    # Rendered mode (docs/gi_pipeline.md "Entering Rendered mode").
+    # trace and draw the view on the GPU. (render.register imports the module beforehand.)
     def view_update(self, context, depsgraph):
+        from . import viewport
         viewport.view_update(self, context, depsgraph)
 
     def view_draw(self, context, depsgraph):
+        from . import viewport
         viewport.view_draw(self, context, depsgraph)
 
     def render(self, depsgraph):
