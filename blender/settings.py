@@ -158,9 +158,9 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
         name="Sparse Gathers",
         description="F12 and Render Preview trace the diffuse indirect light at one gather "
                     "point in four where surfaces are smooth, at every point where they meet "
-                    "and at the 5% of the others whose fill would be noisiest, each with twice "
-                    "the GI Rays; the filter fills the rest (55-75% of the rays; on the test "
-                    "scenes within 3% of every point's error against Cycles, or better). "
+                    "and at the 5% of the others whose fill would be noisiest, each with 1.5 "
+                    "times the GI Rays; the filter fills the rest (about half the rays; on the "
+                    "test scenes within 0-5% of every point's error against Cycles). "
                     "Off: every gather point, GI Rays each",
         default=True,
     )
