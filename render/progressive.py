@@ -190,9 +190,9 @@ class ProgressiveImage:
         return self.sizers[self.sample_kind()]
 
     def sample_kind(self) -> str:
-        """"tile" while the samples trace the gathers, then "lit tile": the later samples
-        trace none (``preview.progressive.sample_settings``), so their tiles take a fraction of
-        the time and are sized by a fit of their own."""
+        """The kind of the sample's tiles: "tile" while the samples trace the gathers, then
+        "lit tile": the later samples trace none (``preview.progressive.sample_settings``), so
+        their tiles take a fraction of the time and are sized by a fit of their own."""
         return "tile" if self.sample < gather_samples(self.target) else "lit tile"
 
     def slice_pixels(self, explore: bool = True) -> int:
@@ -277,8 +277,9 @@ class ProgressiveImage:
                 done.seconds = time.perf_counter() - self.running_started
                 # the sizer fits what one call costs: the slice, or its longest stage
                 staged = self.stage_budget is not None
-                self.sizers["lit tile" if self.running_kind == "lit tile" else "tile"].measured(
-                    done.size[0] * done.size[1], self.longest_stage if staged else done.seconds)
+                sizer = self.sizers.get(self.running_kind, self.sizers["tile"])  # coarse: tile
+                sizer.measured(done.size[0] * done.size[1],
+                               self.longest_stage if staged else done.seconds)
                 self.slices += 1
                 self.elapsed = time.perf_counter() - self.started
                 self.last = done

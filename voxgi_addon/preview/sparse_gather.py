@@ -11,9 +11,10 @@ one. The cells left out lend their rays to the traced ones: a traced point draws
 ``SPARSE_RAYS`` × the gather's rays (``sparse_settings``). After the first list a second one
 (``noisy_holes``) traces the ``EXTRA`` × (valid cells) holes whose fill would carry the most
 noise, so the rays go where the image would show it; in all the gather traces about half a
-dense gather's rays on the test scenes (0.49–0.56). Both tracers plan with ``sparse_plan`` and ``noisy_holes``
-and trace with ``sparse_settings``, so they trace the same points with the same sample ids and
-agree (the second list's ranking reads each tracer's own variances: equal to float32 rounding).
+dense gather's rays on the test scenes (0.49–0.56). Both tracers plan with ``sparse_plan`` and
+``noisy_holes`` and trace with ``sparse_settings``, so where their G-buffers agree they trace
+the same points with the same sample ids; each plans on its own (the GPU's raster, numpy's ray
+cast), and a borderline cell one traces and the other fills differs by its noise.
 
 Numpy only.
 """
