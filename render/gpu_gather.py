@@ -305,18 +305,33 @@ def cache_texture(bvh: GPUBVH, lights, principled, emission, settings, tables=No
 TRAVERSALS_PER_DISPATCH = 32
 
 
-def rays_per_dispatch(light_count: int, hit_samples: int = 1) -> int:
+def rays_per_dispatch(light_count: int, hit_samples: int = 1,
+                      traversals: int = TRAVERSALS_PER_DISPATCH) -> int:
     """Bounce rays per gather dispatch: each ray traverses the BVH once and, at its hit, once
-    per light and shadow sample (``TRAVERSALS_PER_DISPATCH``)."""
+    per light and shadow sample, ``traversals`` in all (at most ``TRAVERSALS_PER_DISPATCH``)."""
     per_ray = 1 + max(light_count, 1) * strata_side(hit_samples) ** 2
-    return max(1, TRAVERSALS_PER_DISPATCH // per_ray)
+    return max(1, min(traversals, TRAVERSALS_PER_DISPATCH) // per_ray)
 
 
-def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, stride: int,
-           width: int, height: int, kernel: str = "bvh_gather", world_mode: bool = False,
-           tables=None, cache=None):
-    """The raw gather: (values, variance) RGBA32F textures of the low-resolution grid, the
-    rays split over dispatches of ``rays_per_dispatch``. kernel : "bvh_gather" (Diffuse
+def gather(*args, **kwargs):
+    """``gather_steps`` run to its end: the raw gather's (values, variance) textures."""
+    steps = gather_steps(*args, **kwargs)
+    while True:
+        try:
+            next(steps)
+        except StopIteration as end:
+            return end.value
+
+
+def gather_steps(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings,
+                 stride: int, width: int, height: int, kernel: str = "bvh_gather",
+                 world_mode: bool = False, tables=None, cache=None,
+                 traversals: int = TRAVERSALS_PER_DISPATCH):
+    """The raw gather, a generator yielding between its dispatches and returning (values,
+    variance) RGBA32F textures of the low-resolution grid: the rays split over dispatches of
+    ``rays_per_dispatch`` (``traversals`` per invocation at most: the viewport's slices take
+    fewer, so that a dispatch over a larger tile stays within a stage's budget; the same rays
+    whatever the split). kernel : "bvh_gather" (Diffuse
     Indirect and AO, ``settings.rays``) or "bvh_glossy" (Glossy Indirect,
     ``settings.glossy_rays``).
     principled : (base, params) of ``preview.passes.principled_table``;
@@ -350,8 +365,10 @@ def gather(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings, 
     # at a bounce hit the emitters draw one shadow ray per stratum, like a lamp (their plain
     # estimate, emitters.EmitterLight.exact = False), the world two (one per technique)
     worlds = sum(light.type == "WORLD" for light in lights)
-    step = rays_per_dispatch(len(lights) + worlds, settings.hit_samples)
+    step = rays_per_dispatch(len(lights) + worlds, settings.hit_samples, traversals)
     for first in range(0, max(last, 1), step):
+        if first > 0:
+            yield
         partial = dispatch_bvh(kernel, {
             **inputs, "partial_image": partial[0], "partial_variance": partial[1]}, low_w, low_h, {
             "sampling": (settings.seed, rays, settings.ao_distance,

@@ -54,8 +54,10 @@ from .gpu_compose import shade_stages
 from .gpu_fast import fast_passes, fast_sums
 from .gpu_gather import (
     cache_texture,
+    TRAVERSALS_PER_DISPATCH,
     denoise,
     gather,
+    gather_steps,
     upsample,
     upsample_field,
     upsample_field_list,
@@ -90,7 +92,8 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                          gpu_scene: GPUScene | None = None, gather_hook=None, raster=None,
                          cache_source=None, on_gpu: bool = False, batch=None,
                          world_glossy: bool = True, lamp_glossy: bool = True,
-                         denoise: bool = True, centre=None):
+                         denoise: bool = True, centre=None,
+                         traversals: int = TRAVERSALS_PER_DISPATCH):
     """A generator that yields between the GPU stages (G-buffer, each gather, each light's
     direct light, each sub-pixel pass, …) and returns (passes, timings) like
     ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
@@ -128,6 +131,9 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     centre : Accurate: the pixel centres' ``gbuffer.GBuffer`` of this camera and size drawn
     already with the scene's batch, textures and Filter Size (the viewport's quick image's,
     which is its first coarse image's: ``viewport_prepare``); None: drawn here.
+    traversals : Accurate: BVH traversals one gather invocation makes per dispatch
+    (``gpu_gather.gather_steps``, which yields between them): the viewport's slices take
+    fewer, so a larger tile's gather is several steps within a stage's budget.
     The viewport's slices run the stages over several draws (``progressive``); the textures
     live in the generator between them, so nothing but its own next stage runs in a draw."""
     check_request(snapshot, width, height, gi_stride, quality)
@@ -147,7 +153,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                                                      cache_source, on_gpu=on_gpu, batch=batch,
                                                      world_glossy=world_glossy,
                                                      lamp_glossy=lamp_glossy, denoise=denoise,
-                                                     centre=centre)
+                                                     centre=centre, traversals=traversals)
         if scene.uploaded:  # rebuilt and uploaded only what changed
             timings = {"scene build + upload": built, **timings}
         glass = transmission.glass_materials(snapshot, scene.tris)
@@ -163,7 +169,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
             snapshot, *layer, hook, raster, cache_source,
             camera_tris=transmission.behind_glass(scene.tris, glass),
             only=transmission.behind_pixels(weight), world_glossy=world_glossy,
-            lamp_glossy=lamp_glossy, denoise=denoise)
+            lamp_glossy=lamp_glossy, denoise=denoise, traversals=traversals)
         world = background(snapshot.world, snapshot.camera, width, height, filter_width)
         timings["behind glass"] = time.perf_counter() - t0
         return transmission.composite(front, behind, weight, world), timings
@@ -295,7 +301,7 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                      glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
                      cache_source=None, camera_tris=None, only=None, on_gpu=False,
                      batch=None, world_glossy=True, lamp_glossy=True, denoise=True,
-                     centre=None):
+                     centre=None, traversals=TRAVERSALS_PER_DISPATCH):
     """Accurate quality on the GPU: ``ACCURATE_STAGES`` run over one layer of the image (the
     front one, or with ``camera_tris`` and ``only`` what glass hides), a generator returning
     (passes, timings) — or, with ``on_gpu`` and no edge pixels (point-sampled), (``GPUSums``
@@ -314,7 +320,7 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                "filter_width": filter_width, "gather_hook": gather_hook, "raster": raster,
                "cache_source": cache_source, "camera_tris": camera_tris, "only": only,
                "on_gpu": on_gpu, "batch": batch, "world_glossy": world_glossy,
-               "lamp_glossy": lamp_glossy, "denoise": denoise,
+               "lamp_glossy": lamp_glossy, "denoise": denoise, "traversals": traversals,
                # a given centre G-buffer is the front layer's (no glass pixels left out)
                "given_centre": centre if camera_tris is None and only is None else None}
     frame = yield from run_stages(ACCURATE_STAGES, Frame(request, given=set(request)))
@@ -406,10 +412,11 @@ def _low(f, kind, kernel="bvh_gather", world_mode=False):
         if not kind.endswith("world glossy"):
             return values
     else:
-        values, variance = gather(scene.bvh, centre.inputs, scene.lights, scene.principled,
-                                  scene.emission, settings, stride, width, height,
-                                  kernel=kernel, world_mode=world_mode, tables=f["tables"],
-                                  cache=cache)
+        values, variance = yield from gather_steps(
+            scene.bvh, centre.inputs, scene.lights, scene.principled, scene.emission, settings,
+            stride, width, height, kernel=kernel, world_mode=world_mode, tables=f["tables"],
+            cache=cache, traversals=f["traversals"])
+        yield  # the filter is a step of its own
     if f["gather_hook"] is not None:
         values, variance = f["gather_hook"](kind, values, variance)
     if not f["denoise"]:  # (raw: the filter's kernel not even bound)
@@ -431,8 +438,8 @@ def _diffuse_gather(f):
     four where the light is smooth and at the cells where it is not (``_sparse_diffuse``), or
     — the viewport's accumulated slices, or ``sparse`` off — at every cell."""
     if _sparse(f):
-        return {"low_diffuse": _sparse_diffuse(f)}
-    return {"low_diffuse": _low(f, "diffuse")}
+        return {"low_diffuse": (yield from _sparse_diffuse(f))}
+    return {"low_diffuse": (yield from _low(f, "diffuse"))}
 
 
 def _sparse(f) -> bool:
@@ -452,7 +459,7 @@ def _sparse_diffuse(f):
     cell_p = seen["position"][rows][:, cols] - VIEW_BACKOFF * seen["direction"][rows][:, cols]
     traced = sparse_plan(valid, cell_p, seen["normal"][rows][:, cols])
     if not traced.any():  # nothing seen: the dense gather writes its zeros
-        return _low(f, "diffuse")
+        return (yield from _low(f, "diffuse"))
     grid = [np.zeros(valid.shape + (4,), np.float32) for _ in range(2)]
     _gather_cells(f, traced, grid)
     extra = noisy_holes(traced, valid, grid[1][..., 0])
@@ -485,7 +492,7 @@ def _gather_cells(f, cells, grid):
 
 def _glossy_gather(f):
     """Glossy Indirect at the gather points (``bvh_glossy``), filtered."""
-    return {"low_glossy": _low(f, "glossy", "bvh_glossy")}
+    return {"low_glossy": (yield from _low(f, "glossy", "bvh_glossy"))}
 
 
 def _upsample(f):
@@ -505,7 +512,7 @@ def _with_world_glossy(f) -> bool:
 def _world_glossy(f):
     """Glossy Direct of the world and emitters (``bvh_glossy`` in world mode), at the gather
     points and upsampled."""
-    low = _low(f, "world glossy", "bvh_glossy", world_mode=True)
+    low = yield from _low(f, "world glossy", "bvh_glossy", world_mode=True)
     return {"low_world": low, "glossy_world": upsample(low, f["centre"].inputs, f["gi_stride"],
                                                        f["width"], f["height"])}
 

@@ -39,6 +39,7 @@ from ..blender.settings import cone_settings, trace_options
 from ..voxgi_addon.preview.film import world_along
 from ..voxgi_addon.preview.progressive import (
     SliceSizer,
+    fit_side,
     gather_samples,
     sample_offset,
     sample_settings,
@@ -61,14 +62,20 @@ STAGE_SHARE = 0.5     # of it, what a call's stages run until, and what the long
 # Rendered mode")
 WORK_SHARE = 0.5
 LEAST_TILE = 48       # pixels: about the smallest tile side (preview.progressive.tile_side)
+# BVH traversals a gather invocation makes per dispatch in a slice (F12: 32): the gather of a
+# tile is several steps, so the longest stage is no longer the gather's one dispatch and the
+# tiles grow (docs/gi_pipeline.md "Viewport samples whose gathers end early")
+SLICE_TRAVERSALS = 8
 
 
 def base_options(settings, width: int, height: int) -> dict:
     """The tracer's options for the viewport's ``width`` × ``height`` image: F12's for that
     size, point-sampled per slice (the samples' sub-pixel offsets anti-alias it), every
     gather point traced (the samples accumulate the gathers; the sparse plan would read the
-    G-buffer back in a slice's stage)."""
+    G-buffer back in a slice's stage), the gathers' rays in steps of ``SLICE_TRAVERSALS``."""
     options = trace_options(settings, width, height)
+    if options["quality"] == "ACCURATE":
+        options["traversals"] = SLICE_TRAVERSALS
     return {**options, "filter_width": 0.0,
             "gather_settings": dataclasses.replace(options["gather_settings"], sparse=False)}
 
@@ -226,7 +233,8 @@ class ProgressiveImage:
         k = self.sample
         shift = ((k * 5 % 8) * tile_w // 8 // stride * stride if tile_w < acc.width else 0,
                  (k * 3 % 8) * tile_h // 8 // stride * stride if tile_h < acc.height else 0)
-        self.tiles = tile_grid(acc.width, acc.height, tile_w, tile_h, shift)
+        self.tiles = tile_grid(acc.width, acc.height, tile_w, tile_h, shift,
+                               trim=lambda n: fit_side(n, LOCAL_SIZE * stride, stride))
         self.tile_count = len(self.tiles)
 
     # ------------------------------------------------------------------ tracing

@@ -217,6 +217,15 @@ class ViewportRenderer:
             self.cache.advance()
             self.timings = {"radiance cache stage": time.perf_counter() - t0}
             return "Refining"
+        if settings.quality == "ACCURATE" and not progressive.coarse_pending \
+                and self.cache.building is not None and not self.cache.hold \
+                and self.cache.advance_first():
+            # a new radiance cache is being built and its completion restarts Accurate's
+            # image: tiles traced before it would be dropped, so its chunks go first, one a
+            # draw (docs/gi_pipeline.md "Viewport samples whose gathers end early"; Fast's
+            # image waits for the worker's bounced voxels after it, and converges meanwhile)
+            self.timings = {"radiance cache stage": time.perf_counter() - t0}
+            return "Refining"
         if not progressive.coarse_pending:
             # the tiles' and the radiance cache's kernels, one per draw before they are used
             # (all at once without a budget: the tests' whole slices)

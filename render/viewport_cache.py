@@ -131,6 +131,14 @@ class ViewportCache:
             raise
         return False
 
+    def advance_first(self) -> bool:
+        """``advance`` the build under way ahead of the tiles: whether a chunk ran (False while
+        its layout is being made: the tiles go on meanwhile)."""
+        if self.building is None or (self.building[1] is None and not self._start()):
+            return False
+        self.advance()
+        return True
+
     @property
     def cache(self):
         """The last complete cache as a ``RadianceCache`` (Fast's voxels reflect it): its

@@ -77,7 +77,7 @@ def draw_until_converged(engine, scene, depsgraph, view, window, dispatches, lim
     (render/viewport_prepare.py: the scene, the vertex batch, the kernels, a step a draw when
     staged) and the first slice's stages — may leave it blank."""
     draws = []
-    for _ in range(400):
+    for _ in range(2000):
         redraws = engine.redraws
         image = engine_view(engine, scene, depsgraph, view, window)
         draws.append((image, dispatches.take_groups(), dispatches.take()))

@@ -73,6 +73,28 @@ def test_the_tiles_cover_every_pixel_once_and_have_one_size(shift):
     assert (cover == 1).all()
 
 
+@pytest.mark.parametrize("shift", [(0, 0), (5, 3), (48, 40), (31, 1)])
+def test_trimmed_tiles_cover_every_pixel_once_and_trace_little_past_the_image(shift):
+    """A 160 × 120 view in 56 × 48 tiles (the viewport's kind: multiples of 8 that are no
+    power of two): the border tiles trace their pixels inside the image and at most 15 more
+    per side (the least side, 24, at most), not a whole tile past it."""
+    from voxgi.voxgi_addon.preview.progressive import fit_side, inside
+
+    tiles = tile_grid(160, 120, 56, 48, shift, trim=lambda n: fit_side(n, 8, 1))
+    cover = np.zeros((120, 160), int)
+    for rect in tiles:
+        window, part = inside(rect, 160, 120)
+        cover[window] += 1
+        w, h = rect[2:]
+        assert w % 8 == 0 and h % 8 == 0 and w & (w - 1) and h & (h - 1), rect
+        # (the least such side is 24)
+        assert 0 < cover[window].shape[1] <= w < max(24, cover[window].shape[1]) + 16, rect
+        assert 0 < cover[window].shape[0] <= h < max(24, cover[window].shape[0]) + 16, rect
+    assert (cover == 1).all()
+    untrimmed = tile_grid(160, 120, 56, 48, shift)
+    assert sum(w * h for *_, w, h in tiles) < sum(w * h for *_, w, h in untrimmed)
+
+
 def test_tile_shapes_hold_whole_work_groups_of_one_texture_kind():
     def power_of_two(n):
         return n & (n - 1) == 0

@@ -154,17 +154,34 @@ def inside(rect, width: int, height: int):
     return (np.s_[iy0:iy1, ix0:ix1], np.s_[iy0 - y0:iy1 - y0, ix0 - x0:ix1 - x0])
 
 
-def tile_grid(width: int, height: int, tile_w: int, tile_h: int, shift=(0, 0)):
+def tile_grid(width: int, height: int, tile_w: int, tile_h: int, shift=(0, 0), trim=None):
     """[(x0, y0, w, h)] tiles covering the ``width`` × ``height`` image once each, row by row
     from the top: a grid of ``tile_w`` × ``tile_h`` tiles whose lines are moved by ``shift``
-    pixels. Every tile has that size — the border tiles reach past the image (their pixels
-    there are traced and dropped): on llvmpipe a texture size of another kind (a power of two
-    or not) compiles the kernels anew, seconds each (``tile_shape``)."""
+    pixels. The border tiles reach past the image (their pixels there are traced and
+    dropped). trim : None, every tile that size; else ``trim(n)`` → the side a border tile
+    traces for its n pixels inside the image (``fit_side``: of the kind every tile's textures
+    have, since on llvmpipe a texture size of another kind — a power of two or not — compiles
+    the kernels anew, seconds each), the tile reaching past the image's border alone: a tile
+    of a grid moved by a fraction of a tile, or of tiles that do not divide the image, traced
+    its whole size beyond the border (a 160 × 120 image in two 136 × 120 tiles traced 1.7 ×
+    its pixels)."""
     tile_w, tile_h = max(1, tile_w), max(1, tile_h)
     sx, sy = shift[0] % tile_w, shift[1] % tile_h
-    xs = range(sx - tile_w if sx else 0, width, tile_w)
-    ys = range(sy - tile_h if sy else 0, height, tile_h)
-    return [(x0, y0, tile_w, tile_h) for y0 in ys for x0 in xs]
+
+    def spans(size, tile, start):
+        out = []
+        for a in range(start, size, tile):
+            lo, hi = max(a, 0), min(a + tile, size)
+            side = tile if trim is None else min(tile, trim(hi - lo))
+            if a < 0 and hi < size:  # cut by the first border alone: it keeps its far edge
+                out.append((hi - side, side))
+            else:  # its near edge (inside the image unless the whole tile is untrimmed)
+                out.append((a if side == tile else lo, side))
+        return out
+
+    xs = spans(width, tile_w, sx - tile_w if sx else 0)
+    ys = spans(height, tile_h, sy - tile_h if sy else 0)
+    return [(x0, y0, w, h) for y0, h in ys for x0, w in xs]
 
 
 def sample_terms(passes, pass_name: str) -> dict[str, np.ndarray]:
@@ -533,18 +550,30 @@ class SliceSizer:
         return int(max(min(self.least, most), min(most, pixels)))
 
 
+def _allowed(side: int, stride: int) -> bool:
+    """A tile side whose textures are of every tile's kind: no power of two, in pixels nor in
+    gather cells (pixels / stride)."""
+    cells = side // stride
+    return side & (side - 1) != 0 and cells & (cells - 1) != 0
+
+
 def tile_side(target: float, multiple: int, stride: int) -> int:
     """The allowed tile side nearest ``target`` (at least the smallest): a multiple of
     ``multiple`` that is no power of two, in pixels nor in gather cells (pixels / stride), so
     every tile's textures are of one kind (llvmpipe compiles a kernel variant per
     power-of-two-ness of its textures' sizes: 5–20 s each for the BVH kernels under load)."""
-    def allowed(side):
-        cells = side // stride
-        return side & (side - 1) != 0 and cells & (cells - 1) != 0
-
     sides = [k * multiple for k in range(1, max(4, int(target // multiple) + 3))
-             if allowed(k * multiple)]
+             if _allowed(k * multiple, stride)]
     return min(sides, key=lambda side: (abs(side - target), side))
+
+
+def fit_side(pixels: int, multiple: int, stride: int) -> int:
+    """The least allowed tile side (``tile_side``'s kind) holding ``pixels`` pixels: what a
+    tile cut by the image's border traces (``tile_grid``'s trim)."""
+    side = max(multiple, -(-pixels // multiple) * multiple)
+    while not _allowed(side, stride):
+        side += multiple
+    return side
 
 
 def tile_shape(pixels: int, width: int, height: int, multiple: int = 1,
