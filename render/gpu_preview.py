@@ -53,8 +53,8 @@ from .gpu_compose import run as _run
 from .gpu_compose import shade_stages
 from .gpu_fast import fast_passes, fast_sums
 from .gpu_gather import (
-    cache_texture,
     TRAVERSALS_PER_DISPATCH,
+    cache_texture,
     denoise,
     gather,
     gather_steps,
