@@ -713,7 +713,7 @@ def _read_back(f):
     plan = f["plan"]
     reach = subpixel_reach(plan)
     read = {name: np.flipud(read_texture(texture)) for name, texture in sums.items()}
-    texel = {name: image.reshape(-1, 4).astype(np.float64) for name, image in read.items()}
+    texel = {name: image.reshape(-1, 4) for name, image in read.items()}  # float32 copies
     if reach:
         lamp_g = np.flipud(read_texture(lamps["sum_g"])) if "sum_g" in lamps else read["sum_g"]
         lamp_f = np.flipud(read_texture(lamps["sum_f"])) if "sum_f" in lamps else read["sum_f"]
