@@ -71,6 +71,11 @@ void main()
   blurred = blur_weight > 0.0 ? blurred / blur_weight : centre_var.xy;
   bvec2 settled = lessThanEqual(sqrt(max(blurred, vec2(0.0))), NOISE_TARGET * abs(signal));
   settled = hole ? bvec2(false) : settled;
+  if (all(settled)) { /* both kept as they are: no tap changes them (the loop below skips both) */
+    imageStore(out_image, cell, centre);
+    imageStore(out_variance, cell, vec4(centre_var.xy, 0.0, 0.0));
+    return;
+  }
   /* The local linear fit (denoise.py _fit): per signal the weighted sums of (1, s, u) ⊗ (1,
    * s, u) over the taps, (s, u) the tap's place in the 5 × 5 window, those of w²·var
    * for the variance, and Σ w·(1, s, u)·value. */
