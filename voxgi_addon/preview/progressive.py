@@ -25,6 +25,7 @@ drawing (``render/progressive.py``) splits a full image into *samples* and each 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -104,7 +105,13 @@ def sample_offset(filter_width: float, samples: int, index: int) -> tuple[float,
 
 def sample_tail_weights(filter_width: float, samples: int, index: int) -> np.ndarray:
     """(3, 3) the weights in its neighbours of sample ``index``'s offset (``sample_offset``),
-    ``passes.tail_weights`` over the side × side offsets the samples visit."""
+    ``passes.tail_weights`` over the side × side offsets the samples visit (made once per
+    sample: the viewport asks at every slice)."""
+    return _sample_tail_weights(float(filter_width), int(samples), int(index)).copy()
+
+
+@functools.lru_cache(maxsize=256)
+def _sample_tail_weights(filter_width: float, samples: int, index: int) -> np.ndarray:
     side = max(1, math.ceil(math.sqrt(samples)))
     offsets = filter_offsets(filter_width, side)
     x, y = sample_offset(filter_width, samples, index)

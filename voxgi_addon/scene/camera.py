@@ -13,6 +13,8 @@ pixels' rays alike: the anti-aliased preview renders one pass per ``filter_offse
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from .snapshot import CameraData
@@ -43,7 +45,13 @@ def filter_offsets(width: float = DEFAULT_FILTER_WIDTH, side: int = 4) -> np.nda
     own square (|x|, |y| ≤ ½), so that equal weights average the passes as the filter weights
     the pixel's own area; the filter's tails beyond it are the neighbours' share
     (``preview.passes.filter_passes``). Offset k is stratum (k // side, k % side) in (x, y).
-    width ≤ 0 gives pixel centres."""
+    width ≤ 0 gives pixel centres. (Made once per size and width: the viewport asks for them
+    at every slice.)"""
+    return _filter_offsets(float(width), int(side)).copy()
+
+
+@functools.lru_cache(maxsize=32)
+def _filter_offsets(width: float, side: int) -> np.ndarray:
     u = (np.arange(side) + 0.5) / side
     if width <= 0.0:
         along = np.zeros(side)
