@@ -37,7 +37,7 @@ from ..voxgi_addon.preview.passes import (
     subpixel_reach,
 )
 from ..voxgi_addon.preview.sparse_gather import noisy_holes, sparse_plan, sparse_settings
-from ..voxgi_addon.preview.upsample import low_shape, sample_pixels
+from ..voxgi_addon.preview.upsample import field_stride, low_shape, sample_pixels
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame
 from ..voxgi_addon.scene.glass import is_glass
 from ..voxgi_addon.scene.textures import TEXTURE_TAPS
@@ -251,18 +251,18 @@ def _eye(camera):
     return (*camera_frame(camera)[1], 1.0)
 
 
-def emitter_fields(scene, gbuffer_inputs, gi_stride: int, width: int, height: int, eye):
-    """The emitters' unshadowed glossy light and Diffuse Direct at the gather points — the
-    only place their per-triangle sums are evaluated everywhere (docs/gi_pipeline.md "Where a
-    preview's time goes") — as (low glossy, low diffuse, full glossy, full diffuse) textures:
-    the gather points' (``emitter_glossy_texture(unshadowed=True)``,
-    ``emitters_unshadowed_texture``) and ``upsample_field``'s at every pixel. eye : ``_eye``
-    of the camera."""
+def emitter_fields(scene, gbuffer_inputs, stride: int, width: int, height: int, eye):
+    """The emitters' unshadowed glossy light and Diffuse Direct at the field's points, one
+    per ``stride`` × ``stride`` block (``upsample.field_stride``) — the only place their
+    per-triangle sums are evaluated everywhere (docs/gi_pipeline.md "Where a preview's time
+    goes") — as (low glossy, low diffuse, full glossy, full diffuse) textures: the points'
+    (``emitter_glossy_texture(unshadowed=True)``, ``emitters_unshadowed_texture``) and
+    ``upsample_field``'s at every pixel. eye : ``_eye`` of the camera."""
     bvh = scene.bvh
-    if gi_stride == 1:
+    if stride == 1:
         points = gbuffer_inputs
     else:
-        pixels, size = _gather_list(gi_stride, width, height)
+        pixels, size = _gather_list(stride, width, height)
         points = _compact("aa_list", {**gbuffer_inputs, "pixels": pixels}, size)
         points["gbuffer_base"] = scene.zeros(*size) if not scene.textured else _compact(
             "aa_list_raw", {"gbuffer_position": gbuffer_inputs["gbuffer_base"],
@@ -274,7 +274,7 @@ def emitter_fields(scene, gbuffer_inputs, gi_stride: int, width: int, height: in
     diffuse = emitters_unshadowed_texture(bvh, points, scene.emitters, scene.no_lamp,
                                           scene.world_map)
     return (glossy, diffuse,
-            *upsample_field(glossy, diffuse, gbuffer_inputs, gi_stride, width, height, eye))
+            *upsample_field(glossy, diffuse, gbuffer_inputs, stride, width, height, eye))
 
 
 def _compact(kernel, inputs, size):
@@ -528,10 +528,11 @@ def _has_emitters(f) -> bool:
 
 def _emitter_field(f):
     """The emitters' unshadowed glossy light (exact_glossy.emitters_shine) and Diffuse Direct
-    (emitters.unshadowed_sum) at the gather points, upsampled to every pixel (evaluated where
-    the field does not hold: near the emitters): ``emitter_fields``."""
-    return {"fields": emitter_fields(f["scene"], f["centre"].inputs, f["gi_stride"], f["width"],
-                                     f["height"], _eye(f["snapshot"].camera))}
+    (emitters.unshadowed_sum) at the field's points (``upsample.field_stride``: one per 2 × 2
+    block at least), upsampled to every pixel (evaluated where the field does not hold: near
+    the emitters): ``emitter_fields``."""
+    return {"fields": emitter_fields(f["scene"], f["centre"].inputs, field_stride(f["gi_stride"]),
+                                     f["width"], f["height"], _eye(f["snapshot"].camera))}
 
 
 def _emitter_shine(f):
@@ -678,9 +679,15 @@ def _subpixel_passes(f):
         # the gathered terms, the emitters' glossy light and unshadowed sum: the centre's
         # where this pass sees its surface, else the gathers and the field at the pass's
         # own point (the field evaluated where it does not hold), in one dispatch
+        strides = (gi_stride, field_stride(gi_stride))
+        together = centres is not None and strides[0] == strides[1]
         *terms, field_glossy, field_diffuse = upsample_field_list(
-            *(fields[:2] if centres is not None else (None, None)), centre.inputs, inputs,
+            *(fields[:2] if together else (None, None)), centre.inputs, inputs,
             pixels, list_size, gi_stride, width, height, eye, offset, terms=gathers)
+        if centres is not None and not together:  # the field on its own grid
+            field_glossy, field_diffuse = upsample_field_list(
+                *fields[:2], centre.inputs, inputs, pixels, list_size, strides[1], width,
+                height, eye, offset)
         glow = None
         if centres is not None:
             glow = emitter_glossy_texture(

@@ -49,7 +49,15 @@ from .gather import (
     gather_glossy_world,
     radiance_cache,
 )
-from .upsample import PLANE_TOLERANCE, STRIDES, EmitterField, sample_pixels, upsample, upsample_at
+from .upsample import (
+    PLANE_TOLERANCE,
+    STRIDES,
+    EmitterField,
+    field_stride,
+    sample_pixels,
+    upsample,
+    upsample_at,
+)
 
 PASS_NAMES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color",
               "Glossy Direct", "Glossy Indirect", "Glossy Color", "Ambient Occlusion")
@@ -1025,12 +1033,12 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     centre_glow = np.zeros((height * width, 3))
     centre_unshadowed = np.zeros((height * width, 3))
     if emitters is not None:
-        # the emitters' unshadowed glossy light and Diffuse Direct at the gather points, read
+        # the emitters' unshadowed glossy light and Diffuse Direct at the field's points, read
         # at the centres (evaluated where the field does not hold: near the emitters), the
         # glossy light with each centre's own visible share
         t0 = time.perf_counter()
-        field = emitter_field(snapshot, tris, seen, materials, emitters, gi_stride,
-                              filter_width)
+        field = emitter_field(snapshot, tris, seen, materials, emitters,
+                              field_stride(gi_stride), filter_width)
         glossy_field, glossy_turn, diffuse_field, diffuse_turn = field.at_centres(hit)
         timings["emitters' light field"] = time.perf_counter() - t0
         t0 = time.perf_counter()
