@@ -217,9 +217,10 @@ class ViewportRenderer:
             self.cache.advance()
             self.timings = {"radiance cache stage": time.perf_counter() - t0}
             return "Refining"
+        self.cache.image_key = progressive.key  # (what the slices' cache stages ask for)
         if settings.quality == "ACCURATE" and not progressive.coarse_pending \
                 and self.cache.building is not None and not self.cache.hold \
-                and self.cache.advance_first():
+                and self.cache.advance_first(progressive.key):
             # a new radiance cache is being built and its completion restarts Accurate's
             # image: tiles traced before it would be dropped, so its chunks go first, one a
             # draw (docs/gi_pipeline.md "Viewport samples whose gathers end early"; Fast's

@@ -44,6 +44,10 @@ class ViewportCache:
         # (nor go on) in it, so the image of a change is not held up by the build's first
         # chunk (its layout alone 0.3 s); the tiles after it start the build
         self.hold = False
+        # the viewport's image key while its slices run (set before each), and the one whose
+        # slice last asked for the build under way: ``advance_first`` runs only that build
+        self.image_key = None
+        self.asked = None
 
     def stage(self, bvh, lights, principled, emission, settings, tables=None):
         """A generator of at most one stage (one chunk of the build the current scene needs),
@@ -59,6 +63,7 @@ class ViewportCache:
             self._wanted = (key, (bvh, lights, principled, emission, settings, tables))
             return self.texture
         self._wanted = None
+        self.asked = self.image_key
         if self.building is None or not _same(self.building[0], key):
             if self.building is not None and self.building[1] is not None:
                 self.building[1].close()
@@ -131,10 +136,13 @@ class ViewportCache:
             raise
         return False
 
-    def advance_first(self) -> bool:
-        """``advance`` the build under way ahead of the tiles: whether a chunk ran (False while
-        its layout is being made: the tiles go on meanwhile)."""
-        if self.building is None or (self.building[1] is None and not self._start()):
+    def advance_first(self, image_key) -> bool:
+        """``advance`` the build under way ahead of the tiles of the image ``image_key``:
+        whether a chunk ran — False when no slice of that image asked for this build (the
+        scene may have changed since: the image's next slice says what it needs) or while its
+        layout is being made (the tiles go on meanwhile)."""
+        if self.building is None or self.asked is None or self.asked != image_key or \
+                (self.building[1] is None and not self._start()):
             return False
         self.advance()
         return True

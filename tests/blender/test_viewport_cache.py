@@ -315,3 +315,63 @@ def test_the_first_image_of_a_change_does_not_start_the_new_cache(voxgi):
     assert renderer.cache.building is None and renderer.cache.texture is complete
     engine_view(engine, scene, depsgraph, view, window)
     assert renderer.shown == "Refining" and renderer.cache.building is not None
+
+
+def test_accurate_tiles_wait_for_the_cache_and_a_stale_build_is_not_run(voxgi):
+    """Accurate, Bounces 3: a completed cache restarts the image, so once a tile has asked for
+    a new cache the draws build it a chunk each and trace no tile until it is complete (before,
+    every tile traced meanwhile was dropped); and a build asked for by an image the scene has
+    since left is not run ahead of the tiles: after two quick moves only the last one's cache
+    is completed."""
+    from stand_in_engine import StandInEngine
+    from test_viewport import camera_matrices, cornell, engine_view, gpu_ready
+
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render.viewport import ViewportRenderer
+    from voxgi.voxgi_addon.scene.changes import UpdateRecord
+
+    scene = cornell()
+    scene.voxgi_viewport.resolution_fraction = 1.0
+    scene.voxgi_viewport.samples = 2
+    scene.voxgi_viewport.coarse_first = True
+    scene.voxgi.bounce_source = "MANUAL"
+    scene.voxgi.bounces = 3
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    live.update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    engine = StandInEngine()
+    renderer = engine.voxgi_viewport = ViewportRenderer()
+    renderer.progressive.stage_budget = None  # a whole slice per draw
+    renderer.cache.budget = 0.0  # the build in many chunks
+    tiles_while_building, chunks = 0, 0
+    for _ in range(5000):
+        redraws, traces = engine.redraws, renderer.traces
+        building = renderer.cache.building is not None
+        engine_view(engine, scene, depsgraph, view, window)
+        if building and renderer.cache.generation == 0:
+            chunks += "radiance cache stage" in renderer.timings
+            tiles_while_building += renderer.traces > traces
+        if engine.redraws == redraws:
+            break
+    assert renderer.progressive.converged and renderer.cache.generation == 1
+    print(f"{chunks} chunks ahead of the tiles, {tiles_while_building} tiles meanwhile")
+    assert chunks > 3 and tiles_while_building == 0
+
+    box = bpy.data.objects["Test Box"]
+    scene.voxgi_viewport.coarse_first = False  # a change's first draw traces a tile
+    for step in range(2):  # two moves: the first one's build is left behind by the second
+        box.location.x += 0.1
+        depsgraph.update()
+        live.update(scene, depsgraph, [UpdateRecord("OBJECT", box.name, transform=True,
+                                                    object_type="MESH")])
+        engine_view(engine, scene, depsgraph, view, window)  # a tile asks for its cache
+        assert renderer.cache.building is not None
+    for _ in range(5000):
+        redraws = engine.redraws
+        engine_view(engine, scene, depsgraph, view, window)
+        if engine.redraws == redraws:
+            break
+    assert renderer.progressive.converged
+    assert renderer.cache.generation == 2  # the last move's cache, not the first's as well
