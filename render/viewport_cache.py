@@ -10,7 +10,9 @@ result is the whole build's) — sized to the slice's stage budget from the last
 time. Until it completes the gathers read the last complete cache (bounces that lag an edit,
 as the live engines' caches do), or none (one bounce) before the first; a completed build
 bumps ``generation``, which is part of the viewport's image key, so the image restarts with
-the new cache. The build's CPU half — the cache's voxels, face points and layout
+the new cache — which is why, once a slice of Accurate's image has asked for a build, the
+viewport runs its chunks ahead of the tiles (``advance_first``: tiles traced meanwhile would
+be dropped). The build's CPU half — the cache's voxels, face points and layout
 (``gpu_gather.cache_layout``, 0.15 s of numpy on the demo box, more on larger scenes) — is
 made on the viewport's preparing thread first (``viewport_prepare.PrepWorker``), never in a
 draw (docs/gi_pipeline.md "Entering Rendered mode").
