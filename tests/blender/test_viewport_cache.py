@@ -272,48 +272,77 @@ def test_fast_bounces_are_made_on_the_worker_while_the_view_keeps_its_image(voxg
     assert not any(builds), job
 
 
+class AccurateView:
+    """The Cornell box in an Accurate Rendered view at Bounces 3 (2 samples, full resolution,
+    a whole slice per draw, the coarse first image on), drawn with the stand-in engine."""
+
+    def __init__(self):
+        from stand_in_engine import StandInEngine
+        from test_viewport import camera_matrices, cornell, gpu_ready
+
+        from voxgi.blender.viewport_session import live_gi
+        from voxgi.render.viewport import ViewportRenderer
+
+        self.scene = scene = cornell()
+        scene.voxgi_viewport.resolution_fraction = 1.0
+        scene.voxgi_viewport.samples = 2
+        scene.voxgi_viewport.coarse_first = True
+        scene.voxgi.bounce_source = "MANUAL"
+        scene.voxgi.bounces = 3
+        gpu_ready()
+        self.depsgraph = bpy.context.evaluated_depsgraph_get()
+        self.live = live_gi(scene.name_full)
+        self.live.update(scene, self.depsgraph)
+        self.view, self.window = camera_matrices(scene, self.depsgraph)
+        self.engine = StandInEngine()
+        self.renderer = self.engine.voxgi_viewport = ViewportRenderer()
+        self.renderer.progressive.stage_budget = None  # a whole slice per draw
+
+    def draw(self) -> bool:
+        """One view_draw; whether it asked for another."""
+        from test_viewport import engine_view
+
+        redraws = self.engine.redraws
+        engine_view(self.engine, self.scene, self.depsgraph, self.view, self.window)
+        return self.engine.redraws != redraws
+
+    def draw_until_still(self, each=None) -> None:
+        """Draw until the view stops asking for redraws (``each()`` before every draw returns
+        what to call after it, or None)."""
+        for _ in range(5000):
+            after = each() if each is not None else None
+            more = self.draw()
+            if after is not None:
+                after()
+            if not more:
+                return
+        raise AssertionError("the view never stopped asking for redraws")
+
+    def move_box(self) -> None:
+        from voxgi.voxgi_addon.scene.changes import UpdateRecord
+
+        box = bpy.data.objects["Test Box"]
+        box.location.x += 0.1
+        self.depsgraph.update()
+        self.live.update(self.scene, self.depsgraph, [UpdateRecord(
+            "OBJECT", box.name, transform=True, object_type="MESH")])
+
+
 def test_the_first_image_of_a_change_does_not_start_the_new_cache(voxgi):
     """An object moves under a complete cache (Accurate, Bounces 3): the coarse first image
     of the change reads the last complete cache and starts no build (its first chunk, the
     layout, took 0.3 s of the first image on the demo scene); the tiles after it do."""
-    from stand_in_engine import StandInEngine
-    from test_viewport import camera_matrices, cornell, engine_view, gpu_ready
-
-    from voxgi.blender.viewport_session import live_gi
-    from voxgi.render.viewport import ViewportRenderer
-    from voxgi.voxgi_addon.scene.changes import UpdateRecord
-
-    scene = cornell()
-    scene.voxgi_viewport.resolution_fraction = 1.0
-    scene.voxgi_viewport.samples = 2
-    scene.voxgi_viewport.coarse_first = True
-    scene.voxgi.bounce_source = "MANUAL"
-    scene.voxgi.bounces = 3
-    gpu_ready()
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    live = live_gi(scene.name_full)
-    live.update(scene, depsgraph)
-    view, window = camera_matrices(scene, depsgraph)
-    engine = StandInEngine()
-    renderer = engine.voxgi_viewport = ViewportRenderer()
-    renderer.progressive.stage_budget = None  # a whole slice per draw
-    for _ in range(5000):
-        redraws = engine.redraws
-        engine_view(engine, scene, depsgraph, view, window)
-        if engine.redraws == redraws:
-            break
+    view = AccurateView()
+    renderer = view.renderer
+    view.draw_until_still()
     assert renderer.cache.generation == 1 and renderer.cache.building is None
     complete = renderer.cache.texture
 
-    box = bpy.data.objects["Test Box"]
-    box.location.x += 0.1
-    depsgraph.update()
-    live.update(scene, depsgraph, [UpdateRecord("OBJECT", box.name, transform=True,
-                                                object_type="MESH")])
-    engine_view(engine, scene, depsgraph, view, window)
+    view.move_box()
+    view.draw()
     assert renderer.shown == "Coarse"
     assert renderer.cache.building is None and renderer.cache.texture is complete
-    engine_view(engine, scene, depsgraph, view, window)
+    view.draw()
     assert renderer.shown == "Refining" and renderer.cache.building is not None
 
 
@@ -323,55 +352,30 @@ def test_accurate_tiles_wait_for_the_cache_and_a_stale_build_is_not_run(voxgi):
     every tile traced meanwhile was dropped); and a build asked for by an image the scene has
     since left is not run ahead of the tiles: after two quick moves only the last one's cache
     is completed."""
-    from stand_in_engine import StandInEngine
-    from test_viewport import camera_matrices, cornell, engine_view, gpu_ready
-
-    from voxgi.blender.viewport_session import live_gi
-    from voxgi.render.viewport import ViewportRenderer
-    from voxgi.voxgi_addon.scene.changes import UpdateRecord
-
-    scene = cornell()
-    scene.voxgi_viewport.resolution_fraction = 1.0
-    scene.voxgi_viewport.samples = 2
-    scene.voxgi_viewport.coarse_first = True
-    scene.voxgi.bounce_source = "MANUAL"
-    scene.voxgi.bounces = 3
-    gpu_ready()
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    live = live_gi(scene.name_full)
-    live.update(scene, depsgraph)
-    view, window = camera_matrices(scene, depsgraph)
-    engine = StandInEngine()
-    renderer = engine.voxgi_viewport = ViewportRenderer()
-    renderer.progressive.stage_budget = None  # a whole slice per draw
+    view = AccurateView()
+    renderer = view.renderer
     renderer.cache.budget = 0.0  # the build in many chunks
-    tiles_while_building, chunks = 0, 0
-    for _ in range(5000):
-        redraws, traces = engine.redraws, renderer.traces
-        building = renderer.cache.building is not None
-        engine_view(engine, scene, depsgraph, view, window)
-        if building and renderer.cache.generation == 0:
-            chunks += "radiance cache stage" in renderer.timings
-            tiles_while_building += renderer.traces > traces
-        if engine.redraws == redraws:
-            break
-    assert renderer.progressive.converged and renderer.cache.generation == 1
-    print(f"{chunks} chunks ahead of the tiles, {tiles_while_building} tiles meanwhile")
-    assert chunks > 3 and tiles_while_building == 0
+    counts = {"chunks": 0, "tiles": 0}
 
-    box = bpy.data.objects["Test Box"]
-    scene.voxgi_viewport.coarse_first = False  # a change's first draw traces a tile
-    for step in range(2):  # two moves: the first one's build is left behind by the second
-        box.location.x += 0.1
-        depsgraph.update()
-        live.update(scene, depsgraph, [UpdateRecord("OBJECT", box.name, transform=True,
-                                                    object_type="MESH")])
-        engine_view(engine, scene, depsgraph, view, window)  # a tile asks for its cache
+    def each():
+        traces, building = renderer.traces, renderer.cache.building is not None
+
+        def after():
+            if building and renderer.cache.generation == 0:
+                counts["chunks"] += "radiance cache stage" in renderer.timings
+                counts["tiles"] += renderer.traces > traces
+        return after
+
+    view.draw_until_still(each)
+    assert renderer.progressive.converged and renderer.cache.generation == 1
+    print(f"{counts['chunks']} chunks ahead of the tiles, {counts['tiles']} tiles meanwhile")
+    assert counts["chunks"] > 3 and counts["tiles"] == 0
+
+    view.scene.voxgi_viewport.coarse_first = False  # a change's first draw traces a tile
+    for _ in range(2):  # two moves: the first one's build is left behind by the second
+        view.move_box()
+        view.draw()  # a tile asks for its cache
         assert renderer.cache.building is not None
-    for _ in range(5000):
-        redraws = engine.redraws
-        engine_view(engine, scene, depsgraph, view, window)
-        if engine.redraws == redraws:
-            break
+    view.draw_until_still()
     assert renderer.progressive.converged
     assert renderer.cache.generation == 2  # the last move's cache, not the first's as well
