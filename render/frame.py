@@ -108,3 +108,13 @@ def run(stages, frame: Frame):
         if stage.slice_end:
             yield
     return frame
+
+
+def finish(steps):
+    """Run a generator of steps (a stage list's ``run``, a kernel's dispatches, …) to its end:
+    its return value (F12 and the other one-call renders)."""
+    while True:
+        try:
+            next(steps)
+        except StopIteration as end:
+            return end.value

@@ -30,6 +30,7 @@ from ..voxgi_addon.preview.denoise import HOLE_SPREAD, NOISE_TARGET, RIDGE
 from ..voxgi_addon.preview.gather import cache_settings
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE, low_shape
+from .frame import finish
 from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, scene_light_textures, strata_side
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
@@ -115,13 +116,8 @@ CACHE_STAGE_SECONDS = 0.015  # a chunk of the viewport's staged build (progressi
 def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
     """The radiance cache of ``settings.bounces`` − 1 iterations (``gi.radiance_cache``)
     gathered on the GPU: ``cache_stages`` with every ray in one chunk."""
-    stages = cache_stages(bvh, lights, principled, emission, settings, tables,
-                          budget=math.inf, first_rows=1 << 30)
-    while True:
-        try:
-            next(stages)
-        except StopIteration as end:
-            return end.value
+    return finish(cache_stages(bvh, lights, principled, emission, settings, tables,
+                               budget=math.inf, first_rows=1 << 30))
 
 
 RECORD_WIDTH = 2048  # rays per row of the cache's ray records (cache_paths.glsl)
@@ -315,12 +311,7 @@ def rays_per_dispatch(light_count: int, hit_samples: int = 1,
 
 def gather(*args, **kwargs):
     """``gather_steps`` run to its end: the raw gather's (values, variance) textures."""
-    steps = gather_steps(*args, **kwargs)
-    while True:
-        try:
-            next(steps)
-        except StopIteration as end:
-            return end.value
+    return finish(gather_steps(*args, **kwargs))
 
 
 def gather_steps(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings,

@@ -41,7 +41,7 @@ from ..voxgi_addon.preview.upsample import field_stride, low_shape, sample_pixel
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame
 from ..voxgi_addon.scene.glass import is_glass
 from ..voxgi_addon.scene.textures import TEXTURE_TAPS
-from .frame import Frame, Stage
+from .frame import Frame, Stage, finish
 from .frame import run as run_stages
 from .gbuffer import PixelMask, gbuffer_shader, rasterize, rasterize_stages, read_gbuffer, vertex_batch
 from .gpu_accumulation import SUM_NAMES, GPUSums
@@ -74,13 +74,6 @@ def render_passes_gpu(*args, **kwargs):
     return finish(render_passes_stages(*args, **kwargs))
 
 
-def finish(stages):
-    """Run a ``render_passes_stages`` generator to its end: its result."""
-    while True:
-        try:
-            next(stages)
-        except StopIteration as end:
-            return end.value
 
 
 def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,

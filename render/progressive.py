@@ -449,6 +449,6 @@ def tracer(live, volume, settings, staged: bool = False, raster=None, cache_sour
         return passes
 
     def trace(camera, width, height, options):
-        from .gpu_preview import finish
+        from .frame import finish
         return finish(stages(camera, width, height, options))
     return stages if staged else trace

@@ -556,8 +556,8 @@ def unpack_sums(packed: np.ndarray) -> dict:
 
 def stacked_tails(samples: np.ndarray, weights: np.ndarray, pixels, width: int,
                   height: int) -> np.ndarray:
-    """(H·W, C) of ``samples``' dtype: the neighbours' tails of P sub-pixel passes' samples ``samples`` (P,
-    N, C) at the flat ``pixels`` (N,), pass k weighted by ``weights[k]`` (3, 3)
+    """(H·W, C) of ``samples``' dtype: the neighbours' tails of P sub-pixel passes' samples
+    ``samples`` (P, N, C) at the flat ``pixels`` (N,), pass k weighted by ``weights[k]`` (3, 3)
     (``pass_tail_weights``): pixel p takes Σ_k weights[k][e] × the pass k sample of the pixel
     p + e — ``add_tails`` pass by pass. The tails are linear in the samples, so each
     neighbour's weighted sum over the passes is one matrix product and is scattered once
