@@ -121,13 +121,14 @@ def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
 
 
 RECORD_WIDTH = 2048  # rays per row of the cache's ray records (cache_paths.glsl)
-_RELAX_SAMPLERS = ("face_places", "radiance_cache", "paths_radiance", "paths_pick")
+_RELAX_SAMPLERS = ("face_places", "radiance_cache", "paths_radiance", "paths_pick",
+                   "cache_level")
 
 
 def _relax_shader():
     if "relax" not in _shaders:
         _shaders["relax"] = build_compute(("cache_lookup", "cache_relax"), _RELAX_SAMPLERS,
-                                          ("sampling",), ("out_image",))
+                                          ("sampling", "levels"), ("out_image",))
     return _shaders["relax"]
 
 
@@ -145,7 +146,7 @@ def face_places(cache):
 
 
 def relax_gpu(places, cache_texture, records, rays: int, count: int, out, keep: bool = False,
-              empty: bool = False):
+              empty: bool = False, level=None):
     """One iteration over the ray ``records`` (``cache_paths.glsl``'s two textures):
     ``cache_relax.glsl`` writes into ``out`` each of the ``count`` faces' next value from
     ``cache_texture``, the previous iteration, at its texel (``face_places``) — a dispatch over
@@ -155,12 +156,17 @@ def relax_gpu(places, cache_texture, records, rays: int, count: int, out, keep: 
     iteration, of the second gets the next one, which the glossy gather reads
     (``radiance_cache.glossy_view``). empty : the previous iteration is the empty cache (the
     first iteration; ``cache_texture`` is any of the cache's texels, not read but its
-    header). Nothing is read back or built on the CPU between iterations. Returns ``out``."""
+    header). level : the same iteration's first pass, which the glossy shares of the hits'
+    weights read (``radiance_cache.relax``; None: they read ``cache_texture``). With ``keep``
+    the first part's .a is 1 + the faces' ``radiance_cache.one_more_bounce``. Nothing is read
+    back or built on the CPU between iterations. Returns ``out``."""
     shader = _relax_shader()
     shader.bind()
-    for name, texture in zip(_RELAX_SAMPLERS, (places, cache_texture, *records)):
+    for name, texture in zip(_RELAX_SAMPLERS, (places, cache_texture, *records,
+                                               cache_texture if level is None else level)):
         shader.uniform_sampler(name, texture)
     shader.uniform_float("sampling", (float(rays), float(keep), float(count), float(empty)))
+    shader.uniform_float("levels", (float(level is not None), 0.0, 0.0, 0.0))
     shader.image("out_image", out)
     gpu.compute.dispatch(shader, math.ceil(places.width / LOCAL_SIZE),
                          math.ceil(places.height / LOCAL_SIZE), 1)
@@ -200,13 +206,14 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     voxel face's ``settings.cache_rays`` rays (``face_points``, sample id = the face's row,
     seed 0) are traced and lit once (``cache_paths.glsl``, records ``RECORD_WIDTH`` to a row,
     in chunks of rows that start at ``first_rows`` and are resized to ``budget`` seconds by
-    the last one's time: the viewport's stages, ``viewport_cache``), then each iteration is one
-    lookup pass over the records writing the next cache texture (``relax_gpu``); the faces
+    the last one's time: the viewport's stages, ``viewport_cache``), then each iteration is two
+    lookup passes over the records writing the next cache texture (``relax_gpu``; the
+    second's glossy shares read the first's faces, ``radiance_cache.relax``); the faces
     are read back once, at the end — or, read_back False (the viewport, whose Accurate
     gathers read the texture only), the cache is returned as a function that reads them
     back when called (Fast's voxels reflect the numpy cache). The texture also holds the next
-    iteration, which the glossy gather reads (``radiance_cache.glossy_view``; one more lookup
-    pass, ``relax_gpu(keep=True)``). layout : ``cache_layout`` of the BVH's triangles made
+    iteration, which the glossy gather reads (``radiance_cache.glossy_view``; two more lookup
+    passes, the last ``relax_gpu(keep=True)``). layout : ``cache_layout`` of the BVH's triangles made
     already (None: made here)."""
     cache, points, axes, texels = layout or cache_layout(bvh.scene_triangles, settings)
     count = len(points)
@@ -254,15 +261,24 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     places = face_places(cache)
     yield
     previous = turns[0]  # the empty cache: its texels not read (relax_gpu empty)
+    while len(turns) < 3:
+        turns.append(float_texture(main, (main.shape[1], main.shape[0])))
+    free = [turns[1], turns[2]]
+    # each iteration in two passes: the second's glossy shares read the first's faces
+    # (radiance_cache.relax's ``level``)
     for k in range(settings.bounces - 1):
-        if len(turns) < 2:
-            turns.append(float_texture(main, (main.shape[1], main.shape[0])))
-        previous = relax_gpu(places, previous, records, rays, count, turns[(k + 1) % 2],
-                             empty=k == 0)
+        estimate = relax_gpu(places, previous, records, rays, count, free[0], empty=k == 0)
+        yield
+        previous = relax_gpu(places, previous, records, rays, count, free[1], empty=k == 0,
+                             level=estimate)
+        free = [t for t in turns if t is not previous][:2]
         yield
     both = float_texture(texels, (texels.shape[1], texels.shape[0]))
+    estimate = relax_gpu(places, previous, records, rays, count, free[0],
+                         empty=settings.bounces == 1)
+    yield
     previous = relax_gpu(places, previous, records, rays, count, both, keep=True,
-                         empty=settings.bounces == 1)  # + glossy's
+                         empty=settings.bounces == 1, level=estimate)  # + glossy's
     yield
     def faces():  # the numpy cache with its faces, read back once
         held = read_texture(previous)

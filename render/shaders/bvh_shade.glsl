@@ -51,11 +51,11 @@ vec3 hit_emission(int material, int triangle, vec2 uv)
  * traces its rays once (cache_paths.glsl) and iterates by lookups (cache_relax.glsl). */
 vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
                vec3 world_rgb, bool emission_seen, out float th, out vec3 x, out vec3 ns,
-               out vec3 cache_weight)
+               out vec3 cache_weight, out vec3 glossy_weight)
 {
   int triangle, slot;
   vec2 uv;
-  x = ns = cache_weight = vec3(0.0);
+  x = ns = cache_weight = glossy_weight = vec3(0.0);
   if (!bvh_closest_hit(origin, d, 0.0, BVH_FAR, th, triangle, slot, uv)) {
     th = BVH_FAR;
     return world_rgb;
@@ -125,20 +125,22 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
                                             vec4(0.0), hit_glossy, -d, base, params,
                                             emitter_glossy));
   /* uniform light (the radiance cache's) is also reflected by the glossy lobes' albedo */
-  cache_weight = weight + principled_glossy_color(base, params.x, params.y, params.z,
-                                                  clamp(-dot(ns, d), 0.0, 1.0));
+  glossy_weight = principled_glossy_color(base, params.x, params.y, params.z,
+                                          clamp(-dot(ns, d), 0.0, 1.0));
+  cache_weight = weight + glossy_weight;
   return radiance + world_glossy + emitter_glossy;
 }
 
 vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
                   vec3 world_rgb, bool emission_seen, out float th)
 {
-  vec3 x, ns, cache_weight;
+  vec3 x, ns, cache_weight, glossy_weight;
   vec3 radiance = ray_paths(origin, d, hit_id, seed, strata, hit_glossy, world_rgb,
-                            emission_seen, th, x, ns, cache_weight);
+                            emission_seen, th, x, ns, cache_weight, glossy_weight);
   /* ... and the radiance cache's indirect light at the hit: bounces 2 … N (cache_indirect) */
   if (th < BVH_FAR) {
-    radiance += cache_weight * cache_indirect(x, ns);
+    vec4 arriving = cache_indirect(x, ns);
+    radiance += (cache_weight + glossy_weight * arriving.a) * arriving.rgb;
   }
   return radiance;
 }

@@ -30,7 +30,7 @@ bool cache_grid_cell(vec3 x, int g, int res, out ivec3 base, out vec3 f)
   return true;
 }
 
-vec3 cache_indirect(vec3 x, vec3 n)
+vec4 cache_indirect(vec3 x, vec3 n)
 {
   ivec2 size = textureSize(radiance_cache, 0);
   vec4 info = texelFetch(radiance_cache, ivec2(size.x - 1, 0), 0);
@@ -50,6 +50,7 @@ vec3 cache_indirect(vec3 x, vec3 n)
       continue;
     }
     vec3 tx = vec3(0.0), ty = vec3(0.0), tz = vec3(0.0);
+    vec3 more = vec3(0.0); /* per axis: Σ weight · (.a − 1), the faces' one-more-bounce ratio */
     vec3 weight = vec3(0.0);
     for (int corner = 0; corner < 8; corner++) {
       ivec3 o = ivec3((corner >> 2) & 1, (corner >> 1) & 1, corner & 1);
@@ -76,6 +77,7 @@ vec3 cache_indirect(vec3 x, vec3 n)
       tx += held.x * fx.rgb;
       ty += held.y * fy.rgb;
       tz += held.z * fz.rgb;
+      more += held * (vec3(fx.w, fy.w, fz.w) - 1.0);
       weight += held;
     }
     vec3 share = vec3(weight.x > 1e-6 ? blend.x : 0.0, weight.y > 1e-6 ? blend.y : 0.0,
@@ -85,9 +87,10 @@ vec3 cache_indirect(vec3 x, vec3 n)
       continue; /* no voxel here holds a face n faces: the next coarser grid */
     }
     vec3 safe = max(weight, vec3(1e-6));
-    return (share.x * tx / safe.x + share.y * ty / safe.y + share.z * tz / safe.z) / norm;
+    return vec4(share.x * tx / safe.x + share.y * ty / safe.y + share.z * tz / safe.z,
+                dot(share, more / safe)) / norm;
   }
-  return vec3(0.0);
+  return vec4(0.0);
 }
 
 /* Corner `corner` of grid g's trilinear neighbourhood at `base` (fractions f): its weight

@@ -41,14 +41,14 @@ void main()
   float z = sqrt(max(0.0, 1.0 - dot(disk, disk)));
   vec3 d = normalize(disk.x * t + disk.y * b + z * n);
   float th;
-  vec3 x, ns, weight;
+  vec3 x, ns, weight, glossy;
   vec3 radiance = ray_paths(origin, d, id * uint(rays) + uint(j), seed, int(sampling.w),
-                            world.w > 0.5, world.rgb, false, th, x, ns, weight);
+                            world.w > 0.5, world.rgb, false, th, x, ns, weight, glossy);
   float picked = -1.0;
   if (th < BVH_FAR) {
     uint pick_state = point_stream(uint(record), CACHE_PICK_STREAM, seed);
     picked = cache_pick(x, ns, unit_float(pick_state));
   }
-  imageStore(out_image, texel, vec4(radiance, 0.0));
+  imageStore(out_image, texel, vec4(radiance, dot(glossy, vec3(1.0)) / max(dot(weight, vec3(1.0)), 1e-30)));
   imageStore(out_pick, texel, vec4(picked < 0.0 ? vec3(0.0) : weight, picked));
 }

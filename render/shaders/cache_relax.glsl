@@ -27,23 +27,30 @@ void main()
   vec4 info = texelFetch(radiance_cache, ivec2(cache_size.x - 1, 0), 0);
   int first_row = 1 + int(info.y + 0.5) * int(info.x + 0.5);
   bool empty = sampling.w > 0.5;
+  bool estimate = levels.x > 0.5;
   vec3 sum = vec3(0.0);
   for (int j = 0; j < rays; j++) {
     int record = face * rays + j;
     ivec2 at = ivec2(record % width, record / width);
-    sum += texelFetch(paths_radiance, at, 0).rgb;
+    vec4 lit = texelFetch(paths_radiance, at, 0);
+    sum += lit.rgb;
     vec4 picked = texelFetch(paths_pick, at, 0);
-    if (!empty && picked.w > -0.5) {
+    if (picked.w > -0.5) {
       int t = int(picked.w + 0.5);
-      sum += picked.rgb *
-             texelFetch(radiance_cache, ivec2(t % cache_size.x, first_row + t / cache_size.x),
-                        0).rgb;
+      ivec2 c = ivec2(t % cache_size.x, first_row + t / cache_size.x);
+      vec3 before = empty ? vec3(0.0) : texelFetch(radiance_cache, c, 0).rgb;
+      vec3 same = estimate ? texelFetch(cache_level, c, 0).rgb : before;
+      sum += picked.rgb * mix(before, same, lit.a);
     }
   }
   vec4 value = vec4(sum / float(rays), 1.0);
   ivec2 texel = ivec2(place.xy + 0.5);
   if (sampling.y > 0.5) {
-    imageStore(out_image, texel, texelFetch(radiance_cache, texel, 0)); /* the previous one */
+    /* the previous one, its .a 1 + how much more light the next one carries */
+    vec3 before = texelFetch(radiance_cache, texel, 0).rgb;
+    float lit = dot(before, vec3(1.0));
+    float more = lit > 0.0 ? max(dot(value.rgb, vec3(1.0)) - lit, 0.0) / lit : 0.0;
+    imageStore(out_image, texel, vec4(before, 1.0 + more));
     imageStore(out_image, ivec2(place.zw + 0.5), value);
   }
   else {

@@ -21,6 +21,10 @@ import scenes
 REFS = pathlib.Path(__file__).resolve().parents[1] / "data" / "bounce_refs"
 LIMITS = json.loads((REFS / "limits.json").read_text())
 PASSES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Glossy Direct", "Glossy Indirect")
+# Diffuse Indirect summed over the image, against Cycles': 2.3–4.1% short on three of the four
+# scenes while the cache counted a glossy scatter as a diffuse bounce
+# (docs/gi_pipeline.md "Glossy scatters between diffuse bounces")
+INDIRECT_SUM_TOLERANCE = 0.02
 
 
 def relative_l1(ours, reference, mask):
@@ -60,9 +64,14 @@ def test_default_bounces_match_cycles_default_light_paths(voxgi, tmp_path, name)
     reference = np.load(REFS / f"{name}.npz")
     mask = reference["Alpha"] > 0.5
     errors = {p: relative_l1(ours[p], reference[p].astype(np.float64), mask) for p in PASSES}
-    print(name, {p: round(e, 4) for p, e in errors.items()})
+    # the light of the later bounces as much as Cycles': a glossy scatter between diffuse
+    # bounces does not count toward its Diffuse limit (radiance_cache.relax)
+    indirect = "Diffuse Indirect"
+    brightness = ours[indirect][mask].sum() / reference[indirect][mask].sum()
+    print(name, {p: round(e, 4) for p, e in errors.items()}, f"{indirect} sum {brightness:.4f}")
     for pass_name, limit in LIMITS[name].items():
         assert errors[pass_name] <= limit, (pass_name, errors)
+    assert abs(brightness - 1.0) <= INDIRECT_SUM_TOLERANCE, brightness
 
 
 def test_thin_wall_dark_room_stays_dark(voxgi, tmp_path):

@@ -93,9 +93,9 @@ class RayPaths:
     that hit; points, normals : (H, 3) their hit points and shading normals (turned toward the
     origin); weight : (H, 3) what each hit reflects toward the origin of light arriving
     uniformly: its diffuse weight plus, Principled, its glossy lobes' albedo (Cycles' Glossy
-    Color), else its albedo. What a ray returns with a cache is linear in it (``with_cache``),
-    so the radiance cache traces its rays once and iterates by lookups alone
-    (``radiance_cache.relax``)."""
+    Color), else its albedo; glossy : (H, 3) the glossy lobes' part of it. What a ray returns
+    with a cache is linear in it (``with_cache``), so the radiance cache traces its rays once
+    and iterates by lookups alone (``radiance_cache.relax``)."""
 
     radiance: np.ndarray
     distance: np.ndarray
@@ -103,13 +103,25 @@ class RayPaths:
     points: np.ndarray
     normals: np.ndarray
     weight: np.ndarray
+    glossy: np.ndarray
+
+    @property
+    def glossy_share(self) -> np.ndarray:
+        """(H,) the glossy lobes' share of each hit's ``weight`` (summed over rgb)."""
+        total = self.weight.sum(axis=1)
+        return np.where(total > 0, self.glossy.sum(axis=1) / np.maximum(total, 1e-30), 0.0)
 
     def with_cache(self, cache) -> np.ndarray:
         """(K, 3) float64: the radiance with the hits also reflecting the indirect light
-        ``cache`` holds at them (None or an empty cache: ``radiance``)."""
+        ``cache`` holds at them (None or an empty cache: ``radiance``). A glossy scatter at
+        the hit does not count toward Cycles' diffuse bounces, so the glossy lobes reflect the
+        light of one more diffuse bounce: the cache's ``lookup`` × (1 + its one-more-bounce
+        ratio) (docs/gi_pipeline.md "Multi-bounce radiance cache", "Glossy scatters between
+        diffuse bounces")."""
         out = self.radiance.copy()
         if cache is not None and cache.iterations and len(self.hit):
-            out[self.hit] += self.weight * lookup(cache, self.points, self.normals)
+            arriving, more = lookup(cache, self.points, self.normals, more=True)
+            out[self.hit] += (self.weight + self.glossy * more[:, None]) * arriving
         return out
 
 
@@ -126,7 +138,7 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
     if emission_seen is None:
         emission_seen = not any(light.type == "EMITTERS" for light in lights)
     hit = np.flatnonzero(tri >= 0)
-    x = ns = weight = np.zeros((0, 3))
+    x = ns = weight = glossy = np.zeros((0, 3))
     if len(hit):
         x = origins[hit] + t[hit, None] * dirs[hit]
         ns = _hit_normals(tris, tri[hit], u[hit], v[hit], dirs[hit])
@@ -167,7 +179,8 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
             diffuse = diffuse_weight(*shading, mu)
             radiance[hit] += diffuse * arriving
             # uniform light (the cache's) is also reflected by the glossy lobe's albedo
-            weight = diffuse + glossy_color(*shading, mu)
+            glossy = glossy_color(*shading, mu)
+            weight = diffuse + glossy
             if reflect is not None:
                 radiance[hit] += reflected.sum(axis=0)
             for direct, towards in zip(lit if hit_glossy else (), light_directions(lights, x)):
@@ -177,8 +190,9 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
                 radiance[hit] += np.where(cos[:, None] > 1e-4, shine, 0.0)
         else:
             weight = np.asarray(albedo, np.float64)[material]
+            glossy = np.zeros_like(weight)
             radiance[hit] += weight * arriving
-    return RayPaths(radiance, t, hit, x, ns, weight)
+    return RayPaths(radiance, t, hit, x, ns, weight, glossy)
 
 
 def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,

@@ -38,7 +38,8 @@ from .sampling import point_streams, unit_float
 
 __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
            "cache_texels", "cached_cache", "face_paths", "face_points", "glossy_view", "iterate",
-           "lookup", "pick", "picks", "relax", "snap_focus", "texel_places", "triangles_key", "with_faces"]
+           "lookup", "one_more_bounce", "pick", "picks", "relax", "snap_focus", "texel_places",
+           "triangles_key", "with_faces"]
 
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin where it has no surface
 FACE_CLEARANCE = 0.02    # voxels in front of its surface a face's rays start (``_face_origins``)
@@ -327,22 +328,41 @@ def _dense_index(grid, cells) -> np.ndarray:
     return index
 
 
-def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
+def one_more_bounce(cache: RadianceCache) -> tuple:
+    """Per grid (N_i, 6) float64: how much more light each face carries with one more
+    diffuse bounce, (Σ ahead − Σ faces) / Σ faces over rgb (0 without an ``ahead`` or where a
+    face is dark). The gathers' hits reflect the cache by their glossy lobes × (1 + it): a
+    glossy scatter leaves a diffuse bounce to come (``exact_indirect.RayPaths.with_cache``;
+    on the GPU the .a of the faces' texels, ``cache_texels``)."""
+    if not cache.ahead:
+        return tuple(np.zeros(f.shape[:2]) for f in cache.faces)
+    out = []
+    for faces, ahead in zip(cache.faces, cache.ahead):
+        lit = np.asarray(faces, np.float64).sum(axis=2)
+        more = np.asarray(ahead, np.float64).sum(axis=2) - lit
+        out.append(np.where(lit > 0, np.maximum(more, 0.0) / np.maximum(lit, 1e-30), 0.0))
+    return tuple(out)
+
+
+def lookup(cache: RadianceCache | None, points, normals, more: bool = False):
     """(K, 3) float64 indirect light (E/π) at ``points`` (K, 3) for unit ``normals`` (K, 3):
     per axis the face n faces, trilinear (node-centred) over the voxels of the finest grid
     holding the point that hold that face, then the axes blended by n² (over the axes some
     neighbour holds; an axis with n² under ``AXIS_BLEND`` weighs nothing); where no
     neighbour there holds a face n faces, the next coarser grid holding the point; 0 where
-    none does."""
+    none does. more : also return (K,) the faces' ``one_more_bounce`` blended alike."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     out = np.zeros((len(p), 3))
+    ratio = np.zeros(len(p))
     if cache is None or cache.iterations == 0 or len(p) == 0:
-        return out
+        return (out, ratio) if more else out
+    ratios = one_more_bounce(cache)
     face = np.where(n < 0, 1, 0) + np.array([0, 2, 4])  # (K, 3) face per axis
     blend = np.where(n ** 2 >= AXIS_BLEND, n ** 2, 0.0)
     todo = np.ones(len(p), bool)
-    for grid, cells, faces, present in zip(cache.grids, cache.cells, cache.faces, cache.present):
+    for grid, cells, faces, present, gain in zip(cache.grids, cache.cells, cache.faces,
+                                                 cache.present, ratios):
         if not todo.any():
             break
         g = (p - np.asarray(grid.origin)) / grid.span
@@ -356,6 +376,7 @@ def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
         base = np.floor(gg).astype(np.int64)
         frac = gg - base
         total = np.zeros((len(rows), 3, 3))  # (k, axis, rgb)
+        gains = np.zeros((len(rows), 3))
         weight = np.zeros((len(rows), 3))
         for corner in range(8):
             offset = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
@@ -368,6 +389,7 @@ def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
             held = (site >= 0)[:, None] & present[safe, face[rows]]      # (k, 3 axes)
             wa = np.where(held, w[:, None], 0.0)
             total += wa[:, :, None] * faces[safe, face[rows]]
+            gains += wa * gain[safe, face[rows]]
             weight += wa
         axis_ok = weight > 1e-6
         mean = total / np.maximum(weight, 1e-6)[:, :, None]
@@ -376,8 +398,10 @@ def lookup(cache: RadianceCache | None, points, normals) -> np.ndarray:
         value = (share[:, :, None] * mean).sum(axis=1) / np.maximum(norm, 1e-12)[:, None]
         found = norm > 1e-6  # else the next coarser grid (a point off its finer grid's voxels)
         out[rows[found]] = value[found]
+        ratio[rows[found]] = ((share * gains / np.maximum(weight, 1e-6)).sum(axis=1) /
+                              np.maximum(norm, 1e-12))[found]
         todo[rows[found]] = False
-    return out
+    return (out, ratio) if more else out
 
 
 # Auto resolution (``build_cache(resolution=0)``): the finest of these whose faces' rays (traced
@@ -485,21 +509,35 @@ def face_paths(cache: RadianceCache, tris, lights, albedo, emission, rays: int =
                      hit_samples, hit_glossy)
 
 
-def relax(cache: RadianceCache, paths, rays: int, chosen=None) -> RadianceCache:
+def _held(cache: RadianceCache) -> np.ndarray:
+    """(F + 1, 3) float64 the present faces' values in ``face_points``' order, then a 0 row
+    (what ``picks`` points at where a hit reads nothing)."""
+    return np.concatenate([f[q] for f, q in zip(cache.faces, cache.present)] +
+                          [np.zeros((1, 3), np.float32)]).astype(np.float64)
+
+
+def relax(cache: RadianceCache, paths, rays: int, chosen=None,
+          level: RadianceCache | None = None) -> RadianceCache:
     """One more bounce: each face's value is the mean over its ``rays`` ``paths`` of what they
     return with ``cache`` at their hits — the hit's exact direct light plus its weight × the
     cache there, read at the one face the ray picks (``picks``; on average the ``lookup``).
     From the empty cache this is iteration 1 (the two-bounce light); each relaxation adds a
-    bounce. chosen : ``picks(cache, paths)`` made already (None: made here)."""
+    diffuse bounce. A hit's glossy scatter does not count toward Cycles' diffuse bounces, so
+    the glossy share of its weight (``RayPaths.glossy_share``) reads ``level``, an estimate
+    of the iteration being made (the same relaxation without it), where the diffuse share
+    reads ``cache``; without ``level`` both read ``cache`` (docs/gi_pipeline.md
+    "Multi-bounce radiance cache", "Glossy scatters between diffuse bounces"). chosen :
+    ``picks(cache, paths)`` made already (None: made here)."""
     count = len(paths.radiance) // max(rays, 1)
     values = np.zeros((count, 3))
     if count:
         out = np.array(paths.radiance, np.float64)
-        if cache.iterations and len(paths.hit):
-            held = np.concatenate([f[q] for f, q in zip(cache.faces, cache.present)] +
-                                  [np.zeros((1, 3), np.float32)]).astype(np.float64)
+        if (cache.iterations or level is not None) and len(paths.hit):
             chosen = picks(cache, paths) if chosen is None else chosen
-            out[paths.hit] += paths.weight * held[chosen]
+            before = _held(cache)[chosen] if cache.iterations else 0.0
+            same = _held(level)[chosen] if level is not None else before
+            share = paths.glossy_share[:, None]
+            out[paths.hit] += paths.weight * ((1.0 - share) * before + share * same)
         values = out.reshape(count, rays, 3).mean(axis=1)
     return with_faces(cache, values)
 
@@ -591,10 +629,12 @@ def iterate(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 16
     """One more bounce: every voxel face gathers ``rays`` exact rays shaded by
     ``exact_indirect.ray_radiance`` with ``cache`` at their hits (see the module doc) — the
     diffuse gather at ``face_points``, sample id = the face's row (``face_paths`` then
-    ``relax``; ``cached_cache`` traces the paths once for all its iterations)."""
+    ``relax``, twice: the glossy shares read the first pass; ``cached_cache`` traces the
+    paths once for all its iterations)."""
     paths = face_paths(cache, tris, lights, albedo, emission, rays, seed, world, hit_samples,
                        hit_glossy)
-    return relax(cache, paths, rays)
+    chosen = picks(cache, paths)
+    return relax(cache, paths, rays, chosen, level=relax(cache, paths, rays, chosen))
 
 
 def _value_key(value):
@@ -644,9 +684,13 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
     paths = face_paths(cache, tris, lights, albedo, emission, rays, world=world,
                        hit_samples=hit_samples, hit_glossy=hit_glossy)
     chosen = picks(cache, paths)  # and the faces their hits read: picked once
-    for _ in range(bounces - 1):  # the same rays every iteration: traced once
-        cache = relax(cache, paths, rays, chosen)
-    cache = replace(cache, ahead=relax(cache, paths, rays, chosen).faces)  # the glossy gather's
+    for _ in range(bounces):  # the same rays every iteration: traced once
+        # each iteration twice: its glossy shares read the first pass (``relax``)
+        made = relax(cache, paths, rays, chosen, level=relax(cache, paths, rays, chosen))
+        if made.iterations == bounces:  # the glossy gather's, one iteration ahead
+            cache = replace(cache, ahead=made.faces)
+        else:
+            cache = made
     _MEMO["entry"] = (key, cache)
     return cache
 
@@ -713,8 +757,11 @@ def cache_texels(cache: RadianceCache, layout: bool = False, ahead: bool = False
         if layout:
             texels[rows, columns, 0] = np.arange(len(rows))
             texels[rows, columns, 1] = part
+            texels[rows, columns, 3] = 1.0
         else:
             texels[rows, columns, :3] = np.concatenate(
                 [f[present] for f, present in zip(faces, cache.present)])
-        texels[rows, columns, 3] = 1.0
+            # .a: 1, and in part 0 + the face's ``one_more_bounce`` (held faces read > 0.5)
+            texels[rows, columns, 3] = 1.0 if part else 1.0 + np.concatenate(
+                [m[present] for m, present in zip(one_more_bounce(cache), cache.present)])
     return texels
