@@ -1,4 +1,6 @@
-/* The multi-bounce radiance cache's indirect light (E/π) at `x` for unit normal `n`
+/* The multi-bounce radiance cache's indirect light (E/π, .rgb) at `x` for unit normal `n`, and
+ * (.a) its faces' one-more-bounce ratio blended alike (the first part's texels' .a − 1:
+ * radiance_cache.one_more_bounce; 0 where the texture has none)
  * (voxgi_addon/gi/radiance_cache.py lookup; texels: radiance_cache.cache_texels): per axis the
  * face n faces, trilinear over the voxels of the finest grid holding `x` that hold that face
  * (texel .a), the axes blended by n² over those some neighbour holds (else the next coarser

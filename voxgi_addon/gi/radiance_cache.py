@@ -19,7 +19,11 @@ and shades each with ``exact_indirect.ray_radiance`` — the hit's exact direct 
 lamps, world, emitters) reflected by its albedo — *plus* the hit's diffuse weight × iteration
 k − 1's cache at the hit. So iteration 1 holds the two-bounce light, iteration k the light of
 bounces 2 … k + 1, and the gather with a cache of N − 1 iterations returns bounces 1 … N: the
-first bounce exact, the rest cached. Bounces = 1 builds no cache at all.
+first bounce exact, the rest cached. Bounces = 1 builds no cache at all. A hit's glossy
+scatter does not count toward Cycles' diffuse bounces: the glossy share of a hit's weight
+reads iteration k itself (``relax``'s ``level``, a second pass), and the gathers' hits reflect
+one more iteration by their glossy lobes (``one_more_bounce``; docs/gi_pipeline.md
+"Multi-bounce radiance cache", "Glossy scatters between diffuse bounces").
 
 Numpy only; the GPU reads the same values from ``cache_texels`` (``render/gpu_gather.py``,
 ``shaders/bvh_shade.glsl`` ``cache_indirect``) and looks them up as ``lookup`` does.
