@@ -227,6 +227,25 @@ vec3 light_direct(int light, vec3 p, vec3 n, uint id, uint seed, int m)
   return value * light_texel(light, 1).rgb;
 }
 
+/* Unit direction from p with normal n to light `light` as direct_light.light_aims: to an area
+ * light's part above the horizon of (p, n) (the clipped outline's corners' mean) where it has
+ * one, else as light_towards. */
+vec3 light_towards(int light, vec3 p);
+vec3 light_aim(int light, vec3 p, vec3 n)
+{
+#ifndef BVH_NO_AREA
+  vec4 head = light_texel(light, 0);
+  if (int(head.x) == 3) {
+    vec3 aim;
+    if (polygon_irradiance(light, int(head.z), p, n, aim) > 0.0) {
+      vec3 d = aim - p;
+      return d / max(length(d), 1e-12);
+    }
+  }
+#endif
+  return light_towards(light, p);
+}
+
 /* Unit direction from p to light `light`'s centre (a sun: against its travel), as
  * direct_light.light_directions. */
 vec3 light_towards(int light, vec3 p)

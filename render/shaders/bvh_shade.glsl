@@ -108,7 +108,7 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
   for (int light = 0; light < textureSize(lights, 0).y; light++) {
     vec3 direct = light_direct(light, lit_at, ns, hit_id, seed + 1u, strata);
     radiance += weight * direct;
-    vec3 towards = light_towards(light, x);
+    vec3 towards = light_aim(light, lit_at, ns);
     float c = dot(ns, towards);
     if (hit_glossy && c > 1e-4 && dot(direct, vec3(1.0)) > 0.0) {
       radiance += direct * (3.14159265358979323846 / c) *

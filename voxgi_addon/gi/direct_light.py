@@ -37,7 +37,8 @@ from ..scene import raycast
 from ..scene.snapshot import LightData
 from .sampling import hashed_square
 
-__all__ = ["diffuse_direct", "emitters_unshadowed", "light_directions", "light_frame",
+__all__ = ["diffuse_direct", "emitters_unshadowed", "light_aims", "light_directions",
+           "light_frame",
            "stratified_square", "concentric_disk"]
 
 _NORMAL_OFFSET = 1e-5  # metres: shadow rays start this far off the surface, towards the light
@@ -413,6 +414,30 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
     if reflect is None:
         return result
     return result, (shine if per_light else shine.sum(axis=0)).astype(np.float32)
+
+
+def light_aims(lights, points, normals) -> list[np.ndarray]:
+    """``light_directions``, except toward an area light: the direction to the middle of its
+    part above each point's horizon (the clipped outline's corners' mean,
+    ``_polygon_irradiance``), where it has one. A bounce hit's glossy lobe reflects a lamp
+    toward one direction (``exact_indirect.ray_paths``); an area light whose centre lies below
+    a face's horizon while part of it lights the face (a block's side under a ceiling light)
+    was reflected by none (docs/gi_pipeline.md "The Accurate integrator", "A hit's glossy
+    lobe toward the lit part of an area light")."""
+    points = np.asarray(points, np.float64)
+    normals = np.asarray(normals, np.float64)
+    lamps = [light for light in lights if light.type not in ("WORLD", "EMITTERS")]
+    out = []
+    for light, towards in zip(lamps, light_directions(lamps, points)):
+        if light.type == "AREA" and len(points):
+            outline, area = area_outline(light)
+            if area > 0:
+                lit, aim = _polygon_irradiance(points, normals, outline, centroid=True)
+                d = aim - points
+                d /= np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
+                towards = np.where((lit > 0.0)[:, None], d, towards)
+        out.append(towards)
+    return out
 
 
 def light_directions(lights, points) -> list[np.ndarray]:

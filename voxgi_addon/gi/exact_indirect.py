@@ -31,7 +31,7 @@ import numpy as np
 
 from ..scene.raycast import closest_hits
 from ..scene.snapshot import RAY_DIFFUSE
-from .direct_light import concentric_disk, diffuse_direct, light_directions
+from .direct_light import concentric_disk, diffuse_direct, light_aims
 from .principled import diffuse_weight, glossy_color, glossy_reflectance
 from .radiance_cache import lookup
 from .sampling import hammersley, perpendicular_basis
@@ -183,7 +183,8 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
             weight = diffuse + glossy
             if reflect is not None:
                 radiance[hit] += reflected.sum(axis=0)
-            for direct, towards in zip(lit if hit_glossy else (), light_directions(lights, x)):
+            lit_at = x + ns * SURFACE_EPSILON
+            for direct, towards in zip(lit if hit_glossy else (), light_aims(lights, lit_at, ns)):
                 cos = np.einsum("ij,ij->i", ns, towards)
                 shine = direct * (np.pi / np.maximum(cos, 1e-4))[:, None] * \
                     glossy_reflectance(*shading, ns, -dirs[hit], towards)
