@@ -239,12 +239,13 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     record_rows = -(-count * rays // RECORD_WIDTH)
     records = tuple(gpu.types.GPUTexture((RECORD_WIDTH, record_rows), format="RGBA32F")
                     for _ in range(2))
-    # the iterations' texels: two of the first part alone in turn, then the two parts; each
-    # holds the layout's header, voxel ids and absent faces, uploaded once, and a relaxation
-    # writes its faces' texels only (a dispatch over the faces). The first is also what the
-    # rays' hits pick their faces in (its ids and the faces each voxel holds).
+    # the iterations' texels: three of the first part alone in turn (the previous iteration,
+    # the next one's first pass, the next one), then the two parts; each holds the layout's
+    # header, voxel ids and absent faces, uploaded once, and a relaxation writes its faces'
+    # texels only (a dispatch over the faces). The first is also what the rays' hits pick
+    # their faces in (its ids and the faces each voxel holds).
     main = cache_texels(cache, layout=True)
-    turns = [float_texture(main, (main.shape[1], main.shape[0]))]
+    turns = [float_texture(main, (main.shape[1], main.shape[0])) for _ in range(3)]
     inputs["radiance_cache"] = turns[0]
     constants = {"sampling": (0.0, rays, count, strata_side(settings.hit_samples)),
                  "world": (*settings.world, float(settings.hit_glossy))}
@@ -260,25 +261,24 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
         yield
     places = face_places(cache)
     yield
-    previous = turns[0]  # the empty cache: its texels not read (relax_gpu empty)
-    while len(turns) < 3:
-        turns.append(float_texture(main, (main.shape[1], main.shape[0])))
-    free = [turns[1], turns[2]]
-    # each iteration in two passes: the second's glossy shares read the first's faces
-    # (radiance_cache.relax's ``level``)
-    for k in range(settings.bounces - 1):
-        estimate = relax_gpu(places, previous, records, rays, count, free[0], empty=k == 0)
+
+    def iteration(previous, out, empty: bool, keep: bool = False):
+        # two passes: the second's glossy shares read the first's faces (radiance_cache.relax's
+        # ``level``), the first written in a turn that is neither ``previous`` nor ``out``
+        spare = next(t for t in turns if t is not previous and t is not out)
+        estimate = relax_gpu(places, previous, records, rays, count, spare, empty=empty)
         yield
-        previous = relax_gpu(places, previous, records, rays, count, free[1], empty=k == 0,
-                             level=estimate)
-        free = [t for t in turns if t is not previous][:2]
+        return relax_gpu(places, previous, records, rays, count, out, keep=keep, empty=empty,
+                         level=estimate)
+
+    previous = turns[0]  # the empty cache: its texels not read (relax_gpu empty)
+    for k in range(settings.bounces - 1):
+        out = next(t for t in turns if t is not previous)
+        previous = yield from iteration(previous, out, empty=k == 0)
         yield
     both = float_texture(texels, (texels.shape[1], texels.shape[0]))
-    estimate = relax_gpu(places, previous, records, rays, count, free[0],
-                         empty=settings.bounces == 1)
-    yield
-    previous = relax_gpu(places, previous, records, rays, count, both, keep=True,
-                         empty=settings.bounces == 1, level=estimate)  # + glossy's
+    previous = yield from iteration(previous, both, empty=settings.bounces == 1,
+                                    keep=True)  # + glossy's
     yield
     def faces():  # the numpy cache with its faces, read back once
         held = read_texture(previous)
