@@ -47,7 +47,7 @@ from ..voxgi_addon.scene.bvh import (
     DET_EPSILON,
     LEAF_BIAS,
     TEXTURE_WIDTH,
-    build_scene_bvh,
+    bvh_of,
     pack_bvh,
 )
 from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
@@ -251,7 +251,7 @@ class GPUBVH:
         if self._unchanged(tris):
             return None
         t0 = time.perf_counter()
-        packed = pack_bvh(build_scene_bvh(tris), tris)  # built once per instanced mesh
+        packed = pack_bvh(bvh_of(tris), tris)  # built once per instanced mesh
         return packed, time.perf_counter() - t0
 
     def upload_steps(self, tris, packed):

@@ -158,21 +158,30 @@ def snap_focus(tris, focus):
     return tuple(float(v) for v in origin + (np.floor((point - origin) / step) + 0.5) * step)
 
 
-def _sites(tris, grids, origins: bool = True) -> tuple[list, list, list]:
+def _sites(tris, grids, origins: bool = True, voxelized: dict | None = None) \
+        -> tuple[list, list, list]:
     """Per grid the (N_i, 3) int32 cells its triangles touch (a coarser grid leaving out the
     cells the next finer grid covers), their (N_i, 6) present faces and their faces' (N_i, 6, 3)
-    ray origins (``RadianceCache``; origins False: none, for Auto's count of the faces)."""
+    ray origins (``RadianceCache``; origins False: none, for Auto's count of the faces).
+    voxelized : a dict kept across calls on the same ``tris`` (``build_cache``'s Auto counts
+    the faces of the grids it tries, then builds the chosen ones): each grid's triangles are
+    voxelized once."""
     corners = np.asarray(tris.positions, np.float64)
     signed = np.asarray(tris.normals, np.float64)
     normals = np.abs(signed)
     triangles = np.arange(len(corners) * 3).reshape(-1, 3)
+    voxelized = {} if voxelized is None else voxelized
     out, present, starts = [], [], []
     for index, grid in enumerate(grids):
         local = (corners - np.asarray(grid.origin)).reshape(-1, 3)
-        surface = voxelize_triangles(local, triangles, float(grid.span))
+        key = (tuple(float(v) for v in grid.origin), float(grid.span))
+        if key not in voxelized:
+            surface = voxelize_triangles(local, triangles, float(grid.span))
+            reach = np.zeros((len(surface.cells), 3))
+            np.maximum.at(reach, surface.cell_of_pair, normals[surface.triangle_of_pair])
+            voxelized[key] = (surface, reach)
+        surface, reach = voxelized[key]
         cells = surface.cells.astype(np.int64)
-        reach = np.zeros((len(cells), 3))
-        np.maximum.at(reach, surface.cell_of_pair, normals[surface.triangle_of_pair])
         res = grid.resolution
         keep = ((cells >= 0) & (cells < res)).all(axis=1)
         if index > 0:  # the finer grid covers cells [start, start + res/2) of this one
@@ -198,7 +207,7 @@ def _backs_in_solids(tris, grid, cells, origins, backs) -> np.ndarray:
     voxel, face = np.nonzero(backs)
     if len(voxel) == 0:
         return origins
-    from ..scene.raycast import closest_hits
+    from ..scene.bvh import closest_hits  # the GPU scene's BVH, built once (``bvh_of``)
 
     centres = np.asarray(grid.origin) + (np.asarray(cells, np.float64)[voxel] + 0.5) * grid.span
     starts = centres + grid.span * np.asarray(origins[voxel, face], np.float64)
@@ -290,38 +299,54 @@ def _face_origins(cells, surface, corners, normals, keep) -> np.ndarray:
     # the lattice's cells are shifted by voxelize's LATTICE_OFFSET (a plane on a lattice plane
     # lies in the cell above it)
     lo = cells[pair_cell] - LATTICE_OFFSET
-    poly, count = _clip_to_cells(corners[tri] - lo[:, None])      # in the cell: float32 holds it
-    poly -= np.float32(0.5 + LATTICE_OFFSET)                      # from the voxel's centre
-    valid = np.arange(_CLIP_VERTICES)[None] < count[:, None]
-    high = np.where(valid[:, :, None], poly, -np.inf).max(axis=1)   # (P, 3) the part's box
-    low = np.where(valid[:, :, None], poly, np.inf).min(axis=1)
-    starts = np.flatnonzero(np.r_[True, pair_cell[1:] != pair_cell[:-1]])
-    voxels = pair_cell[starts]                                    # the cells with pairs
-    some = count > 0
+    # each pair's triangle in its cell (float32 holds it), clipped to the cell only where a
+    # corner lies outside it (most triangles of a large scene lie within one voxel): the
+    # parts' boxes, from the voxel's centre
+    local = (corners[tri] - lo[:, None]).astype(np.float32)
+    high = np.maximum(np.maximum(local[:, 0], local[:, 1]), local[:, 2])   # (P, 3)
+    low = np.minimum(np.minimum(local[:, 0], local[:, 1]), local[:, 2])
+    some = np.ones(len(local), bool)
+    cut = np.flatnonzero(((high > 1) | (low < 0)).any(axis=1))
+    if len(cut):
+        poly, count = _clip_to_cells(local[cut])
+        valid = (np.arange(_CLIP_VERTICES)[None] < count[:, None])[:, :, None]
+        high[cut] = np.where(valid, poly, -np.inf).max(axis=1)
+        low[cut] = np.where(valid, poly, np.inf).min(axis=1)
+        some[cut] = count > 0
+    high -= np.float32(0.5 + LATTICE_OFFSET)                      # from the voxel's centre
+    low -= np.float32(0.5 + LATTICE_OFFSET)
     for axis in range(3):
         along = normals[tri, axis]
         for sign, face in ((1.0, 2 * axis), (-1.0, 2 * axis + 1)):
             for facing in (-1.0, 1.0):  # the backs of those facing away, then their fronts
-                chosen = (facing * sign * along > FACE_AXIS_COSINE) & some
-                if not chosen.any():
+                chosen = np.flatnonzero((facing * sign * along > FACE_AXIS_COSINE) & some)
+                if not len(chosen):
                     continue
                 if facing < 0:  # of several backs, the nearest the centre (a panel's, not
                     # the ceiling's a few cm over it, whose back is the roof's outside)
-                    level = np.abs(np.where(chosen, (high if sign > 0 else low)[:, axis],
-                                            np.inf))
-                    nearest = np.minimum.reduceat(level, starts)
-                    chosen &= level <= np.repeat(nearest, np.diff(np.r_[starts, len(level)])) \
-                        + 1e-6
-                top = np.maximum.reduceat(np.where(chosen[:, None], high, -np.inf), starts)
-                bottom = np.minimum.reduceat(np.where(chosen[:, None], low, np.inf), starts)
+                    level = np.abs((high if sign > 0 else low)[chosen, axis])
+                    begins = _runs(pair_cell[chosen])
+                    nearest = np.minimum.reduceat(level, begins)
+                    chosen = chosen[level <= np.repeat(
+                        nearest, np.diff(np.r_[begins, len(level)])) + 1e-6]
+                begins = _runs(pair_cell[chosen])   # the chosen pairs, cell by cell
+                top = np.maximum.reduceat(high[chosen], begins)
+                bottom = np.minimum.reduceat(low[chosen], begins)
                 held = np.isfinite(top[:, axis])
                 top, bottom = top[held], bottom[held]
                 margin = np.minimum(0.25 * (top - bottom), FACE_CLEARANCE)
                 point = np.clip(0.0, bottom + margin, top - margin)   # the centre, kept on them
                 point[:, axis] = sign * ((top if sign > 0 else -bottom)[:, axis] + FACE_CLEARANCE)
-                origins[voxels[held], face] = point
-                backs[voxels[held], face] = facing < 0
+                voxels = pair_cell[chosen[begins[held]]]
+                origins[voxels, face] = point
+                backs[voxels, face] = facing < 0
     return origins.astype(np.float32), backs
+
+
+def _runs(sorted_keys: np.ndarray) -> np.ndarray:
+    """The first index of each run of equal values in ``sorted_keys`` (``reduceat``'s
+    starts)."""
+    return np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
 
 
 def _dense_index(grid, cells) -> np.ndarray:
@@ -428,11 +453,13 @@ def build_cache(tris, resolution: int = 32, count: int = 1, rays: int = 16,
     (up to ``AUTO_GRIDS``) as stay within that budget: finer voxels near the camera, the whole
     scene at least as fine as one grid would be. A camera outside (an object or a room seen
     from outside) keeps one grid (``snap_focus`` gives no focus there)."""
+    voxelized: dict = {}  # each grid tried voxelized once (``_sites``)
     if resolution == 0:  # the layouts are counted without their faces' origins (the most
         # of a layout's time), then the chosen one is built
         def within(choice, grids):
             return sum(int(p.sum()) for p in _sites(tris, cache_grids(
-                tris, choice, grids, focus), origins=False)[1]) * rays <= RAYS_PER_ITERATION
+                tris, choice, grids, focus), origins=False, voxelized=voxelized)[1]) \
+                * rays <= RAYS_PER_ITERATION
         for resolution in AUTO_RESOLUTIONS:
             if within(resolution, count):
                 break
@@ -440,7 +467,7 @@ def build_cache(tris, resolution: int = 32, count: int = 1, rays: int = 16,
             while count < AUTO_GRIDS and within(resolution, count + 1):
                 count += 1
     grids = cache_grids(tris, resolution, count, focus)
-    cells, present, origins = _sites(tris, grids)
+    cells, present, origins = _sites(tris, grids, voxelized=voxelized)
     faces = tuple(np.zeros((len(c), 6, 3), np.float32) for c in cells)
     return RadianceCache(tuple(grids), tuple(cells), faces, 0, tuple(present), tuple(origins))
 

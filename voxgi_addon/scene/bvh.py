@@ -26,6 +26,7 @@ Units: world space, metres, as ``SceneTriangles``.
 """
 from __future__ import annotations
 
+import threading
 import weakref
 from dataclasses import dataclass
 
@@ -456,11 +457,17 @@ def build_scene_bvh(tris: SceneTriangles) -> BVH:
 _BVHS: weakref.WeakKeyDictionary[SceneTriangles, BVH] = weakref.WeakKeyDictionary()
 
 
+_BUILDING = threading.Lock()  # one build at a time: a second caller waits and takes it
+
+
 def bvh_of(tris: SceneTriangles) -> BVH:
-    """``build_scene_bvh(tris)``, cached per ``SceneTriangles`` object."""
-    bvh = _BVHS.get(tris)
-    if bvh is None:
-        bvh = _BVHS[tris] = build_scene_bvh(tris)
+    """``build_scene_bvh(tris)``, cached per ``SceneTriangles`` object: the GPU scene packs it
+    and the radiance cache's layout traces it (``radiance_cache._backs_in_solids``), from
+    whichever thread comes first."""
+    with _BUILDING:
+        bvh = _BVHS.get(tris)
+        if bvh is None:
+            bvh = _BVHS[tris] = build_scene_bvh(tris)
     return bvh
 
 
