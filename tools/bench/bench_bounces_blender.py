@@ -52,9 +52,10 @@ def downsample(image, factor):
     return image.reshape(h, factor, w, factor, *image.shape[2:]).mean(axis=(1, 3))
 
 
-def cycles_default_paths(scene, width, height, samples, denoise):
+def cycles_default_paths(scene, width, height, samples, denoise, seed=1):
     """(passes, seconds): Cycles at its default light paths, as the stored references
-    (``cycles_passes`` sets Total to the larger of Diffuse and Glossy; put back to 12)."""
+    (``cycles_passes`` sets Total to the larger of Diffuse and Glossy; put back to 12), with
+    ``seed`` (another one gives a second, independent reference)."""
     import cycles_passes
 
     settings = cycles_passes._render_settings
@@ -67,7 +68,7 @@ def cycles_default_paths(scene, width, height, samples, denoise):
     try:
         passes = cycles_passes.render_cycles_passes(
             scene, width, height, samples, diffuse_bounces=DIFFUSE_BOUNCES, ao_distance=1.0,
-            seed=1, glossy_bounces=GLOSSY_BOUNCES, denoise=denoise)
+            seed=seed, glossy_bounces=GLOSSY_BOUNCES, denoise=denoise)
     finally:
         cycles_passes._render_settings = settings
     return passes, cycles_passes.last_render_seconds()

@@ -12,7 +12,9 @@ keeps compiled kernels on disk, as GPU drivers do). Tables:
 1. per scene and size: first and warm preview time, Combined error against Cycles at its
    default light paths, Cycles 16 / 64 spp + OIDN's time and error in the same process, and
    the goal (error ≤ Cycles 16 + OIDN's, warm ≤ ⅓ of its time, first ≤ warm + its
-   time);
+   time); beside them how far a second reference (another seed) lies from the first — the
+   references' own noise, under which no error of the row can go — and the errors against
+   the two references' mean (half their noise's variance);
 2. per scene at each size: the warm preview split into its stages (each dispatch timed to its
    completion), each stage's rays (BVH traversals) and texel fetches, and its floor — that
    work at the rates trivial kernels reach on the same BVH in the same process — and what the
@@ -98,8 +100,9 @@ def run(quick: bool = False, out=print) -> str:
              "| scene | size | triangles | VoxGI first | first, later session | VoxGI warm "
              "| error | Cycles 16 + OIDN "
              "| Cycles 64 + OIDN | warm ÷ C16 | goal (error ≤ C16's, warm ≤ ⅓ C16, first ≤ "
-             "warm + C16) | reference |",
-             "|---|---|---:|---:|---:|---:|---:|---|---|---:|---|---|"]
+             "warm + C16) | reference | two references apart | against their mean: "
+             "VoxGI / C16 / C64 |",
+             "|---|---|---:|---:|---:|---:|---:|---|---|---:|---|---|---:|---|"]
     for row in rows:
         c16, c64 = row["cycles16"], row["cycles64"]
         lines.append(
@@ -107,7 +110,9 @@ def run(quick: bool = False, out=print) -> str:
             f"{row['triangles']:,} | {row['first']:.2f} s | {row['first_later']:.2f} s | "
             f"{row['warm']:.2f} s | "
             f"{row['error']:.3f} | {c16[0]:.2f} s, {c16[1]:.3f} | {c64[0]:.2f} s, {c64[1]:.3f} | "
-            f"{row['warm'] / c16[0]:.1f} | {_goal(row)} | {row['reference']} |")
+            f"{row['warm'] / c16[0]:.1f} | {_goal(row)} | {row['reference']} | "
+            f"{row['reference_noise']:.3f} | {row['against_both']['voxgi']:.3f} / "
+            f"{row['against_both']['cycles16']:.3f} / {row['against_both']['cycles64']:.3f} |")
     lines += ["", "### Where a warm preview's time goes, against the floor: "
               "each stage's dispatches timed to completion; floor = its rays at the ray rate "
               "and its texel fetches at the fetch rate that trivial kernels reach on the same "

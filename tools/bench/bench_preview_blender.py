@@ -25,7 +25,9 @@ In this one process, in this order:
 4. **Cycles 16 and 64 spp + OpenImageDenoise** at its default light paths, and the reference
    (the stored 2048-spp one of tests/data/bounce_refs at 160 × 120 where there is one, else
    Cycles at ``REFERENCE_SPP`` (512 spp up to 160 × 120, 256 above) rendered once and kept in
-   ``out/bench_refs``).
+   ``out/bench_refs``), and a second reference at its samples with another seed
+   (``second_reference``): how far the two lie apart (their own noise, the floor under every
+   error of the row), and each image's error against the two references' mean.
 """
 from __future__ import annotations
 
@@ -47,6 +49,9 @@ from bench_blender import load_addon, median_seconds  # noqa: E402
 STORED_REFS = ROOT / "tests" / "data" / "bounce_refs"
 KEPT_REFS = ROOT / "out" / "bench_refs"
 REFERENCE_SPP = {False: (512, 256), True: (64, 64)}  # by --quick: (up to 160 × 120, larger)
+# Cycles' seeds: 1 the 16- and 64-spp renders (bench_bounces_blender), 0 the stored 2048-spp
+# references (tools/make_bounce_references.py), these the kept references' and the second ones'
+REFERENCE_SEED, SECOND_SEED = 3, 2
 MAX_BOUNCES, DIFFUSE_BOUNCES, GLOSSY_BOUNCES = 12, 4, 4  # Cycles' default Light Paths
 CITY_SIDE = 17  # 17 × 17 instanced domes: about 0.53 M triangles
 
@@ -319,11 +324,11 @@ def _importers(name):
 
 # ------------------------------------------------------------------ Cycles
 
-def cycles_render(scene, width, height, samples, denoise):
+def cycles_render(scene, width, height, samples, denoise, seed=1):
     """(passes, seconds) of Cycles at its default light paths (as bench_bounces_blender)."""
     from bench_bounces_blender import cycles_default_paths
 
-    return cycles_default_paths(scene, width, height, samples, denoise)
+    return cycles_default_paths(scene, width, height, samples, denoise, seed)
 
 
 def reference(name, scene, width, height, quick):
@@ -334,13 +339,31 @@ def reference(name, scene, width, height, quick):
             return data["Combined"].astype(np.float64), data["Alpha"] > 0.5, \
                 "stored 2048 spp"
     spp = REFERENCE_SPP[quick][width * height > 160 * 120]
-    kept = KEPT_REFS / f"{name}_{width}x{height}_{spp}.npz"
+    # a seed of its own: Cycles 16 and 64 spp render with seed 1, and a reference with that
+    # seed shares their first samples (its noise then leans towards theirs)
+    kept = KEPT_REFS / f"{name}_{width}x{height}_{spp}_seed{REFERENCE_SEED}.npz"
     if not kept.exists():
-        passes, _ = cycles_render(scene, width, height, spp, False)
+        passes, _ = cycles_render(scene, width, height, spp, False, seed=REFERENCE_SEED)
         kept.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(kept, Combined=passes["Combined"], Alpha=passes["Alpha"])
     with np.load(kept) as data:
         return data["Combined"].astype(np.float64), data["Alpha"] > 0.5, f"Cycles {spp} spp"
+
+
+def second_reference(name, scene, width, height, quick) -> np.ndarray:
+    """Combined of a second reference: Cycles at the reference's samples with another seed,
+    rendered once and kept in ``out/bench_refs``. How far the two lie apart is the references'
+    own noise, the floor under every error of the row (docs/gi_pipeline.md "How much of the
+    error is the reference's own noise")."""
+    spp = 2048 if not quick and (width, height) == (160, 120) and \
+        (STORED_REFS / f"{name}.npz").exists() else REFERENCE_SPP[quick][width * height > 160 * 120]
+    kept = KEPT_REFS / f"{name}_{width}x{height}_{spp}_seed{SECOND_SEED}.npz"
+    if not kept.exists():
+        passes, _ = cycles_render(scene, width, height, spp, False, seed=SECOND_SEED)
+        kept.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(kept, Combined=passes["Combined"])
+    with np.load(kept) as data:
+        return data["Combined"].astype(np.float64)
 
 
 def relative_l1(ours, ref, mask) -> float:
@@ -429,10 +452,13 @@ def main(argv=None) -> int:
     profiled_total = time.perf_counter() - t0
     ref, mask, ref_source = reference(args.scene, scene, width, height, args.quick)
     error = relative_l1(passes["Combined"], ref, mask)
-    cycles = {}
+    second = second_reference(args.scene, scene, width, height, args.quick)
+    both = 0.5 * (ref + second)  # the two references' mean: half their noise's variance
+    cycles, against_both = {}, {"voxgi": relative_l1(passes["Combined"], both, mask)}
     for samples in (16, 64):
         cycles_passes, seconds = cycles_render(scene, width, height, samples, True)
         cycles[samples] = (seconds, relative_l1(cycles_passes["Combined"], ref, mask))
+        against_both[f"cycles{samples}"] = relative_l1(cycles_passes["Combined"], both, mask)
     ray_rate = 0.5 * (closest_rate + any_rate)
     stages = {}
     for stage in profile.seconds:
@@ -444,6 +470,7 @@ def main(argv=None) -> int:
     triangles = int(len(gpu_scene.tris.positions))
     result = {"scene": args.scene, "width": width, "height": height, "triangles": triangles,
               "first": first, "warm": warm, "error": error, "reference": ref_source,
+              "reference_noise": relative_l1(second, ref, mask), "against_both": against_both,
               "compiles": first_compiles[0], "compile_seconds": first_compiles[1],
               "cycles16": cycles[16], "cycles64": cycles[64], "stages": stages,
               "profiled_total": profiled_total, "fetch_rate": fetch_rate,
