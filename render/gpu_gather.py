@@ -153,8 +153,8 @@ def relax_gpu(places, cache_texture, records, rays: int, count: int, out, keep: 
     the faces only; ``out``'s other texels (the header, the ids, the voxels' absent faces) are
     the layout's, uploaded once (``cache_stages``). keep : ``out`` has two parts
     (``cache_texels(ahead=True)``): each face's texel of the first keeps the previous
-    iteration, of the second gets the next one, which the glossy gather reads
-    (``radiance_cache.glossy_view``). empty : the previous iteration is the empty cache (the
+    iteration, of the second gets the next one, from which the last pass makes the first
+    part's .a (``radiance_cache.one_more_bounce``). empty : the previous iteration is the empty cache (the
     first iteration; ``cache_texture`` is any of the cache's texels, not read but its
     header). level : the same iteration's first pass, which the glossy shares of the hits'
     weights read (``radiance_cache.relax``; None: they read ``cache_texture``). With ``keep``
@@ -212,8 +212,8 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     are read back once, at the end — or, read_back False (the viewport, whose Accurate
     gathers read the texture only), the cache is returned as a function that reads them
     back when called (Fast's voxels reflect the numpy cache). The texture also holds the next
-    iteration, which the glossy gather reads (``radiance_cache.glossy_view``; two more lookup
-    passes, the last ``relax_gpu(keep=True)``). layout : ``cache_layout`` of the BVH's triangles made
+    iteration, for the faces' one-more-bounce ratio (``radiance_cache.one_more_bounce``; two
+    more lookup passes, the last ``relax_gpu(keep=True)``). layout : ``cache_layout`` of the BVH's triangles made
     already (None: made here)."""
     cache, points, axes, texels = layout or cache_layout(bvh.scene_triangles, settings)
     count = len(points)

@@ -41,7 +41,6 @@ float lobe_pdf(vec3 n, vec3 v, vec3 l, float alpha2, float pdf_scale)
 
 void main()
 {
-  cache_part = 1; /* the cache's next iteration, where it holds one (cache_lookup.glsl) */
   ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
   vec3 position, n;
   vec4 ray;
@@ -145,6 +144,13 @@ void main()
     }
     else if (dot(weight, vec3(1.0)) > 0.0) {
       float th;
+      /* the chance Cycles picked this direction by the glossy closure (exact_glossy._Lobe
+       * glossy_chance: the closures' directional albedos as their sample weights) */
+      float pg = dot(colour, LUMINANCE) * pdf;
+      float pd = dot(principled_diffuse_weight(base, params.x, params.y, rough,
+                                               clamp(cos_ni, 0.0, 1.0)), LUMINANCE) *
+                 max(dot(l, n), 0.0) / 3.14159265358979323846;
+      receiver_glossy = mirror ? 1.0 : pg / max(pg + pd, 1e-30);
       vec3 radiance = ray_radiance(origin, l, id * uint(rays) + uint(j), seed, int(sampling.w),
                                    world.w > 0.5, world.rgb, false, th);
       value = mix(vec3(0.0), weight * radiance, greaterThan(colour, vec3(0.0)));

@@ -131,6 +131,12 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
   return radiance + world_glossy + emitter_glossy;
 }
 
+/* The chance that Cycles picked the receiver's glossy closure for the ray being traced (0 for
+ * the diffuse gather): Cycles counts a bounce by the closure it picked but files the light by
+ * the closures' values, so a glossy-gather ray was mostly picked diffuse and leaves one diffuse
+ * bounce fewer to the hit (exact_glossy._Lobe.glossy_chance). Set per ray by bvh_glossy.glsl. */
+float receiver_glossy = 0.0;
+
 vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
                   vec3 world_rgb, bool emission_seen, out float th)
 {
@@ -140,7 +146,12 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
   /* ... and the radiance cache's indirect light at the hit: bounces 2 … N (cache_indirect) */
   if (th < BVH_FAR) {
     vec4 arriving = cache_indirect(x, ns);
-    radiance += (cache_weight + glossy_weight * arriving.a) * arriving.rgb;
+    /* the diffuse share: one diffuse bounce more where the receiver's path was picked glossy
+     * (receiver_glossy); the glossy lobes: always (radiance_cache.one_more_bounce) */
+    radiance += (receiver_glossy > 0.0 ?
+                 (cache_weight - glossy_weight) * (1.0 + receiver_glossy * arriving.a) +
+                     glossy_weight * (1.0 + arriving.a) :
+                 cache_weight + glossy_weight * arriving.a) * arriving.rgb;
   }
   return radiance;
 }

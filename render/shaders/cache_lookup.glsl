@@ -5,14 +5,13 @@
  * face n faces, trilinear over the voxels of the finest grid holding `x` that hold that face
  * (texel .a), the axes blended by n² over those some neighbour holds (else the next coarser
  * grid holding `x`); 0 outside every grid and for the 1 × 1 blank texture (no cache).
- * A texture with two parts (header .z = 1) also holds the next iteration, which the glossy
- * gather reads (radiance_cache.glossy_view): its main() sets cache_part = 1. A corner's voxel
+ * A texture with two parts (header .z = 1) also holds the next iteration (from which the
+ * relaxation's last pass makes part 0's .a); lookups read part 0. A corner's voxel
  * is found through the grid's id rows (-1: none there), its faces among the compact faces.
  * An axis whose n² is under CACHE_AXIS_BLEND weighs nothing and its faces are not fetched: a
  * wall's or a floor's hit reads 8 texels, not 24 (docs/gi_pipeline.md "Multi-bounce radiance
  * cache", "What the cache costs, measured again"). */
 #define CACHE_AXIS_BLEND 1e-6
-int cache_part = 0;
 
 /* Where `x` lies in grid g of the cache (res cells a side; its origin and cell size in header
  * texel (g, 0)): false outside it, else the lower corner `base` of the 2 × 2 × 2 voxels around
@@ -38,8 +37,7 @@ vec4 cache_indirect(vec3 x, vec3 n)
   vec4 info = texelFetch(radiance_cache, ivec2(size.x - 1, 0), 0);
   int res = int(info.x + 0.5);
   int count = int(info.y + 0.5);
-  /* the faces' first texel: part 1's after all of part 0's (V voxels × 6 faces) */
-  int part = (cache_part == 1 && info.z > 0.5) ? int(info.w + 0.5) * 6 : 0;
+  int part = 0; /* part 0's faces (part 1's follow all of them: V voxels × 6 faces) */
   int first_row = 1 + count * res;
   ivec3 face = ivec3(n.x < 0.0 ? 1 : 0, n.y < 0.0 ? 3 : 2, n.z < 0.0 ? 5 : 4);
   vec3 blend = n * n;

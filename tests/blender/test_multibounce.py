@@ -95,7 +95,8 @@ def test_thin_wall_dark_room_stays_dark(voxgi, tmp_path):
 def test_gpu_cache_equals_numpy_cache(voxgi):
     """Two iterations (Bounces 3) of the cache on the Cornell box, one grid and Auto's grids
     nested around a camera: the GPU's voxel faces equal numpy's within 2%, and so do the
-    third iteration's the glossy gather reads (``radiance_cache.glossy_view``)."""
+    third iteration, from which the faces' one-more-bounce ratio comes
+    (``radiance_cache.one_more_bounce``)."""
     from voxgi.blender.snapshot import snapshot_or_error
     from voxgi.render import gpu_context, gpu_gather
     from voxgi.render.gpu_bvh import shared_bvh

@@ -43,8 +43,8 @@ def test_the_staged_build_is_the_whole_build_a_chunk_per_stage(voxgi, monkeypatc
                         lambda *a, **k: (calls.append(1), original(*a, **k))[1])
     whole, _ = gpu_gather.cache_gpu(*inputs)
     # the rays traced once (one chunk), then two lookup passes per iteration (the second's
-    # glossy shares read the first, radiance_cache.relax) and two more for the glossy
-    # gather's iteration (radiance_cache.glossy_view)
+    # glossy shares read the first, radiance_cache.relax) and two more for the next
+    # iteration (radiance_cache.one_more_bounce)
     assert len(calls) == 1 + 2 * 2 + 2
     calls.clear()
     stages, per_stage = cache_stages(*inputs, budget=0.0), []

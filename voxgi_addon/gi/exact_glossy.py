@@ -27,8 +27,7 @@ import numpy as np
 
 from ..scene.snapshot import RAY_GLOSSY
 from .exact_indirect import LUMINANCE, SURFACE_EPSILON, hit_emission, ray_radiance
-from .principled import ROUGHNESS_SQ_THRESHOLD, glossy_color, glossy_reflectance
-from .radiance_cache import glossy_view
+from .principled import ROUGHNESS_SQ_THRESHOLD, diffuse_weight, glossy_color, glossy_reflectance
 from .sampling import hammersley, perpendicular_basis
 
 __all__ = ["GLOSSY_STREAM", "WORLD_GLOSSY_STREAM", "EMITTER_GLOSSY_STREAM", "glossy_indirect",
@@ -112,6 +111,22 @@ class _Lobe:
         cos_ni = self.cos_ni[:, None]
         return d / (4.0 * np.maximum(cos_ni, 1e-4) * (1.0 + _lambda(self.alpha2, cos_ni)))
 
+    def glossy_chance(self, dirs):
+        """(N, K) the chance that Cycles picked each direction by the glossy closure: its
+        sample weight × density over both closures' (directional albedos as the weights, the
+        cosine density for the diffuse one; 1 for a mirror). Cycles counts a bounce by the
+        picked closure but files the path's light by the closures' values, so most of a
+        dielectric's Glossy Indirect rides on paths picked diffuse, with one diffuse bounce
+        fewer ahead (docs/gi_pipeline.md "Multi-bounce radiance cache", "Bounces counted by
+        the picked closure")."""
+        base, metallic, level, rough = (a[:, 0] for a in self.shading)
+        diffuse = diffuse_weight(base, metallic, level, rough, np.clip(self.cos_ni, 0.0, 1.0))
+        glossy = (self.colour @ LUMINANCE)[:, None] * self.pdf(dirs)
+        cosine = (diffuse @ LUMINANCE)[:, None] * np.maximum(
+            np.einsum("nkc,nc->nk", dirs, self.n), 0.0) / np.pi
+        chance = glossy / np.maximum(glossy + cosine, 1e-30)
+        return np.where(self.mirror[:, None], 1.0, chance)
+
     def reflectance(self, dirs):
         """(N, K, 3) BSDF × cos of the lobe toward the viewer for light from ``dirs``."""
         return glossy_reflectance(*self.shading, self.n[:, None], self.v[:, None], dirs)
@@ -141,8 +156,8 @@ def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights,
     """(Glossy Indirect (N, 3) float32, variance of its luminance mean (N,) float32) — see the
     module doc. ``rays`` per point, ``METAL_RAY_FACTOR`` × that at metallic ≥ 0.5. cache : the
     radiance cache the hits reflect too (``exact_indirect.ray_radiance``; None: one bounce),
-    read one iteration ahead of the diffuse gather where it keeps one
-    (``radiance_cache.glossy_view``: a glossy bounce leaves every diffuse bounce to come).
+    with one diffuse bounce more by the chance Cycles picked each ray's direction glossily
+    (``_Lobe.glossy_chance``: a glossy bounce leaves every diffuse bounce to come).
 
     points, normals, views : (N, 3) surface points, unit normals facing the viewer and unit
     directions to the viewer; materials : (N,) material index per point (the last row of the
@@ -161,7 +176,6 @@ def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights,
     materials = np.asarray(materials).reshape(-1)
     metal = np.asarray(principled[1], np.float64)[materials, 0] >= 0.5
     views = np.asarray(views, np.float64).reshape(-1, 3)
-    cache = glossy_view(cache)
     for group, group_rays in ((~metal, rays), (metal, rays * METAL_RAY_FACTOR)):
         if group.any():
             value[group], variance[group] = _glossy_indirect(
@@ -184,7 +198,8 @@ def _glossy_indirect(p, n, views, materials, ids, tris, lights, principled, emis
         hit_ids = ids.repeat(rays) * np.uint32(rays) + np.tile(np.arange(rays, dtype=np.uint32), count)
     radiance, _ = ray_radiance(origins, dirs.reshape(-1, 3), hit_ids, tris, lights,
                                (base_table, param_table), emission, seed, world, hit_samples,
-                               hit_glossy, ray=RAY_GLOSSY, cache=cache)
+                               hit_glossy, ray=RAY_GLOSSY, cache=cache,
+                               receiver=lobe.glossy_chance(dirs).reshape(-1))
     safe_colour = np.where(colour > 0.0, colour, 1.0)
     per_ray = np.where(colour[:, None] > 0.0,
                        weight * radiance.reshape(count, rays, 3) / safe_colour[:, None], 0.0)

@@ -111,17 +111,24 @@ class RayPaths:
         total = self.weight.sum(axis=1)
         return np.where(total > 0, self.glossy.sum(axis=1) / np.maximum(total, 1e-30), 0.0)
 
-    def with_cache(self, cache) -> np.ndarray:
+    def with_cache(self, cache, receiver=None) -> np.ndarray:
         """(K, 3) float64: the radiance with the hits also reflecting the indirect light
         ``cache`` holds at them (None or an empty cache: ``radiance``). A glossy scatter at
         the hit does not count toward Cycles' diffuse bounces, so the glossy lobes reflect the
         light of one more diffuse bounce: the cache's ``lookup`` × (1 + its one-more-bounce
         ratio) (docs/gi_pipeline.md "Multi-bounce radiance cache", "Glossy scatters between
-        diffuse bounces")."""
+        diffuse bounces"). receiver : (K,) per ray the chance Cycles picked the receiver's
+        glossy closure for it (``exact_glossy._Lobe.glossy_chance``; None: 0, the diffuse
+        gather): the hit's diffuse share reflects that much of one more bounce too."""
         out = self.radiance.copy()
         if cache is not None and cache.iterations and len(self.hit):
             arriving, more = lookup(cache, self.points, self.normals, more=True)
-            out[self.hit] += (self.weight + self.glossy * more[:, None]) * arriving
+            if receiver is None:
+                out[self.hit] += (self.weight + self.glossy * more[:, None]) * arriving
+            else:
+                chance = np.asarray(receiver, np.float64).reshape(-1)[self.hit][:, None]
+                out[self.hit] += ((self.weight - self.glossy) * (1.0 + chance * more[:, None])
+                                  + self.glossy * (1.0 + more[:, None])) * arriving
         return out
 
 
@@ -198,7 +205,8 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
 
 def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
                  world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
-                 emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, cache=None):
+                 emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, cache=None,
+                 receiver=None):
     """((K, 3) radiance arriving back along each ray, (K,) distance of its nearest hit, inf on
     a miss): what a bounce ray of the gathers sees — ``world`` on a miss, else the hit's
     emission plus its exact direct light reflected toward the ray's origin (see
@@ -211,7 +219,7 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
     bounces)."""
     paths = ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed, world,
                       hit_samples, hit_glossy, emission_seen, ray)
-    return paths.with_cache(cache), paths.distance
+    return paths.with_cache(cache, receiver), paths.distance
 
 
 def gather_rays(points, normals, sample_ids, rays: int, seed: int = 0):

@@ -41,7 +41,7 @@ from .cascades import CascadeGrid
 from .sampling import point_streams, unit_float
 
 __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
-           "cache_texels", "cached_cache", "face_paths", "face_points", "glossy_view", "iterate",
+           "cache_texels", "cached_cache", "face_paths", "face_points", "iterate",
            "lookup", "one_more_bounce", "pick", "picks", "relax", "snap_focus", "texel_places",
            "triangles_key", "with_faces"]
 
@@ -66,8 +66,8 @@ class RadianceCache:
     ±z only); a lookup blends each axis over the voxels that hold it. origins : per grid
     (N_i, 6, 3) float32 where each face's rays start, in voxels from the voxel's centre
     (``_face_origins``; empty: ``FACE_OFFSET`` along the face's axis). ahead : per grid the
-    faces of the next iteration (as ``faces``), which the glossy gather reads
-    (``glossy_view``); empty: none kept."""
+    faces of the next iteration (as ``faces``), from which ``one_more_bounce`` takes the
+    light a glossy scatter leaves to come; empty: none kept."""
 
     grids: tuple
     cells: tuple
@@ -512,18 +512,6 @@ def with_faces(cache: RadianceCache, values) -> RadianceCache:
                          cache.present, cache.origins)
 
 
-def glossy_view(cache: RadianceCache | None) -> RadianceCache | None:
-    """The cache the glossy gather's bounce hits read: its ``ahead`` iteration where it keeps
-    one (``cached_cache``), else ``cache`` itself. Cycles counts glossy and diffuse bounces
-    apart (Diffuse 4, Glossy 4 by default): a path that leaves the receiver glossily still has
-    all its diffuse bounces ahead, one more than the diffuse gather's hits read
-    (docs/gi_pipeline.md "Multi-bounce radiance cache", "Glossy bounces are not diffuse
-    ones")."""
-    if cache is None or not cache.ahead:
-        return cache
-    return replace(cache, faces=cache.ahead, iterations=cache.iterations + 1, ahead=())
-
-
 def face_paths(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 16,
                seed: int = 0, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
                hit_glossy: bool = True):
@@ -698,7 +686,7 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
                  resolution: int = 0, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
                  hit_glossy: bool = True, focus=None) -> RadianceCache | None:
     """The cache of ``bounces`` − 1 iterations for these triangles, lights and materials (None
-    for ``bounces`` ≤ 1), with the next iteration ``ahead`` (``glossy_view``), kept for the
+    for ``bounces`` ≤ 1), with the next iteration ``ahead`` (``one_more_bounce``), kept for the
     next call with the same inputs (the viewport's slices ask for the same cache). focus : the
     camera (Auto nests grids around it, ``build_cache``;
     ``snap_focus``'d here)."""
@@ -718,7 +706,7 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
     for _ in range(bounces):  # the same rays every iteration: traced once
         # each iteration twice: its glossy shares read the first pass (``relax``)
         made = relax(cache, paths, rays, chosen, level=relax(cache, paths, rays, chosen))
-        if made.iterations == bounces:  # the glossy gather's, one iteration ahead
+        if made.iterations == bounces:  # one iteration ahead: ``one_more_bounce``
             cache = replace(cache, ahead=made.faces)
         else:
             cache = made
