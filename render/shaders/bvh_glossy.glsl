@@ -85,6 +85,12 @@ void main()
     lum2 = partial.x;
   }
   bool reflects = cos_ni > 0.0 && dot(colour, vec3(1.0)) > 0.0;
+  /* the closures' sample weights for the chance Cycles picked a direction glossily
+   * (exact_glossy._Lobe.glossy_chance: their directional albedos) */
+  float glossy_pick = dot(colour, LUMINANCE);
+  float diffuse_pick = dot(principled_diffuse_weight(base, params.x, params.y, rough,
+                                                     clamp(cos_ni, 0.0, 1.0)), LUMINANCE) /
+                       3.14159265358979323846;
   int first_ray = int(chunk.x);
   int end_ray = min(rays, first_ray + int(chunk.y));
   for (int j = first_ray; j < end_ray && reflects; j++) {
@@ -144,12 +150,7 @@ void main()
     }
     else if (dot(weight, vec3(1.0)) > 0.0) {
       float th;
-      /* the chance Cycles picked this direction by the glossy closure (exact_glossy._Lobe
-       * glossy_chance: the closures' directional albedos as their sample weights) */
-      float pg = dot(colour, LUMINANCE) * pdf;
-      float pd = dot(principled_diffuse_weight(base, params.x, params.y, rough,
-                                               clamp(cos_ni, 0.0, 1.0)), LUMINANCE) *
-                 max(dot(l, n), 0.0) / 3.14159265358979323846;
+      float pg = glossy_pick * pdf, pd = diffuse_pick * max(dot(l, n), 0.0);
       receiver_glossy = mirror ? 1.0 : pg / max(pg + pd, 1e-30);
       vec3 radiance = ray_radiance(origin, l, id * uint(rays) + uint(j), seed, int(sampling.w),
                                    world.w > 0.5, world.rgb, false, th);

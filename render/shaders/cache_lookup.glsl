@@ -37,7 +37,6 @@ vec4 cache_indirect(vec3 x, vec3 n)
   vec4 info = texelFetch(radiance_cache, ivec2(size.x - 1, 0), 0);
   int res = int(info.x + 0.5);
   int count = int(info.y + 0.5);
-  int part = 0; /* part 0's faces (part 1's follow all of them: V voxels × 6 faces) */
   int first_row = 1 + count * res;
   ivec3 face = ivec3(n.x < 0.0 ? 1 : 0, n.y < 0.0 ? 3 : 2, n.z < 0.0 ? 5 : 4);
   vec3 blend = n * n;
@@ -63,7 +62,7 @@ vec4 cache_indirect(vec3 x, vec3 n)
       if (id < -0.5) {
         continue; /* no voxel of the grid there */
       }
-      int first = part + int(id + 0.5) * 6;
+      int first = int(id + 0.5) * 6; /* part 0's faces (part 1's follow all of them) */
       ivec3 t = ivec3(first) + face;
       vec4 fx = axes.x ? texelFetch(radiance_cache, ivec2(t.x % size.x, first_row + t.x / size.x),
                                     0) : vec4(0.0);
