@@ -24,8 +24,8 @@ def release_gpu_resources() -> None:
     """Free the compiled shaders kept between renders while Blender's GPU module is still up:
     on unregister and, since the bpy module never unregisters add-ons, at exit before bpy's own
     exit handler (docs/gi_pipeline.md, "GPU resources at exit")."""
-    for name in ("viewport", "debug_draw", "gpu_shaders", "gpu_bvh", "gpu_gather",
-                 "gpu_principled", "gpu_compose", "gpu_accumulation",
+    for name in ("viewport", "kernel_warmup", "debug_draw", "gpu_shaders", "gpu_bvh",
+                 "gpu_gather", "gpu_principled", "gpu_compose", "gpu_accumulation",
                  "gpu_gather_sums"):
         module = sys.modules.get(f"{__name__}.{name}")  # not imported: nothing cached
         if module is not None:
@@ -39,11 +39,17 @@ def register() -> None:
     # sys.modules holds them, as after that first call: the engine's globals, which Blender
     # keeps to its exit, would keep their GPU objects alive past its GPU's teardown.
     importlib.import_module(f"{__name__}.viewport")
+    # the views' scene-independent kernels compiled while a VoxGI file is open in the UI,
+    # one per timer tick, before a view enters Rendered mode (kernel_warmup)
+    importlib.import_module(f"{__name__}.kernel_warmup").register()
     atexit.unregister(release_gpu_resources)
     atexit.register(release_gpu_resources)
 
 
 def unregister() -> None:
+    warmup = sys.modules.get(f"{__name__}.kernel_warmup")
+    if warmup is not None:
+        warmup.unregister()
     atexit.unregister(release_gpu_resources)
     unregister_modules(modules)
     release_gpu_resources()

@@ -254,24 +254,32 @@ class GPUBVH:
         packed = pack_bvh(bvh_of(tris), tris)  # built once per instanced mesh
         return packed, time.perf_counter() - t0
 
-    def upload_steps(self, tris, packed):
+    def upload_steps(self, tris, packed, part_bytes: int = 0):
         """Upload ``packed`` (``pack(tris)``) a texture per step (a generator: nodes, triangles,
-        normals), the BVH switching to them at the last; None (unchanged): only remember
+        normals) — consecutive ones together while their bytes stay within ``part_bytes``, a
+        scene part — the BVH switching to them at the last; None (unchanged): only remember
         ``tris``. Main thread."""
         self.uploaded_bytes = 0
         if packed is None:
             self._tris = tris
             return
         packed, seconds = packed
+        step = [0]
 
         def upload(texels, part):
-            note_upload(part)
+            if step[0] and step[0] + texels.nbytes > part_bytes:
+                step[0] = 0
+            if not step[0]:
+                note_upload(part)
+            step[0] += max(int(texels.nbytes), 1)
             return float_texture(texels, (texels.shape[1], texels.shape[0]))
 
         nodes = upload(packed.nodes, "bvh nodes")
-        yield
+        if step[0] + packed.triangles.nbytes > part_bytes:
+            yield
         triangles = upload(packed.triangles, "bvh triangles")
-        yield
+        if step[0] + packed.normals.nbytes > part_bytes:
+            yield
         self.normals = upload(packed.normals, "bvh normals")
         self.nodes, self.triangles = nodes, triangles
         self.build_seconds = seconds

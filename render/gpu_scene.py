@@ -56,6 +56,11 @@ from .gpu_shaders import note_upload
 from .gpu_volume import float_texture
 
 # What ``uploaded`` names: the parts of a scene.
+# Scene parts go in one per step (a ``view_draw``'s one upload), but consecutive small ones
+# together while their bytes stay within PART_BYTES: the demo box's 11 parts took 11 draws
+# before its first GI image, each sending 0.1–1 ms of tables (docs/gi_pipeline.md "Kernels
+# compiled before the view needs them"); a megabyte takes about a millisecond to send
+PART_BYTES = 1 << 20
 WAITING = "waiting"  # what an ``upload_steps`` step that sent nothing (the BVH building) yields
 PARTS = ("bvh", "materials", "textures", "constants", "lights", "world", "emitters")
 
@@ -458,9 +463,20 @@ class GPUScene:
         new: dict[str, object] = {}
         sent: dict[str, int] = {}
 
+        step = [0]  # bytes sent in this step
+
         def send(part: str, nbytes: int) -> None:
-            note_upload(part)
+            if not step[0]:
+                note_upload(part)  # one scene part a step: the small ones sent with it are its
+            step[0] += max(int(nbytes), 1)
             sent[part] = sent.get(part, 0) + int(nbytes)
+
+        def full(nbytes: int) -> bool:
+            """Whether a part of ``nbytes`` waits for the next step (``PART_BYTES``)."""
+            if step[0] and step[0] + nbytes > PART_BYTES:
+                step[0] = 0
+                return True
+            return False
 
         textures = dict(self.textures)
         # (known from the last texture part's step on: ``ScenePlan.textures_sent``)
@@ -471,68 +487,81 @@ class GPUScene:
             send("textures", 32)
             if last == "none":
                 plan.textures_sent = textures
-            yield
         if plan.atlas is not None:
             atlas = plan.atlas
+            if full(atlas.size * 2):
+                yield
             textures["texture_atlas"] = float_texture(atlas, (atlas.shape[1], atlas.shape[0]),
                                                       "RGBA16F")
             send("textures", atlas.size * 2)
             if last == "atlas":
                 plan.textures_sent = textures
-            yield
         if plan.texture_table is not None:
+            out, rows = plan.texture_table
+            if full(out.nbytes):
+                yield
             if serial != self.serial:
                 return
-            out, rows = plan.texture_table
             textures["texture_table"] = float_texture(out, (TEXTURE_WIDTH, rows))
             send("textures", out.nbytes)
             plan.textures_sent = textures
-            yield
         plan.textures_sent = textures
         if plan.materials is not None:
+            principled, emission, slots, variants, glow = plan.materials
+            if full(5 * len(principled[0]) * 16):
+                yield
             if serial != self.serial:
                 return
             t0 = time.perf_counter()
-            principled, emission, slots, variants, glow = plan.materials
             new["materials"] = principled_materials_texture(principled, emission, slots,
                                                             variants, glow)
             send("materials", 5 * len(principled[0]) * 16)
             seconds["materials"] = seconds.get("materials", 0.0) + time.perf_counter() - t0
-            yield
         lut = lut_texture()  # constant; cached by gpu_principled
         if lut is not self.lut or self.no_world is None:
+            nbytes = lut.width * lut.height * 16
+            none = (world_table(None, 0), emitter_table(None, 0))
+            if self.no_world is None:
+                nbytes += sum(_texture_bytes(table) for table in none)
+            if full(nbytes):
+                yield
             if serial != self.serial:
                 return
             new["lut"] = lut
-            nbytes = lut.width * lut.height * 16
             if self.no_world is None:
-                none = (world_table(None, 0), emitter_table(None, 0))
                 new["no_world"], new["no_emitters"] = (_table_texture(table) for table in none)
-                nbytes += sum(_texture_bytes(table) for table in none)
             ltc_texture()  # the glossy kernels' constant table (cached by gpu_ltc)
             send("constants", nbytes)
-            yield
         if plan.lamps is not None:
+            every, each, none = plan.lamps
+            nbytes = sum(_texture_bytes(t) for t in (every, *each, none))
+            if full(nbytes):
+                yield
             if serial != self.serial:
                 return
-            every, each, none = plan.lamps
             new["lamp_table"] = _table_texture(every)
             new["lamp_tables"] = [_table_texture(table) for table in each]
             new["no_lamp"] = _table_texture(none)
-            send("lights", sum(_texture_bytes(t) for t in (every, *each, none)))
-            yield
+            send("lights", nbytes)
         if plan.world is not None:
+            if full(_texture_bytes(plan.world)):
+                yield
             if serial != self.serial:
                 return
             new["world_map"] = _table_texture(plan.world)
             send("world", _texture_bytes(plan.world))
-            yield
         if plan.emitters is not None:
+            if full(_texture_bytes(plan.emitters)):
+                yield
             if serial != self.serial:
                 return
             new["emitters"] = _table_texture(plan.emitters)
             send("emitters", _texture_bytes(plan.emitters))
+        if step[0]:  # the step of the last parts ends here
+            step[0] = 0
             yield
+            if serial != self.serial:
+                return
         # the BVH last: it may still be building (``prepare``'s on_tables) while the other
         # parts go in; a step that finds it building sends nothing
         while not plan.bvh_ready.is_set() or plan.bvh_error is not None:
@@ -546,7 +575,7 @@ class GPUScene:
             t0 = time.perf_counter()
             bvh, packed = plan.bvh
             # the BVH knows its own triangles (a content check): it may go in on its own
-            for _ in bvh.upload_steps(plan.tris, packed):
+            for _ in bvh.upload_steps(plan.tris, packed, PART_BYTES):
                 yield
                 if serial != self.serial:
                     return

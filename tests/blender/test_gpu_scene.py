@@ -193,10 +193,13 @@ def test_the_other_parts_go_in_while_the_bvh_builds(voxgi, monkeypatch):
     """``GPUScene.prepare``'s on_tables (the viewport, docs/gi_pipeline.md "Entering Rendered
     mode"): the plan comes with every part but the BVH, whose build is held here; its upload
     sends those parts a step each, then steps that send nothing while the BVH builds, then the
-    BVH's three textures; the scene is then the plan's and renders as one built in one go."""
+    BVH's three textures; the scene is then the plan's and renders as one built in one go.
+    (A texture a step, as a large scene's: ``PART_BYTES`` 0.)"""
     import threading
 
-    from voxgi.render import gpu_bvh
+    from voxgi.render import gpu_bvh, gpu_scene
+
+    monkeypatch.setattr(gpu_scene, "PART_BYTES", 0)
     from voxgi.render.gpu_bvh import GPUBVH
     from voxgi.render.gpu_scene import WAITING, GPUScene
     from voxgi.render.gpu_shaders import counters
@@ -257,3 +260,65 @@ def test_the_other_parts_go_in_while_the_bvh_builds(voxgi, monkeypatch):
     assert after == ["bvh nodes", "bvh triangles", "bvh normals"]
     assert scene.keys == plan.keys and scene.tris is plan.tris
     assert_same_passes(render(snapshot, scene), fresh(snapshot))
+
+
+def test_small_parts_go_in_together_within_part_bytes(voxgi, monkeypatch):
+    """``gpu_scene.PART_BYTES``: consecutive scene parts go in one upload step (a view_draw's
+    one scene part) while their bytes stay within it — the emissive room's tables in fewer
+    steps than a texture a step — no step sends more than that unless one texture alone is
+    larger, each step counts one part, and the scene renders as one sent a texture a step."""
+    from voxgi.render import gpu_bvh, gpu_scene
+    from voxgi.render.gpu_bvh import GPUBVH
+    from voxgi.render.gpu_scene import GPUScene
+    from voxgi.render.gpu_shaders import counters
+
+    gpu_ready()
+    light_scenes.build("emissive_room", bpy.context.scene)
+    snapshot = snapshot_now()
+    made = []
+    default = gpu_scene.PART_BYTES
+
+    def counted(module, name):
+        original = getattr(module, name)
+
+        def make(*args, **kwargs):
+            texture = original(*args, **kwargs)
+            made.append(texture.width * texture.height * (8 if texture.format == "RGBA16F"
+                                                          else 16))
+            return texture
+        monkeypatch.setattr(module, name, make)
+
+    for module, name in ((gpu_scene, "float_texture"), (gpu_bvh, "float_texture"),
+                         (gpu_scene, "principled_materials_texture")):
+        counted(module, name)
+
+    def sent_in_steps(part_bytes):
+        monkeypatch.setattr(gpu_scene, "PART_BYTES", part_bytes)
+        scene = GPUScene(bvh=GPUBVH())
+        plan = scene.prepare(snapshot)
+        assert plan.bvh_ready.wait(60.0)
+        steps, sizes = scene.upload_steps(plan), []
+        while True:
+            mark = counters.mark()
+            made.clear()
+            try:
+                next(steps)
+                ended = False
+            except StopIteration:
+                ended = True
+            parts = counters.since(mark)[1]
+            assert len(parts) <= 1, parts
+            if made:
+                assert len(parts) == 1, (parts, made)  # one counted part a step that sends
+                sizes.append(list(made))
+            if ended:
+                return scene, sizes
+
+    apart, one_by_one = sent_in_steps(0)
+    together, grouped = sent_in_steps(default)
+    assert len(grouped) < len(one_by_one), (grouped, one_by_one)
+    assert all(sum(step) <= default or len(step) == 1 for step in grouped), grouped
+    assert sorted(b for step in grouped for b in step) == \
+        sorted(b for step in one_by_one for b in step)  # the same textures
+    assert together.keys == apart.keys
+    assert_same_passes(render(snapshot, together), render(snapshot, apart))

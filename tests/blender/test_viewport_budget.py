@@ -170,8 +170,12 @@ def test_no_draw_compiles_or_uploads_more_than_one_thing_and_the_image_is_the_sa
     reference = before[-1][0]
 
     # entering Rendered mode from cold caches, spread over draws; the vertex batch in several
-    # chunks on this small scene, as on a large one
+    # chunks and the scene's parts a texture a step on this small scene, as on a large one
+    # (its small tables go in one step otherwise: test_small_scene_parts_go_together)
+    from voxgi.render import gpu_scene
+
     monkeypatch.setattr(viewport_prepare, "CHUNK_TRIANGLES", 512)
+    monkeypatch.setattr(gpu_scene, "PART_BYTES", 0)
     cold_caches()
     live_gi(scene.name_full).rescan = "entering Rendered mode again"
     engine = StandInEngine()
@@ -271,3 +275,58 @@ def test_a_radiance_cache_completed_in_a_draw_asks_for_the_next_draw(voxgi, monk
     before = engine.redraws
     draw(engine, depsgraph, view, window)
     assert engine.redraws == before
+
+
+def test_kernels_warmed_with_the_file_open_leave_the_draws_the_scenes_own(voxgi, monkeypatch):
+    """render/kernel_warmup.py: while a VoxGI file is open, the add-on's timer compiles the
+    views' scene-independent kernels, one a tick, and nothing for a scene another engine
+    renders. Entering Rendered mode after it compiles before the first GI image only the
+    G-buffer raster and the scene's BVH variants, one a draw, shows the first GI image draws
+    sooner than from cold caches, and converges to the same image."""
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render import gpu_scene, kernel_warmup, viewport_prepare
+    from voxgi.render.viewport import view_update
+
+    scene = demo_scene()
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    view, window = camera_matrices(scene, depsgraph)
+    compiles = Compiles(monkeypatch)
+    monkeypatch.setattr(viewport_prepare, "CHUNK_TRIANGLES", 512)
+
+    def entering(warm: bool):
+        cold_caches()
+        compiles.take()
+        if warm:
+            scene.render.engine = "CYCLES"
+            assert kernel_warmup.tick(scene) == kernel_warmup.IDLE_SECONDS
+            assert compiles.take() == 0  # not a VoxGI file: nothing compiled
+            scene.render.engine = "VOXGI"
+            ticks = []
+            while True:
+                wait = kernel_warmup.tick(scene)
+                ticks.append(compiles.take())
+                if wait == kernel_warmup.IDLE_SECONDS:
+                    break
+            assert ticks[-1] == 0 and set(ticks[:-1]) == {1}, ticks  # one compile a tick
+            assert len(ticks) > 8
+        live_gi(scene.name_full).rescan = "entering Rendered mode again"
+        engine = StandInEngine()
+        view_update(engine, context(view, window), depsgraph)
+        renderer_for(engine, whole=False)
+        draws = draw_to_the_end(engine, depsgraph, view, window, compiles)
+        assert_bounded(draws, "entering")
+        first_gi = next(i for i, d in enumerate(draws) if d[7])
+        return draws, first_gi
+
+    cold, cold_first = entering(False)
+    warmed, warm_first = entering(True)
+    before_gi = sorted(name for d in warmed[:warm_first + 1] for name in d[5])
+    generic = {name for name, _, _ in kernel_warmup.generic_steps(scene.voxgi)[1]}
+    assert before_gi == sorted(k for k in FIRST_IMAGE_KERNELS if k not in generic), before_gi
+    assert before_gi == ["bvh_direct", "bvh_direct", "bvh_gather", "gbuffer raster"]
+    assert warm_first < cold_first, (warm_first, cold_first)
+    print(f"first GI image at draw {warm_first} with the kernels warmed, {cold_first} from "
+          f"cold caches")
+    np.testing.assert_allclose(warmed[-1][0], cold[-1][0], atol=1e-5)
+    assert gpu_scene.PART_BYTES > 0

@@ -1,0 +1,103 @@
+"""The view's kernels compiled before a view needs them (docs/gi_pipeline.md "Kernels compiled
+before the view needs them").
+
+Entering Rendered mode compiles every kernel the first GI image uses, one per ``view_draw``
+(``viewport_prepare.kernel_steps``): eleven on the demo box, so the first GI image could not
+come before the eleventh draw. Most of them do not depend on the scene — the quick image's
+shade, the gathers' upsampling and filter, the composition's surface and light sums, the
+accumulation's three — only the BVH kernels do (their variants follow the scene's lights,
+textures and cut-outs). While a file whose render engine is VoxGI is open in Blender's UI, a
+timer compiles those scene-independent kernels (``kernel_steps`` without a scene, with the
+file's settings), **one per tick**, a tick every ``STEP_SECONDS``: a compile of 1–20 ms
+between two events, before the user switches a view to Rendered, which then compiles only the
+scene's BVH variants. The getters are the views' own cached ones (``viewport_prepare.kernel_steps``), so
+a kernel is compiled once whichever comes first.
+
+A compile that took longer than ``SLOW_COMPILE`` (Mesa's shader cache empty: a first session
+on a machine) spaces the next tick by ``SLOW_SECONDS``, so the warm-up never holds the main
+thread for longer than one compile at a time. Nothing runs in background mode (no view to
+enter), and nothing once every kernel of the file's settings is compiled (the timer then only
+looks every ``IDLE_SECONDS`` whether the settings or the engine changed).
+"""
+from __future__ import annotations
+
+import time
+
+import bpy
+
+from .gpu_context import gpu_usable
+from .gpu_gather import _glossy_shader
+
+STEP_SECONDS = 0.1   # between two compiles
+IDLE_SECONDS = 1.0   # between two looks when there is nothing to compile
+SLOW_COMPILE = 0.030  # a compile longer than this spaces the next one by SLOW_SECONDS
+SLOW_SECONDS = 1.0
+
+ENGINE = "VOXGI"
+
+
+def generic_steps(settings) -> tuple[tuple, list]:
+    """(key, steps): the kernels of ``viewport_prepare.kernel_steps`` that no scene's features
+    choose (the BVH kernels' variants are left out: they need the scene), with the lamps'
+    glossy light (``glossy direct``, which every scene with a lamp uses), for the VoxGI
+    settings ``settings`` (``Scene.voxgi``)."""
+    from .viewport_prepare import kernel_key, kernel_steps
+
+    key = kernel_key(None, settings)
+    steps = kernel_steps(*key)
+    steps.append(("glossy direct", 2, _glossy_shader))
+    return key, steps
+
+
+_warmup = None  # the KernelWarmup of the generic lists (not the views': their status counts)
+
+
+def step(settings) -> str:
+    """Compile the next scene-independent kernel for ``settings`` not compiled yet: its name,
+    or "" when all are (counted in ``gpu_shaders.counters`` like the views' compiles)."""
+    global _warmup
+    from .viewport_prepare import KernelWarmup
+
+    if _warmup is None:
+        _warmup = KernelWarmup()
+    key, steps = generic_steps(settings)
+    return _warmup.step(key, steps, 2)
+
+
+def tick(scene) -> float:
+    """One tick of the timer for the active ``scene``: a compile when it renders with VoxGI
+    and the GPU can be used; the seconds until the next tick."""
+    if scene is None or scene.render.engine != ENGINE or not hasattr(scene, "voxgi") or \
+            not gpu_usable()[0]:
+        return IDLE_SECONDS
+    t0 = time.perf_counter()
+    name = step(scene.voxgi)
+    if not name:
+        return IDLE_SECONDS
+    return SLOW_SECONDS if time.perf_counter() - t0 > SLOW_COMPILE else STEP_SECONDS
+
+
+def _tick() -> float | None:
+    """The timer (Blender's UI only: in background mode there is no view to enter)."""
+    if bpy.app.background:
+        return None
+    try:
+        return tick(getattr(bpy.context, "scene", None))
+    except Exception:  # noqa: BLE001 - a view compiles it again and reports what failed
+        return None
+
+
+def release() -> None:
+    """Forget which lists are compiled (the shaders' caches are cleared with it)."""
+    global _warmup
+    _warmup = None
+
+
+def register() -> None:
+    if not bpy.app.background and not bpy.app.timers.is_registered(_tick):
+        bpy.app.timers.register(_tick, first_interval=IDLE_SECONDS, persistent=True)
+
+
+def unregister() -> None:
+    if bpy.app.timers.is_registered(_tick):
+        bpy.app.timers.unregister(_tick)
