@@ -447,9 +447,10 @@ class GPUScene:
     def upload_steps(self, plan: ScenePlan):
         """The GPU half of ``update``: send what ``plan`` (``prepare``) rebuilt, a part per
         step (a generator: the texture atlas, the texture table, the materials, the constants,
-        the lamps' tables, the world, the emitters, the BVH's three textures — a step while the
-        BVH is still building yields ``WAITING`` and sends nothing; each counted by
-        ``gpu_shaders.note_upload``), then make the scene the plan's at once, so a scene left
+        the lamps' tables, the world, the emitters, the BVH's three textures — consecutive
+        ones together while their bytes stay within ``PART_BYTES``; a step while the BVH is
+        still building yields ``WAITING`` and sends nothing; each step's parts counted as one
+        by ``gpu_shaders.note_upload``), then make the scene the plan's at once, so a scene left
         between two steps is still the previous one throughout. Main thread. A plan prepared
         against other keys than the scene's (another update came first) is dropped, and so is
         this one when another ``upload_steps`` (F12's update) starts before it ends:

@@ -24,7 +24,9 @@ into steps of which a draw takes at most one of each kind:
   (``gbuffer.ChunkedBatch``);
 * **the kernels** (``kernel_steps``): every compute shader the view's slices use, in the
   order they first use them, compiled one per draw before they are needed — the ones of the
-  coarse first image first, then the tiles' and the radiance cache's;
+  coarse first image first, then the tiles' and the radiance cache's (those no scene's
+  features choose are usually in already: ``kernel_warmup`` compiles them while the file is
+  open);
 * **a quick image**: once the raster shader and the batch are there, the view shows Solid-like
   shading of the G-buffer (``shaders/quick_shade.glsl``: Base Color under a headlight) until
   the first GI image replaces it, so the view is not empty while the BVH, the lights and the
