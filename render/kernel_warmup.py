@@ -16,7 +16,7 @@ a kernel is compiled once whichever comes first.
 A compile that took longer than ``SLOW_COMPILE`` (Mesa's shader cache empty: a first session
 on a machine) spaces the next tick by ``SLOW_SECONDS``, so the warm-up never holds the main
 thread for longer than one compile at a time. Nothing runs in background mode (no view to
-enter), and nothing once every kernel of the file's settings is compiled (the timer then only
+enter) nor while F12 renders, and nothing once every kernel of the file's settings is compiled (the timer then only
 looks every ``IDLE_SECONDS`` whether the settings or the engine changed).
 """
 from __future__ import annotations
@@ -81,6 +81,8 @@ def _tick() -> float | None:
     """The timer (Blender's UI only: in background mode there is no view to enter)."""
     if bpy.app.background:
         return None
+    if bpy.app.is_job_running("RENDER"):  # F12 compiles what it uses, in its own context
+        return IDLE_SECONDS
     try:
         return tick(getattr(bpy.context, "scene", None))
     except Exception:  # noqa: BLE001 - a view compiles it again and reports what failed
