@@ -111,6 +111,8 @@ def no_texture_inputs() -> dict[str, object]:
 _cache_upload: dict[str, object] = {}
 CACHE_IMAGE_WIDTH = 256  # voxel faces per row of the cache's gather "image"
 CACHE_STAGE_SECONDS = 0.015  # a chunk of the viewport's staged build (progressive.STAGE_SHARE)
+CHUNK_AIM = 0.75    # of it, what the next chunk is sized for by the last one's time
+CHUNK_GROWTH = 2.0  # ... growing at most this many times a chunk
 
 
 def cache_gpu(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
@@ -257,7 +259,12 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
                      {**constants, "chunk": (top, end, 0.0, 0.0)}, images=records)
         seconds = time.perf_counter() - t0
         top = end
-        rows = max(1, min(record_rows, int(rows * min(4.0, budget / max(seconds, 1e-4)))))
+        # the next chunk at CHUNK_AIM of the budget by this one's time, at most twice its
+        # rows: a chunk's rays cost more or less by where its faces lie, and the viewport's
+        # other threads share the cores (chunks aimed at the whole budget and grown 4× at a
+        # time took 23–42 ms, the draw over its 30 ms)
+        rows = max(1, min(record_rows, int(rows * min(CHUNK_GROWTH, CHUNK_AIM * budget /
+                                                      max(seconds, 1e-4)))))
         yield
     places = face_places(cache)
     yield
