@@ -70,6 +70,7 @@ def read_camera(scene, depsgraph) -> CameraData | None:
         ortho_scale=float(camera.ortho_scale),
         clip_start=float(camera.clip_start),
         clip_end=float(camera.clip_end),
+        sensor_fit=str(camera.sensor_fit),
     )
 
 

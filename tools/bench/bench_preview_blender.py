@@ -68,6 +68,10 @@ def build(name: str, scene) -> None:
         light_scenes.build(name, scene)
     elif name == "city":
         scale_scene.city_block(scene, CITY_SIDE)
+    elif name == "diorama":  # what an artist brings: a glTF download's meshes, each its own
+        import diorama_scene
+
+        diorama_scene.diorama(scene)
     else:
         raise SystemExit(f"unknown scene {name!r}")
 

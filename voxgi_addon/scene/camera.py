@@ -76,13 +76,20 @@ def _frustum(camera: CameraData, width: int, height: int) -> tuple[float, float,
         cx, cy = p[0, 2] * hx, p[1, 2] * hy
     w0, h0 = camera.resolution
     if abs(w0 * height - h0 * width) > 1e-9 * w0 * height:
-        # Another aspect than the projection's: Blender's AUTO sensor fit keeps the field of
-        # view of the larger image dimension (the shift, in camera units, is unchanged).
-        larger = hx if w0 >= h0 else hy
-        if width >= height:
-            hx, hy = larger, larger * height / width
+        # Another aspect than the projection's: the camera's Sensor Fit says which field of
+        # view stays — Horizontal the width's, Vertical the height's (a glTF camera's: its
+        # yfov), Auto the larger image dimension's (the shift, in camera units, is unchanged)
+        fit = getattr(camera, "sensor_fit", "AUTO")
+        if fit == "HORIZONTAL":
+            hy = hx * height / width
+        elif fit == "VERTICAL":
+            hx = hy * width / height
         else:
-            hx, hy = larger * width / height, larger
+            larger = hx if w0 >= h0 else hy
+            if width >= height:
+                hx, hy = larger, larger * height / width
+            else:
+                hx, hy = larger * width / height, larger
     return cx, cy, hx, hy
 
 
@@ -109,7 +116,7 @@ def camera_rays(camera: CameraData, width: int | None = None, height: int | None
     directions : (H·W, 3) float64 unit vectors.
     Pixel (row j, column i) is ray ``j·W + i``; row 0 is the **top** of the image, and pixel
     centres sit at (i + ½, j + ½) as in Cycles. A frame whose aspect differs from the camera's
-    resolution is fitted like Blender's AUTO sensor fit.
+    resolution is fitted as the camera's Sensor Fit fits it (``_frustum``).
     """
     if camera.type not in ("PERSP", "ORTHO"):
         raise ValueError(f"camera type {camera.type!r} is not supported (PERSP or ORTHO)")

@@ -210,6 +210,8 @@ class CameraData:
     world_matrix : (4, 4) float64; the camera looks along its local -Z.
     projection_matrix : (4, 4) float64 OpenGL-style, for ``resolution``.
     resolution : (width, height) in pixels after the render percentage.
+    sensor_fit : Blender's Sensor Fit ("AUTO", "HORIZONTAL", "VERTICAL"): which field of
+        view an image of another aspect than ``resolution``'s keeps (``camera._frustum``).
     """
 
     name: str
@@ -222,6 +224,7 @@ class CameraData:
     ortho_scale: float = 0.0
     clip_start: float = 0.1
     clip_end: float = 100.0
+    sensor_fit: str = "AUTO"
 
 
 @dataclass(frozen=True)
