@@ -433,10 +433,16 @@ def read_armatures(entries: list[_Entry], depsgraph) -> dict:
 
 
 def read_lights(depsgraph) -> list:
-    """The ``LightData`` of the view layer's visible lights at the depsgraph's frame."""
+    """The ``LightData`` of the lights Blender renders from the view layer (``renders``:
+    visible there and not disabled in renders, as the meshes) at the depsgraph's frame."""
     view_layer, lights = depsgraph.view_layer, []
+    disabled = None
     for obj in view_layer.objects:
-        if obj.type == "LIGHT" and obj.visible_get(view_layer=view_layer):
+        if obj.type != "LIGHT":
+            continue
+        if disabled is None:
+            disabled = render_disabled()
+        if renders(obj, view_layer, disabled):
             light = read_light(obj, obj.evaluated_get(depsgraph))
             if light is not None:
                 lights.append(light)

@@ -257,6 +257,26 @@ def test_lights_and_world(voxgi, snapshot_module):
     assert snap.camera is None
 
 
+def test_lights_disabled_in_renders_are_left_out(voxgi, snapshot_module):
+    """A lamp Blender does not render — Disable in Renders on the object or on a collection
+    it is in — lights nothing in the preview either, as a mesh so disabled shows nothing (with
+    the diorama's two lamps disabled in renders the preview's Diffuse Direct read 2.5 ×
+    Cycles')."""
+    for name in ("Shown", "Disabled", "In a disabled collection"):
+        light = scenes.link(bpy.data.objects.new(name, bpy.data.lights.new(name, "POINT")))
+    bpy.data.objects["Disabled"].hide_render = True
+    hidden = bpy.data.collections.new("Off in renders")
+    bpy.context.scene.collection.children.link(hidden)
+    moved = bpy.data.objects["In a disabled collection"]
+    for collection in list(moved.users_collection):
+        collection.objects.unlink(moved)
+    hidden.objects.link(moved)
+    hidden.hide_render = True
+    assert light is moved
+    names = [light.name for light in _snapshot(snapshot_module).lights]
+    assert names == ["Shown"], names
+
+
 def test_too_many_deform_bones_is_a_clear_error(voxgi, snapshot_module):
     from voxgi.voxgi_addon.errors import VoxGIError
 
