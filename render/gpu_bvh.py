@@ -39,6 +39,8 @@ from ..voxgi_addon.gi.exact_glossy import (
 )
 from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
 from ..voxgi_addon.gi.radiance_cache import PICK_STREAM
+from ..voxgi_addon.gi.terminator import FIND_REACH
+from ..voxgi_addon.gi.terminator import OFFSET as TERMINATOR_OFFSET
 from ..voxgi_addon.gi.world_light import world_table
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
@@ -51,7 +53,7 @@ from ..voxgi_addon.scene.bvh import (
     pack_bvh,
 )
 from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
-from ..voxgi_addon.scene.snapshot import RAY_ALL, RAY_DIFFUSE, RAY_GLOSSY, RAY_SHADOW
+from ..voxgi_addon.scene.snapshot import RAY_ALL, RAY_CAMERA, RAY_DIFFUSE, RAY_GLOSSY, RAY_SHADOW
 from ..voxgi_addon.scene.textures import METALLIC_LEVELS, ROUGHNESS_LEVELS
 from .gpu_ltc import DEFINES as LTC_DEFINES
 from .gpu_ltc import ltc_texture
@@ -69,7 +71,7 @@ KERNELS = {
     "bvh_probe": (("textures", "bvh_probe"), _BVH + ("ray_origin", "ray_direction") + _TEXTURES,
                   ("mode",)),
     "bvh_direct": (("textures", "bvh_lights", "same_surface", "bvh_direct"),
-                   _BVH + ("lights", "world_map", "emitters", "gbuffer_position",
+                   _BVH + ("bvh_normals", "lights", "world_map", "emitters", "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "centre_position", "centre_normal",
                            "centre_view", "centre_unshadowed", "emitter_field") + _TEXTURES,
                    ("sampling", "strata")),
@@ -162,7 +164,13 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
                    # the kind of ray a kernel's closest hits are (ray visibility, bvh_common)
                    "BVH_RAY_SHADOW": str(RAY_SHADOW), "BVH_LEAF_BIAS": str(LEAF_BIAS),
                    "BVH_CLOSEST_RAY": {"bvh_glossy": str(RAY_GLOSSY),
-                                       "bvh_probe": "int(mode.y)"}.get(kernel, str(RAY_DIFFUSE))}
+                                       "bvh_probe": "int(mode.y)",
+                                       # (its one closest hit: the triangle under a pixel,
+                                       # for the shadow terminator's lift)
+                                       "bvh_direct": str(RAY_CAMERA)}.get(kernel,
+                                                                          str(RAY_DIFFUSE)),
+                   "TERMINATOR_OFFSET": repr(float(TERMINATOR_OFFSET)),
+                   "TERMINATOR_REACH": repr(float(FIND_REACH))}
         if "principled" in files:
             defines.update(PRINCIPLED_DEFINES)
         if "textures" in files:

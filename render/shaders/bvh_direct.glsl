@@ -23,6 +23,58 @@
  * (sampling.w = 1), (the field's sum where it holds, else the exact one, 0): the pixel
  * centres' sums, which mode 1 reads as its centre_unshadowed. */
 
+/* The triangle under the pixel's point `q` seen along unit `view` with shading normal `n`
+ * (a camera ray from TERMINATOR_REACH back to as far past it: terminator.find_lifts), and its
+ * lift (terminator.lift) for the lights' shadow rays (bvh_lights.glsl shadow_hit). */
+void terminator_set(vec3 q, vec3 view, vec3 n)
+{
+  float th;
+  int triangle, slot;
+  vec2 uv;
+  if (!bvh_closest_hit(q - TERMINATOR_REACH * view, view, 0.0, 2.0 * TERMINATOR_REACH, th,
+                       triangle, slot, uv)) {
+    return;
+  }
+  vec3 V0 = bvh_texel_triangles(3 * slot).xyz;
+  vec3 V1 = V0 + bvh_texel_triangles(3 * slot + 1).xyz;
+  vec3 V2 = V0 + bvh_texel_triangles(3 * slot + 2).xyz;
+  ivec2 at0 = ivec2((3 * slot) & (BVH_WIDTH - 1), (3 * slot) >> BVH_WIDTH_LOG2);
+  ivec2 at1 = ivec2((3 * slot + 1) & (BVH_WIDTH - 1), (3 * slot + 1) >> BVH_WIDTH_LOG2);
+  ivec2 at2 = ivec2((3 * slot + 2) & (BVH_WIDTH - 1), (3 * slot + 2) >> BVH_WIDTH_LOG2);
+  vec3 N0 = texelFetch(bvh_normals, at0, 0).xyz;
+  vec3 N1 = texelFetch(bvh_normals, at1, 0).xyz;
+  vec3 N2 = texelFetch(bvh_normals, at2, 0).xyz;
+  vec3 face = cross(V1 - V0, V2 - V0);
+  face /= max(length(face), 1e-30);
+  vec3 ng = dot(face, n) < 0.0 ? -face : face; /* on the shaded side */
+  float b0 = 1.0 - uv.x - uv.y, b1 = uv.x, b2 = uv.y;
+  vec3 p = V0 * b0 + V1 * b1 + V2 * b2;
+  vec3 ni = N0 * b0 + N1 * b1 + N2 * b2;
+  float a = dot(N2 - N0, V0 - V2);
+  float b = dot(N2 - N1, V1 - V2);
+  float c = dot(N1 - N0, V1 - V0);
+  float h = a * b0 * (b0 - 1.0) + (a + b + c) * b0 * b1 + b * b1 * (b1 - 1.0);
+  if (dot(ni, ng) > 0.0) {
+    float e0 = max(max(dot(V1 - V0, N0), dot(V2 - V0, N0)), 0.0);
+    float e1 = max(max(dot(V0 - V1, N1), dot(V2 - V1, N1)), 0.0);
+    float e2 = max(max(dot(V0 - V2, N2), dot(V1 - V2, N2)), 0.0);
+    float up = min(min(max(dot(V0 - p, N0) + e0, 0.0), max(dot(V1 - p, N1) + e1, 0.0)),
+                   max(dot(V2 - p, N2) + e2, 0.0));
+    h = max(up, 0.5 * h);
+  }
+  else {
+    float f0 = max(max(dot(V0 - V1, N0), dot(V0 - V2, N0)), 0.0);
+    float f1 = max(max(dot(V1 - V0, N1), dot(V1 - V2, N1)), 0.0);
+    float f2 = max(max(dot(V2 - V0, N2), dot(V2 - V1, N2)), 0.0);
+    float down = min(min(max(dot(p - V0, N0) + f0, 0.0), max(dot(p - V1, N1) + f1, 0.0)),
+                     max(dot(p - V2, N2) + f2, 0.0));
+    h = min(-down, 0.5 * h);
+  }
+  terminator_lift = ni * h;
+  terminator_ng = ng;
+  terminator_n = n;
+}
+
 void main()
 {
   ivec2 px = ivec2(gl_GlobalInvocationID.xy);
@@ -61,6 +113,7 @@ void main()
   }
   uint id = position.w > 1.5 ? uint(position.w) - 2u  /* a listed pixel: aa_compact.glsl */
                              : uint((size.y - 1 - px.y) * size.x + px.x);
+  terminator_set(position.xyz, texelFetch(gbuffer_view, px, 0).xyz, n);
   vec3 value = diffuse_direct(p, n, id, uint(sampling.x), int(sampling.y), known);
   imageStore(out_image, px, vec4(value, 1.0));
 }

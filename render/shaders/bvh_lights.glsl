@@ -12,12 +12,50 @@ vec4 light_texel(int light, int k)
   return texelFetch(lights, ivec2(k, light), 0);
 }
 
+/* Cycles' shadow terminator offset (voxgi_addon/gi/terminator.py): a kernel that knows the
+ * triangle under its shading point sets its lift (terminator_lift, the geometric normal on the
+ * shaded side terminator_ng and the shading normal terminator_n: terminator_set); every shadow
+ * ray of the lights below then starts from the point lifted by terminator.amount of it.
+ * Zero (the default: gather hits, cache faces) leaves the rays as they were. */
+vec3 terminator_lift = vec3(0.0);
+vec3 terminator_ng = vec3(0.0);
+vec3 terminator_n = vec3(0.0);
+
+/* terminator.amount: the share of the lift a shadow ray toward unit `dir` takes */
+float terminator_amount(vec3 dir)
+{
+  float nl = dot(terminator_n, dir);
+  vec3 ng = nl < 0.0 ? -terminator_ng : terminator_ng;
+  nl = abs(nl);
+  float ngl = dot(ng, dir);
+  return nl < TERMINATOR_OFFSET ? clamp(2.0 - (ngl + nl) / TERMINATOR_OFFSET, 0.0, 1.0) :
+                                  clamp(1.0 - ngl / TERMINATOR_OFFSET, 0.0, 1.0);
+}
+
+/* Is anything in the way of the shadow ray from `origin` in unit direction `dir` within
+ * `tmax` (BVH_FAR: to a sun or the sky), leaving from the lifted start (a ray toward a point
+ * keeps its end there)? */
+bool shadow_hit(vec3 origin, vec3 dir, float tmax)
+{
+  float share = dot(terminator_lift, terminator_lift) > 0.0 ? terminator_amount(dir) : 0.0;
+  if (share <= 0.0) {
+    return bvh_any_hit(origin, dir, tmax);
+  }
+  vec3 start = origin + terminator_lift * share;
+  if (tmax >= BVH_FAR) {
+    return bvh_any_hit(start, dir, tmax);
+  }
+  vec3 ray = origin + dir * tmax - start;
+  float len = length(ray);
+  return bvh_any_hit(start, ray / max(len, 1e-30), len);
+}
+
 /* Unoccluded share of the ray from `origin` to `target`: 1 or 0. */
 float visible_to(vec3 origin, vec3 target)
 {
   vec3 ray = target - origin;
   float len = length(ray);
-  return bvh_any_hit(origin, ray / max(len, 1e-30), len) ? 0.0 : 1.0;
+  return shadow_hit(origin, ray / max(len, 1e-30), len) ? 0.0 : 1.0;
 }
 
 /* The j-th stratum a light's loop over m × m strata draws (direct_light._visible_share): the
@@ -44,7 +82,7 @@ float sun_light(int light, vec3 p, vec3 n, uint state, int m)
   vec3 origin = p + NORMAL_OFFSET * n;
   float tan_half = light_texel(light, 3).w;
   if (tan_half <= 0.0) {
-    return bvh_any_hit(origin, to_light, BVH_FAR) ? 0.0 : value;
+    return shadow_hit(origin, to_light, BVH_FAR) ? 0.0 : value;
   }
   vec3 t, b;
   perpendicular_basis(to_light, t, b);
@@ -56,7 +94,7 @@ float sun_light(int light, vec3 p, vec3 n, uint state, int m)
     }
     vec2 disk = concentric_disk(hashed_stratum(state, stratum_order(j, m), m)) * tan_half;
     vec3 dir = normalize(to_light + disk.x * t + disk.y * b);
-    visible += bvh_any_hit(origin, dir, BVH_FAR) ? 0.0 : 1.0;
+    visible += shadow_hit(origin, dir, BVH_FAR) ? 0.0 : 1.0;
     drawn++;
   }
   return value * visible / float(drawn);
@@ -410,7 +448,10 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
       float pdf = (uniform_sky ? 0.0 : dot(radiance, LUMA) / head.w) + cos_n / M_PI_F;
       vec3 f = radiance * (cos_n / max(pdf, 1e-30));
       f_sum += f;
-      if (max(f.r, max(f.g, f.b)) > 0.0 && !bvh_any_hit(origin, dir, BVH_FAR)) {
+      /* the map's rays as Cycles' light samples (lifted by the shadow terminator offset),
+       * the cosine ones as its BSDF's rays that find the sky (not lifted) */
+      if (max(f.r, max(f.g, f.b)) > 0.0 &&
+          !(technique == 0 ? shadow_hit(origin, dir, BVH_FAR) : bvh_any_hit(origin, dir, BVH_FAR))) {
         f_lit += f;
 #ifdef PRINCIPLED_IOR
         if (lobe) {
@@ -695,7 +736,7 @@ vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, vec4 kn
     g = emitter_facing(t, p) ? g : 0.0;
     vec3 f = radiance * g;
     f_sum += f;
-    if (g > 0.0 && !bvh_any_hit(origin, d, dist)) {
+    if (g > 0.0 && !shadow_hit(origin, d, dist)) {
       f_lit += f;
 #ifdef PRINCIPLED_IOR
       if (lobe) {

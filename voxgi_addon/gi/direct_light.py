@@ -303,13 +303,21 @@ def _area(light, p, n, tris, strata):
     return value
 
 
-def _world(world, p, n, tris, strata, reflect=None):
+def _world(world, p, n, tris, strata, reflect=None, unlifted=None):
+    """The world's Diffuse Direct (``world_light.world_direct``): its map-sampled rays through
+    ``tris`` (lifted by the shadow terminator offset where diffuse_direct was given it), its
+    cosine rays through ``unlifted`` (``tris`` when None)."""
     from .world_light import world_direct
 
     origins_offset = _NORMAL_OFFSET * n
-    occluded = None if tris is None else (
-        lambda origins, dirs: _occluded(tris, origins, dirs, np.full(len(dirs), np.inf)))
-    return world_direct(world, p + origins_offset, n, occluded, strata, reflect)
+    unlifted = tris if unlifted is None else unlifted
+
+    def through(occluder):
+        return None if occluder is None else (
+            lambda origins, dirs: _occluded(occluder, origins, dirs, np.full(len(dirs), np.inf)))
+
+    return world_direct(world, p + origins_offset, n, through(unlifted), strata, reflect,
+                        sampled=None if unlifted is tris else through(tris))
 
 
 def _emitters(emitters, p, n, tris, strata, reflect=None, unshadowed=None):
@@ -338,7 +346,7 @@ _BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD"
 
 def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
                    sample_ids=None, per_light: bool = False, strata_block=None, reflect=None,
-                   unshadowed=None):
+                   unshadowed=None, terminator=None):
     """Cycles' ``Diffuse Direct`` (irradiance / π, no albedo) at surface points.
 
     Parameters
@@ -370,6 +378,9 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
     unshadowed : (N, 3) the emissive triangles' exact unshadowed light at the points
         (``emitters_unshadowed``; the anti-aliased preview's sub-pixel passes take their pixel
         centre's where they see its surface); None: evaluated here.
+    terminator : ((N, 3) lifts, (N, 3) geometric normals) of the points
+        (``terminator.find_lifts``): every shadow ray starts from its point lifted as Cycles'
+        shadow terminator offset lifts it (``terminator.ShadowStarts``); None: from the point.
 
     Returns
     -------
@@ -382,6 +393,11 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
     shine = np.zeros_like(out)
     rng = np.random.default_rng(seed)
     ids = None if sample_ids is None else np.asarray(sample_ids).reshape(-1)
+    unlifted = tris  # the world's rays Cycles finds by the BSDF's sampling: not lifted
+    if terminator is not None and tris is not None and np.any(terminator[0]):
+        from .terminator import ShadowStarts
+
+        tris = ShadowStarts(tris, p + _NORMAL_OFFSET * n, n, *terminator)
     for index, light in enumerate(lights):
         shade = _BY_TYPE.get(light.type)
         if shade is None or getattr(light, "power", 1.0) == 0:
@@ -403,6 +419,8 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
                     return square[:, (row + i) * side + column + j]
             given = {} if unshadowed is None or light.type != "EMITTERS" else {
                 "unshadowed": np.asarray(unshadowed, np.float64).reshape(-1, 3)[a:b]}
+            if light.type == "WORLD":
+                given["unlifted"] = unlifted
             if reflect is not None and light.type in ("WORLD", "EMITTERS"):
                 value, glossy = shade(light, p[a:b], n[a:b], tris, strata,
                                       lambda lit, dirs, a=a: reflect(a + lit, dirs), **given)

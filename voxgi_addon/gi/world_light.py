@@ -274,7 +274,7 @@ def hidden_less(value, f, blocked, strata: int, held: bool | None = None) -> np.
     return np.maximum(light, 0.0) if held else light
 
 
-def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None):
+def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sampled=None):
     """(N, 3) Diffuse Direct of the world at points p with unit normals n (facing the viewer):
     the unshadowed table value less the estimate of its hidden part from one world-map and one
     cosine ray per stratum (the balance heuristic; ``hidden_less``).
@@ -286,7 +286,11 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None):
         cos toward the light (a bounce hit's glossy lobe seen from the receiver,
         ``principled.glossy_reflectance``): then also returns the (N, 3) radiance it reflects
         of the world, from the same rays — each ray's L V reflect / (K (p_map + p_cos)), the
-        balance heuristic of both techniques (p_cos alone for a uniform world)."""
+        balance heuristic of both techniques (p_cos alone for a uniform world).
+    sampled : the shadow test of the world-map technique's rays, when it differs from
+        ``occluded`` (the cosine rays'): Cycles samples a textured world as a light (its
+        shadow rays lifted by the shadow terminator offset, ``terminator.ShadowStarts``) and
+        finds it by the BSDF's rays too (not lifted); a uniform world it finds by those alone."""
     p = np.asarray(p, np.float64)
     n = np.asarray(n, np.float64)
     value = unshadowed(world, n)
@@ -305,10 +309,16 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None):
         np.maximum(cos, 0.0) / math.pi
     f = radiance * (np.maximum(cos, 0.0) / np.maximum(pdf, 1e-30))[..., None]  # (M, 2K, 3)
     up = cos > 0
-    origins = np.repeat(p[lit], dirs.shape[1], axis=0)
+    origins = np.repeat(p[lit], dirs.shape[1], axis=0).reshape(dirs.shape)
     blocked = np.zeros(up.shape, bool)
-    if up.any():
-        blocked[up] = occluded(origins[up.ravel()], dirs[up])
+    if sampled is not None and not world.uniform:  # the map's rays (the first K) apart
+        k = square.shape[1]
+        for part, test in ((slice(0, k), sampled), (slice(k, None), occluded)):
+            rays = up[:, part]
+            if rays.any():
+                blocked[:, part][rays] = test(origins[:, part][rays], dirs[:, part][rays])
+    elif up.any():
+        blocked[up] = occluded(origins[up], dirs[up])
     # The table's exact unshadowed value less the rays' estimate of the hidden part
     # (Σ L cos / pdf over the K rays of each technique, / K π): exact where every ray sees
     # the world, and unbiased where some are hidden. The visible share Σ seen / Σ all it

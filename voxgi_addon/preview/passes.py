@@ -35,6 +35,7 @@ from ..gi.emitters import NEAR_STEP, emitter_distances
 from ..gi.exact_glossy import emitters_glossy_field, emitters_shine
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.sampling import hashed_square
+from ..gi.terminator import find_lifts
 from ..gi.world_light import scene_lights, world_light
 from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, camera_frame, filter_offsets
 from ..scene.geometry import world_triangles
@@ -749,7 +750,7 @@ def filtered_sums(sums, count, tails, width: int, height: int, filter_width: flo
 
 def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
                  visibility=None, sample_ids=None, per_light=False, seed=0, strata_block=None,
-                 unshadowed=None):
+                 unshadowed=None, views=None):
     """(N, 3) Diffuse Direct at surface points: exact shadow rays against ``tris`` (shadows
     "RAYS") or one soft-shadow cone per light through ``octree`` ("CONES"; ``visibility``
     as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own).
@@ -757,12 +758,19 @@ def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
     GPU kernel ``render/shaders/bvh_direct.glsl`` draws (``direct_light.diffuse_direct``);
     seed : the strata's seed (the scene's Seed, ``GatherSettings.seed``); strata_block : one
     sub-pixel pass's block of them (``subpixel_passes``); unshadowed : the emitters' exact
-    unshadowed light at the points ("RAYS"; ``emitters_unshadowed_at``), None: evaluated."""
+    unshadowed light at the points ("RAYS"; ``emitters_unshadowed_at``), None: evaluated.
+    views : (N, 3) the camera rays' unit directions to the points ("RAYS"): the shadow rays
+    then leave smooth-shaded triangles as Cycles' shadow terminator offset lifts them
+    (``terminator.find_lifts``, GLSL bvh_direct.glsl ``terminator_set``)."""
     if shadows == "CONES":
         return cone_shadowed_direct(octree, points, normals, lights, cones, samples, visibility)
+    terminator = None
+    if views is not None and tris is not None and hasattr(tris, "positions"):
+        terminator = find_lifts(tris, points, views, normals)
     return diffuse_direct(points + normals * SURFACE_EPSILON, normals, lights, tris,
                           samples=samples, sample_ids=sample_ids, per_light=per_light, seed=seed,
-                          strata_block=strata_block, unshadowed=unshadowed)
+                          strata_block=strata_block, unshadowed=unshadowed,
+                          terminator=terminator)
 
 
 def emitters_unshadowed_at(emitters, points, normals) -> np.ndarray:
@@ -827,7 +835,7 @@ def fast_direct(octree, seen, stride, hit, lights, tris, cones, samples, shadows
     n = seen.normal.reshape(-1, 3)[hit]
     if shadows != "CONES":
         each = direct_light(octree, p, n, lights, tris, cones, samples, shadows, sample_ids=hit,
-                            per_light=True)
+                            per_light=True, views=seen.direction.reshape(-1, 3)[hit])
         return each.sum(axis=0), each[:lamps]
     world = next((light for light in lights if light.type == "WORLD"), None)
     positions, normals = seen.position.reshape(-1, 3), seen.normal.reshape(-1, 3)
@@ -1117,7 +1125,7 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         # (the shadow rays are the pass's own: its block of the strata)
         per_light = direct_light(None, p, n, lights, tris, cones, light_samples, shadows,
                                  sample_ids=hit, per_light=True, seed=gather_settings.seed,
-                                 strata_block=block, unshadowed=unshadowed)
+                                 strata_block=block, unshadowed=unshadowed, views=-views)
         shine = glossy_direct_radiance(snapshot, p, n, views, mat,
                                        per_light[:len(snapshot.lights)], hit, base)
         accumulate_pass(sums if into is None else into, snapshot, hit, mat, n, views,
