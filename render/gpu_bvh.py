@@ -39,7 +39,8 @@ from ..voxgi_addon.gi.exact_glossy import (
 )
 from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
 from ..voxgi_addon.gi.radiance_cache import PICK_STREAM
-from ..voxgi_addon.gi.terminator import FIND_REACH
+from ..voxgi_addon.gi.surface_lookup import REACH as FIND_REACH
+from ..voxgi_addon.gi.surface_lookup import TRUST
 from ..voxgi_addon.gi.terminator import OFFSET as TERMINATOR_OFFSET
 from ..voxgi_addon.gi.world_light import world_table
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF
@@ -170,7 +171,8 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
                                        "bvh_direct": str(RAY_CAMERA)}.get(kernel,
                                                                           str(RAY_DIFFUSE)),
                    "TERMINATOR_OFFSET": repr(float(TERMINATOR_OFFSET)),
-                   "TERMINATOR_REACH": repr(float(FIND_REACH))}
+                   "TERMINATOR_REACH": repr(float(FIND_REACH)),
+                   "TERMINATOR_TRUST": repr(float(TRUST))}
         if "principled" in files:
             defines.update(PRINCIPLED_DEFINES)
         if "textures" in files:

@@ -15,6 +15,25 @@
  * 0, 0); the last one writes the outputs above.  * Sampler `materials`: (M + 1) × 3 texels, row 0 base colour, row 1 emission, row 2 (metallic,
  * Specular IOR Level, roughness) (last column: none); `principled_lut`: principled.glsl's. */
 
+/* The geometric normal of the triangle under the surface point `q` seen along unit `view`, on
+ * the side of the shading normal `n` (voxgi_addon/gi/surface_lookup.py geometric_normals:
+ * a ray from TERMINATOR_REACH in front of it to as far behind, the face trusted within 60° of
+ * `n`); `n` where none is found or trusted. */
+vec3 geometric_normal(vec3 q, vec3 view, vec3 n)
+{
+  float th;
+  int triangle, slot;
+  vec2 uv;
+  if (!bvh_closest_hit(q - TERMINATOR_REACH * view, view, 0.0, 2.0 * TERMINATOR_REACH, th,
+                       triangle, slot, uv)) {
+    return n;
+  }
+  vec3 face = cross(bvh_texel_triangles(3 * slot + 1).xyz, bvh_texel_triangles(3 * slot + 2).xyz);
+  face /= max(length(face), 1e-30);
+  face = dot(face, n) < 0.0 ? -face : face;
+  return dot(face, n) > TERMINATOR_TRUST ? face : n;
+}
+
 void main()
 {
   ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
@@ -24,6 +43,10 @@ void main()
   if (!gather_point(cell, position, n, ray, id)) {
     return;
   }
+  /* Cycles' diffuse BSDF draws its directions about the shading normal and drops those below
+   * the triangle's own plane (bsdf_diffuse_sample): they carry no light here either (AO still
+   * counts them) */
+  vec3 ng = geometric_normal(position + VIEW_BACKOFF * ray.xyz, ray.xyz, n);
   uint seed = uint(sampling.x);
   int rays = int(sampling.y);
   vec3 origin = position + SURFACE_EPSILON * n;
@@ -49,6 +72,7 @@ void main()
     float th;
     vec3 radiance = ray_radiance(origin, d, id * uint(rays) + uint(j), seed, int(sampling.w),
                                  world.w > 0.5, world.rgb, false, th);
+    radiance = dot(d, ng) > 0.0 ? radiance : vec3(0.0);
     unoccluded += th >= sampling.z ? 1.0 : 0.0;
     sum += radiance;
     float l = dot(radiance, LUMINANCE);

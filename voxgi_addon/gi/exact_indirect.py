@@ -239,7 +239,7 @@ def gather_rays(points, normals, sample_ids, rays: int, seed: int = 0):
 def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission, rays: int = 16,
                     ao_distance: float = 1.0, seed: int = 0, world=(0.0, 0.0, 0.0),
                     hit_samples: int = 1, statistics: bool = False, hit_glossy: bool = False,
-                    cache=None):
+                    cache=None, geometric=None):
     """(Diffuse Indirect (N, 3) float32, Ambient Occlusion (N,) float32) — see the module doc;
     with ``statistics`` also (N, 2) float32: the variance of the indirect light's luminance mean
     (unbiased sample variance / rays) and of the AO mean (from the share of unoccluded rays
@@ -259,6 +259,9 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
         whatever the glossy bounce limit.
     cache : a ``radiance_cache.RadianceCache`` whose indirect light the hits reflect too (the
         bounces beyond the first); None: one bounce.
+    geometric : (N, 3) the points' geometric normals (``surface_lookup.geometric_normals``):
+        a ray below its triangle's plane carries no light — Cycles' diffuse BSDF drops such
+        directions (``bsdf_diffuse_sample``) — though AO still counts it; None: every ray.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -270,6 +273,9 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
     origins, dirs, hit_ids = gather_rays(p, n, ids, rays, seed)
     radiance, t = ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed,
                                world, hit_samples, hit_glossy, cache=cache)
+    if geometric is not None:
+        ng = np.repeat(np.asarray(geometric, np.float64).reshape(-1, 3), rays, axis=0)
+        radiance = np.where((np.einsum("ij,ij->i", dirs, ng) > 0.0)[:, None], radiance, 0.0)
     unoccluded = (t >= ao_distance).reshape(count, rays).mean(axis=1)
     per_ray = radiance.reshape(count, rays, 3)
     indirect = per_ray.mean(axis=1)

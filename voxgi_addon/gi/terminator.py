@@ -24,10 +24,9 @@ import numpy as np
 
 from ..scene.snapshot import RAY_CAMERA
 
-__all__ = ["OFFSET", "FIND_REACH", "lift", "amount", "find_lifts", "ShadowStarts"]
+__all__ = ["OFFSET", "lift", "amount", "find_lifts", "ShadowStarts"]
 
-OFFSET = 0.1       # Cycles' default Shadow Terminator Geometry Offset (every object)
-FIND_REACH = 1e-3  # metres: the triangle under a shading point is found by a ray this far back
+OFFSET = 0.1  # Cycles' default Shadow Terminator Geometry Offset (every object)
 
 
 def lift(corners, normals, u, v, ng) -> np.ndarray:
@@ -88,31 +87,26 @@ def amount(normals, ng, dirs, offset: float = OFFSET) -> np.ndarray:
 
 def find_lifts(tris, points, views, normals):
     """((N, 3) lifts, (N, 3) geometric normals) of shading points (N, 3) seen along unit
-    ``views`` (N, 3) with shading normals (N, 3): the triangle under each point found by a
-    camera ray from ``FIND_REACH`` back along its view to as far past it (zero lifts where
-    none is, or where ``tris`` has no corner normals: flat shading)."""
-    from ..scene.bvh import closest_hits
+    ``views`` (N, 3) with shading normals (N, 3): at the triangle under each point
+    (``surface_lookup.find_triangles``, a camera ray's); zero lifts where none is found or
+    trusted, or where ``tris`` has no corner normals (flat shading)."""
+    from .surface_lookup import find_triangles
 
     p = np.asarray(points, np.float64).reshape(-1, 3)
-    d = np.asarray(views, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     lifts, ngs = np.zeros_like(p), np.zeros_like(p)
     corner_normals = getattr(tris, "corner_normals", None)
     if len(p) == 0 or corner_normals is None:
         return lifts, ngs
-    t, tri, u, v = closest_hits(tris, p - FIND_REACH * d, d, 0.0, 2.0 * FIND_REACH,
-                                ray=RAY_CAMERA)
+    tri, u, v, face = find_triangles(tris, p, views, n, RAY_CAMERA)
     hit = tri >= 0
     if not hit.any():
         return lifts, ngs
     which = tri[hit]
     corners = np.asarray(tris.positions, np.float64).reshape(-1, 3, 3)[which]
-    face = np.asarray(tris.normals, np.float64).reshape(-1, 3)[which]
-    # the geometric normal on the side the point is shaded from (its shading normal's)
-    face = np.where((np.einsum("ij,ij->i", face, n[hit]) < 0.0)[:, None], -face, face)
-    ngs[hit] = face
+    ngs[hit] = face[hit]
     lifts[hit] = lift(corners, np.asarray(corner_normals, np.float64)[which], u[hit], v[hit],
-                      face)
+                      face[hit])
     return lifts, ngs
 
 

@@ -23,6 +23,8 @@ import numpy as np
 from ..gi.emitters import emitter_light
 from ..gi.exact_glossy import glossy_indirect, glossy_world_direct
 from ..gi.exact_indirect import indirect_and_ao
+from ..gi.surface_lookup import geometric_normals
+from ..scene.snapshot import RAY_DIFFUSE
 from .denoise import atrous_filter
 from .sparse_gather import noisy_holes, sparse_plan, sparse_settings
 from .upsample import sample_pixels, upsample
@@ -111,9 +113,14 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     rows, cols = sample_pixels(height, width, stride)
     valid = hit[rows][:, cols]
     cell_p = position[rows][:, cols]
-    if direction is not None:
-        cell_p = cell_p - VIEW_BACKOFF * direction[rows][:, cols]
     cell_n = normal[rows][:, cols]
+    cell_g = None  # the cells' geometric normals (the rays below their triangle carry none)
+    if direction is not None:
+        cell_d = direction[rows][:, cols]
+        cell_g = np.array(cell_n, np.float64)
+        cell_g[valid] = geometric_normals(tris, cell_p[valid], cell_d[valid], cell_n[valid],
+                                          RAY_DIFFUSE)
+        cell_p = cell_p - VIEW_BACKOFF * cell_d
     # the cells gathered: all, or with ``settings.sparse`` one in four where the light is
     # smooth (sparse_gather), the others filled by the filter's first pass
     traced = sparse_plan(valid, cell_p, cell_n) if settings.sparse else valid
@@ -128,7 +135,7 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
             cell_p[cells], cell_n[cells], ids, tris, lights, albedo, emission, rays=rays,
             ao_distance=settings.ao_distance, seed=settings.seed, world=settings.world,
             hit_samples=settings.hit_samples, statistics=True, hit_glossy=settings.hit_glossy,
-            cache=cache)
+            cache=cache, geometric=None if cell_g is None else cell_g[cells])
         values[cells] = np.concatenate([indirect, ao[:, None]], axis=1)
         variance[cells] = var
 
