@@ -48,9 +48,6 @@ void terminator_set(vec3 q, vec3 view, vec3 n)
   vec3 face = cross(V1 - V0, V2 - V0);
   face /= max(length(face), 1e-30);
   vec3 ng = dot(face, n) < 0.0 ? -face : face; /* on the shaded side */
-  if (dot(ng, n) <= TERMINATOR_TRUST) {
-    return; /* another surface's face (a crease): surface_lookup.TRUST */
-  }
   float b0 = 1.0 - uv.x - uv.y, b1 = uv.x, b2 = uv.y;
   vec3 p = V0 * b0 + V1 * b1 + V2 * b2;
   vec3 ni = N0 * b0 + N1 * b1 + N2 * b2;
