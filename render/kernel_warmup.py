@@ -64,11 +64,18 @@ def step(settings) -> str:
     return _warmup.step(key, steps, 2)
 
 
+def done(settings) -> bool:
+    """Whether every scene-independent kernel for ``settings`` is compiled (no GPU call)."""
+    key, _ = generic_steps(settings)
+    return _warmup is not None and (key, 2) in _warmup.done
+
+
 def tick(scene) -> float:
-    """One tick of the timer for the active ``scene``: a compile when it renders with VoxGI
-    and the GPU can be used; the seconds until the next tick."""
+    """One tick of the timer for the active ``scene``: a compile when it renders with VoxGI,
+    some kernel is still to compile and the GPU can be used; the seconds until the next tick
+    (an idle tick touches no GPU)."""
     if scene is None or scene.render.engine != ENGINE or not hasattr(scene, "voxgi") or \
-            not gpu_usable()[0]:
+            done(scene.voxgi) or not gpu_usable()[0]:
         return IDLE_SECONDS
     t0 = time.perf_counter()
     name = step(scene.voxgi)

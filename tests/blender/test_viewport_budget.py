@@ -310,6 +310,7 @@ def test_kernels_warmed_with_the_file_open_leave_the_draws_the_scenes_own(voxgi,
                     break
             assert ticks[-1] == 0 and set(ticks[:-1]) == {1}, ticks  # one compile a tick
             assert len(ticks) > 8
+            assert kernel_warmup.done(scene.voxgi)  # the next ticks touch no GPU
         live_gi(scene.name_full).rescan = "entering Rendered mode again"
         engine = StandInEngine()
         view_update(engine, context(view, window), depsgraph)
