@@ -171,3 +171,22 @@ vec3 bvh_triangle_face_normal(int slot)
   float len = length(n);
   return len > 0.0 ? n / len : vec3(0.0);
 }
+
+/* The triangle under the surface point `q` seen along unit `view` (voxgi_addon/gi/
+ * surface_lookup.py find_triangles: a ray from TERMINATOR_REACH in front of it to as far
+ * behind): its packed slot, barycentrics and face normal on the side of the shading normal
+ * `n`; false where none is found. */
+bool surface_triangle(vec3 q, vec3 view, vec3 n, out int slot, out vec2 uv, out vec3 face)
+{
+  float th;
+  int triangle;
+  face = n;
+  if (!bvh_closest_hit(q - TERMINATOR_REACH * view, view, 0.0, 2.0 * TERMINATOR_REACH, th,
+                       triangle, slot, uv)) {
+    return false;
+  }
+  face = cross(bvh_texel_triangles(3 * slot + 1).xyz, bvh_texel_triangles(3 * slot + 2).xyz);
+  face /= max(length(face), 1e-30);
+  face = dot(face, n) < 0.0 ? -face : face;
+  return true;
+}

@@ -29,11 +29,10 @@
  * lift (terminator.lift) for the lights' shadow rays (bvh_lights.glsl shadow_hit). */
 void terminator_set(vec3 q, vec3 view, vec3 n)
 {
-  float th;
-  int triangle, slot;
+  int slot;
   vec2 uv;
-  if (!bvh_closest_hit(q - TERMINATOR_REACH * view, view, 0.0, 2.0 * TERMINATOR_REACH, th,
-                       triangle, slot, uv)) {
+  vec3 ng; /* the geometric normal on the shaded side */
+  if (!surface_triangle(q, view, n, slot, uv, ng)) {
     return;
   }
   vec3 V0 = bvh_texel_triangles(3 * slot).xyz;
@@ -45,9 +44,6 @@ void terminator_set(vec3 q, vec3 view, vec3 n)
   vec3 N0 = texelFetch(bvh_normals, at0, 0).xyz;
   vec3 N1 = texelFetch(bvh_normals, at1, 0).xyz;
   vec3 N2 = texelFetch(bvh_normals, at2, 0).xyz;
-  vec3 face = cross(V1 - V0, V2 - V0);
-  face /= max(length(face), 1e-30);
-  vec3 ng = dot(face, n) < 0.0 ? -face : face; /* on the shaded side */
   float b0 = 1.0 - uv.x - uv.y, b1 = uv.x, b2 = uv.y;
   vec3 p = V0 * b0 + V1 * b1 + V2 * b2;
   vec3 ni = N0 * b0 + N1 * b1 + N2 * b2;

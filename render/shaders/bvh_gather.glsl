@@ -21,17 +21,11 @@
  * `n`); `n` where none is found or trusted. */
 vec3 geometric_normal(vec3 q, vec3 view, vec3 n)
 {
-  float th;
-  int triangle, slot;
+  int slot;
   vec2 uv;
-  if (!bvh_closest_hit(q - TERMINATOR_REACH * view, view, 0.0, 2.0 * TERMINATOR_REACH, th,
-                       triangle, slot, uv)) {
-    return n;
-  }
-  vec3 face = cross(bvh_texel_triangles(3 * slot + 1).xyz, bvh_texel_triangles(3 * slot + 2).xyz);
-  face /= max(length(face), 1e-30);
-  face = dot(face, n) < 0.0 ? -face : face;
-  return dot(face, n) > TERMINATOR_TRUST ? face : n;
+  vec3 face;
+  return surface_triangle(q, view, n, slot, uv, face) && dot(face, n) > TERMINATOR_TRUST ? face
+                                                                                         : n;
 }
 
 void main()

@@ -225,3 +225,25 @@ def thin_wall_side_masks(width=128, height=64, margin=0.15):
     gx, gy = np.meshgrid(x, y)
     inside = (np.abs(gx) < 2.0 - margin) & (np.abs(gy) < 1.0 - margin)
     return inside & (gx < -margin), inside & (gx > margin)
+
+
+def camera_looking_at(location, target=(0.0, 0.0, 0.0), scene=None):
+    """A new scene camera at ``location`` looking at ``target`` (up: +Z)."""
+    from mathutils import Vector
+
+    scene = scene or bpy.context.scene
+    camera = link(bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera")), scene)
+    camera.location = location
+    camera.rotation_euler = (Vector(target) - camera.location).to_track_quat("-Z", "Y").to_euler()
+    scene.camera = camera
+    return camera
+
+
+def uniform_world(colour, scene=None, name="World"):
+    """A new world of one Background colour (RGB), the scene's."""
+    scene = scene or bpy.context.scene
+    world = bpy.data.worlds.new(name)
+    next(n for n in world.node_tree.nodes if n.type == "BACKGROUND").inputs[
+        "Color"].default_value = (*colour, 1.0)
+    scene.world = world
+    return world

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import bpy
 import numpy as np
+import scenes
 from cycles_reference import render_cycles_passes
 from mathutils import Vector
 
@@ -27,16 +28,8 @@ def _terrain_scene():
     mesh.shade_smooth()
     terrain = bpy.data.objects.new("Terrain", mesh)
     scene.collection.objects.link(terrain)
-    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    camera.location = (0.0, -6.0, 4.0)
-    camera.rotation_euler = (Vector((0.0, 0.0, 0.0)) - camera.location).to_track_quat(
-        "-Z", "Y").to_euler()
-    scene.collection.objects.link(camera)
-    scene.camera = camera
-    world = bpy.data.worlds.new("Sky")
-    next(n for n in world.node_tree.nodes if n.type == "BACKGROUND").inputs[
-        "Color"].default_value = (0.5, 0.6, 0.8, 1.0)
-    scene.world = world
+    scenes.camera_looking_at((0.0, -6.0, 4.0), scene=scene)
+    scenes.uniform_world((0.5, 0.6, 0.8), scene, "Sky")
     scene.render.engine = "VOXGI"
     scene.render.resolution_x, scene.render.resolution_y = WIDTH, HEIGHT
     scene.voxgi.bounce_source = "CYCLES"  # its default light paths, as the reference's

@@ -7,6 +7,7 @@ import math
 
 import bpy
 import numpy as np
+import scenes
 from cycles_reference import render_cycles_passes
 from mathutils import Vector
 
@@ -29,16 +30,8 @@ def _sphere_scene():
     sun.data.energy, sun.data.angle = 3.0, math.radians(1.0)
     sun.rotation_euler = Vector((-1.0, 0.2, -0.3)).to_track_quat("-Z", "Y").to_euler()
     scene.collection.objects.link(sun)
-    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    camera.location = (0.0, -4.0, 0.0)
-    camera.rotation_euler = (Vector((0.0, 0.0, 0.0)) - camera.location).to_track_quat(
-        "-Z", "Y").to_euler()
-    scene.collection.objects.link(camera)
-    scene.camera = camera
-    world = bpy.data.worlds.new("Black")
-    next(n for n in world.node_tree.nodes if n.type == "BACKGROUND").inputs[
-        "Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    scene.world = world
+    scenes.camera_looking_at((0.0, -4.0, 0.0), scene=scene)
+    scenes.uniform_world((0.0, 0.0, 0.0), scene, "Black")
     scene.render.engine = "VOXGI"
     scene.render.resolution_x, scene.render.resolution_y = WIDTH, HEIGHT
     scene.voxgi.bounce_source, scene.voxgi.bounces = "MANUAL", 1
