@@ -454,10 +454,12 @@ def _sparse_diffuse(f):
     if not traced.any():  # nothing seen: the dense gather writes its zeros
         return (yield from _low(f, "diffuse"))
     grid = [np.zeros(valid.shape + (4,), np.float32) for _ in range(2)]
-    _gather_cells(f, traced, grid)
+    settings = sparse_settings(f["gather_settings"], np.count_nonzero(valid),
+                               np.count_nonzero(traced))
+    _gather_cells(f, traced, grid, settings)
     extra = noisy_holes(traced, valid, grid[1][..., 0])
     if extra.any():
-        _gather_cells(f, extra, grid)
+        _gather_cells(f, extra, grid, settings)
         traced = traced | extra
     grid[1][..., 2] = valid & ~traced  # the holes the filter's first pass fills (denoise.glsl)
     grid = [float_texture(np.flipud(cells), (cells.shape[1], cells.shape[0])) for cells in grid]
@@ -465,11 +467,11 @@ def _sparse_diffuse(f):
                    settings.denoise_iterations, fit=True, holes=bool((valid & ~traced).any()))[0]
 
 
-def _gather_cells(f, cells, grid):
+def _gather_cells(f, cells, grid, settings):
     """The diffuse gather at the grid's ``cells`` (a list, ``_compact``: each point draws its
-    pixel's samples, with the rays of ``sparse_settings``), read back into ``grid`` (values,
-    variance) there."""
-    scene, settings, centre = f["scene"], f["gather_settings"], f["centre"]
+    pixel's samples, with the rays of ``settings``: ``sparse_settings``'), read back into
+    ``grid`` (values, variance) there."""
+    scene, centre = f["scene"], f["centre"]
     width, height = f["width"], f["height"]
     rows, cols = sample_pixels(height, width, f["gi_stride"])
     cell_rows, cell_cols = np.nonzero(cells)
@@ -477,7 +479,7 @@ def _gather_cells(f, cells, grid):
     pixels, size = _pixel_list(listed, width, height)
     inputs = _compact("aa_list", {**centre.inputs, "pixels": pixels}, size)
     textures = gather(scene.bvh, inputs, scene.lights, scene.principled, scene.emission,
-                      sparse_settings(settings), 1, size[0], size[1],
+                      settings, 1, size[0], size[1],
                       tables=f["tables"], cache=f["cache"])
     for cells_of, texture in zip(grid, textures):
         cells_of[cells] = read_texture(texture).reshape(-1, 4)[:len(listed)]

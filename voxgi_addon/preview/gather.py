@@ -124,7 +124,8 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     # the cells gathered: all, or with ``settings.sparse`` one in four where the light is
     # smooth (sparse_gather), the others filled by the filter's first pass
     traced = sparse_plan(valid, cell_p, cell_n) if settings.sparse else valid
-    rays = sparse_settings(settings).rays if settings.sparse else settings.rays
+    rays = sparse_settings(settings, np.count_nonzero(valid), np.count_nonzero(traced)).rays \
+        if settings.sparse else settings.rays
     values = np.zeros(valid.shape + (4,), np.float32)
     variance = np.zeros(valid.shape + (2,), np.float32)
     cache = radiance_cache(tris, lights, albedo, emission, settings)
