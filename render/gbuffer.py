@@ -175,7 +175,7 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
               offset=(0.0, 0.0), shader=None, textures=None,
               filter_width: float = DEFAULT_FILTER_WIDTH, batch=None, out=None,
               mask: PixelMask | None = None, texture_taps: int = 1,
-              texture_share: int = 1) -> GBuffer:
+              texture_share: int = 1, supersample: int = 1) -> GBuffer:
     """Draw ``tris`` (``SceneTriangles``) seen by ``camera`` into a new ``GBuffer``.
     batch : ``vertex_batch(tris, roughness, shader, textures is not None)`` made already by a
     render that draws them again, or a ``ChunkedBatch`` of them (the viewport's: only its
@@ -203,20 +203,27 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
     texture_taps, texture_share : ``textures.primary_base``'s ``taps`` (the Base Color's taps
     per axis over each pixel's own square, 1–4: ``TEXTURE_TAPS`` for the pixel-centre pass)
     and ``share`` (a sub-pixel pass is one of ``AA_SIDE``² samples of its pixel).
+    supersample : K, a G-buffer of K·width × K·height: the image's pixels each drawn at K × K
+    points (texel (K·x + i, K·y + j) at pixel (x, y) + offset + ((i + ½) / K − ½, (j + ½) / K −
+    ½), x right and y down), the textures' footprints still the image pixel's (every sample one
+    of ``texture_share``² of its pixel). One raster for K² sub-pixel passes: a 140k-triangle
+    scene's raster is its vertices' work, 50–90 ms whatever its size. The mask is then K times
+    the image's size too.
     """
     fresh = out is None
-    out = GBuffer(width, height) if fresh else out
+    out = GBuffer(width * supersample, height * supersample) if fresh else out
     framebuffer = gpu.types.GPUFrameBuffer(depth_slot=out.depth,
                                            color_slots=(out.position, out.normal, out.view,
                                                         out.base))
     rotation, position = camera_frame(camera)
-    matrix = view_projection(camera, width, height, offset)
+    matrix = view_projection(camera, width * supersample, height * supersample,
+                             (offset[0] * supersample, offset[1] * supersample))
     shader = shader or gbuffer_shader()
     with framebuffer.bind():
         if fresh:
             framebuffer.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
         if len(tris):
-            gpu.state.viewport_set(0, 0, width, height)
+            gpu.state.viewport_set(0, 0, width * supersample, height * supersample)
             if mask is not None and fresh:
                 mask.draw()
             gpu.state.depth_test_set("LESS")

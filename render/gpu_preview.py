@@ -32,13 +32,14 @@ from ..voxgi_addon.preview.passes import (
     material_indices,
     new_sums,
     pass_tail_weights,
+    pass_weights,
     stacked_tails,
     subpixel_passes,
     subpixel_reach,
 )
 from ..voxgi_addon.preview.sparse_gather import noisy_holes, sparse_plan, sparse_settings
 from ..voxgi_addon.preview.upsample import field_stride, low_shape, sample_pixels
-from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame
+from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame, filter_samples
 from ..voxgi_addon.scene.glass import is_glass
 from ..voxgi_addon.scene.textures import TEXTURE_TAPS
 from .frame import Frame, Stage, finish
@@ -209,17 +210,47 @@ def _glass_weight(snapshot, scene, raster, width, height, filter_width):
 
 # ---------------------------------------------------------------- Accurate: sub-pixel passes
 
-def _pixel_list(listed, width: int, height: int):
+def _pixel_list(listed, width: int, height: int, fine: int = 1, sub=(0, 0)):
     """(texture, (w, h)) of the edge pixels' list (aa_compact.glsl): texel t (row-major from
     the texture's first row) = (x, y, id, 1) of pixel id = listed[t] (flat, row 0 on top; GL
-    y = height − 1 − row), padded with zeros to w × h, w a multiple of the work group size."""
+    y = height − 1 − row), padded with zeros to w × h, w a multiple of the work group size.
+    fine, sub : (x, y) read in a G-buffer ``fine`` times the image's size (``rasterize``'s
+    supersample) at the pixel's sample sub = (i, j) (x right, y down)."""
     # the sides keep the frame's power-of-two class: one JIT per kernel (gpu_shaders.size_like)
     side = size_like(math.ceil(math.sqrt(len(listed))), width, LOCAL_SIZE)
     rows = size_like(math.ceil(len(listed) / side), height)
     texels = np.zeros((rows * side, 4), np.float32)
-    texels[:len(listed)] = np.stack([listed % width, height - 1 - listed // width, listed,
-                                     np.ones(len(listed))], axis=1)
+    texels[:len(listed)] = np.stack([
+        fine * (listed % width) + sub[0],
+        fine * (height - 1 - listed // width) + fine - 1 - sub[1], listed,
+        np.ones(len(listed))], axis=1)
     return float_texture(texels.reshape(rows, side, 4), (side, rows)), (side, rows)
+
+
+# Most texels of a supersampled sub-pixel raster (``supersampling``): its G-buffer's four
+# RGBA32F targets and depth hold 68 bytes a texel (285 MB at this size)
+SUPERSAMPLE_TEXELS = 1 << 22
+
+
+def supersampling(width: int, height: int, filter_width: float) -> int:
+    """K, the sub-pixel passes' rasters' scale: the largest divisor of AA_SIDE whose K·width ×
+    K·height G-buffer stays within ``SUPERSAMPLE_TEXELS`` — one raster draws K² of the AA_SIDE²
+    passes (the sample grid of ``camera.filter_samples``): at 160 × 120 all 16 in one, at
+    640 × 480 four in each of four, at 1920 × 1080 one each. 1 where the filter's samples are
+    not that grid (a filter narrower than Cycles' default: drawn by importance)."""
+    offsets = filter_samples(filter_width, AA_SIDE)[0]
+    lattice = (np.arange(AA_SIDE) + 0.5) / AA_SIDE - 0.5
+    fine = AA_SIDE if np.allclose(np.unique(offsets[:, 0]), lattice) else 1
+    while fine > 1 and (AA_SIDE % fine or fine * fine * width * height > SUPERSAMPLE_TEXELS):
+        fine -= 1
+    return fine
+
+
+def _raster_shift(group: int, fine: int) -> float:
+    """The offset (pixels) of the raster that draws the passes ``group``, ``group`` + AA_SIDE /
+    fine, … along one axis: its fine × fine samples of a pixel then lie at the centres of those
+    passes' cells of ``camera.filter_samples``' grid ((i + ½) / AA_SIDE − ½)."""
+    return (group + 0.5) / AA_SIDE - 0.5 / fine
 
 
 def _gather_list(stride: int, width: int, height: int):
@@ -621,12 +652,14 @@ def _reads_back(f) -> bool:
 
 def _subpixel_passes(f):
     """The sub-pixel passes over the edge pixels (``edge_all``), rendered over a list of them
-    (aa_compact.glsl): per pass a G-buffer (the listed pixels only where that pays:
-    ``gbuffer.PixelMask``), the gathered terms and the
+    (aa_compact.glsl): per pass its samples of a G-buffer ``supersampling`` times finer than
+    the image — one raster for all sixteen at 160 × 120 — (the listed pixels only where that
+    pays: ``gbuffer.PixelMask``), the gathered terms and the
     emitters' light — the centre's where the pass sees its centre's surface, else the gathers
     and the field at the pass's own point (docs/gi_pipeline.md "Anti-aliasing") — and the
     pass's direct light; their sums replace the centre pass's, their filter tails reach the
-    neighbours (``preview.passes.stacked_tails``)."""
+    neighbours (``preview.passes.stacked_tails``), each pass weighted by its cell's share of
+    the filter (``preview.passes.pass_weights``)."""
     scene, snapshot, plan = f["scene"], f["snapshot"], f["plan"]
     width, height, gi_stride = f["width"], f["height"], f["gi_stride"]
     texel, edge, listed = f["centre_texel"], f["edge_all"], f["listed"]
@@ -659,17 +692,35 @@ def _subpixel_passes(f):
     # the passes draw the listed pixels only where the raster has the texture code (its
     # fragments cost 3× the mask's full-screen pass: 47 → 14 ms a pass, textured room at
     # 640 × 480); the plain variant's are cheaper than the mask (9 → 10 ms, the box)
-    mask = PixelMask(edge) if scene.raster_textures() is not None else None
+    fine = supersampling(width, height, f["filter_width"])
+    keep = np.repeat(np.repeat(edge, fine, axis=0), fine, axis=1)
+    mask = PixelMask(keep) if scene.raster_textures() is not None else None
     settings = f["gather_settings"]
-    for index, (offset, block) in enumerate(plan):
-        gbuffer = rasterize(f["seen_tris"], snapshot.camera, scene.rough, width, height, offset,
-                            shader=f["raster_shader"], textures=scene.raster_textures(),
-                            filter_width=f["filter_width"], batch=f["vertex_batch"], mask=mask,
-                            texture_share=AA_SIDE)
-        inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": pixels}, list_size)
+    weights = pass_weights(plan, f["filter_width"])
+    rasters = {}  # (group x, group y) → the G-buffer drawing its passes
+
+    def place(index):  # ((tx, gx), (ty, gy)): pass (a, b) is sample (tx, ty) of raster (gx, gy)
+        return (divmod(index // AA_SIDE, AA_SIDE // fine),
+                divmod(index % AA_SIDE, AA_SIDE // fine))
+
+    # the passes raster by raster (one G-buffer held at a time)
+    for index in sorted(range(len(plan)), key=lambda k: (place(k)[0][1], place(k)[1][1], k)):
+        offset, block = plan[index]
+        (tx, gx), (ty, gy) = place(index)
+        if (gx, gy) not in rasters:
+            rasters.clear()
+            rasters[gx, gy] = rasterize(
+                f["seen_tris"], snapshot.camera, scene.rough, width, height,
+                offset if fine == 1 else (_raster_shift(gx, fine), _raster_shift(gy, fine)),
+                shader=f["raster_shader"],
+                textures=scene.raster_textures(), filter_width=f["filter_width"],
+                batch=f["vertex_batch"], mask=mask, texture_share=AA_SIDE, supersample=fine)
+        gbuffer = rasters[gx, gy]
+        at = pixels if fine == 1 else _pixel_list(listed, width, height, fine, (tx, ty))[0]
+        inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": at}, list_size)
         inputs["gbuffer_base"] = blank if not scene.textured else _compact(
             "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,
-                            "gbuffer_view": gbuffer.base, "pixels": pixels},
+                            "gbuffer_view": gbuffer.base, "pixels": at},
             list_size)["gbuffer_position"]
         # the gathered terms, the emitters' glossy light and unshadowed sum: the centre's
         # where this pass sees its surface, else the gathers and the field at the pass's
@@ -697,8 +748,8 @@ def _subpixel_passes(f):
         for k, name in enumerate(names):
             samples[index, :, 4 * k:4 * k + 4] = \
                 read_texture(textures[name]).reshape(-1, 4)[:len(listed)]
-    own = samples.sum(axis=0, dtype=np.float64)
-    samples /= len(plan)
+    samples *= (weights / len(plan)).astype(np.float32)[:, None, None]
+    own = samples.sum(axis=0, dtype=np.float64) * len(plan)
     tail = stacked_tails(samples, pass_tail_weights(plan, f["filter_width"]), listed, width,
                          height)
     tails = _sums_of({name: tail[:, 4 * k:4 * k + 4] for k, name in enumerate(names)})

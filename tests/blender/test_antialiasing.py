@@ -225,3 +225,48 @@ def test_silhouette_samples_take_the_indirect_light_of_the_surface_they_see(voxg
     error = relative_l1(ours, reference, steps)
     print("Diffuse Indirect at the silhouettes", round(error, 4))
     assert error <= 0.1
+
+
+def test_one_raster_draws_the_sixteen_sub_pixel_passes(voxgi, monkeypatch):
+    """The sub-pixel passes' samples lie on a grid of the pixel's square
+    (``camera.filter_samples``), so one G-buffer four times finer than an 80 × 60 image draws
+    all sixteen (counted: one raster beside the pixel centres', not sixteen) and a 640 × 480
+    one draws four in each of four rasters. Its sample (i, j) is what a raster of the image at
+    that pass's offset draws: the preview equals the one drawn pass by pass."""
+    from voxgi.blender.settings import cone_settings, trace_options
+    from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.render import gpu_preview
+    from voxgi.render.gpu_context import ensure_gpu_context
+
+    assert ensure_gpu_context()[0]
+    assert gpu_preview.supersampling(80, 60, 1.5) == 4
+    assert gpu_preview.supersampling(640, 480, 1.5) == 2
+    assert gpu_preview.supersampling(1920, 1080, 1.5) == 1
+    assert gpu_preview.supersampling(80, 60, 0.75) == 1  # narrow: drawn offsets, one a raster
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    gi_scenes.build("columned_hall", scene)
+    width, height = 80, 60
+    options = trace_options(scene.voxgi, width, height)
+    snapshot = take_snapshot(bpy.context, bpy.context.evaluated_depsgraph_get())
+    drawn = []
+    rasterize = gpu_preview.rasterize
+    monkeypatch.setattr(gpu_preview, "rasterize", lambda *a, **k: drawn.append(
+        k.get("supersample", 1)) or rasterize(*a, **k))
+
+    def render():
+        drawn.clear()
+        passes, timings = gpu_preview.render_passes_gpu(
+            snapshot, None, width, height, cone_settings(scene.voxgi), **options)
+        assert "sub-pixel passes (GPU)" in timings
+        return {k: np.asarray(v, np.float64) for k, v in passes.items()}, list(drawn)
+
+    together, rasters = render()
+    assert rasters == [4], rasters  # the centres' G-buffer is drawn by rasterize_stages
+    monkeypatch.setattr(gpu_preview, "supersampling", lambda *a: 1)
+    apart, rasters = render()
+    assert rasters == [1] * 16, rasters
+    everywhere = np.ones((height, width), bool)
+    for name in ("Combined", "Diffuse Color", "Diffuse Direct", "Alpha"):
+        assert np.abs(apart[name]).sum() > 0.0, name
+        assert relative_l1(together[name], apart[name], everywhere) <= 1e-3, name

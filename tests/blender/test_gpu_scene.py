@@ -165,12 +165,15 @@ def test_f12_after_a_file_load_draws_the_new_files_scene(voxgi, tmp_path):
 
 
 def test_the_passes_g_buffers_share_one_vertex_batch(voxgi, monkeypatch):
-    """The anti-aliased preview rasterizes a G-buffer per sub-pixel pass: the triangles'
-    vertex batch is built once for all of a render's G-buffers (gbuffer.vertex_batch), and
-    the passes equal those of a batch built for every G-buffer (as before)."""
+    """The anti-aliased preview rasterizes several G-buffers — a G-buffer per sub-pixel pass
+    where the image is too large for one raster to draw several (``gpu_preview.supersampling``
+    1, as at 1920 × 1080): the triangles' vertex batch is built once for all of a render's
+    G-buffers (gbuffer.vertex_batch), and the passes equal those of a batch built for every
+    G-buffer (as before)."""
     from voxgi.render import gbuffer, gpu_preview
 
     gpu_ready()
+    monkeypatch.setattr(gpu_preview, "supersampling", lambda *a: 1)
     light_scenes.build("emissive_room", bpy.context.scene)
     built = []
     original = gbuffer._new_batch

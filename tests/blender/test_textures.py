@@ -307,15 +307,20 @@ def test_a_procedural_material_on_a_mesh_without_uvs_warns(voxgi):
 def test_masked_sub_pixel_rasters_give_the_same_image(voxgi, monkeypatch):
     """The sub-pixel passes of a textured scene rasterize only the edge pixels they list
     (``gbuffer.PixelMask``: depth 0 elsewhere, so the textured fragments there are never
-    shaded): the preview is the one the unmasked rasters give, bit for bit, and it did mask."""
-    from voxgi.render import gbuffer
+    shaded): the preview is the one the unmasked rasters give, bit for bit, and it did mask
+    (the passes' one supersampled raster: ``gpu_preview.supersampling``)."""
+    from voxgi.render import gbuffer, gpu_preview
 
     scene = build()
-    drawn = []
+    drawn, rasters = [], []
     draw = gbuffer.PixelMask.draw
     monkeypatch.setattr(gbuffer.PixelMask, "draw", lambda self: (drawn.append(1), draw(self)))
+    rasterize = gpu_preview.rasterize
+    monkeypatch.setattr(gpu_preview, "rasterize", lambda *a, **k: rasters.append(
+        k.get("mask")) or rasterize(*a, **k))
     masked, _ = preview(scene)
-    assert len(drawn) >= 16  # each sub-pixel pass masked its raster
+    assert rasters and all(mask is not None for mask in rasters)  # every sub-pixel raster
+    assert len(drawn) == len(rasters)  # masked its raster
     monkeypatch.setattr(gbuffer.PixelMask, "draw", lambda self: None)
     plain, _ = preview(scene)
     for name in PASSES:

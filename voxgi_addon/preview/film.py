@@ -5,7 +5,7 @@ render), with ``passes["Alpha"]`` the pixel's filtered share of camera samples t
 surface (``passes.filter_coverage``). Cycles' Combined shows the world behind the geometry:
 
 * ``background``: the world's radiance along the camera rays of each pixel, sampled at the
-  anti-aliased preview's sub-pixel offsets (``camera.filter_offsets``, bilinear in the map so
+  anti-aliased preview's sub-pixel offsets (``camera.filter_samples``, bilinear in the map so
   the sky is not blurred beyond its own pixels) and taken through the same pixel filter as the
   passes — the background a pixel's filter window sees.
 * ``film_combined``: RGBA Combined. Opaque film: RGB + (1 − coverage − holdout) × background,
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene.camera import DEFAULT_FILTER_WIDTH, camera_rays, filter_offsets
+from ..scene.camera import DEFAULT_FILTER_WIDTH, camera_rays, filter_samples
 from ..scene.equirect import sample_bilinear
 from .passes import AA_SIDE, filter_coverage
 
@@ -47,10 +47,10 @@ def background(world, camera, width: int, height: int,
         raise ValueError(f"image size must be positive, got {width}×{height}")
     if getattr(world, "radiance", None) is None:
         return np.zeros((height, width, 3), np.float32)
-    offsets = filter_offsets(filter_width, AA_SIDE)
+    offsets, weights = filter_samples(filter_width, AA_SIDE)
     total = np.zeros((height, width, 3))
-    for offset in offsets:
-        total += world_along(world, camera, width, height, offset)
+    for offset, weight in zip(offsets, weights):
+        total += weight * world_along(world, camera, width, height, offset)
     return filter_coverage(total / len(offsets), filter_width)
 
 

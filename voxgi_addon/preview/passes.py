@@ -37,7 +37,7 @@ from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.sampling import hashed_square
 from ..gi.terminator import find_lifts
 from ..gi.world_light import scene_lights, world_light
-from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, camera_frame, filter_offsets
+from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, camera_frame, filter_samples
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
 from ..scene.textures import TEXTURE_TAPS, primary_base, texel_emission
@@ -295,7 +295,9 @@ AA_SIDE = 4  # the anti-aliased preview renders AA_SIDE² sub-pixel passes
 
 def subpixel_passes(filter_width: float, light_samples: int):
     """The anti-aliased preview's passes: [(offset (x, y) in pixels, strata_block)], one per
-    ``camera.filter_offsets`` entry (AA_SIDE² of them), each drawing a block of the shadow
+    ``camera.filter_samples`` entry (AA_SIDE² of them, weighted by ``pass_weights``: a grid
+    that one raster AA_SIDE times finer than the image draws together), each drawing a block
+    of the shadow
     rays' M × M strata (``direct_light.diffuse_direct``'s strata_block) so that the passes
     together trace every stratum equally often — the shadow rays and their stratification stay
     those of one pass over all strata. M = ⌈√light_samples⌉ when it tiles the AA_SIDE ×
@@ -309,7 +311,7 @@ def subpixel_passes(filter_width: float, light_samples: int):
     if side > 2 and side % AA_SIDE:
         side = max(AA_SIDE, AA_SIDE * int(math.floor(side / AA_SIDE + 0.5)))
     out = []
-    for k, offset in enumerate(filter_offsets(filter_width, AA_SIDE)):
+    for k, offset in enumerate(filter_samples(filter_width, AA_SIDE)[0]):
         a, b = divmod(k, AA_SIDE)
         if side % AA_SIDE == 0:
             m = side // AA_SIDE
@@ -317,6 +319,18 @@ def subpixel_passes(filter_width: float, light_samples: int):
         else:
             out.append((tuple(offset), (side, a % side, b % side, 1)))
     return out
+
+
+def pass_weights(plan, filter_width: float) -> np.ndarray:
+    """(P,) the weight of each pass of ``plan`` (``subpixel_passes``) in its pixel's sums, mean
+    1: the filter's mass over the pass's cell of the grid (``camera.filter_samples``); ones for
+    point sampling. A pixel's sums over the passes are Σ weight × sample, so dividing them by
+    the pass count (``finish_passes``) is the filter's weighted mean. Pass (a, b) draws block
+    (a, b) of the lights' strata, and the weights are symmetric in a and in b, so a light whose
+    shadowed share varies linearly across its strata keeps its mean."""
+    if len(plan) <= 1:
+        return np.ones(len(plan))
+    return filter_samples(filter_width, AA_SIDE)[1]
 
 
 def subpixel_reach(plan) -> int:
@@ -499,12 +513,15 @@ def pass_tail_weights(plan, filter_width: float) -> np.ndarray:
     density ∝ f inside q's square, so its weight there is f(o + e) / f(o) — scaled per e so
     that the passes' mean is ``neighbour_weights`` (a flat image stays flat). At ≤ 0.5 (the
     filter inside the pixel): the own pixel alone."""
-    return tail_weights([offset for offset, _ in plan], filter_width)
+    return tail_weights([offset for offset, _ in plan], filter_width,
+                        pass_weights(plan, filter_width))
 
 
-def tail_weights(offsets, filter_width: float) -> np.ndarray:
+def tail_weights(offsets, filter_width: float, weights=None) -> np.ndarray:
     """(P, 3, 3) ``pass_tail_weights`` of the sub-pixel ``offsets`` (P, 2) (x right, y down)
-    drawn as ``camera.filter_offsets`` draws them; normalised over these offsets."""
+    drawn as ``camera.filter_offsets`` draws them (weights None) or weighted as
+    ``camera.filter_samples`` weighs them (weights (P,), their own pixel's); normalised over
+    these offsets (the weighted mean of each neighbour's is its ``neighbour_weights``)."""
     base = neighbour_weights(filter_width)
     out = np.zeros((len(offsets), 3, 3))
     if base.sum() <= 1.0:
@@ -515,7 +532,8 @@ def tail_weights(offsets, filter_width: float) -> np.ndarray:
         gx = blackman_harris(ox + steps, filter_width) / blackman_harris(ox, filter_width)
         gy = blackman_harris(oy + steps, filter_width) / blackman_harris(oy, filter_width)
         out[k] = np.outer(gy, gx)
-    mean = out.mean(axis=0)
+    share = np.ones(len(out)) if weights is None else np.asarray(weights, np.float64)
+    mean = np.tensordot(share, out, 1) / share.sum()
     return out * np.divide(base, mean, out=np.zeros_like(base), where=mean > 0.0)
 
 
@@ -614,7 +632,7 @@ _LIGHTS = {"Diffuse Direct": "Diffuse Color", "Diffuse Indirect": "Diffuse Color
 def filter_passes(passes, filter_width: float):
     """Cycles' pixel filter over the neighbours (PASS_NAMES images (H, W, 3) → the same): each
     pixel's own passes are its square's share of the filter (the sub-pixel passes sample the
-    filter inside it, ``camera.filter_offsets``); the filter's tails reach the 8 neighbours'
+    filter inside it, ``camera.filter_samples``); the filter's tails reach the 8 neighbours'
     squares, which add their images weighted by the filter's share of each
     (``neighbour_weights``: 1 : 0.155 : 0.024 at Filter Size 1.5; nothing at ≤ 0.5). Colours,
     AO and Combined are the weighted means (a background neighbour adds 0, as to Cycles'
@@ -1156,13 +1174,14 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     listed = np.flatnonzero(edge)
     if len(listed):
         samples = []
-        for offset, block in plan:
+        for (offset, block), weight in zip(plan, pass_weights(plan, filter_width)):
             one = new_sums(height * width)
             shade(primary_visibility(camera_tris, snapshot.camera, width, height, offset),
                   edge, block, into=one, offset=offset, share=AA_SIDE)
             for name in SUMS:
-                sums[name][listed] += one[name][listed]
-            samples.append(pack_sums({name: one[name][listed] for name in SUMS}) / len(plan))
+                sums[name][listed] += weight * one[name][listed]
+            samples.append(pack_sums({name: one[name][listed] for name in SUMS})
+                           * (weight / len(plan)))
         tails = unpack_sums(stacked_tails(np.stack(samples), pass_tail_weights(plan, filter_width),
                                           listed, width, height))
     count = np.where(edge, len(plan), 1)

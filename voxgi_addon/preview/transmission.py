@@ -27,7 +27,7 @@ import dataclasses
 
 import numpy as np
 
-from ..scene.camera import DEFAULT_FILTER_WIDTH, filter_offsets
+from ..scene.camera import DEFAULT_FILTER_WIDTH, filter_samples
 from ..scene.glass import camera_transmittance, is_glass
 from ..scene.snapshot import RAY_ALL, RAY_CAMERA
 
@@ -86,10 +86,10 @@ def glass_weight(materials, hits_at, width: int, height: int,
         return weight.astype(np.float32)
     edge = _edges(weight)
     if edge.any():
-        offsets = filter_offsets(filter_width, AA_SIDE)
+        offsets, weights = filter_samples(filter_width, AA_SIDE)
         total = np.zeros((int(edge.sum()), 3))
-        for offset in offsets:
-            total += weight_at(tuple(offset))[edge]
+        for offset, share in zip(offsets, weights):
+            total += share * weight_at(tuple(offset))[edge]
         weight[edge] = total / len(offsets)
     return filter_coverage(weight, filter_width).astype(np.float32)
 

@@ -6,10 +6,12 @@
 * ``view_projection`` — the (4, 4) world → clip matrix that rasterizes the same pixels.
 * ``camera_frame`` — the camera's orthonormal rotation and position.
 * ``filter_offsets`` — sub-pixel offsets drawn by importance from Cycles' pixel filter
-  within the pixel's own square.
+  within the pixel's own square (equal weights: the viewport's progressive samples).
+* ``filter_samples`` — the same filter as a weighted grid (the one-shot image's sub-pixel
+  passes, which one supersampled raster draws together).
 
 Every ray function takes a sub-pixel ``offset`` (x right, y down, in pixels) that moves all
-pixels' rays alike: the anti-aliased preview renders one pass per ``filter_offsets`` entry.
+pixels' rays alike: the anti-aliased preview renders one pass per ``filter_samples`` entry.
 """
 from __future__ import annotations
 
@@ -20,7 +22,7 @@ import numpy as np
 from .snapshot import CameraData
 
 __all__ = ["DEFAULT_FILTER_WIDTH", "camera_frame", "camera_rays", "camera_ray_lengths",
-           "filter_offsets", "view_projection"]
+           "filter_offsets", "filter_samples", "view_projection"]
 
 DEFAULT_FILTER_WIDTH = 1.5  # pixels: Cycles' default Blackman-Harris Filter Size
 _FILTER_TABLE = 4096  # entries of the filter's inverse CDF
@@ -63,6 +65,58 @@ def _filter_offsets(width: float, side: int) -> np.ndarray:
         along = np.interp(u, cdf / cdf[-1], x)
     k = np.arange(side * side)
     return np.stack([along[k // side], along[k % side]], axis=1)
+
+
+# How much worse than the importance-drawn offsets the weighted grid may cover a straight edge
+# across the pixel (its worst place) and still be used: 1.24 × at Cycles' default Filter Size,
+# where the grid's whole images read closer to Cycles' than the drawn offsets' (docs/
+# gi_pipeline.md "Anti-aliasing": "One raster for the sixteen passes")
+GRID_EDGE_SLACK = 1.3
+
+
+def filter_samples(width: float = DEFAULT_FILTER_WIDTH, side: int = 4):
+    """(offsets (side², 2), weights (side²,)): Cycles' pixel filter over the pixel's own square
+    (|x|, |y| ≤ ½) as a weighted grid — offset k the centre of cell (k // side, k % side) in
+    (x, y) of a side × side grid of equal cells, weighted by the filter's mass over that cell
+    (``blackman_harris``, separable), the weights' mean 1. A filter narrower than the pixel
+    keeps ``filter_offsets`` with equal weights where the grid would cover a straight edge
+    across the pixel worse than ``GRID_EDGE_SLACK`` × their worst (its central columns then
+    hold most of the filter: 0.31 off at width 0.5, 0.11 drawn; at Cycles' default 1.5, 0.150
+    against 0.121, the grid's). ``filter_offsets`` draws the same
+    filter by importance with equal weights, each offset on its own; these offsets lie on a
+    lattice, so a raster ``side`` times finer than the image draws all of them at once
+    (render/gpu_preview.py "sub-pixel passes"). The filter's tails beyond the square are the
+    neighbours' share (``preview.passes.filter_passes``). width ≤ 0: the pixel centre, weight
+    1 each."""
+    offsets, weights = _filter_samples(float(width), int(side))
+    return offsets.copy(), weights.copy()
+
+
+@functools.lru_cache(maxsize=32)
+def _filter_samples(width: float, side: int):
+    k = np.arange(side * side)
+    if width <= 0.0:
+        return np.zeros((side * side, 2)), np.ones(side * side)
+    drawn = _filter_offsets(width, side)
+    along = (np.arange(side) + 0.5) / side - 0.5
+    # the filter's mass over each of the side cells along an axis (midpoint sums, fine steps)
+    steps = ((np.arange(256) + 0.5) / 256 - 0.5) / side
+    mass = np.array([blackman_harris(centre + steps, width).mean() for centre in along])
+    mass /= mass.mean()
+    # a straight edge across the pixel: the worst coverage of each arrangement against the
+    # filter's own (the grid's weighted columns against the drawn equal ones)
+    x = np.linspace(-0.5, 0.5, 2001)
+    f = blackman_harris(x, width)
+    cover = np.cumsum(f) / f.sum()
+    edges = np.linspace(-0.5, 0.5, 81)
+    truth = np.interp(edges, x, cover)
+    grid_worst = np.abs((mass[None, :] * (along[None, :] < edges[:, None])).mean(axis=1)
+                        - truth).max()
+    drawn_worst = np.abs((drawn[::side, 0][None, :] < edges[:, None]).mean(axis=1)
+                         - truth).max()
+    if width < 0.5 or grid_worst > GRID_EDGE_SLACK * drawn_worst:
+        return drawn, np.ones(side * side)
+    return np.stack([along[k // side], along[k % side]], axis=1), mass[k // side] * mass[k % side]
 
 
 def _frustum(camera: CameraData, width: int, height: int) -> tuple[float, float, float, float]:
