@@ -74,6 +74,49 @@ def test_default_bounces_match_cycles_default_light_paths(voxgi, tmp_path, name)
     assert abs(brightness - 1.0) <= INDIRECT_SUM_TOLERANCE, brightness
 
 
+def quick_cycles(scene, width, height):
+    """Cycles 16 spp + OpenImageDenoise (albedo and normal) at its default light paths (12
+    total, 4 diffuse, 4 glossy bounces: the references'), seed 1: the quick preview artists
+    already use."""
+    from cycles_reference import _reference
+
+    harness = _reference()
+    settings = harness._render_settings
+
+    def default_total(*args, **kwargs):
+        return [(owner, name, 12 if name == "max_bounces" else value)
+                for owner, name, value in settings(*args, **kwargs)]
+
+    harness._render_settings = default_total
+    try:
+        passes = harness.render_cycles_passes(scene, width, height, 16, diffuse_bounces=4,
+                                              ao_distance=1.0, seed=1, glossy_bounces=4,
+                                              denoise=True)
+    finally:
+        harness._render_settings = settings
+    return {name: np.asarray(image, np.float64)[..., :3] for name, image in passes.items()}
+
+
+@pytest.mark.parametrize("name", list(bounce_scenes.SCENES))
+def test_default_preview_is_as_close_as_cycles_16_spp_with_oidn(voxgi, tmp_path, name):
+    """The bar every preview is held to: at Cycles' default light paths the default preview's
+    Combined lies at least as close to Cycles' converged render as Cycles' own 16 spp +
+    OpenImageDenoise does, both measured here against the stored reference."""
+    scene = bpy.context.scene
+    bounce_scenes.build(name, scene)
+    follow_cycles(scene)
+    ours = preview(tmp_path, scene, bounce_scenes.WIDTH, bounce_scenes.HEIGHT)
+    quick = quick_cycles(scene, bounce_scenes.WIDTH, bounce_scenes.HEIGHT)
+    reference = np.load(REFS / f"{name}.npz")
+    mask = reference["Alpha"] > 0.5
+    truth = reference["Combined"].astype(np.float64)[..., :3]
+    mine = relative_l1(ours["Combined"], truth, mask)
+    theirs = relative_l1(quick["Combined"], truth, mask)
+    print(name, f"preview {mine:.4f}", f"Cycles 16 spp + OIDN {theirs:.4f}")
+    assert theirs > 0.005  # a real render, not the reference's own image
+    assert mine <= theirs, (mine, theirs)
+
+
 def test_thin_wall_dark_room_stays_dark(voxgi, tmp_path):
     """The room split by a 2 cm wall (thinner than the cache's 13 cm voxels): at the default
     Bounces the dark side's Diffuse Indirect stays ≤ 2% of the lit side's mean."""
