@@ -230,18 +230,23 @@ def _pixel_list(listed, width: int, height: int, fine: int = 1, sub=(0, 0)):
 # Most texels of a supersampled sub-pixel raster (``supersampling``): its G-buffer's four
 # RGBA32F targets and depth hold 68 bytes a texel (285 MB at this size)
 SUPERSAMPLE_TEXELS = 1 << 22
+# Longest side of one (OpenGL's GL_MAX_TEXTURE_SIZE is at least this on llvmpipe and on the
+# GPUs Blender supports): a panorama strip's raster stays drawable
+SUPERSAMPLE_SIDE = 16384
 
 
 def supersampling(width: int, height: int, filter_width: float) -> int:
     """K, the sub-pixel passes' rasters' scale: the largest divisor of AA_SIDE whose K·width ×
-    K·height G-buffer stays within ``SUPERSAMPLE_TEXELS`` — one raster draws K² of the AA_SIDE²
-    passes (the sample grid of ``camera.filter_samples``): at 160 × 120 all 16 in one, at
-    640 × 480 four in each of four, at 1920 × 1080 one each. 1 where the filter's samples are
-    not that grid (a filter narrower than Cycles' default: drawn by importance)."""
+    K·height G-buffer stays within ``SUPERSAMPLE_TEXELS`` and ``SUPERSAMPLE_SIDE`` — one
+    raster draws K² of the AA_SIDE² passes (the sample grid of ``camera.filter_samples``): at
+    160 × 120 all 16 in one, at 640 × 480 four in each of four, at 1920 × 1080 one each. 1
+    where the filter's samples are not that grid (a filter narrower than Cycles' default:
+    drawn by importance)."""
     offsets = filter_samples(filter_width, AA_SIDE)[0]
     lattice = (np.arange(AA_SIDE) + 0.5) / AA_SIDE - 0.5
     fine = AA_SIDE if np.allclose(np.unique(offsets[:, 0]), lattice) else 1
-    while fine > 1 and (AA_SIDE % fine or fine * fine * width * height > SUPERSAMPLE_TEXELS):
+    while fine > 1 and (AA_SIDE % fine or fine * fine * width * height > SUPERSAMPLE_TEXELS
+                        or fine * max(width, height) > SUPERSAMPLE_SIDE):
         fine -= 1
     return fine
 

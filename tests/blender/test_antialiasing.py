@@ -243,6 +243,7 @@ def test_one_raster_draws_the_sixteen_sub_pixel_passes(voxgi, monkeypatch):
     assert gpu_preview.supersampling(640, 480, 1.5) == 2
     assert gpu_preview.supersampling(1920, 1080, 1.5) == 1
     assert gpu_preview.supersampling(80, 60, 0.75) == 1  # narrow: drawn offsets, one a raster
+    assert gpu_preview.supersampling(6000, 40, 1.5) == 2  # a strip: 4 × 6000 texels too long
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     gi_scenes.build("columned_hall", scene)
