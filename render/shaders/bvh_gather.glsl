@@ -11,8 +11,8 @@
  * The rays of a point are split over several dispatches (render/gpu_gather.py
  * rays_per_dispatch): llvmpipe stops every loop of an invocation after 65535 iterations in all
  * (docs/blender_facts.md "llvmpipe's loop limit"), which silently dropped rays past about the
- * 600th. Dispatches before the last write raw sums (rgb, unoccluded rays) and (Σ luminance², 0,
- * 0, 0); the last one writes the outputs above.  * Sampler `materials`: (M + 1) × 3 texels, row 0 base colour, row 1 emission, row 2 (metallic,
+ * 600th. Dispatches before the last write raw sums (rgb, unoccluded rays) and (Σ luminance²,
+ * the point's geometric normal); the last one writes the outputs above.  * Sampler `materials`: (M + 1) × 3 texels, row 0 base colour, row 1 emission, row 2 (metallic,
  * Specular IOR Level, roughness) (last column: none); `principled_lut`: principled.glsl's. */
 
 /* The geometric normal of the triangle under the surface point `q` seen along unit `view`, on
@@ -39,8 +39,11 @@ void main()
   }
   /* Cycles' diffuse BSDF draws its directions about the shading normal and drops those below
    * the triangle's own plane (bsdf_diffuse_sample): they carry no light here either (AO still
-   * counts them) */
-  vec3 ng = geometric_normal(position + VIEW_BACKOFF * ray.xyz, ray.xyz, n);
+   * counts them). The first dispatch of a point finds the triangle (a short ray) and hands its
+   * normal on in its partial variance's .yzw; the later ones read it there (a viewport slice
+   * splits a point's rays over dozens of dispatches). */
+  vec3 ng = chunk.z > 0.5 ? texelFetch(partial_variance, cell, 0).yzw :
+                            geometric_normal(position + VIEW_BACKOFF * ray.xyz, ray.xyz, n);
   uint seed = uint(sampling.x);
   int rays = int(sampling.y);
   vec3 origin = position + SURFACE_EPSILON * n;
@@ -74,7 +77,7 @@ void main()
   }
   if (chunk.w < 0.5) {
     imageStore(out_image, cell, vec4(sum, unoccluded));
-    imageStore(out_variance, cell, vec4(lum2, 0.0, 0.0, 0.0));
+    imageStore(out_variance, cell, vec4(lum2, ng));
     return;
   }
   float count = float(rays);
