@@ -39,7 +39,7 @@ from ..voxgi_addon.preview.passes import (
 )
 from ..voxgi_addon.preview.sparse_gather import noisy_holes, sparse_plan, sparse_settings
 from ..voxgi_addon.preview.upsample import field_stride, low_shape, sample_pixels
-from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame, filter_samples
+from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame, filter_on_grid
 from ..voxgi_addon.scene.glass import is_glass
 from ..voxgi_addon.scene.textures import TEXTURE_TAPS
 from .frame import Frame, Stage, finish
@@ -242,9 +242,7 @@ def supersampling(width: int, height: int, filter_width: float) -> int:
     160 × 120 all 16 in one, at 640 × 480 four in each of four, at 1920 × 1080 one each. 1
     where the filter's samples are not that grid (a filter narrower than Cycles' default:
     drawn by importance)."""
-    offsets = filter_samples(filter_width, AA_SIDE)[0]
-    lattice = (np.arange(AA_SIDE) + 0.5) / AA_SIDE - 0.5
-    fine = AA_SIDE if np.allclose(np.unique(offsets[:, 0]), lattice) else 1
+    fine = AA_SIDE if filter_on_grid(filter_width, AA_SIDE) else 1
     while fine > 1 and (AA_SIDE % fine or fine * fine * width * height > SUPERSAMPLE_TEXELS
                         or fine * max(width, height) > SUPERSAMPLE_SIDE):
         fine -= 1
@@ -698,8 +696,8 @@ def _subpixel_passes(f):
     # fragments cost 3× the mask's full-screen pass: 47 → 14 ms a pass, textured room at
     # 640 × 480); the plain variant's are cheaper than the mask (9 → 10 ms, the box)
     fine = supersampling(width, height, f["filter_width"])
-    keep = np.repeat(np.repeat(edge, fine, axis=0), fine, axis=1)
-    mask = PixelMask(keep) if scene.raster_textures() is not None else None
+    mask = None if scene.raster_textures() is None else \
+        PixelMask(np.repeat(np.repeat(edge, fine, axis=0), fine, axis=1))
     settings = f["gather_settings"]
     weights = pass_weights(plan, f["filter_width"])
     rasters = {}  # (group x, group y) → the G-buffer drawing its passes

@@ -38,6 +38,18 @@ def preview(name, tracer="AUTO", width=gi_scenes.WIDTH, height=gi_scenes.HEIGHT,
     return {k: np.asarray(v, np.float64) for k, v in passes.items()}, session.gi_timings
 
 
+def hall_snapshot(width=80, height=60):
+    """(scene, trace options, snapshot) of the columned hall at ``width`` × ``height``."""
+    from voxgi.blender.settings import trace_options
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    gi_scenes.build("columned_hall", scene)
+    return (scene, trace_options(scene.voxgi, width, height),
+            take_snapshot(bpy.context, bpy.context.evaluated_depsgraph_get()))
+
+
 def test_numpy_and_gpu_agree_with_sub_pixel_passes(voxgi):
     gpu, timings = preview("thin_wall_rooms", "AUTO", 80, 60)
     assert "sub-pixel passes (GPU)" in timings  # the default Filter Size anti-aliases
@@ -109,8 +121,7 @@ def test_only_edge_pixels_take_sub_pixel_passes(voxgi):
     all strata — exactly the point-sampled preview (Filter Size 0) there, in every pass — while
     the pixels along coverage and material edges are anti-aliased: where a share of their
     camera rays sees the other side, their Diffuse Color moves toward it."""
-    from voxgi.blender.settings import cone_settings, trace_options
-    from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.blender.settings import cone_settings
     from voxgi.render.gbuffer import rasterize, read_gbuffer
     from voxgi.render.gpu_context import ensure_gpu_context
     from voxgi.render.gpu_preview import render_passes_gpu
@@ -126,12 +137,8 @@ def test_only_edge_pixels_take_sub_pixel_passes(voxgi):
     from voxgi.voxgi_addon.scene.geometry import world_triangles
 
     assert ensure_gpu_context()[0]
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    gi_scenes.build("columned_hall", scene)
     width, height = 80, 60
-    options = trace_options(scene.voxgi, width, height)
-    snapshot = take_snapshot(bpy.context, bpy.context.evaluated_depsgraph_get())
+    scene, options, snapshot = hall_snapshot(width, height)
     images = {}
     for filter_width in (0.0, 1.5):
         passes, _ = render_passes_gpu(snapshot, None, width, height,
@@ -233,8 +240,7 @@ def test_one_raster_draws_the_sixteen_sub_pixel_passes(voxgi, monkeypatch):
     all sixteen (counted: one raster beside the pixel centres', not sixteen) and a 640 × 480
     one draws four in each of four rasters. Its sample (i, j) is what a raster of the image at
     that pass's offset draws: the preview equals the one drawn pass by pass."""
-    from voxgi.blender.settings import cone_settings, trace_options
-    from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.blender.settings import cone_settings
     from voxgi.render import gpu_preview
     from voxgi.render.gpu_context import ensure_gpu_context
 
@@ -244,12 +250,8 @@ def test_one_raster_draws_the_sixteen_sub_pixel_passes(voxgi, monkeypatch):
     assert gpu_preview.supersampling(1920, 1080, 1.5) == 1
     assert gpu_preview.supersampling(80, 60, 0.75) == 1  # narrow: drawn offsets, one a raster
     assert gpu_preview.supersampling(6000, 40, 1.5) == 2  # a strip: 4 × 6000 texels too long
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    gi_scenes.build("columned_hall", scene)
     width, height = 80, 60
-    options = trace_options(scene.voxgi, width, height)
-    snapshot = take_snapshot(bpy.context, bpy.context.evaluated_depsgraph_get())
+    scene, options, snapshot = hall_snapshot(width, height)
     drawn = []
     rasterize = gpu_preview.rasterize
     monkeypatch.setattr(gpu_preview, "rasterize", lambda *a, **k: drawn.append(

@@ -22,7 +22,8 @@ import numpy as np
 from .snapshot import CameraData
 
 __all__ = ["DEFAULT_FILTER_WIDTH", "camera_frame", "camera_rays", "camera_ray_lengths",
-           "filter_offsets", "filter_samples", "view_projection"]
+           "filter_offsets", "filter_on_grid", "filter_samples",
+           "view_projection"]
 
 DEFAULT_FILTER_WIDTH = 1.5  # pixels: Cycles' default Blackman-Harris Filter Size
 _FILTER_TABLE = 4096  # entries of the filter's inverse CDF
@@ -78,25 +79,30 @@ def filter_samples(width: float = DEFAULT_FILTER_WIDTH, side: int = 4):
     """(offsets (side², 2), weights (side²,)): Cycles' pixel filter over the pixel's own square
     (|x|, |y| ≤ ½) as a weighted grid — offset k the centre of cell (k // side, k % side) in
     (x, y) of a side × side grid of equal cells, weighted by the filter's mass over that cell
-    (``blackman_harris``, separable), the weights' mean 1. A filter narrower than the pixel
-    keeps ``filter_offsets`` with equal weights where the grid would cover a straight edge
-    across the pixel worse than ``GRID_EDGE_SLACK`` × their worst (its central columns then
-    hold most of the filter: 0.31 off at width 0.5, 0.11 drawn; at Cycles' default 1.5, 0.150
-    against 0.121, the grid's). ``filter_offsets`` draws the same
-    filter by importance with equal weights, each offset on its own; these offsets lie on a
-    lattice, so a raster ``side`` times finer than the image draws all of them at once
-    (render/gpu_preview.py "sub-pixel passes"). The filter's tails beyond the square are the
+    (``blackman_harris``, separable), the weights' mean 1. The offsets lie on a lattice, so a
+    raster ``side`` times finer than the image draws all of them at once (render/
+    gpu_preview.py ``supersampling``); ``filter_offsets`` draws the same filter by importance,
+    equal weights, each offset on its own. Where the grid would cover a straight edge across
+    the pixel worse than ``GRID_EDGE_SLACK`` × the drawn offsets' worst (a filter narrower
+    than Cycles' default: its central cells hold most of it, 0.31 off at width 0.5 against
+    0.11 drawn; at the default 1.5, 0.150 against 0.121) these are ``filter_offsets`` with
+    equal weights (``filter_on_grid`` False). The filter's tails beyond the square are the
     neighbours' share (``preview.passes.filter_passes``). width ≤ 0: the pixel centre, weight
     1 each."""
-    offsets, weights = _filter_samples(float(width), int(side))
+    offsets, weights, _ = _filter_samples(float(width), int(side))
     return offsets.copy(), weights.copy()
+
+
+def filter_on_grid(width: float = DEFAULT_FILTER_WIDTH, side: int = 4) -> bool:
+    """Whether ``filter_samples(width, side)`` is the weighted grid (not the drawn offsets)."""
+    return _filter_samples(float(width), int(side))[2]
 
 
 @functools.lru_cache(maxsize=32)
 def _filter_samples(width: float, side: int):
     k = np.arange(side * side)
     if width <= 0.0:
-        return np.zeros((side * side, 2)), np.ones(side * side)
+        return np.zeros((side * side, 2)), np.ones(side * side), False
     drawn = _filter_offsets(width, side)
     along = (np.arange(side) + 0.5) / side - 0.5
     # the filter's mass over each of the side cells along an axis (midpoint sums, fine steps)
@@ -115,8 +121,9 @@ def _filter_samples(width: float, side: int):
     drawn_worst = np.abs((drawn[::side, 0][None, :] < edges[:, None]).mean(axis=1)
                          - truth).max()
     if width < 0.5 or grid_worst > GRID_EDGE_SLACK * drawn_worst:
-        return drawn, np.ones(side * side)
-    return np.stack([along[k // side], along[k % side]], axis=1), mass[k // side] * mass[k % side]
+        return drawn, np.ones(side * side), False
+    return (np.stack([along[k // side], along[k % side]], axis=1),
+            mass[k // side] * mass[k % side], True)
 
 
 def _frustum(camera: CameraData, width: int, height: int) -> tuple[float, float, float, float]:
