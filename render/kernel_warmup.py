@@ -18,6 +18,10 @@ on a machine) spaces the next tick by ``SLOW_SECONDS``, so the warm-up never hol
 thread for longer than one compile at a time. Nothing runs in background mode (no view to
 enter) nor while F12 renders, and nothing once every kernel of the file's settings is compiled (the timer then only
 looks every ``IDLE_SECONDS`` whether the settings or the engine changed).
+
+The same timer starts, for a saved file, the process that builds the kernels' machine code in
+Mesa's shader cache before any view needs it (``warmup_process``: what a machine's first
+session would otherwise build in the view's draws, 40–640 ms each).
 """
 from __future__ import annotations
 
@@ -27,6 +31,7 @@ import bpy
 
 from .gpu_context import gpu_usable
 from .gpu_gather import _glossy_shader
+from .warmup_process import WarmupProcesses
 
 STEP_SECONDS = 0.1   # between two compiles
 IDLE_SECONDS = 1.0   # between two looks when there is nothing to compile
@@ -34,6 +39,8 @@ SLOW_COMPILE = 0.030  # a compile longer than this spaces the next one by SLOW_S
 SLOW_SECONDS = 1.0
 
 ENGINE = "VOXGI"
+DEFAULT_REGION = (1280, 720)
+processes = WarmupProcesses()  # the kernels' warm-up process of the open file (UI only)
 
 
 def generic_steps(settings) -> tuple[tuple, list]:
@@ -84,6 +91,25 @@ def tick(scene) -> float:
     return SLOW_SECONDS if time.perf_counter() - t0 > SLOW_COMPILE else STEP_SECONDS
 
 
+def region_size(context) -> tuple[int, int]:
+    """The largest 3D view's size in the open windows (where Rendered mode will draw), or
+    ``warmup_process``'s default."""
+    sizes = [(region.width, region.height)
+             for window in getattr(context.window_manager, "windows", ())
+             for area in window.screen.areas if area.type == "VIEW_3D"
+             for region in area.regions if region.type == "WINDOW"]
+    return max(sizes, key=lambda s: s[0] * s[1], default=DEFAULT_REGION)
+
+
+def start_process(scene, context) -> bool:
+    """Start the kernels' warm-up process for the open file when it is saved and renders
+    with VoxGI (``warmup_process``: once per file version on this machine): whether it
+    started."""
+    if scene is None or scene.render.engine != ENGINE or not bpy.data.filepath:
+        return False
+    return processes.start(bpy.data.filepath, *region_size(context))
+
+
 def _tick() -> float | None:
     """The timer (Blender's UI only: in background mode there is no view to enter)."""
     if bpy.app.background:
@@ -91,7 +117,9 @@ def _tick() -> float | None:
     if bpy.app.is_job_running("RENDER"):  # F12 compiles what it uses, in its own context
         return IDLE_SECONDS
     try:
-        return tick(getattr(bpy.context, "scene", None))
+        scene = getattr(bpy.context, "scene", None)
+        start_process(scene, bpy.context)
+        return tick(scene)
     except Exception:  # noqa: BLE001 - a view compiles it again and reports what failed
         return None
 
@@ -110,3 +138,4 @@ def register() -> None:
 def unregister() -> None:
     if bpy.app.timers.is_registered(_tick):
         bpy.app.timers.unregister(_tick)
+    processes.stop()
