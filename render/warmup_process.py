@@ -12,11 +12,14 @@ disk, and a later process whose kernels have the same source and state loads the
 
 So when a saved file whose render engine is VoxGI is open in Blender's UI, ``kernel_warmup``'s
 timer starts, once per file version on the machine, **one background process at the lowest
-priority** (``start``): Blender (or the Python that has ``bpy``) in background mode, running
-this module (``main``), which opens the file, draws the scene camera's view in Rendered mode
-into an offscreen buffer of the user's region size until it has converged (every kernel of the
-view's slices, for the file's own lights, textures and cut-outs), then renders a small F12
-preview (the F12 kernels). It touches nothing of the user's session: it reads the saved file
+priority** (``WarmupProcesses.start``): Blender (or the Python that has ``bpy``) in background
+mode, running this module (``main``), which opens the file, draws the scene camera's view in
+Rendered mode into an offscreen buffer of the largest 3D view's size until it has converged
+(every kernel of the view's slices, for the file's own lights, textures and cut-outs), renders
+a small F12 preview (the F12 kernels), and then runs a second child: a new session entering
+Rendered mode on the cache the first one filled, to its first tile — the variants of a
+session's first draws (the quick image, the first coarse image), which the first child's
+draws, slow while they build, go without. It touches nothing of the user's session: it reads the saved file
 and writes only Mesa's cache and a stamp (``stamp_path``) that says this file version is
 warmed. ``VOXGI_NO_WARMUP_PROCESS`` (any non-empty value) turns it off.
 """
@@ -34,6 +37,7 @@ DISABLE = "VOXGI_NO_WARMUP_PROCESS"
 SECONDS = 180.0   # the child's own limit (it stops there, whatever is left)
 F12_SIZE = (96, 54)  # the small F12 preview: its kernels (not powers of two, as a frame's)
 DONE = "VOXGI-WARMUP done"
+CONVERGE, ENTER = "converge", "enter"  # the two children's phases (``warm``)
 
 
 def stamp_path(blend: str, cache_dir: str | None = None) -> pathlib.Path:
@@ -64,13 +68,13 @@ def _sources_digest() -> str:
     return _SOURCES[0]
 
 
-def command(blend: str, width: int, height: int) -> list[str]:
+def command(blend: str, width: int, height: int, phase: str = "") -> list[str]:
     """The child's command line: Blender's binary in background mode with factory settings
     running this file, or — Blender as a Python module — this Python running it."""
     import bpy
 
     script = str(pathlib.Path(__file__).resolve())
-    args = [str(ROOT), blend, str(int(width)), str(int(height))]
+    args = [str(ROOT), blend, str(int(width)), str(int(height)), phase or CONVERGE]
     binary = getattr(bpy.app, "binary_path", "")
     if binary and os.path.basename(binary).lower().startswith("blender"):
         return [binary, "-b", "--factory-startup", "--python", script, "--", *args]
@@ -189,21 +193,20 @@ def _view(scene, depsgraph, width, height):
     return view.inverted(), window
 
 
-def warm(blend: str, width: int, height: int, seconds: float = SECONDS) -> str:
-    """The child's work in this process (module doc): open ``blend``, draw its view in
-    Rendered mode at ``width`` × ``height`` until converged, render a small F12 preview.
-    Returns a line saying what was done."""
+def warm(blend: str, width: int, height: int, phase: str = CONVERGE,
+         seconds: float = SECONDS) -> str:
+    """A child's work in this process (module doc): open ``blend`` and draw its view in
+    Rendered mode at ``width`` × ``height`` — until converged, then a small F12 preview
+    (``CONVERGE``), or to its first tile (``ENTER``). Returns a line saying what was done."""
     import types
 
     import bpy
     import gpu
 
     from ..blender import jobs
-    from . import gpu_scene
     from .gpu_context import ensure_gpu_context
     from .gpu_shaders import counters
     from .pipeline import render_scene_passes
-    from .viewport import release as release_views
     from .viewport import view_draw, view_update
 
     started = time.perf_counter()
@@ -239,20 +242,20 @@ def warm(blend: str, width: int, height: int, seconds: float = SECONDS) -> str:
                 time.sleep(0.01)  # waiting for the worker's job
 
     try:
-        # 1. to convergence: every kernel of the view's slices and its radiance cache
-        enter(_Engine(), lambda r, idle: idle and r.progressive.converged and
-              (r.cache.generation > 0 or not r.cache.resume()))
-        jobs.wait_idle(60.0)
-        # 2. entered again with the scene to prepare anew (its kernels built now): the quick
-        # image and the first coarse image, which the first pass's slower draws may have
-        # gone without, to the first tile after it
-        release_views()
-        gpu_scene.release()
-        enter(_Engine(), lambda r, idle: r.traces >= 2 or idle and r.progressive.converged)
+        if phase == CONVERGE:
+            # every kernel of the view's slices and its radiance cache
+            enter(_Engine(), lambda r, idle: idle and r.progressive.converged and
+                  (r.cache.generation > 0 or not r.cache.resume()))
+        else:
+            # ENTER: a new session's first draws on the cache the first child filled, to the
+            # first tile after the first GI image: the quick image's and the first coarse
+            # image's variants, which that child's slower (building) draws went without
+            enter(_Engine(), lambda r, idle: r.traces >= 2 or idle and r.progressive.converged)
         jobs.wait_idle(60.0)
     finally:
         offscreen.free()
-    if scene.camera is not None and time.perf_counter() - started < seconds:
+    if phase == CONVERGE and scene.camera is not None and \
+            time.perf_counter() - started < seconds:
         render_scene_passes(bpy.context, scene, None, *F12_SIZE)
     return (f"{DONE}: {draws} draws, {counters.compiles - before} kernels compiled, "
             f"{time.perf_counter() - started:.1f} s")
@@ -273,17 +276,25 @@ def _load_addon(root: str):
 
 
 def main(argv: list[str]) -> int:
-    """The child: ``ROOT BLEND WIDTH HEIGHT`` (after ``--`` when run by Blender's binary)."""
+    """A child: ``ROOT BLEND WIDTH HEIGHT PHASE`` (after ``--`` when run by Blender's
+    binary). The ``CONVERGE`` child then runs the ``ENTER`` one, a session of its own."""
     if "--" in argv:
         argv = argv[argv.index("--") + 1:]
-    root, blend, width, height = argv[-4:]
+    root, blend, width, height, phase = argv[-5:]
     import bpy  # noqa: F401 - Blender as a module: start it before the add-on
 
     name = _load_addon(root)
     import importlib
 
     child = importlib.import_module(f"{name}.render.warmup_process")
-    print(child.warm(blend, int(width), int(height)), flush=True)
+    print(child.warm(blend, int(width), int(height), phase), flush=True)
+    if phase == CONVERGE:
+        entered = subprocess.run(command(blend, int(width), int(height), ENTER),
+                                 stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                                 timeout=SECONDS + 120.0)
+        done = [line for line in entered.stdout.splitlines() if line.startswith(DONE)]
+        print(f"{done[-1] if done else 'entering failed'} (a new session)", flush=True)
+        return entered.returncode
     return 0
 
 
