@@ -15,13 +15,14 @@ timer starts, once per file version on the machine, **one background process at 
 priority** (``WarmupProcesses.start``): Blender (or the Python that has ``bpy``) in background
 mode, running this module (``main``), which opens the file, draws the scene camera's view in
 Rendered mode into an offscreen buffer of the largest 3D view's size until it has converged
-(every kernel of the view's slices, for the file's own lights, textures and cut-outs), renders
-a small F12 preview (the F12 kernels), and then runs a second child: a new session entering
-Rendered mode on the cache the first one filled, to its first tile — the variants of a
-session's first draws (the quick image, the first coarse image), which the first child's
-draws, slow while they build, go without. It touches nothing of the user's session: it reads the saved file
-and writes only Mesa's cache and a stamp (``stamp_path``) that says this file version is
-warmed. ``VOXGI_NO_WARMUP_PROCESS`` (any non-empty value) turns it off.
+(every kernel of the view's slices, for the file's own lights, textures and cut-outs), and
+then runs two more children, each a process of its own: a new session entering Rendered mode
+on the cache the first one filled, to its first tile — the variants of a session's first draws
+(the quick image, the first coarse image), which the first child's draws, slow while they
+build, go without — and small F12 previews (the F12 kernels; in a process that had built the
+view's variant of a kernel, llvmpipe kept F12's variant of it out of the cache). It touches
+nothing of the user's session: it reads the saved file and writes only Mesa's cache and a stamp
+(``stamp_path``) that says this file version is warmed. ``VOXGI_NO_WARMUP_PROCESS`` (any non-empty value) turns it off.
 """
 from __future__ import annotations
 
@@ -35,9 +36,14 @@ import time
 ROOT = pathlib.Path(__file__).resolve().parents[1]  # the add-on's package directory
 DISABLE = "VOXGI_NO_WARMUP_PROCESS"
 SECONDS = 180.0   # the child's own limit (it stops there, whatever is left)
-F12_SIZE = (96, 54)  # the small F12 preview: its kernels (not powers of two, as a frame's)
+# the small F12 previews: their kernels — at one gather point a pixel, and at a stride of 2
+# (the upsampling's: a frame past 160 × 120 pixels) — at sizes not powers of two, as a frame's
+F12_SIZES = ((96, 54), (208, 117))
 DONE = "VOXGI-WARMUP done"
-CONVERGE, ENTER = "converge", "enter"  # the two children's phases (``warm``)
+# the children's phases (``warm``), each a process of its own: llvmpipe keeps a kernel's code
+# built in a process that had built another variant of it in memory out of the cache on disk
+# (the F12 glossy gather's after the view's: 0.6 s again in the next session)
+CONVERGE, ENTER, F12 = "converge", "enter", "f12"
 
 
 def stamp_path(blend: str, cache_dir: str | None = None) -> pathlib.Path:
@@ -196,8 +202,9 @@ def _view(scene, depsgraph, width, height):
 def warm(blend: str, width: int, height: int, phase: str = CONVERGE,
          seconds: float = SECONDS) -> str:
     """A child's work in this process (module doc): open ``blend`` and draw its view in
-    Rendered mode at ``width`` × ``height`` — until converged, then a small F12 preview
-    (``CONVERGE``), or to its first tile (``ENTER``). Returns a line saying what was done."""
+    Rendered mode at ``width`` × ``height`` until converged (``CONVERGE``) or to its first
+    tile (``ENTER``); or render small F12 previews (``F12``). Returns a line saying what was
+    done."""
     import types
 
     import bpy
@@ -246,17 +253,18 @@ def warm(blend: str, width: int, height: int, phase: str = CONVERGE,
             # every kernel of the view's slices and its radiance cache
             enter(_Engine(), lambda r, idle: idle and r.progressive.converged and
                   (r.cache.generation > 0 or not r.cache.resume()))
-        else:
-            # ENTER: a new session's first draws on the cache the first child filled, to the
-            # first tile after the first GI image: the quick image's and the first coarse
-            # image's variants, which that child's slower (building) draws went without
+        elif phase == ENTER:
+            # a new session's first draws on the cache the first child filled, to the first
+            # tile after the first GI image: the quick image's and the first coarse image's
+            # variants, which that child's slower (building) draws went without
             enter(_Engine(), lambda r, idle: r.traces >= 2 or idle and r.progressive.converged)
         jobs.wait_idle(60.0)
     finally:
         offscreen.free()
-    if phase == CONVERGE and scene.camera is not None and \
-            time.perf_counter() - started < seconds:
-        render_scene_passes(bpy.context, scene, None, *F12_SIZE)
+    if phase == F12 and scene.camera is not None:
+        for size in F12_SIZES:
+            if time.perf_counter() - started < seconds:
+                render_scene_passes(bpy.context, scene, None, *size)
     return (f"{DONE}: {draws} draws, {counters.compiles - before} kernels compiled, "
             f"{time.perf_counter() - started:.1f} s")
 
@@ -277,7 +285,8 @@ def _load_addon(root: str):
 
 def main(argv: list[str]) -> int:
     """A child: ``ROOT BLEND WIDTH HEIGHT PHASE`` (after ``--`` when run by Blender's
-    binary). The ``CONVERGE`` child then runs the ``ENTER`` one, a session of its own."""
+    binary). The ``CONVERGE`` child then runs the ``ENTER`` and ``F12`` ones, each a process of
+    its own."""
     if "--" in argv:
         argv = argv[argv.index("--") + 1:]
     root, blend, width, height, phase = argv[-5:]
@@ -288,14 +297,16 @@ def main(argv: list[str]) -> int:
 
     child = importlib.import_module(f"{name}.render.warmup_process")
     print(child.warm(blend, int(width), int(height), phase), flush=True)
-    if phase == CONVERGE:
-        entered = subprocess.run(command(blend, int(width), int(height), ENTER),
-                                 stdin=subprocess.DEVNULL, capture_output=True, text=True,
-                                 timeout=SECONDS + 120.0)
-        done = [line for line in entered.stdout.splitlines() if line.startswith(DONE)]
-        print(f"{done[-1] if done else 'entering failed'} (a new session)", flush=True)
-        return entered.returncode
-    return 0
+    code = 0
+    for after in (ENTER, F12) if phase == CONVERGE else ():
+        ran = subprocess.run(command(blend, int(width), int(height), after),
+                             stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                             timeout=SECONDS + 120.0)
+        done = [line for line in ran.stdout.splitlines() if line.startswith(DONE)]
+        print(f"{done[-1] if done else after + ' failed'} ({after}, a process of its own)",
+              flush=True)
+        code = code or ran.returncode
+    return code
 
 
 if __name__ == "__main__":
