@@ -29,9 +29,9 @@ import time
 
 import bpy
 
+from . import warmup_process
 from .gpu_context import gpu_usable
 from .gpu_gather import _glossy_shader
-from .warmup_process import WarmupProcesses
 
 STEP_SECONDS = 0.1   # between two compiles
 IDLE_SECONDS = 1.0   # between two looks when there is nothing to compile
@@ -40,7 +40,6 @@ SLOW_SECONDS = 1.0
 
 ENGINE = "VOXGI"
 DEFAULT_REGION = (1280, 720)
-processes = WarmupProcesses()  # the kernels' warm-up process of the open file (UI only)
 
 
 def generic_steps(settings) -> tuple[tuple, list]:
@@ -107,7 +106,7 @@ def start_process(scene, context) -> bool:
     started."""
     if scene is None or scene.render.engine != ENGINE or not bpy.data.filepath:
         return False
-    return processes.start(bpy.data.filepath, *region_size(context))
+    return warmup_process.processes.start(bpy.data.filepath, *region_size(context))
 
 
 def _tick() -> float | None:
@@ -138,4 +137,4 @@ def register() -> None:
 def unregister() -> None:
     if bpy.app.timers.is_registered(_tick):
         bpy.app.timers.unregister(_tick)
-    processes.stop()
+    warmup_process.processes.stop()

@@ -153,10 +153,20 @@ class WarmupProcesses:
             return False
         return True
 
+    def status(self) -> str:
+        """The sidebar's line while a child runs (nothing changed; "" when none runs)."""
+        if self.running is None or self.running[0].poll() is not None:
+            return ""
+        return "Building the kernels in the background (this machine's first session with " \
+            "this file)"
+
     def stop(self) -> None:
         if self.running is not None and self.running[0].poll() is None:
             self.running[0].kill()
         self.running = None
+
+
+processes = WarmupProcesses()  # the open file's children (``kernel_warmup``'s timer; UI only)
 
 
 # ------------------------------------------------------------------ the child

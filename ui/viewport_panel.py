@@ -10,6 +10,7 @@ import bpy
 
 from ..blender import jobs
 from ..blender.viewport_session import peek_live_gi
+from ..render import warmup_process
 
 LEVEL_ICONS = {"ERROR": "CANCEL", "WARNING": "ERROR", "INFO": "INFO"}
 VIEWPORT_SETTINGS = ("resolution_fraction", "samples", "coarse_first", "viewport_pass")
@@ -52,7 +53,11 @@ def progress_line(job) -> str:
 
 
 def draw_job(layout, scene) -> None:
-    """The scene's running job as a percent line with its Cancel button (Esc does the same)."""
+    """The scene's running job as a percent line with its Cancel button (Esc does the same);
+    the kernels' warm-up process while it runs (render/warmup_process.py)."""
+    building = warmup_process.processes.status()
+    if building:
+        layout.label(text=building, icon="SORTTIME")
     job = jobs.running_job(scene.name_full)
     if job is None:
         return

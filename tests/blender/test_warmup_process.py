@@ -126,10 +126,16 @@ def test_which_files_start_a_child(tmp_path, monkeypatch):
         def kill(self):
             pass
 
-    monkeypatch.setattr(warmup_process, "launch",
-                        lambda blend, w, h, **_: started.append((blend, w, h)) or Child(0))
+    children = []
+
+    def launch(blend, w, h, **_):
+        started.append((blend, w, h))
+        children.append(Child(None))  # running until the test says it ended
+        return children[-1]
+
+    monkeypatch.setattr(warmup_process, "launch", launch)
     processes = warmup_process.WarmupProcesses(cache_dir=str(tmp_path / "stamps"))
-    monkeypatch.setattr(kernel_warmup, "processes", processes)
+    monkeypatch.setattr(warmup_process, "processes", processes)
     scene = bpy.context.scene
     scene.render.engine = "VOXGI"
     assert not kernel_warmup.start_process(scene, bpy.context)  # not saved yet
@@ -147,12 +153,18 @@ def test_which_files_start_a_child(tmp_path, monkeypatch):
              for a in w.screen.areas if a.type == "VIEW_3D" for r in a.regions
              if r.type == "WINDOW"] or [kernel_warmup.DEFAULT_REGION]
     assert started == [(blend, *max(views, key=lambda s: s[0] * s[1]))]
+    assert "in the background" in processes.status()  # the sidebar says so while it runs
+    assert not kernel_warmup.start_process(scene, bpy.context)  # one at a time
+    children[-1].code = 0
+    assert processes.status() == ""
     assert not processes.poll()  # the child said it was done: its stamp written
     assert warmup_process.stamp_path(blend, processes.cache_dir).exists()
     assert not kernel_warmup.start_process(scene, bpy.context)  # this version is warmed
     bpy.ops.wm.save_as_mainfile(filepath=blend)  # a new version of the file
     assert kernel_warmup.start_process(scene, bpy.context)
     assert len(started) == 2
+    children[-1].code = 0
+    assert not processes.poll()
     # a child that failed writes no stamp, and is not started again in this session
     monkeypatch.setattr(warmup_process, "launch", lambda *a, **k: Child(1))
     other = str(tmp_path / "other.blend")
