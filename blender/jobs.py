@@ -31,7 +31,9 @@ bpy facts this relies on (Blender 5.0, checked with the ``bpy`` module):
 from __future__ import annotations
 
 import contextlib
+import os
 import queue
+import sys
 import threading
 import time
 import traceback
@@ -153,7 +155,26 @@ def _run_job(job: Job, results: queue.Queue) -> None:
     job._finished.set()
 
 
+BACKGROUND_NICE = 10  # the worker threads' niceness over the main thread's (Linux)
+
+
+def background_priority() -> None:
+    """Lower the calling thread's CPU priority below the main thread's (Linux: a thread is a
+    task of its own, ``setpriority`` on its id; elsewhere nothing). On two cores the worker's
+    numpy (snapshots' geometry, BVH builds, cache layouts) ran beside the view's draws and
+    made llvmpipe's raster threads of a draw wait for a core: a draw's image took 20–24 ms
+    instead of 6–10 (docs/gi_pipeline.md "Worker threads below the main thread")."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(),
+                       os.getpriority(os.PRIO_PROCESS, 0) + BACKGROUND_NICE)
+    except (OSError, AttributeError):
+        pass
+
+
 def _work(inbox: queue.Queue, results: queue.Queue) -> None:
+    background_priority()
     while (job := inbox.get()) is not None:
         _run_job(job, results)
 

@@ -118,7 +118,7 @@ class ProgressiveImage:
         # stage takes about that much (so a call stays within the budget)
         self.budget = budget
         self.sizers = {kind: shared_sizer(budget * STAGE_SHARE, amortize=False, kind=kind)
-                       for kind in ("tile", "lit tile")}
+                       for kind in ("tile", "lit tile", "coarse")}
         self.stage_budget: float | None = budget * STAGE_SHARE  # None: a whole slice a call
         self.running = None        # the slice under way: a generator of its stages
         self.running_started = 0.0
@@ -214,11 +214,18 @@ class ProgressiveImage:
 
     def coarse_size(self, stride: int) -> tuple[int, int]:
         """The coarse image: the whole view in one slice's tile (``tile_shape``: textures of
-        the tiles' kind, its pixels stretched over the view's aspect), or half the width and
-        height when one slice holds more than a quarter of the image."""
+        the tiles' kind, its pixels stretched over the view's aspect; as many pixels as the
+        coarse images' own fit allows once one was measured), or half the width and height
+        when one slice holds more than a quarter of the image."""
         acc = self.accumulation
-        tile_w, tile_h = tile_shape(self.slice_pixels(explore=False), acc.width, acc.height,
-                                    LOCAL_SIZE * stride, stride)
+        pixels = self.slice_pixels(explore=False)
+        coarse = self.sizers["coarse"]
+        if self.fixed_pixels is None and coarse.model() is not None:
+            # its own fit once one was measured: a coarse image costs more a pixel than a
+            # tile (its gathers all of a sample's rays), and sized by the tiles' its longest
+            # stage ran 20–26 ms against their 15
+            pixels = min(pixels, coarse.pixels(acc.width * acc.height, explore=False))
+        tile_w, tile_h = tile_shape(pixels, acc.width, acc.height, LOCAL_SIZE * stride, stride)
         if 2 * tile_w > acc.width or 2 * tile_h > acc.height:
             return max(1, (acc.width + 1) // 2), max(1, (acc.height + 1) // 2)
         return tile_w, tile_h
@@ -285,7 +292,7 @@ class ProgressiveImage:
                 done.seconds = time.perf_counter() - self.running_started
                 # the sizer fits what one call costs: the slice, or its longest stage
                 staged = self.stage_budget is not None
-                sizer = self.sizers.get(self.running_kind, self.sizers["tile"])  # coarse: tile
+                sizer = self.sizers[self.running_kind]
                 sizer.measured(done.size[0] * done.size[1],
                                self.longest_stage if staged else done.seconds)
                 self.slices += 1

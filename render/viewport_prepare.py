@@ -48,6 +48,7 @@ import time
 import gpu
 import numpy as np
 
+from ..blender.jobs import background_priority
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.radiance_cache import snap_focus
 from ..voxgi_addon.scene.textures import TEXTURE_TAPS
@@ -140,6 +141,7 @@ class PrepWorker:
         self._wake.set()
 
     def _run(self) -> None:
+        background_priority()  # below the view's draws (its threads inherit it)
         while not self._stop:
             self._wake.wait()
             with self._lock:

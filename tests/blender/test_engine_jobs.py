@@ -665,3 +665,21 @@ def test_stress_viewport_job_while_the_main_thread_edits_the_scene(interactive, 
         np.testing.assert_allclose(mine, theirs, atol=1e-6)
     assert live.staged is result.staged and live.snapshot is result.snapshot
     assert len(result.snapshot.objects) == len(bpy.context.view_layer.objects) - 3  # - rig, light, camera
+
+
+def test_the_worker_runs_below_the_main_thread(interactive):
+    """On Linux the worker thread (and the viewport's preparing thread) runs at a lower CPU
+    priority than the main thread, so its numpy does not take the cores the view's draws
+    need (docs/gi_pipeline.md "Worker threads below the main thread")."""
+    import os
+    import sys
+    import threading
+
+    if not sys.platform.startswith("linux"):
+        return  # elsewhere the threads keep the process's priority (nothing to check)
+    seen = []
+    job = interactive.submit("scene", lambda cancel: seen.append(
+        os.getpriority(os.PRIO_PROCESS, threading.get_native_id())), label="probe")
+    assert interactive.wait_idle(30.0) and job.state == "done"
+    main = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    assert seen == [min(19, main + interactive.BACKGROUND_NICE)]
