@@ -61,6 +61,7 @@ STAGE_SHARE = 0.5     # of it, what a call's stages run until, and what the long
 # under load, and a stage's raster work lands there too; docs/gi_pipeline.md "Entering
 # Rendered mode")
 WORK_SHARE = 0.5
+UNTIMED_SHARE = 0.5  # of the stage budget: the least a stage never timed is taken to cost
 LEAST_TILE = 48       # pixels: about the smallest tile side (preview.progressive.tile_side)
 # BVH traversals a gather invocation makes per dispatch in a slice (F12: 32): the gather of a
 # tile is several steps, so the longest stage is no longer the gather's one dispatch and the
@@ -312,9 +313,13 @@ class ProgressiveImage:
                 # or after a stage that compiled a kernel
                 spent = time.perf_counter() - t0
                 # a stage never timed (the first slice of its kind: entering Rendered mode)
-                # is taken to be as long as the longest one timed
-                upcoming = self.stage_seconds.get((self.running_kind, self.running_stage),
-                                                  max(self.stage_seconds.values(), default=0.0))
+                # is taken to be as long as the longest one timed, and at least half a
+                # stage's budget (the first coarse image's later stages run 7–11 ms after
+                # early ones of 1–4: two of them in a call made 21–27 ms)
+                upcoming = self.stage_seconds.get(
+                    (self.running_kind, self.running_stage),
+                    max(max(self.stage_seconds.values(), default=0.0),
+                        UNTIMED_SHARE * self.stage_budget))
                 if spent >= self.stage_budget or counters.compiles != compiles or \
                         spent + upcoming > WORK_SHARE * max(self.budget, self.stage_budget):
                     return Slice("stage", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
