@@ -194,6 +194,66 @@ float polygon_irradiance(int light, int count, vec3 p, vec3 n, out vec3 aim)
   return abs(sum) / (2.0 * M_PI_F);
 }
 
+/* A rectangle seen from o, set up for drawing points uniformly in its solid angle (Ureña,
+ * Fajardo & King 2013; sampling.spherical_rectangle, which this ports): the local frame (x, y,
+ * z), the corner's coordinates x0, y0, z0 and far edges x1, y1, and the spherical angles'
+ * terms b0, b1, k and the solid angle S. */
+struct SphereRect {
+  vec3 o, x, y, z;
+  float x0, y0, z0, x1, y1, b0, b1, k, solid;
+};
+
+SphereRect sphere_rect(vec3 o, vec3 corner, vec3 edge_x, vec3 edge_y)
+{
+  SphereRect r;
+  float exl = length(edge_x), eyl = length(edge_y);
+  r.o = o;
+  r.x = edge_x / exl;
+  r.y = edge_y / eyl;
+  r.z = cross(r.x, r.y);
+  vec3 d = corner - o;
+  float z0 = dot(d, r.z);
+  if (z0 > 0.0) {
+    r.z = -r.z;
+  }
+  r.z0 = -abs(z0);
+  r.x0 = dot(d, r.x);
+  r.y0 = dot(d, r.y);
+  r.x1 = r.x0 + exl;
+  r.y1 = r.y0 + eyl;
+  vec3 v00 = vec3(r.x0, r.y0, r.z0), v01 = vec3(r.x0, r.y1, r.z0);
+  vec3 v10 = vec3(r.x1, r.y0, r.z0), v11 = vec3(r.x1, r.y1, r.z0);
+  vec3 n0 = normalize(cross(v00, v10)), n1 = normalize(cross(v10, v11));
+  vec3 n2 = normalize(cross(v11, v01)), n3 = normalize(cross(v01, v00));
+  float g0 = acos(clamp(-dot(n0, n1), -1.0, 1.0)), g1 = acos(clamp(-dot(n1, n2), -1.0, 1.0));
+  float g2 = acos(clamp(-dot(n2, n3), -1.0, 1.0)), g3 = acos(clamp(-dot(n3, n0), -1.0, 1.0));
+  r.b0 = n0.z;
+  r.b1 = n2.z;
+  r.k = 2.0 * M_PI_F - g2 - g3;
+  r.solid = max(g0 + g1 - r.k, 0.0);
+  return r;
+}
+
+/* The point of `r` at uv in [0, 1)²; `fallback` where the solid angle vanishes. */
+vec3 sphere_rect_point(SphereRect r, vec2 uv, vec3 fallback)
+{
+  if (r.solid <= 1e-7) {
+    return fallback;
+  }
+  float au = uv.x * r.solid + r.k;
+  float fu = (cos(au) * r.b0 - r.b1) / sin(au);
+  float cu = clamp(sign(fu) / sqrt(fu * fu + r.b0 * r.b0), -1.0, 1.0);
+  float xu = clamp(-(cu * r.z0) / sqrt(max(1.0 - cu * cu, 1e-30)), r.x0, r.x1);
+  float dd = sqrt(xu * xu + r.z0 * r.z0);
+  float h0 = r.y0 / sqrt(dd * dd + r.y0 * r.y0);
+  float h1 = r.y1 / sqrt(dd * dd + r.y1 * r.y1);
+  float hv = h0 + uv.y * (h1 - h0);
+  float hv2 = hv * hv;
+  float yv = hv2 < 1.0 - 1e-6 ? hv * dd / sqrt(max(1.0 - hv2, 1e-30)) : r.y1;
+  vec3 q = r.o + xu * r.x + yv * r.y + r.z0 * r.z;
+  return any(isnan(q)) || any(isinf(q)) ? fallback : q;
+}
+
 float area_light(int light, vec4 head, vec3 p, vec3 n, uint state, int m)
 {
   vec3 centre = light_texel(light, 2).xyz;
@@ -213,16 +273,27 @@ float area_light(int light, vec4 head, vec3 p, vec3 n, uint state, int m)
   vec3 origin = p + NORMAL_OFFSET * n;
   float f_sum = 0.0;
   float f_lit = 0.0;
+  /* a rectangle (its edges perpendicular) is drawn by solid angle, as Cycles draws it: a
+   * sample's share is its cosine at p alone; a disk or an ellipse by area, its share
+   * cos·cos / r² (direct_light._area) */
+  bool by_angle = head.y < 0.5 && abs(dot(ex, ey)) <= 1e-6 * length(ex) * length(ey);
+  SphereRect rect;
+  if (by_angle) {
+    rect = sphere_rect(p, centre - ex - ey, 2.0 * ex, 2.0 * ey);
+  }
   for (int j = 0; j < m * m; j++) {
     if (j == 4 && m >= ADAPTIVE_FROM && f_sum > 0.0 && (f_lit == 0.0 || f_lit == f_sum)) {
       break; /* the corners above the horizon agree */
     }
     vec2 s = hashed_stratum(state, stratum_order(j, m), m);
     vec2 unit = head.y > 0.5 ? concentric_disk(s) : s * 2.0 - 1.0;
-    vec3 target = centre + unit.x * ex + unit.y * ey;
+    vec3 target = by_angle ? sphere_rect_point(rect, s, centre) :
+                             centre + unit.x * ex + unit.y * ey;
     vec3 w = target - p;
     float r2 = dot(w, w);
-    float f = max(dot(w, n), 0.0) * max(-dot(w, emit), 0.0) / (max(r2, 1e-30) * max(r2, 1e-30));
+    float f = by_angle ? max(dot(w, n), 0.0) / sqrt(max(r2, 1e-30)) :
+                         max(dot(w, n), 0.0) * max(-dot(w, emit), 0.0) /
+                             (max(r2, 1e-30) * max(r2, 1e-30));
     f_sum += f;
     if (f > 0.0) {
       f_lit += f * visible_to(origin, target);

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..scene import raycast
 from ..scene.snapshot import LightData
-from .sampling import hashed_square
+from .sampling import hashed_square, spherical_rectangle
 
 __all__ = ["diffuse_direct", "emitters_unshadowed", "light_aims", "light_directions",
            "light_frame",
@@ -261,6 +261,10 @@ def _polygon_irradiance(p: np.ndarray, n: np.ndarray, outline: np.ndarray,
 
 
 def _area(light, p, n, tris, strata):
+    """An area light's Diffuse Direct: its exact unshadowed light times the visible share of
+    its shadow rays, each weighted by its share of the irradiance (a ratio estimator). A
+    rectangle is drawn by solid angle, as Cycles draws it, so a sample's share is its cosine
+    at the point alone (docs/gi_pipeline.md "Rectangular lights drawn by solid angle")."""
     centre, x, y, emit = light_frame(light)
     outline, area = area_outline(light)
     if area <= 0:
@@ -276,17 +280,31 @@ def _area(light, p, n, tris, strata):
     # Light samples, for the shadow rays.
     sampled = np.arange(len(p)) if tris is not None else np.zeros(0, int)
     if len(sampled):
-        unit = strata(in_front[sampled]) * 2.0 - 1.0
+        square = strata(in_front[sampled])
+        unit = square * 2.0 - 1.0
         if light.shape in ("DISK", "ELLIPSE"):
             unit = concentric_disk(0.5 * (unit + 1.0))
         sx = float(light.size)
         sy = float(light.size_y) if light.shape in ("RECTANGLE", "ELLIPSE") else sx
-        targets = centre + unit[..., :1] * (0.5 * sx * x) + unit[..., 1:] * (0.5 * sy * y)
+        ex, ey = 0.5 * sx * x, 0.5 * sy * y
+        # a rectangle (its edges perpendicular) drawn by solid angle, as Cycles draws it: a
+        # sample's share of the irradiance is then its cosine at the point alone; a disk or
+        # an ellipse by area, its share cos·cos / r² (bvh_lights.glsl area_light)
+        by_angle = light.shape not in ("DISK", "ELLIPSE") and \
+            abs(float(ex @ ey)) <= 1e-6 * float(np.linalg.norm(ex) * np.linalg.norm(ey))
+        if by_angle:
+            targets, _ = spherical_rectangle(p[sampled], centre - ex - ey, 2.0 * ex, 2.0 * ey,
+                                             square)
+        else:
+            targets = centre + unit[..., :1] * ex + unit[..., 1:] * ey
         w = targets - p[sampled, None]
         r2 = np.einsum("nkc,nkc->nk", w, w)
         cos_x = np.einsum("nkc,nc->nk", w, n[sampled])
-        cos_l = -(w @ emit)
-        f = np.maximum(cos_x, 0.0) * np.maximum(cos_l, 0.0) / np.maximum(r2, 1e-30) ** 2
+        if by_angle:
+            f = np.maximum(cos_x, 0.0) / np.sqrt(np.maximum(r2, 1e-30))
+        else:
+            cos_l = -(w @ emit)
+            f = np.maximum(cos_x, 0.0) * np.maximum(cos_l, 0.0) / np.maximum(r2, 1e-30) ** 2
     lit = np.flatnonzero(unshadowed > 0)
     if len(lit) and tris is not None:  # here sampled = every point, so rows line up
         origins = p[lit] + _NORMAL_OFFSET * n[lit]

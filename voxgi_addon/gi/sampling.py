@@ -13,6 +13,8 @@ sample index. Everything is uint32 arithmetic with wrap-around, and a hash becom
 * ``hammersley`` — the N-point Hammersley set ((j + ½)/N, radical inverse of j) shifted per
   point by a hashed Cranley–Patterson rotation: stratified in x, low discrepancy in 2D, and
   independent between pixels.
+* ``spherical_rectangle`` — points of a rectangular light uniform in the solid angle it subtends
+  (Ureña et al. 2013), as Cycles draws them.
 * ``perpendicular_basis`` — the tangent frame ``direct_light`` builds around a direction (the
   GLSL port makes the same choice of helper axis).
 """
@@ -28,6 +30,7 @@ __all__ = [
     "pcg_hash",
     "perpendicular_basis",
     "point_streams",
+    "spherical_rectangle",
     "radical_inverse",
     "unit_float",
 ]
@@ -101,3 +104,62 @@ def perpendicular_basis(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     t = np.cross(w, helper)
     t /= np.linalg.norm(t, axis=1, keepdims=True)
     return t, np.cross(w, t)
+
+
+def spherical_rectangle(origins, corner, edge_x, edge_y, uv):
+    """Points of a rectangle drawn uniformly in the solid angle it subtends from each origin
+    (Ureña, Fajardo & King 2013, "An area-preserving parametrization for spherical
+    rectangles"; Cycles samples its rectangular lights so): ((N, K, 3) points, (N,) solid
+    angles in sr). origins (N, 3); the rectangle ``corner`` + s·``edge_x`` + t·``edge_y``,
+    s, t in [0, 1] (the edges perpendicular); uv (N, K, 2) in [0, 1)², stratified as given.
+    An origin in the rectangle's plane subtends nothing: its points are the rectangle's
+    centre and its solid angle 0. ``render/shaders/bvh_lights.glsl`` ports it."""
+    o = np.asarray(origins, np.float64).reshape(-1, 3)
+    corner = np.asarray(corner, np.float64)
+    exl, eyl = float(np.linalg.norm(edge_x)), float(np.linalg.norm(edge_y))
+    x, y = np.asarray(edge_x, np.float64) / exl, np.asarray(edge_y, np.float64) / eyl
+    z = np.cross(x, y)
+    d = corner - o
+    z0 = d @ z
+    flip = z0 > 0.0  # the rectangle's plane behind −z of the local frame
+    zs = np.where(flip[:, None], -z, z)
+    z0 = -np.abs(z0)
+    x0, y0 = d @ x, d @ y
+    x1, y1 = x0 + exl, y0 + eyl
+
+    def unit(v):
+        return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
+
+    v00 = np.stack([x0, y0, z0], -1)
+    v01 = np.stack([x0, y1, z0], -1)
+    v10 = np.stack([x1, y0, z0], -1)
+    v11 = np.stack([x1, y1, z0], -1)
+    n0, n1 = unit(np.cross(v00, v10)), unit(np.cross(v10, v11))
+    n2, n3 = unit(np.cross(v11, v01)), unit(np.cross(v01, v00))
+
+    def angle(a, b):
+        return np.arccos(np.clip(-np.einsum("ij,ij->i", a, b), -1.0, 1.0))
+
+    g0, g1, g2, g3 = angle(n0, n1), angle(n1, n2), angle(n2, n3), angle(n3, n0)
+    b0, b1 = n0[:, 2], n2[:, 2]
+    k = 2.0 * math.pi - g2 - g3
+    solid = np.maximum(g0 + g1 - k, 0.0)
+    u, v = uv[..., 0], uv[..., 1]
+    au = u * solid[:, None] + k[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fu = (np.cos(au) * b0[:, None] - b1[:, None]) / np.sin(au)
+        cu = np.clip(np.sign(fu) / np.sqrt(fu * fu + (b0 * b0)[:, None]), -1.0, 1.0)
+        xu = np.clip(-(cu * z0[:, None]) / np.sqrt(np.maximum(1.0 - cu * cu, 1e-300)),
+                     x0[:, None], x1[:, None])
+        dd = np.sqrt(xu * xu + (z0 * z0)[:, None])
+        h0 = y0[:, None] / np.sqrt(dd * dd + (y0 * y0)[:, None])
+        h1 = y1[:, None] / np.sqrt(dd * dd + (y1 * y1)[:, None])
+        hv = h0 + v * (h1 - h0)
+        hv2 = hv * hv
+        yv = np.where(hv2 < 1.0 - 1e-6, hv * dd / np.sqrt(np.maximum(1.0 - hv2, 1e-300)),
+                      y1[:, None])
+    points = o[:, None] + xu[..., None] * x + yv[..., None] * y + z0[:, None, None] * zs[:, None]
+    bad = ~np.isfinite(points).all(axis=-1) | (solid[:, None] <= 1e-12)
+    centre = corner + 0.5 * (np.asarray(edge_x, np.float64) + np.asarray(edge_y, np.float64))
+    points = np.where(bad[..., None], centre, points)
+    return points, np.where(solid > 1e-12, solid, 0.0)
