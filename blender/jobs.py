@@ -163,14 +163,15 @@ def background_priority() -> None:
     task of its own, ``setpriority`` on its id; elsewhere nothing). On two cores the worker's
     numpy (snapshots' geometry, BVH builds, cache layouts) ran beside the view's draws and
     made llvmpipe's raster threads of a draw wait for a core: a draw's image took 20–24 ms
-    instead of 6–10 (docs/gi_pipeline.md "Worker threads below the main thread")."""
+    instead of 6–10 (docs/gi_pipeline.md "Worker threads below the main
+    thread, steps timed to their rasters' end")."""
     if not sys.platform.startswith("linux"):
         return
     try:
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(),
                        os.getpriority(os.PRIO_PROCESS, 0) + BACKGROUND_NICE)
-    except (OSError, AttributeError):
-        pass
+    except (OSError, AttributeError):  # not permitted here: the thread keeps the process's
+        return
 
 
 def _work(inbox: queue.Queue, results: queue.Queue) -> None:

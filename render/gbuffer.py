@@ -259,7 +259,8 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
             # the raster done now, not at a later read or the draw's end: llvmpipe defers a
             # raster's work to the next use of its targets, so a viewport step that drew this
             # ended in a few ms while its raster landed, unmeasured, in the draw's last
-            # milliseconds (docs/gi_pipeline.md "Steps timed to their rasters' end")
+            # milliseconds (docs/gi_pipeline.md "Worker threads below the main thread, steps
+            # timed to their rasters' end")
             framebuffer.read_color(0, 0, 1, 1, 4, 0, "FLOAT")
     return out
 

@@ -670,7 +670,8 @@ def test_stress_viewport_job_while_the_main_thread_edits_the_scene(interactive, 
 def test_the_worker_runs_below_the_main_thread(interactive):
     """On Linux the worker thread (and the viewport's preparing thread) runs at a lower CPU
     priority than the main thread, so its numpy does not take the cores the view's draws
-    need (docs/gi_pipeline.md "Worker threads below the main thread")."""
+    need (docs/gi_pipeline.md "Worker threads below the main
+    thread, steps timed to their rasters' end")."""
     import os
     import sys
     import threading

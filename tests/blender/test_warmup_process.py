@@ -124,7 +124,7 @@ def test_which_files_start_a_child(tmp_path, monkeypatch):
             return self.code
 
         def kill(self):
-            pass
+            self.code = -9
 
     children = []
 
@@ -174,3 +174,27 @@ def test_which_files_start_a_child(tmp_path, monkeypatch):
     assert not processes.poll()
     assert not warmup_process.stamp_path(other, processes.cache_dir).exists()
     assert not kernel_warmup.start_process(scene, bpy.context)
+
+
+def test_the_child_runs_at_the_lowest_priority(tmp_path):
+    """The child lowers its own priority first thing (no ``preexec_fn``: that would fork the
+    whole Blender process on the main thread), so the user's session keeps the cores."""
+    import time
+
+    from voxgi.render import warmup_process
+
+    if not sys.platform.startswith("linux"):
+        return  # /proc is Linux's; elsewhere the child's priority is not read here
+    blend = saved_demo(tmp_path / "demo.blend")
+    child = warmup_process.launch(blend, *REGION, env=shader_cache_env(tmp_path / "cache"))
+    try:
+        nice = None
+        for _ in range(200):  # until its first step ran
+            time.sleep(0.05)
+            nice = int(open(f"/proc/{child.pid}/stat").read().rsplit(")", 1)[1].split()[16])
+            if nice == 19 or child.poll() is not None:
+                break
+        assert nice == 19
+    finally:
+        child.kill()
+        child.wait()

@@ -366,8 +366,13 @@ def cold_rows(name: str, quick: bool, warmed: bool = False) -> list:
     if done.returncode != 0:
         raise RuntimeError(f"the {'warmed' if warmed else 'cold'} run failed:\n"
                            f"{done.stderr[-2000:]}")
+    return _printed_rows(done.stdout)
+
+
+def _printed_rows(stdout: str) -> list:
+    """The (what, seconds, note) rows a ``--rows`` run printed."""
     rows = []
-    for line in done.stdout.splitlines():
+    for line in stdout.splitlines():
         if line.startswith("ROW\t"):
             _, what, seconds, note = line.split("\t", 3)
             rows.append((what, float(seconds), note))
@@ -398,11 +403,8 @@ def after_warmup_rows(name: str, quick: bool, blend: str) -> list:
         raise RuntimeError(f"the run after the warm-up failed:\n{done.stderr[-2000:]}")
     rows = [(f"{name}: the kernels' warm-up process on the saved file (nice 19)", seconds,
              "a machine's first session: Mesa's shader cache empty before it")]
-    for line in done.stdout.splitlines():
-        if line.startswith("ROW\t"):
-            _, what, value, note = line.split("\t", 3)
-            rows.append((f"{what} — a first-ever session after the warm-up process",
-                         float(value), note))
+    rows += [(f"{what} — a first-ever session after the warm-up process", value, note)
+             for what, value, note in _printed_rows(done.stdout)]
     return rows
 
 
