@@ -415,7 +415,7 @@ class GPUScene:
                 keys["textures"] = "none"
                 keys.pop("texture_table", None)
             return
-        key = digest(tuple((t.key or digest(t.pixels), t.interpolation, t.extension,
+        key = digest(tuple((t.key or digest(t.pixels), t.interpolation, t.extension, t.srgb_bytes,
                             np.asarray(t.uv_transform, np.float64)) for t in surface.textures))
         atlas = table = None
         if key != keys.get("textures"):

@@ -51,7 +51,7 @@ import bpy
 import numpy as np
 
 from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
-from ...voxgi_addon.scene.textures import PARAM_VARIANTS, variant_values, within_max_size
+from ...voxgi_addon.scene.textures import PARAM_VARIANTS, srgb_to_linear, variant_values, within_max_size
 from .left_out import material_notes
 from .reads import count
 from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _NeedsBake, _tree_key
@@ -83,14 +83,6 @@ def _clear_on_load(*_args) -> None:
     clear_bake_cache()
 
 
-def srgb_to_linear(values: np.ndarray) -> np.ndarray:
-    """The sRGB transfer function inverted: encoded values in [0, 1] -> linear, same shape, float32."""
-    values = np.asarray(values, dtype=np.float32)
-    low = values / np.float32(12.92)
-    high = ((values + np.float32(0.055)) / np.float32(1.055)) ** np.float32(2.4)
-    return np.where(values <= 0.04045, low, high).astype(np.float32)
-
-
 def image_mean_color(image) -> np.ndarray | None:
     """Mean linear RGB of a ``bpy.types.Image``'s pixels, (3,) float32, or None if it has no pixels.
 
@@ -99,6 +91,12 @@ def image_mean_color(image) -> np.ndarray | None:
     """
     rgb = image_rgb(image)
     return None if rgb is None else rgb.reshape(-1, 3).mean(axis=0, dtype=np.float64).astype(np.float32)
+
+
+def _srgb_bytes(image) -> bool:
+    """Is ``image`` a byte image in sRGB (its pixels the encoded bytes, which Cycles blends
+    before decoding: ``TextureData.srgb_bytes``)?"""
+    return image.colorspace_settings.name == "sRGB" and not image.is_float
 
 
 def image_rgb(image) -> np.ndarray | None:
@@ -116,7 +114,7 @@ def image_rgb(image) -> np.ndarray | None:
         return rgb
     if bpy.data.colorspace.working_space not in SCENE_LINEAR:
         raise _NeedsBake(f"the file's working colour space is {bpy.data.colorspace.working_space}")
-    if space == "sRGB" and not image.is_float:
+    if _srgb_bytes(image):
         return srgb_to_linear(rgb)  # byte pixels hold the encoded values (docs "World")
     if space == "sRGB":
         return rgb  # float buffers are made scene-linear on load
@@ -769,7 +767,8 @@ def _image_texture(node, with_alpha: bool = False):
     texture = TextureData(
         name=node.image.name_full, pixels=within_max_size(rgb),
         interpolation="Closest" if node.interpolation == "Closest" else "Linear",
-        extension=node.extension, uv_transform=transform, key=image_key)
+        extension=node.extension, uv_transform=transform, key=image_key,
+        srgb_bytes=_srgb_bytes(node.image))
     return texture, uv_map
 
 

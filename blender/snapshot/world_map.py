@@ -33,6 +33,7 @@ import numpy as np
 from ...voxgi_addon.files.exr import read_exr
 from ...voxgi_addon.scene import equirect
 from ...voxgi_addon.scene.snapshot import WorldData
+from ...voxgi_addon.scene.textures import srgb_to_linear
 
 MAX_HEIGHT = 512          # maps are at most 1024 x 512
 MIN_HEIGHT = 32           # ... and at least 64 x 32 (a uniform world: UNIFORM_HEIGHT)
@@ -310,12 +311,6 @@ def _image_pixels(image) -> np.ndarray | None:
     if image.channels < 3:
         out[..., 1:3] = pixels[..., :1]
     return out
-
-
-def srgb_to_linear(values: np.ndarray) -> np.ndarray:
-    """The sRGB transfer function, as Blender's colour management applies it to byte images."""
-    values = np.asarray(values, np.float32)
-    return np.where(values <= 0.04045, values / 12.92, ((values + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
 def _image_radiance(image) -> np.ndarray:

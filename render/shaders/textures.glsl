@@ -6,6 +6,13 @@
  * done here on texel indices (an atlas cannot wrap), as numpy does it. The atlas' A channel
  * is the textures' alpha (1 without one): cut-outs (bvh_cutout_counts, at the end). */
 
+/* textures.srgb_to_linear: encoded sRGB -> linear. */
+vec3 texture_srgb_decode(vec3 c)
+{
+  return mix(pow((max(c, vec3(0.04045)) + 0.055) / 1.055, vec3(2.4)), c / 12.92,
+             vec3(lessThanEqual(c, vec3(0.04045))));
+}
+
 int texture_wrap(int x, int size)
 {
   return x - size * int(floor(float(x) / float(size)));
@@ -29,7 +36,7 @@ vec4 texture_fetch4(vec4 rect, int x, int y, int extension)
   return texelFetch(texture_atlas, ivec2(int(rect.x + 0.5) + x, int(rect.y + 0.5) + y), 0);
 }
 
-vec4 texture_level4(int slot, int level, vec2 st, int interpolation, int extension)
+vec4 texture_level4_raw(int slot, int level, vec2 st, int interpolation, int extension)
 {
   vec4 rect = texelFetch(texture_table, ivec2(3 + level, slot), 0);
   float x = st.x * rect.z;
@@ -50,6 +57,17 @@ vec4 texture_level4(int slot, int level, vec2 st, int interpolation, int extensi
   vec4 top = texture_fetch4(rect, ix, iy + 1, extension) * (1.0 - fx) +
              texture_fetch4(rect, ix + 1, iy + 1, extension) * fx;
   return bottom * (1.0 - fy) + top * fy;
+}
+
+/* One level's four channels; level 0 of a byte sRGB image holds encoded colour, blended and
+ * then decoded as Cycles does (textures.encoded: the table's texel 2 .y). */
+vec4 texture_level4(int slot, int level, vec2 st, int interpolation, int extension)
+{
+  vec4 value = texture_level4_raw(slot, level, st, interpolation, extension);
+  if (level == 0 && texelFetch(texture_table, ivec2(2, slot), 0).y > 0.5) {
+    value.rgb = texture_srgb_decode(value.rgb);
+  }
+  return value;
 }
 
 vec3 texture_level(int slot, int level, vec2 st, int interpolation, int extension)

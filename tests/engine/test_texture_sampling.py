@@ -14,10 +14,12 @@ from voxgi.voxgi_addon.scene.snapshot import (
 )
 from voxgi.voxgi_addon.scene.textures import (
     HALF,
+    linear_to_srgb,
     mip_pyramid,
     pack_atlas,
     sample_level,
     sample_texture,
+    srgb_to_linear,
 )
 from voxgi.voxgi_addon.voxelize.attributes import average_attributes
 from voxgi.voxgi_addon.voxelize.scene_caches import texel_albedo
@@ -114,6 +116,52 @@ def test_atlas_holds_every_level_where_the_table_says():
             x0, y0, w, h = table[i, 3 + k].astype(int)
             used[y0:y0 + h, x0:x0 + w] += 1
     assert used.max() == 1 and used.sum() == total
+
+
+def test_a_byte_srgb_image_blends_its_texels_in_srgb():
+    """Cycles blends a byte sRGB image's encoded texels and decodes the blend (measured with
+    Cycles: half-way between a black and a white texel it reads 0.23, not 0.5; a float image
+    reads 0.5): a flagged texture does the same, Closest reads its texels either way."""
+    two = np.float32([[[0, 0, 0], [1, 1, 1]]])  # one row: black, white (linear)
+    s = np.float32([0.25, 0.375, 0.5, 0.625, 0.75])  # texel centres at s = 0.25 and 0.75
+    t = np.full(5, 0.5, np.float32)
+    uv = np.stack([s, t], axis=1)
+    linear = sample_texture(TextureData("float", two, extension="EXTEND", key="two"), uv)[:, 0]
+    blended = sample_texture(TextureData("bytes", two, extension="EXTEND", key="two",
+                                         srgb_bytes=True), uv)[:, 0]
+    np.testing.assert_allclose(linear, [0, 0.25, 0.5, 0.75, 1], atol=2e-3)
+    np.testing.assert_allclose(blended, srgb_to_linear([0, 0.25, 0.5, 0.75, 1]), atol=2e-3)
+    assert blended[2] == pytest.approx(0.214, abs=3e-3)
+    closest = sample_texture(TextureData("bytes", two, "Closest", "EXTEND", key="two",
+                                         srgb_bytes=True), uv[[1, 3]])[:, 0]
+    np.testing.assert_allclose(closest, [0, 1], atol=1e-3)
+    np.testing.assert_allclose(linear_to_srgb(srgb_to_linear(s)), s, atol=1e-6)
+
+
+def test_a_minified_byte_srgb_image_keeps_its_darker_blends():
+    """The mip levels of a byte sRGB image hold the mean of what Cycles reads over their
+    texels (the blends between texels included), so a minified lookup reads about what
+    averaging many magnified lookups reads, darker than the texels' linear mean: of that
+    difference, the levels miss at most 15% (their means take two points a texel per axis)."""
+    pixels = checker(16, 4, dark=0.02, light=0.9)  # cells of 4 texels: half the texels on borders
+    texture = TextureData("c", pixels, key="fine-checker", srgb_bytes=True)
+    n = 256
+    grid = (np.arange(n, dtype=np.float32) + 0.5) / n
+    u, v = np.meshgrid(grid, grid)
+    uv = np.stack([u.ravel(), v.ravel()], axis=1)
+    magnified = sample_texture(texture, uv).mean(axis=0)
+    levels = mip_pyramid(pixels, srgb_bytes=True)
+    top = sample_texture(texture, uv[:1], lod=np.float32([len(levels) - 1]))[0]
+    linear = pixels[..., :3].reshape(-1, 3).mean(axis=0)
+    assert magnified[0] < 0.9 * linear[0]  # the blends read darker: 0.40 against 0.46
+    assert np.abs(top - magnified).max() <= 0.15 * np.abs(linear - magnified).min()
+    middle = sample_texture(texture, uv, lod=np.full(len(uv), 1.5, np.float32)).mean(axis=0)
+    assert np.abs(middle - magnified).max() <= 0.15 * np.abs(linear - magnified).min()
+    # the atlas says which textures hold encoded sRGB at level 0 (the GPU decodes those)
+    atlas, table = pack_atlas((texture, TextureData("f", pixels, key="fine-checker")))
+    assert table[0, 2, 1] == 1 and table[1, 2, 1] == 0
+    x0, y0, w, h = table[0, 3].astype(int)
+    np.testing.assert_allclose(atlas[y0:y0 + h, x0:x0 + w, :3], linear_to_srgb(pixels), atol=2e-3)
 
 
 def textured_quad(size=2.0, uv_scale=1.0):

@@ -78,6 +78,9 @@ class TextureData:
         coordinates (the Mapping nodes in front of the image; the identity without).
     key : content key of the pixels (same pixels → same key; caches of mip pyramids and
         uploads).
+    srgb_bytes : the image is a byte image in the sRGB colour space. Cycles keeps such an
+        image's encoded bytes, interpolates them and decodes the result, so between two texels
+        it reads darker than a linear blend (docs/gi_pipeline.md "Byte images blend in sRGB").
     """
 
     name: str
@@ -86,6 +89,7 @@ class TextureData:
     extension: str = "REPEAT"
     uv_transform: np.ndarray = field(default_factory=lambda: np.eye(2, 3))
     key: str = ""
+    srgb_bytes: bool = False
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,11 @@ the square root of the cosine between the ray and the face, in texels of the tri
 density, ``texel_density``) — a stand-in for the pixel filter, which averages a high-frequency
 texture over the pixel. Bounce hits sample level 0.
 
+Byte images in sRGB (``TextureData.srgb_bytes``) are blended as Cycles blends them: in their
+encoded values, decoded after (``encoded``: level 0 holds sRGB, the levels above the means of
+what Cycles reads over each texel), so the border between two texels reads darker than a
+linear blend (docs/gi_pipeline.md "Byte images blend in sRGB").
+
 Values are held at half precision (``HALF``), as the GPU atlas (RGBA16F) stores them, so the
 numpy reference and the GLSL port (render/shaders/textures.glsl) read the same texels; the
 filtering arithmetic is float32 on both. ``pack_atlas`` lays every level of every texture
@@ -106,28 +111,92 @@ def within_max_size(pixels: np.ndarray) -> np.ndarray:
     return image
 
 
-def mip_pyramid(pixels: np.ndarray) -> list[np.ndarray]:
+def srgb_to_linear(values) -> np.ndarray:
+    """The sRGB transfer function inverted (encoded values in [0, 1] → linear), float32, as
+    Blender's colour management and Cycles decode byte images."""
+    values = np.asarray(values, np.float32)
+    low = values / np.float32(12.92)
+    high = ((np.maximum(values, np.float32(0.04045)) + np.float32(0.055)) / np.float32(1.055)) \
+        ** np.float32(2.4)
+    return np.where(values <= np.float32(0.04045), low, high).astype(np.float32)
+
+
+def linear_to_srgb(values) -> np.ndarray:
+    """The sRGB transfer function (linear → encoded), float32; ``srgb_to_linear`` inverts it."""
+    values = np.maximum(np.asarray(values, np.float32), np.float32(0.0))
+    low = values * np.float32(12.92)
+    high = np.float32(1.055) * np.maximum(values, np.float32(0.0031308)) ** np.float32(1 / 2.4) \
+        - np.float32(0.055)
+    return np.where(values <= np.float32(0.0031308), low, high).astype(np.float32)
+
+
+def encoded(texture: TextureData) -> bool:
+    """Does ``texture``'s level 0 hold encoded sRGB, interpolated and then decoded? A byte sRGB
+    image (``TextureData.srgb_bytes``) under Linear interpolation: Cycles blends its bytes
+    (Closest reads one texel, which decodes to its linear value either way)."""
+    return bool(texture.srgb_bytes) and texture.interpolation != "Closest"
+
+
+_PADS = {"REPEAT": "wrap", "EXTEND": "edge", "CLIP": "constant"}
+def _decoded_means(level: np.ndarray, extension: str) -> np.ndarray:
+    """(h, w, C) float32: per texel of ``level`` (linear RGB[A]), the mean over its square of
+    the colour Cycles reads there from the encoded texels (bilinear in sRGB, then decoded),
+    from the 2 × 2 points at a quarter and three quarters of the texel (their bilinear weights
+    are 1/4 and 3/4 towards the nearer neighbour; the midpoint rule on each half, which
+    overstates the blends' darkening by about a tenth); alpha is kept as it is. Rows go in
+    bands, so a 2048² image's temporaries stay small (0.4 s)."""
+    code = linear_to_srgb(level[..., :3])
+    pad = np.pad(code, ((1, 1), (1, 1), (0, 0)), mode=_PADS.get(extension, "edge"))
+    q, t = np.float32(0.25), np.float32(0.75)
+    means = np.empty(code.shape, np.float32)
+    band = 64
+    for top in range(0, code.shape[0], band):
+        rows = pad[top:top + band + 2]
+        centre = rows[1:-1]
+        total = np.zeros(centre.shape[:1] + code.shape[1:], np.float32)
+        for row in (q * rows[:-2] + t * centre, t * centre + q * rows[2:]):
+            middle = t * row[:, 1:-1]
+            for points in (middle + q * row[:, :-2], middle + q * row[:, 2:]):
+                total += srgb_to_linear(points)
+        means[top:top + band] = total * np.float32(0.25)
+    return np.concatenate([means, level[..., 3:]], axis=-1)
+
+
+def mip_pyramid(pixels: np.ndarray, srgb_bytes: bool = False,
+                extension: str = "REPEAT") -> list[np.ndarray]:
     """[(h_k, w_k, C) float32] levels of ``pixels`` (row 0 at the bottom; C = 3, or 4 with
     alpha) down to 1 × 1 or MAX_LEVELS, each rounded to half precision (``HALF``); images
-    larger than MAX_SIZE start at their first level within it."""
+    larger than MAX_SIZE start at their first level within it.
+
+    ``srgb_bytes`` (``encoded``: an image Cycles blends in sRGB): level 0 holds the encoded
+    colour, which samplers decode after interpolating, and the levels above are box averages of
+    what Cycles reads over each level-0 texel (``_decoded_means``, with ``extension``'s
+    neighbours), so a minified lookup keeps the darker blends between texels."""
     level = np.asarray(pixels, np.float32)[..., :4]
-    levels = []
-    while True:
-        if max(level.shape[:2]) <= MAX_SIZE:
-            levels.append(level.astype(HALF).astype(np.float32))
-        if len(levels) == MAX_LEVELS or max(level.shape[:2]) == 1:
-            return levels
+    while max(level.shape[:2]) > MAX_SIZE:
         level = _halve(level)
+    if srgb_bytes:
+        first = np.concatenate([linear_to_srgb(level[..., :3]), level[..., 3:]], axis=-1)
+        level = _decoded_means(level, extension)
+    else:
+        first = level
+    levels = [first.astype(HALF).astype(np.float32)]
+    while len(levels) < MAX_LEVELS and max(level.shape[:2]) > 1:
+        level = _halve(level)
+        levels.append(level.astype(HALF).astype(np.float32))
+    return levels
 
 
 def pyramid(texture: TextureData) -> list[np.ndarray]:
     """The cached ``mip_pyramid`` of a texture (by its key; by its pixels' identity without)."""
     key = texture.key or f"id{id(texture.pixels)}"
+    if encoded(texture):
+        key = f"{key}|srgb|{texture.extension}"
     levels = _PYRAMIDS.get(key)
     if levels is None:
         while len(_PYRAMIDS) >= MAX_CACHED:
             _PYRAMIDS.pop(next(iter(_PYRAMIDS)))
-        levels = _PYRAMIDS[key] = mip_pyramid(texture.pixels)
+        levels = _PYRAMIDS[key] = mip_pyramid(texture.pixels, encoded(texture), texture.extension)
     return levels
 
 
@@ -186,18 +255,25 @@ def sample_rgba(texture: TextureData, uv: np.ndarray, lod=None) -> np.ndarray:
     s = a[0, 0] * uv[:, 0] + a[0, 1] * uv[:, 1] + a[0, 2]
     t = a[1, 0] * uv[:, 0] + a[1, 1] * uv[:, 1] + a[1, 2]
     interp, ext = texture.interpolation, texture.extension
+    decode = encoded(texture)
+
+    def level_value(level, at=slice(None)):
+        value = sample_level(levels[level], s[at], t[at], interp, ext)
+        if decode and level == 0:  # blended in sRGB, then decoded (Cycles' byte images)
+            value[:, :3] = srgb_to_linear(value[:, :3])
+        return value
+
     if lod is None:
-        return _rgba(sample_level(levels[0], s, t, interp, ext))
+        return _rgba(level_value(0))
     lod = np.clip(np.asarray(lod, np.float32), 0.0, np.float32(len(levels) - 1))
     l0 = np.floor(lod).astype(np.int64)
     f = (lod - l0.astype(np.float32))[:, None]
     out = np.zeros((len(uv), levels[0].shape[2]), np.float32)
     for level in np.unique(l0):
         at = np.flatnonzero(l0 == level)
-        value = sample_level(levels[level], s[at], t[at], interp, ext)
+        value = level_value(level, at)
         if level + 1 < len(levels):
-            upper = sample_level(levels[level + 1], s[at], t[at], interp, ext)
-            value = value * (np.float32(1.0) - f[at]) + upper * f[at]
+            value = value * (np.float32(1.0) - f[at]) + level_value(level + 1, at) * f[at]
         out[at] = value
     return _rgba(out)
 
@@ -667,8 +743,8 @@ def pack_atlas(textures, width: int | None = None):
 
     Returns (atlas (H, W, 4) float32, table (len(textures), TEXTURE_TEXELS, 4) float32): per
     texture, texel 0 = (uv_transform row 0, level count), 1 = (row 1, interpolation), 2 =
-    (extension, 0, 0, 0), 3 + k = level k's (x0, y0, w, h) in the atlas (row 0 = the images'
-    bottom rows). Levels are packed on shelves, tallest first."""
+    (extension, 1 where level 0 holds encoded sRGB (``encoded``), 0, 0), 3 + k = level k's
+    (x0, y0, w, h) in the atlas (row 0 = the images' bottom rows). Levels are packed on shelves, tallest first."""
     rects = []
     for i, texture in enumerate(textures):
         for k, level in enumerate(pyramid(texture)):
@@ -698,6 +774,7 @@ def pack_atlas(textures, width: int | None = None):
         table[i, 0] = (*a[0], len(pyramid(texture)))
         table[i, 1] = (*a[1], INTERPOLATIONS.get(texture.interpolation, 0))
         table[i, 2, 0] = EXTENSIONS.get(texture.extension, 0)
+        table[i, 2, 1] = float(encoded(texture))
     return atlas, table
 
 
