@@ -37,7 +37,7 @@ from ..voxgi_addon.gi.exact_glossy import (
     METAL_RAY_FACTOR,
     WORLD_GLOSSY_STREAM,
 )
-from ..voxgi_addon.gi.exact_indirect import RAY_STREAM, SURFACE_EPSILON
+from ..voxgi_addon.gi.exact_indirect import CONTINUE_STREAM, METAL_FOLLOWED, RAY_STREAM, SURFACE_EPSILON
 from ..voxgi_addon.gi.radiance_cache import PICK_STREAM
 from ..voxgi_addon.gi.surface_lookup import REACH as FIND_REACH
 from ..voxgi_addon.gi.surface_lookup import TRUST
@@ -191,6 +191,9 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
         if "same_surface" in files:
             defines["PLANE_TOLERANCE"] = repr(float(PLANE_TOLERANCE))
             defines["NEAR_STEP"] = repr(float(NEAR_STEP))
+        if "bvh_shade" in files:  # a metal hit followed one reflection further (ray_radiance)
+            defines["CONTINUE_STREAM"] = f"{CONTINUE_STREAM}u"
+            defines["METAL_FOLLOWED"] = repr(float(METAL_FOLLOWED))
         if kernel in ("bvh_gather", "bvh_glossy", "bvh_cache_paths"):
             defines["VIEW_BACKOFF"] = repr(float(VIEW_BACKOFF))
             defines["GLOSSY_STREAM"] = f"{GLOSSY_STREAM}u"

@@ -8,25 +8,6 @@
  * With grid.w = 1 the kernel gathers the world's Glossy Direct instead (exact_glossy.py
  * glossy_world_direct), the same outputs. */
 
-/* GGX visible normal for the local view v (z > 0) and roughness alpha (Heitz 2018). */
-vec3 vndf_half_vector(vec3 v, float alpha, vec2 u)
-{
-  vec3 vh = normalize(vec3(alpha * v.x, alpha * v.y, v.z));
-  float lensq = vh.x * vh.x + vh.y * vh.y;
-  vec3 t1 = lensq > 1e-7 ? vec3(-vh.y, vh.x, 0.0) / sqrt(lensq) : vec3(1.0, 0.0, 0.0);
-  vec3 t2 = cross(vh, t1);
-  float r = sqrt(u.x);
-  float phi = 2.0 * M_PI_F * u.y;
-  float p1 = r * cos(phi);
-  float p2 = r * sin(phi);
-  float s = 0.5 * (1.0 + vh.z);
-  p2 = (1.0 - s) * sqrt(max(1.0 - p1 * p1, 0.0)) + s * p2;
-  float p3 = sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0));
-  vec3 nh = p1 * t1 + p2 * t2 + p3 * vh;
-  vec3 h = vec3(alpha * nh.x, alpha * nh.y, max(nh.z, 0.0));
-  return h / max(length(h), 1e-30);
-}
-
 /* Density of the visible-normal sample l (voxgi_addon/gi/exact_glossy.py _Lobe.pdf): D of
  * normalize(v + l) computed as principled_glossy_reflectance does (1 − cos² as |n × h|², exact
  * in float32 near a mirror's peak), so that it cancels in the weight. */

@@ -49,6 +49,11 @@ vec3 hit_emission(int material, int triangle, vec2 uv)
  * hit reflects toward the origin of light arriving uniformly (the diffuse weight + the glossy
  * lobes' albedo); 0 on a miss. What the ray returns with a cache is linear in it, so the cache
  * traces its rays once (cache_paths.glsl) and iterates by lookups (cache_relax.glsl). */
+/* The last ray_paths hit's roughness and metallic (its material's, per texel where a texture
+ * sets them): ray_radiance samples a metal's lobe from them. */
+float hit_roughness = 1.0;
+float hit_metallic = 0.0;
+
 vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
                vec3 world_rgb, bool emission_seen, out float th, out vec3 x, out vec3 ns,
                out vec3 cache_weight, out vec3 glossy_weight)
@@ -127,6 +132,8 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
   /* uniform light (the radiance cache's) is also reflected by the glossy lobes' albedo */
   glossy_weight = principled_glossy_color(base, params.x, params.y, params.z,
                                           clamp(-dot(ns, d), 0.0, 1.0));
+  hit_roughness = clamp(params.z, 0.0, 1.0);
+  hit_metallic = params.x;
   cache_weight = weight + glossy_weight;
   return radiance + world_glossy + emitter_glossy;
 }
@@ -137,21 +144,68 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
  * bounce fewer to the hit (exact_glossy._Lobe.glossy_chance). Set per ray by bvh_glossy.glsl. */
 float receiver_glossy = 0.0;
 
+/* The metal hits' lobe (exact_indirect.metal_lobe_rays): a GGX visible normal of roughness
+ * hit_roughness about ns seen from -d, from the hash of the ray's light-sample id and seed
+ * (CONTINUE_STREAM); returns the reflected direction (below the surface: no light). */
+vec3 metal_lobe_ray(vec3 ns, vec3 d, uint hit_id, uint seed)
+{
+  float alpha = max(hit_roughness * hit_roughness, 1e-3);
+  vec3 t, b;
+  perpendicular_basis(ns, t, b);
+  vec3 v = -d;
+  vec3 v_local = normalize(vec3(dot(t, v), dot(b, v), max(dot(ns, v), 1e-4)));
+  uint h = point_stream(hit_id, CONTINUE_STREAM, seed);
+  vec3 hl = vndf_half_vector(v_local, alpha, vec2(unit_float(h), unit_float(pcg_hash(h))));
+  return reflect(d, hl.x * t + hl.y * b + hl.z * ns);
+}
+
 vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
                   vec3 world_rgb, bool emission_seen, out float th)
 {
-  vec3 x, ns, cache_weight, glossy_weight;
-  vec3 radiance = ray_paths(origin, d, hit_id, seed, strata, hit_glossy, world_rgb,
-                            emission_seen, th, x, ns, cache_weight, glossy_weight);
-  /* ... and the radiance cache's indirect light at the hit: bounces 2 … N (cache_indirect) */
-  if (th < BVH_FAR) {
+  /* The hit's own light (ray_paths), then the radiance cache's indirect light at it: bounces
+   * 2 … N (cache_indirect). A metal's lobe does not take the cache's light as uniform: it is
+   * followed one reflection further (metal_lobe_ray), whose hit adds its own light and its
+   * cache's, carried by the metal's Glossy Color (docs/gi_pipeline.md "Metals reflect where
+   * they point"). One loop for both, so the second hit's code is not compiled twice and
+   * costs nothing where no lane meets a metal. */
+  bool cached = textureSize(radiance_cache, 0).x > 1;
+  vec3 total = vec3(0.0);
+  vec3 carried = vec3(1.0);
+  vec3 o = origin;
+  vec3 dir = d;
+  th = BVH_FAR;
+  for (int bounce = 0; bounce < 2; bounce++) {
+    bool first = bounce == 0;
+    float t_hit;
+    vec3 x, ns, cache_weight, glossy_weight;
+    total += carried * ray_paths(o, dir, first ? hit_id : pcg_hash(hit_id ^ CONTINUE_STREAM),
+                                 seed, first ? strata : 1, first ? hit_glossy : true,
+                                 first ? world_rgb : vec3(0.0), first && emission_seen, t_hit,
+                                 x, ns, cache_weight, glossy_weight);
+    if (first) {
+      th = t_hit;
+    }
+    if (t_hit >= BVH_FAR) {
+      break;
+    }
     vec4 arriving = cache_indirect(x, ns);
+    if (first && cached && hit_metallic >= METAL_FOLLOWED) {
+      total += (cache_weight - glossy_weight) * arriving.rgb;
+      carried = glossy_weight;
+      dir = metal_lobe_ray(ns, dir, hit_id, seed);
+      o = x + SURFACE_EPSILON * ns;
+      if (dot(dir, ns) <= 0.0) {
+        break;
+      }
+      continue;
+    }
     /* the diffuse share: one diffuse bounce more where the receiver's path was picked glossy
      * (receiver_glossy); the glossy lobes: always (radiance_cache.one_more_bounce) */
-    radiance += (receiver_glossy > 0.0 ?
-                 (cache_weight - glossy_weight) * (1.0 + receiver_glossy * arriving.a) +
-                     glossy_weight * (1.0 + arriving.a) :
-                 cache_weight + glossy_weight * arriving.a) * arriving.rgb;
+    total += carried * (first && receiver_glossy > 0.0 ?
+                        (cache_weight - glossy_weight) * (1.0 + receiver_glossy * arriving.a) +
+                            glossy_weight * (1.0 + arriving.a) :
+                        cache_weight + glossy_weight * arriving.a) * arriving.rgb;
+    break;
   }
-  return radiance;
+  return total;
 }

@@ -78,3 +78,22 @@ void perpendicular_basis(vec3 w, out vec3 t, out vec3 b)
   t = normalize(cross(w, helper));
   b = cross(w, t);
 }
+
+/* GGX visible normal for the local view v (z > 0) and roughness alpha (Heitz 2018). */
+vec3 vndf_half_vector(vec3 v, float alpha, vec2 u)
+{
+  vec3 vh = normalize(vec3(alpha * v.x, alpha * v.y, v.z));
+  float lensq = vh.x * vh.x + vh.y * vh.y;
+  vec3 t1 = lensq > 1e-7 ? vec3(-vh.y, vh.x, 0.0) / sqrt(lensq) : vec3(1.0, 0.0, 0.0);
+  vec3 t2 = cross(vh, t1);
+  float r = sqrt(u.x);
+  float phi = 2.0 * 3.14159265358979323846 * u.y;
+  float p1 = r * cos(phi);
+  float p2 = r * sin(phi);
+  float s = 0.5 * (1.0 + vh.z);
+  p2 = (1.0 - s) * sqrt(max(1.0 - p1 * p1, 0.0)) + s * p2;
+  float p3 = sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0));
+  vec3 nh = p1 * t1 + p2 * t2 + p3 * vh;
+  vec3 h = vec3(alpha * nh.x, alpha * nh.y, max(nh.z, 0.0));
+  return h / max(length(h), 1e-30);
+}

@@ -3,7 +3,8 @@ shaders/bvh_glossy.glsl: energy under a uniform sky, mirrors, and what a glossy 
 import numpy as np
 import pytest
 
-from voxgi.voxgi_addon.gi.exact_glossy import glossy_indirect, vndf_half_vectors
+from voxgi.voxgi_addon.gi.exact_glossy import glossy_indirect
+from voxgi.voxgi_addon.gi.sampling import vndf_half_vectors
 from voxgi.voxgi_addon.scene.geometry import SceneTriangles
 
 ANGLES = np.radians([0.0, 30.0, 45.0, 60.0, 75.0, 85.0])
@@ -51,6 +52,31 @@ def test_visible_normals_face_the_view_and_the_normal():
     assert (np.einsum("nkc,nc->nk", h, v) > -1e-9).all()  # visible from the view
     smooth = vndf_half_vectors(v, np.full(len(v), 1e-4), rng.random((len(v), 16, 2)))
     np.testing.assert_allclose(smooth[..., 2], 1.0, atol=1e-6)  # α → 0: the normal itself
+
+
+def test_a_metal_hit_is_followed_along_its_lobe():
+    """``exact_indirect.metal_lobe_rays``: the direction a metal hit's path is followed along
+    (the radiance cache's light read where the lobe points) is the mirror reflection for a
+    smooth metal, and for a rough one spreads about it — its mean within the lobe's width of
+    the mirror direction, different rays for different light-sample ids."""
+    from voxgi.voxgi_addon.gi.exact_indirect import metal_lobe_rays
+
+    n = 4096
+    normals = np.tile([0.0, 0.0, 1.0], (n, 1))
+    arriving = np.tile(np.array([0.6, 0.0, -0.8]), (n, 1))  # 37° from the normal
+    mirror = np.array([0.6, 0.0, 0.8])
+    ids = np.arange(n, dtype=np.uint32)
+    smooth = metal_lobe_rays(normals, arriving, np.zeros(n), ids)
+    angle = np.degrees(np.arccos(np.clip(smooth @ mirror, -1.0, 1.0)))
+    assert np.percentile(angle, 99) < 1.0  # α is held ≥ 1e-3: GGX's tail, barely
+    rough = metal_lobe_rays(normals, arriving, np.full(n, 0.4), ids)
+    np.testing.assert_allclose(np.linalg.norm(rough, axis=1), 1.0, atol=1e-9)
+    spread = np.degrees(np.arccos(np.clip(rough @ mirror, -1.0, 1.0)))
+    assert 3.0 < np.median(spread) < 25.0  # α = 0.16: a lobe of some ten degrees
+    mean = rough.mean(axis=0)
+    assert np.degrees(np.arccos(mean @ mirror / np.linalg.norm(mean))) < 8.0
+    assert len(np.unique(np.round(rough, 6), axis=0)) > 0.99 * n
+    assert not np.allclose(metal_lobe_rays(normals, arriving, np.full(n, 0.4), ids, seed=1), rough)
 
 
 def test_a_mirror_shows_the_lit_wall_and_a_rough_floor_blurs_it():

@@ -28,11 +28,10 @@ import numpy as np
 from ..scene.snapshot import RAY_GLOSSY
 from .exact_indirect import LUMINANCE, SURFACE_EPSILON, hit_emission, ray_radiance
 from .principled import ROUGHNESS_SQ_THRESHOLD, diffuse_weight, glossy_color, glossy_reflectance
-from .sampling import hammersley, perpendicular_basis
+from .sampling import hammersley, perpendicular_basis, vndf_half_vectors
 
 __all__ = ["GLOSSY_STREAM", "WORLD_GLOSSY_STREAM", "EMITTER_GLOSSY_STREAM", "glossy_indirect",
-           "emitters_shine", "emitters_glossy_field", "glossy_world_direct",
-           "vndf_half_vectors"]
+           "emitters_shine", "emitters_glossy_field", "glossy_world_direct"]
 
 GLOSSY_STREAM = 0x6105  # hash stream of the glossy rays' rotation
 WORLD_GLOSSY_STREAM = 0x6107  # hash stream of the map-importance rays of glossy_world_direct
@@ -43,30 +42,6 @@ METAL_RAY_FACTOR = 4
 # lifted to it, so that the Fresnel ratio there stays defined (the LTC integral itself clips).
 HORIZON_LIFT = 0.02
 EMITTER_GLOSSY_STREAM = 0x6109  # hash stream of its rays drawn on the emitters
-
-
-def vndf_half_vectors(view_local: np.ndarray, alpha: np.ndarray, square: np.ndarray) -> np.ndarray:
-    """(N, K, 3) unit half vectors in the local frame (z = normal) drawn from GGX's visible
-    normals for views ``view_local`` (N, 3) (z > 0) and roughness α (N,), from ``square``
-    (N, K, 2) in [0, 1)² (Heitz 2018, listing 1)."""
-    a = np.asarray(alpha, np.float64)[:, None]
-    vh = np.stack([a[:, 0] * view_local[:, 0], a[:, 0] * view_local[:, 1], view_local[:, 2]], axis=1)
-    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
-    lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
-    safe = np.sqrt(np.maximum(lensq, 1e-30))
-    t1 = np.where((lensq > 1e-7)[:, None],
-                  np.stack([-vh[:, 1] / safe, vh[:, 0] / safe, np.zeros_like(safe)], axis=1),
-                  [[1.0, 0.0, 0.0]])
-    t2 = np.cross(vh, t1)
-    r = np.sqrt(square[..., 0])
-    phi = 2.0 * np.pi * square[..., 1]
-    p1, p2 = r * np.cos(phi), r * np.sin(phi)
-    s = 0.5 * (1.0 + vh[:, 2:3])
-    p2 = (1.0 - s) * np.sqrt(np.maximum(1.0 - p1 * p1, 0.0)) + s * p2
-    p3 = np.sqrt(np.maximum(1.0 - p1 * p1 - p2 * p2, 0.0))
-    nh = p1[..., None] * t1[:, None] + p2[..., None] * t2[:, None] + p3[..., None] * vh[:, None]
-    h = np.stack([a * nh[..., 0], a * nh[..., 1], np.maximum(nh[..., 2], 0.0)], axis=-1)
-    return h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-30)
 
 
 def _lambda(alpha2, cos):

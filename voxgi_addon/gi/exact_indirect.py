@@ -34,13 +34,17 @@ from ..scene.snapshot import RAY_DIFFUSE
 from .direct_light import concentric_disk, diffuse_direct, light_aims
 from .principled import diffuse_weight, glossy_color, glossy_reflectance
 from .radiance_cache import lookup
-from .sampling import hammersley, perpendicular_basis
+from .sampling import hammersley, pcg_hash, perpendicular_basis, point_streams, unit_float, vndf_half_vectors
 
 __all__ = ["RAY_STREAM", "SURFACE_EPSILON", "RayPaths", "cosine_directions", "gather_rays",
            "indirect_and_ao", "ray_paths", "ray_radiance"]
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 weights of R, G, B
 RAY_STREAM = 0x5EED   # hash stream of the diffuse rays' rotation
+# hash stream of a metal hit's reflection, followed one bounce further (``metal_lobe_rays``),
+# and (xor'ed into the ray's light-sample id) of the light samples at that second hit
+CONTINUE_STREAM = 0x6C0B
+METAL_FOLLOWED = 0.5  # Metallic from which a hit's glossy lobe is followed (``ray_radiance``)
 SURFACE_EPSILON = 1e-4  # metres off the surface, as preview.SURFACE_EPSILON
 
 
@@ -104,6 +108,8 @@ class RayPaths:
     normals: np.ndarray
     weight: np.ndarray
     glossy: np.ndarray
+    roughness: np.ndarray | None = None  # (H,) the hits' Principled roughness and metallic
+    metallic: np.ndarray | None = None
 
     @property
     def glossy_share(self) -> np.ndarray:
@@ -146,6 +152,7 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
         emission_seen = not any(light.type == "EMITTERS" for light in lights)
     hit = np.flatnonzero(tri >= 0)
     x = ns = weight = glossy = np.zeros((0, 3))
+    roughness = metallic = None
     if len(hit):
         x = origins[hit] + t[hit, None] * dirs[hit]
         ns = _hit_normals(tris, tri[hit], u[hit], v[hit], dirs[hit])
@@ -164,6 +171,7 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
                 base = tris.textures.base_at(tri[hit], np.asarray(tris.materials)[tri[hit]],
                                              u[hit], v[hit], base)
             shading = (base, params[:, 0], params[:, 1], params[:, 2])
+            roughness, metallic = np.clip(params[:, 2], 0.0, 1.0), params[:, 0]
         reflect = None
         if principled and hit_glossy:
             def reflect(points, towards):  # the hit's glossy lobe toward the ray's origin
@@ -200,7 +208,27 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
             weight = np.asarray(albedo, np.float64)[material]
             glossy = np.zeros_like(weight)
             radiance[hit] += weight * arriving
-    return RayPaths(radiance, t, hit, x, ns, weight, glossy)
+    return RayPaths(radiance, t, hit, x, ns, weight, glossy, roughness, metallic)
+
+
+def metal_lobe_rays(normals, dirs, roughness, hit_ids, seed: int = 0) -> np.ndarray:
+    """(N, 3) one direction per hit drawn from its GGX lobe (visible normals, Heitz 2018) of
+    ``roughness`` about ``normals``, seen along ``dirs`` (the arriving rays), from the hash of
+    each ray's light-sample id ``hit_ids`` (``CONTINUE_STREAM``): the reflection a metal hit's
+    path is followed along (``ray_radiance``; bvh_shade.glsl ``metal_lobe_ray``)."""
+    normals = np.asarray(normals, np.float64)
+    dirs = np.asarray(dirs, np.float64)
+    alpha = np.maximum(np.asarray(roughness, np.float64) ** 2, 1e-3)
+    t, b = perpendicular_basis(normals)
+    v = -dirs
+    local = np.stack([np.einsum("ij,ij->i", t, v), np.einsum("ij,ij->i", b, v),
+                      np.maximum(np.einsum("ij,ij->i", normals, v), 1e-4)], axis=1)
+    local /= np.linalg.norm(local, axis=1, keepdims=True)
+    h = point_streams(hit_ids, CONTINUE_STREAM, seed)
+    square = np.stack([unit_float(h), unit_float(pcg_hash(h))], axis=-1)[:, None, :]
+    half = vndf_half_vectors(local, alpha, square)[:, 0]
+    m = half[:, :1] * t + half[:, 1:2] * b + half[:, 2:3] * normals
+    return dirs - 2.0 * np.einsum("ij,ij->i", dirs, m)[:, None] * m
 
 
 def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
@@ -216,10 +244,34 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
     light the cache holds at it (bounces beyond the first) by its diffuse weight and, taking
     that light as uniform over the hemisphere, its glossy lobes' albedo (Cycles' Glossy Color):
     the paths that bounce glossily in between (Cycles' default light paths allow 4 glossy
-    bounces)."""
+    bounces). A metal hit (Metallic ≥ ``METAL_FOLLOWED``) keeps the cache for its diffuse
+    share; its glossy share is followed one reflection further instead (``metal_lobe_rays``):
+    that hit's own light and its cache's, carried by the metal's Glossy Color
+    (docs/gi_pipeline.md "Metals reflect where they point")."""
     paths = ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed, world,
                       hit_samples, hit_glossy, emission_seen, ray)
-    return paths.with_cache(cache, receiver), paths.distance
+    out = paths.with_cache(cache, receiver)
+    if cache is None or not cache.iterations or paths.metallic is None:
+        return out, paths.distance
+    # A metal's lobe does not take the cache's light as uniform: its path is followed one
+    # reflection further (docs/gi_pipeline.md "Metals reflect where they point")
+    metal = np.flatnonzero(paths.metallic >= METAL_FOLLOWED)
+    if len(metal):
+        rays = paths.hit[metal]
+        arriving = lookup(cache, paths.points[metal], paths.normals[metal])
+        glossy = paths.glossy[metal]
+        out[rays] = paths.radiance[rays] + (paths.weight[metal] - glossy) * arriving
+        ids = np.asarray(hit_ids).astype(np.uint32)[rays]
+        further = metal_lobe_rays(paths.normals[metal], np.asarray(dirs, np.float64)[rays],
+                                  paths.roughness[metal], ids, seed)
+        up = np.einsum("ij,ij->i", further, paths.normals[metal]) > 0.0
+        if up.any():
+            start = paths.points[metal][up] + SURFACE_EPSILON * paths.normals[metal][up]
+            second = ray_paths(start, further[up], pcg_hash(ids[up] ^ np.uint32(CONTINUE_STREAM)),
+                               tris, lights, albedo, emission, seed, (0.0, 0.0, 0.0), 1, True,
+                               False, ray)
+            out[rays[up]] += glossy[up] * second.with_cache(cache)
+    return out, paths.distance
 
 
 def gather_rays(points, normals, sample_ids, rays: int, seed: int = 0):

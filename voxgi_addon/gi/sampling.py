@@ -33,6 +33,7 @@ __all__ = [
     "spherical_rectangle",
     "radical_inverse",
     "unit_float",
+    "vndf_half_vectors",
 ]
 
 _GOLDEN = np.uint32(0x9E3779B9)
@@ -163,3 +164,27 @@ def spherical_rectangle(origins, corner, edge_x, edge_y, uv):
     centre = corner + 0.5 * (np.asarray(edge_x, np.float64) + np.asarray(edge_y, np.float64))
     points = np.where(bad[..., None], centre, points)
     return points, np.where(solid > 1e-12, solid, 0.0)
+
+
+def vndf_half_vectors(view_local: np.ndarray, alpha: np.ndarray, square: np.ndarray) -> np.ndarray:
+    """(N, K, 3) unit half vectors in the local frame (z = normal) drawn from GGX's visible
+    normals for views ``view_local`` (N, 3) (z > 0) and roughness α (N,), from ``square``
+    (N, K, 2) in [0, 1)² (Heitz 2018, listing 1)."""
+    a = np.asarray(alpha, np.float64)[:, None]
+    vh = np.stack([a[:, 0] * view_local[:, 0], a[:, 0] * view_local[:, 1], view_local[:, 2]], axis=1)
+    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
+    lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
+    safe = np.sqrt(np.maximum(lensq, 1e-30))
+    t1 = np.where((lensq > 1e-7)[:, None],
+                  np.stack([-vh[:, 1] / safe, vh[:, 0] / safe, np.zeros_like(safe)], axis=1),
+                  [[1.0, 0.0, 0.0]])
+    t2 = np.cross(vh, t1)
+    r = np.sqrt(square[..., 0])
+    phi = 2.0 * np.pi * square[..., 1]
+    p1, p2 = r * np.cos(phi), r * np.sin(phi)
+    s = 0.5 * (1.0 + vh[:, 2:3])
+    p2 = (1.0 - s) * np.sqrt(np.maximum(1.0 - p1 * p1, 0.0)) + s * p2
+    p3 = np.sqrt(np.maximum(1.0 - p1 * p1 - p2 * p2, 0.0))
+    nh = p1[..., None] * t1[:, None] + p2[..., None] * t2[:, None] + p3[..., None] * vh[:, None]
+    h = np.stack([a * nh[..., 0], a * nh[..., 1], np.maximum(nh[..., 2], 0.0)], axis=-1)
+    return h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-30)
