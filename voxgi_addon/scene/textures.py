@@ -115,19 +115,26 @@ def srgb_to_linear(values) -> np.ndarray:
     """The sRGB transfer function inverted (encoded values in [0, 1] → linear), float32, as
     Blender's colour management and Cycles decode byte images."""
     values = np.asarray(values, np.float32)
-    low = values / np.float32(12.92)
-    high = ((np.maximum(values, np.float32(0.04045)) + np.float32(0.055)) / np.float32(1.055)) \
-        ** np.float32(2.4)
-    return np.where(values <= np.float32(0.04045), low, high).astype(np.float32)
+    out = np.maximum(values, np.float32(0.04045), out=np.empty_like(values))
+    out += np.float32(0.055)
+    out *= np.float32(1 / 1.055)
+    np.power(out, np.float32(2.4), out=out)
+    low = values <= np.float32(0.04045)
+    out[low] = values[low] * np.float32(1 / 12.92)
+    return out
 
 
 def linear_to_srgb(values) -> np.ndarray:
     """The sRGB transfer function (linear → encoded), float32; ``srgb_to_linear`` inverts it."""
-    values = np.maximum(np.asarray(values, np.float32), np.float32(0.0))
-    low = values * np.float32(12.92)
-    high = np.float32(1.055) * np.maximum(values, np.float32(0.0031308)) ** np.float32(1 / 2.4) \
-        - np.float32(0.055)
-    return np.where(values <= np.float32(0.0031308), low, high).astype(np.float32)
+    values = np.asarray(values, np.float32)
+    values = np.maximum(values, np.float32(0.0), out=np.empty_like(values))
+    out = np.maximum(values, np.float32(0.0031308), out=np.empty_like(values))
+    np.power(out, np.float32(1 / 2.4), out=out)
+    out *= np.float32(1.055)
+    out -= np.float32(0.055)
+    low = values <= np.float32(0.0031308)
+    out[low] = values[low] * np.float32(12.92)
+    return out
 
 
 def encoded(texture: TextureData) -> bool:
@@ -144,12 +151,12 @@ def _decoded_means(level: np.ndarray, extension: str) -> np.ndarray:
     from the 2 × 2 points at a quarter and three quarters of the texel (their bilinear weights
     are 1/4 and 3/4 towards the nearer neighbour; the midpoint rule on each half, which
     overstates the blends' darkening by about a tenth); alpha is kept as it is. Rows go in
-    bands, so a 2048² image's temporaries stay small (0.4 s)."""
+    bands, so a 2048² image's temporaries stay small (0.3 s of its pyramid's 0.4–0.6 s)."""
     code = linear_to_srgb(level[..., :3])
     pad = np.pad(code, ((1, 1), (1, 1), (0, 0)), mode=_PADS.get(extension, "edge"))
     q, t = np.float32(0.25), np.float32(0.75)
     means = np.empty(code.shape, np.float32)
-    band = 64
+    band = 32
     for top in range(0, code.shape[0], band):
         rows = pad[top:top + band + 2]
         centre = rows[1:-1]
