@@ -40,10 +40,70 @@ void main()
   vec2 disk = concentric_disk(hammersley(state, j, rays));
   float z = sqrt(max(0.0, 1.0 - dot(disk, disk)));
   vec3 d = normalize(disk.x * t + disk.y * b + z * n);
-  float th;
+  float th = BVH_FAR;
   vec3 x, ns, weight, glossy;
-  vec3 radiance = ray_paths(origin, d, id * uint(rays) + uint(j), seed, int(sampling.w),
-                            world.w > 0.5, world.rgb, false, th, x, ns, weight, glossy);
+  uint hit_id = id * uint(rays) + uint(j);
+  /* A metal hit is followed one reflection further (radiance_cache.follow_metals): one loop
+   * for both hits, so the second's code is compiled once and runs only where a lane meets a
+   * metal (as bvh_shade.glsl ray_radiance). */
+  bool metal = false;
+  vec3 radiance = vec3(0.0);
+  vec3 second_weight = vec3(0.0), second_glossy = vec3(0.0);
+  vec3 x2 = vec3(0.0), ns2 = vec3(0.0);
+  vec3 o = origin;
+  vec3 dir = d;
+  for (int step = 0; step < 2; step++) {
+    bool first = step == 0;
+    float t_hit;
+    vec3 px, pn, pw, pg;
+    radiance += (first ? vec3(1.0) : glossy) *
+                ray_paths(o, dir, first ? hit_id : pcg_hash(hit_id ^ CONTINUE_STREAM), seed,
+                          first ? int(sampling.w) : 1, first ? world.w > 0.5 : true,
+                          first ? world.rgb : vec3(0.0), false, t_hit, px, pn, pw, pg);
+    if (first) {
+      th = t_hit;
+      x = x2 = px;
+      ns = ns2 = pn;
+      weight = pw;
+      glossy = pg;
+      if (t_hit >= BVH_FAR || hit_metallic < METAL_FOLLOWED) {
+        break;
+      }
+      metal = true;
+      dir = metal_lobe_ray(ns, d, hit_id, seed);
+      o = x + SURFACE_EPSILON * ns;
+      if (dot(dir, ns) <= 0.0) {
+        break;
+      }
+      continue;
+    }
+    if (t_hit < BVH_FAR) {
+      second_weight = glossy * pw;
+      second_glossy = glossy * pg;
+      x2 = px;
+      ns2 = pn;
+    }
+    break;
+  }
+  if (metal) {
+    /* the record reads one face: the first hit's for its diffuse share, or the second hit's
+     * for the Glossy Color × that hit's weight, chosen by their sums, divided by its chance */
+    vec3 diffuse = weight - glossy;
+    float a_sum = dot(diffuse, vec3(1.0));
+    float b_sum = dot(second_weight, vec3(1.0));
+    float u = unit_float(point_stream(uint(record), CONTINUE_STREAM + 1u, seed));
+    if (u * (a_sum + b_sum) < a_sum) {
+      weight = diffuse * ((a_sum + b_sum) / max(a_sum, 1e-30));
+      glossy = vec3(0.0);
+    }
+    else {
+      float scale = (a_sum + b_sum) / max(b_sum, 1e-30);
+      weight = second_weight * scale;
+      glossy = second_glossy * scale;
+      x = x2;
+      ns = ns2;
+    }
+  }
   float picked = -1.0;
   if (th < BVH_FAR) {
     uint pick_state = point_stream(uint(record), CACHE_PICK_STREAM, seed);

@@ -38,7 +38,7 @@ import numpy as np
 from ..errors import VoxGIError
 from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
 from .cascades import CascadeGrid
-from .sampling import point_streams, unit_float
+from .sampling import pcg_hash, point_streams, unit_float
 
 __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
            "cache_texels", "cached_cache", "face_paths", "face_points", "iterate",
@@ -519,13 +519,68 @@ def face_paths(cache: RadianceCache, tris, lights, albedo, emission, rays: int =
     sample id = the face's row; the diffuse gather's rays, ``exact_indirect.gather_rays``),
     face by face: traced and lit once, then every iteration only looks the cache up at their
     hits (``relax``). lights, albedo, emission, world, hit_samples, hit_glossy : as the
-    gather's."""
+    gather's. A metal hit is followed one reflection further (``follow_metals``)."""
     from .exact_indirect import gather_rays, ray_paths
 
     points, axes = face_points(cache)
     origins, dirs, ids = gather_rays(points, axes, np.arange(len(points)), rays, seed)
-    return ray_paths(origins, dirs, ids, tris, lights, albedo, emission, seed, world,
-                     hit_samples, hit_glossy)
+    paths = ray_paths(origins, dirs, ids, tris, lights, albedo, emission, seed, world,
+                      hit_samples, hit_glossy)
+    return follow_metals(paths, dirs, ids, tris, lights, albedo, emission, seed)
+
+
+def follow_metals(paths, dirs, ids, tris, lights, albedo, emission, seed: int = 0):
+    """``paths`` with each metal hit (Metallic ≥ ``exact_indirect.METAL_FOLLOWED``) followed
+    one reflection further, as the gathers follow theirs (``exact_indirect.ray_radiance``;
+    docs/gi_pipeline.md "Metals reflect where they point"): the record adds the metal's Glossy
+    Color × the second hit's own light, and reads one face — the first hit's, for its diffuse
+    share, or the second hit's, for the Glossy Color × that hit's weight — chosen by those
+    weights' sums with the record's hash (``exact_indirect.CONTINUE_STREAM`` + 1) and divided
+    by its chance, so the relaxation's single lookup per record stays unbiased
+    (cache_paths.glsl does the same)."""
+    from .exact_indirect import CONTINUE_STREAM, METAL_FOLLOWED, SURFACE_EPSILON, metal_lobe_rays, ray_paths
+
+    if paths.metallic is None or not len(paths.hit):
+        return paths
+    metal = np.flatnonzero(paths.metallic >= METAL_FOLLOWED)
+    if not len(metal):
+        return paths
+    rays = paths.hit[metal]
+    normals = paths.normals[metal]
+    ids = np.asarray(ids).astype(np.uint32)[rays]
+    further = metal_lobe_rays(normals, np.asarray(dirs, np.float64)[rays],
+                              paths.roughness[metal], ids, seed)
+    glossy = paths.glossy[metal]
+    diffuse = paths.weight[metal] - glossy
+    radiance = np.array(paths.radiance, np.float64)
+    points, normals_out = paths.points.copy(), paths.normals.copy()
+    weight, glossy_out = paths.weight.copy(), paths.glossy.copy()
+    second_weight = np.zeros_like(glossy)
+    second_glossy = np.zeros_like(glossy)
+    second_points = paths.points[metal].copy()
+    second_normals = normals.copy()
+    up = np.flatnonzero(np.einsum("ij,ij->i", further, normals) > 0.0)
+    if len(up):
+        start = paths.points[metal][up] + SURFACE_EPSILON * normals[up]
+        second = ray_paths(start, further[up], pcg_hash(ids[up] ^ np.uint32(CONTINUE_STREAM)),
+                           tris, lights, albedo, emission, seed, (0.0, 0.0, 0.0), 1, True,
+                           False)
+        radiance[rays[up]] += glossy[up] * second.radiance
+        landed = up[second.hit]
+        second_weight[landed] = glossy[landed] * second.weight
+        second_glossy[landed] = glossy[landed] * second.glossy
+        second_points[landed], second_normals[landed] = second.points, second.normals
+    a, b = diffuse.sum(axis=1), second_weight.sum(axis=1)
+    u = unit_float(point_streams(rays, CONTINUE_STREAM + 1, seed))
+    first = u * (a + b) < a
+    total = a + b
+    scale = np.where(first, total / np.maximum(a, 1e-30), total / np.maximum(b, 1e-30))
+    weight[metal] = np.where(first[:, None], diffuse, second_weight) * scale[:, None]
+    glossy_out[metal] = np.where(first[:, None], 0.0, second_glossy) * scale[:, None]
+    points[metal] = np.where(first[:, None], paths.points[metal], second_points)
+    normals_out[metal] = np.where(first[:, None], normals, second_normals)
+    return replace(paths, radiance=radiance, points=points, normals=normals_out, weight=weight,
+                   glossy=glossy_out)
 
 
 def _held(cache: RadianceCache) -> np.ndarray:
