@@ -159,6 +159,16 @@ vec3 metal_lobe_ray(vec3 ns, vec3 d, uint hit_id, uint seed)
   return reflect(d, hl.x * t + hl.y * b + hl.z * ns);
 }
 
+/* The metal hit x's reflection followed one bounce further (exact_indirect.follow_metal_hits):
+ * its origin `o` and direction `dir`; false when it points below the surface (no light). The
+ * second hit's light samples are drawn with id pcg_hash(hit_id ^ CONTINUE_STREAM). */
+bool metal_follow(vec3 x, vec3 ns, vec3 d, uint hit_id, uint seed, out vec3 o, out vec3 dir)
+{
+  dir = metal_lobe_ray(ns, d, hit_id, seed);
+  o = x + SURFACE_EPSILON * ns;
+  return dot(dir, ns) > 0.0;
+}
+
 vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
                   vec3 world_rgb, bool emission_seen, out float th)
 {
@@ -192,9 +202,7 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
     if (first && cached && hit_metallic >= METAL_FOLLOWED) {
       total += (cache_weight - glossy_weight) * arriving.rgb;
       carried = glossy_weight;
-      dir = metal_lobe_ray(ns, dir, hit_id, seed);
-      o = x + SURFACE_EPSILON * ns;
-      if (dot(dir, ns) <= 0.0) {
+      if (!metal_follow(x, ns, dir, hit_id, seed, o, dir)) {
         break;
       }
       continue;

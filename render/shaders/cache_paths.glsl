@@ -70,9 +70,7 @@ void main()
         break;
       }
       metal = true;
-      dir = metal_lobe_ray(ns, d, hit_id, seed);
-      o = x + SURFACE_EPSILON * ns;
-      if (dot(dir, ns) <= 0.0) {
+      if (!metal_follow(x, ns, d, hit_id, seed, o, dir)) {
         break;
       }
       continue;

@@ -135,33 +135,53 @@ def test_thin_wall_dark_room_stays_dark(voxgi, tmp_path):
     assert ratio <= 0.02
 
 
+def cache_inputs():
+    """(triangles, lights, Principled table, emission) of the context scene's snapshot: what
+    the radiance cache is built from, on the GPU as in numpy."""
+    from voxgi.blender.snapshot import snapshot_or_error
+    from voxgi.render import gpu_context
+    from voxgi.voxgi_addon.gi.light_injection import material_emission
+    from voxgi.voxgi_addon.gi.world_light import scene_lights
+    from voxgi.voxgi_addon.preview.passes import principled_table
+    from voxgi.voxgi_addon.scene.geometry import world_triangles
+
+    assert gpu_context.ensure_gpu_context()[0]
+    snapshot, _ = snapshot_or_error(bpy.context, bpy.context.evaluated_depsgraph_get())
+    tris = world_triangles(snapshot)
+    emission = material_emission(snapshot)
+    return tris, scene_lights(snapshot, tris, emission), principled_table(snapshot), emission
+
+
+def gpu_and_numpy_caches(bounces: int = 3, rays: int = 8, resolution: int = 16):
+    """The context scene's radiance cache of ``bounces`` built on the GPU and in numpy, with
+    (triangles, lights, Principled table, emission) (``cache_inputs``)."""
+    from voxgi.render import gpu_gather
+    from voxgi.render.gpu_bvh import shared_bvh
+    from voxgi.voxgi_addon.gi import radiance_cache
+    from voxgi.voxgi_addon.preview.gather import GatherSettings
+
+    inputs = tris, lights, principled, emission = cache_inputs()
+    settings = GatherSettings(bounces=bounces, cache_resolution=resolution, cache_rays=rays)
+    gpu, _ = gpu_gather.cache_gpu(shared_bvh().update(tris), lights, principled, emission,
+                                  settings)
+    numpy = radiance_cache.cached_cache(tris, lights, principled, emission, bounces, rays,
+                                        resolution)
+    return gpu, numpy, inputs
+
+
 def test_gpu_cache_equals_numpy_cache(voxgi):
     """Two iterations (Bounces 3) of the cache on the Cornell box, one grid and Auto's grids
     nested around a camera: the GPU's voxel faces equal numpy's within 2%, and so do the
     third iteration, from which the faces' one-more-bounce ratio comes
     (``radiance_cache.one_more_bounce``)."""
-    from voxgi.blender.snapshot import snapshot_or_error
-    from voxgi.render import gpu_context, gpu_gather
+    from voxgi.render import gpu_gather
     from voxgi.render.gpu_bvh import shared_bvh
     from voxgi.voxgi_addon.gi import radiance_cache
-    from voxgi.voxgi_addon.gi.light_injection import material_emission
-    from voxgi.voxgi_addon.gi.world_light import scene_lights
     from voxgi.voxgi_addon.preview.gather import GatherSettings
-    from voxgi.voxgi_addon.preview.passes import principled_table
-    from voxgi.voxgi_addon.scene.geometry import world_triangles
 
-    scene = bpy.context.scene
-    bounce_scenes.build("cornell_box", scene)
-    assert gpu_context.ensure_gpu_context()[0]
-    snapshot, _ = snapshot_or_error(bpy.context, bpy.context.evaluated_depsgraph_get())
-    tris = world_triangles(snapshot)
-    emission = material_emission(snapshot)
-    lights = scene_lights(snapshot, tris, emission)
-    principled = principled_table(snapshot)
+    bounce_scenes.build("cornell_box", bpy.context.scene)
+    gpu, numpy, (tris, lights, principled, emission) = gpu_and_numpy_caches()
     settings = GatherSettings(bounces=3, cache_resolution=16, cache_rays=8)
-    gpu, _ = gpu_gather.cache_gpu(shared_bvh().update(tris), lights, principled, emission,
-                                  settings)
-    numpy = radiance_cache.cached_cache(tris, lights, principled, emission, 3, 8, 16)
     assert gpu.iterations == numpy.iterations == 2
     a, b = (np.concatenate(c.faces).astype(np.float64) for c in (gpu, numpy))
     assert b.mean() > 0.01
@@ -182,10 +202,10 @@ def test_gpu_cache_equals_numpy_cache(voxgi):
     assert np.abs(a - b).sum() / np.abs(b).sum() <= 0.02
     # the same triangles snapshotted again (a viewport slice) keep the uploaded cache
     texture = gpu_gather.cache_texture(shared_bvh(), lights, principled, emission, settings)
-    again = world_triangles(snapshot)
+    again, again_lights, _, _ = cache_inputs()
     assert again is not tris
-    assert gpu_gather.cache_texture(shared_bvh().update(again), scene_lights(snapshot, again,
-                                    emission), principled, emission, settings) is texture
+    assert gpu_gather.cache_texture(shared_bvh().update(again), again_lights, principled,
+                                    emission, settings) is texture
 
 
 @pytest.mark.parametrize("sparse", [False, True], ids=["dense", "sparse"])
@@ -254,28 +274,11 @@ def test_gpu_cache_follows_the_metals_as_numpy_does(voxgi):
     ``radiance_cache.follow_metals``): on the metal room (Bounces 3), the GPU's voxel faces
     equal numpy's within 2%, and they differ from the faces of a cache that takes the metals'
     lobes as reading uniform light."""
-    from voxgi.blender.snapshot import snapshot_or_error
-    from voxgi.render import gpu_context, gpu_gather
-    from voxgi.render.gpu_bvh import shared_bvh
     from voxgi.voxgi_addon.gi import radiance_cache
     from voxgi.voxgi_addon.gi.exact_indirect import gather_rays, ray_paths
-    from voxgi.voxgi_addon.gi.light_injection import material_emission
-    from voxgi.voxgi_addon.gi.world_light import scene_lights
-    from voxgi.voxgi_addon.preview.gather import GatherSettings
-    from voxgi.voxgi_addon.preview.passes import principled_table
-    from voxgi.voxgi_addon.scene.geometry import world_triangles
 
     metal_room()
-    assert gpu_context.ensure_gpu_context()[0]
-    snapshot, _ = snapshot_or_error(bpy.context, bpy.context.evaluated_depsgraph_get())
-    tris = world_triangles(snapshot)
-    emission = material_emission(snapshot)
-    lights = scene_lights(snapshot, tris, emission)
-    principled = principled_table(snapshot)
-    settings = GatherSettings(bounces=3, cache_resolution=16, cache_rays=8)
-    gpu, _ = gpu_gather.cache_gpu(shared_bvh().update(tris), lights, principled, emission,
-                                  settings)
-    numpy = radiance_cache.cached_cache(tris, lights, principled, emission, 3, 8, 16)
+    gpu, numpy, (tris, lights, principled, emission) = gpu_and_numpy_caches()
     a, b = (np.concatenate(c.faces).astype(np.float64) for c in (gpu, numpy))
     assert b.mean() > 0.01
     assert np.abs(a - b).sum() / np.abs(b).sum() <= 0.02

@@ -36,8 +36,9 @@ from .principled import diffuse_weight, glossy_color, glossy_reflectance
 from .radiance_cache import lookup
 from .sampling import hammersley, pcg_hash, perpendicular_basis, point_streams, unit_float, vndf_half_vectors
 
-__all__ = ["RAY_STREAM", "SURFACE_EPSILON", "RayPaths", "cosine_directions", "gather_rays",
-           "indirect_and_ao", "ray_paths", "ray_radiance"]
+__all__ = ["CONTINUE_STREAM", "METAL_FOLLOWED", "RAY_STREAM", "SURFACE_EPSILON", "RayPaths",
+           "cosine_directions", "follow_metal_hits", "gather_rays", "indirect_and_ao",
+           "metal_lobe_rays", "ray_paths", "ray_radiance"]
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 weights of R, G, B
 RAY_STREAM = 0x5EED   # hash stream of the diffuse rays' rotation
@@ -231,6 +232,28 @@ def metal_lobe_rays(normals, dirs, roughness, hit_ids, seed: int = 0) -> np.ndar
     return dirs - 2.0 * np.einsum("ij,ij->i", dirs, m)[:, None] * m
 
 
+def follow_metal_hits(paths: RayPaths, metal, dirs, hit_ids, tris, lights, albedo, emission,
+                      seed: int = 0, ray: int = RAY_DIFFUSE):
+    """The hits ``metal`` (indices into ``paths``' hits) followed one reflection further
+    (``metal_lobe_rays``; bvh_shade.glsl ``metal_follow``): (up, second) — ``up`` the indices
+    into ``metal`` whose reflection leaves above the surface, ``second`` the ``RayPaths`` of
+    those reflections (no world, no emission: the metal's own light sampling holds them; one
+    light sample a light, the glossy lobes lit; light-sample ids hashed with
+    ``CONTINUE_STREAM``), None when there is none."""
+    rays = paths.hit[metal]
+    normals = paths.normals[metal]
+    ids = np.asarray(hit_ids).astype(np.uint32)[rays]
+    further = metal_lobe_rays(normals, np.asarray(dirs, np.float64)[rays],
+                              paths.roughness[metal], ids, seed)
+    up = np.flatnonzero(np.einsum("ij,ij->i", further, normals) > 0.0)
+    if not len(up):
+        return up, None
+    start = paths.points[metal][up] + SURFACE_EPSILON * normals[up]
+    return up, ray_paths(start, further[up], pcg_hash(ids[up] ^ np.uint32(CONTINUE_STREAM)),
+                         tris, lights, albedo, emission, seed, (0.0, 0.0, 0.0), 1, True, False,
+                         ray)
+
+
 def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
                  world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
                  emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, cache=None,
@@ -261,15 +284,9 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
         arriving = lookup(cache, paths.points[metal], paths.normals[metal])
         glossy = paths.glossy[metal]
         out[rays] = paths.radiance[rays] + (paths.weight[metal] - glossy) * arriving
-        ids = np.asarray(hit_ids).astype(np.uint32)[rays]
-        further = metal_lobe_rays(paths.normals[metal], np.asarray(dirs, np.float64)[rays],
-                                  paths.roughness[metal], ids, seed)
-        up = np.einsum("ij,ij->i", further, paths.normals[metal]) > 0.0
-        if up.any():
-            start = paths.points[metal][up] + SURFACE_EPSILON * paths.normals[metal][up]
-            second = ray_paths(start, further[up], pcg_hash(ids[up] ^ np.uint32(CONTINUE_STREAM)),
-                               tris, lights, albedo, emission, seed, (0.0, 0.0, 0.0), 1, True,
-                               False, ray)
+        up, second = follow_metal_hits(paths, metal, dirs, hit_ids, tris, lights, albedo,
+                                       emission, seed, ray)
+        if second is not None:
             out[rays[up]] += glossy[up] * second.with_cache(cache)
     return out, paths.distance
 

@@ -38,7 +38,7 @@ import numpy as np
 from ..errors import VoxGIError
 from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
 from .cascades import CascadeGrid
-from .sampling import pcg_hash, point_streams, unit_float
+from .sampling import point_streams, unit_float
 
 __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
            "cache_texels", "cached_cache", "face_paths", "face_points", "iterate",
@@ -538,7 +538,7 @@ def follow_metals(paths, dirs, ids, tris, lights, albedo, emission, seed: int = 
     weights' sums with the record's hash (``exact_indirect.CONTINUE_STREAM`` + 1) and divided
     by its chance, so the relaxation's single lookup per record stays unbiased
     (cache_paths.glsl does the same)."""
-    from .exact_indirect import CONTINUE_STREAM, METAL_FOLLOWED, SURFACE_EPSILON, metal_lobe_rays, ray_paths
+    from .exact_indirect import CONTINUE_STREAM, METAL_FOLLOWED, follow_metal_hits
 
     if paths.metallic is None or not len(paths.hit):
         return paths
@@ -547,9 +547,6 @@ def follow_metals(paths, dirs, ids, tris, lights, albedo, emission, seed: int = 
         return paths
     rays = paths.hit[metal]
     normals = paths.normals[metal]
-    ids = np.asarray(ids).astype(np.uint32)[rays]
-    further = metal_lobe_rays(normals, np.asarray(dirs, np.float64)[rays],
-                              paths.roughness[metal], ids, seed)
     glossy = paths.glossy[metal]
     diffuse = paths.weight[metal] - glossy
     radiance = np.array(paths.radiance, np.float64)
@@ -559,12 +556,8 @@ def follow_metals(paths, dirs, ids, tris, lights, albedo, emission, seed: int = 
     second_glossy = np.zeros_like(glossy)
     second_points = paths.points[metal].copy()
     second_normals = normals.copy()
-    up = np.flatnonzero(np.einsum("ij,ij->i", further, normals) > 0.0)
-    if len(up):
-        start = paths.points[metal][up] + SURFACE_EPSILON * normals[up]
-        second = ray_paths(start, further[up], pcg_hash(ids[up] ^ np.uint32(CONTINUE_STREAM)),
-                           tris, lights, albedo, emission, seed, (0.0, 0.0, 0.0), 1, True,
-                           False)
+    up, second = follow_metal_hits(paths, metal, dirs, ids, tris, lights, albedo, emission, seed)
+    if second is not None:
         radiance[rays[up]] += glossy[up] * second.radiance
         landed = up[second.hit]
         second_weight[landed] = glossy[landed] * second.weight
