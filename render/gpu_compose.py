@@ -11,6 +11,8 @@ import math
 
 import gpu
 
+from ..voxgi_addon.preview.resolve import LEAST_CENTRES
+from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE
 from .gpu_bvh import absent_lights, direct_light_texture
 from .gpu_gather import glossy_direct_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
@@ -26,6 +28,9 @@ SURFACE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "gbuff
 LIGHT_SAMPLERS = ("colour", "direct_image", "shine_image", "sum_f", "sum_g")
 MASK_SAMPLERS = ("gbuffer_position", "pixels")
 COMPACT_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "pixels")
+RESOLVE_SAMPLERS = (*COMPACT_SAMPLERS, "centre_position", "centre_normal", "centre_view",
+                    *(f"sum_{k}" for k in (*SURFACE_SUMS, "g")))
+RESOLVE_OUTPUTS = tuple(f"out_{k}" for k in (*SURFACE_SUMS, "g"))
 _aa_shaders: dict[str, object] = {}
 
 
@@ -39,6 +44,11 @@ def _aa_shader(kernel: str):
             _aa_shaders[kernel] = build_compute(
                 ("aa_compact",), COMPACT_SAMPLERS, (), ("out_position", "out_normal", "out_view"),
                 {"RAW": "1"} if kernel == "aa_list_raw" else None)
+        elif kernel == "aa_resolve":
+            _aa_shaders[kernel] = build_compute(
+                ("aa_resolve",), RESOLVE_SAMPLERS, ("resolve",), RESOLVE_OUTPUTS,
+                {"PLANE_TOLERANCE": repr(float(PLANE_TOLERANCE)),
+                 "LEAST_CENTRES": str(LEAST_CENTRES)})
         elif kernel == "aa_mask":
             _aa_shaders[kernel] = build_compute(("aa_mask",), MASK_SAMPLERS, (),
                                                 ("out_position",))
@@ -48,11 +58,14 @@ def _aa_shader(kernel: str):
     return _aa_shaders[kernel]
 
 
-def run(kernel, samplers, inputs, outputs, width, height):
-    """Dispatch ``kernel`` over width × height; returns its new output textures by name."""
+def run(kernel, samplers, inputs, outputs, width, height, constants=None):
+    """Dispatch ``kernel`` over width × height (``constants``: its push constants by name, 4
+    floats each); returns its new output textures by name."""
     shader = _aa_shader(kernel)
     images = {name: gpu.types.GPUTexture((width, height), format="RGBA32F") for name in outputs}
     shader.bind()
+    for name, value in (constants or {}).items():
+        shader.uniform_float(name, value)
     for name in samplers:
         shader.uniform_sampler(name, inputs[name])
     for name, image in images.items():

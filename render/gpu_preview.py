@@ -37,6 +37,7 @@ from ..voxgi_addon.preview.passes import (
     subpixel_passes,
     subpixel_reach,
 )
+from ..voxgi_addon.preview.resolve import SPREAD
 from ..voxgi_addon.preview.sparse_gather import noisy_holes, sparse_plan, sparse_settings
 from ..voxgi_addon.preview.upsample import field_stride, low_shape, sample_pixels
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame, filter_on_grid
@@ -49,6 +50,8 @@ from .gpu_accumulation import SUM_NAMES, GPUSums
 from .gpu_bvh import emitter_glossy_texture, emitters_unshadowed_texture
 from .gpu_compose import COMPACT_SAMPLERS as _COMPACT_SAMPLERS
 from .gpu_compose import MASK_SAMPLERS as _MASK_SAMPLERS
+from .gpu_compose import RESOLVE_OUTPUTS as _RESOLVE_OUTPUTS
+from .gpu_compose import RESOLVE_SAMPLERS as _RESOLVE_SAMPLERS
 from .gpu_compose import SURFACE_SUMS as _SURFACE_SUMS
 from .gpu_compose import run as _run
 from .gpu_compose import shade_stages
@@ -622,20 +625,15 @@ def _centres(f):
 
 
 def _centre_pass(f):
-    """The centre pass over the image off the geometry's edges (the edge pixels background,
-    so every kernel returns early there), all strata: the sums' textures, and the lamps'
-    light apart where there are sub-pixel passes (for ``light_edge_pixels``). With
-    ``on_gpu`` and no sub-pixel passes, the frame's result: the sums as ``GPUSums``."""
-    centre, width, height, edge = f["centre"], f["width"], f["height"], f["edge"]
+    """The centre pass over the whole image, all strata: the sums' textures (the edge pixels'
+    are what their sub-pixel samples resolve from, ``preview.resolve``, and are then replaced
+    by the samples' sums), and the lamps' light apart where there are sub-pixel passes (for
+    ``light_edge_pixels``). With ``on_gpu`` and no sub-pixel passes, the frame's result: the
+    sums as ``GPUSums``."""
+    centre, width, height = f["centre"], f["width"], f["height"]
     scene = f["scene"]
     reach = subpixel_reach(f["plan"])
     inputs = dict(centre.inputs)
-    if edge.any():
-        keep = np.flipud(~edge).astype(np.float32)
-        inputs["gbuffer_position"] = _run("aa_mask", _MASK_SAMPLERS, {
-            "gbuffer_position": centre.position,
-            "pixels": float_texture(keep, (width, height), "R32F")},  # aa_mask reads .x
-            ("out_position",), width, height)["out_position"]
     zero = scene.zeros(width, height)
     lamps = {}
     centres = _centres(f)
@@ -669,7 +667,6 @@ def _subpixel_passes(f):
     if not len(listed):
         return {"texel": texel, "tails": new_sums(width * height)}
     pixels, list_size = _pixel_list(listed, width, height)
-    blank = scene.zeros(*list_size)
     zero = scene.zeros(width, height)
     centre = f["centre"]
     # the gathers at the gather points and at the centres, for each pass's samples
@@ -681,16 +678,11 @@ def _subpixel_passes(f):
     eye = _eye(snapshot.camera)
     centres = _centres(f)
     fields = f["fields"]
-    listed_centres = None
-    if centres is not None:  # the centres' G-buffer and emitters' light there
-        listed_centres = _compact("aa_list", {**centre.inputs, "pixels": pixels}, list_size)
-        raw = _compact("aa_list_raw", {
-            "gbuffer_position": centres["shine"], "gbuffer_normal": centres["unshadowed"],
-            "gbuffer_view": centres["unshadowed"], "pixels": pixels}, list_size)
-        listed_centres["shine"] = raw["gbuffer_position"]
-        listed_centres["unshadowed"] = raw["gbuffer_normal"]
-    # every pass's samples, the sum textures' texels side by side (names' order)
+    # every pass's samples, the sum textures' texels side by side (names' order); a sample
+    # takes the centres' sums around it where they see its surface and their light is smooth
+    # (aa_resolve.glsl, preview.resolve), the others are shaded below
     names = _SUM_TEXTURES
+    flag = 4 * names.index("sum_d") + 3  # the resolved samples' mark (aa_resolve.glsl)
     samples = np.empty((len(plan), len(listed), 4 * len(names)), np.float32)
     # the passes draw the listed pixels only where the raster has the texture code (its
     # fragments cost 3× the mask's full-screen pass: 47 → 14 ms a pass, textured room at
@@ -721,10 +713,32 @@ def _subpixel_passes(f):
         gbuffer = rasters[gx, gy]
         at = pixels if fine == 1 else _pixel_list(listed, width, height, fine, (tx, ty))[0]
         inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": at}, list_size)
+        blended = _run("aa_resolve", _RESOLVE_SAMPLERS, {
+            **inputs, "pixels": pixels, "centre_position": centre.position,
+            "centre_normal": centre.normal, "centre_view": centre.view, **f["sums"]},
+            _RESOLVE_OUTPUTS, *list_size,
+            constants={"resolve": (*offset, SPREAD, 0.0)})
+        for k, name in enumerate(names):
+            samples[index, :, 4 * k:4 * k + 4] = \
+                read_texture(blended["out" + name[3:]]).reshape(-1, 4)[:len(listed)]
+        left = np.flatnonzero(samples[index, :, flag] < 0.5)
+        samples[index, :, flag] = 0.0
+        if not len(left):
+            continue
+        # the samples left, shaded over a list of their own pixels
+        sub_pixels, sub_size = pixels, list_size
+        if len(left) < len(listed):
+            sub_pixels, sub_size = _pixel_list(listed[left], width, height)
+            at = sub_pixels if fine == 1 else \
+                _pixel_list(listed[left], width, height, fine, (tx, ty))[0]
+            inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": at}, sub_size)
+        blank = scene.zeros(*sub_size)
         inputs["gbuffer_base"] = blank if not scene.textured else _compact(
             "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,
                             "gbuffer_view": gbuffer.base, "pixels": at},
-            list_size)["gbuffer_position"]
+            sub_size)["gbuffer_position"]
+        listed_centres = None if centres is None else \
+            _listed_centres(centre, centres, sub_pixels, sub_size)
         # the gathered terms, the emitters' glossy light and unshadowed sum: the centre's
         # where this pass sees its surface, else the gathers and the field at the pass's
         # own point (the field evaluated where it does not hold), in one dispatch
@@ -732,10 +746,10 @@ def _subpixel_passes(f):
         together = centres is not None and strides[0] == strides[1]
         *terms, field_glossy, field_diffuse = upsample_field_list(
             *(fields[:2] if together else (None, None)), centre.inputs, inputs,
-            pixels, list_size, gi_stride, width, height, eye, offset, terms=gathers)
+            sub_pixels, sub_size, gi_stride, width, height, eye, offset, terms=gathers)
         if centres is not None and not together:  # the field on its own grid
             field_glossy, field_diffuse = upsample_field_list(
-                *fields[:2], centre.inputs, inputs, pixels, list_size, strides[1], width,
+                *fields[:2], centre.inputs, inputs, sub_pixels, sub_size, strides[1], width,
                 height, eye, offset)
         glow = None
         if centres is not None:
@@ -746,11 +760,11 @@ def _subpixel_passes(f):
         # this pass's samples, read back to count in the neighbours by the filter at
         # their own place (preview.passes.stacked_tails)
         textures = yield from _shade(f, inputs, {name: blank for name in names}, terms, blank,
-                                     list_size, block, glow=glow, centre=listed_centres,
+                                     sub_size, block, glow=glow, centre=listed_centres,
                                      field=field_diffuse)
         for k, name in enumerate(names):
-            samples[index, :, 4 * k:4 * k + 4] = \
-                read_texture(textures[name]).reshape(-1, 4)[:len(listed)]
+            samples[index, left, 4 * k:4 * k + 4] = \
+                read_texture(textures[name]).reshape(-1, 4)[:len(left)]
     samples *= (weights / len(plan)).astype(np.float32)[:, None, None]
     own = samples.sum(axis=0, dtype=np.float64) * len(plan)
     tail = stacked_tails(samples, pass_tail_weights(plan, f["filter_width"]), listed, width,
@@ -759,6 +773,18 @@ def _subpixel_passes(f):
     for k, name in enumerate(names):
         texel[name][listed] = own[:, 4 * k:4 * k + 4]
     return {"texel": texel, "tails": tails}
+
+
+def _listed_centres(centre, centres, pixels, size):
+    """The pixel centres' G-buffer and the emitters' light there (``_centres``) at the
+    ``pixels`` list."""
+    listed = _compact("aa_list", {**centre.inputs, "pixels": pixels}, size)
+    raw = _compact("aa_list_raw", {
+        "gbuffer_position": centres["shine"], "gbuffer_normal": centres["unshadowed"],
+        "gbuffer_view": centres["unshadowed"], "pixels": pixels}, size)
+    listed["shine"] = raw["gbuffer_position"]
+    listed["unshadowed"] = raw["gbuffer_normal"]
+    return listed
 
 
 def _read_back(f):
@@ -834,7 +860,8 @@ ACCURATE_STAGES = (
     Stage("read-back", ("sums", "lamps", "edge", "seen", "plan", "result"),
           ("centre_texel", "edge_all", "listed"), _read_back, when=_reads_back,
           slice_end=False),
-    Stage("sub-pixel passes (GPU)", ("centre_texel", "edge_all", "listed", "centre", "plan",
+    Stage("sub-pixel passes (GPU)", ("centre_texel", "edge_all", "listed", "centre", "sums",
+                                     "plan",
                                      "seen_tris", "raster_shader", "vertex_batch",
                                      "low_diffuse", "low_glossy", "low_world", "diffuse_ao",
                                      "glossy", "glossy_world", "fields", "shine", "unshadowed",

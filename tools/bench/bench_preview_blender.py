@@ -177,15 +177,19 @@ STAGES = {"bvh_gather": "diffuse+AO gather", "bvh_glossy": "glossy gather",
           "upsample": "denoise + upsample", "bvh_direct": "direct light",
           "glossy_direct": "direct light", "bvh_emitter_glossy": "direct light",
           "aa_surface": "compose", "aa_light": "compose", "aa_mask": "compose",
-          "aa_list": "compose", "aa_list_raw": "compose", "gbuffer": "G-buffers",
+          "aa_list": "compose", "aa_list_raw": "compose", "aa_resolve": "compose",
+          "gbuffer": "G-buffers",
           "upsample_field": "direct light", "upsample_field_list": "direct light"}
 # Texel fetches per invocation of the kernels that trace no ray, read off their shaders: the
 # à-trous filter's 25 taps × (value, variance, position, normal) plus its 3 × 3 variance
 # prefilter, the upsample's 16 cells × 3, the composition's G-buffer, terms and sums; the
 # emitters' field's 9 taps × 4 and its point (and list entry); the sub-pixel passes' list
-# upsample also reads the three gathered terms at each tap (9 × 3 more) and the centre's.
+# upsample also reads the three gathered terms at each tap (9 × 3 more) and the centre's; the
+# sub-pixel samples' resolve its entry (4), each of the 3 × 3 centres' G-buffer and light
+# (3 + 5) and the 2 × 2's seven sums (an upper bound).
 FETCHES = {"denoise": 25 * 4 + 9, "upsample": 16 * 3, "aa_surface": 16, "aa_light": 5,
-           "aa_mask": 2, "aa_list": 4, "aa_list_raw": 4, "relax": 16 * 8,
+           "aa_mask": 2, "aa_list": 4, "aa_list_raw": 4, "aa_resolve": 4 + 9 * 8 + 4 * 7,
+           "relax": 16 * 8,
            "upsample_field": 9 * 4 + 2, "upsample_field_list": 9 * 7 + 6}
 
 

@@ -50,11 +50,12 @@ from .gather import (
     gather_glossy_world,
     radiance_cache,
 )
+from .resolve import combined_light, resolve_samples
 from .upsample import (
-    PLANE_TOLERANCE,
     STRIDES,
     EmitterField,
     field_stride,
+    same_surface,
     sample_pixels,
     upsample,
     upsample_at,
@@ -342,25 +343,6 @@ def subpixel_reach(plan) -> int:
     return int(math.ceil(largest - 1e-12)) if largest > 0.0 else 0
 
 
-def same_surface(hit_a, material_a, position_a, normal_a, hit_b, material_b, position_b,
-                 normal_b) -> np.ndarray:
-    """(…) bool: whether two G-buffer samples (hit (…) bool, material (…) int, position,
-    normal (…, 3)) see one surface: both see nothing, or both see the same material with
-    either point on the other's tangent plane within ``upsample.PLANE_TOLERANCE`` × their
-    distance (the joint-bilateral upsample's test; depth steps and creases are not).
-    ``edge_pixels`` tests neighbouring pixel centres with it; the sub-pixel passes a pass's
-    sample against its pixel's centre (the emitters' glossy light and unshadowed sum,
-    ``render_passes``); the GLSL port is render/shaders/same_surface.glsl."""
-    hit_a, hit_b = np.asarray(hit_a, bool), np.asarray(hit_b, bool)
-    step = np.asarray(position_b, np.float64) - np.asarray(position_a, np.float64)
-    off_plane = np.maximum(np.abs(np.einsum("...i,...i->...", normal_a, step)),
-                           np.abs(np.einsum("...i,...i->...", normal_b, step)))
-    apart = off_plane > PLANE_TOLERANCE * np.linalg.norm(step, axis=-1)
-    differ = (hit_a != hit_b) | (hit_a & hit_b & ((np.asarray(material_a) !=
-                                                   np.asarray(material_b)) | apart))
-    return ~differ
-
-
 def edge_pixels(hit, material, position, normal, reach: int) -> np.ndarray:
     """(H, W) bool: the pixels that need sub-pixel passes, from the pixel-centre G-buffer
     (hit (H, W) bool, material (H, W) int, position, normal (H, W, 3); row 0 on top). A pixel is
@@ -553,6 +535,14 @@ def add_tails(tails, values, pixels, weights: np.ndarray, width: int, height: in
             ok = (ty >= 0) & (ty < height) & (tx >= 0) & (tx < width)
             for name, value in values.items():
                 tails[name][ty[ok] * width + tx[ok]] += w * np.asarray(value, np.float64)[ok]
+
+
+def _resolve_view(seen, height: int, width: int) -> dict:
+    """A ray-cast G-buffer (``primary_visibility``'s) as ``resolve.resolve_samples`` reads
+    one: hit, material, position, normal, holdout as (H, W[, 3]) arrays."""
+    holdout = np.zeros((height, width), bool) if seen.holdout is None else seen.holdout
+    return {"hit": seen.hit, "material": np.where(seen.hit, seen.material, -1),
+            "position": seen.position, "normal": seen.normal, "holdout": holdout}
 
 
 def pack_sums(values) -> np.ndarray:
@@ -1159,29 +1149,42 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
             lamps["light"] = lamp_light(only["diffuse_direct"], only["diffuse_color"],
                                         only["glossy_direct"], only["glossy_color"])
 
-    # The centre pass off the geometry's edges, then its shadow and light edges join them
-    # (their centre pass is dropped) and the sub-pixel passes render all edges.
+    # The centre pass over every pixel, then its shadow and light edges join the geometry's
+    # and the sub-pixel passes render all edges: each sample takes the centres' sums around
+    # it where they see its surface and their light is smooth (resolve.resolve_samples), the
+    # others are shaded. The edge pixels' centre sums are what the samples resolve from.
     lamps = {}
-    shade(centre_seen, ~edge, centre_pass(light_samples)[1], lamps, taps=TEXTURE_TAPS)
+    shade(centre_seen, np.ones(height * width, bool), centre_pass(light_samples)[1], lamps,
+          taps=TEXTURE_TAPS)
     lit = light_edge_pixels(lamps["light"].reshape(height, width),
                             centre_seen.hit & ~edge.reshape(height, width), reach,
                             len(plan)).ravel()
-    for values in sums.values():
-        values[lit] = 0.0
     edge |= lit
     # Each sub-pixel pass's samples count in the neighbours by the filter at their own place.
     tails = new_sums(height * width)
     listed = np.flatnonzero(edge)
     if len(listed):
+        table, light = pack_sums(sums), combined_light(sums)
+        for values in sums.values():
+            values[edge] = 0.0
+        centres = _resolve_view(centre_seen, height, width)
         samples = []
         for (offset, block), weight in zip(plan, pass_weights(plan, filter_width)):
             one = new_sums(height * width)
-            shade(primary_visibility(camera_tris, snapshot.camera, width, height, offset),
-                  edge, block, into=one, offset=offset, share=AA_SIDE)
-            for name in SUMS:
-                sums[name][listed] += weight * one[name][listed]
-            samples.append(pack_sums({name: one[name][listed] for name in SUMS})
-                           * (weight / len(plan)))
+            seen_pass = primary_visibility(camera_tris, snapshot.camera, width, height, offset)
+            at = _resolve_view(seen_pass, height, width)
+            resolved, packed = resolve_samples(
+                centres, light, table, listed, width, height, offset,
+                {key: value.reshape(height * width, -1)[listed].squeeze(-1)
+                 if value.ndim == 2 else value.reshape(height * width, 3)[listed]
+                 for key, value in at.items()})
+            left = np.zeros(height * width, bool)
+            left[listed[~resolved]] = True
+            shade(seen_pass, left, block, into=one, offset=offset, share=AA_SIDE)
+            packed[~resolved] = pack_sums({name: one[name][listed[~resolved]] for name in SUMS})
+            for name, value in unpack_sums(packed).items():
+                sums[name][listed] += weight * value
+            samples.append(packed * (weight / len(plan)))
         tails = unpack_sums(stacked_tails(np.stack(samples), pass_tail_weights(plan, filter_width),
                                           listed, width, height))
     count = np.where(edge, len(plan), 1)

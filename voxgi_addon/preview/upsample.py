@@ -249,3 +249,23 @@ def _taps(valid, position, normal, stride: int, rows, cols, p, n, offset):
             w = (wu[di + 1] * wv[dj + 1] * valid[j, i] * facing ** NORMAL_POWER
                  * np.exp(-(plane / scale) ** 2)).astype(np.float32)
             yield j, i, w, step, nk
+
+
+def same_surface(hit_a, material_a, position_a, normal_a, hit_b, material_b, position_b,
+                 normal_b) -> np.ndarray:
+    """(…) bool: whether two G-buffer samples (hit (…) bool, material (…) int, position,
+    normal (…, 3)) see one surface: both see nothing, or both see the same material with
+    either point on the other's tangent plane within ``upsample.PLANE_TOLERANCE`` × their
+    distance (the joint-bilateral upsample's test; depth steps and creases are not).
+    ``passes.edge_pixels`` tests neighbouring pixel centres with it; the sub-pixel passes a
+    pass's sample against its pixel's centre (the emitters' glossy light and unshadowed sum,
+    ``passes.render_passes``) and against the centres around it (``resolve.resolve_samples``);
+    the GLSL port is render/shaders/same_surface.glsl."""
+    hit_a, hit_b = np.asarray(hit_a, bool), np.asarray(hit_b, bool)
+    step = np.asarray(position_b, np.float64) - np.asarray(position_a, np.float64)
+    off_plane = np.maximum(np.abs(np.einsum("...i,...i->...", normal_a, step)),
+                           np.abs(np.einsum("...i,...i->...", normal_b, step)))
+    apart = off_plane > PLANE_TOLERANCE * np.linalg.norm(step, axis=-1)
+    differ = (hit_a != hit_b) | (hit_a & hit_b & ((np.asarray(material_a) !=
+                                                   np.asarray(material_b)) | apart))
+    return ~differ
