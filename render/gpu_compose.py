@@ -29,7 +29,7 @@ LIGHT_SAMPLERS = ("colour", "direct_image", "shine_image", "sum_f", "sum_g")
 MASK_SAMPLERS = ("gbuffer_position", "pixels")
 COMPACT_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "pixels")
 RESOLVE_SAMPLERS = (*COMPACT_SAMPLERS, "centre_position", "centre_normal", "centre_view",
-                    *(f"sum_{k}" for k in (*SURFACE_SUMS, "g")))
+                    "centre_base", *(f"sum_{k}" for k in (*SURFACE_SUMS, "g")))
 RESOLVE_OUTPUTS = tuple(f"out_{k}" for k in (*SURFACE_SUMS, "g"))
 _aa_shaders: dict[str, object] = {}
 

@@ -715,7 +715,8 @@ def _subpixel_passes(f):
         inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": at}, list_size)
         blended = _run("aa_resolve", _RESOLVE_SAMPLERS, {
             **inputs, "pixels": pixels, "centre_position": centre.position,
-            "centre_normal": centre.normal, "centre_view": centre.view, **f["sums"]},
+            "centre_normal": centre.normal, "centre_view": centre.view,
+            "centre_base": centre.base, **f["sums"]},
             _RESOLVE_OUTPUTS, *list_size,
             constants={"resolve": (*offset, SPREAD, 0.0)})
         for k, name in enumerate(names):

@@ -4,7 +4,8 @@
  * aa_compact.glsl; gbuffer_* the pass's G-buffer there, position.w = 2 + id where it sees a
  * surface, 0 where not, -1 a holdout), the centres of its pixel's 3 × 3 that see the sample's
  * surface (centre_* the centres' G-buffer: same material, each on the other's tangent plane
- * within PLANE_TOLERANCE × their distance; both seeing nothing, or both a holdout) and their
+ * within PLANE_TOLERANCE × their distance, and no texture on it: centre_base.w > 0.5, whose
+ * colour the centre averages over its whole pixel; both seeing nothing, or both a holdout) and their
  * light (the light the centre pass's sums sum_* carry: emission and the four light passes,
  * summed over the channels). Where at least LEAST_CENTRES see it and their light spreads by at
  * most resolve.z of the largest, out_* = the bilinear blend of the sums of those of the 2 × 2
@@ -57,10 +58,11 @@ void main()
         bool ok = (cp.w > 0.5) == s_hit && (cp.w < -0.5) == s_holdout;
         if (ok && s_hit) {
           vec3 step = cp.xyz - sp.xyz;
-          float off_plane = max(abs(dot(sn, step)),
-                                abs(dot(texelFetch(centre_normal, q, 0).xyz, step)));
+          vec3 cn = texelFetch(centre_normal, q, 0).xyz;
+          float off_plane = max(abs(dot(sn, step)), abs(dot(cn, step)));
           ok = material == int(texelFetch(centre_view, q, 0).w + 0.5) &&
-               off_plane <= PLANE_TOLERANCE * length(step);
+               off_plane <= PLANE_TOLERANCE * length(step) &&
+               texelFetch(centre_base, q, 0).w < 0.5;
         }
         if (ok) {
           sees |= 1 << ((dr + 1) * 3 + dc + 1);

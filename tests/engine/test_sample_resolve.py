@@ -88,20 +88,24 @@ def test_a_sample_on_another_surface_takes_only_that_surfaces_light():
     np.testing.assert_allclose(blended[0], 1.0)
 
 
-@pytest.mark.parametrize("case", ["sliver", "off the plane"])
+@pytest.mark.parametrize("case", ["sliver", "off the plane", "textured"])
 def test_a_surface_too_few_centres_see_is_shaded(case):
     """A sliver only one centre sees (a thin object), or a point off every centre's plane (a
-    step in depth): nothing around tells how its light runs, so it is shaded."""
+    step in depth): nothing around tells how its light runs, so it is shaded. So is a
+    textured surface's sample: its centres' colour is their whole pixel's texture."""
     material = np.zeros((HEIGHT, WIDTH), np.int32)
+    centres = floor_centres(material)
     sample = dict(material=0)
     if case == "sliver":
         material[4, 5] = 2
         sample = dict(material=2)
-    else:
+    elif case == "off the plane":
         sample = dict(z=3.0)
+    else:
+        centres["textured"] = np.ones((HEIGHT, WIDTH), bool)
     light, values = light_table(0.0)
     listed = np.array([4 * WIDTH + 5])
-    resolved, _ = resolve_samples(floor_centres(material), light, values, listed, WIDTH, HEIGHT,
+    resolved, _ = resolve_samples(centres, light, values, listed, WIDTH, HEIGHT,
                                   (0.125, 0.125), samples_at(listed, (0.125, 0.125), **sample))
     assert not resolved[0]
 

@@ -537,12 +537,22 @@ def add_tails(tails, values, pixels, weights: np.ndarray, width: int, height: in
                 tails[name][ty[ok] * width + tx[ok]] += w * np.asarray(value, np.float64)[ok]
 
 
-def _resolve_view(seen, height: int, width: int) -> dict:
-    """A ray-cast G-buffer (``primary_visibility``'s) as ``resolve.resolve_samples`` reads
-    one: hit, material, position, normal, holdout as (H, W[, 3]) arrays."""
+def _resolve_view(seen, tris, height: int, width: int) -> dict:
+    """A ray-cast G-buffer (``primary_visibility``'s, of ``tris``) as
+    ``resolve.resolve_samples`` reads one: hit, material, position, normal, holdout, textured
+    (its material has a Base Color or emission texture) as (H, W[, 3]) arrays."""
     holdout = np.zeros((height, width), bool) if seen.holdout is None else seen.holdout
+    textured = np.zeros((height, width), bool)
+    tex = getattr(tris, "textures", None)
+    if tex is not None:
+        hit = np.flatnonzero(seen.hit.ravel())
+        materials = np.asarray(tris.materials)[seen.triangle.ravel()[hit]]
+        row = tex.row_of(materials)
+        emissive = tex.emission_slots[row] >= 0 if tex.emission_slots is not None else False
+        textured.ravel()[hit] = (tex.slots[row] >= 0) | emissive
     return {"hit": seen.hit, "material": np.where(seen.hit, seen.material, -1),
-            "position": seen.position, "normal": seen.normal, "holdout": holdout}
+            "position": seen.position, "normal": seen.normal, "holdout": holdout,
+            "textured": textured}
 
 
 def pack_sums(values) -> np.ndarray:
@@ -1167,12 +1177,12 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         table, light = pack_sums(sums), combined_light(sums)
         for values in sums.values():
             values[edge] = 0.0
-        centres = _resolve_view(centre_seen, height, width)
+        centres = _resolve_view(centre_seen, tris, height, width)
         samples = []
         for (offset, block), weight in zip(plan, pass_weights(plan, filter_width)):
             one = new_sums(height * width)
             seen_pass = primary_visibility(camera_tris, snapshot.camera, width, height, offset)
-            at = _resolve_view(seen_pass, height, width)
+            at = _resolve_view(seen_pass, tris, height, width)
             resolved, packed = resolve_samples(
                 centres, light, table, listed, width, height, offset,
                 {key: value.reshape(height * width, -1)[listed].squeeze(-1)

@@ -12,13 +12,15 @@ each geometric sample the light of the shaded pixels around it that lie on its o
 Here a sample takes the bilinear blend of the pixel centres around its place in the image (the
 2 × 2 whose square holds it) that see its surface (``upsample.same_surface``: same material,
 on each other's tangent plane), or, where none of the four does, the nearest such centre among
-its pixel's 3 × 3. It is **resolved** only where that light is known to be smooth: at least
-``LEAST_CENTRES`` of the 3 × 3 centres see its surface and their light spreads by at most
-``SPREAD`` of the largest. Elsewhere — a shadow's or a contact's edge running through the pixel,
-a sliver of a surface no centre sees — the sample is shaded as before (the caller's pass over
-the samples left). The light compared is the sum of the light the sums carry (``light``, the
-caller's: Combined before the film's division), so a colour edge within one material (a
-texture) counts as well.
+its pixel's 3 × 3. A textured surface's centre stands in for no sample: it averages the
+texture over its whole pixel (``textures.primary_base``'s taps), so a sample taking it would
+blur the texture once more (the glTF diorama's Diffuse Color, measured). It is **resolved**
+only where that light is known to be smooth: at least ``LEAST_CENTRES`` of the 3 × 3 centres
+see its surface and their light spreads by at most ``SPREAD`` of the largest. Elsewhere — a
+shadow's or a contact's edge running through the pixel, a sliver of a surface no centre sees —
+the sample is shaded as before (the caller's pass over the samples left). The light compared
+is the sum of the light the sums carry (``light``, the caller's: Combined before the film's
+division).
 """
 from __future__ import annotations
 
@@ -59,7 +61,9 @@ def resolve_samples(centre, light, values, listed, width: int, height: int, offs
     pass's sub-pixel offset (x right, y down, pixels); sample : the samples' G-buffer in the
     same keys, hit (N,), material (N,), position and normal (N, 3). Both may hold "holdout"
     (a holdout hides what is behind: it sees nothing, but only a holdout stands in for
-    another). A sample not resolved has blended 0 (the caller shades it)."""
+    another); centre may hold "textured" (H, W) bool: a centre on a textured surface stands
+    in for no sample (its colour is its whole pixel's texture, not the sample's). A sample
+    not resolved has blended 0 (the caller shades it)."""
     listed = np.asarray(listed, np.int64)
     count = len(listed)
     values = np.asarray(values)
@@ -78,6 +82,8 @@ def resolve_samples(centre, light, values, listed, width: int, height: int, offs
             for key in ("hit", "material", "position", "normal")}
     centre_holdout = np.asarray(centre.get("holdout", np.zeros((height, width), bool)),
                                 bool).ravel()
+    centre_textured = np.asarray(centre.get("textured", np.zeros((height, width), bool)),
+                                 bool).ravel()
     s_hit = np.asarray(sample["hit"], bool)
     s_material = np.asarray(sample["material"])
     s_position = np.asarray(sample["position"], np.float32)
@@ -99,7 +105,8 @@ def resolve_samples(centre, light, values, listed, width: int, height: int, offs
             step = flat["position"][at] - s_position
             off_plane = np.maximum(np.abs(np.einsum("ij,ij->i", s_normal, step)),
                                    np.abs(np.einsum("ij,ij->i", flat["normal"][at], step)))
-            apart = off_plane > PLANE_TOLERANCE * np.sqrt(np.einsum("ij,ij->i", step, step))
+            apart = (off_plane > PLANE_TOLERANCE * np.sqrt(np.einsum("ij,ij->i", step, step))) | \
+                centre_textured[at]
             c_hit = flat["hit"][at, 0]
             sees = inside & (c_hit == s_hit) & (centre_holdout[at] == s_holdout) & \
                 (~s_hit | ((flat["material"][at, 0] == s_material) & ~apart))
