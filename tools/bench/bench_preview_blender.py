@@ -267,9 +267,9 @@ def profiled(fn, profile: Profile):
         return dispatch_bvh
 
     def compose_wrapper(original):
-        def run(kernel, samplers, inputs, outputs, width, height):
+        def run(kernel, samplers, inputs, outputs, width, height, constants=None):
             t0 = time.perf_counter()
-            out = original(kernel, samplers, inputs, outputs, width, height)
+            out = original(kernel, samplers, inputs, outputs, width, height, constants)
             _finish(next(iter(out.values())))
             profile.add(kernel, time.perf_counter() - t0,
                         *_traversals(kernel, width, height, None, lights))
