@@ -219,6 +219,14 @@ def _traversals(kernel, width, height, constants, lights) -> tuple[float, float]
     return 0.0, invocations * FETCHES.get(kernel, 4)
 
 
+def _on_gpu(lines) -> None:
+    """Stop the row if the preview fell back to the numpy tracer (its report says why): the
+    bench times the GPU tracer, and a fallback would time something else silently."""
+    fallback = [text for _, text in lines if "numpy tracer used" in text]
+    if fallback:
+        raise SystemExit(fallback[0])
+
+
 class Profile:
     """Every dispatch of the tracer timed to completion and its work counted, by stage."""
 
@@ -435,6 +443,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     passes, lines = profiled(preview, first_profile)
     first = time.perf_counter() - t0
+    _on_gpu(lines)
     first_compiles = (len(compiles), sum(compiles))
     if args.first_only:
         print("FIRST " + json.dumps({"first": first, "compiles": first_compiles[0],
@@ -456,7 +465,7 @@ def main(argv=None) -> int:
     profile = Profile()
     gpu_gather._cache_upload.clear()
     t0 = time.perf_counter()
-    profiled(preview, profile)
+    _on_gpu(profiled(preview, profile)[1])
     profiled_total = time.perf_counter() - t0
     ref, mask, ref_source = reference(args.scene, scene, width, height, args.quick)
     error = relative_l1(passes["Combined"], ref, mask)
