@@ -281,7 +281,7 @@ def test_sub_pixel_samples_take_the_light_of_the_centres_that_see_their_surface(
     sub-pixel samples take the light of the shaded pixel centres around them that see their
     surface (aa_resolve.glsl, ``preview.resolve``) and only the rest are shaded; the image is
     the one shading every sample gives, to within a hundredth, in a hall of silhouettes and
-    sunlit edges (measured: 44% resolved, Combined 0.0006 apart)."""
+    sunlit edges (measured: 69% resolved, Combined 0.0021 apart)."""
     from voxgi.render import gpu_preview
     from voxgi.render.gpu_tracer import read_texture
 
@@ -301,7 +301,7 @@ def test_sub_pixel_samples_take_the_light_of_the_centres_that_see_their_surface(
     resolved, timings = preview("columned_hall")
     assert "sub-pixel passes (GPU)" in timings
     assert counts["samples"] > 1000
-    assert counts["resolved"] >= counts["samples"] / 3, counts
+    assert counts["resolved"] >= counts["samples"] / 2, counts
     monkeypatch.setattr(gpu_preview, "SPREAD", -1.0)  # no sample resolved where there is light
     counts.update(samples=0, resolved=0)
     shaded, _ = preview("columned_hall")

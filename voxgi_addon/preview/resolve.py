@@ -35,7 +35,7 @@ __all__ = ["LEAST_CENTRES", "SPREAD", "combined_light", "resolve_samples"]
 # The most the light of the centres that see a sample's surface may spread (relative to the
 # largest) for the sample to take their blend (measured: docs/gi_pipeline.md "Anti-aliasing at
 # the cost of a sample")
-SPREAD = 0.1
+SPREAD = 0.3
 # The fewest of its pixel's 3 × 3 centres that must see a sample's surface: one alone says
 # nothing of how the light runs across it
 LEAST_CENTRES = 2
