@@ -855,7 +855,7 @@ ACCURATE_STAGES = (
     Stage("emitters' unshadowed light (GPU)", ("centre", "fields"), ("unshadowed",),
           _emitter_unshadowed, when=_has_emitters),
     Stage("edge pixels", ("plan", "seen"), ("edge",), _edge_pixels, slice_end=False),
-    Stage("direct (GPU)", ("centre", "plan", "edge", "diffuse_ao", "glossy", "glossy_world", "shine",
+    Stage("direct (GPU)", ("centre", "plan", "diffuse_ao", "glossy", "glossy_world", "shine",
                            "unshadowed", "gather_settings"),
           ("sums", "lamps", "result"), _centre_pass, slice_end=False),
     Stage("read-back", ("sums", "lamps", "edge", "seen", "plan", "result"),

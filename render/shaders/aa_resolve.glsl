@@ -113,7 +113,7 @@ void main()
         g *= inverse;
         resolved = true;
       }
-      else if (nearest.x >= 0) {
+      else { /* at least LEAST_CENTRES see it: there is a nearest */
         a = texelFetch(sum_a, nearest, 0);
         b = texelFetch(sum_b, nearest, 0);
         c = texelFetch(sum_c, nearest, 0);

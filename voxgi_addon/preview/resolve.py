@@ -129,9 +129,9 @@ def resolve_samples(centre, light, values, listed, width: int, height: int, offs
                          1e-6, 0.0)
             weight += w
             total += w[:, None] * values[at]
+    # (a smooth sample has a nearest centre: at least LEAST_CENTRES see its surface)
     blend = weight > 0.0
-    resolved = smooth & (blend | (nearest >= 0))
     blended[blend] = total[blend] / weight[blend, None]
-    alone = resolved & ~blend
+    alone = smooth & ~blend
     blended[alone] = values[nearest[alone]]
-    return resolved, blended
+    return smooth, blended
