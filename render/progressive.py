@@ -67,6 +67,10 @@ LEAST_TILE = 48       # pixels: about the smallest tile side (preview.progressiv
 # tile is several steps, so the longest stage is no longer the gather's one dispatch and the
 # tiles grow (docs/gi_pipeline.md "Viewport samples whose gathers end early")
 SLICE_TRAVERSALS = 8
+# slices of a kind whose stage times predict that stage in the next one: the longest of them,
+# scaled up to the next slice's pixels (the last one's time alone let a tile cut by the
+# image's border predict a whole tile's stage; draws ran to 35-50 ms)
+STAGE_HISTORY = 4
 
 
 def base_options(settings, width: int, height: int) -> dict:
@@ -124,10 +128,12 @@ class ProgressiveImage:
         self.running = None        # the slice under way: a generator of its stages
         self.running_started = 0.0
         self.longest_stage = 0.0
-        # (slice kind, stage index) → its seconds in the last slice of that kind: a slice's
-        # stages come in the same order each time, so they predict the next one's
-        self.stage_seconds: dict[tuple[str, int], float] = {}
+        # (slice kind, stage index) → (seconds, pixels) in the last STAGE_HISTORY slices of
+        # that kind: a slice's stages come in the same order each time, so they predict the
+        # next one's (``predicted``)
+        self.stage_seconds: dict[tuple[str, int], list[tuple[float, int]]] = {}
         self.running_kind, self.running_stage = "", 0
+        self.running_pixels = 0    # the slice under way's pixels (its tile's, the coarse's)
         self.fixed_pixels: int | None = None  # tests: every slice this many pixels
         self.key = None
         # the samples' sums and the shown image live on the GPU (gpu_accumulation): a slice
@@ -270,8 +276,11 @@ class ProgressiveImage:
             return Slice("wait", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
         t0 = time.perf_counter() - spent  # the draw's start
         kind = "coarse" if self.coarse_pending else self.sample_kind()
-        upcoming = self.stage_seconds.get(
-            (kind, self.running_stage if self.running is not None else 0))
+        if self.running is not None:
+            upcoming = self.predicted(kind, self.running_stage, self.running_pixels)
+        else:
+            upcoming = self.predicted(kind, 0, self.tiles[0][2] * self.tiles[0][3]
+                                      if self.tiles and kind != "coarse" else 0)
         share = WORK_SHARE * max(self.budget, self.stage_budget or 0.0)
         if staged and spent > 0.0 and (spent + upcoming > share if upcoming is not None
                                        else spent > 0.5 * share):
@@ -305,7 +314,9 @@ class ProgressiveImage:
                 raise
             seconds = time.perf_counter() - s0
             self.longest_stage = max(self.longest_stage, seconds)
-            self.stage_seconds[self.running_kind, self.running_stage] = seconds
+            key = self.running_kind, self.running_stage
+            self.stage_seconds[key] = [*self.stage_seconds.get(key, ()),
+                                       (seconds, self.running_pixels)][-STAGE_HISTORY:]
             self.running_stage += 1
             if staged:
                 # stop at the stage budget, or before a next stage that took the last slice of
@@ -316,13 +327,25 @@ class ProgressiveImage:
                 # is taken to be as long as the longest one timed, and at least half a
                 # stage's budget (the first coarse image's later stages run 7–11 ms after
                 # early ones of 1–4: two of them in a call made 21–27 ms)
-                upcoming = self.stage_seconds.get(
-                    (self.running_kind, self.running_stage),
-                    max(max(self.stage_seconds.values(), default=0.0),
-                        UNTIMED_SHARE * self.stage_budget))
+                upcoming = self.predicted(self.running_kind, self.running_stage,
+                                          self.running_pixels)
+                if upcoming is None:
+                    upcoming = max(max((t for times in self.stage_seconds.values()
+                                        for t, _ in times), default=0.0),
+                                   UNTIMED_SHARE * self.stage_budget)
                 if spent >= self.stage_budget or counters.compiles != compiles or \
                         spent + upcoming > WORK_SHARE * max(self.budget, self.stage_budget):
                     return Slice("stage", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
+
+    def predicted(self, kind: str, index: int, pixels: int) -> float | None:
+        """Seconds stage ``index`` of the next slice of ``kind`` (``pixels`` of it; 0:
+        unknown) is taken to run: the longest of its last STAGE_HISTORY, each scaled up to
+        ``pixels`` where it ran over fewer (never down: a stage's fixed cost stays); None
+        when it never ran."""
+        times = self.stage_seconds.get((kind, index))
+        if not times:
+            return None
+        return max(t * max(1.0, pixels / p) if pixels and p else t for t, p in times)
 
     def _slice(self, trace, view, window, settings, filter_width: float):
         """The next slice — the coarse image or one tile — as a generator of stages: the
@@ -345,6 +368,7 @@ class ProgressiveImage:
             gather, lights = sample_settings(options["gather_settings"],
                                              options["light_samples"], self.target, 0,
                                              gathering=self.target)  # a quick image
+            self.running_pixels = size[0] * size[1]
             camera = camera_from_view(view, window, *size)
             centre = self.coarse_centre(size) if self.coarse_centre is not None else None
             self.coarse_centre = None
@@ -367,6 +391,7 @@ class ProgressiveImage:
             if not self.tiles:
                 self._next_tiles(options["gi_stride"])
             rect = self.tiles.pop(0)
+            self.running_pixels = rect[2] * rect[3]
             gather, lights = sample_settings(options["gather_settings"],
                                              options["light_samples"], self.target, self.sample)
             full = camera_from_view(view, window, width, height)

@@ -389,3 +389,21 @@ def test_the_frame_stays_on_the_gpu_no_draw_reads_anything_back(voxgi, monkeypat
         assert reads == [], f"{quality}, Bounces {bounces}: {len(reads)} read-backs in view_draw"
         if bounces > 1:
             assert renderer.cache.texture is not None and renderer.cache._cache is None
+
+
+def test_a_stage_is_predicted_by_its_longest_recent_run_scaled_to_the_next_tile():
+    """A draw stops before a stage that would end past its share of the 30 ms budget, as
+    predicted from the slices before: the longest of that stage's last runs, scaled up to the
+    next tile's pixels where it ran over fewer (a border tile's short run predicted a whole
+    tile's stage, and draws ran to 35–50 ms), never scaled down."""
+    from voxgi.render.progressive import STAGE_HISTORY, ProgressiveImage
+
+    image = ProgressiveImage()
+    assert image.predicted("tile", 1, 10_000) is None  # never ran
+    runs = [(0.004, 10_000), (0.009, 10_000), (0.002, 2_500), (0.005, 10_000)]
+    image.stage_seconds[("tile", 1)] = runs[-STAGE_HISTORY:]
+    assert image.predicted("tile", 1, 10_000) == 0.009  # the longest, not the last
+    assert image.predicted("tile", 1, 20_000) == 0.018  # scaled up to a bigger tile
+    assert image.predicted("tile", 1, 1_000) == 0.009   # not down to a smaller one
+    assert image.predicted("tile", 1, 0) == 0.009       # pixels unknown
+    assert image.predicted("lit tile", 1, 10_000) is None  # a kind of its own

@@ -50,6 +50,10 @@ SEED_STEP = 7919  # seeds of successive samples: far apart in the hashed sequenc
 # edges and the shadows' strata alone (docs/gi_pipeline.md "Viewport samples whose gathers end
 # early").
 GATHER_SAMPLES = 4
+# The quantile of the measured slices that a slice sizer fits into its budget (``SliceSizer``):
+# sized by the median, one staged draw in nine ran 25–44 ms against the 30 ms budget
+# (docs/gi_pipeline.md "Entering Rendered mode")
+TAIL = 0.9
 
 
 def gather_samples(samples: int) -> int:
@@ -499,16 +503,20 @@ class SliceSizer:
     """Pixels per slice for a time budget, from measured slices: seconds ≈ fixed + per_pixel ×
     pixels, fitted robustly (Theil–Sen: the median slope between slices of different sizes,
     then the median intercept) over the last ``keep`` slices, so a slice that waited for a
-    kernel compile or another process does not skew it. Until there is a measurement:
+    kernel compile or another process does not skew it. The budget is met by the slices'
+    ``TAIL`` quantile, not their median: the model is scaled by that quantile of the measured
+    over the modelled seconds (at least 1), so a machine whose slices scatter (another process,
+    the worker thread's Python) gets smaller ones. Until there is a measurement:
     ``first_pixels``; while the measured slices have one size, twice that (the fit needs two),
-    and after a fit the last fit, with every ``explore``-th call asking 2 × the fitted or the
-    last measured size, whichever is larger (a tile of another size: ``tile_side``), so the
-    fit follows a machine whose load changes even where the smallest tile holds every slice.
-    A slice never has fewer pixels than its fixed cost is worth (fixed / per_pixel: at least
-    half of it tracing), so where the fixed cost alone is over the budget (a slow or loaded
-    machine) slices run over it rather than spend most of their time on overhead — unless
-    ``amortize`` is False (the viewport's staged slices, sized by their longest stage: a
-    bigger slice would only make that stage longer), where such a machine gets ``least``."""
+    and after a fit the last fit. When the recent slices have one size (the image's tiles all
+    alike), every ``explore``-th call asks another: half the fitted size, which stays within
+    the budget, or, where the smallest tile holds every slice, 2 × the last measured size, so
+    the fit follows a machine whose load changes there too. A slice never has fewer pixels
+    than its fixed cost is worth (fixed / per_pixel: at least half of it tracing), so where the
+    fixed cost alone is over the budget (a slow or loaded machine) slices run over it rather
+    than spend most of their time on overhead — unless ``amortize`` is False (the viewport's
+    staged slices, sized by their longest stage: a bigger slice would only make that stage
+    longer), where such a machine gets ``least``."""
 
     def __init__(self, budget: float, first_pixels: int = 4096, least: int = 256,
                  keep: int = 48, explore: int = 4, amortize: bool = True):
@@ -523,13 +531,18 @@ class SliceSizer:
     def measured(self, pixels: int, seconds: float) -> None:
         self.samples = [*self.samples, (int(pixels), float(seconds))][-self.keep:]
 
+    def _sized(self) -> bool:
+        """Whether the kept slices have sizes far enough apart to fit a slope."""
+        p = [s[0] for s in self.samples]
+        return len(p) >= 2 and max(p) - min(p) > 0.25 * sum(p) / len(p)
+
     def model(self) -> tuple[float, float] | None:
         """(fixed seconds, seconds per pixel), or None until two sizes were measured; while
         the recent slices have one size, the last fit from two."""
+        if not self._sized():
+            return self.fitted
         p = np.array([s[0] for s in self.samples], np.float64)
         t = np.array([s[1] for s in self.samples], np.float64)
-        if len(p) < 2 or np.ptp(p) <= 0.25 * p.mean():
-            return self.fitted
         i, j = np.triu_indices(len(p), 1)
         apart = np.abs(p[i] - p[j]) > 0.25 * p.mean()
         slope = float(np.median((t[i] - t[j])[apart] / (p[i] - p[j])[apart]))
@@ -539,9 +552,21 @@ class SliceSizer:
             self.fitted = max(float(np.median(t - slope * p)), 0.0), slope
         return self.fitted
 
+    def tail(self) -> float:
+        """How much longer than the model the ``TAIL`` quantile of the kept slices ran (at
+        least 1): what the budget is divided by."""
+        fitted = self.model()
+        if fitted is None or not self.samples:
+            return 1.0
+        fixed, per_pixel = fitted
+        p = np.array([s[0] for s in self.samples], np.float64)
+        t = np.array([s[1] for s in self.samples], np.float64)
+        modelled = np.maximum(fixed + per_pixel * p, 1e-9)
+        return max(1.0, float(np.quantile(t / modelled, TAIL)))
+
     def pixels(self, most: int, explore: bool = True) -> int:
         """Pixels of the next slice, between ``least`` and ``most``. explore False: the fitted
-        size only, never a larger one to measure (a slice the view waits for: the coarse
+        size only, never another one to measure (a slice the view waits for: the coarse
         first image)."""
         fitted = self.model()
         if explore:
@@ -550,10 +575,13 @@ class SliceSizer:
             pixels = 2 * self.samples[-1][0] if self.samples and explore else self.first_pixels
         else:
             fixed, per_pixel = fitted
-            spare = max(self.budget - fixed, fixed if self.amortize else 0.0)
+            budget = self.budget / self.tail()
+            spare = max(budget - fixed, fixed if self.amortize else 0.0)
             pixels = spare / per_pixel
-            if explore and self.explore and self.calls % self.explore == 0:  # another size
-                pixels = 2.0 * max(pixels, self.samples[-1][0] if self.samples else 0)
+            if explore and self.explore and self.calls % self.explore == 0 and \
+                    not self._sized():  # another size, for the fit
+                pixels = (0.5 * pixels if pixels >= 2 * self.least else
+                          2.0 * max(pixels, self.samples[-1][0] if self.samples else 0))
         return int(max(min(self.least, most), min(most, pixels)))
 
 
