@@ -40,7 +40,11 @@ from ..voxgi_addon.preview.debug_instances import (
 )
 from ..voxgi_addon.preview.progressive import SliceSizer
 
-SLICE_BUDGET = 0.020  # seconds of cubes one draw aims at (of issue 19's 30 ms a draw)
+# seconds of cubes one draw aims at: half of a draw's 30 ms (issue 19), as the GI view's
+# stages (render/progressive.py STAGE_SHARE): the layer put over the view with its depth
+# costs 5–14 ms of the draw on its own, and at 20 ms the longest draws of a million cubes
+# ran 35 ms (60 ms with the sizer at its median)
+SLICE_BUDGET = 0.015
 FIRST_SLICE = 4096    # instances of the first slice, before any was measured
 LEAST_SLICE = 4096    # the fewest instances a slice draws
 
