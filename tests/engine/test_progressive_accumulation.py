@@ -267,6 +267,17 @@ def test_the_slice_sizer_fits_the_budget_with_the_slices_tail_not_their_median()
     fixed, per_pixel = scattered.model()
     ratios = np.array([t / (fixed + per_pixel * p) for p, t in scattered.samples])
     assert np.sum(ratios * (fixed + per_pixel * pixels) <= 0.015) >= 43
+    # a slice that waited once (a kernel's build: 17 s) is no scatter: it shrinks no slice
+    steady.measured(6000, 17.0)
+    assert steady.tail() == pytest.approx(1.0)
+    # nor do the first few slices, whose quantile is their longest
+    few = SliceSizer(0.015, least=256)
+    for pixels, seconds in ((4000, 0.008), (8000, 0.008), (6000, 0.024)):
+        few.measured(pixels, seconds)
+    assert few.tail() == 1.0
+    for pixels, seconds in few.samples * 2:  # the same again: now the quantile is taken
+        few.measured(pixels, seconds)
+    assert few.tail() > 1.5
 
 
 def test_the_gathers_are_accumulated_per_cell_of_the_images_grid():

@@ -54,6 +54,8 @@ GATHER_SAMPLES = 4
 # sized by the median, one staged draw in nine ran 25–44 ms against the 30 ms budget
 # (docs/gi_pipeline.md "Entering Rendered mode")
 TAIL = 0.9
+TAIL_LEAST = 8   # slices measured before the quantile is taken
+ONE_OFF = 3.0    # a slice this many times the median's ratio to the model waited once
 
 
 def gather_samples(samples: int) -> int:
@@ -554,15 +556,19 @@ class SliceSizer:
 
     def tail(self) -> float:
         """How much longer than the model the ``TAIL`` quantile of the kept slices ran (at
-        least 1): what the budget is divided by."""
+        least 1): what the budget is divided by. 1 until ``TAIL_LEAST`` slices were measured
+        (the quantile of a few is their longest); a slice more than ``ONE_OFF`` times its
+        model's median ratio waited for something once (a kernel's build, another process's
+        burst), which no size would have kept within the budget: it is left out."""
         fitted = self.model()
-        if fitted is None or not self.samples:
+        if fitted is None or len(self.samples) < TAIL_LEAST:
             return 1.0
         fixed, per_pixel = fitted
         p = np.array([s[0] for s in self.samples], np.float64)
         t = np.array([s[1] for s in self.samples], np.float64)
-        modelled = np.maximum(fixed + per_pixel * p, 1e-9)
-        return max(1.0, float(np.quantile(t / modelled, TAIL)))
+        ratio = t / np.maximum(fixed + per_pixel * p, 1e-9)
+        ratio = ratio[ratio <= ONE_OFF * np.median(ratio)]
+        return max(1.0, float(np.quantile(ratio, TAIL)))
 
     def pixels(self, most: int, explore: bool = True) -> int:
         """Pixels of the next slice, between ``least`` and ``most``. explore False: the fitted
