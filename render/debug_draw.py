@@ -39,12 +39,13 @@ from ..voxgi_addon.preview.debug_instances import (
     spread,
 )
 from ..voxgi_addon.preview.progressive import SliceSizer
+from . import progressive
 
-# seconds of cubes one draw aims at: half of a draw's 30 ms (issue 19), as the GI view's
-# stages (render/progressive.py STAGE_SHARE): the layer put over the view with its depth
-# costs 5–14 ms of the draw on its own, and at 20 ms the longest draws of a million cubes
-# ran 35 ms (60 ms with the sizer at its median)
-SLICE_BUDGET = 0.015
+# seconds of cubes one draw aims at: the share of a draw's 30 ms the GI view's stages get
+# (render/progressive.py STAGE_SHARE; docs/gi_pipeline.md "Slices sized by their tail, stages
+# predicted by their longest runs"): the layer put over the view with its depth costs 5–14 ms
+# of the draw on its own, and at 20 ms of cubes the longest draws of a million cubes ran 35 ms
+SLICE_BUDGET = progressive.SLICE_BUDGET * progressive.STAGE_SHARE
 FIRST_SLICE = 4096    # instances of the first slice, before any was measured
 LEAST_SLICE = 4096    # the fewest instances a slice draws
 

@@ -52,7 +52,7 @@ SEED_STEP = 7919  # seeds of successive samples: far apart in the hashed sequenc
 GATHER_SAMPLES = 4
 # The quantile of the measured slices that a slice sizer fits into its budget (``SliceSizer``):
 # sized by the median, one staged draw in nine ran 25–44 ms against the 30 ms budget
-# (docs/gi_pipeline.md "Entering Rendered mode")
+# (docs/gi_pipeline.md "Slices sized by their tail, stages predicted by their longest runs")
 TAIL = 0.9
 TAIL_LEAST = 8   # slices measured before the quantile is taken
 ONE_OFF = 3.0    # a slice this many times the median's ratio to the model waited once
