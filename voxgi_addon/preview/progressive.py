@@ -554,13 +554,14 @@ class SliceSizer:
             self.fitted = max(float(np.median(t - slope * p)), 0.0), slope
         return self.fitted
 
-    def tail(self) -> float:
+    def tail(self, fitted: tuple[float, float] | None = None) -> float:
         """How much longer than the model the ``TAIL`` quantile of the kept slices ran (at
         least 1): what the budget is divided by. 1 until ``TAIL_LEAST`` slices were measured
         (the quantile of a few is their longest); a slice more than ``ONE_OFF`` times its
         model's median ratio waited for something once (a kernel's build, another process's
-        burst), which no size would have kept within the budget: it is left out."""
-        fitted = self.model()
+        burst), which no size would have kept within the budget: it is left out. fitted : the
+        ``model()`` the caller has already fitted (None: fitted here)."""
+        fitted = self.model() if fitted is None else fitted
         if fitted is None or len(self.samples) < TAIL_LEAST:
             return 1.0
         fixed, per_pixel = fitted
@@ -581,7 +582,7 @@ class SliceSizer:
             pixels = 2 * self.samples[-1][0] if self.samples and explore else self.first_pixels
         else:
             fixed, per_pixel = fitted
-            budget = self.budget / self.tail()
+            budget = self.budget / self.tail(fitted)
             spare = max(budget - fixed, fixed if self.amortize else 0.0)
             pixels = spare / per_pixel
             if explore and self.explore and self.calls % self.explore == 0 and \
