@@ -39,13 +39,14 @@ from ..voxgi_addon.preview.debug_instances import (
     spread,
 )
 from ..voxgi_addon.preview.progressive import SliceSizer
-from . import progressive
 
 # seconds of cubes one draw aims at: the share of a draw's 30 ms the GI view's stages get
-# (render/progressive.py STAGE_SHARE; docs/gi_pipeline.md "Slices sized by their tail, stages
-# predicted by their longest runs"): the layer put over the view with its depth costs 5–14 ms
-# of the draw on its own, and at 20 ms of cubes the longest draws of a million cubes ran 35 ms
-SLICE_BUDGET = progressive.SLICE_BUDGET * progressive.STAGE_SHARE
+# (render/progressive.py SLICE_BUDGET × STAGE_SHARE, not imported: importing the tracer's
+# module with the debug view made the process crash at exit; docs/gi_pipeline.md "Slices
+# sized by their tail, stages predicted by their longest runs"): the layer put over the view
+# with its depth costs 5–14 ms of the draw on its own, and at 20 ms of cubes the longest
+# draws of a million cubes ran 35 ms
+SLICE_BUDGET = 0.015
 FIRST_SLICE = 4096    # instances of the first slice, before any was measured
 LEAST_SLICE = 4096    # the fewest instances a slice draws
 
