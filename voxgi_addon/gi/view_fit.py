@@ -37,7 +37,7 @@ import numpy as np
 
 from ..errors import VoxGIError
 from ..scene.geometry import world_triangles
-from ..scene.raycast import few_rays_grid, primary_visibility
+from ..scene.raycast import camera_first_hits, few_rays_grid, primary_visibility
 from ..voxelize.packing import MAX_CELLS_PER_AXIS
 from .cascades import MAX_CASCADES, CascadeGrid, place_cascades
 
@@ -216,9 +216,7 @@ def _value_bytes(value):
 def _first_hits(snapshot, objects, camera, width, height):
     """(depth (N,), point (N, 3), shows a point (N,)) of the probe rays on ``objects`` only."""
     tris = world_triangles(dataclasses.replace(snapshot, objects=objects), shading=False)
-    few_rays_grid(tris)
-    hits = primary_visibility(tris, camera, width, height)
-    return hits.depth.reshape(-1), hits.position.reshape(-1, 3), hits.hit.reshape(-1)
+    return camera_first_hits(tris, camera, width, height)
 
 
 def _split_hits(snapshot, width, height, previous: ViewProbe | None):

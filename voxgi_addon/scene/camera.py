@@ -23,7 +23,7 @@ from .snapshot import CameraData
 
 __all__ = ["DEFAULT_FILTER_WIDTH", "camera_frame", "camera_rays", "camera_ray_lengths",
            "filter_offsets", "filter_on_grid", "filter_samples",
-           "view_projection"]
+           "image_points", "view_projection"]
 
 DEFAULT_FILTER_WIDTH = 1.5  # pixels: Cycles' default Blackman-Harris Filter Size
 _FILTER_TABLE = 4096  # entries of the filter's inverse CDF
@@ -197,6 +197,26 @@ def camera_rays(camera: CameraData, width: int | None = None, height: int | None
         local_origins = local_dirs * near  # the point on the near plane z = -near
         local_dirs /= np.linalg.norm(local_dirs, axis=1, keepdims=True)
     return local_origins @ rotation.T + position, local_dirs @ rotation.T
+
+
+def image_points(camera: CameraData, points: np.ndarray, width: int, height: int):
+    """(x, y, in front) of world ``points`` (N, 3) on a ``width`` × ``height`` image of
+    ``camera``, in pixels as ``camera_rays`` places them (pixel (row j, column i) has its centre
+    at x = i + ½, y = j + ½, row 0 on top); in front (N,) bool: the point lies ahead of the
+    camera's eye (always for an orthographic camera), where x and y are meaningful."""
+    cx, cy, hx, hy = _frustum(camera, width, height)
+    rotation, position = camera_frame(camera)
+    local = (np.asarray(points, np.float64).reshape(-1, 3) - position) @ rotation
+    x, y = local[:, 0], local[:, 1]
+    if camera.type == "ORTHO":
+        front = np.ones(len(local), bool)
+    else:
+        depth = -local[:, 2]
+        front = depth > 0.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x, y = x / depth, y / depth
+    return (((x - cx) / hx + 1.0) * (0.5 * width), (1.0 - (y - cy) / hy) * (0.5 * height),
+            front)
 
 
 def camera_ray_lengths(camera: CameraData, directions: np.ndarray) -> np.ndarray:

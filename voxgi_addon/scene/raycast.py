@@ -17,14 +17,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
-from .camera import camera_ray_lengths, camera_rays
+from .camera import camera_ray_lengths, camera_rays, image_points
 from .geometry import SceneTriangles
 from .snapshot import RAY_CAMERA, RAY_DIFFUSE, RAY_SHADOW, CameraData
 from .textures import cutout_hits
 
 __all__ = [
     "TriangleGrid", "build_grid", "closest_hits", "occluded", "SHADOW_EPSILON", "PrimaryHits",
-    "primary_visibility",
+    "primary_visibility", "camera_first_hits",
 ]
 
 SHADOW_EPSILON = 1e-4  # metres: shadow rays ignore hits this close to either end
@@ -112,6 +112,14 @@ def _box_pairs(positions, origin, span, dims) -> tuple[np.ndarray, np.ndarray]:
     return cell, triangle
 
 
+def _corner_rows(positions: np.ndarray) -> np.ndarray:
+    """(10, T) ``TriangleGrid.corners`` rows of triangles ``positions`` (T, 3, 3)."""
+    e1 = positions[:, 1] - positions[:, 0]
+    e2 = positions[:, 2] - positions[:, 0]
+    scale = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+    return np.ascontiguousarray(np.concatenate([positions[:, 0].T, e1.T, e2.T, scale[None]]))
+
+
 def build_grid(tris: SceneTriangles, cells_per_triangle: float = _CELLS_PER_TRIANGLE,
                exact: bool = True) -> TriangleGrid:
     """A ``TriangleGrid`` with about ``cells_per_triangle`` cells per triangle: fewer cells
@@ -128,10 +136,7 @@ def build_grid(tris: SceneTriangles, cells_per_triangle: float = _CELLS_PER_TRIA
     span = max(span, float(extent.max()) / _MAX_CELLS_PER_AXIS, 1e-6)
     origin = lo - 0.5 * span
     dims = np.floor((hi - origin) / span + LATTICE_OFFSET).astype(np.int64) + 2
-    e1 = positions[:, 1] - positions[:, 0]
-    e2 = positions[:, 2] - positions[:, 0]
-    scale = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
-    corners = np.ascontiguousarray(np.concatenate([positions[:, 0].T, e1.T, e2.T, scale[None]]))
+    corners = _corner_rows(positions)
     if count == 0:
         return TriangleGrid(origin, span, dims, np.zeros(int(dims.prod()) + 2, np.int64),
                             np.zeros(0, np.int32), corners, cutouts_of(tris))
@@ -451,3 +456,94 @@ def primary_visibility(tris: SceneTriangles, camera: CameraData, width: int | No
         barycentric=np.where(hit[:, None], np.stack([u, v], axis=1), 0.0).reshape(height, width, 2),
         holdout=held.reshape(height, width),
     )
+
+
+# --------------------------------------------------------------------------- a few camera rays
+
+# (ray, triangle) pairs per ray up to which ``camera_first_hits`` tests the pairs directly
+PROJECTED_PAIRS_PER_RAY = 16
+_PIXEL_MARGIN = 1e-3  # pixels around a triangle's projected bounds (rounding of the projection)
+
+
+def _projected_pairs(tris: SceneTriangles, camera: CameraData, width: int, height: int,
+                     limit: int):
+    """(ray, triangle) pairs of the pixel-centre rays of a ``width`` × ``height`` image and
+    the triangles whose projected bounds hold that centre (every pair in which the ray can
+    hit the triangle), or None when there would be more than ``limit``. A triangle reaching
+    behind the camera's eye pairs with every ray, one wholly behind it with none, and one
+    with a non-finite corner with none (no ray hits it)."""
+    positions = np.asarray(tris.positions, np.float64).reshape(-1, 3, 3)
+    x, y, front = image_points(camera, positions, width, height)
+    x, y, front = x.reshape(-1, 3), y.reshape(-1, 3), front.reshape(-1, 3)
+    # the pixels whose centres (i + ½, j + ½) lie in the bounds (a column at a time: numpy's
+    # reductions over rows of 3 are slow)
+    with np.errstate(invalid="ignore"):
+        low_x = np.minimum(np.minimum(x[:, 0], x[:, 1]), x[:, 2])
+        high_x = np.maximum(np.maximum(x[:, 0], x[:, 1]), x[:, 2])
+        low_y = np.minimum(np.minimum(y[:, 0], y[:, 1]), y[:, 2])
+        high_y = np.maximum(np.maximum(y[:, 0], y[:, 1]), y[:, 2])
+        i0 = np.clip(np.ceil(low_x - 0.5 - _PIXEL_MARGIN), 0, width)
+        i1 = np.clip(np.floor(high_x - 0.5 + _PIXEL_MARGIN), -1, width - 1)
+        j0 = np.clip(np.ceil(low_y - 0.5 - _PIXEL_MARGIN), 0, height)
+        j1 = np.clip(np.floor(high_y - 0.5 + _PIXEL_MARGIN), -1, height - 1)
+    finite = np.isfinite(low_x + high_x + low_y + high_y)  # (NaN corners project to NaN)
+    ahead = front[:, 0] & front[:, 1] & front[:, 2]
+    across = (front[:, 0] | front[:, 1] | front[:, 2]) & ~ahead \
+        & np.isfinite(positions.reshape(-1, 9)).all(axis=1)
+    ahead &= finite
+    i0, j0 = np.where(across, 0, i0), np.where(across, 0, j0)
+    i1, j1 = np.where(across, width - 1, i1), np.where(across, height - 1, j1)
+    columns = np.where(ahead | across, np.maximum(i1 - i0 + 1, 0), 0).astype(np.int64)
+    rows = np.where(ahead | across, np.maximum(j1 - j0 + 1, 0), 0).astype(np.int64)
+    count = columns * rows
+    if int(count.sum()) > limit:
+        return None
+    triangle = np.repeat(np.arange(len(positions)), count)
+    k = np.arange(len(triangle)) - np.repeat(np.cumsum(count) - count, count)
+    wide = columns[triangle]
+    ray = (j0[triangle].astype(np.int64) + k // wide) * width + i0[triangle].astype(np.int64) \
+        + k % wide
+    return ray, triangle
+
+
+def camera_first_hits(tris: SceneTriangles, camera: CameraData, width: int, height: int):
+    """(depth (N,), position (N, 3), shows (N,)) of the pixel-centre camera rays of a
+    ``width`` × ``height`` image (ray j·W + i): ``primary_visibility``'s depth, position and
+    hit, flattened. A few thousand rays against triangles that each cover few of them (the
+    view fit's probe of a posed character) are tested against the triangles whose projected
+    bounds hold them (``_projected_pairs``): no grid is built. Otherwise they are traced
+    through a grid of few cells (``few_rays_grid``). Both test each ray against every
+    triangle it can hit with the same arithmetic: the same distances, the same points."""
+    width, height = int(width), int(height)
+    pairs = None
+    if len(tris):
+        pairs = _projected_pairs(tris, camera, width, height,
+                                 PROJECTED_PAIRS_PER_RAY * width * height)
+    if pairs is None:
+        few_rays_grid(tris)
+        hits = primary_visibility(tris, camera, width, height)
+        return hits.depth.reshape(-1), hits.position.reshape(-1, 3), hits.hit.reshape(-1)
+    ray, tri = pairs
+    origins, directions = camera_rays(camera, width, height)
+    count = len(origins)
+    best_t, best_tri = np.full(count, np.inf), np.full(count, -1, np.int64)
+    if len(ray):
+        positions = np.asarray(tris.positions, np.float64).reshape(-1, 3, 3)
+        o, d = origins[ray].T, directions[ray].T
+        t, u, v = _intersect(_corner_rows(positions[tri]), o, d)
+        good = (t > 0.0) & (t < camera_ray_lengths(camera, directions)[ray])
+        accept = tris.accepted(RAY_CAMERA) if hasattr(tris, "accepted") else None
+        if accept is not None:
+            good &= accept[tri]
+        good = counted_hits(cutouts_of(tris, camera=True), good, tri, u, v, o.T, d.T)
+        ray, tri, t = ray[good], tri[good], t[good]
+        np.minimum.at(best_t, ray, t)
+        win = t == best_t[ray]
+        best_tri[ray[win]] = tri[win]
+    shows = best_tri >= 0
+    holdout = getattr(tris, "holdout", None)
+    if holdout is not None:
+        shows &= ~np.asarray(holdout)[np.maximum(best_tri, 0)]
+    position = np.where(shows[:, None], origins + directions * np.where(shows, best_t, 0.0)[:, None],
+                        0.0)
+    return best_t, position, shows
