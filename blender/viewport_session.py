@@ -54,6 +54,7 @@ from .session import scene_session
 from .settings import gi_settings
 from .snapshot import snapshot_or_error, snapshot_summary
 from .snapshot.mesh_cache import MeshReads
+from .snapshot.scene import read_ahead
 from .updates import (
     records_from_depsgraph,
     remembered_index,
@@ -67,6 +68,8 @@ from .updates import (
 
 JOB_LABEL = "Updating viewport GI"
 MEGABYTE = 1_000_000
+# seconds of a full snapshot's mesh reads per view_update or draw (``LiveGI.read_on``)
+READ_SLICE = 0.008
 
 
 @dataclass
@@ -133,6 +136,14 @@ class LiveGI:
         # the last snapshot's mesh reads, reused by the next full snapshot for the meshes
         # whose geometry no update touched (snapshot/mesh_cache.py)
         self.mesh_reads = MeshReads()
+        # a full snapshot's plan while its meshes are read ahead, a slice per view_update or
+        # draw (``read_on``; docs/gi_pipeline.md "Snapshots that read only what changed"):
+        # the job is submitted when they are all read. read_slice : seconds of reads per
+        # slice, set by the render engine's view_update (draws follow to go on with them);
+        # None (the default: a caller that does not draw) reads everything at once.
+        self.reading: UpdatePlan | None = None
+        self.read_slice: float | None = None
+        self.read_all = False  # every mesh read ahead, and no update since: snapshot next
         self.skin: dict[str, tuple[bytes, bytes]] = {}  # skinned objects' states (``update``)
         self.world = None          # updates.world_state at the last snapshot
         self.world_changed = True  # the next posed snapshot reads the world again
@@ -149,6 +160,7 @@ class LiveGI:
         """``view_update``: plan the depsgraph's updates (or ``records``) and schedule them."""
         if records is None:
             records = records_from_depsgraph(depsgraph, self.index)
+        self.read_all = False  # (the reads ahead are checked again)
         # every update is seen here, also those that plan nothing: the kept mesh reads forget
         # what they may have changed (before the skinned objects' echo is told apart)
         self.mesh_reads.forget_updated(records, _mesh_data_name, _shape_keys_mesh)
@@ -160,7 +172,10 @@ class LiveGI:
         key = settings_key(scene)
         if self.index is None or self.rescan:
             plan = full_plan(self.rescan or "first update")
-            self.mesh_reads.clear()  # undo, a new engine: updates may have been missed
+            if self.rescan or self.reading is None:
+                # undo, a new engine: updates may have been missed (while the first
+                # snapshot's meshes are read ahead, this one sees every update)
+                self.mesh_reads.clear()
         elif key[0] != self.settings[0]:
             plan = full_plan("voxel settings changed")
         else:
@@ -213,10 +228,37 @@ class LiveGI:
     # ------------------------------------------------------------------ the job
 
     def schedule(self, plan: UpdatePlan, scene, depsgraph=None) -> jobs.Job | None:
-        """Snapshot now (main thread) and submit the plan's work to the worker."""
+        """Snapshot now (main thread) and submit the plan's work to the worker; a full
+        snapshot whose meshes take longer than ``read_slice`` to read waits for them
+        (``read_on``), its plan kept in ``reading``."""
         self._count(plan)
         if plan.stages == {"trace"}:
             return None
+        if self.reading is not None:  # a full snapshot's reads are under way: it joins them
+            self.reading = self.reading.merged(plan)
+            return None
+        return self._submit(plan, scene, depsgraph)
+
+    def read_on(self, scene, depsgraph=None) -> bool:
+        """Go on with a full snapshot's mesh reads for ``read_slice`` seconds (all of them
+        without one); the call after the one that read the last (with no update between)
+        takes the snapshot and submits its job: a slice, then the snapshot, each within a
+        draw. True while that is still to come."""
+        if self.reading is None:
+            return False
+        depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+        if not self.read_all:
+            self.read_all = read_ahead(depsgraph, self.mesh_reads,
+                                       self.read_slice or float("inf"))
+            if self.read_slice is not None:
+                return True
+        plan, self.reading, self.read_all = self.reading, None, False
+        self._submit(plan, scene, depsgraph, read=True)
+        return False
+
+    def _submit(self, plan: UpdatePlan, scene, depsgraph=None, read: bool = False
+                ) -> jobs.Job | None:
+        """``schedule``'s snapshot and job; read : the meshes were just read ahead."""
         running = jobs.running_job(self.scene_name)
         if running is not None and self.pending is not None:
             plan = self.pending.merged(plan)  # the superseded job's work still has to happen
@@ -229,6 +271,10 @@ class LiveGI:
                                           world=self.world_changed)
         elif "snapshot" not in plan.stages and self.latest_snapshot is not None:
             snapshot = self.latest_snapshot
+        elif self.read_slice is not None and not read and \
+                not read_ahead(depsgraph, self.mesh_reads, self.read_slice):
+            self.reading = plan  # the draws go on with the reads (``read_on``)
+            return None
         try:
             if snapshot is None:
                 snapshot, _ = snapshot_or_error(None, depsgraph, reads=self.mesh_reads)

@@ -48,7 +48,7 @@ import numpy as np
 from gpu_extras.batch import batch_for_shader
 
 from ..blender.settings import cone_settings, gi_stride, pixel_filter_width
-from ..blender.viewport_session import SNAPSHOT_HOOKS, live_gi
+from ..blender.viewport_session import READ_SLICE, SNAPSHOT_HOOKS, live_gi
 from ..blender.viewport_settings import VIEWPORT_PASSES
 from ..voxgi_addon.scene.view_camera import camera_from_view
 from . import viewport_prepare
@@ -326,13 +326,23 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
     camera_key = (view.tobytes(), window.tobytes(), width, height)
     pass_name = VIEWPORT_PASSES[view_settings.viewport_pass]
     live = live_gi(scene.name_full)
+    read = 0.0
+    if live.reading is not None:
+        # a full snapshot's mesh reads, a slice a draw, and the snapshot after the last: the
+        # draw's work (nothing traced or prepared in it; the last image stays), the next
+        # draw asked for
+        t0 = time.perf_counter()
+        live.read_on(scene, depsgraph)
+        read = time.perf_counter() - t0
+        if redraw is not None:
+            redraw()
     if camera_key != renderer.view_key:
         renderer.view_key = camera_key
         live.view_changed(camera_from_view(view, window, width, height), scene, depsgraph)
     traced = ""
     progressive = renderer.progressive
     source = live.image_source(scene.voxgi.quality)
-    if source is not None:
+    if source is not None and not read:
         options = base_options(scene.voxgi, width, height)
         if scene.voxgi.quality != "ACCURATE" and options["gather_settings"].bounces > 1:
             # Fast's voxels with the last complete cache's bounces, made on the worker: the
@@ -373,6 +383,8 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
                                                or renderer.cache.building is not None)
                                    or renderer.cache.generation != generation):
             redraw()  # the next slice on the next draw
+    if read:
+        renderer.timings = {"snapshot read": read}
     if traced:
         renderer.shown = traced
     elif renderer.texture is None:
@@ -444,6 +456,8 @@ def view_update(engine, context, depsgraph) -> None:
         width, height = viewport_size(region.width, region.height, fraction)
         live.view_camera = camera_from_view(_matrix(region_data.view_matrix),
                                             _matrix(region_data.window_matrix), width, height)
+    # draws follow: a full snapshot's mesh reads go on in them, a slice each (``draw_view``)
+    live.read_slice = READ_SLICE
     live.update(scene, depsgraph)
 
 

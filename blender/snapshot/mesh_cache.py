@@ -15,7 +15,8 @@ them when
   the evaluated mesh has the same numbers of vertices, corners and faces and the same active
   and render UV maps (``change_key``);
 - it is a mesh object of the last snapshot read as the same key (an added or shown object is
-  read), not skinned (a skinned mesh's rest shape is read through temporary modifiers:
+  read), or one read ahead of the next snapshot since (``scene.read_ahead``: a full snapshot's
+  reads spread over the view's draws), not skinned (a skinned mesh's rest shape is read through temporary modifiers:
   ``skin.py``), not a curve, text or metaball and not one an instancer makes of its own
   (``(instanced)`` keys).
 
@@ -135,6 +136,16 @@ class MeshReads:
             self._kept = {key: a for key, a in self._kept.items()
                           if a.object not in objects and a.data not in datas
                           and not (modified and a.modified)}
+
+    def holds(self, key: str, change: tuple) -> bool:
+        """Are the arrays of ``key`` kept, read at ``change``?"""
+        arrays = self._kept.get(key)
+        return arrays is not None and arrays.change == change
+
+    def keep(self, key: str, arrays: MeshArrays) -> None:
+        """Keep arrays read ahead of a snapshot (``scene.read_ahead``): the next snapshot takes
+        them unless an update forgets them first."""
+        self._kept[key] = arrays
 
     # ------------------------------------------------------------------ a snapshot
 

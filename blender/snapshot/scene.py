@@ -12,6 +12,7 @@ share one ``MeshData`` and one cache; any other object gets its own key
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import bpy
@@ -323,6 +324,35 @@ def _visible_mesh_entries(view_layer, warnings: list[str], depsgraph=None) -> li
                 )
         entries.append(entry)
     return entries
+
+
+def read_ahead(depsgraph, reads: MeshReads, seconds: float) -> bool:
+    """Read into ``reads`` the visible meshes the next snapshot would read, for about
+    ``seconds`` (at least one mesh); True when none is left, so that ``take_snapshot`` with
+    ``reads`` reads no mesh the kept ones can stand for. The live viewport spreads a full
+    snapshot's mesh reads over its draws this way (docs/gi_pipeline.md "Snapshots that read
+    only what changed"): its owner keeps ``reads`` up to date with the depsgraph's updates
+    meanwhile. Skinned and instanced meshes are never kept, so they are left to the
+    snapshot."""
+    start = time.perf_counter()
+    seen, read = set(), 0
+    for entry in _visible_mesh_entries(depsgraph.view_layer, [], depsgraph):
+        if entry.kind == "skinned" or entry.key in seen:
+            continue
+        seen.add(entry.key)
+        obj_eval = entry.obj.evaluated_get(depsgraph)
+        change = change_key(entry.obj, obj_eval)
+        if change is None or reads.holds(entry.key, change):
+            continue
+        if read and time.perf_counter() - start > seconds:
+            return False
+        evaluated = _EvaluatedMesh(obj_eval)
+        try:
+            reads.keep(entry.key, _read_arrays(entry, evaluated.mesh, change))
+        finally:
+            evaluated.clear()
+        read += 1
+    return True
 
 
 def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = None

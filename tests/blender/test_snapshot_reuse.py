@@ -223,3 +223,45 @@ def test_a_new_engine_reads_everything_again(live_box):
     view_update(StandInEngine(), None, depsgraph)
     assert read_since(before)["meshes"] >= len(live.latest_snapshot.meshes)
     same(live.latest_snapshot, fresh_snapshot(scene), "after a new engine")
+
+
+def test_a_full_snapshot_read_a_mesh_a_slice_sees_the_edits_made_between_slices(live_box):
+    """Entering Rendered mode on a large scene: its meshes are read a slice per draw
+    (``LiveGI.read_on``), and the job waits for them. An edit made between two slices to a
+    mesh already read is read again; the snapshot then equals a full one, and the reads add
+    up to one per mesh plus the edited one again."""
+    scene, built, live = live_box
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    recorder = Recorder(live)
+    bpy.app.handlers.depsgraph_update_post.append(recorder)
+    try:
+        taken, jobs_before = live.snapshots, len(live.plans)
+        live.read_slice = 1e-9  # one mesh a slice
+        live.rescan = "Rendered mode entered"
+        before = reads()
+        live.update(scene, depsgraph, recorder.take())
+        assert live.reading is not None and live.snapshots == taken  # no snapshot yet
+        assert read_since(before)["meshes"] == 1
+        slices, edited = 1, False
+        while live.read_on(scene, depsgraph):
+            slices += 1
+            assert live.snapshots == taken
+            if not edited:  # the box's vertices, after the box was read ahead (the first)
+                edited = True
+                mesh = built["box"].data
+                co = np.empty(len(mesh.vertices) * 3, np.float32)
+                mesh.vertices.foreach_get("co", co)
+                mesh.vertices.foreach_set("co", co * 0.8)
+                mesh.update()
+                bpy.context.view_layer.update()
+                live.update(scene, depsgraph, recorder.take())  # joins the reads under way
+                assert live.reading is not None and len(live.plans) == jobs_before + 2
+        assert live.reading is None and live.snapshots == taken + 1
+        # a mesh a slice: every mesh once (the faceless one too, in no snapshot), the edited
+        # box again; the snapshot itself reads only what is never kept (the instanced mesh)
+        assert slices >= len(live.latest_snapshot.meshes)
+        assert read_since(before)["meshes"] == len(live.latest_snapshot.meshes) + 2
+        recorder.take()
+        same(live.latest_snapshot, fresh_snapshot(scene), "read a slice at a time")
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(recorder)

@@ -180,7 +180,12 @@ def test_no_draw_compiles_or_uploads_more_than_one_thing_and_the_image_is_the_sa
     live_gi(scene.name_full).rescan = "entering Rendered mode again"
     engine = StandInEngine()
     compiles.take()
-    view_update(engine, context(view, window), depsgraph)  # the snapshot; the scene prepared
+    # the meshes read a slice a draw, as on a large scene (LiveGI.read_on)
+    from voxgi.render import viewport
+
+    monkeypatch.setattr(viewport, "READ_SLICE", 1e-9)
+    view_update(engine, context(view, window), depsgraph)  # a mesh read
+    assert live_gi(scene.name_full).reading is not None  # the snapshot waits for the others
     entering = compiles.take()
     assert entering == 0, f"view_update compiled {entering} shaders"
     renderer_for(engine, whole=False)

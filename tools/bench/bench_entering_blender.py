@@ -73,7 +73,7 @@ def _kind(label: str) -> str:
     if label.startswith("scene"):
         return "scene part sent"
     if label in ("vertex batch", "raster first draw", "quick image", "stage",
-                 "radiance cache stage"):
+                 "radiance cache stage", "snapshot read"):
         return {"stage": "slice stage"}.get(label, label)
     return ""
 
@@ -237,7 +237,7 @@ def measure(scene, name: str, quick: bool, entering_only: bool = False,
     entering = _phase(session.draws)
     quick_index = next((i for i, d in enumerate(session.draws) if d[2] == "Quick"), None)
     to_quick = _phase(session.draws[:quick_index + 1]) if quick_index is not None else entering
-    rows.append((f"{name}: view_update on entering (snapshot, the worker's jobs submitted)",
+    rows.append((f"{name}: view_update on entering (the snapshot, or a slice of its mesh reads)",
                  update, "main thread"))
     rows.append((f"{name}: longest view_draw, entering → first image (quick image)",
                  to_quick["longest"],
