@@ -40,13 +40,24 @@ from ..voxelize.scene_caches import CacheBuildResult
 from ..voxelize.surface import voxelize_triangles
 
 __all__ = ["CascadeGrid", "CascadeVoxels", "place_cascades", "build_cascades", "merge_voxels",
-           "place_objects", "merge_placement", "Placement", "ObjectPlacement", "grids_key",
+           "cells_within", "place_objects", "merge_placement", "Placement", "ObjectPlacement", "grids_key",
            "transformed_cell_bounds", "voxel_patches", "TRANSFORM_MODES", "PATCH_SHRINK"]
 
 MAX_CASCADES = 8
 TRANSFORM_MODES = ("patch", "centre")
 _SPAN_TOLERANCE = 1e-9
 
+
+
+def cells_within(cells: np.ndarray, low, high) -> np.ndarray:
+    """(…, 3) cells → (…,) bool: every coordinate in [low, high) (low, high: scalars or (3,)).
+    A column at a time: numpy's ``all`` over rows of 3 is 20–30 times slower, and the posed
+    update asks this of every voxel and shadow-ray point (docs/gi_pipeline.md "Posed
+    updates")."""
+    c = np.asarray(cells)
+    low, high = np.broadcast_to(low, (3,)), np.broadcast_to(high, (3,))
+    return (c[..., 0] >= low[0]) & (c[..., 0] < high[0]) & (c[..., 1] >= low[1]) \
+        & (c[..., 1] < high[1]) & (c[..., 2] >= low[2]) & (c[..., 2] < high[2])
 
 @dataclass(frozen=True, eq=False)
 class CascadeGrid:
@@ -85,8 +96,7 @@ class CascadeGrid:
 
     def contains(self, cells: np.ndarray) -> np.ndarray:
         """(N, 3) integer cells → (N,) bool, True where every coordinate is in [0, resolution)."""
-        c = np.asarray(cells)
-        return ((c >= 0) & (c < self.resolution)).all(axis=-1)
+        return cells_within(cells, 0, self.resolution)
 
 
 @dataclass(frozen=True, eq=False)
@@ -261,7 +271,7 @@ def _object_voxels(cache: VoxelCache, transform: _ObjectTransform, grid: Cascade
     keep = grid.contains(cells)
     if drop_finer:
         f0, f1 = _finer_region(grid)
-        keep &= ~((cells >= f0) & (cells < f1)).all(axis=1)
+        keep &= ~cells_within(cells, f0, f1)
     if not keep.any():
         return None
     m = matrices if matrices.ndim == 2 else matrices[keep]
@@ -315,9 +325,9 @@ def _object_patch_voxels(cache: VoxelCache, transform: _ObjectTransform, grid: C
     # a patch stays within (√3/2)·span·scale of its centre: cull by the centre's cell first
     margin = int(np.ceil(0.87 * _max_scale(all_m) * cache.span / grid.span)) + 1
     centre_cells = grid.cells_of(centres)
-    keep = ((centre_cells >= -margin) & (centre_cells < res + margin)).all(axis=1)
+    keep = cells_within(centre_cells, -margin, res + margin)
     if drop_finer:
-        keep &= ~((centre_cells >= f0 + margin) & (centre_cells < f1 - margin)).all(axis=1)
+        keep &= ~cells_within(centre_cells, f0 + margin, f1 - margin)
     idx = np.flatnonzero(keep)
     if not len(idx):
         return None
@@ -339,7 +349,7 @@ def _object_patch_voxels(cache: VoxelCache, transform: _ObjectTransform, grid: C
     cells = surface.cells[pc].astype(np.int64)
     inside = grid.contains(cells)
     if drop_finer:
-        inside &= ~((cells >= f0) & (cells < f1)).all(axis=1)
+        inside &= ~cells_within(cells, f0, f1)
     if not inside.any():
         return None
     pv, cells = pv[inside], cells[inside]

@@ -45,7 +45,11 @@ def _find(keys, words, sorted_keys, sorted_words) -> tuple[np.ndarray, np.ndarra
     if len(sorted_keys) == 0 or len(words) == 0:
         return np.zeros(len(words), bool), np.zeros(len(words), np.int64)
     at = np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)
-    return (sorted_keys[at] == keys) & (sorted_words[at] == words).all(axis=1), at
+    found = sorted_keys[at] == keys
+    rows = sorted_words[at]
+    for k in range(words.shape[1]):  # a column at a time (``all`` over short rows is slow)
+        found &= rows[:, k] == words[:, k]
+    return found, at
 
 
 def ray_origins(start, normals) -> np.ndarray:
@@ -111,8 +115,9 @@ class ShadowRays:
             if index > 0:  # the finer cascade's region reads the finer cascade's cells
                 q = res // 4
                 differ[q:3 * q, q:3 * q, q:3 * q] = False
-            cells = np.argwhere(differ)
-            if len(cells):
+            flat = np.flatnonzero(differ)  # (argwhere's (K, 3) is 10 times slower)
+            if len(flat):
+                cells = np.stack(np.unravel_index(flat, differ.shape), axis=1)
                 pad = 1e-6 * span
                 boxes.append((origin + cells.min(axis=0) * span - pad,
                               origin + (cells.max(axis=0) + 1) * span + pad))
@@ -122,7 +127,9 @@ class ShadowRays:
 def meets_boxes(origins, dirs, max_t, boxes) -> np.ndarray:
     """(N,) bool: does each ray's segment [0, max_t] meet any of ``boxes`` (B, 2, 3)?"""
     meets = np.zeros(len(origins), bool)
-    flat = np.flatnonzero((dirs == 0).any(axis=1))  # parallel to a face: its slab by hand
+    # parallel to a face: its slab by hand (columns at a time: reductions over rows of 3 are
+    # 20–30 times slower)
+    flat = np.flatnonzero((dirs[:, 0] == 0) | (dirs[:, 1] == 0) | (dirs[:, 2] == 0))
     with np.errstate(divide="ignore", invalid="ignore"):
         inverse = 1.0 / dirs
         for low, high in boxes:
@@ -134,8 +141,8 @@ def meets_boxes(origins, dirs, max_t, boxes) -> np.ndarray:
                 within = (o >= low) & (o <= high)
                 near[flat] = np.where(d == 0, np.where(within, -np.inf, np.inf), near[flat])
                 far[flat] = np.where(d == 0, np.where(within, np.inf, -np.inf), far[flat])
-            enter = np.maximum(near.max(axis=1), 0.0)
-            leave = np.minimum(far.min(axis=1), max_t)
+            enter = np.maximum(np.maximum(np.maximum(near[:, 0], near[:, 1]), near[:, 2]), 0.0)
+            leave = np.minimum(np.minimum(np.minimum(far[:, 0], far[:, 1]), far[:, 2]), max_t)
             meets |= enter <= leave
     return meets
 

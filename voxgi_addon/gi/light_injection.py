@@ -26,6 +26,7 @@ import dataclasses
 
 import numpy as np
 
+from .cascades import cells_within
 from .direct_light import diffuse_direct
 from .kept_rays import KeptRays, ShadowRays, ray_origins
 from .voxel_shadows import CascadeOccupancy
@@ -107,7 +108,7 @@ def voxel_emission(cascades, corners, radiance) -> list[np.ndarray]:
             area = np.nan_to_num(area, nan=0.0)
             cells = surface.cells.astype(np.int64)
             res = int(g.resolution)
-            inside = ((cells >= 0) & (cells < res)).all(axis=1)
+            inside = cells_within(cells, 0, res)
             key = (cells[:, 0] * res + cells[:, 1]) * res + cells[:, 2]
             own = np.asarray(cv.cells, np.int64)
             own_key = (own[:, 0] * res + own[:, 1]) * res + own[:, 2]

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .cascades import cells_within
+
 __all__ = ["CascadeOccupancy"]
 
 # When few rays march (BATCH_POINTS / BATCH_STEPS at most), a pass tests BATCH_STEPS points of
@@ -47,7 +49,7 @@ class CascadeOccupancy:
 
     def _cells(self, points, origin, span, res):
         cells = np.floor((points - origin) / span).astype(np.int64)
-        inside = ((cells >= 0) & (cells < res)).all(axis=1)
+        inside = cells_within(cells, 0, res)
         return np.clip(cells, 0, res - 1), inside
 
     def occupied(self, points: np.ndarray) -> np.ndarray:
@@ -73,7 +75,7 @@ class CascadeOccupancy:
         for index in range(len(self.grids) - 1, -1, -1):  # finest last, so it wins
             origin, span, res, _ = self.grids[index]
             cells = np.floor((points - origin) / span).astype(np.int64)
-            inside = ((cells >= 0) & (cells < res)).all(axis=1)
+            inside = cells_within(cells, 0, res)
             level[inside] = index
             cell[inside] = cells[inside]
         return level, cell
