@@ -185,7 +185,9 @@ class _Nodes:
     occlusion: np.ndarray  # (M,) float32
     count: np.ndarray      # (M,) int32
     child_mask: np.ndarray  # (M,) uint8
-    # (M, 6, 4) premultiplied directional values (faces FACES, channels r·α, g·α, b·α, α);
+    # (24, M) premultiplied directional values, row 4·f + c = channel c (r·α, g·α, b·α, α) of
+    # face f of FACES: channel-major like the sampling tables, so that every numpy loop of the
+    # build runs over M (an (M, 6, 4) layout made them loop over 4 channels at a time);
     # None = direction-independent (leaves): every face is the isotropic premultiplied value.
     directional: np.ndarray | None = None
 
@@ -202,19 +204,27 @@ class _Nodes:
         return np.concatenate([self.radiance * self.occlusion[:, None],
                                self.occlusion[:, None]], axis=1).astype(np.float32)
 
-    def face(self, f: int) -> np.ndarray:
-        """(M, 4) float32 premultiplied values seen from face ``f`` of FACES."""
-        return self.premultiplied() if self.directional is None else self.directional[:, f]
-
     def all_faces(self) -> np.ndarray:
-        """(M, 6, 4) float32 directional values (leaves: the isotropic value on every face)."""
+        """(24, M) float32 directional values, row 4·f + c (leaves: the isotropic value on
+        every face)."""
         if self.directional is None:
-            return np.repeat(self.premultiplied()[:, None, :], len(FACES), axis=1)
+            return np.tile(self.premultiplied().T, (len(FACES), 1))
         return self.directional
 
 
+# Face f = 2·axis + s of FACES: its axis, the sign of its viewer direction, and the octants
+# (z<<2 | y<<1 | x) of the 4 front and the 4 back children of its columns (front = bit
+# ``axis`` of the octant is 1 − s), columns in the order of the other two axes (z, y, x).
+_FACE_AXES = np.repeat(np.arange(3), 2)
+_FACE_SIGNS = np.tile(np.array([1.0, -1.0], np.float32), 3)[:, None]
+_OCTANTS = np.arange(8).reshape(2, 2, 2)  # [z, y, x]
+_FRONT = np.array([np.take(_OCTANTS, 1 - f % 2, axis=2 - f // 2).ravel()
+                   for f in range(len(FACES))])
+_BACK = np.array([np.take(_OCTANTS, f % 2, axis=2 - f // 2).ravel() for f in range(len(FACES))])
+
+
 def _one_sided_faces(nodes: _Nodes) -> np.ndarray:
-    """(M, 6, 4) leaf faces of ``build_octree(one_sided_leaves=True)``.
+    """(24, M) leaf faces of ``build_octree(one_sided_leaves=True)``.
 
     A surface voxel emits into its normal's hemisphere only: face f (viewer direction v_f, a
     unit axis) shows radiance × clip(1 + n·v_f, 0, 1) and α = 1. The back (n·v = −1) is black
@@ -222,12 +232,16 @@ def _one_sided_faces(nodes: _Nodes) -> np.ndarray:
     surface viewed from its front side samples exactly as with isotropic leaves. A voxel whose
     normal is short (opposite faces averaged into it) is attenuated little: it cannot tell.
     """
-    faces = np.repeat(nodes.premultiplied()[:, None, :], len(FACES), axis=1)
-    for f in range(len(FACES)):
-        axis, s = divmod(f, 2)
-        n_dot_v = nodes.normal[:, axis] * (1.0 - 2.0 * s)
-        faces[:, f, :3] *= np.clip(1.0 + n_dot_v, 0.0, 1.0)[:, None]
-    return faces
+    m = len(nodes.keys)
+    weight = nodes.normal.T[_FACE_AXES]  # (6, M): face f views along axis f // 2
+    weight *= _FACE_SIGNS  # n·v
+    weight += 1.0
+    np.clip(weight, 0.0, 1.0, out=weight)
+    faces = np.empty((len(FACES), 4, m), np.float32)
+    np.multiply((nodes.radiance * nodes.occlusion[:, None]).T[None], weight[:, None],
+                out=faces[:, :3])
+    faces[:, 3] = nodes.occlusion
+    return faces.reshape(4 * len(FACES), m)
 
 
 def _group_starts(sorted_keys: np.ndarray) -> np.ndarray:
@@ -245,17 +259,20 @@ def _leaf_nodes(cells, radiance, albedo, normal, count, offset: int,
     if len(keys) == 0:
         return _Nodes.empty()
     order = np.argsort(keys, kind="stable")
-    keys, count = keys[order], np.asarray(count, np.int64)[order]
+    keys = keys[order]
     starts = _group_starts(keys)
     attrs = [np.asarray(v, np.float32).reshape(-1, 3)[order] for v in (radiance, albedo, normal)]
     if len(starts) < len(keys):  # cells are unique by contract; merge duplicates anyway
+        count = np.asarray(count, np.int64)[order]
         weight = np.maximum(count, 1).astype(np.float64)[:, None]
         total = np.add.reduceat(weight, starts, axis=0)
         attrs = [(np.add.reduceat(a * weight, starts, axis=0) / total).astype(np.float32)
                  for a in attrs]
-    m = len(starts)
-    leaves = _Nodes(keys[starts], *attrs, np.ones(m, np.float32),
-                    np.add.reduceat(count, starts).astype(np.int32), np.zeros(m, np.uint8))
+        keys, count = keys[starts], np.add.reduceat(count, starts).astype(np.int32)
+    else:
+        count = np.asarray(count)[order].astype(np.int32)
+    m = len(keys)
+    leaves = _Nodes(keys, *attrs, np.ones(m, np.float32), count, np.zeros(m, np.uint8))
     if one_sided:
         leaves.directional = _one_sided_faces(leaves)
     return leaves
@@ -282,27 +299,25 @@ def _parents(children: _Nodes) -> _Nodes:
 
 def _directional_parents(children: _Nodes, groups: np.ndarray, octants: np.ndarray,
                          parents: int) -> np.ndarray:
-    """(P, 6, 4) directional values of the parents (Crassin et al. 2011; Gomes 2015 §4.15).
+    """(24, P) directional values of the parents (Crassin et al. 2011; Gomes 2015 §4.15).
 
     For face f = 2·axis + s (viewer on the +axis side for s = 0, the −axis side for s = 1),
     each of the 4 columns of two children along ``axis`` is composited front to back with the
     children's own face-f values, front = the child nearer the viewer (bit ``axis`` of the
     octant = 1 − s): c = c_f + (1 − α_f)·c_b, α = α_f + (1 − α_f)·α_b, absent children 0; the
-    parent's value is the mean of the 4 columns. groups : (M,) parent index of each child;
-    octants : (M,) z<<2 | y<<1 | x. One face at a time keeps the scatter array at (P, 8, 4).
+    parent's value is the mean of the 4 columns (summed in ``_FRONT``'s order). groups : (M,)
+    parent index of each child; octants : (M,) z<<2 | y<<1 | x. All faces at once on a
+    channel-major (6, 4, 8, P) scatter: every operation then loops over P.
     """
-    out = np.empty((parents, len(FACES), 4), np.float32)
-    for f in range(len(FACES)):
-        axis, s = divmod(f, 2)
-        full = np.zeros((parents, 8, 4), np.float32)
-        full[groups, octants] = children.face(f)
-        full = full.reshape(parents, 2, 2, 2, 4)  # [parent, z, y, x, channel]
-        along = 3 - axis  # x → 3, y → 2, z → 1
-        front = np.take(full, 1 - s, axis=along)
-        back = np.take(full, s, axis=along)
-        column = front + (1.0 - front[..., 3:4]) * back
-        out[:, f] = column.reshape(parents, 4, 4).mean(axis=1)
-    return out
+    full = np.zeros((4 * len(FACES), 8 * parents), np.float32)
+    full[:, octants.astype(np.intp) * parents + groups] = children.all_faces()
+    full = full.reshape(len(FACES), 4, 8, parents)  # [face, channel, octant, parent]
+    faces = np.arange(len(FACES))[:, None]
+    front = full[faces, :, _FRONT]  # (6, 4 columns, 4 channels, P)
+    column = full[faces, :, _BACK]
+    column *= 1.0 - front[:, :, 3:4]  # in place: the same products and sums, fewer temporaries
+    column += front
+    return column.mean(axis=1).reshape(4 * len(FACES), parents)
 
 
 def _merge_own(own: _Nodes, parents: _Nodes) -> _Nodes:
@@ -332,14 +347,14 @@ def _merge_own(own: _Nodes, parents: _Nodes) -> _Nodes:
     # Directional: a parent alone keeps its faces; a voxel alone is a leaf (α = 1, its radiance
     # on every face); both: each face's colour = ½·own + ½·children's composited colour on that
     # face (un-premultiplied), α = 1 — the isotropic rule applied face by face.
-    directional = np.zeros((m, len(FACES), 4), np.float32)
-    directional[i_par] = parents.all_faces()
-    mine = own.all_faces()
-    children = directional[i_own]
-    colour = children[..., :3] / np.maximum(children[..., 3:4], 1e-30)
-    mixed = np.concatenate([0.5 * (colour + mine[..., :3]), np.ones_like(mine[..., 3:])], -1)
-    directional[i_own] = np.where(both[:, :, None], mixed, mine)
-    return _Nodes(keys, *attrs, occlusion, count, mask, directional)
+    directional = np.zeros((len(FACES), 4, m), np.float32)
+    directional.reshape(4 * len(FACES), m)[:, i_par] = parents.all_faces()
+    mine = own.all_faces().reshape(len(FACES), 4, -1)
+    children = directional[:, :, i_own]
+    colour = children[:, :3] / np.maximum(children[:, 3:4], 1e-30)
+    mixed = np.concatenate([0.5 * (colour + mine[:, :3]), np.ones_like(mine[:, 3:])], 1)
+    directional[:, :, i_own] = np.where(both[:, 0], mixed, mine)
+    return _Nodes(keys, *attrs, occlusion, count, mask, directional.reshape(4 * len(FACES), m))
 
 
 @dataclass(frozen=True)
@@ -389,18 +404,23 @@ def _frame(grids) -> _Frame:
                   tuple((res // 2) * (2 ** (n - 1 - i) - 1) for i in range(n)))
 
 
-def _table(nodes: _Nodes, rows: np.ndarray, size: int) -> np.ndarray:
-    """(4, size + 1) premultiplied sampling channels r·α, g·α, b·α, α; unused rows 0."""
+def _table(nodes: _Nodes, rows: np.ndarray | None, size: int) -> np.ndarray:
+    """(4, size + 1) premultiplied sampling channels r·α, g·α, b·α, α in columns ``rows``
+    (None: the first M); unused columns 0."""
+    rows = slice(0, len(nodes.keys)) if rows is None else rows
     table = np.zeros((4, size + 1), np.float32)
     table[:3, rows] = (nodes.radiance * nodes.occlusion[:, None]).T
     table[3, rows] = nodes.occlusion
     return table
 
 
-def _directional_table(nodes: _Nodes, rows: np.ndarray, size: int) -> np.ndarray:
-    """(24, size + 1) directional sampling channels, row 4·f + c = channel c of face f."""
-    table = np.zeros((4 * len(FACES), size + 1), sampling.DIRECTIONAL_DTYPE)
-    table[:, rows] = nodes.all_faces().reshape(len(nodes.keys), 4 * len(FACES)).T
+def _directional_table(nodes: _Nodes) -> np.ndarray:
+    """(24, M + 1) directional sampling channels, row 4·f + c = channel c of face f; the
+    last column 0."""
+    m = len(nodes.keys)
+    table = np.empty((4 * len(FACES), m + 1), sampling.DIRECTIONAL_DTYPE)
+    table[:, :m] = nodes.all_faces()
+    table[:, m] = 0.0
     return table
 
 
@@ -427,7 +447,7 @@ def _dense_level(level: int, nodes: _Nodes, child_base: np.ndarray | None) -> De
     index[rows] = np.arange(m, dtype=np.int32)
     return DenseLevel(level=level, child_base=base, child_mask=mask,
                       table=_table(nodes, rows, s ** 3),
-                      directional=_directional_table(nodes, np.arange(m), m),
+                      directional=_directional_table(nodes),
                       directional_index=index, **grids)
 
 
@@ -442,8 +462,7 @@ def _sparse_level(level: int, nodes: _Nodes, child_base: np.ndarray, frame: _Fra
         index_map[(rel[:, 0] * w + rel[:, 1]) * w + rel[:, 2]] = np.arange(m, dtype=np.int32)
     return SparseLevel(level, nodes.keys, nodes.radiance, nodes.occlusion, nodes.normal,
                        nodes.albedo, nodes.count, child_base, nodes.child_mask, w0, w,
-                       index_map, _table(nodes, np.arange(m), m),
-                       _directional_table(nodes, np.arange(m), m))
+                       index_map, _table(nodes, None, m), _directional_table(nodes))
 
 
 def build_octree(cascades, radiance, dense_depth: int = 6, *,
@@ -487,7 +506,7 @@ def build_octree(cascades, radiance, dense_depth: int = 6, *,
     nodes[depth] = own[depth]
     for ell in range(depth - 1, -1, -1):
         nodes[ell] = _parents(nodes[ell + 1])
-        if ell in own:
+        if ell in own and len(own[ell].keys):
             nodes[ell] = _merge_own(own[ell], nodes[ell])
     levels = []
     for ell, nd in enumerate(nodes):
