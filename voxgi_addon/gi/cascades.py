@@ -55,9 +55,11 @@ def cells_within(cells: np.ndarray, low, high) -> np.ndarray:
     update asks this of every voxel and shadow-ray point (docs/gi_pipeline.md "Posed
     updates")."""
     c = np.asarray(cells)
-    low, high = np.broadcast_to(low, (3,)), np.broadcast_to(high, (3,))
-    return (c[..., 0] >= low[0]) & (c[..., 0] < high[0]) & (c[..., 1] >= low[1]) \
-        & (c[..., 1] < high[1]) & (c[..., 2] >= low[2]) & (c[..., 2] < high[2])
+    x, y, z = c[..., 0], c[..., 1], c[..., 2]
+    if np.ndim(low) == 0 and np.ndim(high) == 0:  # (no broadcast_to: 5 µs a call)
+        return (x >= low) & (x < high) & (y >= low) & (y < high) & (z >= low) & (z < high)
+    (lx, ly, lz), (hx, hy, hz) = np.broadcast_to(low, (3,)), np.broadcast_to(high, (3,))
+    return (x >= lx) & (x < hx) & (y >= ly) & (y < hy) & (z >= lz) & (z < hz)
 
 @dataclass(frozen=True, eq=False)
 class CascadeGrid:
