@@ -9,7 +9,7 @@ submits one job to the worker (``jobs.py``):
 
     refresh_caches (voxelize only keys whose fingerprint changed; ``voxelize/incremental``)
     → update_gi_stages (cascades, injection, octree; cascades reused for light-only changes)
-    → volume_atlas (the octree's GPU layout, so the main thread only uploads it)
+    → volume_atlas (the octree's GPU layout, so the main thread only uploads it; for Fast)
     → Fast at Bounces > 1: bounced_volumes (the octrees rebuilt with the view's radiance
       cache and their layouts; ``bounce_cache``, ``render/viewport_bounces.py``)
 
@@ -297,6 +297,9 @@ class LiveGI:
         base_span, count, gi = settings.base_span, settings.cascade_count, gi_settings(settings)
         store, previous, progress = self.store, self.staged, self.progress
         bounce_cache = self.bounce_cache
+        # the octree's GPU layout only for Fast, whose cones read it (Accurate traces the
+        # triangles; a view switched to Fast lays out the applied octree itself: GPUVolume)
+        fast = settings.quality != "ACCURATE"
         stages = plan.stages
         progress(0.0, "starting")
 
@@ -309,8 +312,10 @@ class LiveGI:
             staged = update_gi_stages(snapshot, refreshed.caches, gi, previous, stages, cancel,
                                       lambda f, text: progress(0.6 + 0.3 * f, text))
             t2 = time.perf_counter()
-            progress(0.9, "octree layout for the GPU")
-            atlas = volume_atlas(staged.state.octree)
+            atlas = None
+            if fast:
+                progress(0.9, "octree layout for the GPU")
+                atlas = volume_atlas(staged.state.octree)
             t3 = time.perf_counter()
             bounced = None
             if bounce_cache is not None:  # Fast's cones: the octrees with the cache's bounces
@@ -319,8 +324,9 @@ class LiveGI:
             t4 = time.perf_counter()
             progress(1.0, "done")
             timings = {"caches": t1 - t0, **{f"  {k}": v for k, v in refreshed.caches.timings.items()},
-                       "gi": t2 - t1, **{f"  {k}": v for k, v in staged.state.timings.items()},
-                       "atlas": t3 - t2}
+                       "gi": t2 - t1, **{f"  {k}": v for k, v in staged.state.timings.items()}}
+            if atlas is not None:
+                timings["atlas"] = t3 - t2
             if bounced is not None:
                 timings["bounced octrees + atlases"] = t4 - t3
             return LiveResult(snapshot, refreshed.caches, staged, atlas, refreshed.voxelized,
