@@ -118,6 +118,38 @@ def test_an_injection_after_a_move_marches_only_what_meets_it_and_equals_a_fresh
         assert np.array_equal(mine, theirs)
 
 
+def two_blocks(shift):
+    """``room``'s cascades with two 3³ blocks far apart in the finest (two limbs), both moved
+    by ``shift`` voxels along x."""
+    out = room(block_at=(0, 0, 40))  # (its 4³ block outside the grid: left out)
+    first = out[0]
+    blocks = [np.stack(np.meshgrid(*[np.arange(3)] * 3, indexing="ij"), -1).reshape(-1, 3)
+              + np.asarray(at) + (shift, 0, 0) for at in ((5, 6, 4), (23, 24, 4))]
+    keep = (first.cells < RES).all(axis=1)
+    out[0] = voxels(first.grid, np.concatenate([first.cells[keep], *blocks]))
+    return out
+
+
+def test_rays_that_pass_between_two_moved_blocks_keep_their_result(monkeypatch):
+    """Two limbs that move: the cells that changed are boxed part by part
+    (``kept_rays.SPLIT``), not in one box spanning both, so voxels whose rays pass between
+    them are not lit again; the light is still a fresh injection's."""
+    from voxgi.voxgi_addon.gi import kept_rays
+
+    snapshot = lit_snapshot(LIGHTS)
+    before, after = two_blocks(0), two_blocks(1)
+    fresh = inject_direct_light(after, snapshot, samples=1)
+    relit = {}
+    for split in (1, kept_rays.SPLIT):
+        monkeypatch.setattr(kept_rays, "SPLIT", split)
+        first = inject_direct_light(before, snapshot, samples=1, keep_rays=True)
+        kept = inject_direct_light(after, snapshot, samples=1, rays=first.rays)
+        for mine, theirs in zip(kept, fresh, strict=True):
+            assert np.array_equal(mine, theirs)
+        relit[split] = kept.relit
+    assert 0 < relit[kept_rays.SPLIT] < 0.6 * relit[1], relit
+
+
 def test_a_moved_light_marches_its_own_rays_again():
     before = room()
     first = inject_direct_light(before, lit_snapshot(LIGHTS), samples=1, keep_rays=True)

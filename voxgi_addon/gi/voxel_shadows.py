@@ -72,12 +72,17 @@ class CascadeOccupancy:
         """(level (N,) int, -1 outside every cascade; cell (N, 3) int64 in that cascade)."""
         level = np.full(len(points), -1, np.int64)
         cell = np.zeros((len(points), 3), np.int64)
-        for index in range(len(self.grids) - 1, -1, -1):  # finest last, so it wins
-            origin, span, res, _ = self.grids[index]
-            cells = np.floor((points - origin) / span).astype(np.int64)
+        rows = None  # the points not yet in a finer cascade (None: all of them)
+        for index, (origin, span, res, _) in enumerate(self.grids):  # finest first
+            at = points if rows is None else points[rows]
+            cells = np.floor((at - origin) / span).astype(np.int64)
             inside = cells_within(cells, 0, res)
-            level[inside] = index
-            cell[inside] = cells[inside]
+            found = np.flatnonzero(inside) if rows is None else rows[inside]
+            level[found] = index
+            cell[found] = cells[inside]
+            rows = np.flatnonzero(~inside) if rows is None else rows[~inside]
+            if not len(rows):
+                break
         return level, cell
 
     def occluded(self, origins: np.ndarray, dirs: np.ndarray, max_t) -> np.ndarray:
