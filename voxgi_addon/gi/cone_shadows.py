@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from ..scene.short_axis import max_along, min_along
 from .conetrace import (
     LUMINANCE,
     ConeSettings,
@@ -51,7 +52,7 @@ def emitter_groups(light) -> list:
     vertex = vertex.reshape(-1, 3)
     label = np.arange(vertex.max() + 1)
     while True:  # each triangle's corners take the smallest label among them, until stable
-        low = label[vertex].min(axis=1)
+        low = min_along(label[vertex])
         new = label.copy()
         np.minimum.at(new, vertex.ravel(), np.repeat(low, 3))
         new = new[new]
@@ -114,7 +115,7 @@ def cone_shadowed_direct(volume, points, normals, lights, cones: ConeSettings,
     for light in lights:
         if light.type == "WORLD":
             value = unshadowed(light, n)
-            lit = np.flatnonzero(value.max(axis=1) > 0)
+            lit = np.flatnonzero(max_along(value) > 0)
             if len(lit):
                 seen = world_seen(lit) if world_seen is not None else trace_world_visibility(
                     volume, p[lit], n[lit], cones, world_mips(light.radiance))
@@ -138,7 +139,7 @@ def cone_shadowed_direct(volume, points, normals, lights, cones: ConeSettings,
 def _shadowed(out, value, light, p, n, volume, cones, visibility) -> None:
     """out += the unshadowed ``value`` (N, 3) × the light's shadow cone where it is lit."""
     value = np.asarray(value, np.float64)
-    lit = np.flatnonzero(value.max(axis=1) > 0)
+    lit = np.flatnonzero(max_along(value) > 0)
     if len(lit) == 0:
         return
     if visibility is not None:

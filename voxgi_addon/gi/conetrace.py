@@ -33,6 +33,7 @@ from typing import Protocol
 import numpy as np
 
 from ..scene.equirect import box_downsample, sample_bilinear
+from ..scene.short_axis import norm3
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 WORLD_MIP_HEIGHT = 64   # rows of the finest prefiltered world map (columns: twice that)
@@ -413,7 +414,7 @@ def trace_shadow(volume: ConeVolume, points, normals, light_positions, light_rad
     origins = offset_origins(points, normals, volume, settings.start_offset)
     height = settings.start_offset * local_voxel_size(volume, points)
     to_light = light_positions - origins
-    dist = np.linalg.norm(to_light, axis=1)
+    dist = norm3(to_light)
     axis = to_light / np.maximum(dist, 1e-12)[:, None]
     radius = np.maximum(light_radius, 1e-3)
     half = np.arctan(radius / np.maximum(dist, 1e-6))

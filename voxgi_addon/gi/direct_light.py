@@ -34,6 +34,7 @@ import math
 import numpy as np
 
 from ..scene import raycast
+from ..scene.short_axis import any_along, norm3
 from ..scene.snapshot import LightData
 from .sampling import hashed_square, spherical_rectangle
 
@@ -79,7 +80,7 @@ def _perpendicular_basis(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors (N, 3) orthogonal to unit vectors w (N, 3) and to each other."""
     helper = np.where(np.abs(w[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     t = np.cross(w, helper)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    t /= norm3(t)[:, None]
     return t, np.cross(w, t)
 
 
@@ -109,9 +110,9 @@ def _visible_share(occluder, origins, directions, lengths, weights=None) -> np.n
         blocked[:, corners] = _trace(occluder, origins, directions[:, corners],
                                      lengths[:, corners])
         counted = w[:, corners] > 0.0
-        seen = (counted & ~blocked[:, corners]).any(axis=1)
-        hidden = (counted & blocked[:, corners]).any(axis=1)
-        settled = counted.any(axis=1) & (seen != hidden)
+        seen = any_along(counted & ~blocked[:, corners])
+        hidden = any_along(counted & blocked[:, corners])
+        settled = any_along(counted) & (seen != hidden)
         open_rows = np.flatnonzero(~settled)
         if len(open_rows):
             blocked[np.ix_(open_rows, rest)] = _trace(
@@ -137,7 +138,7 @@ def _trace(occluder, origins, directions, lengths) -> np.ndarray:
 def _visible_share_of_points(occluder, origins, targets, weights=None) -> np.ndarray:
     """``_visible_share`` of rays from origins (N, 3) to target points (N, K, 3)."""
     ray = targets - origins[:, None]
-    length = np.linalg.norm(ray, axis=2)
+    length = norm3(ray)
     return _visible_share(occluder, origins, ray / np.maximum(length, 1e-30)[..., None], length, weights)
 
 
@@ -155,7 +156,7 @@ def _sun(light, p, n, tris, strata):
             dirs = to_light + disk[..., :1] * t[0] + disk[..., 1:] * b[0]  # (N, K, 3) in the cone
         else:
             dirs = np.tile(to_light, (len(lit), 1, 1))
-        dirs = dirs / np.linalg.norm(dirs, axis=-1, keepdims=True)
+        dirs = dirs / norm3(dirs)[..., None]
         origins = p[lit] + _NORMAL_OFFSET * n[lit]
         value[lit] *= _visible_share(tris, origins, dirs, np.full(dirs.shape[:2], np.inf))
     return value
@@ -216,10 +217,10 @@ def _edge_terms(a: np.ndarray, b: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Lambert's formula's term of the edges a → b (…, 3) of a polygon seen from a point
     (directions from it, any length) for its unit normal n (broadcast): the angle the edge
     spans times the cosine of its great circle's pole with n."""
-    a = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-30)
-    b = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-30)
+    a = a / np.maximum(norm3(a)[..., None], 1e-30)
+    b = b / np.maximum(norm3(b)[..., None], 1e-30)
     cross = np.cross(a, b)
-    sin = np.linalg.norm(cross, axis=-1)
+    sin = norm3(cross)
     angle = np.arctan2(sin, np.einsum("...c,...c->...", a, b))
     return angle * np.einsum("...c,...c->...", cross, n) / np.maximum(sin, 1e-30)
 
@@ -470,7 +471,7 @@ def light_aims(lights, points, normals) -> list[np.ndarray]:
             if area > 0:
                 lit, aim = _polygon_irradiance(points, normals, outline, centroid=True)
                 d = aim - points
-                d /= np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
+                d /= np.maximum(norm3(d)[..., None], 1e-12)
                 towards = np.where((lit > 0.0)[:, None], d, towards)
         out.append(towards)
     return out
@@ -489,5 +490,5 @@ def light_directions(lights, points) -> list[np.ndarray]:
             d = np.broadcast_to(m[:3, 2] / np.linalg.norm(m[:3, 2]), points.shape)
         else:
             d = m[:3, 3] - points
-        out.append(d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12))
+        out.append(d / np.maximum(norm3(d)[..., None], 1e-12))
     return out

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..scene.short_axis import any_along, max_along, norm3
 from ..scene.textures import sample_texture
 from .world_light import hidden_less
 
@@ -121,8 +122,8 @@ def _textured_split(tris, keep, corners, radiance):
     textured = slot >= 0
     if not textured.any():
         return same
-    area = 0.5 * np.linalg.norm(np.cross(corners[kept, 1] - corners[kept, 0],
-                                         corners[kept, 2] - corners[kept, 0]), axis=1)
+    area = 0.5 * norm3(np.cross(corners[kept, 1] - corners[kept, 0],
+                                corners[kept, 2] - corners[kept, 0]))
     texels = float(np.max((surface.emission_density[kept] ** 2 * area)[textured], initial=0.0))
     level = 0
     while (level < MAX_SPLIT_LEVEL and (~textured).sum() + textured.sum() * 4 ** (level + 1)
@@ -169,8 +170,7 @@ def emitter_light(tris, emission) -> EmitterLight | None:
     materials = np.where((materials >= 0) & (materials < last), materials, last)
     radiance = emission[materials]
     corners = np.asarray(tris.positions, np.float64)
-    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
-                                         corners[:, 2] - corners[:, 0]), axis=1)
+    area = 0.5 * norm3(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
     keep = (radiance @ LUMINANCE > 0) & (area > 0) & np.isfinite(area)
     if not keep.any() or keep.sum() > MAX_EMITTER_TRIANGLES:
         return None
@@ -188,8 +188,7 @@ def emitter_light(tris, emission) -> EmitterLight | None:
     sides = sides[order]
     corners = corners[order].astype(np.float32).astype(np.float64)
     radiance = radiance[order].astype(np.float32).astype(np.float64)
-    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
-                                         corners[:, 2] - corners[:, 0]), axis=1)
+    area = 0.5 * norm3(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
     power = area * (radiance @ LUMINANCE)
     cdf = np.cumsum(power) / power.sum()
     cdf[-1] = 1.0
@@ -253,7 +252,7 @@ def triangle_distances(p, corners) -> np.ndarray:
     ]
     for holds, offset in reversed(cases):
         closest = np.where(holds[..., None], offset, closest)
-    return np.linalg.norm(closest, axis=-1)
+    return norm3(closest)
 
 
 def emitter_distances(light: EmitterLight, p, n, chunk: int = 4096) -> np.ndarray:
@@ -267,7 +266,7 @@ def emitter_distances(light: EmitterLight, p, n, chunk: int = 4096) -> np.ndarra
     out = np.full(len(p), 1e30)
     for start in range(0, len(p), chunk):
         q, m = p[start:start + chunk], n[start:start + chunk]
-        above = np.einsum("nevc,nc->nev", light.corners[None] - q[:, None, None], m).max(axis=-1)
+        above = max_along(np.einsum("nevc,nc->nev", light.corners[None] - q[:, None, None], m))
         near = np.where((above > 0) & _facing(light, q), triangle_distances(q, light.corners),
                         1e30)
         out[start:start + chunk] = near.min(axis=1) if near.shape[1] else 1e30
@@ -292,21 +291,21 @@ def clipped_form_factors(p, n, corners) -> np.ndarray:
     valid = np.stack([s[1] for s in slots], axis=-1)            # (N, E, 6)
     # Unused slots repeat the previous valid corner: their edges have zero length and add 0.
     index = np.where(valid, np.arange(6), -1)
-    last_valid = np.max(index, axis=-1, keepdims=True)
+    last_valid = max_along(index)[..., None]
     index = np.maximum.accumulate(index, axis=-1)
     index = np.where(index < 0, last_valid, index)
     index = np.maximum(index, 0)
     points = np.take_along_axis(points, index[..., None], axis=-2)
-    length = np.linalg.norm(points, axis=-1, keepdims=True)
+    length = norm3(points)[..., None]
     a = np.divide(points, length, out=np.zeros_like(points), where=length > 0)
     b = np.roll(a, -1, axis=-2)
     cross = np.cross(a, b)
-    sin = np.linalg.norm(cross, axis=-1)
+    sin = norm3(cross)
     angle = np.arctan2(sin, np.einsum("...c,...c->...", a, b))
     gamma = np.divide(cross, sin[..., None], out=np.zeros_like(cross), where=sin[..., None] > 1e-12)
     total = (angle * np.einsum("nekc,nc->nek", gamma, n)).sum(axis=-1)
     out = np.abs(total) / (2.0 * math.pi)
-    return np.where(valid.any(axis=-1), out, 0.0)
+    return np.where(any_along(valid), out, 0.0)
 
 
 def sample_points(light: EmitterLight, square) -> tuple[np.ndarray, np.ndarray]:
@@ -359,7 +358,7 @@ def emitters_direct(light: EmitterLight, p, n, occluded, strata, reflect=None,
     if light.exact or occluded is None:
         value = unshadowed_sum(light, p, n) if unshadowed is None else \
             np.array(unshadowed, np.float64).reshape(len(p), 3)
-        lit = np.flatnonzero((value > 0).any(axis=1))
+        lit = np.flatnonzero(any_along(value > 0))
     else:  # the shadow rays' own estimate, mean of f V
         value, lit = np.ones((len(p), 3)), np.arange(len(p))
     glossy = np.zeros_like(value)
@@ -372,7 +371,7 @@ def emitters_direct(light: EmitterLight, p, n, occluded, strata, reflect=None,
     d = w / np.maximum(r, 1e-30)[..., None]
     corners = light.corners[k]
     normal = np.cross(corners[..., 1, :] - corners[..., 0, :], corners[..., 2, :] - corners[..., 0, :])
-    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-30)
+    normal /= np.maximum(norm3(normal)[..., None], 1e-30)
     cos_x = np.einsum("mkc,mc->mk", d, n[lit])
     cos_l = np.abs(np.einsum("mkc,mkc->mk", d, normal))
     pdf_area = (light.radiance[k] @ LUMINANCE) / _total_power(light)

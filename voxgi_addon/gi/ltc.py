@@ -31,6 +31,8 @@ import pathlib
 
 import numpy as np
 
+from ..scene.short_axis import norm3
+
 __all__ = ["TABLE_PATH", "load_table", "ltc_inverse", "view_x", "ltc_matrix", "hemisphere_norm",
            "ltc_density", "ltc_polygon_integral", "table_texels", "local_frame"]
 
@@ -150,7 +152,7 @@ def ltc_density(minv, w) -> np.ndarray:
     at unit directions w (…, 3) (whole sphere; not renormalised to the hemisphere)."""
     minv = np.asarray(minv, np.float64)
     wo = np.einsum("...ij,...j->...i", minv, w)
-    length = np.linalg.norm(wo, axis=-1)
+    length = norm3(wo)
     cos = np.maximum(wo[..., 2] / length, 0.0)
     det = minv[..., 1, 1] * (minv[..., 0, 0] * minv[..., 2, 2] - minv[..., 0, 2] * minv[..., 2, 0])
     return cos / math.pi * np.abs(det) / length ** 3
@@ -163,11 +165,11 @@ def local_frame(n, v) -> np.ndarray:
     v = np.asarray(v, np.float64)
     n, v = np.broadcast_arrays(n, v)
     t = v - n * np.sum(n * v, axis=-1, keepdims=True)
-    length = np.linalg.norm(t, axis=-1, keepdims=True)
+    length = norm3(t)[..., None]
     # fallback tangent: the axis least aligned with n, made orthogonal
     axis = np.eye(3)[np.argmin(np.abs(n), axis=-1)]
     fallback = axis - n * np.sum(n * axis, axis=-1, keepdims=True)
-    fallback /= np.linalg.norm(fallback, axis=-1, keepdims=True)
+    fallback /= norm3(fallback)[..., None]
     t = np.where(length > 1e-6, t / np.maximum(length, 1e-300), fallback)
     return np.stack([t, np.cross(n, t), n], axis=-2)
 
@@ -202,11 +204,11 @@ def _clamped_cosine_integral(points: np.ndarray, vector: bool = False):
     also (…, 3) ±Σ_edges θ_k γ_k / 2π = ∫ ω dω / 2π over the clipped polygon (Stokes), signed
     so that its z ≥ 0: the polygon's mean direction, 0 where nothing is above z = 0."""
     points, any_above = _clip(points, points[..., 2])
-    length = np.linalg.norm(points, axis=-1, keepdims=True)
+    length = norm3(points)[..., None]
     a = np.divide(points, length, out=np.zeros_like(points), where=length > 0)
     b = np.roll(a, -1, axis=-2)
     cross = np.cross(a, b)
-    sin = np.linalg.norm(cross, axis=-1)
+    sin = norm3(cross)
     angle = np.arctan2(sin, np.sum(a * b, axis=-1))
     gz = np.divide(cross[..., 2], sin, out=np.zeros_like(sin), where=sin > 0)
     signed = (angle * gz).sum(axis=-1) / (2.0 * math.pi)
@@ -273,7 +275,7 @@ def ltc_polygon_integral(p, n, v, roughness, corners, chunk: int = 64, direction
             continue
         out[:, start:start + chunk], mean = _clamped_cosine_integral(transformed, vector=True)
         world = np.einsum("nji,ntj->nti", frame, np.einsum("nij,ntj->nti", back, mean))
-        length = np.linalg.norm(world, axis=-1, keepdims=True)
+        length = norm3(world)[..., None]
         towards[:, start:start + chunk] = np.divide(world, length, out=np.zeros_like(world),
                                                     where=length > 0)
     out = np.where((cos_view > 0.0)[:, None], out / norm[:, None], 0.0)

@@ -36,8 +36,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import VoxGIError
+from ..scene.short_axis import any_along, max_along, min_along
 from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
-from .cascades import CascadeGrid
+from .cascades import CascadeGrid, cells_within
 from .sampling import point_streams, unit_float
 
 __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
@@ -183,12 +184,12 @@ def _sites(tris, grids, origins: bool = True, voxelized: dict | None = None) \
         surface, reach = voxelized[key]
         cells = surface.cells.astype(np.int64)
         res = grid.resolution
-        keep = ((cells >= 0) & (cells < res)).all(axis=1)
+        keep = cells_within(cells, 0, res)
         if index > 0:  # the finer grid covers cells [start, start + res/2) of this one
             finer = grids[index - 1]
             start = np.round((np.asarray(finer.origin) - np.asarray(grid.origin))
                              / grid.span).astype(np.int64)
-            keep &= ~((cells >= start) & (cells < start + res // 2)).all(axis=1)
+            keep &= ~cells_within(cells, start, start + res // 2)
         out.append(cells[keep].astype(np.int32))
         present.append(np.repeat(reach[keep] > FACE_AXIS_COSINE, 2, axis=1))
         if origins:
@@ -233,7 +234,7 @@ def _clip_to_cells(tris):
     for axis in range(3):
         for sign, bound in ((1.0, 0.0), (-1.0, 1.0)):
             side = sign * (poly[:, :, axis] - bound)                      # (P, 9) ≥ 0: kept
-            cut = np.flatnonzero(((side < 0) & (slots[None] < count[:, None])).any(axis=1))
+            cut = np.flatnonzero(any_along((side < 0) & (slots[None] < count[:, None])))
             if len(cut) == 0:
                 continue
             p, n, d = poly[cut], count[cut], side[cut]
@@ -306,12 +307,12 @@ def _face_origins(cells, surface, corners, normals, keep) -> np.ndarray:
     high = np.maximum(np.maximum(local[:, 0], local[:, 1]), local[:, 2])   # (P, 3)
     low = np.minimum(np.minimum(local[:, 0], local[:, 1]), local[:, 2])
     some = np.ones(len(local), bool)
-    cut = np.flatnonzero(((high > 1) | (low < 0)).any(axis=1))
+    cut = np.flatnonzero(any_along((high > 1) | (low < 0)))
     if len(cut):
         poly, count = _clip_to_cells(local[cut])
         valid = (np.arange(_CLIP_VERTICES)[None] < count[:, None])[:, :, None]
-        high[cut] = np.where(valid, poly, -np.inf).max(axis=1)
-        low[cut] = np.where(valid, poly, np.inf).min(axis=1)
+        high[cut] = max_along(np.where(valid, poly, -np.inf), 1)
+        low[cut] = min_along(np.where(valid, poly, np.inf), 1)
         some[cut] = count > 0
     high -= np.float32(0.5 + LATTICE_OFFSET)                      # from the voxel's centre
     low -= np.float32(0.5 + LATTICE_OFFSET)
@@ -396,7 +397,7 @@ def lookup(cache: RadianceCache | None, points, normals, more: bool = False):
             break
         g = (p - np.asarray(grid.origin)) / grid.span
         res = grid.resolution
-        inside = todo & ((g >= 0) & (g < res)).all(axis=1)
+        inside = todo & cells_within(g, 0, res)
         rows = np.flatnonzero(inside)
         if len(rows) == 0 or len(cells) == 0:
             continue
@@ -411,7 +412,7 @@ def lookup(cache: RadianceCache | None, points, normals, more: bool = False):
             offset = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
             c = base + offset
             w = np.prod(np.where(offset == 1, frac, 1.0 - frac), axis=1)
-            ok = ((c >= 0) & (c < res)).all(axis=1)
+            ok = cells_within(c, 0, res)
             key = np.where(ok, (c[:, 0] * res + c[:, 1]) * res + c[:, 2], 0)
             site = np.where(ok, index[key], -1)
             safe = np.maximum(site, 0)[:, None]
@@ -649,7 +650,7 @@ def pick(cache: RadianceCache, points, normals, u) -> np.ndarray:
             break
         at = (p - np.asarray(grid.origin)) / grid.span
         res = grid.resolution
-        rows = np.flatnonzero(todo & ((at >= 0) & (at < res)).all(axis=1))
+        rows = np.flatnonzero(todo & cells_within(at, 0, res))
         if len(rows) == 0 or len(cells) == 0:
             continue
         index = _dense_index(grid, cells)
@@ -663,7 +664,7 @@ def pick(cache: RadianceCache, points, normals, u) -> np.ndarray:
             offset = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
             c = base + offset
             w = np.prod(np.where(offset == 1, frac, 1.0 - frac), axis=1)
-            ok = ((c >= 0) & (c < res)).all(axis=1)
+            ok = cells_within(c, 0, res)
             site = np.where(ok, index[np.where(ok, (c[:, 0] * res + c[:, 1]) * res + c[:, 2],
                                                0)], -1)
             holds = (site >= 0)[:, None] & present[np.maximum(site, 0)[:, None], face[rows]]

@@ -24,6 +24,8 @@ import math
 
 import numpy as np
 
+from ..scene.short_axis import all_along, norm3
+
 __all__ = [
     "hammersley",
     "hashed_square",
@@ -103,7 +105,7 @@ def perpendicular_basis(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     axis is x unless |w.x| ≥ 0.9, then y — the GLSL port makes the same choice)."""
     helper = np.where(np.abs(w[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     t = np.cross(w, helper)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    t /= norm3(t)[:, None]
     return t, np.cross(w, t)
 
 
@@ -129,7 +131,7 @@ def spherical_rectangle(origins, corner, edge_x, edge_y, uv):
     x1, y1 = x0 + exl, y0 + eyl
 
     def unit(v):
-        return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)
+        return v / np.maximum(norm3(v)[..., None], 1e-300)
 
     v00 = np.stack([x0, y0, z0], -1)
     v01 = np.stack([x0, y1, z0], -1)
@@ -160,7 +162,7 @@ def spherical_rectangle(origins, corner, edge_x, edge_y, uv):
         yv = np.where(hv2 < 1.0 - 1e-6, hv * dd / np.sqrt(np.maximum(1.0 - hv2, 1e-300)),
                       y1[:, None])
     points = o[:, None] + xu[..., None] * x + yv[..., None] * y + z0[:, None, None] * zs[:, None]
-    bad = ~np.isfinite(points).all(axis=-1) | (solid[:, None] <= 1e-12)
+    bad = ~all_along(np.isfinite(points)) | (solid[:, None] <= 1e-12)
     centre = corner + 0.5 * (np.asarray(edge_x, np.float64) + np.asarray(edge_y, np.float64))
     points = np.where(bad[..., None], centre, points)
     return points, np.where(solid > 1e-12, solid, 0.0)
@@ -172,7 +174,7 @@ def vndf_half_vectors(view_local: np.ndarray, alpha: np.ndarray, square: np.ndar
     (N, K, 2) in [0, 1)² (Heitz 2018, listing 1)."""
     a = np.asarray(alpha, np.float64)[:, None]
     vh = np.stack([a[:, 0] * view_local[:, 0], a[:, 0] * view_local[:, 1], view_local[:, 2]], axis=1)
-    vh /= np.linalg.norm(vh, axis=1, keepdims=True)
+    vh /= norm3(vh)[:, None]
     lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
     safe = np.sqrt(np.maximum(lensq, 1e-30))
     t1 = np.where((lensq > 1e-7)[:, None],
@@ -187,4 +189,4 @@ def vndf_half_vectors(view_local: np.ndarray, alpha: np.ndarray, square: np.ndar
     p3 = np.sqrt(np.maximum(1.0 - p1 * p1 - p2 * p2, 0.0))
     nh = p1[..., None] * t1[:, None] + p2[..., None] * t2[:, None] + p3[..., None] * vh[:, None]
     h = np.stack([a * nh[..., 0], a * nh[..., 1], np.maximum(nh[..., 2], 0.0)], axis=-1)
-    return h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-30)
+    return h / np.maximum(norm3(h)[..., None], 1e-30)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..scene.short_axis import norm3
 from ..scene.snapshot import RAY_CAMERA
 
 __all__ = ["REACH", "TRUST", "find_triangles", "geometric_normals"]
@@ -41,7 +42,7 @@ def find_triangles(tris, points, views, normals, ray: int = RAY_CAMERA, trust: b
     hit = np.flatnonzero(found >= 0)
     corners = np.asarray(tris.positions, np.float64).reshape(-1, 3, 3)[found[hit]]
     f = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    f /= np.maximum(np.linalg.norm(f, axis=1), 1e-30)[:, None]
+    f /= np.maximum(norm3(f), 1e-30)[:, None]
     f = np.where((np.einsum("ij,ij->i", f, n[hit]) < 0.0)[:, None], -f, f)
     trusted = np.einsum("ij,ij->i", f, n[hit]) > TRUST if trust else np.ones(len(hit), bool)
     at = hit[trusted]

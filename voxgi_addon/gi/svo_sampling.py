@@ -27,6 +27,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from .cascades import cells_within
 from .morton import morton_encode, spread_bits
 
 CHUNK_POINTS = 1 << 15  # points per vectorised chunk: keeps the (8, m) temporaries in cache
@@ -76,7 +77,7 @@ class DenseLevel:
     def rows(self, nodes: np.ndarray) -> np.ndarray:
         """(N, 3) int64 node coordinates → (N,) rows of ``table`` (s³ = absent or outside)."""
         s = 1 << self.level
-        inside = np.all((nodes >= 0) & (nodes < s), axis=1)
+        inside = cells_within(nodes, 0, s)
         rows = np.where(inside, (nodes[:, 0] * s + nodes[:, 1]) * s + nodes[:, 2], s ** 3)
         present = self.table[3, np.minimum(rows, s ** 3)] > 0
         return np.where(present, rows, s ** 3)
@@ -186,7 +187,7 @@ def rows_of_keys(keys: np.ndarray, query: np.ndarray) -> np.ndarray:
 def coordinate_rows(nodes: np.ndarray, level: int, keys: np.ndarray) -> np.ndarray:
     """(N, 3) int64 node coordinates of a sparse level → (N,) rows (len(keys) where absent)."""
     side = 1 << level
-    inside = np.all((nodes >= 0) & (nodes < side), axis=1)
+    inside = cells_within(nodes, 0, side)
     query = np.full(len(nodes), _INVALID_KEY_BIT, dtype=np.uint64)
     query[inside] = morton_encode(nodes[inside])
     return rows_of_keys(keys, query)

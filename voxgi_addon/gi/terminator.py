@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..scene.short_axis import norm3
 from ..scene.snapshot import RAY_CAMERA
 
 __all__ = ["OFFSET", "lift", "amount", "find_lifts", "ShadowStarts"]
@@ -153,7 +154,7 @@ class ShadowStarts:
                 if finite.any():  # toward a point: the same end, from the new start
                     end = o[own][moved][finite] + dirs[finite] * lengths[finite][:, None]
                     ray = end - start[finite]
-                    span = np.linalg.norm(ray, axis=1)
+                    span = norm3(ray)
                     dirs[finite] = ray / np.maximum(span, 1e-30)[:, None]
                     lengths[finite] = span
                 index = np.flatnonzero(own)[moved]

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..scene.equirect import box_downsample, direction_to_pixel, pixel_directions, row_solid_angles
+from ..scene.short_axis import any_along, norm3
 from .sampling import perpendicular_basis
 
 __all__ = ["WorldLight", "world_light", "scene_lights", "world_direct", "world_table",
@@ -227,7 +228,7 @@ def _cosine(normals, square):
     lift = np.sqrt(np.maximum(0.0, 1.0 - (disk ** 2).sum(-1)))
     t, b = perpendicular_basis(normals)
     d = disk[..., :1] * t[:, None] + disk[..., 1:] * b[:, None] + lift[..., None] * normals[:, None]
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+    return d / norm3(d)[..., None]
 
 
 def unshadowed(world: WorldLight, normals) -> np.ndarray:
@@ -294,7 +295,7 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     p = np.asarray(p, np.float64)
     n = np.asarray(n, np.float64)
     value = unshadowed(world, n)
-    lit = np.flatnonzero((value > 0).any(axis=1))
+    lit = np.flatnonzero(any_along(value > 0))
     glossy = np.zeros_like(value)
     if len(lit) == 0 or occluded is None:
         return value if reflect is None else (value, glossy)

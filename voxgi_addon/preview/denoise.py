@@ -58,6 +58,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..gi.exact_indirect import LUMINANCE
+from ..scene.short_axis import all_along
 
 KERNEL = np.array([1 / 16, 1 / 4, 3 / 8, 1 / 4, 1 / 16])
 NORMAL_POWER = 32
@@ -226,5 +227,5 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
         full_keep = np.concatenate([np.repeat(keep[..., :1], 3, axis=-1), keep[..., 1:]], axis=-1)
         v = np.where(full_keep, fitted, v)
         var = np.where(keep, fitted_var, var)
-        hole = hole & ~keep.all(axis=-1)  # filled
+        hole = hole & ~all_along(keep)  # filled
     return v.astype(np.float32), var.astype(np.float32)

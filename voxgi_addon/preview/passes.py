@@ -40,6 +40,7 @@ from ..gi.world_light import scene_lights, world_light
 from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, camera_frame, filter_samples
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
+from ..scene.short_axis import any_along, norm3
 from ..scene.textures import TEXTURE_TAPS, primary_base, texel_emission
 from . import transmission
 from .gather import (
@@ -126,7 +127,7 @@ def _glossy_points(light, index, points, normals, sample_ids, alpha):
     size_y = light.size_y if light.shape in ("RECTANGLE", "ELLIPSE") else light.size
     half_x, half_y = 0.5 * light.size * x_axis, 0.5 * size_y * y_axis
     extent = 2.0 * max(np.linalg.norm(half_x), np.linalg.norm(half_y))
-    amount = glossy_jitter(alpha, extent, np.linalg.norm(position - points, axis=1))[:, None, None]
+    amount = glossy_jitter(alpha, extent, norm3(position - points))[:, None, None]
     m = AREA_GLOSSY_GRID
     k = np.arange(m * m)
     centres = (np.stack([k // m, k % m], axis=1) + 0.5) / m
@@ -135,7 +136,7 @@ def _glossy_points(light, index, points, normals, sample_ids, alpha):
     unit = concentric_disk(square) if light.shape in ("DISK", "ELLIPSE") else 2.0 * square - 1.0
     on_light = position + unit[..., :1] * half_x + unit[..., 1:] * half_y  # (N, K, 3)
     offset = np.swapaxes(on_light, 0, 1) - points[None]  # (K, N, 3)
-    distance = np.maximum(np.linalg.norm(offset, axis=-1), 1e-9)
+    distance = np.maximum(norm3(offset), 1e-9)
     towards = offset / distance[..., None]
     receiver = np.maximum(np.einsum("knj,nj->kn", towards, normals), 0.0)
     weight = np.maximum(-(towards @ emits), 0.0) * receiver / distance ** 2  # irradiance share
@@ -207,7 +208,7 @@ def principled_colours(snapshot, mat, cos_view, base=None):
     """
     if base is not None:
         table = principled_table(snapshot)[0]
-        own = np.flatnonzero(np.any(np.asarray(base) != table[np.asarray(mat)], axis=1))
+        own = np.flatnonzero(any_along(np.asarray(base) != table[np.asarray(mat)]))
         diffuse, glossy = principled_colours(snapshot, mat, cos_view)
         if len(own):
             params = principled_table(snapshot)[1][np.asarray(mat)[own]]

@@ -25,6 +25,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..scene.short_axis import norm3
+
 __all__ = ["EXTRA", "MATCH", "SPARSE_RAYS", "noisy_holes", "sparse_plan", "sparse_settings"]
 
 # Rays per traced point, as a multiple of the gather's (docs/gi_pipeline.md "Gathers at fewer
@@ -73,7 +75,7 @@ def sparse_plan(valid: np.ndarray, position: np.ndarray, normal: np.ndarray) -> 
         offset = _shifted(position, dr, dc) - position
         facing = np.maximum((normal * _shifted(normal, dr, dc)).sum(axis=-1), 0.0) ** 32
         plane = np.abs((normal * offset).sum(axis=-1))
-        tol = 0.1 * np.linalg.norm(offset, axis=-1) + 1e-4
+        tol = 0.1 * norm3(offset) + 1e-4
         matched += np.where(there, share * facing * np.exp(-(plane / tol) ** 2), 0.0)
         present += share * there
     return base | (valid & (matched < MATCH * present))

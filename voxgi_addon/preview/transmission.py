@@ -29,6 +29,7 @@ import numpy as np
 
 from ..scene.camera import DEFAULT_FILTER_WIDTH, filter_samples
 from ..scene.glass import camera_transmittance, is_glass
+from ..scene.short_axis import max_along
 from ..scene.snapshot import RAY_ALL, RAY_CAMERA
 
 __all__ = ["glass_materials", "behind_glass", "glass_weight", "behind_pixels", "composite"]
@@ -64,7 +65,7 @@ def _edges(weight: np.ndarray) -> np.ndarray:
     for dy in (0, 1, 2):
         for dx in (0, 1, 2):
             other = padded[dy:dy + height, dx:dx + width]
-            out |= np.abs(other - weight).max(axis=2) > 1e-6
+            out |= max_along(np.abs(other - weight), 2) > 1e-6
     return out
 
 
@@ -98,7 +99,7 @@ def behind_pixels(weight: np.ndarray) -> np.ndarray:
     """(H, W) bool the pixels whose behind layer counts: some camera sample sees glass there
     (weight > 0), grown by a pixel so that the behind layer's own edge tests and filter see
     their neighbours. The behind layer shades only these (the rest of the image as background)."""
-    seen = np.asarray(weight).max(axis=2) > 0.0
+    seen = max_along(weight, 2) > 0.0
     grown = seen.copy()
     grown[1:] |= seen[:-1]
     grown[:-1] |= seen[1:]

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..scene.short_axis import norm3
+
 STRIDES = (1, 2, 4)
 NORMAL_POWER = 8
 PLANE_TOLERANCE = 0.1
@@ -177,14 +179,14 @@ class EmitterField:
         turn2 = np.zeros(len(p), np.float32)
         glossy_turn2 = np.zeros(len(p), np.float32)
         eye_distance = None if self.eye is None else \
-            np.maximum(np.linalg.norm(p - self.eye, axis=1), np.float32(1e-6))
+            np.maximum(norm3(p - self.eye), np.float32(1e-6))
         for j, i, w, step, nk in _taps(self.valid, self.position, self.normal, self.stride,
                                        rows, cols, p, n, offset):
             glossy += w[:, None] * self.glossy[j, i]
             diffuse += w[:, None] * self.diffuse[j, i]
             weight += w
             room = self.distance[j, i] - step
-            bend = np.linalg.norm(n - nk, axis=1)
+            bend = norm3(n - nk)
             turn = np.where(room > 0.0, np.minimum(step / np.where(room > 0.0, room, 1.0),
                                                    np.float32(1e15)), np.float32(1e15)) + bend
             turn2 += np.where(w > 0.0, w * turn * turn, 0.0)
@@ -265,7 +267,7 @@ def same_surface(hit_a, material_a, position_a, normal_a, hit_b, material_b, pos
     step = np.asarray(position_b, np.float64) - np.asarray(position_a, np.float64)
     off_plane = np.maximum(np.abs(np.einsum("...i,...i->...", normal_a, step)),
                            np.abs(np.einsum("...i,...i->...", normal_b, step)))
-    apart = off_plane > PLANE_TOLERANCE * np.linalg.norm(step, axis=-1)
+    apart = off_plane > PLANE_TOLERANCE * norm3(step)
     differ = (hit_a != hit_b) | (hit_a & hit_b & ((np.asarray(material_a) !=
                                                    np.asarray(material_b)) | apart))
     return ~differ

@@ -21,6 +21,7 @@ from ..errors import VoxGICancelled, VoxGIError
 from ..gi.direct_light import diffuse_direct
 from ..gi.exact_indirect import hit_emission
 from ..scene.geometry import SceneTriangles, world_triangles
+from ..scene.short_axis import norm3
 from .direct import emissive_sides, emitter_probe_sh, world_probe_sh
 from .grid import DISABLED, RELOCATED, ProbeGrid
 from .masks import ALL_SUBVOLUMES, occlusion_masks
@@ -113,7 +114,7 @@ def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
         c = np.asarray(tris.corner_normals, np.float64)[k]
         uu, vv = u[hit, None], v[hit, None]
         smooth = (1.0 - uu - vv) * c[:, 0] + uu * c[:, 1] + vv * c[:, 2]
-        length = np.linalg.norm(smooth, axis=1, keepdims=True)
+        length = norm3(smooth)[:, None]
         normal = np.where(length > 1e-12, smooth / np.maximum(length, 1e-12), normal)
     face = np.asarray(tris.normals, np.float64)[k]
     sign = np.where(np.einsum("ij,ij->i", face, dirs[hit]) > 0, -1.0, 1.0)  # Cycles flips back faces

@@ -43,6 +43,7 @@ from ..gi.sampling import hashed_square
 from ..gi.world_light import LUMINANCE, sample_world, world_pdf, world_radiance
 from ..scene.equirect import direction_to_pixel
 from ..scene.raycast import occluded
+from ..scene.short_axis import norm3
 from .sh import sh_basis
 
 __all__ = ["WORLD_STREAM", "EMITTER_STREAM", "world_sh", "world_probe_sh", "emitter_probe_sh",
@@ -246,7 +247,7 @@ def emitter_probe_sh(tris, light, positions, directions, rays, radiance, sides, 
         hp, hn, ht = hit_p[lit], hit_n[lit], t_hit[lit]
         corners = np.asarray(tris.positions, np.float64)[ht]
         normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-30)
+        normal /= np.maximum(norm3(normal)[:, None], 1e-30)
         cos_l = np.einsum("mc,mc->m", d[hn], normal)
         # the ray arrives on the side facing away from its direction: the side of -cos_l
         side = sides[ht]
@@ -261,7 +262,7 @@ def emitter_probe_sh(tris, light, positions, directions, rays, radiance, sides, 
     dirs = w / np.maximum(r, 1e-30)[..., None]
     c = light.corners[index]
     normal = np.cross(c[..., 1, :] - c[..., 0, :], c[..., 2, :] - c[..., 0, :])
-    normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-30)
+    normal /= np.maximum(norm3(normal)[..., None], 1e-30)
     cos_l = np.einsum("pkc,pkc->pk", dirs, normal)
     side = light.sides[index]
     useful = ((side == 0) | (side * -np.sign(cos_l) > 0)) & (np.abs(cos_l) > 1e-6) & (r > 1e-9)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..scene.short_axis import norm3
 from .placement import SUBDIVISIONS, ProbeLayout
 
 __all__ = ["ALL_SUBVOLUMES", "occlusion_masks", "passable_subvolumes", "path_search"]
@@ -33,7 +34,7 @@ def passable_subvolumes(layout: ProbeLayout, positions, threshold: float) -> np.
     v_count = len(layout.volume_cells)
     probes = layout.volume_probes[g.volume_row]  # (Q, 8)
     to_probe = np.asarray(positions, np.float64)[probes] - g.centroid[:, None, :]  # (Q, 8, 3)
-    dist = np.linalg.norm(to_probe, axis=2)
+    dist = norm3(to_probe)
     cos = np.einsum("qj,qcj->qc", g.normal, to_probe) / np.maximum(dist, 1e-12)
     weight = g.area[:, None] * np.abs(cos)
     key = (g.volume_row[:, None] * 8 + np.arange(8)[None]) * 64 + g.sub[:, None]

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import VoxGIError
+from ..scene.short_axis import all_along, norm3
 from ..voxelize.cube_clipping import clip_to_cells
 from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
 from .grid import CORNER_OFFSETS
@@ -98,7 +99,7 @@ def place_probes(triangles, normals, lo, hi, dims) -> ProbeLayout:
     surface = voxelize_triangles(local.reshape(-1, 3), np.arange(3 * len(tri)).reshape(-1, 3), 1.0)
     sub_dims = dims * SUBDIVISIONS
     cells = surface.cells.astype(np.int64)
-    inside = ((cells >= 0) & (cells < sub_dims)).all(axis=1)
+    inside = all_along((cells >= 0) & (cells < sub_dims))
     pair_ok = inside[surface.cell_of_pair]
     pair_tri = surface.triangle_of_pair[pair_ok].astype(np.int64)
     pair_cell = cells[surface.cell_of_pair[pair_ok]]
@@ -119,8 +120,8 @@ def place_probes(triangles, normals, lo, hi, dims) -> ProbeLayout:
     # shifted lattice), the area turned into m² through the triangle's share in that frame.
     shifted = local[pair_tri] + LATTICE_OFFSET
     piece, centroid = clip_to_cells(shifted, pair_cell)
-    full = 0.5 * np.linalg.norm(np.cross(shifted[:, 1] - shifted[:, 0], shifted[:, 2] - shifted[:, 0]), axis=1)
-    world = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    full = 0.5 * norm3(np.cross(shifted[:, 1] - shifted[:, 0], shifted[:, 2] - shifted[:, 0]))
+    world = 0.5 * norm3(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]))
     area = np.divide(piece, full, out=np.zeros_like(piece), where=full > 0) * world[pair_tri]
     keep = area > 0
     centroid_world = lo + (pair_cell + centroid - LATTICE_OFFSET) * sub_size

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..scene.short_axis import all_along
 from .grid import CORNER_OFFSETS, NO_INDEX, ProbeGrid
 from .placement import SUBDIVISIONS
 from .sh import COSINE_LOBE, sh_basis
@@ -93,7 +94,7 @@ def query_grids(grids, points, normals, use_masks: bool = True) -> np.ndarray:
     todo = np.ones(len(p), bool)
     for grid in grids:
         hi = grid.origin + grid.dims * grid.volume_size
-        inside = todo & ((p >= grid.origin) & (p <= hi)).all(axis=1)
+        inside = todo & all_along((p >= grid.origin) & (p <= hi))
         if inside.any():
             out[inside] = query_irradiance(grid, p[inside], nrm[inside], use_masks)
         todo &= ~inside

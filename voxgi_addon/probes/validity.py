@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..scene import raycast
+from ..scene.short_axis import norm3
 from .grid import DISABLED, RELOCATED
 
 __all__ = ["ProbeRays", "trace_probe_rays", "relocate_probes"]
@@ -84,7 +85,7 @@ def relocate_probes(tris, positions, directions, threshold: float, max_offset: f
         j = np.argmin(t_back, axis=1)
         t_near = t_back[np.arange(len(invalid)), j]
         target = pos[invalid] + d[j] * (t_near + step)[:, None]
-        ok = np.isfinite(t_near) & (np.linalg.norm(target - start[invalid], axis=1) <= max_offset)
+        ok = np.isfinite(t_near) & (norm3(target - start[invalid]) <= max_offset)
         moved = invalid[ok]
         if len(moved) == 0:
             break

@@ -34,6 +34,7 @@ import numpy as np
 
 from .geometry import SceneTriangles
 from .raycast import SHADOW_EPSILON, counted_hits, cutouts_of
+from .short_axis import max_along, min_along, norm3
 from .snapshot import RAY_ALL, RAY_DIFFUSE, RAY_SHADOW
 
 __all__ = [
@@ -197,7 +198,7 @@ def build_bvh(tris: SceneTriangles, max_leaf: int = MAX_LEAF) -> BVH:
     t = len(positions)
     if t > _MAX_TRIANGLES:
         raise ValueError(f"{t} triangles: the packed BVH holds at most {_MAX_TRIANGLES}")
-    tlo, thi = positions.min(axis=1), positions.max(axis=1)
+    tlo, thi = min_along(positions, 1), max_along(positions, 1)
     # The split search works in float32 (half the memory traffic); bounds are float64.
     blo32 = np.ascontiguousarray(tlo.T, np.float32)  # (3, T): a row per axis
     bhi32 = np.ascontiguousarray(thi.T, np.float32)
@@ -371,7 +372,7 @@ def build_instanced_bvh(tris: SceneTriangles, groups, rest) -> BVH:
     if len(positions) > _MAX_TRIANGLES:
         raise ValueError(f"{len(positions)} triangles: the packed BVH holds at most {_MAX_TRIANGLES}")
     # float32 boxes (half the memory traffic; the pad below covers their rounding)
-    tlo, thi = positions.min(axis=1).astype(np.float32), positions.max(axis=1).astype(np.float32)
+    tlo, thi = min_along(positions, 1).astype(np.float32), max_along(positions, 1).astype(np.float32)
     # items: the rest's BVH (if any), then every placement; per item its nodes and triangles
     lo, hi, miss, first, count, order, nodes, tris_of = [], [], [], [], [], [], [], []
     depth = 1
@@ -564,7 +565,7 @@ def pack_bvh(bvh: BVH, tris: SceneTriangles) -> BVHTextures:
         packed[a:b, 0, :3], packed[a:b, 0, 3] = p[:, 0], codes[which]
         packed[a:b, 1, :3], packed[a:b, 1, 3] = e1, which
         packed[a:b, 2, :3] = e2
-        packed[a:b, 2, 3] = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+        packed[a:b, 2, 3] = norm3(e1) * norm3(e2)
         if cutout is not None:  # cut-outs (textures.cutout_hits) carry a negative scale
             packed[a:b, 2, 3] *= np.where(cutout[0].cutout[which], -1.0, 1.0)
         if corner_normals is not None:
@@ -582,7 +583,7 @@ def _intersect(p, o, d):
     e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
     pv = np.cross(d, e2)
     det = np.einsum("ij,ij->i", e1, pv)
-    scale = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1) * np.linalg.norm(d, axis=1)
+    scale = norm3(e1) * norm3(e2) * norm3(d)
     ok = np.abs(det) > DET_EPSILON * scale
     inv = np.divide(1.0, det, out=np.zeros_like(det), where=ok)
     s = o - p[:, 0]
@@ -625,8 +626,8 @@ def traverse(bvh: BVH, tris: SceneTriangles, origins, directions, t_min=0.0, t_m
         with np.errstate(invalid="ignore"):
             t0 = (bvh.lo[k] - o[live]) * inv[live]
             t1 = (bvh.hi[k] - o[live]) * inv[live]
-        enter = np.maximum(np.minimum(t0, t1).max(axis=1), lo_t[live])
-        leave = np.minimum(np.maximum(t0, t1).min(axis=1), best[live])
+        enter = np.maximum(max_along(np.minimum(t0, t1)), lo_t[live])
+        leave = np.minimum(min_along(np.maximum(t0, t1)), best[live])
         meets = enter <= leave
         count = np.where(meets, bvh.count[k], 0)
         inner = meets & (bvh.first[k] < 0)

@@ -19,6 +19,7 @@ import functools
 
 import numpy as np
 
+from .short_axis import norm3
 from .snapshot import CameraData
 
 __all__ = ["DEFAULT_FILTER_WIDTH", "camera_frame", "camera_rays", "camera_ray_lengths",
@@ -195,7 +196,7 @@ def camera_rays(camera: CameraData, width: int | None = None, height: int | None
     else:
         local_dirs = np.stack([gx.ravel(), gy.ravel(), -np.ones(gx.size)], axis=1)
         local_origins = local_dirs * near  # the point on the near plane z = -near
-        local_dirs /= np.linalg.norm(local_dirs, axis=1, keepdims=True)
+        local_dirs /= norm3(local_dirs)[:, None]
     return local_origins @ rotation.T + position, local_dirs @ rotation.T
 
 

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .short_axis import norm3
+
 
 def pixel_directions(height: int, width: int) -> np.ndarray:
     """(H, W, 3) float64 unit directions of the pixel centres."""
@@ -38,7 +40,7 @@ def direction_to_pixel(directions, height: int = 1, width: int = 2) -> tuple[np.
     (pixel centres at integer + 0.5). A zero direction maps to the horizon at phi = 0.
     """
     d = np.asarray(directions, np.float64)
-    length = np.linalg.norm(d, axis=-1)
+    length = norm3(d)
     z = np.divide(d[..., 2], length, out=np.zeros_like(length), where=length > 0)
     el = np.arcsin(np.clip(z, -1.0, 1.0))
     phi = np.arctan2(d[..., 1], d[..., 0])

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .short_axis import norm3
 from .skinning import blend_matrices, skin_matrices, transform_normals, transform_points
 from .snapshot import RAY_ALL, MeshData, ObjectData, SceneSnapshot
 from .textures import SurfaceTextures, surface_textures
@@ -149,7 +150,7 @@ def _place_rigid(matrices: np.ndarray, mesh: MeshData, shading: bool = True):
     normals = np.matmul(np.asarray(mesh.corner_normals, np.float64).reshape(1, -1, 3),
                         (cofactor * sign[:, None, None]).transpose(0, 2, 1))
     normals = normals.reshape(len(matrices), -1, 3, 3)
-    length = np.linalg.norm(normals, axis=-1, keepdims=True)
+    length = norm3(normals)[..., None]
     return world, np.divide(normals, length, out=np.zeros_like(normals), where=length > 1e-12)
 
 
@@ -199,7 +200,7 @@ def world_triangles(snapshot: SceneSnapshot, shading: bool = True) -> SceneTrian
             if placed_normals is not None:
                 normals[rows] = placed_normals.reshape(-1, 3, 3)
     normal = _cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    length = np.linalg.norm(normal, axis=1, keepdims=True)
+    length = norm3(normal)[:, None]
     normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
     if smooth and flat.any():  # meshes without corner normals shade flat
         normals[flat] = normal[flat][:, None]

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import VoxGIError
+from .short_axis import norm3
 from .snapshot import ArmatureData
 
 __all__ = ["skin_matrices", "inverse", "blend_matrices", "skin_points", "transform_points",
@@ -133,7 +134,7 @@ def transform_normals(matrices: np.ndarray, normals: np.ndarray) -> np.ndarray:
         out = n @ cof.T * np.sign(det)
     else:
         out = np.einsum("nij,nj->ni", cof, n) * np.sign(det)[:, None]
-    length = np.linalg.norm(out, axis=1, keepdims=True)
+    length = norm3(out)[:, None]
     return np.divide(out, length, out=np.zeros_like(out), where=length > 1e-12)
 
 

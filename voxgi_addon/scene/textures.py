@@ -67,6 +67,7 @@ import numpy as np
 
 from .camera import DEFAULT_FILTER_WIDTH, _frustum, blackman_harris, camera_frame, filter_offsets
 from .glass import ray_alpha
+from .short_axis import max_along, norm3
 from .snapshot import SceneSnapshot, TextureData
 
 MAX_LEVELS = 12              # mip levels kept per texture (level 0 = the image)
@@ -456,7 +457,7 @@ def pack_emission(emission) -> np.ndarray:
     2^(E − 15)) and three 8-bit mantissas (0 for no emission), clamped to [0, EMISSION_MAX];
     relative precision 2^-8 of the brightest channel."""
     e = np.clip(np.asarray(emission, np.float32), 0.0, EMISSION_MAX)
-    m = e.max(axis=-1)
+    m = max_along(e)
     lit = m >= np.float32(2.0 ** -15)
     x = np.clip(np.floor(np.log2(np.where(lit, m, 1.0))).astype(np.int64) + 1, -14, 16)
     c = np.clip(np.floor(e * np.exp2(8.0 - x)[..., None] + 0.5), 0, 255).astype(np.uint32)
@@ -482,7 +483,7 @@ def texel_density(positions: np.ndarray, uvs: np.ndarray, world=None) -> np.ndar
     uv = np.asarray(uvs, np.float64)
     if world is None:
         p = np.asarray(positions, np.float64)
-        world = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+        world = norm3(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]))
     world = np.asarray(world, np.float64).reshape(-1)
     e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     flat = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
@@ -573,7 +574,7 @@ def face_tangents(positions: np.ndarray, uvs: np.ndarray) -> np.ndarray:
     t = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * inv
     b = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * inv
     n = np.cross(e1, e2)
-    length = np.linalg.norm(t, axis=1, keepdims=True)
+    length = norm3(t)[:, None]
     out = np.zeros((len(p), 4), np.float32)
     out[:, :3] = np.divide(t, length, out=np.zeros_like(t), where=length > 0)
     out[:, 3] = np.where(np.einsum("ij,ij->i", np.cross(n, t), b) < 0.0, -1.0, 1.0)
@@ -586,15 +587,15 @@ def perturbed_normals(normals, tangents, colour, strength) -> np.ndarray:
     n = np.asarray(normals, np.float64)
     t = np.asarray(tangents, np.float64)
     t_dir = t[:, :3] - n * np.einsum("ij,ij->i", t[:, :3], n)[:, None]  # orthogonal to N
-    length = np.linalg.norm(t_dir, axis=1, keepdims=True)
+    length = norm3(t_dir)[:, None]
     t_dir = np.divide(t_dir, length, out=np.zeros_like(t_dir), where=length > 1e-12)
     b = t[:, 3:4] * np.cross(n, t_dir)
     c = 2.0 * np.asarray(colour, np.float64) - 1.0
     m = c[:, :1] * t_dir + c[:, 1:2] * b + c[:, 2:3] * n
-    m /= np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)
+    m /= np.maximum(norm3(m)[:, None], 1e-12)
     k = np.maximum(np.asarray(strength, np.float64), 0.0)[:, None]
     m = n + (m - n) * k
-    out = m / np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-12)
+    out = m / np.maximum(norm3(m)[:, None], 1e-12)
     return np.where(length > 1e-12, out, n)  # no tangent (degenerate UVs): unperturbed
 
 
@@ -714,7 +715,7 @@ def _on_plane(start, direction, position, normal) -> np.ndarray:
     along the plane."""
     across = np.einsum("ij,ij->i", direction, normal)
     reach = np.einsum("ij,ij->i", position - start, normal)
-    ok = np.abs(across) > 1e-9 * np.linalg.norm(direction, axis=1)
+    ok = np.abs(across) > 1e-9 * norm3(direction)
     t = np.divide(reach, across, out=np.zeros_like(reach), where=ok)
     return np.where(ok[:, None], start + t[:, None] * direction, position)
 
@@ -837,7 +838,7 @@ def primary_base(tris, seen, pixels, base, camera, width: int, height: int,
     if camera.type == "ORTHO":
         distance = np.ones(len(pixels))
     else:
-        distance = np.linalg.norm(position - camera_frame(camera)[1], axis=1)
+        distance = norm3(position - camera_frame(camera)[1])
     cos = np.einsum("ij,ij->i", seen.face_normal.reshape(-1, 3)[pixels],
                     seen.direction.reshape(-1, 3)[pixels])
     taps = int(taps) if filter_width > 0.0 else 1

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..scene.short_axis import norm3
 from .cube_clipping import clip_to_cells, patch_areas
 from .surface import LATTICE_OFFSET, VoxelizedSurface, to_grid_units
 
@@ -74,7 +75,7 @@ def face_normals_and_areas(positions: np.ndarray, triangles: np.ndarray):
     """(T, 3) unit face normals (zero for degenerate faces) and (T,) areas."""
     p = np.asarray(positions, np.float64)[triangles]
     cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    length = np.linalg.norm(cross, axis=1)
+    length = norm3(cross)
     normals = np.divide(cross, length[:, None], out=np.zeros_like(cross), where=length[:, None] > 0)
     return normals, 0.5 * length
 
@@ -133,14 +134,14 @@ def average_attributes(surface: VoxelizedSurface, positions, triangles, tri_albe
     spec = _weighted_mean(np.asarray(tri_specular, np.float64)[:, None], pt, pc, weight, n)[:, 0]
     normal = _weighted_mean(normals, pt, pc, weight, n)
     pieces = _Pieces(pc, normals[pt], clipped, centroid, n)
-    crease = np.flatnonzero(np.linalg.norm(normal, axis=1) < CREASE_RESULTANT)
+    crease = np.flatnonzero(norm3(normal) < CREASE_RESULTANT)
     if len(crease):
         face = _dominant_face_normal(normals, pt, pc, weight, crease, n)
         fill = pieces.area_along(face)[crease] / np.maximum(
             patch_areas(face[crease], pieces.offsets(face)[crease], 0.5), 1e-30)
         use = crease[fill >= FACE_FILL]
         normal[use] = face[use]
-    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-30)[:, None]
+    normal /= np.maximum(norm3(normal), 1e-30)[:, None]
     w = idx = None
     if skin_weights is not None:
         vert = nearest_contact_vertex(surface, positions, triangles)
@@ -180,7 +181,7 @@ def _dominant_face_normal(normals, pt, pc, weight, voxels, count):
     for c in range(3):
         out[:, c] = np.bincount(p_vox[agree], weights=(w * normals[p_tri, c])[agree],
                                 minlength=count)
-    return out / np.maximum(np.linalg.norm(out, axis=1), 1e-30)[:, None]
+    return out / np.maximum(norm3(out), 1e-30)[:, None]
 
 
 class _Pieces:

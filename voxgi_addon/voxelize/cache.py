@@ -13,6 +13,7 @@ from functools import cached_property
 
 import numpy as np
 
+from ..scene.short_axis import norm3
 from . import packing as vp
 from .attributes import VoxelAttributes
 from .cube_clipping import PATCH_SHRINK, voxel_patches
@@ -69,7 +70,7 @@ class VoxelCache:
         """Unpack to float attributes (normals renormalised; ``plane_offset`` (N,) in metres)."""
         rgba = vp.unpack_unorm8x4(self.colors)
         n = vp.unpack_normals(self.normals)
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+        n /= np.maximum(norm3(n)[:, None], 1e-12)
         w = vp.unpack_weights(self.weights) if self.weights is not None else None
         i = vp.unpack_indices(self.bone_indices) if self.bone_indices is not None else None
         offset = vp.unpack_plane_offsets(self.normals) * np.float32(self.span)

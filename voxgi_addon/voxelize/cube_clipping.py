@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..scene.short_axis import norm3
+
 # Struct-of-arrays style: a vector is a list of three (N,) component arrays, so nothing reduces
 # over a length-3 axis (slow in numpy).
 
@@ -191,7 +193,7 @@ def voxel_patches(normals: np.ndarray, offsets: np.ndarray, half: float):
     # a basis (u, v) of the plane: u = n × (the axis n is least along), v = n × u
     nn = np.stack(n, axis=1)
     u = np.cross(nn, np.eye(3)[np.argmin(np.abs(nn), axis=1)])
-    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-30)
+    u /= np.maximum(norm3(u)[:, None], 1e-30)
     w = np.cross(nn, u)
     x = rel[0] * u[:, 0, None] + rel[1] * u[:, 1, None] + rel[2] * u[:, 2, None]
     y = rel[0] * w[:, 0, None] + rel[1] * w[:, 1, None] + rel[2] * w[:, 2, None]

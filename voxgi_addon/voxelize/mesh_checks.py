@@ -6,6 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import VoxGIError
+from ..scene.short_axis import all_along, norm3
 
 
 @dataclass(frozen=True)
@@ -37,10 +38,10 @@ def filter_triangles(name: str, positions: np.ndarray, triangles: np.ndarray) ->
     if tris.size and (tris.min() < 0 or tris.max() >= len(pos)):
         raise VoxGIError(f"mesh '{name}': triangle vertex index out of range (0..{len(pos) - 1})")
     p = pos[tris]
-    finite = np.isfinite(p).all(axis=(1, 2))
+    finite = all_along(np.isfinite(p).reshape(-1, 9))
     with np.errstate(invalid="ignore", over="ignore"):
         e0, e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 1], p[:, 0] - p[:, 2]
-        twice_area = np.linalg.norm(np.cross(e0, -e2), axis=1)
+        twice_area = norm3(np.cross(e0, -e2))
         longest_sq = np.maximum(np.maximum((e0**2).sum(1), (e1**2).sum(1)), (e2**2).sum(1))
         solid = 0.5 * twice_area > 1e-12 * longest_sq
     solid &= finite

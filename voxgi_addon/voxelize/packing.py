@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..scene.short_axis import norm3
+
 MAX_CELLS_PER_AXIS = 1024
 
 
@@ -63,7 +65,7 @@ def plane_reach(normals: np.ndarray) -> np.ndarray:
     from the voxel centre at which a plane with that normal still touches the voxel cube
     (0 for a zero vector)."""
     n = np.asarray(normals, np.float64)
-    length = np.linalg.norm(n, axis=1)
+    length = norm3(n)
     return np.divide(0.5 * np.abs(n).sum(axis=1), length, out=np.zeros(len(n)), where=length > 0)
 
 
