@@ -72,7 +72,7 @@ def measure(rounds: int, profile: bool, faceless: bool = False) -> list:
 
     from voxgi.blender import jobs
     from voxgi.blender.updates import records_from_depsgraph
-    from voxgi.blender.viewport_session import live_gi
+    from voxgi.blender.viewport_session import READ_SLICE, live_gi
 
     jobs.synchronous = False
     scene = build("diorama")
@@ -92,6 +92,9 @@ def measure(rounds: int, profile: bool, faceless: bool = False) -> list:
     live.update(scene, depsgraph)
     entering = time.perf_counter() - t0
     jobs.wait_idle(600)
+    # the edits as the render engine's view_update hands them over: a full snapshot first
+    # reads ahead what it would read, a slice at most (viewport_session.READ_SLICE)
+    live.read_slice = READ_SLICE
     times: dict[str, list[float]] = {}
     profiler = cProfile.Profile() if profile else None
     try:
