@@ -280,6 +280,24 @@ def test_the_slice_sizer_fits_the_budget_with_the_slices_tail_not_their_median()
     assert few.tail() > 1.5
 
 
+def test_a_burst_of_slow_slices_shrinks_the_next_at_once():
+    """Another process's burst slows every slice twofold: after two such slices in a row the
+    next is sized for the slower machine (not once the tail of 48 has moved), one slow slice
+    alone shrinks nothing, and a slice at the usual pace ends it."""
+    sizer = SliceSizer(0.015, least=256)
+    for k in range(48):
+        pixels = (4000, 6000, 8000)[k % 3]
+        sizer.measured(pixels, 1e-6 * pixels)
+    usual = sizer.pixels(10 ** 6, explore=False)
+    sizer.measured(6000, 2e-6 * 6000)
+    assert sizer.pixels(10 ** 6, explore=False) == usual  # one slow slice: a one-off
+    sizer.measured(8000, 2e-6 * 8000)
+    burst = sizer.pixels(10 ** 6, explore=False)
+    assert burst == pytest.approx(usual / 2, rel=0.05)
+    sizer.measured(4000, 1e-6 * 4000)  # the burst is over
+    assert sizer.pixels(10 ** 6, explore=False) == usual
+
+
 def test_the_gathers_are_accumulated_per_cell_of_the_images_grid():
     from voxgi.voxgi_addon.preview.progressive import LUMINANCE, GatherSums
 

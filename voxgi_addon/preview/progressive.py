@@ -56,6 +56,10 @@ GATHER_SAMPLES = 4
 TAIL = 0.9
 TAIL_LEAST = 8   # slices measured before the quantile is taken
 ONE_OFF = 3.0    # a slice this many times the median's ratio to the model waited once
+# The last RECENT slices all this much slower than the model: the machine is (another
+# process's burst), so the next slices are sized for it at once, not once the quantile of
+# the kept ones has moved: a burst ran a dozen staged draws in a row at 33–50 ms
+RECENT = 2
 
 
 def gather_samples(samples: int) -> int:
@@ -559,7 +563,10 @@ class SliceSizer:
         least 1): what the budget is divided by. 1 until ``TAIL_LEAST`` slices were measured
         (the quantile of a few is their longest); a slice more than ``ONE_OFF`` times its
         model's median ratio waited for something once (a kernel's build, another process's
-        burst), which no size would have kept within the budget: it is left out. fitted : the
+        burst), which no size would have kept within the budget: it is left out. But when the
+        last ``RECENT`` slices all ran slower than that quantile says, the least of their
+        ratios is taken: the machine is slower now (a burst of another process), and the next
+        slices are sized for it until a slice runs at its usual pace. fitted : the
         ``model()`` the caller has already fitted (None: fitted here)."""
         fitted = self.model() if fitted is None else fitted
         if fitted is None or len(self.samples) < TAIL_LEAST:
@@ -568,8 +575,9 @@ class SliceSizer:
         p = np.array([s[0] for s in self.samples], np.float64)
         t = np.array([s[1] for s in self.samples], np.float64)
         ratio = t / np.maximum(fixed + per_pixel * p, 1e-9)
+        recent = float(ratio[-RECENT:].min())  # (a burst: every one of them slow)
         ratio = ratio[ratio <= ONE_OFF * np.median(ratio)]
-        return max(1.0, float(np.quantile(ratio, TAIL)))
+        return max(1.0, float(np.quantile(ratio, TAIL)), recent)
 
     def pixels(self, most: int, explore: bool = True) -> int:
         """Pixels of the next slice, between ``least`` and ``most``. explore False: the fitted
