@@ -248,13 +248,23 @@ class LiveGI:
             return False
         depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
         if not self.read_all:
-            self.read_all = read_ahead(depsgraph, self.mesh_reads,
-                                       self.read_slice or float("inf"))
+            self.read_all = self._read_ahead(depsgraph)
             if self.read_slice is not None:
                 return True
         plan, self.reading, self.read_all = self.reading, None, False
         self._submit(plan, scene, depsgraph, read=True)
         return False
+
+    def _read_ahead(self, depsgraph) -> bool:
+        """``read_ahead`` for ``read_slice`` (everything without one); True when every mesh
+        is read. A read that fails forgets the kept reads and leaves the meshes to the
+        snapshot, which reads them or says why it cannot."""
+        try:
+            return read_ahead(depsgraph, self.mesh_reads, self.read_slice or float("inf"))
+        except Exception:  # noqa: BLE001 - never stuck between draws
+            traceback.print_exc()
+            self.mesh_reads.clear()
+            return True
 
     def _submit(self, plan: UpdatePlan, scene, depsgraph=None, read: bool = False
                 ) -> jobs.Job | None:
@@ -271,8 +281,7 @@ class LiveGI:
                                           world=self.world_changed)
         elif "snapshot" not in plan.stages and self.latest_snapshot is not None:
             snapshot = self.latest_snapshot
-        elif self.read_slice is not None and not read and \
-                not read_ahead(depsgraph, self.mesh_reads, self.read_slice):
+        elif self.read_slice is not None and not read and not self._read_ahead(depsgraph):
             self.reading = plan  # the draws go on with the reads (``read_on``)
             return None
         try:

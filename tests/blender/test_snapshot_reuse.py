@@ -265,3 +265,32 @@ def test_a_full_snapshot_read_a_mesh_a_slice_sees_the_edits_made_between_slices(
         same(live.latest_snapshot, fresh_snapshot(scene), "read a slice at a time")
     finally:
         bpy.app.handlers.depsgraph_update_post.remove(recorder)
+
+
+def test_a_read_ahead_that_fails_leaves_the_meshes_to_the_snapshot(live_box, monkeypatch,
+                                                                    capsys):
+    """A slice's read that raises (an object gone under it, a bug) never leaves the view
+    waiting between draws: the kept reads are forgotten and the snapshot reads the meshes."""
+    from voxgi.blender import viewport_session
+
+    scene, _, live = live_box
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    original, calls = viewport_session.read_ahead, []
+
+    def failing(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            raise RuntimeError("a read went wrong")
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(viewport_session, "read_ahead", failing)
+    taken = live.snapshots
+    live.read_slice = 1e-9
+    live.rescan = "Rendered mode entered"
+    live.update(scene, depsgraph, [])
+    assert live.reading is not None
+    while live.read_on(scene, depsgraph):
+        pass
+    assert len(calls) == 2 and "a read went wrong" in capsys.readouterr().err
+    assert live.reading is None and live.snapshots == taken + 1 and live.error == ""
+    same(live.latest_snapshot, fresh_snapshot(scene), "after a failed read")
