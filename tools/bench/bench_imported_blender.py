@@ -213,7 +213,8 @@ def playback_rows(frames: int = PLAYBACK_FRAMES, fps: int = PLAYBACK_FPS):
         bpy.app.handlers.depsgraph_update_post.remove(record)
         bpy.app.handlers.frame_change_post.remove(record)
         jobs.synchronous = None
-    out = {"frames": frames, "fps": frames / played, "shown": len(shown),
+    first, last = changed_at[2], changed_at[frames + 1]  # the frame changes' own rate
+    out = {"frames": frames, "fps": (frames - 1) / max(last - first, 1e-9), "shown": len(shown),
            "last": shown[-1] if shown else None, "main longest": max(ours),
            "main median": _median(ours), "lag median": _median(lags) if lags else None}
     print(f"\n### Playback of the imported rig in the viewport: {frames} frames at {fps} fps "
