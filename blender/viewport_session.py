@@ -269,17 +269,22 @@ class LiveGI:
     def _submit(self, plan: UpdatePlan, scene, depsgraph=None, read: bool = False
                 ) -> jobs.Job | None:
         """``schedule``'s snapshot and job; read : the meshes were just read ahead."""
+        # what changed since the last snapshot decides how this one is read; the running job
+        # it supersedes read what its own plan needed into that last snapshot (a pose played
+        # while the first update still voxelizes reads the pose, not every mesh again)
+        changed = plan
         running = jobs.running_job(self.scene_name)
         if running is not None and self.pending is not None:
             plan = self.pending.merged(plan)  # the superseded job's work still has to happen
         depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
         snapshot = None
-        if not plan.full_snapshot and "snapshot" in plan.stages and self.latest_snapshot is not None:
+        if not changed.full_snapshot and "snapshot" in changed.stages and \
+                self.latest_snapshot is not None:
             # a pose or a move: matrices only, the world only when it changed
             # (docs/gi_pipeline.md "Posed updates")
             snapshot = transform_snapshot(self.latest_snapshot, scene, depsgraph,
                                           world=self.world_changed)
-        elif "snapshot" not in plan.stages and self.latest_snapshot is not None:
+        elif "snapshot" not in changed.stages and self.latest_snapshot is not None:
             snapshot = self.latest_snapshot
         elif self.read_slice is not None and not read and not self._read_ahead(depsgraph):
             self.reading = plan  # the draws go on with the reads (``read_on``)

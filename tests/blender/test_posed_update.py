@@ -316,6 +316,57 @@ def test_playing_a_rig_reads_only_poses_drops_frames_and_ends_on_the_last(
     assert file_state() == untouched
 
 
+def test_frames_played_while_the_first_update_voxelizes_read_only_their_poses(
+        rig_room, interactive, monkeypatch):
+    """Play pressed while the first update (every mesh read, every cache voxelized) still runs:
+    each frame supersedes that job with its work merged in, but reads only its pose — the
+    meshes were read into the snapshot the running job was given. The last frame's result is
+    voxel for voxel the update of a full snapshot of it."""
+    from voxgi.blender import viewport_session
+    from voxgi.blender.settings import gi_settings
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.voxgi_addon.gi.incremental import update_gi_stages
+
+    release, entered = threading.Event(), threading.Event()
+    original = viewport_session.refresh_caches
+
+    def held_first(*args, **kwargs):  # the first update's voxelization takes its time
+        if not entered.is_set():
+            entered.set()
+            assert release.wait(TIMEOUT)
+        return original(*args, **kwargs)
+
+    jobs = interactive
+    scene, built = rig_room
+    rig_scenes.keyframe_walk(built["rig"], frames=4, start=1)
+    scene.frame_set(1)
+    monkeypatch.setattr(viewport_session, "refresh_caches", held_first)
+    live = live_gi(scene.name_full)
+    recorder = Recorder(live)
+    bpy.app.handlers.depsgraph_update_post.append(recorder)
+    bpy.app.handlers.frame_change_post.append(recorder)
+    try:
+        first = live.update(scene, bpy.context.evaluated_depsgraph_get())
+        assert first.full_snapshot and entered.wait(TIMEOUT)
+        before = reads()
+        for frame in (2, 3, 4):
+            scene.frame_set(frame)
+            live.update(scene, bpy.context.evaluated_depsgraph_get(), recorder.take())
+            assert live.latest_snapshot.frame == frame
+        assert read_since(before) == {"meshes": 0, "materials": 0, "worlds": 0}
+        assert "voxelize" in live.pending.stages  # the first update's work still to come
+    finally:
+        release.set()
+        bpy.app.handlers.depsgraph_update_post.remove(recorder)
+        bpy.app.handlers.frame_change_post.remove(recorder)
+    assert jobs.wait_idle(TIMEOUT)
+    jobs.drain()
+    assert live.error == "" and live.pending is None and live.snapshot.frame == 4
+    expected = update_gi_stages(fresh_snapshot(scene), live.staged.caches,
+                                gi_settings(scene.voxgi), None, {"transform"}).state
+    same_state(live.staged.state, expected)
+
+
 def test_a_short_job_finishes_and_only_the_newest_waiting_one_runs_after_it(interactive):
     """``finish_running``: the running job is applied, a job waiting behind it is superseded
     by a newer one, which runs next."""
