@@ -141,6 +141,9 @@ class LiveGI:
         # the job is submitted when they are all read. read_slice : seconds of reads per
         # slice, set by the render engine's view_update (draws follow to go on with them);
         # None (the default: a caller that does not draw) reads everything at once.
+        # (snapshot, state, version) an Accurate view finishes before the latest snapshot,
+        # set by the view for its draw (render/viewport_prepare.hold_source), else None
+        self.held_source = None
         self.reading: UpdatePlan | None = None
         self.read_slice: float | None = None
         self.read_all = False  # every mesh read ahead, and no update since: snapshot next
@@ -214,6 +217,8 @@ class LiveGI:
         after the change), without waiting for the worker (the state may be an older one, or
         None; Accurate does not read it). Fast cone-traces the worker's octree: the applied
         result."""
+        if quality == "ACCURATE" and self.held_source is not None:
+            return self.held_source  # a view finishes an earlier frame's first image first
         if quality == "ACCURATE" and self.latest_snapshot is not None:
             state = None if self.staged is None else self.staged.state
             return self.latest_snapshot, state, ("snapshot", self.snapshots)

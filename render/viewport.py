@@ -96,6 +96,7 @@ class ViewportRenderer:
         self.view_key = None       # the last view seen
         self.timings: dict[str, float] = {}
         self.traces = 0            # slices (tracer calls) this view traced (tests, panel)
+        self.shown_version = None  # the image source's version of what the view shows
         self.shown = ""            # what the last draw showed: "Coarse", "Refining",
         #                            "Converged" (traced this draw), "Cached", "Previous", ""
         self.status = ""           # the status line (header, sidebar)
@@ -183,6 +184,7 @@ class ViewportRenderer:
 
             def show(texture):
                 self.texture, self.quick_key = texture, key
+                self.shown_version = key[0]
                 drew.append(1)
 
             quick = viewport_prepare.QuickView(
@@ -283,6 +285,7 @@ class ViewportRenderer:
             return "Coarse" if progressive.coarse_pending else (
                 "Converged" if progressive.converged else "Refining")
         self.texture = progressive.image  # on the GPU: drawn as it is, nothing read back
+        self.shown_version = progressive.key[0]
         self.quick_key = None  # a GI image from now on: no quick image over it
         self.traces += 1
         self.timings = {"atlas upload": upload, f"slice ({done.kind})": done.seconds,
@@ -341,7 +344,13 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
         live.view_changed(camera_from_view(view, window, width, height), scene, depsgraph)
     traced = ""
     progressive = renderer.progressive
+    live.held_source = None
     source = live.image_source(scene.voxgi.quality)
+    if source is not None and scene.voxgi.quality == "ACCURATE":
+        # a frame being prepared is finished and shown before a newer one (what this draw's
+        # slices trace too: ``LiveGI.image_source`` gives it)
+        held = viewport_prepare.hold_source(live, source, renderer.shown_version)
+        live.held_source, source = (None if held is source else held), held
     if source is not None and not read:
         options = base_options(scene.voxgi, width, height)
         if scene.voxgi.quality != "ACCURATE" and options["gather_settings"].bounces > 1:
@@ -383,6 +392,11 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
                                                or renderer.cache.building is not None)
                                    or renderer.cache.generation != generation):
             redraw()  # the next slice on the next draw
+    if source is not None and not read and scene.voxgi.quality == "ACCURATE":
+        key = progressive.key
+        viewport_prepare.hold_traced(live, source, None if key is None else key[0],
+                                     renderer.shown_version)
+    live.held_source = None  # (only this draw's slices trace what the view holds)
     if read:
         renderer.timings = {"snapshot read": read}
     if traced:
@@ -443,6 +457,7 @@ def view_update(engine, context, depsgraph) -> None:
         # no engine listened were not seen, so everything is read again (the caches'
         # fingerprints still decide what is voxelized; snapshot/mesh_cache.py)
         engine.voxgi_entered = True
+        viewport_prepare.preparation.hold = None  # a new view holds no earlier frame
         if live.index is not None:
             live.rescan = live.rescan or "Rendered mode entered"
     # a new snapshot's GPU scene is prepared on the worker at once, ahead of the update job

@@ -190,6 +190,9 @@ class ScenePreparation:
         self.applied = None               # (snapshot, scene keys) of the last plan that went in
         self.arrays: VertexArrays | None = None  # of the latest triangles
         self.sent = 0                     # parts sent of the upload under way (status)
+        # (live GI, snapshot, version): the snapshot the views finish preparing and show
+        # before a newer one (a playing rig's frames: ``hold_source``), None when none is held
+        self.hold = None
 
     def request(self, scene_name: str, snapshot) -> SceneJob:
         """Prepare ``snapshot``'s scene (``PrepWorker``) unless it is being or has been."""
@@ -302,8 +305,37 @@ def prepare_snapshot(live, snapshot, scene):
     session's update job (voxels for Fast, F12 and the panels) waits for it (the event
     returned), so the two do not share the 2 cores while the user waits for the image."""
     if scene is not None and getattr(scene.voxgi, "quality", "") == "ACCURATE":
+        held = preparation.hold
+        if held is not None and held[0] is live and held[1] is not snapshot:
+            return None  # the view finishes the frame it prepares first (``hold_source``)
         return preparation.request(live.scene_name, snapshot).finished
     return None
+
+
+def hold_source(live, source, shown_version):
+    """The (snapshot, state, version) an Accurate view traces: ``source`` (``LiveGI.
+    image_source``: the latest snapshot), unless the view is still preparing an earlier one
+    that it has shown nothing of yet — then that one, finished first. A new snapshot
+    superseded the one being prepared, so while a rig played (a snapshot a frame, each ~130 ms
+    from its GPU scene to its first image on the rig room) no frame's own image was ever drawn;
+    now the view shows one frame after another as fast as they can be prepared, the newest
+    next, and drops the ones between (docs/gi_pipeline.md "Posed updates"). shown_version :
+    the version of the image the view shows."""
+    held = preparation.hold
+    job = preparation.job
+    if held is not None and (held[0] is not live or shown_version == held[2] or (
+            job is not None and job.snapshot is held[1] and job.error)):
+        preparation.hold = held = None  # its image is drawn (or it failed): the newest next
+    if held is not None and held[2] != source[2]:
+        return held[1], source[1], held[2]
+    return source
+
+
+def hold_traced(live, source, traced_version, shown_version) -> None:
+    """After a draw that traced ``source``'s image (``traced_version``: its key's version):
+    hold it while the view has shown nothing of it (``hold_source``)."""
+    if source is not None and traced_version == source[2] and traced_version != shown_version:
+        preparation.hold = (live, source[0], source[2])
 
 
 # ---------------------------------------------------------------- the kernels

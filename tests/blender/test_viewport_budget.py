@@ -336,3 +336,64 @@ def test_kernels_warmed_with_the_file_open_leave_the_draws_the_scenes_own(voxgi,
           f"cold caches")
     np.testing.assert_allclose(warmed[-1][0], cold[-1][0], atol=1e-5)
     assert gpu_scene.PART_BYTES > 0
+
+
+def test_a_playing_rig_shows_one_frame_after_another_the_newest_next(voxgi, monkeypatch):
+    """Frames of a playing rig come faster than a frame's image (its GPU scene, then its
+    coarse slice, a step a draw): the view finishes the frame it is preparing and shows it,
+    then goes on with the newest, dropping the ones between (``viewport_prepare.hold_source``);
+    before, every new frame superseded the one being prepared and no frame's image was drawn
+    while the rig played."""
+    import rig_scenes
+    from test_posed_update import Recorder
+
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render import gpu_scene, viewport_prepare
+    from voxgi.render.viewport import view_update
+
+    scene = bpy.context.scene
+    built = rig_scenes.build_gltf_rig_room(scene, 0.5)
+    rig_scenes.keyframe_walk(built["rig"], frames=5, start=1)
+    scene.frame_set(1)
+    scene.render.resolution_x, scene.render.resolution_y = WIDTH, HEIGHT
+    scene.render.resolution_percentage = 100
+    scene.voxgi.quality = "ACCURATE"
+    scene.voxgi.base_span, scene.voxgi.cascade_count, scene.voxgi.grid_resolution = 0.2, 2, "32"
+    scene.voxgi_viewport.resolution_fraction = 1.0
+    scene.voxgi_viewport.samples = SAMPLES
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    view, window = camera_matrices(scene, depsgraph)
+    # a frame's GPU scene in several steps, as a large scene's
+    monkeypatch.setattr(viewport_prepare, "CHUNK_TRIANGLES", 512)
+    monkeypatch.setattr(gpu_scene, "PART_BYTES", 0)
+    engine = StandInEngine()
+    view_update(engine, context(view, window), depsgraph)
+    renderer = renderer_for(engine, whole=False)
+    for _ in range(600):  # Rendered mode entered: to the first GI image
+        draw(engine, depsgraph, view, window)
+        if renderer.traces:
+            break
+    assert renderer.traces
+    live = live_gi(scene.name_full)
+    recorder = Recorder(live)
+    bpy.app.handlers.depsgraph_update_post.append(recorder)
+    bpy.app.handlers.frame_change_post.append(recorder)
+    versions, shown = {}, []
+    try:
+        for frame in (2, 3, 4):  # a draw between frames: no frame's image is ready in it
+            scene.frame_set(frame)
+            live.update(scene, depsgraph, recorder.take())
+            versions[frame] = ("snapshot", live.snapshots)
+            draw(engine, depsgraph, view, window)
+            shown.append(renderer.shown_version)
+        for _ in range(600):
+            draw(engine, depsgraph, view, window)
+            shown.append(renderer.shown_version)
+            if renderer.shown_version == versions[4]:
+                break
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(recorder)
+        bpy.app.handlers.frame_change_post.remove(recorder)
+    order = [v for i, v in enumerate(shown) if v in versions.values() and v not in shown[:i]]
+    assert order == [versions[2], versions[4]], (order, versions)  # frame 3 dropped

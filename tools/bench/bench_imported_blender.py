@@ -316,7 +316,8 @@ def view_playback_rows(frames: int = PLAYBACK_FRAMES, fps: int = PLAYBACK_FPS):
           f"each frame's view_update, the view drawn between frames (1280 × 720)\n")
     print("| what | value | notes |\n|---|---:|---|")
     print(f"| frames whose own image was drawn | {len(seen)} of {frames} | the quick image or a "
-          f"traced one of the frame's snapshot; the others superseded before their image |")
+          f"traced one of the frame's snapshot; the view finishes the frame it prepares, then "
+          f"the newest (the ones between dropped, never queued) |")
     print(f"| view_update per frame: median / longest | {out['main median'] * 1000:.1f} / "
           f"{out['main longest'] * 1000:.1f} ms | the posed snapshot, the hooks and the "
           f"job's submission (main thread) |")
