@@ -351,6 +351,8 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
         # slices trace too: ``LiveGI.image_source`` gives it)
         held = viewport_prepare.hold_source(live, source, renderer.shown_version)
         live.held_source, source = (None if held is source else held), held
+    elif scene.voxgi.quality != "ACCURATE":
+        viewport_prepare.preparation.hold = None  # (Fast traces the applied voxels)
     if source is not None and not read:
         options = base_options(scene.voxgi, width, height)
         if scene.voxgi.quality != "ACCURATE" and options["gather_settings"].bounces > 1:
