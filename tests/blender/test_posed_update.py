@@ -222,6 +222,20 @@ def file_state() -> str:
     return digest.hexdigest()
 
 
+def held_once(function):
+    """(wrapper, release, entered): ``function`` whose first call waits (on the worker) until
+    ``release`` is set, ``entered`` set when it began; later calls run at once."""
+    release, entered = threading.Event(), threading.Event()
+
+    def held(*args, **kwargs):
+        if not entered.is_set():
+            entered.set()
+            assert release.wait(TIMEOUT)
+        return function(*args, **kwargs)
+
+    return held, release, entered
+
+
 class Recorder:
     """The depsgraph's updates as the viewport's ``view_update`` gets them (a frame change
     runs ``frame_change_post`` instead of ``depsgraph_update_post``)."""
@@ -253,13 +267,8 @@ def test_playing_a_rig_reads_only_poses_drops_frames_and_ends_on_the_last(
     from voxgi.blender.viewport_session import live_gi
     from voxgi.voxgi_addon.gi.incremental import update_gi_stages
 
-    release, entered = threading.Event(), threading.Event()
-
-    def held_first(*args, **kwargs):  # the worker busy with one frame while the others come
-        if not entered.is_set():
-            entered.set()
-            assert release.wait(TIMEOUT)
-        return update_gi_stages(*args, **kwargs)
+    # the worker busy with one frame while the others come
+    held_first, release, entered = held_once(update_gi_stages)
 
     jobs = interactive
     scene, built = rig_room
@@ -327,14 +336,8 @@ def test_frames_played_while_the_first_update_voxelizes_read_only_their_poses(
     from voxgi.blender.viewport_session import live_gi
     from voxgi.voxgi_addon.gi.incremental import update_gi_stages
 
-    release, entered = threading.Event(), threading.Event()
-    original = viewport_session.refresh_caches
-
-    def held_first(*args, **kwargs):  # the first update's voxelization takes its time
-        if not entered.is_set():
-            entered.set()
-            assert release.wait(TIMEOUT)
-        return original(*args, **kwargs)
+    # the first update's voxelization takes its time
+    held_first, release, entered = held_once(viewport_session.refresh_caches)
 
     jobs = interactive
     scene, built = rig_room
