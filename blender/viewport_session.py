@@ -136,14 +136,14 @@ class LiveGI:
         # the last snapshot's mesh reads, reused by the next full snapshot for the meshes
         # whose geometry no update touched (snapshot/mesh_cache.py)
         self.mesh_reads = MeshReads()
+        # (snapshot, state, version) an Accurate view finishes before the latest snapshot,
+        # set by the view for its draw (render/viewport_prepare.hold_source), else None
+        self.held_source = None
         # a full snapshot's plan while its meshes are read ahead, a slice per view_update or
         # draw (``read_on``; docs/gi_pipeline.md "Snapshots that read only what changed"):
         # the job is submitted when they are all read. read_slice : seconds of reads per
         # slice, set by the render engine's view_update (draws follow to go on with them);
         # None (the default: a caller that does not draw) reads everything at once.
-        # (snapshot, state, version) an Accurate view finishes before the latest snapshot,
-        # set by the view for its draw (render/viewport_prepare.hold_source), else None
-        self.held_source = None
         self.reading: UpdatePlan | None = None
         self.read_slice: float | None = None
         self.read_all = False  # every mesh read ahead, and no update since: snapshot next
