@@ -43,9 +43,9 @@ def live_view(scene):
     return (depsgraph, live, *camera_matrices(scene, depsgraph))
 
 
-def cornell(camera_type="PERSP"):
+def cornell(camera_type="PERSP", light="POINT"):
     scene = bpy.context.scene
-    scenes.build_test_cornell_box(scene, light="POINT")
+    scenes.build_test_cornell_box(scene, light=light)
     scene.voxgi.base_span = 0.07
     scene.voxgi.grid_resolution = "64"
     scene.voxgi.diffuse_cones = 8

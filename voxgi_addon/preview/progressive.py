@@ -70,10 +70,13 @@ def gather_samples(samples: int) -> int:
 def sample_settings(gather: GatherSettings, light_samples: int, samples: int, index: int,
                     gathering: int | None = None):
     """(GatherSettings, light samples) of sample ``index`` of ``samples``, each with its own
-    seed: ⌈light samples / samples⌉ shadow rays per light, and the first ``gathering`` samples
-    (None: ``gather_samples``) ⌈rays / gathering⌉ gather rays and ⌈glossy rays / gathering⌉
-    glossy rays, the later ones none (they read the gathers' sums) — so the samples together
-    trace at least the one-shot image's rays."""
+    seed: the one-shot image's light samples (its pixel centres' strata: every sample's
+    direct light is F12's, so the first sample's image is already as smooth as F12's — with
+    ⌈light samples / samples⌉ a sample, one stratum, the view's penumbrae stayed noisy for
+    most of its samples: docs/gi_pipeline.md "Every sample with the pixel's light samples"),
+    and the first ``gathering`` samples (None: ``gather_samples``) ⌈rays / gathering⌉ gather
+    rays and ⌈glossy rays / gathering⌉ glossy rays, the later ones none (they read the
+    gathers' sums) — so the samples together trace at least the one-shot image's rays."""
     if samples < 1:
         raise ValueError(f"samples must be at least 1, not {samples}")
     if not 0 <= index < samples:
@@ -84,7 +87,7 @@ def sample_settings(gather: GatherSettings, light_samples: int, samples: int, in
         gather, rays=max(1, math.ceil(gather.rays / gathering)) if traced else 0,
         glossy_rays=max(1, math.ceil(gather.glossy_rays / gathering)) if traced else 0,
         seed=gather.seed + SEED_STEP * index)
-    return per, max(1, math.ceil(light_samples / samples))
+    return per, max(1, int(light_samples))
 
 
 def bayer(side: int) -> np.ndarray:
