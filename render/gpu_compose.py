@@ -29,7 +29,7 @@ LIGHT_SAMPLERS = ("colour", "direct_image", "shine_image", "sum_f", "sum_g")
 MASK_SAMPLERS = ("gbuffer_position", "pixels")
 COMPACT_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "pixels")
 RESOLVE_SAMPLERS = (*COMPACT_SAMPLERS, "centre_position", "centre_normal", "centre_view",
-                    "centre_base", *(f"sum_{k}" for k in (*SURFACE_SUMS, "g")))
+                    "centre_base", *(f"sum_{k}" for k in (*SURFACE_SUMS, "g")), "offsets")
 RESOLVE_OUTPUTS = tuple(f"out_{k}" for k in (*SURFACE_SUMS, "g"))
 _aa_shaders: dict[str, object] = {}
 
@@ -58,11 +58,14 @@ def _aa_shader(kernel: str):
     return _aa_shaders[kernel]
 
 
-def run(kernel, samplers, inputs, outputs, width, height, constants=None):
+def run(kernel, samplers, inputs, outputs, width, height, constants=None, over=None):
     """Dispatch ``kernel`` over width × height (``constants``: its push constants by name, 4
-    floats each); returns its new output textures by name."""
+    floats each); returns its new output textures by name, of that size. over : (w, h) the
+    invocations when they are fewer than the outputs' texels (a kernel writing several rows
+    of outputs per invocation)."""
     shader = _aa_shader(kernel)
     images = {name: gpu.types.GPUTexture((width, height), format="RGBA32F") for name in outputs}
+    width, height = over or (width, height)
     shader.bind()
     for name, value in (constants or {}).items():
         shader.uniform_float(name, value)

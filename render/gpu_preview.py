@@ -692,80 +692,85 @@ def _subpixel_passes(f):
         PixelMask(np.repeat(np.repeat(edge, fine, axis=0), fine, axis=1))
     settings = f["gather_settings"]
     weights = pass_weights(plan, f["filter_width"])
-    rasters = {}  # (group x, group y) → the G-buffer drawing its passes
 
     def place(index):  # ((tx, gx), (ty, gy)): pass (a, b) is sample (tx, ty) of raster (gx, gy)
         return (divmod(index // AA_SIDE, AA_SIDE // fine),
                 divmod(index % AA_SIDE, AA_SIDE // fine))
 
-    # the passes raster by raster (one G-buffer held at a time)
-    for index in sorted(range(len(plan)), key=lambda k: (place(k)[0][1], place(k)[1][1], k)):
-        offset, block = plan[index]
-        (tx, gx), (ty, gy) = place(index)
-        if (gx, gy) not in rasters:
-            rasters.clear()
-            rasters[gx, gy] = rasterize(
-                f["seen_tris"], snapshot.camera, scene.rough, width, height,
-                offset if fine == 1 else (_raster_shift(gx, fine), _raster_shift(gy, fine)),
-                shader=f["raster_shader"],
-                textures=scene.raster_textures(), filter_width=f["filter_width"],
-                batch=f["vertex_batch"], mask=mask, texture_share=AA_SIDE, supersample=fine)
-        gbuffer = rasters[gx, gy]
-        at = pixels if fine == 1 else _pixel_list(listed, width, height, fine, (tx, ty))[0]
-        inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": at}, list_size)
+    groups: dict[tuple[int, int], list[int]] = {}  # the passes of each raster, in order
+    for index in range(len(plan)):
+        (_, gx), (_, gy) = place(index)
+        groups.setdefault((gx, gy), []).append(index)
+    # the passes raster by raster (one G-buffer held at a time); all the raster's passes
+    # resolved in one dispatch, the centres around each pixel read once for all of them
+    for (gx, gy), indices in sorted(groups.items()):
+        gbuffer = rasterize(
+            f["seen_tris"], snapshot.camera, scene.rough, width, height,
+            plan[indices[0]][0] if fine == 1 else
+            (_raster_shift(gx, fine), _raster_shift(gy, fine)),
+            shader=f["raster_shader"],
+            textures=scene.raster_textures(), filter_width=f["filter_width"],
+            batch=f["vertex_batch"], mask=mask, texture_share=AA_SIDE, supersample=fine)
+        table = np.zeros((1, AA_SIDE * AA_SIDE, 4), np.float32)
+        for k, index in enumerate(indices):
+            (tx, _), (ty, _) = place(index)
+            table[0, k] = (*plan[index][0], tx, ty)
         blended = _run("aa_resolve", _RESOLVE_SAMPLERS, {
-            **inputs, "pixels": pixels, "centre_position": centre.position,
+            **gbuffer.inputs, "pixels": pixels, "centre_position": centre.position,
             "centre_normal": centre.normal, "centre_view": centre.view,
-            "centre_base": centre.base, **f["sums"]},
-            _RESOLVE_OUTPUTS, *list_size,
-            constants={"resolve": (*offset, SPREAD, 0.0)})
+            "centre_base": centre.base, **f["sums"],
+            "offsets": float_texture(table, (AA_SIDE * AA_SIDE, 1))},
+            _RESOLVE_OUTPUTS, list_size[0], list_size[1] * len(indices),
+            constants={"resolve": (float(len(indices)), SPREAD, float(fine),
+                                   float(list_size[1]))}, over=list_size)
         for k, name in enumerate(names):
-            samples[index, :, 4 * k:4 * k + 4] = \
-                read_texture(blended["out" + name[3:]]).reshape(-1, 4)[:len(listed)]
-        left = np.flatnonzero(samples[index, :, flag] < 0.5)
-        samples[index, :, flag] = 0.0
-        if not len(left):
-            continue
-        # the samples left, shaded over a list of their own pixels
-        sub_pixels, sub_size = pixels, list_size
-        if len(left) < len(listed):
-            sub_pixels, sub_size = _pixel_list(listed[left], width, height)
+            rows = read_texture(blended["out" + name[3:]]).reshape(len(indices), -1, 4)
+            samples[indices, :, 4 * k:4 * k + 4] = rows[:, :len(listed)]
+        for index in indices:  # the samples left, shaded over a list of their own pixels
+            offset, block = plan[index]
+            (tx, _), (ty, _) = place(index)
+            left = np.flatnonzero(samples[index, :, flag] < 0.5)
+            samples[index, :, flag] = 0.0
+            if not len(left):
+                continue
+            sub_pixels, sub_size = (pixels, list_size) if len(left) == len(listed) else \
+                _pixel_list(listed[left], width, height)
             at = sub_pixels if fine == 1 else \
                 _pixel_list(listed[left], width, height, fine, (tx, ty))[0]
             inputs = _compact("aa_list", {**gbuffer.inputs, "pixels": at}, sub_size)
-        blank = scene.zeros(*sub_size)
-        inputs["gbuffer_base"] = blank if not scene.textured else _compact(
-            "aa_list_raw", {"gbuffer_position": gbuffer.base, "gbuffer_normal": gbuffer.base,
-                            "gbuffer_view": gbuffer.base, "pixels": at},
-            sub_size)["gbuffer_position"]
-        listed_centres = None if centres is None else \
-            _listed_centres(centre, centres, sub_pixels, sub_size)
-        # the gathered terms, the emitters' glossy light and unshadowed sum: the centre's
-        # where this pass sees its surface, else the gathers and the field at the pass's
-        # own point (the field evaluated where it does not hold), in one dispatch
-        strides = (gi_stride, field_stride(gi_stride))
-        together = centres is not None and strides[0] == strides[1]
-        *terms, field_glossy, field_diffuse = upsample_field_list(
-            *(fields[:2] if together else (None, None)), centre.inputs, inputs,
-            sub_pixels, sub_size, gi_stride, width, height, eye, offset, terms=gathers)
-        if centres is not None and not together:  # the field on its own grid
-            field_glossy, field_diffuse = upsample_field_list(
-                *fields[:2], centre.inputs, inputs, sub_pixels, sub_size, strides[1], width,
-                height, eye, offset)
-        glow = None
-        if centres is not None:
-            glow = emitter_glossy_texture(
-                scene.bvh, inputs, scene.emitters, scene.materials, settings.glossy_rays,
-                settings.seed, scene.no_lamp, scene.world_map, centre=listed_centres,
-                field=field_glossy)
-        # this pass's samples, read back to count in the neighbours by the filter at
-        # their own place (preview.passes.stacked_tails)
-        textures = yield from _shade(f, inputs, {name: blank for name in names}, terms, blank,
-                                     sub_size, block, glow=glow, centre=listed_centres,
-                                     field=field_diffuse)
-        for k, name in enumerate(names):
-            samples[index, left, 4 * k:4 * k + 4] = \
-                read_texture(textures[name]).reshape(-1, 4)[:len(left)]
+            blank = scene.zeros(*sub_size)
+            inputs["gbuffer_base"] = blank if not scene.textured else _compact(
+                "aa_list_raw", {"gbuffer_position": gbuffer.base,
+                                "gbuffer_normal": gbuffer.base, "gbuffer_view": gbuffer.base,
+                                "pixels": at}, sub_size)["gbuffer_position"]
+            listed_centres = None if centres is None else \
+                _listed_centres(centre, centres, sub_pixels, sub_size)
+            # the gathered terms, the emitters' glossy light and unshadowed sum: the centre's
+            # where this pass sees its surface, else the gathers and the field at the pass's
+            # own point (the field evaluated where it does not hold), in one dispatch
+            strides = (gi_stride, field_stride(gi_stride))
+            together = centres is not None and strides[0] == strides[1]
+            *terms, field_glossy, field_diffuse = upsample_field_list(
+                *(fields[:2] if together else (None, None)), centre.inputs, inputs,
+                sub_pixels, sub_size, gi_stride, width, height, eye, offset, terms=gathers)
+            if centres is not None and not together:  # the field on its own grid
+                field_glossy, field_diffuse = upsample_field_list(
+                    *fields[:2], centre.inputs, inputs, sub_pixels, sub_size, strides[1],
+                    width, height, eye, offset)
+            glow = None
+            if centres is not None:
+                glow = emitter_glossy_texture(
+                    scene.bvh, inputs, scene.emitters, scene.materials, settings.glossy_rays,
+                    settings.seed, scene.no_lamp, scene.world_map, centre=listed_centres,
+                    field=field_glossy)
+            # this pass's samples, read back to count in the neighbours by the filter at
+            # their own place (preview.passes.stacked_tails)
+            textures = yield from _shade(f, inputs, {name: blank for name in names}, terms,
+                                         blank, sub_size, block, glow=glow,
+                                         centre=listed_centres, field=field_diffuse)
+            for k, name in enumerate(names):
+                samples[index, left, 4 * k:4 * k + 4] = \
+                    read_texture(textures[name]).reshape(-1, 4)[:len(left)]
     samples *= (weights / len(plan)).astype(np.float32)[:, None, None]
     own = samples.sum(axis=0, dtype=np.float64) * len(plan)
     tail = stacked_tails(samples, pass_tail_weights(plan, f["filter_width"]), listed, width,

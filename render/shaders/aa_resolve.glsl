@@ -1,17 +1,23 @@
-/* The sub-pixel samples of one pass resolved from the shaded pixel centres around them: the
- * port of voxgi_addon/preview/resolve.py resolve_samples (docs/gi_pipeline.md "Anti-aliasing
- * at the cost of a sample"). Per entry of the edge pixels' list (pixels = (x, y, id, 1),
- * aa_compact.glsl; gbuffer_* the pass's G-buffer there, position.w = 2 + id where it sees a
- * surface, 0 where not, -1 a holdout), the centres of its pixel's 3 × 3 that see the sample's
- * surface (centre_* the centres' G-buffer: same material, each on the other's tangent plane
- * within PLANE_TOLERANCE × their distance, and no texture on it: centre_base.w > 0.5, whose
- * colour the centre averages over its whole pixel; both seeing nothing, or both a holdout) and their
- * light (the light the centre pass's sums sum_* carry: emission and the four light passes,
- * summed over the channels). Where at least LEAST_CENTRES see it and their light spreads by at
- * most resolve.z of the largest, out_* = the bilinear blend of the sums of those of the 2 × 2
- * centres around the sample's place (the pass's offset resolve.xy, x right, y down, pixels)
- * that see it, or the nearest one of the 3 × 3 that does, and out_d.w = 1; elsewhere zeros
- * (the sample is shaded by the pass's kernels). */
+/* The sub-pixel samples of the passes one raster draws, resolved from the shaded pixel centres
+ * around them: the port of voxgi_addon/preview/resolve.py resolve_samples (docs/gi_pipeline.md
+ * "Anti-aliasing at the cost of a sample"), every pass of the raster in one invocation per
+ * edge pixel, so the pixel's 3 × 3 centres are read once for all of them.
+ *
+ * Per entry of the edge pixels' list (pixels = (x, y, id, 1), GL coordinates, aa_compact.glsl)
+ * and per pass p < resolve.x: the pass's sample is the texel (fine x + tx, fine y + fine − 1 −
+ * ty) of the raster's G-buffer gbuffer_* (fine = resolve.z; passes row p = (offset x, offset
+ * y, tx, ty): the pass's sub-pixel offset, x right, y down, pixels, and its sample in the
+ * raster's fine × fine block; position.w > 0.5 where it sees a surface, −1 a holdout). The
+ * centres of its pixel's 3 × 3 that see the sample's surface (centre_* the centres' G-buffer:
+ * same material, each on the other's tangent plane within PLANE_TOLERANCE × their distance, and
+ * no texture on it: centre_base.w > 0.5, whose colour the centre averages over its whole pixel;
+ * both seeing nothing, or both a holdout) and their light (the light the centre pass's sums
+ * sum_* carry: emission and the four light passes, summed over the channels). Where at least
+ * LEAST_CENTRES see it and their light spreads by at most resolve.y of the largest, the pass's
+ * out_* = the bilinear blend of the sums of those of the 2 × 2 centres around the sample's place
+ * that see it, or the nearest one of the 3 × 3 that does, and out_d.w = 1; elsewhere zeros (the
+ * sample is shaded by the pass's kernels). Pass p's outputs are rows p · resolve.w … of out_*
+ * (resolve.w: the list's height). */
 
 vec3 sums_light(ivec2 q)
 {
@@ -20,70 +26,102 @@ vec3 sums_light(ivec2 q)
          texelFetch(sum_g, q, 0).rgb;
 }
 
+void store(ivec2 t, vec4 a, vec4 b, vec4 c, vec4 d, vec4 e, vec4 f, vec4 g)
+{
+  imageStore(out_a, t, a);
+  imageStore(out_b, t, b);
+  imageStore(out_c, t, c);
+  imageStore(out_d, t, d);
+  imageStore(out_e, t, e);
+  imageStore(out_f, t, f);
+  imageStore(out_g, t, g);
+}
+
 void main()
 {
   ivec2 t = ivec2(gl_GlobalInvocationID.xy);
-  ivec2 size = imageSize(out_a);
-  if (t.x >= size.x || t.y >= size.y) {
+  ivec2 list = textureSize(pixels, 0);
+  if (t.x >= list.x || t.y >= list.y) {
     return;
   }
-  vec4 a = vec4(0.0), b = vec4(0.0), c = vec4(0.0), d = vec4(0.0), e = vec4(0.0);
-  vec4 f = vec4(0.0), g = vec4(0.0);
+  int passes = int(resolve.x + 0.5);
+  int fine = int(resolve.z + 0.5);
+  int rows = int(resolve.w + 0.5);
   vec4 pixel = texelFetch(pixels, t, 0);
-  bool resolved = false;
-  if (pixel.w > 0.5) {
-    ivec2 full = textureSize(centre_position, 0);
-    int id = int(pixel.z + 0.5);
-    int row = id / full.x;
-    int col = id - row * full.x;
-    vec4 sp = texelFetch(gbuffer_position, t, 0);
-    vec3 sn = texelFetch(gbuffer_normal, t, 0).xyz;
-    int material = int(texelFetch(gbuffer_view, t, 0).w + 0.5);
+  if (pixel.w < 0.5) {
+    for (int p = 0; p < passes; p++) {
+      store(ivec2(t.x, t.y + p * rows), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0), vec4(0.0),
+            vec4(0.0), vec4(0.0));
+    }
+    return;
+  }
+  ivec2 full = textureSize(centre_position, 0);
+  int id = int(pixel.z + 0.5);
+  int row = id / full.x;
+  int col = id - row * full.x;
+  /* the 3 × 3 centres, read once for every pass: index (dr + 1) * 3 + dc + 1 */
+  vec4 c_position[9];
+  vec3 c_normal[9];
+  int c_material[9];
+  bool c_there[9];
+  bool c_plain[9];
+  float c_light[9];
+  for (int k = 0; k < 9; k++) {
+    int r = row + k / 3 - 1, cc = col + k % 3 - 1;
+    c_there[k] = r >= 0 && r < full.y && cc >= 0 && cc < full.x;
+    ivec2 q = ivec2(clamp(cc, 0, full.x - 1), full.y - 1 - clamp(r, 0, full.y - 1));
+    c_position[k] = texelFetch(centre_position, q, 0);
+    c_normal[k] = texelFetch(centre_normal, q, 0).xyz;
+    c_material[k] = int(texelFetch(centre_view, q, 0).w + 0.5);
+    c_plain[k] = texelFetch(centre_base, q, 0).w < 0.5;
+    vec3 l = sums_light(q);
+    c_light[k] = l.r + l.g + l.b;
+  }
+  ivec2 block = ivec2(pixel.xy + 0.5) * fine;
+  for (int p = 0; p < passes; p++) {
+    vec4 pass = texelFetch(offsets, ivec2(p, 0), 0);
+    ivec2 at = block + ivec2(int(pass.z + 0.5), fine - 1 - int(pass.w + 0.5));
+    vec4 a = vec4(0.0), b = vec4(0.0), c = vec4(0.0), d = vec4(0.0), e = vec4(0.0);
+    vec4 f = vec4(0.0), g = vec4(0.0);
+    bool resolved = false;
+    vec4 sp = texelFetch(gbuffer_position, at, 0);
+    vec3 sn = texelFetch(gbuffer_normal, at, 0).xyz;
+    int material = int(texelFetch(gbuffer_view, at, 0).w + 0.5);
     bool s_hit = sp.w > 0.5;
     bool s_holdout = sp.w < -0.5;
-    float u = float(col) + resolve.x;
-    float v = float(row) + resolve.y;
+    float u = float(col) + pass.x;
+    float v = float(row) + pass.y;
     int many = 0;
     float low = 1e30, high = -1e30, best = 1e30;
-    ivec2 nearest = ivec2(-1);
-    int sees = 0; /* bit (dr + 1) * 3 + dc + 1: that centre sees the sample's surface */
-    for (int dr = -1; dr <= 1; dr++) {
-      for (int dc = -1; dc <= 1; dc++) {
-        int r = row + dr, cc = col + dc;
-        if (r < 0 || r >= full.y || cc < 0 || cc >= full.x) {
-          continue;
-        }
-        ivec2 q = ivec2(cc, full.y - 1 - r);
-        vec4 cp = texelFetch(centre_position, q, 0);
-        bool ok = (cp.w > 0.5) == s_hit && (cp.w < -0.5) == s_holdout;
-        if (ok && s_hit) {
-          vec3 step = cp.xyz - sp.xyz;
-          vec3 cn = texelFetch(centre_normal, q, 0).xyz;
-          float off_plane = max(abs(dot(sn, step)), abs(dot(cn, step)));
-          ok = material == int(texelFetch(centre_view, q, 0).w + 0.5) &&
-               off_plane <= PLANE_TOLERANCE * length(step) &&
-               texelFetch(centre_base, q, 0).w < 0.5;
-        }
-        if (ok) {
-          sees |= 1 << ((dr + 1) * 3 + dc + 1);
-          vec3 l = sums_light(q);
-          float light = l.r + l.g + l.b;
-          many++;
-          low = min(low, light);
-          high = max(high, light);
-          float d2 = (float(r) - v) * (float(r) - v) + (float(cc) - u) * (float(cc) - u);
-          if (d2 < best) {
-            best = d2;
-            nearest = q;
-          }
+    int nearest = -1;
+    int sees = 0; /* bit k: centre k sees the sample's surface */
+    for (int k = 0; k < 9; k++) {
+      vec4 cp = c_position[k];
+      bool ok = c_there[k] && (cp.w > 0.5) == s_hit && (cp.w < -0.5) == s_holdout;
+      if (ok && s_hit) {
+        vec3 step = cp.xyz - sp.xyz;
+        float off_plane = max(abs(dot(sn, step)), abs(dot(c_normal[k], step)));
+        ok = material == c_material[k] && off_plane <= PLANE_TOLERANCE * length(step) &&
+             c_plain[k];
+      }
+      if (ok) {
+        sees |= 1 << k;
+        many++;
+        low = min(low, c_light[k]);
+        high = max(high, c_light[k]);
+        float dr = float(row + k / 3 - 1) - v, dc = float(col + k % 3 - 1) - u;
+        float d2 = dr * dr + dc * dc;
+        if (d2 < best) {
+          best = d2;
+          nearest = k;
         }
       }
     }
-    if (many >= LEAST_CENTRES && high - low <= resolve.z * max(high, 0.0)) {
-      int row_step = int(floor(resolve.y));
-      int col_step = int(floor(resolve.x));
-      float fy = resolve.y - float(row_step);
-      float fx = resolve.x - float(col_step);
+    if (many >= LEAST_CENTRES && high - low <= resolve.y * max(high, 0.0)) {
+      int row_step = int(floor(pass.y));
+      int col_step = int(floor(pass.x));
+      float fy = pass.y - float(row_step);
+      float fx = pass.x - float(col_step);
       float weight = 0.0;
       for (int dr = 0; dr <= 1; dr++) {
         for (int dc = 0; dc <= 1; dc++) {
@@ -111,25 +149,19 @@ void main()
         e *= inverse;
         f *= inverse;
         g *= inverse;
-        resolved = true;
       }
       else { /* at least LEAST_CENTRES see it: there is a nearest */
-        a = texelFetch(sum_a, nearest, 0);
-        b = texelFetch(sum_b, nearest, 0);
-        c = texelFetch(sum_c, nearest, 0);
-        d = texelFetch(sum_d, nearest, 0);
-        e = texelFetch(sum_e, nearest, 0);
-        f = texelFetch(sum_f, nearest, 0);
-        g = texelFetch(sum_g, nearest, 0);
-        resolved = true;
+        ivec2 q = ivec2(col + nearest % 3 - 1, full.y - 1 - (row + nearest / 3 - 1));
+        a = texelFetch(sum_a, q, 0);
+        b = texelFetch(sum_b, q, 0);
+        c = texelFetch(sum_c, q, 0);
+        d = texelFetch(sum_d, q, 0);
+        e = texelFetch(sum_e, q, 0);
+        f = texelFetch(sum_f, q, 0);
+        g = texelFetch(sum_g, q, 0);
       }
+      resolved = true;
     }
+    store(ivec2(t.x, t.y + p * rows), a, b, c, vec4(d.rgb, resolved ? 1.0 : 0.0), e, f, g);
   }
-  imageStore(out_a, t, a);
-  imageStore(out_b, t, b);
-  imageStore(out_c, t, c);
-  imageStore(out_d, t, vec4(d.rgb, resolved ? 1.0 : 0.0));
-  imageStore(out_e, t, e);
-  imageStore(out_f, t, f);
-  imageStore(out_g, t, g);
 }

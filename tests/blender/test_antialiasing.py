@@ -288,12 +288,13 @@ def test_sub_pixel_samples_take_the_light_of_the_centres_that_see_their_surface(
     counts = {"samples": 0, "resolved": 0}
     run = gpu_preview._run
 
-    def counting(kernel, samplers, inputs, outputs, width, height, constants=None):
-        out = run(kernel, samplers, inputs, outputs, width, height, constants)
-        if kernel == "aa_resolve":
+    def counting(kernel, samplers, inputs, outputs, width, height, constants=None, over=None):
+        out = run(kernel, samplers, inputs, outputs, width, height, constants, over)
+        if kernel == "aa_resolve":  # a raster's passes, one block of the outputs' rows each
             listed = read_texture(inputs["pixels"])[..., 3] > 0.5
             marked = read_texture(out["out_d"])[..., 3] > 0.5
-            counts["samples"] += int(listed.sum())
+            marked = marked.reshape(-1, *listed.shape)
+            counts["samples"] += int(listed.sum()) * len(marked)
             counts["resolved"] += int((listed & marked).sum())
         return out
 
