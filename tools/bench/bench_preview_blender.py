@@ -188,7 +188,7 @@ STAGES = {"bvh_gather": "diffuse+AO gather", "bvh_glossy": "glossy gather",
 # sub-pixel samples' resolve its entry (4), each of the 3 × 3 centres' G-buffer and light
 # (3 + 5) and the 2 × 2's seven sums (an upper bound).
 FETCHES = {"denoise": 25 * 4 + 9, "upsample": 16 * 3, "aa_surface": 16, "aa_light": 5,
-           "aa_mask": 2, "aa_list": 4, "aa_list_raw": 4, "aa_resolve": 4 + 9 * 8 + 4 * 7,
+           "aa_mask": 2, "aa_list": 4, "aa_list_raw": 4,
            "relax": 16 * 8,
            "upsample_field": 9 * 4 + 2, "upsample_field_list": 9 * 7 + 6}
 
@@ -216,6 +216,10 @@ def _traversals(kernel, width, height, constants, lights) -> tuple[float, float]
         return invocations * block * block, 0.0
     if kernel == "bvh_emitter_glossy":
         return invocations * float(sampling[1]), 0.0
+    if kernel == "aa_resolve":  # a pixel's 3 × 3 centres once (9 textures), then per pass its
+        # offsets, its sample's G-buffer and the 2 × 2 centres' seven sums
+        passes = float((constants or {}).get("resolve", (1.0,))[0])
+        return 0.0, invocations * (1 + 9 * 9 + passes * (1 + 3 + 4 * 7))
     return 0.0, invocations * FETCHES.get(kernel, 4)
 
 
@@ -275,12 +279,12 @@ def profiled(fn, profile: Profile):
         return dispatch_bvh
 
     def compose_wrapper(original):
-        def run(kernel, samplers, inputs, outputs, width, height, constants=None):
+        def run(kernel, samplers, inputs, outputs, width, height, constants=None, over=None):
             t0 = time.perf_counter()
-            out = original(kernel, samplers, inputs, outputs, width, height, constants)
+            out = original(kernel, samplers, inputs, outputs, width, height, constants, over)
             _finish(next(iter(out.values())))
             profile.add(kernel, time.perf_counter() - t0,
-                        *_traversals(kernel, width, height, None, lights))
+                        *_traversals(kernel, *(over or (width, height)), constants, lights))
             return out
         return run
 
