@@ -11,7 +11,7 @@ import math
 
 import gpu
 
-from ..voxgi_addon.preview.resolve import LEAST_CENTRES
+from ..voxgi_addon.preview.resolve import LEAST_CENTRES, LEAST_COLOUR
 from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE
 from .gpu_bvh import absent_lights, direct_light_texture
 from .gpu_gather import glossy_direct_texture
@@ -29,7 +29,8 @@ LIGHT_SAMPLERS = ("colour", "direct_image", "shine_image", "sum_f", "sum_g")
 MASK_SAMPLERS = ("gbuffer_position", "pixels")
 COMPACT_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "pixels")
 RESOLVE_SAMPLERS = (*COMPACT_SAMPLERS, "centre_position", "centre_normal", "centre_view",
-                    "centre_base", *(f"sum_{k}" for k in (*SURFACE_SUMS, "g")), "offsets")
+                    "centre_base", *(f"sum_{k}" for k in (*SURFACE_SUMS, "g")), "offsets",
+                    "gbuffer_base", "materials", "principled_lut")
 RESOLVE_OUTPUTS = tuple(f"out_{k}" for k in (*SURFACE_SUMS, "g"))
 _aa_shaders: dict[str, object] = {}
 
@@ -38,7 +39,7 @@ def _aa_shader(kernel: str):
     if kernel not in _aa_shaders:
         if kernel == "aa_surface":
             _aa_shaders[kernel] = build_compute(
-                ("principled", "aa_surface"), SURFACE_SAMPLERS, (),
+                ("principled", "surface", "aa_surface"), SURFACE_SAMPLERS, (),
                 (*(f"out_{k}" for k in SURFACE_SUMS), "out_colour"), PRINCIPLED_DEFINES)
         elif kernel in ("aa_list", "aa_list_raw"):
             _aa_shaders[kernel] = build_compute(
@@ -46,9 +47,11 @@ def _aa_shader(kernel: str):
                 {"RAW": "1"} if kernel == "aa_list_raw" else None)
         elif kernel == "aa_resolve":
             _aa_shaders[kernel] = build_compute(
-                ("aa_resolve",), RESOLVE_SAMPLERS, ("resolve",), RESOLVE_OUTPUTS,
-                {"PLANE_TOLERANCE": repr(float(PLANE_TOLERANCE)),
-                 "LEAST_CENTRES": str(LEAST_CENTRES)})
+                ("principled", "surface", "aa_resolve"), RESOLVE_SAMPLERS, ("resolve",),
+                RESOLVE_OUTPUTS, {**PRINCIPLED_DEFINES,
+                                  "PLANE_TOLERANCE": repr(float(PLANE_TOLERANCE)),
+                                  "LEAST_CENTRES": str(LEAST_CENTRES),
+                                  "LEAST_COLOUR": repr(float(LEAST_COLOUR))})
         elif kernel == "aa_mask":
             _aa_shaders[kernel] = build_compute(("aa_mask",), MASK_SAMPLERS, (),
                                                 ("out_position",))

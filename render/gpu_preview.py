@@ -680,7 +680,8 @@ def _subpixel_passes(f):
     fields = f["fields"]
     # every pass's samples, the sum textures' texels side by side (names' order); a sample
     # takes the centres' sums around it where they see its surface and their light is smooth
-    # (aa_resolve.glsl, preview.resolve), the others are shaded below
+    # (a textured sample their light, coloured by its own texel: aa_resolve.glsl,
+    # preview.resolve), the others are shaded below
     names = _SUM_TEXTURES
     flag = 4 * names.index("sum_d") + 3  # the resolved samples' mark (aa_resolve.glsl)
     samples = np.empty((len(plan), len(listed), 4 * len(names)), np.float32)
@@ -719,7 +720,8 @@ def _subpixel_passes(f):
             **gbuffer.inputs, "pixels": pixels, "centre_position": centre.position,
             "centre_normal": centre.normal, "centre_view": centre.view,
             "centre_base": centre.base, **f["sums"],
-            "offsets": float_texture(table, (AA_SIDE * AA_SIDE, 1))},
+            "offsets": float_texture(table, (AA_SIDE * AA_SIDE, 1)),
+            "materials": scene.materials, "principled_lut": scene.lut},
             _RESOLVE_OUTPUTS, list_size[0], list_size[1] * len(indices),
             constants={"resolve": (float(len(indices)), SPREAD, float(fine),
                                    float(list_size[1]))}, over=list_size)

@@ -17,13 +17,59 @@
  * out_* = the bilinear blend of the sums of those of the 2 × 2 centres around the sample's place
  * that see it, or the nearest one of the 3 × 3 that does, and out_d.w = 1; elsewhere zeros (the
  * sample is shaded by the pass's kernels). Pass p's outputs are rows p · resolve.w … of out_*
- * (resolve.w: the list's height). */
+ * (resolve.w: the list's height).
+ *
+ * A sample on a textured surface (its raster texel gbuffer_base.w > 0.5) resolves its light
+ * only: each centre's light passes over its colours (Diffuse Direct and Indirect over its
+ * Diffuse Color, Glossy Direct and Indirect over its Glossy Color; a centre whose colours
+ * have a channel below LEAST_COLOUR, unless that colour is black throughout, stands in for no
+ * such sample), compared and blended as above, then coloured by the sample's own Principled
+ * colours and emission at its texel (surface.glsl): a textured centre's colours are its whole
+ * pixel's texture, not the sample's. */
 
 vec3 sums_light(ivec2 q)
 {
   return texelFetch(sum_a, q, 0).rgb + texelFetch(sum_d, q, 0).rgb +
          texelFetch(sum_e, q, 0).rgb + texelFetch(sum_f, q, 0).rgb +
          texelFetch(sum_g, q, 0).rgb;
+}
+
+/* light over colour, per channel; 0 where the colour is black throughout (a metal's diffuse) */
+vec3 over(vec3 light, vec3 colour)
+{
+  return max(colour.r, max(colour.g, colour.b)) > 0.0 ? light / max(colour, LEAST_COLOUR) :
+                                                       vec3(0.0);
+}
+
+/* whether a colour's light can be recovered: every channel at least LEAST_COLOUR, or black */
+bool recoverable(vec3 colour)
+{
+  return min(colour.r, min(colour.g, colour.b)) >= LEAST_COLOUR ||
+         max(colour.r, max(colour.g, colour.b)) <= 0.0;
+}
+
+/* w × the centre q's sums into a … g; by_light: its light passes over its colours, its
+ * colours and emission left out (the sample's own colour them) */
+void blend_at(ivec2 q, float w, bool by_light, inout vec4 a, inout vec4 b, inout vec4 c,
+              inout vec4 d, inout vec4 e, inout vec4 f, inout vec4 g)
+{
+  vec4 sa = texelFetch(sum_a, q, 0), sb = texelFetch(sum_b, q, 0), sc = texelFetch(sum_c, q, 0);
+  vec4 sd = texelFetch(sum_d, q, 0), se = texelFetch(sum_e, q, 0), sf = texelFetch(sum_f, q, 0);
+  vec4 sg = texelFetch(sum_g, q, 0);
+  if (by_light) {
+    sd.rgb = over(sd.rgb, sb.rgb);
+    sg.rgb = over(sg.rgb, sb.rgb);
+    se.rgb = over(se.rgb, sc.rgb);
+    sf.rgb = over(sf.rgb, sc.rgb);
+    sa.rgb = sb.rgb = sc.rgb = vec3(0.0);
+  }
+  a += w * sa;
+  b += w * sb;
+  c += w * sc;
+  d += w * sd;
+  e += w * se;
+  f += w * sf;
+  g += w * sg;
 }
 
 void store(ivec2 t, vec4 a, vec4 b, vec4 c, vec4 d, vec4 e, vec4 f, vec4 g)
@@ -65,7 +111,9 @@ void main()
   int c_material[9];
   bool c_there[9];
   bool c_plain[9];
+  bool c_colours[9];  /* its light can be taken over its colours (a textured sample's) */
   float c_light[9];
+  float c_own[9];     /* its light passes over its colours, summed (a textured sample's test) */
   for (int k = 0; k < 9; k++) {
     int r = row + k / 3 - 1, cc = col + k % 3 - 1;
     c_there[k] = r >= 0 && r < full.y && cc >= 0 && cc < full.x;
@@ -76,6 +124,11 @@ void main()
     c_plain[k] = texelFetch(centre_base, q, 0).w < 0.5;
     vec3 l = sums_light(q);
     c_light[k] = l.r + l.g + l.b;
+    vec3 diffuse = texelFetch(sum_b, q, 0).rgb, glossy = texelFetch(sum_c, q, 0).rgb;
+    c_colours[k] = recoverable(diffuse) && recoverable(glossy);
+    vec3 own = over(texelFetch(sum_d, q, 0).rgb + texelFetch(sum_g, q, 0).rgb, diffuse) +
+               over(texelFetch(sum_e, q, 0).rgb + texelFetch(sum_f, q, 0).rgb, glossy);
+    c_own[k] = own.r + own.g + own.b;
   }
   ivec2 block = ivec2(pixel.xy + 0.5) * fine;
   for (int p = 0; p < passes; p++) {
@@ -86,9 +139,12 @@ void main()
     bool resolved = false;
     vec4 sp = texelFetch(gbuffer_position, at, 0);
     vec3 sn = texelFetch(gbuffer_normal, at, 0).xyz;
-    int material = int(texelFetch(gbuffer_view, at, 0).w + 0.5);
+    vec4 ray = texelFetch(gbuffer_view, at, 0);
+    int material = int(ray.w + 0.5);
     bool s_hit = sp.w > 0.5;
     bool s_holdout = sp.w < -0.5;
+    vec4 texel = texelFetch(gbuffer_base, at, 0);
+    bool by_light = s_hit && texel.w > 0.5;  /* a textured sample: its light alone */
     float u = float(col) + pass.x;
     float v = float(row) + pass.y;
     int many = 0;
@@ -102,13 +158,14 @@ void main()
         vec3 step = cp.xyz - sp.xyz;
         float off_plane = max(abs(dot(sn, step)), abs(dot(c_normal[k], step)));
         ok = material == c_material[k] && off_plane <= PLANE_TOLERANCE * length(step) &&
-             c_plain[k];
+             (by_light ? c_colours[k] : c_plain[k]);
       }
       if (ok) {
         sees |= 1 << k;
         many++;
-        low = min(low, c_light[k]);
-        high = max(high, c_light[k]);
+        float light = by_light ? c_own[k] : c_light[k];
+        low = min(low, light);
+        high = max(high, light);
         float dr = float(row + k / 3 - 1) - v, dc = float(col + k % 3 - 1) - u;
         float d2 = dr * dr + dc * dc;
         if (d2 < best) {
@@ -131,13 +188,7 @@ void main()
           float w = (dr == 1 ? fy : 1.0 - fy) * (dc == 1 ? fx : 1.0 - fx) + 1e-6;
           ivec2 q = ivec2(col + col_step + dc, full.y - 1 - (row + row_step + dr));
           weight += w;
-          a += w * texelFetch(sum_a, q, 0);
-          b += w * texelFetch(sum_b, q, 0);
-          c += w * texelFetch(sum_c, q, 0);
-          d += w * texelFetch(sum_d, q, 0);
-          e += w * texelFetch(sum_e, q, 0);
-          f += w * texelFetch(sum_f, q, 0);
-          g += w * texelFetch(sum_g, q, 0);
+          blend_at(q, w, by_light, a, b, c, d, e, f, g);
         }
       }
       if (weight > 0.0) {
@@ -151,14 +202,19 @@ void main()
         g *= inverse;
       }
       else { /* at least LEAST_CENTRES see it: there is a nearest */
-        ivec2 q = ivec2(col + nearest % 3 - 1, full.y - 1 - (row + nearest / 3 - 1));
-        a = texelFetch(sum_a, q, 0);
-        b = texelFetch(sum_b, q, 0);
-        c = texelFetch(sum_c, q, 0);
-        d = texelFetch(sum_d, q, 0);
-        e = texelFetch(sum_e, q, 0);
-        f = texelFetch(sum_f, q, 0);
-        g = texelFetch(sum_g, q, 0);
+        blend_at(ivec2(col + nearest % 3 - 1, full.y - 1 - (row + nearest / 3 - 1)), 1.0,
+                 by_light, a, b, c, d, e, f, g);
+      }
+      if (by_light) {  /* the light coloured by the sample's own colours and emission */
+        vec3 diffuse_colour, glossy_colour, emission;
+        surface_colours(texel, sn, ray, diffuse_colour, glossy_colour, emission);
+        a.rgb = emission;
+        b.rgb = diffuse_colour;
+        c.rgb = glossy_colour;
+        d.rgb *= diffuse_colour;
+        g.rgb *= diffuse_colour;
+        e.rgb *= glossy_colour;
+        f.rgb *= glossy_colour;
       }
       resolved = true;
     }

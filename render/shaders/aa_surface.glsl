@@ -34,23 +34,9 @@ void main()
     c.w += 1.0;
   }
   if (w > 0.5) {
-    vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
-    vec4 ray = texelFetch(gbuffer_view, px, 0);
-    int last_material = textureSize(materials, 0).x - 1;
-    int material = int(ray.w + 0.5);
-    material = (material >= 0 && material < last_material) ? material : last_material;
-    vec4 texel = texelFetch(gbuffer_base, px, 0);  /* Base Color per texel (G-buffer) */
-    vec3 base = texel.w > 0.5 ? texel.rgb : texelFetch(materials, ivec2(material, 0), 0).rgb;
-    vec3 emission = texelFetch(materials, ivec2(material, 1), 0).rgb;
-    if (texel.w > 1.5) {  /* emission per texel (textures.glsl pack_emission) */
-      uint bits = floatBitsToUint(texel.w) - 0x40000000u;
-      emission = vec3(uvec3(bits >> 16, bits >> 8, bits) & uvec3(255u)) *
-                 exp2(float(int(bits >> 24) - 15) - 8.0);
-    }
-    vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
-    float mu = clamp(dot(n, -ray.xyz), 0.0, 1.0);
-    diffuse_colour = principled_diffuse_weight(base, params.x, params.y, params.z, mu);
-    vec3 glossy_colour = principled_glossy_color(base, params.x, params.y, params.z, mu);
+    vec3 glossy_colour, emission;
+    surface_colours(texelFetch(gbuffer_base, px, 0), texelFetch(gbuffer_normal, px, 0).xyz,
+                    texelFetch(gbuffer_view, px, 0), diffuse_colour, glossy_colour, emission);
     vec4 gathered = texelFetch(centre_diffuse, px, 0);
     a += vec4(emission, 1.0);
     b += vec4(diffuse_colour, gathered.w);

@@ -135,3 +135,52 @@ def test_combined_light_sums_the_light_passes():
             "glossy_indirect": np.array([[0.25, 0.0, 0.0]]),
             "diffuse_color": np.array([[9.0, 9.0, 9.0]]), "coverage": np.array([1.0])}
     assert combined_light(sums)[0] == pytest.approx(5.0)
+
+
+def test_a_textured_sample_takes_the_centres_light_and_its_own_colours():
+    """On a textured surface the centres' colours are their whole pixels' texture: a sample
+    there takes only their light (its passes over their colours, ``light_over_colours``) and
+    the caller colours it with its own texel (``coloured``), so a checkered floor under smooth
+    light resolves to each sample's own colour × the light at its place."""
+    from voxgi.voxgi_addon.preview.passes import coloured, light_over_colours, unpack_sums
+
+    rows, cols = np.mgrid[0:HEIGHT, 0:WIDTH]
+    irradiance = (1.0 + 0.02 * cols).ravel()[:, None] * np.ones(3)
+    texture = np.where(((rows + cols) % 2 == 0).ravel()[:, None], [0.8, 0.2, 0.1],
+                       [0.1, 0.3, 0.9])  # each centre's colour: its pixel's texels
+    pixels = HEIGHT * WIDTH
+    sums = {"emission": np.zeros((pixels, 3)), "coverage": np.ones(pixels),
+            "diffuse_color": texture, "ao": np.ones(pixels),
+            "glossy_color": np.full((pixels, 3), 0.04),
+            "diffuse_direct": texture * irradiance, "diffuse_indirect": 0.5 * texture,
+            "glossy_direct": 0.04 * irradiance, "glossy_indirect": np.full((pixels, 3), 0.02),
+            "holdout": np.zeros(pixels)}
+    table, own, ok = light_over_colours(sums)
+    assert ok.all()
+    centres = {**floor_centres(), "textured": np.ones((HEIGHT, WIDTH), bool)}
+    listed = np.array([3 * WIDTH + 4, 6 * WIDTH + 7])
+    offset = (0.375, -0.125)
+    sample = {**samples_at(listed, offset), "textured": np.ones(len(listed), bool)}
+    plain, _ = resolve_samples(centres, combined_light(sums), table, listed, WIDTH, HEIGHT,
+                               offset, {**sample, "textured": np.zeros(len(listed), bool)})
+    assert not plain.any()  # without its own colours a textured sample is shaded, as before
+    resolved, blended = resolve_samples(centres, combined_light(sums), table, listed, WIDTH,
+                                        HEIGHT, offset, sample, light_values=table,
+                                        own_light=own, colours_ok=ok)
+    assert resolved.all()
+    mine = np.array([[0.5, 0.6, 0.7], [0.2, 0.2, 0.2]])  # the samples' own texels
+    values = unpack_sums(coloured(blended, mine, np.full((2, 3), 0.04), np.zeros((2, 3))))
+    light = 1.0 + 0.02 * (divmod(listed, WIDTH)[1] + offset[0])
+    np.testing.assert_allclose(values["diffuse_direct"], mine * light[:, None], rtol=1e-5)
+    np.testing.assert_allclose(values["diffuse_indirect"], 0.5 * mine, rtol=1e-5)
+    np.testing.assert_allclose(values["diffuse_color"], mine)
+    np.testing.assert_allclose(values["glossy_direct"], 0.04 * light[:, None] * np.ones(3),
+                               rtol=1e-5)
+    # a centre whose colour has a black channel cannot give its light back: none stands in
+    dark = dict(sums, diffuse_color=texture * [1.0, 1.0, 0.0])
+    table, own, ok = light_over_colours(dark)
+    assert not ok.any()
+    resolved, _ = resolve_samples(centres, combined_light(dark), table, listed, WIDTH, HEIGHT,
+                                  offset, sample, light_values=table, own_light=own,
+                                  colours_ok=ok)
+    assert not resolved.any()

@@ -51,7 +51,7 @@ from .gather import (
     gather_glossy_world,
     radiance_cache,
 )
-from .resolve import combined_light, resolve_samples
+from .resolve import combined_light, over, recoverable, resolve_samples
 from .upsample import (
     STRIDES,
     EmitterField,
@@ -554,6 +554,40 @@ def _resolve_view(seen, tris, height: int, width: int) -> dict:
     return {"hit": seen.hit, "material": np.where(seen.hit, seen.material, -1),
             "position": seen.position, "normal": seen.normal, "holdout": holdout,
             "textured": textured}
+
+
+def light_over_colours(sums):
+    """(table (H·W, 24), own light (H·W,), colours_ok (H·W,) bool) of the centres' ``sums``
+    for the textured samples that resolve from them (``resolve.resolve_samples``' by_light): the
+    sums packed with the light passes over their colours and no colours nor emission (the
+    sample's own go in, ``coloured``); the light passes over colours summed (what their spread
+    test compares); whether the colours give their light back (``resolve.recoverable``)."""
+    diffuse, glossy = sums["diffuse_color"], sums["glossy_color"]
+    light = dict(sums)
+    light["diffuse_direct"] = over(sums["diffuse_direct"], diffuse)
+    light["diffuse_indirect"] = over(sums["diffuse_indirect"], diffuse)
+    light["glossy_direct"] = over(sums["glossy_direct"], glossy)
+    light["glossy_indirect"] = over(sums["glossy_indirect"], glossy)
+    for name in ("emission", "diffuse_color", "glossy_color"):
+        light[name] = np.zeros_like(sums[name])
+    own = over(np.asarray(sums["diffuse_indirect"]) + sums["diffuse_direct"], diffuse) + \
+        over(np.asarray(sums["glossy_indirect"]) + sums["glossy_direct"], glossy)
+    return pack_sums(light), own.sum(axis=-1, dtype=np.float64), \
+        recoverable(diffuse) & recoverable(glossy)
+
+
+def coloured(packed, diffuse, glossy, emission) -> np.ndarray:
+    """(N, 24) resolved light (``light_over_colours``' packing) coloured by the samples' own
+    Diffuse and Glossy Color and emission (N, 3): the sums a shaded sample would carry."""
+    out = np.array(packed, np.float64)
+    values = unpack_sums(out)
+    values["emission"][:] = emission
+    values["diffuse_color"][:] = diffuse
+    values["glossy_color"][:] = glossy
+    for name, colour in (("diffuse_direct", diffuse), ("diffuse_indirect", diffuse),
+                         ("glossy_direct", glossy), ("glossy_indirect", glossy)):
+        values[name] *= colour
+    return out
 
 
 def pack_sums(values) -> np.ndarray:
@@ -1160,6 +1194,18 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
             lamps["light"] = lamp_light(only["diffuse_direct"], only["diffuse_color"],
                                         only["glossy_direct"], only["glossy_color"])
 
+    def own_colours(seen, pixels):
+        """(Diffuse Color, Glossy Color, emission) (N, 3) of a sub-pixel pass's samples at the
+        flat ``pixels`` (each a hit), by their own texels (``accumulate_pass``'s)."""
+        mat = material_indices(snapshot, seen.material.ravel())[pixels]
+        n = seen.normal.reshape(-1, 3)[pixels]
+        views = -seen.direction.reshape(-1, 3)[pixels]
+        base = primary_base(tris, seen, pixels, principled_table(snapshot)[0][mat],
+                            snapshot.camera, width, height, filter_width, 1, AA_SIDE)
+        cos_view = np.clip(np.einsum("ij,ij->i", n, views), 0.0, 1.0)
+        diffuse, glossy = principled_colours(snapshot, mat, cos_view, base)
+        return diffuse, glossy, texel_emission(base, material_table(snapshot)[3][mat])
+
     # The centre pass over every pixel, then its shadow and light edges join the geometry's
     # and the sub-pixel passes render all edges: each sample takes the centres' sums around
     # it where they see its surface and their light is smooth (resolve.resolve_samples), the
@@ -1176,6 +1222,8 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     listed = np.flatnonzero(edge)
     if len(listed):
         table, light = pack_sums(sums), combined_light(sums)
+        # what a textured sample resolves from: the centres' light over their colours
+        light_table, own_light, colours_ok = light_over_colours(sums)
         for values in sums.values():
             values[edge] = 0.0
         centres = _resolve_view(centre_seen, tris, height, width)
@@ -1188,7 +1236,13 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
                 centres, light, table, listed, width, height, offset,
                 {key: value.reshape(height * width, -1)[listed].squeeze(-1)
                  if value.ndim == 2 else value.reshape(height * width, 3)[listed]
-                 for key, value in at.items()})
+                 for key, value in at.items()},
+                light_values=light_table, own_light=own_light, colours_ok=colours_ok)
+            # a textured sample's light, coloured by its own colours and emission
+            mine = np.flatnonzero(resolved & at["textured"].ravel()[listed] &
+                                  seen_pass.hit.ravel()[listed])
+            if len(mine):
+                packed[mine] = coloured(packed[mine], *own_colours(seen_pass, listed[mine]))
             left = np.zeros(height * width, bool)
             left[listed[~resolved]] = True
             shade(seen_pass, left, block, into=one, offset=offset, share=AA_SIDE)

@@ -21,6 +21,12 @@ shadow's or a contact's edge running through the pixel, a sliver of a surface no
 the sample is shaded as before (the caller's pass over the samples left). The light compared
 is the sum of the light the sums carry (``light``, the caller's: Combined before the film's
 division).
+
+A sample on a textured surface resolves its light alone (``resolve_samples``' ``by_light``):
+the centres' light passes over their colours (``over``; a centre whose colours cannot give
+their light back, ``recoverable``, stands in for no such sample) are compared and blended the
+same way, and the caller colours the blend with the sample's own colours and emission — a
+textured centre's colours are its whole pixel's texture, not the sample's.
 """
 from __future__ import annotations
 
@@ -30,7 +36,8 @@ import numpy as np
 
 from .upsample import PLANE_TOLERANCE
 
-__all__ = ["LEAST_CENTRES", "SPREAD", "combined_light", "resolve_samples"]
+__all__ = ["LEAST_CENTRES", "LEAST_COLOUR", "SPREAD", "combined_light", "over", "recoverable",
+           "resolve_samples"]
 
 # The most the light of the centres that see a sample's surface may spread (relative to the
 # largest) for the sample to take their blend (measured: docs/gi_pipeline.md "Anti-aliasing at
@@ -39,6 +46,24 @@ SPREAD = 0.3
 # The fewest of its pixel's 3 × 3 centres that must see a sample's surface: one alone says
 # nothing of how the light runs across it
 LEAST_CENTRES = 2
+# The least colour channel a centre's light is taken back over (a textured sample's); a colour
+# black throughout (a metal's diffuse) has no light to give back, and gives 0
+LEAST_COLOUR = 1e-3
+
+
+def over(light, colour) -> np.ndarray:
+    """(N, 3) light over colour per channel (light passes are sums of light × colour), 0 where
+    the colour is black throughout (float32, as the GPU's ``aa_resolve.glsl``)."""
+    light, colour = np.asarray(light, np.float32), np.asarray(colour, np.float32)
+    some = np.max(colour, axis=-1, keepdims=True) > 0.0
+    return np.where(some, light / np.maximum(colour, np.float32(LEAST_COLOUR)), np.float32(0.0))
+
+
+def recoverable(colour) -> np.ndarray:
+    """(N,) bool: whether a colour's light comes back over it (``over``): every channel at
+    least LEAST_COLOUR, or black throughout."""
+    colour = np.asarray(colour, np.float32)
+    return (np.min(colour, axis=-1) >= LEAST_COLOUR) | (np.max(colour, axis=-1) <= 0.0)
 
 
 def combined_light(sums) -> np.ndarray:
@@ -51,7 +76,8 @@ def combined_light(sums) -> np.ndarray:
 
 
 def resolve_samples(centre, light, values, listed, width: int, height: int, offset, sample,
-                    spread: float = SPREAD):
+                    spread: float = SPREAD, light_values=None, own_light=None,
+                    colours_ok=None):
     """(resolved (N,) bool, blended (N, C) float64) for the samples of one sub-pixel pass at
     the ``listed`` pixels (N,) (flat indices, row 0 on top) of a ``width`` × ``height`` image.
 
@@ -63,7 +89,11 @@ def resolve_samples(centre, light, values, listed, width: int, height: int, offs
     (a holdout hides what is behind: it sees nothing, but only a holdout stands in for
     another); centre may hold "textured" (H, W) bool: a centre on a textured surface stands
     in for no sample (its colour is its whole pixel's texture, not the sample's). A sample
-    not resolved has blended 0 (the caller shades it)."""
+    not resolved has blended 0 (the caller shades it).
+
+    A sample with ``sample["textured"]`` resolves ``by_light`` (module doc): from the centres
+    whose ``colours_ok`` (H·W,) bool, compared by ``own_light`` (H·W,) and blended from
+    ``light_values`` (H·W, C) — the caller's light over colour — where it takes them."""
     listed = np.asarray(listed, np.int64)
     count = len(listed)
     values = np.asarray(values)
@@ -89,6 +119,11 @@ def resolve_samples(centre, light, values, listed, width: int, height: int, offs
     s_position = np.asarray(sample["position"], np.float32)
     s_normal = np.asarray(sample["normal"], np.float32)
     s_holdout = np.asarray(sample.get("holdout", np.zeros(count, bool)), bool)
+    by_light = s_hit & np.asarray(sample.get("textured", np.zeros(count, bool)), bool)
+    if by_light.any():
+        own_light = np.asarray(own_light, np.float64)
+        colours_ok = np.asarray(colours_ok, bool).ravel()
+        light_values = np.asarray(light_values)
     # the 3 × 3 centres around the pixel: which see the sample's surface (as
     # upsample.same_surface), how many, their light's spread, the nearest to the sample
     many = np.zeros(count, np.int64)
@@ -105,15 +140,19 @@ def resolve_samples(centre, light, values, listed, width: int, height: int, offs
             step = flat["position"][at] - s_position
             off_plane = np.maximum(np.abs(np.einsum("ij,ij->i", s_normal, step)),
                                    np.abs(np.einsum("ij,ij->i", flat["normal"][at], step)))
-            apart = (off_plane > PLANE_TOLERANCE * np.sqrt(np.einsum("ij,ij->i", step, step))) | \
-                centre_textured[at]
+            apart = off_plane > PLANE_TOLERANCE * np.sqrt(np.einsum("ij,ij->i", step, step))
             c_hit = flat["hit"][at, 0]
+            eligible = ~centre_textured[at]
+            if by_light.any():
+                eligible = np.where(by_light, colours_ok[at], eligible)
             sees = inside & (c_hit == s_hit) & (centre_holdout[at] == s_holdout) & \
-                (~s_hit | ((flat["material"][at, 0] == s_material) & ~apart))
+                (~s_hit | ((flat["material"][at, 0] == s_material) & ~apart & eligible))
             sees_at[dr, dc] = sees, at
             many += sees
-            low = np.where(sees, np.minimum(low, light[at]), low)
-            high = np.where(sees, np.maximum(high, light[at]), high)
+            compared = light[at] if not by_light.any() else \
+                np.where(by_light, own_light[at], light[at])
+            low = np.where(sees, np.minimum(low, compared), low)
+            high = np.where(sees, np.maximum(high, compared), high)
             d2 = (r - v) ** 2 + (c - u) ** 2
             closer = sees & (d2 < distance)
             nearest, distance = np.where(closer, at, nearest), np.where(closer, d2, distance)
@@ -128,10 +167,15 @@ def resolve_samples(centre, light, values, listed, width: int, height: int, offs
             w = np.where(sees & smooth, (fy if dr else 1.0 - fy) * (fx if dc else 1.0 - fx) +
                          1e-6, 0.0)
             weight += w
-            total += w[:, None] * values[at]
+            taken = values[at] if not by_light.any() else \
+                np.where(by_light[:, None], light_values[at], values[at])
+            total += w[:, None] * taken
     # (a smooth sample has a nearest centre: at least LEAST_CENTRES see its surface)
     blend = weight > 0.0
     blended[blend] = total[blend] / weight[blend, None]
     alone = smooth & ~blend
     blended[alone] = values[nearest[alone]]
+    if by_light.any():
+        mine = alone & by_light
+        blended[mine] = light_values[nearest[mine]]
     return smooth, blended
