@@ -162,8 +162,8 @@ def test_each_view_draw_traces_one_slice_and_the_samples_converge_to_f12(voxgi, 
 
 
 def test_the_first_sample_is_as_smooth_as_f12_under_an_area_light(voxgi, monkeypatch, tmp_path):
-    """Each sample's direct light takes F12's strata: under an area light the view's image
-    after its first sample (a quarter of the gather rays in, the penumbrae whole) is already
+    """The gathering samples carry F12's light samples between them, as its gather rays: under
+    an area light the view's image after its first sample (a quarter of both in) is already
     near F12's, where one stratum a sample left the penumbrae noisy for most of the samples."""
     scene, depsgraph, view, window, engine, renderer = quarter_view(light="AREA")
     image = None

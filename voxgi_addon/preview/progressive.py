@@ -70,13 +70,14 @@ def gather_samples(samples: int) -> int:
 def sample_settings(gather: GatherSettings, light_samples: int, samples: int, index: int,
                     gathering: int | None = None):
     """(GatherSettings, light samples) of sample ``index`` of ``samples``, each with its own
-    seed: the one-shot image's light samples (its pixel centres' strata: every sample's
-    direct light is F12's, so the first sample's image is already as smooth as F12's — with
-    ⌈light samples / samples⌉ a sample, one stratum, the view's penumbrae stayed noisy for
-    most of its samples: docs/gi_pipeline.md "Every sample with the pixel's light samples"),
-    and the first ``gathering`` samples (None: ``gather_samples``) ⌈rays / gathering⌉ gather
-    rays and ⌈glossy rays / gathering⌉ glossy rays, the later ones none (they read the
-    gathers' sums) — so the samples together trace at least the one-shot image's rays."""
+    seed: the first ``gathering`` samples (None: ``gather_samples``) ⌈rays / gathering⌉
+    gather rays and ⌈glossy rays / gathering⌉ glossy rays, the later ones none (they read the
+    gathers' sums), and every sample ⌈light samples / gathering⌉ shadow rays a light — so the
+    gathering samples between them trace the one-shot image's rays and its light samples, and
+    the view's first image is near F12's (with ⌈light samples / samples⌉, one stratum a
+    sample, its penumbrae stayed noisy for most of the samples: docs/gi_pipeline.md "Every
+    sample with a share of the pixel's light samples"). The samples are averaged alike, so
+    every one traces as many."""
     if samples < 1:
         raise ValueError(f"samples must be at least 1, not {samples}")
     if not 0 <= index < samples:
@@ -87,7 +88,7 @@ def sample_settings(gather: GatherSettings, light_samples: int, samples: int, in
         gather, rays=max(1, math.ceil(gather.rays / gathering)) if traced else 0,
         glossy_rays=max(1, math.ceil(gather.glossy_rays / gathering)) if traced else 0,
         seed=gather.seed + SEED_STEP * index)
-    return per, max(1, int(light_samples))
+    return per, max(1, math.ceil(light_samples / gathering))
 
 
 def bayer(side: int) -> np.ndarray:
