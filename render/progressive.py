@@ -365,10 +365,9 @@ class ProgressiveImage:
 
         if self.coarse_pending:
             size = self.coarse_size(options["gi_stride"])
-            # a quick image: a sample's share of the gather rays and one shadow ray a light
-            gather, _ = sample_settings(options["gather_settings"], options["light_samples"],
-                                        self.target, 0, gathering=self.target)
-            lights = 1
+            gather, lights = sample_settings(options["gather_settings"],
+                                             options["light_samples"], self.target, 0,
+                                             gathering=self.target)  # a quick image
             self.running_pixels = size[0] * size[1]
             camera = camera_from_view(view, window, *size)
             centre = self.coarse_centre(size) if self.coarse_centre is not None else None

@@ -5,6 +5,7 @@ reads them; playing a rig in the viewport changes nothing in the file and ends o
 frame's result. Counted, not timed."""
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import importlib
@@ -253,6 +254,22 @@ class Recorder:
         return records
 
 
+@contextlib.contextmanager
+def recording(live, release):
+    """A ``Recorder`` of ``live``'s updates on the depsgraph's and the frame's changes while
+    the block runs; leaving it lets the held job go (``release``) and removes the handlers."""
+    recorder = Recorder(live)
+    handlers = (bpy.app.handlers.depsgraph_update_post, bpy.app.handlers.frame_change_post)
+    for handler in handlers:
+        handler.append(recorder)
+    try:
+        yield recorder
+    finally:
+        release.set()
+        for handler in handlers:
+            handler.remove(recorder)
+
+
 def test_playing_a_rig_reads_only_poses_drops_frames_and_ends_on_the_last(
         rig_room, interactive, monkeypatch):
     """Ten frames of an animated rig handed to the viewport while the worker is still busy
@@ -282,14 +299,11 @@ def test_playing_a_rig_reads_only_poses_drops_frames_and_ends_on_the_last(
     live.update(scene, depsgraph)  # the first update: a full snapshot, every cache
     jobs.synchronous = False
     assert live.staged is not None and live.error == ""
-    recorder = Recorder(live)
-    bpy.app.handlers.depsgraph_update_post.append(recorder)
-    bpy.app.handlers.frame_change_post.append(recorder)
     monkeypatch.setattr(viewport_session, "update_gi_stages", held_first)
     runner = jobs._runner
     before, waiting, plans, generation = reads(), [], len(live.plans), live.generation
     submitted = []
-    try:
+    with recording(live, release) as recorder:
         for frame in range(2, 11):
             scene.frame_set(frame)
             plan = live.update(scene, bpy.context.evaluated_depsgraph_get(), recorder.take())
@@ -300,10 +314,6 @@ def test_playing_a_rig_reads_only_poses_drops_frames_and_ends_on_the_last(
                 assert entered.wait(TIMEOUT)
             waiting.append(sum(1 for j in runner.pending if not j.superseded and not j.started))
             jobs.drain()
-    finally:
-        release.set()
-        bpy.app.handlers.depsgraph_update_post.remove(recorder)
-        bpy.app.handlers.frame_change_post.remove(recorder)
     assert jobs.wait_idle(TIMEOUT)
     jobs.drain()
     assert read_since(before) == {"meshes": 0, "materials": 0, "worlds": 0}
@@ -345,10 +355,7 @@ def test_frames_played_while_the_first_update_voxelizes_read_only_their_poses(
     scene.frame_set(1)
     monkeypatch.setattr(viewport_session, "refresh_caches", held_first)
     live = live_gi(scene.name_full)
-    recorder = Recorder(live)
-    bpy.app.handlers.depsgraph_update_post.append(recorder)
-    bpy.app.handlers.frame_change_post.append(recorder)
-    try:
+    with recording(live, release) as recorder:
         first = live.update(scene, bpy.context.evaluated_depsgraph_get())
         assert first.full_snapshot and entered.wait(TIMEOUT)
         before = reads()
@@ -358,10 +365,6 @@ def test_frames_played_while_the_first_update_voxelizes_read_only_their_poses(
             assert live.latest_snapshot.frame == frame
         assert read_since(before) == {"meshes": 0, "materials": 0, "worlds": 0}
         assert "voxelize" in live.pending.stages  # the first update's work still to come
-    finally:
-        release.set()
-        bpy.app.handlers.depsgraph_update_post.remove(recorder)
-        bpy.app.handlers.frame_change_post.remove(recorder)
     assert jobs.wait_idle(TIMEOUT)
     jobs.drain()
     assert live.error == "" and live.pending is None and live.snapshot.frame == 4
