@@ -26,7 +26,7 @@ from ..voxgi_addon.gi.radiance_cache import (
     triangles_key,
     with_faces,
 )
-from ..voxgi_addon.preview.denoise import HOLE_SPREAD, NOISE_TARGET, RIDGE
+from ..voxgi_addon.preview.denoise import GLOSSY_SIGMA_LUMINANCE, HOLE_SPREAD, NOISE_TARGET, RIDGE, SIGMA_LUMINANCE
 from ..voxgi_addon.preview.gather import cache_settings
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE, low_shape
@@ -54,7 +54,8 @@ def _denoise_shader():
 
 
 def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: int,
-            iterations: int = 4, fit: bool = True, holes: bool = False):
+            iterations: int = 4, fit: bool = True, holes: bool = False,
+            sigma: float = SIGMA_LUMINANCE):
     """``iterations`` passes of the à-trous filter over the low-resolution ``values`` (light rgb,
     AO) and ``variance`` textures whose cells trace the pixels ``traced_pixel`` picks in the
     ``width`` × ``height`` G-buffer; returns the filtered (values, variance) textures. fit :
@@ -71,7 +72,7 @@ def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: i
             shader.uniform_sampler(name, inputs[name])
         shader.uniform_float("grid", (float(stride), float(width), float(height), float(1 << it)))
         spread = float(HOLE_SPREAD) if it == 0 and holes else 1.0  # (denoise.py HOLE_SPREAD)
-        shader.uniform_float("options", (1.0 if fit else 0.0, spread, 0.0, 0.0))
+        shader.uniform_float("options", (1.0 if fit else 0.0, spread, sigma, 0.0))
         shader.image("out_image", out[0])
         shader.image("out_variance", out[1])
         gpu.compute.dispatch(shader, math.ceil(values.width / LOCAL_SIZE),
@@ -537,7 +538,8 @@ def gather_low(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settin
                               stride, width, height, kernel=kernel, world_mode=world_mode,
                               tables=tables)
     values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
-                        settings.denoise_iterations, fit=kernel == "bvh_gather")
+                        settings.denoise_iterations, fit=kernel == "bvh_gather",
+                        sigma=SIGMA_LUMINANCE if kernel == "bvh_gather" else GLOSSY_SIGMA_LUMINANCE)
     return values
 
 

@@ -19,6 +19,7 @@ import numpy as np
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.cone_bounces import fast_cache_settings
 from ..voxgi_addon.preview import transmission
+from ..voxgi_addon.preview.denoise import GLOSSY_SIGMA_LUMINANCE, SIGMA_LUMINANCE
 from ..voxgi_addon.preview.film import background
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF, GatherSettings, focused
 from ..voxgi_addon.preview.passes import (
@@ -452,7 +453,8 @@ def _low(f, kind, kernel="bvh_gather", world_mode=False):
     if not f["denoise"]:  # (raw: the filter's kernel not even bound)
         return values
     return denoise(values, variance, centre.inputs, stride, width, height,
-                   settings.denoise_iterations, fit=kind.endswith("diffuse"))[0]
+                   settings.denoise_iterations, fit=kind.endswith("diffuse"),
+                   sigma=SIGMA_LUMINANCE if kind.endswith("diffuse") else GLOSSY_SIGMA_LUMINANCE)[0]
 
 
 def _empty_like(texture):

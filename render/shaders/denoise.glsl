@@ -2,7 +2,7 @@
  * ported line for line) over the reduced-resolution gather. low_image = (light rgb, AO),
  * low_variance = (var of the light's luminance mean, var of the AO mean); taps 2^i cells apart,
  * B3-spline weights × same-surface terms (normal^32, plane) × per signal
- * exp(−|Δ| / (4·√(var_p + var_q) + 1e-6)), var_p the centre's variance prefiltered over 3 × 3
+ * exp(−|Δ| / (SIGMA_LUMINANCE·√(var_p + var_q) + 1e-6)), var_p the centre's variance prefiltered over 3 × 3
  * valid cells, var_q the tap's own (why both: denoise.py).
  * The value is a weighted local linear fit through the taps (denoise.py _fit): the weighted
  * mean where the taps surround the cell, corrected by the slope where they lie on one side.
@@ -113,7 +113,7 @@ void main()
       float tol = 0.1 * length(offset) + 1e-4;
       float geometry = kernel_at(float(a) / float(spread)) * kernel_at(float(b) / float(spread)) *
                        facing * exp(-(plane / tol) * (plane / tol));
-      vec2 scale = 4.0 * sqrt(max(blurred + varq, vec2(0.0))) + 1e-6;
+      vec2 scale = options.z * sqrt(max(blurred + varq, vec2(0.0))) + 1e-6;
       vec2 w = hole ? vec2(geometry) :
                geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);
       float s = float(b) / float(spread); /* the tap's place in the window */

@@ -64,6 +64,9 @@ KERNEL = np.array([1 / 16, 1 / 4, 3 / 8, 1 / 4, 1 / 16])
 NORMAL_POWER = 32
 PLANE_TOLERANCE = 0.1
 SIGMA_LUMINANCE = 4.0
+# the glossy gathers' (8 rays a point, the weighted mean): a narrower luminance test keeps the
+# reflections' detail (docs/gi_pipeline.md "The glossy gathers' luminance test")
+GLOSSY_SIGMA_LUMINANCE = 2.0
 NOISE_TARGET = 0.02  # a cell is settled when its mean's standard error is within 2% of it
 RIDGE = 0.25  # the local fit's slope damping, × the taps' mean squared distance
 _EPSILON = 1e-6

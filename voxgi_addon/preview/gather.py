@@ -25,7 +25,7 @@ from ..gi.exact_glossy import glossy_indirect, glossy_world_direct
 from ..gi.exact_indirect import indirect_and_ao
 from ..gi.surface_lookup import geometric_normals
 from ..scene.snapshot import RAY_DIFFUSE
-from .denoise import atrous_filter
+from .denoise import GLOSSY_SIGMA_LUMINANCE, atrous_filter
 from .sparse_gather import noisy_holes, sparse_plan, sparse_settings
 from .upsample import sample_pixels, upsample
 
@@ -211,7 +211,8 @@ def _glossy_cells(estimator, scene, options, hit, position, normal, direction, m
     values[valid, :3] = glossy
     variance[valid, 0] = var
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
-                              iterations=settings.denoise_iterations, fit=False)
+                              iterations=settings.denoise_iterations, fit=False,
+                              sigma_luminance=GLOSSY_SIGMA_LUMINANCE)
     if low:
         return values, valid
     return upsample(values, valid, hit, position, normal, stride)[..., :3]
