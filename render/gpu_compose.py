@@ -87,7 +87,7 @@ def release() -> None:
 
 def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples: int,
                  seed: int, block=None, lamps=None, glow=None, centre=None, field=None,
-                 lamp_glossy: bool = True):
+                 lamp_glossy: bool = True, smooth=None):
     """(Stages, one per light's dispatches, returning) ``sums`` + one pass over ``inputs``, a
     G-buffer of ``size`` (an image's or the edge pixels' list's) of ``scene`` (a ``GPUScene``
     updated to ``snapshot``): terms = the gathered (Diffuse Indirect, AO), Glossy Indirect and
@@ -103,7 +103,10 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     the sum at every texel); field : the field at the pass's own points
     (``direct_light_texture``'s). lamp_glossy : the lamps' glossy light
     (``glossy_direct_texture``); False: none (the viewport's first coarse image, before that
-    kernel is compiled: docs/gi_pipeline.md "Entering Rendered mode")."""
+    kernel is compiled: docs/gi_pipeline.md "Entering Rendered mode"). smooth : filters the
+    world's and emitters' Diffuse Direct texture (rgb, the world's part's variance) of a whole
+    image before it is added (F12's centre pass: docs/gi_pipeline.md "The world's light
+    filtered"); None: added as traced."""
     bvh, principled, emission = scene.bvh, scene.principled, scene.emission
     materials, lut = scene.materials, scene.lut
     extra = scene.has_scene_lights
@@ -135,6 +138,8 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
                                       strata_block=block, table=scene.no_lamp,
                                       absent=absent_lights(scene.lights[len(scene.lamp_tables):]),
                                       centre=centre, field=field)
+        if smooth is not None:
+            direct = smooth(direct)
         out = run("aa_light", LIGHT_SAMPLERS, {
             "colour": colour, "direct_image": direct,
             "shine_image": blank if glow is None else glow, **sums},

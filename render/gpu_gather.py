@@ -55,7 +55,7 @@ def _denoise_shader():
 
 def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: int,
             iterations: int = 4, fit: bool = True, holes: bool = False,
-            sigma: float = SIGMA_LUMINANCE):
+            sigma: float = SIGMA_LUMINANCE, alpha_variance: bool = False):
     """``iterations`` passes of the à-trous filter over the low-resolution ``values`` (light rgb,
     AO) and ``variance`` textures whose cells trace the pixels ``traced_pixel`` picks in the
     ``width`` × ``height`` G-buffer; returns the filtered (values, variance) textures. fit :
@@ -72,7 +72,9 @@ def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: i
             shader.uniform_sampler(name, inputs[name])
         shader.uniform_float("grid", (float(stride), float(width), float(height), float(1 << it)))
         spread = float(HOLE_SPREAD) if it == 0 and holes else 1.0  # (denoise.py HOLE_SPREAD)
-        shader.uniform_float("options", (1.0 if fit else 0.0, spread, sigma, 0.0))
+        # (the first pass reads a pixel's world light's variance from its alpha: denoise.glsl)
+        in_alpha = 1.0 if alpha_variance and it == 0 else 0.0
+        shader.uniform_float("options", (1.0 if fit else 0.0, spread, sigma, in_alpha))
         shader.image("out_image", out[0])
         shader.image("out_variance", out[1])
         gpu.compute.dispatch(shader, math.ceil(values.width / LOCAL_SIZE),

@@ -612,11 +612,29 @@ _SUM_TEXTURES = (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")
 
 
 def _shade(f, inputs, sums, terms, blank, size, block, lamps=None, glow=None, centre=None,
-           field=None):
+           field=None, smooth=None):
     """``gpu_compose.shade_stages`` of this frame's scene and snapshot."""
     return shade_stages(f["scene"], f["snapshot"], inputs, sums, terms, blank, size,
                         f["light_samples"], f["gather_settings"].seed, block, lamps, glow,
-                        centre, field, lamp_glossy=f["lamp_glossy"])
+                        centre, field, lamp_glossy=f["lamp_glossy"], smooth=smooth)
+
+
+def _world_smooth(f):
+    """The filter of the centre pass's world light (``gpu_compose.shade_stages``' smooth):
+    the diffuse gather's à-trous filter over the image's pixels, its variance the world's
+    hidden part's (docs/gi_pipeline.md "The world's light filtered"). None where the world
+    sheds no light, and for the viewport's slices (their samples average it, and a tile's
+    filter would end at the tile's edge)."""
+    if f["on_gpu"] or not f["denoise"] or \
+            not any(light.type == "WORLD" for light in f["scene"].lights):
+        return None
+    width, height, inputs = f["width"], f["height"], f["centre"].inputs
+    iterations = f["gather_settings"].denoise_iterations
+
+    def smooth(direct):
+        return denoise(direct, direct, inputs, 1, width, height, iterations,
+                       alpha_variance=True)[0]
+    return smooth
 
 
 def _centres(f):
@@ -642,7 +660,8 @@ def _centre_pass(f):
     sums = yield from _shade(f, inputs, {name: zero for name in _SUM_TEXTURES},
                              (f["diffuse_ao"], f["glossy"], f["glossy_world"]), zero,
                              (width, height), centre_pass(f["light_samples"])[1],
-                             lamps if reach else None, f["shine"], centres)
+                             lamps if reach else None, f["shine"], centres,
+                             smooth=_world_smooth(f))
     result = None
     if f["on_gpu"] and not reach:  # the viewport adds them to its sums on the GPU
         result = (GPUSums({name: sums[name] for name in SUM_NAMES}, width, height))

@@ -5,7 +5,7 @@
  * given); strata = (M, row, column, 0): the dispatch draws the m × m block at (row, column)
  * of each light's M × M strata (sampling.glsl STRATA_BLOCK; the whole set when m = M), so the
  * anti-aliased preview's sub-pixel passes share one stratified set of shadow rays.
- * out = (rgb, 1).
+ * out = (rgb, the variance of the world's part's luminance: bvh_lights.glsl world_variance).
  * gbuffer_view = (ray direction, material). sampling.z, the mode:
  * 0: Diffuse Direct, the emitters' exact unshadowed sum evaluated at every texel
  * (O(emissive triangles), bvh_lights.glsl emitters_unshadowed);
@@ -112,5 +112,5 @@ void main()
                              : uint((size.y - 1 - px.y) * size.x + px.x);
   terminator_set(position.xyz, texelFetch(gbuffer_view, px, 0).xyz, n);
   vec3 value = diffuse_direct(p, n, id, uint(sampling.x), int(sampling.y), known);
-  imageStore(out_image, px, vec4(value, 1.0));
+  imageStore(out_image, px, vec4(value, world_variance));
 }

@@ -482,10 +482,16 @@ vec3 hidden_less(vec3 value, vec3 f_sum, vec3 f_lit, int m)
  * principled.glsl), in `glossy` the radiance a bounce hit's glossy lobe (Principled `base`,
  * `params`) reflects of it toward `v` from the same rays: each ray's L V f / (m² (p_map +
  * p_cos)), the balance heuristic of both techniques. */
+/* The variance of the luminance of the last world_direct_lobe's estimate of the world's hidden
+ * part (its rays taken as independent: an upper bound under the strata), for the filter of a
+ * pixel's world light (bvh_direct.glsl's alpha, denoise.glsl options.w). */
+float world_variance = 0.0;
+
 vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec3 base,
                        vec3 params, out vec3 glossy)
 {
   glossy = vec3(0.0);
+  world_variance = 0.0;
   vec4 head = world_header();
   int h = int(head.x);
   int w = int(head.y);
@@ -499,6 +505,7 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   vec3 f_sum = vec3(0.0);
   vec3 f_lit = vec3(0.0);
   bool uniform_sky = texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).z > 0.5;
+  float hidden_sum = 0.0, hidden_squares = 0.0; /* Σ h, Σ h², h = a ray's lum(f) / π if hidden */
   for (int technique = uniform_sky ? 1 : 0; technique < 2; technique++) { /* uniform: cosine only */
     for (int k = 0; k < m * m; k++) {
       vec2 s = hashed_stratum(state, k, m);
@@ -521,8 +528,14 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
       f_sum += f;
       /* the map's rays as Cycles' light samples (lifted by the shadow terminator offset),
        * the cosine ones as its BSDF's rays that find the sky (not lifted) */
-      if (max(f.r, max(f.g, f.b)) > 0.0 &&
-          !(technique == 0 ? shadow_hit(origin, dir, BVH_FAR) : bvh_any_hit(origin, dir, BVH_FAR))) {
+      bool seen = max(f.r, max(f.g, f.b)) > 0.0 &&
+          !(technique == 0 ? shadow_hit(origin, dir, BVH_FAR) : bvh_any_hit(origin, dir, BVH_FAR));
+      if (!seen) {
+        float h = dot(f, LUMA) / M_PI_F;
+        hidden_sum += h;
+        hidden_squares += h * h;
+      }
+      if (seen) {
         f_lit += f;
 #ifdef PRINCIPLED_IOR
         if (lobe) {
@@ -534,6 +547,10 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
     }
   }
   glossy /= float(m * m);
+  /* the hidden part's estimate is Σ h / m² over N = techniques × m² rays: T var(h) / m² */
+  float rays = float(m * m * (uniform_sky ? 1 : 2));
+  float spread = max(hidden_squares - hidden_sum * hidden_sum / rays, 0.0) / max(rays - 1.0, 1.0);
+  world_variance = rays / float(m * m) * spread / float(m * m);
   return hidden_less(value, f_sum, f_lit, m);
 }
 

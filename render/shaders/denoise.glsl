@@ -10,7 +10,9 @@
  * within NOISE_TARGET of its value is settled: kept as it is (denoise.py NOISE_TARGET).
  * grid = (stride, full width, full height, tap step); low-resolution rows count from the bottom;
  * options.x = 1: the local linear fit, 0: the weighted mean; options.y: the kernel stretched over
- * that many times its width (2 in the first pass over a grid with holes: denoise.py HOLE_SPREAD).
+ * that many times its width (2 in the first pass over a grid with holes: denoise.py HOLE_SPREAD);
+ * options.z: the luminance test's σ; options.w = 1: low_image = (light rgb, the variance of its
+ * luminance) and no scalar (a pixel's world light, bvh_direct.glsl), low_variance unread.
  * A cell whose low_variance.z is 1 is a hole (the sparse gather left it out: denoise.py
  * atrous_filter(holes=…)): no tap, never settled, its taps weighed by geometry alone (it has
  * no light of its own to compare); the pass writes its fit and variance.z = 0. */
@@ -35,8 +37,10 @@ void main()
   int stride = int(grid.x);
   ivec2 full = ivec2(grid.yz);
   int step = int(grid.w);
+  bool alpha_variance = options.w > 0.5; /* a pixel's world light: (rgb, its variance) */
   vec4 centre = texelFetch(low_image, cell, 0);
-  vec4 centre_var = texelFetch(low_variance, cell, 0);
+  vec4 centre_var = alpha_variance ? vec4(centre.a, 0.0, 0.0, 0.0) : texelFetch(low_variance, cell, 0);
+  centre.a = alpha_variance ? 0.0 : centre.a;
   ivec2 px = traced_pixel(low.y - 1 - cell.y, cell.x, stride, full);
   vec4 position = texelFetch(gbuffer_position, px, 0);
   if (position.w < 0.5) {
@@ -59,7 +63,8 @@ void main()
       if (texelFetch(gbuffer_position, traced_pixel(low.y - 1 - q.y, q.x, stride, full), 0).w < 0.5) {
         continue;
       }
-      vec4 qvar = texelFetch(low_variance, q, 0);
+      vec4 qvar = alpha_variance ? vec4(texelFetch(low_image, q, 0).a, 0.0, 0.0, 0.0)
+                                 : texelFetch(low_variance, q, 0);
       if (qvar.z > 0.5) {
         continue; /* a hole: no variance of its own */
       }
@@ -102,7 +107,8 @@ void main()
       }
       vec3 nq = texelFetch(gbuffer_normal, qpx, 0).xyz;
       vec4 vq = texelFetch(low_image, qc, 0);
-      vec4 var4 = texelFetch(low_variance, qc, 0);
+      vec4 var4 = alpha_variance ? vec4(vq.a, 0.0, 0.0, 0.0) : texelFetch(low_variance, qc, 0);
+      vq.a = alpha_variance ? 0.0 : vq.a;
       if (var4.z > 0.5) {
         continue; /* a hole is no tap */
       }

@@ -30,11 +30,12 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENES = ("cornell_box", "columned_hall", "textured_room", "emissive_room", "hdri_courtyard",
-          "metal_room", "city", "diorama")
+          "sky_courtyard", "metal_room", "city", "diorama")
 SIZES = ((160, 120), (640, 480))
 LABELS = {"cornell_box": "Cornell box (area light)", "columned_hall": "columned hall (sun)",
           "textured_room": "textured room", "emissive_room": "emissive room",
           "hdri_courtyard": "HDRI courtyard (exterior)",
+          "sky_courtyard": "courtyard under a uniform sky + sun",
           "metal_room": "room of metals (steel, copper, gold)",
           "city": "city block, instanced domes",
           "diorama": "imported glTF diorama (142k triangles, textured)"}

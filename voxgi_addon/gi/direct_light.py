@@ -322,7 +322,7 @@ def _area(light, p, n, tris, strata):
     return value
 
 
-def _world(world, p, n, tris, strata, reflect=None, unlifted=None):
+def _world(world, p, n, tris, strata, reflect=None, unlifted=None, variance=None):
     """The world's Diffuse Direct (``world_light.world_direct``): its map-sampled rays through
     ``tris`` (lifted by the shadow terminator offset where diffuse_direct was given it), its
     cosine rays through ``unlifted`` (``tris`` when None)."""
@@ -336,7 +336,7 @@ def _world(world, p, n, tris, strata, reflect=None, unlifted=None):
             lambda origins, dirs: _occluded(occluder, origins, dirs, np.full(len(dirs), np.inf)))
 
     return world_direct(world, p + origins_offset, n, through(unlifted), strata, reflect,
-                        sampled=None if unlifted is tris else through(tris))
+                        sampled=None if unlifted is tris else through(tris), variance=variance)
 
 
 def _emitters(emitters, p, n, tris, strata, reflect=None, unshadowed=None):
@@ -365,7 +365,7 @@ _BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD"
 
 def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
                    sample_ids=None, per_light: bool = False, strata_block=None, reflect=None,
-                   unshadowed=None, terminator=None):
+                   unshadowed=None, terminator=None, world_variance=None):
     """Cycles' ``Diffuse Direct`` (irradiance / π, no albedo) at surface points.
 
     Parameters
@@ -400,6 +400,8 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
     terminator : ((N, 3) lifts, (N, 3) geometric normals) of the points
         (``terminator.find_lifts``): every shadow ray starts from its point lifted as Cycles'
         shadow terminator offset lifts it (``terminator.ShadowStarts``); None: from the point.
+    world_variance : an (N,) float array that gets the variance of the luminance of the
+        world's estimate (``world_light.hidden_variance``; the GPU's bvh_direct.glsl alpha).
 
     Returns
     -------
@@ -440,6 +442,8 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
                 "unshadowed": np.asarray(unshadowed, np.float64).reshape(-1, 3)[a:b]}
             if light.type == "WORLD":
                 given["unlifted"] = unlifted
+                if world_variance is not None:
+                    given["variance"] = part = np.zeros(b - a)
             if reflect is not None and light.type in ("WORLD", "EMITTERS"):
                 value, glossy = shade(light, p[a:b], n[a:b], tris, strata,
                                       lambda lit, dirs, a=a: reflect(a + lit, dirs), **given)
@@ -447,6 +451,8 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
             else:
                 value = shade(light, p[a:b], n[a:b], tris, strata, **given)
             out[index, a:b] += (value[:, None] if value.ndim == 1 else value) * color
+            if "variance" in given:  # (the colour is the world's strength: 1)
+                world_variance[a:b] += part
     result = (out if per_light else out.sum(axis=0)).astype(np.float32)
     if reflect is None:
         return result

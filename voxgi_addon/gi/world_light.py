@@ -275,7 +275,19 @@ def hidden_less(value, f, blocked, strata: int, held: bool | None = None) -> np.
     return np.maximum(light, 0.0) if held else light
 
 
-def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sampled=None):
+def hidden_variance(f, blocked, strata: int) -> np.ndarray:
+    """(N,) the variance of the luminance of ``hidden_less``' estimate of the hidden part,
+    Σ h / strata over the R rays of ``f`` (N, R, 3), h = lum(f) / π where ``blocked``:
+    R / strata² × the rays' sample variance of h, the rays taken as independent (an upper bound
+    under the strata; GLSL ``world_variance``, bvh_lights.glsl)."""
+    h = np.where(blocked, (np.asarray(f, np.float64) @ LUMINANCE) / math.pi, 0.0)
+    rays = h.shape[1]
+    spread = np.maximum((h * h).sum(axis=1) - h.sum(axis=1) ** 2 / rays, 0.0) / max(rays - 1, 1)
+    return rays / strata * spread / strata
+
+
+def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sampled=None,
+                 variance=None):
     """(N, 3) Diffuse Direct of the world at points p with unit normals n (facing the viewer):
     the unshadowed table value less the estimate of its hidden part from one world-map and one
     cosine ray per stratum (the balance heuristic; ``hidden_less``).
@@ -291,7 +303,10 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     sampled : the shadow test of the world-map technique's rays, when it differs from
         ``occluded`` (the cosine rays'): Cycles samples a textured world as a light (its
         shadow rays lifted by the shadow terminator offset, ``terminator.ShadowStarts``) and
-        finds it by the BSDF's rays too (not lifted); a uniform world it finds by those alone."""
+        finds it by the BSDF's rays too (not lifted); a uniform world it finds by those alone.
+    variance : an (N,) array that gets the variance of the luminance of the hidden part's
+        estimate (``hidden_variance``; left as it is where no ray is drawn), for the filter of
+        a pixel's world light (docs/gi_pipeline.md "The world's light filtered")."""
     p = np.asarray(p, np.float64)
     n = np.asarray(n, np.float64)
     value = unshadowed(world, n)
@@ -328,6 +343,8 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     # drawn alone, the sun's share lost), which left the HDRI courtyard's walls' bounce
     # light 3% dark (docs/gi_pipeline.md "The world's light where it is partly hidden").
     value[lit] = hidden_less(value[lit], f, blocked, square.shape[1])
+    if variance is not None:
+        variance[lit] = hidden_variance(f, blocked, square.shape[1])
     if reflect is None:
         return value
     per_technique = square.shape[1]

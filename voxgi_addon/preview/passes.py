@@ -43,6 +43,7 @@ from ..scene.raycast import primary_visibility
 from ..scene.short_axis import any_along, norm3
 from ..scene.textures import TEXTURE_TAPS, primary_base, texel_emission
 from . import transmission
+from .denoise import atrous_filter
 from .gather import (
     GatherSettings,
     focused,
@@ -803,7 +804,7 @@ def filtered_sums(sums, count, tails, width: int, height: int, filter_width: flo
 
 def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
                  visibility=None, sample_ids=None, per_light=False, seed=0, strata_block=None,
-                 unshadowed=None, views=None):
+                 unshadowed=None, views=None, world_variance=None):
     """(N, 3) Diffuse Direct at surface points: exact shadow rays against ``tris`` (shadows
     "RAYS") or one soft-shadow cone per light through ``octree`` ("CONES"; ``visibility``
     as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own).
@@ -814,7 +815,8 @@ def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
     unshadowed light at the points ("RAYS"; ``emitters_unshadowed_at``), None: evaluated.
     views : (N, 3) the camera rays' unit directions to the points ("RAYS"): the shadow rays
     then leave smooth-shaded triangles as Cycles' shadow terminator offset lifts them
-    (``terminator.find_lifts``, GLSL bvh_direct.glsl ``terminator_set``)."""
+    (``terminator.find_lifts``, GLSL bvh_direct.glsl ``terminator_set``). world_variance :
+    ("RAYS") gets the variance of the world's part (``direct_light.diffuse_direct``'s)."""
     if shadows == "CONES":
         return cone_shadowed_direct(octree, points, normals, lights, cones, samples, visibility)
     terminator = None
@@ -823,7 +825,29 @@ def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
     return diffuse_direct(points + normals * SURFACE_EPSILON, normals, lights, tris,
                           samples=samples, sample_ids=sample_ids, per_light=per_light, seed=seed,
                           strata_block=strata_block, unshadowed=unshadowed,
-                          terminator=terminator)
+                          terminator=terminator, world_variance=world_variance)
+
+
+def world_filtered(per_light, variance, lights, hit, seen, iterations: int) -> np.ndarray:
+    """``per_light`` (L, N, 3) of a whole image's pixels ``hit`` (N,) with the world's and
+    emitters' light (their sum) filtered over the image by the diffuse gather's à-trous filter
+    (``denoise.atrous_filter`` on the G-buffer ``seen``, stride 1), ``variance`` (N,) the
+    world's estimate's (``direct_light.diffuse_direct``'s world_variance): the world's row gets
+    the filtered sum, the emitters' row 0 (GLSL: the world's and emitters' dispatch filtered,
+    ``render/gpu_preview.py`` ``_world_smooth``; docs/gi_pipeline.md "The world's light
+    filtered")."""
+    rows = [k for k, light in enumerate(lights) if light.type in ("WORLD", "EMITTERS")]
+    height, width = seen.hit.shape
+    values = np.zeros((height * width, 4), np.float64)
+    spread = np.zeros((height * width, 2), np.float64)
+    values[hit, :3] = per_light[rows].sum(axis=0)
+    spread[hit, 0] = variance
+    filtered, _ = atrous_filter(values.reshape(height, width, 4), spread.reshape(height, width, 2),
+                                seen.hit, seen.position, seen.normal, iterations=iterations)
+    out = np.array(per_light, copy=True)
+    out[rows] = 0.0
+    out[[k for k in rows if lights[k].type == "WORLD"][0]] = filtered.reshape(-1, 4)[hit, :3]
+    return out
 
 
 def emitters_unshadowed_at(emitters, points, normals) -> np.ndarray:
@@ -1176,9 +1200,17 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
             unshadowed[other] = emitters_unshadowed_held(emitters, p[other], n[other],
                                                          diffuse_at, diffuse_turn)
         # (the shadow rays are the pass's own: its block of the strata)
+        # the centre pass's world light is filtered over the image (F12's; the GPU's
+        # _world_smooth), from the variance of its estimate
+        variance = np.zeros(len(hit)) if seen is centre_seen and shadows == "RAYS" and \
+            any(light.type == "WORLD" for light in lights) else None
         per_light = direct_light(None, p, n, lights, tris, cones, light_samples, shadows,
                                  sample_ids=hit, per_light=True, seed=gather_settings.seed,
-                                 strata_block=block, unshadowed=unshadowed, views=-views)
+                                 strata_block=block, unshadowed=unshadowed, views=-views,
+                                 world_variance=variance)
+        if variance is not None:
+            per_light = world_filtered(per_light, variance, lights, hit, seen,
+                                       gather_settings.denoise_iterations)
         shine = glossy_direct_radiance(snapshot, p, n, views, mat,
                                        per_light[:len(snapshot.lights)], hit, base)
         accumulate_pass(sums if into is None else into, snapshot, hit, mat, n, views,
