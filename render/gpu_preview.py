@@ -24,6 +24,7 @@ from ..voxgi_addon.preview.film import background
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF, GatherSettings, focused
 from ..voxgi_addon.preview.passes import (
     AA_SIDE,
+    WORLD_FILTER_PASSES,
     centre_pass,
     check_request,
     edge_pixels,
@@ -629,10 +630,9 @@ def _world_smooth(f):
             not any(light.type == "WORLD" for light in f["scene"].lights):
         return None
     width, height, inputs = f["width"], f["height"], f["centre"].inputs
-    iterations = f["gather_settings"].denoise_iterations
 
     def smooth(direct):
-        return denoise(direct, direct, inputs, 1, width, height, iterations,
+        return denoise(direct, direct, inputs, 1, width, height, WORLD_FILTER_PASSES,
                        alpha_variance=True)[0]
     return smooth
 

@@ -61,7 +61,7 @@ def test_the_filter_takes_the_noise_and_keeps_a_shadow_edge():
     per_light[1] = (noisy.reshape(-1, 1) - 0.01) * np.ones(3)
     per_light[2] = 0.01  # the emitters': filtered with the world's, into its row
     variance = np.full(height * width, sigma ** 2)
-    out = world_filtered(per_light, variance, lights, np.arange(height * width), seen, 4)
+    out = world_filtered(per_light, variance, lights, np.arange(height * width), seen)
     assert np.array_equal(out[0], per_light[0])
     assert not out[2].any()
     filtered = out[1][:, 0].reshape(height, width)
