@@ -56,6 +56,10 @@ void main()
   uint state = point_stream(id, GLOSSY_STREAM, seed);
   uint world_state = point_stream(id, WORLD_GLOSSY_STREAM, seed);
   bool sky_on = world_on();
+  /* a uniform world: the lobe's rays alone (the map's importance is uniform over the sphere,
+   * half of it below the horizon: exact_glossy.glossy_world_direct) */
+  bool uniform_sky = sky_on &&
+      texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).z > 0.5;
   bool emitting = emitter_header().w > 0.5;
   const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
   vec3 sum = vec3(0.0);
@@ -112,12 +116,12 @@ void main()
         }
         else if (sky_on) {
           vec3 sky = world_radiance_at(world_pixel(l, wh, ww));
-          float map_pdf = dot(sky, LUMA) / head.w;
+          float map_pdf = uniform_sky ? 0.0 : dot(sky, LUMA) / head.w;
           float share = mirror ? 1.0 : pdf / max(pdf + map_pdf, 1e-30);
           value += sky * weight * share;
         }
       }
-      if (!mirror && sky_on) {
+      if (!mirror && sky_on && !uniform_sky) {
         vec3 le = world_sample(hammersley(world_state, j, rays), wh, ww);
         vec3 sky = world_radiance_at(world_pixel(le, wh, ww));
         float map_pdf = dot(sky, LUMA) / head.w;

@@ -194,7 +194,8 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
     balance heuristic: ray j of the lobe's ``rays`` (``glossy_indirect``'s, same stream) and
     ray j drawn from the map's importance (``world_light.sample_world``, stream
     ``WORLD_GLOSSY_STREAM``) each add L f / (p_lobe + p_map) where they reach the sky
-    unoccluded; a mirror takes its one reflected ray. With ``emission`` (M + 1, 3) per
+    unoccluded; a mirror takes its one reflected ray, and a uniform world the lobe's rays alone
+    (its map's importance is uniform over the sphere). With ``emission`` (M + 1, 3) per
     material, a lobe ray landing on an emissive triangle adds its emission × the ray's weight
     (``glossy_indirect`` then leaves it out); with ``emitters`` (``emitters.EmitterLight``, the
     same triangles) only a mirror's ray does: a glossy lobe gets them from ``emitters_shine``
@@ -239,10 +240,15 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
         value += seen * weight * share
     if world is None:
         return _glossy_mean(lobe, value)
-    lobe_pdf, map_pdf = lobe.pdf(dirs), world_pdf(world, dirs)
+    lobe_pdf = lobe.pdf(dirs)
+    # a uniform world: the lobe's rays alone (the map's importance is uniform over the sphere,
+    # half of it below the horizon; GLSL bvh_glossy.glsl uniform_sky)
+    map_pdf = np.zeros_like(lobe_pdf) if world.uniform else world_pdf(world, dirs)
     share = np.where(lobe.mirror[:, None], 1.0, lobe_pdf / np.maximum(lobe_pdf + map_pdf, 1e-30))
     value += np.where((useful & (hit < 0))[..., None],
                       world_radiance(world, dirs) * weight * share[..., None], 0.0)
+    if world.uniform:
+        return _glossy_mean(lobe, value)
 
     def reaching(dirs, useful):  # (N, K) the rays that leave the scene
         return useful & (nearest(dirs, useful) < 0)
