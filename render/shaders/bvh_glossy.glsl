@@ -58,8 +58,7 @@ void main()
   bool sky_on = world_on();
   /* a uniform world: the lobe's rays alone (the map's importance is uniform over the sphere,
    * half of it below the horizon: exact_glossy.glossy_world_direct) */
-  bool uniform_sky = sky_on &&
-      texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).z > 0.5;
+  bool uniform_sky = sky_on && world_uniform();
   bool emitting = emitter_header().w > 0.5;
   const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
   vec3 sum = vec3(0.0);

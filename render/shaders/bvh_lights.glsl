@@ -381,6 +381,13 @@ bool world_on()
   return texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).x > 0.5;
 }
 
+/* A uniform world (its map one colour: world_light.WorldLight.uniform): the cosine's or the
+ * lobe's rays alone, its map's importance being uniform over the sphere. */
+bool world_uniform()
+{
+  return texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).z > 0.5;
+}
+
 /* Pixel (row, column) of unit direction d (scene/equirect.direction_to_pixel). */
 ivec2 world_pixel(vec3 d, int h, int w)
 {
@@ -504,8 +511,8 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   perpendicular_basis(n, t, b);
   vec3 f_sum = vec3(0.0);
   vec3 f_lit = vec3(0.0);
-  bool uniform_sky = texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).z > 0.5;
-  float hidden_sum = 0.0, hidden_squares = 0.0; /* Σ h, Σ h², h = a ray's lum(f) / π if hidden */
+  bool uniform_sky = world_uniform();
+  float hidden_sum = 0.0, hidden_squares = 0.0; /* Σ, Σ² of a hidden ray's lum(f) / π */
   for (int technique = uniform_sky ? 1 : 0; technique < 2; technique++) { /* uniform: cosine only */
     for (int k = 0; k < m * m; k++) {
       vec2 s = hashed_stratum(state, k, m);
@@ -531,11 +538,11 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
       bool seen = max(f.r, max(f.g, f.b)) > 0.0 &&
           !(technique == 0 ? shadow_hit(origin, dir, BVH_FAR) : bvh_any_hit(origin, dir, BVH_FAR));
       if (!seen) {
-        float h = dot(f, LUMA) / M_PI_F;
-        hidden_sum += h;
-        hidden_squares += h * h;
+        float hidden = dot(f, LUMA) / M_PI_F;
+        hidden_sum += hidden;
+        hidden_squares += hidden * hidden;
       }
-      if (seen) {
+      else {
         f_lit += f;
 #ifdef PRINCIPLED_IOR
         if (lobe) {
