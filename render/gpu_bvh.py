@@ -138,6 +138,9 @@ LIGHT_FEATURES = {"SUN": ("SUN",), "AREA": ("AREA",), "POINT": ("POINT", "SPOT")
                   "WORLD": ("WORLD",), "EMITTERS": ("EMITTERS",)}
 
 
+EMITTERS_ONLY = ("AREA", "POINT", "SUN", "WORLD")  # a variant with the emitters' code only
+
+
 def absent_lights(lights) -> tuple[str, ...]:
     """The ``LIGHT_FEATURES`` no light of ``lights`` (``Light``s with a ``type``) needs."""
     types = {light.type for light in lights}
@@ -267,17 +270,21 @@ class GPUBVH:
         packed = pack_bvh(bvh_of(tris), tris)  # built once per instanced mesh
         return packed, time.perf_counter() - t0
 
-    def upload_steps(self, tris, packed, part_bytes: int = 0):
+    def upload_steps(self, tris, packed, part_bytes: int = 0, sent: int = 0):
         """Upload ``packed`` (``pack(tris)``) a texture per step (a generator: nodes, triangles,
         normals) — consecutive ones together while their bytes stay within ``part_bytes``, a
         scene part — the BVH switching to them at the last; None (unchanged): only remember
-        ``tris``. Main thread."""
+        ``tris``. sent : bytes of the step under way that other parts sent already (its scene
+        part counted: the nodes go with them while they fit). Main thread."""
         self.uploaded_bytes = 0
         if packed is None:
             self._tris = tris
             return
         packed, seconds = packed
-        step = [0]
+        step = [int(sent)]
+        if step[0] and step[0] + packed.nodes.nbytes > part_bytes:
+            step[0] = 0
+            yield
 
         def upload(texels, part):
             if step[0] and step[0] + texels.nbytes > part_bytes:
@@ -443,7 +450,7 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
 
 
 def emitters_unshadowed_texture(bvh: GPUBVH, gbuffer_inputs, emitters, lights=None, world=None,
-                                field=None):
+                                field=None, absent: tuple[str, ...] = EMITTERS_ONLY):
     """The emissive triangles' exact unshadowed Diffuse Direct over a G-buffer (``bvh_direct``'s
     mode 2, ``bvh_lights.glsl`` emitters_unshadowed, the port of ``emitters.unshadowed_sum``):
     an RGBA32F texture of the G-buffer's size (bottom row first), (sum, the distance to the
@@ -453,7 +460,9 @@ def emitters_unshadowed_texture(bvh: GPUBVH, gbuffer_inputs, emitters, lights=No
     holds, else the exact one, 0) instead — the pixel centres' sums, ``direct_light_texture``'s
     centre "unshadowed". emitters : an ``emitters_texture``; lights, world : the scene's
     ``lights_texture`` / ``world_texture`` (read by no code path here; bound because
-    bvh_lights.glsl declares them; None: empty ones)."""
+    bvh_lights.glsl declares them; None: empty ones). absent : the variant's kinds of light
+    left out (``absent_lights``; the scene's, so that this mode shares the scene's one
+    ``bvh_direct`` variant: the default, the emitters' code only, is a variant of its own)."""
     position = gbuffer_inputs["gbuffer_position"]
     inputs = {**bvh.inputs, **gbuffer_inputs, "emitters": emitters,
               "lights": lights if lights is not None else lights_texture([], None),
@@ -461,7 +470,7 @@ def emitters_unshadowed_texture(bvh: GPUBVH, gbuffer_inputs, emitters, lights=No
               "centre_position": position, "centre_normal": position, "centre_view": position,
               "centre_unshadowed": position,  # not read
               "emitter_field": position if field is None else field,
-              "bvh_absent": ("AREA", "POINT", "SUN", "WORLD")}  # the emitters' code only
+              "bvh_absent": tuple(absent)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
                         {"sampling": (0, 1, 2, 0 if field is None else 1),
                          "strata": (1, 0, 0, 0)})
@@ -495,7 +504,7 @@ def emitter_glossy_texture(bvh: GPUBVH, gbuffer_inputs, emitters, materials, ray
               "centre_normal": given["gbuffer_normal"], "centre_view": given["gbuffer_view"],
               "centre_shine": given["shine"],
               "emitter_field": position if field is None else field,  # not read without
-              "bvh_absent": ("AREA", "POINT", "SUN", "WORLD")}  # the emitters' code only
+              "bvh_absent": EMITTERS_ONLY}
     mode = 2 if unshadowed else 0 if centre is None else 1
     return dispatch_bvh("bvh_emitter_glossy", inputs, position.width, position.height,
                         {"sampling": (seed, max(1, int(rays)), mode, 0 if field is None else 1)})

@@ -117,12 +117,16 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     sums = {**sums, **{f"sum_{k}": out[f"out_{k}"] for k in SURFACE_SUMS}}
     colour = out["out_colour"]
     # Light by light: each lamp's light feeds the glossy lobe, and one dispatch stays within
-    # llvmpipe's loop limit (docs/blender_facts.md "llvmpipe's loop limit").
+    # llvmpipe's loop limit (docs/blender_facts.md "llvmpipe's loop limit"). Every dispatch
+    # takes the scene's one variant (the code of all its kinds of light): a variant per lamp
+    # kind cost a compile each and no time a dispatch (docs/gi_pipeline.md "One direct-light
+    # variant per scene")
+    absent = absent_lights(scene.lights)
     for index, table in enumerate(scene.lamp_tables):
         direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
                                       world=scene.no_world, emitters=scene.no_emitters,
                                       strata_block=block, table=table,
-                                      absent=absent_lights(scene.lights[index:index + 1]))
+                                      absent=absent)
         shine = glossy_direct_texture(inputs, direct, table, index, principled, emission,
                                       materials=materials) if lamp_glossy else blank
         out = run("aa_light", LIGHT_SAMPLERS, {
@@ -136,7 +140,7 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
         direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
                                       world=scene.world_map, emitters=scene.emitters,
                                       strata_block=block, table=scene.no_lamp,
-                                      absent=absent_lights(scene.lights[len(scene.lamp_tables):]),
+                                      absent=absent,
                                       centre=centre, field=field)
         if smooth is not None:
             direct = smooth(direct)

@@ -115,6 +115,16 @@ def _texture_bytes(table: np.ndarray) -> int:
     return int(np.asarray(table, np.float32).nbytes)
 
 
+def _bvh_fits(plan, sent: int) -> bool:
+    """Whether ``plan``'s BVH is built and goes in with a step that has sent ``sent`` bytes
+    (within ``PART_BYTES``; an unchanged BVH sends nothing)."""
+    if not plan.bvh_ready.is_set() or plan.bvh_error is not None:
+        return False
+    if plan.bvh is None or plan.bvh[1] is None:
+        return True
+    return sent + plan.bvh[1][0].nbytes <= PART_BYTES
+
+
 def _table_texture(table: np.ndarray):
     """An RGBA32F texture of a (rows, texels, 4) table (texels wide)."""
     return float_texture(table, (table.shape[1], table.shape[0]))
@@ -558,7 +568,7 @@ class GPUScene:
                 return
             new["emitters"] = _table_texture(plan.emitters)
             send("emitters", _texture_bytes(plan.emitters))
-        if step[0]:  # the step of the last parts ends here
+        if step[0] and not _bvh_fits(plan, step[0]):  # the step of the last parts ends here
             step[0] = 0
             yield
             if serial != self.serial:
@@ -576,7 +586,9 @@ class GPUScene:
             t0 = time.perf_counter()
             bvh, packed = plan.bvh
             # the BVH knows its own triangles (a content check): it may go in on its own
-            for _ in bvh.upload_steps(plan.tris, packed, PART_BYTES):
+            # (a BVH built by now whose bytes fit the step of the last parts goes in with them:
+            # the demo box's whole scene in one step)
+            for _ in bvh.upload_steps(plan.tris, packed, PART_BYTES, sent=step[0]):
                 yield
                 if serial != self.serial:
                     return

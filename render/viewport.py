@@ -105,6 +105,7 @@ class ViewportRenderer:
         # kernels made ready a step per draw, the quick image (viewport_prepare)
         self.prepare = ViewPreparation()
         self.quick_key = None      # the view of the quick image shown (None: a GI image)
+        self.display_warm = False  # the texture's draw made once (``draw``) before an image
         self.cache = ViewportCache()  # the radiance cache, built a stage at a time
         self.bounces = ViewportBounces()  # Fast: the voxels with its bounces, made on the worker
         self.bounced = None        # ... those this key's image reflects (None: one bounce)
@@ -297,22 +298,33 @@ class ViewportRenderer:
     # ------------------------------------------------------------------ drawing
 
     def draw(self) -> bool:
-        """Draw the shown texture over the whole viewport (NDC quad); False if none."""
+        """Draw the shown texture over the whole viewport (NDC quad); False if none. While
+        there is none, the first call draws a transparent texel over a corner instead, which
+        changes no pixel (premultiplied blending): the draw's code is then built, 6–8 ms on
+        llvmpipe, in a draw with time to spare, not in the one that shows the first image."""
         if self.texture is None:
+            if not self.display_warm:
+                self.display_warm = True
+                blank = gpu.types.GPUTexture((1, 1), format="RGBA32F",
+                                             data=gpu.types.Buffer("FLOAT", 4, [0.0] * 4))
+                self._quad(blank, ((-1, -1), (-0.99, -1), (-1, -0.99), (-0.99, -0.99)))
             return False
+        self._quad(self.texture, ((-1, -1), (1, -1), (-1, 1), (1, 1)))
+        return True
+
+    @staticmethod
+    def _quad(texture, corners) -> None:
         from mathutils import Matrix
 
         shader = gpu.shader.from_builtin("IMAGE")
-        corners = ((-1, -1), (1, -1), (-1, 1), (1, 1))
         batch = batch_for_shader(shader, "TRI_STRIP", {"pos": corners,
                                                        "texCoord": ((0, 0), (1, 0), (0, 1), (1, 1))})
         with gpu.matrix.push_pop(), gpu.matrix.push_pop_projection():
             gpu.matrix.load_identity()
             gpu.matrix.load_projection_matrix(Matrix.Identity(4))
             shader.bind()
-            shader.uniform_sampler("image", self.texture)
+            shader.uniform_sampler("image", texture)
             batch.draw(shader)
-        return True
 
 
 def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_matrix,

@@ -60,7 +60,7 @@ from . import (
     gpu_preview,  # noqa: F401 - imported with the view, not in its first slice
 )
 from .gbuffer import ChunkedBatch, gbuffer_shader, rasterize, vertex_arrays
-from .gpu_bvh import absent_lights, bvh_features, bvh_shader
+from .gpu_bvh import EMITTERS_ONLY, absent_lights, bvh_features, bvh_shader
 from .gpu_scene import WAITING, current_scene
 from .gpu_shaders import LOCAL_SIZE, build_compute, compute_shader, counters, note_upload
 from .gpu_volume import float_texture
@@ -418,9 +418,8 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
             # either (``first_image_options``)
             bvh("bvh_glossy", 2)
         if found is not None and found.emitters:
-            only = ("AREA", "POINT", "SUN", "WORLD")
-            bvh("bvh_emitter_glossy", 1, True, only)
-            bvh("bvh_direct", 1, True, only)
+            bvh("bvh_emitter_glossy", 1, True, EMITTERS_ONLY)
+            bvh("bvh_direct", 1, True)  # the field's unshadowed sums: the scene's variant
             add("upsample field", 1, lambda: gpu_gather._field_shader(False))
     else:
         add("cone diffuse_ao", 1, lambda: compute_shader("diffuse_ao"))
@@ -431,14 +430,12 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
             add("cone shadow", 1, lambda: compute_shader("shadow"))
     if quality == "ACCURATE" or shadows == "RAYS":  # gpu_compose.shade_stages
         add("aa_surface", 1, lambda: gpu_compose._aa_shader("aa_surface"))
-        for absent in (found.lamps if found is not None else ()):
-            bvh("bvh_direct", 1, True, absent)
+        if found is not None and (found.lamps or found.tail is not None):
+            bvh("bvh_direct", 1, True)  # every light's dispatch: the scene's one variant
         if found is not None and found.lamps:
             # the lamps' glossy light: not in the first coarse image (``first_image_options``)
             add("glossy direct", 2 if quality == "ACCURATE" else 1, gpu_gather._glossy_shader)
         add("aa_light", 1, lambda: gpu_compose._aa_shader("aa_light"))
-        if found is not None and found.tail is not None:
-            bvh("bvh_direct", 1, True, found.tail)
     for name in ("pass_sample", "accumulate", "estimate"):
         add(name, 1, lambda name=name: gpu_accumulation._shader(name))
     if quality == "ACCURATE":
