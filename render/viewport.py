@@ -86,6 +86,11 @@ def _options(settings, width: int, height: int, full=None) -> dict:
     return options
 
 
+# of a draw's budget: the most work a draw may have done to also build the texture's draw
+# code before the view has an image (``ViewportRenderer.draw``)
+WARM_DISPLAY_WORK = 0.25
+
+
 class ViewportRenderer:
     """The image of one 3D view, its progressive accumulation and the GPU objects behind it."""
 
@@ -299,11 +304,13 @@ class ViewportRenderer:
 
     def draw(self) -> bool:
         """Draw the shown texture over the whole viewport (NDC quad); False if none. While
-        there is none, the first call draws a transparent texel over a corner instead, which
-        changes no pixel (premultiplied blending): the draw's code is then built, 6–8 ms on
-        llvmpipe, in a draw with time to spare, not in the one that shows the first image."""
+        there is none, the first call whose draw worked less than ``WARM_DISPLAY_WORK`` draws
+        a transparent texel over a corner instead, which changes no pixel (premultiplied
+        blending): the draw's code is then built (6–14 ms on llvmpipe) in a draw with time to
+        spare, not in the one that shows the first image beside its last stages."""
         if self.texture is None:
-            if not self.display_warm:
+            work = self.timings.get("view_draw work", sum(self.timings.values()))
+            if not self.display_warm and work <= WARM_DISPLAY_WORK * self.progressive.budget:
                 self.display_warm = True
                 blank = gpu.types.GPUTexture((1, 1), format="RGBA32F",
                                              data=gpu.types.Buffer("FLOAT", 4, [0.0] * 4))

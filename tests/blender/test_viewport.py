@@ -492,3 +492,38 @@ def test_the_coarse_first_image_dispatches_about_a_quarter_of_the_work(voxgi, mo
     assert engine.voxgi_viewport.shown == "Converged" and engine.redraws == 1
     print(f"work groups: coarse {coarse}, full {full} ({coarse / full:.2f})")
     assert 0.15 * full < coarse < 0.35 * full
+
+
+def test_the_texture_draw_is_built_before_the_first_image_without_changing_a_pixel(voxgi):
+    """Before a view has an image, a draw with time to spare draws a transparent texel with
+    the display's blending (llvmpipe builds the texture draw's code there, not in the draw
+    that shows the first image beside its last stages): no pixel of the view changes, and it
+    happens once, and not in a draw that already did most of its work."""
+    from voxgi.render.viewport import WARM_DISPLAY_WORK, ViewportRenderer
+
+    gpu_ready()
+    w, h = 400, 300  # (the texel's corner quad covers pixels there, as in a 3D view)
+    offscreen = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
+    background = (0.2, 0.4, 0.6, 1.0)
+
+    def drawn(renderer):
+        with offscreen.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=background)
+            gpu.state.blend_set("ALPHA_PREMULT")
+            try:
+                shown = renderer.draw()
+            finally:
+                gpu.state.blend_set("NONE")
+            pixels = np.array(fb.read_color(0, 0, w, h, 4, 0, "FLOAT").to_list(), np.float32)
+        return shown, pixels.reshape(h, w, 4)
+
+    busy = ViewportRenderer()
+    busy.timings = {"view_draw work": 2.0 * WARM_DISPLAY_WORK * busy.progressive.budget}
+    shown, pixels = drawn(busy)
+    assert not shown and not busy.display_warm  # a draw that worked: left for a later one
+    renderer = ViewportRenderer()
+    shown, pixels = drawn(renderer)
+    assert not shown and renderer.display_warm
+    np.testing.assert_allclose(pixels, np.broadcast_to(background, pixels.shape), atol=1e-6)
+    offscreen.free()
