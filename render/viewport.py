@@ -412,7 +412,12 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
                                                or traced == "Refining"
                                                or renderer.cache.building is not None)
                                    or renderer.cache.generation != generation):
-            redraw()  # the next slice on the next draw
+            if traced == "Preparing" and not renderer.prepare.timings:
+                # nothing to do but wait for the preparing thread: drawn again once it
+                # has moved on, the cores left to it meanwhile
+                viewport_prepare.wake_later(redraw)
+            else:
+                redraw()  # the next slice on the next draw
     if source is not None and not read and scene.voxgi.quality == "ACCURATE":
         key = progressive.key
         viewport_prepare.hold_traced(live, source, None if key is None else key[0],

@@ -397,3 +397,63 @@ def test_a_playing_rig_shows_one_frame_after_another_the_newest_next(voxgi, monk
         bpy.app.handlers.frame_change_post.remove(recorder)
     order = [v for i, v in enumerate(shown) if v in versions.values() and v not in shown[:i]]
     assert order == [versions[2], versions[4]], (order, versions)  # frame 3 dropped
+
+
+def test_a_view_waiting_for_its_scene_asks_for_a_redraw_only_once_it_moved_on(interactive,
+                                                                              monkeypatch):
+    """A draw with nothing to do but wait for the preparing thread (here its BVH build, held)
+    asks for no redraw at once: each redraw would draw the last image again, taking the cores
+    from that build. The view's timer (``viewport_prepare.wake_tick``, run here as Blender's
+    event loop would) asks for it once the build is in, and the view then converges."""
+    import threading
+
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render import gpu_bvh, viewport_prepare
+    from voxgi.render.viewport import view_update
+
+    scene = demo_scene()
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    view, window = camera_matrices(scene, depsgraph)
+    compiles = Compiles(monkeypatch)
+    release = threading.Event()
+    pack = gpu_bvh.GPUBVH.pack
+
+    def held(self, tris):
+        assert release.wait(60.0)
+        return pack(self, tris)
+
+    monkeypatch.setattr(gpu_bvh.GPUBVH, "pack", held)
+    cold_caches()
+    live_gi(scene.name_full).rescan = "entering Rendered mode again"
+    engine = StandInEngine()
+    view_update(engine, context(view, window), depsgraph)
+    renderer = renderer_for(engine, whole=False)
+    try:
+        waited = None
+        for index in range(200):  # the steps it can take while the BVH builds, then waiting
+            interactive.drain()
+            before = engine.redraws
+            draw(engine, depsgraph, view, window)
+            if renderer.shown == "Preparing" and not renderer.prepare.timings:
+                waited = index
+                break
+            if renderer.shown in ("Preparing", "Quick"):  # a step: the next draw at once
+                assert engine.redraws == before + 1, renderer.timings
+        assert waited is not None, "the view never waited for its BVH"
+        assert engine.redraws == before  # waiting: no redraw asked
+        assert viewport_prepare.wake_tick() == viewport_prepare.WAKE_POLL
+        assert engine.redraws == before  # still building: the timer polls on
+    finally:
+        release.set()
+    for _ in range(600):
+        if viewport_prepare.wake_tick() is None:
+            break
+        threading.Event().wait(viewport_prepare.WAKE_POLL)
+    assert engine.redraws == before + 1  # the build is in: one redraw asked
+    for _ in range(200):  # and the view goes on to its first GI image
+        draw(engine, depsgraph, view, window)
+        if renderer.traces:
+            break
+    assert renderer.traces and renderer.shown == "Coarse", renderer.status
+    assert compiles.take() > 0

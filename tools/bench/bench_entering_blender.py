@@ -134,6 +134,7 @@ class Session:
         time.sleep(EVENT_LOOP_SLEEP)  # Blender's main loop between two redraws
         t0 = time.perf_counter()
         jobs.drain()
+        self.asked = self.engine.redraws
         drained = time.perf_counter() - t0
         with self.offscreen.bind():
             t0 = time.perf_counter()
@@ -147,6 +148,19 @@ class Session:
                                      "(at)": t0 - self.started},
                            renderer.shown, renderer.traces))
         return seconds, renderer
+
+    def wait_for_redraw(self, limit: float = 5.0) -> None:
+        """Until the last draw's view asks for a redraw — at once, or from the timer a view
+        that waits for its preparing thread leaves (``viewport_prepare.wake_tick``, run here
+        as Blender's event loop would) — as Blender redraws a region only when tagged."""
+        from voxgi.blender import jobs
+        from voxgi.render import viewport_prepare
+
+        started = time.perf_counter()
+        while self.engine.redraws == self.asked and time.perf_counter() - started < limit:
+            time.sleep(viewport_prepare.WAKE_POLL)
+            viewport_prepare.wake_tick()
+            jobs.drain()
 
     def close(self):
         import bpy
@@ -234,6 +248,7 @@ def measure(scene, name: str, quick: bool, entering_only: bool = False,
         if renderer.traces:
             first_gi = now
             break
+        session.wait_for_redraw()
     entering = _phase(session.draws)
     quick_index = next((i for i, d in enumerate(session.draws) if d[2] == "Quick"), None)
     to_quick = _phase(session.draws[:quick_index + 1]) if quick_index is not None else entering
