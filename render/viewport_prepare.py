@@ -324,7 +324,9 @@ def wake_later(redraw) -> None:
     ``WAKE_MOST``: from a ``bpy.app.timers`` callback in Blender's UI; without an event loop
     (the benchmark) its caller runs ``wake_tick`` as the timer would."""
     _waiting.append((redraw, preparing_state(), time.perf_counter() + WAKE_MOST))
-    if not bpy.app.timers.is_registered(wake_tick):
+    # (timers never fire without an event loop, and one left registered at a background
+    # process's exit crashed it)
+    if not bpy.app.background and not bpy.app.timers.is_registered(wake_tick):
         bpy.app.timers.register(wake_tick, first_interval=WAKE_POLL)
 
 
@@ -967,3 +969,6 @@ def release() -> None:
     preparation.free()
     warmup.__init__()
     _QUICK.clear()
+    _waiting.clear()
+    if bpy.app.timers.is_registered(wake_tick):
+        bpy.app.timers.unregister(wake_tick)
