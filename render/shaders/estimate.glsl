@@ -7,11 +7,21 @@
  * scale_nearest); finished: the sums with their tails (Cycles' pixel filter over the
  * neighbours). Writes out_image (W × H, rows bottom to top) over window (x0, y0 from the top,
  * w, h) only.
- * info: (W, H, backdrop w, backdrop h); mode: (film, transparent, finished, has backdrop). */
+ * info: (W, H, backdrop w, backdrop h); mode: (film, transparent, finished, has backdrop:
+ * 1, or 2 before any sample, the sums then 1 × 1 blanks that are not read). */
 
 float safe_ratio(float a, float b)
 {
   return b > 0.0 ? a / b : 0.0;
+}
+
+/* The backdrop's nearest pixel to p (preview.progressive.scale_nearest). */
+vec4 backdrop_at(ivec2 p, ivec2 image)
+{
+  ivec2 back = ivec2(info.zw);
+  int row = min(int((float(p.y) + 0.5) * float(back.y) / float(image.y)), back.y - 1);
+  int col = min(int((float(p.x) + 0.5) * float(back.x) / float(image.x)), back.x - 1);
+  return texelFetch(backdrop, ivec2(col, back.y - 1 - row), 0);
 }
 
 void main()
@@ -22,6 +32,10 @@ void main()
   }
   ivec2 image = ivec2(info.xy);
   ivec2 out_texel = ivec2(p.x, image.y - 1 - p.y);
+  if (mode.w > 1.5) {
+    imageStore(out_image, out_texel, backdrop_at(p, image));
+    return;
+  }
   vec4 L[LAYERS];
   for (int l = 0; l < LAYERS; l++) {
     L[l] = texelFetch(acc, layer_texel(p, l), 0);
@@ -31,10 +45,7 @@ void main()
   }
   float count = texelFetch(acc, layer_texel(p, 0), 0).a;
   if (count < 0.5 && mode.w > 0.5) {
-    ivec2 back = ivec2(info.zw);
-    int row = min(int((float(p.y) + 0.5) * float(back.y) / float(image.y)), back.y - 1);
-    int col = min(int((float(p.x) + 0.5) * float(back.x) / float(image.x)), back.x - 1);
-    imageStore(out_image, out_texel, texelFetch(backdrop, ivec2(col, back.y - 1 - row), 0));
+    imageStore(out_image, out_texel, backdrop_at(p, image));
     return;
   }
   vec3 mean = vec3(safe_ratio(L[0].r, L[1].r), safe_ratio(L[0].g, L[1].g),
