@@ -13,7 +13,7 @@ import gpu
 
 from ..voxgi_addon.preview.resolve import LEAST_CENTRES, LEAST_COLOUR
 from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE
-from .gpu_bvh import absent_lights, direct_light_texture
+from .gpu_bvh import direct_light_texture
 from .gpu_gather import glossy_direct_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_shaders import LOCAL_SIZE, build_compute
@@ -121,7 +121,7 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     # takes the scene's one variant (the code of all its kinds of light): a variant per lamp
     # kind cost a compile each and no time a dispatch (docs/gi_pipeline.md "One direct-light
     # variant per scene")
-    absent = absent_lights(scene.lights)
+    absent = scene.absent
     for index, table in enumerate(scene.lamp_tables):
         direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
                                       world=scene.no_world, emitters=scene.no_emitters,

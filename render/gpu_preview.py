@@ -49,7 +49,7 @@ from .frame import Frame, Stage, finish
 from .frame import run as run_stages
 from .gbuffer import PixelMask, gbuffer_shader, rasterize, rasterize_stages, read_gbuffer, vertex_batch
 from .gpu_accumulation import SUM_NAMES, GPUSums
-from .gpu_bvh import absent_lights, emitter_glossy_texture, emitters_unshadowed_texture
+from .gpu_bvh import emitter_glossy_texture, emitters_unshadowed_texture
 from .gpu_compose import COMPACT_SAMPLERS as _COMPACT_SAMPLERS
 from .gpu_compose import MASK_SAMPLERS as _MASK_SAMPLERS
 from .gpu_compose import RESOLVE_OUTPUTS as _RESOLVE_OUTPUTS
@@ -304,7 +304,7 @@ def emitter_fields(scene, gbuffer_inputs, stride: int, width: int, height: int, 
     glossy = emitter_glossy_texture(bvh, points, scene.emitters, scene.materials, 1, 0,
                                     scene.no_lamp, scene.world_map, unshadowed=True)
     diffuse = emitters_unshadowed_texture(bvh, points, scene.emitters, scene.no_lamp,
-                                          scene.world_map, absent=absent_lights(scene.lights))
+                                          scene.world_map, absent=scene.absent)
     return (glossy, diffuse,
             *upsample_field(glossy, diffuse, gbuffer_inputs, stride, width, height, eye))
 
@@ -584,7 +584,7 @@ def _emitter_unshadowed(f):
     scene, centre = f["scene"], f["centre"]
     return {"unshadowed": emitters_unshadowed_texture(
         scene.bvh, centre.inputs, scene.emitters, scene.no_lamp, scene.world_map,
-        field=f["fields"][3], absent=absent_lights(scene.lights))}
+        field=f["fields"][3], absent=scene.absent)}
 
 
 def _reads_gbuffer(f) -> bool:

@@ -645,7 +645,13 @@ class GPUScene:
         return {"lights": self.lamp_table, "world_map": self.world_map,
                 "emitters": self.emitters, "materials": self.materials,
                 "principled_lut": self.lut, **self.textures, "bvh_textures": self.textured,
-                "bvh_absent": absent_lights(self.lights)}
+                "bvh_absent": self.absent}
+
+    @property
+    def absent(self) -> tuple[str, ...]:
+        """The kinds of light the scene has none of (``absent_lights``): its one variant of
+        the BVH kernels, the gathers' and every direct-light dispatch's."""
+        return absent_lights(self.lights)
 
     @staticmethod
     def zeros(width: int, height: int):

@@ -45,6 +45,7 @@ per draw.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import threading
 import time
@@ -340,10 +341,8 @@ def wake_tick() -> float | None:
         if state == seen and now < deadline:
             waiting.append(entry)
             continue
-        try:
+        with contextlib.suppress(ReferenceError):  # the view's engine freed meanwhile
             redraw()
-        except ReferenceError:  # the view's engine was freed meanwhile
-            pass
     _waiting[:] = waiting
     return WAKE_POLL if waiting else None
 
@@ -391,27 +390,25 @@ def hold_traced(live, source, traced_version, shown_version) -> None:
 
 @dataclasses.dataclass(frozen=True)
 class Features:
-    """What picks the kernels' variants (``gpu_bvh.bvh_shader``): some cut-out, some triangle
-    hidden from a kind of ray, textured hits, the kinds of light the scene has none of, per
-    lamp the kinds it is not, and of the world and emitters' light (None: neither)."""
+    """What picks the kernels' variants (``gpu_bvh.bvh_shader``) and which the view needs:
+    some cut-out, some triangle hidden from a kind of ray, textured hits, the kinds of light
+    the scene has none of (every light's dispatch takes that one variant), some lamp, some
+    light of the world or the emitters, some emissive triangle."""
 
     cutouts: bool
     hidden: bool
     textured: bool
     absent: tuple
-    lamps: tuple
-    tail: tuple | None
+    lamps: bool
+    tail: bool
     emitters: bool
 
 
 def features(tris, lights, lamp_count: int) -> Features:
     """The ``Features`` of a prepared scene: its triangles and lights list (lamps first)."""
     cutouts, hidden = bvh_features(tris)
-    tail = lights[lamp_count:]
     return Features(cutouts, hidden, getattr(tris, "textures", None) is not None,
-                    absent_lights(lights),
-                    tuple(absent_lights(lights[i:i + 1]) for i in range(lamp_count)),
-                    absent_lights(tail) if tail else None,
+                    absent_lights(lights), lamp_count > 0, len(lights) > lamp_count,
                     any(light.type == "EMITTERS" for light in lights))
 
 
@@ -462,7 +459,7 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
             bvh("bvh_glossy", 2)
             add("upsample pair", 2, lambda: gpu_gather._upsample_shader(True))
         add("upsample", 1, lambda: gpu_gather._upsample_shader(False))
-        if found is not None and found.tail is not None:
+        if found is not None and found.tail:
             # the world's and emitters' Glossy Direct gather: not in the first coarse image
             # either (``first_image_options``)
             bvh("bvh_glossy", 2)
@@ -479,7 +476,7 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
             add("cone shadow", 1, lambda: compute_shader("shadow"))
     if quality == "ACCURATE" or shadows == "RAYS":  # gpu_compose.shade_stages
         add("aa_surface", 1, lambda: gpu_compose._aa_shader("aa_surface"))
-        if found is not None and (found.lamps or found.tail is not None):
+        if found is not None and (found.lamps or found.tail):
             bvh("bvh_direct", 1, True)  # every light's dispatch: the scene's one variant
         if found is not None and found.lamps:
             # the lamps' glossy light: not in the first coarse image (``first_image_options``)
@@ -891,7 +888,7 @@ class ViewPreparation:
         options = {"denoise": False}
         if key[3]:
             options["glossy_indirect"] = False
-        if found.tail is not None:
+        if found.tail:
             options["world_glossy"] = False
         if found.lamps:
             options["lamp_glossy"] = False
