@@ -205,41 +205,41 @@ class GPUAccumulation:
             self._black = zeros(1, 1)
         return self._black
 
-    def _estimate(self, out, window, backdrop=None, finished: bool = False) -> None:
+    def _estimate(self, out, window, backdrop=None) -> None:
         x0, y0, w, h = window
         shader = _shader("estimate")
         shader.bind()
         # before the first sample (a coarse image's view over its backdrop) the sums hold
         # nothing: blanks are bound instead of making them (two W × 5H clears, 5–6 ms of the
-        # coarse image's last draw at 320 × 180), and the tails only for the finished image
+        # coarse image's last draw at 320 × 180)
         empty = self.added == 0 and backdrop is not None
         shader.uniform_sampler("acc", self._blank() if empty else self.acc)
-        shader.uniform_sampler("tails", self.tails if finished and not empty else self._blank())
+        shader.uniform_sampler("tails", self._blank() if empty else self.tails)
         back = backdrop if backdrop is not None else self._blank()
         shader.uniform_sampler("backdrop", back)
         shader.uniform_float("window", (float(x0), float(y0), float(w), float(h)))
         shader.uniform_float("info", (float(self.width), float(self.height), float(back.width),
                                       float(back.height)))
         shader.uniform_float("mode", (1.0 if self.film else 0.0,
-                                      1.0 if self.transparent else 0.0,
-                                      1.0 if finished else 0.0,
+                                      1.0 if self.transparent else 0.0, 0.0,
                                       2.0 if empty else 1.0 if backdrop is not None else 0.0))
         shader.image("out_image", out)
         _dispatch(shader, w, h)
 
-    def estimate(self, backdrop=None, finished: bool = False):
-        """A new (W, H) RGBA32F texture: the mean so far on the film (``Accumulation.
-        estimate_rgba``), ``backdrop`` (a texture, any size) where no sample landed yet;
-        finished: the samples with their tails over the neighbours (``Accumulation.finished``
-        through ``film_rgba``), as F12's filtered image."""
+    def estimate(self, backdrop=None):
+        """A new (W, H) RGBA32F texture: the samples so far with their tails over the
+        neighbours, on the film (``Accumulation.estimate_rgba``: at every sample the image
+        filtered as F12's is), ``backdrop`` (a texture, any size) where no sample landed
+        yet."""
         out = gpu.types.GPUTexture((self.width, self.height), format="RGBA32F")
-        self._estimate(out, (0, 0, self.width, self.height), backdrop, finished)
+        self._estimate(out, (0, 0, self.width, self.height), backdrop)
         return out
 
     def estimate_into(self, image, rect) -> None:
-        """Refresh ``image`` (the last ``estimate``'s texture) where the tile ``rect`` landed:
-        only its pixels changed (``Accumulation.estimate_into``)."""
-        window, _ = inside(rect, self.width, self.height)
+        """Refresh ``image`` (the last ``estimate``'s texture) where the tile ``rect`` changed
+        it: its pixels and, by the tails, one pixel around (``Accumulation.estimate_into``)."""
+        x0, y0, w, h = (int(v) for v in rect)
+        window, _ = inside((x0 - 1, y0 - 1, w + 2, h + 2), self.width, self.height)
         rows, cols = window
         if rows.start < rows.stop and cols.start < cols.stop:
             self._estimate(image, (cols.start, rows.start, cols.stop - cols.start,

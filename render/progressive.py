@@ -11,14 +11,15 @@ one-shot GPU tracer (``gpu_preview.render_passes_gpu``, F12's kernels) over a sm
    traced through its own off-axis camera (``preview.progressive.tile_camera``) with sample k's
    sub-pixel offset, seed and share of the rays (``sample_settings``), and added to the
    per-pixel sums on the GPU (``gpu_accumulation.GPUAccumulation``; numpy's
-   ``preview.progressive.Accumulation`` is the reference it is tested against); the tile
-   grid moves from sample to sample;
+   ``preview.progressive.Accumulation`` is the reference it is tested against), and by Cycles'
+   pixel filter at the sample's offset into the neighbours' tails, so the image shown after
+   any tile is filtered as F12's is (the view reaches F12's error after fewer samples); the
+   tile grid moves from sample to sample;
 3. **the film** (Combined): every slice also looks the world up along its camera rays
    (``preview.film.world_along``) and the samples' coverage and holdout shares are summed
    with it (``film=True``), so the image shows the world behind the geometry —
    or, with Film › Transparent, alpha = coverage — as F12's film does (``preview.film``);
-4. **converged** after ``target`` samples: the mean gets the pixel filter's tails over the
-   neighbours as F12's image does; nothing more is traced until the key changes.
+4. **converged** after ``target`` samples: nothing more is traced until the key changes.
 
 The slice's pixels come from measured slice times (``SliceSizer``: a fixed cost per slice
 plus a cost per pixel) so that one slice stays near ``SLICE_BUDGET``. The work one slice
@@ -416,8 +417,8 @@ class ProgressiveImage:
             if not self.tiles:
                 self.sample += 1
                 self.converged = self.sample >= self.target
-        if self.converged:  # with the samples' tails: the pixel filter, as F12's
-            self.image = acc.estimate(finished=True)
+        if self.converged:  # every pixel has its samples: no backdrop
+            self.image = acc.estimate()
         elif done.kind == "tile" and self.image is not None \
                 and (self.image.width, self.image.height) == (width, height) \
                 and not self.image_stale:

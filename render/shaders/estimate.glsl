@@ -1,14 +1,14 @@
 /* The viewport's current image from its GPU sums (accumulate.glsl's layers; the readable
- * reference: voxgi_addon/preview/progressive.Accumulation.estimate_rgba / film_rgba /
- * finished): per pixel the mean (sums / weights per channel + gathered / gather weights),
- * on the film (preview/film.film_combined: the world behind the share no surface or holdout
- * covers, alpha 1 − holdout; Film › Transparent: alpha = coverage) or with alpha 1; where no
- * sample landed yet, the backdrop (any size, nearest pixel; preview.progressive.
- * scale_nearest); finished: the sums with their tails (Cycles' pixel filter over the
- * neighbours). Writes out_image (W × H, rows bottom to top) over window (x0, y0 from the top,
- * w, h) only.
- * info: (W, H, backdrop w, backdrop h); mode: (film, transparent, finished, has backdrop:
- * 1, or 2 before any sample, the sums then 1 × 1 blanks that are not read). */
+ * reference: voxgi_addon/preview/progressive.Accumulation.estimate_rgba / film_rgba): per
+ * pixel the mean of the sums with their tails (the samples so far, the pixel's own and its
+ * neighbours' by Cycles' pixel filter: the image filtered as F12's at every sample) — sums /
+ * weights per channel + gathered / gather weights — on the film (preview/film.film_combined:
+ * the world behind the share no surface or holdout covers, alpha 1 − holdout; Film ›
+ * Transparent: alpha = coverage) or with alpha 1; where no sample of its own landed yet, the
+ * backdrop (any size, nearest pixel; preview.progressive.scale_nearest). Writes out_image
+ * (W × H, rows bottom to top) over window (x0, y0 from the top, w, h) only.
+ * info: (W, H, backdrop w, backdrop h); mode: (film, transparent, 0, has backdrop: 1, or 2
+ * before any sample, the sums then 1 × 1 blanks that are not read). */
 
 float safe_ratio(float a, float b)
 {
@@ -38,10 +38,7 @@ void main()
   }
   vec4 L[LAYERS];
   for (int l = 0; l < LAYERS; l++) {
-    L[l] = texelFetch(acc, layer_texel(p, l), 0);
-    if (mode.z > 0.5) {
-      L[l] += texelFetch(tails, layer_texel(p, l), 0);
-    }
+    L[l] = texelFetch(acc, layer_texel(p, l), 0) + texelFetch(tails, layer_texel(p, l), 0);
   }
   float count = texelFetch(acc, layer_texel(p, 0), 0).a;
   if (count < 0.5 && mode.w > 0.5) {

@@ -346,19 +346,46 @@ def test_gathered_light_is_weighted_by_the_samples_behind_the_gathers():
 
 
 def test_refreshing_the_estimate_where_a_tile_landed_equals_a_new_estimate():
+    """A tile changes its pixels and, by its samples' tails, the pixels around it: the
+    image refreshed over the tile's reach equals a new estimate."""
+    from voxgi.voxgi_addon.preview.progressive import sample_tail_weights
+
     rng = np.random.default_rng(7)
-    acc = Accumulation("Combined", 10, 8)
+    acc = Accumulation("Combined", 10, 8, film=True)
 
     def sample(h, w):
         out = {name: rng.uniform(0, 1, (h, w, 3)) for name in PASS_NAMES}
+        out["Alpha"] = rng.uniform(0, 1, (h, w))
         return out
 
-    acc.add((0, 0, 10, 8), sample(8, 10))
-    image = acc.estimate()
-    for rect in ((-2, 3, 6, 6), (6, -1, 6, 6)):  # tiles reaching past the image
-        acc.add(rect, sample(6, 6), gather_weight=2.0)
+    acc.add((0, 0, 10, 8), sample(8, 10), tails=sample_tail_weights(1.5, 4, 0))
+    image = acc.estimate_rgba()
+    for k, rect in enumerate(((-2, 3, 6, 6), (6, -1, 6, 6), (3, 2, 4, 3))):  # two past the image
+        acc.add(rect, sample(rect[3], rect[2]), gather_weight=2.0,
+                tails=sample_tail_weights(1.5, 4, k + 1))
         acc.estimate_into(image, rect)
-    assert np.allclose(image, acc.estimate(), atol=1e-6)
+    assert np.allclose(image, acc.estimate_rgba(), atol=1e-6)
+
+
+def test_the_first_sample_is_shown_filtered_as_the_finished_image():
+    """What the view shows after any sample is Cycles' pixel filter over the samples so far
+    (each pixel's own and its neighbours' by the filter at their offsets), not each pixel's
+    own samples alone: after one sample of a sharp edge, the pixels beside it already carry
+    the filter's share of the other side, as the finished image does."""
+    from voxgi.voxgi_addon.preview.progressive import sample_offset, sample_tail_weights
+
+    samples, size = 16, 1.5
+    for k in range(samples):
+        acc = Accumulation("Diffuse Direct", 6, 3)
+        passes = {name: np.zeros((3, 6, 3)) for name in PASS_NAMES}
+        passes["Diffuse Color"][:] = 1.0
+        passes["Diffuse Direct"][:, 3:] = 1.0  # lit right of the edge between columns 2 and 3
+        acc.add((0, 0, 6, 3), passes, tails=sample_tail_weights(size, samples, k))
+        shown = acc.estimate()
+        assert np.allclose(shown, acc.finished(size))
+        # the filter (2 × 1.5 px wide) reaches one pixel across the border from any offset
+        assert 0.0 < shown[1, 2, 0] < 0.5 < shown[1, 3, 0] < 1.0, (k, sample_offset(size, samples, k))
+        assert shown[1, 0, 0] == 0.0 and shown[1, 5, 0] == 1.0  # two pixels away: untouched
 
 
 def test_samples_count_in_the_neighbours_by_the_filter_at_their_own_offsets():

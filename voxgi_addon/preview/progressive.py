@@ -13,9 +13,11 @@ drawing (``render/progressive.py``) splits a full image into *samples* and each 
 * ``tile_grid`` — the tiles covering the image, the grid shifted from sample to sample so the
   tiles' borders (the gather's filter sees fewer neighbours there) do not stay in place.
 * ``Accumulation`` — per-pixel sums of one pass (light passes as light × colour over colour,
-  as Cycles' film divides them) and per-pixel counts; ``estimate`` fills the pixels no sample
-  reached yet from a coarse image; ``finished`` adds the filter's tails over the neighbours
-  as the one-shot image does (``passes.filter_passes``).
+  as Cycles' film divides them) and per-pixel counts, and the filter's tails: each sample's
+  sums also go into the neighbours by Cycles' pixel filter at its offset, so ``estimate`` —
+  at any sample, as Cycles' viewport shows its film — is the filtered image the one-shot
+  image is (``passes.filter_passes``), and fills the pixels no sample reached yet from a
+  coarse image; ``finished`` is that image once every sample is in.
 * the film (``film=True``): per pixel the samples' world along their camera rays, their
   coverage (``Alpha``) and holdout shares, with the same tails, so ``film_rgba`` composes the
   world behind the geometry as F12's film does (``preview.film``).
@@ -345,39 +347,46 @@ class Accumulation:
         """Samples every pixel has (the complete ones)."""
         return int(self.counts.min()) if self.counts.size else 0
 
-    def mean(self) -> np.ndarray:
-        """(H, W, 3) the samples' mean (0 where a pixel has none, or no colour)."""
-        mean = np.divide(self.sums, self.weights, out=np.zeros_like(self.sums),
-                         where=self.weights > 0.0)
+    def _filtered(self, window=np.s_[:, :]) -> dict[str, np.ndarray]:
+        """The sums over ``window`` with the tails the neighbours' samples brought so far
+        (``add``'s), by name: each pixel's samples and its neighbours' by Cycles' pixel filter
+        at their own offsets, whatever samples have landed (a weighted mean at any time)."""
+        own = {name: array[window] for name, array in self._sums().items()}
+        if self.tails is None:
+            return own
+        return {name: own[name] + self.tails[name][window] for name in own}
+
+    def mean(self, window=np.s_[:, :]) -> np.ndarray:
+        """(h, w, 3) over ``window``: the mean of the samples so far with their tails over the
+        neighbours (``_filtered``; 0 where a pixel has none, or no colour)."""
+        sums = self._filtered(window)
+        mean = np.divide(sums["sums"], sums["weights"], out=np.zeros_like(sums["sums"]),
+                         where=sums["weights"] > 0.0)
         if self.gathered is not None:
-            mean += np.divide(self.gathered, self.gather_weights,
-                              out=np.zeros_like(self.gathered), where=self.gather_weights > 0.0)
+            mean += np.divide(sums["gathered"], sums["gather_weights"],
+                              out=np.zeros_like(sums["gathered"]),
+                              where=sums["gather_weights"] > 0.0)
         return mean
 
     def estimate_into(self, image, rect) -> None:
         """Refresh ``image`` ((H, W, 3), the last ``estimate``; (H, W, 4): ``estimate_rgba``'s)
-        where the tile ``rect`` landed: only its pixels changed."""
-        window, _ = inside(rect, self.width, self.height)
-        sums, weights = self.sums[window], self.weights[window]
-        mean = np.divide(sums, weights, out=np.zeros_like(sums), where=weights > 0.0)
-        if self.gathered is not None:
-            gathered, gweights = self.gathered[window], self.gather_weights[window]
-            mean += np.divide(gathered, gweights, out=np.zeros_like(gathered),
-                              where=gweights > 0.0)
+        where the tile ``rect`` changed it: its pixels and, by the tails, one pixel around."""
+        x0, y0, w, h = rect
+        window, _ = inside((x0 - 1, y0 - 1, w + 2, h + 2), self.width, self.height)
+        mean = self.mean(window)
         image[window] = mean if image.shape[2] == 3 else self.film_rgba(mean, window)
 
     def film_rgba(self, rgb, window=np.s_[:, :], filter_width: float | None = None):
         """(h, w, 4) float32: ``rgb`` (this pass's estimate over ``window`` of the image) on
         the film (``preview.film.film_combined``) with the samples' world, coverage and
-        holdout shares there — alpha 1 without the film. filter_width : the finished image's
-        (``finished``): the shares with the samples' tails (else through the filter)."""
+        holdout shares there, with their tails (``_filtered``) — alpha 1 without the film.
+        filter_width : the finished image's (``finished``): without tails, the shares are
+        filtered over the neighbours instead."""
         rgb = np.asarray(rgb, np.float32)
         if self.film is None:
             return np.concatenate([rgb, np.ones(rgb.shape[:2] + (1,), np.float32)], axis=2)
-        film, weights = self.film[window], self.film_weights[window]
-        if filter_width is not None and self.tails is not None:
-            film = film + self.tails["film"][window]
-            weights = weights + self.tails["film_weights"][window]
+        sums = self._filtered(window)
+        film, weights = sums["film"], sums["film_weights"]
         shares = np.divide(film, weights, out=np.zeros_like(film), where=weights > 0.0)
         if filter_width is not None and self.tails is None:
             shares = filter_coverage(shares, filter_width)
@@ -394,8 +403,9 @@ class Accumulation:
         return out
 
     def estimate(self, coarse=None) -> np.ndarray:
-        """(H, W, 3) float32: the mean where a pixel has samples, elsewhere ``coarse`` ((h, w,
-        3), any size: scaled to the image by nearest pixel), or 0 without it."""
+        """(H, W, 3) float32: the mean (with the tails so far) where a pixel has samples,
+        elsewhere ``coarse`` ((h, w, 3), any size: scaled to the image by nearest pixel), or 0
+        without it."""
         out = self.mean()
         empty = self.counts == 0
         if coarse is not None and empty.any():
@@ -404,20 +414,12 @@ class Accumulation:
 
     def finished(self, filter_width: float) -> np.ndarray:
         """(H, W, 3) float32: the mean with Cycles' pixel filter over the neighbours, as the
-        one-shot image gets it: with the samples' tails (``add``'s), each pixel's sums and
-        weights plus the neighbours' samples by the filter at their own offsets
+        one-shot image gets it: with the samples' tails (``add``'s), ``mean`` — each pixel's
+        sums and weights plus the neighbours' samples by the filter at their own offsets
         (``passes.filtered_sums``); without, the neighbours' means by their share of the
         filter (``passes.filter_passes``)."""
         if self.tails is not None:
-            own = self._sums()
-            total = {name: own[name] + self.tails[name] for name in own}
-            out = np.divide(total["sums"], total["weights"],
-                            out=np.zeros_like(total["sums"]), where=total["weights"] > 0.0)
-            if self.gathered is not None:
-                out += np.divide(total["gathered"], total["gather_weights"],
-                                 out=np.zeros_like(total["gathered"]),
-                                 where=total["gather_weights"] > 0.0)
-            return out.astype(np.float32)
+            return self.mean().astype(np.float32)
         mean = self.mean()
         passes = {name: np.zeros_like(mean) for name in PASS_NAMES}  # not read for this pass
         passes[self.pass_name] = mean
