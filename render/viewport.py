@@ -53,8 +53,9 @@ from ..blender.viewport_settings import VIEWPORT_PASSES
 from ..voxgi_addon.scene.view_camera import camera_from_view
 from . import viewport_prepare
 from .gpu_fast import cone_volumes
+from .gpu_gather import CHUNK_GROWTH
 from .gpu_scene import current_scene
-from .gpu_shaders import note_upload
+from .gpu_shaders import counters, note_upload
 from .gpu_volume import GPUVolume
 from .progressive import SLICE_BUDGET, ProgressiveImage, base_options, tracer
 from .viewport_bounces import FastCacheSource, ViewportBounces
@@ -204,6 +205,29 @@ class ViewportRenderer:
         self.timings = {**self.prepare.timings, "view_draw work": time.perf_counter() - started}
         return "Quick" if drew else "Preparing"
 
+    def _cache_chunks(self, chunk, t0: float) -> bool:
+        """Run the radiance cache's build in this draw: ``chunk()`` (``ViewportCache.advance``
+        or ``advance_first``: whether it ran one), then more while the build goes on, the next
+        chunk — taken to last up to CHUNK_GROWTH × the longest so far, as the build grows its
+        ray chunks — ends within the slices' stage budget from ``t0``, and none compiled a
+        kernel or sent a scene part (a draw does one of each at most). A relaxation pass of a
+        small scene's cache is 1–2 ms: one a draw spent most of the build's draws on the draws
+        themselves. Whether a chunk ran."""
+        mark = counters.compiles, counters.uploads
+        started = time.perf_counter()
+        if not chunk():
+            return False
+        budget = self.progressive.stage_budget
+        longest = time.perf_counter() - started
+        while budget is not None and self.cache.building is not None \
+                and (counters.compiles, counters.uploads) == mark \
+                and time.perf_counter() - t0 + CHUNK_GROWTH * longest <= budget:
+            started = time.perf_counter()
+            if not chunk():
+                break
+            longest = max(longest, time.perf_counter() - started)
+        return True
+
     def refine(self, live, scene, view, window) -> str:
         """One slice of the current key (``ProgressiveImage.step``); what it traced: "Coarse",
         "Refining", "Converged", "Quick" / "Preparing" (the view is being made ready:
@@ -219,20 +243,22 @@ class ViewportRenderer:
         if progressive.converged:
             if not self.cache.resume():
                 return ""
-            # converged on the last cache while a new one is built: build on (a chunk per
-            # draw); its completion changes the image key and the image restarts
+            # converged on the last cache while a new one is built: build on (chunks within
+            # the draw's stage budget); its completion changes the image key and the image
+            # restarts
             t0 = time.perf_counter()
-            self.cache.advance()
+            self._cache_chunks(self.cache.advance, t0)
             self.timings = {"radiance cache stage": time.perf_counter() - t0}
             return "Refining"
         self.cache.image_key = progressive.key  # (what the slices' cache stages ask for)
         if settings.quality == "ACCURATE" and not progressive.coarse_pending \
                 and self.cache.building is not None and not self.cache.hold \
-                and self.cache.advance_first(progressive.key):
+                and self._cache_chunks(lambda: self.cache.advance_first(progressive.key), t0):
             # a new radiance cache is being built and its completion restarts Accurate's
-            # image: tiles traced before it would be dropped, so its chunks go first, one a
-            # draw (docs/gi_pipeline.md "Viewport samples whose gathers end early"; Fast's
-            # image waits for the worker's bounced voxels after it, and converges meanwhile)
+            # image: tiles traced before it would be dropped, so its chunks go first, as many
+            # a draw as its stage budget holds (docs/gi_pipeline.md "Viewport samples whose
+            # gathers end early"; Fast's image waits for the worker's bounced voxels after
+            # it, and converges meanwhile)
             self.timings = {"radiance cache stage": time.perf_counter() - t0}
             return "Refining"
         if not progressive.coarse_pending:

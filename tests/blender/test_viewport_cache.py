@@ -380,3 +380,33 @@ def test_accurate_tiles_wait_for_the_cache_and_a_stale_build_is_not_run(voxgi):
     view.draw_until_still()
     assert renderer.progressive.converged
     assert renderer.cache.generation == 2  # the last move's cache, not the first's as well
+
+
+def test_a_draw_runs_as_many_chunks_of_the_build_as_its_stage_budget_holds(voxgi):
+    """The build's chunks (a relaxation pass of the box's cache is 1-2 ms) share a draw while
+    the next one fits the slices' stage budget, and a draw that compiled a kernel runs no
+    more: with the budget held at nothing the build takes a draw a chunk, with a budget that
+    holds it all a draw or two; either way the view converges on the complete cache (the
+    staged build equals the whole one: ``test_the_staged_build_is_the_whole_build_a_chunk_per
+    _stage``)."""
+
+    def cache_draws(stage_budget):
+        view = AccurateView()
+        renderer = view.renderer
+        renderer.progressive.stage_budget = stage_budget
+        renderer.cache.budget = 0.0  # the build in many chunks
+        counted = {"draws": 0}
+
+        def each():
+            def after():
+                counted["draws"] += "radiance cache stage" in renderer.timings
+            return after
+
+        view.draw_until_still(each)
+        assert renderer.progressive.converged and renderer.cache.generation == 1
+        assert renderer.cache.building is None and renderer.cache.texture is not None
+        return counted["draws"]
+
+    one_each, shared = cache_draws(1e-9), cache_draws(60.0)
+    print(f"the build's draws: {one_each} a chunk each, {shared} sharing them")
+    assert one_each > 8 and shared <= 2
