@@ -10,6 +10,7 @@ rays. Needs a GPU context.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import replace
 
@@ -179,6 +180,12 @@ def relax_gpu(places, cache_texture, records, rays: int, count: int, out, keep: 
 
 
 _LAYOUT: dict = {}  # the last cache_layout: (its key, the layout)
+_AHEAD: dict = {}   # key → the thread making that layout (``cache_layout_ahead``)
+
+
+def _layout_key(tris, settings) -> tuple:
+    return (triangles_key(tris), settings.cache_resolution, settings.cache_rays,
+            settings.cache_focus)
 
 
 def cache_layout(tris, settings):
@@ -188,9 +195,12 @@ def cache_layout(tris, settings):
     (``SceneTriangles``). Kept for the next call with the same triangles (by content) and
     cache settings: an edit of the lights, the materials or the world, or the Bounces, lays
     nothing out again (docs/gi_pipeline.md "Multi-bounce radiance cache", "What the cache
-    costs after the picks")."""
-    key = (triangles_key(tris), settings.cache_resolution, settings.cache_rays,
-           settings.cache_focus)
+    costs after the picks"). One made ahead (``cache_layout_ahead``) is waited for."""
+    key = _layout_key(tris, settings)
+    ahead = _AHEAD.get(key)
+    if ahead is not None and ahead is not threading.current_thread():
+        ahead.join()  # (an error there: made again below, where it is raised)
+        _AHEAD.pop(key, None)
     held = _LAYOUT.get("entry")
     if held is not None and held[0] == key:
         return held[1]
@@ -201,6 +211,29 @@ def cache_layout(tris, settings):
               cache_texels(cache, layout=True, ahead=True) if len(points) else None)
     _LAYOUT["entry"] = (key, layout)
     return layout
+
+
+def cache_layout_ahead(tris, settings) -> None:
+    """Start ``cache_layout(tris, settings)`` on a thread of its own, unless it is made or
+    being made: F12's first preview of a scene calls this as soon as its triangles are
+    known, so the layout (its voxels and face points, 0.5–1.4 s of numpy on a 0.1–1 M-triangle
+    scene) is made while the main thread builds the BVH (numpy releases the GIL in both; the
+    layout's last step, the faces' backs in solids, traces that BVH: ``bvh_of`` waits for
+    it), not after it. The radiance cache's stage then takes it (``cache_layout``)."""
+    key = _layout_key(tris, settings)
+    held = _LAYOUT.get("entry")
+    if (held is not None and held[0] == key) or key in _AHEAD:
+        return
+
+    def make():
+        try:
+            cache_layout(tris, settings)
+        except Exception:  # noqa: BLE001 - made again, and raised, by the stage's own call
+            pass
+
+    thread = threading.Thread(target=make, name="VoxGI cache layout", daemon=True)
+    _AHEAD[key] = thread
+    thread.start()
 
 
 def cache_stages(bvh, lights, principled, emission, settings, tables=None,

@@ -60,6 +60,7 @@ from .gpu_compose import shade_stages
 from .gpu_fast import fast_passes, fast_sums
 from .gpu_gather import (
     TRAVERSALS_PER_DISPATCH,
+    cache_layout_ahead,
     cache_texture,
     denoise,
     gather,
@@ -139,14 +140,19 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     # glass' two layers are composed on the CPU: the sums stay on the GPU only without it
     on_gpu = on_gpu and not any(is_glass(m) for m in snapshot.materials)
     if quality == "ACCURATE":
+        gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
+        ahead = None
+        if cache_source is None and gather_settings.bounces > 1:
+            def ahead(tris):  # F12: the cache's layout made while the BVH is built
+                cache_layout_ahead(tris, focused(gather_settings, snapshot.camera, tris))
         t0 = time.perf_counter()
-        scene = (gpu_scene or current_scene()).update(snapshot)  # only what changed is sent
+        # only what changed is sent
+        scene = (gpu_scene or current_scene()).update(snapshot, on_triangles=ahead)
         built = time.perf_counter() - t0
         # the G-buffer's variant follows the scene's textures (gbuffer.gbuffer_shader: the
         # plain one where no material has any)
         raster = raster or gbuffer_shader(textured=scene.textured)
-        layer = (width, height, light_samples, gi_stride,
-                 gather_settings or GatherSettings(ao_distance=cones.ao_distance),
+        layer = (width, height, light_samples, gi_stride, gather_settings,
                  glossy_indirect, filter_width, scene)
         front, timings = yield from _accurate_stages(snapshot, *layer, gather_hook, raster,
                                                      cache_source, on_gpu=on_gpu, batch=batch,

@@ -277,16 +277,17 @@ class GPUScene:
 
     # ------------------------------------------------------------------ update
 
-    def update(self, snapshot) -> GPUScene:
+    def update(self, snapshot, on_triangles=None) -> GPUScene:
         """Make the scene ``snapshot``'s: rebuild and upload the parts whose content changed
         (``uploaded`` says which). The triangles may be empty (nothing is then built for them;
         the caller decides what an empty scene means). ``prepare`` and ``upload_steps`` in
-        one call."""
-        for _ in self.upload_steps(self.prepare(snapshot)):
+        one call; on_triangles : ``prepare``'s."""
+        for _ in self.upload_steps(self.prepare(snapshot, on_triangles=on_triangles)):
             pass
         return self
 
-    def prepare(self, snapshot, on_geometry=None, on_tables=None) -> ScenePlan:
+    def prepare(self, snapshot, on_geometry=None, on_tables=None,
+                on_triangles=None) -> ScenePlan:
         """The CPU half of ``update``: the content keys of ``snapshot``'s parts and, for those
         that differ from the uploaded ones, their tables (world-space triangles, packed BVH,
         texture atlas, material, light, world and emitter tables) — numpy only, nothing sent to
@@ -294,6 +295,8 @@ class GPUScene:
         main thread draws (the viewport: docs/gi_pipeline.md "Entering Rendered mode").
         on_geometry : called with (triangles, roughness table, textured, ``principled_table``)
         as soon as those are known, before the BVH is built (the viewport's vertex arrays).
+        on_triangles : called with the triangles as soon as they are known, before the BVH
+        is built (F12: the radiance cache's layout made on a thread meanwhile).
         on_tables : called with the plan once every part but the BVH is in it (its lights
         list, so the kernels' variants, included); the BVH is then built on a thread of its own
         meanwhile (``ScenePlan.bvh_ready``), so the caller can send the other parts and compile
@@ -317,6 +320,8 @@ class GPUScene:
             keys["geometry"] = geometry
         plan.tris = tris
         seconds["geometry"] = time.perf_counter() - t0
+        if on_triangles is not None and len(tris):
+            on_triangles(tris)
         building = None
         if len(tris):
             # identity check first (free); another user of the shared BVH (the Fast path) may

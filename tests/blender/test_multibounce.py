@@ -208,6 +208,43 @@ def test_gpu_cache_equals_numpy_cache(voxgi):
                                     emission, settings) is texture
 
 
+def test_f12_lays_the_cache_out_on_a_thread_while_the_bvh_builds_and_once(voxgi, tmp_path,
+                                                                            monkeypatch):
+    """F12's first preview of a scene starts the radiance cache's layout (its voxels and face
+    points, numpy) on a thread of its own as soon as the triangles are known, while the main
+    thread builds the BVH; the cache's stage then takes that layout: it is made once, on that
+    thread, and the preview is the one a layout made in the stage gives."""
+    import threading
+
+    from voxgi.render import gpu_gather, gpu_preview, gpu_scene
+
+    bounce_scenes.build("cornell_box", bpy.context.scene)
+    scene = bpy.context.scene
+    follow_cycles(scene)
+    made = []
+    build_cache = gpu_gather.build_cache
+
+    def counted(*args, **kwargs):
+        made.append(threading.current_thread().name)
+        return build_cache(*args, **kwargs)
+
+    monkeypatch.setattr(gpu_gather, "build_cache", counted)
+    gpu_scene.release()
+    gpu_gather._LAYOUT.clear()
+    ahead = preview(tmp_path, scene, 64, 48)
+    assert made == ["VoxGI cache layout"], made
+    assert not gpu_gather._AHEAD  # taken by the cache's stage
+    # without the layout made ahead: the same image
+    monkeypatch.setattr(gpu_preview, "cache_layout_ahead", lambda tris, settings: None)
+    gpu_scene.release()
+    gpu_gather._LAYOUT.clear()
+    gpu_gather._cache_upload.clear()
+    (tmp_path / "inline").mkdir()
+    inline = preview(tmp_path / "inline", scene, 64, 48)
+    assert made[1:] == ["MainThread"], made
+    np.testing.assert_allclose(ahead["Combined"], inline["Combined"], rtol=1e-5, atol=1e-6)
+
+
 @pytest.mark.parametrize("sparse", [False, True], ids=["dense", "sparse"])
 def test_numpy_and_gpu_previews_agree(voxgi, tmp_path, sparse):
     """Bounces 2 on a small Cornell box image: every pass of the GPU preview (the cache's
