@@ -729,8 +729,10 @@ def _subpixel_passes(f):
     for index in range(len(plan)):
         (_, gx), (_, gy) = place(index)
         groups.setdefault((gx, gy), []).append(index)
-    # the passes raster by raster (one G-buffer held at a time); all the raster's passes
-    # resolved in one dispatch, the centres around each pixel read once for all of them
+    # the passes raster by raster (one G-buffer held at a time, drawn again for the next
+    # raster); all the raster's passes resolved in one dispatch, the centres around each
+    # pixel read once for all of them
+    gbuffer = None
     for (gx, gy), indices in sorted(groups.items()):
         gbuffer = rasterize(
             f["seen_tris"], snapshot.camera, scene.rough, width, height,
@@ -738,7 +740,8 @@ def _subpixel_passes(f):
             (_raster_shift(gx, fine), _raster_shift(gy, fine)),
             shader=f["raster_shader"],
             textures=scene.raster_textures(), filter_width=f["filter_width"],
-            batch=f["vertex_batch"], mask=mask, texture_share=AA_SIDE, supersample=fine)
+            batch=f["vertex_batch"], mask=mask, texture_share=AA_SIDE, supersample=fine,
+            into=gbuffer)
         table = np.zeros((1, AA_SIDE * AA_SIDE, 4), np.float32)
         for k, index in enumerate(indices):
             (tx, _), (ty, _) = place(index)
