@@ -206,11 +206,11 @@ class ViewportRenderer:
         return "Quick" if drew else "Preparing"
 
     def _cache_chunks(self, chunk, t0: float) -> bool:
-        """Run the radiance cache's build in this draw: ``chunk()`` (``ViewportCache.advance``
-        or ``advance_first``: whether it ran one), then more while the build goes on, the next
-        chunk — taken to last up to CHUNK_GROWTH × the longest so far, as the build grows its
-        ray chunks — ends within the slices' stage budget from ``t0``, and none compiled a
-        kernel or sent a scene part (a draw does one of each at most). A relaxation pass of a
+        """Run the radiance cache's build in this draw: ``chunk()`` (``ViewportCache.
+        advance_any`` or ``advance_first``: whether it ran one), then more while the build
+        goes on, the next chunk — taken to last up to CHUNK_GROWTH × the longest so far, as
+        the build grows its ray chunks — ends within the slices' stage budget from ``t0``,
+        and none compiled a kernel or sent a scene part (a draw does one of each at most). A relaxation pass of a
         small scene's cache is 1–2 ms: one a draw spent most of the build's draws on the draws
         themselves. Whether a chunk ran."""
         mark = counters.compiles, counters.uploads
@@ -247,7 +247,7 @@ class ViewportRenderer:
             # the draw's stage budget); its completion changes the image key and the image
             # restarts
             t0 = time.perf_counter()
-            self._cache_chunks(self.cache.advance, t0)
+            self._cache_chunks(self.cache.advance_any, t0)
             self.timings = {"radiance cache stage": time.perf_counter() - t0}
             return "Refining"
         self.cache.image_key = progressive.key  # (what the slices' cache stages ask for)

@@ -138,6 +138,14 @@ class ViewportCache:
             raise
         return False
 
+    def advance_any(self) -> bool:
+        """``advance`` the build under way, whichever image asked for it: whether a chunk ran
+        (False: no build under way, or its layout is still being made)."""
+        if self.building is None or (self.building[1] is None and not self._start()):
+            return False
+        self.advance()
+        return True
+
     def advance_first(self, image_key) -> bool:
         """``advance`` the build under way ahead of the tiles of the image ``image_key``:
         whether a chunk ran — False when no slice of that image asked for this build (the

@@ -410,3 +410,23 @@ def test_a_draw_runs_as_many_chunks_of_the_build_as_its_stage_budget_holds(voxgi
     one_each, shared = cache_draws(1e-9), cache_draws(60.0)
     print(f"the build's draws: {one_each} a chunk each, {shared} sharing them")
     assert one_each > 8 and shared <= 2
+
+
+def test_advance_any_says_whether_a_chunk_ran(voxgi):
+    """``ViewportCache.advance_any`` (the converged view's build, chunks sharing a draw) runs a
+    chunk of the build under way and says so; with none under way, nothing: the draw's loop
+    then stops instead of spinning."""
+    from voxgi.render.viewport_cache import ViewportCache
+    from voxgi.voxgi_addon.preview.gather import GatherSettings
+
+    inputs = cornell_inputs(GatherSettings(bounces=3, cache_resolution=16, cache_rays=8))
+    cache = ViewportCache(budget=0.0)
+    assert not cache.advance_any()  # nothing to build
+    stage = cache.stage(*inputs)
+    next(stage)  # the build's first chunk
+    chunks = 1
+    while cache.generation == 0 and chunks < 10000:
+        assert cache.advance_any()
+        chunks += 1
+    assert cache.generation == 1 and chunks > 4
+    assert cache.building is None and not cache.advance_any()
