@@ -180,7 +180,7 @@ def relax_gpu(places, cache_texture, records, rays: int, count: int, out, keep: 
 
 
 _LAYOUT: dict = {}  # the last cache_layout: (its key, the layout)
-_AHEAD: dict = {}   # key → the thread making that layout (``cache_layout_ahead``)
+_AHEAD: dict = {}   # key → (the thread making that layout, its error if it failed)
 
 
 def _layout_key(tris, settings) -> tuple:
@@ -188,19 +188,22 @@ def _layout_key(tris, settings) -> tuple:
             settings.cache_focus)
 
 
-def cache_layout(tris, settings):
+def cache_layout(tris, settings, key=None):
     """The CPU half of ``cache_stages`` (numpy only, any thread: the viewport makes it on its
     preparing thread): (the cache's voxels ``build_cache``, its face points and axes
     ``face_points``, its layout texels ``cache_texels(layout=True, ahead=True)``) for ``tris``
     (``SceneTriangles``). Kept for the next call with the same triangles (by content) and
     cache settings: an edit of the lights, the materials or the world, or the Bounces, lays
     nothing out again (docs/gi_pipeline.md "Multi-bounce radiance cache", "What the cache
-    costs after the picks"). One made ahead (``cache_layout_ahead``) is waited for."""
-    key = _layout_key(tris, settings)
+    costs after the picks"). One made ahead (``cache_layout_ahead``) is waited for. key :
+    ``_layout_key(tris, settings)`` when the caller has it (it hashes every triangle)."""
+    key = key or _layout_key(tris, settings)
     ahead = _AHEAD.get(key)
-    if ahead is not None and ahead is not threading.current_thread():
-        ahead.join()  # (an error there: made again below, where it is raised)
+    if ahead is not None and ahead[0] is not threading.current_thread():
+        ahead[0].join()
         _AHEAD.pop(key, None)
+        if "error" in ahead[1]:  # what failed there is raised here, not made again
+            raise ahead[1]["error"]
     held = _LAYOUT.get("entry")
     if held is not None and held[0] == key:
         return held[1]
@@ -225,14 +228,16 @@ def cache_layout_ahead(tris, settings) -> None:
     if (held is not None and held[0] == key) or key in _AHEAD:
         return
 
+    outcome: dict = {}
+
     def make():
         try:
-            cache_layout(tris, settings)
-        except Exception:  # noqa: BLE001 - made again, and raised, by the stage's own call
-            pass
+            cache_layout(tris, settings, key)
+        except Exception as error:  # noqa: BLE001 - raised by the stage's ``cache_layout``
+            outcome["error"] = error
 
     thread = threading.Thread(target=make, name="VoxGI cache layout", daemon=True)
-    _AHEAD[key] = thread
+    _AHEAD[key] = (thread, outcome)
     thread.start()
 
 

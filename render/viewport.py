@@ -210,9 +210,9 @@ class ViewportRenderer:
         advance_any`` or ``advance_first``: whether it ran one), then more while the build
         goes on, the next chunk — taken to last up to CHUNK_GROWTH × the longest so far, as
         the build grows its ray chunks — ends within the slices' stage budget from ``t0``,
-        and none compiled a kernel or sent a scene part (a draw does one of each at most). A relaxation pass of a
-        small scene's cache is 1–2 ms: one a draw spent most of the build's draws on the draws
-        themselves. Whether a chunk ran."""
+        and none compiled a kernel or sent a scene part (a draw does one of each at most).
+        A relaxation pass of a small scene's cache is 1–2 ms: one a draw spent most of the
+        build's draws on the draws themselves. Whether a chunk ran."""
         mark = counters.compiles, counters.uploads
         started = time.perf_counter()
         if not chunk():

@@ -245,6 +245,30 @@ def test_f12_lays_the_cache_out_on_a_thread_while_the_bvh_builds_and_once(voxgi,
     np.testing.assert_allclose(ahead["Combined"], inline["Combined"], rtol=1e-5, atol=1e-6)
 
 
+def test_a_layout_that_fails_ahead_raises_its_error_where_the_cache_asks_for_it(voxgi,
+                                                                               monkeypatch):
+    """A layout made ahead that fails (a bad mesh, memory) is not lost on its thread: the
+    cache's own ``cache_layout`` raises that error, once, and does not lay out again."""
+    from voxgi.render import gpu_gather
+    from voxgi.voxgi_addon.preview.gather import GatherSettings
+
+    bounce_scenes.build("cornell_box", bpy.context.scene)
+    tris = cache_inputs()[0]
+    calls = []
+
+    def failing(*args, **kwargs):
+        calls.append(1)
+        raise MemoryError("the cache's voxels do not fit")
+
+    monkeypatch.setattr(gpu_gather, "build_cache", failing)
+    gpu_gather._LAYOUT.clear()
+    settings = GatherSettings(bounces=3, cache_resolution=16, cache_rays=8)
+    gpu_gather.cache_layout_ahead(tris, settings)
+    with pytest.raises(MemoryError, match="do not fit"):
+        gpu_gather.cache_layout(tris, settings)
+    assert calls == [1] and not gpu_gather._AHEAD
+
+
 @pytest.mark.parametrize("sparse", [False, True], ids=["dense", "sparse"])
 def test_numpy_and_gpu_previews_agree(voxgi, tmp_path, sparse):
     """Bounces 2 on a small Cornell box image: every pass of the GPU preview (the cache's
