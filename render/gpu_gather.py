@@ -56,13 +56,15 @@ def _denoise_shader():
 
 def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: int,
             iterations: int = 4, fit: bool = True, holes: bool = False,
-            sigma: float = SIGMA_LUMINANCE, alpha_variance: bool = False):
+            sigma: float = SIGMA_LUMINANCE, alpha_variance: bool = False,
+            unseen: bool = False):
     """``iterations`` passes of the à-trous filter over the low-resolution ``values`` (light rgb,
     AO) and ``variance`` textures whose cells trace the pixels ``traced_pixel`` picks in the
     ``width`` × ``height`` G-buffer; returns the filtered (values, variance) textures. fit :
     the local linear fit, else the weighted mean (``preview.denoise.atrous_filter``'s). holes :
     the values have holes (the sparse gather's): the first pass's kernel stretched over
-    ``HOLE_SPREAD`` × its width, as numpy's."""
+    ``HOLE_SPREAD`` × its width, as numpy's. unseen : the variance's .w is 1 at the cells
+    whose light no pass shows (``atrous_filter``'s unseen): no taps of the others' light."""
     shader = _denoise_shader()
     for it in range(iterations):
         out = [gpu.types.GPUTexture((values.width, values.height), format="RGBA32F")
@@ -75,7 +77,8 @@ def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: i
         spread = float(HOLE_SPREAD) if it == 0 and holes else 1.0  # (denoise.py HOLE_SPREAD)
         # (the first pass reads a pixel's world light's variance from its alpha: denoise.glsl)
         in_alpha = 1.0 if alpha_variance and it == 0 else 0.0
-        shader.uniform_float("options", (1.0 if fit else 0.0, spread, sigma, in_alpha))
+        mode = 2.0 if unseen else in_alpha
+        shader.uniform_float("options", (1.0 if fit else 0.0, spread, sigma, mode))
         shader.image("out_image", out[0])
         shader.image("out_variance", out[1])
         gpu.compute.dispatch(shader, math.ceil(values.width / LOCAL_SIZE),

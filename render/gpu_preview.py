@@ -35,12 +35,13 @@ from ..voxgi_addon.preview.passes import (
     new_sums,
     pass_tail_weights,
     pass_weights,
+    shows_diffuse,
     stacked_tails,
     subpixel_passes,
     subpixel_reach,
 )
 from ..voxgi_addon.preview.resolve import SPREAD
-from ..voxgi_addon.preview.sparse_gather import noisy_holes, sparse_plan, sparse_settings
+from ..voxgi_addon.preview.sparse_gather import gather_counts, noisy_holes, ray_counts, sparse_plan, sparse_settings
 from ..voxgi_addon.preview.upsample import field_stride, low_shape, sample_pixels
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame, filter_on_grid
 from ..voxgi_addon.scene.glass import is_glass
@@ -502,21 +503,30 @@ def _sparse_diffuse(f):
     grid = [np.zeros(valid.shape + (4,), np.float32) for _ in range(2)]
     settings = sparse_settings(f["gather_settings"], np.count_nonzero(valid),
                                np.count_nonzero(traced))
-    _gather_cells(f, traced, grid, settings)
-    extra = noisy_holes(traced, valid, grid[1][..., 0])
+    shown = shows_diffuse(f["snapshot"])[material_indices(f["snapshot"], seen["material"])]
+    diffuse = shown[rows][:, cols]
+
+    def trace(cells, at):
+        return _gather_cells(f, cells, at)
+
+    gather_counts(ray_counts(traced, diffuse, settings.rays), *grid, settings, trace)
+    # (the holes whose surface shows diffuse light, by the noise of those that show it)
+    extra = noisy_holes(traced & diffuse, valid & diffuse, grid[1][..., 0])
     if extra.any():
-        _gather_cells(f, extra, grid, settings)
+        gather_counts(ray_counts(extra, diffuse, settings.rays), *grid, settings, trace)
         traced = traced | extra
     grid[1][..., 2] = valid & ~traced  # the holes the filter's first pass fills (denoise.glsl)
+    grid[1][..., 3] = valid & ~diffuse  # the points whose light no pass shows: no taps of it
     grid = [float_texture(np.flipud(cells), (cells.shape[1], cells.shape[0])) for cells in grid]
     return denoise(grid[0], grid[1], centre.inputs, stride, width, height,
-                   settings.denoise_iterations, fit=True, holes=bool((valid & ~traced).any()))[0]
+                   settings.denoise_iterations, fit=True, holes=bool((valid & ~traced).any()),
+                   unseen=True)[0]
 
 
-def _gather_cells(f, cells, grid, settings):
+def _gather_cells(f, cells, settings):
     """The diffuse gather at the grid's ``cells`` (a list, ``_compact``: each point draws its
-    pixel's samples, with the rays of ``settings``: ``sparse_settings``'), read back into
-    ``grid`` (values, variance) there."""
+    pixel's samples, with the rays of ``settings``), read back: ((N, 4) values, (N, 4)
+    variances) in row-major order."""
     scene, centre = f["scene"], f["centre"]
     width, height = f["width"], f["height"]
     rows, cols = sample_pixels(height, width, f["gi_stride"])
@@ -527,8 +537,7 @@ def _gather_cells(f, cells, grid, settings):
     textures = gather(scene.bvh, inputs, scene.lights, scene.principled, scene.emission,
                       settings, 1, size[0], size[1],
                       tables=f["tables"], cache=f["cache"])
-    for cells_of, texture in zip(grid, textures):
-        cells_of[cells] = read_texture(texture).reshape(-1, 4)[:len(listed)]
+    return tuple(read_texture(texture).reshape(-1, 4)[:len(listed)] for texture in textures)
 
 
 def _glossy_gather(f):

@@ -15,7 +15,10 @@
  * luminance) and no scalar (a pixel's world light, bvh_direct.glsl), low_variance unread.
  * A cell whose low_variance.z is 1 is a hole (the sparse gather left it out: denoise.py
  * atrous_filter(holes=…)): no tap, never settled, its taps weighed by geometry alone (it has
- * no light of its own to compare); the pass writes its fit and variance.z = 0. */
+ * no light of its own to compare); the pass writes its fit and variance.z = 0.
+ * options.w = 2: low_variance.w is 1 at the cells whose light no pass shows (a metal's: the
+ * sparse gather drew its AO alone, denoise.py atrous_filter(unseen=…)); they are no taps of
+ * the light of the cells that show it (their AO still is), and the flag is kept. */
 const float KERNEL[5] = float[5](1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0);
 const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
 
@@ -37,7 +40,8 @@ void main()
   int stride = int(grid.x);
   ivec2 full = ivec2(grid.yz);
   int step = int(grid.w);
-  bool alpha_variance = options.w > 0.5; /* a pixel's world light: (rgb, its variance) */
+  bool alpha_variance = options.w > 0.5 && options.w < 1.5; /* a pixel's world light */
+  bool flagged = options.w > 1.5; /* low_variance.w: the light is not shown there */
   vec4 centre = texelFetch(low_image, cell, 0);
   vec4 centre_var = alpha_variance ? vec4(centre.a, 0.0, 0.0, 0.0) : texelFetch(low_variance, cell, 0);
   centre.a = alpha_variance ? 0.0 : centre.a;
@@ -50,6 +54,7 @@ void main()
   }
   vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
   bool hole = centre_var.z > 0.5;
+  bool shown = !(flagged && centre_var.w > 0.5);
   vec2 signal = vec2(dot(centre.rgb, LUMINANCE), centre.a);
   /* The variance prefiltered over the valid 3 × 3 neighbours (denoise.py _blurred). */
   vec2 blurred = vec2(0.0);
@@ -78,7 +83,7 @@ void main()
   settled = hole ? bvec2(false) : settled;
   if (all(settled)) { /* both kept as they are: no tap changes them (the loop below skips both) */
     imageStore(out_image, cell, centre);
-    imageStore(out_variance, cell, vec4(centre_var.xy, 0.0, 0.0));
+    imageStore(out_variance, cell, vec4(centre_var.xy, 0.0, flagged ? centre_var.w : 0.0));
     return;
   }
   /* The local linear fit (denoise.py _fit): per signal the weighted sums of (1, s, u) ⊗ (1,
@@ -122,6 +127,7 @@ void main()
       vec2 scale = options.z * sqrt(max(blurred + varq, vec2(0.0))) + 1e-6;
       vec2 w = hole ? vec2(geometry) :
                geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);
+      w.x = (shown && flagged && var4.w > 0.5) ? 0.0 : w.x;
       float s = float(b) / float(spread); /* the tap's place in the window */
       float u = float(a) / float(spread);
       float quad[6] = float[6](1.0, s, u, s * s, s * u, u * u);
@@ -166,5 +172,6 @@ void main()
   }
   imageStore(out_image, cell, result);
   /* a hole stays one only where no tap could fill it (then left at 0, as numpy's) */
-  imageStore(out_variance, cell, vec4(result_var, hole && (m[0] <= 0.0 || m[6] <= 0.0) ? 1.0 : 0.0, 0.0));
+  imageStore(out_variance, cell, vec4(result_var, hole && (m[0] <= 0.0 || m[6] <= 0.0) ? 1.0 : 0.0,
+                                     flagged ? centre_var.w : 0.0));
 }

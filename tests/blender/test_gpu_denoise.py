@@ -62,3 +62,33 @@ def test_gpu_denoise_equals_numpy(voxgi, fit, size):
     assert np.allclose(out_var[hit][:, :2], ref_var[hit], rtol=1e-2, atol=1e-9)
     # and the filter did something: the noise is mostly gone
     assert np.abs(out[hit] - values[hit]).mean() > 0.01
+
+
+def test_gpu_denoise_keeps_unseen_points_out_of_the_light_as_numpy(voxgi):
+    """Cells flagged unseen (variance .w = 1: a metal's points, whose gather drew its AO alone)
+    lend their AO but not their light, on the GPU as in numpy, and the flag changes the light
+    of their neighbours."""
+    from voxgi.render.gpu_context import ensure_gpu_context
+    from voxgi.render.gpu_gather import denoise
+    from voxgi.render.gpu_tracer import read_texture
+    from voxgi.render.gpu_volume import float_texture
+    from voxgi.voxgi_addon.preview.denoise import atrous_filter
+
+    ready, why = ensure_gpu_context()
+    assert ready, why
+    values, variance, hit, position, normal = _scene()
+    h, w = hit.shape
+    unseen = np.zeros((h, w), bool)
+    unseen[:, 8:16] = True
+    values[unseen, :3] *= np.random.default_rng(5).exponential(1.0, (unseen.sum(), 1)) * 3.0
+    var4 = np.concatenate([variance, np.zeros((h, w, 1)), unseen[..., None] * 1.0], axis=-1)
+    out, _ = denoise(float_texture(np.flipud(values), (w, h)),
+                     float_texture(np.flipud(var4), (w, h)),
+                     _gbuffer_textures(position, normal, hit), 1, w, h, iterations=4,
+                     unseen=True)
+    out = np.flipud(read_texture(out))
+    ref, _ = atrous_filter(values, variance, hit, position, normal, iterations=4, unseen=unseen)
+    plain, _ = atrous_filter(values, variance, hit, position, normal, iterations=4)
+    assert np.allclose(out[hit], ref[hit], rtol=1e-3, atol=1e-4)
+    shown = hit & ~unseen
+    assert np.abs(ref[shown][:, :3] - plain[shown][:, :3]).max() > 0.01

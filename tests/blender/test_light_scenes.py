@@ -257,3 +257,35 @@ def test_numpy_reads_the_emitters_field_as_the_gpu(voxgi, monkeypatch):
     everywhere = np.ones((48, 64), bool)
     for name in PASSES:
         assert relative_l1(gpu[name], reference[name], everywhere) <= 0.02, name
+
+
+def test_gather_points_on_metals_trace_ao_only_and_the_image_keeps_its_light(voxgi,
+                                                                             monkeypatch):
+    """The room of metals at 160 × 120: the points whose surface shows no diffuse light (the
+    full metals, counted from the plan) draw AO_RAYS each, and the preview's passes stay
+    within the scene's limits and within noise of the one that draws every ray everywhere."""
+    from voxgi.render import gpu_preview
+    from voxgi.voxgi_addon.preview import sparse_gather
+
+    counted = []
+    counts_of = gpu_preview.ray_counts
+    monkeypatch.setattr(gpu_preview, "ray_counts",
+                        lambda cells, diffuse, rays: counted.append(
+                            (counts_of(cells, diffuse, rays), cells, diffuse, rays))
+                        or counted[-1][0])
+    ours = preview("metal_room")
+    counts, cells, diffuse, rays = counted[0]
+    metal = cells & ~diffuse
+    assert metal.sum() > 0.5 * cells.sum()  # most of the room is metal
+    assert (counts[metal] == sparse_gather.AO_RAYS).all() and (counts[cells & diffuse] == rays).all()
+    monkeypatch.setattr(sparse_gather, "AO_RAYS", 10 ** 6)  # every point its full rays
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    full = preview("metal_room")
+    with np.load(REFS / "metal_room.npz") as data:
+        reference = {key: data[key].astype(np.float64) for key in data.files}
+    mask = reference["Alpha"] > 0.5
+    limits = json.loads((REFS / "limits.json").read_text())["metal_room"]
+    for pass_name, limit in limits.items():
+        assert relative_l1(ours[pass_name], reference[pass_name], mask) <= limit, pass_name
+    assert relative_l1(ours["Combined"], full["Combined"], mask) <= 0.01
+    assert relative_l1(ours["Ambient Occlusion"], full["Ambient Occlusion"], mask) <= 0.05

@@ -107,3 +107,31 @@ def test_light_sloping_into_a_corner_keeps_its_level_at_the_corner():
         assert abs(got / clean[:, column, 0].mean() - 1.0) < limit, (column, got)
     # and the noise is still averaged away along the slope
     assert np.abs(out[..., :3] - clean)[~wall].mean() < np.abs(noisy[..., :3] - clean)[~wall].mean() / 3
+
+
+def test_unseen_points_lend_their_ao_but_not_their_light():
+    """A floor whose right half is metal: its points drew AO only, so their light (the same
+    level, 0.5) is the noise of a few rays, shown by no pass. Flagged unseen, it does not reach
+    the diffuse half's light beside it, while both halves' AO mixes along the one plane
+    (``atrous_filter(unseen=…)``)."""
+    position, normal, _ = _floor_and_wall()
+    normal[...] = (0.0, 0.0, 1.0)  # one floor
+    position[..., 2] = 0.0
+    position[..., 0] = np.arange(64)[None, :] * 0.01
+    metal = np.zeros((48, 64), bool)
+    metal[:, 32:] = True
+    values, variance = _noisy(np.full((48, 64, 3), 0.5), 0.01)
+    rng = np.random.default_rng(3)
+    few_rays = rng.exponential(0.5, metal.sum())  # a few rays' light: mean 0.5, skewed
+    values[metal, :3] = few_rays[:, None]
+    variance[metal, 0] = 0.25 / 8
+    values[..., 3] = 0.7 + rng.normal(0.0, 0.05, metal.shape)
+    variance[..., 1] = 0.05 ** 2
+    valid = np.ones(metal.shape, bool)
+    out, _ = atrous_filter(values, variance, valid, position, normal, unseen=metal)
+    leaky, _ = atrous_filter(values, variance, valid, position, normal)
+    edge, leaky_edge = out[:, 29:32, 0], leaky[:, 29:32, 0]
+    assert abs(edge.mean() - 0.5) < 0.01, edge.mean()
+    assert np.abs(edge - 0.5).mean() < 0.5 * np.abs(leaky_edge - 0.5).mean()
+    np.testing.assert_array_equal(out[..., 3], leaky[..., 3])  # the AO is filtered as before
+    assert np.abs(out[..., 3] - 0.7).mean() < 0.3 * np.abs(values[..., 3] - 0.7).mean()

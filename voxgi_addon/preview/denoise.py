@@ -155,8 +155,8 @@ def _fit(moments, spread, light, scalar, fit: bool = True):
 def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
                   position: np.ndarray, normal: np.ndarray, iterations: int = 4,
                   sigma_luminance: float = SIGMA_LUMINANCE,
-                  fit: bool = True, holes: np.ndarray | None = None
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  fit: bool = True, holes: np.ndarray | None = None,
+                  unseen: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Filter ``values`` along surfaces.
 
     Parameters
@@ -174,6 +174,10 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
         tap themselves, their own light not compared), later passes filter them as the rest.
         With any hole the first pass's kernel is stretched over HOLE_SPREAD × its width
         (``_kernel``), for every cell.
+    unseen : (H, W) bool, pixels whose light no pass shows (a metal's point, whose gather
+        drew its scalar, the AO, alone: ``sparse_gather.ray_counts``): they are no taps of the
+        light of the pixels that show it (their scalar still is), so their few rays' noise
+        does not reach a diffuse neighbour through the luminance test's weights.
 
     Returns
     -------
@@ -185,6 +189,7 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
     p = np.asarray(position, np.float64)
     n = np.asarray(normal, np.float64)
     hole = np.zeros(ok.shape, bool) if holes is None else np.asarray(holes, bool) & ok
+    hidden = np.zeros(ok.shape, bool) if unseen is None else np.asarray(unseen, bool) & ok
     for it in range(iterations):
         step = 1 << it
         # the first pass over a grid with holes spans the traced lattice's spacing
@@ -217,6 +222,7 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
                 scale = sigma_luminance * np.sqrt(np.maximum(blurred + q_var, 0.0)) + _EPSILON
                 w = geometry[..., None] * np.where(hole[..., None], 1.0,
                                                    np.exp(-np.abs(q_signal - signal) / scale))
+                w[..., 0] *= ~(_shifted(hidden, dy, dx, False) & ~hidden)
                 s = np.full(var.shape[:2], (b_ - reach) / stretch)  # the tap's place in the window
                 u = np.full(var.shape[:2], (a - reach) / stretch)
                 x = np.stack([np.ones_like(s), s, u], axis=-1)  # (H, W, 3)

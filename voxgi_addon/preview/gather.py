@@ -26,7 +26,7 @@ from ..gi.exact_indirect import indirect_and_ao
 from ..gi.surface_lookup import geometric_normals
 from ..scene.snapshot import RAY_DIFFUSE
 from .denoise import GLOSSY_SIGMA_LUMINANCE, atrous_filter
-from .sparse_gather import noisy_holes, sparse_plan, sparse_settings
+from .sparse_gather import gather_counts, noisy_holes, ray_counts, sparse_plan, sparse_settings
 from .upsample import sample_pixels, upsample
 
 
@@ -97,7 +97,7 @@ VIEW_BACKOFF = 2e-4  # metres: gather points step back along the camera ray (see
 
 
 def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: GatherSettings,
-              stride: int, direction=None, low: bool = False) -> np.ndarray:
+              stride: int, direction=None, low: bool = False, shown=None) -> np.ndarray:
     """(H, W, 4) float32: Diffuse Indirect (RGB, Cycles' units) and AO per pixel, 0 where the
     pixel sees no surface. low : return (the filtered gather points' values (Hl, Wl, 4), their
     valid (Hl, Wl) bool) instead, before the upsample (``upsample.upsample`` of them is the
@@ -108,6 +108,8 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     direction : (H, W, 3) the camera rays' unit directions: each gather point steps back along
     its ray by VIEW_BACKOFF, so a point seen on a crease (a ceiling within a hair of a wall, or
     just behind it after float32 rasterization) starts its rays inside the room, not in the wall.
+    shown : (H, W) bool the pixels whose surface shows diffuse light (``passes.shows_diffuse``;
+    None: all): with ``settings.sparse``, the others' points draw ``sparse_gather.AO_RAYS``.
     """
     height, width = hit.shape
     rows, cols = sample_pixels(height, width, stride)
@@ -129,25 +131,30 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     values = np.zeros(valid.shape + (4,), np.float32)
     variance = np.zeros(valid.shape + (2,), np.float32)
     cache = radiance_cache(tris, lights, albedo, emission, settings)
+    ids = rows[:, None] * width + cols[None, :]
 
-    def trace(cells):
-        ids = (rows[:, None] * width + cols[None, :])[cells]
+    def trace(cells, at: GatherSettings):
         indirect, ao, var = indirect_and_ao(
-            cell_p[cells], cell_n[cells], ids, tris, lights, albedo, emission, rays=rays,
-            ao_distance=settings.ao_distance, seed=settings.seed, world=settings.world,
-            hit_samples=settings.hit_samples, statistics=True, hit_glossy=settings.hit_glossy,
+            cell_p[cells], cell_n[cells], ids[cells], tris, lights, albedo, emission,
+            rays=at.rays, ao_distance=at.ao_distance, seed=at.seed, world=at.world,
+            hit_samples=at.hit_samples, statistics=True, hit_glossy=at.hit_glossy,
             cache=cache, geometric=None if cell_g is None else cell_g[cells])
-        values[cells] = np.concatenate([indirect, ao[:, None]], axis=1)
-        variance[cells] = var
+        return np.concatenate([indirect, ao[:, None]], axis=1), var
 
-    trace(traced)
-    if settings.sparse:  # the second list: the holes whose fill would be noisiest
-        extra = noisy_holes(traced, valid, variance[..., 0])
+    if not settings.sparse:
+        values[traced], variance[traced] = trace(traced, replace(settings, rays=rays))
+    else:  # metals' points trace AO only; then the second list, the noisiest holes
+        diffuse = valid if shown is None else np.asarray(shown, bool)[rows][:, cols]
+        at = replace(settings, rays=rays)
+        gather_counts(ray_counts(traced, diffuse, rays), values, variance, at, trace)
+        extra = noisy_holes(traced & diffuse, valid & diffuse, variance[..., 0])
         if extra.any():
-            trace(extra)
+            gather_counts(ray_counts(extra, diffuse, rays), values, variance, at, trace)
             traced = traced | extra
+    unseen = valid & ~diffuse if settings.sparse else None
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
-                              iterations=settings.denoise_iterations, holes=valid & ~traced)
+                              iterations=settings.denoise_iterations, holes=valid & ~traced,
+                              unseen=unseen)
     if low:
         return values, valid
     return upsample(values, valid, hit, position, normal, stride)

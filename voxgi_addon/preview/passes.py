@@ -195,6 +195,15 @@ def material_indices(snapshot, material: np.ndarray) -> np.ndarray:
     return np.where((material >= 0) & (material < m), material, m)
 
 
+def shows_diffuse(snapshot) -> np.ndarray:
+    """(M + 1,) bool per material index (the last: none): whether its surface shows diffuse
+    light — a Diffuse Color above 0, as Cycles' Principled BSDF gives it (not a full metal,
+    not black; per texel, the mean of its textures). A gather point on one that does not
+    feeds the AO pass alone (``sparse_gather.ray_counts``)."""
+    every = np.arange(len(snapshot.materials) + 1)
+    return principled_colours(snapshot, every, np.ones(len(every)))[0].max(axis=1) > 0.0
+
+
 COLOUR_BINS = 2049  # cos(view) samples of principled_colours' tables (0, 1/2048, …, 1)
 
 
@@ -1075,9 +1084,10 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
 
     if quality == "ACCURATE":
         _, _, _, emission = material_table(snapshot)
+        shown = shows_diffuse(snapshot)[material_indices(snapshot, seen.material)] & seen.hit
         low["diffuse"] = gather_gi(tris, lights, principled_table(snapshot), emission, seen.hit,
                                    seen.position, seen.normal, gather_settings, gi_stride,
-                                   seen.direction, low=True)
+                                   seen.direction, low=True, shown=shown)
         traced = upsampled(low["diffuse"], 4)
         timings["diffuse+ao gather"] = time.perf_counter() - t0
     else:

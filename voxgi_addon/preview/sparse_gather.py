@@ -27,7 +27,8 @@ import numpy as np
 
 from ..scene.short_axis import norm3
 
-__all__ = ["EXTRA", "MATCH", "SPARSE_RAYS", "noisy_holes", "sparse_plan", "sparse_settings"]
+__all__ = ["AO_RAYS", "EXTRA", "MATCH", "SPARSE_RAYS", "gather_counts", "noisy_holes",
+           "ray_counts", "sparse_plan", "sparse_settings"]
 
 # Rays per traced point, as a multiple of the gather's (docs/gi_pipeline.md "Gathers at fewer
 # points": with the stretched first pass and the second list, 1.5 × them kept the test scenes'
@@ -123,3 +124,29 @@ def sparse_settings(settings, valid: int | None = None, traced: int | None = Non
     if valid is not None and traced:
         share = min(SPARSE_RAYS, valid / traced)
     return replace(settings, rays=max(1, round(settings.rays * share)))
+
+
+# Rays of a gather point whose surface shows no diffuse light (Diffuse Color 0: a full metal, a
+# black surface). The Diffuse Indirect pass and Combined take the gathered light × Diffuse
+# Color (``passes.finish_passes``), so there the gather feeds the AO pass alone, which these
+# rays and the filter hold (docs/gi_pipeline.md "Gather points on metals trace AO only").
+AO_RAYS = 8
+
+
+def ray_counts(cells: np.ndarray, diffuse: np.ndarray, rays: int) -> np.ndarray:
+    """(Hl, Wl) int: the rays each of ``cells`` (bool) draws, 0 elsewhere: ``rays`` where its
+    surface shows diffuse light (``diffuse``, (Hl, Wl) bool), ``AO_RAYS`` (at most ``rays``)
+    where it does not."""
+    counts = np.where(np.asarray(diffuse, bool), rays, min(AO_RAYS, rays))
+    return np.where(np.asarray(cells, bool), counts, 0)
+
+
+def gather_counts(counts: np.ndarray, values: np.ndarray, variance: np.ndarray, settings,
+                  trace) -> None:
+    """Gathers the cells of ``counts`` (``ray_counts``) into ``values`` (Hl, Wl, 4) and
+    ``variance`` (Hl, Wl, ≥2) in place, one ``trace(cells, settings)`` → ((N, 4), (N, ≥2))
+    per count (row-major), each with ``settings.rays`` = that count: a cell drawing all the
+    rays draws exactly what it would with one count for all."""
+    for count in np.unique(counts[counts > 0]):
+        at = counts == count
+        values[at], variance[at] = trace(at, replace(settings, rays=int(count)))
