@@ -27,7 +27,14 @@ from ..voxgi_addon.gi.radiance_cache import (
     triangles_key,
     with_faces,
 )
-from ..voxgi_addon.preview.denoise import GLOSSY_SIGMA_LUMINANCE, HOLE_SPREAD, NOISE_TARGET, RIDGE, SIGMA_LUMINANCE
+from ..voxgi_addon.preview.denoise import (
+    GLOSSY_SIGMA_LUMINANCE,
+    HOLE_SPREAD,
+    NOISE_TARGET,
+    RIDGE,
+    SAME_SURFACE,
+    SIGMA_LUMINANCE,
+)
 from ..voxgi_addon.preview.gather import cache_settings
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE, low_shape
@@ -39,7 +46,8 @@ from .gpu_shaders import LOCAL_SIZE, build_compute, size_like
 from .gpu_tracer import read_texture
 from .gpu_volume import float_texture
 
-_DENOISE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "low_image", "low_variance")
+_DENOISE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "low_image", "low_variance",
+                     "spread_image", "spread_variance")
 _UPSAMPLE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "low_image")
 _shaders: dict[str, object] = {}
 
@@ -50,8 +58,42 @@ def _denoise_shader():
                                             ("grid", "options"),
                                             ("out_image", "out_variance"),
                                             {"NOISE_TARGET": repr(float(NOISE_TARGET)),
-                                             "RIDGE": repr(float(RIDGE))})
+                                             "RIDGE": repr(float(RIDGE)),
+                                             "SAME_SURFACE": repr(float(SAME_SURFACE))})
     return _shaders["denoise"]
+
+
+def _denoise_dispatch(shader, gbuffer_inputs, values, variance, given, stride, width, height,
+                      options):
+    """One dispatch of the denoise kernel over ``values``/``variance`` with ``given`` (a pair:
+    spread_image, spread_variance; None: the values themselves) and ``options``; returns its
+    (out_image, out_variance)."""
+    out = [gpu.types.GPUTexture((values.width, values.height), format="RGBA32F")
+           for _ in range(2)]
+    given = given or (values, variance)
+    inputs = {**gbuffer_inputs, "low_image": values, "low_variance": variance,
+              "spread_image": given[0], "spread_variance": given[1]}
+    shader.bind()
+    for name in _DENOISE_SAMPLERS:
+        shader.uniform_sampler(name, inputs[name])
+    shader.uniform_float("grid", (float(stride), float(width), float(height), 1.0))
+    shader.uniform_float("options", options)
+    shader.image("out_image", out[0])
+    shader.image("out_variance", out[1])
+    gpu.compute.dispatch(shader, math.ceil(values.width / LOCAL_SIZE),
+                         math.ceil(values.height / LOCAL_SIZE), 1)
+    return tuple(out)
+
+
+def spread_spikes(values, variance, gbuffer_inputs, stride: int, width: int, height: int):
+    """(values, variance) textures with the light above its neighbours' spread over its
+    surface (``preview.denoise.spread_spikes``): two dispatches of the filter's own kernel
+    (denoise.glsl options.w = 3, then 4), before a glossy gather's passes."""
+    shader = _denoise_shader()
+    given = _denoise_dispatch(shader, gbuffer_inputs, values, variance, None, stride, width,
+                              height, (0.0, 1.0, 1.0, 3.0))
+    return _denoise_dispatch(shader, gbuffer_inputs, values, variance, given, stride, width,
+                             height, (0.0, 1.0, 1.0, 4.0))
 
 
 def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: int,
@@ -70,7 +112,8 @@ def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: i
         out = [gpu.types.GPUTexture((values.width, values.height), format="RGBA32F")
                for _ in range(2)]
         shader.bind()
-        inputs = {**gbuffer_inputs, "low_image": values, "low_variance": variance}
+        inputs = {**gbuffer_inputs, "low_image": values, "low_variance": variance,
+                  "spread_image": values, "spread_variance": variance}
         for name in _DENOISE_SAMPLERS:
             shader.uniform_sampler(name, inputs[name])
         shader.uniform_float("grid", (float(stride), float(width), float(height), float(1 << it)))
@@ -580,6 +623,8 @@ def gather_low(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settin
     values, variance = gather(bvh, gbuffer_inputs, lights, principled, emission, settings,
                               stride, width, height, kernel=kernel, world_mode=world_mode,
                               tables=tables)
+    if kernel != "bvh_gather":  # a glossy gather's spikes spread first
+        values, variance = spread_spikes(values, variance, gbuffer_inputs, stride, width, height)
     values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,
                         settings.denoise_iterations, fit=kernel == "bvh_gather",
                         sigma=SIGMA_LUMINANCE if kernel == "bvh_gather" else GLOSSY_SIGMA_LUMINANCE)

@@ -66,6 +66,7 @@ from .gpu_gather import (
     denoise,
     gather,
     gather_steps,
+    spread_spikes,
     upsample,
     upsample_field,
     upsample_field_list,
@@ -460,6 +461,9 @@ def _low(f, kind, kernel="bvh_gather", world_mode=False):
         values, variance = f["gather_hook"](kind, values, variance)
     if not f["denoise"]:  # (raw: the filter's kernel not even bound)
         return values
+    if not kind.endswith("diffuse"):  # a glossy gather's spikes spread first: a step too
+        values, variance = spread_spikes(values, variance, centre.inputs, stride, width, height)
+        yield
     return denoise(values, variance, centre.inputs, stride, width, height,
                    settings.denoise_iterations, fit=kind.endswith("diffuse"),
                    sigma=SIGMA_LUMINANCE if kind.endswith("diffuse") else GLOSSY_SIGMA_LUMINANCE)[0]

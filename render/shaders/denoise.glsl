@@ -22,6 +22,89 @@
 const float KERNEL[5] = float[5](1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0);
 const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
 
+/* The spikes spread before the passes (denoise.py spread_spikes), options.w = 3 then 4:
+ * 3 writes per cell (the light it gives: rgb × its excess over the luminance of the
+ * brightest of its 3 × 3 neighbours on its surface (weight above SAME_SURFACE), the sum of KERNEL × its same-surface weights over its 5 × 5
+ * window) and (its variance where it gives, else 0); 4 reads the values and variances in
+ * low_image / low_variance and those in spread_image / spread_variance, and writes each
+ * cell's light less what it gives plus its share of what each giver of its window gives,
+ * its variance plus that share of theirs. */
+
+/* The same-surface weight of cell c seen from the point (pq, nq) (denoise.py
+ * _giver_weights): 0 where c sees nothing. */
+float giver_weight(vec3 pq, vec3 nq, ivec2 c, ivec2 low, int stride, ivec2 full)
+{
+  vec4 pc = texelFetch(gbuffer_position, traced_pixel(low.y - 1 - c.y, c.x, stride, full), 0);
+  if (pc.w < 0.5) {
+    return 0.0;
+  }
+  vec3 nc = texelFetch(gbuffer_normal, traced_pixel(low.y - 1 - c.y, c.x, stride, full), 0).xyz;
+  vec3 offset = pc.xyz - pq;
+  float plane = abs(dot(nq, offset));
+  float tol = 0.1 * length(offset) + 1e-4;
+  return pow(max(dot(nq, nc), 0.0), 32.0) * exp(-(plane / tol) * (plane / tol));
+}
+
+void spread(ivec2 cell, ivec2 low, int stride, ivec2 full, bool give)
+{
+  vec4 v = texelFetch(low_image, cell, 0);
+  vec4 var = texelFetch(low_variance, cell, 0);
+  vec4 position = texelFetch(gbuffer_position, traced_pixel(low.y - 1 - cell.y, cell.x, stride,
+                                                            full), 0);
+  if (position.w < 0.5) {
+    imageStore(out_image, cell, give ? vec4(0.0) : v);
+    imageStore(out_variance, cell, give ? vec4(0.0) : var);
+    return;
+  }
+  vec3 n = texelFetch(gbuffer_normal, traced_pixel(low.y - 1 - cell.y, cell.x, stride, full),
+                      0).xyz;
+  if (give) {
+    float light = dot(v.rgb, LUMINANCE);
+    float near = 0.0, total = 0.0; /* the brightest same-surface neighbour's light */
+    for (int a = -2; a <= 2; a++) {
+      for (int b = -2; b <= 2; b++) {
+        ivec2 q = cell + ivec2(b, a);
+        if (q.x < 0 || q.y < 0 || q.x >= low.x || q.y >= low.y) {
+          continue;
+        }
+        float g = giver_weight(position.xyz, n, q, low, stride, full);
+        total += KERNEL[a + 2] * KERNEL[b + 2] * g;
+        if (abs(a) <= 1 && abs(b) <= 1 && (a != 0 || b != 0) && g > SAME_SURFACE) {
+          near = max(near, dot(texelFetch(low_image, q, 0).rgb, LUMINANCE));
+        }
+      }
+    }
+    float excess = max(light - near, 0.0);
+    vec3 given = light > 0.0 ? v.rgb * (excess / light) : vec3(0.0);
+    imageStore(out_image, cell, vec4(given, total));
+    imageStore(out_variance, cell, vec4(excess > 0.0 ? var.x : 0.0, 0.0, 0.0, 0.0));
+    return;
+  }
+  vec3 light = v.rgb - texelFetch(spread_image, cell, 0).rgb;
+  float light_var = var.x;
+  for (int a = -2; a <= 2; a++) {
+    for (int b = -2; b <= 2; b++) {
+      ivec2 q = cell - ivec2(b, a); /* the giver whose window holds this cell at (a, b) */
+      if (q.x < 0 || q.y < 0 || q.x >= low.x || q.y >= low.y) {
+        continue;
+      }
+      vec4 given = texelFetch(spread_image, q, 0);
+      if (given.a <= 0.0) {
+        continue;
+      }
+      ivec2 qpx = traced_pixel(low.y - 1 - q.y, q.x, stride, full);
+      vec3 pq = texelFetch(gbuffer_position, qpx, 0).xyz;
+      vec3 nq = texelFetch(gbuffer_normal, qpx, 0).xyz;
+      float share = KERNEL[a + 2] * KERNEL[b + 2] * giver_weight(pq, nq, cell, low, stride, full) /
+                    given.a;
+      light += share * given.rgb;
+      light_var += share * texelFetch(spread_variance, q, 0).x;
+    }
+  }
+  imageStore(out_image, cell, vec4(light, v.a));
+  imageStore(out_variance, cell, vec4(light_var, var.yzw));
+}
+
 /* KERNEL at t ∈ [−2, 2] taps from the centre, linearly interpolated between its taps */
 float kernel_at(float t)
 {
@@ -40,6 +123,10 @@ void main()
   int stride = int(grid.x);
   ivec2 full = ivec2(grid.yz);
   int step = int(grid.w);
+  if (options.w > 2.5) {
+    spread(cell, low, stride, full, options.w < 3.5);
+    return;
+  }
   bool alpha_variance = options.w > 0.5 && options.w < 1.5; /* a pixel's world light */
   bool flagged = options.w > 1.5; /* low_variance.w: the light is not shown there */
   vec4 centre = texelFetch(low_image, cell, 0);

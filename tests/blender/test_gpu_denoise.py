@@ -92,3 +92,39 @@ def test_gpu_denoise_keeps_unseen_points_out_of_the_light_as_numpy(voxgi):
     assert np.allclose(out[hit], ref[hit], rtol=1e-3, atol=1e-4)
     shown = hit & ~unseen
     assert np.abs(ref[shown][:, :3] - plain[shown][:, :3]).max() > 0.01
+
+
+def test_gpu_spreads_the_spikes_as_numpy(voxgi):
+    """The glossy gathers' spikes spread over their surface before the passes
+    (``spread_spikes``; denoise.glsl options.w = 3 and 4): the GPU's light and variance equal
+    numpy's, the light is kept, and the spikes are lower."""
+    from voxgi.render.gpu_context import ensure_gpu_context
+    from voxgi.render.gpu_gather import denoise
+    from voxgi.render.gpu_gather import spread_spikes as gpu_spread
+    from voxgi.render.gpu_tracer import read_texture
+    from voxgi.render.gpu_volume import float_texture
+    from voxgi.voxgi_addon.preview.denoise import atrous_filter, spread_spikes
+
+    ready, why = ensure_gpu_context()
+    assert ready, why
+    values, variance, hit, position, normal = _scene()
+    h, w = hit.shape
+    rng = np.random.default_rng(9)
+    spikes = (rng.random((h, w)) < 0.03) & hit
+    values[spikes, :3] += 5.0
+    variance[spikes, 0] = 25.0 / 8
+    var4 = np.concatenate([variance, np.zeros((h, w, 2))], axis=-1)
+    gbuffer = _gbuffer_textures(position, normal, hit)
+    spread = gpu_spread(float_texture(np.flipud(values), (w, h)),
+                        float_texture(np.flipud(var4), (w, h)), gbuffer, 1, w, h)
+    out, out_var = (np.flipud(read_texture(t)) for t in spread)
+    ref, ref_var = spread_spikes(values, variance, hit, position, normal)
+    assert np.allclose(out[hit], ref[hit], rtol=1e-3, atol=1e-4)
+    assert np.allclose(out_var[hit][:, 0], ref_var[hit][:, 0], rtol=1e-3, atol=1e-7)
+    assert abs(ref[hit][:, :3].sum() / values[hit][:, :3].sum() - 1.0) < 1e-6  # light kept
+    assert ref[spikes][:, :3].max() < 0.7 * values[spikes][:, :3].max()
+    filtered, _ = denoise(*spread, gbuffer, 1, w, h, iterations=4, fit=False)
+    numpy_filtered, _ = atrous_filter(ref, ref_var, hit, position, normal, iterations=4,
+                                      fit=False)
+    assert np.allclose(np.flipud(read_texture(filtered))[hit], numpy_filtered[hit], rtol=1e-3,
+                       atol=1e-4)

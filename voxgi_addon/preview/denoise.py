@@ -152,6 +152,63 @@ def _fit(moments, spread, light, scalar, fit: bool = True):
     return np.maximum(out_v, 0.0), np.maximum(out_var, 0.0)
 
 
+SAME_SURFACE = 0.5  # a neighbour whose same-surface weight is above this is on the surface
+
+
+def _giver_weights(position, normal, ok, dy: int, dx: int) -> np.ndarray:
+    """(H, W) per cell q the same-surface weight of the cell q + (dy, dx) seen from q (q's
+    normal and tangent plane, as the filter's geometry terms): 0 where either is invalid."""
+    q_p = _shifted(position, dy, dx, 0.0)
+    offset = q_p - position
+    facing = np.maximum(np.einsum("...i,...i->...", normal, _shifted(normal, dy, dx, 0.0)), 0.0)
+    plane = np.abs(np.einsum("...i,...i->...", normal, offset))
+    tol = PLANE_TOLERANCE * np.sqrt(np.einsum("...i,...i->...", offset, offset)) + 1e-4
+    return (facing ** NORMAL_POWER * np.exp(-(plane / tol) ** 2) * ok *
+            _shifted(ok, dy, dx, False))
+
+
+def spread_spikes(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
+                  position: np.ndarray, normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(values, variance) with each cell's light above its neighbours' spread over its
+    surface before the filter (docs/gi_pipeline.md "A known defect: a dotted lattice in the
+    filtered glossy gather"): a cell whose luminance exceeds that of the brightest of its
+    3 × 3 neighbours on its surface (same-surface weight above ``SAME_SURFACE``) — an isolated
+    spike, not a highlight's edge, whose brighter inside is beside it — gives that excess (its
+    rgb in proportion) to the cells of its 5 × 5 window, KERNEL × its same-surface weights
+    normalised over them (itself among them), so the light is kept; each receiver's variance
+    grows by its share × the giver's variance. The filter's passes would otherwise leave a
+    spike's light on a lattice of their steps: the spike keeps it (its neighbours differ by
+    more than its prefiltered noise) while the cells one step away take it through its own
+    variance. The scalar (AO) is not moved."""
+    v = np.asarray(values, np.float64).copy()
+    var = np.asarray(variance, np.float64).copy()
+    ok = np.asarray(valid, bool)
+    p = np.asarray(position, np.float64)
+    n = np.asarray(normal, np.float64)
+    light = v[..., :3] @ LUMINANCE
+    near = np.zeros(ok.shape)  # the brightest same-surface neighbour's light
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dy or dx:
+                same = _giver_weights(p, n, ok, dy, dx) > SAME_SURFACE
+                near = np.maximum(near, np.where(same, _shifted(light, dy, dx, 0.0), 0.0))
+    excess = np.where(ok, np.maximum(light - near, 0.0), 0.0)
+    given = np.where(light > 0, excess / np.maximum(light, 1e-30), 0.0)[..., None] * v[..., :3]
+    offsets = [(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3)]
+    kernel = {(dy, dx): KERNEL[dy + 2] * KERNEL[dx + 2] * _giver_weights(p, n, ok, dy, dx)
+              for dy, dx in offsets}
+    total = sum(kernel.values())
+    share = {d: np.where(total > 0, k / np.maximum(total, 1e-30), 0.0) for d, k in kernel.items()}
+    giving = excess > 0
+    out = v.copy()
+    out[..., :3] -= given
+    spread_var = np.where(giving, var[..., 0], 0.0)
+    for (dy, dx), w in share.items():  # the receiver q + (dy, dx) of the giver q
+        out[..., :3] += _shifted(w[..., None] * given, -dy, -dx, 0.0)
+        var[..., 0] += _shifted(w * spread_var, -dy, -dx, 0.0)
+    return out, var
+
+
 def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
                   position: np.ndarray, normal: np.ndarray, iterations: int = 4,
                   sigma_luminance: float = SIGMA_LUMINANCE,

@@ -25,7 +25,7 @@ from ..gi.exact_glossy import glossy_indirect, glossy_world_direct
 from ..gi.exact_indirect import indirect_and_ao
 from ..gi.surface_lookup import geometric_normals
 from ..scene.snapshot import RAY_DIFFUSE
-from .denoise import GLOSSY_SIGMA_LUMINANCE, atrous_filter
+from .denoise import GLOSSY_SIGMA_LUMINANCE, atrous_filter, spread_spikes
 from .sparse_gather import gather_counts, noisy_holes, ray_counts, sparse_plan, sparse_settings
 from .upsample import sample_pixels, upsample
 
@@ -217,6 +217,8 @@ def _glossy_cells(estimator, scene, options, hit, position, normal, direction, m
                             rays=settings.glossy_rays, seed=settings.seed, **options)
     values[valid, :3] = glossy
     variance[valid, 0] = var
+    # (a ray that found a lamp's highlight: its light spread over its surface first)
+    values, variance = spread_spikes(values, variance, valid, cell_p, cell_n)
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
                               iterations=settings.denoise_iterations, fit=False,
                               sigma_luminance=GLOSSY_SIGMA_LUMINANCE)
