@@ -24,40 +24,42 @@ const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
 
 /* The spikes spread before the passes (denoise.py spread_spikes), options.w = 3 then 4:
  * 3 writes per cell (the light it gives: rgb × its excess over the luminance of the
- * brightest of its 3 × 3 neighbours on its surface (weight above SAME_SURFACE), the sum of KERNEL × its same-surface weights over its 5 × 5
- * window) and (its variance where it gives, else 0); 4 reads the values and variances in
- * low_image / low_variance and those in spread_image / spread_variance, and writes each
- * cell's light less what it gives plus its share of what each giver of its window gives,
- * its variance plus that share of theirs. */
+ * brightest of its 3 × 3 neighbours on its surface (weight above SAME_SURFACE); the sum of
+ * KERNEL × its same-surface weights over its 5 × 5 window) and (its variance where it gives,
+ * else 0); 4 reads the values and variances in low_image / low_variance and those in
+ * spread_image / spread_variance, and writes each cell's light less what it gives plus its
+ * share of what each giver of its window gives, its variance plus that share of theirs. */
 
-/* The same-surface weight of cell c seen from the point (pq, nq) (denoise.py
- * _giver_weights): 0 where c sees nothing. */
-float giver_weight(vec3 pq, vec3 nq, ivec2 c, ivec2 low, int stride, ivec2 full)
+/* The same-surface weight of the point (pc, nc) seen from (pq, nq): the filter's geometry
+ * terms, max(n·n_c, 0)^32 × exp(−(|n·(p_c − p)| / (0.1 |p_c − p| + 1e-4))²) (denoise.py
+ * _surface_weight). */
+float surface_weight(vec3 pq, vec3 nq, vec3 pc, vec3 nc)
 {
-  vec4 pc = texelFetch(gbuffer_position, traced_pixel(low.y - 1 - c.y, c.x, stride, full), 0);
-  if (pc.w < 0.5) {
-    return 0.0;
-  }
-  vec3 nc = texelFetch(gbuffer_normal, traced_pixel(low.y - 1 - c.y, c.x, stride, full), 0).xyz;
-  vec3 offset = pc.xyz - pq;
+  vec3 offset = pc - pq;
   float plane = abs(dot(nq, offset));
   float tol = 0.1 * length(offset) + 1e-4;
   return pow(max(dot(nq, nc), 0.0), 32.0) * exp(-(plane / tol) * (plane / tol));
+}
+
+/* The G-buffer point of cell c (position .w < 0.5: it sees nothing) and its normal. */
+vec4 cell_point(ivec2 c, ivec2 low, int stride, ivec2 full, out vec3 normal)
+{
+  ivec2 px = traced_pixel(low.y - 1 - c.y, c.x, stride, full);
+  normal = texelFetch(gbuffer_normal, px, 0).xyz;
+  return texelFetch(gbuffer_position, px, 0);
 }
 
 void spread(ivec2 cell, ivec2 low, int stride, ivec2 full, bool give)
 {
   vec4 v = texelFetch(low_image, cell, 0);
   vec4 var = texelFetch(low_variance, cell, 0);
-  vec4 position = texelFetch(gbuffer_position, traced_pixel(low.y - 1 - cell.y, cell.x, stride,
-                                                            full), 0);
+  vec3 n;
+  vec4 position = cell_point(cell, low, stride, full, n);
   if (position.w < 0.5) {
     imageStore(out_image, cell, give ? vec4(0.0) : v);
     imageStore(out_variance, cell, give ? vec4(0.0) : var);
     return;
   }
-  vec3 n = texelFetch(gbuffer_normal, traced_pixel(low.y - 1 - cell.y, cell.x, stride, full),
-                      0).xyz;
   if (give) {
     float light = dot(v.rgb, LUMINANCE);
     float near = 0.0, total = 0.0; /* the brightest same-surface neighbour's light */
@@ -67,7 +69,9 @@ void spread(ivec2 cell, ivec2 low, int stride, ivec2 full, bool give)
         if (q.x < 0 || q.y < 0 || q.x >= low.x || q.y >= low.y) {
           continue;
         }
-        float g = giver_weight(position.xyz, n, q, low, stride, full);
+        vec3 nq;
+        vec4 pq = cell_point(q, low, stride, full, nq);
+        float g = pq.w < 0.5 ? 0.0 : surface_weight(position.xyz, n, pq.xyz, nq);
         total += KERNEL[a + 2] * KERNEL[b + 2] * g;
         if (abs(a) <= 1 && abs(b) <= 1 && (a != 0 || b != 0) && g > SAME_SURFACE) {
           near = max(near, dot(texelFetch(low_image, q, 0).rgb, LUMINANCE));
@@ -92,10 +96,9 @@ void spread(ivec2 cell, ivec2 low, int stride, ivec2 full, bool give)
       if (given.a <= 0.0) {
         continue;
       }
-      ivec2 qpx = traced_pixel(low.y - 1 - q.y, q.x, stride, full);
-      vec3 pq = texelFetch(gbuffer_position, qpx, 0).xyz;
-      vec3 nq = texelFetch(gbuffer_normal, qpx, 0).xyz;
-      float share = KERNEL[a + 2] * KERNEL[b + 2] * giver_weight(pq, nq, cell, low, stride, full) /
+      vec3 nq;
+      vec3 pq = cell_point(q, low, stride, full, nq).xyz; /* a giver sees a surface */
+      float share = KERNEL[a + 2] * KERNEL[b + 2] * surface_weight(pq, nq, position.xyz, n) /
                     given.a;
       light += share * given.rgb;
       light_var += share * texelFetch(spread_variance, q, 0).x;
@@ -205,12 +208,8 @@ void main()
         continue; /* a hole is no tap */
       }
       vec2 varq = var4.xy;
-      vec3 offset = pq.xyz - position.xyz;
-      float facing = pow(max(dot(n, nq), 0.0), 32.0);
-      float plane = abs(dot(n, offset));
-      float tol = 0.1 * length(offset) + 1e-4;
       float geometry = kernel_at(float(a) / float(spread)) * kernel_at(float(b) / float(spread)) *
-                       facing * exp(-(plane / tol) * (plane / tol));
+                       surface_weight(position.xyz, n, pq.xyz, nq);
       vec2 scale = options.z * sqrt(max(blurred + varq, vec2(0.0))) + 1e-6;
       vec2 w = hole ? vec2(geometry) :
                geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);

@@ -155,16 +155,20 @@ def _fit(moments, spread, light, scalar, fit: bool = True):
 SAME_SURFACE = 0.5  # a neighbour whose same-surface weight is above this is on the surface
 
 
-def _giver_weights(position, normal, ok, dy: int, dx: int) -> np.ndarray:
-    """(H, W) per cell q the same-surface weight of the cell q + (dy, dx) seen from q (q's
-    normal and tangent plane, as the filter's geometry terms): 0 where either is invalid."""
-    q_p = _shifted(position, dy, dx, 0.0)
-    offset = q_p - position
+def _surface_weight(position, normal, dy: int, dx: int) -> np.ndarray:
+    """(H, W) per cell the same-surface weight of the cell (dy, dx) away, seen from the cell
+    (its normal and tangent plane): max(n·n_q, 0)^NORMAL_POWER ×
+    exp(−(|n·(p_q − p)| / (PLANE_TOLERANCE·|p_q − p| + 1e-4))²), the filter's geometry terms."""
+    offset = _shifted(position, dy, dx, 0.0) - position
     facing = np.maximum(np.einsum("...i,...i->...", normal, _shifted(normal, dy, dx, 0.0)), 0.0)
     plane = np.abs(np.einsum("...i,...i->...", normal, offset))
     tol = PLANE_TOLERANCE * np.sqrt(np.einsum("...i,...i->...", offset, offset)) + 1e-4
-    return (facing ** NORMAL_POWER * np.exp(-(plane / tol) ** 2) * ok *
-            _shifted(ok, dy, dx, False))
+    return facing ** NORMAL_POWER * np.exp(-(plane / tol) ** 2)
+
+
+def _giver_weights(position, normal, ok, dy: int, dx: int) -> np.ndarray:
+    """``_surface_weight``, 0 where the cell or the one (dy, dx) away is not ``ok``."""
+    return _surface_weight(position, normal, dy, dx) * ok * _shifted(ok, dy, dx, False)
 
 
 def spread_spikes(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
@@ -266,14 +270,8 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
         for a, ky in enumerate(taps):
             for b_, kx in enumerate(taps):
                 dy, dx = (a - reach) * step, (b_ - reach) * step
-                q_p = _shifted(p, dy, dx, 0.0)
                 q_v = _shifted(v, dy, dx, 0.0)
-                offset = q_p - p
-                facing = np.maximum(np.einsum("...i,...i->...", n, _shifted(n, dy, dx, 0.0)), 0.0)
-                plane = np.abs(np.einsum("...i,...i->...", n, offset))
-                tol = PLANE_TOLERANCE * np.sqrt(np.einsum("...i,...i->...", offset, offset)) + 1e-4
-                geometry = (ky * kx * _shifted(sampled, dy, dx, False) * facing ** NORMAL_POWER
-                            * np.exp(-(plane / tol) ** 2))
+                geometry = ky * kx * _shifted(sampled, dy, dx, False) * _surface_weight(p, n, dy, dx)
                 q_signal = np.stack([q_v[..., :3] @ LUMINANCE, q_v[..., 3]], axis=-1)
                 q_var = _shifted(var, dy, dx, 0.0)
                 scale = sigma_luminance * np.sqrt(np.maximum(blurred + q_var, 0.0)) + _EPSILON
