@@ -41,7 +41,7 @@ from ..voxgi_addon.preview.passes import (
     subpixel_reach,
 )
 from ..voxgi_addon.preview.resolve import SPREAD
-from ..voxgi_addon.preview.sparse_gather import gather_counts, noisy_holes, ray_counts, sparse_plan, sparse_settings
+from ..voxgi_addon.preview.sparse_gather import gather_lists, sparse_plan, sparse_settings
 from ..voxgi_addon.preview.upsample import field_stride, low_shape, sample_pixels
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame, filter_on_grid
 from ..voxgi_addon.scene.glass import is_glass
@@ -513,12 +513,7 @@ def _sparse_diffuse(f):
     def trace(cells, at):
         return _gather_cells(f, cells, at)
 
-    gather_counts(ray_counts(traced, diffuse, settings.rays), *grid, settings, trace)
-    # (the holes whose surface shows diffuse light, by the noise of those that show it)
-    extra = noisy_holes(traced & diffuse, valid & diffuse, grid[1][..., 0])
-    if extra.any():
-        gather_counts(ray_counts(extra, diffuse, settings.rays), *grid, settings, trace)
-        traced = traced | extra
+    traced = gather_lists(traced, valid, diffuse, *grid, settings, trace)
     grid[1][..., 2] = valid & ~traced  # the holes the filter's first pass fills (denoise.glsl)
     grid[1][..., 3] = valid & ~diffuse  # the points whose light no pass shows: no taps of it
     grid = [float_texture(np.flipud(cells), (cells.shape[1], cells.shape[0])) for cells in grid]

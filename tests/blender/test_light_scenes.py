@@ -264,12 +264,11 @@ def test_gather_points_on_metals_trace_ao_only_and_the_image_keeps_its_light(vox
     """The room of metals at 160 × 120: the points whose surface shows no diffuse light (the
     full metals, counted from the plan) draw AO_RAYS each, and the preview's passes stay
     within the scene's limits and within noise of the one that draws every ray everywhere."""
-    from voxgi.render import gpu_preview
     from voxgi.voxgi_addon.preview import sparse_gather
 
     counted = []
-    counts_of = gpu_preview.ray_counts
-    monkeypatch.setattr(gpu_preview, "ray_counts",
+    counts_of = sparse_gather.ray_counts
+    monkeypatch.setattr(sparse_gather, "ray_counts",
                         lambda cells, diffuse, rays: counted.append(
                             (counts_of(cells, diffuse, rays), cells, diffuse, rays))
                         or counted[-1][0])

@@ -26,7 +26,7 @@ from ..gi.exact_indirect import indirect_and_ao
 from ..gi.surface_lookup import geometric_normals
 from ..scene.snapshot import RAY_DIFFUSE
 from .denoise import GLOSSY_SIGMA_LUMINANCE, atrous_filter, spread_spikes
-from .sparse_gather import gather_counts, noisy_holes, ray_counts, sparse_plan, sparse_settings
+from .sparse_gather import gather_lists, sparse_plan, sparse_settings
 from .upsample import sample_pixels, upsample
 
 
@@ -145,12 +145,8 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
         values[traced], variance[traced] = trace(traced, replace(settings, rays=rays))
     else:  # metals' points trace AO only; then the second list, the noisiest holes
         diffuse = valid if shown is None else np.asarray(shown, bool)[rows][:, cols]
-        at = replace(settings, rays=rays)
-        gather_counts(ray_counts(traced, diffuse, rays), values, variance, at, trace)
-        extra = noisy_holes(traced & diffuse, valid & diffuse, variance[..., 0])
-        if extra.any():
-            gather_counts(ray_counts(extra, diffuse, rays), values, variance, at, trace)
-            traced = traced | extra
+        traced = gather_lists(traced, valid, diffuse, values, variance,
+                              replace(settings, rays=rays), trace)
     unseen = valid & ~diffuse if settings.sparse else None
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
                               iterations=settings.denoise_iterations, holes=valid & ~traced,

@@ -27,8 +27,8 @@ import numpy as np
 
 from ..scene.short_axis import norm3
 
-__all__ = ["AO_RAYS", "EXTRA", "MATCH", "SPARSE_RAYS", "gather_counts", "noisy_holes",
-           "ray_counts", "sparse_plan", "sparse_settings"]
+__all__ = ["AO_RAYS", "EXTRA", "MATCH", "SPARSE_RAYS", "gather_counts", "gather_lists",
+           "noisy_holes", "ray_counts", "sparse_plan", "sparse_settings"]
 
 # Rays per traced point, as a multiple of the gather's (docs/gi_pipeline.md "Gathers at fewer
 # points": with the stretched first pass and the second list, 1.5 × them kept the test scenes'
@@ -150,3 +150,18 @@ def gather_counts(counts: np.ndarray, values: np.ndarray, variance: np.ndarray, 
     for count in np.unique(counts[counts > 0]):
         at = counts == count
         values[at], variance[at] = trace(at, replace(settings, rays=int(count)))
+
+
+def gather_lists(traced: np.ndarray, valid: np.ndarray, diffuse: np.ndarray, values: np.ndarray,
+                 variance: np.ndarray, settings, trace) -> np.ndarray:
+    """The sparse gather's two lists into ``values`` and ``variance`` in place, as both tracers
+    run them: the ``traced`` cells (``sparse_plan``), then the holes ``noisy_holes`` picks among
+    those whose surface shows diffuse light (``diffuse``), by the noise of the traced cells
+    that show it — each point ``ray_counts`` rays (``settings.rays`` where it shows diffuse
+    light) through ``trace`` (``gather_counts``). Returns every cell traced."""
+    gather_counts(ray_counts(traced, diffuse, settings.rays), values, variance, settings, trace)
+    extra = noisy_holes(traced & diffuse, valid & diffuse, variance[..., 0])
+    if extra.any():
+        gather_counts(ray_counts(extra, diffuse, settings.rays), values, variance, settings,
+                      trace)
+    return traced | extra
