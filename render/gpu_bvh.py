@@ -49,6 +49,7 @@ from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE
 from ..voxgi_addon.scene.bvh import (
     DET_EPSILON,
     LEAF_BIAS,
+    ORDERS,
     TEXTURE_WIDTH,
     bvh_of,
     pack_bvh,
@@ -167,6 +168,7 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
                    "DET_EPSILON": repr(float(DET_EPSILON)), "RAY_STREAM": f"{RAY_STREAM}u",
                    # the kind of ray a kernel's closest hits are (ray visibility, bvh_common)
                    "BVH_RAY_SHADOW": str(RAY_SHADOW), "BVH_LEAF_BIAS": str(LEAF_BIAS),
+                   "BVH_ORDERS": str(ORDERS),
                    "BVH_CLOSEST_RAY": {"bvh_glossy": str(RAY_GLOSSY),
                                        "bvh_probe": "int(mode.y)",
                                        # (its one closest hit: the triangle under a pixel,

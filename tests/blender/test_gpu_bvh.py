@@ -80,6 +80,37 @@ def test_gpu_hits_equal_the_grid_ray_caster_on_the_demo_scene(voxgi):
     assert bvh.uploaded_bytes == 0
 
 
+def test_gpu_hits_are_the_same_in_one_layout_or_one_per_ray_direction(voxgi, monkeypatch):
+    """A BVH whose nodes pass ``ORDERED_BYTES`` is packed in one layout (bvh.node_layouts): the
+    GPU's traversal reads the count from the root and finds the hits it finds in the six
+    (each layout more rows than there are layouts: an 80k-triangle sphere in the demo scene)."""
+    from voxgi.render.gpu_bvh import GPUBVH, trace_rays
+    from voxgi.render.gpu_tracer import read_texture
+    from voxgi.voxgi_addon.scene import bvh as bvh_module
+
+    demo_scene()
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=6, radius=0.4, location=(0.0, 0.0, 1.0))
+    _, tris = snapshot_now()
+    gpu_ready()
+    rng = np.random.default_rng(3)
+    lo, hi = tris.bounds
+    o = rng.uniform(lo, hi, (3000, 3))
+    d = rng.normal(size=(3000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    max_t = rng.uniform(0.05, 3.0, len(o))
+    six = GPUBVH().update(tris)
+    assert -read_texture(six.nodes)[0, 0, 3] == bvh_module.ORDERS  # the root's miss link
+    assert six.nodes.height >= bvh_module.ORDERS ** 2
+    ordered = trace_rays(six, o, d, 1e-4, np.inf), trace_rays(six, o, d, 0.0, max_t, any_hit=True)
+    monkeypatch.setattr(bvh_module, "ORDERED_BYTES", 0)
+    one = GPUBVH().update(tris)
+    assert -read_texture(one.nodes)[0, 0, 3] == 1
+    single = trace_rays(one, o, d, 1e-4, np.inf), trace_rays(one, o, d, 0.0, max_t, any_hit=True)
+    assert np.isfinite(single[0][0]).mean() > 0.5 and single[1].mean() > 0.1
+    assert (single[0][1] == ordered[0][1]).mean() > 0.999  # (ties between coplanar triangles)
+    assert (single[1] == ordered[1]).mean() > 0.999
+
+
 def test_sample_patterns_are_bit_exact(voxgi):
     from voxgi.render.gpu_bvh import sample_patterns
     from voxgi.voxgi_addon.gi.sampling import (

@@ -13,6 +13,8 @@ from voxgi.voxgi_addon.scene import bvh as bvh_module
 from voxgi.voxgi_addon.scene.bvh import (
     MAX_LEAF,
     NODE_TEXELS,
+    ORDERED_BYTES,
+    ORDERS,
     TEXTURE_WIDTH,
     TRIANGLE_TEXELS,
     build_bvh,
@@ -154,11 +156,25 @@ def test_traversal_equals_the_grid_ray_caster_on_a_scene():
                                   occluded(tris, o, d, max_t))
 
 
+def _layout(packed, layout: int, bvh):
+    """Layout ``layout`` of ``packed``'s node texels read back as a ``BVH`` (the order's)."""
+    rows = packed.nodes.shape[0] // -int(packed.nodes[0, 0, 3])
+    texels = packed.nodes[layout * rows:(layout + 1) * rows].reshape(-1, NODE_TEXELS, 4)
+    texels = texels[:packed.node_count]
+    code = bvh_module.leaf_codes(texels[:, 1, 3])
+    miss = texels[:, 0, 3].astype(np.int32)
+    miss[0] = -1
+    return bvh_module.BVH(lo=texels[:, 0, :3].astype(np.float64), hi=texels[:, 1, :3].astype(np.float64),
+                          miss=miss, first=np.where(code >= 0, code >> 4, -1).astype(np.int32),
+                          count=np.where(code >= 0, code & 15, 0).astype(np.int32), order=bvh.order,
+                          depth=bvh.depth)
+
+
 def test_packing_layout():
     rng = np.random.default_rng(1)
     tris = random_soup(rng, 50)
     bvh = build_bvh(tris)
-    packed = pack_bvh(bvh, tris)
+    packed = pack_bvh(bvh, tris, layouts=1)  # the BVH's own depth-first order
     nodes = packed.nodes.reshape(-1, 4)
     tri = packed.triangles.reshape(-1, 4)
     assert packed.nodes.shape[1:] == (TEXTURE_WIDTH, 4) and packed.nodes.dtype == np.float32
@@ -177,6 +193,35 @@ def test_packing_layout():
     np.testing.assert_array_equal(tri[TRIANGLE_TEXELS * j, 3], tris.materials[bvh.order])
     normals = packed.normals.reshape(-1, 4)
     np.testing.assert_allclose(normals[TRIANGLE_TEXELS * j + 2, :3], tris.normals[bvh.order], atol=1e-6)
+
+
+def test_each_ray_direction_has_a_layout_with_the_nearer_child_first_and_the_same_hits():
+    """``pack_bvh`` packs ``ORDERS`` layouts of one BVH (a small one fits ``ORDERED_BYTES``):
+    in layout 2a + s every interior node's first child lies first along axis a toward +a
+    (s = 0) or −a (s = 1), and each layout, read back from its texels and traversed, finds
+    exactly the hits of the BVH itself (the GPU picks one by each ray's direction)."""
+    rng = np.random.default_rng(5)
+    tris = random_soup(rng, 300)
+    bvh = build_bvh(tris)
+    packed = pack_bvh(bvh, tris)
+    assert bvh_module.node_layouts(len(bvh)) == ORDERS and -packed.nodes[0, 0, 3] == ORDERS
+    assert packed.nodes.shape[0] == ORDERS * max(1, -(-NODE_TEXELS * len(bvh) // TEXTURE_WIDTH))
+    o = rng.uniform(-1.5, 1.5, (400, 3))
+    d = rng.normal(size=(400, 3))
+    expected = traverse(bvh, tris, o, d)
+    for layout in range(ORDERS):
+        laid = _layout(packed, layout, bvh)
+        axis, sign = layout // 2, (1.0, -1.0)[layout % 2]
+        inner = np.flatnonzero(laid.first < 0)
+        near, far = inner + 1, laid.miss[inner + 1]
+        centre = (laid.lo + laid.hi)[:, axis] * sign
+        assert (centre[near] <= centre[far]).all()
+        got = traverse(laid, tris, o, d)
+        np.testing.assert_array_equal(got[1], expected[1])
+        np.testing.assert_allclose(got[0], expected[0])
+    # past ORDERED_BYTES one layout: the BVH's own
+    assert bvh_module.node_layouts(ORDERED_BYTES // 16) == 1
+
 
 
 def test_build_of_100k_triangles_is_balanced():

@@ -130,7 +130,7 @@ def test_leaf_codes_past_a_million_triangles_survive_packing():
     fake = bvh_module.BVH(lo=np.zeros((4, 3)), hi=np.ones((4, 3)), miss=np.array([-1, 2, 3, -1], np.int32),
                           first=firsts, count=counts, order=np.zeros(0, np.int32), depth=2)
     tris = world_triangles(placed_scene(count=0))
-    packed = bvh_module.pack_bvh(fake, tris)
+    packed = bvh_module.pack_bvh(fake, tris, layouts=1)
     codes = bvh_module.leaf_codes(packed.nodes.reshape(-1, 4)[1:8:2, 3])
     np.testing.assert_array_equal(codes, [-1, 8, ((1 << 20) + 1) * 16 + 3, ((1 << 23) - 5) * 16 + 5])
     values = packed.nodes.reshape(-1, 4)[3:8:2, 3]

@@ -19,8 +19,13 @@ its subtree in depth-first order (-1 past the end). Traversal is then a loop wit
 
 ``pack_bvh`` turns a BVH into RGBA32F texels for ``render/shaders/bvh_common.glsl`` (2D textures
 ``TEXTURE_WIDTH`` texels wide, texel k at (k mod width, k div width); integers are stored as
-float values, exact below 2²⁴). ``traverse`` is the numpy statement of the GLSL traversal
-(vectorised over rays; tests compare it with brute force and with ``raycast``).
+float values, exact below 2²⁴). It packs the nodes in ``ORDERS`` depth-first layouts, one per
+major ray direction (``ordered_layouts``: the child nearer along that direction first, so a
+closest-hit ray finds its hit early and skips the farther subtrees; Hachisuka's
+multiple-threaded BVH), while they fit ``ORDERED_BYTES``, else in the BVH's own order; the
+GPU picks a layout per ray (docs/gi_pipeline.md "A layout of the BVH per ray direction").
+``traverse`` is the numpy statement of the GLSL traversal of one layout (vectorised over rays;
+tests compare it with brute force and with ``raycast``; every layout finds the same hits).
 
 Units: world space, metres, as ``SceneTriangles``.
 """
@@ -43,6 +48,8 @@ __all__ = [
     "DET_EPSILON",
     "MAX_LEAF",
     "NODE_TEXELS",
+    "ORDERED_BYTES",
+    "ORDERS",
     "TEXTURE_WIDTH",
     "TRIANGLE_TEXELS",
     "BVHTextures",
@@ -53,7 +60,9 @@ __all__ = [
     "closest_hits",
     "leaf_codes",
     "material_code",
+    "node_layouts",
     "occluded",
+    "ordered_layouts",
     "pack_bvh",
     "traverse",
 ]
@@ -63,6 +72,10 @@ MAX_LEAF = 8            # most triangles in a leaf (the leaf code keeps 4 bits f
 TRAVERSAL_COST = 1.0    # SAH cost of visiting a node, relative to one triangle test
 TEXTURE_WIDTH = 4096    # texels per row of the packed textures (a power of two)
 NODE_TEXELS = 2         # (lo.xyz, miss), (hi.xyz, leaf code)
+ORDERS = 6              # packed node layouts, one per major ray direction (``ordered_layouts``)
+# the most bytes of node texels packed in ORDERS layouts (``node_layouts``): the viewport uploads
+# the node texture in one call on the main thread, about 2.4 GB/s here (48 MB: ~20 ms)
+ORDERED_BYTES = 48 << 20
 TRIANGLE_TEXELS = 3     # (v0.xyz, material code), (e1.xyz, triangle index), (e2.xyz, |e1|·|e2|)
 HIDDEN_SHIFT = 1 << 16  # material code = material + HIDDEN_SHIFT · (RAY_* bits it is hidden from)
 DET_EPSILON = 1e-12     # as raycast's Möller–Trumbore: |det| > ε·|e1|·|e2|·|d| or no hit
@@ -478,10 +491,13 @@ def bvh_of(tris: SceneTriangles) -> BVH:
 class BVHTextures:
     """RGBA32F texel arrays for ``bvh_common.glsl``, each (rows, TEXTURE_WIDTH, 4) float32.
 
-    nodes : 2 texels per node: (lo.xyz, miss link), (hi.xyz, leaf code) with leaf code =
+    nodes : 1 or ``ORDERS`` layouts (``node_layouts``) of equal rows, layout k the k-th of
+        ``ordered_layouts`` (one: the BVH's own order), each
+        2 texels per node: (lo.xyz, miss link), (hi.xyz, leaf code) with leaf code =
         first · 16 + count (first indexes the packed triangles) stored as the float whose bits
         are code + ``LEAF_BIAS`` (exact whatever the triangle count; ``leaf_codes`` reads it),
-        or -1.0 for an interior node.
+        or -1.0 for an interior node. The root's miss link (it has none) is minus the count
+        of layouts.
     triangles : 3 texels per triangle, in leaf order: (v0.xyz, material code), (e1.xyz,
         index into the SceneTriangles), (e2.xyz, ±|e1|·|e2|, negative for a cut-out:
         ``textures.cutout_hits``) — v0 and the edges in metres.
@@ -537,15 +553,61 @@ def material_code(tris: SceneTriangles) -> np.ndarray:
     return materials + HIDDEN_SHIFT * hidden
 
 
-def pack_bvh(bvh: BVH, tris: SceneTriangles) -> BVHTextures:
-    """The texel arrays of ``bvh`` over ``tris`` (see ``BVHTextures``)."""
+def ordered_layouts(bvh: BVH) -> tuple[np.ndarray, np.ndarray]:
+    """The ``ORDERS`` depth-first layouts of ``bvh``'s nodes, one per major ray direction
+    (+x, −x, +y, −y, +z, −z): in layout 2a + s every interior node's child whose box centre lies
+    first along axis a (toward +a for s = 0, −a for s = 1) comes first, so a ray walking that
+    way meets the nearer child first and its closest hit cuts the farther one's subtree short
+    (Hachisuka's multiple-threaded BVH). Returns (position (ORDERS, N) int64: where each node of
+    ``bvh`` stands in each layout; miss (ORDERS, N) int64: its miss link there, -1 = none)."""
     n = len(bvh)
-    nodes = np.zeros((n, 2, 4), np.float32)
-    nodes[:, 0, :3] = bvh.lo
-    nodes[:, 0, 3] = bvh.miss
-    nodes[:, 1, :3] = bvh.hi
+    size = _subtree_sizes(bvh)
+    centre = bvh.lo + bvh.hi
+    levels = _node_levels(bvh)
+    position = np.zeros((ORDERS, n), np.int64)
+    for layout in range(ORDERS):
+        axis, toward_minus = divmod(layout, 2)
+        pos = position[layout]
+        for ids in levels:
+            inner = ids[bvh.first[ids] < 0]
+            if len(inner) == 0:
+                continue
+            a, b = inner + 1, bvh.miss[inner + 1].astype(np.int64)
+            ahead = centre[a, axis] <= centre[b, axis]
+            if toward_minus:
+                ahead = centre[a, axis] >= centre[b, axis]
+            near, far = np.where(ahead, a, b), np.where(ahead, b, a)
+            pos[near] = pos[inner] + 1
+            pos[far] = pos[inner] + 1 + size[near]
+    miss = position + size[None, :]
+    miss[miss >= n] = -1
+    return position, miss
+
+
+def node_layouts(node_count: int) -> int:
+    """How many node layouts ``pack_bvh`` packs for a BVH of ``node_count`` nodes: ``ORDERS``
+    while their texture stays within ``ORDERED_BYTES``, else the one depth-first layout."""
+    rows = max(1, -(-NODE_TEXELS * node_count // TEXTURE_WIDTH))
+    return ORDERS if ORDERS * rows * TEXTURE_WIDTH * 16 <= ORDERED_BYTES else 1
+
+
+def pack_bvh(bvh: BVH, tris: SceneTriangles, layouts: int | None = None) -> BVHTextures:
+    """The texel arrays of ``bvh`` over ``tris`` (see ``BVHTextures``). layouts : ``ORDERS``
+    (``ordered_layouts``) or 1 (the BVH's own depth-first order); None: ``node_layouts``."""
+    n = len(bvh)
+    layouts = node_layouts(n) if layouts is None else int(layouts)
     code = (bvh.first.astype(np.int64) * _LEAF_SHIFT + bvh.count + LEAF_BIAS).astype(np.int32)
-    nodes[:, 1, 3] = np.where(bvh.first >= 0, code.view(np.float32), np.float32(-1.0))
+    leaf = np.where(bvh.first >= 0, code.view(np.float32), np.float32(-1.0))
+    rows = max(1, -(-NODE_TEXELS * n // TEXTURE_WIDTH))  # a layout's rows
+    nodes = np.zeros((layouts, rows * TEXTURE_WIDTH // NODE_TEXELS, NODE_TEXELS, 4), np.float32)
+    placed = ordered_layouts(bvh) if layouts == ORDERS else \
+        (np.arange(n)[None], bvh.miss.astype(np.int64)[None])
+    for layout, (pos, miss) in enumerate(zip(*placed)):
+        nodes[layout, pos, 0, :3] = bvh.lo
+        nodes[layout, pos, 0, 3] = miss
+        nodes[layout, pos, 1, :3] = bvh.hi
+        nodes[layout, pos, 1, 3] = leaf
+    nodes[:, 0, 0, 3] = -layouts  # the root's miss link (it has none) tells the layouts' count
     order = bvh.order
     t = len(order)
     positions = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)
@@ -572,7 +634,7 @@ def pack_bvh(bvh: BVH, tris: SceneTriangles) -> BVHTextures:
             shading[a:b, :, :3] = np.asarray(corner_normals)[which]
         else:
             shading[a:b, :, :3] = np.asarray(tris.normals)[which][:, None]
-    return BVHTextures(_rows(nodes.reshape(-1, 4)), triangles, normals, n, t)
+    return BVHTextures(nodes.reshape(layouts * rows, TEXTURE_WIDTH, 4), triangles, normals, n, t)
 
 
 # --------------------------------------------------------------------------- numpy traversal
