@@ -563,22 +563,22 @@ def ordered_layouts(bvh: BVH) -> tuple[np.ndarray, np.ndarray]:
     n = len(bvh)
     size = _subtree_sizes(bvh)
     centre = bvh.lo + bvh.hi
-    levels = _node_levels(bvh)
-    position = np.zeros((ORDERS, n), np.int64)
-    for layout in range(ORDERS):
-        axis, toward_minus = divmod(layout, 2)
-        pos = position[layout]
-        for ids in levels:
-            inner = ids[bvh.first[ids] < 0]
-            if len(inner) == 0:
-                continue
-            a, b = inner + 1, bvh.miss[inner + 1].astype(np.int64)
-            ahead = centre[a, axis] <= centre[b, axis]
-            if toward_minus:
-                ahead = centre[a, axis] >= centre[b, axis]
-            near, far = np.where(ahead, a, b), np.where(ahead, b, a)
-            pos[near] = pos[inner] + 1
-            pos[far] = pos[inner] + 1 + size[near]
+    position = np.zeros(ORDERS * n, np.int64)  # layout k's at k · n + node
+    shift = n * np.arange(ORDERS)[:, None]
+    for ids in _node_levels(bvh):
+        inner = ids[bvh.first[ids] < 0]
+        if len(inner) == 0:
+            continue
+        a, b = inner + 1, bvh.miss[inner + 1].astype(np.int64)
+        lower = (centre[a] <= centre[b]).T  # (3, K): a comes first toward +axis
+        higher = (centre[a] >= centre[b]).T
+        ahead = np.stack([lower, higher], axis=1).reshape(ORDERS, -1)  # +x, −x, +y, −y, +z, −z
+        near = np.where(ahead, a, b) + shift
+        far = np.where(ahead, b, a) + shift
+        start = position[inner + shift] + 1
+        position[near] = start
+        position[far] = start + size[near - shift]
+    position = position.reshape(ORDERS, n)
     miss = position + size[None, :]
     miss[miss >= n] = -1
     return position, miss
@@ -602,11 +602,11 @@ def pack_bvh(bvh: BVH, tris: SceneTriangles, layouts: int | None = None) -> BVHT
     nodes = np.zeros((layouts, rows * TEXTURE_WIDTH // NODE_TEXELS, NODE_TEXELS, 4), np.float32)
     placed = ordered_layouts(bvh) if layouts == ORDERS else \
         (np.arange(n)[None], bvh.miss.astype(np.int64)[None])
+    block = np.empty((n, NODE_TEXELS, 4), np.float32)  # the texels in the BVH's node order
+    block[:, 0, :3], block[:, 1, :3], block[:, 1, 3] = bvh.lo, bvh.hi, leaf
     for layout, (pos, miss) in enumerate(zip(*placed)):
-        nodes[layout, pos, 0, :3] = bvh.lo
-        nodes[layout, pos, 0, 3] = miss
-        nodes[layout, pos, 1, :3] = bvh.hi
-        nodes[layout, pos, 1, 3] = leaf
+        block[:, 0, 3] = miss
+        nodes[layout, pos] = block
     nodes[:, 0, 0, 3] = -layouts  # the root's miss link (it has none) tells the layouts' count
     order = bvh.order
     t = len(order)
