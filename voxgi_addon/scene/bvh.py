@@ -496,8 +496,9 @@ class BVHTextures:
         2 texels per node: (lo.xyz, miss link), (hi.xyz, leaf code) with leaf code =
         first · 16 + count (first indexes the packed triangles) stored as the float whose bits
         are code + ``LEAF_BIAS`` (exact whatever the triangle count; ``leaf_codes`` reads it),
-        or -1.0 for an interior node. The root's miss link (it has none) is minus the count
-        of layouts.
+        or -1.0 for an interior node. ``ORDERS`` layouts take a multiple of ``ORDERS`` rows,
+        one layout (its rows padded) one more than a multiple: the GPU tells them apart by
+        the texture's height.
     triangles : 3 texels per triangle, in leaf order: (v0.xyz, material code), (e1.xyz,
         index into the SceneTriangles), (e2.xyz, ±|e1|·|e2|, negative for a cut-out:
         ``textures.cutout_hits``) — v0 and the edges in metres.
@@ -599,6 +600,8 @@ def pack_bvh(bvh: BVH, tris: SceneTriangles, layouts: int | None = None) -> BVHT
     code = (bvh.first.astype(np.int64) * _LEAF_SHIFT + bvh.count + LEAF_BIAS).astype(np.int32)
     leaf = np.where(bvh.first >= 0, code.view(np.float32), np.float32(-1.0))
     rows = max(1, -(-NODE_TEXELS * n // TEXTURE_WIDTH))  # a layout's rows
+    if layouts == 1:  # rows ≡ 1 (mod ORDERS): what tells the GPU there is one layout
+        rows += (1 - rows) % ORDERS
     nodes = np.zeros((layouts, rows * TEXTURE_WIDTH // NODE_TEXELS, NODE_TEXELS, 4), np.float32)
     placed = ordered_layouts(bvh) if layouts == ORDERS else \
         (np.arange(n)[None], bvh.miss.astype(np.int64)[None])
@@ -607,7 +610,6 @@ def pack_bvh(bvh: BVH, tris: SceneTriangles, layouts: int | None = None) -> BVHT
     for layout, (pos, miss) in enumerate(zip(*placed)):
         block[:, 0, 3] = miss
         nodes[layout, pos] = block
-    nodes[:, 0, 0, 3] = -layouts  # the root's miss link (it has none) tells the layouts' count
     order = bvh.order
     t = len(order)
     positions = np.asarray(tris.positions, dtype=np.float64).reshape(-1, 3, 3)
