@@ -15,7 +15,7 @@ import numpy as np
 
 from ..scene.short_axis import norm3
 
-STRIDES = (1, 2, 4)
+STRIDES = (1, 2, 3, 4)
 NORMAL_POWER = 8
 PLANE_TOLERANCE = 0.1
 
