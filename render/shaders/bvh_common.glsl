@@ -9,8 +9,8 @@
  *                   rows are padded to one more than a multiple of BVH_ORDERS).
  *   bvh_triangles : 3 texels per triangle in leaf order, (v0.xyz, material), (e1.xyz, index into
  *                   the SceneTriangles), (e2.xyz, |e1|·|e2|).
- * Defines: BVH_WIDTH_LOG2, SHADOW_EPSILON (metres), DET_EPSILON (relative). Hits are
- * double-sided Möller–Trumbore with raycast.py's determinant test; shadow rays count hits with
+ * Defines: BVH_WIDTH_LOG2, BVH_ORDERS, BVH_SHADOW_LAYOUT, SHADOW_EPSILON (metres), DET_EPSILON
+ * (relative). Hits are double-sided Möller–Trumbore with raycast.py's determinant test; shadow rays count hits with
  * SHADOW_EPSILON < t < tmax − SHADOW_EPSILON, as raycast.occluded. The hashed sample patterns
  * are in sampling.glsl, which comes first. A triangle packed with a negative |e1|·|e2| is a
  * cut-out: kernels that define BVH_CUTOUTS (and include textures.glsl, which defines
@@ -80,19 +80,19 @@ int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_
   float best = tmax;
   int found = -1;
   uv = vec2(0.0);
-  /* The nodes' layout (bvh.py pack_bvh: BVH_ORDERS of them fill a multiple of BVH_ORDERS
-   * rows, one layout one row more than a multiple). With BVH_ORDERS of them, a closest hit walks the one of its major direction, +x, −x, +y, −y,
-   * +z, −z (ordered_layouts: the nearer child first). Every shadow ray walks the −z one (the
-   * upper child first): one order keeps the eight lanes llvmpipe runs in lock step on the
-   * same nodes, and shadow rays toward the sun, the sky and most lamps go up (docs/
-   * gi_pipeline.md "A layout of the BVH per ray direction": by their own directions they
-   * went 20–25% slower than in any one order). */
+  /* The nodes' layout (bvh.py pack_bvh: BVH_ORDERS layouts fill a multiple of BVH_ORDERS
+   * rows, one layout one row more than a multiple). Of BVH_ORDERS, a closest hit walks the one
+   * of its major direction, +x, −x, +y, −y, +z, −z (ordered_layouts: the nearer child first);
+   * every shadow ray walks BVH_SHADOW_LAYOUT (−z, the upper child first): one order keeps the
+   * eight lanes llvmpipe runs in lock step on the same nodes, and shadow rays toward the sun,
+   * the sky and most lamps go up (docs/gi_pipeline.md "A layout of the BVH per ray direction":
+   * by their own directions they went 20–30% slower than in any one order). */
   int rows = textureSize(bvh_nodes, 0).y;
   int base = 0;
   if (rows % BVH_ORDERS == 0) {
     vec3 ad = abs(d);
     int axis = ad.x >= ad.y ? (ad.x >= ad.z ? 0 : 2) : (ad.y >= ad.z ? 1 : 2);
-    int order = any_hit ? 5 : 2 * axis + (d[axis] < 0.0 ? 1 : 0);
+    int order = any_hit ? BVH_SHADOW_LAYOUT : 2 * axis + (d[axis] < 0.0 ? 1 : 0);
     base = 2 * order * (rows / BVH_ORDERS) * (BVH_WIDTH / 2);
   }
   int node = 0;

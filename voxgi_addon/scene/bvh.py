@@ -50,6 +50,7 @@ __all__ = [
     "NODE_TEXELS",
     "ORDERED_BYTES",
     "ORDERS",
+    "SHADOW_LAYOUT",
     "TEXTURE_WIDTH",
     "TRIANGLE_TEXELS",
     "BVHTextures",
@@ -73,6 +74,7 @@ TRAVERSAL_COST = 1.0    # SAH cost of visiting a node, relative to one triangle 
 TEXTURE_WIDTH = 4096    # texels per row of the packed textures (a power of two)
 NODE_TEXELS = 2         # (lo.xyz, miss), (hi.xyz, leaf code)
 ORDERS = 6              # packed node layouts, one per major ray direction (``ordered_layouts``)
+SHADOW_LAYOUT = 5       # the layout every shadow ray walks: −z, the upper child first
 # the most bytes of node texels packed in ORDERS layouts (``node_layouts``): the viewport uploads
 # the node texture in one call on the main thread, about 2.4 GB/s here (48 MB: ~20 ms)
 ORDERED_BYTES = 48 << 20
@@ -529,14 +531,6 @@ def _blank_rows(count: int) -> np.ndarray:
     return np.zeros((max(1, -(-count // TEXTURE_WIDTH)), TEXTURE_WIDTH, 4), np.float32)
 
 
-def _rows(texels: np.ndarray) -> np.ndarray:
-    """(K, 4) texels → (rows, TEXTURE_WIDTH, 4) float32, zero-padded (at least one row)."""
-    rows = max(1, -(-len(texels) // TEXTURE_WIDTH))
-    out = np.zeros((rows * TEXTURE_WIDTH, 4), np.float32)
-    out[:len(texels)] = texels
-    return out.reshape(rows, TEXTURE_WIDTH, 4)
-
-
 def leaf_codes(values: np.ndarray) -> np.ndarray:
     """The leaf codes (first · 16 + count; -1 for an interior node) of packed node texels'
     w (``BVHTextures.nodes``), as ``bvh_common.glsl`` reads them."""
@@ -585,11 +579,16 @@ def ordered_layouts(bvh: BVH) -> tuple[np.ndarray, np.ndarray]:
     return position, miss
 
 
+def _layout_rows(node_count: int) -> int:
+    """Texture rows of one layout of ``node_count`` nodes (at least one)."""
+    return max(1, -(-NODE_TEXELS * node_count // TEXTURE_WIDTH))
+
+
 def node_layouts(node_count: int) -> int:
     """How many node layouts ``pack_bvh`` packs for a BVH of ``node_count`` nodes: ``ORDERS``
     while their texture stays within ``ORDERED_BYTES``, else the one depth-first layout."""
-    rows = max(1, -(-NODE_TEXELS * node_count // TEXTURE_WIDTH))
-    return ORDERS if ORDERS * rows * TEXTURE_WIDTH * 16 <= ORDERED_BYTES else 1
+    return ORDERS if ORDERS * _layout_rows(node_count) * TEXTURE_WIDTH * 16 <= ORDERED_BYTES \
+        else 1
 
 
 def pack_bvh(bvh: BVH, tris: SceneTriangles, layouts: int | None = None) -> BVHTextures:
@@ -599,7 +598,7 @@ def pack_bvh(bvh: BVH, tris: SceneTriangles, layouts: int | None = None) -> BVHT
     layouts = node_layouts(n) if layouts is None else int(layouts)
     code = (bvh.first.astype(np.int64) * _LEAF_SHIFT + bvh.count + LEAF_BIAS).astype(np.int32)
     leaf = np.where(bvh.first >= 0, code.view(np.float32), np.float32(-1.0))
-    rows = max(1, -(-NODE_TEXELS * n // TEXTURE_WIDTH))  # a layout's rows
+    rows = _layout_rows(n)
     if layouts == 1:  # rows ≡ 1 (mod ORDERS): what tells the GPU there is one layout
         rows += (1 - rows) % ORDERS
     nodes = np.zeros((layouts, rows * TEXTURE_WIDTH // NODE_TEXELS, NODE_TEXELS, 4), np.float32)
