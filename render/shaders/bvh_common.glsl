@@ -10,11 +10,12 @@
  *   bvh_triangles : 3 texels per triangle in leaf order, (v0.xyz, material), (e1.xyz, index into
  *                   the SceneTriangles), (e2.xyz, |e1|·|e2|).
  * Defines: BVH_WIDTH_LOG2, BVH_ORDERS, BVH_SHADOW_LAYOUT, SHADOW_EPSILON (metres), DET_EPSILON
- * (relative). Hits are double-sided Möller–Trumbore with raycast.py's determinant test; shadow rays count hits with
- * SHADOW_EPSILON < t < tmax − SHADOW_EPSILON, as raycast.occluded. The hashed sample patterns
- * are in sampling.glsl, which comes first. A triangle packed with a negative |e1|·|e2| is a
- * cut-out: kernels that define BVH_CUTOUTS (and include textures.glsl, which defines
- * bvh_cutout_counts) count its hits by its Alpha, as textures.cutout_hits; others as opaque.
+ * (relative). Hits are double-sided Möller–Trumbore with raycast.py's determinant test;
+ * shadow rays count hits with SHADOW_EPSILON < t < tmax − SHADOW_EPSILON, as
+ * raycast.occluded. The hashed sample patterns are in sampling.glsl, which comes first. A
+ * triangle packed with a negative |e1|·|e2| is a cut-out: kernels that define BVH_CUTOUTS (and
+ * include textures.glsl, which defines bvh_cutout_counts) count its hits by its Alpha, as
+ * textures.cutout_hits; others as opaque.
  * Kernels that define BVH_HIDDEN skip the triangles the ray's kind does not see (ray
  * visibility); render/gpu_bvh.py leaves both out of scenes that have none: llvmpipe runs a
  * branch's code in the triangle loop whether a lane takes it or not. */
