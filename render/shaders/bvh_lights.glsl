@@ -35,19 +35,30 @@ float terminator_amount(vec3 dir)
 /* Is anything in the way of the shadow ray from `origin` in unit direction `dir` within
  * `tmax` (BVH_FAR: to a sun or the sky), leaving from the lifted start (a ray toward a point
  * keeps its end there)? */
+bool shadow_ray(vec3 origin, vec3 dir, float tmax, bool lifted)
+{
+  /* one traversal for every case: each call of bvh_any_hit is inlined whole, and llvmpipe's
+   * time to build a kernel's machine code grows with every copy (docs/gi_pipeline.md "One
+   * traversal per light") */
+  float share = lifted && dot(terminator_lift, terminator_lift) > 0.0 ? terminator_amount(dir) :
+                                                                        0.0;
+  vec3 start = origin;
+  vec3 d = dir;
+  float len = tmax;
+  if (share > 0.0) {
+    start = origin + terminator_lift * share;
+    if (tmax < BVH_FAR) {
+      vec3 ray = origin + dir * tmax - start;
+      len = length(ray);
+      d = ray / max(len, 1e-30);
+    }
+  }
+  return bvh_any_hit(start, d, len);
+}
+
 bool shadow_hit(vec3 origin, vec3 dir, float tmax)
 {
-  float share = dot(terminator_lift, terminator_lift) > 0.0 ? terminator_amount(dir) : 0.0;
-  if (share <= 0.0) {
-    return bvh_any_hit(origin, dir, tmax);
-  }
-  vec3 start = origin + terminator_lift * share;
-  if (tmax >= BVH_FAR) {
-    return bvh_any_hit(start, dir, tmax);
-  }
-  vec3 ray = origin + dir * tmax - start;
-  float len = length(ray);
-  return bvh_any_hit(start, ray / max(len, 1e-30), len);
+  return shadow_ray(origin, dir, tmax, true);
 }
 
 /* Unoccluded share of the ray from `origin` to `target`: 1 or 0. */
@@ -81,19 +92,20 @@ float sun_light(int light, vec3 p, vec3 n, uint state, int m)
   }
   vec3 origin = p + NORMAL_OFFSET * n;
   float tan_half = light_texel(light, 3).w;
-  if (tan_half <= 0.0) {
-    return shadow_hit(origin, to_light, BVH_FAR) ? 0.0 : value;
-  }
   vec3 t, b;
   perpendicular_basis(to_light, t, b);
   float visible = 0.0;
   int drawn = 0;
-  for (int j = 0; j < m * m; j++) {
+  int rays = tan_half <= 0.0 ? 1 : m * m; /* a sun without a size: one ray at its centre */
+  for (int j = 0; j < rays; j++) {
     if (j == 4 && m >= ADAPTIVE_FROM && (visible == 0.0 || visible == 4.0)) {
       break; /* the corners agree: the light is all seen or all hidden */
     }
-    vec2 disk = concentric_disk(hashed_stratum(state, stratum_order(j, m), m)) * tan_half;
-    vec3 dir = normalize(to_light + disk.x * t + disk.y * b);
+    vec3 dir = to_light;
+    if (tan_half > 0.0) {
+      vec2 disk = concentric_disk(hashed_stratum(state, stratum_order(j, m), m)) * tan_half;
+      dir = normalize(to_light + disk.x * t + disk.y * b);
+    }
     visible += shadow_hit(origin, dir, BVH_FAR) ? 0.0 : 1.0;
     drawn++;
   }
@@ -126,19 +138,21 @@ float point_light(int light, int kind, vec3 p, vec3 n, uint state, int m)
     return 0.0;
   }
   vec3 origin = p + NORMAL_OFFSET * n;
-  if (radius <= 0.0) {
-    return value * visible_to(origin, centre.xyz);
-  }
   vec3 t, b;
   perpendicular_basis(w, t, b);
   float visible = 0.0;
   int drawn = 0;
-  for (int j = 0; j < m * m; j++) {
+  int rays = radius <= 0.0 ? 1 : m * m; /* a point without a size: one ray at its centre */
+  for (int j = 0; j < rays; j++) {
     if (j == 4 && m >= ADAPTIVE_FROM && (visible == 0.0 || visible == 4.0)) {
       break; /* the corners agree */
     }
-    vec2 disk = concentric_disk(hashed_stratum(state, stratum_order(j, m), m)) * radius;
-    visible += visible_to(origin, centre.xyz + disk.x * t + disk.y * b);
+    vec3 target = centre.xyz;
+    if (radius > 0.0) {
+      vec2 disk = concentric_disk(hashed_stratum(state, stratum_order(j, m), m)) * radius;
+      target += disk.x * t + disk.y * b;
+    }
+    visible += visible_to(origin, target);
     drawn++;
   }
   return value * visible / float(drawn);
@@ -281,27 +295,35 @@ float area_light(int light, vec4 head, vec3 p, vec3 n, uint state, int m)
   if (by_angle) {
     rect = sphere_rect(p, centre - ex - ey, 2.0 * ex, 2.0 * ey);
   }
-  for (int j = 0; j < m * m; j++) {
-    if (j == 4 && m >= ADAPTIVE_FROM && f_sum > 0.0 && (f_lit == 0.0 || f_lit == f_sum)) {
-      break; /* the corners above the horizon agree */
+  for (int j = 0; j <= m * m; j++) {
+    vec3 target = aim;
+    float f = 1.0;
+    if (j == m * m) {
+      if (f_sum > 0.0) {
+        break;
+      }
+      /* no sample above the horizon (one sample at a bounce hit): one ray to the middle of
+       * the part above (direct_light._area), its share f_lit */
     }
-    vec2 s = hashed_stratum(state, stratum_order(j, m), m);
-    vec2 unit = head.y > 0.5 ? concentric_disk(s) : s * 2.0 - 1.0;
-    vec3 target = by_angle ? sphere_rect_point(rect, s, centre) :
-                             centre + unit.x * ex + unit.y * ey;
-    vec3 w = target - p;
-    float r2 = dot(w, w);
-    float f = by_angle ? max(dot(w, n), 0.0) / sqrt(max(r2, 1e-30)) :
-                         max(dot(w, n), 0.0) * max(-dot(w, emit), 0.0) /
-                             (max(r2, 1e-30) * max(r2, 1e-30));
-    f_sum += f;
+    else {
+      if (j == 4 && m >= ADAPTIVE_FROM && f_sum > 0.0 && (f_lit == 0.0 || f_lit == f_sum)) {
+        break; /* the corners above the horizon agree */
+      }
+      vec2 s = hashed_stratum(state, stratum_order(j, m), m);
+      vec2 unit = head.y > 0.5 ? concentric_disk(s) : s * 2.0 - 1.0;
+      target = by_angle ? sphere_rect_point(rect, s, centre) : centre + unit.x * ex + unit.y * ey;
+      vec3 w = target - p;
+      float r2 = dot(w, w);
+      f = by_angle ? max(dot(w, n), 0.0) / sqrt(max(r2, 1e-30)) :
+                     max(dot(w, n), 0.0) * max(-dot(w, emit), 0.0) /
+                         (max(r2, 1e-30) * max(r2, 1e-30));
+      f_sum += f;
+    }
     if (f > 0.0) {
       f_lit += f * visible_to(origin, target);
     }
   }
-  /* no sample above the horizon (one sample at a bounce hit): one ray to the middle of the
-   * part above (direct_light._area) */
-  return area.y * unshadowed * (f_sum > 0.0 ? f_lit / f_sum : visible_to(origin, aim));
+  return area.y * unshadowed * (f_sum > 0.0 ? f_lit / f_sum : f_lit);
 }
 
 /* Diffuse Direct of light `light` alone at p (0 for a padding row), with the samples
@@ -536,7 +558,7 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
       /* the map's rays as Cycles' light samples (lifted by the shadow terminator offset),
        * the cosine ones as its BSDF's rays that find the sky (not lifted) */
       bool seen = max(f.r, max(f.g, f.b)) > 0.0 &&
-          !(technique == 0 ? shadow_hit(origin, dir, BVH_FAR) : bvh_any_hit(origin, dir, BVH_FAR));
+          !shadow_ray(origin, dir, BVH_FAR, technique == 0);
       if (!seen) {
         float hidden = dot(f, LUMA) / M_PI_F;
         hidden_sum += hidden;
