@@ -28,6 +28,7 @@ from ..voxgi_addon.gi.radiance_cache import (
     with_faces,
 )
 from ..voxgi_addon.preview.denoise import (
+    AO_TOLERANCE,
     GLOSSY_SIGMA_LUMINANCE,
     HOLE_SPREAD,
     NOISE_TARGET,
@@ -57,7 +58,8 @@ def _denoise_shader():
         _shaders["denoise"] = build_compute(("pixels", "denoise"), _DENOISE_SAMPLERS,
                                             ("grid", "options"),
                                             ("out_image", "out_variance"),
-                                            {"NOISE_TARGET": repr(float(NOISE_TARGET)),
+                                            {"AO_TOLERANCE": repr(float(AO_TOLERANCE)),
+                                             "NOISE_TARGET": repr(float(NOISE_TARGET)),
                                              "RIDGE": repr(float(RIDGE)),
                                              "SAME_SURFACE": repr(float(SAME_SURFACE))})
     return _shaders["denoise"]

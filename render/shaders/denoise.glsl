@@ -2,7 +2,8 @@
  * ported line for line) over the reduced-resolution gather. low_image = (light rgb, AO),
  * low_variance = (var of the light's luminance mean, var of the AO mean); taps 2^i cells apart,
  * B3-spline weights × same-surface terms (normal^32, plane) × per signal
- * exp(−|Δ| / (SIGMA_LUMINANCE·√(var_p + var_q) + 1e-6)), var_p the centre's variance prefiltered over 3 × 3
+ * exp(−|Δ| / (SIGMA_LUMINANCE·√(var_p + var_q) + 1e-6)) (the light's weight × the AO's
+ * term widened by AO_TOLERANCE too), var_p the centre's variance prefiltered over 3 × 3
  * valid cells, var_q the tap's own (why both: denoise.py).
  * The value is a weighted local linear fit through the taps (denoise.py _fit): the weighted
  * mean where the taps surround the cell, corrected by the slope where they lie on one side.
@@ -213,6 +214,9 @@ void main()
       vec2 scale = options.z * sqrt(max(blurred + varq, vec2(0.0))) + 1e-6;
       vec2 w = hole ? vec2(geometry) :
                geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);
+      /* the light's weight takes the AO's test too, widened by AO_TOLERANCE (denoise.py: an
+       * occlusion's edge is the light's) */
+      w.x *= hole ? 1.0 : exp(-abs(vq.a - signal.y) / (scale.y + AO_TOLERANCE));
       w.x = (shown && flagged && var4.w > 0.5) ? 0.0 : w.x;
       float s = float(b) / float(spread); /* the tap's place in the window */
       float u = float(a) / float(spread);

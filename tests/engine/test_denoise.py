@@ -78,6 +78,30 @@ def test_ao_edges_are_kept_apart_from_the_light():
     assert abs(out[:, 17, 3].mean() - 0.3) < 0.03 and abs(out[:, 22, 3].mean() - 0.8) < 0.03
 
 
+def test_a_noisy_bright_slot_stays_behind_its_occlusion_edge():
+    """A slot between a ceiling and a panel under it: its light is bright and noisy (few rays
+    find the lit gap), its AO low and quiet; the open ceiling beside it dim and quiet, its AO
+    high. The light's own test lets the slot's noise through (the step is within 4 σ of the
+    slot's noise), the AO's test does not: the open ceiling keeps its level up to the edge."""
+    position, normal, wall = _floor_and_wall()
+    normal[...] = (0.0, 0.0, 1.0)
+    position[..., 2] = 0.0
+    position[..., 0] = np.arange(wall.shape[1]) * 0.01
+    slot = np.arange(wall.shape[1]) < 8
+    rng = np.random.default_rng(5)
+    shape = wall.shape
+    light = np.where(slot, 3.0 + rng.normal(0.0, 1.0, shape), 0.5 + rng.normal(0.0, 0.05, shape))
+    ao = np.where(slot, 0.1, 0.9) + rng.normal(0.0, 0.02, shape)
+    values = np.concatenate([np.repeat(light[..., None], 3, -1), ao[..., None]], -1)
+    variance = np.stack([np.broadcast_to(np.where(slot, 1.0, 0.05**2), shape),
+                         np.full(shape, 0.02**2)], -1)
+    out, _ = atrous_filter(values, variance, np.ones(shape, bool), position, normal)
+    beside = out[:, 8:12, 0].mean()  # the open ceiling's first four columns
+    # (with the light's own test alone they read 0.87, 74% over)
+    assert abs(beside / 0.5 - 1.0) < 0.05, beside
+    assert abs(out[:, :6, 0].mean() / 3.0 - 1.0) < 0.1  # the slot keeps its own level
+
+
 def test_background_pixels_are_untouched_and_never_read():
     position, normal, wall = _floor_and_wall()
     values = np.full(wall.shape + (4,), 0.3)

@@ -48,7 +48,16 @@ mostly noise (the GPU's and numpy's previews, equal to 2% with the mean, drifted
 with the fit).
 
 Two signals are filtered side by side with the same geometry weights: the RGB light
-(luminance test on its luminance) and a scalar (ambient occlusion, its own test). Variance is
+(luminance test on its luminance) and a scalar (ambient occlusion, its own test). The light's
+weight takes the scalar's test as well, exp(−|a_p − a_q| / (SIGMA_LUMINANCE·√(var_p + var_q) +
+AO_TOLERANCE)): where the occlusion changes by far more than its noise (a slot between a
+ceiling and a panel under it, a contact), the light changes too, often by more than its own
+noisier test can tell, and a tap across that edge carried the bright slot's light a few cells
+onto the open ceiling (docs/gi_pipeline.md "Occlusion guides the light's filter"). The
+tolerance keeps a smooth darkening toward a wall, which differs over a tap by more than the
+AO's small noise but by little, from cutting the light's taps (without it the room of metals'
+one-bounce Diffuse Indirect got noisier). Where the scalar is 0 everywhere (the glossy
+gathers, the world's light) its test is 1. Variance is
 filtered with the squared weights (the variance of the weighted mean), so later
 passes trust the already smoothed values more. Pixels that see no surface take no part.
 Deterministic: no randomness, fixed order of taps.
@@ -70,6 +79,10 @@ GLOSSY_SIGMA_LUMINANCE = 2.0
 NOISE_TARGET = 0.02  # a cell is settled when its mean's standard error is within 2% of it
 RIDGE = 0.25  # the local fit's slope damping, × the taps' mean squared distance
 _EPSILON = 1e-6
+# the scalar's (AO's) test on the light's weights tolerates this much more than the scalar's
+# noise: an occlusion's edge (a slot, a contact) differs by far more, a smooth darkening over
+# a tap by less (module doc)
+AO_TOLERANCE = 0.1
 # The first pass over a grid with holes stretches KERNEL over HOLE_SPREAD × its width: the
 # sparse gather traces a lattice of every other cell, so the pass reaches as many traced taps
 # as a dense pass reaches cells, and each hole is filled from the 16-20 traced cells of a
@@ -277,6 +290,9 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
                 scale = sigma_luminance * np.sqrt(np.maximum(blurred + q_var, 0.0)) + _EPSILON
                 w = geometry[..., None] * np.where(hole[..., None], 1.0,
                                                    np.exp(-np.abs(q_signal - signal) / scale))
+                # the light's weight takes the scalar's test too, widened (the module doc)
+                w[..., 0] *= np.where(hole, 1.0, np.exp(-np.abs(q_signal[..., 1] - signal[..., 1])
+                                                        / (scale[..., 1] + AO_TOLERANCE)))
                 w[..., 0] *= ~(_shifted(hidden, dy, dx, False) & ~hidden)
                 s = np.full(var.shape[:2], (b_ - reach) / stretch)  # the tap's place in the window
                 u = np.full(var.shape[:2], (a - reach) / stretch)
