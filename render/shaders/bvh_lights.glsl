@@ -33,8 +33,9 @@ float terminator_amount(vec3 dir)
 }
 
 /* Is anything in the way of the shadow ray from `origin` in unit direction `dir` within
- * `tmax` (BVH_FAR: to a sun or the sky), leaving from the lifted start (a ray toward a point
- * keeps its end there)? */
+ * `tmax` (BVH_FAR: to a sun or the sky)? `lifted`: the ray leaves from the start the shadow
+ * terminator lifts (terminator_set; a ray toward a point keeps its end there), else from
+ * `origin` (a BSDF's ray that finds the sky). */
 bool shadow_ray(vec3 origin, vec3 dir, float tmax, bool lifted)
 {
   /* one traversal for every case: each call of bvh_any_hit is inlined whole, and llvmpipe's
@@ -56,6 +57,7 @@ bool shadow_ray(vec3 origin, vec3 dir, float tmax, bool lifted)
   return bvh_any_hit(start, d, len);
 }
 
+/* A light sample's shadow ray: lifted. */
 bool shadow_hit(vec3 origin, vec3 dir, float tmax)
 {
   return shadow_ray(origin, dir, tmax, true);
