@@ -37,7 +37,14 @@ from ..voxgi_addon.gi.exact_glossy import (
     METAL_RAY_FACTOR,
     WORLD_GLOSSY_STREAM,
 )
-from ..voxgi_addon.gi.exact_indirect import CONTINUE_STREAM, METAL_FOLLOWED, RAY_STREAM, SURFACE_EPSILON
+from ..voxgi_addon.gi.exact_indirect import (
+    CONTINUE_STREAM,
+    MAX_FOLLOWS,
+    METAL_FOLLOWED,
+    NEAR_FIELD,
+    RAY_STREAM,
+    SURFACE_EPSILON,
+)
 from ..voxgi_addon.gi.radiance_cache import PICK_STREAM
 from ..voxgi_addon.gi.surface_lookup import REACH as FIND_REACH
 from ..voxgi_addon.gi.surface_lookup import TRUST
@@ -200,6 +207,8 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
         if "bvh_shade" in files:  # a metal hit followed one reflection further (ray_radiance)
             defines["CONTINUE_STREAM"] = f"{CONTINUE_STREAM}u"
             defines["METAL_FOLLOWED"] = repr(float(METAL_FOLLOWED))
+            defines["NEAR_FIELD"] = repr(float(NEAR_FIELD))
+            defines["MAX_FOLLOWS"] = str(MAX_FOLLOWS)
         if kernel in ("bvh_gather", "bvh_glossy", "bvh_cache_paths"):
             defines["VIEW_BACKOFF"] = repr(float(VIEW_BACKOFF))
             defines["GLOSSY_STREAM"] = f"{GLOSSY_STREAM}u"

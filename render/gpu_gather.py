@@ -18,6 +18,7 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.gi.exact_glossy import METAL_RAY_FACTOR
+from ..voxgi_addon.gi.exact_indirect import MAX_FOLLOWS
 from ..voxgi_addon.gi.radiance_cache import (
     build_cache,
     cache_key,
@@ -182,7 +183,7 @@ _RELAX_SAMPLERS = ("face_places", "radiance_cache", "paths_radiance", "paths_pic
 def _relax_shader():
     if "relax" not in _shaders:
         _shaders["relax"] = build_compute(("cache_lookup", "cache_relax"), _RELAX_SAMPLERS,
-                                          ("sampling", "levels"), ("out_image",))
+                                          ("sampling", "levels"), ("out_image", "copy_image"))
     return _shaders["relax"]
 
 
@@ -200,28 +201,33 @@ def face_places(cache):
 
 
 def relax_gpu(places, cache_texture, records, rays: int, count: int, out, keep: bool = False,
-              empty: bool = False, level=None):
+              empty: bool = False, level=None, copy=None):
     """One iteration over the ray ``records`` (``cache_paths.glsl``'s two textures):
     ``cache_relax.glsl`` writes into ``out`` each of the ``count`` faces' next value from
     ``cache_texture``, the previous iteration, at its texel (``face_places``) — a dispatch over
     the faces only; ``out``'s other texels (the header, the ids, the voxels' absent faces) are
-    the layout's, uploaded once (``cache_stages``). keep : ``out`` has two parts
+    the layout's, uploaded once (``cache_stages``). keep : ``out`` has three parts
     (``cache_texels(ahead=True)``): each face's texel of the first keeps the previous
     iteration, of the second gets the next one, from which the last pass makes the first
-    part's .a (``radiance_cache.one_more_bounce``). empty : the previous iteration is the empty cache (the
-    first iteration; ``cache_texture`` is any of the cache's texels, not read but its
-    header). level : the same iteration's first pass, which the glossy shares of the hits'
-    weights read (``radiance_cache.relax``; None: they read ``cache_texture``). With ``keep``
-    the first part's .a is 1 + the faces' ``radiance_cache.one_more_bounce``. Nothing is read
-    back or built on the CPU between iterations. Returns ``out``."""
+    part's .a (``radiance_cache.one_more_bounce``). copy : (texture, part): the faces are
+    also written to that part of it (the cache's earlier iterations,
+    ``radiance_cache.cache_levels``). empty :
+    the previous iteration is the empty cache (the first iteration; ``cache_texture`` is any
+    of the cache's texels, not read but its header). level : the same iteration's first pass,
+    which the glossy shares of the hits' weights read (``radiance_cache.relax``; None: they
+    read ``cache_texture``). With ``keep`` the first part's .a is 1 + the faces'
+    ``radiance_cache.one_more_bounce``. Nothing is read back or built on the CPU between
+    iterations. Returns ``out``."""
     shader = _relax_shader()
     shader.bind()
     for name, texture in zip(_RELAX_SAMPLERS, (places, cache_texture, *records,
                                                cache_texture if level is None else level)):
         shader.uniform_sampler(name, texture)
     shader.uniform_float("sampling", (float(rays), float(keep), float(count), float(empty)))
-    shader.uniform_float("levels", (float(level is not None), 0.0, 0.0, 0.0))
+    shader.uniform_float("levels", (float(level is not None), float(copy[1] if copy else 0),
+                                    0.0, 0.0))
     shader.image("out_image", out)
+    shader.image("copy_image", copy[0] if copy else out)
     gpu.compute.dispatch(shader, math.ceil(places.width / LOCAL_SIZE),
                          math.ceil(places.height / LOCAL_SIZE), 1)
     return out
@@ -358,21 +364,32 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     places = face_places(cache)
     yield
 
-    def iteration(previous, out, empty: bool, keep: bool = False):
+    # the cache the gathers read: its layout's texels (the header, the ids) with ``bounces``
+    # parts of faces — the last iteration, the one ahead, the earlier ones latest first
+    # (radiance_cache.cache_levels: each written there as it is made)
+    parts = settings.bounces
+    rows = 1 + len(cache.grids) * cache.grids[0].resolution + \
+        -(-(parts * int(cache.voxel_count) * 6) // texels.shape[1])
+    levels = np.zeros((max(rows, texels.shape[0]), texels.shape[1], 4), np.float32)
+    levels[:texels.shape[0]] = texels
+    levels[0, -1, 2] = 2 * (settings.bounces - 1) + 1  # iterations, all parts (cache_texels)
+    both = float_texture(levels, (levels.shape[1], levels.shape[0]))
+
+    def iteration(previous, out, empty: bool, keep: bool = False, part: int = 0):
         # two passes: the second's glossy shares read the first's faces (radiance_cache.relax's
         # ``level``), the first written in a turn that is neither ``previous`` nor ``out``
         spare = next(t for t in turns if t is not previous and t is not out)
         estimate = relax_gpu(places, previous, records, rays, count, spare, empty=empty)
         yield
         return relax_gpu(places, previous, records, rays, count, out, keep=keep, empty=empty,
-                         level=estimate)
+                         level=estimate, copy=(both, part) if part else None)
 
     previous = turns[0]  # the empty cache: its texels not read (relax_gpu empty)
-    for k in range(settings.bounces - 1):
+    for k in range(settings.bounces - 1):  # iteration k + 1, kept in part bounces − k − 1
         out = next(t for t in turns if t is not previous)
-        previous = yield from iteration(previous, out, empty=k == 0)
+        part = settings.bounces - k - 1
+        previous = yield from iteration(previous, out, empty=k == 0, part=part if part >= 2 else 0)
         yield
-    both = float_texture(texels, (texels.shape[1], texels.shape[0]))
     previous = yield from iteration(previous, both, empty=settings.bounces == 1,
                                     keep=True)  # + glossy's
     yield
@@ -380,7 +397,9 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
         held = read_texture(previous)
         values = with_faces(cache, held[texel_places(cache)][:, :3])
         return replace(values, iterations=settings.bounces - 1,
-                       ahead=with_faces(cache, held[texel_places(cache, 1)][:, :3]).faces)
+                       ahead=with_faces(cache, held[texel_places(cache, 1)][:, :3]).faces,
+                       earlier=tuple(with_faces(cache, held[texel_places(cache, part)][:, :3])
+                                     .faces for part in range(2, settings.bounces)))
     return (faces() if read_back else faces), previous
 
 
@@ -414,10 +433,18 @@ TRAVERSALS_PER_DISPATCH = 32
 
 
 def rays_per_dispatch(light_count: int, hit_samples: int = 1,
-                      traversals: int = TRAVERSALS_PER_DISPATCH) -> int:
+                      traversals: int = TRAVERSALS_PER_DISPATCH, followed: bool = False) -> int:
     """Bounce rays per gather dispatch: each ray traverses the BVH once and, at its hit, once
-    per light and shadow sample, ``traversals`` in all (at most ``TRAVERSALS_PER_DISPATCH``)."""
-    per_ray = 1 + max(light_count, 1) * strata_side(hit_samples) ** 2
+    per light and shadow sample, ``traversals`` in all (at most ``TRAVERSALS_PER_DISPATCH``).
+    followed : a ray may be followed past near hits (the diffuse gather's near field,
+    ``exact_indirect.NEAR_FIELD``, ``MAX_FOLLOWS`` bounces at most): each bounce counted as
+    one traversal more. Their light samples (one a light) are not counted: few rays are
+    followed (5.5% of the box's, 2–3% of the hall's and the emissive room's, numpy at 48 × 36),
+    counting them made the box's preview 15% slower in dispatches, and a point whose every ray
+    is followed twice still makes under 2 × the count, within the loop limit's margin
+    (``TRAVERSALS_PER_DISPATCH``)."""
+    per_ray = 1 + max(light_count, 1) * strata_side(hit_samples) ** 2 + \
+        (MAX_FOLLOWS if followed else 0)
     return max(1, min(traversals, TRAVERSALS_PER_DISPATCH) // per_ray)
 
 
@@ -468,7 +495,8 @@ def gather_steps(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, sett
     # at a bounce hit the emitters draw one shadow ray per stratum, like a lamp (their plain
     # estimate, emitters.EmitterLight.exact = False), the world two (one per technique)
     worlds = sum(light.type == "WORLD" for light in lights)
-    step = rays_per_dispatch(len(lights) + worlds, settings.hit_samples, traversals)
+    step = rays_per_dispatch(len(lights) + worlds, settings.hit_samples, traversals,
+                             followed=kernel == "bvh_gather" and "radiance_cache" in inputs)
     for first in range(0, max(last, 1), step):
         if first > 0:
             yield

@@ -31,6 +31,7 @@ vec3 geometric_normal(vec3 q, vec3 view, vec3 n)
 void main()
 {
   ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
+  near_follow = true;
   vec3 position, n;
   vec4 ray;
   uint id;

@@ -143,6 +143,21 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
  * the closures' values, so a glossy-gather ray was mostly picked diffuse and leaves one diffuse
  * bounce fewer to the hit (exact_glossy._Lobe.glossy_chance). Set per ray by bvh_glossy.glsl. */
 float receiver_glossy = 0.0;
+/* The diffuse gather's rays follow their near hits one bounce further (ray_radiance; set by
+ * bvh_gather.glsl): exact_indirect.ray_radiance(near_field=True). */
+bool near_follow = false;
+
+/* The cosine-distributed direction about ns a near hit is followed along (exact_indirect
+ * near_bounce_rays): the concentric disc point of the hash of the ray's light-sample id and
+ * seed (CONTINUE_STREAM, as a metal's reflection: a hit takes one or the other), lifted. */
+vec3 near_bounce_ray(vec3 ns, uint hit_id, uint seed)
+{
+  vec3 t, b;
+  perpendicular_basis(ns, t, b);
+  uint h = point_stream(hit_id, CONTINUE_STREAM, seed);
+  vec2 disk = concentric_disk(vec2(unit_float(h), unit_float(pcg_hash(h))));
+  return normalize(disk.x * t + disk.y * b + sqrt(max(0.0, 1.0 - dot(disk, disk))) * ns);
+}
 
 /* The metal hits' lobe (exact_indirect.metal_lobe_rays): a GGX visible normal of roughness
  * hit_roughness about ns seen from -d, from the hash of the ray's light-sample id and seed
@@ -176,35 +191,57 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
    * 2 … N (cache_indirect). A metal's lobe does not take the cache's light as uniform: it is
    * followed one reflection further (metal_lobe_ray), whose hit adds its own light and its
    * cache's, carried by the metal's Glossy Color (docs/gi_pipeline.md "Metals reflect where
-   * they point"). One loop for both, so the second hit's code is not compiled twice and
-   * costs nothing where no lane meets a metal. */
+   * they point"). In the diffuse gather (near_follow) a hit within NEAR_FIELD cache cells is
+   * followed a diffuse bounce further instead, MAX_FOLLOWS times at most, each landing
+   * reading the cache an iteration fewer ("The near field followed"). One loop for all, so
+   * the later hits' code is not compiled again and costs nothing where no lane follows. */
   bool cached = textureSize(radiance_cache, 0).x > 1;
   vec3 total = vec3(0.0);
   vec3 carried = vec3(1.0);
   vec3 o = origin;
   vec3 dir = d;
   th = BVH_FAR;
-  for (int bounce = 0; bounce < 2; bounce++) {
+  int follows = 0;     /* near hits followed so far (exact_indirect._follow_near) */
+  uint id_now = hit_id; /* the light-sample id of the hit being shaded */
+  bool metal = false;   /* a metal's reflection followed: its hit reads the cache whole */
+  for (int bounce = 0; bounce <= MAX_FOLLOWS; bounce++) {
     bool first = bounce == 0;
     float t_hit;
     vec3 x, ns, cache_weight, glossy_weight;
-    total += carried * ray_paths(o, dir, first ? hit_id : pcg_hash(hit_id ^ CONTINUE_STREAM),
-                                 seed, first ? strata : 1, first ? hit_glossy : true,
-                                 first ? world_rgb : vec3(0.0), first && emission_seen, t_hit,
-                                 x, ns, cache_weight, glossy_weight);
+    total += carried * ray_paths(o, dir, id_now, seed, first ? strata : 1,
+                                 first ? hit_glossy : true, first ? world_rgb : vec3(0.0),
+                                 first && emission_seen, t_hit, x, ns, cache_weight,
+                                 glossy_weight);
     if (first) {
       th = t_hit;
     }
-    if (t_hit >= BVH_FAR) {
-      break;
+    if (t_hit >= BVH_FAR || (follows > 0 && follows >= cache_iterations())) {
+      break; /* left the scene, or the followed path holds every bounce */
     }
-    vec4 arriving = cache_indirect(x, ns);
+    /* f followed bounces on, the cache f iterations fewer: part 0, else part f + 1 */
+    vec4 arriving = cache_indirect(x, ns, follows == 0 ? 0 : follows + 1);
+    if (cached && near_follow && hit_metallic < METAL_FOLLOWED && follows < MAX_FOLLOWS &&
+        !metal && follows < cache_iterations() && cache_has_levels() &&
+        t_hit < NEAR_FIELD * cache_cell_size(x)) {
+      /* the near field: the cache's lookup at a hit within NEAR_FIELD of its cells reads
+       * voxels around the gather point itself, so one diffuse bounce is followed exactly,
+       * again where it lands near (docs/gi_pipeline.md "The near field followed") */
+      total += carried * glossy_weight * arriving.a * arriving.rgb;
+      carried *= cache_weight;
+      follows++;
+      o = x + SURFACE_EPSILON * ns;
+      dir = near_bounce_ray(ns, id_now, seed);
+      id_now = pcg_hash(id_now ^ CONTINUE_STREAM);
+      continue;
+    }
     if (first && cached && hit_metallic >= METAL_FOLLOWED) {
       total += (cache_weight - glossy_weight) * arriving.rgb;
       carried = glossy_weight;
-      if (!metal_follow(x, ns, dir, hit_id, seed, o, dir)) {
+      if (!metal_follow(x, ns, dir, id_now, seed, o, dir)) {
         break;
       }
+      id_now = pcg_hash(id_now ^ CONTINUE_STREAM);
+      metal = true;
       continue;
     }
     /* the diffuse share: one diffuse bounce more where the receiver's path was picked glossy

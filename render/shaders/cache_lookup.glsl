@@ -5,8 +5,10 @@
  * face n faces, trilinear over the voxels of the finest grid holding `x` that hold that face
  * (texel .a), the axes blended by n² over those some neighbour holds (else the next coarser
  * grid holding `x`); 0 outside every grid and for the 1 × 1 blank texture (no cache).
- * A texture with two parts (header .z = 1) also holds the next iteration (from which the
- * relaxation's last pass makes part 0's .a); lookups read part 0. A corner's voxel
+ * A texture with two parts also holds the next iteration (from which the
+ * relaxation's last pass makes part 0's .a) and, parts 2 …, the earlier iterations, latest
+ * first (the rays followed past near hits: bvh_shade.glsl); lookups read part `part`. A
+ * corner's voxel
  * is found through the grid's id rows (-1: none there), its faces among the compact faces.
  * An axis whose n² is under CACHE_AXIS_BLEND weighs nothing and its faces are not fetched: a
  * wall's or a floor's hit reads 8 texels, not 24 (docs/gi_pipeline.md "Multi-bounce radiance
@@ -31,7 +33,38 @@ bool cache_grid_cell(vec3 x, int g, int res, out ivec3 base, out vec3 f)
   return true;
 }
 
-vec4 cache_indirect(vec3 x, vec3 n)
+/* The iterations the cache's first part holds (Bounces − 1), and whether it has the ahead and
+ * earlier parts (header .z = 2 × iterations + 1 with them: radiance_cache.cache_texels). */
+int cache_iterations()
+{
+  return int(texelFetch(radiance_cache, ivec2(textureSize(radiance_cache, 0).x - 1, 0), 0).z +
+             0.5) >> 1;
+}
+
+bool cache_has_levels()
+{
+  return (int(texelFetch(radiance_cache, ivec2(textureSize(radiance_cache, 0).x - 1, 0), 0).z +
+              0.5) & 1) == 1;
+}
+
+/* The cell size of the finest grid of the cache holding `x`, 0 outside every grid
+ * (radiance_cache.cell_size). */
+float cache_cell_size(vec3 x)
+{
+  vec4 info = texelFetch(radiance_cache, ivec2(textureSize(radiance_cache, 0).x - 1, 0), 0);
+  int res = int(info.x + 0.5);
+  int count = int(info.y + 0.5);
+  for (int g = 0; g < count; g++) {
+    ivec3 base;
+    vec3 f;
+    if (cache_grid_cell(x, g, res, base, f)) {
+      return texelFetch(radiance_cache, ivec2(g, 0), 0).w;
+    }
+  }
+  return 0.0;
+}
+
+vec4 cache_indirect(vec3 x, vec3 n, int part)
 {
   ivec2 size = textureSize(radiance_cache, 0);
   vec4 info = texelFetch(radiance_cache, ivec2(size.x - 1, 0), 0);
@@ -62,7 +95,8 @@ vec4 cache_indirect(vec3 x, vec3 n)
       if (id < -0.5) {
         continue; /* no voxel of the grid there */
       }
-      int first = int(id + 0.5) * 6; /* part 0's faces (part 1's follow all of them) */
+      /* part `part`'s faces: each part follows all of the previous one's (info.w voxels) */
+      int first = (int(id + 0.5) + part * int(info.w + 0.5)) * 6;
       ivec3 t = ivec3(first) + face;
       vec4 fx = axes.x ? texelFetch(radiance_cache, ivec2(t.x % size.x, first_row + t.x / size.x),
                                     0) : vec4(0.0);

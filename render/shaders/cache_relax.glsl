@@ -9,8 +9,9 @@
  * texels of out_image (the header, the ids, the voxels' absent faces) are the layout's,
  * uploaded once. sampling = (rays per face, 1: out_image has two parts (cache_texels(ahead=
  * True)): the face's texel of part 0 keeps the previous iteration, of part 1 gets the next
- * one, which the glossy gather reads, faces, 1: radiance_cache is the empty cache (the first
- * iteration: the records' radiance alone)). */
+ * one, faces, 1: radiance_cache is the empty cache (the first
+ * iteration: the records' radiance alone)). levels = (1: cache_level holds this iteration's
+ * first pass, the part of copy_image this iteration is also written to (0: none), 0, 0). */
 
 void main()
 {
@@ -55,5 +56,12 @@ void main()
   }
   else {
     imageStore(out_image, texel, value);
+  }
+  if (levels.y > 0.5) {
+    /* this iteration kept in copy_image's part levels.y too (part 0's texel + that many
+     * parts' texels: V voxels × 6 faces each; radiance_cache.cache_levels) */
+    int t = (texel.y - first_row) * cache_size.x + texel.x +
+            int(levels.y + 0.5) * 6 * int(info.w + 0.5);
+    imageStore(copy_image, ivec2(t % cache_size.x, first_row + t / cache_size.x), value);
   }
 }

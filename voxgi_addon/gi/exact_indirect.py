@@ -33,7 +33,7 @@ from ..scene.raycast import closest_hits
 from ..scene.snapshot import RAY_DIFFUSE
 from .direct_light import concentric_disk, diffuse_direct, light_aims
 from .principled import diffuse_weight, glossy_color, glossy_reflectance
-from .radiance_cache import lookup
+from .radiance_cache import cache_levels, cell_size, lookup
 from .sampling import hammersley, pcg_hash, perpendicular_basis, point_streams, unit_float, vndf_half_vectors
 
 __all__ = ["CONTINUE_STREAM", "METAL_FOLLOWED", "RAY_STREAM", "SURFACE_EPSILON", "RayPaths",
@@ -46,6 +46,14 @@ RAY_STREAM = 0x5EED   # hash stream of the diffuse rays' rotation
 # and (xor'ed into the ray's light-sample id) of the light samples at that second hit
 CONTINUE_STREAM = 0x6C0B
 METAL_FOLLOWED = 0.5  # Metallic from which a hit's glossy lobe is followed (``ray_radiance``)
+# The near field (cache cells): a diffuse gather ray hitting within this many cells of the
+# finest cache grid holding the hit reads no cache there — the lookup's trilinear voxels reach
+# back around the gather point itself — but is followed one diffuse bounce further
+# (``near_bounce_rays``), as a final gather traces its short rays on past a photon map's
+# footprint (docs/gi_pipeline.md "The near field followed"); MAX_FOLLOWS such bounces at most
+# (a light cove's slot passes its light on over several)
+NEAR_FIELD = 1.0
+MAX_FOLLOWS = 2
 SURFACE_EPSILON = 1e-4  # metres off the surface, as preview.SURFACE_EPSILON
 
 
@@ -254,10 +262,72 @@ def follow_metal_hits(paths: RayPaths, metal, dirs, hit_ids, tris, lights, albed
                          ray)
 
 
+def near_bounce_rays(normals, hit_ids, seed: int = 0) -> np.ndarray:
+    """(N, 3) the cosine-distributed direction about each of unit ``normals`` a near hit is
+    followed along (``ray_radiance``'s near field; bvh_shade.glsl ``near_bounce_ray``): the
+    concentric disc point of the hash of the ray's light-sample id (``CONTINUE_STREAM``, as a
+    metal's reflection: a hit takes one or the other), lifted."""
+    h = point_streams(np.asarray(hit_ids).astype(np.uint32), CONTINUE_STREAM, seed)
+    square = np.stack([unit_float(h), unit_float(pcg_hash(h))], axis=-1)[:, None, :]
+    return cosine_directions(np.asarray(normals, np.float64), square)[:, 0]
+
+
+def _near(cache, paths: RayPaths) -> np.ndarray:
+    """Indices into ``paths``' hits that lie within ``NEAR_FIELD`` cells of the cache and are
+    no metals (their lobes are followed as such)."""
+    near = paths.distance[paths.hit] < NEAR_FIELD * cell_size(cache, paths.points)
+    if paths.metallic is not None:
+        near &= paths.metallic < METAL_FOLLOWED
+    return np.flatnonzero(near)
+
+
+def _follow_near(paths: RayPaths, out, hit_ids, tris, lights, albedo, emission, seed, ray,
+                 cache) -> None:
+    """``ray_radiance``'s near field, in ``out``: each non-metal hit within ``NEAR_FIELD``
+    cells of the cache reflects, by its weight, one exact diffuse bounce further
+    (``near_bounce_rays``) instead of the cache's light (its glossy lobes keep the cache's one
+    more bounce); where that bounce lands near again, it is followed again, up to
+    ``MAX_FOLLOWS`` bounces and the cache's iterations. A hit f bounces on reads the cache f
+    iterations fewer (``radiance_cache.cache_levels``: bounces 2 … N in all), none once the
+    path has them all. Nothing is followed where the cache keeps no earlier iterations."""
+    levels = cache_levels(cache)
+    if not levels:
+        return
+    near = _near(cache, paths)
+    if not len(near):
+        return
+    index = paths.hit[near]  # the rays of ``out`` each followed path adds to
+    normals = paths.normals[near]
+    arriving, more = lookup(cache, paths.points[near], normals, more=True)
+    out[index] = paths.radiance[index] + paths.glossy[near] * more[:, None] * arriving
+    carried = paths.weight[near]
+    points = paths.points[near]
+    ids = np.asarray(hit_ids).astype(np.uint32)[index]
+    for follow in range(1, min(MAX_FOLLOWS, cache.iterations) + 1):
+        further = near_bounce_rays(normals, ids, seed)
+        ids = pcg_hash(ids ^ np.uint32(CONTINUE_STREAM))  # the next hit's light-sample ids
+        step = ray_paths(points + SURFACE_EPSILON * normals, further, ids, tris, lights, albedo,
+                         emission, seed, (0.0, 0.0, 0.0), 1, True, None, ray)
+        out[index] += carried * step.radiance
+        if follow == cache.iterations or not len(step.hit):
+            break  # the path holds every bounce (or left the scene)
+        on = _near(cache, step) if follow < MAX_FOLLOWS else np.zeros(0, np.int64)
+        read = np.setdiff1d(np.arange(len(step.hit)), on)
+        rays = step.hit[read]
+        out[index[rays]] += carried[rays] * step.weight[read] * lookup(
+            replace(cache, faces=levels[follow], ahead=()), step.points[read],
+            step.normals[read])
+        rays = step.hit[on]
+        index, carried, ids = index[rays], carried[rays] * step.weight[on], ids[rays]
+        points, normals = step.points[on], step.normals[on]
+        if not len(index):
+            break
+
+
 def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
                  world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
                  emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, cache=None,
-                 receiver=None):
+                 receiver=None, near_field: bool = False):
     """((K, 3) radiance arriving back along each ray, (K,) distance of its nearest hit, inf on
     a miss): what a bounce ray of the gathers sees — ``world`` on a miss, else the hit's
     emission plus its exact direct light reflected toward the ray's origin (see
@@ -270,11 +340,17 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
     bounces). A metal hit (Metallic ≥ ``METAL_FOLLOWED``) keeps the cache for its diffuse
     share; its glossy share is followed one reflection further instead (``metal_lobe_rays``):
     that hit's own light and its cache's, carried by the metal's Glossy Color
-    (docs/gi_pipeline.md "Metals reflect where they point")."""
+    (docs/gi_pipeline.md "Metals reflect where they point"). near_field : the diffuse
+    gather's rays: a hit within ``NEAR_FIELD`` cells of the cache is followed one diffuse
+    bounce further instead of reading the cache (``_follow_near``)."""
     paths = ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed, world,
                       hit_samples, hit_glossy, emission_seen, ray)
     out = paths.with_cache(cache, receiver)
-    if cache is None or not cache.iterations or paths.metallic is None:
+    if cache is None or not cache.iterations:
+        return out, paths.distance
+    if near_field and len(paths.hit):
+        _follow_near(paths, out, hit_ids, tris, lights, albedo, emission, seed, ray, cache)
+    if paths.metallic is None:
         return out, paths.distance
     # A metal's lobe does not take the cache's light as uniform: its path is followed one
     # reflection further (docs/gi_pipeline.md "Metals reflect where they point")
@@ -341,7 +417,7 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
         return (*empty, np.zeros((0, 2), np.float32)) if statistics else empty
     origins, dirs, hit_ids = gather_rays(p, n, ids, rays, seed)
     radiance, t = ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed,
-                               world, hit_samples, hit_glossy, cache=cache)
+                               world, hit_samples, hit_glossy, cache=cache, near_field=True)
     if geometric is not None:
         ng = np.repeat(np.asarray(geometric, np.float64).reshape(-1, 3), rays, axis=0)
         radiance = np.where((np.einsum("ij,ij->i", dirs, ng) > 0.0)[:, None], radiance, 0.0)

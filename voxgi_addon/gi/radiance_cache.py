@@ -41,7 +41,8 @@ from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
 from .cascades import CascadeGrid, cells_within
 from .sampling import point_streams, unit_float
 
-__all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
+__all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key", "cell_size",
+           "cache_levels",
            "cache_texels", "cached_cache", "face_paths", "face_points", "iterate",
            "lookup", "one_more_bounce", "pick", "picks", "relax", "snap_focus", "texel_places",
            "triangles_key", "with_faces"]
@@ -68,7 +69,9 @@ class RadianceCache:
     (N_i, 6, 3) float32 where each face's rays start, in voxels from the voxel's centre
     (``_face_origins``; empty: ``FACE_OFFSET`` along the face's axis). ahead : per grid the
     faces of the next iteration (as ``faces``), from which ``one_more_bounce`` takes the
-    light a glossy scatter leaves to come; empty: none kept."""
+    light a glossy scatter leaves to come; empty: none kept. earlier : the faces of the
+    iterations before, latest first (``iterations`` − 1 of them: ``cache_levels``); empty: none
+    kept."""
 
     grids: tuple
     cells: tuple
@@ -77,6 +80,7 @@ class RadianceCache:
     present: tuple = ()
     origins: tuple = ()
     ahead: tuple = ()
+    earlier: tuple = ()
 
     @property
     def voxel_count(self) -> int:
@@ -372,6 +376,30 @@ def one_more_bounce(cache: RadianceCache) -> tuple:
         more = np.asarray(ahead, np.float64).sum(axis=2) - lit
         out.append(np.where(lit > 0, np.maximum(more, 0.0) / np.maximum(lit, 1e-30), 0.0))
     return tuple(out)
+
+
+def cache_levels(cache: RadianceCache) -> tuple:
+    """The cache's faces per iteration count, latest first: (``faces``, then ``earlier``'s),
+    ``iterations`` of them — level f holds bounces 2 … N − f, what a gather ray followed f
+    bounces past a near hit reads where it lands (``exact_indirect._follow_near``). Empty where
+    the cache keeps fewer (``iterate`` alone)."""
+    if len(cache.earlier) != max(cache.iterations - 1, 0):
+        return ()
+    return (cache.faces, *cache.earlier)
+
+
+def cell_size(cache: RadianceCache, points) -> np.ndarray:
+    """(K,) the cell size of the finest grid of ``cache`` holding each of ``points`` (K, 3), 0
+    outside every grid (cache_lookup.glsl ``cache_cell_size``)."""
+    p = np.asarray(points, np.float64).reshape(-1, 3)
+    out = np.zeros(len(p))
+    todo = np.ones(len(p), bool)
+    for grid in cache.grids:
+        inside = todo & cells_within((p - np.asarray(grid.origin)) / grid.span, 0,
+                                     grid.resolution)
+        out[inside] = grid.span
+        todo &= ~inside
+    return out
 
 
 def lookup(cache: RadianceCache | None, points, normals, more: bool = False):
@@ -752,12 +780,15 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
     paths = face_paths(cache, tris, lights, albedo, emission, rays, world=world,
                        hit_samples=hit_samples, hit_glossy=hit_glossy)
     chosen = picks(cache, paths)  # and the faces their hits read: picked once
+    earlier = ()  # the iterations before the latest, latest first (``cache_levels``)
     for _ in range(bounces):  # the same rays every iteration: traced once
         # each iteration twice: its glossy shares read the first pass (``relax``)
         made = relax(cache, paths, rays, chosen, level=relax(cache, paths, rays, chosen))
         if made.iterations == bounces:  # one iteration ahead: ``one_more_bounce``
-            cache = replace(cache, ahead=made.faces)
+            cache = replace(cache, ahead=made.faces, earlier=earlier)
         else:
+            if cache.iterations:
+                earlier = (cache.faces, *earlier)
             cache = made
     _MEMO["entry"] = (key, cache)
     return cache
@@ -793,34 +824,42 @@ def texel_places(cache: RadianceCache, part: int = 0) -> tuple[np.ndarray, np.nd
 def cache_texels(cache: RadianceCache, layout: bool = False, ahead: bool = False) -> np.ndarray:
     """(H, W, 4) float32 texels of ``cache`` for the GPU (``shaders/cache_lookup.glsl``
     ``cache_indirect``), W = res²: row 0 the header — texel i = (origin xyz, span) of grid i,
-    the last texel (res, grid count, 1 with an ahead part, voxels V in all); then per grid g
+    the last texel (res, grid count, 2 × the iterations ``faces`` holds + 1 with the ahead
+    and earlier parts, voxels V in all); then per grid g
     and z the row 1 + g·res + z of each cell's voxel id (texel x + y·res: .x, the grids' voxels
     numbered finest grid first; -1 where the grid has no voxel) and the faces it holds (.y,
     Σ 2^f over its present faces f: ``pick`` reads them without the faces); then the faces, compact:
-    face f of voxel v in part p (0: ``faces``; 1: ``ahead``, which the glossy gather reads,
-    where the cache keeps it) is texel (p·V + v)·6 + f, counted along the rows after the ids,
+    face f of voxel v in part p (0: ``faces``; where the cache keeps an ``ahead`` and its
+    ``earlier`` iterations, 1: ``ahead``, 1 + f: ``cache_levels`` f ≥ 1, which a gather ray
+    followed f bounces past a near hit reads) is texel (p·V + v)·6 + f, counted along the rows
+    after the ids,
     holding (rgb, 1 where the voxel holds the face). Only voxels that exist take texels (a
     dense grid of faces put the HDRI courtyard's 23 k faces in 4.7 M texels: docs/gi_pipeline.md
     "Multi-bounce radiance cache", "Compact texels"). layout : instead of the rgb, (the face's
     row in ``face_points``, p, 0) — a cache's texels before its first iteration — with the
-    ahead part when ``ahead``."""
+    ahead part when ``ahead`` (the GPU's build adds the earlier ones: ``gpu_gather
+    .cache_stages``)."""
     res = cache.grids[0].resolution
     count = len(cache.grids)
     width = _texel_width(cache)
     starts = _voxel_starts(cache)
-    parts = 2 if (ahead if layout else bool(cache.ahead)) else 1
+    levels = () if layout else cache_levels(cache)
+    if layout:
+        parts = 2 if ahead else 1
+    else:  # the earlier iterations only with an ahead one (their part numbers follow it)
+        parts = 1 + len(levels) if cache.ahead and levels else 1
     face_rows = -(-(parts * int(starts[-1]) * 6) // width)
     texels = np.zeros((1 + count * res + face_rows, width, 4), np.float32)
     for g, grid in enumerate(cache.grids):
         texels[0, g] = (*grid.origin, grid.span)
-    texels[0, width - 1] = (res, count, parts - 1, starts[-1])
+    texels[0, width - 1] = (res, count, 2 * cache.iterations + (parts > 1), starts[-1])
     texels[1:1 + count * res, :res * res, 0] = -1.0
     for g, (cells, present) in enumerate(zip(cache.cells, cache.present)):
         c = np.asarray(cells, np.int64)
         at = (1 + g * res + c[:, 2], c[:, 0] + c[:, 1] * res)
         texels[at[0], at[1], 0] = starts[g] + np.arange(len(c))
         texels[at[0], at[1], 1] = _masks(present)
-    for part, faces in enumerate((cache.faces, cache.ahead)[:parts]):
+    for part, faces in enumerate((cache.faces, cache.ahead, *levels[1:])[:parts]):
         rows, columns = texel_places(cache, part)
         if layout:
             texels[rows, columns, 0] = np.arange(len(rows))
