@@ -51,9 +51,10 @@ METAL_FOLLOWED = 0.5  # Metallic from which a hit's glossy lobe is followed (``r
 # back around the gather point itself — but is followed one diffuse bounce further
 # (``near_bounce_rays``), as a final gather traces its short rays on past a photon map's
 # footprint (docs/gi_pipeline.md "The near field followed"); MAX_FOLLOWS such bounces at most
-# (a light cove's slot passes its light on over several)
+# (a second one took a light cove's slot from 0.55-0.74 of path tracing to 0.91-0.99, but the
+# images hardly moved and the 140k-triangle diorama's preview took 8% longer)
 NEAR_FIELD = 1.0
-MAX_FOLLOWS = 2
+MAX_FOLLOWS = 1
 SURFACE_EPSILON = 1e-4  # metres off the surface, as preview.SURFACE_EPSILON
 
 
