@@ -41,6 +41,7 @@ from ..voxgi_addon.gi.exact_indirect import (
     CONTINUE_STREAM,
     MAX_FOLLOWS,
     METAL_FOLLOWED,
+    NEAR_FACING,
     NEAR_FIELD,
     RAY_STREAM,
     SURFACE_EPSILON,
@@ -209,6 +210,7 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
             defines["METAL_FOLLOWED"] = repr(float(METAL_FOLLOWED))
             defines["NEAR_FIELD"] = repr(float(NEAR_FIELD))
             defines["MAX_FOLLOWS"] = str(MAX_FOLLOWS)
+            defines["NEAR_FACING"] = repr(float(NEAR_FACING))
         if kernel in ("bvh_gather", "bvh_glossy", "bvh_cache_paths"):
             defines["VIEW_BACKOFF"] = repr(float(VIEW_BACKOFF))
             defines["GLOSSY_STREAM"] = f"{GLOSSY_STREAM}u"

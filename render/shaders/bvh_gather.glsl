@@ -64,6 +64,7 @@ void main()
   int first_ray = int(chunk.x);
   int end_ray = min(rays, first_ray + int(chunk.y));
   for (int j = first_ray; j < end_ray; j++) {
+    near_normal = n; /* the receiver of the ray's near hits (bvh_shade.glsl) */
     vec2 disk = concentric_disk(hammersley(state, j, rays));
     float z = sqrt(max(0.0, 1.0 - dot(disk, disk)));
     vec3 d = normalize(disk.x * t + disk.y * b + z * n);

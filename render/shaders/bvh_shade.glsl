@@ -146,6 +146,9 @@ float receiver_glossy = 0.0;
 /* The diffuse gather's rays follow their near hits one bounce further (ray_radiance; set by
  * bvh_gather.glsl): exact_indirect.ray_radiance(near_field=True). */
 bool near_follow = false;
+/* The receiver's normal (the gather point's, then each followed hit's): only a hit that faces
+ * it is near (NEAR_FACING; exact_indirect._near). */
+vec3 near_normal = vec3(0.0);
 
 /* The cosine-distributed direction about ns a near hit is followed along (exact_indirect
  * near_bounce_rays): the concentric disc point of the hash of the ray's light-sample id and
@@ -222,13 +225,14 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
     vec4 arriving = cache_indirect(x, ns, follows == 0 ? 0 : follows + 1);
     if (cached && near_follow && hit_metallic < METAL_FOLLOWED && follows < MAX_FOLLOWS &&
         !metal && follows < cache_iterations() && cache_has_levels() &&
-        t_hit < NEAR_FIELD * cache_cell_size(x)) {
-      /* the near field: the cache's lookup at a hit within NEAR_FIELD of its cells reads
-       * voxels around the gather point itself, so one diffuse bounce is followed exactly,
-       * again where it lands near (docs/gi_pipeline.md "The near field followed") */
+        dot(ns, near_normal) < NEAR_FACING && t_hit < NEAR_FIELD * cache_cell_size(x)) {
+      /* the near field: a hit facing the receiver within NEAR_FIELD of the cache's cells
+       * lies across a gap the cache's voxels cannot hold, so one diffuse bounce is followed
+       * exactly, again where it lands near (docs/gi_pipeline.md "The near field followed") */
       total += carried * glossy_weight * arriving.a * arriving.rgb;
       carried *= cache_weight;
       follows++;
+      near_normal = ns;
       o = x + SURFACE_EPSILON * ns;
       dir = near_bounce_ray(ns, id_now, seed);
       id_now = pcg_hash(id_now ^ CONTINUE_STREAM);
