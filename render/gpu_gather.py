@@ -206,8 +206,8 @@ def relax_gpu(places, cache_texture, records, rays: int, count: int, out, keep: 
     ``cache_relax.glsl`` writes into ``out`` each of the ``count`` faces' next value from
     ``cache_texture``, the previous iteration, at its texel (``face_places``) — a dispatch over
     the faces only; ``out``'s other texels (the header, the ids, the voxels' absent faces) are
-    the layout's, uploaded once (``cache_stages``). keep : ``out`` has three parts
-    (``cache_texels(ahead=True)``): each face's texel of the first keeps the previous
+    the layout's, uploaded once (``cache_stages``). keep : ``out`` has the ahead part after
+    the first (``cache_texels(ahead=True)``): each face's texel of the first keeps the previous
     iteration, of the second gets the next one, from which the last pass makes the first
     part's .a (``radiance_cache.one_more_bounce``). copy : (texture, part): the faces are
     also written to that part of it (the cache's earlier iterations,
@@ -441,7 +441,7 @@ def rays_per_dispatch(light_count: int, hit_samples: int = 1,
     one traversal more. Their light samples (one a light) are not counted: few rays are
     followed (5.5% of the box's, 2–3% of the hall's and the emissive room's, numpy at 48 × 36),
     counting them made the box's preview 15% slower in dispatches, and a point whose every ray
-    is followed twice still makes under 2 × the count, within the loop limit's margin
+    is followed still makes under 2 × the count, within the loop limit's margin
     (``TRAVERSALS_PER_DISPATCH``)."""
     per_ray = 1 + max(light_count, 1) * strata_side(hit_samples) ** 2 + \
         (MAX_FOLLOWS if followed else 0)

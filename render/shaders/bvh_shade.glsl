@@ -144,7 +144,7 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
  * bounce fewer to the hit (exact_glossy._Lobe.glossy_chance). Set per ray by bvh_glossy.glsl. */
 float receiver_glossy = 0.0;
 /* The diffuse gather's rays follow their near hits one bounce further (ray_radiance; set by
- * bvh_gather.glsl): exact_indirect.ray_radiance(near_field=True). */
+ * bvh_gather.glsl): exact_indirect.ray_radiance(near_field=the receivers' normals). */
 bool near_follow = false;
 /* The receiver's normal (the gather point's, then each followed hit's): only a hit that faces
  * it is near (NEAR_FACING; exact_indirect._near). */
@@ -194,8 +194,8 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
    * 2 … N (cache_indirect). A metal's lobe does not take the cache's light as uniform: it is
    * followed one reflection further (metal_lobe_ray), whose hit adds its own light and its
    * cache's, carried by the metal's Glossy Color (docs/gi_pipeline.md "Metals reflect where
-   * they point"). In the diffuse gather (near_follow) a hit within NEAR_FIELD cache cells is
-   * followed a diffuse bounce further instead, MAX_FOLLOWS times at most, each landing
+   * they point"). In the diffuse gather (near_follow) a hit within NEAR_FIELD cache cells
+   * that faces its receiver (NEAR_FACING) is followed a diffuse bounce further instead, MAX_FOLLOWS times at most, each landing
    * reading the cache an iteration fewer ("The near field followed"). One loop for all, so
    * the later hits' code is not compiled again and costs nothing where no lane follows. */
   bool cached = textureSize(radiance_cache, 0).x > 1;

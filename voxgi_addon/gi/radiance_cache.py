@@ -41,11 +41,10 @@ from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
 from .cascades import CascadeGrid, cells_within
 from .sampling import point_streams, unit_float
 
-__all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key", "cell_size",
-           "cache_levels",
-           "cache_texels", "cached_cache", "face_paths", "face_points", "iterate",
-           "lookup", "one_more_bounce", "pick", "picks", "relax", "snap_focus", "texel_places",
-           "triangles_key", "with_faces"]
+__all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
+           "cache_levels", "cache_texels", "cell_size", "cached_cache", "face_paths",
+           "face_points", "iterate", "lookup", "one_more_bounce", "pick", "picks", "relax",
+           "snap_focus", "texel_places", "triangles_key", "with_faces"]
 
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin where it has no surface
 FACE_CLEARANCE = 0.02    # voxels in front of its surface a face's rays start (``_face_origins``)
