@@ -12,7 +12,9 @@ one. The cells left out lend their rays to the traced ones: a traced point draws
 out to lend them. After the first list a second one
 (``noisy_holes``) traces the ``EXTRA`` × (valid cells) holes whose fill would carry the most
 noise, so the rays go where the image would show it; in all the gather traces about half a
-dense gather's rays on the test scenes (0.49–0.56). Both tracers plan with ``sparse_plan`` and
+dense gather's rays on the test scenes (0.49–0.56). Last, a cell far brighter than every
+traced cell near it (one ray that found a small, very bright patch) is traced again with more
+rays (``retrace_spikes``): the filter's first pass would fill every hole around it from it. Both tracers plan with ``sparse_plan`` and
 ``noisy_holes`` and trace with ``sparse_settings``, so where their G-buffers agree they trace
 the same points with the same sample ids; each plans on its own (the GPU's raster, numpy's ray
 cast), and a borderline cell one traces and the other fills differs by its noise.
@@ -28,7 +30,8 @@ import numpy as np
 from ..scene.short_axis import norm3
 
 __all__ = ["AO_RAYS", "EXTRA", "MATCH", "SPARSE_RAYS", "gather_counts", "gather_lists",
-           "noisy_holes", "ray_counts", "sparse_plan", "sparse_settings"]
+           "noisy_holes", "ray_counts", "retrace_spikes", "sparse_plan", "sparse_settings",
+           "spikes", "SPIKE", "SPIKE_RAYS"]
 
 # Rays per traced point, as a multiple of the gather's (docs/gi_pipeline.md "Gathers at fewer
 # points": with the stretched first pass and the second list, 1.5 × them kept the test scenes'
@@ -158,10 +161,61 @@ def gather_lists(traced: np.ndarray, valid: np.ndarray, diffuse: np.ndarray, val
     run them: the ``traced`` cells (``sparse_plan``), then the holes ``noisy_holes`` picks among
     those whose surface shows diffuse light (``diffuse``), by the noise of the traced cells
     that show it — each point ``ray_counts`` rays (``settings.rays`` where it shows diffuse
-    light) through ``trace`` (``gather_counts``). Returns every cell traced."""
+    light) through ``trace`` (``gather_counts``), then the spikes among them again
+    (``retrace_spikes``). Returns every cell traced."""
     gather_counts(ray_counts(traced, diffuse, settings.rays), values, variance, settings, trace)
     extra = noisy_holes(traced & diffuse, valid & diffuse, variance[..., 0])
     if extra.any():
         gather_counts(ray_counts(extra, diffuse, settings.rays), values, variance, settings,
                       trace)
+    retrace_spikes((traced | extra) & diffuse, values, variance, settings, trace)
     return traced | extra
+
+
+# A traced cell whose light is more than SPIKE × that of the brightest traced cell within two
+# cells of it is traced again with SPIKE_RAYS × its rays, both estimates merged by their rays
+# (docs/gi_pipeline.md "Spikes traced again"). One ray that found a small, very bright patch
+# (the lit slot over a ceiling panel, seen from the wall below it) reads as a spike, and the
+# sparse filter's first pass fills every hole of its window from it by geometry alone: a
+# visible blotch, 25-30% bright over 30 × 15 pixels. Light that is there (a lit band one cell
+# wide) reads as much again and keeps its level. Not unbiased: a cell picked for its first
+# rays' light keeps a fifth of their weight, so where a few rare rays carry much of the light
+# that light reads lower (measured in the doc).
+SPIKE = 4.0
+SPIKE_RAYS = 4
+
+_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def spikes(traced: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(Hl, Wl) bool: the ``traced`` cells whose luminance (``values`` (Hl, Wl, ≥3) RGB) is
+    above SPIKE × the brightest other traced cell of their 5 × 5 neighbourhood (none there:
+    not a spike)."""
+    traced = np.asarray(traced, bool)
+    light = np.where(traced, np.asarray(values, np.float64)[..., :3] @ _LUMINANCE, -1.0)
+    near = np.full(light.shape, -1.0)
+    for dr in range(-2, 3):
+        for dc in range(-2, 3):
+            if dr or dc:
+                near = np.maximum(near, _shifted(light, dr, dc, -1.0))
+    return traced & (near >= 0.0) & (light > SPIKE * np.maximum(near, 0.0)) & (light > 0.0)
+
+
+def retrace_spikes(traced: np.ndarray, values: np.ndarray, variance: np.ndarray, settings,
+                   trace) -> np.ndarray:
+    """Traces the ``spikes`` among ``traced`` again with SPIKE_RAYS × ``settings.rays`` (the
+    next seed: new samples) through ``trace`` (``gather_counts``' contract) and merges both
+    estimates into ``values`` (Hl, Wl, ≥4) and ``variance`` (Hl, Wl, ≥2: the variances of the
+    means of the light's luminance and of the scalar; the channels after them are left) in
+    place, each mean weighted by its rays. Returns the cells traced again."""
+    again = spikes(traced, values)
+    if not again.any():
+        return again
+    more = replace(settings, rays=SPIKE_RAYS * settings.rays, seed=settings.seed + 1)
+    first = np.asarray(values[again][:, :4], np.float64)
+    first_var = np.asarray(variance[again][:, :2], np.float64)
+    second, second_var = (np.asarray(a, np.float64) for a in trace(again, more))
+    share = 1.0 / (1.0 + SPIKE_RAYS)  # the first rays' share of both
+    values[again, :4] = share * first + (1.0 - share) * second[:, :4]
+    variance[again, :2] = share ** 2 * first_var + (1.0 - share) ** 2 * second_var[:, :2]
+    return again
