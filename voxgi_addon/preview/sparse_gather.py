@@ -14,10 +14,11 @@ out to lend them. After the first list a second one
 noise, so the rays go where the image would show it; in all the gather traces about half a
 dense gather's rays on the test scenes (0.49–0.56). Last, a cell far brighter than every
 traced cell near it (one ray that found a small, very bright patch) is traced again with more
-rays (``retrace_spikes``): the filter's first pass would fill every hole around it from it. Both tracers plan with ``sparse_plan`` and
-``noisy_holes`` and trace with ``sparse_settings``, so where their G-buffers agree they trace
-the same points with the same sample ids; each plans on its own (the GPU's raster, numpy's ray
-cast), and a borderline cell one traces and the other fills differs by its noise.
+rays (``retrace_spikes``): the filter's first pass would fill every hole around it from it.
+Both tracers plan with ``sparse_plan`` and ``noisy_holes`` and trace with ``sparse_settings``,
+so where their G-buffers agree they trace the same points with the same sample ids; each plans
+on its own (the GPU's raster, numpy's ray cast), and a borderline cell one traces and the
+other fills differs by its noise.
 
 Numpy only.
 """
