@@ -44,3 +44,42 @@ def test_sparse_gathers_trace_fewer_points_and_stay_near_cycles(voxgi, tmp_path,
         if name in sparse:
             assert relative_l1(sparse[name], reference[name], mask) <= limit, name
     assert relative_l1(sparse["Combined"], dense["Combined"], mask) <= 0.03
+
+
+def test_f12s_spikes_are_traced_again_on_the_gpu(voxgi, tmp_path, monkeypatch):
+    """The emissive room at 160 × 120: a few of its gather cells catch a ray into the lit slot
+    over the panel and read several times their neighbours. F12's GPU gather traces them again
+    with SPIKE_RAYS × the rays (``sparse_gather.retrace_spikes``, docs/gi_pipeline.md "Spikes
+    traced again"): each read back in its row, merged with its first estimate by their rays,
+    and the brightest spike comes out dimmer — the blotch its light would make gone."""
+    from voxgi.voxgi_addon.preview import sparse_gather
+
+    scene = bpy.context.scene
+    bounce_scenes.build("emissive_room", scene)
+    scene.voxgi.bounce_source = "CYCLES"
+    seen = []
+    retrace = sparse_gather.retrace_spikes
+
+    def recorded(traced, values, variance, settings, trace):
+        def traced_again(cells, more):
+            out = trace(cells, more)
+            seen.append((cells.copy(), more, settings, values[cells].copy(),
+                         np.asarray(out[0], np.float64).copy()))
+            return out
+        again = retrace(traced, values, variance, settings, traced_again)
+        if seen:
+            seen[-1] = seen[-1] + (values[again].copy(),)
+        return again
+
+    monkeypatch.setattr(sparse_gather, "retrace_spikes", recorded)
+    ours = preview(tmp_path, scene, 160, 120)
+    (cells, more, settings, first, second, merged), = seen
+    assert 0 < cells.sum() < 0.01 * cells.size  # a few cells, not the image
+    assert more.rays == sparse_gather.SPIKE_RAYS * settings.rays and more.seed == settings.seed + 1
+    assert np.isfinite(second).all() and (second[:, :3] >= 0.0).all()
+    share = 1.0 / (1 + sparse_gather.SPIKE_RAYS)
+    np.testing.assert_allclose(merged[:, :4], share * first[:, :4] + (1 - share) * second[:, :4],
+                               rtol=1e-5, atol=1e-6)
+    luminance = np.array([0.2126, 0.7152, 0.0722])
+    assert (merged[:, :3] @ luminance).max() < (first[:, :3] @ luminance).max()
+    assert np.isfinite(ours["Combined"]).all()
