@@ -332,6 +332,18 @@ def diffuse_bounces(settings: VoxGISceneSettings) -> int:
     return max(1, min(int(diffuse), int(total)))
 
 
+def glossy_chains(settings: VoxGISceneSettings) -> bool:
+    """Whether a glossy scatter goes on past the one diffuse bounce (``GatherSettings
+    .glossy_chains``): Accurate quality following Cycles' Light Paths at Diffuse 1, with
+    Glossy above 0 and Total above 1 (a Total of 1 ends every path at its first bounce)."""
+    cycles = getattr(settings.id_data, "cycles", None)
+    if settings.quality != "ACCURATE" or settings.bounce_source == "MANUAL" or cycles is None:
+        return False
+    total = int(getattr(cycles, "max_bounces", 12))
+    return diffuse_bounces(settings) == 1 and total > 1 and \
+        int(getattr(cycles, "glossy_bounces", 4)) > 0
+
+
 def trace_options(settings: VoxGISceneSettings, width: int, height: int, frame: int = 0) -> dict:
     """Keyword arguments of both tracers (``preview.passes.render_passes``,
     ``render.gpu_preview.render_passes_gpu``) for a ``width`` × ``height`` image of ``frame``."""
@@ -346,7 +358,8 @@ def trace_options(settings: VoxGISceneSettings, width: int, height: int, frame: 
                                               ao_distance=settings.ao_distance,
                                               seed=sampling_seed(settings, frame),
                                               bounces=diffuse_bounces(settings),
-                                              sparse=settings.sparse_gathers)}
+                                              sparse=settings.sparse_gathers,
+                                              glossy_chains=glossy_chains(settings))}
 
 
 def gi_settings(settings: VoxGISceneSettings):

@@ -37,7 +37,7 @@ from ..voxgi_addon.preview.denoise import (
     SAME_SURFACE,
     SIGMA_LUMINANCE,
 )
-from ..voxgi_addon.preview.gather import cache_settings
+from ..voxgi_addon.preview.gather import cache_settings, uses_cache
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
 from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE, low_shape
 from .frame import finish
@@ -367,7 +367,7 @@ def cache_stages(bvh, lights, principled, emission, settings, tables=None,
     # the cache the gathers read: its layout's texels (the header, the ids) with ``bounces``
     # parts of faces — the last iteration, the one ahead, the earlier ones latest first
     # (radiance_cache.cache_levels: each written there as it is made)
-    parts = settings.bounces
+    parts = max(settings.bounces, 2)  # (one bounce with glossy chains: the empty one, ahead)
     rows = 1 + len(cache.grids) * cache.grids[0].resolution + \
         -(-(parts * int(cache.voxel_count) * 6) // texels.shape[1])
     levels = np.zeros((max(rows, texels.shape[0]), texels.shape[1], 4), np.float32)
@@ -482,7 +482,7 @@ def gather_steps(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, sett
         inputs.update(no_texture_inputs())
     if cache is not None:
         inputs["radiance_cache"] = cache
-    elif settings.bounces > 1 and not world_mode:  # bounces 2 … N from the cache
+    elif uses_cache(settings) and not world_mode:  # bounces 2 … N from the cache
         inputs["radiance_cache"] = cache_texture(bvh, lights, principled, emission, settings,
                                                  tables)
     assert OUTPUTS[kernel] == ("out_image", "out_variance")

@@ -21,7 +21,7 @@ from ..voxgi_addon.gi.cone_bounces import fast_cache_settings
 from ..voxgi_addon.preview import transmission
 from ..voxgi_addon.preview.denoise import GLOSSY_SIGMA_LUMINANCE, SIGMA_LUMINANCE
 from ..voxgi_addon.preview.film import background
-from ..voxgi_addon.preview.gather import VIEW_BACKOFF, GatherSettings, focused
+from ..voxgi_addon.preview.gather import VIEW_BACKOFF, GatherSettings, focused, uses_cache
 from ..voxgi_addon.preview.passes import (
     AA_SIDE,
     WORLD_FILTER_PASSES,
@@ -144,7 +144,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     if quality == "ACCURATE":
         gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
         ahead = None
-        if cache_source is None and gather_settings.bounces > 1:
+        if cache_source is None and uses_cache(gather_settings):
             def ahead(tris):  # F12: the cache's layout made while the BVH is built
                 cache_layout_ahead(tris, focused(gather_settings, snapshot.camera, tris))
         t0 = time.perf_counter()
@@ -184,7 +184,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     fast = (snapshot, gi_state, width, height, cones, light_samples, volume, shadows, gi_stride,
             gather_settings, glossy_indirect)
     given = {}
-    if cache_source is not None and gather_settings.bounces > 1:
+    if cache_source is not None and uses_cache(gather_settings):
         # the viewport: its cache built a stage at a time, the last complete one reflected
         # meanwhile (one bounce before the first), never the whole build in one draw
         scene = current_scene(snapshot)
@@ -412,7 +412,7 @@ def _visibility(f):
 
 
 def _wants_cache(f) -> bool:
-    return f["focused"].bounces > 1
+    return uses_cache(f["focused"])
 
 
 def _radiance_cache(f):
@@ -429,7 +429,7 @@ def _radiance_cache(f):
     cache = yield from source.stage(scene.bvh, scene.lights, scene.principled, scene.emission,
                                     settings, f["tables"])
     if cache is None:  # none complete yet: one bounce until there is
-        settings = dataclasses.replace(settings, bounces=1)
+        settings = dataclasses.replace(settings, bounces=1, glossy_chains=False)
     return {"cache": cache, "gather_settings": settings}
 
 

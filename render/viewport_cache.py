@@ -20,7 +20,7 @@ draw (docs/gi_pipeline.md "Entering Rendered mode").
 from __future__ import annotations
 
 from ..voxgi_addon.gi.radiance_cache import cache_key
-from ..voxgi_addon.preview.gather import cache_settings
+from ..voxgi_addon.preview.gather import cache_settings, uses_cache
 from .gpu_gather import CACHE_STAGE_SECONDS, cache_layout, cache_stages
 
 STAGE_SECONDS = CACHE_STAGE_SECONDS  # what one chunk aims at (half the 30 ms budget)
@@ -55,7 +55,7 @@ class ViewportCache:
         """A generator of at most one stage (one chunk of the build the current scene needs),
         returning the cache texture the gathers read now — the complete one for the current
         scene, else the last complete one — or None when there is none yet (one bounce)."""
-        if settings.bounces <= 1:
+        if not uses_cache(settings):
             return None
         # the BVH's node texture is replaced whenever other triangles are uploaded
         key = (bvh.nodes, cache_key(lights, principled, emission, *cache_settings(settings)))

@@ -57,6 +57,7 @@ import numpy as np
 from ..blender.jobs import background_priority
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.radiance_cache import snap_focus
+from ..voxgi_addon.preview.gather import uses_cache
 from ..voxgi_addon.scene.textures import TEXTURE_TAPS
 from . import (
     gpu_accumulation,
@@ -495,8 +496,10 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
 def kernel_key(found: Features | None, settings) -> tuple:
     """``kernel_steps``' arguments for a scene's ``Features`` and its VoxGI settings."""
     options = base_options(settings, 8, 8)
-    return (found, settings.quality, options["gather_settings"].bounces,
-            options["glossy_indirect"], options["shadows"])
+    gathers = options["gather_settings"]
+    # (one bounce with glossy chains builds a cache too: its kernels as at two)
+    bounces = max(gathers.bounces, 2) if uses_cache(gathers) else gathers.bounces
+    return (found, settings.quality, bounces, options["glossy_indirect"], options["shadows"])
 
 
 class KernelWarmup:

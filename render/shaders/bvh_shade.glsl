@@ -199,6 +199,10 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
    * reading the cache an iteration fewer ("The near field followed"). One loop for all, so
    * the later hits' code is not compiled again and costs nothing where no lane follows. */
   bool cached = textureSize(radiance_cache, 0).x > 1;
+  /* one bounce with Cycles' glossy bounces going on: no iteration of the cache's own, its
+   * first one ahead (part 1), which only a glossy scatter carries (exact_indirect
+   * RayPaths.with_cache; docs/gi_pipeline.md "One bounce and Cycles' glossy bounces") */
+  bool ahead_only = cached && cache_iterations() == 0;
   vec3 total = vec3(0.0);
   vec3 carried = vec3(1.0);
   vec3 o = origin;
@@ -222,7 +226,7 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
       break; /* left the scene, or the followed path holds every bounce */
     }
     /* f followed bounces on, the cache f iterations fewer: part 0, else part f + 1 */
-    vec4 arriving = cache_indirect(x, ns, follows == 0 ? 0 : follows + 1);
+    vec4 arriving = cache_indirect(x, ns, ahead_only ? 1 : (follows == 0 ? 0 : follows + 1));
     if (cached && near_follow && hit_metallic < METAL_FOLLOWED && follows < MAX_FOLLOWS &&
         !metal && follows < cache_iterations() && cache_has_levels() &&
         dot(ns, near_normal) < NEAR_FACING && t_hit < NEAR_FIELD * cache_cell_size(x)) {
@@ -238,7 +242,7 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
       id_now = pcg_hash(id_now ^ CONTINUE_STREAM);
       continue;
     }
-    if (first && cached && hit_metallic >= METAL_FOLLOWED) {
+    if (first && cached && !ahead_only && hit_metallic >= METAL_FOLLOWED) {
       total += (cache_weight - glossy_weight) * arriving.rgb;
       carried = glossy_weight;
       if (!metal_follow(x, ns, dir, id_now, seed, o, dir)) {
@@ -250,7 +254,10 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
     }
     /* the diffuse share: one diffuse bounce more where the receiver's path was picked glossy
      * (receiver_glossy); the glossy lobes: always (radiance_cache.one_more_bounce) */
-    total += carried * (first && receiver_glossy > 0.0 ?
+    float receiver_share = first && receiver_glossy > 0.0 ? receiver_glossy : 0.0;
+    total += carried * (ahead_only ?
+                        (cache_weight - glossy_weight) * receiver_share + glossy_weight :
+                        first && receiver_glossy > 0.0 ?
                         (cache_weight - glossy_weight) * (1.0 + receiver_glossy * arriving.a) +
                             glossy_weight * (1.0 + arriving.a) :
                         cache_weight + glossy_weight * arriving.a) * arriving.rgb;

@@ -142,7 +142,16 @@ class RayPaths:
         glossy closure for it (``exact_glossy._Lobe.glossy_chance``; None: 0, the diffuse
         gather): the hit's diffuse share reflects that much of one more bounce too."""
         out = self.radiance.copy()
-        if cache is not None and cache.iterations and len(self.hit):
+        if cache is not None and not cache.iterations and cache.ahead and len(self.hit):
+            # one bounce, the glossy bounces going on: only what a glossy scatter carries —
+            # the hits' glossy lobes, and the share of their diffuse one whose receiver's
+            # path was picked glossy — reflects the first iteration, held ahead
+            arriving = lookup(replace(cache, faces=cache.ahead, iterations=1, ahead=()),
+                              self.points, self.normals)
+            chance = 0.0 if receiver is None else \
+                np.asarray(receiver, np.float64).reshape(-1)[self.hit][:, None]
+            out[self.hit] += ((self.weight - self.glossy) * chance + self.glossy) * arriving
+        elif cache is not None and cache.iterations and len(self.hit):
             arriving, more = lookup(cache, self.points, self.normals, more=True)
             if receiver is None:
                 out[self.hit] += (self.weight + self.glossy * more[:, None]) * arriving

@@ -762,11 +762,13 @@ def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
                  resolution: int = 0, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
                  hit_glossy: bool = True, focus=None) -> RadianceCache | None:
     """The cache of ``bounces`` − 1 iterations for these triangles, lights and materials (None
-    for ``bounces`` ≤ 1), with the next iteration ``ahead`` (``one_more_bounce``), kept for the
+    for ``bounces`` < 1; at 1, no iteration of its own and the first one ahead: the light a
+    glossy scatter carries past Cycles' Diffuse 1, ``exact_indirect.RayPaths.with_cache``),
+    with the next iteration ``ahead`` (``one_more_bounce``), kept for the
     next call with the same inputs (the viewport's slices ask for the same cache). focus : the
     camera (Auto nests grids around it, ``build_cache``;
     ``snap_focus``'d here)."""
-    if bounces <= 1:
+    if bounces < 1:
         return None
     focus = snap_focus(tris, focus)
     key = (triangles_key(tris), cache_key(lights, albedo, emission, bounces, rays, resolution,

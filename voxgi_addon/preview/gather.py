@@ -47,7 +47,12 @@ class GatherSettings:
     ``radiance_cache.build_cache``). cache_focus : the camera's position on the cache's
     lattice (``focused``; None: none), around which Auto nests finer grids. sparse : the
     diffuse gather traces one cell in four where the light is smooth and the cells where it
-    is not (``sparse_gather``, each with ``SPARSE_RAYS`` × rays), the others filled from them."""
+    is not (``sparse_gather``, each with ``SPARSE_RAYS`` × rays), the others filled from them.
+    glossy_chains : at ``bounces`` 1, a glossy scatter still goes on where Cycles' Glossy
+    bounces go past its Diffuse 1 (its Total above 1): the bounce hits' glossy lobes reflect
+    the light of one more diffuse bounce, as the receiver's glossy closure does in the glossy
+    gather — a cache of no iteration of its own and its first one ahead
+    (``uses_cache``; docs/gi_pipeline.md "One bounce and Cycles' glossy bounces")."""
 
     rays: int = 64
     glossy_rays: int = 8
@@ -62,12 +67,19 @@ class GatherSettings:
     cache_resolution: int = 0
     cache_focus: tuple | None = None
     sparse: bool = False
+    glossy_chains: bool = False
+
+
+def uses_cache(settings: GatherSettings) -> bool:
+    """Whether the gathers read a radiance cache: Bounces above 1, or 1 with the glossy
+    bounces going on (``GatherSettings.glossy_chains``)."""
+    return settings.bounces > 1 or (settings.bounces == 1 and settings.glossy_chains)
 
 
 def focused(settings: GatherSettings, camera, tris) -> GatherSettings:
     """``settings`` with the ``camera``'s position as the radiance cache's focus (snapped:
     ``radiance_cache.snap_focus``), where there is a cache whose grids Auto lays out."""
-    if settings.bounces <= 1 or settings.cache_resolution or camera is None or \
+    if not uses_cache(settings) or settings.cache_resolution or camera is None or \
             len(getattr(tris, "positions", ())) == 0:
         return settings
     from ..gi.radiance_cache import snap_focus
@@ -79,13 +91,14 @@ def cache_settings(settings: GatherSettings) -> tuple:
     """What the radiance cache depends on among ``settings`` (its key beside the scene's)."""
     return (settings.bounces, settings.cache_rays, settings.cache_resolution,
             tuple(float(w) for w in settings.world), settings.hit_samples, settings.hit_glossy,
-            settings.cache_focus)
+            settings.cache_focus, uses_cache(settings))
 
 
 def radiance_cache(tris, lights, albedo, emission, settings: GatherSettings):
-    """The radiance cache the diffuse gather reads at its bounce hits for ``settings.bounces``
-    (None for one bounce; ``gi.radiance_cache.cached_cache``, kept between calls)."""
-    if settings.bounces <= 1:
+    """The radiance cache the gathers read at their bounce hits for ``settings.bounces``
+    (None where they read none, ``uses_cache``; ``gi.radiance_cache.cached_cache``, kept
+    between calls)."""
+    if not uses_cache(settings):
         return None
     from ..gi.radiance_cache import cached_cache
     return cached_cache(tris, lights, albedo, emission, settings.bounces, settings.cache_rays,
