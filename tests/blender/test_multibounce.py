@@ -74,10 +74,9 @@ def test_default_bounces_match_cycles_default_light_paths(voxgi, tmp_path, name)
     assert abs(brightness - 1.0) <= INDIRECT_SUM_TOLERANCE, brightness
 
 
-def quick_cycles(scene, width, height):
-    """Cycles 16 spp + OpenImageDenoise (albedo and normal) at its default light paths (12
-    total, 4 diffuse, 4 glossy bounces: the references'), seed 1: the quick preview artists
-    already use."""
+def cycles_total_12(scene, width, height, samples, diffuse_bounces, seed, denoise=False):
+    """Cycles' passes with Total 12 (its default; ``cycles_passes`` sets Total to the larger of
+    Diffuse and Glossy), ``diffuse_bounces`` and Glossy 4, AO distance 1 m."""
     from cycles_reference import _reference
 
     harness = _reference()
@@ -89,11 +88,18 @@ def quick_cycles(scene, width, height):
 
     harness._render_settings = default_total
     try:
-        passes = harness.render_cycles_passes(scene, width, height, 16, diffuse_bounces=4,
-                                              ao_distance=1.0, seed=1, glossy_bounces=4,
-                                              denoise=True)
+        return harness.render_cycles_passes(scene, width, height, samples,
+                                            diffuse_bounces=diffuse_bounces, ao_distance=1.0,
+                                            seed=seed, glossy_bounces=4, denoise=denoise)
     finally:
         harness._render_settings = settings
+
+
+def quick_cycles(scene, width, height):
+    """Cycles 16 spp + OpenImageDenoise (albedo and normal) at its default light paths (12
+    total, 4 diffuse, 4 glossy bounces: the references'), seed 1: the quick preview artists
+    already use."""
+    passes = cycles_total_12(scene, width, height, 16, 4, seed=1, denoise=True)
     return {name: np.asarray(image, np.float64)[..., :3] for name, image in passes.items()}
 
 
@@ -293,34 +299,20 @@ def test_numpy_and_gpu_previews_agree(voxgi, tmp_path, sparse, diffuse_one):
         assert relative_l1(gpu[name], reference[name], everywhere) <= 0.02, name
 
 
-def test_one_bounce_keeps_cycles_glossy_bounces(voxgi, tmp_path):
+def test_one_bounce_keeps_cycles_glossy_bounces(voxgi):
     """Cycles' Diffuse 1 with its other Light Paths at their defaults (Glossy 4, Total 12):
     a path's glossy scatters go on past its one diffuse bounce. The Cornell box's preview
     sums within 2.5% of Cycles' Combined, 6% of its Diffuse Indirect and 8% of its Glossy
     Indirect (0.986, 0.962, 0.981 at 160 × 120, 1,024 rays, no filter; without the glossy
     chains 0.949, 0.911, 0.731: docs/gi_pipeline.md "One bounce and Cycles' glossy
     bounces")."""
-    from cycles_reference import _reference
-
     from voxgi.blender.settings import glossy_chains
     from voxgi.render.pipeline import render_scene_passes
 
     scene = bpy.context.scene
     bounce_scenes.build("cornell_box", scene)
     width, height = 80, 60
-    harness = _reference()
-    settings = harness._render_settings
-
-    def default_total(*args, **kwargs):
-        return [(owner, name, 12 if name == "max_bounces" else value)
-                for owner, name, value in settings(*args, **kwargs)]
-
-    harness._render_settings = default_total
-    try:
-        cycles = harness.render_cycles_passes(scene, width, height, 512, diffuse_bounces=1,
-                                              ao_distance=1.0, seed=3, glossy_bounces=4)
-    finally:
-        harness._render_settings = settings
+    cycles = cycles_total_12(scene, width, height, 512, 1, seed=3)
     scene.voxgi.bounce_source = "CYCLES"
     scene.cycles.diffuse_bounces, scene.cycles.glossy_bounces = 1, 4
     scene.cycles.max_bounces = 12
