@@ -339,9 +339,10 @@ def glossy_chains(settings: VoxGISceneSettings) -> bool:
     cycles = getattr(settings.id_data, "cycles", None)
     if settings.quality != "ACCURATE" or settings.bounce_source == "MANUAL" or cycles is None:
         return False
+    diffuse = int(getattr(cycles, "diffuse_bounces", 4))
     total = int(getattr(cycles, "max_bounces", 12))
-    return diffuse_bounces(settings) == 1 and total > 1 and \
-        int(getattr(cycles, "glossy_bounces", 4)) > 0
+    # (Diffuse 0, which the preview draws as 1, has no diffuse bounce for glossy ones to follow)
+    return diffuse == 1 and total > 1 and int(getattr(cycles, "glossy_bounces", 4)) > 0
 
 
 def trace_options(settings: VoxGISceneSettings, width: int, height: int, frame: int = 0) -> dict:

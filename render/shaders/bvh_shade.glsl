@@ -195,8 +195,9 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
    * followed one reflection further (metal_lobe_ray), whose hit adds its own light and its
    * cache's, carried by the metal's Glossy Color (docs/gi_pipeline.md "Metals reflect where
    * they point"). In the diffuse gather (near_follow) a hit within NEAR_FIELD cache cells
-   * that faces its receiver (NEAR_FACING) is followed a diffuse bounce further instead, MAX_FOLLOWS times at most, each landing
-   * reading the cache an iteration fewer ("The near field followed"). One loop for all, so
+   * that faces its receiver (NEAR_FACING) is followed a diffuse bounce further instead,
+   * MAX_FOLLOWS times at most, each landing reading the cache an iteration fewer ("The near
+   * field followed"). One loop for all, so
    * the later hits' code is not compiled again and costs nothing where no lane follows. */
   bool cached = textureSize(radiance_cache, 0).x > 1;
   /* one bounce with Cycles' glossy bounces going on: no iteration of the cache's own, its
@@ -254,11 +255,11 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
     }
     /* the diffuse share: one diffuse bounce more where the receiver's path was picked glossy
      * (receiver_glossy); the glossy lobes: always (radiance_cache.one_more_bounce) */
-    float receiver_share = first && receiver_glossy > 0.0 ? receiver_glossy : 0.0;
+    float receiver = first ? max(receiver_glossy, 0.0) : 0.0;
     total += carried * (ahead_only ?
-                        (cache_weight - glossy_weight) * receiver_share + glossy_weight :
-                        first && receiver_glossy > 0.0 ?
-                        (cache_weight - glossy_weight) * (1.0 + receiver_glossy * arriving.a) +
+                        (cache_weight - glossy_weight) * receiver + glossy_weight :
+                        receiver > 0.0 ?
+                        (cache_weight - glossy_weight) * (1.0 + receiver * arriving.a) +
                             glossy_weight * (1.0 + arriving.a) :
                         cache_weight + glossy_weight * arriving.a) * arriving.rgb;
     break;

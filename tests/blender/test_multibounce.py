@@ -332,6 +332,8 @@ def test_one_bounce_keeps_cycles_glossy_bounces(voxgi):
     assert abs(sums["Glossy"] / theirs["Glossy"] - 1.0) <= 0.08, (sums, theirs)
     scene.cycles.max_bounces = 1  # a Total of 1 ends every path at its first bounce
     assert not glossy_chains(scene.voxgi)
+    scene.cycles.max_bounces, scene.cycles.diffuse_bounces = 12, 0  # no diffuse bounce at all
+    assert not glossy_chains(scene.voxgi)
 
 
 def metal_room():
