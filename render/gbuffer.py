@@ -261,6 +261,11 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
                 batch.draw(shader)
             gpu.state.depth_test_set("NONE")
             gpu.state.depth_mask_set(False)
+            # unbound: Blender's context remembers its bound shader by address and skips the
+            # next bind of the same address, and this shader (and the mask's) is freed with its
+            # render; a later render's new raster shader made at that address then drew with
+            # the freed one's program and last camera (docs/gi_pipeline.md "One file's state")
+            gpu.shader.unbind()
             # the raster done now, not at a later read or the draw's end: llvmpipe defers a
             # raster's work to the next use of its targets, so a viewport step that drew this
             # ended in a few ms while its raster landed, unmeasured, in the draw's last
