@@ -61,6 +61,14 @@ void main()
     unoccluded = partial.a;
     lum2 = texelFetch(partial_variance, cell, 0).x;
   }
+  /* the receiver's closures, for the chance Cycles picked a ray glossily (receiver_glossy:
+   * such a path keeps every diffuse bounce to come, one more of the cache at its hit) */
+  vec3 v = -ray.xyz;
+  vec3 base, params;
+  receiver_material(ray.w, base, params);
+  float cos_ni = dot(n, v);
+  vec4 picks = closure_picks(base, params, cos_ni);
+  bool picked = picks.z > PR_ROUGHNESS_SQ_THRESHOLD && cos_ni > 0.0 && picks.x > 0.0;
   int first_ray = int(chunk.x);
   int end_ray = min(rays, first_ray + int(chunk.y));
   for (int j = first_ray; j < end_ray; j++) {
@@ -68,6 +76,7 @@ void main()
     vec2 disk = concentric_disk(hammersley(state, j, rays));
     float z = sqrt(max(0.0, 1.0 - dot(disk, disk)));
     vec3 d = normalize(disk.x * t + disk.y * b + z * n);
+    receiver_glossy = picked ? glossy_pick_chance(n, v, d, picks) : 0.0;
     float th;
     vec3 radiance = ray_radiance(origin, d, id * uint(rays) + uint(j), seed, int(sampling.w),
                                  world.w > 0.5, world.rgb, false, th);

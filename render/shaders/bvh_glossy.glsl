@@ -8,18 +8,6 @@
  * With grid.w = 1 the kernel gathers the world's Glossy Direct instead (exact_glossy.py
  * glossy_world_direct), the same outputs. */
 
-/* Density of the visible-normal sample l (voxgi_addon/gi/exact_glossy.py _Lobe.pdf): D of
- * normalize(v + l) computed as principled_glossy_reflectance does (1 − cos² as |n × h|², exact
- * in float32 near a mirror's peak), so that it cancels in the weight. */
-float lobe_pdf(vec3 n, vec3 v, vec3 l, float alpha2, float pdf_scale)
-{
-  vec3 h_eval = normalize(v + l);
-  float cos_nh = dot(n, h_eval);
-  vec3 nxh = cross(n, h_eval);
-  float den = min(dot(nxh, nxh), 1.0) + alpha2 * min(cos_nh * cos_nh, 1.0);
-  return alpha2 / (M_PI_F * max(den * den, 1e-30)) / pdf_scale;
-}
-
 void main()
 {
   ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
@@ -31,10 +19,8 @@ void main()
   }
   vec3 v = -ray.xyz;
   int last_material = textureSize(materials, 0).x - 1;
-  int material = int(ray.w + 0.5);
-  material = (material >= 0 && material < last_material) ? material : last_material;
-  vec3 base = texelFetch(materials, ivec2(material, 0), 0).rgb;
-  vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
+  vec3 base, params;
+  receiver_material(ray.w, base, params);
   float rough = clamp(params.z, 0.0, 1.0);
   float alpha = rough * rough;
   float alpha2 = alpha * alpha;
@@ -71,10 +57,7 @@ void main()
   bool reflects = cos_ni > 0.0 && dot(colour, vec3(1.0)) > 0.0;
   /* the closures' sample weights for the chance Cycles picked a direction glossily
    * (exact_glossy._Lobe.glossy_chance: their directional albedos) */
-  float glossy_pick = dot(colour, LUMINANCE);
-  float diffuse_pick = dot(principled_diffuse_weight(base, params.x, params.y, rough,
-                                                     clamp(cos_ni, 0.0, 1.0)), LUMINANCE) /
-                       3.14159265358979323846;
+  vec4 picks = closure_picks(base, params, cos_ni);
   int first_ray = int(chunk.x);
   int end_ray = min(rays, first_ray + int(chunk.y));
   for (int j = first_ray; j < end_ray && reflects; j++) {
@@ -134,8 +117,7 @@ void main()
     }
     else if (dot(weight, vec3(1.0)) > 0.0) {
       float th;
-      float pg = glossy_pick * pdf, pd = diffuse_pick * max(dot(l, n), 0.0);
-      receiver_glossy = mirror ? 1.0 : pg / max(pg + pd, 1e-30);
+      receiver_glossy = mirror ? 1.0 : glossy_pick_chance(n, v, l, picks);
       vec3 radiance = ray_radiance(origin, l, id * uint(rays) + uint(j), seed, int(sampling.w),
                                    world.w > 0.5, world.rgb, false, th);
       value = mix(vec3(0.0), weight * radiance, greaterThan(colour, vec3(0.0)));

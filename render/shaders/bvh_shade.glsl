@@ -143,6 +143,56 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
  * the closures' values, so a glossy-gather ray was mostly picked diffuse and leaves one diffuse
  * bounce fewer to the hit (exact_glossy._Lobe.glossy_chance). Set per ray by bvh_glossy.glsl. */
 float receiver_glossy = 0.0;
+/* Density of the visible-normal sample l (voxgi_addon/gi/exact_glossy.py _Lobe.pdf; the glossy
+ * gather's rays and receiver_glossy's chance): D of
+ * normalize(v + l) computed as principled_glossy_reflectance does (1 − cos² as |n × h|², exact
+ * in float32 near a mirror's peak), so that it cancels in the weight. */
+float lobe_pdf(vec3 n, vec3 v, vec3 l, float alpha2, float pdf_scale)
+{
+  vec3 h_eval = normalize(v + l);
+  float cos_nh = dot(n, h_eval);
+  vec3 nxh = cross(n, h_eval);
+  float den = min(dot(nxh, nxh), 1.0) + alpha2 * min(cos_nh * cos_nh, 1.0);
+  return alpha2 / (M_PI_F * max(den * den, 1e-30)) / pdf_scale;
+}
+
+/* The receiver's Principled inputs from its material code (gather_point's ray.w; the tables'
+ * last column for none): base colour and (metallic, Specular IOR Level, roughness). */
+void receiver_material(float code, out vec3 base, out vec3 params)
+{
+  int last_material = textureSize(materials, 0).x - 1;
+  int material = int(code + 0.5);
+  material = (material >= 0 && material < last_material) ? material : last_material;
+  base = texelFetch(materials, ivec2(material, 0), 0).rgb;
+  params = texelFetch(materials, ivec2(material, 2), 0).rgb;
+}
+
+/* glossy_pick_chance's picks for a receiver seen at cos_ni: (its glossy and its diffuse
+ * directional albedo (luminance), the latter / π, the lobe's alpha², lobe_pdf's scale). */
+vec4 closure_picks(vec3 base, vec3 params, float cos_ni)
+{
+  const vec3 LUMA_PICK = vec3(0.2126, 0.7152, 0.0722);
+  float rough = clamp(params.z, 0.0, 1.0);
+  float alpha2 = rough * rough * rough * rough;
+  float mu = clamp(cos_ni, 0.0, 1.0);
+  float c = max(cos_ni, 1e-4);
+  return vec4(dot(principled_glossy_color(base, params.x, params.y, rough, mu), LUMA_PICK),
+              dot(principled_diffuse_weight(base, params.x, params.y, rough, mu), LUMA_PICK) /
+                  M_PI_F,
+              alpha2, 4.0 * c * (1.0 + pr_ggx_lambda(alpha2, c)));
+}
+
+/* receiver_glossy of a diffuse-gather ray l at a receiver of normal n seen along v
+ * (exact_glossy.glossy_pick_chance): its glossy closure's sample weight × the lobe's density
+ * over both closures' (picks = (glossy weight, diffuse weight / π, alpha², pdf_scale); 0 on a
+ * mirror, whose reflection a diffuse direction never is). */
+float glossy_pick_chance(vec3 n, vec3 v, vec3 l, vec4 picks)
+{
+  float pg = picks.x * lobe_pdf(n, v, l, picks.z, picks.w);
+  float pd = picks.y * max(dot(l, n), 0.0);
+  return pg / max(pg + pd, 1e-30);
+}
+
 /* The diffuse gather's rays follow their near hits one bounce further (ray_radiance; set by
  * bvh_gather.glsl): exact_indirect.ray_radiance(near_field=the receivers' normals). */
 bool near_follow = false;

@@ -282,3 +282,31 @@ def test_a_panel_seen_edge_on_ahead_of_a_grazing_view_reflects_as_brute_force(vi
                            np.arange(1), 16, 0)[0]
     expected = _lobe_over_panel(p, n, v, corner, principled, emission[0])
     np.testing.assert_allclose(ours, expected, rtol=0.12)
+
+
+def test_the_diffuse_gathers_glossy_pick_chance_peaks_at_the_reflection():
+    """The chance Cycles picked a diffuse-gather direction by the receiver's glossy closure
+    (``glossy_pick_chance``: such a path keeps one more diffuse bounce): highest toward the
+    view's reflection and the higher the sharper the lobe, near 0 far from it, 0 on a mirror
+    (a diffuse direction is never its reflection) and for a receiver seen from behind."""
+    from voxgi.voxgi_addon.gi.exact_glossy import glossy_pick_chance
+
+    n = np.array([[0.0, 0.0, 1.0]])
+    view = np.array([[np.sin(0.8), 0.0, np.cos(0.8)]])
+    angles = np.linspace(-1.4, 1.4, 57)  # in the plane of incidence, from the normal
+    dirs = np.stack([np.sin(angles), np.zeros_like(angles), np.cos(angles)], axis=1)[None]
+    reflection = np.argmin(np.abs(angles + 0.8))
+    chances = {}
+    for roughness in (0.0, 0.2, 0.5):
+        principled = (np.array([[0.8, 0.8, 0.8], [0.8, 0.8, 0.8]]),
+                      np.array([[0.0, 0.5, roughness], [0.0, 0.5, 0.5]]))
+        chances[roughness] = glossy_pick_chance(n, view, np.array([0]), principled, dirs)[0]
+        back = glossy_pick_chance(n, -view, np.array([0]), principled, dirs)[0]
+        assert np.all(back == 0.0)
+    assert np.all(chances[0.0] == 0.0)
+    for roughness in (0.2, 0.5):
+        chance = chances[roughness]
+        assert np.all((chance >= 0.0) & (chance <= 1.0))
+        assert abs(int(np.argmax(chance)) - reflection) <= 2, roughness
+        assert chance[angles > 0.6].max() < 0.05, roughness  # the view's side, far from it
+    assert chances[0.2].max() > 2.0 * chances[0.5].max() > 0.0

@@ -31,6 +31,7 @@ from .principled import ROUGHNESS_SQ_THRESHOLD, diffuse_weight, glossy_color, gl
 from .sampling import hammersley, perpendicular_basis, vndf_half_vectors
 
 __all__ = ["GLOSSY_STREAM", "WORLD_GLOSSY_STREAM", "EMITTER_GLOSSY_STREAM", "glossy_indirect",
+           "glossy_pick_chance",
            "emitters_shine", "emitters_glossy_field", "glossy_world_direct"]
 
 GLOSSY_STREAM = 0x6105  # hash stream of the glossy rays' rotation
@@ -123,6 +124,15 @@ class _Lobe:
         weight = np.where(((cos_no > 0.0) & (pdf > 0.0))[..., None],
                           self.reflectance(dirs) / np.maximum(pdf, 1e-30)[..., None], 0.0)
         return dirs, weight
+
+
+def glossy_pick_chance(normals, views, materials, principled, dirs) -> np.ndarray:
+    """(N, K) the chance Cycles picked each of the diffuse gather's directions ``dirs`` (N, K,
+    3) by the receiver's glossy closure (``_Lobe.glossy_chance``), 0 on a mirror (a diffuse
+    direction is never its reflection): such a path keeps every diffuse bounce to come."""
+    lobe = _Lobe(normals, views, materials, principled)
+    chance = lobe.glossy_chance(dirs)
+    return np.where(lobe.mirror[:, None] | (lobe.cos_ni[:, None] <= 0.0), 0.0, chance)
 
 
 def glossy_indirect(points, normals, views, materials, sample_ids, tris, lights, principled,

@@ -404,7 +404,7 @@ def gather_rays(points, normals, sample_ids, rays: int, seed: int = 0):
 def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission, rays: int = 16,
                     ao_distance: float = 1.0, seed: int = 0, world=(0.0, 0.0, 0.0),
                     hit_samples: int = 1, statistics: bool = False, hit_glossy: bool = False,
-                    cache=None, geometric=None):
+                    cache=None, geometric=None, receivers=None):
     """(Diffuse Indirect (N, 3) float32, Ambient Occlusion (N,) float32) — see the module doc;
     with ``statistics`` also (N, 2) float32: the variance of the indirect light's luminance mean
     (unbiased sample variance / rays) and of the AO mean (from the share of unoccluded rays
@@ -427,6 +427,11 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
     geometric : (N, 3) the points' geometric normals (``surface_lookup.geometric_normals``):
         a ray below its triangle's plane carries no light — Cycles' diffuse BSDF drops such
         directions (``bsdf_diffuse_sample``) — though AO still counts it; None: every ray.
+    receivers : (views (N, 3) unit directions to the viewer, materials (N,) indices) of the
+        points, with ``albedo`` the Principled pair: a ray's hit reflects one more diffuse
+        bounce of the cache by the chance Cycles picked its direction by the receiver's glossy
+        closure (``exact_glossy.glossy_pick_chance``: a glossy pick leaves every diffuse bounce
+        to come, as the glossy gather's rays); None: none.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
@@ -436,8 +441,13 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
         empty = (np.zeros((0, 3), np.float32), np.zeros(0, np.float32))
         return (*empty, np.zeros((0, 2), np.float32)) if statistics else empty
     origins, dirs, hit_ids = gather_rays(p, n, ids, rays, seed)
+    chance = None
+    if receivers is not None and cache is not None and isinstance(albedo, tuple):
+        from .exact_glossy import glossy_pick_chance
+        chance = glossy_pick_chance(n, receivers[0], receivers[1], albedo,
+                                    dirs.reshape(count, rays, 3)).reshape(-1)
     radiance, t = ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed,
-                               world, hit_samples, hit_glossy, cache=cache,
+                               world, hit_samples, hit_glossy, cache=cache, receiver=chance,
                                near_field=np.repeat(n, rays, axis=0))
     if geometric is not None:
         ng = np.repeat(np.asarray(geometric, np.float64).reshape(-1, 3), rays, axis=0)

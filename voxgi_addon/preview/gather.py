@@ -110,7 +110,8 @@ VIEW_BACKOFF = 2e-4  # metres: gather points step back along the camera ray (see
 
 
 def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: GatherSettings,
-              stride: int, direction=None, low: bool = False, shown=None) -> np.ndarray:
+              stride: int, direction=None, low: bool = False, shown=None,
+              material=None) -> np.ndarray:
     """(H, W, 4) float32: Diffuse Indirect (RGB, Cycles' units) and AO per pixel, 0 where the
     pixel sees no surface. low : return (the filtered gather points' values (Hl, Wl, 4), their
     valid (Hl, Wl) bool) instead, before the upsample (``upsample.upsample`` of them is the
@@ -123,6 +124,10 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     just behind it after float32 rasterization) starts its rays inside the room, not in the wall.
     shown : (H, W) bool the pixels whose surface shows diffuse light (``passes.shows_diffuse``;
     None: all): with ``settings.sparse``, the others' points draw ``sparse_gather.AO_RAYS``.
+    material : (H, W) material index per pixel (the tables' last row for none): with
+    ``direction`` and the Principled pair as ``albedo``, a ray's hit reflects one more bounce
+    of the cache by the chance Cycles picked it glossily (``exact_indirect.indirect_and_ao``
+    receivers); None: never.
     """
     height, width = hit.shape
     rows, cols = sample_pixels(height, width, stride)
@@ -130,12 +135,15 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     cell_p = position[rows][:, cols]
     cell_n = normal[rows][:, cols]
     cell_g = None  # the cells' geometric normals (the rays below their triangle carry none)
+    receivers = None  # the cells' (views, materials): the receivers' glossy picks
     if direction is not None:
         cell_d = direction[rows][:, cols]
         cell_g = np.array(cell_n, np.float64)
         cell_g[valid] = geometric_normals(tris, cell_p[valid], cell_d[valid], cell_n[valid],
                                           RAY_DIFFUSE)
         cell_p = cell_p - VIEW_BACKOFF * cell_d
+        if material is not None:
+            receivers = (-cell_d, np.asarray(material)[rows][:, cols])
     # the cells gathered: all, or with ``settings.sparse`` one in four where the light is
     # smooth (sparse_gather), the others filled by the filter's first pass
     traced = sparse_plan(valid, cell_p, cell_n) if settings.sparse else valid
@@ -151,7 +159,8 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
             cell_p[cells], cell_n[cells], ids[cells], tris, lights, albedo, emission,
             rays=at.rays, ao_distance=at.ao_distance, seed=at.seed, world=at.world,
             hit_samples=at.hit_samples, statistics=True, hit_glossy=at.hit_glossy,
-            cache=cache, geometric=None if cell_g is None else cell_g[cells])
+            cache=cache, geometric=None if cell_g is None else cell_g[cells],
+            receivers=None if receivers is None else (receivers[0][cells], receivers[1][cells]))
         return np.concatenate([indirect, ao[:, None]], axis=1), var
 
     if not settings.sparse:

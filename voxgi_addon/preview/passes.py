@@ -1087,7 +1087,8 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         shown = shows_diffuse(snapshot)[material_indices(snapshot, seen.material)] & seen.hit
         low["diffuse"] = gather_gi(tris, lights, principled_table(snapshot), emission, seen.hit,
                                    seen.position, seen.normal, gather_settings, gi_stride,
-                                   seen.direction, low=True, shown=shown)
+                                   seen.direction, low=True, shown=shown,
+                                   material=materials.reshape(height, width))
         traced = upsampled(low["diffuse"], 4)
         timings["diffuse+ao gather"] = time.perf_counter() - t0
     else:
