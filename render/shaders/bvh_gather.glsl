@@ -68,7 +68,8 @@ void main()
   receiver_material(ray.w, base, params);
   float cos_ni = dot(n, v);
   vec4 picks = closure_picks(base, params, cos_ni);
-  bool picked = picks.z > PR_ROUGHNESS_SQ_THRESHOLD && cos_ni > 0.0 && picks.x > 0.0;
+  bool picked = textureSize(radiance_cache, 0).x > 1 && /* (read only with a cache) */
+                picks.z > PR_ROUGHNESS_SQ_THRESHOLD && cos_ni > 0.0 && picks.x > 0.0;
   int first_ray = int(chunk.x);
   int end_ray = min(rays, first_ray + int(chunk.y));
   for (int j = first_ray; j < end_ray; j++) {

@@ -171,13 +171,12 @@ void receiver_material(float code, out vec3 base, out vec3 params)
  * directional albedo (luminance), the latter / π, the lobe's alpha², lobe_pdf's scale). */
 vec4 closure_picks(vec3 base, vec3 params, float cos_ni)
 {
-  const vec3 LUMA_PICK = vec3(0.2126, 0.7152, 0.0722);
   float rough = clamp(params.z, 0.0, 1.0);
   float alpha2 = rough * rough * rough * rough;
   float mu = clamp(cos_ni, 0.0, 1.0);
   float c = max(cos_ni, 1e-4);
-  return vec4(dot(principled_glossy_color(base, params.x, params.y, rough, mu), LUMA_PICK),
-              dot(principled_diffuse_weight(base, params.x, params.y, rough, mu), LUMA_PICK) /
+  return vec4(dot(principled_glossy_color(base, params.x, params.y, rough, mu), LUMA),
+              dot(principled_diffuse_weight(base, params.x, params.y, rough, mu), LUMA) /
                   M_PI_F,
               alpha2, 4.0 * c * (1.0 + pr_ggx_lambda(alpha2, c)));
 }

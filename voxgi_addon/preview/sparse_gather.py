@@ -28,6 +28,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..gi.exact_indirect import LUMINANCE
 from ..scene.short_axis import norm3
 
 __all__ = ["AO_RAYS", "EXTRA", "MATCH", "SPARSE_RAYS", "gather_counts", "gather_lists",
@@ -185,7 +186,6 @@ def gather_lists(traced: np.ndarray, valid: np.ndarray, diffuse: np.ndarray, val
 SPIKE = 4.0
 SPIKE_RAYS = 4
 
-_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 def spikes(traced: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -193,7 +193,7 @@ def spikes(traced: np.ndarray, values: np.ndarray) -> np.ndarray:
     above SPIKE × the brightest other traced cell of their 5 × 5 neighbourhood (none there:
     not a spike)."""
     traced = np.asarray(traced, bool)
-    light = np.where(traced, np.asarray(values, np.float64)[..., :3] @ _LUMINANCE, -1.0)
+    light = np.where(traced, np.asarray(values, np.float64)[..., :3] @ LUMINANCE, -1.0)
     near = np.full(light.shape, -1.0)
     for dr in range(-2, 3):
         for dc in range(-2, 3):
