@@ -143,14 +143,15 @@ def test_probe_bake_of_the_emissive_room_is_within_15_percent_of_cycles(voxgi):
     """The room lit by an emissive ceiling panel, a glowing sphere (both sampled at the probe by
     power, MIS with the uniform directions) and a spot (whose light the probes hold as it
     bounces off the walls); black world. The typical probe is within the limit and closer than
-    with the uniform directions alone; the worst (0.24, a probe at the open front under the
-    ceiling) carries the noise of the bounce hits' one emitter sample: the ceiling 5 cm above
-    the panel, lit from a few centimetres, gets an area sample's 1/r² now and then
-    (docs/probes.md "Lights at the probe")."""
+    with the uniform directions alone. The bounce hits draw 2 × 2 shadow rays here
+    (``bake.EMITTER_SAMPLES``): with one, a hit beside an emitter (the ceiling 5 cm above the
+    panel, lit from a few centimetres) got an area sample's 1/r² now and then, and the worst
+    probe read 0.24, 0.37 once the hits' glossy lobes reflect it too (docs/probes.md "Bake")."""
     c = _compare("emissive_room")
     _report(c)
     assert c.noise < 0.02
     assert c.dark < 1e-3  # a probe outside the room (under its floor) stays dark
     assert np.median(c.per_probe) < LIMIT
+    assert c.per_probe.max() < 0.2  # 0.124 measured
     assert np.median(c.per_probe) < 0.75 * np.median(c.old_per_probe)
     assert np.median(c.error) < np.median(c.old)

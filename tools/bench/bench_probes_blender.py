@@ -105,7 +105,8 @@ def _cycles_error(scene, k, count):
                                                     filter_width=0.01,
                                                     extra_passes={"Position": "use_pass_position"})
         h, w = passes["Diffuse Color"].shape[:2]
-        radiance = (passes["Diffuse Color"] * passes["Diffuse Direct"]).reshape(-1, 3)
+        radiance = (passes["Diffuse Color"] * passes["Diffuse Direct"] +  # what the seen
+                    passes["Glossy Color"] * passes["Glossy Direct"]).reshape(-1, 3)  # surface sends
         offset = passes["Position"].reshape(-1, 3) - p[index]
         length = np.linalg.norm(offset, axis=1, keepdims=True)
         seen = (length[:, 0] > 1e-6) & (passes["Alpha"].reshape(-1) > 0.5)

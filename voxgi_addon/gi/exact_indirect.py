@@ -164,10 +164,13 @@ class RayPaths:
 
 def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
               world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
-              emission_seen: bool | None = None, ray: int = RAY_DIFFUSE) -> RayPaths:
+              emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, hits=None) -> RayPaths:
     """The ``RayPaths`` of bounce rays (``ray_radiance`` without a cache, plus what a cache
-    would add to: the hits, their normals and weights)."""
-    t, tri, u, v = closest_hits(tris, origins, dirs, 0.0, np.inf, ray)
+    would add to: the hits, their normals and weights). hits : the rays' closest hits
+    (t, triangle, u, v), (K,) each, traced already (``raycast.closest_hits``; None: traced
+    here)."""
+    t, tri, u, v = closest_hits(tris, origins, dirs, 0.0, np.inf, ray) if hits is None else \
+        (np.asarray(a) for a in hits)
     radiance = np.tile(np.asarray(world, dtype=np.float64), (len(dirs), 1))
     # With the emissive triangles among the lights their light reaches the origin as direct
     # light (next-event estimation, gi/emitters.py): a ray landing on one adds no emission
@@ -345,7 +348,7 @@ def _follow_near(paths: RayPaths, out, hit_ids, tris, lights, albedo, emission, 
 def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
                  world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
                  emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, cache=None,
-                 receiver=None, near_field=None):
+                 receiver=None, near_field=None, hits=None):
     """((K, 3) radiance arriving back along each ray, (K,) distance of its nearest hit, inf on
     a miss): what a bounce ray of the gathers sees — ``world`` on a miss, else the hit's
     emission plus its exact direct light reflected toward the ray's origin (see
@@ -361,9 +364,10 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
     (docs/gi_pipeline.md "Metals reflect where they point"). near_field : (K, 3) the
     receivers' normals of the diffuse gather's rays (None: not it): a hit facing its receiver
     within ``NEAR_FIELD`` cells of the cache is followed one diffuse bounce further instead of
-    reading the cache (``_follow_near``)."""
+    reading the cache (``_follow_near``). hits : the rays' closest hits, traced already
+    (``ray_paths``)."""
     paths = ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed, world,
-                      hit_samples, hit_glossy, emission_seen, ray)
+                      hit_samples, hit_glossy, emission_seen, ray, hits)
     out = paths.with_cache(cache, receiver)
     if cache is None or not cache.iterations:
         return out, paths.distance

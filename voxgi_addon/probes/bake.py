@@ -5,23 +5,22 @@ build the occlusion masks (``masks``), then give each probe the SH L2 projection
 its incoming radiance. Light off surfaces comes along the bake's directions
 (``sh.sample_directions``, the same set for every probe, fixed by the seed): one diffuse
 bounce of direct light, exactly as Cycles' ``Diffuse Indirect`` with one bounce sees it — the
-closest triangle hit (``scene.raycast``) shaded with Cycles' light models and shadow rays
-(``gi.direct_light``: lamps, the world, emissive triangles) × albedo. Light straight from the
+closest triangle hit (``scene.raycast``) shaded as the preview's gathers shade their bounce
+hits (``gi.exact_indirect.ray_radiance``: Cycles' light models and shadow rays for lamps, the
+world and emissive triangles, reflected by the hit's Principled diffuse and glossy lobes
+toward the probe). Light straight from the
 world and from the emissive surfaces comes by next-event estimation at the probe, combined
 with those directions by multiple importance sampling (``direct``).
 """
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..errors import VoxGICancelled, VoxGIError
-from ..gi.direct_light import diffuse_direct
-from ..gi.exact_indirect import hit_emission
 from ..scene.geometry import SceneTriangles, world_triangles
-from ..scene.short_axis import norm3
 from .direct import emissive_sides, emitter_probe_sh, world_probe_sh
 from .grid import DISABLED, RELOCATED, ProbeGrid
 from .masks import ALL_SUBVOLUMES, occlusion_masks
@@ -33,6 +32,13 @@ __all__ = ["ProbeSettings", "BakeResult", "bake_probe_grid", "hit_radiance", "ma
            "direct_probe_sh"]
 
 _PROBE_CHUNK = 32  # probes whose rays are shaded together (progress and cancel granularity)
+# Where emissive triangles light the scene, a bounce hit draws at least this many shadow rays
+# (2 × 2 strata) for every light with an extent: the emitters' light at a hit is the plain
+# estimate of one point drawn by power, and its 1/r² beside an emitter (a floor by a glowing
+# sphere, a ceiling a few centimetres over a panel), reflected by the hit's diffuse and glossy
+# lobes, is a spike that a probe's few hundred rays do not average away (docs/probes.md "Bake":
+# the emissive room's worst probe 0.37 → 0.12 relative L1 against Cycles, the bake 2× longer)
+EMITTER_SAMPLES = 4
 
 
 @dataclass(frozen=True)
@@ -42,7 +48,9 @@ class ProbeSettings:
     occlusion masks and the front-facing share they require (eq. 3.1). validity_threshold :
     back-face share above which a probe is invalid; relocate : move invalid probes out
     (else they are disabled). light_samples : shadow rays per hit for lights with an extent
-    (one stratified ray is enough: the SH projection averages the probe's hundreds of hits).
+    (one stratified ray is enough for lamps and the world: the SH projection averages the
+    probe's hundreds of hits; at least ``EMITTER_SAMPLES`` where emissive triangles light the
+    scene).
     direct_samples : rays per probe drawn by the world map's importance, and as many points
     drawn on the emissive triangles by power, for the light arriving straight from them
     (``direct``; rounded up to a square). radiance_factor : the light off surfaces is gathered
@@ -85,60 +93,45 @@ def material_colours(snapshot) -> tuple[np.ndarray, np.ndarray]:
 def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
                  light_samples: int = 4, seed: int = 0, seen_world: bool = True,
                  seen_emission: bool = True, cache=None) -> np.ndarray:
-    """(N, 3) radiance arriving along rays: one diffuse bounce of direct light at the hit (every
-    light: lamps, the world, emissive triangles — ``world_light.scene_lights``) plus its
-    emission, or for a miss (tri = -1) the world in that direction (its map; its colour when it
-    has none). Hits are shaded on the side the ray came from. ``seen_world`` / ``seen_emission``
-    False leave out the world's map on a miss / the emission of a hit (the bake estimates those
-    by next-event estimation at the probe, ``direct``). cache : a ``radiance_cache.RadianceCache``
-    whose light (bounces 2 … N) the hits reflect too, by their albedo (None: one bounce)."""
-    from ..gi.radiance_cache import lookup
+    """(N, 3) radiance arriving along rays whose closest hits (t, tri, u, v) are traced: a hit
+    shaded as the preview's gathers shade their bounce hits (``exact_indirect.ray_radiance``
+    with the Principled table): its emission, every light's direct light (lamps, the world,
+    emissive triangles — ``world_light.scene_lights``) by its diffuse weight seen from the
+    probe and by its glossy lobe toward the probe, a metal's lobe followed one reflection,
+    on the side the ray came from; for a miss (tri = -1) the world in that direction (its
+    map; its colour when it has none). That is what a white diffuse surface at the probe
+    takes in as Cycles' Diffuse Indirect: the specular layer's share of a hit's light leaves
+    its diffuse part and comes back by the glossy lobe (docs/probes.md "Bake").
+    ``seen_world`` / ``seen_emission`` False leave out the world's map on a miss / the
+    emission of a hit (the bake estimates those by next-event estimation at the probe,
+    ``direct``). cache : a ``radiance_cache.RadianceCache`` whose light (bounces 2 … N) the
+    hits reflect too (None: one bounce)."""
+    from ..gi.exact_indirect import ray_radiance
     from ..gi.world_light import scene_lights, world_light, world_radiance
+    from ..preview.passes import principled_table
 
+    origins = np.asarray(origins, np.float64).reshape(-1, 3)
     dirs = np.asarray(dirs, np.float64).reshape(-1, 3)
-    world = np.asarray(snapshot.world.color, np.float64)[:3] * float(snapshot.world.strength)
-    out = np.tile(world, (len(dirs), 1))
-    sky = world_light(snapshot.world)
+    tri = np.asarray(tri, np.int64).reshape(-1)
+    _, emission = material_colours(snapshot)
+    lights = scene_lights(snapshot, tris, emission)
+    if any(light.type == "EMITTERS" for light in lights):
+        light_samples = max(light_samples, EMITTER_SAMPLES)
+    ids = np.arange(len(dirs), dtype=np.uint32)  # each ray's own light samples
+    out, _ = ray_radiance(origins, dirs, ids, tris, lights,
+                          principled_table(snapshot), emission, seed, hit_samples=light_samples,
+                          hit_glossy=True, emission_seen=seen_emission, cache=cache,
+                          hits=(np.asarray(t, np.float64).reshape(-1), tri,
+                                np.asarray(u, np.float64).reshape(-1),
+                                np.asarray(v, np.float64).reshape(-1)))
     miss = np.flatnonzero(tri < 0)
-    if sky is not None and len(miss):
-        out[miss] = world_radiance(sky, dirs[miss]) if seen_world else 0.0
+    sky = world_light(snapshot.world)
+    if sky is not None:
+        out[miss] = world_radiance(sky, dirs[miss]) if seen_world and len(miss) else 0.0
     elif getattr(snapshot.world, "radiance", None) is not None:
         out[miss] = 0.0  # a map with no light in it
-    hit = np.flatnonzero(tri >= 0)
-    if len(hit) == 0:
-        return out
-    k = tri[hit]
-    points = np.asarray(origins, np.float64).reshape(-1, 3)[hit] + dirs[hit] * t[hit, None]
-    normal = np.asarray(tris.normals, np.float64)[k]
-    if tris.corner_normals is not None:
-        c = np.asarray(tris.corner_normals, np.float64)[k]
-        uu, vv = u[hit, None], v[hit, None]
-        smooth = (1.0 - uu - vv) * c[:, 0] + uu * c[:, 1] + vv * c[:, 2]
-        length = norm3(smooth)[:, None]
-        normal = np.where(length > 1e-12, smooth / np.maximum(length, 1e-12), normal)
-    face = np.asarray(tris.normals, np.float64)[k]
-    sign = np.where(np.einsum("ij,ij->i", face, dirs[hit]) > 0, -1.0, 1.0)  # Cycles flips back faces
-    normal = normal * sign[:, None]
-    albedo, emission = material_colours(snapshot)
-    # emissive triangles by their shadow rays' plain estimate (as the gathers' bounce hits,
-    # exact_indirect.ray_radiance): the exact sum over every emitter at every hit cost minutes
-    lights = [replace(light, exact=False) if light.type == "EMITTERS" else light
-              for light in scene_lights(snapshot, tris, emission)]
-    direct = diffuse_direct(points, normal, lights, tris, samples=light_samples, seed=seed)
-    m = len(snapshot.materials)
-    mat = np.asarray(tris.materials, np.int64)[k]
-    mat = np.where((mat >= 0) & (mat < m), mat, m)
-    arriving = direct + (lookup(cache, points, normal) if cache is not None else 0.0)
-    colour = albedo[mat]
-    surface = getattr(tris, "textures", None)
-    if surface is not None:  # Base Color per texel (level 0, as the gathers' bounce hits)
-        metallic = np.array([float(getattr(x, "metallic", 0.0)) for x in snapshot.materials] +
-                            [0.0])[mat]
-        base = surface.base_at(k, mat, u[hit], v[hit], colour / np.maximum(
-            1.0 - metallic[:, None], 1e-6))
-        colour = np.clip(base, 0.0, 1.0) * (1.0 - metallic[:, None])
-    glow = hit_emission(tris, emission, k, u[hit], v[hit]) if seen_emission else 0.0
-    out[hit] = colour * arriving + glow  # emission per texel too (exact_indirect.hit_emission)
+    else:
+        out[miss] = np.asarray(snapshot.world.color, np.float64)[:3] * float(snapshot.world.strength)
     return out
 
 
