@@ -86,35 +86,35 @@ KERNELS = {
                            "gbuffer_normal", "gbuffer_view", "centre_position", "centre_normal",
                            "centre_view", "centre_unshadowed", "emitter_field") + _TEXTURES,
                    ("sampling", "strata")),
-    "bvh_gather": (("pixels", "principled", "bvh_lights", "textures", "cache_lookup", "bvh_shade",
-                    "gather_point", "bvh_gather"),
+    "bvh_gather": (("pixels", "principled", "bvh_lights", "textures", "cache_lookup", "ltc",
+                    "glossy_ltc", "bvh_shade", "gather_point", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials",
                            "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "principled_lut", "partial_image",
                            "partial_variance", "texture_table", "texture_atlas",
-                           "radiance_cache"),
+                           "radiance_cache", "ltc_table"),
                    ("sampling", "world", "grid", "chunk")),
 }
 # The glossy gather reads the same inputs as the diffuse one.
-KERNELS["bvh_glossy"] = (("pixels", "principled", "bvh_lights", "textures", "cache_lookup",
-                          "bvh_shade", "gather_point", "bvh_glossy"),
+# (The world-mode glossy gather integrates the lobe over the emitters by LTC, shaders/ltc.glsl;
+# every bounce hit an area lamp's, glossy_ltc.glsl.)
+KERNELS["bvh_glossy"] = (KERNELS["bvh_gather"][0][:-1] + ("bvh_glossy",),
                          *KERNELS["bvh_gather"][1:])
-# The world-mode glossy gather integrates the lobe over the emitters by LTC (shaders/ltc.glsl).
-KERNELS["bvh_glossy"] = (KERNELS["bvh_glossy"][0][:-1] + ("ltc", "bvh_glossy"),
-                         KERNELS["bvh_glossy"][1] + ("ltc_table",), KERNELS["bvh_glossy"][2])
 # The radiance cache's rays, traced and lit once (gpu_gather.cache_stages): the gather's inputs,
 # radiance_cache the layout's texels (each hit picks the face it reads, cache_lookup.glsl).
 KERNELS["bvh_cache_paths"] = (
-    ("principled", "bvh_lights", "textures", "cache_lookup", "bvh_shade", "cache_paths"),
+    ("principled", "bvh_lights", "textures", "cache_lookup", "ltc", "glossy_ltc", "bvh_shade",
+     "cache_paths"),
     _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials", "gbuffer_position",
             "gbuffer_normal", "principled_lut", "texture_table", "texture_atlas",
-            "radiance_cache"),
+            "radiance_cache", "ltc_table"),
     ("sampling", "world", "chunk"))
 # The emitters' glossy light: its unshadowed field at the gather points, and from the field at
 # the pixel centres and the sub-pixel passes' points (exact_glossy.emitters_shine).
 _CENTRE = ("centre_position", "centre_normal", "centre_view", "centre_shine")
 KERNELS["bvh_emitter_glossy"] = (
-    ("principled", "bvh_lights", "textures", "ltc", "same_surface", "bvh_emitter_glossy"),
+    ("principled", "bvh_lights", "textures", "ltc", "glossy_ltc", "same_surface",
+     "bvh_emitter_glossy"),
     _BVH + ("lights", "world_map", "emitters", "materials", "principled_lut", "gbuffer_position",
             "gbuffer_normal", "gbuffer_view", "gbuffer_base", "ltc_table") + _CENTRE
     + ("emitter_field",) + _TEXTURES,
@@ -151,10 +151,27 @@ LIGHT_FEATURES = {"SUN": ("SUN",), "AREA": ("AREA",), "POINT": ("POINT", "SPOT")
 EMITTERS_ONLY = ("AREA", "POINT", "SUN", "WORLD")  # a variant with the emitters' code only
 
 
-def absent_lights(lights) -> tuple[str, ...]:
-    """The ``LIGHT_FEATURES`` no light of ``lights`` (``Light``s with a ``type``) needs."""
+def absent_lights(lights, metals: bool = True) -> tuple[str, ...]:
+    """The ``LIGHT_FEATURES`` no light of ``lights`` (``Light``s with a ``type``) needs, and
+    "METAL_AREA" (a metal hit's glossy lobe over an area lamp, bvh_shade.glsl) where the scene
+    has an area lamp and no metal (``metals``, ``has_metals``)."""
     types = {light.type for light in lights}
-    return tuple(sorted(k for k, needs in LIGHT_FEATURES.items() if not types & set(needs)))
+    absent = [k for k, needs in LIGHT_FEATURES.items() if not types & set(needs)]
+    if not metals and "AREA" not in absent:
+        absent.append("METAL_AREA")
+    return tuple(sorted(absent))
+
+
+def has_metals(principled, tris) -> bool:
+    """Whether a bounce hit can be a metal (Metallic ≥ ``METAL_FOLLOWED``): a material of the
+    Principled table ``principled`` (``passes.principled_table``; None: unknown) is one, or
+    one sets its Metallic per texel (``tris``' textures' ``param_slots``)."""
+    if principled is None:
+        return True
+    if (np.asarray(principled[1], np.float64)[:, 0] >= METAL_FOLLOWED).any():
+        return True
+    slots = getattr(getattr(tris, "textures", None), "param_slots", None)
+    return slots is not None and bool((np.asarray(slots) >= 0).any())
 
 
 def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,

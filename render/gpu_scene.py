@@ -48,7 +48,7 @@ from ..voxgi_addon.scene.bvh import TEXTURE_WIDTH
 from ..voxgi_addon.scene.geometry import world_triangles
 from ..voxgi_addon.scene.glass import ray_alpha
 from ..voxgi_addon.scene.textures import pack_atlas
-from .gpu_bvh import GPUBVH, absent_lights, shared_bvh
+from .gpu_bvh import GPUBVH, absent_lights, has_metals, shared_bvh
 from .gpu_gather import no_texture_inputs, principled_materials_texture
 from .gpu_ltc import ltc_texture
 from .gpu_principled import lut_texture
@@ -656,7 +656,7 @@ class GPUScene:
     def absent(self) -> tuple[str, ...]:
         """The kinds of light the scene has none of (``absent_lights``): its one variant of
         the BVH kernels, the gathers' and every direct-light dispatch's."""
-        return absent_lights(self.lights)
+        return absent_lights(self.lights, has_metals(self.principled, self.tris))
 
     @staticmethod
     def zeros(width: int, height: int):

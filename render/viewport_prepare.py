@@ -67,7 +67,7 @@ from . import (
     gpu_preview,  # noqa: F401 - imported with the view, not in its first slice
 )
 from .gbuffer import ChunkedBatch, gbuffer_shader, rasterize, vertex_arrays
-from .gpu_bvh import EMITTERS_ONLY, absent_lights, bvh_features, bvh_shader
+from .gpu_bvh import EMITTERS_ONLY, absent_lights, bvh_features, bvh_shader, has_metals
 from .gpu_scene import WAITING, current_scene
 from .gpu_shaders import LOCAL_SIZE, build_compute, compute_shader, counters, note_upload
 from .gpu_volume import float_texture
@@ -405,11 +405,13 @@ class Features:
     emitters: bool
 
 
-def features(tris, lights, lamp_count: int) -> Features:
-    """The ``Features`` of a prepared scene: its triangles and lights list (lamps first)."""
+def features(tris, lights, lamp_count: int, principled=None) -> Features:
+    """The ``Features`` of a prepared scene: its triangles, lights list (lamps first) and
+    Principled table (``passes.principled_table``; None: unknown)."""
     cutouts, hidden = bvh_features(tris)
     return Features(cutouts, hidden, getattr(tris, "textures", None) is not None,
-                    absent_lights(lights), lamp_count > 0, len(lights) > lamp_count,
+                    absent_lights(lights, has_metals(principled, tris)), lamp_count > 0,
+                    len(lights) > lamp_count,
                     any(light.type == "EMITTERS" for light in lights))
 
 
@@ -769,7 +771,7 @@ class ViewPreparation:
             compiled, worked = "gbuffer raster", True
         found = None
         if job.plan is not None:
-            found = features(job.plan.tris, job.plan.lights, len(snapshot.lights))
+            found = features(job.plan.tris, job.plan.lights, len(snapshot.lights), job.plan.principled)
         key = kernel_key(found, settings)
         steps = kernel_steps(*key)
         if not compiled and (whole or self._fits("compile", started, budget)):
@@ -884,7 +886,7 @@ class ViewPreparation:
         job = preparation.job
         if settings.quality != "ACCURATE" or job is None or job.plan is None:
             return {}
-        found = features(job.plan.tris, job.plan.lights, len(snapshot.lights))
+        found = features(job.plan.tris, job.plan.lights, len(snapshot.lights), job.plan.principled)
         key = kernel_key(found, settings)
         if not warmup.pending(key, kernel_steps(*key), 2):
             return {}
@@ -904,7 +906,7 @@ class ViewPreparation:
         job = preparation.job
         if job is None or job.plan is None:
             return ""
-        key = kernel_key(features(job.plan.tris, job.plan.lights, len(snapshot.lights)),
+        key = kernel_key(features(job.plan.tris, job.plan.lights, len(snapshot.lights), job.plan.principled),
                          settings)
         steps = kernel_steps(*key)
         if not warmup.pending(key, steps, 2) or \

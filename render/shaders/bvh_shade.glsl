@@ -2,8 +2,9 @@
  * radiance arriving back along the ray from `origin` in unit direction `d` — `world_rgb` on a
  * miss, else the hit's emission plus its exact direct light (one shadow ray per light and
  * stratum, `strata` = m of m × m, sample id `hit_id`, seed `seed` + 1) reflected toward the
- * origin by the Principled diffuse weight and, when `hit_glossy`, its glossy lobe (each light
- * at its centre direction). `th` = distance of the hit, BVH_FAR on a miss.
+ * origin by the Principled diffuse weight and, when `hit_glossy`, its glossy lobe (a metal's
+ * integrated over an area lamp by LTC, glossy_ltc.glsl area_glossy; else toward the lamp's
+ * lit part's middle). `th` = distance of the hit, BVH_FAR on a miss.
  * Samplers: bvh_* (bvh_common.glsl), lights and world_map (bvh_lights.glsl), materials ((M + 1) × 3 texels:
  * base colour, emission, (metallic, Specular IOR Level, roughness), (Base Color texture slot,
  * Roughness / Metallic texture slot, first variant)),
@@ -107,12 +108,33 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
   vec3 weight = principled_diffuse_weight(base, params.x, params.y, params.z,
                                           clamp(-dot(ns, d), 0.0, 1.0));
   vec3 lit_at = x + ns * SURFACE_EPSILON;
+  /* uniform light (the radiance cache's) is also reflected by the glossy lobes' albedo */
+  glossy_weight = principled_glossy_color(base, params.x, params.y, params.z,
+                                          clamp(-dot(ns, d), 0.0, 1.0));
+
   /* with the emitters among the lights their light comes by next-event estimation: a ray
    * landing on one adds no emission (exact_indirect.ray_radiance) unless `emission_seen` */
   vec3 radiance = (emission_seen || emitter_header().w < 0.5) ? emission : vec3(0.0);
   for (int light = 0; light < textureSize(lights, 0).y; light++) {
     vec3 direct = light_direct(light, lit_at, ns, hit_id, seed + 1u, strata);
     radiance += weight * direct;
+#if !defined(BVH_NO_AREA) && !defined(BVH_NO_METAL_AREA)
+    vec4 head = light_texel(light, 0);
+    if (hit_glossy && params.x >= METAL_FOLLOWED && int(head.x) == 3) {
+      /* a metal under an area lamp: the lobe over it (LTC, glossy_ltc.glsl) by the visible
+       * share of its light (exact_indirect._area_shine); the code only in a scene with a metal
+       * (gpu_bvh.absent_lights) */
+      vec3 aim;
+      float unshadowed = polygon_irradiance(light, int(head.z), lit_at, ns, aim) *
+                         light_texel(light, 6).y * dot(light_texel(light, 1).rgb, LUMA);
+      float lit = dot(direct, LUMA);
+      if (unshadowed > 0.0 && lit > 0.0) {
+        radiance += clamp(lit / unshadowed, 0.0, 1.0) *
+                    area_glossy(light, int(head.z), lit_at, ns, -d, base, params);
+      }
+      continue;
+    }
+#endif
     vec3 towards = light_aim(light, lit_at, ns);
     float c = dot(ns, towards);
     if (hit_glossy && c > 1e-4 && dot(direct, vec3(1.0)) > 0.0) {
@@ -129,9 +151,6 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
                         emitters_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, false,
                                             vec4(0.0), hit_glossy, -d, base, params,
                                             emitter_glossy));
-  /* uniform light (the radiance cache's) is also reflected by the glossy lobes' albedo */
-  glossy_weight = principled_glossy_color(base, params.x, params.y, params.z,
-                                          clamp(-dot(ns, d), 0.0, 1.0));
   hit_roughness = clamp(params.z, 0.0, 1.0);
   hit_metallic = params.x;
   cache_weight = weight + glossy_weight;

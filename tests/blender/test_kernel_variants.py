@@ -49,15 +49,16 @@ def gathers(used):
 
 
 def test_a_plain_scene_traces_lean_kernels_and_the_same_image(voxgi):
-    """The test Cornell box (an area light, no textures, no cut-outs, no world light): its
-    gathers run the variant without cut-outs, textures, sun, point lights, world or
-    emitters, and every pass equals the one of the kernels with all the code."""
+    """The test Cornell box (an area light, no textures, no cut-outs, no world light, no
+    metal): its gathers run the variant without cut-outs, textures, sun, point lights, world,
+    emitters or a metal's glossy lobe over an area lamp, and every pass equals the one of the
+    kernels with all the code."""
     gpu_ready()
     scenes.build_test_cornell_box(bpy.context.scene, light="AREA")
     lean, used = traced_variants(fresh_render)
     full, used_full = traced_variants(fresh_render, every_feature=True)
     assert gathers(used) == {("bvh_gather", False, False,
-                              ("EMITTERS", "POINT", "SUN", "WORLD"), False)}
+                              ("EMITTERS", "METAL_AREA", "POINT", "SUN", "WORLD"), False)}
     assert gathers(used_full) == {("bvh_gather", True, True, (), True)}
     for name, image in full.items():
         assert np.array_equal(lean[name], image), name

@@ -261,6 +261,22 @@ def _polygon_irradiance(p: np.ndarray, n: np.ndarray, outline: np.ndarray,
     return irradiance, p + corners / np.maximum(count, 1)[:, None]
 
 
+def area_unshadowed(light, points, normals) -> np.ndarray:
+    """(N,) ∫ cos θ / π dω over the part of area lamp ``light`` above each point's horizon,
+    0 behind its emitting side: its unshadowed Diffuse Direct over its radiance (``_area``'s
+    exact term), of which its shadowed one is the visible share."""
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    out = np.zeros(len(points))
+    outline, area = area_outline(light)
+    centre, _, _, emit = light_frame(light)
+    front = np.flatnonzero((points - centre) @ emit > 0) if area > 0 else np.zeros(0, int)
+    if len(front):
+        out[front] = _polygon_irradiance(points[front],
+                                         np.asarray(normals, np.float64).reshape(-1, 3)[front],
+                                         outline)
+    return out
+
+
 def _area(light, p, n, tris, strata):
     """An area light's Diffuse Direct: its exact unshadowed light times the visible share of
     its shadow rays, each weighted by its share of the irradiance (a ratio estimator). A

@@ -404,6 +404,45 @@ def _emitters_unshadowed(lobe: _Lobe, emitters, p, glossy) -> np.ndarray:
     return np.einsum("gt,gtc->gc", shape, fresnel * emitters.radiance[None]) * white_colour
 
 
+class _Polygon:
+    """An area lamp as ``_emitters_unshadowed`` reads emitters: its outline's fan of
+    triangles (T, 3, 3), each of the lamp's radiance (T, 3), lighting the side it emits to."""
+
+    def __init__(self, outline, radiance, emit):
+        k = np.arange(1, len(outline) - 1)
+        self.corners = np.stack([np.broadcast_to(outline[0], (len(k), 3)), outline[k],
+                                 outline[k + 1]], axis=1)
+        self.radiance = np.broadcast_to(radiance, (len(k), 3))
+        normal = np.cross(self.corners[:, 1] - self.corners[:, 0],
+                          self.corners[:, 2] - self.corners[:, 0])
+        self.sides = np.where(normal @ emit > 0.0, 1, -1).astype(np.int8)
+
+
+def area_glossy(light, points, normals, views, materials, principled, base=None) -> np.ndarray:
+    """(N, 3) the unshadowed glossy light an area lamp ``light`` sends toward ``views`` off
+    surfaces at ``points`` with unit ``normals`` facing the views (``materials`` indices into
+    the Principled table ``principled``; ``base`` per point, or the table's): its radiance ×
+    the LTC integral of each point's GGX lobe over the lamp's outline, with the Fresnel where
+    the lobe meets it — as the emissive triangles' (``_emitters_unshadowed``). A bounce hit's
+    glossy lobe reflected a lamp by one direction (its lit part's middle): for a lobe narrower
+    than the lamp that read 0.6 of the integral (docs/gi_pipeline.md "A hit's glossy lobe over
+    an area light")."""
+    from .direct_light import area_outline, light_frame
+
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    out = np.zeros((len(points), 3))
+    outline, area = area_outline(light)
+    if area <= 0 or not len(points):
+        return out
+    emit = light_frame(light)[3]
+    radiance = np.asarray(light.color, np.float64)[:3] * (light.power / (np.pi * area))
+    lobe = _Lobe(normals, views, materials, principled, base)
+    glossy = np.flatnonzero(~lobe.mirror & (lobe.cos_ni > 0.0))
+    out[glossy] = _emitters_unshadowed(lobe, _Polygon(outline, radiance, emit), points[glossy],
+                                       glossy)
+    return out
+
+
 def _narrow(corners, points) -> np.ndarray:
     """(G, T) how narrow each triangle ``corners`` (T, 3, 3) looks from each point (G, 3):
     1 − its spread / (π/2), clipped to [0, 1], where the spread is the largest angle between

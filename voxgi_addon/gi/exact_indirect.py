@@ -45,7 +45,13 @@ RAY_STREAM = 0x5EED   # hash stream of the diffuse rays' rotation
 # hash stream of a metal hit's reflection, followed one bounce further (``metal_lobe_rays``),
 # and (xor'ed into the ray's light-sample id) of the light samples at that second hit
 CONTINUE_STREAM = 0x6C0B
-METAL_FOLLOWED = 0.5  # Metallic from which a hit's glossy lobe is followed (``ray_radiance``)
+# Metallic from which a hit's glossy lobe is followed (``ray_radiance``) and reflects an area
+# lamp by the lobe's integral over it (``_area_shine``; the others by the lobe toward one
+# direction, the lamp's lit part's middle: 0.6-1 of the integral, a dielectric's glossy lobe a
+# small part of what it reflects but at grazing views, and the integral at every hit cost the
+# box and the textured room a fifth more time for no change: docs/gi_pipeline.md "A hit's
+# glossy lobe over an area light")
+METAL_FOLLOWED = 0.5
 # The near field (cache cells): a diffuse gather ray hitting within this many cells of the
 # finest cache grid holding the hit reads no cache there — the lookup's trilinear voxels reach
 # back around the gather point itself — but is followed one diffuse bounce further
@@ -226,16 +232,46 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
             if reflect is not None:
                 radiance[hit] += reflected.sum(axis=0)
             lit_at = x + ns * SURFACE_EPSILON
-            for direct, towards in zip(lit if hit_glossy else (), light_aims(lights, lit_at, ns)):
+            lamps = [light for light in lights if light.type not in ("WORLD", "EMITTERS")]
+            wide = metallic >= METAL_FOLLOWED  # metals reflect an area lamp by the integral
+            for light, direct, towards in zip(lamps, lit if hit_glossy else (),
+                                              light_aims(lights, lit_at, ns)):
                 cos = np.einsum("ij,ij->i", ns, towards)
                 shine = direct * (np.pi / np.maximum(cos, 1e-4))[:, None] * \
                     glossy_reflectance(*shading, ns, -dirs[hit], towards)
-                radiance[hit] += np.where(cos[:, None] > 1e-4, shine, 0.0)
+                shine = np.where(cos[:, None] > 1e-4, shine, 0.0)
+                if light.type == "AREA" and wide.any():  # the lobe over the lamp (LTC)
+                    k = np.flatnonzero(wide)
+                    shine[k] = _area_shine(light, direct[k], lit_at[k], ns[k], -dirs[hit][k],
+                                           material[k], albedo, base[k])
+                radiance[hit] += shine
         else:
             weight = np.asarray(albedo, np.float64)[material]
             glossy = np.zeros_like(weight)
             radiance[hit] += weight * arriving
     return RayPaths(radiance, t, hit, x, ns, weight, glossy, roughness, metallic)
+
+
+def _area_shine(light, direct, points, normals, views, materials, principled, base):
+    """(H, 3) what hits' glossy lobes reflect toward ``views`` of an area lamp whose shadowed
+    Diffuse Direct at them is ``direct`` (H, 3): its unshadowed glossy light
+    (``exact_glossy.area_glossy``, the lobe integrated over the lamp) × the visible share
+    ``direct`` holds (its luminance over the unshadowed one, ``direct_light.area_unshadowed``).
+    The lobe toward one direction, the lamp's lit part's middle, read 0.6 of the integral
+    for a lobe of roughness 0.3 under a 1 m lamp (docs/gi_pipeline.md "A hit's glossy lobe
+    over an area light")."""
+    from .direct_light import area_unshadowed
+    from .exact_glossy import area_glossy
+
+    out = np.zeros((len(points), 3))
+    colour = np.asarray(light.color, np.float64)[:3] @ LUMINANCE
+    unshadowed = area_unshadowed(light, points, normals) * colour
+    lit = np.flatnonzero((unshadowed > 0.0) & (np.asarray(direct, np.float64) @ LUMINANCE > 0.0))
+    if len(lit):
+        share = np.clip(np.asarray(direct, np.float64)[lit] @ LUMINANCE / unshadowed[lit], 0.0, 1.0)
+        out[lit] = share[:, None] * area_glossy(light, points[lit], normals[lit], views[lit],
+                                                materials[lit], principled, base[lit])
+    return out
 
 
 def metal_lobe_rays(normals, dirs, roughness, hit_ids, seed: int = 0) -> np.ndarray:
