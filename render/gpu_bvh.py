@@ -95,9 +95,9 @@ KERNELS = {
                            "radiance_cache", "ltc_table"),
                    ("sampling", "world", "grid", "chunk")),
 }
-# The glossy gather reads the same inputs as the diffuse one.
-# (The world-mode glossy gather integrates the lobe over the emitters by LTC, shaders/ltc.glsl;
-# every bounce hit an area lamp's, glossy_ltc.glsl.)
+# The glossy gather reads the same inputs as the diffuse one. (Every kernel that shades bounce
+# hits has ltc.glsl and glossy_ltc.glsl: a metal hit's lobe over an area lamp; the world-mode
+# glossy gather's lobe over the emitters.)
 KERNELS["bvh_glossy"] = (KERNELS["bvh_gather"][0][:-1] + ("bvh_glossy",),
                          *KERNELS["bvh_gather"][1:])
 # The radiance cache's rays, traced and lit once (gpu_gather.cache_stages): the gather's inputs,

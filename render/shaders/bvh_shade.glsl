@@ -111,7 +111,6 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
   /* uniform light (the radiance cache's) is also reflected by the glossy lobes' albedo */
   glossy_weight = principled_glossy_color(base, params.x, params.y, params.z,
                                           clamp(-dot(ns, d), 0.0, 1.0));
-
   /* with the emitters among the lights their light comes by next-event estimation: a ray
    * landing on one adds no emission (exact_indirect.ray_radiance) unless `emission_seen` */
   vec3 radiance = (emission_seen || emitter_header().w < 0.5) ? emission : vec3(0.0);
