@@ -78,6 +78,40 @@ def test_a_scene_with_emitters_keeps_their_code(voxgi):
             name
 
 
+def test_a_metal_under_an_area_lamp_keeps_its_lobe_over_the_lamp(voxgi):
+    """The room of metals (an area lamp, a point lamp, steel, copper and gold): its gathers
+    keep the metal hits' lobe over the area lamp (bvh_shade.glsl, gpu_bvh.has_metals) and give
+    the passes of the kernels with every feature; built without that code they give another
+    Glossy Indirect (the lobe toward one direction), so the code runs. With its metals turned
+    dielectric the room's gathers leave the code out."""
+    from voxgi.render import gpu_bvh
+
+    gpu_ready()
+    light_scenes.build("metal_room", bpy.context.scene)
+    lean, used = traced_variants(fresh_render)
+    full, _ = traced_variants(fresh_render, every_feature=True)
+    assert {v[3] for v in gathers(used)} == {("EMITTERS", "SUN", "WORLD")}
+    for name, image in full.items():
+        assert np.allclose(lean[name], image, rtol=0, atol=1e-6 * max(np.abs(image).max(), 1)), \
+            name
+    original = gpu_bvh.bvh_shader
+    gpu_bvh.bvh_shader = lambda kernel, cutouts=True, textures=True, absent=(), hidden=True: \
+        original(kernel, cutouts, textures, tuple(sorted(set(absent) | {"METAL_AREA"})), hidden)
+    try:
+        one_direction = fresh_render()
+    finally:
+        gpu_bvh.bvh_shader = original
+    change = np.abs(one_direction["Glossy Indirect"] - lean["Glossy Indirect"]).sum()
+    print("one direction changes Glossy Indirect by", change / np.abs(lean["Glossy Indirect"]).sum())
+    assert change > 0.02 * np.abs(lean["Glossy Indirect"]).sum()
+    for material in bpy.data.materials:
+        bsdf = material.node_tree.nodes.get("Principled BSDF") if material.node_tree else None
+        if bsdf is not None:
+            bsdf.inputs["Metallic"].default_value = 0.0
+    _, used = traced_variants(fresh_render)
+    assert {v[3] for v in gathers(used)} == {("EMITTERS", "METAL_AREA", "SUN", "WORLD")}
+
+
 def test_cut_outs_get_the_kernels_that_read_their_alpha(voxgi):
     """The fence cards (image-textured cut-outs): every BVH kernel is built with the cut-out
     test and the texture code, and the slats still let light through as before."""
