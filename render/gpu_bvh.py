@@ -39,6 +39,7 @@ from ..voxgi_addon.gi.exact_glossy import (
 )
 from ..voxgi_addon.gi.exact_indirect import (
     CONTINUE_STREAM,
+    LOBE_FOLLOW_STREAM,
     MAX_FOLLOWS,
     METAL_FOLLOWED,
     NEAR_FACING,
@@ -224,6 +225,7 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
             defines["NEAR_STEP"] = repr(float(NEAR_STEP))
         if "bvh_shade" in files:  # a metal hit followed one reflection further (ray_radiance)
             defines["CONTINUE_STREAM"] = f"{CONTINUE_STREAM}u"
+            defines["LOBE_FOLLOW_STREAM"] = f"{LOBE_FOLLOW_STREAM}u"
             defines["METAL_FOLLOWED"] = repr(float(METAL_FOLLOWED))
             defines["NEAR_FIELD"] = repr(float(NEAR_FIELD))
             defines["MAX_FOLLOWS"] = str(MAX_FOLLOWS)

@@ -815,7 +815,8 @@ float emitters_distance(vec3 p, vec3 n)
 /* Diffuse Direct of the emissive triangles (emitters.emitters_direct): the exact unshadowed
  * sum (emitters_unshadowed; known.rgb where known.w > 0.5, a pixel centre's) less the
  * estimate of its hidden part from one point per stratum, sampled by power; not `exact` (bounce
- * hits): the shadow rays' plain estimate. With `lobe` (kernels with principled.glsl) `glossy`
+ * hits): per stratum the picked triangle's own exact light over its pick's chance less its
+ * sample's where hidden (emitters.emitters_direct). With `lobe` (kernels with principled.glsl) `glossy`
  * gets what a bounce hit's glossy lobe reflects of them toward `v` from the same rays (mean of
  * L V f |cos_l| / (r² p_area)). */
 vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, vec4 known, bool lobe,
@@ -834,6 +835,7 @@ vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, vec4 kn
   vec3 origin = p;
   vec3 f_sum = vec3(0.0);
   vec3 f_lit = vec3(0.0);
+  vec3 f_exact = vec3(0.0); /* Σ π L_t FF_t / P_t of the picked triangles (not `exact`) */
   for (int k = 0; k < m * m; k++) {
     vec2 u = hashed_stratum(state, k, m);
     int t;
@@ -848,13 +850,17 @@ vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, vec4 kn
     float r2 = dot(w, w);
     float dist = sqrt(r2);
     vec3 d = w / max(dist, 1e-30);
-    vec3 normal = cross(c1 - c0, c2 - c0);
-    normal /= max(length(normal), 1e-30);
+    vec3 normal_area = cross(c1 - c0, c2 - c0);
+    vec3 normal = normal_area / max(length(normal_area), 1e-30);
     float g = max(dot(d, n), 0.0) * abs(dot(d, normal)) / max(r2, 1e-30) /
               max(dot(radiance, LUMA) / head.y, 1e-30);
     g = emitter_facing(t, p) ? g : 0.0;
     vec3 f = radiance * g;
     f_sum += f;
+    if (!exact && emitter_facing(t, p)) { /* the picked triangle's exact unshadowed light */
+      float pick = 0.5 * length(normal_area) * dot(radiance, LUMA) / head.y;
+      f_exact += radiance * (clipped_form_factor(t, p, n) * M_PI_F / max(pick, 1e-30));
+    }
     if (g > 0.0 && !shadow_hit(origin, d, dist)) {
       f_lit += f;
 #ifdef PRINCIPLED_IOR
@@ -867,8 +873,8 @@ vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, vec4 kn
     }
   }
   glossy /= float(m * m);
-  if (!exact) {
-    return f_lit / (M_PI_F * float(m * m));
+  if (!exact) { /* each picked triangle's exact light less its sample's if hidden */
+    return (f_exact - (f_sum - f_lit)) / (M_PI_F * float(m * m));
   }
   /* a pixel's light: held at 0 whatever its strata (world_light.hidden_less's difference) */
   return max(value - (f_sum - f_lit) / (float(m * m) * M_PI_F), vec3(0.0));

@@ -258,10 +258,11 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
                   vec3 world_rgb, bool emission_seen, out float th)
 {
   /* The hit's own light (ray_paths), then the radiance cache's indirect light at it: bounces
-   * 2 … N (cache_indirect). A metal's lobe does not take the cache's light as uniform: it is
-   * followed one reflection further (metal_lobe_ray), whose hit adds its own light and its
-   * cache's, carried by the metal's Glossy Color (docs/gi_pipeline.md "Metals reflect where
-   * they point"). In the diffuse gather (near_follow) a hit within NEAR_FIELD cache cells
+   * 2 … N (cache_indirect). A glossy lobe does not take the cache's light as uniform: it is
+   * followed one reflection further (metal_lobe_ray; a dielectric's by its glossy share),
+   * whose hit adds its own light and its cache's, carried by the Glossy Color
+   * (docs/gi_pipeline.md "Metals reflect where they point", "Where the box's regional bias
+   * comes from"). In the diffuse gather (near_follow) a hit within NEAR_FIELD cache cells
    * that faces its receiver (NEAR_FACING) is followed a diffuse bounce further instead,
    * MAX_FOLLOWS times at most, each landing reading the cache an iteration fewer ("The near
    * field followed"). One loop for all, so
@@ -310,9 +311,24 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
       id_now = pcg_hash(id_now ^ CONTINUE_STREAM);
       continue;
     }
-    if (first && cached && !ahead_only && hit_metallic >= METAL_FOLLOWED) {
-      total += (cache_weight - glossy_weight) * arriving.rgb;
-      carried = glossy_weight;
+    /* the hit's glossy lobe followed one reflection further (exact_indirect
+     * lobe_follow_chance): a metal's always, a dielectric's by its glossy share q, carrying
+     * the lobe's light / q; not followed, the lobe's light is left to the followed ones */
+    const vec3 LUMA_FOLLOW = vec3(0.2126, 0.7152, 0.0722);
+    float q = clamp(dot(glossy_weight, LUMA_FOLLOW) / max(dot(cache_weight, LUMA_FOLLOW), 1e-30),
+                    0.0, 1.0);
+    q = hit_metallic >= METAL_FOLLOWED ? 1.0 : q;
+    bool lobe = first && cached && !ahead_only;
+    bool lobe_followed = lobe && q > 0.0 &&
+                         (q >= 1.0 || unit_float(pcg_hash(id_now ^ LOBE_FOLLOW_STREAM)) < q);
+    if (lobe && !lobe_followed) {
+      cache_weight -= glossy_weight;
+      glossy_weight = vec3(0.0);
+    }
+    if (lobe_followed) {
+      total += (cache_weight - glossy_weight) * (1.0 + max(receiver_glossy, 0.0) * arriving.a) *
+               arriving.rgb;
+      carried = glossy_weight / q;
       if (!metal_follow(x, ns, dir, id_now, seed, o, dir)) {
         break;
       }

@@ -47,11 +47,12 @@ def test_sparse_gathers_trace_fewer_points_and_stay_near_cycles(voxgi, tmp_path,
 
 
 def test_f12s_spikes_are_traced_again_on_the_gpu(voxgi, tmp_path, monkeypatch):
-    """The emissive room at 160 × 120: a few of its gather cells catch a ray into the lit slot
-    over the panel and read several times their neighbours. F12's GPU gather traces them again
-    with SPIKE_RAYS × the rays (``sparse_gather.retrace_spikes``, docs/gi_pipeline.md "Spikes
-    traced again"): each read back in its row, merged with its first estimate by their rays,
-    and the brightest spike comes out dimmer — the blotch its light would make gone."""
+    """The emissive room at 160 × 120: F12's GPU gather traces its brightest cells again with
+    SPIKE_RAYS × the rays (``sparse_gather.retrace_spikes``, docs/gi_pipeline.md "Spikes traced
+    again"): each read back in its row, merged with its first estimate by their rays, and the
+    brightest comes out dimmer. Its bounce hits now take each picked emitter's exact light
+    ("Emitters at bounce hits"), so no cell reads SPIKE × its neighbours any more (the rays into
+    the lit slot over the panel did): the test picks the cells at 2 × theirs (5 of 2,500)."""
     from voxgi.voxgi_addon.preview import sparse_gather
 
     scene = bpy.context.scene
@@ -72,6 +73,7 @@ def test_f12s_spikes_are_traced_again_on_the_gpu(voxgi, tmp_path, monkeypatch):
         return again
 
     monkeypatch.setattr(sparse_gather, "retrace_spikes", recorded)
+    monkeypatch.setattr(sparse_gather, "SPIKE", 2.0)
     ours = preview(tmp_path, scene, 160, 120)
     (cells, more, settings, first, second, merged), = seen
     assert 0 < cells.sum() < 0.01 * cells.size  # a few cells, not the image

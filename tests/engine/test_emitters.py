@@ -86,6 +86,40 @@ def test_unoccluded_points_get_the_exact_sum_and_the_plain_estimate_converges_to
     np.testing.assert_allclose(plain.mean(axis=0), exact[0], rtol=0.03)
 
 
+def test_a_bounce_hit_beside_a_panel_reads_its_light_without_spikes():
+    """At a bounce hit (exact False, one stratum a point) each picked triangle gives its own
+    exact light over its pick's chance, less its sample's where hidden: 2 cm under a panel the
+    hits read the exact sum on average with no 1/r² spike, and half the panel hidden still
+    halves it (unbiased)."""
+    light = dataclasses.replace(
+        emitter_light(triangles(panel(z=0.02)), np.array([[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]])),
+        exact=False)
+    count = 4000
+    p = np.tile([0.3, -0.2, 0.0], (count, 1))
+    n = np.tile([0.0, 0.0, 1.0], (count, 1))
+    ids = np.arange(count)
+
+    def one_stratum(points):
+        return hashed_square(ids[points], 0, 1)
+
+    def open_sky(origins, dirs, lengths):
+        return np.zeros(len(dirs), bool)
+
+    hits = emitters_direct(light, p, n, open_sky, one_stratum)[:, 0]
+    exact = emitters_direct(dataclasses.replace(light, exact=True), p[:1], n[:1], None, None)[0, 0]
+    assert hits.mean() == pytest.approx(exact, rel=0.02)
+    assert hits.max() <= 2.0 * exact  # the two triangles' shares: no sample far above them
+
+    def behind_a_wall(origins, dirs, lengths):  # blocks every ray towards x > 0
+        return dirs[:, 0] > 0
+
+    far = dataclasses.replace(light, corners=light.corners + np.array([0.0, 0.0, 1.98]))
+    centre = np.zeros((count, 3))
+    half = emitters_direct(far, centre, n, behind_a_wall, one_stratum)[:, 0]
+    full = emitters_direct(dataclasses.replace(far, exact=True), centre[:1], n[:1], None, None)
+    assert half.mean() == pytest.approx(0.5 * full[0, 0], rel=0.05)
+
+
 def test_half_the_panel_hidden_halves_its_light():
     light = emitter_light(triangles(panel()), np.array([[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]]))
     ids = np.arange(400)

@@ -15,6 +15,13 @@ units, both sides emitting, as Cycles' mesh lights do) is evaluated as the area 
   its first coordinate and a uniform point on it with the remainder and the second
   (``sample_points``); f = L cos_x cos_l / r² / p_area. Where every shadow ray is unoccluded
   the share is exactly 1.
+* **At a bounce hit** (``EmitterLight.exact`` False: the full sum over every triangle at every
+  hit cost the emissive room 3.7 × its preview's time) each stratum's picked triangle gives its
+  own exact light, L_t FF_t / P_t (P_t its pick's chance), less its sample's f / π where the
+  shadow ray is hidden: unbiased, and exact where nothing hides the emitters. The plain
+  estimate f / π it replaces drew 1/r² at hits beside an emitter, rare bright rays that the
+  sparse gather's spike retrace then took out of the image's light (docs/gi_pipeline.md
+  "Emitters at bounce hits").
 
 ``EmitterLight`` stands in the lights list (``world_light.scene_lights``) with
 ``type == "EMITTERS"``; ``emitter_table`` packs it for ``render/shaders/bvh_lights.glsl``.
@@ -277,8 +284,13 @@ def clipped_form_factors(p, n, corners) -> np.ndarray:
     """(N, E) ``∫ max(n·ω, 0)/π dω`` over each triangle (E, 3, 3) seen from points p (N, 3)
     with unit normals n (N, 3), either side: the triangle clipped to the part above the point's
     tangent plane (up to 4 corners), then Lambert's formula |Σ_edges θ_k γ_k·n| / 2π."""
-    rel = corners[None] - p[:, None, None]                      # (N, E, 3, 3)
-    h = np.einsum("nevc,nc->nev", rel, n)                       # heights above the plane
+    return _form_factors(corners[None] - p[:, None, None], np.asarray(n, np.float64)[:, None])
+
+
+def _form_factors(rel, n) -> np.ndarray:
+    """``clipped_form_factors`` of the triangles whose corners lie at ``rel`` (..., 3, 3) from
+    their points, of unit normals ``n`` (broadcast against rel's (..., 3) rows)."""
+    h = np.einsum("...vc,...c->...v", rel, n)                   # heights above the plane
     slots = []
     for i in range(3):  # Sutherland–Hodgman against h >= 0: v_i if above, then the crossing
         j = (i + 1) % 3
@@ -303,7 +315,7 @@ def clipped_form_factors(p, n, corners) -> np.ndarray:
     sin = norm3(cross)
     angle = np.arctan2(sin, np.einsum("...c,...c->...", a, b))
     gamma = np.divide(cross, sin[..., None], out=np.zeros_like(cross), where=sin[..., None] > 1e-12)
-    total = (angle * np.einsum("nekc,nc->nek", gamma, n)).sum(axis=-1)
+    total = (angle * np.einsum("...kc,...c->...k", gamma, n)).sum(axis=-1)
     out = np.abs(total) / (2.0 * math.pi)
     return np.where(any_along(valid), out, 0.0)
 
@@ -383,14 +395,21 @@ def emitters_direct(light: EmitterLight, p, n, occluded, strata, reflect=None,
     if useful.any():
         origins = np.repeat(p[lit], k.shape[1], axis=0).reshape(k.shape + (3,))
         blocked[useful] = occluded(origins[useful], d[useful], r[useful])
-    seen = (f * ~blocked[..., None]).sum(axis=1)
     if reflect is not None:
         towards = np.where(_facing(light, p[lit], k), cos_l / np.maximum(r2, 1e-30)
                            / np.maximum(pdf_area, 1e-30), 0.0)
         shine = light.radiance[k] * towards[..., None] * reflect(lit, d)
         glossy[lit] = np.where((useful & ~blocked)[..., None], shine, 0.0).sum(axis=1) / k.shape[1]
     if not light.exact:
-        value = seen / (math.pi * k.shape[1])  # E/π = mean of L cos_x cos_l / r² / p_area / π
+        # each picked triangle's exact unshadowed light (L_t FF_t over its pick's chance P_t)
+        # less its sample's estimate where that is hidden (f / π): unbiased, and a point
+        # beside an emitter gets the bounded FF_t instead of its samples' 1/r² (a bounce hit's
+        # light; docs/gi_pipeline.md "Emitters at bounce hits")
+        pick = light.area[k] * (light.radiance[k] @ LUMINANCE) / _total_power(light)
+        form = _form_factors(corners - p[lit, None, None], n[lit, None])   # (M, K)
+        form = np.where(_facing(light, p[lit], k), form, 0.0)
+        exact = light.radiance[k] * (form / np.maximum(pick, 1e-30))[..., None]
+        value = (exact - f * blocked[..., None] / math.pi).sum(axis=1) / k.shape[1]
         return value if reflect is None else (value, glossy)
     # a pixel's light: the difference held at 0 whatever its strata (``hidden_less``)
     value[lit] = hidden_less(value[lit], f, blocked, k.shape[1], held=True)

@@ -52,6 +52,9 @@ CONTINUE_STREAM = 0x6C0B
 # box and the textured room a fifth more time for no change: docs/gi_pipeline.md "A hit's
 # glossy lobe over an area light")
 METAL_FOLLOWED = 0.5
+# hash stream of the draw that follows a dielectric hit's glossy lobe by its share
+# (``lobe_follow_chance``)
+LOBE_FOLLOW_STREAM = 0x6C1D
 # The near field (cache cells): a diffuse gather ray hitting within this many cells of the
 # finest cache grid holding the hit reads no cache there — the lookup's trilinear voxels reach
 # back around the gather point itself — but is followed one diffuse bounce further
@@ -194,7 +197,8 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
         material = np.where((material >= 0) & (material < last), material, last)
         if getattr(tris, "textures", None) is not None:  # Roughness / Metallic per texel
             material = tris.textures.variant_at(tri[hit], material, u[hit], v[hit])
-        # emissive triangles by their shadow rays' plain estimate here (emitters.EmitterLight)
+        # emissive triangles by each picked triangle's exact light less its hidden sample's
+        # here (emitters.EmitterLight.exact False)
         at_hits = [replace(light, exact=False) if light.type == "EMITTERS" else light
                    for light in lights]
         principled = isinstance(albedo, tuple)  # (base, (metallic, level, roughness))
@@ -296,7 +300,8 @@ def metal_lobe_rays(normals, dirs, roughness, hit_ids, seed: int = 0) -> np.ndar
 
 def follow_metal_hits(paths: RayPaths, metal, dirs, hit_ids, tris, lights, albedo, emission,
                       seed: int = 0, ray: int = RAY_DIFFUSE):
-    """The hits ``metal`` (indices into ``paths``' hits) followed one reflection further
+    """The hits ``metal`` (indices into ``paths``' hits: the metals and the dielectrics whose
+    glossy lobe ``ray_radiance`` follows, ``lobe_follow_chance``) followed one reflection further
     (``metal_lobe_rays``; bvh_shade.glsl ``metal_follow``): (up, second) — ``up`` the indices
     into ``metal`` whose reflection leaves above the surface, ``second`` the ``RayPaths`` of
     those reflections (no world, no emission: the metal's own light sampling holds them; one
@@ -346,13 +351,14 @@ def _follow_near(paths: RayPaths, out, hit_ids, tris, lights, albedo, emission, 
     more bounce); where that bounce lands near again, it is followed again, up to
     ``MAX_FOLLOWS`` bounces and the cache's iterations. A hit f bounces on reads the cache f
     iterations fewer (``radiance_cache.cache_levels``: bounces 2 … N in all), none once the
-    path has them all. Nothing is followed where the cache keeps no earlier iterations."""
+    path has them all. Nothing is followed where the cache keeps no earlier iterations.
+    Returns the hits followed (indices into ``paths``' hits)."""
     levels = cache_levels(cache)
     if not levels:
-        return
+        return np.zeros(0, np.int64)
     near = _near(cache, paths, receivers)
     if not len(near):
-        return
+        return near
     index = paths.hit[near]  # the rays of ``out`` each followed path adds to
     normals = paths.normals[near]
     arriving, more = lookup(cache, paths.points[near], normals, more=True)
@@ -379,6 +385,7 @@ def _follow_near(paths: RayPaths, out, hit_ids, tris, lights, albedo, emission, 
         points, normals = step.points[on], step.normals[on]
         if not len(index):
             break
+    return near
 
 
 def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
@@ -394,10 +401,12 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
     light the cache holds at it (bounces beyond the first) by its diffuse weight and, taking
     that light as uniform over the hemisphere, its glossy lobes' albedo (Cycles' Glossy Color):
     the paths that bounce glossily in between (Cycles' default light paths allow 4 glossy
-    bounces). A metal hit (Metallic ≥ ``METAL_FOLLOWED``) keeps the cache for its diffuse
-    share; its glossy share is followed one reflection further instead (``metal_lobe_rays``):
-    that hit's own light and its cache's, carried by the metal's Glossy Color
-    (docs/gi_pipeline.md "Metals reflect where they point"). near_field : (K, 3) the
+    bounces). A hit keeps the cache for its diffuse share; its glossy share is followed one
+    reflection further instead (``metal_lobe_rays``), a metal's (Metallic ≥
+    ``METAL_FOLLOWED``) always, a dielectric's by the chance ``lobe_follow_chance``: that
+    hit's own light and its cache's, carried by the Glossy Color ÷ the chance
+    (docs/gi_pipeline.md "Metals reflect where they point", "Where the box's regional bias comes from").
+    near_field : (K, 3) the
     receivers' normals of the diffuse gather's rays (None: not it): a hit facing its receiver
     within ``NEAR_FIELD`` cells of the cache is followed one diffuse bounce further instead of
     reading the cache (``_follow_near``). hits : the rays' closest hits, traced already
@@ -407,24 +416,45 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
     out = paths.with_cache(cache, receiver)
     if cache is None or not cache.iterations:
         return out, paths.distance
+    near = np.zeros(0, np.int64)
     if near_field is not None and len(paths.hit):
-        _follow_near(paths, out, hit_ids, tris, lights, albedo, emission, seed, ray, cache,
-                     np.asarray(near_field, np.float64).reshape(-1, 3))
-    if paths.metallic is None:
+        near = _follow_near(paths, out, hit_ids, tris, lights, albedo, emission, seed, ray,
+                            cache, np.asarray(near_field, np.float64).reshape(-1, 3))
+    if paths.metallic is None or not len(paths.hit):
         return out, paths.distance
-    # A metal's lobe does not take the cache's light as uniform: its path is followed one
-    # reflection further (docs/gi_pipeline.md "Metals reflect where they point")
-    metal = np.flatnonzero(paths.metallic >= METAL_FOLLOWED)
-    if len(metal):
-        rays = paths.hit[metal]
-        arriving = lookup(cache, paths.points[metal], paths.normals[metal])
-        glossy = paths.glossy[metal]
-        out[rays] = paths.radiance[rays] + (paths.weight[metal] - glossy) * arriving
-        up, second = follow_metal_hits(paths, metal, dirs, hit_ids, tris, lights, albedo,
+    # A hit's glossy lobe does not take the cache's light as uniform: it is followed one
+    # reflection further, a metal's always, a dielectric's by the chance of its glossy share
+    # (docs/gi_pipeline.md "Metals reflect where they point", "Where the box's regional bias comes from")
+    rest = np.setdiff1d(np.arange(len(paths.hit)), near)
+    chance = lobe_follow_chance(paths)
+    ids = np.asarray(hit_ids).astype(np.uint32)[paths.hit]
+    followed = (chance > 0.0) & ((chance >= 1.0) | (
+        unit_float(pcg_hash(ids ^ np.uint32(LOBE_FOLLOW_STREAM))) < chance))
+    rays = paths.hit[rest]
+    arriving, more = lookup(cache, paths.points[rest], paths.normals[rest], more=True)
+    picked = 0.0 if receiver is None else \
+        np.asarray(receiver, np.float64).reshape(-1)[rays][:, None]
+    out[rays] = paths.radiance[rays] + (paths.weight[rest] - paths.glossy[rest]) * \
+        (1.0 + picked * more[:, None]) * arriving
+    lobes = rest[followed[rest]]
+    if len(lobes):
+        up, second = follow_metal_hits(paths, lobes, dirs, hit_ids, tris, lights, albedo,
                                        emission, seed, ray)
         if second is not None:
-            out[rays[up]] += glossy[up] * second.with_cache(cache)
+            carried = paths.glossy[lobes] / chance[lobes][:, None]
+            out[paths.hit[lobes][up]] += carried[up] * second.with_cache(cache)
     return out, paths.distance
+
+
+def lobe_follow_chance(paths: RayPaths) -> np.ndarray:
+    """(H,) the chance each hit's glossy lobe is followed one reflection further
+    (``ray_radiance``; bvh_shade.glsl): 1 for a metal (Metallic ≥ ``METAL_FOLLOWED``), else
+    its glossy lobes' share of its weight (luminance), the followed ones carrying the lobes'
+    light ÷ that chance — an estimate of what the lobe reflects where it points, without the
+    uniform light the cache would give it (which read the box's back wall 2–4% bright:
+    docs/gi_pipeline.md "Where the box's regional bias comes from: the hits' glossy lobes")."""
+    share = (paths.glossy @ LUMINANCE) / np.maximum(paths.weight @ LUMINANCE, 1e-30)
+    return np.where(paths.metallic >= METAL_FOLLOWED, 1.0, np.clip(share, 0.0, 1.0))
 
 
 def gather_rays(points, normals, sample_ids, rays: int, seed: int = 0):
