@@ -854,10 +854,11 @@ vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, vec4 kn
     vec3 normal = normal_area / max(length(normal_area), 1e-30);
     float g = max(dot(d, n), 0.0) * abs(dot(d, normal)) / max(r2, 1e-30) /
               max(dot(radiance, LUMA) / head.y, 1e-30);
-    g = emitter_facing(t, p) ? g : 0.0;
+    bool facing = emitter_facing(t, p);
+    g = facing ? g : 0.0;
     vec3 f = radiance * g;
     f_sum += f;
-    if (!exact && emitter_facing(t, p)) { /* the picked triangle's exact unshadowed light */
+    if (!exact && facing) { /* the picked triangle's exact unshadowed light */
       float pick = 0.5 * length(normal_area) * dot(radiance, LUMA) / head.y;
       f_exact += radiance * (clipped_form_factor(t, p, n) * M_PI_F / max(pick, 1e-30));
     }

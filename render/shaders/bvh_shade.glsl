@@ -314,9 +314,7 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
     /* the hit's glossy lobe followed one reflection further (exact_indirect
      * lobe_follow_chance): a metal's always, a dielectric's by its glossy share q, carrying
      * the lobe's light / q; not followed, the lobe's light is left to the followed ones */
-    const vec3 LUMA_FOLLOW = vec3(0.2126, 0.7152, 0.0722);
-    float q = clamp(dot(glossy_weight, LUMA_FOLLOW) / max(dot(cache_weight, LUMA_FOLLOW), 1e-30),
-                    0.0, 1.0);
+    float q = clamp(dot(glossy_weight, LUMA) / max(dot(cache_weight, LUMA), 1e-30), 0.0, 1.0);
     q = hit_metallic >= METAL_FOLLOWED ? 1.0 : q;
     bool lobe = first && cached && !ahead_only;
     bool lobe_followed = lobe && q > 0.0 &&

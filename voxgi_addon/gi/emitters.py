@@ -388,7 +388,8 @@ def emitters_direct(light: EmitterLight, p, n, occluded, strata, reflect=None,
     cos_l = np.abs(np.einsum("mkc,mkc->mk", d, normal))
     pdf_area = (light.radiance[k] @ LUMINANCE) / _total_power(light)
     g = np.maximum(cos_x, 0.0) * cos_l / np.maximum(r2, 1e-30) / np.maximum(pdf_area, 1e-30)
-    g = np.where(_facing(light, p[lit], k), g, 0.0)
+    facing = _facing(light, p[lit], k)
+    g = np.where(facing, g, 0.0)
     f = light.radiance[k] * g[..., None]
     useful = g > 0
     blocked = np.zeros(useful.shape, bool)
@@ -396,7 +397,7 @@ def emitters_direct(light: EmitterLight, p, n, occluded, strata, reflect=None,
         origins = np.repeat(p[lit], k.shape[1], axis=0).reshape(k.shape + (3,))
         blocked[useful] = occluded(origins[useful], d[useful], r[useful])
     if reflect is not None:
-        towards = np.where(_facing(light, p[lit], k), cos_l / np.maximum(r2, 1e-30)
+        towards = np.where(facing, cos_l / np.maximum(r2, 1e-30)
                            / np.maximum(pdf_area, 1e-30), 0.0)
         shine = light.radiance[k] * towards[..., None] * reflect(lit, d)
         glossy[lit] = np.where((useful & ~blocked)[..., None], shine, 0.0).sum(axis=1) / k.shape[1]
@@ -407,7 +408,7 @@ def emitters_direct(light: EmitterLight, p, n, occluded, strata, reflect=None,
         # light; docs/gi_pipeline.md "Emitters at bounce hits")
         pick = light.area[k] * (light.radiance[k] @ LUMINANCE) / _total_power(light)
         form = _form_factors(corners - p[lit, None, None], n[lit, None])   # (M, K)
-        form = np.where(_facing(light, p[lit], k), form, 0.0)
+        form = np.where(facing, form, 0.0)
         exact = light.radiance[k] * (form / np.maximum(pick, 1e-30))[..., None]
         value = (exact - f * blocked[..., None] / math.pi).sum(axis=1) / k.shape[1]
         return value if reflect is None else (value, glossy)
