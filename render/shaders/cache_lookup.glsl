@@ -14,6 +14,37 @@
  * wall's or a floor's hit reads 8 texels, not 24 (docs/gi_pipeline.md "Multi-bounce radiance
  * cache", "What the cache costs, measured again"). */
 #define CACHE_AXIS_BLEND 1e-6
+/* A neighbour's face is read only where its surface lies at most this many voxels behind the
+ * point's tangent plane, unless none of that axis' held faces does (radiance_cache.py
+ * PLANE_TOLERANCE, _in_front; docs/gi_pipeline.md "Faces behind the point"). */
+#define CACHE_PLANE_TOLERANCE 0.25
+#define CACHE_PLANE_STEPS 63.5
+
+/* The planes of the faces `face` (one per axis) of a voxel whose id texel is `id`: each face's
+ * ray origin along its axis, in voxels from the voxel's centre (.z: faces +x, −x, +y; .w: −y,
+ * +z, −z, 7 bits each: radiance_cache.plane_codes). */
+vec3 cache_planes(vec4 id, ivec3 face)
+{
+  ivec2 codes = ivec2(id.zw + 0.5);
+  vec3 q;
+  for (int a = 0; a < 3; a++) {
+    int f = face[a];
+    int code = f < 3 ? codes.x : codes.y;
+    q[a] = float((code >> (7 * (f % 3))) & 127);
+  }
+  return q / CACHE_PLANE_STEPS - 1.0;
+}
+
+/* Per axis: does the face `face` of voxel `cell` (id texel `id`) of the grid at `grid` (origin,
+ * cell size) lie in front of the tangent plane at x with normal n, within the tolerance
+ * (radiance_cache._in_front)? */
+bvec3 cache_in_front(vec4 grid, ivec3 cell, vec4 id, ivec3 face, vec3 x, vec3 n)
+{
+  vec3 centre = grid.xyz + (vec3(cell) + 0.5) * grid.w;
+  float base = dot(centre - x, n);
+  return greaterThanEqual(vec3(base) + grid.w * cache_planes(id, face) * n,
+                          vec3(-CACHE_PLANE_TOLERANCE * grid.w));
+}
 
 /* Where `x` lies in grid g of the cache (res cells a side; its origin and cell size in header
  * texel (g, 0)): false outside it, else the lower corner `base` of the 2 × 2 × 2 voxels around
@@ -81,17 +112,22 @@ vec4 cache_indirect(vec3 x, vec3 n, int part)
     if (!cache_grid_cell(x, g, res, base, f)) {
       continue;
     }
+    vec4 grid = texelFetch(radiance_cache, ivec2(g, 0), 0);
+    /* per axis over the faces in front (cache_in_front) and, where none is, over all held */
     vec3 tx = vec3(0.0), ty = vec3(0.0), tz = vec3(0.0);
+    vec3 ax = vec3(0.0), ay = vec3(0.0), az = vec3(0.0);
     vec3 more = vec3(0.0); /* per axis: Σ weight · (.a − 1), the faces' one-more-bounce ratio */
-    vec3 weight = vec3(0.0);
+    vec3 more_all = vec3(0.0);
+    vec3 weight = vec3(0.0), weight_all = vec3(0.0);
     for (int corner = 0; corner < 8; corner++) {
       ivec3 o = ivec3((corner >> 2) & 1, (corner >> 1) & 1, corner & 1);
       ivec3 cell = base + o;
       if (any(lessThan(cell, ivec3(0))) || any(greaterThanEqual(cell, ivec3(res)))) {
         continue;
       }
-      float id = texelFetch(radiance_cache, ivec2(cell.x + cell.y * res, 1 + g * res + cell.z),
-                            0).x;
+      vec4 id_texel = texelFetch(radiance_cache,
+                                 ivec2(cell.x + cell.y * res, 1 + g * res + cell.z), 0);
+      float id = id_texel.x;
       if (id < -0.5) {
         continue; /* no voxel of the grid there */
       }
@@ -106,13 +142,25 @@ vec4 cache_indirect(vec3 x, vec3 n, int part)
                                     0) : vec4(0.0);
       vec3 wv = mix(1.0 - f, f, vec3(o));
       float w = wv.x * wv.y * wv.z;
-      vec3 held = w * vec3(fx.w > 0.5 ? 1.0 : 0.0, fy.w > 0.5 ? 1.0 : 0.0, fz.w > 0.5 ? 1.0 : 0.0);
+      vec3 loose = w * vec3(fx.w > 0.5 ? 1.0 : 0.0, fy.w > 0.5 ? 1.0 : 0.0, fz.w > 0.5 ? 1.0 : 0.0);
+      vec3 held = mix(vec3(0.0), loose, cache_in_front(grid, cell, id_texel, face, x, n));
       tx += held.x * fx.rgb;
       ty += held.y * fy.rgb;
       tz += held.z * fz.rgb;
+      ax += loose.x * fx.rgb;
+      ay += loose.y * fy.rgb;
+      az += loose.z * fz.rgb;
       more += held * (vec3(fx.w, fy.w, fz.w) - 1.0);
+      more_all += loose * (vec3(fx.w, fy.w, fz.w) - 1.0);
       weight += held;
+      weight_all += loose;
     }
+    bvec3 strict = greaterThan(weight, vec3(1e-6));
+    tx = strict.x ? tx : ax;
+    ty = strict.y ? ty : ay;
+    tz = strict.z ? tz : az;
+    more = mix(more_all, more, strict);
+    weight = mix(weight_all, weight, strict);
     vec3 share = vec3(weight.x > 1e-6 ? blend.x : 0.0, weight.y > 1e-6 ? blend.y : 0.0,
                       weight.z > 1e-6 ? blend.z : 0.0);
     float norm = share.x + share.y + share.z;
@@ -128,8 +176,10 @@ vec4 cache_indirect(vec3 x, vec3 n, int part)
 
 /* Corner `corner` of grid g's trilinear neighbourhood at `base` (fractions f): its weight
  * times whether its voxel holds each axis' face `face` (the id row's mask .y; 0 outside the
- * grid or where it has no voxel). */
-vec3 cache_corner_held(int corner, ivec3 base, vec3 f, int g, int res, ivec3 face)
+ * grid or where it has no voxel), and, per axis where `strict`, whether that face lies in
+ * front of x's tangent plane (cache_in_front; grid: the grid's header texel). */
+vec3 cache_corner_held(int corner, ivec3 base, vec3 f, int g, int res, ivec3 face, vec4 grid,
+                       vec3 x, vec3 n, bvec3 strict)
 {
   ivec3 o = ivec3((corner >> 2) & 1, (corner >> 1) & 1, corner & 1);
   ivec3 cell = base + o;
@@ -142,8 +192,10 @@ vec3 cache_corner_held(int corner, ivec3 base, vec3 f, int g, int res, ivec3 fac
   }
   int mask = int(id.y + 0.5);
   vec3 wv = mix(1.0 - f, f, vec3(o));
+  bvec3 front = cache_in_front(grid, cell, id, face, x, n);
+  bvec3 keep = bvec3(!strict.x || front.x, !strict.y || front.y, !strict.z || front.z);
   return (wv.x * wv.y * wv.z) * vec3(float((mask >> face.x) & 1), float((mask >> face.y) & 1),
-                                     float((mask >> face.z) & 1));
+                                     float((mask >> face.z) & 1)) * vec3(keep);
 }
 
 /* The texel of one face that cache_indirect(x, n) reads, drawn by `u` in [0, 1) with the
@@ -169,10 +221,15 @@ float cache_pick(vec3 x, vec3 n, float u)
     if (!cache_grid_cell(x, g, res, base, f)) {
       continue;
     }
-    vec3 weight = vec3(0.0);
+    vec4 grid = texelFetch(radiance_cache, ivec2(g, 0), 0);
+    /* per axis the faces in front, where some are (else all held: cache_indirect) */
+    vec3 weight = vec3(0.0), weight_all = vec3(0.0);
     for (int corner = 0; corner < 8; corner++) {
-      weight += cache_corner_held(corner, base, f, g, res, face);
+      weight += cache_corner_held(corner, base, f, g, res, face, grid, x, n, bvec3(true));
+      weight_all += cache_corner_held(corner, base, f, g, res, face, grid, x, n, bvec3(false));
     }
+    bvec3 strict = greaterThan(weight, vec3(1e-6));
+    weight = mix(weight_all, weight, strict);
     vec3 share = vec3(weight.x > 1e-6 ? blend.x : 0.0, weight.y > 1e-6 ? blend.y : 0.0,
                       weight.z > 1e-6 ? blend.z : 0.0);
     float norm = share.x + share.y + share.z;
@@ -196,7 +253,7 @@ float cache_pick(vec3 x, vec3 n, float u)
     int pick = -1;
     float run = 0.0;
     for (int corner = 0; corner < 8; corner++) {
-      float w = cache_corner_held(corner, base, f, g, res, face)[axis];
+      float w = cache_corner_held(corner, base, f, g, res, face, grid, x, n, strict)[axis];
       if (w > 0.0) {
         if (pick < 0 || run <= v) {
           pick = corner;

@@ -664,3 +664,26 @@ def test_the_near_field_is_followed_where_the_cache_cannot_see_a_slot(monkeypatc
     assert np.all(far < 0.45), far
     assert np.all((near > 0.5) & (near < 1.2)) and np.all(near - far > 0.15), near
     assert np.all(np.abs(two - 1.0) < 0.2), two
+
+
+def test_a_panel_under_a_ceiling_reads_the_rooms_light_not_the_slots():
+    """The front of a panel hung 5 cm under a ceiling (the light cove of ``slot_room``) at
+    Bounces 4: its cached indirect light against brute-force path tracing. The slot between
+    panel and ceiling holds light many times the room's, in the ceiling's voxels' faces just
+    above the panel's; the panel's lookups blended those in by their trilinear weight (12–15 ×
+    the path-traced light, measured) before faces behind the point's tangent plane were left
+    out (``radiance_cache._in_front``: 0.82–0.94 ×). The far ceiling, whose neighbours all lie on its plane,
+    reads as before."""
+    tris, albedo, emission = slot_room()
+    cache = radiance_cache(tris, [], albedo, emission, GatherSettings(bounces=4, cache_rays=64))
+    assert cache.grids[0].span > 0.05  # the slot is thinner than a voxel
+    down = np.tile([0.0, 0.0, -1.0], (4, 1))
+    panel = np.c_[[-0.6, -0.2, 0.3, 0.7], np.full(4, 0.1), np.full(4, 2.5499)]
+    ceiling = np.c_[np.full(4, 1.8), [-1.0, 0.0, 1.0, 1.5], np.full(4, 2.5999)]
+    for points, low, high in ((panel, 0.7, 1.3), (ceiling, 0.7, 1.3)):
+        looked = rc.lookup(cache, points, down).sum(axis=1)
+        exact = (_path_traced(tris, albedo, emission, points, down, 4, (512, 16, 8, 4)) -
+                 _path_traced(tris, albedo, emission, points, down, 1, (4096,), seed=7)).sum(axis=1)
+        ratio = looked / exact
+        print("cached / path-traced bounces 2-4:", ratio.round(3))
+        assert np.all((ratio > low) & (ratio < high)), ratio

@@ -43,8 +43,8 @@ from .sampling import point_streams, unit_float
 
 __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_key",
            "cache_levels", "cache_texels", "cell_size", "cached_cache", "face_paths",
-           "face_points", "iterate", "lookup", "one_more_bounce", "pick", "picks", "relax",
-           "snap_focus", "texel_places", "triangles_key", "with_faces"]
+           "face_planes", "face_points", "iterate", "lookup", "one_more_bounce", "pick", "picks",
+           "plane_codes", "relax", "snap_focus", "texel_places", "triangles_key", "with_faces"]
 
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin where it has no surface
 FACE_CLEARANCE = 0.02    # voxels in front of its surface a face's rays start (``_face_origins``)
@@ -52,6 +52,12 @@ FACE_AXIS_COSINE = 0.2   # a voxel holds the faces of the axes its triangles' no
 # an axis whose n² is under this weighs nothing in a lookup (``lookup``): the GPU then fetches
 # no texel of it (cache_lookup.glsl CACHE_AXIS_BLEND), 8 not 24 at a wall's or a floor's hit
 AXIS_BLEND = 1e-6
+# A lookup reads a neighbour's face only where that face's ray origin — its surface — is not
+# more than this many voxels behind the point's tangent plane, unless none of the neighbours'
+# faces of that axis is: a panel 5 cm under a ceiling read, through the ceiling's voxels above
+# it, the light caught between the two (docs/gi_pipeline.md "Faces behind the point")
+PLANE_TOLERANCE = 0.25
+PLANE_STEPS = 63.5  # the faces' planes as the GPU holds them: 1/63.5 voxel steps in [-1, 1]
 PICK_STREAM = 0x7C0A  # hash stream of the face a cache ray's hit reads (``pick``)
 FACES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
 
@@ -361,6 +367,40 @@ def _dense_index(grid, cells) -> np.ndarray:
     return index
 
 
+def face_planes(cache: RadianceCache) -> tuple:
+    """Per grid (N_i, 6) float64: each face's ray origin along its own axis (where its surface
+    lies), in voxels from the voxel's centre, quantized as the GPU holds it (7 bits,
+    ``plane_codes``)."""
+    out = []
+    for g, cells in enumerate(cache.cells):
+        if cache.origins:
+            along = np.asarray(cache.origins[g], np.float64)[:, np.arange(6), np.arange(6) // 2]
+        else:
+            along = np.broadcast_to(FACE_OFFSET * FACES.sum(axis=1), (len(cells), 6))
+        out.append(np.round(np.clip(along, -1.0, 1.0) * PLANE_STEPS + PLANE_STEPS)
+                   / PLANE_STEPS - 1.0)
+    return tuple(out)
+
+
+def plane_codes(planes) -> np.ndarray:
+    """(N, 2) float32 of one grid's ``face_planes`` (N, 6): faces +x, −x, +y and −y, +z, −z
+    packed as q₀ + 128 q₁ + 16384 q₂ with q = the plane's 7-bit step (exact in float32;
+    ``cache_texels``' id rows .z, .w; cache_lookup.glsl ``cache_planes``)."""
+    q = np.round((np.asarray(planes, np.float64) + 1.0) * PLANE_STEPS).astype(np.int64)
+    return np.stack([q[:, 0] + 128 * q[:, 1] + 16384 * q[:, 2],
+                     q[:, 3] + 128 * q[:, 4] + 16384 * q[:, 5]], axis=1).astype(np.float32)
+
+
+def _in_front(grid, cell, planes, p, n) -> np.ndarray:
+    """(K, 3) bool per axis: is the face of voxel ``cell`` (K, 3) with planes ``planes`` (K, 3,
+    the axes' faces' ``face_planes``) at most PLANE_TOLERANCE voxels behind the tangent plane
+    of points ``p`` with normals ``n`` (K, 3)? Its ray origin: the voxel's centre moved along
+    the face's axis to its plane."""
+    centre = np.asarray(grid.origin) + (np.asarray(cell, np.float64) + 0.5) * grid.span
+    base = np.einsum("kc,kc->k", centre - p, n)
+    return base[:, None] + grid.span * planes * n >= -PLANE_TOLERANCE * grid.span
+
+
 def one_more_bounce(cache: RadianceCache) -> tuple:
     """Per grid (N_i, 6) float64: how much more light each face carries with one more
     diffuse bounce, (Σ ahead − Σ faces) / Σ faces over rgb (0 without an ``ahead`` or where a
@@ -418,8 +458,9 @@ def lookup(cache: RadianceCache | None, points, normals, more: bool = False):
     face = np.where(n < 0, 1, 0) + np.array([0, 2, 4])  # (K, 3) face per axis
     blend = np.where(n ** 2 >= AXIS_BLEND, n ** 2, 0.0)
     todo = np.ones(len(p), bool)
-    for grid, cells, faces, present, gain in zip(cache.grids, cache.cells, cache.faces,
-                                                 cache.present, ratios):
+    for grid, cells, faces, present, gain, planes in zip(cache.grids, cache.cells, cache.faces,
+                                                         cache.present, ratios,
+                                                         face_planes(cache)):
         if not todo.any():
             break
         g = (p - np.asarray(grid.origin)) / grid.span
@@ -432,9 +473,11 @@ def lookup(cache: RadianceCache | None, points, normals, more: bool = False):
         gg = g[rows] - 0.5
         base = np.floor(gg).astype(np.int64)
         frac = gg - base
-        total = np.zeros((len(rows), 3, 3))  # (k, axis, rgb)
-        gains = np.zeros((len(rows), 3))
-        weight = np.zeros((len(rows), 3))
+        # (k, axis, rgb), (k, axis), (k, axis): over the faces in front (``_in_front``), [0],
+        # and over all held, [1], which an axis takes where none is in front
+        total = np.zeros((2, len(rows), 3, 3))
+        gains = np.zeros((2, len(rows), 3))
+        weight = np.zeros((2, len(rows), 3))
         for corner in range(8):
             offset = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
             c = base + offset
@@ -444,10 +487,16 @@ def lookup(cache: RadianceCache | None, points, normals, more: bool = False):
             site = np.where(ok, index[key], -1)
             safe = np.maximum(site, 0)[:, None]
             held = (site >= 0)[:, None] & present[safe, face[rows]]      # (k, 3 axes)
-            wa = np.where(held, w[:, None], 0.0)
-            total += wa[:, :, None] * faces[safe, face[rows]]
-            gains += wa * gain[safe, face[rows]]
-            weight += wa
+            front = held & _in_front(grid, c, planes[safe, face[rows]], p[rows], n[rows])
+            for which, mask in enumerate((front, held)):
+                wa = np.where(mask, w[:, None], 0.0)
+                total[which] += wa[:, :, None] * faces[safe, face[rows]]
+                gains[which] += wa * gain[safe, face[rows]]
+                weight[which] += wa
+        strict = weight[0] > 1e-6
+        total = np.where(strict[:, :, None], total[0], total[1])
+        gains = np.where(strict, gains[0], gains[1])
+        weight = np.where(strict, weight[0], weight[1])
         axis_ok = weight > 1e-6
         mean = total / np.maximum(weight, 1e-6)[:, :, None]
         share = np.where(axis_ok, blend[rows], 0.0)
@@ -672,7 +721,8 @@ def pick(cache: RadianceCache, points, normals, u) -> np.ndarray:
     blend = np.where(n ** 2 >= AXIS_BLEND, n ** 2, 0.0)
     todo = np.ones(len(p), bool)
     starts = _voxel_starts(cache)
-    for g, (grid, cells, present) in enumerate(zip(cache.grids, cache.cells, cache.present)):
+    for g, (grid, cells, present, planes) in enumerate(zip(cache.grids, cache.cells,
+                                                           cache.present, face_planes(cache))):
         if not todo.any():
             break
         at = (p - np.asarray(grid.origin)) / grid.span
@@ -685,7 +735,7 @@ def pick(cache: RadianceCache, points, normals, u) -> np.ndarray:
         gg = at[rows] - 0.5
         base = np.floor(gg).astype(np.int64)
         frac = gg - base
-        held = np.zeros((len(rows), 8, 3))
+        held = np.zeros((2, len(rows), 8, 3))  # in front, [0], and all held, [1] (``lookup``)
         ids = np.full((len(rows), 8), -1, np.int64)
         for corner in range(8):
             offset = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
@@ -694,9 +744,13 @@ def pick(cache: RadianceCache, points, normals, u) -> np.ndarray:
             ok = cells_within(c, 0, res)
             site = np.where(ok, index[np.where(ok, (c[:, 0] * res + c[:, 1]) * res + c[:, 2],
                                                0)], -1)
-            holds = (site >= 0)[:, None] & present[np.maximum(site, 0)[:, None], face[rows]]
-            held[:, corner] = np.where(holds, w[:, None], 0.0)
+            safe = np.maximum(site, 0)[:, None]
+            holds = (site >= 0)[:, None] & present[safe, face[rows]]
+            front = holds & _in_front(grid, c, planes[safe, face[rows]], p[rows], n[rows])
+            held[0, :, corner] = np.where(front, w[:, None], 0.0)
+            held[1, :, corner] = np.where(holds, w[:, None], 0.0)
             ids[:, corner] = np.where(site >= 0, starts[g] + site, -1)
+        held = np.where((held[0].sum(axis=1) > 1e-6)[:, None, :], held[0], held[1])
         weight = held.sum(axis=1)
         share = np.where(weight > 1e-6, blend[rows], 0.0)
         norm = share.sum(axis=1)
@@ -828,8 +882,9 @@ def cache_texels(cache: RadianceCache, layout: bool = False, ahead: bool = False
     the last texel (res, grid count, 2 × the iterations ``faces`` holds + 1 with the ahead
     and earlier parts, voxels V in all); then per grid g
     and z the row 1 + g·res + z of each cell's voxel id (texel x + y·res: .x, the grids' voxels
-    numbered finest grid first; -1 where the grid has no voxel) and the faces it holds (.y,
-    Σ 2^f over its present faces f: ``pick`` reads them without the faces); then the faces, compact:
+    numbered finest grid first; -1 where the grid has no voxel), the faces it holds (.y,
+    Σ 2^f over its present faces f: ``pick`` reads them without the faces) and where their
+    surfaces lie (.z, .w: ``plane_codes``); then the faces, compact:
     face f of voxel v in part p (0: ``faces``; where the cache keeps an ``ahead`` and its
     ``earlier`` iterations, 1: ``ahead``, 1 + f: ``cache_levels`` f ≥ 1, which a gather ray
     followed f bounces past a near hit reads) is texel (p·V + v)·6 + f, counted along the rows
@@ -855,11 +910,13 @@ def cache_texels(cache: RadianceCache, layout: bool = False, ahead: bool = False
         texels[0, g] = (*grid.origin, grid.span)
     texels[0, width - 1] = (res, count, 2 * cache.iterations + (parts > 1), starts[-1])
     texels[1:1 + count * res, :res * res, 0] = -1.0
-    for g, (cells, present) in enumerate(zip(cache.cells, cache.present)):
+    for g, (cells, present, planes) in enumerate(zip(cache.cells, cache.present,
+                                                    face_planes(cache))):
         c = np.asarray(cells, np.int64)
         at = (1 + g * res + c[:, 2], c[:, 0] + c[:, 1] * res)
         texels[at[0], at[1], 0] = starts[g] + np.arange(len(c))
         texels[at[0], at[1], 1] = _masks(present)
+        texels[at[0], at[1], 2:4] = plane_codes(planes)
     for part, faces in enumerate((cache.faces, cache.ahead, *levels[1:])[:parts]):
         rows, columns = texel_places(cache, part)
         if layout:
