@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import math
 import time
 
 import numpy as np
@@ -48,6 +49,7 @@ from ..voxgi_addon.preview.progressive import (
     tile_camera,
     tile_grid,
     tile_shape,
+    tile_side,
 )
 from ..voxgi_addon.scene.view_camera import camera_from_view
 from .gpu_accumulation import GPUAccumulation, read_rgba
@@ -63,6 +65,12 @@ STAGE_SHARE = 0.5     # of it, what a call's stages run until, and what the long
 # Rendered mode")
 WORK_SHARE = 0.5
 UNTIMED_SHARE = 0.5  # of the stage budget: the least a stage never timed is taken to cost
+# seconds of stages the coarse first image aims at in all, over its draws: the view waits for
+# it (a view change's first image within 0.1 s: its draws also pay their own work and Blender's
+# event loop between them). Sized by its longest stage, it was a quarter of the view and took
+# 115-190 ms of stages over 9-12 draws on the demo scene at 1280 × 720 (docs/gi_pipeline.md
+# "A coarse image sized by its whole work")
+COARSE_WORK = 0.03
 LEAST_TILE = 48       # pixels: about the smallest tile side (preview.progressive.tile_side)
 # BVH traversals a gather invocation makes per dispatch in a slice (F12: 32): the gather of a
 # tile is several steps, so the longest stage is no longer the gather's one dispatch and the
@@ -124,11 +132,13 @@ class ProgressiveImage:
         # stage takes about that much (so a call stays within the budget)
         self.budget = budget
         self.sizers = {kind: shared_sizer(budget * STAGE_SHARE, amortize=False, kind=kind)
-                       for kind in ("tile", "lit tile", "coarse")}
+                       for kind in ("tile", "lit tile")}
+        self.sizers["coarse"] = shared_sizer(COARSE_WORK, amortize=False, kind="coarse")
         self.stage_budget: float | None = budget * STAGE_SHARE  # None: a whole slice a call
         self.running = None        # the slice under way: a generator of its stages
         self.running_started = 0.0
         self.longest_stage = 0.0
+        self.running_work = 0.0    # the slice under way's stages' seconds, summed
         # (slice kind, stage index) → (seconds, pixels) in the last STAGE_HISTORY slices of
         # that kind: a slice's stages come in the same order each time, so they predict the
         # next one's (``predicted``)
@@ -221,22 +231,32 @@ class ProgressiveImage:
         return self.sizer.pixels(most, explore)
 
     def coarse_size(self, stride: int) -> tuple[int, int]:
-        """The coarse image: the whole view in one slice's tile (``tile_shape``: textures of
-        the tiles' kind, its pixels stretched over the view's aspect; as many pixels as the
-        coarse images' own fit allows once one was measured), or half the width and height
-        when one slice holds more than a quarter of the image."""
+        """The coarse image: the whole view at about one slice's pixels or, once a coarse image
+        was measured, as many as its stages can trace within COARSE_WORK in all (the view waits
+        for every one of them), with the view's aspect, at most about half its width and
+        height; sides of the tiles' kind (``tile_side``: whole work groups, no power of two)."""
         acc = self.accumulation
         pixels = self.slice_pixels(explore=False)
         coarse = self.sizers["coarse"]
-        if self.fixed_pixels is None and coarse.model() is not None:
-            # its own fit once one was measured: a coarse image costs more a pixel than a
-            # tile (its gathers all of a sample's rays), and sized by the tiles' its longest
-            # stage ran 20–26 ms against their 15
-            pixels = min(pixels, coarse.pixels(acc.width * acc.height, explore=False))
-        tile_w, tile_h = tile_shape(pixels, acc.width, acc.height, LOCAL_SIZE * stride, stride)
-        if 2 * tile_w > acc.width or 2 * tile_h > acc.height:
-            return max(1, (acc.width + 1) // 2), max(1, (acc.height + 1) // 2)
-        return tile_w, tile_h
+        if self.fixed_pixels is None and coarse.samples:
+            # its own fit of its stages' whole time: a coarse image costs more a pixel than a
+            # tile (its gathers all of a sample's rays); while one size was measured, that
+            # size's seconds a pixel, its fixed cost included
+            if coarse.model() is not None:
+                fit = coarse.pixels(acc.width * acc.height, explore=False)
+            else:
+                measured, seconds = coarse.samples[-1]
+                fit = max(coarse.least, int(COARSE_WORK * measured / max(seconds, 1e-6)))
+            pixels = min(pixels, fit)
+        # (a square tile stretched over the view, or half of both sides whatever the pixels,
+        # before: a coarse image of 80 × 80 pixels became 160 × 90, twice its work); its sides
+        # whole work groups of the gather grid as the tiles' (LOCAL_SIZE cells of stride
+        # pixels): a side of another kind made llvmpipe build kernel variants mid-session
+        # (a view change's first image 1.4 s with an empty shader cache)
+        scale = min(0.5, math.sqrt(pixels / (acc.width * acc.height)))
+        multiple = LOCAL_SIZE * stride
+        return (max(1, min(acc.width, tile_side(acc.width * scale, multiple, stride))),
+                max(1, min(acc.height, tile_side(acc.height * scale, multiple, stride))))
 
     def _next_tiles(self, stride: int) -> None:
         acc = self.accumulation
@@ -291,6 +311,7 @@ class ProgressiveImage:
             self.running = self._slice(trace, view, window, settings, filter_width)
             self.running_started, self.longest_stage, self.running_stage = \
                 time.perf_counter(), 0.0, 0
+            self.running_work = 0.0
         while True:
             s0 = time.perf_counter()
             compiles = counters.compiles
@@ -300,11 +321,14 @@ class ProgressiveImage:
                 self.running = None
                 done = end.value
                 self.longest_stage = max(self.longest_stage, time.perf_counter() - s0)
+                self.running_work += time.perf_counter() - s0
                 done.seconds = time.perf_counter() - self.running_started
-                # the sizer fits what one call costs: the slice, or its longest stage
+                # the sizer fits what one call costs: the slice, or its longest stage; the
+                # coarse image's, what the view waits for: all its stages
                 staged = self.stage_budget is not None
                 sizer = self.sizers[self.running_kind]
                 sizer.measured(done.size[0] * done.size[1],
+                               self.running_work if self.running_kind == "coarse" else
                                self.longest_stage if staged else done.seconds)
                 self.slices += 1
                 self.elapsed = time.perf_counter() - self.started
@@ -315,6 +339,7 @@ class ProgressiveImage:
                 raise
             seconds = time.perf_counter() - s0
             self.longest_stage = max(self.longest_stage, seconds)
+            self.running_work += seconds
             key = self.running_kind, self.running_stage
             self.stage_seconds[key] = [*self.stage_seconds.get(key, ()),
                                        (seconds, self.running_pixels)][-STAGE_HISTORY:]

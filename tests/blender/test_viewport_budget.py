@@ -131,8 +131,10 @@ def draw_to_the_end(engine, depsgraph, view, window, compiles, limit=3000, drawn
         got = [] if drawn is None else drawn[:]
         if drawn is not None:
             drawn.clear()
+        last = renderer.progressive.last
         draws.append((image, compiles.take(), len(compiled), len(sent), renderer.shown,
-                      compiled, sent, renderer.traces, dict(renderer.timings), got))
+                      compiled, sent, renderer.traces, dict(renderer.timings), got,
+                      None if last is None else (last.kind, tuple(last.size))))
         if engine.redraws == redraws and renderer.progressive.converged \
                 and renderer.cache.generation > 0:
             return draws
@@ -214,7 +216,8 @@ def test_no_draw_compiles_or_uploads_more_than_one_thing_and_the_image_is_the_sa
     # the first coarse image's G-buffer is the quick image's: from entering to the first GI
     # image no slice draws one, and the quick image's chunks are drawn into it once each (by
     # the batch's fill as each is sent, or after), at the coarse image's size
-    coarse_size = engine.voxgi_viewport.progressive.last.size  # (the first slice's)
+    kind, coarse_size = draws[first_gi][10]  # the first slice's
+    assert kind == "coarse", draws[first_gi][10]
     entering_draws = [g for d in draws[:first_gi + 1] for g in d[9]]
     assert not [g for g in entering_draws if g[0] == "rasterize_stages"], entering_draws
     into = [g for g in entering_draws if g[0] == "rasterize" and g[1] == tuple(coarse_size)]

@@ -431,3 +431,43 @@ def test_a_stage_is_predicted_by_its_longest_recent_run_scaled_to_the_next_tile(
     assert image.predicted("tile", 1, 1_000) == 0.009   # not down to a smaller one
     assert image.predicted("tile", 1, 0) == 0.009       # pixels unknown
     assert image.predicted("lit tile", 1, 10_000) is None  # a kind of its own
+
+
+def test_the_coarse_image_is_sized_by_its_whole_work_with_the_views_aspect():
+    """The view waits for its coarse first image, over as many draws as its stages take: it is
+    sized so that all its stages together take about ``COARSE_WORK``, with the view's aspect.
+    Before, it was sized by its longest stage, and any size over a quarter of the view became
+    exactly half its width and height: on the demo scene a 320 × 180 view's coarse image was
+    160 × 90, 115–170 ms of stages over 9–10 draws (now 49–85 ms to the first image)."""
+    import types
+
+    from voxgi.render.gpu_shaders import LOCAL_SIZE
+    from voxgi.render.progressive import COARSE_WORK, ProgressiveImage
+    from voxgi.voxgi_addon.preview.progressive import SliceSizer
+
+    image = ProgressiveImage()
+    image.sizers = {kind: SliceSizer(0.015, first_pixels=2304, least=2304, amortize=False)
+                    for kind in ("tile", "lit tile", "coarse")}
+    image.sizers["coarse"].budget = COARSE_WORK
+    image.accumulation = types.SimpleNamespace(width=320, height=180)
+    image.sizers["tile"].measured(12_000, 0.012)  # tiles of 12,000 pixels fit their stages
+    image.sizers["tile"].measured(6_000, 0.006)
+    assert image.coarse_size(1) == (160, 88)  # none measured yet: about half of both sides
+    # one coarse image measured: 14,400 pixels in 3 × COARSE_WORK of stages → about a third
+    image.sizers["coarse"].measured(14_400, 3 * COARSE_WORK)
+    w, h = image.coarse_size(1)
+    assert abs(w * h - 4_800) < 0.15 * 4_800 and abs(w / h - 320 / 180) < 0.25, (w, h)
+    # sides of the tiles' kind: whole work groups of the gather grid, no power of two
+    assert w % LOCAL_SIZE == 0 and h % LOCAL_SIZE == 0 and w & (w - 1) and h & (h - 1)
+    # two sizes measured: their fit (10 ms fixed, the rest a pixel) → 16,000 pixels in
+    # COARSE_WORK, more than a quarter of the view: at most half its width and height
+    per_pixel = (COARSE_WORK - 0.010) / 16_000
+    image.sizers["coarse"].samples = [(p, 0.010 + per_pixel * p) for p in (6_400, 14_400)]
+    assert image.coarse_size(1) == (160, 88)
+    # and 8,000 pixels with the view's aspect, at a third of the GI resolution
+    per_pixel = (COARSE_WORK - 0.010) / 8_000
+    image.sizers["coarse"].samples = [(p, 0.010 + per_pixel * p) for p in (6_400, 14_400)]
+    w, h = image.coarse_size(3)
+    assert abs(w * h - 8_000) < 0.15 * 8_000 and abs(w / h - 320 / 180) < 0.25, (w, h)
+    assert w % (3 * LOCAL_SIZE) == 0 and h % (3 * LOCAL_SIZE) == 0
+    assert (w // 3) & (w // 3 - 1) and (h // 3) & (h // 3 - 1)
