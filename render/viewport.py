@@ -413,9 +413,15 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
         key = renderer.trace_key(source[2], camera_key, scene, pass_name, options) \
             + (cache_version,)
         if key != progressive.key:
+            # only the radiance cache came in (the view, the scene and the settings as they
+            # were): the image so far stays the backdrop until the tiles cover it, with no
+            # coarse image of its own (a fresh view traced two: docs/gi_pipeline.md "A coarse
+            # image sized by its whole work")
+            cache_only = progressive.key is not None and key[:-1] == progressive.key[:-1]
             # Combined on the film, as F12's: the world behind the geometry (preview.film)
             progressive.restart(key, pass_name, width, height, view_settings.samples,
-                                view_settings.coarse_first, film=pass_name == "Combined",
+                                view_settings.coarse_first and not cache_only,
+                                film=pass_name == "Combined",
                                 transparent=bool(scene.render.film_transparent),
                                 world=source[0].world)
         generation = renderer.cache.generation

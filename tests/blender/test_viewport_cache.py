@@ -469,3 +469,53 @@ def test_advance_any_says_whether_a_chunk_ran(voxgi):
         chunks += 1
     assert cache.generation == 1 and chunks > 4
     assert cache.building is None and not cache.advance_any()
+
+
+def test_a_completed_cache_restarts_the_image_without_a_second_coarse_image(voxgi):
+    """A fresh view (Accurate, Bounces 3, Coarse First Image on) shows a coarse image while
+    its radiance cache is built; the cache's completion restarts the image, and the image so
+    far stays the backdrop until the tiles cover it: no second coarse image (it cost the box's
+    fresh view 3–5 draws; docs/gi_pipeline.md "A coarse image sized by its whole work").
+    A view change still starts with one."""
+    from stand_in_engine import StandInEngine
+    from test_viewport import camera_matrices, cornell, engine_view, gpu_ready, turned
+
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render.viewport import ViewportRenderer
+
+    scene = cornell()
+    scene.voxgi.quality = "ACCURATE"
+    scene.voxgi.bounce_source = "MANUAL"
+    scene.voxgi.bounces = 3
+    scene.voxgi_viewport.resolution_fraction = 1.0
+    scene.voxgi_viewport.samples = 2
+    scene.voxgi_viewport.coarse_first = True
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live_gi(scene.name_full).update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    engine = StandInEngine()
+    renderer = engine.voxgi_viewport = ViewportRenderer()
+
+    def slices_until_converged(view_matrix):
+        """The kinds of the slices finished, with the cache's generation when each did."""
+        finished, traces, draws = [], renderer.traces, 0
+        while draws < 5000:
+            redraws = engine.redraws
+            engine_view(engine, scene, depsgraph, view_matrix, window)
+            draws += 1
+            if renderer.traces != traces:
+                traces = renderer.traces
+                finished.append((renderer.progressive.last.kind, renderer.cache.generation))
+            if engine.redraws == redraws:
+                break
+        assert renderer.progressive.converged, f"not converged after {draws} draws"
+        return finished
+
+    fresh = slices_until_converged(view)
+    assert renderer.cache.generation == 1
+    coarse = [generation for kind, generation in fresh if kind == "coarse"]
+    assert coarse == [0], fresh  # the one-bounce coarse image, none with the cache
+    assert any(kind == "tile" and generation == 1 for kind, generation in fresh), fresh
+    changed = slices_until_converged(turned(view, 2.0))
+    assert changed[0][0] == "coarse" and [k for k, _ in changed].count("coarse") == 1, changed
