@@ -176,11 +176,12 @@ vec4 cache_indirect(vec3 x, vec3 n, int part)
 
 /* Corner `corner` of grid g's trilinear neighbourhood at `base` (fractions f): its weight
  * times whether its voxel holds each axis' face `face` (the id row's mask .y; 0 outside the
- * grid or where it has no voxel), and, per axis where `strict`, whether that face lies in
- * front of x's tangent plane (cache_in_front; grid: the grid's header texel). */
+ * grid or where it has no voxel), and in `front` per axis whether that face lies in front of
+ * x's tangent plane (cache_in_front; grid: the grid's header texel). */
 vec3 cache_corner_held(int corner, ivec3 base, vec3 f, int g, int res, ivec3 face, vec4 grid,
-                       vec3 x, vec3 n, bvec3 strict)
+                       vec3 x, vec3 n, out bvec3 front)
 {
+  front = bvec3(false);
   ivec3 o = ivec3((corner >> 2) & 1, (corner >> 1) & 1, corner & 1);
   ivec3 cell = base + o;
   if (any(lessThan(cell, ivec3(0))) || any(greaterThanEqual(cell, ivec3(res)))) {
@@ -192,10 +193,9 @@ vec3 cache_corner_held(int corner, ivec3 base, vec3 f, int g, int res, ivec3 fac
   }
   int mask = int(id.y + 0.5);
   vec3 wv = mix(1.0 - f, f, vec3(o));
-  bvec3 front = cache_in_front(grid, cell, id, face, x, n);
-  bvec3 keep = bvec3(!strict.x || front.x, !strict.y || front.y, !strict.z || front.z);
+  front = cache_in_front(grid, cell, id, face, x, n);
   return (wv.x * wv.y * wv.z) * vec3(float((mask >> face.x) & 1), float((mask >> face.y) & 1),
-                                     float((mask >> face.z) & 1)) * vec3(keep);
+                                     float((mask >> face.z) & 1));
 }
 
 /* The texel of one face that cache_indirect(x, n) reads, drawn by `u` in [0, 1) with the
@@ -225,8 +225,10 @@ float cache_pick(vec3 x, vec3 n, float u)
     /* per axis the faces in front, where some are (else all held: cache_indirect) */
     vec3 weight = vec3(0.0), weight_all = vec3(0.0);
     for (int corner = 0; corner < 8; corner++) {
-      weight += cache_corner_held(corner, base, f, g, res, face, grid, x, n, bvec3(true));
-      weight_all += cache_corner_held(corner, base, f, g, res, face, grid, x, n, bvec3(false));
+      bvec3 front;
+      vec3 held = cache_corner_held(corner, base, f, g, res, face, grid, x, n, front);
+      weight += held * vec3(front);
+      weight_all += held;
     }
     bvec3 strict = greaterThan(weight, vec3(1e-6));
     weight = mix(weight_all, weight, strict);
@@ -253,7 +255,9 @@ float cache_pick(vec3 x, vec3 n, float u)
     int pick = -1;
     float run = 0.0;
     for (int corner = 0; corner < 8; corner++) {
-      float w = cache_corner_held(corner, base, f, g, res, face, grid, x, n, strict)[axis];
+      bvec3 front;
+      float w = cache_corner_held(corner, base, f, g, res, face, grid, x, n, front)[axis];
+      w = strict[axis] && !front[axis] ? 0.0 : w;
       if (w > 0.0) {
         if (pick < 0 || run <= v) {
           pick = corner;

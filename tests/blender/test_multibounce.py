@@ -243,6 +243,26 @@ def test_gpu_cache_equals_numpy_cache(voxgi):
                                     emission, settings) is texture
 
 
+def test_gpu_cache_equals_numpy_cache_where_faces_lie_behind_the_point(voxgi, monkeypatch):
+    """The emissive room's panel 5 cm under its ceiling (Bounces 3, 64³): its lookups and
+    picks leave out the faces behind the point's tangent plane (``radiance_cache._in_front``,
+    cache_lookup.glsl ``cache_in_front``, the planes packed in the id texels). The GPU's faces
+    equal numpy's within 0.2% (measured 0.02%), while numpy without the plane test lies 0.6%
+    from them: a GPU that left the test out would fail."""
+    from voxgi.voxgi_addon.gi import radiance_cache
+
+    bounce_scenes.build("emissive_room", bpy.context.scene)
+    gpu, numpy, (tris, lights, principled, emission) = gpu_and_numpy_caches(resolution=64)
+    a, b = (np.concatenate(c.faces).astype(np.float64) for c in (gpu, numpy))
+    assert np.abs(a - b).sum() / np.abs(b).sum() <= 0.002
+    monkeypatch.setattr(radiance_cache, "PLANE_TOLERANCE", np.inf)
+    radiance_cache._MEMO.clear()
+    without = radiance_cache.cached_cache(tris, lights, principled, emission, 3, 8, 64)
+    radiance_cache._MEMO.clear()
+    c = np.concatenate(without.faces).astype(np.float64)
+    assert np.abs(c - b).sum() / np.abs(b).sum() >= 0.003
+
+
 def test_f12_lays_the_cache_out_on_a_thread_while_the_bvh_builds_and_once(voxgi, tmp_path,
                                                                             monkeypatch):
     """F12's first preview of a scene starts the radiance cache's layout (its voxels and face

@@ -687,3 +687,17 @@ def test_a_panel_under_a_ceiling_reads_the_rooms_light_not_the_slots():
         ratio = looked / exact
         print("cached / path-traced bounces 2-4:", ratio.round(3))
         assert np.all((ratio > low) & (ratio < high)), ratio
+
+
+def test_the_gpu_lookup_holds_the_same_constants():
+    """cache_lookup.glsl defines its own copies of the lookup's constants (the GPU's twin of
+    ``lookup`` and ``pick``): they equal the engine's, so the two read the same faces."""
+    import pathlib
+    import re
+
+    glsl = (pathlib.Path(rc.__file__).resolve().parents[2] / "render" / "shaders" /
+            "cache_lookup.glsl").read_text()
+    defines = dict(re.findall(r"#define (CACHE_\w+) (\S+)", glsl))
+    assert float(defines["CACHE_PLANE_TOLERANCE"]) == rc.PLANE_TOLERANCE
+    assert float(defines["CACHE_PLANE_STEPS"]) == rc.PLANE_STEPS
+    assert float(defines["CACHE_AXIS_BLEND"]) == rc.AXIS_BLEND
