@@ -31,6 +31,7 @@ from ..voxgi_addon.gi.radiance_cache import (
 from ..voxgi_addon.preview.denoise import (
     AO_TOLERANCE,
     GLOSSY_SIGMA_LUMINANCE,
+    GUIDE_WEIGHT,
     HOLE_SPREAD,
     NOISE_TARGET,
     RIDGE,
@@ -61,6 +62,7 @@ def _denoise_shader():
                                             ("out_image", "out_variance"),
                                             {"AO_TOLERANCE": repr(float(AO_TOLERANCE)),
                                              "NOISE_TARGET": repr(float(NOISE_TARGET)),
+                                             "GUIDE_WEIGHT": repr(float(GUIDE_WEIGHT)),
                                              "RIDGE": repr(float(RIDGE)),
                                              "SAME_SURFACE": repr(float(SAME_SURFACE))})
     return _shaders["denoise"]

@@ -15,8 +15,9 @@
  * options.z: the luminance test's σ; options.w = 1: low_image = (light rgb, the variance of its
  * luminance) and no scalar (a pixel's world light, bvh_direct.glsl), low_variance unread.
  * A cell whose low_variance.z is 1 is a hole (the sparse gather left it out: denoise.py
- * atrous_filter(holes=…)): no tap, never settled, its taps weighed by geometry alone (it has
- * no light of its own to compare); the pass writes its fit and variance.z = 0.
+ * atrous_filter(holes=…)): no tap, never settled, its taps compared with its traced 3 × 3
+ * neighbours' light on its surface (denoise.py _hole_guide; by geometry alone where their
+ * weights come to GUIDE_WEIGHT or less); the pass writes its fit and variance.z = 0.
  * options.w = 2: low_variance.w is 1 at the cells whose light no pass shows (a metal's: the
  * sparse gather drew its AO alone, denoise.py atrous_filter(unseen=…)); they are no taps of
  * the light of the cells that show it (their AO still is), and the flag is kept. */
@@ -150,13 +151,18 @@ void main()
   /* The variance prefiltered over the valid 3 × 3 neighbours (denoise.py _blurred). */
   vec2 blurred = vec2(0.0);
   float blur_weight = 0.0;
+  vec2 guide = vec2(0.0); /* a hole's: its traced neighbours' light on its surface */
+  vec2 guide_squares = vec2(0.0);
+  float guide_weight = 0.0;
   for (int a = -1; a <= 1; a++) {
     for (int b = -1; b <= 1; b++) {
       ivec2 q = cell + ivec2(b, a);
       if (q.x < 0 || q.y < 0 || q.x >= low.x || q.y >= low.y) {
         continue;
       }
-      if (texelFetch(gbuffer_position, traced_pixel(low.y - 1 - q.y, q.x, stride, full), 0).w < 0.5) {
+      ivec2 qpx = traced_pixel(low.y - 1 - q.y, q.x, stride, full);
+      vec4 pq = texelFetch(gbuffer_position, qpx, 0);
+      if (pq.w < 0.5) {
         continue;
       }
       vec4 qvar = alpha_variance ? vec4(texelFetch(low_image, q, 0).a, 0.0, 0.0, 0.0)
@@ -167,9 +173,25 @@ void main()
       float g = (a == 0 ? 0.5 : 0.25) * (b == 0 ? 0.5 : 0.25);
       blurred += g * qvar.xy;
       blur_weight += g;
+      if (hole) {
+        float sw = g * surface_weight(position.xyz, n, pq.xyz, texelFetch(gbuffer_normal, qpx, 0).xyz);
+        vec4 vq = texelFetch(low_image, q, 0);
+        vec2 sq = vec2(dot(vq.rgb, LUMINANCE), alpha_variance ? 0.0 : vq.a);
+        guide += sw * sq;
+        guide_squares += sw * sq * sq;
+        guide_weight += sw;
+      }
     }
   }
   blurred = blur_weight > 0.0 ? blurred / blur_weight : centre_var.xy;
+  /* a hole without a guide weighs its taps by geometry alone */
+  bool guided = hole && guide_weight > GUIDE_WEIGHT;
+  signal = guided ? guide / guide_weight : signal;
+  /* the neighbours' spread about the guide: noise the hole's taps may differ by besides their
+   * own (denoise.py _hole_guide) */
+  vec2 guide_spread = guided ? max(guide_squares / guide_weight - signal * signal, vec2(0.0)) :
+                               vec2(0.0);
+  bool unguided = hole && !guided;
   bvec2 settled = lessThanEqual(sqrt(max(blurred, vec2(0.0))), NOISE_TARGET * abs(signal));
   settled = hole ? bvec2(false) : settled;
   if (all(settled)) { /* both kept as they are: no tap changes them (the loop below skips both) */
@@ -211,12 +233,12 @@ void main()
       vec2 varq = var4.xy;
       float geometry = kernel_at(float(a) / float(spread)) * kernel_at(float(b) / float(spread)) *
                        surface_weight(position.xyz, n, pq.xyz, nq);
-      vec2 scale = options.z * sqrt(max(blurred + varq, vec2(0.0))) + 1e-6;
-      vec2 w = hole ? vec2(geometry) :
+      vec2 scale = options.z * sqrt(max(blurred + varq + guide_spread, vec2(0.0))) + 1e-6;
+      vec2 w = unguided ? vec2(geometry) :
                geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);
       /* the light's weight takes the AO's test too, widened by AO_TOLERANCE (denoise.py: an
        * occlusion's edge is the light's) */
-      w.x *= hole ? 1.0 : exp(-abs(vq.a - signal.y) / (scale.y + AO_TOLERANCE));
+      w.x *= unguided ? 1.0 : exp(-abs(vq.a - signal.y) / (scale.y + AO_TOLERANCE));
       w.x = (shown && flagged && var4.w > 0.5) ? 0.0 : w.x;
       float s = float(b) / float(spread); /* the tap's place in the window */
       float u = float(a) / float(spread);

@@ -37,6 +37,20 @@ def _scene(h=30, w=40, seed=3):
     return values, variance * rng.uniform(0.5, 1.5, (h, w, 1)), hit, position, normal
 
 
+def _on_gpu(values, var4, hit, position, normal, **options):
+    """``gpu_gather.denoise`` (4 passes) of the (H, W, 4) ``values`` and ``var4`` grids (row 0
+    on top), read back in the same layout."""
+    from voxgi.render.gpu_gather import denoise
+    from voxgi.render.gpu_tracer import read_texture
+    from voxgi.render.gpu_volume import float_texture
+
+    h, w = hit.shape
+    out, _ = denoise(float_texture(np.flipud(values), (w, h)),
+                     float_texture(np.flipud(var4), (w, h)),
+                     _gbuffer_textures(position, normal, hit), 1, w, h, iterations=4, **options)
+    return np.flipud(read_texture(out))
+
+
 @pytest.mark.parametrize("fit,size", [(True, (30, 40)), (False, (30, 40)), (True, (12, 16))])
 def test_gpu_denoise_equals_numpy(voxgi, fit, size):
     """(12 × 16: at the last pass a cell's only tap is itself, where a float32 fit once read
@@ -69,9 +83,6 @@ def test_gpu_denoise_keeps_unseen_points_out_of_the_light_as_numpy(voxgi):
     lend their AO but not their light, on the GPU as in numpy, and the flag changes the light
     of their neighbours."""
     from voxgi.render.gpu_context import ensure_gpu_context
-    from voxgi.render.gpu_gather import denoise
-    from voxgi.render.gpu_tracer import read_texture
-    from voxgi.render.gpu_volume import float_texture
     from voxgi.voxgi_addon.preview.denoise import atrous_filter
 
     ready, why = ensure_gpu_context()
@@ -82,16 +93,44 @@ def test_gpu_denoise_keeps_unseen_points_out_of_the_light_as_numpy(voxgi):
     unseen[:, 8:16] = True
     values[unseen, :3] *= np.random.default_rng(5).exponential(1.0, (unseen.sum(), 1)) * 3.0
     var4 = np.concatenate([variance, np.zeros((h, w, 1)), unseen[..., None] * 1.0], axis=-1)
-    out, _ = denoise(float_texture(np.flipud(values), (w, h)),
-                     float_texture(np.flipud(var4), (w, h)),
-                     _gbuffer_textures(position, normal, hit), 1, w, h, iterations=4,
-                     unseen=True)
-    out = np.flipud(read_texture(out))
+    out = _on_gpu(values, var4, hit, position, normal, unseen=True)
     ref, _ = atrous_filter(values, variance, hit, position, normal, iterations=4, unseen=unseen)
     plain, _ = atrous_filter(values, variance, hit, position, normal, iterations=4)
     assert np.allclose(out[hit], ref[hit], rtol=1e-3, atol=1e-4)
     shown = hit & ~unseen
     assert np.abs(ref[shown][:, :3] - plain[shown][:, :3]).max() > 0.01
+
+
+def test_gpu_fills_the_sparse_gathers_holes_as_numpy(voxgi):
+    """Holes (variance .z = 1: the cells the sparse gather left out, here all but the lattice of
+    odd rows and columns, a band one cell wide lit 10× and the rows beside it) are filled on
+    the GPU as in numpy,
+    each compared with its traced neighbours' light: the holes beside the band keep their own
+    level."""
+    from voxgi.render.gpu_context import ensure_gpu_context
+    from voxgi.voxgi_addon.preview.denoise import atrous_filter
+
+    ready, why = ensure_gpu_context()
+    assert ready, why
+    values, variance, hit, position, normal = _scene()
+    h, w = hit.shape
+    rows, cols = np.indices((h, w))
+    band = rows == 15
+    # the rows beside the band traced too, as the second list picks them (sparse_gather
+    # noisy_holes: their neighbours lie across the light's edge)
+    holes = hit & ~(((rows % 2 == 1) & (cols % 2 == 1)) | (np.abs(rows - 15) <= 1))
+    values[holes] = 0.0
+    variance[holes] = 0.0
+    unlit, _ = atrous_filter(values, variance, hit, position, normal, iterations=4, holes=holes)
+    values[band, :3] *= 10.0  # (its noise as before: the step is far above it)
+    var4 = np.concatenate([variance, holes[..., None] * 1.0, np.zeros((h, w, 1))], axis=-1)
+    out = _on_gpu(values, var4, hit, position, normal, holes=True)
+    ref, _ = atrous_filter(values, variance, hit, position, normal, iterations=4, holes=holes)
+    assert np.allclose(out[hit], ref[hit], rtol=1e-3, atol=1e-4)
+    # two and three rows from the band its light adds little (filled by geometry alone: up
+    # to 1.0 over the light there without it, 0.35-0.41 on average)
+    above = hit & ((rows == 12) | (rows == 13))
+    assert np.abs(out[above, 0] - unlit[above, 0]).max() < 0.05
 
 
 def test_gpu_spreads_the_spikes_as_numpy(voxgi):

@@ -191,3 +191,62 @@ def test_a_spike_is_spread_over_its_surface_and_leaves_no_lattice():
                               sigma_luminance=2.0)
     assert lattice(plain) > 0.1
     assert abs(lattice(smooth)) < 0.25 * lattice(plain)
+
+
+def _banded_ceiling(h=24, w=40, band_row=11, seed=7):
+    """A plane (2 cm cells) with a band one cell tall lit 10× the rest (the ceiling behind a
+    panel's edge, lit by the slot over it), traced as the sparse gather traces it: the lattice
+    of odd rows and odd columns, the band and the row beside it whole (their cells fail the
+    same-surface test or are noisy), the rest holes. Returns (values, variance, holes, position,
+    normal, band)."""
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    position = np.stack([xs * 0.02, ys * 0.02, np.zeros_like(xs)], axis=-1)
+    normal = np.zeros((h, w, 3))
+    normal[..., 2] = 1.0
+    band = ys == band_row
+    rng = np.random.default_rng(seed)
+    light = np.where(band, 3.0, 0.3) * (1.0 + rng.normal(0.0, 0.05, (h, w)))
+    values = np.concatenate([np.repeat(light[..., None], 3, -1), np.full((h, w, 1), 0.8)], -1)
+    variance = np.stack([(0.05 * np.where(band, 3.0, 0.3)) ** 2, np.full((h, w), 1e-4)], -1)
+    traced = ((ys % 2 == 1) & (xs % 2 == 1)) | band | (ys == band_row - 1)
+    holes = ~traced
+    values[holes] = 0.0
+    variance[holes] = 0.0
+    return values, variance, holes, position, normal, band
+
+
+def test_holes_beside_a_lit_band_take_their_own_surroundings_light():
+    """The first pass fills a hole from the traced cells of its 9 × 9 window, compared with
+    its traced neighbours' light: holes two rows from a band lit 10× keep the level around
+    them (filled by geometry alone they read 0.59-0.87 against 0.3: a dotted line over the
+    band, seen over a ceiling panel's edge), and the band keeps its own."""
+    values, variance, holes, position, normal, band = _banded_ceiling()
+    ok = np.ones(holes.shape, bool)
+    out, _ = atrous_filter(values, variance, ok, position, normal, holes=holes)
+    near = np.zeros(holes.shape, bool)
+    near[8:10] = True  # two and three rows above the band
+    print(out[near & holes, 0].min(), out[near & holes, 0].max())
+    assert np.abs(out[near, 0] / 0.3 - 1.0).max() < 0.1
+    assert abs(out[band, 0].mean() / 3.0 - 1.0) < 0.05
+    assert not np.any(out[ok, 0] <= 0.0)  # every hole filled
+
+
+def test_holes_in_noiseless_sloping_light_are_filled_along_the_slope():
+    """Traced cells whose rays all agree (variance 0) on light that slopes: each hole's taps
+    differ from its guide by the slope, not by noise, and the spread of its neighbours lets
+    them in — every hole is filled, at the slope's level (compared by the noise alone, a
+    tap's weight was 0 and the holes stayed black)."""
+    h, w = 24, 40
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    position = np.stack([xs * 0.02, ys * 0.02, np.zeros_like(xs)], axis=-1)
+    normal = np.zeros((h, w, 3))
+    normal[..., 2] = 1.0
+    light = 0.5 + 0.02 * xs
+    holes = ~((ys % 2 == 1) & (xs % 2 == 1))
+    values = np.concatenate([np.repeat(light[..., None], 3, -1), np.full((h, w, 1), 0.8)], -1)
+    values[holes] = 0.0
+    variance = np.zeros((h, w, 2))
+    out, _ = atrous_filter(values, variance, np.ones((h, w), bool), position, normal,
+                           holes=holes)
+    inner = holes & (ys > 1) & (ys < h - 2) & (xs > 1) & (xs < w - 2)
+    assert np.abs(out[inner, 0] / light[inner] - 1.0).max() < 0.01

@@ -88,6 +88,10 @@ AO_TOLERANCE = 0.1
 # as a dense pass reaches cells, and each hole is filled from the 16-20 traced cells of a
 # 9 × 9 window instead of the 4-6 of a 5 × 5 (docs/gi_pipeline.md "Gathers at fewer points")
 HOLE_SPREAD = 2
+# A hole's guide (``_hole_guide``) needs its traced 3 × 3 neighbours' same-surface weights to
+# come to more than this (of the 0.75 of eight on its surface): fewer, and its taps are weighed
+# by geometry alone
+GUIDE_WEIGHT = 0.05
 
 
 def _shifted(image: np.ndarray, dy: int, dx: int, fill) -> np.ndarray:
@@ -113,11 +117,13 @@ def _kernel(spread: int) -> np.ndarray:
     return np.interp(np.arange(-2 * spread, 2 * spread + 1) / spread, np.arange(-2, 3), KERNEL)
 
 
-def _blurred(variance: np.ndarray, ok: np.ndarray) -> np.ndarray:
+def _blurred(variance: np.ndarray, ok: np.ndarray, at: np.ndarray | None = None) -> np.ndarray:
     """(H, W, 2) variance averaged over each valid pixel's valid 3 × 3 neighbours (Gaussian
     weights), as SVGF prefilters it: one point's own estimate from a few rays is itself noisy —
     a point whose rays all missed a small bright patch reports ~0 variance and would refuse its
-    neighbours."""
+    neighbours. ``at`` (default ``ok``): the pixels given the average (a hole, not ``ok``
+    itself, takes its ``ok`` neighbours'), where they have any."""
+    at = ok if at is None else at
     total = np.zeros_like(variance)
     weight = np.zeros(variance.shape[:2])
     for a, ky in enumerate(GAUSS_3):
@@ -125,7 +131,37 @@ def _blurred(variance: np.ndarray, ok: np.ndarray) -> np.ndarray:
             q_ok = _shifted(ok, a - 1, b - 1, False) * ky * kx
             total += q_ok[..., None] * _shifted(variance, a - 1, b - 1, 0.0)
             weight += q_ok
-    return np.where(ok[..., None], total / np.maximum(weight, 1e-30)[..., None], variance)
+    averaged = at & (weight > 0.0)
+    return np.where(averaged[..., None], total / np.maximum(weight, 1e-30)[..., None], variance)
+
+
+def _hole_guide(signal: np.ndarray, sampled: np.ndarray, hole: np.ndarray, position: np.ndarray,
+                normal: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """((H, W, 2) guide, (H, W, 2) its spread, (H, W) bool guided): per ``hole`` the mean
+    ``signal`` (light's luminance, scalar) of its ``sampled`` 3 × 3 neighbours on its surface
+    (GAUSS_3 × ``_surface_weight``) and their variance about it, where their weights come to
+    more than GUIDE_WEIGHT. The first pass compares its taps with the guide as a traced cell's
+    with its own light, the spread added to the noise it allows: the light may slope across
+    the neighbours by more than their noise (module doc)."""
+    total = np.zeros_like(signal)
+    squares = np.zeros_like(signal)
+    weight = np.zeros(signal.shape[:2])
+    for a, ky in enumerate(GAUSS_3):
+        for b, kx in enumerate(GAUSS_3):
+            if a == 1 and b == 1:
+                continue
+            w = ky * kx * _shifted(sampled, a - 1, b - 1, False) * \
+                _surface_weight(position, normal, a - 1, b - 1)
+            q = _shifted(signal, a - 1, b - 1, 0.0)
+            total += w[..., None] * q
+            squares += w[..., None] * q * q
+            weight += w
+    guided = hole & (weight > GUIDE_WEIGHT)
+    norm = np.maximum(weight, 1e-30)[..., None]
+    guide = total / norm
+    spread = np.maximum(squares / norm - guide * guide, 0.0)
+    return (np.where(guided[..., None], guide, 0.0), np.where(guided[..., None], spread, 0.0),
+            guided)
 
 
 def _fit(moments, spread, light, scalar, fit: bool = True):
@@ -245,7 +281,8 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
         gathers: 8 rays a point are too noisy to extrapolate a slope from).
     holes : (H, W) bool, valid pixels with no value of their own (the cells the sparse gather
         left out, ``sparse_gather``): the first pass gives them the fit of their taps (no
-        tap themselves, their own light not compared), later passes filter them as the rest.
+        tap themselves; the light compared with a tap's is their traced neighbours' on their
+        surface, ``_hole_guide``, else none), later passes filter them as the rest.
         With any hole the first pass's kernel is stretched over HOLE_SPREAD × its width
         (``_kernel``), for every cell.
     unseen : (H, W) bool, pixels whose light no pass shows (a metal's point, whose gather
@@ -270,7 +307,12 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
         stretch = HOLE_SPREAD if it == 0 and hole.any() else 1
         signal = np.stack([v[..., :3] @ LUMINANCE, v[..., 3]], axis=-1)
         sampled = ok & ~hole  # the taps (a hole is none until the first pass fills it)
-        blurred = _blurred(var, sampled)
+        blurred = _blurred(var, sampled, ok)
+        # a hole's light is its traced neighbours' (_hole_guide); one without any on its
+        # surface weighs its taps by geometry alone
+        guide, guide_spread, guided = _hole_guide(signal, sampled, hole, p, n)
+        signal = np.where(guided[..., None], guide, signal)
+        free = hole & ~guided
         settled = np.sqrt(np.maximum(blurred, 0.0)) <= NOISE_TARGET * np.abs(signal)  # (H, W, 2)
         settled &= ~hole[..., None]
         # per signal (light, scalar): the weighted sums of the local linear fit (_fit)
@@ -287,11 +329,12 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
                 geometry = ky * kx * _shifted(sampled, dy, dx, False) * _surface_weight(p, n, dy, dx)
                 q_signal = np.stack([q_v[..., :3] @ LUMINANCE, q_v[..., 3]], axis=-1)
                 q_var = _shifted(var, dy, dx, 0.0)
-                scale = sigma_luminance * np.sqrt(np.maximum(blurred + q_var, 0.0)) + _EPSILON
-                w = geometry[..., None] * np.where(hole[..., None], 1.0,
+                scale = sigma_luminance * np.sqrt(np.maximum(blurred + q_var + guide_spread, 0.0)) + \
+                    _EPSILON
+                w = geometry[..., None] * np.where(free[..., None], 1.0,
                                                    np.exp(-np.abs(q_signal - signal) / scale))
                 # the light's weight takes the scalar's test too, widened (the module doc)
-                w[..., 0] *= np.where(hole, 1.0, np.exp(-np.abs(q_signal[..., 1] - signal[..., 1])
+                w[..., 0] *= np.where(free, 1.0, np.exp(-np.abs(q_signal[..., 1] - signal[..., 1])
                                                         / (scale[..., 1] + AO_TOLERANCE)))
                 w[..., 0] *= ~(_shifted(hidden, dy, dx, False) & ~hidden)
                 s = np.full(var.shape[:2], (b_ - reach) / stretch)  # the tap's place in the window

@@ -11,7 +11,7 @@ one. The cells left out lend their rays to the traced ones: a traced point draws
 ``SPARSE_RAYS`` × the gather's rays (``sparse_settings``), or fewer where few cells are left
 out to lend them. After the first list a second one
 (``noisy_holes``) traces the ``EXTRA`` × (valid cells) holes whose fill would carry the most
-noise, so the rays go where the image would show it; in all the gather traces about half a
+noise or lie across a light's edge, so the rays go where the image would show it; in all the gather traces about half a
 dense gather's rays on the test scenes (0.49–0.56). Last, a cell far brighter than every
 traced cell near it (one ray that found a small, very bright patch) is traced again with more
 rays (``retrace_spikes``): the filter's first pass would fill every hole around it from it.
@@ -93,27 +93,52 @@ def sparse_plan(valid: np.ndarray, position: np.ndarray, normal: np.ndarray) -> 
 EXTRA = 0.05
 
 
-def noisy_holes(traced: np.ndarray, valid: np.ndarray, variance: np.ndarray) -> np.ndarray:
+def noisy_holes(traced: np.ndarray, valid: np.ndarray, variance: np.ndarray,
+                light: np.ndarray | None = None) -> np.ndarray:
     """(Hl, Wl) bool: the holes to gather too — the ``EXTRA`` × (valid cells) holes whose fill
-    would be noisiest: the variance of the mean of their ``traced`` 3 × 3 neighbours, from those
-    neighbours' ``variance`` (Hl, Wl) (of their light's luminance mean). Absolute, not relative
-    to the light: the image's error (relative L1 sums absolute differences) is largest where
-    the fill's noise is, whether the light there is bright or dim. Ties go to the first in
-    row-major order."""
+    would be furthest off: the variance of the mean of their ``traced`` 3 × 3 neighbours, from
+    those neighbours' ``variance`` (Hl, Wl) (of their light's luminance mean), plus how far
+    their ``light`` (Hl, Wl, ≥3 RGB; None: not counted) spreads beyond that noise (the
+    variance of their luminances but the brightest's, less their mean variance): a hole
+    beside a light's edge (a lit band one cell wide) lies on one side of it, and its fill can
+    only guess which.
+    Absolute, not relative to the light: the image's error (relative L1 sums absolute
+    differences) is largest where the fill's is, whether the light there is bright or dim.
+    Ties go to the first in row-major order."""
     traced = np.asarray(traced, bool)
     var = np.where(traced, np.asarray(variance, np.float64), 0.0)
+    lum = np.zeros(var.shape) if light is None else \
+        np.where(traced, np.asarray(light, np.float64)[..., :3] @ LUMINANCE, 0.0)
     total = np.zeros(var.shape)
     count = np.zeros(var.shape)
+    first = np.zeros(var.shape)
+    second = np.zeros(var.shape)
+    brightest = np.zeros(var.shape)
+    noisiest = np.zeros(var.shape)
     for dr in (-1, 0, 1):
         for dc in (-1, 0, 1):
             total += _shifted(var, dr, dc)
             count += _shifted(traced, dr, dc, False)
+            first += _shifted(lum, dr, dc)
+            second += _shifted(lum * lum, dr, dc)
+            brightest = np.maximum(brightest, _shifted(lum, dr, dc))
+            noisiest = np.maximum(noisiest, _shifted(var, dr, dc))
     holes = np.asarray(valid, bool) & ~traced & (count > 0)
     wanted = min(int(EXTRA * np.count_nonzero(valid)), int(np.count_nonzero(holes)))
     out = np.zeros(traced.shape, bool)
     if wanted > 0:
-        noise = np.where(holes, total / np.maximum(count, 1.0) ** 2, -1.0).ravel()
-        out.ravel()[np.argsort(-noise, kind="stable")[:wanted]] = True
+        n = np.maximum(count, 1.0)
+        # the spread of the neighbours but the brightest: an edge has two on each side of it,
+        # a spike (one ray that found a small bright patch: ``retrace_spikes``) one alone
+        rest = np.maximum(count - 1.0, 1.0)
+        spread = np.where(count >= 3.0, (second - brightest ** 2) / rest -
+                          ((first - brightest) / rest) ** 2 - total / n, 0.0)
+        # the noise of the fill but the noisiest neighbour's: holes picked for one neighbour
+        # that caught a rare bright ray (its variance is as high as its light) would leave
+        # the holes not picked filled from the dimmer ones, the image's light short
+        noise = np.where(count >= 2.0, (total - noisiest) / rest, total) / n
+        error = np.where(holes, noise + np.maximum(spread, 0.0), -1.0).ravel()
+        out.ravel()[np.argsort(-error, kind="stable")[:wanted]] = True
     return out
 
 
@@ -166,7 +191,7 @@ def gather_lists(traced: np.ndarray, valid: np.ndarray, diffuse: np.ndarray, val
     light) through ``trace`` (``gather_counts``), then the spikes among them again
     (``retrace_spikes``). Returns every cell traced."""
     gather_counts(ray_counts(traced, diffuse, settings.rays), values, variance, settings, trace)
-    extra = noisy_holes(traced & diffuse, valid & diffuse, variance[..., 0])
+    extra = noisy_holes(traced & diffuse, valid & diffuse, variance[..., 0], values)
     if extra.any():
         gather_counts(ray_counts(extra, diffuse, settings.rays), values, variance, settings,
                       trace)
