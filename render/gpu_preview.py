@@ -41,7 +41,13 @@ from ..voxgi_addon.preview.passes import (
     subpixel_reach,
 )
 from ..voxgi_addon.preview.resolve import SPREAD
-from ..voxgi_addon.preview.sparse_gather import gather_lists, sparse_plan, sparse_settings
+from ..voxgi_addon.preview.sparse_gather import (
+    gather_lists,
+    glossy_cells,
+    sparse_glossy_settings,
+    sparse_plan,
+    sparse_settings,
+)
 from ..voxgi_addon.preview.upsample import field_stride, low_shape, sample_pixels
 from ..voxgi_addon.scene.camera import DEFAULT_FILTER_WIDTH, camera_frame, filter_on_grid
 from ..voxgi_addon.scene.glass import is_glass
@@ -522,10 +528,10 @@ def _sparse_diffuse(f):
                    unseen=True)[0]
 
 
-def _gather_cells(f, cells, settings):
-    """The diffuse gather at the grid's ``cells`` (a list, ``_compact``: each point draws its
-    pixel's samples, with the rays of ``settings``), read back: ((N, 4) values, (N, 4)
-    variances) in row-major order."""
+def _gather_cells(f, cells, settings, kernel="bvh_gather"):
+    """The diffuse gather (or ``kernel``'s) at the grid's ``cells`` (a list, ``_compact``: each
+    point draws its pixel's samples, with the rays of ``settings``), read back: ((N, 4)
+    values, (N, 4) variances) in row-major order."""
     scene, centre = f["scene"], f["centre"]
     width, height = f["width"], f["height"]
     rows, cols = sample_pixels(height, width, f["gi_stride"])
@@ -534,14 +540,43 @@ def _gather_cells(f, cells, settings):
     pixels, size = _pixel_list(listed, width, height)
     inputs = _compact("aa_list", {**centre.inputs, "pixels": pixels}, size)
     textures = gather(scene.bvh, inputs, scene.lights, scene.principled, scene.emission,
-                      settings, 1, size[0], size[1],
+                      settings, 1, size[0], size[1], kernel=kernel,
                       tables=f["tables"], cache=f["cache"])
     return tuple(read_texture(texture).reshape(-1, 4)[:len(listed)] for texture in textures)
 
 
 def _glossy_gather(f):
-    """Glossy Indirect at the gather points (``bvh_glossy``), filtered."""
+    """Glossy Indirect at the gather points (``bvh_glossy``), filtered: at the cells of
+    ``preview.sparse_gather.glossy_cells`` (sparse where the cells are pixels), or every cell."""
+    if _sparse(f):
+        stride, seen = f["gi_stride"], f["seen"]
+        rows, cols = sample_pixels(f["height"], f["width"], stride)
+        valid = seen["hit"][rows][:, cols]
+        cell_p = seen["position"][rows][:, cols] - VIEW_BACKOFF * seen["direction"][rows][:, cols]
+        shown = shows_diffuse(f["snapshot"])[material_indices(f["snapshot"], seen["material"])]
+        traced = glossy_cells(valid, cell_p, seen["normal"][rows][:, cols], stride, True,
+                              shown[rows][:, cols])
+        if traced.any() and (valid & ~traced).any():
+            return {"low_glossy": (yield from _sparse_glossy(f, valid, traced))}
     return {"low_glossy": (yield from _low(f, "glossy", "bvh_glossy"))}
+
+
+def _sparse_glossy(f, valid, traced):
+    """The glossy gather over the ``traced`` cells of the grid's ``valid`` ones, the others
+    holes that the filter's first pass fills (no spikes spread first: the fill compares each
+    tap with a hole's traced neighbours; as numpy's ``gather._glossy_cells``)."""
+    stride, width, height, centre = f["gi_stride"], f["width"], f["height"], f["centre"]
+    settings = sparse_glossy_settings(f["gather_settings"], np.count_nonzero(valid),
+                                      np.count_nonzero(traced))
+    grid = [np.zeros(valid.shape + (4,), np.float32) for _ in range(2)]
+    grid[0][traced], grid[1][traced] = _gather_cells(f, traced, settings, "bvh_glossy")
+    grid[1][..., 2:] = 0.0
+    grid[1][..., 2] = valid & ~traced  # the holes (denoise.glsl)
+    grid = [float_texture(np.flipud(cells), (cells.shape[1], cells.shape[0])) for cells in grid]
+    yield  # the filter is a step of its own
+    return denoise(grid[0], grid[1], centre.inputs, stride, width, height,
+                   settings.denoise_iterations, fit=False, holes=True,
+                   sigma=GLOSSY_SIGMA_LUMINANCE)[0]
 
 
 def _upsample(f):
@@ -886,7 +921,8 @@ ACCURATE_STAGES = (
     Stage("diffuse+ao gather (GPU)", ("centre", "cache", "gather_settings", "tables", "seen",
                                       "focused"),
           ("low_diffuse",), _diffuse_gather),
-    Stage("glossy gather (GPU)", ("centre", "cache", "gather_settings", "tables"),
+    Stage("glossy gather (GPU)", ("centre", "cache", "gather_settings", "tables", "seen",
+                                  "focused"),
           ("low_glossy",), _glossy_gather, when=lambda f: f["glossy_indirect"]),
     Stage("upsample", ("centre", "low_diffuse", "low_glossy"), ("diffuse_ao", "glossy"), _upsample,
           slice_end=False),

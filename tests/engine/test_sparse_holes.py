@@ -54,3 +54,23 @@ def test_one_neighbours_rare_bright_ray_does_not_pick_the_holes_around_it():
     beside = (np.abs(rows - 11) <= 1) & (np.abs(cols - 11) <= 1)
     assert not (picked & beside).any()
     assert np.all(cols[picked] >= 29)
+
+
+def test_the_glossy_gather_is_sparse_where_its_cells_are_pixels_and_its_light_not_all():
+    """With Sparse Gathers, at a cell per pixel the glossy gather traces the diffuse gather's
+    plan and every cell of a full metal (all its light is glossy); at a cell per 3 × 3 pixels,
+    or with Sparse Gathers off, every cell."""
+    from voxgi.voxgi_addon.preview.sparse_gather import SPARSE_GLOSSY_STRIDE, glossy_cells
+
+    h, w = 12, 16
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    position = np.stack([xs * 0.02, ys * 0.02, np.zeros_like(xs)], axis=-1)
+    normal = np.zeros((h, w, 3))
+    normal[..., 2] = 1.0
+    valid = np.ones((h, w), bool)
+    diffuse = xs < 8  # the right half a full metal
+    traced = glossy_cells(valid, position, normal, SPARSE_GLOSSY_STRIDE, True, diffuse)
+    assert traced[~diffuse].all()
+    assert traced[diffuse].mean() < 0.3  # one cell in four on the plane
+    assert glossy_cells(valid, position, normal, 3, True, diffuse).all()
+    assert glossy_cells(valid, position, normal, 1, False, diffuse).all()

@@ -26,7 +26,7 @@ from ..gi.exact_indirect import indirect_and_ao
 from ..gi.surface_lookup import geometric_normals
 from ..scene.snapshot import RAY_DIFFUSE
 from .denoise import GLOSSY_SIGMA_LUMINANCE, atrous_filter, spread_spikes
-from .sparse_gather import gather_lists, sparse_plan, sparse_settings
+from .sparse_gather import gather_lists, glossy_cells, sparse_glossy_settings, sparse_plan, sparse_settings
 from .upsample import sample_pixels, upsample
 
 
@@ -179,7 +179,8 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
 
 
 def gather_glossy(tris, lights, principled, emission, hit, position, normal, direction, material,
-                  settings: GatherSettings, stride: int, low: bool = False) -> np.ndarray:
+                  settings: GatherSettings, stride: int, low: bool = False,
+                  shown=None) -> np.ndarray:
     """(H, W, 3) float32: Glossy Indirect (Cycles' units, without the glossy colour) per pixel,
     0 where the pixel sees no surface — ``settings.glossy_rays`` exact rays from the GGX visible
     normals of each gather point (``gi.exact_glossy``), the à-trous filter and the upsample of
@@ -188,12 +189,16 @@ def gather_glossy(tris, lights, principled, emission, hit, position, normal, dir
 
     direction : (H, W, 3) the camera rays' unit directions; material : (H, W) material index
     per pixel (the tables' last row for none); principled : ``passes.principled_table``.
+    shown : (H, W) bool the pixels whose surface shows diffuse light (``gather_gi``'s; None:
+    all): with ``settings.sparse`` the others' points are all traced
+    (``sparse_gather.glossy_cells``).
     """
     return _glossy_cells(glossy_indirect, (tris, lights, principled, emission), {
         "world": settings.world, "hit_samples": settings.hit_samples,
         "hit_glossy": settings.hit_glossy,
         "cache": radiance_cache(tris, lights, principled, emission, settings)},
-        hit, position, normal, direction, material, settings, stride, low)
+        hit, position, normal, direction, material, settings, stride, low, sparse=True,
+        shown=shown)
 
 
 def gather_glossy_world(tris, world, principled, hit, position, normal, direction, material,
@@ -218,28 +223,40 @@ def gather_glossy_world(tris, world, principled, hit, position, normal, directio
 
 
 def _glossy_cells(estimator, scene, options, hit, position, normal, direction, material,
-                  settings: GatherSettings, stride: int, low: bool = False) -> np.ndarray:
+                  settings: GatherSettings, stride: int, low: bool = False,
+                  sparse: bool = False, shown=None) -> np.ndarray:
     """``estimator(points, normals, views, materials, ids, *scene, rays, seed, **options)`` →
     (rgb, variance) at the glossy gather points (stepped back along the camera rays), filtered
-    and upsampled to (H, W, 3)."""
+    and upsampled to (H, W, 3). sparse : with ``settings.sparse``, the cells of
+    ``sparse_gather.glossy_cells`` (``shown``: ``gather_glossy``'s), the others holes the
+    filter fills."""
     height, width = hit.shape
     rows, cols = sample_pixels(height, width, stride)
     valid = hit[rows][:, cols]
     cell_p = position[rows][:, cols] - VIEW_BACKOFF * direction[rows][:, cols]
     cell_n = normal[rows][:, cols]
-    ids = (rows[:, None] * width + cols[None, :])[valid]
+    traced = glossy_cells(valid, cell_p, cell_n, stride, sparse and settings.sparse,
+                          None if shown is None else np.asarray(shown, bool)[rows][:, cols])
+    holes = valid & ~traced
+    if holes.any():
+        settings = sparse_glossy_settings(settings, np.count_nonzero(valid),
+                                          np.count_nonzero(traced))
+    ids = (rows[:, None] * width + cols[None, :])[traced]
     values = np.zeros(valid.shape + (4,), np.float32)
     variance = np.zeros(valid.shape + (2,), np.float32)
-    glossy, var = estimator(cell_p[valid], cell_n[valid], -direction[rows][:, cols][valid],
-                            material[rows][:, cols][valid], ids, *scene,
+    glossy, var = estimator(cell_p[traced], cell_n[traced], -direction[rows][:, cols][traced],
+                            material[rows][:, cols][traced], ids, *scene,
                             rays=settings.glossy_rays, seed=settings.seed, **options)
-    values[valid, :3] = glossy
-    variance[valid, 0] = var
-    # (a ray that found a lamp's highlight: its light spread over its surface first)
-    values, variance = spread_spikes(values, variance, valid, cell_p, cell_n)
+    values[traced, :3] = glossy
+    variance[traced, 0] = var
+    if not holes.any():
+        # (a ray that found a lamp's highlight: its light spread over its surface first; with
+        # holes the fill compares each tap with the hole's traced neighbours instead)
+        values, variance = spread_spikes(values, variance, valid, cell_p, cell_n)
     values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
                               iterations=settings.denoise_iterations, fit=False,
-                              sigma_luminance=GLOSSY_SIGMA_LUMINANCE)
+                              sigma_luminance=GLOSSY_SIGMA_LUMINANCE,
+                              holes=holes if holes.any() else None)
     if low:
         return values, valid
     return upsample(values, valid, hit, position, normal, stride)[..., :3]

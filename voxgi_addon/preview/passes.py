@@ -1100,7 +1100,7 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         low["glossy"] = gather_glossy(tris, lights, principled_table(snapshot), emission,
                                       seen.hit, seen.position, seen.normal, seen.direction,
                                       materials.reshape(height, width), gather_settings,
-                                      gi_stride, low=True)
+                                      gi_stride, low=True, shown=shown)
         glossy = upsampled(low["glossy"], 3)
         timings["glossy gather"] = time.perf_counter() - t0
     elif glossy_indirect:
