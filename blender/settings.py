@@ -159,10 +159,11 @@ class VoxGISceneSettings(bpy.types.PropertyGroup):
         name="Sparse Gathers",
         description="F12 and Render Preview trace the diffuse indirect light at one gather "
                     "point in four where surfaces are smooth, at every point where they meet "
-                    "and at the 5% of the others whose fill would be noisiest, each with 1.5 "
-                    "times the GI Rays; the filter fills the rest (about half the rays; on the "
-                    "test scenes within 0-5% of every point's error against Cycles). "
-                    "Off: every gather point, GI Rays each",
+                    "and at the 5% of the others whose fill would be furthest off, each with "
+                    "1.5 times the GI Rays; the filter fills the rest (about half the rays; on "
+                    "the test scenes within 0-5% of every point's error against Cycles). With "
+                    "a gather point per pixel the glossy light is gathered the same way, but "
+                    "at every point of a full metal. Off: every gather point, GI Rays each",
         default=True,
     )
     bounce_source: bpy.props.EnumProperty(
