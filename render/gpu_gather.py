@@ -55,17 +55,23 @@ _UPSAMPLE_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "low_image")
 _shaders: dict[str, object] = {}
 
 
-def _denoise_shader():
-    if "denoise" not in _shaders:
-        _shaders["denoise"] = build_compute(("pixels", "denoise"), _DENOISE_SAMPLERS,
-                                            ("grid", "options"),
-                                            ("out_image", "out_variance"),
-                                            {"AO_TOLERANCE": repr(float(AO_TOLERANCE)),
-                                             "NOISE_TARGET": repr(float(NOISE_TARGET)),
-                                             "GUIDE_WEIGHT": repr(float(GUIDE_WEIGHT)),
-                                             "RIDGE": repr(float(RIDGE)),
-                                             "SAME_SURFACE": repr(float(SAME_SURFACE))})
-    return _shaders["denoise"]
+def _denoise_shader(holes: bool = False):
+    """The filter's kernel; ``holes``: its variant that compares a hole's taps with its
+    traced neighbours' light (denoise.glsl DENOISE_HOLES), left out of the other, since
+    llvmpipe pays for a branch's code where no lane takes it (the dense filter 12% slower)."""
+    name = "denoise holes" if holes else "denoise"
+    if name not in _shaders:
+        defines = {"AO_TOLERANCE": repr(float(AO_TOLERANCE)),
+                   "NOISE_TARGET": repr(float(NOISE_TARGET)),
+                   "GUIDE_WEIGHT": repr(float(GUIDE_WEIGHT)),
+                   "RIDGE": repr(float(RIDGE)),
+                   "SAME_SURFACE": repr(float(SAME_SURFACE))}
+        if holes:
+            defines["DENOISE_HOLES"] = "1"
+        _shaders[name] = build_compute(("pixels", "denoise"), _DENOISE_SAMPLERS,
+                                       ("grid", "options"), ("out_image", "out_variance"),
+                                       defines)
+    return _shaders[name]
 
 
 def _denoise_dispatch(shader, gbuffer_inputs, values, variance, given, stride, width, height,
@@ -112,7 +118,7 @@ def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: i
     the values have holes (the sparse gather's): the first pass's kernel stretched over
     ``HOLE_SPREAD`` × its width, as numpy's. unseen : the variance's .w is 1 at the cells
     whose light no pass shows (``atrous_filter``'s unseen): no taps of the others' light."""
-    shader = _denoise_shader()
+    shader = _denoise_shader(holes)
     for it in range(iterations):
         out = [gpu.types.GPUTexture((values.width, values.height), format="RGBA32F")
                for _ in range(2)]

@@ -17,7 +17,9 @@
  * A cell whose low_variance.z is 1 is a hole (the sparse gather left it out: denoise.py
  * atrous_filter(holes=…)): no tap, never settled, its taps compared with its traced 3 × 3
  * neighbours' light on its surface (denoise.py _hole_guide; by geometry alone where their
- * weights come to GUIDE_WEIGHT or less); the pass writes its fit and variance.z = 0.
+ * weights come to GUIDE_WEIGHT or less; the code only in the DENOISE_HOLES variant, which
+ * gpu_gather.denoise runs over a grid with holes); the pass writes its fit and
+ * variance.z = 0.
  * options.w = 2: low_variance.w is 1 at the cells whose light no pass shows (a metal's: the
  * sparse gather drew its AO alone, denoise.py atrous_filter(unseen=…)); they are no taps of
  * the light of the cells that show it (their AO still is), and the flag is kept. */
@@ -173,6 +175,7 @@ void main()
       float g = (a == 0 ? 0.5 : 0.25) * (b == 0 ? 0.5 : 0.25);
       blurred += g * qvar.xy;
       blur_weight += g;
+#ifdef DENOISE_HOLES
       if (hole) {
         float sw = g * surface_weight(position.xyz, n, pq.xyz, texelFetch(gbuffer_normal, qpx, 0).xyz);
         vec4 vq = texelFetch(low_image, q, 0);
@@ -181,6 +184,7 @@ void main()
         guide_squares += sw * sq * sq;
         guide_weight += sw;
       }
+#endif
     }
   }
   blurred = blur_weight > 0.0 ? blurred / blur_weight : centre_var.xy;
