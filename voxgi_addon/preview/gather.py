@@ -165,7 +165,7 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
 
     if not settings.sparse:
         values[traced], variance[traced] = trace(traced, replace(settings, rays=rays))
-    else:  # metals' points trace AO only; then the second list, the noisiest holes
+    else:  # metals' points trace AO only; then the second list (noisy_holes)
         diffuse = valid if shown is None else np.asarray(shown, bool)[rows][:, cols]
         traced = gather_lists(traced, valid, diffuse, values, variance,
                               replace(settings, rays=rays), trace)
