@@ -497,24 +497,33 @@ def _sparse(f) -> bool:
     return f["gather_hook"] is None and f["focused"].sparse and f["denoise"]
 
 
+def _sparse_cells(f, seen):
+    """(valid, points, normals, diffuse, plan) of the gathers' grid (Hl, Wl) from the read-back
+    G-buffer ``seen``: the cells that see a surface, their points stepped back along the camera
+    rays (as the numpy tracer's), their normals, whether their surface shows diffuse light
+    (``passes.shows_diffuse``), and the cells ``sparse_plan`` traces — planned once for the
+    diffuse and the glossy gather."""
+    rows, cols = sample_pixels(f["height"], f["width"], f["gi_stride"])
+    valid = seen["hit"][rows][:, cols]
+    cell_p = seen["position"][rows][:, cols] - VIEW_BACKOFF * seen["direction"][rows][:, cols]
+    cell_n = seen["normal"][rows][:, cols]
+    shown = shows_diffuse(f["snapshot"])[material_indices(f["snapshot"], seen["material"])]
+    return valid, cell_p, cell_n, shown[rows][:, cols], sparse_plan(valid, cell_p, cell_n)
+
+
 def _sparse_diffuse(f):
     """The diffuse gather over the cells ``preview.sparse_gather.sparse_plan`` picks from the
     read-back G-buffer, then over the holes ``noisy_holes`` picks from the first list's
     variances (``_gather_cells``), the other cells holes that the à-trous filter's first pass
     fills (``denoise.glsl``, as the numpy tracer's ``gather_gi``)."""
-    settings, centre = f["gather_settings"], f["centre"]
-    stride, width, height, seen = f["gi_stride"], f["width"], f["height"], f["seen"]
-    rows, cols = sample_pixels(height, width, stride)
-    valid = seen["hit"][rows][:, cols]
-    cell_p = seen["position"][rows][:, cols] - VIEW_BACKOFF * seen["direction"][rows][:, cols]
-    traced = sparse_plan(valid, cell_p, seen["normal"][rows][:, cols])
+    centre = f["centre"]
+    stride, width, height = f["gi_stride"], f["width"], f["height"]
+    valid, cell_p, cell_n, diffuse, traced = f["cells"]
     if not traced.any():  # nothing seen: the dense gather writes its zeros
         return (yield from _low(f, "diffuse"))
     grid = [np.zeros(valid.shape + (4,), np.float32) for _ in range(2)]
     settings = sparse_settings(f["gather_settings"], np.count_nonzero(valid),
                                np.count_nonzero(traced))
-    shown = shows_diffuse(f["snapshot"])[material_indices(f["snapshot"], seen["material"])]
-    diffuse = shown[rows][:, cols]
 
     def trace(cells, at):
         return _gather_cells(f, cells, at)
@@ -549,13 +558,8 @@ def _glossy_gather(f):
     """Glossy Indirect at the gather points (``bvh_glossy``), filtered: at the cells of
     ``preview.sparse_gather.glossy_cells`` (sparse where the cells are pixels), or every cell."""
     if _sparse(f):
-        stride, seen = f["gi_stride"], f["seen"]
-        rows, cols = sample_pixels(f["height"], f["width"], stride)
-        valid = seen["hit"][rows][:, cols]
-        cell_p = seen["position"][rows][:, cols] - VIEW_BACKOFF * seen["direction"][rows][:, cols]
-        shown = shows_diffuse(f["snapshot"])[material_indices(f["snapshot"], seen["material"])]
-        traced = glossy_cells(valid, cell_p, seen["normal"][rows][:, cols], stride, True,
-                              shown[rows][:, cols])
+        valid, cell_p, cell_n, diffuse, plan = f["cells"]
+        traced = glossy_cells(valid, cell_p, cell_n, f["gi_stride"], True, diffuse, plan)
         if traced.any() and (valid & ~traced).any():
             return {"low_glossy": (yield from _sparse_glossy(f, valid, traced))}
     return {"low_glossy": (yield from _low(f, "glossy", "bvh_glossy"))}
@@ -643,7 +647,8 @@ def _reads_gbuffer(f) -> bool:
 def _read_gbuffer(f):
     """The centre G-buffer read back (``gbuffer.read_gbuffer``): the edge test's and the
     sparse gather's (the viewport's point-sampled slices read nothing back)."""
-    return {"seen": read_gbuffer(f["centre"])}
+    seen = read_gbuffer(f["centre"])
+    return {"seen": seen, "cells": _sparse_cells(f, seen) if _sparse(f) else None}
 
 
 def _edge_pixels(f):
@@ -916,12 +921,12 @@ ACCURATE_STAGES = (
     Stage("radiance cache", ("focused", "tables"), ("cache", "gather_settings"),
           _radiance_cache, when=_wants_cache, slice_end=False,
           skipped=lambda f: {"cache": None, "gather_settings": f["focused"]}),
-    Stage("G-buffer read-back", ("centre", "plan", "focused"), ("seen",), _read_gbuffer,
+    Stage("G-buffer read-back", ("centre", "plan", "focused"), ("seen", "cells"), _read_gbuffer,
           when=_reads_gbuffer, slice_end=False),
-    Stage("diffuse+ao gather (GPU)", ("centre", "cache", "gather_settings", "tables", "seen",
+    Stage("diffuse+ao gather (GPU)", ("centre", "cache", "gather_settings", "tables", "cells",
                                       "focused"),
           ("low_diffuse",), _diffuse_gather),
-    Stage("glossy gather (GPU)", ("centre", "cache", "gather_settings", "tables", "seen",
+    Stage("glossy gather (GPU)", ("centre", "cache", "gather_settings", "tables", "cells",
                                   "focused"),
           ("low_glossy",), _glossy_gather, when=lambda f: f["glossy_indirect"]),
     Stage("upsample", ("centre", "low_diffuse", "low_glossy"), ("diffuse_ao", "glossy"), _upsample,

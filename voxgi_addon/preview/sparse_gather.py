@@ -167,17 +167,18 @@ SPARSE_GLOSSY_STRIDE = 1
 
 
 def glossy_cells(valid: np.ndarray, position: np.ndarray, normal: np.ndarray, stride: int,
-                 sparse: bool, diffuse: np.ndarray | None = None) -> np.ndarray:
+                 sparse: bool, diffuse: np.ndarray | None = None,
+                 plan: np.ndarray | None = None) -> np.ndarray:
     """(Hl, Wl) bool: the cells the Glossy Indirect gather traces — with ``sparse`` (Sparse
     Gathers) at a ``stride`` up to SPARSE_GLOSSY_STRIDE ``sparse_plan``'s and every cell whose
     surface shows no diffuse light (``diffuse`` (Hl, Wl) bool, None: all show it; a full
     metal, whose light is all glossy: filled, the room of metals' Combined read 0.0329 against
     0.0264 at one bounce), the others holes that the filter's first pass fills; else every
-    ``valid`` cell."""
+    ``valid`` cell. plan : ``sparse_plan``'s cells, made already (None: made here)."""
     valid = np.asarray(valid, bool)
     if sparse and stride <= SPARSE_GLOSSY_STRIDE:
         metal = np.zeros(valid.shape, bool) if diffuse is None else valid & ~np.asarray(diffuse, bool)
-        return sparse_plan(valid, position, normal) | metal
+        return (sparse_plan(valid, position, normal) if plan is None else plan) | metal
     return valid
 
 
