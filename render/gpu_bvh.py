@@ -39,6 +39,8 @@ from ..voxgi_addon.gi.exact_glossy import (
 )
 from ..voxgi_addon.gi.exact_indirect import (
     CONTINUE_STREAM,
+    LAMP_PICK_FLOOR,
+    LAMP_PICK_STREAM,
     LOBE_FOLLOW_STREAM,
     MAX_FOLLOWS,
     METAL_FOLLOWED,
@@ -226,6 +228,8 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
         if "bvh_shade" in files:  # a metal hit followed one reflection further (ray_radiance)
             defines["CONTINUE_STREAM"] = f"{CONTINUE_STREAM}u"
             defines["LOBE_FOLLOW_STREAM"] = f"{LOBE_FOLLOW_STREAM}u"
+            defines["LAMP_PICK_STREAM"] = f"{LAMP_PICK_STREAM}u"
+            defines["LAMP_PICK_FLOOR"] = repr(float(LAMP_PICK_FLOOR))
             defines["METAL_FOLLOWED"] = repr(float(METAL_FOLLOWED))
             defines["NEAR_FIELD"] = repr(float(NEAR_FIELD))
             defines["MAX_FOLLOWS"] = str(MAX_FOLLOWS)

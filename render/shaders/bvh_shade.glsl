@@ -45,6 +45,43 @@ vec3 hit_emission(int material, int triangle, vec2 uv)
   return texelFetch(materials, ivec2(material, 1), 0).rgb;
 }
 
+/* The share of lamp picks light `light` takes at p with normal n (exact_indirect.lamp_picks):
+ * its Diffuse Direct there as if nothing hid it and an area lamp were a point at its centre
+ * (luminance; a spot's cone left out), 0 for a padding row. A bounce hit traces the shadow rays
+ * of one lamp picked by these, its light divided by its chance (ray_paths). */
+float lamp_pick_weight(int light, vec3 p, vec3 n)
+{
+  vec4 head = light_texel(light, 0);
+  int kind = int(head.x);
+  if (kind < 0) {
+    return 0.0;
+  }
+  vec4 colour = light_texel(light, 1);
+  float power = colour.w * dot(colour.rgb, LUMA);
+  if (kind == 0) {
+    return power * max(dot(n, -light_texel(light, 5).xyz), 0.0) / M_PI_F;
+  }
+  vec4 centre = light_texel(light, 2);
+  vec3 delta = centre.xyz - p;
+  float d2 = dot(delta, delta);
+  float c = max(dot(n, delta), 0.0) / sqrt(max(d2, 1e-30));
+  if (kind == 3) { /* Lambert's small-source form, the lamp's area keeping it finite */
+    float area = light_texel(light, 6).x;
+    float facing = max(dot(light_texel(light, 5).xyz, -delta), 0.0) / sqrt(max(d2, 1e-30));
+    return power * c * facing / (M_PI_F * M_PI_F * (d2 + area));
+  }
+  return power * c / (4.0 * M_PI_F * M_PI_F * (d2 + centre.w * centre.w));
+}
+
+/* The chance of picking a lamp of pick weight w among `count` lamps whose weights sum to
+ * `total`: a share LAMP_PICK_FLOOR spread evenly (no lamp that may light p is never picked,
+ * whatever the weights leave out), the rest by weight. */
+float lamp_chance(float w, float total, int count)
+{
+  return total > 0.0 ? (1.0 - LAMP_PICK_FLOOR) * w / total + LAMP_PICK_FLOOR / float(count) :
+                       1.0 / float(count);
+}
+
 /* ray_radiance without the radiance cache (voxgi_addon/gi/exact_indirect.py ray_paths): also
  * the hit `x`, its shading normal `ns` (turned toward the origin) and `cache_weight`, what the
  * hit reflects toward the origin of light arriving uniformly (the diffuse weight + the glossy
@@ -114,9 +151,38 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
   /* with the emitters among the lights their light comes by next-event estimation: a ray
    * landing on one adds no emission (exact_indirect.ray_radiance) unless `emission_seen` */
   vec3 radiance = (emission_seen || emitter_header().w < 0.5) ? emission : vec3(0.0);
-  for (int light = 0; light < textureSize(lights, 0).y; light++) {
+  /* One lamp's shadow rays, picked by lamp_pick_weight, its light over its chance
+   * (exact_indirect.lamp_picks): a hit's cost no longer grows with the lamps. A metal whose
+   * lobe is taken traces them all: its light is the lobe's, which the weights do not see. */
+  int lamp_count = textureSize(lights, 0).y;
+  int picked = 0;
+  float chance = 1.0;
+  bool pick = lamp_count > 1 && !(hit_glossy && params.x >= METAL_FOLLOWED);
+  if (pick) {
+    float total = 0.0;
+    int real = 0;
+    for (int light = 0; light < lamp_count; light++) {
+      total += lamp_pick_weight(light, lit_at, ns);
+      real += int(light_texel(light, 0).x) >= 0 ? 1 : 0;
+    }
+    float u = unit_float(point_stream(hit_id, LAMP_PICK_STREAM, seed + 1u));
+    float below = 0.0;
+    picked = -1;
+    for (int light = 0; light < lamp_count; light++) {
+      float w = lamp_pick_weight(light, lit_at, ns);
+      float p = int(light_texel(light, 0).x) >= 0 ? lamp_chance(w, total, max(real, 1)) : 0.0;
+      if (picked < 0 && p > 0.0 && (u < below + p || light == lamp_count - 1)) {
+        picked = light;
+        chance = p;
+      }
+      below += p;
+    }
+    picked = max(picked, 0);
+  }
+  vec3 lamps = vec3(0.0);
+  for (int light = picked; light < (pick ? picked + 1 : lamp_count); light++) {
     vec3 direct = light_direct(light, lit_at, ns, hit_id, seed + 1u, strata);
-    radiance += weight * direct;
+    lamps += weight * direct;
 #if !defined(BVH_NO_AREA) && !defined(BVH_NO_METAL_AREA)
     vec4 head = light_texel(light, 0);
     if (hit_glossy && params.x >= METAL_FOLLOWED && int(head.x) == 3) {
@@ -128,8 +194,8 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
                          light_texel(light, 6).y * dot(light_texel(light, 1).rgb, LUMA);
       float lit = dot(direct, LUMA);
       if (unshadowed > 0.0 && lit > 0.0) {
-        radiance += clamp(lit / unshadowed, 0.0, 1.0) *
-                    area_glossy(light, int(head.z), lit_at, ns, -d, base, params);
+        lamps += clamp(lit / unshadowed, 0.0, 1.0) *
+                 area_glossy(light, int(head.z), lit_at, ns, -d, base, params);
       }
       continue;
     }
@@ -137,11 +203,12 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
     vec3 towards = light_aim(light, lit_at, ns);
     float c = dot(ns, towards);
     if (hit_glossy && c > 1e-4 && dot(direct, vec3(1.0)) > 0.0) {
-      radiance += direct * (3.14159265358979323846 / c) *
-                  principled_glossy_reflectance(base, params.x, params.y, params.z, ns, -d,
-                                                towards);
+      lamps += direct * (3.14159265358979323846 / c) *
+               principled_glossy_reflectance(base, params.x, params.y, params.z, ns, -d,
+                                             towards);
     }
   }
+  radiance += lamps / chance;
   /* the world and the emitters light the hit too: its diffuse weight and, when `hit_glossy`,
    * its glossy lobe from the same shadow rays (exact_indirect.ray_radiance) */
   vec3 world_glossy, emitter_glossy;

@@ -173,9 +173,11 @@ def test_gpu_direct_light_equals_numpy(voxgi, light):
     assert (value < 0.2 * np.median(value)).mean() > 0.02
 
 
-def test_gpu_ao_and_indirect_equal_numpy(voxgi):
+@pytest.mark.parametrize("lamps", ["AREA", "AREA+POINT"])
+def test_gpu_ao_and_indirect_equal_numpy(voxgi, lamps):
     """The raw gather (shaders/bvh_gather.glsl, every pixel, before filtering): AO, Diffuse
-    Indirect and both variances equal gi.exact_indirect's on the same rays."""
+    Indirect and both variances equal gi.exact_indirect's on the same rays — with two lamps,
+    each bounce hit tracing the one both pick (exact_indirect.lamp_picks)."""
     from voxgi.render.gbuffer import rasterize, read_gbuffer
     from voxgi.render.gpu_bvh import GPUBVH
     from voxgi.render.gpu_gather import gather
@@ -186,6 +188,9 @@ def test_gpu_ao_and_indirect_equal_numpy(voxgi):
 
     scene = bpy.context.scene
     scenes.build_test_cornell_box(scene, light="AREA")
+    if lamps == "AREA+POINT":
+        location, settings = scenes.TEST_BOX_LIGHTS["POINT"]
+        scenes._light(scene, "Test Point Light", "POINT", location, **settings)
     snapshot, tris = snapshot_now()
     gpu_ready()
     w, h, rays = 40, 30, 8

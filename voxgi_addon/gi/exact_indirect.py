@@ -31,13 +31,14 @@ import numpy as np
 
 from ..scene.raycast import closest_hits
 from ..scene.snapshot import RAY_DIFFUSE
-from .direct_light import concentric_disk, diffuse_direct, light_aims
+from .direct_light import area_outline, concentric_disk, diffuse_direct, light_aims, light_frame
 from .principled import diffuse_weight, glossy_color, glossy_reflectance
 from .radiance_cache import cache_levels, cell_size, lookup
 from .sampling import hammersley, pcg_hash, perpendicular_basis, point_streams, unit_float, vndf_half_vectors
 
-__all__ = ["CONTINUE_STREAM", "METAL_FOLLOWED", "RAY_STREAM", "SURFACE_EPSILON", "RayPaths",
-           "cosine_directions", "follow_metal_hits", "gather_rays", "indirect_and_ao",
+__all__ = ["CONTINUE_STREAM", "LAMP_PICK_FLOOR", "LAMP_PICK_STREAM", "METAL_FOLLOWED", "RAY_STREAM",
+           "SURFACE_EPSILON", "RayPaths",
+           "cosine_directions", "follow_metal_hits", "gather_rays", "indirect_and_ao", "lamp_picks",
            "metal_lobe_rays", "ray_paths", "ray_radiance"]
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 weights of R, G, B
@@ -70,6 +71,14 @@ MAX_FOLLOWS = 1
 # diorama's preview took 14% longer for nothing, and the courtyards gained 3-5% for 4-8%)
 NEAR_FACING = -0.5
 SURFACE_EPSILON = 1e-4  # metres off the surface, as preview.SURFACE_EPSILON
+# A bounce hit traces the shadow rays of one lamp (sun, point, spot, area), picked by
+# ``lamp_picks`` from this hash stream (of its light-sample id and seed + 1), its light divided
+# by its chance: a hit's cost no longer grows with the lamps. LAMP_PICK_FLOOR of the chance is
+# spread evenly over the lamps, the rest goes by each one's unshadowed light at the hit, so
+# that a lamp the weights underrate (an area lamp whose centre is below the horizon) is still
+# picked (docs/gi_pipeline.md "One lamp a bounce hit").
+LAMP_PICK_STREAM = 0x6C2F
+LAMP_PICK_FLOOR = 0.25
 
 
 def cosine_directions(normals: np.ndarray, square: np.ndarray) -> np.ndarray:
@@ -171,6 +180,58 @@ class RayPaths:
         return out
 
 
+_LAMP_KINDS = ("SUN", "POINT", "SPOT", "AREA")
+
+
+def _lamps(lights) -> list[int]:
+    """The indices in ``lights`` of the lamps the GPU's light table holds
+    (``preview.light_table``: a sun, point, spot or area light of non-zero power, an area
+    light of non-zero area), in its order."""
+    return [i for i, light in enumerate(lights) if light.type in _LAMP_KINDS and light.power != 0
+            and (light.type != "AREA" or area_outline(light)[1] > 0)]
+
+
+def _pick_weights(light, points, normals) -> np.ndarray:
+    """(H,) ``lamp_picks``' weight of ``light`` at ``points`` with ``normals``: its Diffuse
+    Direct there as if nothing hid it and an area lamp were a point at its centre (luminance;
+    a spot's cone left out). GLSL ``lamp_pick_weight`` (bvh_shade.glsl)."""
+    centre, _, _, emit = light_frame(light)
+    power = float(light.power) * float(np.asarray(light.color, np.float64)[:3] @ LUMINANCE)
+    if light.type == "SUN":
+        return power * np.maximum(normals @ -emit, 0.0) / np.pi
+    delta = centre - points
+    d2 = np.einsum("ij,ij->i", delta, delta)
+    dist = np.sqrt(np.maximum(d2, 1e-30))
+    c = np.maximum(np.einsum("ij,ij->i", normals, delta), 0.0) / dist
+    if light.type == "AREA":  # Lambert's small-source form, the lamp's area keeping it finite
+        facing = np.maximum(-delta @ emit, 0.0) / dist
+        return power * c * facing / (np.pi * np.pi * (d2 + area_outline(light)[1]))
+    return power * c / (4.0 * np.pi * np.pi * (d2 + float(light.radius) ** 2))
+
+
+def lamp_picks(lights, points, normals, hit_ids, seed: int):
+    """The lamp each bounce hit traces (``LAMP_PICK_STREAM``): (the picked light's index in
+    ``lights`` (H,), its chance (H,)), or None where the lights hold fewer than two lamps (the
+    one there is always traced). points : (H, 3) where the hits' light is taken (lifted off the
+    surface); seed : the hits' light samples' seed (``ray_paths``' seed + 1)."""
+    lamps = _lamps(lights)
+    if len(lamps) < 2:
+        return None
+    points = np.asarray(points, np.float64)
+    normals = np.asarray(normals, np.float64)
+    weights = np.stack([_pick_weights(lights[i], points, normals) for i in lamps])  # (L, H)
+    total = weights.sum(axis=0)
+    count = len(lamps)
+    spread = (1.0 - LAMP_PICK_FLOOR) * weights / np.where(total > 0.0, total, 1.0) + \
+        LAMP_PICK_FLOOR / count
+    chances = np.where(total > 0.0, spread, 1.0 / count)
+    u = unit_float(point_streams(hit_ids, LAMP_PICK_STREAM, seed))
+    below = np.cumsum(chances, axis=0)
+    first = np.argmax(u[None, :] < below, axis=0)  # the first lamp whose share holds u …
+    k = np.where((u[None, :] < below).any(axis=0), first, count - 1)  # … else the last
+    return np.asarray(lamps)[k], chances[k, np.arange(len(k))]
+
+
 def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
               world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
               emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, hits=None) -> RayPaths:
@@ -222,10 +283,22 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
                              reflect=reflect)
         if reflect is not None:  # the world's and emitters' light off the hit's glossy lobe
             lit, reflected = lit
+        # one lamp a hit (LAMP_PICK_STREAM), its light over its chance; every light's share is
+        # computed here, the GPU traces the picked lamp's shadow rays alone. A metal whose lobe
+        # is taken keeps every lamp: its light is the lobe's, which the weights do not see.
+        share = np.ones((len(lights), len(hit)))
+        picks = lamp_picks(lights, x + ns * SURFACE_EPSILON, ns, hit_ids[hit], seed + 1)
+        if picks is not None:
+            picked, chance = picks
+            whole = np.zeros(len(hit), bool)
+            if principled and hit_glossy:
+                whole = metallic >= METAL_FOLLOWED
+            for i in _lamps(lights):
+                share[i] = np.where(whole, 1.0, np.where(picked == i, 1.0 / chance, 0.0))
         # the emission per texel where the material has an emission texture (level 0)
         radiance[hit] = hit_emission(tris, emission, tri[hit], u[hit], v[hit]) \
             if emission_seen else 0.0
-        arriving = lit.sum(axis=0)
+        arriving = (lit * share[:, :, None]).sum(axis=0)
         if principled:
             mu = np.clip(-np.einsum("ij,ij->i", ns, dirs[hit]), 0.0, 1.0)
             diffuse = diffuse_weight(*shading, mu)
@@ -238,8 +311,8 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
             lit_at = x + ns * SURFACE_EPSILON
             lamps = [light for light in lights if light.type not in ("WORLD", "EMITTERS")]
             wide = metallic >= METAL_FOLLOWED  # metals reflect an area lamp by the integral
-            for light, direct, towards in zip(lamps, lit if hit_glossy else (),
-                                              light_aims(lights, lit_at, ns)):
+            for light, direct, towards, scale in zip(lamps, lit if hit_glossy else (),
+                                                     light_aims(lights, lit_at, ns), share):
                 cos = np.einsum("ij,ij->i", ns, towards)
                 shine = direct * (np.pi / np.maximum(cos, 1e-4))[:, None] * \
                     glossy_reflectance(*shading, ns, -dirs[hit], towards)
@@ -248,7 +321,7 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
                     k = np.flatnonzero(wide)
                     shine[k] = _area_shine(light, direct[k], lit_at[k], ns[k], -dirs[hit][k],
                                            material[k], albedo, base[k])
-                radiance[hit] += shine
+                radiance[hit] += shine * scale[:, None]
         else:
             weight = np.asarray(albedo, np.float64)[material]
             glossy = np.zeros_like(weight)
