@@ -47,8 +47,8 @@ vec3 hit_emission(int material, int triangle, vec2 uv)
 
 /* The share of lamp picks light `light` takes at p with normal n (exact_indirect.lamp_picks):
  * its Diffuse Direct there as if nothing hid it and an area lamp were a point at its centre
- * (luminance; a spot's cone left out), 0 for a padding row. A bounce hit traces the shadow rays
- * of one lamp picked by these, its light divided by its chance (ray_paths). */
+ * (luminance), 0 for a padding row. A bounce hit traces the shadow rays of one lamp picked by
+ * these, its light divided by its chance (ray_paths). */
 float lamp_pick_weight(int light, vec3 p, vec3 n)
 {
   vec4 head = light_texel(light, 0);
@@ -70,7 +70,16 @@ float lamp_pick_weight(int light, vec3 p, vec3 n)
     float facing = max(dot(light_texel(light, 5).xyz, -delta), 0.0) / sqrt(max(d2, 1e-30));
     return power * c * facing / (M_PI_F * M_PI_F * (d2 + area));
   }
-  return power * c / (4.0 * M_PI_F * M_PI_F * (d2 + centre.w * centre.w));
+  float cone = 1.0;
+  if (kind == 2) { /* a spot's cone, as point_light's */
+    vec4 emit = light_texel(light, 5);
+    float cos_half = light_texel(light, 4).w;
+    float cos_phi = dot(-delta, emit.xyz) / sqrt(max(d2, 1e-30));
+    float x = emit.w <= 0.0 ? (cos_phi > cos_half ? 1.0 : 0.0) :
+                              clamp((cos_phi - cos_half) / ((1.0 - cos_half) * emit.w), 0.0, 1.0);
+    cone = emit.w <= 0.0 ? x : x * x * (3.0 - 2.0 * x);
+  }
+  return power * cone * c / (4.0 * M_PI_F * M_PI_F * (d2 + centre.w * centre.w));
 }
 
 /* The chance of picking a lamp of pick weight w among `count` lamps whose weights sum to

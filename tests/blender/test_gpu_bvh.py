@@ -173,7 +173,7 @@ def test_gpu_direct_light_equals_numpy(voxgi, light):
     assert (value < 0.2 * np.median(value)).mean() > 0.02
 
 
-@pytest.mark.parametrize("lamps", ["AREA", "AREA+POINT"])
+@pytest.mark.parametrize("lamps", ["AREA", "AREA+POINT", "AREA+SPOT"])
 def test_gpu_ao_and_indirect_equal_numpy(voxgi, lamps):
     """The raw gather (shaders/bvh_gather.glsl, every pixel, before filtering): AO, Diffuse
     Indirect and both variances equal gi.exact_indirect's on the same rays — with two lamps,
@@ -191,6 +191,9 @@ def test_gpu_ao_and_indirect_equal_numpy(voxgi, lamps):
     if lamps == "AREA+POINT":
         location, settings = scenes.TEST_BOX_LIGHTS["POINT"]
         scenes._light(scene, "Test Point Light", "POINT", location, **settings)
+    if lamps == "AREA+SPOT":  # shining down on the short block's side of the floor
+        scenes._light(scene, "Test Spot Light", "SPOT", (0.4, -0.2, 1.6), energy=150.0,
+                      spot_size=0.9, spot_blend=0.3, shadow_soft_size=0.05)
     snapshot, tris = snapshot_now()
     gpu_ready()
     w, h, rays = 40, 30, 8

@@ -101,3 +101,24 @@ def test_a_metal_hit_traces_every_lamp(monkeypatch):
                                    ao_distance=0.1, seed=2, hit_glossy=True)
     assert ours[0].max() > 0.01
     np.testing.assert_allclose(ours, whole, rtol=1e-12)
+
+
+@pytest.mark.parametrize("aimed", [True, False])
+def test_a_spot_is_picked_by_the_light_its_cone_sends(aimed):
+    """A spot over the floor beside a point lamp: aimed at the floor it takes most picks there;
+    turned up to the ceiling (the floor outside its cone) the floor share alone."""
+    count = 4000
+    points = np.tile([[0.0, 0.0, 0.0]], (count, 1))
+    normals = np.tile([[0.0, 0.0, 1.0]], (count, 1))
+    m = frame((0.0, 0.0, 1.0))
+    if not aimed:
+        m[:3, :3] = np.diag([1.0, -1.0, -1.0])  # its -Z (where it shines) turned up
+    spot = LightData("S", "SPOT", np.ones(3, np.float32), 600.0, m, spot_size=0.8, spot_blend=0.2)
+    lights = [lamps()[2], spot]
+    picked, chance = lamp_picks(lights, points, normals, np.arange(count), 3)
+    share = np.bincount(picked, minlength=2)[1] / count
+    if aimed:
+        assert share > 0.8
+    else:
+        assert share == pytest.approx(LAMP_PICK_FLOOR / 2, abs=0.02)
+        assert np.allclose(chance[picked == 1], LAMP_PICK_FLOOR / 2)

@@ -39,7 +39,7 @@ from ..scene.snapshot import LightData
 from .sampling import hashed_square, spherical_rectangle
 
 __all__ = ["diffuse_direct", "emitters_unshadowed", "light_aims", "light_directions",
-           "light_frame",
+           "light_frame", "spot_factor",
            "stratified_square", "concentric_disk"]
 
 _NORMAL_OFFSET = 1e-5  # metres: shadow rays start this far off the surface, towards the light
@@ -162,7 +162,9 @@ def _sun(light, p, n, tris, strata):
     return value
 
 
-def _spot_factor(light: LightData, emit: np.ndarray, from_light: np.ndarray) -> np.ndarray:
+def spot_factor(light: LightData, emit: np.ndarray, from_light: np.ndarray) -> np.ndarray:
+    """(N,) a spot's cone at unit directions ``from_light`` (N, 3) away from it, its emission
+    direction ``emit``: the smoothstep of its edge over Spot Blend, no falloff inside."""
     cos_half = math.cos(0.5 * float(light.spot_size))
     cos_phi = from_light @ emit
     if light.spot_blend <= 0.0:
@@ -181,7 +183,7 @@ def _point(light, p, n, tris, strata):
     value = light.power / (4.0 * math.pi) * np.maximum(np.einsum("ij,ij->i", n, w), 0.0)
     value /= (d2 + radius * radius) * math.pi
     if light.type == "SPOT":
-        value *= _spot_factor(light, emit, -w)
+        value *= spot_factor(light, emit, -w)
     lit = np.flatnonzero(value > 0)
     if len(lit) and tris is not None:
         if radius > 0:

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..scene.raycast import closest_hits
 from ..scene.snapshot import RAY_DIFFUSE
-from .direct_light import area_outline, concentric_disk, diffuse_direct, light_aims, light_frame
+from .direct_light import area_outline, concentric_disk, diffuse_direct, light_aims, light_frame, spot_factor
 from .principled import diffuse_weight, glossy_color, glossy_reflectance
 from .radiance_cache import cache_levels, cell_size, lookup
 from .sampling import hammersley, pcg_hash, perpendicular_basis, point_streams, unit_float, vndf_half_vectors
@@ -193,8 +193,8 @@ def _lamps(lights) -> list[int]:
 
 def _pick_weights(light, points, normals) -> np.ndarray:
     """(H,) ``lamp_picks``' weight of ``light`` at ``points`` with ``normals``: its Diffuse
-    Direct there as if nothing hid it and an area lamp were a point at its centre (luminance;
-    a spot's cone left out). GLSL ``lamp_pick_weight`` (bvh_shade.glsl)."""
+    Direct there as if nothing hid it and an area lamp were a point at its centre (luminance).
+    GLSL ``lamp_pick_weight`` (bvh_shade.glsl)."""
     centre, _, _, emit = light_frame(light)
     power = float(light.power) * float(np.asarray(light.color, np.float64)[:3] @ LUMINANCE)
     if light.type == "SUN":
@@ -206,7 +206,8 @@ def _pick_weights(light, points, normals) -> np.ndarray:
     if light.type == "AREA":  # Lambert's small-source form, the lamp's area keeping it finite
         facing = np.maximum(-delta @ emit, 0.0) / dist
         return power * c * facing / (np.pi * np.pi * (d2 + area_outline(light)[1]))
-    return power * c / (4.0 * np.pi * np.pi * (d2 + float(light.radius) ** 2))
+    cone = spot_factor(light, emit, -delta / dist[:, None]) if light.type == "SPOT" else 1.0
+    return power * cone * c / (4.0 * np.pi * np.pi * (d2 + float(light.radius) ** 2))
 
 
 def lamp_picks(lights, points, normals, hit_ids, seed: int):
