@@ -157,11 +157,14 @@ EMITTERS_ONLY = ("AREA", "POINT", "SUN", "WORLD")  # a variant with the emitters
 def absent_lights(lights, metals: bool = True) -> tuple[str, ...]:
     """The ``LIGHT_FEATURES`` no light of ``lights`` (``Light``s with a ``type``) needs, and
     "METAL_AREA" (a metal hit's glossy lobe over an area lamp, bvh_shade.glsl) where the scene
-    has an area lamp and no metal (``metals``, ``has_metals``)."""
+    has an area lamp and no metal (``metals``, ``has_metals``), and "METALS" (a metal hit's
+    lamp picks by its lobe, bvh_shade.glsl hit_lamp_weight) where it has no metal."""
     types = {light.type for light in lights}
     absent = [k for k, needs in LIGHT_FEATURES.items() if not types & set(needs)]
     if not metals and "AREA" not in absent:
         absent.append("METAL_AREA")
+    if not metals:
+        absent.append("METALS")
     return tuple(sorted(absent))
 
 

@@ -82,6 +82,31 @@ float lamp_pick_weight(int light, vec3 p, vec3 n)
   return power * cone * c / (4.0 * M_PI_F * M_PI_F * (d2 + centre.w * centre.w));
 }
 
+/* lamp_pick_weight at a hit: at a metal hit whose glossy lobe is taken (`metal`), times what
+ * the hit sends toward v (its diffuse weight `diffuse` and its lobe toward the lamp, as the
+ * lamps' loop in ray_paths reflects them), since a metal's light is its lobe's
+ * (exact_indirect.lamp_picks' weights). */
+float hit_lamp_weight(int light, vec3 p, vec3 n, bool metal, vec3 diffuse, vec3 v, vec3 base,
+                      vec3 params)
+{
+  float w = lamp_pick_weight(light, p, n);
+#ifdef BVH_NO_METALS
+  return w; /* no metal in the scene: the code is left out (llvmpipe pays for it untaken) */
+#else
+  if (!metal || w <= 0.0) {
+    return w;
+  }
+  vec3 towards = light_aim(light, p, n);
+  float c = dot(n, towards);
+  float lobe = c > 1e-4 ? (M_PI_F / c) *
+                              dot(principled_glossy_reflectance(base, params.x, params.y,
+                                                                params.z, n, v, towards),
+                                  LUMA) :
+                          0.0;
+  return w * (dot(diffuse, LUMA) + lobe);
+#endif
+}
+
 /* The chance of picking a lamp of pick weight w among `count` lamps whose weights sum to
  * `total`: a share LAMP_PICK_FLOOR spread evenly (no lamp that may light p is never picked,
  * whatever the weights leave out), the rest by weight. */
@@ -160,25 +185,25 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
   /* with the emitters among the lights their light comes by next-event estimation: a ray
    * landing on one adds no emission (exact_indirect.ray_radiance) unless `emission_seen` */
   vec3 radiance = (emission_seen || emitter_header().w < 0.5) ? emission : vec3(0.0);
-  /* One lamp's shadow rays, picked by lamp_pick_weight, its light over its chance
-   * (exact_indirect.lamp_picks): a hit's cost no longer grows with the lamps. A metal whose
-   * lobe is taken traces them all: its light is the lobe's, which the weights do not see. */
+  /* One lamp's shadow rays, picked by hit_lamp_weight, its light over its chance
+   * (exact_indirect.lamp_picks): a hit's cost no longer grows with the lamps. */
   int lamp_count = textureSize(lights, 0).y;
   int picked = 0;
   float chance = 1.0;
-  bool pick = lamp_count > 1 && !(hit_glossy && params.x >= METAL_FOLLOWED);
+  bool pick = lamp_count > 1;
+  bool metal = hit_glossy && params.x >= METAL_FOLLOWED;
   if (pick) {
     float total = 0.0;
     int real = 0;
     for (int light = 0; light < lamp_count; light++) {
-      total += lamp_pick_weight(light, lit_at, ns);
+      total += hit_lamp_weight(light, lit_at, ns, metal, weight, -d, base, params);
       real += int(light_texel(light, 0).x) >= 0 ? 1 : 0;
     }
     float u = unit_float(point_stream(hit_id, LAMP_PICK_STREAM, seed + 1u));
     float below = 0.0;
     picked = -1;
     for (int light = 0; light < lamp_count; light++) {
-      float w = lamp_pick_weight(light, lit_at, ns);
+      float w = hit_lamp_weight(light, lit_at, ns, metal, weight, -d, base, params);
       float p = int(light_texel(light, 0).x) >= 0 ? lamp_chance(w, total, max(real, 1)) : 0.0;
       if (picked < 0 && p > 0.0 && (u < below + p || light == lamp_count - 1)) {
         picked = light;

@@ -51,14 +51,15 @@ def gathers(used):
 def test_a_plain_scene_traces_lean_kernels_and_the_same_image(voxgi):
     """The test Cornell box (an area light, no textures, no cut-outs, no world light, no
     metal): its gathers run the variant without cut-outs, textures, sun, point lights, world,
-    emitters or a metal's glossy lobe over an area lamp, and every pass equals the one of the
-    kernels with all the code."""
+    emitters, a metal's glossy lobe over an area lamp or its lamp picks by that lobe, and every
+    pass equals the one of the kernels with all the code."""
     gpu_ready()
     scenes.build_test_cornell_box(bpy.context.scene, light="AREA")
     lean, used = traced_variants(fresh_render)
     full, used_full = traced_variants(fresh_render, every_feature=True)
     assert gathers(used) == {("bvh_gather", False, False,
-                              ("EMITTERS", "METAL_AREA", "POINT", "SUN", "WORLD"), False)}
+                              ("EMITTERS", "METALS", "METAL_AREA", "POINT", "SUN", "WORLD"),
+                              False)}
     assert gathers(used_full) == {("bvh_gather", True, True, (), True)}
     for name, image in full.items():
         assert np.array_equal(lean[name], image), name
@@ -72,7 +73,7 @@ def test_a_scene_with_emitters_keeps_their_code(voxgi):
     lean, used = traced_variants(fresh_render)
     full, _ = traced_variants(fresh_render, every_feature=True)
     absent = {v[3] for v in gathers(used)}
-    assert absent == {("AREA", "SUN", "WORLD")}
+    assert absent == {("AREA", "METALS", "SUN", "WORLD")}
     for name, image in full.items():
         assert np.allclose(lean[name], image, rtol=0, atol=1e-6 * max(np.abs(image).max(), 1)), \
             name
@@ -83,7 +84,8 @@ def test_a_metal_under_an_area_lamp_keeps_its_lobe_over_the_lamp(voxgi):
     keep the metal hits' lobe over the area lamp (bvh_shade.glsl, gpu_bvh.has_metals) and give
     the passes of the kernels with every feature; built without that code they give another
     Glossy Indirect (the lobe toward one direction), so the code runs. With its metals turned
-    dielectric the room's gathers leave the code out."""
+    dielectric the room's gathers leave the code out, and the metal hits' lamp picks by their
+    lobe too."""
     from voxgi.render import gpu_bvh
 
     gpu_ready()
@@ -109,7 +111,7 @@ def test_a_metal_under_an_area_lamp_keeps_its_lobe_over_the_lamp(voxgi):
         if bsdf is not None:
             bsdf.inputs["Metallic"].default_value = 0.0
     _, used = traced_variants(fresh_render)
-    assert {v[3] for v in gathers(used)} == {("EMITTERS", "METAL_AREA", "SUN", "WORLD")}
+    assert {v[3] for v in gathers(used)} == {("EMITTERS", "METALS", "METAL_AREA", "SUN", "WORLD")}
 
 
 def test_cut_outs_get_the_kernels_that_read_their_alpha(voxgi):

@@ -210,17 +210,42 @@ def _pick_weights(light, points, normals) -> np.ndarray:
     return power * cone * c / (4.0 * np.pi * np.pi * (d2 + float(light.radius) ** 2))
 
 
-def lamp_picks(lights, points, normals, hit_ids, seed: int):
+def _metal_weights(lights, lamps, weights, points, normals, metal, diffuse, views, shading):
+    """``weights`` (L, H) at the metal hits ``metal`` (H,) bool whose glossy lobe is taken:
+    times what the hit sends toward ``views`` — its diffuse weight ``diffuse`` (H, 3) and its
+    lobe (Principled ``shading``) toward the lamp (``light_aims``), as ``ray_paths`` reflects
+    each lamp — since a metal's light is its lobe's. GLSL ``hit_lamp_weight``."""
+    k = np.flatnonzero(metal)
+    if not len(k):
+        return weights
+    weights = weights.copy()
+    at = [i for i, light in enumerate(lights) if light.type not in ("WORLD", "EMITTERS")]
+    aims = light_aims(lights, points[k], normals[k])  # (the lamps of ``at``, in its order)
+    part = tuple(np.asarray(a)[k] for a in shading)
+    for row, i in enumerate(lamps):
+        towards = aims[at.index(i)]
+        cos = np.einsum("ij,ij->i", normals[k], towards)
+        reflected = glossy_reflectance(*part, normals[k], views[k], towards) @ LUMINANCE
+        lobe = np.where(cos > 1e-4, np.pi / np.maximum(cos, 1e-4) * reflected, 0.0)
+        weights[row, k] *= diffuse[k] @ LUMINANCE + lobe
+    return weights
+
+
+def lamp_picks(lights, points, normals, hit_ids, seed: int, metal=None):
     """The lamp each bounce hit traces (``LAMP_PICK_STREAM``): (the picked light's index in
     ``lights`` (H,), its chance (H,)), or None where the lights hold fewer than two lamps (the
     one there is always traced). points : (H, 3) where the hits' light is taken (lifted off the
-    surface); seed : the hits' light samples' seed (``ray_paths``' seed + 1)."""
+    surface); seed : the hits' light samples' seed (``ray_paths``' seed + 1). metal : None, or
+    (mask (H,), diffuse weight (H, 3), views (H, 3), Principled shading) of the metal hits whose
+    lobe is taken, weighed by what they reflect (``_metal_weights``)."""
     lamps = _lamps(lights)
     if len(lamps) < 2:
         return None
     points = np.asarray(points, np.float64)
     normals = np.asarray(normals, np.float64)
     weights = np.stack([_pick_weights(lights[i], points, normals) for i in lamps])  # (L, H)
+    if metal is not None:
+        weights = _metal_weights(lights, lamps, weights, points, normals, *metal)
     total = weights.sum(axis=0)
     count = len(lamps)
     spread = (1.0 - LAMP_PICK_FLOOR) * weights / np.where(total > 0.0, total, 1.0) + \
@@ -285,17 +310,19 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
         if reflect is not None:  # the world's and emitters' light off the hit's glossy lobe
             lit, reflected = lit
         # one lamp a hit (LAMP_PICK_STREAM), its light over its chance; every light's share is
-        # computed here, the GPU traces the picked lamp's shadow rays alone. A metal whose lobe
-        # is taken keeps every lamp: its light is the lobe's, which the weights do not see.
+        # computed here, the GPU traces the picked lamp's shadow rays alone. A metal hit whose
+        # lobe is taken weighs the lamps by what its lobe reflects of them.
+        metal = None
+        if principled and hit_glossy:
+            mu = np.clip(-np.einsum("ij,ij->i", ns, dirs[hit]), 0.0, 1.0)
+            metal = (metallic >= METAL_FOLLOWED, diffuse_weight(*shading, mu), -dirs[hit],
+                     shading)
         share = np.ones((len(lights), len(hit)))
-        picks = lamp_picks(lights, x + ns * SURFACE_EPSILON, ns, hit_ids[hit], seed + 1)
+        picks = lamp_picks(lights, x + ns * SURFACE_EPSILON, ns, hit_ids[hit], seed + 1, metal)
         if picks is not None:
             picked, chance = picks
-            whole = np.zeros(len(hit), bool)
-            if principled and hit_glossy:
-                whole = metallic >= METAL_FOLLOWED
             for i in _lamps(lights):
-                share[i] = np.where(whole, 1.0, np.where(picked == i, 1.0 / chance, 0.0))
+                share[i] = np.where(picked == i, 1.0 / chance, 0.0)
         # the emission per texel where the material has an emission texture (level 0)
         radiance[hit] = hit_emission(tris, emission, tri[hit], u[hit], v[hit]) \
             if emission_seen else 0.0
