@@ -518,8 +518,12 @@ vec3 hidden_less(vec3 value, vec3 f_sum, vec3 f_lit, int m)
  * pixel's world light (bvh_direct.glsl's alpha, denoise.glsl options.w). */
 float world_variance = 0.0;
 
+/* `single` (a bounce hit's): one ray a stratum, by the map where the stratum's x is under ½,
+ * else by the cosine, x stretched back over [0, 1), each ray over the techniques' mean density
+ * (one-sample MIS, world_light.one_technique; docs/gi_pipeline.md "One world ray a bounce
+ * hit"). */
 vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec3 base,
-                       vec3 params, out vec3 glossy)
+                       vec3 params, bool single, out vec3 glossy)
 {
   glossy = vec3(0.0);
   world_variance = 0.0;
@@ -536,10 +540,17 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   vec3 f_sum = vec3(0.0);
   vec3 f_lit = vec3(0.0);
   bool uniform_sky = world_uniform();
+  bool split = single && !uniform_sky;
   float hidden_sum = 0.0, hidden_squares = 0.0; /* Σ, Σ² of a hidden ray's lum(f) / π */
-  for (int technique = uniform_sky ? 1 : 0; technique < 2; technique++) { /* uniform: cosine only */
+  /* uniform: cosine only; split: one loop, each stratum drawing its technique */
+  for (int pass = uniform_sky || split ? 1 : 0; pass < 2; pass++) {
     for (int k = 0; k < m * m; k++) {
       vec2 s = hashed_stratum(state, k, m);
+      int technique = pass;
+      if (split) {
+        technique = s.x < 0.5 ? 0 : 1;
+        s.x = s.x < 0.5 ? 2.0 * s.x : 2.0 * s.x - 1.0;
+      }
       vec3 dir;
       if (technique == 0) {
         dir = world_sample(s, h, w);
@@ -554,7 +565,8 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
         continue;
       }
       vec3 radiance = world_radiance_at(world_pixel(dir, h, w));
-      float pdf = (uniform_sky ? 0.0 : dot(radiance, LUMA) / head.w) + cos_n / M_PI_F;
+      float pdf = ((uniform_sky ? 0.0 : dot(radiance, LUMA) / head.w) + cos_n / M_PI_F) *
+                  (split ? 0.5 : 1.0);
       vec3 f = radiance * (cos_n / max(pdf, 1e-30));
       f_sum += f;
       /* the map's rays as Cycles' light samples (lifted by the shadow terminator offset),
@@ -579,7 +591,7 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   }
   glossy /= float(m * m);
   /* the hidden part's estimate is Σ h / m² over N = techniques × m² rays: T var(h) / m² */
-  float rays = float(m * m * (uniform_sky ? 1 : 2));
+  float rays = float(m * m * (uniform_sky || split ? 1 : 2));
   float spread = max(hidden_squares - hidden_sum * hidden_sum / rays, 0.0) / max(rays - 1.0, 1.0);
   world_variance = rays / float(m * m) * spread / float(m * m);
   return hidden_less(value, f_sum, f_lit, m);
@@ -588,13 +600,13 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
 vec3 world_direct(vec3 p, vec3 n, uint state, int m)
 {
   vec3 unused;
-  return world_direct_lobe(p, n, state, m, false, n, vec3(0.0), vec3(0.0), unused);
+  return world_direct_lobe(p, n, state, m, false, n, vec3(0.0), vec3(0.0), false, unused);
 }
 
 /* The world's Diffuse Direct with the samples diffuse_direct draws for it (its hash stream,
  * its index after the lamps, is the header's texel 1.y); 0 without a world. */
 vec3 world_light_lobe(vec3 p, vec3 n, uint id, uint seed, int m, bool lobe, vec3 v, vec3 base,
-                      vec3 params, out vec3 glossy)
+                      vec3 params, bool single, out vec3 glossy)
 {
   glossy = vec3(0.0);
 #ifdef BVH_NO_WORLD
@@ -605,14 +617,14 @@ vec3 world_light_lobe(vec3 p, vec3 n, uint id, uint seed, int m, bool lobe, vec3
   }
   uint stream = uint(texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).y);
   return world_direct_lobe(p, n, point_stream(id, stream, seed), m, lobe, v, base, params,
-                           glossy);
+                           single, glossy);
 #endif
 }
 
 vec3 world_light_direct(vec3 p, vec3 n, uint id, uint seed, int m)
 {
   vec3 unused;
-  return world_light_lobe(p, n, id, seed, m, false, n, vec3(0.0), vec3(0.0), unused);
+  return world_light_lobe(p, n, id, seed, m, false, n, vec3(0.0), vec3(0.0), false, unused);
 }
 
 /* ---- Emissive triangles as a light (voxgi_addon/gi/emitters.py; sampler `emitters` holds

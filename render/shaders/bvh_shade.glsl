@@ -244,10 +244,11 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
   }
   radiance += lamps / chance;
   /* the world and the emitters light the hit too: its diffuse weight and, when `hit_glossy`,
-   * its glossy lobe from the same shadow rays (exact_indirect.ray_radiance) */
+   * its glossy lobe from the same shadow rays (exact_indirect.ray_radiance); the world's
+   * strata one ray each (world_light.one_technique) */
   vec3 world_glossy, emitter_glossy;
   radiance += weight * (world_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, hit_glossy, -d,
-                                         base, params, world_glossy) +
+                                         base, params, true, world_glossy) +
                         emitters_light_lobe(lit_at, ns, hit_id, seed + 1u, strata, false,
                                             vec4(0.0), hit_glossy, -d, base, params,
                                             emitter_glossy));

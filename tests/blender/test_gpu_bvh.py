@@ -173,16 +173,39 @@ def test_gpu_direct_light_equals_numpy(voxgi, light):
     assert (value < 0.2 * np.median(value)).mean() > 0.02
 
 
-@pytest.mark.parametrize("lamps", ["AREA", "AREA+POINT", "AREA+SPOT"])
+def soft_hdri_world():
+    """The synthetic HDRI of light_scenes with its sun's disc held at 40: the map's importance
+    still leans on it (the map's rays are the bounce hits' half), but no ray of the few a
+    point traces here is worth the whole image's difference — at 30,000 one shadow ray that
+    float32 and float64 draw a hair apart at the disc's edge moved a pixel by 16 (84% of the
+    difference in 10 pixels)."""
+    import light_scenes
+
+    pixels = light_scenes.hdri_pixels(256, 128)
+    pixels[..., :3] = np.minimum(pixels[..., :3], 4.0)
+    image = bpy.data.images.new("Soft HDRI", 256, 128, float_buffer=True)
+    image.pixels.foreach_set(pixels.ravel())
+    image.pack()
+    world = light_scenes.hdri_world("Soft HDRI World")
+    next(n for n in world.node_tree.nodes if n.type == "TEX_ENVIRONMENT").image = image
+    # ten times as strong: a good share of the box's bounce light, the sun's disc at 40
+    next(n for n in world.node_tree.nodes if n.type == "BACKGROUND").inputs[
+        "Strength"].default_value = 10.0
+    return world
+
+
+@pytest.mark.parametrize("lamps", ["AREA", "AREA+POINT", "AREA+SPOT", "AREA+HDRI"])
 def test_gpu_ao_and_indirect_equal_numpy(voxgi, lamps):
     """The raw gather (shaders/bvh_gather.glsl, every pixel, before filtering): AO, Diffuse
     Indirect and both variances equal gi.exact_indirect's on the same rays — with two lamps,
-    each bounce hit tracing the one both pick (exact_indirect.lamp_picks)."""
+    each bounce hit tracing the one both pick (exact_indirect.lamp_picks); under an HDRI, each
+    hit's world stratum drawing the same one ray (world_light.one_technique)."""
     from voxgi.render.gbuffer import rasterize, read_gbuffer
     from voxgi.render.gpu_bvh import GPUBVH
     from voxgi.render.gpu_gather import gather
     from voxgi.render.gpu_tracer import read_texture
     from voxgi.voxgi_addon.gi.exact_indirect import indirect_and_ao
+    from voxgi.voxgi_addon.gi.world_light import scene_lights
     from voxgi.voxgi_addon.preview.gather import GatherSettings
     from voxgi.voxgi_addon.preview.passes import material_table, principled_table
 
@@ -194,6 +217,8 @@ def test_gpu_ao_and_indirect_equal_numpy(voxgi, lamps):
     if lamps == "AREA+SPOT":  # shining down on the short block's side of the floor
         scenes._light(scene, "Test Spot Light", "SPOT", (0.4, -0.2, 1.6), energy=150.0,
                       spot_size=0.9, spot_blend=0.3, shadow_soft_size=0.05)
+    if lamps == "AREA+HDRI":  # its sky through the box's open side
+        scene.world = soft_hdri_world()
     snapshot, tris = snapshot_now()
     gpu_ready()
     w, h, rays = 40, 30, 8
@@ -202,13 +227,14 @@ def test_gpu_ao_and_indirect_equal_numpy(voxgi, lamps):
     gbuffer = rasterize(tris, snapshot.camera, rough, w, h)
     seen = read_gbuffer(gbuffer)
     settings = GatherSettings(rays=rays, ao_distance=1.0, seed=3)
-    values, variance = gather(GPUBVH().update(tris), gbuffer.inputs, snapshot.lights, principled,
+    lights = scene_lights(snapshot, tris, emission)  # the lamps, and the world when it shines
+    values, variance = gather(GPUBVH().update(tris), gbuffer.inputs, lights, principled,
                               emission, settings, 1, w, h)
     out, out_var = np.flipud(read_texture(values)), np.flipud(read_texture(variance))
     hit = seen["hit"]
     ids = np.flatnonzero(hit.ravel())
     indirect, ao, var = indirect_and_ao(seen["position"][hit], seen["normal"][hit], ids, tris,
-                                        snapshot.lights, principled, emission, rays=rays,
+                                        lights, principled, emission, rays=rays,
                                         ao_distance=1.0, seed=3, statistics=True,
                                         hit_glossy=settings.hit_glossy)
     ao_error = relative_l1(out[hit][:, 3], ao)
@@ -218,6 +244,13 @@ def test_gpu_ao_and_indirect_equal_numpy(voxgi, lamps):
           f"variances {variance_error:.5f}")
     assert ao_error < 0.02 and indirect_error < 0.02 and variance_error < 0.02
     assert 0.2 < ao.mean() < 0.95 and indirect.mean() > 0.01
+    if lamps == "AREA+HDRI":  # the world lights the hits: the test sees its rays
+        lamps_only = indirect_and_ao(seen["position"][hit], seen["normal"][hit], ids, tris,
+                                     [light for light in lights if light.type != "WORLD"],
+                                     principled, emission, rays=rays, ao_distance=1.0, seed=3,
+                                     hit_glossy=settings.hit_glossy)[0]
+        print(f"the world's share of the indirect light: {1 - lamps_only.mean() / indirect.mean():.3f}")
+        assert lamps_only.mean() < 0.9 * indirect.mean()
     # Red and green walls bleed: the indirect light is not grey everywhere.
     assert np.abs(indirect[:, 0] - indirect[:, 1]).max() > 0.02
 

@@ -9,6 +9,7 @@ from voxgi.voxgi_addon.gi.direct_light import diffuse_direct
 from voxgi.voxgi_addon.gi.sampling import hashed_square
 from voxgi.voxgi_addon.gi.world_light import (
     build_world_light,
+    one_technique,
     sample_world,
     unshadowed,
     world_direct,
@@ -147,3 +148,37 @@ def test_a_uniform_worlds_irradiance_is_its_radiance_and_the_quadrature_agrees()
     quadrature = build_world_light(nearly)
     assert not quadrature.uniform
     np.testing.assert_allclose(quadrature.irradiance, flat.irradiance, rtol=2e-3)
+
+
+def test_a_bounce_hits_one_ray_a_stratum_converges_to_the_visible_integral():
+    """At a bounce hit each stratum draws one ray, by the map or by the cosine
+    (``one_technique``: one-sample MIS over the techniques' mean density): half the shadow
+    rays, and the mean still converges to the visible integral — with the sun in view, and
+    with the sun hidden (where the map's rays are the ones that find the wall)."""
+    radiance = sky_with_sun()
+    world = build_world_light(radiance)
+    n = np.array([[0.0, 0.0, 1.0]])
+    points = np.zeros((100_000, 3))  # one stratum each: a hidden sun's rays are rare
+    normals = np.repeat(n, len(points), axis=0)
+    luminance = [0.2126, 0.7152, 0.0722]
+    for wall in (lambda d: d[..., 1] > 0.2, lambda d: d[..., 0] > 0.3):  # sun seen, hidden
+        rays = []
+
+        def occluded(origins, dirs, wall=wall):
+            rays.append(len(dirs))
+            return wall(dirs)
+
+        both = world_direct(world, points, normals, occluded, strata_for(len(points), 1))
+        both_rays = sum(rays)
+        rays.clear()
+        single = world_direct(world, points, normals, occluded, strata_for(len(points), 1),
+                              single=True)
+        expected = brute_force(radiance, n[0], lambda d, wall=wall: ~wall(d))
+        print(f"expected {expected @ luminance:.3f}: one ray {single.mean(0) @ luminance:.3f}, "
+              f"two {both.mean(0) @ luminance:.3f}; rays {sum(rays)} against {both_rays}")
+        assert sum(rays) <= 0.5 * both_rays + 1
+        np.testing.assert_allclose(single.mean(axis=0), expected, rtol=0.04)
+        np.testing.assert_allclose(both.mean(axis=0), expected, rtol=0.04)
+    # one technique a ray: about half the strata drew each
+    mapped, drawn = one_technique(hashed_square(np.arange(1000), 0, 1, 0))
+    assert 0.4 < mapped.mean() < 0.6 and drawn.min() >= 0.0 and drawn.max() < 1.0

@@ -340,10 +340,11 @@ def _area(light, p, n, tris, strata):
     return value
 
 
-def _world(world, p, n, tris, strata, reflect=None, unlifted=None, variance=None):
+def _world(world, p, n, tris, strata, reflect=None, unlifted=None, variance=None,
+           single=False):
     """The world's Diffuse Direct (``world_light.world_direct``): its map-sampled rays through
     ``tris`` (lifted by the shadow terminator offset where diffuse_direct was given it), its
-    cosine rays through ``unlifted`` (``tris`` when None)."""
+    cosine rays through ``unlifted`` (``tris`` when None); single: one ray a stratum."""
     from .world_light import world_direct
 
     origins_offset = _NORMAL_OFFSET * n
@@ -354,7 +355,8 @@ def _world(world, p, n, tris, strata, reflect=None, unlifted=None, variance=None
             lambda origins, dirs: _occluded(occluder, origins, dirs, np.full(len(dirs), np.inf)))
 
     return world_direct(world, p + origins_offset, n, through(unlifted), strata, reflect,
-                        sampled=None if unlifted is tris else through(tris), variance=variance)
+                        sampled=None if unlifted is tris else through(tris), variance=variance,
+                        single=single)
 
 
 def _emitters(emitters, p, n, tris, strata, reflect=None, unshadowed=None):
@@ -383,7 +385,8 @@ _BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD"
 
 def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
                    sample_ids=None, per_light: bool = False, strata_block=None, reflect=None,
-                   unshadowed=None, terminator=None, world_variance=None):
+                   unshadowed=None, terminator=None, world_variance=None,
+                   one_technique: bool = False):
     """Cycles' ``Diffuse Direct`` (irradiance / π, no albedo) at surface points.
 
     Parameters
@@ -420,6 +423,9 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
         shadow terminator offset lifts it (``terminator.ShadowStarts``); None: from the point.
     world_variance : an (N,) float array that gets the variance of the luminance of the
         world's estimate (``world_light.hidden_variance``; the GPU's bvh_direct.glsl alpha).
+    one_technique : the world's strata draw one ray each, by the map or by the cosine
+        (``world_light.one_technique``), not one of each: a bounce hit's (bvh_shade.glsl
+        ray_paths).
 
     Returns
     -------
@@ -460,6 +466,7 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
                 "unshadowed": np.asarray(unshadowed, np.float64).reshape(-1, 3)[a:b]}
             if light.type == "WORLD":
                 given["unlifted"] = unlifted
+                given["single"] = one_technique
                 if world_variance is not None:
                     given["variance"] = part = np.zeros(b - a)
             if reflect is not None and light.type in ("WORLD", "EMITTERS"):

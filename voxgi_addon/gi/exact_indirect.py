@@ -260,11 +260,14 @@ def lamp_picks(lights, points, normals, hit_ids, seed: int, metal=None):
 
 def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
               world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
-              emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, hits=None) -> RayPaths:
+              emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, hits=None,
+              one_world_ray: bool = True) -> RayPaths:
     """The ``RayPaths`` of bounce rays (``ray_radiance`` without a cache, plus what a cache
     would add to: the hits, their normals and weights). hits : the rays' closest hits
     (t, triangle, u, v), (K,) each, traced already (``raycast.closest_hits``; None: traced
-    here)."""
+    here). one_world_ray : each of a hit's world strata draws one ray, by the map or by the
+    cosine (``world_light.one_technique``), as the GPU's gathers and cache do; False: one of
+    each (a probe's bake, whose few rays a probe are not filtered)."""
     t, tri, u, v = closest_hits(tris, origins, dirs, 0.0, np.inf, ray) if hits is None else \
         (np.asarray(a) for a in hits)
     radiance = np.tile(np.asarray(world, dtype=np.float64), (len(dirs), 1))
@@ -304,9 +307,12 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
                     *(np.repeat(a[points], k, axis=0) for a in shading),
                     np.repeat(ns[points], k, axis=0), -np.repeat(dirs[hit][points], k, axis=0),
                     towards.reshape(-1, 3)).reshape(towards.shape)
+        # the world's strata one ray each (world_light.one_technique): the hits' mean over a
+        # gather point's rays is what counts, and the second ray a stratum cost the HDRI
+        # courtyard's gathers a fifth of their time
         lit = diffuse_direct(x + ns * SURFACE_EPSILON, ns, at_hits, tris, samples=hit_samples,
                              seed=seed + 1, sample_ids=hit_ids[hit], per_light=True,
-                             reflect=reflect)
+                             reflect=reflect, one_technique=one_world_ray)
         if reflect is not None:  # the world's and emitters' light off the hit's glossy lobe
             lit, reflected = lit
         # one lamp a hit (LAMP_PICK_STREAM), its light over its chance; every light's share is
@@ -492,7 +498,7 @@ def _follow_near(paths: RayPaths, out, hit_ids, tris, lights, albedo, emission, 
 def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
                  world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = False,
                  emission_seen: bool | None = None, ray: int = RAY_DIFFUSE, cache=None,
-                 receiver=None, near_field=None, hits=None):
+                 receiver=None, near_field=None, hits=None, one_world_ray: bool = True):
     """((K, 3) radiance arriving back along each ray, (K,) distance of its nearest hit, inf on
     a miss): what a bounce ray of the gathers sees — ``world`` on a miss, else the hit's
     emission plus its exact direct light reflected toward the ray's origin (see
@@ -511,9 +517,10 @@ def ray_radiance(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: i
     receivers' normals of the diffuse gather's rays (None: not it): a hit facing its receiver
     within ``NEAR_FIELD`` cells of the cache is followed one diffuse bounce further instead of
     reading the cache (``_follow_near``). hits : the rays' closest hits, traced already
-    (``ray_paths``)."""
+    (``ray_paths``). one_world_ray : as ``ray_paths``' (the rays' own hits; the hits past
+    them, a metal's reflection or the near field, draw one ray a stratum)."""
     paths = ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed, world,
-                      hit_samples, hit_glossy, emission_seen, ray, hits)
+                      hit_samples, hit_glossy, emission_seen, ray, hits, one_world_ray)
     out = paths.with_cache(cache, receiver)
     if cache is None or not cache.iterations:
         return out, paths.distance

@@ -38,7 +38,7 @@ from ..scene.short_axis import any_along, norm3
 from .sampling import perpendicular_basis
 
 __all__ = ["WorldLight", "world_light", "scene_lights", "world_direct", "world_table",
-           "sample_world", "world_pdf", "world_radiance", "IRRADIANCE_HEIGHT", "SOURCE_HEIGHT"]
+           "one_technique", "sample_world", "world_pdf", "world_radiance", "IRRADIANCE_HEIGHT", "SOURCE_HEIGHT"]
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 IRRADIANCE_HEIGHT = 32   # rows of the unshadowed-irradiance table (columns: twice that)
@@ -286,8 +286,24 @@ def hidden_variance(f, blocked, strata: int) -> np.ndarray:
     return rays / strata * spread / strata
 
 
+def one_technique(square):
+    """(mapped (M, K) bool, the strata (M, K, 2) for the drawn technique's direction): each
+    stratum draws one direction, by the world map's importance where its first coordinate is
+    under ½, else by the cosine, that coordinate stretched back over [0, 1) — one-sample
+    multiple importance sampling, each ray weighed by L cos over the techniques' mean density
+    (½ (p_map + p_cos)): unbiased, at one shadow ray a stratum instead of two
+    (bvh_lights.glsl world_direct_lobe's ``single``; docs/gi_pipeline.md "One world ray a
+    bounce hit")."""
+    square = np.asarray(square, np.float64)
+    u = square[..., 0]
+    mapped = u < 0.5
+    drawn = square.copy()
+    drawn[..., 0] = np.where(mapped, 2.0 * u, 2.0 * u - 1.0)
+    return mapped, drawn
+
+
 def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sampled=None,
-                 variance=None):
+                 variance=None, single: bool = False):
     """(N, 3) Diffuse Direct of the world at points p with unit normals n (facing the viewer):
     the unshadowed table value less the estimate of its hidden part from one world-map and one
     cosine ray per stratum (the balance heuristic; ``hidden_less``).
@@ -306,7 +322,9 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
         finds it by the BSDF's rays too (not lifted); a uniform world it finds by those alone.
     variance : an (N,) array that gets the variance of the luminance of the hidden part's
         estimate (``hidden_variance``; left as it is where no ray is drawn), for the filter of
-        a pixel's world light (docs/gi_pipeline.md "The world's light filtered")."""
+        a pixel's world light (docs/gi_pipeline.md "The world's light filtered").
+    single : one ray a stratum, not one of each technique (``one_technique``: a bounce hit's
+        world light, whose mean over the many rays that read it is what counts)."""
     p = np.asarray(p, np.float64)
     n = np.asarray(n, np.float64)
     value = unshadowed(world, n)
@@ -315,19 +333,32 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     if len(lit) == 0 or occluded is None:
         return value if reflect is None else (value, glossy)
     square = strata(lit)  # (M, K, 2)
-    dirs = _cosine(n[lit], square) if world.uniform else \
-        np.concatenate([sample_world(world, square), _cosine(n[lit], square)], axis=1)
+    split = single and not world.uniform
+    if split:
+        mapped, square = one_technique(square)
+        dirs = np.where(mapped[..., None], sample_world(world, square), _cosine(n[lit], square))
+    else:
+        dirs = _cosine(n[lit], square) if world.uniform else \
+            np.concatenate([sample_world(world, square), _cosine(n[lit], square)], axis=1)
     cos = np.einsum("mkc,mc->mk", dirs, n[lit])
     radiance = world_radiance(world, dirs)
     # the density the rays were drawn with (both techniques' sum; the cosine's alone for a
-    # uniform world), so that the ratio weighs each ray by L cos / pdf
+    # uniform world; one of the two at a time: their mean), so that the ratio weighs each ray
+    # by L cos / pdf
     pdf = (0.0 if world.uniform else radiance @ LUMINANCE / world.total) + \
         np.maximum(cos, 0.0) / math.pi
+    if split:
+        pdf = 0.5 * pdf
     f = radiance * (np.maximum(cos, 0.0) / np.maximum(pdf, 1e-30))[..., None]  # (M, 2K, 3)
     up = cos > 0
     origins = np.repeat(p[lit], dirs.shape[1], axis=0).reshape(dirs.shape)
     blocked = np.zeros(up.shape, bool)
-    if sampled is not None and not world.uniform:  # the map's rays (the first K) apart
+    if sampled is not None and split:  # the map's rays (those of the strata that drew it) apart
+        for part, test in ((mapped, sampled), (~mapped, occluded)):
+            rays = up & part
+            if rays.any():
+                blocked[rays] = test(origins[rays], dirs[rays])
+    elif sampled is not None and not world.uniform:  # the map's rays (the first K) apart
         k = square.shape[1]
         for part, test in ((slice(0, k), sampled), (slice(k, None), occluded)):
             rays = up[:, part]

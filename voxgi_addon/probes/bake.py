@@ -121,6 +121,7 @@ def hit_radiance(snapshot, tris: SceneTriangles, origins, dirs, t, tri, u, v,
     out, _ = ray_radiance(origins, dirs, ids, tris, lights,
                           principled_table(snapshot), emission, seed, hit_samples=light_samples,
                           hit_glossy=True, emission_seen=seen_emission, cache=cache,
+                          one_world_ray=False,  # a probe's few rays: both of the world's
                           hits=(np.asarray(t, np.float64).reshape(-1), tri,
                                 np.asarray(u, np.float64).reshape(-1),
                                 np.asarray(v, np.float64).reshape(-1)))
