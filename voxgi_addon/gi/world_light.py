@@ -336,7 +336,10 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     split = single and not world.uniform
     if split:
         mapped, square = one_technique(square)
-        dirs = np.where(mapped[..., None], sample_world(world, square), _cosine(n[lit], square))
+        dirs = np.empty(square.shape[:-1] + (3,))  # each stratum's direction by its technique
+        dirs[mapped] = sample_world(world, square[mapped])
+        rows = np.nonzero(~mapped)[0]
+        dirs[~mapped] = _cosine(n[lit][rows], square[~mapped][:, None])[:, 0]
     else:
         dirs = _cosine(n[lit], square) if world.uniform else \
             np.concatenate([sample_world(world, square), _cosine(n[lit], square)], axis=1)
