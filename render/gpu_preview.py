@@ -24,7 +24,9 @@ from ..voxgi_addon.preview.film import background
 from ..voxgi_addon.preview.gather import VIEW_BACKOFF, GatherSettings, focused, uses_cache
 from ..voxgi_addon.preview.passes import (
     AA_SIDE,
+    NO_TAILS,
     WORLD_FILTER_PASSES,
+    Tails,
     centre_pass,
     check_request,
     edge_pixels,
@@ -32,7 +34,6 @@ from ..voxgi_addon.preview.passes import (
     lamp_light,
     light_edge_pixels,
     material_indices,
-    new_sums,
     pass_tail_weights,
     pass_weights,
     shows_diffuse,
@@ -740,7 +741,7 @@ def _subpixel_passes(f):
     width, height, gi_stride = f["width"], f["height"], f["gi_stride"]
     texel, edge, listed = f["centre_texel"], f["edge_all"], f["listed"]
     if not len(listed):
-        return {"texel": texel, "tails": new_sums(width * height)}
+        return {"texel": texel, "tails": NO_TAILS}
     pixels, list_size = _pixel_list(listed, width, height)
     zero = scene.zeros(width, height)
     centre = f["centre"]
@@ -853,9 +854,9 @@ def _subpixel_passes(f):
                     read_texture(textures[name]).reshape(-1, 4)[:len(left)]
     samples *= (weights / len(plan)).astype(np.float32)[:, None, None]
     own = samples.sum(axis=0, dtype=np.float64) * len(plan)
-    tail = stacked_tails(samples, pass_tail_weights(plan, f["filter_width"]), listed, width,
-                         height)
-    tails = _sums_of({name: tail[:, 4 * k:4 * k + 4] for k, name in enumerate(names)})
+    at, tail = stacked_tails(samples, pass_tail_weights(plan, f["filter_width"]), listed, width,
+                             height)
+    tails = Tails(at, _sums_of({name: tail[:, 4 * k:4 * k + 4] for k, name in enumerate(names)}))
     for k, name in enumerate(names):
         texel[name][listed] = own[:, 4 * k:4 * k + 4]
     return {"texel": texel, "tails": tails}
@@ -898,7 +899,7 @@ def _has_passes(f) -> bool:
 def _no_passes(f):
     if f["result"] is not None:  # the viewport's sums stay on the GPU
         return {"texel": None, "tails": None}
-    return {"texel": f["centre_texel"], "tails": new_sums(f["width"] * f["height"])}
+    return {"texel": f["centre_texel"], "tails": NO_TAILS}
 
 
 def _finish(f):

@@ -151,6 +151,7 @@ def _sub_pixel_film(lit, width=3, height=3, size=1.5):
     from voxgi.voxgi_addon.preview.passes import (
         SUMS,
         add_tails,
+        dense_tails,
         finish_passes,
         new_sums,
         pass_tail_weights,
@@ -171,7 +172,7 @@ def _sub_pixel_film(lit, width=3, height=3, size=1.5):
             sums[name] += weight * one[name]
         add_tails(tails, {name: weight * one[name] / len(plan) for name in SUMS}, pixels,
                   weights, width, height)
-    exact = finish_passes(sums, len(plan), width, height, size, tails)["Diffuse Direct"]
+    exact = finish_passes(sums, len(plan), width, height, size, dense_tails(tails))["Diffuse Direct"]
     means = finish_passes(sums, len(plan), width, height, size)["Diffuse Direct"]
     return exact[height // 2, width // 2, 0], means[height // 2, width // 2, 0]
 
@@ -220,7 +221,13 @@ def test_passes_summed_before_one_scatter_give_the_tails_of_a_scatter_per_pass()
         values = {name: rng.random((len(listed),) + per_pass[name].shape[1:]) for name in SUMS}
         add_tails(per_pass, values, listed, row, width, height)
         samples.append(pack_sums(values))
-    once = unpack_sums(stacked_tails(np.stack(samples), weights, listed, width, height))
+    at, packed = stacked_tails(np.stack(samples), weights, listed, width, height)
+    assert np.all(np.diff(at) > 0)
+    once = unpack_sums(packed)
+    reached = np.zeros(width * height, bool)
+    reached[at] = True
     for name in SUMS:
         assert np.any(once[name] != 0.0)
-        np.testing.assert_allclose(once[name], per_pass[name], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(once[name], per_pass[name][at], rtol=1e-12, atol=1e-12)
+        # nothing reaches a pixel left out
+        assert not np.any(per_pass[name][~reached])

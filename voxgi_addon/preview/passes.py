@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -618,31 +619,60 @@ def unpack_sums(packed: np.ndarray) -> dict:
     return out
 
 
+class Tails(NamedTuple):
+    """The sub-pixel samples' filter tails in the pixels they reach (``stacked_tails``): ``at``
+    (M,) the flat pixels, ascending; ``values`` name of SUMS → (M, C) or (M,) there. Only the
+    listed pixels' neighbours get any: a dense image of them took 0.1–0.2 s of a 640 × 480
+    preview in allocation and copies alone."""
+    at: np.ndarray
+    values: dict
+
+
+NO_TAILS = Tails(np.zeros(0, np.int64), {})
+
+
+def dense_tails(tails: dict) -> Tails:
+    """The ``Tails`` of ``new_sums``-shaped tails (``add_tails``' readable form): the pixels
+    where any sum is not 0."""
+    rows = [np.asarray(value).reshape(len(value), -1) for value in tails.values()]
+    at = np.flatnonzero(np.any(np.concatenate(rows, axis=1) != 0.0, axis=1))
+    return Tails(at, {name: np.asarray(value)[at] for name, value in tails.items()})
+
+
 def stacked_tails(samples: np.ndarray, weights: np.ndarray, pixels, width: int,
-                  height: int) -> np.ndarray:
-    """(H·W, C) of ``samples``' dtype: the neighbours' tails of P sub-pixel passes' samples
-    ``samples`` (P, N, C) at the flat ``pixels`` (N,), pass k weighted by ``weights[k]`` (3, 3)
-    (``pass_tail_weights``): pixel p takes Σ_k weights[k][e] × the pass k sample of the pixel
-    p + e — ``add_tails`` pass by pass. The tails are linear in the samples, so each
-    neighbour's weighted sum over the passes is one matrix product and is scattered once
-    (docs/gi_pipeline.md "Anti-aliasing": 8 scatters per name per pass took 2.9 of a 640 ×
-    480 preview's 7.6 s, summing them name by name pass by pass another 0.2)."""
+                  height: int) -> tuple[np.ndarray, np.ndarray]:
+    """(at (M,), values (M, C) of ``samples``' dtype): the neighbours' tails of P sub-pixel
+    passes' samples ``samples`` (P, N, C) at the flat ``pixels`` (N,), pass k weighted by
+    ``weights[k]`` (3, 3) (``pass_tail_weights``), at the M pixels they reach (ascending): pixel
+    p takes Σ_k weights[k][e] × the pass k sample of the pixel p + e — ``add_tails`` pass by
+    pass. The tails are linear in the samples, so each neighbour's weighted sum over the
+    passes is one matrix product and is scattered once (docs/gi_pipeline.md "Anti-aliasing":
+    8 scatters per name per pass took 2.9 of a 640 × 480 preview's 7.6 s, summing them name by
+    name pass by pass another 0.2)."""
     samples = np.asarray(samples)
     passes, count, channels = samples.shape
     weights = np.asarray(weights, np.float64).reshape(passes, 9)
-    # on an image one pixel wider on every side, cropped at the end: no target falls outside
-    tails = np.zeros(((height + 2) * (width + 2), channels), samples.dtype)
     used = [k for k in range(9) if k != 4 and np.any(weights[:, k] != 0.0)]
-    if count and used:
-        summed = np.tensordot(weights[:, used].T.astype(samples.dtype),
-                              samples.reshape(passes, count * channels), 1)
-        y, x = np.divmod(np.asarray(pixels), width)
-        at = (y + 1) * (width + 2) + x + 1
-        for row, k in enumerate(used):
-            shift = (k // 3 - 1) * (width + 2) + k % 3 - 1
-            tails[at - shift] += summed[row].reshape(count, channels)
-    tails = tails.reshape(height + 2, width + 2, channels)[1:-1, 1:-1]
-    return np.ascontiguousarray(tails).reshape(width * height, channels)
+    if not count or not used:
+        return np.zeros(0, np.int64), np.zeros((0, channels), samples.dtype)
+    summed = np.tensordot(weights[:, used].T.astype(samples.dtype),
+                          samples.reshape(passes, count * channels), 1)
+    summed = summed.reshape(len(used), count, channels)
+    y, x = np.divmod(np.asarray(pixels), width)
+    reached = []  # per neighbour: the samples whose target lies inside, and the targets
+    for k in used:
+        ty, tx = y - (k // 3 - 1), x - (k % 3 - 1)
+        inside = np.flatnonzero((ty >= 0) & (ty < height) & (tx >= 0) & (tx < width))
+        reached.append((inside, (ty * width + tx)[inside]))
+    slot = np.full(width * height, -1, np.int64)  # each reached pixel's row in values
+    for _, targets in reached:
+        slot[targets] = 0
+    at = np.flatnonzero(slot == 0)
+    slot[at] = np.arange(len(at))
+    values = np.zeros((len(at), channels), samples.dtype)
+    for row, (inside, targets) in enumerate(reached):  # one target per sample: no collisions
+        values[slot[targets]] += summed[row][inside]
+    return at, values
 
 
 def _neighbour_sum(image: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -721,8 +751,8 @@ def finish_passes(sums, count, width: int, height: int,
     (H·W,) per pixel: 1 off the edges, the pass count on them): per pixel, colours, AO and
     Combined are means over the passes (0 where a pass saw the background, as Cycles' film),
     light passes the light × colour over the colour (0 where that is 0); then Cycles' pixel
-    filter over the neighbours — with ``tails`` (``new_sums``, filled by ``add_tails`` with
-    the sub-pixel passes' samples of the pixels whose count is above 1, each pass weighted by
+    filter over the neighbours — with ``tails`` (a ``Tails``, ``stacked_tails``' of the
+    sub-pixel passes' samples of the pixels whose count is above 1, each pass weighted by
     its ``pass_tail_weights``), a pixel takes those pixels' samples by the filter at each
     sample's own place and the other pixels' means by their share (``filtered_sums``); without,
     every neighbour's mean by its share (``filter_passes``)."""
@@ -767,7 +797,23 @@ def filter_coverage(coverage: np.ndarray, filter_width: float) -> np.ndarray:
     return (image[..., 0] if flat else image).astype(np.float32)
 
 
-def filtered_sums(sums, count, tails, width: int, height: int, filter_width: float):
+def _filtered_3x3(image: np.ndarray, side) -> np.ndarray:
+    """(H, W, C): ``image`` + ``_neighbour_sum`` of it for separable weights 1 : side along
+    each axis (``neighbour_weights``), in the image's dtype: a row pass and a column pass, the
+    scaled image shifted onto the sum (no temporary per tap)."""
+    side = image.dtype.type(side)
+    scaled = image * side
+    rows = image.copy()
+    rows[:, 1:] += scaled[:, :-1]
+    rows[:, :-1] += scaled[:, 1:]
+    np.multiply(rows, side, out=scaled)
+    out = rows
+    out[1:] += scaled[:-1]
+    out[:-1] += scaled[1:]
+    return out
+
+
+def filtered_sums(sums, count, tails: Tails, width: int, height: int, filter_width: float):
     """``finish_passes`` with the sub-pixel samples' own filter weights (``tails``): every
     sum S of a pixel p becomes S(p) / count(p) + tails(p) + Σ share(e) × S(p + e) over the
     neighbours p + e with count 1 (one pass through the centre, a smooth surface: its mean
@@ -775,19 +821,25 @@ def filtered_sums(sums, count, tails, width: int, height: int, filter_width: flo
     passes Σ light × colour over Σ colour as Cycles' film divides them. A 1-pixel gap between
     two surfaces takes from each neighbour the part of its square next to the gap, not its
     mean (the mean was 3.7% off Diffuse Direct at the slot beside an emissive panel). In
-    float32, as the images are (the float64 copies took 0.2 s of a 640 × 480 preview)."""
-    weights = neighbour_weights(filter_width).astype(np.float32)
+    float32, as the images are (the float64 copies took 0.2 s of a 640 × 480 preview), name
+    by name (each image small enough for the caches: all side by side took twice as long)."""
+    weights = neighbour_weights(filter_width)
+    side = np.float32(weights[1, 0])
+    pixels = width * height
     count = np.asarray(count, np.float32).reshape(-1, 1)
-    smooth = (count <= 1.0).reshape(height, width, 1)
+    edge = np.flatnonzero(count > 1.0)  # their own mean, not their share of a neighbour's
     full = {}
-    for name in SUMS:  # name by name: each image stays small enough for the caches
-        mean = np.asarray(sums[name], np.float32).reshape(width * height, -1) / count
-        mean = mean.reshape(height, width, -1)
-        total = mean + np.asarray(tails[name], np.float32).reshape(height, width, -1)
-        total += _neighbour_sum(np.where(smooth, mean, np.float32(0.0)), weights)
-        full[name] = total.reshape(width * height, -1)
-    norm = (1.0 + _neighbour_sum(np.ones((height, width, 1), np.float32), weights)
-            ).reshape(-1, 1)
+    for name in SUMS:
+        mean = np.asarray(sums[name], np.float32).reshape(pixels, -1) / count
+        own = mean[edge]
+        mean[edge] = 0.0
+        total = _filtered_3x3(mean.reshape(height, width, -1), side).reshape(pixels, -1)
+        total[edge] += own
+        if len(tails.at):
+            total[tails.at] += np.asarray(tails.values[name], np.float32).reshape(
+                len(tails.at), -1)
+        full[name] = total
+    norm = _filtered_3x3(np.ones((height, width, 1), np.float32), side).reshape(-1, 1)
 
     def ratio(light, colour):
         return np.divide(light, colour, out=np.zeros_like(light), where=colour > 0.0)
@@ -1267,7 +1319,7 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
                             len(plan)).ravel()
     edge |= lit
     # Each sub-pixel pass's samples count in the neighbours by the filter at their own place.
-    tails = new_sums(height * width)
+    tails = NO_TAILS
     listed = np.flatnonzero(edge)
     if len(listed):
         table, light = pack_sums(sums), combined_light(sums)
@@ -1299,8 +1351,9 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
             for name, value in unpack_sums(packed).items():
                 sums[name][listed] += weight * value
             samples.append(packed * (weight / len(plan)))
-        tails = unpack_sums(stacked_tails(np.stack(samples), pass_tail_weights(plan, filter_width),
-                                          listed, width, height))
+        at, packed = stacked_tails(np.stack(samples), pass_tail_weights(plan, filter_width),
+                                   listed, width, height)
+        tails = Tails(at, unpack_sums(packed))
     count = np.where(edge, len(plan), 1)
     timings["sub-pixel passes" if len(plan) > 1 else "direct + compose"] = \
         time.perf_counter() - t0
