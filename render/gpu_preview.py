@@ -754,13 +754,14 @@ def _subpixel_passes(f):
     eye = _eye(snapshot.camera)
     centres = _centres(f)
     fields = f["fields"]
-    # every pass's samples, the sum textures' texels side by side (names' order); a sample
+    # every pass's samples, one block a sum texture (names' order: each read-back one copy); a
+    # sample
     # takes the centres' sums around it where they see its surface and their light is smooth
     # (a textured sample their light, coloured by its own texel: aa_resolve.glsl,
     # preview.resolve), the others are shaded below
     names = _SUM_TEXTURES
-    flag = 4 * names.index("sum_d") + 3  # the resolved samples' mark (aa_resolve.glsl)
-    samples = np.empty((len(plan), len(listed), 4 * len(names)), np.float32)
+    flag = names.index("sum_d")  # its alpha: the resolved samples' mark (aa_resolve.glsl)
+    samples = np.empty((len(plan), len(names), len(listed), 4), np.float32)
     # the passes draw the listed pixels only where the raster has the texture code (its
     # fragments cost 3× the mask's full-screen pass: 47 → 14 ms a pass, textured room at
     # 640 × 480); the plain variant's are cheaper than the mask (9 → 10 ms, the box)
@@ -806,12 +807,13 @@ def _subpixel_passes(f):
                                    float(list_size[1]))}, over=list_size)
         for k, name in enumerate(names):
             rows = read_texture(blended["out" + name[3:]]).reshape(len(indices), -1, 4)
-            samples[indices, :, 4 * k:4 * k + 4] = rows[:, :len(listed)]
+            for row, index in enumerate(indices):
+                samples[index, k] = rows[row, :len(listed)]
         for index in indices:  # the samples left, shaded over a list of their own pixels
             offset, block = plan[index]
             (tx, _), (ty, _) = place(index)
-            left = np.flatnonzero(samples[index, :, flag] < 0.5)
-            samples[index, :, flag] = 0.0
+            left = np.flatnonzero(samples[index, flag, :, 3] < 0.5)
+            samples[index, flag, :, 3] = 0.0
             if not len(left):
                 continue
             sub_pixels, sub_size = (pixels, list_size) if len(left) == len(listed) else \
@@ -850,15 +852,15 @@ def _subpixel_passes(f):
                                          blank, sub_size, block, glow=glow,
                                          centre=listed_centres, field=field_diffuse)
             for k, name in enumerate(names):
-                samples[index, left, 4 * k:4 * k + 4] = \
+                samples[index, k, left] = \
                     read_texture(textures[name]).reshape(-1, 4)[:len(left)]
-    samples *= (weights / len(plan)).astype(np.float32)[:, None, None]
+    samples *= (weights / len(plan)).astype(np.float32)[:, None, None, None]
     own = samples.sum(axis=0, dtype=np.float64) * len(plan)
     at, tail = stacked_tails(samples, pass_tail_weights(plan, f["filter_width"]), listed, width,
                              height)
     tails = Tails(at, _sums_of({name: tail[:, 4 * k:4 * k + 4] for k, name in enumerate(names)}))
     for k, name in enumerate(names):
-        texel[name][listed] = own[:, 4 * k:4 * k + 4]
+        texel[name][listed] = own[k]
     return {"texel": texel, "tails": tails}
 
 

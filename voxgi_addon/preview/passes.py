@@ -642,7 +642,8 @@ def dense_tails(tails: dict) -> Tails:
 def stacked_tails(samples: np.ndarray, weights: np.ndarray, pixels, width: int,
                   height: int) -> tuple[np.ndarray, np.ndarray]:
     """(at (M,), values (M, C) of ``samples``' dtype): the neighbours' tails of P sub-pixel
-    passes' samples ``samples`` (P, N, C) at the flat ``pixels`` (N,), pass k weighted by
+    passes' samples ``samples`` (P, N, C) — or (P, B, N, c) in B blocks of c channels, the
+    values then (M, B·c), block after block — at the flat ``pixels`` (N,), pass k weighted by
     ``weights[k]`` (3, 3) (``pass_tail_weights``), at the M pixels they reach (ascending): pixel
     p takes Σ_k weights[k][e] × the pass k sample of the pixel p + e — ``add_tails`` pass by
     pass. The tails are linear in the samples, so each neighbour's weighted sum over the
@@ -650,14 +651,16 @@ def stacked_tails(samples: np.ndarray, weights: np.ndarray, pixels, width: int,
     8 scatters per name per pass took 2.9 of a 640 × 480 preview's 7.6 s, summing them name by
     name pass by pass another 0.2)."""
     samples = np.asarray(samples)
-    passes, count, channels = samples.shape
+    if samples.ndim == 3:
+        samples = samples[:, None]
+    passes, blocks, count, channels = samples.shape
     weights = np.asarray(weights, np.float64).reshape(passes, 9)
     used = [k for k in range(9) if k != 4 and np.any(weights[:, k] != 0.0)]
     if not count or not used:
-        return np.zeros(0, np.int64), np.zeros((0, channels), samples.dtype)
+        return np.zeros(0, np.int64), np.zeros((0, blocks * channels), samples.dtype)
     summed = np.tensordot(weights[:, used].T.astype(samples.dtype),
-                          samples.reshape(passes, count * channels), 1)
-    summed = summed.reshape(len(used), count, channels)
+                          samples.reshape(passes, -1), 1)
+    summed = summed.reshape(len(used), blocks, count, channels)
     y, x = np.divmod(np.asarray(pixels), width)
     reached = []  # per neighbour: the samples whose target lies inside, and the targets
     for k in used:
@@ -669,10 +672,10 @@ def stacked_tails(samples: np.ndarray, weights: np.ndarray, pixels, width: int,
         slot[targets] = 0
     at = np.flatnonzero(slot == 0)
     slot[at] = np.arange(len(at))
-    values = np.zeros((len(at), channels), samples.dtype)
+    values = np.zeros((len(at), blocks, channels), samples.dtype)
     for row, (inside, targets) in enumerate(reached):  # one target per sample: no collisions
-        values[slot[targets]] += summed[row][inside]
-    return at, values
+        values[slot[targets]] += summed[row][:, inside].transpose(1, 0, 2)
+    return at, values.reshape(len(at), blocks * channels)
 
 
 def _neighbour_sum(image: np.ndarray, weights: np.ndarray) -> np.ndarray:
