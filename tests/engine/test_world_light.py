@@ -75,6 +75,24 @@ def test_unshadowed_light_equals_the_brute_force_integral(normal):
     np.testing.assert_allclose(unshadowed(world, n[None])[0], brute_force(radiance, n), rtol=0.02)
 
 
+def test_a_low_sun_lights_the_ground_from_where_it_is():
+    """A real HDRI's sun a few pixels wide 2.6° above the horizon (a 1024 × 512 map, as
+    pedestrian_overpass_1k.hdr): the table is integrated over boxes of 4 × 4 pixels, and a box's
+    light taken from its centre, 0.6° lower, read that file's ground irradiance 5% low (its
+    Diffuse Direct 2.8% under Cycles') and this map's 2%. From the box's luminous centroid it
+    is the map's own."""
+    height, width = 512, 1024
+    d = pixel_directions(height, width)
+    sun = np.array([0.627, -0.778, 0.046]) / np.linalg.norm([0.627, -0.778, 0.046])
+    radiance = np.where(d[..., 2:] > 0, np.array([0.3, 0.35, 0.5]), np.array([0.05, 0.04, 0.03]))
+    radiance = radiance + ((d @ sun) > math.cos(math.radians(0.3)))[..., None] * 60_000.0
+    world = build_world_light(radiance)
+    for normal in ((0, 0, 1.0), (0.3, 0.2, 0.93), (0.0, -0.6, 0.8)):
+        n = np.asarray(normal) / np.linalg.norm(normal)
+        np.testing.assert_allclose(unshadowed(world, n[None])[0], brute_force(radiance, n),
+                                   rtol=0.005)
+
+
 def test_shadowed_light_converges_to_the_visible_integral():
     """A wall blocking every direction with y > 0.2: the visible share estimated by the shadow
     rays (map and cosine samples) converges to the brute-force integral over what is left."""
