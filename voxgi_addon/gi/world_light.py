@@ -105,7 +105,8 @@ def _irradiance_table(radiance: np.ndarray) -> np.ndarray:
     height, width = radiance.shape[:2]
     power = np.asarray(radiance, np.float32) * \
         row_solid_angles(height, width).astype(np.float32)[:, None, None]  # L ω per pixel
-    # the luminous power's first moment: directions (cos el cos φ, cos el sin φ, sin el)
+    # the luminous power's first moment over the pixel centres (equirect.pixel_directions'
+    # (cos el cos φ, cos el sin φ, sin el), built from its separable factors in float32)
     el = np.pi / 2 - (np.arange(height) + 0.5) * np.pi / height
     phi = -np.pi + (np.arange(width) + 0.5) * 2 * np.pi / width
     luminous = power @ LUMINANCE.astype(np.float32)
