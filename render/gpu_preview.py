@@ -754,9 +754,8 @@ def _subpixel_passes(f):
     eye = _eye(snapshot.camera)
     centres = _centres(f)
     fields = f["fields"]
-    # every pass's samples, one block a sum texture (names' order: each read-back one copy); a
-    # sample
-    # takes the centres' sums around it where they see its surface and their light is smooth
+    # every pass's samples, one block a sum texture (names' order: each read-back one copy);
+    # a sample takes the centres' sums around it where they see its surface and their light is smooth
     # (a textured sample their light, coloured by its own texel: aa_resolve.glsl,
     # preview.resolve), the others are shaded below
     names = _SUM_TEXTURES

@@ -681,18 +681,9 @@ def stacked_tails(samples: np.ndarray, weights: np.ndarray, pixels, width: int,
 def _neighbour_sum(image: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """(H, W, C): Σ weights[dy + 1, dx + 1] × image[y + dy, x + dx] over the 8 neighbours
     (the centre left out; outside the image counts as 0). ``neighbour_weights`` are separable
-    (the filter's share along x times along y, 1 at the centre): a row pass and a column pass
-    of 3 taps, less the centre."""
-    along = weights[1]
-    rows = image.copy()
-    rows[:, 1:] += along[0] * image[:, :-1]
-    rows[:, :-1] += along[2] * image[:, 1:]
-    column = weights[:, 1]
-    out = rows.copy()
-    out[1:] += column[0] * rows[:-1]
-    out[:-1] += column[2] * rows[1:]
-    out -= image
-    return out
+    and symmetric (the filter's share along x times along y, 1 at the centre):
+    ``_filtered_3x3`` less the centre."""
+    return _filtered_3x3(image, weights[1, 0]) - image
 
 
 def _window_max(image: np.ndarray) -> np.ndarray:
