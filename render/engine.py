@@ -98,7 +98,9 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
                 image = np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=2)
             elif render_pass.channels == 3:
                 image = image[:, :, :3]
-            render_pass.rect = np.ascontiguousarray(image, np.float32).reshape(-1, render_pass.channels)
+            # one copy through the buffer protocol: assigning ``rect`` converts a pixel at a
+            # time (1.1-1.4 s for a 640 x 480 frame's passes, against 15 ms)
+            render_pass.rect.foreach_set(np.ascontiguousarray(image, np.float32).ravel())
         self.end_result(result)
 
 
