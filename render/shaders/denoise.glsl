@@ -42,7 +42,13 @@ float surface_weight(vec3 pq, vec3 nq, vec3 pc, vec3 nc)
   vec3 offset = pc - pq;
   float plane = abs(dot(nq, offset));
   float tol = 0.1 * length(offset) + 1e-4;
-  return pow(max(dot(nq, nc), 0.0), 32.0) * exp(-(plane / tol) * (plane / tol));
+  float c = max(dot(nq, nc), 0.0); /* c^32 by five squarings: pow is a log and an exp */
+  c *= c;
+  c *= c;
+  c *= c;
+  c *= c;
+  c *= c;
+  return c * exp(-(plane / tol) * (plane / tol));
 }
 
 /* The G-buffer point of cell c (position .w < 0.5: it sees nothing) and its normal. */
@@ -112,12 +118,29 @@ void spread(ivec2 cell, ivec2 low, int stride, ivec2 full, bool give)
   imageStore(out_variance, cell, vec4(light_var, var.yzw));
 }
 
-/* KERNEL at t ∈ [−2, 2] taps from the centre, linearly interpolated between its taps */
+/* KERNEL at t ∈ [−2, 2] taps from the centre, linearly interpolated between its taps: the
+ * two lines through its taps 3/8, 1/4, 1/16 (no array read: llvmpipe indexes an array in
+ * memory) */
 float kernel_at(float t)
 {
-  float x = t + 2.0;
-  int i = min(int(floor(x)), 3);
-  return mix(KERNEL[i], KERNEL[i + 1], x - float(i));
+  float x = min(abs(t), 2.0);
+  return x <= 1.0 ? 0.375 - 0.125 * x : 0.25 - 0.1875 * (x - 1.0);
+}
+
+/* The fit's row from the sums m = Σ w·(1, s, u), m2 = Σ w·(s², su, u²) (the value is
+ * row · Σ w·(1, s, u)·value), and its variance from q, q2 (the same sums of w²·var). */
+void fit_row(vec3 m, vec3 m2, vec3 q, vec3 q2, out vec3 row, out float variance)
+{
+  float damp = RIDGE * (m2.x + m2.z) * 0.5 + 1e-4 * m.x; /* (denoise.py _fit) */
+  float ma = m2.x + damp, mb = m2.y, mc = m2.z + damp;
+  row = vec3(ma * mc - mb * mb, m.z * mb - m.y * mc, m.y * mb - m.z * ma);
+  float det = dot(m, row);
+  row /= det > 0.0 ? det : 1.0;
+  if (options.x < 0.5) { /* the weighted mean (denoise.py fit=False) */
+    row = vec3(1.0 / m.x, 0.0, 0.0);
+  }
+  variance = row.x * row.x * q.x + row.y * row.y * q2.x + row.z * row.z * q2.z +
+             2.0 * (row.x * row.y * q.y + row.x * row.z * q.z + row.y * row.z * q2.y);
 }
 
 void main()
@@ -205,13 +228,12 @@ void main()
   }
   /* The local linear fit (denoise.py _fit): per signal the weighted sums of (1, s, u) ⊗ (1,
    * s, u) over the taps, (s, u) the tap's place in the 5 × 5 window, those of w²·var
-   * for the variance, and Σ w·(1, s, u)·value. */
-  float m[12];  /* Σ w·(1, s, u, s², su, u²): light then scalar */
-  float q[12];  /* the same of w²·var_q */
-  for (int k = 0; k < 12; k++) {
-    m[k] = 0.0;
-    q[k] = 0.0;
-  }
+   * for the variance, and Σ w·(1, s, u)·value. Vectors, not arrays: llvmpipe keeps an array
+   * that a loop indexes in memory, and the sums were 60% of the pass's time. */
+  vec3 m_light = vec3(0.0), m2_light = vec3(0.0); /* Σ w·(1, s, u), Σ w·(s², su, u²) */
+  vec3 m_scalar = vec3(0.0), m2_scalar = vec3(0.0);
+  vec3 q_light = vec3(0.0), q2_light = vec3(0.0); /* the same of w²·var_q */
+  vec3 q_scalar = vec3(0.0), q2_scalar = vec3(0.0);
   vec3 light0 = vec3(0.0), light1 = vec3(0.0), light2 = vec3(0.0);
   vec3 scalar = vec3(0.0);
   int spread = int(options.y); /* the kernel stretched over spread × its width (holes: 2) */
@@ -238,21 +260,24 @@ void main()
       float geometry = kernel_at(float(a) / float(spread)) * kernel_at(float(b) / float(spread)) *
                        surface_weight(position.xyz, n, pq.xyz, nq);
       vec2 scale = options.z * sqrt(max(blurred + varq + guide_spread, vec2(0.0))) + 1e-6;
-      vec2 w = unguided ? vec2(geometry) :
-               geometry * exp(-abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale);
+      vec2 t = abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale;
       /* the light's weight takes the AO's test too, widened by AO_TOLERANCE (denoise.py: an
-       * occlusion's edge is the light's) */
-      w.x *= unguided ? 1.0 : exp(-abs(vq.a - signal.y) / (scale.y + AO_TOLERANCE));
+       * occlusion's edge is the light's): one exp of the two tests' sum */
+      t.x += abs(vq.a - signal.y) / (scale.y + AO_TOLERANCE);
+      vec2 w = unguided ? vec2(geometry) : geometry * exp(-t);
       w.x = (shown && flagged && var4.w > 0.5) ? 0.0 : w.x;
       float s = float(b) / float(spread); /* the tap's place in the window */
       float u = float(a) / float(spread);
-      float quad[6] = float[6](1.0, s, u, s * s, s * u, u * u);
-      for (int k = 0; k < 6; k++) {
-        m[k] += w.x * quad[k];
-        m[6 + k] += w.y * quad[k];
-        q[k] += w.x * w.x * varq.x * quad[k];
-        q[6 + k] += w.y * w.y * varq.y * quad[k];
-      }
+      vec3 linear = vec3(1.0, s, u);
+      vec3 square = vec3(s * s, s * u, u * u);
+      m_light += w.x * linear;
+      m2_light += w.x * square;
+      m_scalar += w.y * linear;
+      m2_scalar += w.y * square;
+      q_light += w.x * w.x * varq.x * linear;
+      q2_light += w.x * w.x * varq.x * square;
+      q_scalar += w.y * w.y * varq.y * linear;
+      q2_scalar += w.y * w.y * varq.y * square;
       light0 += w.x * vq.rgb;
       light1 += w.x * s * vq.rgb;
       light2 += w.x * u * vq.rgb;
@@ -261,33 +286,20 @@ void main()
   }
   vec4 result = centre;
   vec2 result_var = centre_var.xy;
-  for (int k = 0; k < 2; k++) {
-    int o = 6 * k;
-    if (m[o] <= 0.0 || (k == 0 ? settled.x : settled.y)) {
-      continue;
-    }
-    float damp = RIDGE * (m[o + 3] + m[o + 5]) * 0.5 + 1e-4 * m[o]; /* (denoise.py _fit) */
-    float ma = m[o + 3] + damp, mb = m[o + 4], mc = m[o + 5] + damp;
-    vec3 row = vec3(ma * mc - mb * mb, m[o + 2] * mb - m[o + 1] * mc, m[o + 1] * mb - m[o + 2] * ma);
-    float det = m[o] * row.x + m[o + 1] * row.y + m[o + 2] * row.z;
-    row /= det > 0.0 ? det : 1.0;
-    if (options.x < 0.5) { /* the weighted mean (denoise.py fit=False) */
-      row = vec3(1.0 / m[o], 0.0, 0.0);
-    }
-    float variance = row.x * row.x * q[o] + row.y * row.y * q[o + 3] + row.z * row.z * q[o + 5] +
-                     2.0 * (row.x * row.y * q[o + 1] + row.x * row.z * q[o + 2] +
-                            row.y * row.z * q[o + 4]);
-    if (k == 0) {
-      result.rgb = max(row.x * light0 + row.y * light1 + row.z * light2, vec3(0.0));
-      result_var.x = max(variance, 0.0);
-    }
-    else {
-      result.a = max(dot(row, scalar), 0.0);
-      result_var.y = max(variance, 0.0);
-    }
+  vec3 row;
+  float variance;
+  if (m_light.x > 0.0 && !settled.x) {
+    fit_row(m_light, m2_light, q_light, q2_light, row, variance);
+    result.rgb = max(row.x * light0 + row.y * light1 + row.z * light2, vec3(0.0));
+    result_var.x = max(variance, 0.0);
+  }
+  if (m_scalar.x > 0.0 && !settled.y) {
+    fit_row(m_scalar, m2_scalar, q_scalar, q2_scalar, row, variance);
+    result.a = max(dot(row, scalar), 0.0);
+    result_var.y = max(variance, 0.0);
   }
   imageStore(out_image, cell, result);
   /* a hole stays one only where no tap could fill it (then left at 0, as numpy's) */
-  imageStore(out_variance, cell, vec4(result_var, hole && (m[0] <= 0.0 || m[6] <= 0.0) ? 1.0 : 0.0,
+  imageStore(out_variance, cell, vec4(result_var, hole && (m_light.x <= 0.0 || m_scalar.x <= 0.0) ? 1.0 : 0.0,
                                      flagged ? centre_var.w : 0.0));
 }
