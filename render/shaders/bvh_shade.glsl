@@ -401,9 +401,10 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
     if (cached && near_follow && hit_metallic < METAL_FOLLOWED && follows < MAX_FOLLOWS &&
         !metal && follows < cache_iterations() && cache_has_levels() &&
         dot(ns, near_normal) < NEAR_FACING && t_hit < NEAR_FIELD * cache_cell_size(x)) {
-      /* the near field: a hit facing the receiver within NEAR_FIELD of the cache's cells
-       * lies across a gap the cache's voxels cannot hold, so one diffuse bounce is followed
-       * exactly, again where it lands near (docs/gi_pipeline.md "The near field followed") */
+      /* the near field: a hit facing the receiver, or meeting it at a crease, within
+       * NEAR_FIELD of the cache's cells lies where the cache's voxels cannot hold its light,
+       * so one diffuse bounce is followed exactly, again where it lands near
+       * (docs/gi_pipeline.md "The near field followed", "Creases followed too") */
       total += carried * glossy_weight * arriving.a * arriving.rgb;
       carried *= cache_weight;
       follows++;

@@ -65,11 +65,15 @@ LOBE_FOLLOW_STREAM = 0x6C1D
 # images hardly moved and the 140k-triangle diorama's preview took 8% longer)
 NEAR_FIELD = 1.0
 MAX_FOLLOWS = 1
-# ... and only a hit that faces the receiver (the cosine of their normals under NEAR_FACING):
-# two surfaces facing each other within a cell, a gap thinner than the cache's voxels, whose
-# one face per axis and sign cannot hold both (followed everywhere near, the 140k-triangle
-# diorama's preview took 14% longer for nothing, and the courtyards gained 3-5% for 4-8%)
-NEAR_FACING = -0.5
+# ... and only a hit on a surface turned more than 60 degrees from the receiver's (the cosine
+# of their normals under NEAR_FACING): two surfaces facing each other within a cell, a gap
+# thinner than the cache's voxels, whose one face per axis and sign cannot hold both, and a
+# crease (a wall's foot seen from the ground beside it), where the cache's light at the wall
+# blends the voxels about the crease and reads its foot low (Diffuse Indirect 2-6% of Combined
+# under Cycles' along a courtyard's walls). Not the hits in or near the receiver's own plane:
+# followed everywhere near, the 140k-triangle diorama's preview took 14% longer for nothing
+# (docs/gi_pipeline.md "The near field followed", "Creases followed too")
+NEAR_FACING = 0.5
 SURFACE_EPSILON = 1e-4  # metres off the surface, as preview.SURFACE_EPSILON
 # A bounce hit traces the shadow rays of one lamp (sun, point, spot, area), picked by
 # ``lamp_picks`` from this hash stream (of its light-sample id and seed + 1), its light divided
@@ -440,8 +444,8 @@ def near_bounce_rays(normals, hit_ids, seed: int = 0) -> np.ndarray:
 
 def _near(cache, paths: RayPaths, receivers) -> np.ndarray:
     """Indices into ``paths``' hits that lie within ``NEAR_FIELD`` cells of the cache, face
-    their ray's receiver (``receivers``, (K, 3) its normal per ray: the cosine under
-    ``NEAR_FACING``) and are no metals (their lobes are followed as such)."""
+    their ray's receiver or meet it at a crease (``receivers``, (K, 3) its normal per ray: the
+    cosine under ``NEAR_FACING``) and are no metals (their lobes are followed as such)."""
     facing = np.einsum("ij,ij->i", paths.normals, receivers[paths.hit]) < NEAR_FACING
     near = facing & (paths.distance[paths.hit] < NEAR_FIELD * cell_size(cache, paths.points))
     if paths.metallic is not None:
