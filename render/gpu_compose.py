@@ -11,6 +11,7 @@ import math
 
 import gpu
 
+from ..voxgi_addon.gi.direct_light import world_block
 from ..voxgi_addon.preview.resolve import LEAST_CENTRES, LEAST_COLOUR
 from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE
 from .gpu_bvh import direct_light_texture
@@ -139,7 +140,7 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     if extra:  # the world's and emitters' own dispatch (streams after the lamps)
         direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
                                       world=scene.world_map, emitters=scene.emitters,
-                                      strata_block=block, table=scene.no_lamp,
+                                      strata_block=world_block(block), table=scene.no_lamp,
                                       absent=absent,
                                       centre=centre, field=field)
         if smooth is not None:

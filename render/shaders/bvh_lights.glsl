@@ -496,11 +496,16 @@ vec3 world_sample(vec2 u, int h, int w)
  * Σ seen f (f_lit) over m × m strata (world_light.hidden_less): the value less the hidden
  * rays' estimate, held at 0 from DIFFERENCE_STRATA strata (m ≥ 2: a pixel's light); a bounce
  * hit's or a probe ray's single stratum is not held (the mean of the rays that read it
- * counts). */
+ * counts), nor a sub-pixel sample's share of its pixel's strata (direct_light.world_block). */
 vec3 hidden_less(vec3 value, vec3 f_sum, vec3 f_lit, int m)
 {
   vec3 light = value - (f_sum - f_lit) / (float(m * m) * M_PI_F);
-  return m >= 2 ? max(light, vec3(0.0)) : light;
+#ifdef STRATA_BLOCK
+  bool share = STRATA_BLOCK.x > m; /* a sub-pixel sample's share of its pixel's strata */
+#else
+  bool share = false;
+#endif
+  return m >= 2 && !share ? max(light, vec3(0.0)) : light;
 }
 
 /* Diffuse Direct of the world (world_light.world_direct): the unshadowed table value less

@@ -200,3 +200,41 @@ def test_a_bounce_hits_one_ray_a_stratum_converges_to_the_visible_integral():
     # one technique a ray: about half the strata drew each
     mapped, drawn = one_technique(hashed_square(np.arange(1000), 0, 1, 0))
     assert 0.4 < mapped.mean() < 0.6 and drawn.min() >= 0.0 and drawn.max() < 1.0
+
+
+class _Wall:
+    """Hides every direction with y < -0.2 (the sun's among them) from every point."""
+
+    def occluded(self, origins, dirs, max_t):
+        return np.asarray(dirs)[:, 1] < -0.2
+
+
+def test_the_sub_pixel_samples_draw_the_worlds_strata_as_one_estimate():
+    """A pixel's AA_SIDE² sub-pixel samples at one point, each drawing its block of the lamps'
+    4 × 4 strata: the world draws ``world_block`` of it — four strata of an 8 × 8 set a sample
+    — and a sample's estimate is not held at 0, so the samples' mean is the one estimate of all
+    64 strata. (One stratum a sample of a sky and a sun was grain the world filter does not
+    reach, dark dots along silhouettes and shadow edges; held per sample, a sample whose hidden
+    rays outweigh the table read 0 and the pixel bright inside a shadow: docs/gi_pipeline.md
+    "The world's strata at the sub-pixel samples".)"""
+    from voxgi.voxgi_addon.gi.direct_light import world_block
+    from voxgi.voxgi_addon.preview.passes import AA_SIDE, subpixel_passes
+
+    world = build_world_light(sky_with_sun())
+    points = np.zeros((40, 3))
+    normals = np.tile([0.0, -0.3, 1.0], (40, 1)) / math.hypot(0.3, 1.0)
+    ids = np.arange(40)
+    plan = subpixel_passes(1.5, 16)
+    assert len(plan) == AA_SIDE ** 2 and all(block[3] == 1 for _, block in plan)
+    assert world_block(plan[0][1]) == (8, 0, 0, 2) and world_block((4, 0, 0, 4)) == (4, 0, 0, 4)
+    samples = [diffuse_direct(points, normals, [world], _Wall(), sample_ids=ids, seed=3,
+                              strata_block=block) for _, block in plan]
+    whole = diffuse_direct(points, normals, [world], _Wall(), sample_ids=ids, seed=3,
+                           strata_block=(8, 0, 0, 8))
+    mean = np.mean(samples, axis=0)
+    assert min(s.min() for s in samples) < 0.0  # some samples' hidden rays outweigh the table
+    # the whole set's estimate is a pixel's light, held at 0: equal where it is not held
+    lit = whole > 0.0
+    assert lit.mean() > 0.8
+    np.testing.assert_allclose(mean[lit], whole[lit], rtol=1e-4, atol=1e-6)
+    assert np.all(mean[~lit] <= 1e-6)

@@ -341,10 +341,11 @@ def _area(light, p, n, tris, strata):
 
 
 def _world(world, p, n, tris, strata, reflect=None, unlifted=None, variance=None,
-           single=False):
+           single=False, held=None):
     """The world's Diffuse Direct (``world_light.world_direct``): its map-sampled rays through
     ``tris`` (lifted by the shadow terminator offset where diffuse_direct was given it), its
-    cosine rays through ``unlifted`` (``tris`` when None); single: one ray a stratum."""
+    cosine rays through ``unlifted`` (``tris`` when None); single: one ray a stratum; held :
+    ``world_light.hidden_less``'s."""
     from .world_light import world_direct
 
     origins_offset = _NORMAL_OFFSET * n
@@ -356,7 +357,7 @@ def _world(world, p, n, tris, strata, reflect=None, unlifted=None, variance=None
 
     return world_direct(world, p + origins_offset, n, through(unlifted), strata, reflect,
                         sampled=None if unlifted is tris else through(tris), variance=variance,
-                        single=single)
+                        single=single, held=held)
 
 
 def _emitters(emitters, p, n, tris, strata, reflect=None, unshadowed=None):
@@ -381,6 +382,24 @@ def emitters_unshadowed(emitters, points, normals) -> np.ndarray:
 
 _BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD": _world,
             "EMITTERS": _emitters}
+
+
+def world_block(block):
+    """The strata block of the world's and the emitters' shadow rays in a sub-pixel pass that
+    draws ``block`` = (M, row, column, m) of the lamps' M × M strata: the same share of a set
+    twice as fine, (2M, 2 row, 2 column, 2m), four strata a sample where the lamps draw one.
+    A sample's one stratum of a sky or a sun in an HDRI is grain the world filter does not
+    reach (it filters the pixel centres), seen as dark dots along silhouettes and shadow
+    edges (docs/gi_pipeline.md "The world's strata at the sub-pixel samples"). A sample's
+    world light is not held at 0 (``world_light.hidden_less``): its pixel's mean over the
+    samples is the estimate, and held per sample it read bright inside shadows. A pass over
+    all the strata (m = M: the centre pass, the viewport's samples) and None: as given."""
+    if block is None:
+        return None
+    side, row, column, m = block
+    if m >= side:
+        return block
+    return (2 * side, 2 * row, 2 * column, 2 * m)
 
 
 def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
@@ -410,7 +429,8 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
     strata_block : (M, row, column, m), with ``sample_ids`` only: draw just the m × m block at
         (row, column) of each light's M × M hashed strata (``samples`` is then ignored) — one
         sub-pixel pass of the anti-aliased preview, whose passes share one stratified set
-        (GLSL: ``STRATA_BLOCK`` in ``render/shaders/sampling.glsl``). None: all strata.
+        (GLSL: ``STRATA_BLOCK`` in ``render/shaders/sampling.glsl``); the world and the
+        emitters draw ``world_block`` of it. None: all strata.
     reflect : callable(point indices (M,), unit directions (M, K, 3)) -> (M, K, 3), a glossy
         BSDF × cos at the points (``world_light.world_direct``): then also returns, for the
         world and the emitters, the radiance it reflects from the same shadow rays — a bounce
@@ -457,8 +477,10 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
                 def strata(points_of_chunk, chunk_ids=ids[a:b], stream=index):
                     return hashed_square(chunk_ids[points_of_chunk], stream, samples, seed)
             else:
-                def strata(points_of_chunk, chunk_ids=ids[a:b], stream=index):
-                    side, row, column, m = strata_block
+                def strata(points_of_chunk, chunk_ids=ids[a:b], stream=index,
+                           block=world_block(strata_block) if light.type in ("WORLD", "EMITTERS")
+                           else strata_block):
+                    side, row, column, m = block
                     square = hashed_square(chunk_ids[points_of_chunk], stream, side * side, seed)
                     i, j = np.divmod(np.arange(m * m), m)
                     return square[:, (row + i) * side + column + j]
@@ -467,6 +489,8 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
             if light.type == "WORLD":
                 given["unlifted"] = unlifted
                 given["single"] = one_technique
+                if strata_block is not None and strata_block[3] < strata_block[0]:
+                    given["held"] = False  # a sample's share of its pixel's strata
                 if world_variance is not None:
                     given["variance"] = part = np.zeros(b - a)
             if reflect is not None and light.type in ("WORLD", "EMITTERS"):

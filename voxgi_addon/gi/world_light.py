@@ -330,7 +330,7 @@ def one_technique(square):
 
 
 def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sampled=None,
-                 variance=None, single: bool = False):
+                 variance=None, single: bool = False, held: bool | None = None):
     """(N, 3) Diffuse Direct of the world at points p with unit normals n (facing the viewer):
     the unshadowed table value less the estimate of its hidden part from one world-map and one
     cosine ray per stratum (the balance heuristic; ``hidden_less``).
@@ -403,7 +403,7 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     # beside a wall: its sun ray seen and its sky ray hidden read fully lit; its sky ray
     # drawn alone, the sun's share lost), which left the HDRI courtyard's walls' bounce
     # light 3% dark (docs/gi_pipeline.md "The world's light where it is partly hidden").
-    value[lit] = hidden_less(value[lit], f, blocked, square.shape[1])
+    value[lit] = hidden_less(value[lit], f, blocked, square.shape[1], held)
     if variance is not None:
         variance[lit] = hidden_variance(f, blocked, square.shape[1])
     if reflect is None:
