@@ -43,6 +43,10 @@ __all__ = ["WorldLight", "world_light", "scene_lights", "world_direct", "world_t
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 IRRADIANCE_HEIGHT = 32   # rows of the unshadowed-irradiance table (columns: twice that)
 SOURCE_HEIGHT = 128      # rows of the map the irradiance table is integrated from
+# normals of the table integrated at once: their cosines to every box of the map (128 × 256) stay
+# under numpy's 4 MiB threshold for transparent huge pages, whose first faults stalled a new
+# process's first table 1.2–2.9 s (docs/gi_pipeline.md "The world's table without huge pages")
+_NORMALS_AT_ONCE = 12
 _CACHE_SIZE = 4
 
 
@@ -128,9 +132,11 @@ def _irradiance_table(radiance: np.ndarray) -> np.ndarray:
     weighted = weighted.reshape(-1, 3) / math.pi
     normals = _table_normals().reshape(-1, 3)
     out = np.zeros((len(normals), 3))
-    for a in range(0, len(normals), 256):
-        cos = np.maximum(normals[a:a + 256] @ dirs.T, 0.0)
-        out[a:a + 256] = cos @ weighted
+    across = np.ascontiguousarray(dirs.T)
+    for a in range(0, len(normals), _NORMALS_AT_ONCE):
+        cos = normals[a:a + _NORMALS_AT_ONCE] @ across
+        np.maximum(cos, 0.0, out=cos)
+        out[a:a + _NORMALS_AT_ONCE] = cos @ weighted
     return out.reshape(IRRADIANCE_HEIGHT, 2 * IRRADIANCE_HEIGHT, 3)
 
 
