@@ -492,6 +492,67 @@ vec3 world_sample(vec2 u, int h, int w)
   return vec3(r * cos(phi), r * sin(phi), z);
 }
 
+/* The map's sun (world_light.Sun): `count` pixels row-major from row `first_row` of the table,
+ * each (row, column, its row's inclusive CDF, its inclusive CDF within the row). */
+vec4 world_sun_texel(int k, int first_row)
+{
+  int width = textureSize(world_map, 0).x;
+  return texelFetch(world_map, ivec2(k % width, first_row + k / width), 0);
+}
+
+/* world_light.sample_sun: the row by u.x, the pixel in it by u.y (binary searches over the
+ * sun's texels), then uniform in z and azimuth inside the pixel; pdf lum(L) / the sun's total. */
+vec3 world_sun_sample(vec2 u, int h, int w, int first_row, int count)
+{
+  int lo = 0;
+  int hi = count - 1;
+  while (lo < hi) { /* the row's first pixel: the first whose row CDF exceeds u.x */
+    int mid = (lo + hi) / 2;
+    if (world_sun_texel(mid, first_row).z > u.x) {
+      hi = mid;
+    }
+    else {
+      lo = mid + 1;
+    }
+  }
+  int first = lo;
+  float low = first > 0 ? world_sun_texel(first - 1, first_row).z : 0.0;
+  float high = world_sun_texel(first, first_row).z;
+  float f0 = clamp((u.x - low) / max(high - low, 1e-30), 0.0, 1.0);
+  hi = count;
+  while (lo < hi) { /* the row's end: the first pixel of a later row */
+    int mid = (lo + hi) / 2;
+    if (world_sun_texel(mid, first_row).z > high) {
+      hi = mid;
+    }
+    else {
+      lo = mid + 1;
+    }
+  }
+  int end = lo;
+  lo = first;
+  hi = end - 1;
+  while (lo < hi) { /* the pixel: the row's first whose CDF exceeds u.y */
+    int mid = (lo + hi) / 2;
+    if (world_sun_texel(mid, first_row).w > u.y) {
+      hi = mid;
+    }
+    else {
+      lo = mid + 1;
+    }
+  }
+  vec4 texel = world_sun_texel(lo, first_row);
+  float left = lo > first ? world_sun_texel(lo - 1, first_row).w : 0.0;
+  float f1 = clamp((u.y - left) / max(texel.w - left, 1e-30), 0.0, 1.0);
+  float i = texel.x;
+  float z_top = cos(i * M_PI_F / float(h));
+  float z_bottom = cos((i + 1.0) * M_PI_F / float(h));
+  float z = z_top + f0 * (z_bottom - z_top);
+  float phi = -M_PI_F + (texel.y + f1) * (2.0 * M_PI_F / float(w));
+  float r = sqrt(max(0.0, 1.0 - z * z));
+  return vec3(r * cos(phi), r * sin(phi), z);
+}
+
 /* A light's shadowed value from its exact unshadowed `value` and its rays' Σ f (f_sum) and
  * Σ seen f (f_lit) over m × m strata (world_light.hidden_less): the value less the hidden
  * rays' estimate, held at 0 from DIFFERENCE_STRATA strata (m ≥ 2: a pixel's light); a bounce
@@ -546,6 +607,17 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   vec3 f_lit = vec3(0.0);
   bool uniform_sky = world_uniform();
   bool split = single && !uniform_sky;
+  /* a pixel's strata trace the map's sun apart (world_light._sun_hidden): the rays that land
+   * in it carry nothing here and are not traced */
+  ivec2 last = ivec2(0, textureSize(world_map, 0).y - 1);
+  int sun_count = int(texelFetch(world_map, last + ivec2(1, 0), 0).w + 0.5);
+#ifdef STRATA_BLOCK
+  bool share = STRATA_BLOCK.x > m; /* a sub-pixel sample's share of its pixel's strata */
+#else
+  bool share = false;
+#endif
+  bool sunny = sun_count > 0 && !single && !lobe && !uniform_sky && m >= 2 && !share;
+  vec4 sun_head = sunny ? texelFetch(world_map, last + ivec2(2, 0), 0) : vec4(0.0);
   float hidden_sum = 0.0, hidden_squares = 0.0; /* Σ, Σ² of a hidden ray's lum(f) / π */
   /* uniform: cosine only; split: one loop, each stratum drawing its technique */
   for (int pass = uniform_sky || split ? 1 : 0; pass < 2; pass++) {
@@ -573,6 +645,9 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
       float pdf = ((uniform_sky ? 0.0 : dot(radiance, LUMA) / head.w) + cos_n / M_PI_F) *
                   (split ? 0.5 : 1.0);
       vec3 f = radiance * (cos_n / max(pdf, 1e-30));
+      if (sunny && dot(radiance, LUMA) > sun_head.x) {
+        f = vec3(0.0);
+      }
       f_sum += f;
       /* the map's rays as Cycles' light samples (lifted by the shadow terminator offset),
        * the cosine ones as its BSDF's rays that find the sky (not lifted) */
@@ -599,7 +674,43 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   float rays = float(m * m * (uniform_sky || split ? 1 : 2));
   float spread = max(hidden_squares - hidden_sum * hidden_sum / rays, 0.0) / max(rays - 1.0, 1.0);
   world_variance = rays / float(m * m) * spread / float(m * m);
-  return hidden_less(value, f_sum, f_lit, m);
+  if (!sunny) {
+    return hidden_less(value, f_sum, f_lit, m);
+  }
+  /* the sun: one ray a stratum by its power, the corners first; where those above the
+   * horizon agree the others are not drawn (as a lamp's); Σ hidden f / (drawn π) */
+  vec3 sun_hidden = vec3(0.0);
+  float sun_sum = 0.0, sun_squares = 0.0;
+  int drawn = 0, sun_seen = 0, sun_blocked = 0;
+  for (int j = 0; j < m * m; j++) {
+    if (j == 4 && m >= ADAPTIVE_FROM && (sun_seen == 0) != (sun_blocked == 0)) {
+      break;
+    }
+    vec3 dir = world_sun_sample(hashed_stratum(state, stratum_order(j, m), m), h, w,
+                                h + int(head.z), sun_count);
+    drawn++;
+    float cos_n = dot(dir, n);
+    if (cos_n <= 0.0) {
+      continue;
+    }
+    vec3 radiance = world_radiance_at(world_pixel(dir, h, w));
+    vec3 f = radiance * (cos_n / max(dot(radiance, LUMA) / sun_head.y, 1e-30));
+    if (shadow_ray(origin, dir, BVH_FAR, true)) {
+      sun_blocked++;
+      sun_hidden += f;
+      float hidden = dot(f, LUMA) / M_PI_F;
+      sun_sum += hidden;
+      sun_squares += hidden * hidden;
+    }
+    else {
+      sun_seen++;
+    }
+  }
+  float count = float(drawn);
+  world_variance += max(sun_squares - sun_sum * sun_sum / count, 0.0) / max(count - 1.0, 1.0) /
+                    count;
+  return max(value - (f_sum - f_lit) / (float(m * m) * M_PI_F) - sun_hidden / (count * M_PI_F),
+             vec3(0.0));
 }
 
 vec3 world_direct(vec3 p, vec3 n, uint state, int m)

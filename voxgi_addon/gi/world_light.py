@@ -21,6 +21,10 @@ with shadow rays.
   that sum. A small bright sun in an HDRI gets nearly every map sample (sharp, noise-free
   shadows), a uniform sky the cosine samples. Where every ray is unoccluded the share is
   exactly 1.
+* **The sun apart** at a pixel's strata: a map whose few brightest pixels carry most of its
+  light (``Sun``) has them traced as a lamp is — one ray a stratum by the sun's own power, the
+  four corner strata first and the rest only where those disagree (a penumbra) — while the
+  map's and the cosine's rays leave them out (``_sun_hidden``).
 
 ``WorldLight`` holds the tables (built once per world content, ``world_light``) and stands in
 the lights list beside ``LightData`` lamps with ``type == "WORLD"``; ``world_table`` packs it
@@ -38,7 +42,8 @@ from ..scene.short_axis import any_along, norm3
 from .sampling import perpendicular_basis
 
 __all__ = ["WorldLight", "world_light", "scene_lights", "world_direct", "world_table",
-           "one_technique", "sample_world", "world_pdf", "world_radiance", "IRRADIANCE_HEIGHT", "SOURCE_HEIGHT"]
+           "one_technique", "sample_world", "sample_sun", "world_pdf", "world_radiance",
+           "IRRADIANCE_HEIGHT", "SOURCE_HEIGHT"]
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 IRRADIANCE_HEIGHT = 32   # rows of the unshadowed-irradiance table (columns: twice that)
@@ -48,6 +53,31 @@ SOURCE_HEIGHT = 128      # rows of the map the irradiance table is integrated fr
 # process's first table 1.2–2.9 s (docs/gi_pipeline.md "The world's table without huge pages")
 _NORMALS_AT_ONCE = 12
 _CACHE_SIZE = 4
+# The sun of a map: its pixels brighter than SUN_CONTRAST × the map's mean luminance (at most
+# SUN_PIXELS, the brightest), kept apart when they carry at least SUN_SHARE of its luminous
+# power — a pixel's centre strata then trace it as a lamp is traced (its four corner strata
+# first, all sixteen only where they disagree) and the rest of the map without it (``Sun``;
+# docs/gi_pipeline.md "The sun of an HDRI traced as a lamp"). SUN_SHARE: the corners' four
+# rays cost less than the map rays the sun takes off the sky's sixteen (share × 16 ≥ 4).
+SUN_CONTRAST = 100.0
+SUN_PIXELS = 256
+SUN_SHARE = 0.25
+
+
+@dataclass(frozen=True, eq=False)
+class Sun:
+    """A map's sun: its K pixels row by row, the rows' inclusive CDF of their power (per
+    pixel, its row's value) and each pixel's inclusive CDF within its row, all rounded to
+    float32 as the GPU's table holds them; ``threshold`` the luminance above which a pixel is
+    the sun's (half-way between the sun's dimmest pixel and the brightest other one) and
+    ``total`` its luminous power Σ lum(L) ω (the sun's pdf is lum(L) / total)."""
+
+    rows: np.ndarray
+    columns: np.ndarray
+    row_cdf: np.ndarray
+    column_cdf: np.ndarray
+    threshold: float
+    total: float
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,6 +98,7 @@ class WorldLight:
     column_cdf: np.ndarray
     total: float
     irradiance: np.ndarray
+    sun: Sun | None = None
     type: str = "WORLD"
     name: str = "World"
 
@@ -162,7 +193,51 @@ def build_world_light(radiance, key: str = "") -> WorldLight | None:
     row_cdf, column_cdf = (a.astype(np.float32).astype(np.float64) for a in (row_cdf, column_cdf))
     total = float(np.float32(total))
     irradiance = _irradiance_table(radiance).astype(np.float32).astype(np.float64)
-    return WorldLight(key, radiance, row_cdf, column_cdf, total, irradiance)
+    return WorldLight(key, radiance, row_cdf, column_cdf, total, irradiance,
+                      _find_sun(radiance, power, total))
+
+
+def _find_sun(radiance, power, total: float) -> Sun | None:
+    """The ``Sun`` of a map (its luminous ``power`` per pixel, ``total`` its sum), or None:
+    the pixels brighter than SUN_CONTRAST × the mean luminance (the SUN_PIXELS brightest),
+    when they carry SUN_SHARE of the power."""
+    luminance = radiance @ LUMINANCE
+    flat = luminance.reshape(-1)
+    candidates = np.flatnonzero(flat > SUN_CONTRAST * total / (4 * math.pi))
+    if len(candidates) == 0:
+        return None
+    order = candidates[np.argsort(flat[candidates], kind="stable")[::-1]]
+    inside = order[:SUN_PIXELS]
+    outside = flat[order[SUN_PIXELS]] if len(order) > SUN_PIXELS else \
+        float(np.max(np.where(flat > SUN_CONTRAST * total / (4 * math.pi), 0.0, flat)))
+    dimmest = float(flat[inside].min())
+    if not dimmest > outside:  # a tie at the cut: the pixels of that luminance are left out
+        inside = inside[flat[inside] > outside]
+        if len(inside) == 0:
+            return None
+        dimmest = float(flat[inside].min())
+    sun_power = power.reshape(-1)[inside]
+    share = float(sun_power.sum()) / total
+    if share < SUN_SHARE:
+        return None
+    width = radiance.shape[1]
+    rows, columns = np.divmod(np.sort(inside), width)
+    each = power[rows, columns]
+    sun_total = float(each.sum())
+    starts = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])
+    row_power = np.add.reduceat(each, starts)
+    row_of = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, len(rows)]))
+    row_cdf = (np.cumsum(row_power) / sun_total)[row_of]
+    row_cdf[row_of == len(starts) - 1] = 1.0
+    within = np.cumsum(each) - np.repeat(np.r_[0.0, np.cumsum(row_power)[:-1]],
+                                         np.diff(np.r_[starts, len(rows)]))
+    column_cdf = within / np.repeat(row_power, np.diff(np.r_[starts, len(rows)]))
+    ends = np.r_[starts[1:], len(rows)] - 1
+    column_cdf[ends] = 1.0
+    threshold = float(np.float32(0.5 * (dimmest + outside)))
+    return Sun(rows, columns, row_cdf.astype(np.float32).astype(np.float64),
+               column_cdf.astype(np.float32).astype(np.float64), threshold,
+               float(np.float32(sun_total)))
 
 
 _cache: dict[str, tuple[tuple, WorldLight | None]] = {}
@@ -245,12 +320,56 @@ def sample_world(world: WorldLight, square) -> np.ndarray:
     left = np.where(j > 0, np.take_along_axis(cdf, np.maximum(j - 1, 0)[..., None], -1)[..., 0], 0.0)
     right = np.take_along_axis(cdf, j[..., None], -1)[..., 0]
     f1 = np.clip((u1 - left) / np.maximum(right - left, 1e-30), 0.0, 1.0)
+    return _inside_pixel(i, j, f0, f1, h, w)
+
+
+def sample_sun(world: WorldLight, square) -> np.ndarray:
+    """Unit directions (..., 3) drawn by the luminous power of the map's sun (``Sun``) from
+    ``square`` (..., 2): the row by the first coordinate, the pixel in it by the second, then
+    uniform in solid angle inside the pixel with their remainders (as ``sample_world``; GLSL
+    ``world_sun_sample``). Its pdf is lum(L) / ``Sun.total``."""
+    sun = world.sun
+    h, w = world.radiance.shape[:2]
+    u = np.asarray(square, np.float64)
+    u0, u1 = u[..., 0], u[..., 1]
+    last = len(sun.rows) - 1
+    first = np.minimum(np.searchsorted(sun.row_cdf, u0, side="right"), last)
+    low = np.where(first > 0, sun.row_cdf[np.maximum(first - 1, 0)], 0.0)
+    high = sun.row_cdf[first]
+    f0 = np.clip((u0 - low) / np.maximum(high - low, 1e-30), 0.0, 1.0)
+    end = np.searchsorted(sun.row_cdf, high, side="right")  # the row is [first, end)
+    # the pixel: the first of the row whose CDF exceeds u1 (a binary search within the row)
+    pixel = first.copy()
+    for step in _halvings(last + 1):
+        probe = pixel + step
+        ok = (probe < end) & (sun.column_cdf[np.minimum(probe - 1, last)] <= u1)
+        pixel = np.where(ok, probe, pixel)
+    pixel = np.minimum(pixel, end - 1)
+    left = np.where(pixel > first, sun.column_cdf[np.maximum(pixel - 1, 0)], 0.0)
+    right = sun.column_cdf[pixel]
+    f1 = np.clip((u1 - left) / np.maximum(right - left, 1e-30), 0.0, 1.0)
+    i, j = sun.rows[pixel], sun.columns[pixel]
+    return _inside_pixel(i, j, f0, f1, h, w)
+
+
+def _inside_pixel(i, j, f0, f1, h: int, w: int) -> np.ndarray:
+    """Unit directions in pixels (i, j) of an h × w map at fractions (f0, f1) of the pixel: in
+    z = sin el by f0 and in azimuth by f1, so uniform in solid angle inside it."""
     z_top = np.cos(i * math.pi / h)
     z_bottom = np.cos((i + 1) * math.pi / h)
     z = z_top + f0 * (z_bottom - z_top)
     phi = -math.pi + (j + f1) * (2 * math.pi / w)
     r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
+
+
+def _halvings(count: int):
+    """The steps of a binary search over ``count`` items: the largest power of two below it,
+    halved down to 1."""
+    step = 1 << max(0, (count - 1).bit_length() - 1)
+    while step >= 1:
+        yield step
+        step >>= 1
 
 
 def _cosine(normals, square):
@@ -387,6 +506,13 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
         pdf = 0.5 * pdf
     f = radiance * (np.maximum(cos, 0.0) / np.maximum(pdf, 1e-30))[..., None]  # (M, 2K, 3)
     up = cos > 0
+    sunny = world.sun is not None and not single and reflect is None and \
+        held is not False and square.shape[1] >= DIFFERENCE_STRATA
+    if sunny:  # the sun is its own technique's (``_sun_hidden``): the rays that land in it
+        # carry nothing here and are not traced
+        in_sun = radiance @ LUMINANCE > world.sun.threshold
+        f[in_sun] = 0.0
+        up &= ~in_sun
     origins = np.repeat(p[lit], dirs.shape[1], axis=0).reshape(dirs.shape)
     blocked = np.zeros(up.shape, bool)
     if sampled is not None and split:  # the map's rays (those of the strata that drew it) apart
@@ -409,15 +535,73 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     # beside a wall: its sun ray seen and its sky ray hidden read fully lit; its sky ray
     # drawn alone, the sun's share lost), which left the HDRI courtyard's walls' bounce
     # light 3% dark (docs/gi_pipeline.md "The world's light where it is partly hidden").
-    value[lit] = hidden_less(value[lit], f, blocked, square.shape[1], held)
+    if sunny:
+        sun_hidden, sun_variance = _sun_hidden(world, p[lit], n[lit], square, sampled or occluded)
+        light = value[lit] - (f * blocked[..., None]).sum(axis=1) / (square.shape[1] * math.pi) \
+            - sun_hidden
+        value[lit] = np.maximum(light, 0.0)
+    else:
+        value[lit] = hidden_less(value[lit], f, blocked, square.shape[1], held)
     if variance is not None:
-        variance[lit] = hidden_variance(f, blocked, square.shape[1])
+        variance[lit] = hidden_variance(f, blocked, square.shape[1]) + \
+            (sun_variance if sunny else 0.0)
     if reflect is None:
         return value
     per_technique = square.shape[1]
     shine = radiance * reflect(lit, dirs) / np.maximum(pdf, 1e-30)[..., None]
     glossy[lit] = np.where((up & ~blocked)[..., None], shine, 0.0).sum(axis=1) / per_technique
     return value, glossy
+
+
+def _sun_hidden(world: WorldLight, origins, normals, square, occluded):
+    """((M, 3) the hidden part of the map's sun at M points, E/π, and (M,) its luminance's
+    variance): one ray a stratum drawn by the sun's power (``sample_sun``), f = L cos / pdf; the
+    four corner strata first (``direct_light`` ADAPTIVE_FROM, GLSL ``stratum_order``), and
+    where those above the horizon agree — the sun all seen or all hidden — the others are not
+    drawn, as for a lamp. The estimate is Σ over the hidden rays of f / (the rays drawn · π)."""
+    from .direct_light import ADAPTIVE_FROM
+
+    count, k = square.shape[:2]
+    side = int(round(math.sqrt(k)))
+    dirs = sample_sun(world, square)
+    cos = np.einsum("mkc,mc->mk", dirs, normals)
+    radiance = world_radiance(world, dirs)
+    pdf = radiance @ LUMINANCE / world.sun.total
+    f = radiance * (np.maximum(cos, 0.0) / np.maximum(pdf, 1e-30))[..., None]
+    counted = cos > 0
+    blocked = np.zeros((count, k), bool)
+    starts = np.repeat(origins[:, None], k, axis=1)
+
+    def trace(rows, columns):
+        rays = np.zeros((len(rows), len(columns)), bool)
+        up = counted[np.ix_(rows, columns)]
+        if up.any():
+            rays[up] = occluded(starts[np.ix_(rows, columns)][up], dirs[np.ix_(rows, columns)][up])
+        blocked[np.ix_(rows, columns)] = rays
+
+    drawn = np.full(count, k)
+    if side >= ADAPTIVE_FROM and side * side == k:
+        corners = np.array([0, side - 1, side * (side - 1), k - 1])
+        rest = np.setdiff1d(np.arange(k), corners)
+        trace(np.arange(count), corners)
+        seen = any_along(counted[:, corners] & ~blocked[:, corners])
+        hidden = any_along(counted[:, corners] & blocked[:, corners])
+        settled = seen != hidden
+        trace(np.flatnonzero(~settled), rest)
+        drawn = np.where(settled, 4, k)
+        blocked[np.ix_(np.flatnonzero(settled), rest)] = False
+    else:
+        trace(np.arange(count), np.arange(k))
+    hidden_f = np.where(blocked[..., None], f, 0.0)
+    estimate = hidden_f.sum(axis=1) / (drawn[:, None] * math.pi)
+    h = (hidden_f @ LUMINANCE) / math.pi
+    drawn_mask = np.ones((count, k), bool)
+    if side >= ADAPTIVE_FROM and side * side == k:
+        drawn_mask[np.ix_(np.flatnonzero(settled), rest)] = False
+    h = np.where(drawn_mask, h, 0.0)
+    spread = np.maximum((h * h).sum(axis=1) - h.sum(axis=1) ** 2 / drawn, 0.0) / \
+        np.maximum(drawn - 1, 1)
+    return estimate, spread / drawn
 
 
 def world_table(world: WorldLight | None, stream: int = 0) -> np.ndarray:
@@ -427,9 +611,12 @@ def world_table(world: WorldLight | None, stream: int = 0) -> np.ndarray:
     * rows 0 … H − 1, columns 0 … W − 1: radiance rgb, the row's inclusive column CDF;
       column W: the inclusive row CDF in x;
     * rows H … H + IRRADIANCE_HEIGHT − 1, columns 0 … 2·IRRADIANCE_HEIGHT − 1: E(n)/π rgb;
+    * then the sun's K pixels (``Sun``), row-major from row H + IRRADIANCE_HEIGHT: (row,
+      column, its row's inclusive CDF, its inclusive CDF within the row);
     * the last row: texel 0 = (H, W, IRRADIANCE_HEIGHT, total), texel 1 = (1 = a world, its
       samples' hash stream ``stream`` = its index in the lights list after the lamps,
-      1 = uniform (``WorldLight.uniform``), 0).
+      1 = uniform (``WorldLight.uniform``), K), texel 2 = (the sun's luminance threshold, its
+      total, 0, 0).
 
     None gives a 1-row table saying "no world"."""
     if world is None:
@@ -437,11 +624,20 @@ def world_table(world: WorldLight | None, stream: int = 0) -> np.ndarray:
         return table
     h, w = world.radiance.shape[:2]
     ih = IRRADIANCE_HEIGHT
-    table = np.zeros((h + ih + 1, max(w + 1, 2 * ih), 4), np.float64)
+    width = max(w + 1, 2 * ih)
+    sun = world.sun
+    count = 0 if sun is None else len(sun.rows)
+    sun_rows = -(-count // width)
+    table = np.zeros((h + ih + sun_rows + 1, width, 4), np.float64)
     table[:h, :w, :3] = world.radiance
     table[:h, :w, 3] = world.column_cdf
     table[:h, w, 0] = world.row_cdf
     table[h:h + ih, :2 * ih, :3] = world.irradiance
+    if count:
+        texels = np.zeros((sun_rows * width, 4))
+        texels[:count] = np.stack([sun.rows, sun.columns, sun.row_cdf, sun.column_cdf], axis=1)
+        table[h + ih:h + ih + sun_rows] = texels.reshape(sun_rows, width, 4)
+        table[-1, 2, :2] = sun.threshold, sun.total
     table[-1, 0] = (h, w, ih, world.total)
-    table[-1, 1, :3] = 1.0, stream, float(world.uniform)
+    table[-1, 1] = 1.0, stream, float(world.uniform), count
     return table.astype(np.float32)
