@@ -740,3 +740,53 @@ def test_the_gpu_lookup_holds_the_same_constants():
     assert float(defines["CACHE_PLANE_TOLERANCE"]) == rc.PLANE_TOLERANCE
     assert float(defines["CACHE_PLANE_STEPS"]) == rc.PLANE_STEPS
     assert float(defines["CACHE_AXIS_BLEND"]) == rc.AXIS_BLEND
+
+
+def test_a_triangle_across_a_whole_cell_is_that_cells_square_without_clipping():
+    """``_covering`` finds the triangles whose part in a cell is the cell's square in their
+    plane (a wall's or a floor's across many voxels), which the faces' origins then take
+    without clipping: exactly the box ``_clip_to_cells`` cuts, and never a triangle that
+    covers only part of the square, is tilted or lies outside the cell."""
+    rng = np.random.default_rng(7)
+    tris = []
+    for _ in range(400):
+        axis = int(rng.integers(3))
+        level = float(rng.choice([rng.uniform(0, 1), 0.0, 1.0, rng.uniform(1.01, 2)]))
+        corners = rng.uniform(-2.0, 3.0, (3, 3))  # anywhere about the cell
+        if rng.random() < 0.6:  # a large triangle about the square (an inscribed circle of
+            # radius 1.2-2.5 around a point within 0.3 of its middle: it holds the square)
+            turn = rng.uniform(0, 2 * math.pi) + np.arange(3) * 2 * math.pi / 3
+            middle = 0.5 + rng.uniform(-0.3, 0.3, 2)
+            ring = 2 * rng.uniform(1.2, 2.5) * np.stack([np.cos(turn), np.sin(turn)], axis=1)
+            across = [b for b in range(3) if b != axis]
+            corners[:, across] = middle + ring * (1 if rng.random() < 0.5 else -1)
+        corners[:, axis] = level
+        if rng.random() < 0.2:  # tilted a little
+            corners[0, axis] += 0.01
+        tris.append(corners)
+    tris = np.asarray(tris, np.float32)
+    covered, axis = rc._covering(tris)
+    assert 40 < covered.sum() < 360
+    poly, count = rc._clip_to_cells(tris[covered])
+    valid = (np.arange(poly.shape[1])[None] < count[:, None])[:, :, None]
+    high = np.where(valid, poly, -np.inf).max(axis=1)
+    low = np.where(valid, poly, np.inf).min(axis=1)
+    for row, a in enumerate(axis[covered]):
+        across = [b for b in range(3) if b != a]
+        np.testing.assert_allclose(high[row, across], 1.0, atol=1e-6)
+        np.testing.assert_allclose(low[row, across], 0.0, atol=1e-6)
+        assert high[row, a] == low[row, a] == tris[covered][row, 0, a]
+    # the others: their clipped part is not the whole square in one flat plane (not every
+    # corner of the square is a corner of it)
+    poly, count = rc._clip_to_cells(tris[~covered])
+    valid = np.arange(poly.shape[1])[None] < count[:, None]
+    whole = np.zeros(len(poly), bool)
+    for a in range(3):
+        across = [b for b in range(3) if b != a]
+        flat = np.ptp(np.where(valid[..., None], poly, poly[:, :1]), axis=1)[:, a] == 0
+        corners = np.ones(len(poly), bool)
+        for corner in ((0, 0), (1, 0), (0, 1), (1, 1)):
+            near = np.abs(poly[:, :, across] - np.asarray(corner, np.float32)).max(axis=2) < 1e-6
+            corners &= (near & valid).any(axis=1)
+        whole |= flat & corners & (count > 0)
+    assert not whole.any()

@@ -269,6 +269,34 @@ def _clip_to_cells(tris):
     return poly, count
 
 
+def _covering(tris):
+    """((P,) bool, (P,) int axis) of triangles ``tris`` (P, 3, 3) in a cell's coordinates: those
+    lying in a plane across one axis (their three corners' coordinate the same, within the
+    cell) whose projection holds all four corners of the cell's square across it — their part
+    in the cell is that square, as ``_clip_to_cells`` would cut it (most pairs of a room's
+    walls and floors, which cover many cells each)."""
+    covered = np.zeros(len(tris), bool)
+    axis = np.zeros(len(tris), np.int64)
+    for a in range(3):
+        level = tris[:, 0, a]
+        flat = np.flatnonzero((tris[:, 1, a] == level) & (tris[:, 2, a] == level) &
+                              (level >= 0) & (level <= 1) & ~covered)
+        if len(flat) == 0:
+            continue
+        u, v = (a + 1) % 3, (a + 2) % 3
+        t = tris[flat][:, :, [u, v]].astype(np.float64)          # (F, 3, 2)
+        edge = np.roll(t, -1, axis=1) - t                          # corner k → k + 1
+        area = edge[:, 0, 0] * edge[:, 1, 1] - edge[:, 0, 1] * edge[:, 1, 0]
+        inside = area != 0
+        for corner in ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)):
+            to = np.asarray(corner) - t                            # (F, 3, 2)
+            side = (edge[..., 0] * to[..., 1] - edge[..., 1] * to[..., 0]) * np.sign(area)[:, None]
+            inside &= side.min(axis=1) >= 0
+        covered[flat[inside]] = True
+        axis[flat[inside]] = a
+    return covered, axis
+
+
 def _face_origins(cells, surface, corners, normals, keep) -> np.ndarray:
     """(N, 6, 3) float32: where the rays of each face of the kept ``cells`` start, in voxels
     from the voxel's centre (docs/gi_pipeline.md "Multi-bounce radiance cache", "Faces start
@@ -317,6 +345,13 @@ def _face_origins(cells, surface, corners, normals, keep) -> np.ndarray:
     low = np.minimum(np.minimum(local[:, 0], local[:, 1]), local[:, 2])
     some = np.ones(len(local), bool)
     cut = np.flatnonzero(any_along((high > 1) | (low < 0)))
+    if len(cut):  # a wall's or a floor's triangle across the whole cell: its part is the cell's
+        # square in its plane, without clipping
+        square, axis = _covering(local[cut])
+        plane = local[cut[square], 0, axis[square]]
+        high[cut[square]], low[cut[square]] = 1.0, 0.0
+        high[cut[square], axis[square]] = low[cut[square], axis[square]] = plane
+        cut = cut[~square]
     if len(cut):
         poly, count = _clip_to_cells(local[cut])
         valid = (np.arange(_CLIP_VERTICES)[None] < count[:, None])[:, :, None]
