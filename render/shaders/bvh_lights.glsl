@@ -616,7 +616,7 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
 #else
   bool share = false;
 #endif
-  bool sunny = sun_count > 0 && !single && !lobe && !uniform_sky && m >= 2 && !share;
+  bool sunny = sun_count > 0 && !single && !lobe && !uniform_sky && m >= 2;
   vec4 sun_head = sunny ? texelFetch(world_map, last + ivec2(2, 0), 0) : vec4(0.0);
   float hidden_sum = 0.0, hidden_squares = 0.0; /* Σ, Σ² of a hidden ray's lum(f) / π */
   /* uniform: cosine only; split: one loop, each stratum drawing its technique */
@@ -709,8 +709,8 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   float count = float(drawn);
   world_variance += max(sun_squares - sun_sum * sun_sum / count, 0.0) / max(count - 1.0, 1.0) /
                     count;
-  return max(value - (f_sum - f_lit) / (float(m * m) * M_PI_F) - sun_hidden / (count * M_PI_F),
-             vec3(0.0));
+  vec3 light = value - (f_sum - f_lit) / (float(m * m) * M_PI_F) - sun_hidden / (count * M_PI_F);
+  return share ? light : max(light, vec3(0.0));
 }
 
 vec3 world_direct(vec3 p, vec3 n, uint state, int m)

@@ -221,8 +221,9 @@ def test_the_sub_pixel_samples_draw_the_worlds_strata_as_one_estimate():
     from voxgi.voxgi_addon.gi.direct_light import world_block
     from voxgi.voxgi_addon.preview.passes import AA_SIDE, subpixel_passes
 
-    # the map's sun drawn with the rest of it: a pixel's whole set traces a sun apart
-    # (``test_a_pixels_strata_trace_the_maps_sun_as_a_lamp``), the sub-pixel samples do not
+    # the map's sun drawn with the rest of it: both trace a sun apart
+    # (``test_a_pixels_strata_trace_the_maps_sun_as_a_lamp``), and the whole set's stops at its
+    # four corners where they agree, which a sample's four strata do not: equal in the mean only
     world = dataclasses.replace(build_world_light(sky_with_sun()), sun=None)
     points = np.zeros((40, 3))
     normals = np.tile([0.0, -0.3, 1.0], (40, 1)) / math.hypot(0.3, 1.0)
@@ -241,6 +242,22 @@ def test_the_sub_pixel_samples_draw_the_worlds_strata_as_one_estimate():
     assert lit.mean() > 0.8
     np.testing.assert_allclose(mean[lit], whole[lit], rtol=1e-4, atol=1e-6)
     assert np.all(mean[~lit] <= 1e-6)
+    # with its sun traced apart (the wall hides it): the samples' mean and the whole set agree
+    # over the points to their noise, and the samples' sun is not grain of a few map rays
+    world = build_world_light(sky_with_sun())
+    points, normals = np.zeros((400, 3)), np.tile(normals[:1], (400, 1))
+    ids = np.arange(400)
+    samples = [diffuse_direct(points, normals, [world], _Wall(), sample_ids=ids, seed=3,
+                              strata_block=block) for _, block in plan]
+    whole = diffuse_direct(points, normals, [world], _Wall(), sample_ids=ids, seed=3,
+                           strata_block=(8, 0, 0, 8))
+    mean = np.mean(samples, axis=0)
+    spread = 4 * np.std(mean, axis=0) / math.sqrt(len(ids)) + 1e-4
+    assert np.all(np.abs(mean.mean(axis=0) - whole.mean(axis=0)) <= spread)
+    plain = np.mean([diffuse_direct(points, normals, [dataclasses.replace(world, sun=None)],
+                                    _Wall(), sample_ids=ids, seed=3, strata_block=block)
+                     for _, block in plan], axis=0)
+    assert np.std(mean, axis=0).max() < 0.5 * np.std(plain, axis=0).max()
 
 
 def test_a_pixels_strata_trace_the_maps_sun_as_a_lamp():

@@ -507,7 +507,7 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     f = radiance * (np.maximum(cos, 0.0) / np.maximum(pdf, 1e-30))[..., None]  # (M, 2K, 3)
     up = cos > 0
     sunny = world.sun is not None and not single and reflect is None and \
-        held is not False and square.shape[1] >= DIFFERENCE_STRATA
+        square.shape[1] >= DIFFERENCE_STRATA
     if sunny:  # the sun is its own technique's (``_sun_hidden``): the rays that land in it
         # carry nothing here and are not traced
         in_sun = radiance @ LUMINANCE > world.sun.threshold
@@ -539,7 +539,7 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
         sun_hidden, sun_variance = _sun_hidden(world, p[lit], n[lit], square, sampled or occluded)
         light = value[lit] - (f * blocked[..., None]).sum(axis=1) / (square.shape[1] * math.pi) \
             - sun_hidden
-        value[lit] = np.maximum(light, 0.0)
+        value[lit] = light if held is False else np.maximum(light, 0.0)
     else:
         value[lit] = hidden_less(value[lit], f, blocked, square.shape[1], held)
     if variance is not None:
