@@ -55,8 +55,9 @@ _NORMALS_AT_ONCE = 12
 _CACHE_SIZE = 4
 # The sun of a map: its pixels brighter than SUN_CONTRAST × the map's mean luminance (at most
 # SUN_PIXELS, the brightest), kept apart when they carry at least SUN_SHARE of its luminous
-# power — a pixel's centre strata then trace it as a lamp is traced (its four corner strata
-# first, all sixteen only where they disagree) and the rest of the map without it (``Sun``;
+# power — a pixel's strata (its centre's, its sub-pixel samples') then trace it as a lamp is
+# traced (the four corner strata first, all only where they disagree) and the rest of the
+# map without it (``Sun``;
 # docs/gi_pipeline.md "The sun of an HDRI traced as a lamp"). SUN_SHARE: the corners' four
 # rays cost less than the map rays the sun takes off the sky's sixteen (share × 16 ≥ 4).
 SUN_CONTRAST = 100.0
@@ -201,15 +202,16 @@ def _find_sun(radiance, power, total: float) -> Sun | None:
     """The ``Sun`` of a map (its luminous ``power`` per pixel, ``total`` its sum), or None:
     the pixels brighter than SUN_CONTRAST × the mean luminance (the SUN_PIXELS brightest),
     when they carry SUN_SHARE of the power."""
-    luminance = radiance @ LUMINANCE
-    flat = luminance.reshape(-1)
-    candidates = np.flatnonzero(flat > SUN_CONTRAST * total / (4 * math.pi))
+    flat = (radiance @ LUMINANCE).reshape(-1)
+    bright = flat > SUN_CONTRAST * total / (4 * math.pi)
+    candidates = np.flatnonzero(bright)
     if len(candidates) == 0:
         return None
     order = candidates[np.argsort(flat[candidates], kind="stable")[::-1]]
     inside = order[:SUN_PIXELS]
+    # the brightest pixel left out: the next candidate, or the brightest of the others
     outside = flat[order[SUN_PIXELS]] if len(order) > SUN_PIXELS else \
-        float(np.max(np.where(flat > SUN_CONTRAST * total / (4 * math.pi), 0.0, flat)))
+        float(np.max(np.where(bright, 0.0, flat)))
     dimmest = float(flat[inside].min())
     if not dimmest > outside:  # a tie at the cut: the pixels of that luminance are left out
         inside = inside[flat[inside] > outside]
@@ -476,7 +478,11 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
         estimate (``hidden_variance``; left as it is where no ray is drawn), for the filter of
         a pixel's world light (docs/gi_pipeline.md "The world's light filtered").
     single : one ray a stratum, not one of each technique (``one_technique``: a bounce hit's
-        world light, whose mean over the many rays that read it is what counts)."""
+        world light, whose mean over the many rays that read it is what counts).
+
+    With a ``Sun`` and at least 2 × 2 strata (not single, no ``reflect``), the sun's hidden part
+    is estimated apart (``_sun_hidden``) and the map's and cosine rays landing in it count
+    nothing."""
     p = np.asarray(p, np.float64)
     n = np.asarray(n, np.float64)
     value = unshadowed(world, n)
@@ -579,7 +585,6 @@ def _sun_hidden(world: WorldLight, origins, normals, square, occluded):
             rays[up] = occluded(starts[np.ix_(rows, columns)][up], dirs[np.ix_(rows, columns)][up])
         blocked[np.ix_(rows, columns)] = rays
 
-    drawn = np.full(count, k)
     if side >= ADAPTIVE_FROM and side * side == k:
         corners = np.array([0, side - 1, side * (side - 1), k - 1])
         rest = np.setdiff1d(np.arange(k), corners)
@@ -587,18 +592,14 @@ def _sun_hidden(world: WorldLight, origins, normals, square, occluded):
         seen = any_along(counted[:, corners] & ~blocked[:, corners])
         hidden = any_along(counted[:, corners] & blocked[:, corners])
         settled = seen != hidden
-        trace(np.flatnonzero(~settled), rest)
+        trace(np.flatnonzero(~settled), rest)  # the settled rows' other rays stay undrawn
         drawn = np.where(settled, 4, k)
-        blocked[np.ix_(np.flatnonzero(settled), rest)] = False
     else:
         trace(np.arange(count), np.arange(k))
-    hidden_f = np.where(blocked[..., None], f, 0.0)
+        drawn = np.full(count, k)
+    hidden_f = np.where(blocked[..., None], f, 0.0)   # an undrawn ray is not blocked: 0
     estimate = hidden_f.sum(axis=1) / (drawn[:, None] * math.pi)
     h = (hidden_f @ LUMINANCE) / math.pi
-    drawn_mask = np.ones((count, k), bool)
-    if side >= ADAPTIVE_FROM and side * side == k:
-        drawn_mask[np.ix_(np.flatnonzero(settled), rest)] = False
-    h = np.where(drawn_mask, h, 0.0)
     spread = np.maximum((h * h).sum(axis=1) - h.sum(axis=1) ** 2 / drawn, 0.0) / \
         np.maximum(drawn - 1, 1)
     return estimate, spread / drawn
