@@ -289,8 +289,8 @@ def test_kernels_warmed_with_the_file_open_leave_the_draws_the_scenes_own(voxgi,
     """render/kernel_warmup.py: while a VoxGI file is open, the add-on's timer compiles the
     views' scene-independent kernels, one a tick, and nothing for a scene another engine
     renders. Entering Rendered mode after it compiles before the first GI image only the
-    G-buffer raster and the scene's BVH variants, one a draw, shows the first GI image draws
-    sooner than from cold caches, and converges to the same image."""
+    G-buffer raster and the scene's BVH variants, one a draw, prepares the view in fewer draws
+    than from cold caches, and converges to the same image."""
     from voxgi.blender.viewport_session import live_gi
     from voxgi.render import gpu_scene, kernel_warmup, viewport_prepare
     from voxgi.render.viewport import view_update
@@ -326,17 +326,22 @@ def test_kernels_warmed_with_the_file_open_leave_the_draws_the_scenes_own(voxgi,
         draws = draw_to_the_end(engine, depsgraph, view, window, compiles)
         assert_bounded(draws, "entering")
         first_gi = next(i for i, d in enumerate(draws) if d[7])
-        return draws, first_gi
+        # the draws that prepared the view before its first GI slice, not counting those
+        # that only waited for the preparing thread (their number, and the coarse image's
+        # stages after, follow the machine's speed: the draws' time budget)
+        preparing = [d for d in draws[:first_gi] if d[4] in ("Preparing", "Quick")
+                     and set(d[8]) != {"view_draw work"}]
+        return draws, first_gi, len(preparing)
 
-    cold, cold_first = entering(False)
-    warmed, warm_first = entering(True)
+    cold, cold_first, cold_preparing = entering(False)
+    warmed, warm_first, warm_preparing = entering(True)
     before_gi = sorted(name for d in warmed[:warm_first + 1] for name in d[5])
     generic = {name for name, _, _ in kernel_warmup.generic_steps(scene.voxgi)[1]}
     assert before_gi == sorted(k for k in FIRST_IMAGE_KERNELS if k not in generic), before_gi
     assert before_gi == ["bvh_direct", "bvh_gather", "gbuffer raster"]
-    assert warm_first < cold_first, (warm_first, cold_first)
-    print(f"first GI image at draw {warm_first} with the kernels warmed, {cold_first} from "
-          f"cold caches")
+    assert warm_preparing < cold_preparing, (warm_preparing, cold_preparing)
+    print(f"the view prepared in {warm_preparing} draws with the kernels warmed, "
+          f"{cold_preparing} from cold caches; first GI image at draw {warm_first} / {cold_first}")
     np.testing.assert_allclose(warmed[-1][0], cold[-1][0], atol=1e-5)
     assert gpu_scene.PART_BYTES > 0
 
