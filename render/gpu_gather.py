@@ -62,14 +62,13 @@ def _denoise_shader(holes: bool = False):
     name = "denoise holes" if holes else "denoise"
     if name not in _shaders:
         defines = {"AO_TOLERANCE": repr(float(AO_TOLERANCE)),
-                   "NOISE_TARGET": repr(float(NOISE_TARGET)),
                    "GUIDE_WEIGHT": repr(float(GUIDE_WEIGHT)),
                    "RIDGE": repr(float(RIDGE)),
                    "SAME_SURFACE": repr(float(SAME_SURFACE))}
         if holes:
             defines["DENOISE_HOLES"] = "1"
         _shaders[name] = build_compute(("pixels", "denoise"), _DENOISE_SAMPLERS,
-                                       ("grid", "options"), ("out_image", "out_variance"),
+                                       ("grid", "options", "settle"), ("out_image", "out_variance"),
                                        defines)
     return _shaders[name]
 
@@ -89,6 +88,7 @@ def _denoise_dispatch(shader, gbuffer_inputs, values, variance, given, stride, w
         shader.uniform_sampler(name, inputs[name])
     shader.uniform_float("grid", (float(stride), float(width), float(height), 1.0))
     shader.uniform_float("options", options)
+    shader.uniform_float("settle", (float(NOISE_TARGET), 0.0, 0.0, 0.0))
     shader.image("out_image", out[0])
     shader.image("out_variance", out[1])
     gpu.compute.dispatch(shader, math.ceil(values.width / LOCAL_SIZE),
@@ -110,14 +110,15 @@ def spread_spikes(values, variance, gbuffer_inputs, stride: int, width: int, hei
 def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: int,
             iterations: int = 4, fit: bool = True, holes: bool = False,
             sigma: float = SIGMA_LUMINANCE, alpha_variance: bool = False,
-            unseen: bool = False):
+            unseen: bool = False, noise_target: float = NOISE_TARGET):
     """``iterations`` passes of the à-trous filter over the low-resolution ``values`` (light rgb,
     AO) and ``variance`` textures whose cells trace the pixels ``traced_pixel`` picks in the
     ``width`` × ``height`` G-buffer; returns the filtered (values, variance) textures. fit :
     the local linear fit, else the weighted mean (``preview.denoise.atrous_filter``'s). holes :
     the values have holes (the sparse gather's): the first pass's kernel stretched over
     ``HOLE_SPREAD`` × its width, as numpy's. unseen : the variance's .w is 1 at the cells
-    whose light no pass shows (``atrous_filter``'s unseen): no taps of the others' light."""
+    whose light no pass shows (``atrous_filter``'s unseen): no taps of the others' light.
+    noise_target : ``atrous_filter``'s (a cell within it of its value is kept as it is)."""
     shader = _denoise_shader(holes)
     for it in range(iterations):
         out = [gpu.types.GPUTexture((values.width, values.height), format="RGBA32F")
@@ -133,6 +134,7 @@ def denoise(values, variance, gbuffer_inputs, stride: int, width: int, height: i
         in_alpha = 1.0 if alpha_variance and it == 0 else 0.0
         mode = 2.0 if unseen else in_alpha
         shader.uniform_float("options", (1.0 if fit else 0.0, spread, sigma, mode))
+        shader.uniform_float("settle", (float(noise_target), 0.0, 0.0, 0.0))
         shader.image("out_image", out[0])
         shader.image("out_variance", out[1])
         gpu.compute.dispatch(shader, math.ceil(values.width / LOCAL_SIZE),

@@ -25,7 +25,7 @@ from ..voxgi_addon.preview.gather import VIEW_BACKOFF, GatherSettings, focused, 
 from ..voxgi_addon.preview.passes import (
     AA_SIDE,
     NO_TAILS,
-    WORLD_FILTER_PASSES,
+    WORLD_NOISE_TARGET,
     Tails,
     centre_pass,
     check_request,
@@ -40,6 +40,7 @@ from ..voxgi_addon.preview.passes import (
     stacked_tails,
     subpixel_passes,
     subpixel_reach,
+    world_filter_passes,
 )
 from ..voxgi_addon.preview.resolve import SPREAD
 from ..voxgi_addon.preview.sparse_gather import (
@@ -687,8 +688,9 @@ def _world_smooth(f):
     width, height, inputs = f["width"], f["height"], f["centre"].inputs
 
     def smooth(direct):
-        return denoise(direct, direct, inputs, 1, width, height, WORLD_FILTER_PASSES,
-                       alpha_variance=True)[0]
+        return denoise(direct, direct, inputs, 1, width, height,
+                       world_filter_passes(width, height), alpha_variance=True,
+                       noise_target=WORLD_NOISE_TARGET)[0]
     return smooth
 
 

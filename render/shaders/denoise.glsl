@@ -8,7 +8,8 @@
  * The value is a weighted local linear fit through the taps (denoise.py _fit): the weighted
  * mean where the taps surround the cell, corrected by the slope where they lie on one side.
  * Variances are filtered with squared weights (the fit's own weights). A cell whose prefiltered standard error is
- * within NOISE_TARGET of its value is settled: kept as it is (denoise.py NOISE_TARGET).
+ * within settle.x of its value is settled: kept as it is (denoise.py NOISE_TARGET; 0 for a
+ * pixel's world light, passes.py WORLD_NOISE_TARGET: only a cell with no variance is).
  * grid = (stride, full width, full height, tap step); low-resolution rows count from the bottom;
  * options.x = 1: the local linear fit, 0: the weighted mean; options.y: the kernel stretched over
  * that many times its width (2 in the first pass over a grid with holes: denoise.py HOLE_SPREAD);
@@ -219,7 +220,7 @@ void main()
   vec2 guide_spread = guided ? max(guide_squares / guide_weight - signal * signal, vec2(0.0)) :
                                vec2(0.0);
   bool unguided = hole && !guided;
-  bvec2 settled = lessThanEqual(sqrt(max(blurred, vec2(0.0))), NOISE_TARGET * abs(signal));
+  bvec2 settled = lessThanEqual(sqrt(max(blurred, vec2(0.0))), settle.x * abs(signal));
   settled = hole ? bvec2(false) : settled;
   if (all(settled)) { /* both kept as they are: no tap changes them (the loop below skips both) */
     imageStore(out_image, cell, centre);

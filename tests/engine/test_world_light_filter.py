@@ -8,7 +8,7 @@ import types
 import numpy as np
 
 from voxgi.voxgi_addon.gi.world_light import hidden_less, hidden_variance
-from voxgi.voxgi_addon.preview.passes import world_filtered
+from voxgi.voxgi_addon.preview.passes import world_filter_passes, world_filtered
 
 
 def test_the_reported_variance_is_the_estimates_own():
@@ -73,3 +73,41 @@ def test_the_filter_takes_the_noise_and_keeps_a_shadow_edge():
     edge = width // 2
     for column, light in ((edge - 3, 0.2), (edge + 2, 0.8)):
         assert abs(filtered[4:-4, column].mean() - light) <= 0.03 * light, (column, light)
+
+
+def test_grain_under_the_gathers_noise_target_is_filtered_too():
+    """Sunlit ground that sees nearly all the sky: each pixel's estimate is off by 1% of its
+    light, under the 2% at which the gathers' filter keeps a cell as it is. The world's light is
+    most of such a pixel, so the filter takes that grain too (threefold less), and pixels
+    whose rays all saw the sky (variance 0, their neighbours' too) stay exactly as traced."""
+    seen = _wall()
+    height, width = seen.hit.shape
+    truth = np.full((height, width), 0.8)
+    sigma = 0.008
+    rng = np.random.default_rng(11)
+    noisy = truth + rng.normal(0.0, sigma, truth.shape)
+    noisy[4:16, 6:18] = 0.81  # all their rays reached the sky
+    lights = [types.SimpleNamespace(type="WORLD")]
+    per_light = (noisy.reshape(1, -1, 1) * np.ones(3)).astype(np.float32)
+    variance = np.full(height * width, sigma ** 2)
+    variance.reshape(height, width)[4:16, 6:18] = 0.0
+    out = world_filtered(per_light, variance, lights, np.arange(height * width), seen)
+    filtered = out[0][:, 0].reshape(height, width)
+    grainy = np.zeros((height, width), bool)
+    grainy[4:-4, 22:-4] = True  # away from the sky-seeing pixels
+    before = np.std((noisy - truth)[grainy])
+    after = np.std((filtered - truth)[grainy])
+    assert after < before / 3, (before, after)
+    assert np.all(filtered[8:12, 10:14] == np.float32(0.81))  # 4 pixels in
+
+
+def test_the_filters_window_covers_the_same_part_of_the_scene_at_every_size():
+    """Two passes (a 13-pixel window) at 160 × 120; an image twice as wide takes one pass more,
+    which doubles the window, so it spans the same part of the scene (and at least two passes
+    however small the image)."""
+    assert world_filter_passes(160, 120) == 2
+    assert world_filter_passes(32, 24) == 2
+    for width, height in ((160, 120), (320, 240), (400, 300), (1920, 1080)):
+        assert world_filter_passes(2 * width, 2 * height) == world_filter_passes(width, height) + 1
+    assert world_filter_passes(640, 480) == 4
+    assert world_filter_passes(480, 640) == 4

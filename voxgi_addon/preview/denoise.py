@@ -266,7 +266,8 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
                   position: np.ndarray, normal: np.ndarray, iterations: int = 4,
                   sigma_luminance: float = SIGMA_LUMINANCE,
                   fit: bool = True, holes: np.ndarray | None = None,
-                  unseen: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  unseen: np.ndarray | None = None,
+                  noise_target: float = NOISE_TARGET) -> tuple[np.ndarray, np.ndarray]:
     """Filter ``values`` along surfaces.
 
     Parameters
@@ -289,6 +290,9 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
         drew its scalar, the AO, alone: ``sparse_gather.ray_counts``): they are no taps of the
         light of the pixels that show it (their scalar still is), so their few rays' noise
         does not reach a diffuse neighbour through the luminance test's weights.
+    noise_target : a pixel whose mean's standard error is within this share of its value is
+        settled, kept as it is (``NOISE_TARGET``); 0: only a pixel with no variance is (the
+        world's light: ``passes.world_filtered``).
 
     Returns
     -------
@@ -313,7 +317,7 @@ def atrous_filter(values: np.ndarray, variance: np.ndarray, valid: np.ndarray,
         guide, guide_spread, guided = _hole_guide(signal, sampled, hole, p, n)
         signal = np.where(guided[..., None], guide, signal)
         free = hole & ~guided
-        settled = np.sqrt(np.maximum(blurred, 0.0)) <= NOISE_TARGET * np.abs(signal)  # (H, W, 2)
+        settled = np.sqrt(np.maximum(blurred, 0.0)) <= noise_target * np.abs(signal)  # (H, W, 2)
         settled &= ~hole[..., None]
         # per signal (light, scalar): the weighted sums of the local linear fit (_fit)
         moments = np.zeros(var.shape + (6,))     # Σ w·(1, s, u, s², su, u²)
