@@ -225,6 +225,7 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
             defines["BVH_HIDDEN"] = "1"
         if kernel == "bvh_direct":
             defines["STRATA_BLOCK"] = "ivec3(strata.xyz)"
+            defines["WORLD_STRATA"] = "int(strata.w)"
         if "same_surface" in files:
             defines["PLANE_TOLERANCE"] = repr(float(PLANE_TOLERANCE))
             defines["NEAR_STEP"] = repr(float(NEAR_STEP))
@@ -453,7 +454,8 @@ def strata_side(samples: int) -> int:
 
 def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0,
                          only: int | None = None, world=None, emitters=None, strata_block=None,
-                         table=None, absent: tuple[str, ...] = (), centre=None, field=None):
+                         table=None, absent: tuple[str, ...] = (), centre=None, field=None,
+                         world_strata: int = 0):
     """Diffuse Direct over a G-buffer (``shaders/bvh_direct.glsl``), an RGBA32F texture of the
     G-buffer's size (bottom row first), rgb in Cycles' units; ``only`` : of that lamp alone
     (``lights_texture``; -1: none); world, emitters : a ``world_texture`` / ``emitters_texture``
@@ -469,7 +471,8 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
     the field holds (bvh_direct.glsl), the others from ``field`` (the field at the pass's own
     points, ``gpu_gather.upsample_field_list``'s second; None: none) where it holds, and
     evaluate it elsewhere (centre None: all do); the shadow rays are the pass's own
-    everywhere."""
+    everywhere. world_strata : the side of the strata of the world's map and cosine rays over
+    the whole set (``direct_light.diffuse_direct``'s; 0: the lamps' side)."""
     position = gbuffer_inputs["gbuffer_position"]
     side = strata_side(samples)
     block = strata_block or (side, 0, 0, side)
@@ -486,7 +489,7 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
                         {"sampling": (seed, block[3], 0 if centre is None else 1,
                                       0 if field is None else 1),
-                         "strata": (*block[:3], 0)})
+                         "strata": (*block[:3], world_strata)})
 
 
 def emitters_unshadowed_texture(bvh: GPUBVH, gbuffer_inputs, emitters, lights=None, world=None,

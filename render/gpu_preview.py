@@ -41,6 +41,7 @@ from ..voxgi_addon.preview.passes import (
     subpixel_passes,
     subpixel_reach,
     world_filter_passes,
+    world_strata_side,
 )
 from ..voxgi_addon.preview.resolve import SPREAD
 from ..voxgi_addon.preview.sparse_gather import (
@@ -670,10 +671,14 @@ _SUM_TEXTURES = (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")
 
 def _shade(f, inputs, sums, terms, blank, size, block, lamps=None, glow=None, centre=None,
            field=None, smooth=None):
-    """``gpu_compose.shade_stages`` of this frame's scene and snapshot."""
+    """``gpu_compose.shade_stages`` of this frame's scene and snapshot; with ``smooth`` (the
+    centre pass's world filter) the world's rays over ``world_strata_side``'s strata."""
+    world_strata = 0 if smooth is None else world_strata_side(f["light_samples"], f["width"],
+                                                              f["height"])
     return shade_stages(f["scene"], f["snapshot"], inputs, sums, terms, blank, size,
                         f["light_samples"], f["gather_settings"].seed, block, lamps, glow,
-                        centre, field, lamp_glossy=f["lamp_glossy"], smooth=smooth)
+                        centre, field, lamp_glossy=f["lamp_glossy"], smooth=smooth,
+                        world_strata=world_strata)
 
 
 def _world_smooth(f):

@@ -617,12 +617,18 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   bool share = false;
 #endif
   bool sunny = sun_count > 0 && !single && !lobe && !uniform_sky && m >= 2;
+  /* a whole image's pixel centres: the rest of the map over fewer strata, the world's filter
+   * averaging them over a window wide enough (passes.world_strata_side) */
+  int ms = m;
+#ifdef WORLD_STRATA
+  ms = !share && !single && !lobe && WORLD_STRATA > 0 ? WORLD_STRATA : m;
+#endif
   vec4 sun_head = sunny ? texelFetch(world_map, last + ivec2(2, 0), 0) : vec4(0.0);
   float hidden_sum = 0.0, hidden_squares = 0.0; /* Σ, Σ² of a hidden ray's lum(f) / π */
   /* uniform: cosine only; split: one loop, each stratum drawing its technique */
   for (int pass = uniform_sky || split ? 1 : 0; pass < 2; pass++) {
-    for (int k = 0; k < m * m; k++) {
-      vec2 s = hashed_stratum(state, k, m);
+    for (int k = 0; k < ms * ms; k++) {
+      vec2 s = ms == m ? hashed_stratum(state, k, m) : whole_stratum(state, k, ms);
       int technique = pass;
       if (split) {
         technique = s.x < 0.5 ? 0 : 1;
@@ -669,13 +675,13 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
       }
     }
   }
-  glossy /= float(m * m);
+  glossy /= float(ms * ms);
   /* the hidden part's estimate is Σ h / m² over N = techniques × m² rays: T var(h) / m² */
-  float rays = float(m * m * (uniform_sky || split ? 1 : 2));
+  float rays = float(ms * ms * (uniform_sky || split ? 1 : 2));
   float spread = max(hidden_squares - hidden_sum * hidden_sum / rays, 0.0) / max(rays - 1.0, 1.0);
-  world_variance = rays / float(m * m) * spread / float(m * m);
+  world_variance = rays / float(ms * ms) * spread / float(ms * ms);
   if (!sunny) {
-    return hidden_less(value, f_sum, f_lit, m);
+    return hidden_less(value, f_sum, f_lit, ms);
   }
   /* the sun: one ray a stratum by its power, the corners first; where those above the
    * horizon agree the others are not drawn (as a lamp's); Σ hidden f / (drawn π) */
@@ -709,7 +715,7 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   float count = float(drawn);
   world_variance += max(sun_squares - sun_sum * sun_sum / count, 0.0) / max(count - 1.0, 1.0) /
                     count;
-  vec3 light = value - (f_sum - f_lit) / (float(m * m) * M_PI_F) - sun_hidden / (count * M_PI_F);
+  vec3 light = value - (f_sum - f_lit) / (float(ms * ms) * M_PI_F) - sun_hidden / (count * M_PI_F);
   return share ? light : max(light, vec3(0.0));
 }
 

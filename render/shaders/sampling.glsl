@@ -39,6 +39,14 @@ vec2 hashed_stratum(uint state, int k, int m)
   return (vec2(float(k / m), float(k % m)) + jitter) / float(m);
 }
 
+/* Stratum k of a whole m × m set (no STRATA_BLOCK), as hashed_stratum draws it without one. */
+vec2 whole_stratum(uint state, int k, int m)
+{
+  vec2 jitter = vec2(unit_float(pcg_hash(state + uint(2 * k))),
+                     unit_float(pcg_hash(state + uint(2 * k + 1))));
+  return (vec2(float(k / m), float(k % m)) + jitter) / float(m);
+}
+
 float radical_inverse(uint b)
 {
   b = (b << 16u) | (b >> 16u);

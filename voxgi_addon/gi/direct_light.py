@@ -341,11 +341,11 @@ def _area(light, p, n, tris, strata):
 
 
 def _world(world, p, n, tris, strata, reflect=None, unlifted=None, variance=None,
-           single=False, held=None):
+           single=False, held=None, rest=None):
     """The world's Diffuse Direct (``world_light.world_direct``): its map-sampled rays through
     ``tris`` (lifted by the shadow terminator offset where diffuse_direct was given it), its
     cosine rays through ``unlifted`` (``tris`` when None); single: one ray a stratum; held :
-    ``world_light.hidden_less``'s."""
+    ``world_light.hidden_less``'s; rest : ``world_direct``'s."""
     from .world_light import world_direct
 
     origins_offset = _NORMAL_OFFSET * n
@@ -357,7 +357,7 @@ def _world(world, p, n, tris, strata, reflect=None, unlifted=None, variance=None
 
     return world_direct(world, p + origins_offset, n, through(unlifted), strata, reflect,
                         sampled=None if unlifted is tris else through(tris), variance=variance,
-                        single=single, held=held)
+                        single=single, held=held, rest=rest)
 
 
 def _emitters(emitters, p, n, tris, strata, reflect=None, unshadowed=None):
@@ -405,7 +405,7 @@ def world_block(block):
 def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
                    sample_ids=None, per_light: bool = False, strata_block=None, reflect=None,
                    unshadowed=None, terminator=None, world_variance=None,
-                   one_technique: bool = False):
+                   one_technique: bool = False, world_strata: int | None = None):
     """Cycles' ``Diffuse Direct`` (irradiance / π, no albedo) at surface points.
 
     Parameters
@@ -446,6 +446,10 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
     one_technique : the world's strata draw one ray each, by the map or by the cosine
         (``world_light.one_technique``), not one of each: a bounce hit's (bvh_shade.glsl
         ray_paths).
+    world_strata : with ``sample_ids`` and all the strata (no ``strata_block``, or one of them
+        all): the world's map and cosine rays over world_strata² strata of their own (the
+        map's sun keeps the lamps'; ``passes.world_strata_side``, GLSL bvh_direct.glsl
+        WORLD_STRATA). None: the lamps' strata.
 
     Returns
     -------
@@ -489,6 +493,11 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
             if light.type == "WORLD":
                 given["unlifted"] = unlifted
                 given["single"] = one_technique
+                if world_strata is not None and ids is not None and \
+                        (strata_block is None or strata_block[3] >= strata_block[0]):
+                    given["rest"] = lambda points_of_chunk, chunk_ids=ids[a:b], stream=index: \
+                        hashed_square(chunk_ids[points_of_chunk], stream,
+                                      world_strata * world_strata, seed)
                 if strata_block is not None and strata_block[3] < strata_block[0]:
                     given["held"] = False  # a sample's share of its pixel's strata
                 if world_variance is not None:

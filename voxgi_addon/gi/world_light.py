@@ -457,7 +457,7 @@ def one_technique(square):
 
 
 def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sampled=None,
-                 variance=None, single: bool = False, held: bool | None = None):
+                 variance=None, single: bool = False, held: bool | None = None, rest=None):
     """(N, 3) Diffuse Direct of the world at points p with unit normals n (facing the viewer):
     the unshadowed table value less the estimate of its hidden part from one world-map and one
     cosine ray per stratum (the balance heuristic; ``hidden_less``).
@@ -479,6 +479,9 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
         a pixel's world light (docs/gi_pipeline.md "The world's light filtered").
     single : one ray a stratum, not one of each technique (``one_technique``: a bounce hit's
         world light, whose mean over the many rays that read it is what counts).
+    rest : callable(point indices) -> (N, K', 2), the strata of the map's and cosine rays when
+        they differ from the sun's (a whole image's pixel centres: ``passes.world_strata_side``);
+        None: ``strata``'s.
 
     With a ``Sun`` and at least 2 × 2 strata (not single, no ``reflect``), the sun's hidden part
     is estimated apart (``_sun_hidden``) and the map's and cosine rays landing in it count
@@ -491,6 +494,9 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     if len(lit) == 0 or occluded is None:
         return value if reflect is None else (value, glossy)
     square = strata(lit)  # (M, K, 2)
+    sun_square = square
+    if rest is not None:
+        square = rest(lit)  # (M, K', 2)
     split = single and not world.uniform
     if split:
         mapped, square = one_technique(square)
@@ -513,7 +519,7 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     f = radiance * (np.maximum(cos, 0.0) / np.maximum(pdf, 1e-30))[..., None]  # (M, 2K, 3)
     up = cos > 0
     sunny = world.sun is not None and not single and reflect is None and \
-        square.shape[1] >= DIFFERENCE_STRATA
+        sun_square.shape[1] >= DIFFERENCE_STRATA
     if sunny:  # the sun is its own technique's (``_sun_hidden``): the rays that land in it
         # carry nothing here and are not traced
         in_sun = radiance @ LUMINANCE > world.sun.threshold
@@ -542,7 +548,8 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     # drawn alone, the sun's share lost), which left the HDRI courtyard's walls' bounce
     # light 3% dark (docs/gi_pipeline.md "The world's light where it is partly hidden").
     if sunny:
-        sun_hidden, sun_variance = _sun_hidden(world, p[lit], n[lit], square, sampled or occluded)
+        sun_hidden, sun_variance = _sun_hidden(world, p[lit], n[lit], sun_square,
+                                               sampled or occluded)
         light = value[lit] - (f * blocked[..., None]).sum(axis=1) / (square.shape[1] * math.pi) \
             - sun_hidden
         value[lit] = light if held is False else np.maximum(light, 0.0)

@@ -859,7 +859,7 @@ def filtered_sums(sums, count, tails: Tails, width: int, height: int, filter_wid
 
 def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
                  visibility=None, sample_ids=None, per_light=False, seed=0, strata_block=None,
-                 unshadowed=None, views=None, world_variance=None):
+                 unshadowed=None, views=None, world_variance=None, world_strata=None):
     """(N, 3) Diffuse Direct at surface points: exact shadow rays against ``tris`` (shadows
     "RAYS") or one soft-shadow cone per light through ``octree`` ("CONES"; ``visibility``
     as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own).
@@ -871,7 +871,8 @@ def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
     views : (N, 3) the camera rays' unit directions to the points ("RAYS"): the shadow rays
     then leave smooth-shaded triangles as Cycles' shadow terminator offset lifts them
     (``terminator.find_lifts``, GLSL bvh_direct.glsl ``terminator_set``). world_variance :
-    ("RAYS") gets the variance of the world's part (``direct_light.diffuse_direct``'s)."""
+    ("RAYS") gets the variance of the world's part (``direct_light.diffuse_direct``'s);
+    world_strata : ("RAYS") ``diffuse_direct``'s."""
     if shadows == "CONES":
         return cone_shadowed_direct(octree, points, normals, lights, cones, samples, visibility)
     terminator = None
@@ -880,7 +881,8 @@ def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
     return diffuse_direct(points + normals * SURFACE_EPSILON, normals, lights, tris,
                           samples=samples, sample_ids=sample_ids, per_light=per_light, seed=seed,
                           strata_block=strata_block, unshadowed=unshadowed,
-                          terminator=terminator, world_variance=world_variance)
+                          terminator=terminator, world_variance=world_variance,
+                          world_strata=world_strata)
 
 
 # The world light's filter spans about this share of the image's longer side: at 160 × 120 two
@@ -893,6 +895,25 @@ WORLD_FILTER_SHARE = 0.08
 # of an open scene's pixels, and 2% grain left on the courtyards' sunlit ground was a tenth of
 # their error (docs/gi_pipeline.md "The world's light filtered at every pixel")
 WORLD_NOISE_TARGET = 0.0
+
+
+# From this many passes (a window 4.7 times as wide as two passes' and 22 times the pixels) the
+# filter averages enough pixels that a pixel centre's world rays go over a quarter fewer
+# strata a side (16 -> 9 at the default 16 Light Samples): at 640 x 480 the sky courtyard's
+# error stayed under Cycles 16 spp + OIDN's, where at 160 x 120 it reached it
+# (docs/gi_pipeline.md "Fewer world rays where the filter is wide")
+WORLD_FEWER_FROM = 4
+
+
+def world_strata_side(samples: int, width: int, height: int) -> int:
+    """The side of the strata of the world's map and cosine rays at a ``width`` × ``height``
+    image's pixel centres, for ``samples`` Light Samples (the lamps' side ⌈√samples⌉): a
+    quarter fewer (rounded down) where the world's filter has WORLD_FEWER_FROM passes or more
+    (``world_filter_passes``). The map's sun keeps the lamps' strata."""
+    side = max(1, math.ceil(math.sqrt(samples)))
+    if world_filter_passes(width, height) >= WORLD_FEWER_FROM:
+        return side - side // 4
+    return side
 
 
 def world_filter_passes(width: int, height: int) -> int:
@@ -1285,10 +1306,13 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         # _world_smooth), from the variance of its estimate
         variance = np.zeros(len(hit)) if seen is centre_seen and shadows == "RAYS" and \
             any(light.type == "WORLD" for light in lights) else None
+        # (and its rays go over world_strata_side's strata: the filter's window is wide)
         per_light = direct_light(None, p, n, lights, tris, cones, light_samples, shadows,
                                  sample_ids=hit, per_light=True, seed=gather_settings.seed,
                                  strata_block=block, unshadowed=unshadowed, views=-views,
-                                 world_variance=variance)
+                                 world_variance=variance,
+                                 world_strata=None if variance is None else world_strata_side(
+                                     light_samples, *seen.hit.shape[::-1]))
         if variance is not None:
             per_light = world_filtered(per_light, variance, lights, hit, seen)
         shine = glossy_direct_radiance(snapshot, p, n, views, mat,
