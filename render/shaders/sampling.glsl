@@ -23,6 +23,14 @@ uint point_stream(uint id, uint stream, uint seed)
   return pcg_hash(pcg_hash(id + seed * 0x9E3779B9u) + stream);
 }
 
+/* Stratum k of a whole m × m set of a point's stream: (row, column) + jitter, / m. */
+vec2 whole_stratum(uint state, int k, int m)
+{
+  vec2 jitter = vec2(unit_float(pcg_hash(state + uint(2 * k))),
+                     unit_float(pcg_hash(state + uint(2 * k + 1))));
+  return (vec2(float(k / m), float(k % m)) + jitter) / float(m);
+}
+
 /* Stratum k of m×m of a point's stream (sampling.hashed_square). A kernel that defines
  * STRATA_BLOCK = ivec3(M, row, column) (bvh_direct.glsl's sub-pixel passes) draws a block of a
  * larger set instead: stratum k of the loop's m × m is stratum (row + k / m, column + k % m) of
@@ -34,17 +42,7 @@ vec2 hashed_stratum(uint state, int k, int m)
   k = (block.y + k / m) * block.x + block.z + k % m;
   m = block.x;
 #endif
-  vec2 jitter = vec2(unit_float(pcg_hash(state + uint(2 * k))),
-                     unit_float(pcg_hash(state + uint(2 * k + 1))));
-  return (vec2(float(k / m), float(k % m)) + jitter) / float(m);
-}
-
-/* Stratum k of a whole m × m set (no STRATA_BLOCK), as hashed_stratum draws it without one. */
-vec2 whole_stratum(uint state, int k, int m)
-{
-  vec2 jitter = vec2(unit_float(pcg_hash(state + uint(2 * k))),
-                     unit_float(pcg_hash(state + uint(2 * k + 1))));
-  return (vec2(float(k / m), float(k % m)) + jitter) / float(m);
+  return whole_stratum(state, k, m);
 }
 
 float radical_inverse(uint b)
