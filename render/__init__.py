@@ -23,11 +23,8 @@ classes = tuple(cls for module in modules for cls in module.classes)
 def release_gpu_resources() -> None:
     """Free the compiled shaders kept between renders while Blender's GPU module is still up:
     on unregister and, since the bpy module never unregisters add-ons, at exit before bpy's own
-    exit handler (docs/gi_pipeline.md, "GPU resources at exit"). The context's bound shader,
-    one of these, is unbound first: a shader made later at a freed one's address would not be
-    bound (``gbuffer.rasterize``)."""
-    if "gpu" in sys.modules:
-        sys.modules["gpu"].shader.unbind()
+    exit handler (docs/gi_pipeline.md, "GPU resources at exit"). Each module's release
+    unbinds the context's shader before it drops its own (``gpu_shaders.forget``)."""
     for name in ("viewport", "kernel_warmup", "debug_draw", "gpu_shaders", "gpu_bvh",
                  "gpu_gather", "gpu_principled", "gpu_compose", "gpu_accumulation",
                  "gpu_gather_sums"):

@@ -389,4 +389,5 @@ def release() -> None:
     global _shader, _layer_shader
     for drawer in list(_drawers):
         drawer.free()
+    gpu.shader.unbind()  # (gpu_shaders.forget)
     _shader = _layer_shader = None

@@ -26,7 +26,7 @@ import numpy as np
 from ..voxgi_addon.preview.passes import PASS_NAMES
 from ..voxgi_addon.preview.progressive import GATHERED, LIGHT_COLOURS, inside, sample_terms
 from .gpu_scene import GPUScene
-from .gpu_shaders import LOCAL_SIZE, build_compute
+from .gpu_shaders import LOCAL_SIZE, build_compute, forget
 from .gpu_volume import float_texture
 
 zeros = GPUScene.zeros  # cleared on the GPU: nothing uploaded (an upload cost 4 ms a restart)
@@ -70,7 +70,7 @@ def _shader(name: str):
 
 def release() -> None:
     """Drop the cached shaders (at exit, or when the GPU context goes)."""
-    _shaders.clear()
+    forget(_shaders)
 
 
 def _dispatch(shader, width: int, height: int) -> None:

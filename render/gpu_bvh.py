@@ -73,7 +73,7 @@ from .gpu_ltc import DEFINES as LTC_DEFINES
 from .gpu_ltc import ltc_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
-from .gpu_shaders import LOCAL_SIZE, build_compute, note_upload
+from .gpu_shaders import LOCAL_SIZE, build_compute, forget, note_upload
 from .gpu_tracer import read_texture
 from .gpu_volume import float_texture
 
@@ -595,7 +595,7 @@ def release() -> None:
     """Drop the cached shaders and the shared BVH textures (docs/gi_pipeline.md, "GPU resources
     at exit")."""
     global _shared
-    _shaders.clear()
+    forget(_shaders)
     _BLANK.clear()
     _shared = None
     scene = sys.modules.get(f"{__package__}.gpu_scene")  # it holds the shared BVH too

@@ -17,7 +17,7 @@ from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE
 from .gpu_bvh import direct_light_texture
 from .gpu_gather import glossy_direct_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
-from .gpu_shaders import LOCAL_SIZE, build_compute
+from .gpu_shaders import LOCAL_SIZE, build_compute, forget
 
 # The sums of preview.passes.accumulate_pass as textures: name → (texture, channels) where
 # channels name what its rgb and alpha hold (see shaders/aa_surface.glsl).
@@ -83,7 +83,7 @@ def run(kernel, samplers, inputs, outputs, width, height, constants=None, over=N
 
 def release() -> None:
     """Drop the cached composition shaders."""
-    _aa_shaders.clear()
+    forget(_aa_shaders)
 
 
 def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples: int,

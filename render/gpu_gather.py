@@ -45,7 +45,7 @@ from .frame import finish
 from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, scene_light_textures, strata_side
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
-from .gpu_shaders import LOCAL_SIZE, build_compute, size_like
+from .gpu_shaders import LOCAL_SIZE, build_compute, forget, size_like
 from .gpu_tracer import read_texture
 from .gpu_volume import float_texture
 
@@ -728,6 +728,6 @@ def _glossy_shader():
 def release() -> None:
     """Drop the cached shaders, the cache's texture and its layout (docs/gi_pipeline.md, "GPU
     resources at exit")."""
-    _shaders.clear()
+    forget(_shaders)
     _cache_upload.clear()
     _LAYOUT.clear()

@@ -21,7 +21,7 @@ import math
 import gpu
 
 from ..voxgi_addon.preview.upsample import low_shape
-from .gpu_shaders import LOCAL_SIZE, build_compute
+from .gpu_shaders import LOCAL_SIZE, build_compute, forget
 
 _SAMPLERS = ("gather_values", "gather_variance")
 _OUTPUTS = ("out_mean", "out_pooled")
@@ -37,7 +37,7 @@ def _shader():
 
 def release() -> None:
     """Drop the cached kernel (Blender frees a ``GPUShader`` with its last reference)."""
-    _shaders.clear()
+    forget(_shaders)
 
 
 class GPUGatherSums:

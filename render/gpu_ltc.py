@@ -14,7 +14,7 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.gi.ltc import load_table, table_texels
-from .gpu_shaders import LOCAL_SIZE, build_compute
+from .gpu_shaders import LOCAL_SIZE, build_compute, forget
 from .gpu_tracer import read_texture
 from .gpu_volume import float_texture
 
@@ -68,4 +68,4 @@ def evaluate(p, n, v, roughness, corners) -> np.ndarray:
 
 def release() -> None:
     """Drop the cached texture and shader."""
-    _cache.clear()
+    forget(_cache)

@@ -14,7 +14,7 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.gi.principled import DEFAULT_IOR, LUT_ROWS, lut_texels
-from .gpu_shaders import LOCAL_SIZE, build_compute
+from .gpu_shaders import LOCAL_SIZE, build_compute, forget
 from .gpu_tracer import read_texture
 from .gpu_volume import float_texture
 
@@ -74,4 +74,4 @@ def evaluate(base, metallic, level, roughness, normal, view, light, irradiance):
 
 def release() -> None:
     """Drop the cached texture and shader."""
-    _cache.clear()
+    forget(_cache)

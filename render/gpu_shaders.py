@@ -155,6 +155,18 @@ def _power_of_two(n: int) -> bool:
     return n > 0 and n & (n - 1) == 0
 
 
+def forget(*caches) -> None:
+    """Clear ``caches`` of shaders (Blender frees a ``GPUShader`` with its last reference),
+    the context's bound shader unbound first. The context remembers its bound shader by
+    address and skips a bind of the same address: a shader made later where a freed bound one
+    lay would not be bound, and its draws or dispatches would run the freed one's program (a
+    render after a module's ``release`` rasterized an empty G-buffer about one time in eight:
+    docs/gi_pipeline.md "One file's state")."""
+    gpu.shader.unbind()
+    for cache in caches:
+        cache.clear()
+
+
 def release() -> None:
-    """Drop the cached shaders (Blender frees a ``GPUShader`` with its last reference)."""
-    _cache.clear()
+    """Drop the cached shaders."""
+    forget(_cache)
