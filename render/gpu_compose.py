@@ -88,7 +88,7 @@ def release() -> None:
 
 def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples: int,
                  seed: int, block=None, lamps=None, glow=None, centre=None, field=None,
-                 lamp_glossy: bool = True, smooth=None, world_strata: int = 0):
+                 lamp_glossy: bool = True, smooth=None, world_strata: int = 0, world_fewer=None):
     """(Stages, one per light's dispatches, returning) ``sums`` + one pass over ``inputs``, a
     G-buffer of ``size`` (an image's or the edge pixels' list's) of ``scene`` (a ``GPUScene``
     updated to ``snapshot``): terms = the gathered (Diffuse Indirect, AO), Glossy Indirect and
@@ -107,8 +107,8 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     kernel is compiled: docs/gi_pipeline.md "Entering Rendered mode"). smooth : filters the
     world's and emitters' Diffuse Direct texture (rgb, the world's part's variance) of a whole
     image before it is added (F12's centre pass: docs/gi_pipeline.md "The world's light
-    filtered"); None: added as traced. world_strata : the side of the world's strata over the
-    whole set (``direct_light_texture``'s; 0: the lamps')."""
+    filtered"); None: added as traced. world_strata, world_fewer : the side of the world's
+    strata and the texels that take it (``direct_light_texture``'s; 0: the lamps')."""
     bvh, principled, emission = scene.bvh, scene.principled, scene.emission
     materials, lut = scene.materials, scene.lut
     extra = scene.has_scene_lights
@@ -143,7 +143,8 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
                                       world=scene.world_map, emitters=scene.emitters,
                                       strata_block=world_block(block), table=scene.no_lamp,
                                       absent=absent,
-                                      centre=centre, field=field, world_strata=world_strata)
+                                      centre=centre, field=field, world_strata=world_strata,
+                                      world_fewer=world_fewer)
         if smooth is not None:
             direct = smooth(direct)
         out = run("aa_light", LIGHT_SAMPLERS, {

@@ -40,6 +40,7 @@ from ..voxgi_addon.preview.passes import (
     stacked_tails,
     subpixel_passes,
     subpixel_reach,
+    world_fewer_pixels,
     world_filter_passes,
     world_strata_side,
 )
@@ -59,7 +60,7 @@ from .frame import Frame, Stage, finish
 from .frame import run as run_stages
 from .gbuffer import PixelMask, gbuffer_shader, rasterize, rasterize_stages, read_gbuffer, vertex_batch
 from .gpu_accumulation import SUM_NAMES, GPUSums
-from .gpu_bvh import emitter_glossy_texture, emitters_unshadowed_texture
+from .gpu_bvh import emitter_glossy_texture, emitters_unshadowed_texture, world_fewer_texture
 from .gpu_compose import COMPACT_SAMPLERS as _COMPACT_SAMPLERS
 from .gpu_compose import MASK_SAMPLERS as _MASK_SAMPLERS
 from .gpu_compose import RESOLVE_OUTPUTS as _RESOLVE_OUTPUTS
@@ -672,13 +673,16 @@ _SUM_TEXTURES = (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")
 def _shade(f, inputs, sums, terms, blank, size, block, lamps=None, glow=None, centre=None,
            field=None, smooth=None):
     """``gpu_compose.shade_stages`` of this frame's scene and snapshot; with ``smooth`` (the
-    centre pass's world filter) the world's rays over ``world_strata_side``'s strata."""
-    world_strata = 0 if smooth is None else world_strata_side(f["light_samples"], f["width"],
-                                                              f["height"])
+    centre pass's world filter) the world's rays over ``world_strata_side``'s strata at the
+    pixels away from the geometry's edges (``world_fewer_pixels``)."""
+    fewer = None if smooth is None else world_fewer_pixels(f["edge"], f["light_samples"])
+    world_strata = 0 if fewer is None else world_strata_side(f["light_samples"], f["width"],
+                                                             f["height"])
     return shade_stages(f["scene"], f["snapshot"], inputs, sums, terms, blank, size,
                         f["light_samples"], f["gather_settings"].seed, block, lamps, glow,
                         centre, field, lamp_glossy=f["lamp_glossy"], smooth=smooth,
-                        world_strata=world_strata)
+                        world_strata=world_strata,
+                        world_fewer=None if fewer is None else world_fewer_texture(fewer))
 
 
 def _world_smooth(f):
@@ -951,7 +955,7 @@ ACCURATE_STAGES = (
           _emitter_unshadowed, when=_has_emitters),
     Stage("edge pixels", ("plan", "seen"), ("edge",), _edge_pixels, slice_end=False),
     Stage("direct (GPU)", ("centre", "plan", "diffuse_ao", "glossy", "glossy_world", "shine",
-                           "unshadowed", "gather_settings"),
+                           "unshadowed", "gather_settings", "edge"),
           ("sums", "lamps", "result"), _centre_pass, slice_end=False),
     Stage("read-back", ("sums", "lamps", "edge", "seen", "plan", "result"),
           ("centre_texel", "edge_all", "listed"), _read_back, when=_reads_back,

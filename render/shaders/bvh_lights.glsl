@@ -617,11 +617,16 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   bool share = false;
 #endif
   bool sunny = sun_count > 0 && !single && !lobe && !uniform_sky && m >= 2;
-  /* a whole image's pixel centres: the rest of the map over fewer strata, the world's filter
-   * averaging them over a window wide enough (passes.world_strata_side) */
+  /* a whole image's pixel centres: the rest of the map over fewer strata where the world's
+   * filter averages them over a window wide enough and on one surface
+   * (passes.world_strata_side, world_fewer_pixels) */
   int ms = m;
 #ifdef WORLD_STRATA
-  ms = !share && !single && !lobe && WORLD_STRATA > 0 ? WORLD_STRATA : m;
+  /* (one flag a work group, uniform over it: gpu_bvh.world_fewer_texture) */
+  if (!share && !single && !lobe && WORLD_STRATA > 0 &&
+      texelFetch(world_fewer, ivec2(gl_WorkGroupID.xy), 0).x > 0.5) {
+    ms = WORLD_STRATA;
+  }
 #endif
   vec4 sun_head = sunny ? texelFetch(world_map, last + ivec2(2, 0), 0) : vec4(0.0);
   float hidden_sum = 0.0, hidden_squares = 0.0; /* Σ, Σ² of a hidden ray's lum(f) / π */

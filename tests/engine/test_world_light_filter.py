@@ -111,3 +111,60 @@ def test_the_filters_window_covers_the_same_part_of_the_scene_at_every_size():
         assert world_filter_passes(2 * width, 2 * height) == world_filter_passes(width, height) + 1
     assert world_filter_passes(640, 480) == 4
     assert world_filter_passes(480, 640) == 4
+
+
+def test_fewer_world_rays_only_where_the_narrowest_window_sees_no_edge():
+    """At 640 × 480 (four passes) a pixel's world rays go over fewer strata only where no
+    geometric edge lies within the two-pass window's half width (6 pixels, a square), decided
+    for whole 8 × 8 blocks (the GPU's work groups, counted from the bottom row): next to a
+    silhouette at column 300 the blocks reaching columns 294-306 keep every stratum, the ones
+    beyond are cut, and so is nothing along the image's border. At 160 × 120 (two passes) no
+    pixel is."""
+    from voxgi.voxgi_addon.preview.passes import (
+        WORLD_FEWER_BLOCK,
+        WORLD_FEWER_REACH,
+        world_fewer_pixels,
+    )
+
+    assert (WORLD_FEWER_REACH, WORLD_FEWER_BLOCK) == (6, 8)
+    edge = np.zeros((480, 640), bool)
+    edge[:, 300] = True  # a silhouette down the image
+    edge[[0, -1], :] = edge[:, [0, -1]] = True  # the border, as edge_pixels marks it
+    fewer = world_fewer_pixels(edge, 16)
+    assert fewer[240, 312] and fewer[240, 287] and not fewer[240, 311] and not fewer[240, 288]
+    assert not fewer[:, 288:312].any() and fewer[8:-8, 312:-8].all() and fewer[8:-8, 8:288].all()
+    assert not fewer[7, 100] and fewer[8, 100] and not fewer[:8].any() and not fewer[:, -8:].any()
+    # blocks counted from the bottom row: an image 100 rows high has its partial block on top
+    tall = np.zeros((100, 64), bool)
+    tall[50, 30] = True
+    cut = world_fewer_pixels(np.pad(tall, ((0, 0), (0, 576)))[:, :640], 16)
+    for top in range(100 - 8, -8, -8):
+        for left in range(0, 64, 8):
+            block = cut[max(top, 0):top + 8, left:left + 8]
+            assert block.all() or not block.any(), (top, left)
+    assert not cut[50, 30] and not cut[44, 30] and cut[100 - 8 * 8 - 1, 30]
+    assert world_fewer_pixels(np.zeros((120, 160), bool), 16) is None
+    assert world_fewer_pixels(edge, 1) is None  # one stratum: nothing to cut
+
+
+def test_the_cut_pixels_draw_the_fewer_strata_and_the_rest_all():
+    """``world_direct`` with ``fewer``: the flagged points' light is the one drawn with the
+    fewer strata alone, the others' the one with every stratum, ray for ray."""
+    from test_world_light import _Wall, build_world_light, sky_with_sun
+
+    from voxgi.voxgi_addon.gi.direct_light import diffuse_direct
+
+    world = build_world_light(sky_with_sun())
+    count = 300
+    points = np.zeros((count, 3))
+    normals = np.tile([0.0, -0.3, 1.0], (count, 1)) / np.hypot(0.3, 1.0)
+    ids = np.arange(count)
+    fewer = np.arange(count) % 3 == 0
+    kwargs = dict(sample_ids=ids, seed=5, world_variance=None)
+    every = diffuse_direct(points, normals, [world], _Wall(), **kwargs)
+    cut = diffuse_direct(points, normals, [world], _Wall(), world_strata=3, **kwargs)
+    both = diffuse_direct(points, normals, [world], _Wall(), world_strata=3, world_fewer=fewer,
+                          **kwargs)
+    assert np.abs(cut - every).max() > 1e-3  # the two draws differ
+    np.testing.assert_allclose(both[fewer], cut[fewer], rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(both[~fewer], every[~fewer], rtol=1e-6, atol=1e-7)

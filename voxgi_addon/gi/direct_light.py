@@ -341,11 +341,11 @@ def _area(light, p, n, tris, strata):
 
 
 def _world(world, p, n, tris, strata, reflect=None, unlifted=None, variance=None,
-           single=False, held=None, rest=None):
+           single=False, held=None, rest=None, fewer=None):
     """The world's Diffuse Direct (``world_light.world_direct``): its map-sampled rays through
     ``tris`` (lifted by the shadow terminator offset where diffuse_direct was given it), its
     cosine rays through ``unlifted`` (``tris`` when None); single: one ray a stratum; held :
-    ``world_light.hidden_less``'s; rest : ``world_direct``'s."""
+    ``world_light.hidden_less``'s; rest, fewer : ``world_direct``'s."""
     from .world_light import world_direct
 
     origins_offset = _NORMAL_OFFSET * n
@@ -357,7 +357,7 @@ def _world(world, p, n, tris, strata, reflect=None, unlifted=None, variance=None
 
     return world_direct(world, p + origins_offset, n, through(unlifted), strata, reflect,
                         sampled=None if unlifted is tris else through(tris), variance=variance,
-                        single=single, held=held, rest=rest)
+                        single=single, held=held, rest=rest, fewer=fewer)
 
 
 def _emitters(emitters, p, n, tris, strata, reflect=None, unshadowed=None):
@@ -405,7 +405,8 @@ def world_block(block):
 def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int = 0,
                    sample_ids=None, per_light: bool = False, strata_block=None, reflect=None,
                    unshadowed=None, terminator=None, world_variance=None,
-                   one_technique: bool = False, world_strata: int | None = None):
+                   one_technique: bool = False, world_strata: int | None = None,
+                   world_fewer=None):
     """Cycles' ``Diffuse Direct`` (irradiance / π, no albedo) at surface points.
 
     Parameters
@@ -450,6 +451,8 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
         all): the world's map and cosine rays over world_strata² strata of their own (the
         map's sun keeps the lamps'; ``passes.world_strata_side``, GLSL bvh_direct.glsl
         WORLD_STRATA). None: the lamps' strata.
+    world_fewer : (N,) bool, with world_strata: the points that take them (the others the
+        lamps' strata; ``passes.world_fewer_pixels``, GLSL bvh_direct's world_fewer). None: all.
 
     Returns
     -------
@@ -498,6 +501,8 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
                     given["rest"] = lambda points_of_chunk, chunk_ids=ids[a:b], stream=index: \
                         hashed_square(chunk_ids[points_of_chunk], stream,
                                       world_strata * world_strata, seed)
+                    if world_fewer is not None:
+                        given["fewer"] = np.asarray(world_fewer, bool).reshape(-1)[a:b]
                 if strata_block is not None and strata_block[3] < strata_block[0]:
                     given["held"] = False  # a sample's share of its pixel's strata
                 if world_variance is not None:

@@ -457,7 +457,8 @@ def one_technique(square):
 
 
 def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sampled=None,
-                 variance=None, single: bool = False, held: bool | None = None, rest=None):
+                 variance=None, single: bool = False, held: bool | None = None, rest=None,
+                 fewer=None):
     """(N, 3) Diffuse Direct of the world at points p with unit normals n (facing the viewer):
     the unshadowed table value less the estimate of its hidden part from one world-map and one
     cosine ray per stratum (the balance heuristic; ``hidden_less``).
@@ -482,12 +483,17 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     rest : callable(point indices) -> (N, K', 2), the strata of the map's and cosine rays when
         they differ from the sun's (a whole image's pixel centres: ``passes.world_strata_side``);
         None: ``strata``'s.
+    fewer : (N,) bool, with ``rest``: the points whose map and cosine rays take ``rest``'s
+        strata; the others take ``strata``'s (``passes.world_fewer_pixels``). None: all.
 
     With a ``Sun`` and at least 2 × 2 strata (not single, no ``reflect``), the sun's hidden part
     is estimated apart (``_sun_hidden``) and the map's and cosine rays landing in it count
     nothing."""
     p = np.asarray(p, np.float64)
     n = np.asarray(n, np.float64)
+    if rest is not None and fewer is not None:
+        return _world_direct_split(world, p, n, occluded, strata, sampled, variance, single,
+                                   held, rest, np.asarray(fewer, bool))
     value = unshadowed(world, n)
     lit = np.flatnonzero(any_along(value > 0))
     glossy = np.zeros_like(value)
@@ -564,6 +570,26 @@ def world_direct(world: WorldLight, p, n, occluded, strata, reflect=None, sample
     shine = radiance * reflect(lit, dirs) / np.maximum(pdf, 1e-30)[..., None]
     glossy[lit] = np.where((up & ~blocked)[..., None], shine, 0.0).sum(axis=1) / per_technique
     return value, glossy
+
+
+def _world_direct_split(world, p, n, occluded, strata, sampled, variance, single, held, rest,
+                        fewer):
+    """``world_direct`` at the ``fewer`` points with ``rest``'s strata and at the others with
+    ``strata``'s: each group's rays drawn as when it is alone (the strata are hashed per
+    point)."""
+    value = np.zeros((len(p), 3))
+    for group, given in ((fewer, rest), (~fewer, None)):
+        own = np.flatnonzero(group)
+        if len(own) == 0:
+            continue
+        part = None if variance is None else variance[own]
+        value[own] = world_direct(
+            world, p[own], n[own], occluded, lambda points, own=own: strata(own[points]),
+            sampled=sampled, variance=part, single=single, held=held,
+            rest=None if given is None else (lambda points, own=own: rest(own[points])))
+        if variance is not None:
+            variance[own] = part
+    return value
 
 
 def _sun_hidden(world: WorldLight, origins, normals, square, occluded):

@@ -859,7 +859,8 @@ def filtered_sums(sums, count, tails: Tails, width: int, height: int, filter_wid
 
 def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
                  visibility=None, sample_ids=None, per_light=False, seed=0, strata_block=None,
-                 unshadowed=None, views=None, world_variance=None, world_strata=None):
+                 unshadowed=None, views=None, world_variance=None, world_strata=None,
+                 world_fewer=None):
     """(N, 3) Diffuse Direct at surface points: exact shadow rays against ``tris`` (shadows
     "RAYS") or one soft-shadow cone per light through ``octree`` ("CONES"; ``visibility``
     as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own).
@@ -872,7 +873,7 @@ def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
     then leave smooth-shaded triangles as Cycles' shadow terminator offset lifts them
     (``terminator.find_lifts``, GLSL bvh_direct.glsl ``terminator_set``). world_variance :
     ("RAYS") gets the variance of the world's part (``direct_light.diffuse_direct``'s);
-    world_strata : ("RAYS") ``diffuse_direct``'s."""
+    world_strata, world_fewer : ("RAYS") ``diffuse_direct``'s."""
     if shadows == "CONES":
         return cone_shadowed_direct(octree, points, normals, lights, cones, samples, visibility)
     terminator = None
@@ -882,7 +883,7 @@ def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
                           samples=samples, sample_ids=sample_ids, per_light=per_light, seed=seed,
                           strata_block=strata_block, unshadowed=unshadowed,
                           terminator=terminator, world_variance=world_variance,
-                          world_strata=world_strata)
+                          world_strata=world_strata, world_fewer=world_fewer)
 
 
 # The world light's filter spans about this share of the image's longer side: at 160 × 120 two
@@ -903,6 +904,17 @@ WORLD_NOISE_TARGET = 0.0
 # error stayed under Cycles 16 spp + OIDN's, where at 160 x 120 it reached it
 # (docs/gi_pipeline.md "Fewer world rays where the filter is wide")
 WORLD_FEWER_FROM = 4
+# ... and only at the pixels that lie farther than this from the geometry's edges: the half
+# width of the narrowest window the world's filter has (two passes, 13 x 13 pixels, the one
+# that at 160 x 120 averages all the strata), so a pixel whose fewer rays the filter must
+# average has that window on its own surface. Nearer an edge the filter, which stops at edges,
+# averages fewer pixels: with the cut there the city's streets at 640 x 480 read 3% more error
+# (docs/gi_pipeline.md "Fewer world rays where the filter is wide")
+WORLD_FEWER_REACH = (4 * (1 << 2) - 3) // 2
+# ... decided for whole blocks of this many pixels a side, the GPU kernels' work groups
+# (render/gpu_shaders.py LOCAL_SIZE): llvmpipe runs a group's lanes in lock step, so a group
+# whose pixels drew over both strata counts paid for both
+WORLD_FEWER_BLOCK = 8
 
 
 def world_strata_side(samples: int, width: int, height: int) -> int:
@@ -914,6 +926,32 @@ def world_strata_side(samples: int, width: int, height: int) -> int:
     if world_filter_passes(width, height) >= WORLD_FEWER_FROM:
         return side - side // 4
     return side
+
+
+def world_fewer_pixels(edge, samples: int) -> np.ndarray | None:
+    """(H, W) bool: the pixels whose world rays go over ``world_strata_side``'s fewer strata,
+    from the image's geometric edge pixels ``edge`` (H, W) (``edge_pixels``; none when
+    point-sampled): those with no edge pixel within WORLD_FEWER_REACH (a square window). None
+    where no pixel's rays are cut (the filter's window is narrow, or so few Light Samples that
+    a quarter fewer strata a side is as many)."""
+    edge = np.asarray(edge, bool)
+    height, width = edge.shape
+    side = max(1, math.ceil(math.sqrt(samples)))
+    if world_strata_side(samples, width, height) == side:
+        return None
+    reach = WORLD_FEWER_REACH
+    counts = np.pad(edge.astype(np.int32), reach).cumsum(axis=0).cumsum(axis=1)
+    counts = np.pad(counts, ((1, 0), (1, 0)))  # the edge pixels in each (2 reach + 1)² window
+    span = 2 * reach + 1
+    near = counts[span:, span:] - counts[:-span, span:] - counts[span:, :-span] + \
+        counts[:-span, :-span]
+    # whole blocks of the GPU's work groups, counted from the bottom row as its texels are
+    block = WORLD_FEWER_BLOCK
+    rows, columns = -(-height // block), -(-width // block)
+    cut = np.ones((rows * block, columns * block), bool)
+    cut[:height, :width] = near[::-1] == 0
+    cut = cut.reshape(rows, block, columns, block).all(axis=(1, 3))
+    return np.repeat(np.repeat(cut, block, axis=0), block, axis=1)[:height, :width][::-1]
 
 
 def world_filter_passes(width: int, height: int) -> int:
@@ -1306,13 +1344,17 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         # _world_smooth), from the variance of its estimate
         variance = np.zeros(len(hit)) if seen is centre_seen and shadows == "RAYS" and \
             any(light.type == "WORLD" for light in lights) else None
-        # (and its rays go over world_strata_side's strata: the filter's window is wide)
+        # (and its rays go over world_strata_side's strata where the filter's window is wide
+        # and on one surface: world_fewer_pixels)
+        fewer = None if variance is None else world_fewer_pixels(edge.reshape(height, width),
+                                                                 light_samples)
         per_light = direct_light(None, p, n, lights, tris, cones, light_samples, shadows,
                                  sample_ids=hit, per_light=True, seed=gather_settings.seed,
                                  strata_block=block, unshadowed=unshadowed, views=-views,
                                  world_variance=variance,
-                                 world_strata=None if variance is None else world_strata_side(
-                                     light_samples, *seen.hit.shape[::-1]))
+                                 world_strata=None if fewer is None else world_strata_side(
+                                     light_samples, width, height),
+                                 world_fewer=None if fewer is None else fewer.ravel()[hit])
         if variance is not None:
             per_light = world_filtered(per_light, variance, lights, hit, seen)
         shine = glossy_direct_radiance(snapshot, p, n, views, mat,
