@@ -27,7 +27,7 @@ def release_gpu_resources() -> None:
     unbinds the context's shader before it drops its own (``gpu_shaders.forget``)."""
     for name in ("viewport", "kernel_warmup", "debug_draw", "gpu_shaders", "gpu_bvh",
                  "gpu_gather", "gpu_principled", "gpu_compose", "gpu_accumulation",
-                 "gpu_gather_sums"):
+                 "gpu_gather_sums", "gpu_tails"):
         module = sys.modules.get(f"{__name__}.{name}")  # not imported: nothing cached
         if module is not None:
             module.release()

@@ -37,7 +37,6 @@ from ..voxgi_addon.preview.passes import (
     pass_tail_weights,
     pass_weights,
     shows_diffuse,
-    stacked_tails,
     subpixel_passes,
     subpixel_reach,
     world_fewer_pixels,
@@ -83,6 +82,7 @@ from .gpu_gather import (
 )
 from .gpu_scene import GPUScene, current_scene
 from .gpu_shaders import LOCAL_SIZE, size_like
+from .gpu_tails import GPUTails, reached_pixels
 from .gpu_tracer import read_texture
 from .gpu_volume import GPUVolume, float_texture
 
@@ -745,9 +745,11 @@ def _subpixel_passes(f):
     pays: ``gbuffer.PixelMask``), the gathered terms and the
     emitters' light — the centre's where the pass sees its centre's surface, else the gathers
     and the field at the pass's own point (docs/gi_pipeline.md "Anti-aliasing") — and the
-    pass's direct light; their sums replace the centre pass's, their filter tails reach the
-    neighbours (``preview.passes.stacked_tails``), each pass weighted by its cell's share of
-    the filter (``preview.passes.pass_weights``)."""
+    pass's direct light; summed on the GPU (``gpu_tails.GPUTails``, the statement of
+    ``preview.passes.stacked_tails``) into the edge pixel, each pass weighted by its cell's
+    share of the filter (``preview.passes.pass_weights``), and into the neighbours its filter
+    tails reach (``pass_tail_weights``): the edge pixels' sums are all in the returned tails,
+    read back once a reached pixel."""
     scene, snapshot, plan = f["scene"], f["snapshot"], f["plan"]
     width, height, gi_stride = f["width"], f["height"], f["gi_stride"]
     texel, edge, listed = f["centre_texel"], f["edge_all"], f["listed"]
@@ -770,8 +772,14 @@ def _subpixel_passes(f):
     # (a textured sample their light, coloured by its own texel: aa_resolve.glsl,
     # preview.resolve), the others are shaded below
     names = _SUM_TEXTURES
-    flag = names.index("sum_d")  # its alpha: the resolved samples' mark (aa_resolve.glsl)
-    samples = np.empty((len(plan), len(names), len(listed), 4), np.float32)
+    # summed on the GPU into the pixels they reach, each pass weighted by its cell's share of
+    # the filter in its own pixel and by the filter at its place in the neighbours'
+    reached = reached_pixels(listed, width, height)
+    reach = GPUTails(pixels, list_size, (width, height), reached,
+                     *_pixel_list(reached, width, height))
+    share = pass_weights(plan, f["filter_width"]) / len(plan)
+    reach_weights = pass_tail_weights(plan, f["filter_width"]) * share[:, None, None]
+    reach_weights[:, 1, 1] = share
     # the passes draw the listed pixels only where the raster has the texture code (its
     # fragments cost 3× the mask's full-screen pass: 47 → 14 ms a pass, textured room at
     # 640 × 480); the plain variant's are cheaper than the mask (9 → 10 ms, the box)
@@ -779,7 +787,6 @@ def _subpixel_passes(f):
     mask = None if scene.raster_textures() is None else \
         PixelMask(np.repeat(np.repeat(edge, fine, axis=0), fine, axis=1))
     settings = f["gather_settings"]
-    weights = pass_weights(plan, f["filter_width"])
 
     def place(index):  # ((tx, gx), (ty, gy)): pass (a, b) is sample (tx, ty) of raster (gx, gy)
         return (divmod(index // AA_SIDE, AA_SIDE // fine),
@@ -815,15 +822,12 @@ def _subpixel_passes(f):
             _RESOLVE_OUTPUTS, list_size[0], list_size[1] * len(indices),
             constants={"resolve": (float(len(indices)), SPREAD, float(fine),
                                    float(list_size[1]))}, over=list_size)
-        for k, name in enumerate(names):
-            rows = read_texture(blended["out" + name[3:]]).reshape(len(indices), -1, 4)
-            for row, index in enumerate(indices):
-                samples[index, k] = rows[row, :len(listed)]
-        for index in indices:  # the samples left, shaded over a list of their own pixels
+        # the resolved samples' mark: out_d's alpha (aa_resolve.glsl)
+        marks = read_texture(blended["out_d"])[..., 3].reshape(len(indices), -1)
+        for row, index in enumerate(indices):  # the samples left, shaded over their own list
             offset, block = plan[index]
             (tx, _), (ty, _) = place(index)
-            left = np.flatnonzero(samples[index, flag, :, 3] < 0.5)
-            samples[index, flag, :, 3] = 0.0
+            left = np.flatnonzero(marks[row, :len(listed)] < 0.5)
             if not len(left):
                 continue
             sub_pixels, sub_size = (pixels, list_size) if len(left) == len(listed) else \
@@ -856,21 +860,18 @@ def _subpixel_passes(f):
                     scene.bvh, inputs, scene.emitters, scene.materials, settings.glossy_rays,
                     settings.seed, scene.no_lamp, scene.world_map, centre=listed_centres,
                     field=field_glossy)
-            # this pass's samples, read back to count in the neighbours by the filter at
-            # their own place (preview.passes.stacked_tails)
+            # this pass's shaded samples, put among the raster's resolved ones
             textures = yield from _shade(f, inputs, {name: blank for name in names}, terms,
                                          blank, sub_size, block, glow=glow,
                                          centre=listed_centres, field=field_diffuse)
-            for k, name in enumerate(names):
-                samples[index, k, left] = \
-                    read_texture(textures[name]).reshape(-1, 4)[:len(left)]
-    samples *= (weights / len(plan)).astype(np.float32)[:, None, None, None]
-    own = samples.sum(axis=0, dtype=np.float64) * len(plan)
-    at, tail = stacked_tails(samples, pass_tail_weights(plan, f["filter_width"]), listed, width,
-                             height)
-    tails = Tails(at, _sums_of({name: tail[:, 4 * k:4 * k + 4] for k, name in enumerate(names)}))
-    for k, name in enumerate(names):
-        texel[name][listed] = own[k]
+            side, rows = list_size
+            reach.place(blended, textures, np.stack(
+                [left % side, left // side + row * rows], axis=1), sub_size)
+        reach.add(blended, reach_weights[indices])
+    # the edge pixels' own sums are in their tails (``finish_passes`` adds both)
+    for name in names:
+        texel[name][listed] = 0.0
+    tails = Tails(reached, _sums_of(reach.read()))
     return {"texel": texel, "tails": tails}
 
 
