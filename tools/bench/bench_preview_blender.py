@@ -178,6 +178,7 @@ STAGES = {"bvh_gather": "diffuse+AO gather", "bvh_glossy": "glossy gather",
           "glossy_direct": "direct light", "bvh_emitter_glossy": "direct light",
           "aa_surface": "compose", "aa_light": "compose", "aa_mask": "compose",
           "aa_list": "compose", "aa_list_raw": "compose", "aa_resolve": "compose",
+          "aa_index": "compose", "aa_place": "compose", "aa_tails": "compose",
           "gbuffer": "G-buffers",
           "upsample_field": "direct light", "upsample_field_list": "direct light"}
 # Texel fetches per invocation of the kernels that trace no ray, read off their shaders: the
@@ -257,7 +258,7 @@ def _finish(texture) -> None:
 
 def profiled(fn, profile: Profile):
     """Run ``fn`` with the tracer's dispatch functions wrapped to time and count each one."""
-    from voxgi.render import gpu_bvh, gpu_compose, gpu_gather, gpu_preview, gpu_scene
+    from voxgi.render import gpu_bvh, gpu_compose, gpu_gather, gpu_preview, gpu_scene, gpu_tails
 
     lights = len(gpu_scene.current_scene().lights) if gpu_scene.current_scene() else 1
     saved = []
@@ -311,8 +312,28 @@ def profiled(fn, profile: Profile):
             return call
         return wrapper
 
+    def tails_wrapper(kernel):  # gpu_tails.GPUTails' methods: (invocations, fetches each)
+        def wrapper(original):
+            def call(self, *args):
+                t0 = time.perf_counter()
+                out = original(self, *args)
+                _finish(self.sums["a"])
+                if kernel == "aa_tails":  # 7 sums, 9 index fetches, every neighbour listed
+                    w, h = self.reached_size
+                    count = w * h * (7 + 9 + 9 * len(args[1]) * 8)
+                elif kernel == "aa_place":
+                    count = args[3][0] * args[3][1] * 8
+                else:
+                    count = args[1][0] * args[1][1]
+                profile.add(kernel, time.perf_counter() - t0, 0.0, float(count))
+                return out
+            return call
+        return wrapper
+
     patch(gpu_bvh, "dispatch_bvh", bvh_wrapper)
     patch(gpu_gather, "dispatch_bvh", bvh_wrapper)
+    for name, kernel in (("__init__", "aa_index"), ("place", "aa_place"), ("add", "aa_tails")):
+        patch(gpu_tails.GPUTails, name, tails_wrapper(kernel))
     patch(gpu_compose, "run", compose_wrapper)
     patch(gpu_preview, "_run", compose_wrapper)
     patch(gpu_gather, "relax_gpu", timed("relax"))
