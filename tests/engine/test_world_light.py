@@ -228,9 +228,11 @@ def test_the_sub_pixel_samples_draw_the_worlds_strata_as_one_estimate():
     points = np.zeros((40, 3))
     normals = np.tile([0.0, -0.3, 1.0], (40, 1)) / math.hypot(0.3, 1.0)
     ids = np.arange(40)
-    plan = subpixel_passes(1.5, 16)
+    plan = subpixel_passes(1.5, 4)  # the passes' 4 × 4 (``EDGE_STRATA`` × a centre's 2 × 2)
     assert len(plan) == AA_SIDE ** 2 and all(block[3] == 1 for _, block in plan)
     assert world_block(plan[0][1]) == (8, 0, 0, 2) and world_block((4, 0, 0, 4)) == (4, 0, 0, 4)
+    # the default plan's passes already draw 2 × 2 of the lamps' 8 × 8: the world the same four
+    assert subpixel_passes(1.5, 16)[0][1] == (8, 0, 0, 2) == world_block((8, 0, 0, 2))
     samples = [diffuse_direct(points, normals, [world], _Wall(), sample_ids=ids, seed=3,
                               strata_block=block) for _, block in plan]
     whole = diffuse_direct(points, normals, [world], _Wall(), sample_ids=ids, seed=3,

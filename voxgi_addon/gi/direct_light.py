@@ -387,7 +387,10 @@ _BY_TYPE = {"SUN": _sun, "POINT": _point, "SPOT": _point, "AREA": _area, "WORLD"
 def world_block(block):
     """The strata block of the world's and the emitters' shadow rays in a sub-pixel pass that
     draws ``block`` = (M, row, column, m) of the lamps' M × M strata: the same share of a set
-    twice as fine, (2M, 2 row, 2 column, 2m), four strata a sample where the lamps draw one.
+    twice as fine, (2M, 2 row, 2 column, 2m), four strata a sample where the lamps draw one;
+    the lamps' own block where it already has four or more (m ≥ 2: the passes' strata at the
+    default 16 Light Samples, ``passes.EDGE_STRATA``), so a sample's world and emitter rays
+    stay four.
     A sample's one stratum of a sky or a sun in an HDRI is grain the world filter does not
     reach (it filters the pixel centres), seen as dark dots along silhouettes and shadow
     edges (docs/gi_pipeline.md "The world's strata at the sub-pixel samples"). A sample's
@@ -397,7 +400,7 @@ def world_block(block):
     if block is None:
         return None
     side, row, column, m = block
-    if m >= side:
+    if m >= side or m >= 2:
         return block
     return (2 * side, 2 * row, 2 * column, 2 * m)
 

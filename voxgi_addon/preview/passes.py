@@ -306,21 +306,31 @@ def compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao, glos
 AA_SIDE = 4  # the anti-aliased preview renders AA_SIDE² sub-pixel passes
 
 
+# The sub-pixel passes' strata side over the pixel centres': an edge pixel's 16 passes trace 4×
+# its centre's shadow rays (the hall at 640 × 480: Combined 0.10121 → 0.10003, below Cycles 16
+# spp + OIDN's 0.10047, for the unresolved samples' rays; docs/gi_pipeline.md "More shadow rays
+# at the edge pixels")
+EDGE_STRATA = 2
+
+
 def subpixel_passes(filter_width: float, light_samples: int):
     """The anti-aliased preview's passes: [(offset (x, y) in pixels, strata_block)], one per
     ``camera.filter_samples`` entry (AA_SIDE² of them, weighted by ``pass_weights``: a grid
     that one raster AA_SIDE times finer than the image draws together), each drawing a block
     of the shadow
     rays' M × M strata (``direct_light.diffuse_direct``'s strata_block) so that the passes
-    together trace every stratum equally often — the shadow rays and their stratification stay
-    those of one pass over all strata. M = ⌈√light_samples⌉ when it tiles the AA_SIDE ×
-    AA_SIDE passes (1, 2 or a multiple of AA_SIDE), else the nearest that does (3 → 4, 5 → 4,
-    6 → 8, …). Pass (a, b) draws block (a, b) of side M / AA_SIDE, or for M < AA_SIDE
-    stratum (a mod M, b mod M). filter_width ≤ 0: one pass through the pixel centres with
-    all strata (point sampling)."""
+    together trace every stratum equally often. M = EDGE_STRATA × ⌈√light_samples⌉ (the
+    pixel centres' side times EDGE_STRATA: an edge pixel's passes trace EDGE_STRATA² times a
+    centre's shadow rays, where its light changes and no filter smooths it; docs/gi_pipeline.md
+    "More shadow rays at the edge pixels") when it tiles the AA_SIDE × AA_SIDE passes (1, 2 or
+    a multiple of AA_SIDE), else the nearest that does (6 → 8, 10 → 8, …). Pass (a, b) draws
+    block (a, b) of side M / AA_SIDE, or for M < AA_SIDE stratum (a mod M, b mod M).
+    filter_width ≤ 0: one pass through the pixel centres with all ⌈√light_samples⌉² strata
+    (point sampling; ``centre_pass``)."""
     side = max(1, math.ceil(math.sqrt(light_samples)))
     if filter_width <= 0.0:
         return [((0.0, 0.0), (side, 0, 0, side))]
+    side *= EDGE_STRATA
     if side > 2 and side % AA_SIDE:
         side = max(AA_SIDE, AA_SIDE * int(math.floor(side / AA_SIDE + 0.5)))
     out = []
