@@ -323,7 +323,7 @@ def subpixel_passes(filter_width: float, light_samples: int):
     pixel centres' side times EDGE_STRATA: an edge pixel's passes trace EDGE_STRATA² times a
     centre's shadow rays, where its light changes and no filter smooths it; docs/gi_pipeline.md
     "More shadow rays at the edge pixels") when it tiles the AA_SIDE × AA_SIDE passes (1, 2 or
-    a multiple of AA_SIDE), else the nearest that does (6 → 8, 10 → 8, …). Pass (a, b) draws
+    a multiple of AA_SIDE), else the nearest that does (6 → 8, 10 → 12, …). Pass (a, b) draws
     block (a, b) of side M / AA_SIDE, or for M < AA_SIDE stratum (a mod M, b mod M).
     filter_width ≤ 0: one pass through the pixel centres with all ⌈√light_samples⌉² strata
     (point sampling; ``centre_pass``)."""
