@@ -171,7 +171,34 @@ def no_texture_inputs() -> dict[str, object]:
     return {name: float_texture(blank, (1, 1)) for name in ("texture_table", "texture_atlas")}
 
 
+# The session's last complete radiance cache, whoever built it — F12, ``render_preview`` or a
+# Rendered view (``viewport_cache.ViewportCache``): {"entry": (the BVH's node texture, its
+# ``cache_key``, its cache (a ``RadianceCache``, or a function reading one back), its
+# texture)}. The same triangles (the session's one GPU scene keeps their node texture), lights,
+# materials and cache settings give the same cache whoever builds it (a test), so a view
+# entered after F12, F12 after a view, and a view switched off and on again read it and build
+# none (docs/gi_pipeline.md "One radiance cache for F12 and the Rendered view").
 _cache_upload: dict[str, object] = {}
+
+
+def shared_cache(nodes, key):
+    """(cache, texture) of the session's complete radiance cache when it was built over the
+    BVH node texture ``nodes`` for ``key`` (``cache_key``), else None."""
+    held = _cache_upload.get("entry")
+    if held is None or held[0] is not nodes or held[1] != key:
+        return None
+    return held[2], held[3]
+
+
+def share_cache(nodes, key, cache, texture) -> None:
+    """Keep a complete radiance cache (see ``shared_cache``) for the session's next reader."""
+    _cache_upload["entry"] = (nodes, key, cache, texture)
+
+
+def drop_shared_cache() -> None:
+    """Forget the session's radiance cache (a file load: it belongs to the file it came from;
+    the views holding it keep theirs)."""
+    _cache_upload.clear()
 CACHE_IMAGE_WIDTH = 256  # voxel faces per row of the cache's gather "image"
 CACHE_STAGE_SECONDS = 0.015  # a chunk of the viewport's staged build (progressive.STAGE_SHARE)
 CHUNK_AIM = 0.75    # of it, what the next chunk is sized for by the last one's time
@@ -423,16 +450,16 @@ def gather_tables(lights, principled, emission) -> dict:
 def cache_texture(bvh: GPUBVH, lights, principled, emission, settings, tables=None):
     """The texture of the radiance cache the diffuse gather reads at its bounce hits for
     ``settings.bounces`` (``cache_gpu``), kept for the next gather with the same triangles,
-    lights, materials and cache settings (the viewport's slices)."""
+    lights, materials and cache settings — or the one a Rendered view built for them
+    (``shared_cache``)."""
     key = cache_key(lights, principled, emission, *cache_settings(settings))
-    held = _cache_upload.get("entry")
     # the BVH's node texture is replaced whenever other triangles are uploaded (the same
     # triangles snapshotted again keep it: a viewport slice's)
-    if held is None or held[0] is not bvh.nodes or held[1] != key:
-        cache, texture = cache_gpu(bvh, lights, principled, emission, settings, tables)
-        held = (bvh.nodes, key, cache, texture)
-        _cache_upload["entry"] = held
-    return held[3]
+    held = shared_cache(bvh.nodes, key)
+    if held is None:
+        held = cache_gpu(bvh, lights, principled, emission, settings, tables)
+        share_cache(bvh.nodes, key, *held)
+    return held[1]
 
 
 # Ray traversals (a bounce ray or a shadow ray) one gather invocation may make per dispatch.

@@ -49,7 +49,7 @@ from ..voxgi_addon.scene.geometry import world_triangles
 from ..voxgi_addon.scene.glass import ray_alpha
 from ..voxgi_addon.scene.textures import pack_atlas
 from .gpu_bvh import GPUBVH, absent_lights, has_metals, shared_bvh
-from .gpu_gather import no_texture_inputs, principled_materials_texture
+from .gpu_gather import drop_shared_cache, no_texture_inputs, principled_materials_texture
 from .gpu_ltc import ltc_texture
 from .gpu_principled import lut_texture
 from .gpu_shaders import note_upload
@@ -691,9 +691,10 @@ def current_scene(snapshot=None) -> GPUScene:
 @bpy.app.handlers.persistent
 def _drop_on_load(*_args) -> None:
     # What was uploaded belongs to the file it came from (docs/gi_pipeline.md "One file's
-    # state"): the next render builds the new file's scene.
+    # state"): the next render builds the new file's scene, and its radiance cache.
     global _current
     _current = None
+    drop_shared_cache()
 
 
 def release() -> None:

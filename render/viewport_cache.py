@@ -16,12 +16,18 @@ be dropped). The build's CPU half — the cache's voxels, face points and layout
 (``gpu_gather.cache_layout``, 0.15 s of numpy on the demo box, more on larger scenes) — is
 made on the viewport's preparing thread first (``viewport_prepare.PrepWorker``), never in a
 draw (docs/gi_pipeline.md "Entering Rendered mode").
+
+A complete build is the session's too (``gpu_gather.share_cache``), and a view whose scene the
+session already holds a complete cache for takes it instead of building one
+(``gpu_gather.shared_cache``): a view entered after F12, or switched off and on again, starts
+on every bounce at once, and F12 after a view builds none (docs/gi_pipeline.md "One radiance
+cache for F12 and the Rendered view").
 """
 from __future__ import annotations
 
 from ..voxgi_addon.gi.radiance_cache import cache_key
 from ..voxgi_addon.preview.gather import cache_settings, uses_cache
-from .gpu_gather import CACHE_STAGE_SECONDS, cache_layout, cache_stages
+from .gpu_gather import CACHE_STAGE_SECONDS, cache_layout, cache_stages, share_cache, shared_cache
 
 STAGE_SECONDS = CACHE_STAGE_SECONDS  # what one chunk aims at (half the 30 ms budget)
 
@@ -60,6 +66,8 @@ class ViewportCache:
         # the BVH's node texture is replaced whenever other triangles are uploaded
         key = (bvh.nodes, cache_key(lights, principled, emission, *cache_settings(settings)))
         if _same(key, self.key):
+            return self.texture
+        if self._adopt(key):  # F12 or another view built it: no stage (even while held)
             return self.texture
         if self.hold:  # asked for, not begun: ``resume`` begins it if the image converges first
             self._wanted = (key, (bvh, lights, principled, emission, settings, tables))
@@ -132,6 +140,7 @@ class ViewportCache:
             (self._read, self.texture), self._cache = end.value, None
             self.key, self.building = key, None
             self.generation += 1
+            share_cache(*key, self._read, self.texture)  # for F12 and the next view
             return True
         except BaseException:
             self.building = None
@@ -155,6 +164,21 @@ class ViewportCache:
                 (self.building[1] is None and not self._start()):
             return False
         self.advance()
+        return True
+
+    def _adopt(self, key) -> bool:
+        """Take the session's complete cache for ``key`` (``gpu_gather.shared_cache``) as this
+        view's, dropping a build under way; whether there was one. A new generation, as a
+        completed build's: the image restarts on it."""
+        shared = shared_cache(*key)
+        if shared is None:
+            return False
+        if self.building is not None and self.building[1] is not None:
+            self.building[1].close()
+        cache, self.texture = shared
+        self._read, self._cache = (cache, None) if callable(cache) else (None, cache)
+        self.key, self.building, self._wanted = key, None, None
+        self.generation += 1
         return True
 
     @property

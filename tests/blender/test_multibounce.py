@@ -293,7 +293,7 @@ def test_f12_lays_the_cache_out_on_a_thread_while_the_bvh_builds_and_once(voxgi,
     monkeypatch.setattr(gpu_preview, "cache_layout_ahead", lambda tris, settings: None)
     gpu_scene.release()
     gpu_gather._LAYOUT.clear()
-    gpu_gather._cache_upload.clear()
+    gpu_gather.drop_shared_cache()
     (tmp_path / "inline").mkdir()
     inline = preview(tmp_path / "inline", scene, 64, 48)
     assert made[1:] == ["MainThread"], made

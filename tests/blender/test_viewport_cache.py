@@ -519,3 +519,69 @@ def test_a_completed_cache_restarts_the_image_without_a_second_coarse_image(voxg
     assert any(kind == "tile" and generation == 1 for kind, generation in fresh), fresh
     changed = slices_until_converged(turned(view, 2.0))
     assert changed[0][0] == "coarse" and [k for k, _ in changed].count("coarse") == 1, changed
+
+
+def test_f12_and_the_rendered_view_share_one_radiance_cache(voxgi, monkeypatch):
+    """A view entered after F12 reads F12's radiance cache, F12 after a view reads the view's,
+    and a view switched off and on again reads the one it built: none builds it again, and
+    F12's image over the view's cache is F12's over its own (the two builds are one cache)."""
+    from stand_in_engine import StandInEngine
+    from test_viewport import camera_matrices, cornell, engine_view, gpu_ready
+
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render import gpu_gather, viewport_cache
+    from voxgi.render.pipeline import render_scene_passes
+    from voxgi.render.viewport import ViewportRenderer
+
+    scene = cornell()
+    scene.voxgi.quality = "ACCURATE"
+    scene.voxgi_viewport.samples = 1
+    scene.voxgi.bounce_source = "MANUAL"
+    scene.voxgi.bounces = 3
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live_gi(scene.name_full).update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    built = {"view": 0, "f12": 0}
+    stages, whole = viewport_cache.cache_stages, gpu_gather.cache_gpu
+    monkeypatch.setattr(viewport_cache, "cache_stages",
+                        lambda *a, **k: (built.__setitem__("view", built["view"] + 1),
+                                         stages(*a, **k))[1])
+    monkeypatch.setattr(gpu_gather, "cache_gpu",
+                        lambda *a, **k: (built.__setitem__("f12", built["f12"] + 1),
+                                         whole(*a, **k))[1])
+
+    def converged_view():
+        engine = StandInEngine()
+        renderer = engine.voxgi_viewport = ViewportRenderer()
+        for _ in range(5000):
+            redraws = engine.redraws
+            engine_view(engine, scene, depsgraph, view, window)
+            if engine.redraws == redraws:
+                break
+        assert renderer.progressive.converged and renderer.cache.generation == 1
+        return renderer
+
+    def f12():
+        passes, _ = render_scene_passes(bpy.context, scene, None, 48, 36)
+        return np.asarray(passes["Combined"], np.float64)
+
+    gpu_gather.drop_shared_cache()  # as after an edit
+    first = converged_view()
+    assert built == {"view": 1, "f12": 0}
+    over_views = f12()  # F12 after the view: the view's cache
+    assert built == {"view": 1, "f12": 0}
+    assert gpu_gather.shared_cache(*first.cache.key)[1] is first.cache.texture
+    again = converged_view()  # the view switched off and on: no build
+    assert built == {"view": 1, "f12": 0} and again.cache.texture is first.cache.texture
+    gpu_gather.drop_shared_cache()
+    own = f12()  # F12 building its own
+    assert built == {"view": 1, "f12": 1}
+    assert own.mean() > 0.01
+    np.testing.assert_allclose(over_views, own, rtol=1e-5, atol=1e-6)
+    after = converged_view()  # a view entered after F12: F12's cache, no build
+    assert built == {"view": 1, "f12": 1}
+    assert after.cache.texture is gpu_gather.shared_cache(*after.cache.key)[1]
+    assert after.cache.cache is not None  # F12's read-back cache, for Fast's voxels
+    bpy.ops.wm.read_factory_settings(use_empty=True)  # another file: its own cache
+    assert gpu_gather.shared_cache(*after.cache.key) is None

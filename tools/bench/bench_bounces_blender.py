@@ -114,7 +114,7 @@ def main(argv=None) -> int:
 
     def drop_cache():
         # as after an edit: the next preview builds its radiance cache again
-        gpu_gather._cache_upload.clear()
+        gpu_gather.drop_shared_cache()
 
     size_note = (f"{width}×{height} (quick: errors against the 160×120 reference averaged 2×2, "
                  "a check of the tooling, not the measurement)" if args.quick

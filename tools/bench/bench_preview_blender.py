@@ -477,7 +477,7 @@ def main(argv=None) -> int:
     first_timings = _timings(lines)
     warm_times = []
     for _ in range(repeats):
-        gpu_gather._cache_upload.clear()  # as after an edit: the cache is built again
+        gpu_gather.drop_shared_cache()  # as after an edit: the cache is built again
         t0 = time.perf_counter()
         passes, lines = preview()
         warm_times.append(time.perf_counter() - t0)
@@ -488,7 +488,7 @@ def main(argv=None) -> int:
     fetch_rate = _fetch_rate(3)
     closest_rate, any_rate = _ray_rates(gpu_scene.bvh, gpu_scene.tris, 3)
     profile = Profile()
-    gpu_gather._cache_upload.clear()
+    gpu_gather.drop_shared_cache()
     t0 = time.perf_counter()
     _on_gpu(profiled(preview, profile)[1])
     profiled_total = time.perf_counter() - t0

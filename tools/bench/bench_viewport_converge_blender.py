@@ -16,7 +16,9 @@ paths, 2048 spp):
    view and projection matrices, a 640 × 480 region at the default Viewport Resolution ¼ —
    so the traced image is 160 × 120 — and the default Viewport Samples) into an offscreen,
    draw after draw, from a fresh view (a new ``ViewportRenderer``: its radiance cache built
-   inside the draws, as when a 3D view is switched to Rendered) and from a view change (a view
+   inside the draws, as when a 3D view is switched to Rendered after an edit), from a fresh
+   view whose cache the session holds (a view switched off and on again, or entered after
+   F12: ``gpu_gather.shared_cache``) and from a view change (a view
    converged 10° away turns to the camera: the radiance cache kept). After every draw that
    finished a slice the shown estimate is read back (``ProgressiveImage.read_image``, not
    timed) and its RGB compared with F12's Combined over the same pixels; the time until it is
@@ -91,6 +93,7 @@ def view_runs(scene, depsgraph, f12, mask, repeats):
 
     from voxgi.blender import jobs
     from voxgi.blender.viewport_session import live_gi
+    from voxgi.render import gpu_gather
     from voxgi.render.viewport import ViewportRenderer, viewport_size
 
     width, height = REGION
@@ -153,14 +156,22 @@ def view_runs(scene, depsgraph, f12, mask, repeats):
         engine.voxgi_viewport = ViewportRenderer()
         return engine
 
+    def unshared():  # as after an edit: no complete cache in the session for this scene
+        gpu_gather.drop_shared_cache()
+        return fresh()
+
     live.update(scene, depsgraph)
     assert jobs.wait_idle(600), "the viewport job did not finish"
     jobs.drain()
-    run(fresh(), view, measure=False)  # warm-up: shaders compiled, the slice sizer learns
+    run(unshared(), view, measure=False)  # warm-up: shaders compiled, the slice sizer learns
     runs = {"fresh view (radiance cache built in the draws)": [],
+            "fresh view after F12 or another view (radiance cache shared)": [],
             "view change (radiance cache kept)": []}
     for _ in range(repeats):
-        runs["fresh view (radiance cache built in the draws)"].append(run(fresh(), view))
+        runs["fresh view (radiance cache built in the draws)"].append(run(unshared(), view))
+        # the view just built it: a view switched off and on, or entered after F12, reads it
+        runs["fresh view after F12 or another view (radiance cache shared)"].append(
+            run(fresh(), view))
         engine = fresh()
         run(engine, away, measure=False)  # converged 10° away, then the view turns
         assert jobs.wait_idle(600), "a viewport job did not finish"
@@ -227,7 +238,8 @@ def main(argv=None) -> int:
                 f"{med([r.seconds for r in results]):.2f} s ({med([r.wall for r in results]):.2f}"
                 f" s wall){'' if converged else ', not converged'}, error "
                 f"{med([r.points[-1][3] for r in results]):.4f}; "
-                f"{med([r.cache_builds for r in results]):.0f} radiance cache built, "
+                f"{med([r.cache_builds for r in results]):.0f} radiance cache built or taken "
+                f"from the session, "
                 f"{med([r.restarts for r in results]):.0f} image restart | "
                 f"{cycles_seconds:.2f} s, "
                 f"e16 {e16:.3f} (F12's {f12_error:.3f}) | "
