@@ -42,7 +42,7 @@ from ..voxgi_addon.preview.upsample import low_shape
 from ..voxgi_addon.scene.textures import TexelBase
 from .gbuffer import rasterize, read_gbuffer
 from .gpu_bvh import direct_light_texture
-from .gpu_gather import cache_gpu, glossy_direct_texture
+from .gpu_gather import cache_gpu, glossy_direct_texture, share_cache, shared_cache
 from .gpu_scene import current_scene
 from .gpu_tracer import dispatch, read_texture
 from .gpu_volume import GPUVolume, float_texture
@@ -50,23 +50,25 @@ from .gpu_volume import GPUVolume, float_texture
 # per GPUVolume of the diffuse cones (the caller's, kept between calls) the GPUVolumes of the
 # other kinds of cones whose voxels differ (gi/ray_views.py), released with it
 _view_volumes: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-_held_cache: dict = {}  # the last radiance cache (_radiance_cache)
 
 
 def _radiance_cache(scene, settings):
     """The radiance cache of ``settings.bounces`` (``gi.radiance_cache``; None for one
-    bounce) gathered on the GPU (``gpu_gather.cache_gpu``) for the GPU scene ``scene``, kept
+    bounce) gathered on the GPU (``gpu_gather.cache_gpu``) for the GPU scene ``scene``: the
+    session's (``gpu_gather.shared_cache``, whoever built it: Accurate's F12, a Rendered view)
     while its triangles (the BVH's node texture), lights, materials and cache settings stay."""
     if settings.bounces <= 1:
         return None
     key = cache_key(scene.lights, scene.principled, scene.emission, *cache_settings(settings))
-    held = _held_cache.get("entry")
-    if held is None or held[0] is not scene.bvh.nodes or held[1] != key:
-        cache, _ = cache_gpu(scene.bvh, scene.lights, scene.principled, scene.emission,
-                             settings, scene.gather_tables())
-        held = (scene.bvh.nodes, key, cache)
-        _held_cache["entry"] = held
-    return held[2]
+    held = shared_cache(scene.bvh.nodes, key)
+    if held is None:
+        held = cache_gpu(scene.bvh, scene.lights, scene.principled, scene.emission,
+                         settings, scene.gather_tables())
+        share_cache(scene.bvh.nodes, key, *held)
+    if callable(held[0]):  # a view's: its faces read back once, then kept with it
+        held = (held[0](), held[1])
+        share_cache(scene.bvh.nodes, key, *held)
+    return held[0]
 
 
 _BUILD = object()  # fast_passes' radiance: build (or keep) the whole cache here

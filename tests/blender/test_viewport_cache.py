@@ -585,3 +585,40 @@ def test_f12_and_the_rendered_view_share_one_radiance_cache(voxgi, monkeypatch):
     assert after.cache.cache is not None  # F12's read-back cache, for Fast's voxels
     bpy.ops.wm.read_factory_settings(use_empty=True)  # another file: its own cache
     assert gpu_gather.shared_cache(*after.cache.key) is None
+
+
+def test_fast_quality_reads_the_sessions_radiance_cache(voxgi, monkeypatch):
+    """Fast quality's F12 takes the session's cache (here a view's, read back once) and builds
+    none; what it reads is the cache it builds itself."""
+    import types
+
+    from voxgi.render import gpu_fast, gpu_gather
+    from voxgi.render.viewport_cache import ViewportCache
+    from voxgi.voxgi_addon.preview.gather import GatherSettings
+
+    bvh, lights, principled, emission, settings = cornell_inputs(
+        GatherSettings(bounces=3, cache_resolution=16, cache_rays=8))
+    scene = types.SimpleNamespace(
+        bvh=bvh, lights=lights, principled=principled, emission=emission,
+        gather_tables=lambda: gpu_gather.gather_tables(lights, principled, emission))
+    gpu_gather.drop_shared_cache()
+    view = ViewportCache()
+    for _ in range(10000):
+        if view.generation:
+            break
+        for _ in view.stage(bvh, lights, principled, emission, settings):
+            pass
+    assert view.generation == 1
+    built, whole = [], gpu_fast.cache_gpu
+    monkeypatch.setattr(gpu_fast, "cache_gpu",
+                        lambda *a, **k: (built.append(1), whole(*a, **k))[1])
+    taken = gpu_fast._radiance_cache(scene, settings)
+    assert built == [] and taken is not None and not callable(taken)
+    assert gpu_fast._radiance_cache(scene, settings) is taken  # read back once
+    gpu_gather.drop_shared_cache()
+    own = gpu_fast._radiance_cache(scene, settings)
+    assert built == [1]
+    for part in ("faces", "ahead"):
+        a, b = (np.concatenate(getattr(c, part)).astype(np.float64) for c in (taken, own))
+        assert b.mean() > 0.01
+        np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-7)
