@@ -178,13 +178,13 @@ def no_texture_inputs() -> dict[str, object]:
 # materials and cache settings give the same cache whoever builds it (a test), so a view
 # entered after F12, F12 after a view, and a view switched off and on again read it and build
 # none (docs/gi_pipeline.md "One radiance cache for F12 and the Rendered view").
-_cache_upload: dict[str, object] = {}
+_shared: dict[str, object] = {}
 
 
 def shared_cache(nodes, key):
     """(cache, texture) of the session's complete radiance cache when it was built over the
     BVH node texture ``nodes`` for ``key`` (``cache_key``), else None."""
-    held = _cache_upload.get("entry")
+    held = _shared.get("entry")
     if held is None or held[0] is not nodes or held[1] != key:
         return None
     return held[2], held[3]
@@ -192,13 +192,15 @@ def shared_cache(nodes, key):
 
 def share_cache(nodes, key, cache, texture) -> None:
     """Keep a complete radiance cache (see ``shared_cache``) for the session's next reader."""
-    _cache_upload["entry"] = (nodes, key, cache, texture)
+    _shared["entry"] = (nodes, key, cache, texture)
 
 
 def drop_shared_cache() -> None:
     """Forget the session's radiance cache (a file load: it belongs to the file it came from;
     the views holding it keep theirs)."""
-    _cache_upload.clear()
+    _shared.clear()
+
+
 CACHE_IMAGE_WIDTH = 256  # voxel faces per row of the cache's gather "image"
 CACHE_STAGE_SECONDS = 0.015  # a chunk of the viewport's staged build (progressive.STAGE_SHARE)
 CHUNK_AIM = 0.75    # of it, what the next chunk is sized for by the last one's time
@@ -756,5 +758,5 @@ def release() -> None:
     """Drop the cached shaders, the cache's texture and its layout (docs/gi_pipeline.md, "GPU
     resources at exit")."""
     forget(_shaders)
-    _cache_upload.clear()
+    _shared.clear()
     _LAYOUT.clear()

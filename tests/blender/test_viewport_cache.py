@@ -606,8 +606,7 @@ def test_fast_quality_reads_the_sessions_radiance_cache(voxgi, monkeypatch):
     for _ in range(10000):
         if view.generation:
             break
-        for _ in view.stage(bvh, lights, principled, emission, settings):
-            pass
+        list(view.stage(bvh, lights, principled, emission, settings))  # one stage
     assert view.generation == 1
     built, whole = [], gpu_fast.cache_gpu
     monkeypatch.setattr(gpu_fast, "cache_gpu",
