@@ -495,7 +495,7 @@ def gather(*args, **kwargs):
 def gather_steps(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings,
                  stride: int, width: int, height: int, kernel: str = "bvh_gather",
                  world_mode: bool = False, tables=None, cache=None,
-                 traversals: int = TRAVERSALS_PER_DISPATCH):
+                 traversals: int = TRAVERSALS_PER_DISPATCH, lattice: bool = False):
     """The raw gather, a generator yielding between its dispatches and returning (values,
     variance) RGBA32F textures of the low-resolution grid: the rays split over dispatches of
     ``rays_per_dispatch`` (``traversals`` per invocation at most: the viewport's slices take
@@ -509,8 +509,14 @@ def gather_steps(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, sett
     tables : the light and material textures of ``lights``, ``principled`` and ``emission``
     made already (``gpu_scene.GPUScene.gather_tables``); None: made here.
     cache : the radiance cache texture the bounce hits read (``cache_texels``); None: the
-    ``cache_texture`` of ``settings.bounces`` (none for one bounce and in ``world_mode``)."""
+    ``cache_texture`` of ``settings.bounces`` (none for one bounce and in ``world_mode``).
+    lattice : only the lattice of the grid's cells — odd row, odd column from the top-left,
+    clamped to the last row and column (``sparse_gather.sparse_plan``'s first list, which
+    needs no G-buffer): the textures are that lattice's (``low_shape`` of the grid's shape at
+    stride 2), cell (i, j) the grid's cell (2 i + 1, 2 j + 1) (``gather_point.glsl``)."""
     low_h, low_w = low_shape(height, width, stride)
+    if lattice:
+        low_h, low_w = low_shape(low_h, low_w, 2)
     placeholder = gpu.types.GPUTexture((size_like(1, low_w), size_like(1, low_h)),
                                        format="RGBA32F")  # the partials' JIT class
     partial = (placeholder, placeholder)
@@ -544,7 +550,7 @@ def gather_steps(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, sett
             "sampling": (settings.seed, rays, settings.ao_distance,
                          strata_side(settings.hit_samples)),
             "world": (*settings.world, float(settings.hit_glossy)),
-            "grid": (stride, width, height, float(world_mode)),
+            "grid": (stride, width, height, float(world_mode) + (2.0 if lattice else 0.0)),
             "chunk": (first, step, float(first > 0), float(first + step >= last))})
     return partial
 

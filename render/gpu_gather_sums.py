@@ -60,7 +60,7 @@ class GPUGatherSums:
             self.sums[kind] = texture
         return texture
 
-    def add(self, kind: str, rect, values, variance, rays: int):
+    def add(self, kind: str, rect, values, variance, rays: int, lattice: bool = False):
         """Add one sample's raw gather of the tile ``rect`` (x0, y0, w, h; x0, y0 multiples
         of the stride, y0 from the image's top; it may reach past the image): ``values``,
         ``variance`` RGBA32F textures of the tile's low shape (``low_shape(h, w, stride)``),
@@ -68,16 +68,21 @@ class GPUGatherSums:
         textures of that size: over every sample so far in the image's cells, the tile's own
         gather (NaN as 0) past them. Nothing is read back. rays 0 (a sample after the
         gathering ones): nothing is added, ``values`` and ``variance`` only give the tile's
-        shape, and its cells past the image take the nearest cell's (``GatherSums.add``)."""
+        shape, and its cells past the image take the nearest cell's (``GatherSums.add``).
+        lattice : ``values`` and ``variance`` hold the tile's lattice only (``gpu_gather
+        .gather_steps``' lattice: its shape ``low_shape`` of the tile's low shape at stride
+        2); the tile's other cells add nothing. A cell no sample has reached is a hole: its
+        pooled variance's .z is 1 (``gpu_gather.denoise(holes=True)`` fills it)."""
         x0, y0, w, h = rect
         s = self.stride
         if x0 % s or y0 % s:
             raise ValueError(f"a tile at ({x0}, {y0}) does not start on a stride-{s} block")
         low_h, low_w = low_shape(h, w, s)
+        given_h, given_w = low_shape(low_h, low_w, 2) if lattice else (low_h, low_w)
         for texture in (values, variance):
-            if (texture.width, texture.height) != (low_w, low_h):
+            if (texture.width, texture.height) != (given_w, given_h):
                 raise ValueError(f"a {texture.width}×{texture.height} gather for a tile of "
-                                 f"{low_w}×{low_h} cells")
+                                 f"{given_w}×{given_h} cells")
         sums = self._storage(kind)
         shader = _shader()
         outputs = {name: gpu.types.GPUTexture((low_w, low_h), format="RGBA32F") for name in _OUTPUTS}
@@ -87,7 +92,8 @@ class GPUGatherSums:
         if rays:
             self.rays[kind] = rays
         shader.uniform_float("cells", (float(x0 // s), float(y0 // s),
-                                       float(rays or self.rays.get(kind, 1)), 0.0 if rays else 1.0))
+                                       float(rays or self.rays.get(kind, 1)),
+                                       1.0 if not rays else 2.0 if lattice else 0.0))
         for name, texture in outputs.items():
             shader.image(name, texture)
         shader.image("sums", sums)

@@ -43,6 +43,7 @@ from ..voxgi_addon.preview.passes import (
     world_filter_passes,
     world_strata_side,
 )
+from ..voxgi_addon.preview.progressive import LATTICE_CELLS, LATTICE_RAYS
 from ..voxgi_addon.preview.resolve import SPREAD
 from ..voxgi_addon.preview.sparse_gather import (
     gather_lists,
@@ -105,7 +106,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                          cache_source=None, on_gpu: bool = False, batch=None,
                          world_glossy: bool = True, lamp_glossy: bool = True,
                          denoise: bool = True, centre=None,
-                         traversals: int = TRAVERSALS_PER_DISPATCH):
+                         traversals: int = TRAVERSALS_PER_DISPATCH, lattice: bool = False):
     """A generator that yields between the GPU stages (G-buffer, each gather, each light's
     direct light, each sub-pixel pass, …) and returns (passes, timings) like
     ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
@@ -146,6 +147,10 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     traversals : Accurate: BVH traversals one gather invocation makes per dispatch
     (``gpu_gather.gather_steps``, which yields between them): the viewport's slices take
     fewer, so a larger tile's gather is several steps within a stage's budget.
+    lattice : Accurate with a ``gather_hook``: the diffuse gather traces only the lattice of
+    its cells (``gpu_gather.gather_steps``' lattice) with ``LATTICE_RAYS`` × the rays, the
+    others holes that the filter fills (the viewport's first sample: docs/gi_pipeline.md
+    "The view's first sample at the lattice").
     The viewport's slices run the stages over several draws (``progressive``); the textures
     live in the generator between them, so nothing but its own next stage runs in a draw."""
     check_request(snapshot, width, height, gi_stride, quality)
@@ -170,7 +175,8 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                                                      cache_source, on_gpu=on_gpu, batch=batch,
                                                      world_glossy=world_glossy,
                                                      lamp_glossy=lamp_glossy, denoise=denoise,
-                                                     centre=centre, traversals=traversals)
+                                                     centre=centre, traversals=traversals,
+                                                     lattice=lattice)
         if scene.uploaded:  # rebuilt and uploaded only what changed
             timings = {"scene build + upload": built, **timings}
         glass = transmission.glass_materials(snapshot, scene.tris)
@@ -181,12 +187,12 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
         t0 = time.perf_counter()
         weight = _glass_weight(snapshot, scene, raster, width, height, filter_width)
         hook = None if gather_hook is None else \
-            (lambda kind, values, variance: gather_hook(f"behind {kind}", values, variance))
+            (lambda kind, *given, **how: gather_hook(f"behind {kind}", *given, **how))
         behind, _ = yield from _accurate_stages(
             snapshot, *layer, hook, raster, cache_source,
             camera_tris=transmission.behind_glass(scene.tris, glass),
             only=transmission.behind_pixels(weight), world_glossy=world_glossy,
-            lamp_glossy=lamp_glossy, denoise=denoise, traversals=traversals)
+            lamp_glossy=lamp_glossy, denoise=denoise, traversals=traversals, lattice=lattice)
         world = background(snapshot.world, snapshot.camera, width, height, filter_width)
         timings["behind glass"] = time.perf_counter() - t0
         return transmission.composite(front, behind, weight, world), timings
@@ -351,7 +357,7 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                      glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
                      cache_source=None, camera_tris=None, only=None, on_gpu=False,
                      batch=None, world_glossy=True, lamp_glossy=True, denoise=True,
-                     centre=None, traversals=TRAVERSALS_PER_DISPATCH):
+                     centre=None, traversals=TRAVERSALS_PER_DISPATCH, lattice=False):
     """Accurate quality on the GPU: ``ACCURATE_STAGES`` run over one layer of the image (the
     front one, or with ``camera_tris`` and ``only`` what glass hides), a generator returning
     (passes, timings) — or, with ``on_gpu`` and no edge pixels (point-sampled), (``GPUSums``
@@ -371,6 +377,7 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                "cache_source": cache_source, "camera_tris": camera_tris, "only": only,
                "on_gpu": on_gpu, "batch": batch, "world_glossy": world_glossy,
                "lamp_glossy": lamp_glossy, "denoise": denoise, "traversals": traversals,
+               "lattice": lattice and gather_hook is not None and denoise,
                # a given centre G-buffer is the front layer's (no glass pixels left out)
                "given_centre": centre if camera_tris is None and only is None else None}
     frame = yield from run_stages(ACCURATE_STAGES, Frame(request, given=set(request)))
@@ -462,11 +469,21 @@ def _low(f, kind, kernel="bvh_gather", world_mode=False):
         if not kind.endswith("world glossy"):
             return values
     else:
+        # the viewport's first sample: the diffuse gather at the lattice of its cells, with
+        # LATTICE_RAYS × the rays (and as many traversals a dispatch per traced cell)
+        lattice = f["lattice"] and kernel == "bvh_gather"
+        if lattice:
+            settings = dataclasses.replace(settings, rays=LATTICE_RAYS * settings.rays)
         values, variance = yield from gather_steps(
             scene.bvh, centre.inputs, scene.lights, scene.principled, scene.emission, settings,
             stride, width, height, kernel=kernel, world_mode=world_mode, tables=f["tables"],
-            cache=cache, traversals=f["traversals"])
+            cache=cache, traversals=f["traversals"] * (LATTICE_CELLS if lattice else 1),
+            lattice=lattice)
         yield  # the filter is a step of its own
+        if lattice:  # the hook spreads the lattice over the grid; the filter fills its holes
+            values, variance = f["gather_hook"](kind, values, variance, lattice=True)
+            return denoise(values, variance, centre.inputs, stride, width, height,
+                           settings.denoise_iterations, fit=True, holes=True)[0]
     if f["gather_hook"] is not None:
         values, variance = f["gather_hook"](kind, values, variance)
     if not f["denoise"]:  # (raw: the filter's kernel not even bound)

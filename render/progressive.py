@@ -80,6 +80,10 @@ SLICE_TRAVERSALS = 8
 # scaled up to the next slice's pixels (the last one's time alone let a tile cut by the
 # image's border predict a whole tile's stage; draws ran to 35-50 ms)
 STAGE_HISTORY = 4
+# the first sample's diffuse gather at the lattice of its cells, with LATTICE_RAYS × its rays
+# (voxgi_addon/preview/progressive.py; docs/gi_pipeline.md "The view's first sample at the
+# lattice"): the view is first within Cycles' error of F12's image when that sample is whole
+LATTICE_FIRST = True
 
 
 def base_options(settings, width: int, height: int) -> dict:
@@ -429,6 +433,9 @@ class ProgressiveImage:
                 if self.gathers is None:
                     self.gathers = GPUGatherSums(width, height, options["gi_stride"])
                 tile_options["gather_hook"] = gather_hook(self.gathers, rect, gather)
+                # (not a view's only gathering sample: its converged image gathers densely)
+                tile_options["lattice"] = LATTICE_FIRST and self.sample == 0 and \
+                    gather_samples(self.target) > 1
                 # the samples behind the tile's gathers; none after the gathering samples,
                 # which add no gathered light (``sample_settings``)
                 weight = float(self.sample + 1) if self.sample < gather_samples(self.target) \
@@ -479,9 +486,11 @@ def gather_hook(sums, rect, gather):
     rays = {"diffuse": gather.rays, "glossy": gather.glossy_rays,
             "world glossy": gather.glossy_rays}
 
-    def hook(kind, values, variance):
-        # behind glass: its own sums, with the front's rays
-        return sums.add(kind, rect, values, variance, rays[kind.removeprefix("behind ")])
+    def hook(kind, values, variance, lattice=False):
+        # behind glass: its own sums, with the front's rays; lattice: the gather's lattice
+        # only (the first sample's), spread over the grid with holes the filter fills
+        return sums.add(kind, rect, values, variance, rays[kind.removeprefix("behind ")],
+                        lattice=lattice)
     return hook
 
 

@@ -457,6 +457,9 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
         bvh("bvh_gather", 1)
         # the first coarse image takes its gathers raw (``first_image_options``)
         add("denoise", 2, gpu_gather._denoise_shader)
+        # the first sample's gather at the lattice: its holes filled (render/progressive.py
+        # LATTICE_FIRST)
+        add("denoise holes", 2, lambda: gpu_gather._denoise_shader(True))
         # ... and goes without the glossy indirect gather: its kernels come in phase 2
         if glossy_indirect:
             bvh("bvh_glossy", 2)

@@ -34,7 +34,7 @@ void main()
 
   uint seed = uint(sampling.x);
   int rays = int(sampling.y);
-  bool world_mode = grid.w > 0.5; /* Glossy Direct of the world and the emitters */
+  bool world_mode = mod(grid.w, 2.0) > 0.5; /* Glossy Direct of the world and the emitters */
   if (!world_mode && params.x >= 0.5) {
     rays *= METAL_RAY_FACTOR; /* exact_glossy.glossy_indirect: a metal's colour is all glossy */
   }

@@ -1,9 +1,12 @@
 /* The gather point of low-resolution cell `cell` of the gathers (bvh_gather.glsl,
- * bvh_glossy.glsl; grid = (stride, full width, full height, ·)): false for a cell outside the
+ * bvh_glossy.glsl; grid = (stride, full width, full height, w)): false for a cell outside the
  * grid, or whose G-buffer pixel sees no surface (its outputs are then written 0). Otherwise
  * the surface point stepped back along the camera ray by VIEW_BACKOFF (preview/gather.py), its
  * normal, the G-buffer's view texel (camera ray direction, material) and the sample id (the
- * pixel index, row 0 on top; a compacted list's point: its pixel's, sparse_gather). */
+ * pixel index, row 0 on top; a compacted list's point: its pixel's, sparse_gather).
+ * grid.w ≥ 2: the cells are the lattice of the stride's grid (odd row, odd column, counted from
+ * the top-left, clamped to its last row and column: gpu_gather.gather_steps' lattice), cell
+ * (i, j) the stride's cell (2 i + 1, 2 j + 1); grid.w − 2 is then the kernel's own flag. */
 bool gather_point(ivec2 cell, out vec3 position, out vec3 n, out vec4 ray, out uint id)
 {
   position = n = vec3(0.0);
@@ -14,7 +17,14 @@ bool gather_point(ivec2 cell, out vec3 position, out vec3 n, out vec4 ray, out u
     return false;
   }
   ivec2 full = ivec2(grid.yz);
-  ivec2 px = traced_pixel(size.y - 1 - cell.y, cell.x, int(grid.x), full);
+  int stride = int(grid.x);
+  int top = size.y - 1 - cell.y;
+  int column = cell.x;
+  if (grid.w > 1.5) { /* the lattice of the stride's grid */
+    top = min(2 * top + 1, (full.y + stride - 1) / stride - 1);
+    column = min(2 * column + 1, (full.x + stride - 1) / stride - 1);
+  }
+  ivec2 px = traced_pixel(top, column, stride, full);
   vec4 p = texelFetch(gbuffer_position, px, 0);
   if (p.w < 0.5) {
     imageStore(out_image, cell, vec4(0.0));

@@ -12,6 +12,10 @@
  * (a sample after the gathering ones, voxgi_addon/preview/progressive.py sample_settings):
  * nothing is added and the gather textures are not read, every cell of the tile takes the
  * image's nearest cell's mean and pooled variance (rays: those of the samples summed).
+ * cells.w = 2, the lattice (gpu_gather.gather_steps' lattice): the gather textures hold only
+ * the tile's cells of odd row and column from its top-left (clamped to its last row and
+ * column), the lattice's shape; the tile's other cells add nothing.
+ * A cell no sample has reached yet is a hole: out_pooled.z = 1 (denoise.glsl fills it).
  * out_mean, out_pooled: the mean of every sample so far and the pooled variance (Σ var / n²;
  * with one ray per point the luminance's is the samples' spread, (Σ l² / n − l̄²) / (n − 1),
  * once n > 1); cells of the tile past the image keep the tile's own gather. */
@@ -35,16 +39,26 @@ void main()
   grid.y /= 3;
   int col = int(floor(cells.x + 0.5)) + t.x;
   int row = int(floor(cells.y + 0.5)) + (size.y - 1 - t.y); /* from the image's top */
-  bool read_only = cells.w > 0.5;
+  bool read_only = cells.w > 0.5 && cells.w < 1.5;
+  bool lattice = cells.w > 1.5;
   if (read_only) {
     col = clamp(col, 0, grid.x - 1);
     row = clamp(row, 0, grid.y - 1);
   }
-  vec4 value = read_only ? vec4(0.0) : finite(texelFetch(gather_values, t, 0));
-  vec4 variance = read_only ? vec4(0.0) : finite(texelFetch(gather_variance, t, 0));
+  /* the tile's cell in the gather textures (the lattice: its lattice cell, if it is one) */
+  ivec2 at_gather = t;
+  bool adds = !read_only;
+  if (lattice) {
+    int top = size.y - 1 - t.y; /* the cell's row from the tile's top */
+    adds = min(2 * (top / 2) + 1, size.y - 1) == top && min(2 * (t.x / 2) + 1, size.x - 1) == t.x;
+    at_gather = ivec2(t.x / 2, (size.y + 1) / 2 - 1 - top / 2);
+  }
+  vec4 value = adds ? finite(texelFetch(gather_values, at_gather, 0)) : vec4(0.0);
+  vec4 variance = adds ? finite(texelFetch(gather_variance, at_gather, 0)) : vec4(0.0);
   if (col < 0 || row < 0 || col >= grid.x || row >= grid.y) {
-    imageStore(out_mean, t, value); /* past the image: the tile's own gather */
-    imageStore(out_pooled, t, variance);
+    /* past the image: the tile's own gather (a hole off the lattice) */
+    imageStore(out_mean, t, value);
+    imageStore(out_pooled, t, lattice && !adds ? vec4(0.0, 0.0, 1.0, 0.0) : variance);
     return;
   }
   ivec2 at = ivec2(col, grid.y - 1 - row);
@@ -52,8 +66,8 @@ void main()
   float lum = dot(value.rgb, LUMINANCE);
   vec4 sum_values = imageLoad(sums, at) + value;
   vec4 sum_variance = imageLoad(sums, at + layer) + variance;
-  vec4 rest = imageLoad(sums, at + 2 * layer) + vec4(lum * lum, read_only ? 0.0 : 1.0, 0.0, 0.0);
-  if (!read_only) {
+  vec4 rest = imageLoad(sums, at + 2 * layer) + vec4(lum * lum, adds ? 1.0 : 0.0, 0.0, 0.0);
+  if (adds) {
     imageStore(sums, at, sum_values);
     imageStore(sums, at + layer, sum_variance);
     imageStore(sums, at + 2 * layer, rest);
@@ -65,6 +79,7 @@ void main()
     float l = dot(mean.rgb, LUMINANCE);
     pooled.x = max(rest.x / n - l * l, 0.0) / max(n - 1.0, 1.0);
   }
+  pooled.z = rest.y > 0.5 ? pooled.z : 1.0; /* a hole */
   imageStore(out_mean, t, mean);
   imageStore(out_pooled, t, pooled);
 }

@@ -153,3 +153,37 @@ def test_gpu_gather_sums_errors(gpu_tools):
     with pytest.raises(ValueError, match="3×2 gather for a tile of 3×3 cells"):
         sums.add("diffuse", (0, 0, 12, 12), upload(np.zeros((3, 3, 4), np.float32)), cells, 1)
     assert not sums.sums  # nothing allocated for a refused tile
+
+
+def test_gpu_lattice_gather_sums_equal_numpy(gpu_tools):
+    """A sample gathered at the lattice only (the view's first: ``lattice``) adds the same
+    cells and leaves the same holes on the GPU as in numpy, tiles past the image and of odd
+    sizes included; the next sample at every cell fills them."""
+    from voxgi.render.gpu_gather_sums import GPUGatherSums
+    from voxgi.voxgi_addon.preview.progressive import GatherSums, tile_grid
+    from voxgi.voxgi_addon.preview.upsample import low_shape
+
+    upload, download = gpu_tools
+    width, height, stride = 31, 23, 1
+    reference, sums = GatherSums(width, height, stride), GPUGatherSums(width, height, stride)
+    rng = np.random.default_rng(11)
+    holes = 0
+    for sample, (shift, lattice) in enumerate((((3, 2), True), ((0, 5), False))):
+        for rect in tile_grid(width, height, 9, 7, shift):
+            low_h, low_w = low_shape(rect[3], rect[2], stride)
+            given = low_shape(low_h, low_w, 2) if lattice else (low_h, low_w)
+            values, variance = _gather(rng, *given, nans=True)
+            variance[..., 2:] = 0.0
+            ref_mean, ref_pooled = reference.add("diffuse", rect, values, variance, 4,
+                                                 lattice=lattice)
+            mean, pooled = sums.add("diffuse", rect, upload(values), upload(variance), 4,
+                                    lattice=lattice)
+            mean, pooled = download(mean), download(pooled)
+            assert mean.shape[:2] == (low_h, low_w)
+            np.testing.assert_allclose(mean, ref_mean, rtol=RTOL, atol=ATOL,
+                                       err_msg=f"{rect} sample {sample}")
+            np.testing.assert_allclose(pooled, ref_pooled, rtol=RTOL, atol=ATOL,
+                                       err_msg=f"{rect} sample {sample}")
+            holes += int((pooled[..., 2] == 1.0).sum()) if lattice else 0
+            assert lattice or not (pooled[..., 2] == 1.0).any()
+    assert holes > width * height // 2

@@ -471,3 +471,49 @@ def test_the_coarse_image_is_sized_by_its_whole_work_with_the_views_aspect():
     assert abs(w * h - 8_000) < 0.15 * 8_000 and abs(w / h - 320 / 180) < 0.25, (w, h)
     assert w % (3 * LOCAL_SIZE) == 0 and h % (3 * LOCAL_SIZE) == 0
     assert (w // 3) & (w // 3 - 1) and (h // 3) & (h // 3 - 1)
+
+
+def test_the_first_sample_gathers_at_one_cell_in_four_and_lands_as_near_f12(voxgi, monkeypatch,
+                                                                             tmp_path):
+    """The view's first sample traces its diffuse gather at the lattice of the grid's cells
+    (odd row, odd column) with twice its rays, the other cells holes the filter fills; the
+    later samples gather at every cell. After that sample the view lies about as near F12's
+    image as a first sample gathered at every cell, for half its diffuse gather's rays."""
+    import voxgi.render.gpu_preview as gpu_preview
+    from voxgi.render import progressive
+
+    calls = []
+    original = gpu_preview.gather_steps
+
+    def recorded(*args, **kwargs):
+        if kwargs.get("kernel") == "bvh_gather":
+            calls.append((kwargs.get("lattice", False), args[5].rays))
+        return (yield from original(*args, **kwargs))
+
+    monkeypatch.setattr(gpu_preview, "gather_steps", recorded)
+    scene, depsgraph, view, window, engine, _ = quarter_view()
+    f12 = f12_combined(scene, tmp_path)
+    rays = scene.voxgi.gi_rays // 4  # over the 4 gathering samples of 16
+    first = {}
+    for lattice in (False, True):
+        monkeypatch.setattr(progressive, "LATTICE_FIRST", lattice)
+        renderer = quarter_slices(engine)  # a new view of the same scene
+        calls.clear()
+        image = None
+        for _ in range(200):  # until the first sample's last tile is in
+            image = engine_view(engine, scene, depsgraph, view, window)
+            if renderer.progressive.samples_done >= 1:
+                break
+        assert renderer.progressive.samples_done == 1
+        sampled = calls[1:]  # (the first: the coarse image's own gather)
+        assert sampled and all(c == ((True, 2 * rays) if lattice else (False, rays)) for c in sampled)
+        first[lattice] = relative_l1(image[..., :3], f12)
+        calls.clear()
+        for _ in range(20):  # the second sample gathers at every cell
+            engine_view(engine, scene, depsgraph, view, window)
+            if renderer.progressive.samples_done >= 2:
+                break
+        assert calls and all(c == (False, rays) for c in calls)
+    print(f"after the first sample vs F12: every cell {first[False]:.4f}, "
+          f"the lattice {first[True]:.4f}")
+    assert first[True] <= 1.1 * first[False]

@@ -428,3 +428,37 @@ def test_a_staged_sizer_keeps_the_least_tile_where_the_fixed_cost_is_over_the_bu
         sizer.explore = 0
     assert whole.pixels(10**6) == 10000  # fixed / per pixel: half of it tracing
     assert staged.pixels(10**6) == 2304
+
+
+def test_a_lattice_sample_adds_its_cells_and_leaves_holes_the_next_sample_fills():
+    """The view's first sample gathers at the lattice of the grid (odd row and column from a
+    tile's top-left, clamped to its last row and column: F12's sparse plan's first list): only
+    those cells are added; the others are holes (variance's third channel 1, mean 0) until a
+    sample reaches them."""
+    from voxgi.voxgi_addon.preview.progressive import GatherSums, lattice_cells
+    from voxgi.voxgi_addon.preview.upsample import sample_pixels
+
+    assert lattice_cells(5, 4).astype(int).tolist() == [
+        [0, 0, 0, 0], [0, 1, 0, 1], [0, 0, 0, 0], [0, 1, 0, 1], [0, 1, 0, 1]]
+    for h, w in ((1, 1), (6, 7), (9, 2)):  # the pixels a stride-2 grid traces, read as cells
+        rows, cols = sample_pixels(h, w, 2)
+        expected = np.zeros((h, w), bool)
+        expected[rows[:, None], cols[None, :]] = True
+        assert np.array_equal(lattice_cells(h, w), expected)
+
+    sums = GatherSums(6, 5, 1)  # tile (0, 0, 6, 5): a lattice of 3 × 3
+    rng = np.random.default_rng(2)
+    lattice_v, lattice_var = rng.uniform(0.5, 1, (3, 3, 4)), rng.uniform(0, 0.1, (3, 3, 4))
+    lattice_var[..., 2:] = 0.0
+    mean, var = sums.add("diffuse", (0, 0, 6, 5), lattice_v, lattice_var, rays=8, lattice=True)
+    on = lattice_cells(5, 6)
+    assert np.allclose(mean[on], lattice_v.reshape(-1, 4)) and np.all(mean[~on] == 0.0)
+    assert np.all(var[~on][:, 2] == 1.0) and np.all(var[on][:, 2] == 0.0)
+    assert np.array_equal(sums.kinds["diffuse"]["n"], on.astype(float))
+    dense_v, dense_var = rng.uniform(0, 1, (5, 6, 4)), np.zeros((5, 6, 4))
+    mean, var = sums.add("diffuse", (0, 0, 6, 5), dense_v, dense_var, rays=8)
+    assert np.all(var[..., 2] == 0.0)  # no holes left
+    assert np.allclose(mean[~on], dense_v[~on])
+    assert np.allclose(mean[on], (dense_v[on] + lattice_v.reshape(-1, 4)) / 2)
+    with pytest.raises(ValueError, match="3×3 cells"):
+        sums.add("diffuse", (0, 0, 6, 5), dense_v, dense_var, rays=8, lattice=True)

@@ -445,13 +445,17 @@ class GatherSums:
         self.shape = low_shape(height, width, stride)
         self.kinds: dict[str, dict[str, np.ndarray]] = {}
 
-    def add(self, kind: str, rect, values, variance, rays: int):
+    def add(self, kind: str, rect, values, variance, rays: int, lattice: bool = False):
         """Add one sample's raw gather of the tile ``rect`` (x0, y0, w, h; x0, y0 multiples
         of the stride; it may reach past the image): values, variance (h_l, w_l, 4), row 0 on
         top; rays : its rays per point. Returns the tile's (values, variance): over every
         sample so far in the image's cells, its own past them. rays 0 (a sample after the
         gathering ones, ``sample_settings``): nothing is added, values and variance are not
-        read, and the tile's cells past the image take the nearest cell's."""
+        read, and the tile's cells past the image take the nearest cell's.
+        lattice : values and variance hold only the tile's lattice — its cells of odd row and
+        column from its top-left, clamped to its last row and column (``lattice_cells``) — in
+        the lattice's shape; the tile's other cells add nothing. A cell no sample has reached
+        yet is a hole: its variance's third channel is 1 (the filter fills it)."""
         x0, y0, w, h = rect
         s = self.stride
         if x0 % s or y0 % s:
@@ -467,9 +471,18 @@ class GatherSums:
             return mean.astype(np.float32), pooled.astype(np.float32)
         values = np.nan_to_num(np.asarray(values, np.float64))  # cells of no surface: unset
         variance = np.nan_to_num(np.asarray(variance, np.float64))
-        if values.shape[:2] != (low_h, low_w) or variance.shape[:2] != (low_h, low_w):
+        given = low_shape(low_h, low_w, 2) if lattice else (low_h, low_w)
+        if values.shape[:2] != given or variance.shape[:2] != given:
             raise ValueError(f"a {values.shape[1]}×{values.shape[0]} gather for a tile of "
-                             f"{low_w}×{low_h} cells")
+                             f"{given[1]}×{given[0]} cells")
+        added = np.ones((low_h, low_w), bool)
+        if lattice:  # spread over the tile's cells, zero off the lattice
+            added = lattice_cells(low_h, low_w)
+            spread = [np.zeros((low_h, low_w, 4)) for _ in range(2)]
+            rows, cols = np.nonzero(added)
+            for out, given_cells in zip(spread, (values, variance)):
+                out[rows, cols] = given_cells[rows // 2, cols // 2]
+            values, variance = spread
         if sums is None:
             sums = self.kinds[kind] = {
                 "values": np.zeros((*self.shape, 4)), "variance": np.zeros((*self.shape, 4)),
@@ -479,11 +492,13 @@ class GatherSums:
         sums["values"][cells] += values[part]
         sums["variance"][cells] += variance[part]
         sums["lum2"][cells] += (values[part][..., :3] @ LUMINANCE) ** 2
-        sums["n"][cells] += 1.0
+        sums["n"][cells] += added[part]
         mean, pooled = self._mean(sums, cells)
-        # the tile's cells past the image keep their own gather
+        # the tile's cells past the image keep their own gather (off the lattice: holes)
         values, variance = values.copy(), variance.copy()
         values[part], variance[part] = mean, pooled
+        variance[..., 2] = np.where(~added, 1.0, variance[..., 2])
+        variance[part][..., 2] = np.where(sums["n"][cells] > 0, pooled[..., 2], 1.0)
         return values.astype(np.float32), variance.astype(np.float32)
 
     @staticmethod
@@ -500,6 +515,26 @@ class GatherSums:
                                 0.0) / np.maximum(count - 1.0, 1.0)
             pooled[..., 0] = np.where(count > 1.0, spread, pooled[..., 0])
         return mean, pooled
+
+
+# The view's first sample gathers at one cell in LATTICE_CELLS (``lattice_cells``) with
+# LATTICE_RAYS × its rays, the others holes the filter fills: half its diffuse gather's rays,
+# as F12's sparse gather lends the holes' rays to its traced cells (docs/gi_pipeline.md "The
+# view's first sample at the lattice")
+LATTICE_CELLS = 4
+LATTICE_RAYS = 2
+
+
+def lattice_cells(height: int, width: int) -> np.ndarray:
+    """(height, width) bool: the lattice of a grid of cells — odd row, odd column from the
+    top-left, and the last row and column where they are even (``upsample.sample_pixels``' at
+    stride 2, read as cells): the viewport's first sample gathers at those only (``gpu_gather
+    .gather_steps``' lattice), cell (i, j) of the lattice's own grid at (2 i + 1, 2 j + 1)."""
+    rows = np.minimum(np.arange(-(-height // 2)) * 2 + 1, height - 1)
+    cols = np.minimum(np.arange(-(-width // 2)) * 2 + 1, width - 1)
+    cells = np.zeros((height, width), bool)
+    cells[rows[:, None], cols[None, :]] = True
+    return cells
 
 
 def scale_nearest(image, width: int, height: int) -> np.ndarray:
