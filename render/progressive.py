@@ -105,9 +105,8 @@ def shared_sizer(budget: float, amortize: bool = True, kind: str = "tile") -> Sl
     """The process's slice sizer for ``budget`` and slices of ``kind``: every view measures
     the same machine, so a 3D view switched to Rendered starts from what the others measured
     (the first one from the smallest tile). amortize : as ``SliceSizer``'s (False for staged
-    slices). kind : "tile" for the samples that trace the gathers, "lattice tile" for the
-    first of them when it gathers at the lattice, "lit tile" for the later ones, which cost a
-    fraction of a pixel's time (``sample_kind``): each its own fit."""
+    slices). kind : "tile" for the samples that trace the gathers, "lit tile" for the later
+    ones, which cost a fraction of a pixel's time (``sample_kind``): each its own fit."""
     if (budget, amortize, kind) not in _sizers:
         _sizers[budget, amortize, kind] = SliceSizer(
             budget, first_pixels=LEAST_TILE * LEAST_TILE, least=LEAST_TILE * LEAST_TILE,
@@ -137,7 +136,7 @@ class ProgressiveImage:
         # stage takes about that much (so a call stays within the budget)
         self.budget = budget
         self.sizers = {kind: shared_sizer(budget * STAGE_SHARE, amortize=False, kind=kind)
-                       for kind in ("tile", "lattice tile", "lit tile")}
+                       for kind in ("tile", "lit tile")}
         self.sizers["coarse"] = shared_sizer(COARSE_WORK, amortize=False, kind="coarse")
         self.stage_budget: float | None = budget * STAGE_SHARE  # None: a whole slice a call
         self.running = None        # the slice under way: a generator of its stages
@@ -222,19 +221,8 @@ class ProgressiveImage:
     def sample_kind(self) -> str:
         """The kind of the sample's tiles: "tile" while the samples trace the gathers, then
         "lit tile": the later samples trace none (``preview.progressive.sample_settings``), so
-        their tiles take a fraction of the time and are sized by a fit of their own. The
-        first sample's are "lattice tile" when it gathers at the lattice (``lattice_sample``):
-        their stages are other dispatches, which the later samples' must not be predicted by
-        (a sample 1 stage predicted by sample 0's ran a draw to 40 ms)."""
-        if self.lattice_sample():
-            return "lattice tile"
+        their tiles take a fraction of the time and are sized by a fit of their own."""
         return "tile" if self.sample < gather_samples(self.target) else "lit tile"
-
-    def lattice_sample(self) -> bool:
-        """Whether the sample being traced gathers at the lattice of its cells (Accurate's:
-        ``LATTICE_FIRST``): the first, unless it is the view's only gathering sample (then its
-        converged image gathers at every cell)."""
-        return LATTICE_FIRST and self.sample == 0 and gather_samples(self.target) > 1
 
     def slice_pixels(self, explore: bool = True) -> int:
         """Pixels of the next slice (at most the image's); explore : as ``SliceSizer.pixels``'
@@ -445,7 +433,9 @@ class ProgressiveImage:
                 if self.gathers is None:
                     self.gathers = GPUGatherSums(width, height, options["gi_stride"])
                 tile_options["gather_hook"] = gather_hook(self.gathers, rect, gather)
-                tile_options["lattice"] = self.lattice_sample()
+                # (not a view's only gathering sample: its converged image gathers densely)
+                tile_options["lattice"] = LATTICE_FIRST and self.sample == 0 and \
+                    gather_samples(self.target) > 1
                 # the samples behind the tile's gathers; none after the gathering samples,
                 # which add no gathered light (``sample_settings``)
                 weight = float(self.sample + 1) if self.sample < gather_samples(self.target) \

@@ -447,7 +447,7 @@ def test_the_coarse_image_is_sized_by_its_whole_work_with_the_views_aspect():
 
     image = ProgressiveImage()
     image.sizers = {kind: SliceSizer(0.015, first_pixels=2304, least=2304, amortize=False)
-                    for kind in ("tile", "lattice tile", "lit tile", "coarse")}
+                    for kind in ("tile", "lit tile", "coarse")}
     image.sizers["coarse"].budget = COARSE_WORK
     image.accumulation = types.SimpleNamespace(width=320, height=180)
     image.sizers["tile"].measured(12_000, 0.012)  # tiles of 12,000 pixels fit their stages
