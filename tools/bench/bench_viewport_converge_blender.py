@@ -3,7 +3,8 @@ time goes"), run with the bpy venv:
 ``.venv/bin/python tools/bench/bench_viewport_converge_blender.py [--quick]``.
 
 "The viewport converges as fast": per interior scene of ``tests/blender/bounce_scenes.py``
-(the Cornell box and the columned hall; ``--quick``: the box alone, one run each) with a
+(the Cornell box, the columned hall, the emissive room and the textured room; ``--quick``:
+the box alone, one run each) with a
 stored Cycles reference at 160 × 120 (tests/data/bounce_refs, Cycles at its default light
 paths, 2048 spp):
 
@@ -52,7 +53,7 @@ from bench_bounces_blender import REFS, cycles_default_paths, relative_l1  # noq
 from bench_viewport_blender import timed_view_draw  # noqa: E402
 
 REGION = (640, 480)  # at the default Viewport Resolution (¼): a 160 × 120 traced image
-SCENES = ("cornell_box", "columned_hall")
+SCENES = ("cornell_box", "columned_hall", "emissive_room", "textured_room")
 
 
 def med(values):
@@ -184,7 +185,7 @@ def view_runs(scene, depsgraph, f12, mask, repeats):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--scenes", nargs="*", help=f"of {', '.join(SCENES)} (default: both; "
+    ap.add_argument("--scenes", nargs="*", help=f"of {', '.join(SCENES)} (default: all; "
                                                 "--quick: cornell_box)")
     args = ap.parse_args(argv)
     load_addon()
