@@ -85,6 +85,18 @@ def one_sample_groups(scene, live, dispatches) -> int:
     return dispatches.take_groups()
 
 
+def draw_until_samples(engine, scene, depsgraph, view, window, samples: int, limit: int = 200):
+    """view_draw until the view has ``samples`` samples whole (their last tile in): the last
+    image drawn."""
+    image = None
+    for _ in range(limit):
+        image = engine_view(engine, scene, depsgraph, view, window)
+        if engine.voxgi_viewport.progressive.samples_done >= samples:
+            break
+    assert engine.voxgi_viewport.progressive.samples_done == samples
+    return image
+
+
 def draw_until_converged(engine, scene, depsgraph, view, window, dispatches, limit):
     """view_draw until the engine stops asking for redraws: [(image, groups, calls)]. Only
     the draws before the view's first image — those that make it ready
@@ -165,13 +177,8 @@ def test_the_first_sample_is_as_smooth_as_f12_under_an_area_light(voxgi, monkeyp
     """The gathering samples carry F12's light samples between them, as its gather rays: under
     an area light the view's image after its first sample (a quarter of both in) is already
     near F12's, where one stratum a sample left the penumbrae noisy for most of the samples."""
-    scene, depsgraph, view, window, engine, renderer = quarter_view(light="AREA")
-    image = None
-    for _ in range(200):  # until the first sample's last tile is in
-        image = engine_view(engine, scene, depsgraph, view, window)
-        if renderer.progressive.samples_done >= 1:
-            break
-    assert renderer.progressive.samples_done == 1
+    scene, depsgraph, view, window, engine, _ = quarter_view(light="AREA")
+    image = draw_until_samples(engine, scene, depsgraph, view, window, 1)
     f12 = f12_combined(scene, tmp_path)
     first = relative_l1(image[..., :3], f12)
     print(f"after the first sample vs F12: {first:.4f}")
@@ -481,6 +488,7 @@ def test_the_first_sample_gathers_at_one_cell_in_four_and_lands_as_near_f12(voxg
     image as a first sample gathered at every cell, for half its diffuse gather's rays."""
     import voxgi.render.gpu_preview as gpu_preview
     from voxgi.render import progressive
+    from voxgi.voxgi_addon.preview.progressive import LATTICE_RAYS
 
     calls = []
     original = gpu_preview.gather_steps
@@ -497,23 +505,16 @@ def test_the_first_sample_gathers_at_one_cell_in_four_and_lands_as_near_f12(voxg
     first = {}
     for lattice in (False, True):
         monkeypatch.setattr(progressive, "LATTICE_FIRST", lattice)
-        renderer = quarter_slices(engine)  # a new view of the same scene
+        quarter_slices(engine)  # a new view of the same scene
         calls.clear()
-        image = None
-        for _ in range(200):  # until the first sample's last tile is in
-            image = engine_view(engine, scene, depsgraph, view, window)
-            if renderer.progressive.samples_done >= 1:
-                break
-        assert renderer.progressive.samples_done == 1
+        image = draw_until_samples(engine, scene, depsgraph, view, window, 1)
         sampled = calls[1:]  # (the first: the coarse image's own gather)
-        assert sampled and all(c == ((True, 2 * rays) if lattice else (False, rays)) for c in sampled)
+        expected = (True, LATTICE_RAYS * rays) if lattice else (False, rays)
+        assert sampled and all(c == expected for c in sampled)
         first[lattice] = relative_l1(image[..., :3], f12)
         calls.clear()
-        for _ in range(20):  # the second sample gathers at every cell
-            engine_view(engine, scene, depsgraph, view, window)
-            if renderer.progressive.samples_done >= 2:
-                break
-        assert calls and all(c == (False, rays) for c in calls)
+        draw_until_samples(engine, scene, depsgraph, view, window, 2, limit=20)
+        assert calls and all(c == (False, rays) for c in calls)  # every cell from the second
     print(f"after the first sample vs F12: every cell {first[False]:.4f}, "
           f"the lattice {first[True]:.4f}")
     assert first[True] <= 1.1 * first[False]
