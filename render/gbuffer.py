@@ -88,7 +88,8 @@ def gbuffer_shader(textured: bool = True):
         info.typedef_source("struct TapData { vec4 taps; vec4 offsets; vec4 step_x; "
                             "vec4 step_y; };\n")
         info.uniform_buf(0, "TapData", "tap_data")
-        taps = ("#define texture_taps (tap_data.taps.xy)\n#define tap_offsets (tap_data.offsets)\n"
+        taps = ("#define texture_taps (tap_data.taps.xy)\n#define tap_shift (tap_data.taps.zw)\n"
+                "#define tap_offsets (tap_data.offsets)\n"
                 "#define pixel_step_x (tap_data.step_x.xyz)\n"
                 "#define pixel_step_y (tap_data.step_y.xyz)\n")
     info.fragment_out(0, "VEC4", "out_position")
@@ -175,7 +176,8 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
               offset=(0.0, 0.0), shader=None, textures=None,
               filter_width: float = DEFAULT_FILTER_WIDTH, batch=None, out=None,
               mask: PixelMask | None = None, texture_taps: int = 1,
-              texture_share: int = 1, supersample: int = 1, into=None) -> GBuffer:
+              texture_share: int = 1, supersample: int = 1, into=None,
+              tap_shift=(0.0, 0.0)) -> GBuffer:
     """Draw ``tris`` (``SceneTriangles``) seen by ``camera`` into a new ``GBuffer``.
     batch : ``vertex_batch(tris, roughness, shader, textures is not None)`` made already by a
     render that draws them again, or a ``ChunkedBatch`` of them (the viewport's: only its
@@ -203,6 +205,11 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
     texture_taps, texture_share : ``textures.primary_base``'s ``taps`` (the Base Color's taps
     per axis over each pixel's own square, 1–4: ``TEXTURE_TAPS`` for the pixel-centre pass)
     and ``share`` (a sub-pixel pass is one of ``AA_SIDE``² samples of its pixel).
+    tap_shift : (x, y) pixels (x right, y down) the taps' square is moved by from each
+    fragment's own camera ray: a view's sample whose camera is moved by o sub-pixel
+    (``progressive.sample_offset``) gives −o, so its taps stand on its pixel's own square, as
+    F12's centre pass's do, whatever o (docs/gi_pipeline.md "A sample's textures over its
+    pixel's square").
     supersample : K, a G-buffer of K·width × K·height: the image's pixels each drawn at K × K
     points (texel (K·x + i, K·y + j) at pixel (x, y) + offset + ((i + ½) / K − ½, (j + ½) / K −
     ½), x right and y down), the textures' footprints still the image pixel's (every sample one
@@ -244,7 +251,7 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
                 shader.uniform_sampler("texture_atlas", textures[1])
                 # (held until the draw: the shader keeps no reference to the block)
                 tap_block = _tap_block(camera, width, height, filter_width, texture_taps,
-                                       texture_share)
+                                       texture_share, tap_shift)
                 shader.uniform_block("tap_data", tap_block)
             for name, value in (
                     ("view_projection", matrix.T.ravel().tolist()),
@@ -276,19 +283,21 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
 
 
 
-def _tap_block(camera, width: int, height: int, filter_width: float, taps: int, share: int):
+def _tap_block(camera, width: int, height: int, filter_width: float, taps: int, share: int,
+               shift=(0.0, 0.0)):
     """The textured G-buffer shader's uniform block ``tap_data`` (``TapData``): texture_taps
-    (taps per axis, share), tap_offsets (the offsets along one axis,
+    (taps per axis, share) and tap_shift (``rasterize``'s), tap_offsets (the offsets along one axis,
     ``camera.filter_offsets``) and the pixel steps (``textures.pixel_steps``)."""
     block = np.zeros((4, 4), np.float32)
     for row, (_, value) in enumerate(_tap_uniforms(camera, width, height, filter_width, taps,
-                                                   share)):
+                                                   share, shift)):
         block[row, :len(value)] = value
     return gpu.types.GPUUniformBuf(block.ravel())
 
 
-def _tap_uniforms(camera, width: int, height: int, filter_width: float, taps: int, share: int):
-    """The G-buffer shader's texture_taps (taps per axis, share), tap_offsets (the offsets
+def _tap_uniforms(camera, width: int, height: int, filter_width: float, taps: int, share: int,
+                  shift=(0.0, 0.0)):
+    """The G-buffer shader's texture_taps (taps per axis, share, then tap_shift), tap_offsets (the offsets
     along one axis, ``camera.filter_offsets``) and pixel steps (``textures.pixel_steps``)."""
     taps = int(taps) if filter_width > 0.0 else 1
     if not 1 <= taps <= 4:
@@ -297,7 +306,8 @@ def _tap_uniforms(camera, width: int, height: int, filter_width: float, taps: in
     if taps > 1:
         along[:taps] = filter_offsets(filter_width, taps)[::taps, 0]
     steps = pixel_steps(camera, width, height).astype(np.float32)
-    return (("texture_taps", (float(taps), float(max(int(share), 1)))), ("tap_offsets", along),
+    return (("texture_taps", (float(taps), float(max(int(share), 1)), float(shift[0]),
+                              float(shift[1]))), ("tap_offsets", along),
             ("pixel_step_x", steps[0]), ("pixel_step_y", steps[1]))
 
 
@@ -340,22 +350,24 @@ class ChunkedBatch:
 
 def rasterize_stages(tris, camera, roughness, width: int, height: int, offset=(0.0, 0.0),
                      shader=None, textures=None, filter_width: float = DEFAULT_FILTER_WIDTH,
-                     batch=None, texture_taps: int = 1):
+                     batch=None, texture_taps: int = 1, tap_shift=(0.0, 0.0)):
     """``rasterize`` as a generator of stages returning the ``GBuffer``: with a
     ``ChunkedBatch`` (the viewport's) it yields after each chunk in view is drawn, so a
     scene's G-buffer goes over several draws (140k triangles: 60–80 ms of llvmpipe's vertex
     work in one); any other batch is drawn in the one call."""
     if not isinstance(batch, ChunkedBatch) or len(batch.batches) <= 1:
         return rasterize(tris, camera, roughness, width, height, offset, shader, textures,
-                         filter_width, batch, texture_taps=texture_taps)
+                         filter_width, batch, texture_taps=texture_taps, tap_shift=tap_shift)
     inside = batch.visible(view_projection(camera, width, height, offset))
     out = rasterize(tris, camera, roughness, width, height, offset, shader, textures,
                     filter_width, batch.part(inside[0], inside[0] + 1) if inside
-                    else ChunkedBatch(), texture_taps=texture_taps)  # cleared, the first chunk
+                    else ChunkedBatch(), texture_taps=texture_taps,
+                    tap_shift=tap_shift)  # cleared, the first chunk
     for index in inside[1:]:
         yield
         rasterize(tris, camera, roughness, width, height, offset, shader, textures,
-                  filter_width, batch.part(index, index + 1), out=out, texture_taps=texture_taps)
+                  filter_width, batch.part(index, index + 1), out=out, texture_taps=texture_taps,
+                  tap_shift=tap_shift)
     return out
 
 

@@ -106,7 +106,8 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                          cache_source=None, on_gpu: bool = False, batch=None,
                          world_glossy: bool = True, lamp_glossy: bool = True,
                          denoise: bool = True, centre=None,
-                         traversals: int = TRAVERSALS_PER_DISPATCH, lattice: bool = False):
+                         traversals: int = TRAVERSALS_PER_DISPATCH, lattice: bool = False,
+                         texture_filter=None):
     """A generator that yields between the GPU stages (G-buffer, each gather, each light's
     direct light, each sub-pixel pass, …) and returns (passes, timings) like
     ``preview.render_passes`` (``filter_width`` included). ``volume`` : a ``GPUVolume`` kept
@@ -151,6 +152,12 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
     its cells (``gpu_gather.gather_steps``' lattice) with ``LATTICE_RAYS`` × the rays, the
     others holes that the filter fills (the viewport's first sample: docs/gi_pipeline.md
     "The view's first sample at the lattice").
+    texture_filter : Accurate: (Filter Size, tap shift) the centre G-buffer's textures are
+    sampled with (``TEXTURE_TAPS`` taps over each pixel's square, moved by the shift from each
+    pixel's camera ray: ``gbuffer.rasterize``'s ``tap_shift``) instead of ``filter_width``'s:
+    a view's sample is point-sampled (Filter Size 0) with its camera moved sub-pixel, yet its
+    textures are its pixels' own squares', as F12's are (docs/gi_pipeline.md "A sample's
+    textures over its pixel's square"). None: ``filter_width``'s, unmoved.
     The viewport's slices run the stages over several draws (``progressive``); the textures
     live in the generator between them, so nothing but its own next stage runs in a draw."""
     check_request(snapshot, width, height, gi_stride, quality)
@@ -176,7 +183,7 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
                                                      world_glossy=world_glossy,
                                                      lamp_glossy=lamp_glossy, denoise=denoise,
                                                      centre=centre, traversals=traversals,
-                                                     lattice=lattice)
+                                                     lattice=lattice, texture_filter=texture_filter)
         if scene.uploaded:  # rebuilt and uploaded only what changed
             timings = {"scene build + upload": built, **timings}
         glass = transmission.glass_materials(snapshot, scene.tris)
@@ -192,7 +199,8 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
             snapshot, *layer, hook, raster, cache_source,
             camera_tris=transmission.behind_glass(scene.tris, glass),
             only=transmission.behind_pixels(weight), world_glossy=world_glossy,
-            lamp_glossy=lamp_glossy, denoise=denoise, traversals=traversals, lattice=lattice)
+            lamp_glossy=lamp_glossy, denoise=denoise, traversals=traversals, lattice=lattice,
+            texture_filter=texture_filter)
         world = background(snapshot.world, snapshot.camera, width, height, filter_width)
         timings["behind glass"] = time.perf_counter() - t0
         return transmission.composite(front, behind, weight, world), timings
@@ -357,7 +365,8 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                      glossy_indirect, filter_width, scene=None, gather_hook=None, raster=None,
                      cache_source=None, camera_tris=None, only=None, on_gpu=False,
                      batch=None, world_glossy=True, lamp_glossy=True, denoise=True,
-                     centre=None, traversals=TRAVERSALS_PER_DISPATCH, lattice=False):
+                     centre=None, traversals=TRAVERSALS_PER_DISPATCH, lattice=False,
+                     texture_filter=None):
     """Accurate quality on the GPU: ``ACCURATE_STAGES`` run over one layer of the image (the
     front one, or with ``camera_tris`` and ``only`` what glass hides), a generator returning
     (passes, timings) — or, with ``on_gpu`` and no edge pixels (point-sampled), (``GPUSums``
@@ -378,6 +387,7 @@ def _accurate_stages(snapshot, width, height, light_samples, gi_stride, gather_s
                "on_gpu": on_gpu, "batch": batch, "world_glossy": world_glossy,
                "lamp_glossy": lamp_glossy, "denoise": denoise, "traversals": traversals,
                "lattice": lattice and gather_hook is not None and denoise,
+               "texture_filter": texture_filter,
                # a given centre G-buffer is the front layer's (no glass pixels left out)
                "given_centre": centre if camera_tris is None and only is None else None}
     frame = yield from run_stages(ACCURATE_STAGES, Frame(request, given=set(request)))
@@ -414,11 +424,13 @@ def _visibility(f):
     scene, width, height = f["scene"], f["width"], f["height"]
     if f["given_centre"] is not None:
         return {"centre": f["given_centre"]}
+    # the textures' filter: the render's, or the view's sample's own (``texture_filter``)
+    textures_width, shift = f["texture_filter"] or (f["filter_width"], (0.0, 0.0))
     centre = yield from rasterize_stages(f["seen_tris"], f["snapshot"].camera, scene.rough, width,
                                          height, shader=f["raster_shader"],
                                          textures=scene.raster_textures(),
-                                         filter_width=f["filter_width"], batch=f["vertex_batch"],
-                                         texture_taps=TEXTURE_TAPS)
+                                         filter_width=textures_width, batch=f["vertex_batch"],
+                                         texture_taps=TEXTURE_TAPS, tap_shift=shift)
     if f["only"] is not None:  # the other pixels' coverage 0: background to every kernel
         centre.position = _run("aa_mask", _MASK_SAMPLERS, {
             "gbuffer_position": centre.position,

@@ -425,9 +425,13 @@ class ProgressiveImage:
             gather, lights = sample_settings(options["gather_settings"],
                                              options["light_samples"], self.target, self.sample)
             full = camera_from_view(view, window, width, height)
-            camera = tile_camera(full, *rect,
-                                 offset=sample_offset(filter_width, self.target, self.sample))
-            tile_options = {**options, "gather_settings": gather, "light_samples": lights}
+            offset = sample_offset(filter_width, self.target, self.sample)
+            camera = tile_camera(full, *rect, offset=offset)
+            # the sample's textures over its pixels' own squares, as F12's centre pass takes
+            # them, not at its moved camera rays' points (docs/gi_pipeline.md "A sample's
+            # textures over its pixel's square")
+            tile_options = {**options, "gather_settings": gather, "light_samples": lights,
+                            "texture_filter": (filter_width, (-offset[0], -offset[1]))}
             weight = 1.0
             if settings.quality == "ACCURATE":  # the filter runs on the accumulated gathers
                 if self.gathers is None:

@@ -20,7 +20,9 @@
  * UVs extrapolated over the plane through the fragment's derivatives (exact: UV and position
  * are the same affine map of the plane): texture_taps = textures.primary_base's (taps, share)
  * (the centre pass: (4, 1); a sub-pixel pass, one of AA_SIDE² samples of its pixel: (1, 4),
- * its Base Color's and emission's footprint a quarter of the pixel's).
+ * its Base Color's and emission's footprint a quarter of the pixel's). The taps stand at
+ * tap_offsets + tap_shift from the fragment's own camera ray: a view's sample, whose camera is
+ * moved sub-pixel by o, gives −o, so its taps are its pixel's own square's (gbuffer.rasterize).
  * The texture code is there only with RASTER_TEXTURES (gbuffer.gbuffer_shader(textured)): a
  * scene without textures draws with the plain variant, 4-5x faster on llvmpipe, which runs the
  * code of a branch no fragment takes. */
@@ -127,7 +129,8 @@ void main()
         for (int j = 0; j < taps; j++) {
           vec2 uv = surface_uv;
           if (solvable) {
-            vec3 d = tap_point(world_position, flat_normal, vec2(tap_offsets[i], tap_offsets[j])) -
+            vec3 d = tap_point(world_position, flat_normal,
+                               vec2(tap_offsets[i], tap_offsets[j]) + tap_shift) -
                      world_position;
             float r1 = dot(dpx, d), r2 = dot(dpy, d);
             uv += ((a22 * r1 - a12 * r2) * dux + (a11 * r2 - a12 * r1) * duy) / det;

@@ -518,3 +518,42 @@ def test_the_first_sample_gathers_at_one_cell_in_four_and_lands_as_near_f12(voxg
     print(f"after the first sample vs F12: every cell {first[False]:.4f}, "
           f"the lattice {first[True]:.4f}")
     assert first[True] <= 1.1 * first[False]
+
+
+def test_a_samples_textures_are_its_pixels_own_squares_as_f12s(voxgi, monkeypatch, tmp_path):
+    """A view's sample moves its camera rays sub-pixel (the samples anti-alias the edges) but
+    takes its textures over its pixels' own squares, as F12's centre pass does: on the
+    textured room the view after its first sample lies near F12's image. Textures
+    point-sampled at each sample's moved rays (as before) put the checkers' edges a texel's
+    jump away from F12's until many samples were in."""
+    import texture_scenes
+
+    import voxgi.render.gpu_preview as gpu_preview
+
+    scene = bpy.context.scene
+    texture_scenes.build_textured_room(scene)
+    scene.render.engine = "VOXGI"
+    scene.render.resolution_x, scene.render.resolution_y = WIDTH, HEIGHT
+    scene.render.resolution_percentage = 100
+    scene.cycles.filter_width = 1.5  # Cycles' default
+    scene.voxgi_viewport.resolution_fraction = 1.0
+    scene.voxgi_viewport.samples = SAMPLES
+    depsgraph, _, view, window = live_view(scene)
+    f12 = f12_combined(scene, tmp_path)
+    engine = StandInEngine()
+    original = gpu_preview.rasterize_stages
+
+    def at_points(*args, **kwargs):  # a sample's textures at its moved rays' points
+        if tuple(kwargs.get("tap_shift", (0.0, 0.0))) != (0.0, 0.0):
+            kwargs.update(filter_width=0.0, tap_shift=(0.0, 0.0))
+        return original(*args, **kwargs)
+
+    first = {}
+    for squares in (True, False):
+        monkeypatch.setattr(gpu_preview, "rasterize_stages", original if squares else at_points)
+        quarter_slices(engine)  # a new view of the same scene
+        image = draw_until_samples(engine, scene, depsgraph, view, window, 1)
+        first[squares] = relative_l1(image[..., :3], f12)
+    print(f"after the first sample vs F12: the pixels' squares {first[True]:.4f}, "
+          f"the moved rays' points {first[False]:.4f}")
+    assert first[True] < 0.075  # 0.114 at the moved rays' points
