@@ -72,20 +72,33 @@ void main()
                 picks.z > PR_ROUGHNESS_SQ_THRESHOLD && cos_ni > 0.0 && picks.x > 0.0;
   int first_ray = int(chunk.x);
   int end_ray = min(rays, first_ray + int(chunk.y));
-  for (int j = first_ray; j < end_ray; j++) {
-    near_normal = n; /* the receiver of the ray's near hits (bvh_shade.glsl) */
-    vec2 disk = concentric_disk(hammersley(state, j, rays));
-    float z = sqrt(max(0.0, 1.0 - dot(disk, disk)));
-    vec3 d = normalize(disk.x * t + disk.y * b + z * n);
-    receiver_glossy = picked ? glossy_pick_chance(n, v, d, picks) : 0.0;
-    float th;
-    vec3 radiance = ray_radiance(origin, d, id * uint(rays) + uint(j), seed, int(sampling.w),
-                                 world.w > 0.5, world.rgb, false, th);
-    radiance = dot(d, ng) > 0.0 ? radiance : vec3(0.0);
-    unoccluded += th >= sampling.z ? 1.0 : 0.0;
-    sum += radiance;
-    float l = dot(radiance, LUMINANCE);
-    lum2 += l * l;
+  /* the rays' paths as one stream (bvh_shade.glsl path_step): each step one bounce */
+  int j = first_ray;
+  bool tracing = false;
+  Path path;
+  vec3 d = n;
+  for (int step = 0; step < (end_ray - first_ray) * (MAX_FOLLOWS + 1); step++) {
+    if (!tracing) {
+      if (j >= end_ray) {
+        break;
+      }
+      near_normal = n; /* the receiver of the ray's near hits (bvh_shade.glsl) */
+      vec2 disk = concentric_disk(hammersley(state, j, rays));
+      float z = sqrt(max(0.0, 1.0 - dot(disk, disk)));
+      d = normalize(disk.x * t + disk.y * b + z * n);
+      receiver_glossy = picked ? glossy_pick_chance(n, v, d, picks) : 0.0;
+      path = path_start(origin, d, id * uint(rays) + uint(j));
+      j++;
+      tracing = true;
+    }
+    if (path_step(path, seed, int(sampling.w), world.w > 0.5, world.rgb, false)) {
+      tracing = false;
+      vec3 radiance = dot(d, ng) > 0.0 ? path.total : vec3(0.0);
+      unoccluded += path.th >= sampling.z ? 1.0 : 0.0;
+      sum += radiance;
+      float l = dot(radiance, LUMINANCE);
+      lum2 += l * l;
+    }
   }
   if (chunk.w < 0.5) {
     imageStore(out_image, cell, vec4(sum, unoccluded));

@@ -356,6 +356,117 @@ bool metal_follow(vec3 x, vec3 ns, vec3 d, uint hit_id, uint seed, out vec3 o, o
   return dot(dir, ns) > 0.0;
 }
 
+/* One path of ray_radiance, a bounce at a time (path_start, path_step): the diffuse gather runs
+ * its rays' paths as one stream, each step one bounce of whichever path a lane is on, so a
+ * lane whose path is followed further does not hold the others (llvmpipe runs a work group's
+ * lanes in lockstep: a loop of bounces inside a loop of rays ran as many bounces as the lane
+ * that followed most, for every ray). */
+struct Path {
+  vec3 total;   /* the light gathered so far */
+  vec3 carried; /* the throughput of the bounce to trace */
+  vec3 o;       /* its origin and direction */
+  vec3 dir;
+  float th;     /* the first hit's distance, BVH_FAR on a miss */
+  uint id_now;  /* the light-sample id of the hit being shaded */
+  int bounce;
+  int follows;  /* near hits followed so far (exact_indirect._follow_near) */
+  bool metal;   /* a metal's reflection followed: its hit reads the cache whole */
+};
+
+Path path_start(vec3 origin, vec3 d, uint hit_id)
+{
+  Path path;
+  path.total = vec3(0.0);
+  path.carried = vec3(1.0);
+  path.o = origin;
+  path.dir = d;
+  path.th = BVH_FAR;
+  path.id_now = hit_id;
+  path.bounce = 0;
+  path.follows = 0;
+  path.metal = false;
+  return path;
+}
+
+/* One bounce of `path` (ray_radiance's, below): the hit's light, then the cache's at it or
+ * a bounce further; true when the path is whole (at most MAX_FOLLOWS + 1 bounces). */
+bool path_step(inout Path path, uint seed, int strata, bool hit_glossy, vec3 world_rgb,
+               bool emission_seen)
+{
+  bool cached = textureSize(radiance_cache, 0).x > 1;
+  /* one bounce with Cycles' glossy bounces going on: no iteration of the cache's own, its
+   * first one ahead (part 1), which only a glossy scatter carries (exact_indirect
+   * RayPaths.with_cache; docs/gi_pipeline.md "One bounce and Cycles' glossy bounces") */
+  bool ahead_only = cached && cache_iterations() == 0;
+  bool first = path.bounce == 0;
+  path.bounce++;
+  float t_hit;
+  vec3 x, ns, cache_weight, glossy_weight;
+  path.total += path.carried * ray_paths(path.o, path.dir, path.id_now, seed, first ? strata : 1,
+                                         first ? hit_glossy : true,
+                                         first ? world_rgb : vec3(0.0),
+                                         first && emission_seen, t_hit, x, ns, cache_weight,
+                                         glossy_weight);
+  if (first) {
+    path.th = t_hit;
+  }
+  if (t_hit >= BVH_FAR || (path.follows > 0 && path.follows >= cache_iterations())) {
+    return true; /* left the scene, or the followed path holds every bounce */
+  }
+  /* f followed bounces on, the cache f iterations fewer: part 0, else part f + 1 */
+  int follows = path.follows;
+  vec4 arriving = cache_indirect(x, ns, ahead_only ? 1 : (follows == 0 ? 0 : follows + 1));
+  if (cached && near_follow && hit_metallic < METAL_FOLLOWED && follows < MAX_FOLLOWS &&
+      !path.metal && follows < cache_iterations() && cache_has_levels() &&
+      dot(ns, near_normal) < NEAR_FACING && t_hit < NEAR_FIELD * cache_cell_size(x)) {
+    /* the near field: a hit facing the receiver, or meeting it at a crease, within
+     * NEAR_FIELD of the cache's cells lies where the cache's voxels cannot hold its light,
+     * so one diffuse bounce is followed exactly, again where it lands near
+     * (docs/gi_pipeline.md "The near field followed", "Creases followed too") */
+    path.total += path.carried * glossy_weight * arriving.a * arriving.rgb;
+    path.carried *= cache_weight;
+    path.follows++;
+    near_normal = ns;
+    path.o = x + SURFACE_EPSILON * ns;
+    path.dir = near_bounce_ray(ns, path.id_now, seed);
+    path.id_now = pcg_hash(path.id_now ^ CONTINUE_STREAM);
+    return path.bounce > MAX_FOLLOWS;
+  }
+  /* the hit's glossy lobe followed one reflection further (exact_indirect
+   * lobe_follow_chance): a metal's always, a dielectric's by its glossy share q, carrying
+   * the lobe's light / q; not followed, the lobe's light is left to the followed ones */
+  float q = clamp(dot(glossy_weight, LUMA) / max(dot(cache_weight, LUMA), 1e-30), 0.0, 1.0);
+  q = hit_metallic >= METAL_FOLLOWED ? 1.0 : q;
+  bool lobe = first && cached && !ahead_only;
+  bool lobe_followed = lobe && q > 0.0 &&
+                       (q >= 1.0 || unit_float(pcg_hash(path.id_now ^ LOBE_FOLLOW_STREAM)) < q);
+  if (lobe && !lobe_followed) {
+    cache_weight -= glossy_weight;
+    glossy_weight = vec3(0.0);
+  }
+  if (lobe_followed) {
+    path.total += (cache_weight - glossy_weight) * (1.0 + max(receiver_glossy, 0.0) * arriving.a) *
+                  arriving.rgb;
+    path.carried = glossy_weight / q;
+    if (!metal_follow(x, ns, path.dir, path.id_now, seed, path.o, path.dir)) {
+      return true;
+    }
+    path.id_now = pcg_hash(path.id_now ^ CONTINUE_STREAM);
+    path.metal = true;
+    return path.bounce > MAX_FOLLOWS;
+  }
+  /* the diffuse share: one diffuse bounce more where the receiver's path was picked glossy
+   * (receiver_glossy); the glossy lobes: always (radiance_cache.one_more_bounce) */
+  float receiver = first ? max(receiver_glossy, 0.0) : 0.0;
+  path.total += path.carried * (ahead_only ?
+                                (cache_weight - glossy_weight) * receiver + glossy_weight :
+                                receiver > 0.0 ?
+                                (cache_weight - glossy_weight) * (1.0 + receiver * arriving.a) +
+                                    glossy_weight * (1.0 + arriving.a) :
+                                cache_weight + glossy_weight * arriving.a) * arriving.rgb;
+  return true;
+}
+
 vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit_glossy,
                   vec3 world_rgb, bool emission_seen, out float th)
 {
@@ -369,84 +480,12 @@ vec3 ray_radiance(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool 
    * MAX_FOLLOWS times at most, each landing reading the cache an iteration fewer ("The near
    * field followed"). One loop for all, so
    * the later hits' code is not compiled again and costs nothing where no lane follows. */
-  bool cached = textureSize(radiance_cache, 0).x > 1;
-  /* one bounce with Cycles' glossy bounces going on: no iteration of the cache's own, its
-   * first one ahead (part 1), which only a glossy scatter carries (exact_indirect
-   * RayPaths.with_cache; docs/gi_pipeline.md "One bounce and Cycles' glossy bounces") */
-  bool ahead_only = cached && cache_iterations() == 0;
-  vec3 total = vec3(0.0);
-  vec3 carried = vec3(1.0);
-  vec3 o = origin;
-  vec3 dir = d;
-  th = BVH_FAR;
-  int follows = 0;     /* near hits followed so far (exact_indirect._follow_near) */
-  uint id_now = hit_id; /* the light-sample id of the hit being shaded */
-  bool metal = false;   /* a metal's reflection followed: its hit reads the cache whole */
+  Path path = path_start(origin, d, hit_id);
   for (int bounce = 0; bounce <= MAX_FOLLOWS; bounce++) {
-    bool first = bounce == 0;
-    float t_hit;
-    vec3 x, ns, cache_weight, glossy_weight;
-    total += carried * ray_paths(o, dir, id_now, seed, first ? strata : 1,
-                                 first ? hit_glossy : true, first ? world_rgb : vec3(0.0),
-                                 first && emission_seen, t_hit, x, ns, cache_weight,
-                                 glossy_weight);
-    if (first) {
-      th = t_hit;
+    if (path_step(path, seed, strata, hit_glossy, world_rgb, emission_seen)) {
+      break;
     }
-    if (t_hit >= BVH_FAR || (follows > 0 && follows >= cache_iterations())) {
-      break; /* left the scene, or the followed path holds every bounce */
-    }
-    /* f followed bounces on, the cache f iterations fewer: part 0, else part f + 1 */
-    vec4 arriving = cache_indirect(x, ns, ahead_only ? 1 : (follows == 0 ? 0 : follows + 1));
-    if (cached && near_follow && hit_metallic < METAL_FOLLOWED && follows < MAX_FOLLOWS &&
-        !metal && follows < cache_iterations() && cache_has_levels() &&
-        dot(ns, near_normal) < NEAR_FACING && t_hit < NEAR_FIELD * cache_cell_size(x)) {
-      /* the near field: a hit facing the receiver, or meeting it at a crease, within
-       * NEAR_FIELD of the cache's cells lies where the cache's voxels cannot hold its light,
-       * so one diffuse bounce is followed exactly, again where it lands near
-       * (docs/gi_pipeline.md "The near field followed", "Creases followed too") */
-      total += carried * glossy_weight * arriving.a * arriving.rgb;
-      carried *= cache_weight;
-      follows++;
-      near_normal = ns;
-      o = x + SURFACE_EPSILON * ns;
-      dir = near_bounce_ray(ns, id_now, seed);
-      id_now = pcg_hash(id_now ^ CONTINUE_STREAM);
-      continue;
-    }
-    /* the hit's glossy lobe followed one reflection further (exact_indirect
-     * lobe_follow_chance): a metal's always, a dielectric's by its glossy share q, carrying
-     * the lobe's light / q; not followed, the lobe's light is left to the followed ones */
-    float q = clamp(dot(glossy_weight, LUMA) / max(dot(cache_weight, LUMA), 1e-30), 0.0, 1.0);
-    q = hit_metallic >= METAL_FOLLOWED ? 1.0 : q;
-    bool lobe = first && cached && !ahead_only;
-    bool lobe_followed = lobe && q > 0.0 &&
-                         (q >= 1.0 || unit_float(pcg_hash(id_now ^ LOBE_FOLLOW_STREAM)) < q);
-    if (lobe && !lobe_followed) {
-      cache_weight -= glossy_weight;
-      glossy_weight = vec3(0.0);
-    }
-    if (lobe_followed) {
-      total += (cache_weight - glossy_weight) * (1.0 + max(receiver_glossy, 0.0) * arriving.a) *
-               arriving.rgb;
-      carried = glossy_weight / q;
-      if (!metal_follow(x, ns, dir, id_now, seed, o, dir)) {
-        break;
-      }
-      id_now = pcg_hash(id_now ^ CONTINUE_STREAM);
-      metal = true;
-      continue;
-    }
-    /* the diffuse share: one diffuse bounce more where the receiver's path was picked glossy
-     * (receiver_glossy); the glossy lobes: always (radiance_cache.one_more_bounce) */
-    float receiver = first ? max(receiver_glossy, 0.0) : 0.0;
-    total += carried * (ahead_only ?
-                        (cache_weight - glossy_weight) * receiver + glossy_weight :
-                        receiver > 0.0 ?
-                        (cache_weight - glossy_weight) * (1.0 + receiver * arriving.a) +
-                            glossy_weight * (1.0 + arriving.a) :
-                        cache_weight + glossy_weight * arriving.a) * arriving.rgb;
-    break;
   }
-  return total;
+  th = path.th;
+  return path.total;
 }
