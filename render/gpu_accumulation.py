@@ -24,7 +24,14 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.preview.passes import PASS_NAMES
-from ..voxgi_addon.preview.progressive import GATHERED, LIGHT_COLOURS, inside, sample_terms
+from ..voxgi_addon.preview.progressive import (
+    GATHERED,
+    LIGHT_COLOURS,
+    TEXTURE_STEP,
+    inside,
+    sample_terms,
+)
+from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE
 from .gpu_scene import GPUScene
 from .gpu_shaders import LOCAL_SIZE, build_compute, forget
 from .gpu_volume import float_texture
@@ -48,6 +55,9 @@ class GPUSums:
     textures: dict
     width: int
     height: int
+    # the pixels' G-buffer (position, normal, view: gbuffer.GBuffer's) where the sums were
+    # traced, for the film's mean weights within a surface (``GPUAccumulation.add``)
+    surface: tuple | None = None
 
 
 def _shader(name: str):
@@ -56,14 +66,18 @@ def _shader(name: str):
     if name not in _shaders:
         samplers, constants, outputs, read_write = {
             "pass_sample": (SUM_NAMES, ("kind",), ("out_value", "out_weight", "out_light"), ()),
-            "accumulate": (("sample_value", "sample_weight", "sample_light", "world_image"),
+            "accumulate": (("sample_value", "sample_weight", "sample_light", "world_image",
+                            "centre_position", "centre_normal", "centre_view", "centre_base"),
                            ("rect", "window", "mode", "info", "tail_a", "tail_b", "tail_c"),
                            (), ("acc", "tails")),
             "estimate": (("acc", "tails", "backdrop"), ("window", "info", "mode"),
                          ("out_image",), ()),
         }[name]
-        files = (name,) if name == "pass_sample" else ("accumulation_common", name)
-        _shaders[name] = build_compute(files, samplers, constants, outputs,
+        files = {"pass_sample": (name,), "accumulate": ("accumulation_common", "same_surface", name),
+                 "estimate": ("accumulation_common", name)}[name]
+        defines = {"PLANE_TOLERANCE": repr(float(PLANE_TOLERANCE)),
+                   "TEXTURE_STEP": repr(float(TEXTURE_STEP))} if name == "accumulate" else None
+        _shaders[name] = build_compute(files, samplers, constants, outputs, defines=defines,
                                        read_write=read_write)
     return _shaders[name]
 
@@ -139,12 +153,17 @@ class GPUAccumulation:
         self.added = 0  # samples added (tiles of all samples)
         self._black = None
 
-    def add(self, rect, sample, gather_weight: float = 1.0, tails=None, world=None) -> None:
+    def add(self, rect, sample, gather_weight: float = 1.0, tails=None, world=None,
+            mean_tails=None, surface=None) -> None:
         """Add one sample of the tile ``rect`` (x0, y0 from the top, w, h): a ``GPUSums`` or
         numpy passes (PASS_NAMES → (h, w, 3), row 0 on top, with "Alpha" for the film), as
         ``Accumulation.add``: gather_weight, tails ((3, 3) the sample's filter weights in its
         neighbours, ``sample_tail_weights``; None: none), world ((h, w, 3) the world along the
-        tile's camera rays, or None: black)."""
+        tile's camera rays, or None: black). mean_tails ((3, 3) ``passes.neighbour_weights``,
+        with tails and the tile's G-buffer: surface, the (position, normal, view, base)
+        textures of ``gbuffer.GBuffer``, or None: the sample's own, ``GPUSums.surface``): a
+        pixel's sample goes into a neighbour of the tile across a step of one surface's
+        texture by these instead of tails (``Accumulation.add``'s mean_tails)."""
         x0, y0, w, h = (int(v) for v in rect)
         (value, weight, light), size = sample_textures(sample, self.pass_name, self.film)
         if size != (w, h):
@@ -165,10 +184,18 @@ class GPUAccumulation:
         if tails is not None:
             spread[:9] = np.asarray(tails, np.float32).reshape(9)
             spread[4] = 0.0  # the centre is the pixel's own sum
+        surface = surface if surface is not None else getattr(sample, "surface", None)
+        mean = 0.0
+        if tails is not None and mean_tails is not None and surface is not None:
+            mean = float(np.asarray(mean_tails)[1, 2])  # separable: a at the sides, a² corners
+        else:
+            surface = (self._blank(),) * 4
         shader = _shader("accumulate")
         shader.bind()
-        for name, texture in zip(("sample_value", "sample_weight", "sample_light", "world_image"),
-                                 (value, weight, light, world_texture)):
+        for name, texture in zip(("sample_value", "sample_weight", "sample_light", "world_image",
+                                  "centre_position", "centre_normal", "centre_view",
+                                  "centre_base"),
+                                 (value, weight, light, world_texture, *surface)):
             shader.uniform_sampler(name, texture)
         m = float(gather_weight) if self.pass_name in GATHERED else 1.0
         shader.uniform_float("rect", (float(x0), float(y0), float(w), float(h)))
@@ -176,7 +203,7 @@ class GPUAccumulation:
         shader.uniform_float("mode", (float(self.kind), m, float(gather_weight),
                                       1.0 if self.film else 0.0))
         shader.uniform_float("info", (float(self.width), float(self.height),
-                                      1.0 if world is not None and self.film else 0.0, 0.0))
+                                      1.0 if world is not None and self.film else 0.0, mean))
         for name, part in zip(("tail_a", "tail_b", "tail_c"), (spread[:4], spread[4:8],
                                                                spread[8:])):
             shader.uniform_float(name, tuple(float(v) for v in part))

@@ -759,7 +759,9 @@ def _centre_pass(f):
                              smooth=_world_smooth(f))
     result = None
     if f["on_gpu"] and not reach:  # the viewport adds them to its sums on the GPU
-        result = (GPUSums({name: sums[name] for name in SUM_NAMES}, width, height))
+        result = GPUSums({name: sums[name] for name in SUM_NAMES}, width, height,
+                         surface=(inputs["gbuffer_position"], inputs["gbuffer_normal"],
+                                  inputs["gbuffer_view"], inputs["gbuffer_base"]))
     return {"sums": sums, "lamps": lamps, "result": result}
 
 

@@ -39,6 +39,7 @@ import numpy as np
 
 from ..blender.settings import cone_settings, trace_options
 from ..voxgi_addon.preview.film import world_along
+from ..voxgi_addon.preview.passes import neighbour_weights
 from ..voxgi_addon.preview.progressive import (
     SliceSizer,
     fit_side,
@@ -84,6 +85,7 @@ STAGE_HISTORY = 4
 # (voxgi_addon/preview/progressive.py; docs/gi_pipeline.md "The view's first sample at the
 # lattice"): the view is first within Cycles' error of F12's image when that sample is whole
 LATTICE_FIRST = True
+MEAN_TAILS = True
 
 
 def base_options(settings, width: int, height: int) -> dict:
@@ -448,6 +450,7 @@ class ProgressiveImage:
             yield  # the estimate is a stage of its own
             acc.add(rect, passes, gather_weight=weight,
                     tails=sample_tail_weights(filter_width, self.target, self.sample),
+                    mean_tails=neighbour_weights(filter_width) if MEAN_TAILS else None,
                     world=world(camera, rect[2], rect[3]))
             done = Slice("tile", rect, (rect[2], rect[3]), self.sample)
             if not self.tiles:

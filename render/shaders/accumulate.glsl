@@ -14,8 +14,13 @@
  * rect: the tile (x0, y0 from the top, w, h) in image pixels; window: the pixels this dispatch
  * covers (x0, y0, w, h: the tile's inside the image grown by one for the tails);
  * mode: (kind 0 plain / 1 light pass / 2 Combined, weight, gather weight, film);
- * info: (W, H, has world, 0); tail_a, tail_b, tail_c: the 3 × 3 tail weights row-major
- * (w[ey + 1][ex + 1], ey down), the centre's unused. */
+ * info: (W, H, has world, a); tail_a, tail_b, tail_c: the 3 × 3 tail weights row-major
+ * (w[ey + 1][ex + 1], ey down), the centre's unused.
+ * a > 0: centre_position, centre_normal, centre_view, centre_base hold the tile's G-buffer
+ * (same_surface.glsl; gbuffer_frag.glsl's out_base), and a sample goes into a neighbour of the
+ * tile across a step of one surface's texture (texture_step; the reference: preview.progressive
+ * .texture_steps) by the filter's mean weights (a at the sides, a² at the corners:
+ * passes.neighbour_weights) instead of its offset's. */
 
 bool in_tile(ivec2 s)
 {
@@ -47,6 +52,26 @@ float tail_weight(int k)
   return k < 4 ? tail_a[k] : (k < 8 ? tail_b[k - 4] : tail_c[k - 8]);
 }
 
+ivec2 tile_texel(ivec2 s)
+{
+  ivec4 r = ivec4(rect);
+  return ivec2(s.x - r.x, r.w - 1 - (s.y - r.y));
+}
+
+/* whether the tile's pixels s and p (both in the tile) see one surface whose texture differs
+ * between them */
+bool texture_step(ivec2 s, ivec2 p)
+{
+  ivec2 t = tile_texel(s), u = tile_texel(p);
+  vec4 position = texelFetch(centre_position, t, 0);
+  vec4 base = texelFetch(centre_base, t, 0);
+  vec4 other = texelFetch(centre_base, u, 0);
+  return position.w >= 0.5 && base.w > 0.5 && other.w > 0.5 &&
+         distance(base.rgb, other.rgb) > TEXTURE_STEP &&
+         same_surface(position, texelFetch(centre_normal, t, 0).xyz,
+                      texelFetch(centre_view, t, 0).w, u);
+}
+
 void main()
 {
   ivec2 p;
@@ -54,7 +79,8 @@ void main()
     return;
   }
   vec4 c[LAYERS];
-  if (in_tile(p)) {
+  bool own = in_tile(p);
+  if (own) {
     sample_at(p, c);
     for (int l = 0; l < LAYERS; l++) {
       ivec2 at = layer_texel(p, l);
@@ -72,7 +98,13 @@ void main()
       int k = (ey + 1) * 3 + ex + 1;
       float weight = tail_weight(k);
       ivec2 s = p + ivec2(ex, ey);
-      if (k == 4 || weight == 0.0 || !in_tile(s)) {
+      if (k == 4 || !in_tile(s)) {
+        continue;
+      }
+      if (info.w > 0.0 && own && texture_step(s, p)) {
+        weight = (ex != 0 && ey != 0) ? info.w * info.w : info.w;
+      }
+      if (weight == 0.0) {
         continue;
       }
       sample_at(s, c);

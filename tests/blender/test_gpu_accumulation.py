@@ -156,3 +156,64 @@ def test_the_viewports_gpu_composition_equals_the_cpu_passes(voxgi, quality):
         error = np.abs(images[0] - images[1]).sum() / max(np.abs(images[1]).sum(), 1e-9)
         assert error < 2e-3, (pass_name, error)
         assert images[1][..., :3].max() > 0.0 or pass_name.startswith("Glossy"), pass_name
+
+
+def random_surface(rng, w, h):
+    """A tile's G-buffer as numpy arrays (``Accumulation.add``'s surface) and as the textures
+    ``GPUAccumulation.add`` reads (position, normal, view, base; rows bottom to top): two
+    planes of two materials, a textured share whose Base Color takes a few values (steps
+    between some neighbours, none between others), and pixels that see nothing."""
+    from voxgi.render.gpu_volume import float_texture
+
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    second = (x + 0.5 * y) > 0.6 * w  # a crease: the second plane
+    position = np.stack([x, y, np.where(second, 0.4 * x, 0.0)], -1)
+    normal = np.where(second[..., None], np.array([-0.371, 0.0, 0.928]), np.array([0.0, 0.0, 1.0]))
+    hit = rng.random((h, w)) > 0.1
+    material = np.where(second, 3, 1) + (rng.random((h, w)) < 0.05)
+    base = np.zeros((h, w, 4))
+    textured = rng.random((h, w)) < 0.8
+    base[..., :3] = rng.integers(0, 3, (h, w, 1)) * np.array([0.3, 0.2, 0.1]) + 0.05
+    base[..., 3] = textured
+    base[~textured] = 0.0
+    surface = {"hit": hit, "material": material, "position": position, "normal": normal,
+               "base": base}
+
+    def texture(rgb, w4):
+        return float_texture(np.flipud(np.dstack([rgb, w4])).astype(np.float32).copy(), (w, h))
+
+    textures = (texture(position, hit.astype(np.float64)), texture(normal, np.zeros((h, w))),
+                texture(np.zeros((h, w, 3)), material.astype(np.float64)),
+                texture(base[..., :3], base[..., 3]))
+    return surface, textures
+
+
+def test_across_a_textures_steps_the_gpu_takes_the_filters_mean_as_numpy(voxgi):
+    """With the tile's G-buffer the samples go into their neighbours across a step of one
+    surface's texture by the filter's mean weights (``texture_steps``): the GPU's sums equal
+    the numpy reference's, and differ from the sums by the offsets' weights alone."""
+    from voxgi.render.gpu_accumulation import GPUAccumulation, read_rgba
+    from voxgi.voxgi_addon.preview.passes import neighbour_weights
+    from voxgi.voxgi_addon.preview.progressive import Accumulation, sample_tail_weights
+
+    gpu_ready()
+    rng = np.random.default_rng(11)
+    ours = GPUAccumulation("Combined", W, H, True, False)
+    reference = Accumulation("Combined", W, H, True, False)
+    offsets_only = Accumulation("Combined", W, H, True, False)
+    mean = neighbour_weights(1.5)
+    for sample, grid in enumerate(tiles()):
+        tails = sample_tail_weights(1.5, 4, sample)
+        for rect in grid:
+            passes = random_passes(rng, rect[2], rect[3])
+            world = rng.uniform(0.0, 1.0, (rect[3], rect[2], 3)).astype(np.float32)
+            surface, textures = random_surface(rng, rect[2], rect[3])
+            ours.add(rect, passes, tails=tails, world=world, mean_tails=mean, surface=textures)
+            reference.add(rect, passes, tails=tails, world=world, mean_tails=mean,
+                          surface=surface)
+            offsets_only.add(rect, passes, tails=tails, world=world)
+    finished = read_rgba(ours.estimate())
+    expected = reference.film_rgba(reference.finished(1.5), filter_width=1.5)
+    assert np.allclose(finished, expected, rtol=1e-4, atol=1e-5)
+    apart = offsets_only.film_rgba(offsets_only.finished(1.5), filter_width=1.5)
+    assert np.abs(finished - apart).max() > 1e-3

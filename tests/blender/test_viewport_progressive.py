@@ -520,15 +520,10 @@ def test_the_first_sample_gathers_at_one_cell_in_four_and_lands_as_near_f12(voxg
     assert first[True] <= 1.1 * first[False]
 
 
-def test_a_samples_textures_are_its_pixels_own_squares_as_f12s(voxgi, monkeypatch, tmp_path):
-    """A view's sample moves its camera rays sub-pixel (the samples anti-alias the edges) but
-    takes its textures over its pixels' own squares, as F12's centre pass does: on the
-    textured room the view after its first sample lies near F12's image. Textures
-    point-sampled at each sample's moved rays (as before) put the checkers' edges a texel's
-    jump away from F12's until many samples were in."""
+def textured_view(tmp_path):
+    """(scene, depsgraph, view, window, F12's Combined) of the textured room at the test's
+    size, its view at full resolution with the test's samples and Cycles' default filter."""
     import texture_scenes
-
-    import voxgi.render.gpu_preview as gpu_preview
 
     scene = bpy.context.scene
     texture_scenes.build_textured_room(scene)
@@ -540,6 +535,18 @@ def test_a_samples_textures_are_its_pixels_own_squares_as_f12s(voxgi, monkeypatc
     scene.voxgi_viewport.samples = SAMPLES
     depsgraph, _, view, window = live_view(scene)
     f12 = f12_combined(scene, tmp_path)
+    return scene, depsgraph, view, window, f12
+
+
+def test_a_samples_textures_are_its_pixels_own_squares_as_f12s(voxgi, monkeypatch, tmp_path):
+    """A view's sample moves its camera rays sub-pixel (the samples anti-alias the edges) but
+    takes its textures over its pixels' own squares, as F12's centre pass does: on the
+    textured room the view after its first sample lies near F12's image. Textures
+    point-sampled at each sample's moved rays (as before) put the checkers' edges a texel's
+    jump away from F12's until many samples were in."""
+    import voxgi.render.gpu_preview as gpu_preview
+
+    scene, depsgraph, view, window, f12 = textured_view(tmp_path)
     engine = StandInEngine()
     original = gpu_preview.rasterize_stages
 
@@ -557,3 +564,29 @@ def test_a_samples_textures_are_its_pixels_own_squares_as_f12s(voxgi, monkeypatc
     print(f"after the first sample vs F12: the pixels' squares {first[True]:.4f}, "
           f"the moved rays' points {first[False]:.4f}")
     assert first[True] < 0.075  # 0.114 at the moved rays' points
+
+
+def test_across_a_textures_steps_the_samples_take_the_filters_mean(voxgi, monkeypatch, tmp_path):
+    """A view's samples take their textures over their pixels' own squares, so across a step
+    of a surface's texture (the checkers' edges) a sample goes into its neighbour by the pixel
+    filter's mean weight, not by its offset's: on the textured room the view's early samples
+    then lie near F12's image instead of swinging the checkers' edges sample by sample, and
+    the converged view lies nearer too."""
+    import voxgi.render.progressive as progressive
+
+    scene, depsgraph, view, window, f12 = textured_view(tmp_path)
+    engine = StandInEngine()
+    errors = {}
+    for mean in (True, False):
+        monkeypatch.setattr(progressive, "MEAN_TAILS", mean)
+        quarter_slices(engine)  # a new view of the same scene
+        errors[mean] = [relative_l1(draw_until_samples(engine, scene, depsgraph, view, window,
+                                                       samples)[..., :3], f12)
+                        for samples in (1, 2, 3, 4, SAMPLES)]
+    print("vs F12 after samples 1, 2, 3, 4, 16: the filter's mean across texture steps "
+          + " ".join(f"{e:.4f}" for e in errors[True]) + "; the offsets' weights "
+          + " ".join(f"{e:.4f}" for e in errors[False]))
+    # by the offsets' weights alone: 0.0531, then 0.0388 0.0412 0.0360
+    assert errors[True][0] < 0.05
+    assert max(errors[True][1:4]) < 0.036
+    assert errors[True][-1] < 0.03        # 0.0258 (the offsets' 0.0271)

@@ -36,7 +36,7 @@ from ..scene.camera import filter_offsets
 from .film import film_combined
 from .gather import GatherSettings
 from .passes import PASS_NAMES, filter_coverage, filter_passes, tail_weights
-from .upsample import low_shape
+from .upsample import low_shape, same_surface
 
 # The passes made of the gathers: their samples are weighted by the samples behind the
 # gathers' sums (``GatherSums``: a later sample's gather filters more rays).
@@ -229,6 +229,36 @@ def sample_terms(passes, pass_name: str) -> dict[str, np.ndarray]:
     return {"value": value, "weight": ones, "light": np.zeros_like(value)}
 
 
+# a Base Color step between two pixels (linear RGB distance): above float rounding
+TEXTURE_STEP = 1e-4
+
+
+def texture_steps(surface, ey: int, ex: int) -> np.ndarray:
+    """(h, w) bool over a tile's G-buffer ``surface`` (``Accumulation.add``'s): whether the
+    pixel (y, x) and the pixel (y − ey, x − ex) of the tile both see one textured surface
+    (``upsample.same_surface``; Base Color per texel, flag base[..., 3] > ½) whose Base
+    Color differs between them. A view's sample takes its textures over its pixel's whole
+    square whatever its sub-pixel offset (docs/gi_pipeline.md "A sample's textures over its
+    pixel's square"), so across such a step its value goes into the neighbour by the filter's
+    mean weight, not its offset's: the offset's weights there only swing the texture's edge
+    from sample to sample (docs/gi_pipeline.md "The filter's mean across a texture's
+    steps"). Elsewhere — lighting within one colour, and the geometry's edges — the offset's
+    weights place what the sample saw. The GLSL port: accumulate.glsl ``texture_step``."""
+    hit, material = np.asarray(surface["hit"], bool), np.asarray(surface["material"])
+    position, normal = np.asarray(surface["position"]), np.asarray(surface["normal"])
+    base = np.asarray(surface["base"], np.float64)
+    height, width = hit.shape
+    out = np.zeros((height, width), bool)
+    # source (y, x) → target (y − ey, x − ex), both in the tile
+    a = (slice(max(ey, 0), height + min(ey, 0)), slice(max(ex, 0), width + min(ex, 0)))
+    b = (slice(max(-ey, 0), height + min(-ey, 0)), slice(max(-ex, 0), width + min(-ex, 0)))
+    textured = (base[a][..., 3] > 0.5) & (base[b][..., 3] > 0.5)
+    differs = np.linalg.norm(base[a][..., :3] - base[b][..., :3], axis=-1) > TEXTURE_STEP
+    out[a] = hit[a] & textured & differs & same_surface(
+        hit[a], material[a], position[a], normal[a], hit[b], material[b], position[b], normal[b])
+    return out
+
+
 class Accumulation:
     """The samples of one pass of a ``width`` × ``height`` image: per pixel the sum of the
     pass (× its colour for a light pass), of the weights (the colour, or 1) and the count.
@@ -274,14 +304,21 @@ class Accumulation:
             out.update(film=self.film, film_weights=self.film_weights)
         return out
 
-    def add(self, rect, passes, gather_weight: float = 1.0, tails=None, world=None) -> None:
+    def add(self, rect, passes, gather_weight: float = 1.0, tails=None, world=None,
+            mean_tails=None, surface=None) -> None:
         """Add one sample's ``passes`` (PASS_NAMES → (h, w, 3), row 0 on top) of the tile
         ``rect`` (x0, y0, w, h); gather_weight : the weight of its gathered light. tails :
         (3, 3) the weights of the sample's offset in the neighbours (``sample_tail_weights``):
         each of its pixels' sums also goes into the 8 neighbours by them, as Cycles' film
         weighs a sample over its whole filter window (``finished``).
         world : (h, w, 3) the world along the sample's camera rays (``film.world_along``;
-        None: black), for the film (an Accumulation made with ``film``)."""
+        None: black), for the film (an Accumulation made with ``film``).
+        mean_tails : (3, 3) ``passes.neighbour_weights``, with tails and ``surface`` (the
+        tile's G-buffer: hit (h, w) bool, material (h, w) int, position, normal (h, w, 3),
+        base (h, w, 4) the Base Color per texel and its flag, ``gbuffer_frag.glsl``'s
+        out_base): a pixel's sample goes into a neighbour of the tile by these instead of
+        tails where the two see one surface (``upsample.same_surface``) whose texture differs
+        between them (``texture_steps``)."""
         before = None
         if tails is not None:
             window0, _ = inside(rect, self.width, self.height)
@@ -317,12 +354,17 @@ class Accumulation:
                 self.colour[window] += weights
         self.counts[window] += 1
         if before is not None:
+            steps = None if mean_tails is None or surface is None else \
+                {key: np.asarray(array)[part] for key, array in surface.items()}
             self._add_tails(window, {name: array[window] - before[name]
-                                     for name, array in self._sums().items()}, tails)
+                                     for name, array in self._sums().items()}, tails,
+                            mean_tails, steps)
 
-    def _add_tails(self, window, added, weights) -> None:
+    def _add_tails(self, window, added, weights, mean=None, surface=None) -> None:
         """Add a sample's sums ``added`` (name → (h, w, C) at ``window``) into the tails of
-        the pixels e before them by weights[ey + 1, ex + 1] (``passes.add_tails``)."""
+        the pixels e before them by weights[ey + 1, ex + 1] (``passes.add_tails``); with
+        ``mean`` and ``surface`` (``add``'s, over the window) by mean[ey + 1, ex + 1] where
+        ``texture_steps`` holds."""
         if self.tails is None:
             self.tails = {name: np.zeros_like(array) for name, array in self._sums().items()}
         rows, cols = window
@@ -339,8 +381,12 @@ class Accumulation:
                 source = (slice(y0 - rows.start, y1 - rows.start),
                           slice(x0 - cols.start, x1 - cols.start))
                 target = (slice(y0 - ey, y1 - ey), slice(x0 - ex, x1 - ex))
+                factor = w
+                if surface is not None:
+                    step = texture_steps(surface, ey, ex)[source]
+                    factor = np.where(step, float(mean[ey + 1, ex + 1]), w)[..., None]
                 for name, value in added.items():
-                    self.tails[name][target] += w * value[source]
+                    self.tails[name][target] += factor * value[source]
 
     @property
     def samples(self) -> int:
