@@ -50,7 +50,6 @@ from gpu_extras.batch import batch_for_shader
 from ..blender.settings import cone_settings, gi_stride, pixel_filter_width
 from ..blender.viewport_session import READ_SLICE, SNAPSHOT_HOOKS, live_gi
 from ..blender.viewport_settings import VIEWPORT_PASSES
-from ..voxgi_addon.preview.progressive import gather_samples
 from ..voxgi_addon.scene.view_camera import camera_from_view
 from . import viewport_prepare
 from .gpu_fast import cone_volumes
@@ -211,13 +210,10 @@ class ViewportRenderer:
         advance_any`` or ``advance_first``: whether it ran one), then more while the build
         goes on, the next chunk — taken to last up to CHUNK_GROWTH × the longest so far, as
         the build grows its ray chunks — ends within the slices' stage budget from ``t0``,
-        none compiled a kernel or sent a scene part (a draw does one of each at most) and
-        none completed a cache the image restarts on (a provisional pass: the whole build
-        after it waits for the first sample, ``viewport_cache``).
+        and none compiled a kernel or sent a scene part (a draw does one of each at most).
         A relaxation pass of a small scene's cache is 1–2 ms: one a draw spent most of the
         build's draws on the draws themselves. Whether a chunk ran."""
         mark = counters.compiles, counters.uploads
-        generation = self.cache.generation
         started = time.perf_counter()
         if not chunk():
             return False
@@ -225,7 +221,6 @@ class ViewportRenderer:
         longest = time.perf_counter() - started
         while budget is not None and self.cache.building is not None \
                 and (counters.compiles, counters.uploads) == mark \
-                and self.cache.generation == generation \
                 and time.perf_counter() - t0 + CHUNK_GROWTH * longest <= budget:
             started = time.perf_counter()
             if not chunk():
@@ -256,9 +251,6 @@ class ViewportRenderer:
             self.timings = {"radiance cache stage": time.perf_counter() - t0}
             return "Refining"
         self.cache.image_key = progressive.key  # (what the slices' cache stages ask for)
-        # (a provisional cache pays where later samples gather on the whole one)
-        self.cache.provisional_first = settings.quality == "ACCURATE" and \
-            gather_samples(progressive.target) > 1
         if settings.quality == "ACCURATE" and not progressive.coarse_pending \
                 and self.cache.building is not None and not self.cache.hold \
                 and self._cache_chunks(lambda: self.cache.advance_first(progressive.key), t0):
@@ -267,14 +259,6 @@ class ViewportRenderer:
             # a draw as its stage budget holds (docs/gi_pipeline.md "Viewport samples whose
             # gathers end early"; Fast's image waits for the worker's bounced voxels after
             # it, and converges meanwhile)
-            self.timings = {"radiance cache stage": time.perf_counter() - t0}
-            return "Refining"
-        if self.cache.refining and not progressive.coarse_pending and progressive.running is None \
-                and progressive.samples_done >= 1 \
-                and self._cache_chunks(lambda: self.cache.advance_any(in_place=True), t0):
-            # the image started on a provisional cache (half its rays, ``viewport_cache``): once
-            # its first sample is whole, the whole build runs ahead of the next sample's tiles,
-            # and those gather on it (docs/gi_pipeline.md "A provisional cache first")
             self.timings = {"radiance cache stage": time.perf_counter() - t0}
             return "Refining"
         if not progressive.coarse_pending:

@@ -17,14 +17,6 @@ be dropped). The build's CPU half — the cache's voxels, face points and layout
 made on the viewport's preparing thread first (``viewport_prepare.PrepWorker``), never in a
 draw (docs/gi_pipeline.md "Entering Rendered mode").
 
-Accurate's view of several samples builds a provisional cache first: every face's rays at
-``PROVISIONAL_SHARE`` on the same layout, half the build's time. Its completion is a
-generation (the image starts on it); the whole build follows once the view's first sample is
-whole, ahead of the next sample's tiles, and replaces it in place (``advance(in_place=True)``:
-no restart; only the first of the view's gathering samples gathered on the provisional
-cache). Only the whole build is the session's. A view that converges first (one sample)
-restarts on the whole cache as on any other (docs/gi_pipeline.md "A provisional cache first").
-
 A complete build is the session's too (``gpu_gather.share_cache``), and a view whose scene the
 session already holds a complete cache for takes it instead of building one
 (``gpu_gather.shared_cache``): a view entered after F12, or switched off and on again, starts
@@ -33,18 +25,11 @@ cache for F12 and the Rendered view").
 """
 from __future__ import annotations
 
-from dataclasses import replace
-
 from ..voxgi_addon.gi.radiance_cache import cache_key
 from ..voxgi_addon.preview.gather import cache_settings, uses_cache
 from .gpu_gather import CACHE_STAGE_SECONDS, cache_layout, cache_stages, share_cache, shared_cache
 
 STAGE_SECONDS = CACHE_STAGE_SECONDS  # what one chunk aims at (half the 30 ms budget)
-# A build of Accurate's view first traces this share of every face's rays (on the same layout):
-# the provisional cache its image starts on; the whole build follows once the view's first
-# sample is whole and replaces it in place (docs/gi_pipeline.md "A provisional cache first")
-PROVISIONAL_SHARE = 0.5
-PROVISIONAL_LEAST = 4  # rays a face: a provisional pass of fewer is not made (the whole at once)
 
 
 class ViewportCache:
@@ -71,11 +56,6 @@ class ViewportCache:
         # slice last asked for the build under way: ``advance_first`` runs only that build
         self.image_key = None
         self.asked = None
-        # set by the viewport: whether a build starts with a provisional pass (Accurate's view:
-        # Fast's voxels reflect the numpy cache, bounced on the worker once a build completes)
-        self.provisional_first = False
-        self.provisional = False  # the build under way is a provisional pass
-        self.refining = False     # the texture is a provisional pass; the whole build under way
 
     def stage(self, bvh, lights, principled, emission, settings, tables=None):
         """A generator of at most one stage (one chunk of the build the current scene needs),
@@ -97,7 +77,7 @@ class ViewportCache:
         if self.building is None or not _same(self.building[0], key):
             if self.building is not None and self.building[1] is not None:
                 self.building[1].close()
-            self.building, self.provisional, self.refining = (key, None), False, False
+            self.building = (key, None)
             self._inputs = (bvh, lights, principled, emission, settings, tables)
         if self.building[1] is None and not self._start():
             return self.texture  # its layout is being made: no stage yet
@@ -130,19 +110,10 @@ class ViewportCache:
         layout = self.layout[2].get("layout")
         if layout is None:
             return False
-        rays = int(settings.cache_rays * PROVISIONAL_SHARE)
-        self.provisional = self.provisional_first and rays >= PROVISIONAL_LEAST
-        first = replace(settings, cache_rays=rays) if self.provisional else settings
-        self.building = (self.building[0], cache_stages(
-            bvh, lights, principled, emission, first, tables, self.budget, read_back=False,
-            layout=layout))
+        key = self.building[0]
+        self.building = (key, cache_stages(bvh, lights, principled, emission, settings, tables,
+                                           self.budget, read_back=False, layout=layout))
         return True
-
-    def _whole(self):
-        """The whole build's stages after its provisional pass (the same layout)."""
-        bvh, lights, principled, emission, settings, tables = self._inputs
-        return cache_stages(bvh, lights, principled, emission, settings, tables, self.budget,
-                            read_back=False, layout=self.layout[2]["layout"])
 
     def resume(self) -> bool:
         """Begin the build a held ``stage`` asked for, when none is under way (the image
@@ -155,12 +126,9 @@ class ViewportCache:
                 self.building, self._inputs = (key, None), inputs
         return self.building is not None
 
-    def advance(self, in_place: bool = False) -> bool:
-        """Run one chunk of the build under way (if any); True when it completed a cache — a
-        provisional pass (a new generation; the whole build goes on) or the whole build (a new
-        generation too, unless ``in_place`` and it replaces the provisional pass: the image
-        goes on with it). The viewport calls this on its own while the image has converged
-        on the old cache."""
+    def advance(self) -> bool:
+        """Run one chunk of the build under way (if any); True when it completed the cache.
+        The viewport calls this on its own while the image has converged on the old cache."""
         if self.building is None:
             return False
         if self.building[1] is None and not self._start():
@@ -170,16 +138,8 @@ class ViewportCache:
             next(stages)
         except StopIteration as end:
             (self._read, self.texture), self._cache = end.value, None
-            self.key = key
-            if self.provisional:  # the image starts on it; not the session's (F12's) cache
-                self.provisional, self.refining = False, True
-                self.building = (key, self._whole())
-                self.generation += 1
-                return True
-            self.building = None
-            if not (self.refining and in_place):
-                self.generation += 1
-            self.refining = False
+            self.key, self.building = key, None
+            self.generation += 1
             share_cache(*key, self._read, self.texture)  # for F12 and the next view
             return True
         except BaseException:
@@ -187,12 +147,12 @@ class ViewportCache:
             raise
         return False
 
-    def advance_any(self, in_place: bool = False) -> bool:
+    def advance_any(self) -> bool:
         """``advance`` the build under way, whichever image asked for it: whether a chunk ran
         (False: no build under way, or its layout is still being made)."""
         if self.building is None or (self.building[1] is None and not self._start()):
             return False
-        self.advance(in_place)
+        self.advance()
         return True
 
     def advance_first(self, image_key) -> bool:
@@ -218,7 +178,6 @@ class ViewportCache:
         cache, self.texture = shared
         self._read, self._cache = (cache, None) if callable(cache) else (None, cache)
         self.key, self.building, self._wanted = key, None, None
-        self.provisional = self.refining = False
         self.generation += 1
         return True
 

@@ -521,60 +521,6 @@ def test_a_completed_cache_restarts_the_image_without_a_second_coarse_image(voxg
     assert changed[0][0] == "coarse" and [k for k, _ in changed].count("coarse") == 1, changed
 
 
-def test_a_fresh_view_starts_on_a_provisional_cache_and_the_whole_one_replaces_it(voxgi,
-                                                                                  monkeypatch):
-    """A fresh Accurate view of several samples builds a provisional cache of half the rays
-    first and traces its first sample on it; then the whole build (the same layout, every
-    ray) runs ahead of the next sample's tiles and replaces it without restarting the image
-    — so the first image comes after half the build, not all of it — and the session's
-    cache, F12's, is the whole one: F12 over it is F12 over its own build."""
-    from stand_in_engine import StandInEngine
-    from test_viewport import cornell, engine_view, live_view
-
-    from voxgi.render import gpu_gather, viewport_cache
-    from voxgi.render.pipeline import render_scene_passes
-    from voxgi.render.viewport import ViewportRenderer
-
-    scene = cornell()
-    scene.voxgi.quality = "ACCURATE"
-    scene.voxgi.bounce_source = "MANUAL"
-    scene.voxgi.bounces = 3
-    scene.voxgi_viewport.samples = 4
-    depsgraph, _, view, window = live_view(scene)
-    rays, stages = [], viewport_cache.cache_stages
-    monkeypatch.setattr(viewport_cache, "cache_stages",
-                        lambda *a, **k: (rays.append(a[4].cache_rays), stages(*a, **k))[1])
-    gpu_gather.drop_shared_cache()  # as after an edit
-    engine = StandInEngine()
-    renderer = engine.voxgi_viewport = ViewportRenderer()
-    tiles, traces = [], renderer.traces  # (sample, the cache was the provisional one)
-    for _ in range(5000):
-        redraws = engine.redraws
-        refining = renderer.cache.refining
-        engine_view(engine, scene, depsgraph, view, window)
-        if renderer.traces != traces:
-            traces = renderer.traces
-            tiles.append((renderer.progressive.last.sample, refining))
-        if engine.redraws == redraws:
-            break
-    assert renderer.progressive.converged
-    assert rays == [rays[1] // 2, rays[1]] and rays[1] >= 8, rays
-    # the first sample on the provisional cache, every later one on the whole cache
-    assert tiles and all(provisional == (sample == 0) for sample, provisional in tiles), tiles
-    assert renderer.cache.generation == 1 and not renderer.cache.refining
-    assert gpu_gather.shared_cache(*renderer.cache.key)[1] is renderer.cache.texture
-
-    def f12():
-        passes, _ = render_scene_passes(bpy.context, scene, None, 48, 36)
-        return np.asarray(passes["Combined"], np.float64)
-
-    over_view = f12()
-    gpu_gather.drop_shared_cache()
-    own = f12()
-    assert own.mean() > 0.01
-    np.testing.assert_allclose(over_view, own, rtol=1e-5, atol=1e-6)
-
-
 def test_f12_and_the_rendered_view_share_one_radiance_cache(voxgi, monkeypatch):
     """A view entered after F12 reads F12's radiance cache, F12 after a view reads the view's,
     and a view switched off and on again reads the one it built: none builds it again, and
