@@ -278,7 +278,7 @@ _AHEAD: dict = {}   # key → (the thread making that layout, its error if it fa
 
 def _layout_key(tris, settings) -> tuple:
     return (triangles_key(tris), settings.cache_resolution, settings.cache_rays,
-            settings.cache_focus)
+            settings.cache_focus, settings.cache_nest_rays)
 
 
 def cache_layout(tris, settings, key=None):
@@ -301,7 +301,7 @@ def cache_layout(tris, settings, key=None):
     if held is not None and held[0] == key:
         return held[1]
     cache = build_cache(tris, settings.cache_resolution, rays=settings.cache_rays,
-                        focus=settings.cache_focus)
+                        focus=settings.cache_focus, nest_rays=settings.cache_nest_rays)
     points, axes = face_points(cache)
     layout = (cache, points, axes,
               cache_texels(cache, layout=True, ahead=True) if len(points) else None)

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.cone_bounces import fast_cache_settings
+from ..voxgi_addon.gi.light_injection import material_emission
 from ..voxgi_addon.preview import transmission
 from ..voxgi_addon.preview.denoise import GLOSSY_SIGMA_LUMINANCE, SIGMA_LUMINANCE
 from ..voxgi_addon.preview.film import background
@@ -168,7 +169,8 @@ def render_passes_stages(snapshot, gi_state, width: int, height: int, cones,
         ahead = None
         if cache_source is None and uses_cache(gather_settings):
             def ahead(tris):  # F12: the cache's layout made while the BVH is built
-                cache_layout_ahead(tris, focused(gather_settings, snapshot.camera, tris))
+                cache_layout_ahead(tris, focused(gather_settings, snapshot.camera, tris,
+                                                 material_emission(snapshot)))
         t0 = time.perf_counter()
         # only what changed is sent
         scene = (gpu_scene or current_scene()).update(snapshot, on_triangles=ahead)
@@ -410,11 +412,13 @@ def _plan(f):
     # caller's of the scene's triangles (the viewport's chunked one: rasterize_stages)
     if batch is None or camera_tris is not None:
         batch = vertex_batch(seen_tris, scene.rough, raster, scene.raster_textures() is not None)
-    # the radiance cache nests finer grids around the camera (a tile's camera: the view's)
+    # the radiance cache nests finer grids around the camera (a tile's camera: the view's), or
+    # around the emitters where the camera stands outside
     return {"plan": subpixel_passes(f["filter_width"], f["light_samples"]),
             "raster_shader": raster, "vertex_batch": batch, "seen_tris": seen_tris,
             "tables": scene.gather_tables(),
-            "focused": focused(f["settings"], f["snapshot"].camera, scene.tris)}
+            "focused": focused(f["settings"], f["snapshot"].camera, scene.tris,
+                               material_emission(f["snapshot"]))}
 
 
 def _visibility(f):

@@ -224,14 +224,16 @@ def test_gpu_cache_equals_numpy_cache(voxgi):
     a, b = (np.concatenate(c.ahead).astype(np.float64) for c in (gpu, numpy))
     assert b.mean() > np.concatenate(numpy.faces).mean() > 0.01  # one bounce more
     assert np.abs(a - b).sum() / np.abs(b).sum() <= 0.02
-    # Auto's grids nested around a camera inside the box (issue 20: the finest that holds a
-    # point is read): the GPU's faces and lookups (cache_lookup.glsl) still equal numpy's
+    # Auto's grids nested around a focus inside the box (issue 20: the finest that holds a
+    # point is read), within the emitters' focus' budget: the GPU's faces and lookups
+    # (cache_lookup.glsl) still equal numpy's
     inside = radiance_cache.snap_focus(tris, (0.0, 0.0, 1.0))
-    nested = GatherSettings(bounces=3, cache_rays=16, cache_focus=inside)
+    budget = radiance_cache.RAYS_PER_ITERATION
+    nested = GatherSettings(bounces=3, cache_rays=16, cache_focus=inside, cache_nest_rays=budget)
     gpu_nested, _ = gpu_gather.cache_gpu(shared_bvh().update(tris), lights, principled, emission,
                                          nested)
     numpy_nested = radiance_cache.cached_cache(tris, lights, principled, emission, 3, 16, 0,
-                                               focus=inside)
+                                               focus=inside, nest_rays=budget)
     assert len(gpu_nested.grids) == len(numpy_nested.grids) > 1
     a, b = (np.concatenate(c.faces).astype(np.float64) for c in (gpu_nested, numpy_nested))
     assert np.abs(a - b).sum() / np.abs(b).sum() <= 0.02

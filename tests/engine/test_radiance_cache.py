@@ -206,18 +206,19 @@ def test_light_through_a_thin_wall_stays_out():
     np.testing.assert_array_equal(radiance, 0.0)
 
 
-def test_auto_resolution_keeps_an_iteration_within_half_a_gather():
-    """Resolution 0 picks the finest grid whose faces × rays fit RAYS_PER_ITERATION (the next
-    finer one would not), and the coarsest when none fits."""
+def test_auto_resolution_keeps_an_iteration_within_a_quarter_of_a_gather():
+    """Resolution 0 picks the finest grid whose faces × rays fit BASE_RAYS (the next finer one
+    would not), and the coarsest when none fits."""
     tris, _, _, _ = lit_room()
-    for rays in (4, 16, 64):
+    assert rc.BASE_RAYS == 160 * 120 * 64 // 4 < rc.RAYS_PER_ITERATION
+    for rays in (4, 8, 16, 64):
         cache = rc.build_cache(tris, 0, rays=rays)
         res = cache.grids[0].resolution
         faces = sum(int(p.sum()) for p in cache.present)
-        assert faces * rays <= rc.RAYS_PER_ITERATION
+        assert faces * rays <= rc.BASE_RAYS
         if res < max(rc.AUTO_RESOLUTIONS):
             finer = rc.build_cache(tris, 2 * res)
-            assert sum(int(p.sum()) for p in finer.present) * rays > rc.RAYS_PER_ITERATION
+            assert sum(int(p.sum()) for p in finer.present) * rays > rc.BASE_RAYS
     assert rc.build_cache(tris, 0, rays=10 ** 6).grids[0].resolution == min(rc.AUTO_RESOLUTIONS)
 
 
@@ -275,7 +276,8 @@ def test_nested_grids_around_the_camera():
 
 def test_auto_nests_grids_around_the_camera_within_the_ray_budget():
     """Auto with a focus keeps the single grid's resolution and adds nested grids while the
-    rays stay within the budget: finer voxels near the camera, none coarser elsewhere."""
+    rays stay within the budget (around a camera ``BASE_RAYS``): finer voxels near the camera,
+    none coarser elsewhere."""
     tris, _, _, _ = lit_room()
     focus = rc.snap_focus(tris, (1.0, -1.0, 1.2))
     rays = 32  # the room's single grid is then 32³, with room for nested grids
@@ -283,11 +285,11 @@ def test_auto_nests_grids_around_the_camera_within_the_ray_budget():
     nested = rc.build_cache(tris, 0, rays=rays, focus=focus)
     assert nested.grids[-1].span == flat.grids[0].span
     assert len(nested.grids) > 1 and nested.grids[0].span < flat.grids[0].span
-    assert rc._rays(nested, rays) <= rc.RAYS_PER_ITERATION
+    assert rc._rays(nested, rays) <= rc.BASE_RAYS
     if len(nested.grids) < rc.AUTO_GRIDS:
         more = rc.build_cache(tris, nested.grids[0].resolution, len(nested.grids) + 1,
                               focus=focus)
-        assert rc._rays(more, rays) > rc.RAYS_PER_ITERATION
+        assert rc._rays(more, rays) > rc.BASE_RAYS
     # the camera moving within a step of the lattice keeps the grids (and the cache)
     assert rc.snap_focus(tris, (1.01, -1.02, 1.19)) == focus
 
@@ -587,6 +589,46 @@ def test_a_picked_face_has_the_lookups_expectation():
     np.testing.assert_array_equal(rows, rc.picks(cache, paths))
 
 
+def test_a_camera_outside_nests_the_cache_around_the_emitters():
+    """The emissive room seen from outside (its camera 20 m off its open side): ``focused``
+    puts the cache's focus at the glowing panel (the emitters' centre by power), whose nested
+    grids may take up to half a gather's rays (``RAYS_PER_ITERATION``) — the panel's slot then
+    lies in voxels of a quarter of the single grid's. A camera inside keeps its own focus and
+    the base budget; a room without emitters seen from outside keeps one grid."""
+    from types import SimpleNamespace
+
+    from voxgi.voxgi_addon.preview.gather import focused
+
+    tris, albedo, emission = slot_room()
+    np.testing.assert_allclose(rc.emitters_centre(tris, emission), (0.0, 0.1, 2.55), atol=1e-9)
+    assert rc.emitters_centre(tris, np.zeros_like(emission)) is None
+
+    def camera(x, y, z):
+        matrix = np.eye(4)
+        matrix[:3, 3] = (x, y, z)
+        return SimpleNamespace(world_matrix=matrix)
+
+    settings = GatherSettings(bounces=4)
+    outside = focused(settings, camera(0.0, -20.0, 1.4), tris, emission)
+    assert outside.cache_focus == rc.snap_focus(tris, (0.0, 0.1, 2.55))
+    assert outside.cache_nest_rays == rc.RAYS_PER_ITERATION
+    cache = rc.build_cache(tris, 0, rays=settings.cache_rays, focus=outside.cache_focus,
+                           nest_rays=outside.cache_nest_rays)
+    single = rc.build_cache(tris, 0, rays=settings.cache_rays)
+    assert len(single.grids) == 1 and len(cache.grids) == rc.AUTO_GRIDS
+    assert cache.grids[0].span == pytest.approx(single.grids[0].span / 4)
+    corners = np.array([[-0.8, -0.4, 2.55], [0.8, 0.6, 2.55]])  # the panel's
+    for grid, points in ((cache.grids[0], np.array([[0.0, 0.1, 2.55]])), (cache.grids[1], corners)):
+        lo, hi = grid.extent  # the panel's middle in the finest grid, all of it in the next
+        assert ((points >= lo) & (points < hi)).all(), (grid, points)
+    assert rc.BASE_RAYS < rc._rays(cache, settings.cache_rays) <= rc.RAYS_PER_ITERATION
+    inside = focused(settings, camera(1.0, 1.0, 1.2), tris, emission)
+    assert inside.cache_focus == rc.snap_focus(tris, (1.0, 1.0, 1.2))
+    assert inside.cache_nest_rays == 0
+    unlit = focused(settings, camera(0.0, -20.0, 1.4), tris, np.zeros_like(emission))
+    assert unlit.cache_focus is None and unlit.cache_nest_rays == 0
+
+
 def slot_room():
     """A 5 × 4 × 2.6 m room open on its −y side, lit only by a 1.6 × 1 m panel hung 5 cm under
     the ceiling and glowing on both sides (a light cove's slot, a third of the cache's cells;
@@ -647,7 +689,8 @@ def test_the_near_field_is_followed_where_the_cache_cannot_see_a_slot(monkeypatc
     n = np.tile([0.0, 0.0, -1.0], (3, 1))
     ids = np.arange(len(p))
     rays = 1024
-    cache = radiance_cache(tris, [], albedo, emission, GatherSettings(bounces=4, cache_rays=64))
+    cache = radiance_cache(tris, [], albedo, emission,  # 32³: 16 cm cells
+                           GatherSettings(bounces=4, cache_rays=64, cache_resolution=32))
     assert cache.grids[0].span > 3 * 0.05  # the slot is a third of a cell
     one, _ = indirect_and_ao(p, n, ids, tris, [], albedo, emission, rays=rays)
     exact = (_path_traced(tris, albedo, emission, p, n, 4, (1024, 32, 16, 8)) -
@@ -714,7 +757,8 @@ def test_a_panel_under_a_ceiling_reads_the_rooms_light_not_the_slots():
     out (``radiance_cache._in_front``: 0.82–0.94 ×). The far ceiling, whose neighbours all lie on its plane,
     reads as before."""
     tris, albedo, emission = slot_room()
-    cache = radiance_cache(tris, [], albedo, emission, GatherSettings(bounces=4, cache_rays=64))
+    cache = radiance_cache(tris, [], albedo, emission,
+                           GatherSettings(bounces=4, cache_rays=64, cache_resolution=32))
     assert cache.grids[0].span > 0.05  # the slot is thinner than a voxel
     down = np.tile([0.0, 0.0, -1.0], (4, 1))
     panel = np.c_[[-0.6, -0.2, 0.3, 0.7], np.full(4, 0.1), np.full(4, 2.5499)]

@@ -24,7 +24,7 @@ import weakref
 import numpy as np
 
 from .light_injection import InjectedRadiance, voxel_centres
-from .radiance_cache import RAYS_PER_ITERATION, build_cache, lookup
+from .radiance_cache import BASE_RAYS, build_cache, lookup
 from .ray_views import KINDS, view_octree
 from .svo import build_octree
 
@@ -76,7 +76,7 @@ def voxel_indirect(cascade, cache) -> np.ndarray:
 
 # Fast's cache resolutions when the settings say Auto (``GatherSettings.cache_resolution`` 0):
 # the finest of these whose iteration stays within Auto's ray budget
-# (``radiance_cache.RAYS_PER_ITERATION``), the coarsest otherwise — Accurate's Auto without its
+# (``radiance_cache.BASE_RAYS``), the coarsest otherwise — Accurate's Auto without its
 # 64³. Fast's error is its cones' own: against Cycles' default light paths the four bounce
 # scenes' Combined at 32³ is within −0.026 … +0.018 of Accurate's Auto (32³–64³ there) and
 # −0.031 … +0.005 of 16³'s, the cache taking 1.4–3.7 s; 16³ let the thin-wall room's dark side
@@ -94,7 +94,7 @@ def fast_cache_settings(settings, tris):
     for resolution in FAST_CACHE_RESOLUTIONS:
         if resolution not in counts:
             counts[resolution] = sum(int(p.sum()) for p in build_cache(tris, resolution).present)
-        if counts[resolution] * settings.cache_rays <= RAYS_PER_ITERATION:
+        if counts[resolution] * settings.cache_rays <= BASE_RAYS:
             break
     return dataclasses.replace(settings, cache_resolution=resolution)
 

@@ -168,6 +168,44 @@ def snap_focus(tris, focus):
     return tuple(float(v) for v in origin + (np.floor((point - origin) / step) + 0.5) * step)
 
 
+_EMITTERS: dict[int, tuple] = {}  # id(positions) → (weak reference, emission bytes, centre)
+
+
+def emitters_centre(tris, emission):
+    """The emitting triangles' centre (3,) weighted by their power (luminance × area), or None
+    without any: where a camera outside the scene nests the cache's finer grids
+    (``preview.gather.focused``). emission : (M + 1, 3) per material, as
+    ``light_injection.material_emission``. Kept per positions array and emission while they
+    live (the viewport asks every slice)."""
+    emission = np.asarray(emission, np.float64).reshape(-1, 3)
+    positions = tris.positions
+    key = emission.tobytes()
+    kept = _EMITTERS.get(id(positions))
+    if kept is not None and kept[0]() is positions and kept[1] == key:
+        return kept[2]
+    last = len(emission) - 1
+    materials = np.asarray(tris.materials)
+    materials = np.where((materials >= 0) & (materials < last), materials, last)
+    luminance = emission @ np.array([0.2126, 0.7152, 0.0722])
+    power = luminance[materials]
+    lit = power > 0
+    centre = None
+    if lit.any():
+        corners = np.asarray(positions, np.float64)[lit]
+        area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                             corners[:, 2] - corners[:, 0]), axis=1)
+        weight = power[lit] * area
+        if weight.sum() > 0:
+            centre = tuple(float(v) for v in
+                           (weight[:, None] * corners.mean(axis=1)).sum(axis=0) / weight.sum())
+    try:
+        ref = weakref.ref(positions, lambda _, k=id(positions): _EMITTERS.pop(k, None))
+        _EMITTERS[id(positions)] = (ref, key, centre)
+    except TypeError:  # not weakly referable (a list): not kept
+        pass
+    return centre
+
+
 def _sites(tris, grids, origins: bool = True, voxelized: dict | None = None) \
         -> tuple[list, list, list]:
     """Per grid the (N_i, 3) int32 cells its triangles touch (a coarser grid leaving out the
@@ -546,37 +584,42 @@ def lookup(cache: RadianceCache | None, points, normals, more: bool = False):
 
 
 # Auto resolution (``build_cache(resolution=0)``): the finest of these whose faces' rays (traced
-# once for all iterations, ``face_paths``) are at most RAYS_PER_ITERATION — half the rays of a
-# diffuse gather at GI Resolution Auto (about 160 × 120 points) and the default 64 GI Rays, so
-# the whole cache costs at most half a gather.
+# once for all iterations, ``face_paths``) are at most BASE_RAYS — a quarter of the rays of a
+# diffuse gather at GI Resolution Auto (about 160 × 120 points) and the default 64 GI Rays —
+# then grids nested around a focus while all the faces' rays stay within that budget (around
+# a camera) or RAYS_PER_ITERATION, half that gather (around the emitters, ``nest_rays``): the
+# whole cache costs at most half a gather (docs/gi_pipeline.md "The radiance cache at 8 rays a
+# face").
 AUTO_RESOLUTIONS = (64, 32, 16)
+BASE_RAYS = 160 * 120 * 64 // 4
 RAYS_PER_ITERATION = 160 * 120 * 64 // 2
 # With a focus (the camera) inside the scene, Auto also nests up to this many grids around it
 # while the rays stay within the budget (``build_cache``).
 AUTO_GRIDS = 3
 
 
-def build_cache(tris, resolution: int = 32, count: int = 1, rays: int = 16,
-                focus=None) -> RadianceCache:
+def build_cache(tris, resolution: int = 32, count: int = 1, rays: int = 8,
+                focus=None, nest_rays: int = 0) -> RadianceCache:
     """An empty cache (iteration 0, all zeros) on ``cache_grids`` of ``tris``. resolution 0:
     Auto, the finest of ``AUTO_RESOLUTIONS`` whose faces × ``rays`` (rays per face) stay within
-    ``RAYS_PER_ITERATION`` (the coarsest otherwise), then, with a ``focus`` inside the scene's
-    grid (a camera among the geometry: an interior, a street), as many nested grids around it
-    (up to ``AUTO_GRIDS``) as stay within that budget: finer voxels near the camera, the whole
-    scene at least as fine as one grid would be. A camera outside (an object or a room seen
-    from outside) keeps one grid (``snap_focus`` gives no focus there)."""
+    ``BASE_RAYS`` (the coarsest otherwise), then, with a ``focus`` inside the scene's grid (a
+    camera among the geometry: an interior, a street; else the emitters, ``preview.gather
+    .focused``), as many nested grids around it (up to ``AUTO_GRIDS``) as keep all the faces'
+    rays within ``nest_rays`` (0: ``BASE_RAYS``; the emitters' focus: ``RAYS_PER_ITERATION``):
+    finer voxels near the camera or the emitters, the whole scene at least as fine as one grid
+    would be. Without a focus (``snap_focus`` gives none outside the scene's grid) one grid."""
     voxelized: dict = {}  # each grid tried voxelized once (``_sites``)
     if resolution == 0:  # the layouts are counted without their faces' origins (the most
         # of a layout's time), then the chosen one is built
-        def within(choice, grids):
+        def within(choice, grids, budget):
             return sum(int(p.sum()) for p in _sites(tris, cache_grids(
                 tris, choice, grids, focus), origins=False, voxelized=voxelized)[1]) \
-                * rays <= RAYS_PER_ITERATION
+                * rays <= budget
         for resolution in AUTO_RESOLUTIONS:
-            if within(resolution, count):
+            if within(resolution, count, BASE_RAYS):
                 break
         if focus is not None and _inside(cache_grids(tris, resolution, count, focus)[-1], focus):
-            while count < AUTO_GRIDS and within(resolution, count + 1):
+            while count < AUTO_GRIDS and within(resolution, count + 1, nest_rays or BASE_RAYS):
                 count += 1
     grids = cache_grids(tris, resolution, count, focus)
     cells, present, origins = _sites(tris, grids, voxelized=voxelized)
@@ -624,7 +667,7 @@ def with_faces(cache: RadianceCache, values) -> RadianceCache:
                          cache.present, cache.origins)
 
 
-def face_paths(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 16,
+def face_paths(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 8,
                seed: int = 0, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
                hit_glossy: bool = True):
     """The ``exact_indirect.RayPaths`` of every face's ``rays`` gather rays (``face_points``,
@@ -808,7 +851,7 @@ def pick(cache: RadianceCache, points, normals, u) -> np.ndarray:
     return out
 
 
-def iterate(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 16, seed: int = 0,
+def iterate(cache: RadianceCache, tris, lights, albedo, emission, rays: int = 8, seed: int = 0,
             world=(0.0, 0.0, 0.0), hit_samples: int = 1, hit_glossy: bool = True) -> RadianceCache:
     """One more bounce: every voxel face gathers ``rays`` exact rays shaded by
     ``exact_indirect.ray_radiance`` with ``cache`` at their hits (see the module doc) — the
@@ -847,26 +890,26 @@ def triangles_key(tris) -> tuple:
                  ("positions", "materials", "corner_normals", "visibility"))
 
 
-def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 16,
+def cached_cache(tris, lights, albedo, emission, bounces: int, rays: int = 8,
                  resolution: int = 0, world=(0.0, 0.0, 0.0), hit_samples: int = 1,
-                 hit_glossy: bool = True, focus=None) -> RadianceCache | None:
+                 hit_glossy: bool = True, focus=None, nest_rays: int = 0) -> RadianceCache | None:
     """The cache of ``bounces`` − 1 iterations for these triangles, lights and materials (None
     for ``bounces`` < 1; at 1, no iteration of its own and the first one ahead: the light a
     glossy scatter carries past Cycles' Diffuse 1, ``exact_indirect.RayPaths.with_cache``),
     with the next iteration ``ahead`` (``one_more_bounce``), kept for the
     next call with the same inputs (the viewport's slices ask for the same cache). focus : the
-    camera (Auto nests grids around it, ``build_cache``;
+    camera or the emitters (Auto nests grids around it within ``nest_rays``, ``build_cache``;
     ``snap_focus``'d here)."""
     if bounces < 1:
         return None
     focus = snap_focus(tris, focus)
     key = (triangles_key(tris), cache_key(lights, albedo, emission, bounces, rays, resolution,
                                            tuple(float(w) for w in world), hit_samples,
-                                           hit_glossy, focus))
+                                           hit_glossy, focus, nest_rays))
     held = _MEMO.get("entry")
     if held is not None and held[0] == key:
         return held[1]
-    cache = build_cache(tris, resolution, rays=rays, focus=focus)
+    cache = build_cache(tris, resolution, rays=rays, focus=focus, nest_rays=nest_rays)
     paths = face_paths(cache, tris, lights, albedo, emission, rays, world=world,
                        hit_samples=hit_samples, hit_glossy=hit_glossy)
     chosen = picks(cache, paths)  # and the faces their hits read: picked once

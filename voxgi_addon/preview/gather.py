@@ -44,8 +44,9 @@ class GatherSettings:
     exact one-bounce gather and builds no cache; N > 1 adds at each bounce hit the light of
     bounces 2 … N from a radiance cache of N − 1 iterations (``gi.radiance_cache``, with
     ``cache_rays`` rays per voxel face on a ``cache_resolution``³ grid; 0: Auto,
-    ``radiance_cache.build_cache``). cache_focus : the camera's position on the cache's
-    lattice (``focused``; None: none), around which Auto nests finer grids. sparse : the
+    ``radiance_cache.build_cache``). cache_focus : the camera's or the emitters' position on
+    the cache's lattice (``focused``; None: none), around which Auto nests finer grids, their
+    faces' rays within ``cache_nest_rays`` (0: ``radiance_cache.BASE_RAYS``). sparse : the
     diffuse gather traces one cell in four where the light is smooth and the cells where it
     is not (``sparse_gather``, each with ``SPARSE_RAYS`` × rays), the others filled from them.
     glossy_chains : at ``bounces`` 1, a glossy scatter still goes on where Cycles' Glossy
@@ -63,9 +64,10 @@ class GatherSettings:
     seed: int = 0
     world: tuple[float, float, float] = (0.0, 0.0, 0.0)
     bounces: int = 1
-    cache_rays: int = 16
+    cache_rays: int = 8
     cache_resolution: int = 0
     cache_focus: tuple | None = None
+    cache_nest_rays: int = 0
     sparse: bool = False
     glossy_chains: bool = False
 
@@ -76,22 +78,30 @@ def uses_cache(settings: GatherSettings) -> bool:
     return settings.bounces > 1 or (settings.bounces == 1 and settings.glossy_chains)
 
 
-def focused(settings: GatherSettings, camera, tris) -> GatherSettings:
-    """``settings`` with the ``camera``'s position as the radiance cache's focus (snapped:
-    ``radiance_cache.snap_focus``), where there is a cache whose grids Auto lays out."""
-    if not uses_cache(settings) or settings.cache_resolution or camera is None or \
+def focused(settings: GatherSettings, camera, tris, emission=None) -> GatherSettings:
+    """``settings`` with the radiance cache's focus (snapped: ``radiance_cache.snap_focus``),
+    where there is a cache whose grids Auto lays out: the ``camera``'s position where it stands
+    among the geometry, else the emitters' power-weighted centre (``radiance_cache
+    .emitters_centre``; emission : per material as ``light_injection.material_emission``,
+    None: not asked), where the light changes fastest; else none."""
+    if not uses_cache(settings) or settings.cache_resolution or \
             len(getattr(tris, "positions", ())) == 0:
         return settings
-    from ..gi.radiance_cache import snap_focus
-    focus = snap_focus(tris, np.asarray(camera.world_matrix, np.float64)[:3, 3])
-    return replace(settings, cache_focus=focus)
+    from ..gi.radiance_cache import RAYS_PER_ITERATION, emitters_centre, snap_focus
+    focus = None if camera is None else \
+        snap_focus(tris, np.asarray(camera.world_matrix, np.float64)[:3, 3])
+    if focus is None and emission is not None:
+        focus = snap_focus(tris, emitters_centre(tris, emission))
+        if focus is not None:  # its nested grids may take up to half a gather's rays
+            return replace(settings, cache_focus=focus, cache_nest_rays=RAYS_PER_ITERATION)
+    return replace(settings, cache_focus=focus, cache_nest_rays=0)
 
 
 def cache_settings(settings: GatherSettings) -> tuple:
     """What the radiance cache depends on among ``settings`` (its key beside the scene's)."""
     return (settings.bounces, settings.cache_rays, settings.cache_resolution,
             tuple(float(w) for w in settings.world), settings.hit_samples, settings.hit_glossy,
-            settings.cache_focus, uses_cache(settings))
+            settings.cache_focus, settings.cache_nest_rays, uses_cache(settings))
 
 
 def radiance_cache(tris, lights, albedo, emission, settings: GatherSettings):
@@ -103,7 +113,7 @@ def radiance_cache(tris, lights, albedo, emission, settings: GatherSettings):
     from ..gi.radiance_cache import cached_cache
     return cached_cache(tris, lights, albedo, emission, settings.bounces, settings.cache_rays,
                         settings.cache_resolution, settings.world, settings.hit_samples,
-                        settings.hit_glossy, settings.cache_focus)
+                        settings.hit_glossy, settings.cache_focus, settings.cache_nest_rays)
 
 
 VIEW_BACKOFF = 2e-4  # metres: gather points step back along the camera ray (see gather_gi)

@@ -34,6 +34,7 @@ from ..gi.direct_light import (
 )
 from ..gi.emitters import NEAR_STEP, emitter_distances
 from ..gi.exact_glossy import emitters_glossy_field, emitters_shine
+from ..gi.light_injection import material_emission
 from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.sampling import hashed_square
 from ..gi.terminator import find_lifts
@@ -1165,7 +1166,8 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         shadows = "RAYS"
     gather_settings = gather_settings or GatherSettings(ao_distance=cones.ao_distance)
     if quality == "ACCURATE":  # the radiance cache nests finer grids around the camera
-        gather_settings = focused(gather_settings, snapshot.camera, tris)
+        gather_settings = focused(gather_settings, snapshot.camera, tris,
+                                  material_emission(snapshot))
     timings = {}
     t0 = time.perf_counter()
     seen = primary_visibility(camera_tris, snapshot.camera, width, height)
