@@ -224,8 +224,8 @@ def test_gpu_cache_equals_numpy_cache(voxgi):
     a, b = (np.concatenate(c.ahead).astype(np.float64) for c in (gpu, numpy))
     assert b.mean() > np.concatenate(numpy.faces).mean() > 0.01  # one bounce more
     assert np.abs(a - b).sum() / np.abs(b).sum() <= 0.02
-    # Auto's grids nested around a focus inside the box (issue 20: the finest that holds a
-    # point is read), within the emitters' focus' budget: the GPU's faces and lookups
+    # Auto's grids nested around a focus inside the box (the finest grid that holds a point
+    # is read), within the emitters' focus' budget: the GPU's faces and lookups
     # (cache_lookup.glsl) still equal numpy's
     inside = radiance_cache.snap_focus(tris, (0.0, 0.0, 1.0))
     budget = radiance_cache.RAYS_PER_ITERATION

@@ -177,32 +177,25 @@ def emitters_centre(tris, emission):
     (``preview.gather.focused``). emission : (M + 1, 3) per material, as
     ``light_injection.material_emission``. Kept per positions array and emission while they
     live (the viewport asks every slice)."""
+    from .light_injection import emissive_triangles
+
     emission = np.asarray(emission, np.float64).reshape(-1, 3)
     positions = tris.positions
     key = emission.tobytes()
     kept = _EMITTERS.get(id(positions))
     if kept is not None and kept[0]() is positions and kept[1] == key:
         return kept[2]
-    last = len(emission) - 1
-    materials = np.asarray(tris.materials)
-    materials = np.where((materials >= 0) & (materials < last), materials, last)
-    luminance = emission @ np.array([0.2126, 0.7152, 0.0722])
-    power = luminance[materials]
-    lit = power > 0
-    centre = None
-    if lit.any():
-        corners = np.asarray(positions, np.float64)[lit]
-        area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
-                                             corners[:, 2] - corners[:, 0]), axis=1)
-        weight = power[lit] * area
-        if weight.sum() > 0:
-            centre = tuple(float(v) for v in
-                           (weight[:, None] * corners.mean(axis=1)).sum(axis=0) / weight.sum())
-    try:
+    corners, radiance = emissive_triangles(tris, emission)
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
+                                         corners[:, 2] - corners[:, 0]), axis=1)
+    weight = (radiance @ np.array([0.2126, 0.7152, 0.0722])) * area
+    centre = tuple(float(v) for v in (weight[:, None] * corners.mean(axis=1)).sum(axis=0)
+                   / weight.sum()) if weight.sum() > 0 else None
+    try:  # kept while the positions live (a list is not weakly referable: not kept)
         ref = weakref.ref(positions, lambda _, k=id(positions): _EMITTERS.pop(k, None))
-        _EMITTERS[id(positions)] = (ref, key, centre)
-    except TypeError:  # not weakly referable (a list): not kept
-        pass
+    except TypeError:
+        return centre
+    _EMITTERS[id(positions)] = (ref, key, centre)
     return centre
 
 
