@@ -177,6 +177,7 @@ def emitters_centre(tris, emission):
     (``preview.gather.focused``). emission : (M + 1, 3) per material, as
     ``light_injection.material_emission``. Kept per positions array and emission while they
     live (the viewport asks every slice)."""
+    from .emitters import LUMINANCE
     from .light_injection import emissive_triangles
 
     emission = np.asarray(emission, np.float64).reshape(-1, 3)
@@ -188,7 +189,7 @@ def emitters_centre(tris, emission):
     corners, radiance = emissive_triangles(tris, emission)
     area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0],
                                          corners[:, 2] - corners[:, 0]), axis=1)
-    weight = (radiance @ np.array([0.2126, 0.7152, 0.0722])) * area
+    weight = (radiance @ LUMINANCE) * area  # as the emitters' power (emitters.emitter_light)
     centre = tuple(float(v) for v in (weight[:, None] * corners.mean(axis=1)).sum(axis=0)
                    / weight.sum()) if weight.sum() > 0 else None
     try:  # kept while the positions live (a list is not weakly referable: not kept)
