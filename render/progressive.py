@@ -52,6 +52,7 @@ from ..voxgi_addon.preview.progressive import (
     tile_shape,
     tile_side,
 )
+from ..voxgi_addon.preview.tile_costs import CostMap, split_to_fit
 from ..voxgi_addon.scene.view_camera import camera_from_view
 from .gpu_accumulation import GPUAccumulation, read_rgba
 from .gpu_gather_sums import GPUGatherSums
@@ -86,6 +87,11 @@ STAGE_HISTORY = 4
 # lattice"): the view is first within Cycles' error of F12's image when that sample is whole
 LATTICE_FIRST = True
 MEAN_TAILS = True
+# of the stage budget: a tile whose longest stage the view's cost map predicts past this is cut
+# in two (``preview.tile_costs``): the emitters' stages cost ten times as much a pixel by the
+# emissive room's panel as over its floor, and a tile of the sample's one size there ran one
+# stage to 30–45 ms (docs/gi_pipeline.md "Tiles split where they cost")
+SPLIT_SHARE = 1.0
 
 
 def base_options(settings, width: int, height: int) -> dict:
@@ -151,6 +157,9 @@ class ProgressiveImage:
         self.stage_seconds: dict[tuple[str, int], list[tuple[float, int]]] = {}
         self.running_kind, self.running_stage = "", 0
         self.running_pixels = 0    # the slice under way's pixels (its tile's, the coarse's)
+        self.running_rect = None   # the tile under way (None: the coarse image)
+        self.costs: CostMap | None = None  # where the key's stages cost their time
+        self.tile_stride = 1       # the gather stride the sample's tiles were made for
         self.fixed_pixels: int | None = None  # tests: every slice this many pixels
         self.key = None
         # the samples' sums and the shown image live on the GPU (gpu_accumulation): a slice
@@ -209,6 +218,10 @@ class ProgressiveImage:
         self.gathers = None
         self.backdrop = previous
         self.sample, self.tiles, self.tile_count = 0, [], 0
+        if self.costs is None:
+            self.costs = CostMap(width, height)
+        else:
+            self.costs.restart(width, height)
         self.started, self.elapsed, self.slices = time.perf_counter(), 0.0, 0
         self.converged, self.coarse_pending = False, bool(coarse)
         self.failed = ""  # why a slice of this key failed ("" = none): no retry until a change
@@ -277,6 +290,22 @@ class ProgressiveImage:
         self.tiles = tile_grid(acc.width, acc.height, tile_w, tile_h, shift,
                                trim=lambda n: fit_side(n, LOCAL_SIZE * stride, stride))
         self.tile_count = len(self.tiles)
+        self.tile_stride = stride
+
+    def _split_next(self, kind: str) -> None:
+        """Cut the next tile where the key's cost map predicts one of its stages past the
+        stage budget (``preview.tile_costs.split_to_fit``): its parts go first. Not with
+        whole slices a call, nor where a test fixed the slices' pixels."""
+        if not self.tiles or self.stage_budget is None or self.costs is None or \
+                self.fixed_pixels is not None:
+            return
+        stride = self.tile_stride
+        parts = split_to_fit(self.tiles[0], lambda rect: self.costs.longest(kind, rect),
+                             SPLIT_SHARE * self.stage_budget, LOCAL_SIZE * stride, stride,
+                             self.costs.inside)
+        if len(parts) > 1:
+            self.tiles[0:1] = parts
+            self.tile_count += len(parts) - 1
 
     # ------------------------------------------------------------------ tracing
 
@@ -303,6 +332,11 @@ class ProgressiveImage:
             return Slice("wait", (0, 0, 0, 0), (0, 0), self.sample, finished=False)
         t0 = time.perf_counter() - spent  # the draw's start
         kind = "coarse" if self.coarse_pending else self.sample_kind()
+        if self.running is None and kind != "coarse":
+            if not self.tiles:  # the sample's tiles, made here so the first is cut as the rest
+                self._next_tiles(base_options(settings, self.accumulation.width,
+                                              self.accumulation.height)["gi_stride"])
+            self._split_next(kind)
         if self.running is not None:
             upcoming = self.predicted(kind, self.running_stage, self.running_pixels)
         else:
@@ -349,6 +383,8 @@ class ProgressiveImage:
             key = self.running_kind, self.running_stage
             self.stage_seconds[key] = [*self.stage_seconds.get(key, ()),
                                        (seconds, self.running_pixels)][-STAGE_HISTORY:]
+            if self.running_rect is not None and self.costs is not None:
+                self.costs.measured(key, self.running_rect, seconds)
             self.running_stage += 1
             if staged:
                 # stop at the stage budget, or before a next stage that took the last slice of
@@ -401,6 +437,7 @@ class ProgressiveImage:
                                              options["light_samples"], self.target, 0,
                                              gathering=self.target)  # a quick image
             self.running_pixels = size[0] * size[1]
+            self.running_rect = None
             camera = camera_from_view(view, window, *size)
             centre = self.coarse_centre(size) if self.coarse_centre is not None else None
             self.coarse_centre = None
@@ -424,6 +461,7 @@ class ProgressiveImage:
                 self._next_tiles(options["gi_stride"])
             rect = self.tiles.pop(0)
             self.running_pixels = rect[2] * rect[3]
+            self.running_rect = rect
             gather, lights = sample_settings(options["gather_settings"],
                                              options["light_samples"], self.target, self.sample)
             full = camera_from_view(view, window, width, height)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import bpy
 import numpy as np
+import pytest
 from stand_in_engine import StandInEngine
 from test_viewport import (
     HEIGHT,
@@ -438,6 +439,35 @@ def test_a_stage_is_predicted_by_its_longest_recent_run_scaled_to_the_next_tile(
     assert image.predicted("tile", 1, 1_000) == 0.009   # not down to a smaller one
     assert image.predicted("tile", 1, 0) == 0.009       # pixels unknown
     assert image.predicted("lit tile", 1, 10_000) is None  # a kind of its own
+
+
+def test_a_tile_where_a_stage_costs_more_than_the_stage_budget_is_cut_in_two():
+    """A stage's cost a pixel differs across the view (the emitters' stages by a panel cost
+    ten times their cost over the floor): a tile whose longest stage the view's cost map
+    predicts past the stage budget, from what the stages cost where it lies, is traced as
+    two, so that one stage does not run the draw past the 30 ms."""
+    from voxgi.render.progressive import ProgressiveImage
+    from voxgi.voxgi_addon.preview.tile_costs import CostMap
+
+    image = ProgressiveImage()
+    image.costs = CostMap(160, 120)
+    for y0 in range(0, 120, 40):
+        for x0 in range(0, 160, 40):  # 1 µs a pixel on the left half, 12 µs on the right
+            image.costs.measured(("tile", 2), (x0, y0, 40, 40), (12e-6 if x0 >= 80 else 1e-6) * 1600)
+    cheap, dear = (0, 0, 48, 40), (104, 40, 48, 40)
+    assert image.costs.predicted(("tile", 2), cheap) == pytest.approx(1e-6 * 1920)
+    assert image.costs.predicted(("tile", 2), dear) == pytest.approx(12e-6 * 1920)
+    assert image.stage_budget == pytest.approx(0.015)
+    image.tiles, image.tile_count, image.tile_stride = [cheap, dear], 2, 1
+    image._split_next("tile")
+    assert image.tiles == [cheap, dear]  # 1.9 ms: whole
+    image.tiles.pop(0)
+    image._split_next("tile")  # 23 ms: two of 24 × 40
+    assert image.tiles == [(104, 40, 24, 40), (128, 40, 24, 40)]
+    assert image.tile_count == 3
+    image.tiles, image.fixed_pixels = [dear], 1920  # a test's fixed slices stay whole
+    image._split_next("tile")
+    assert image.tiles == [dear]
 
 
 def test_the_coarse_image_is_sized_by_its_whole_work_with_the_views_aspect():

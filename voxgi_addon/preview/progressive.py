@@ -687,7 +687,7 @@ class SliceSizer:
         return int(max(min(self.least, most), min(most, pixels)))
 
 
-def _allowed(side: int, stride: int) -> bool:
+def allowed_side(side: int, stride: int) -> bool:
     """A tile side whose textures are of every tile's kind: no power of two, in pixels nor in
     gather cells (pixels / stride)."""
     cells = side // stride
@@ -700,7 +700,7 @@ def tile_side(target: float, multiple: int, stride: int) -> int:
     every tile's textures are of one kind (llvmpipe compiles a kernel variant per
     power-of-two-ness of its textures' sizes: 5–20 s each for the BVH kernels under load)."""
     sides = [k * multiple for k in range(1, max(4, int(target // multiple) + 3))
-             if _allowed(k * multiple, stride)]
+             if allowed_side(k * multiple, stride)]
     return min(sides, key=lambda side: (abs(side - target), side))
 
 
@@ -708,7 +708,7 @@ def fit_side(pixels: int, multiple: int, stride: int) -> int:
     """The least allowed tile side (``tile_side``'s kind) holding ``pixels`` pixels: what a
     tile cut by the image's border traces (``tile_grid``'s trim)."""
     side = max(multiple, -(-pixels // multiple) * multiple)
-    while not _allowed(side, stride):
+    while not allowed_side(side, stride):
         side += multiple
     return side
 
