@@ -27,7 +27,8 @@ COST_CELL = 8  # pixels: a side of the cost map's cells (a work group of the ima
 class CostMap:
     """Seconds per pixel of each stage (any hashable key: the slice's kind and the stage's
     index), per cell of ``cell`` pixels of a ``width`` × ``height`` image (rows from the top,
-    as tiles count them): the last tile's that ran the stage over the cell."""
+    as tiles count them): the last tile's that ran the stage over the cell (float32: a
+    1920 × 1080 view's 33 stages take 4 MB)."""
 
     def __init__(self, width: int, height: int, cell: int = COST_CELL):
         if cell <= 0:
@@ -66,7 +67,7 @@ class CostMap:
         if cells is None or w * h <= 0 or not math.isfinite(seconds) or seconds < 0.0:
             return
         if key not in self.maps:
-            self.maps[key] = np.full(self.shape, np.nan)
+            self.maps[key] = np.full(self.shape, np.nan, np.float32)
         self.maps[key][cells] = seconds / (w * h)
 
     def predicted(self, key, rect) -> float | None:
