@@ -22,7 +22,9 @@ one-shot GPU tracer (``gpu_preview.render_passes_gpu``, F12's kernels) over a sm
 4. **converged** after ``target`` samples: nothing more is traced until the key changes.
 
 The slice's pixels come from measured slice times (``SliceSizer``: a fixed cost per slice
-plus a cost per pixel) so that one slice stays near ``SLICE_BUDGET``. The work one slice
+plus a cost per pixel) so that one slice stays near ``SLICE_BUDGET``; a tile where the view's
+cost map (``preview.tile_costs``) predicts one of its stages past the stage budget is cut in
+two. The work one slice
 dispatches is one tracer call over at most ``slice_pixels`` pixels (tests count the
 dispatched work groups). The frame stays on the GPU: the tracer hands its sums over as
 textures, the gathers are summed on the GPU (``gpu_gather_sums``) and the shown image is a
@@ -88,8 +90,8 @@ STAGE_HISTORY = 4
 LATTICE_FIRST = True
 MEAN_TAILS = True
 # of the stage budget: a tile whose longest stage the view's cost map predicts past this is cut
-# in two (``preview.tile_costs``): the emitters' stages cost ten times as much a pixel by the
-# emissive room's panel as over its floor, and a tile of the sample's one size there ran one
+# in two (``preview.tile_costs``): the emitters' stages cost two to ten times as much a pixel
+# by the emissive room's panel as elsewhere, and a tile of the sample's one size there ran one
 # stage to 30–45 ms (docs/gi_pipeline.md "Tiles split where they cost")
 SPLIT_SHARE = 1.0
 

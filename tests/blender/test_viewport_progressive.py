@@ -443,7 +443,7 @@ def test_a_stage_is_predicted_by_its_longest_recent_run_scaled_to_the_next_tile(
 
 def test_a_tile_where_a_stage_costs_more_than_the_stage_budget_is_cut_in_two():
     """A stage's cost a pixel differs across the view (the emitters' stages by a panel cost
-    ten times their cost over the floor): a tile whose longest stage the view's cost map
+    two to ten times what they cost elsewhere): a tile whose longest stage the view's cost map
     predicts past the stage budget, from what the stages cost where it lies, is traced as
     two, so that one stage does not run the draw past the 30 ms."""
     from voxgi.render.progressive import ProgressiveImage

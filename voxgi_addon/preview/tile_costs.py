@@ -2,7 +2,7 @@
 over the image, and tiles split where that map says one stage would run past the draw's budget.
 
 A stage's cost per pixel differs across the view: the emitters' light field and glossy light
-cost ten times as much a pixel by the emissive room's panel as over its floor
+cost two to ten times as much a pixel by the emissive room's panel as elsewhere
 (docs/gi_pipeline.md "Tiles split where they cost"). The viewport's tiles of one sample all
 have one size, fitted to the stages' recent runs, so a tile that lands on the costly part ran
 one stage past the 30 ms a draw may take. The map (``CostMap``) holds, per stage and per cell
