@@ -42,6 +42,7 @@ from ..voxgi_addon.preview.passes import (
     subpixel_reach,
     world_fewer_pixels,
     world_filter_passes,
+    world_rest_share,
     world_strata_side,
 )
 from ..voxgi_addon.preview.progressive import LATTICE_CELLS, LATTICE_RAYS
@@ -709,8 +710,8 @@ def _shade(f, inputs, sums, terms, blank, size, block, lamps=None, glow=None, ce
     centre pass's world filter) the world's rays over ``world_strata_side``'s strata at the
     pixels away from the geometry's edges (``world_fewer_pixels``)."""
     fewer = None if smooth is None else world_fewer_pixels(f["edge"], f["light_samples"])
-    world_strata = 0 if fewer is None else world_strata_side(f["light_samples"], f["width"],
-                                                             f["height"])
+    world_strata = 0 if fewer is None else world_strata_side(
+        f["light_samples"], f["width"], f["height"], world_rest_share(f["scene"].lights))
     return shade_stages(f["scene"], f["snapshot"], inputs, sums, terms, blank, size,
                         f["light_samples"], f["gather_settings"].seed, block, lamps, glow,
                         centre, field, lamp_glossy=f["lamp_glossy"], smooth=smooth,

@@ -297,9 +297,10 @@ def test_fewer_world_strata_at_the_pixels_are_the_same_in_numpy_and_gpu(voxgi, m
     """Where the world's filter is wide (here forced at a small size: passes.WORLD_FEWER_FROM
     2) the pixel centres' world rays go over a quarter fewer strata a side (9 instead of 16)
     away from the geometry's edges (here in every 8 × 8 block with no edge pixel:
-    WORLD_FEWER_REACH 0), the sun's strata kept: numpy and GLSL draw the same rays at the same
-    pixels. (The HDRI courtyard's light is mostly its sun, which keeps its strata: it needs
-    more blocks for the cut to show.)"""
+    WORLD_FEWER_REACH 0), the sun's strata kept, and the HDRI courtyard's rest of the map (5%
+    of its power) over 2 × 2: numpy and GLSL draw the same rays at the same pixels. (The HDRI
+    courtyard's light is mostly its sun, which keeps its strata: it needs more blocks for the
+    cut to show.)"""
     from voxgi.voxgi_addon.preview import passes
 
     full = preview(name, "AUTO", width, height, sparse=False)

@@ -303,3 +303,42 @@ def test_a_pixels_strata_trace_the_maps_sun_as_a_lamp():
             assert split_rays <= plain_rays + 4 * count, (split_rays, plain_rays)
         if sun_part == "hidden":  # in the sun's shadow the grain is the sky's alone
             assert split.std(axis=0).max() < 0.5 * plain.std(axis=0).max()
+
+
+def test_the_rest_of_a_sunny_map_goes_over_fewer_strata_and_stays_unbiased():
+    """Where the world's filter is wide (640 × 480), a pixel's map and cosine rays go over a
+    quarter fewer strata a side (3 × 3 at 16 Light Samples); with a sun traced apart, the rest
+    of the map goes over that side times its share of the power, at least 2 × 2. The share is
+    the map's power outside the sun's pixels; a map without a sun keeps 3 × 3, and so does every
+    map where the filter is narrow (160 × 120). At 2 × 2 the rest's estimate is still the
+    brute-force sum, in the sun's shadow where the rest is all of a point's light (docs/gi_pipeline.md
+    "The rest of a sunny map over fewer strata")."""
+    from voxgi.voxgi_addon.preview.passes import world_rest_share, world_strata_side
+
+    world = build_world_light(sky_with_sun())
+    h, w = world.radiance.shape[:2]
+    power = (world.radiance @ np.array([0.2126, 0.7152, 0.0722])) * row_solid_angles(h, w)[:, None]
+    outside = power.sum() - power[world.sun.rows, world.sun.columns].sum()
+    assert world.rest_share == pytest.approx(outside / power.sum(), rel=1e-6)
+    assert 0.0 < world.rest_share < 0.5
+    plain = build_world_light(np.full((8, 16, 3), 0.7))
+    assert plain.rest_share == 1.0 and world_rest_share([plain]) == 1.0 and world_rest_share([]) == 1.0
+    assert world_rest_share([world]) == world.rest_share
+    assert world_strata_side(16, 640, 480) == 3
+    assert world_strata_side(16, 640, 480, world.rest_share) == 2
+    assert world_strata_side(16, 640, 480, 0.9) == 3 and world_strata_side(64, 640, 480, 0.5) == 3
+    assert world_strata_side(16, 160, 120, world.rest_share) == 4
+    count = 4000
+    normals = np.tile([0.0, -0.3, 1.0], (count, 1)) / math.hypot(0.3, 1.0)
+
+    def occluded(origins, dirs):  # a wall hides the sun and the sky beyond it
+        return np.asarray(dirs)[:, 1] < 0.0
+
+    fine = np.repeat(np.repeat(world.radiance, 8, axis=0), 8, axis=1)
+    exact = brute_force(fine, normals[0], lambda d: d[..., 1] >= 0.0)
+    for side in (3, 2):
+        light = world_direct(world, np.zeros((count, 3)), normals, occluded, strata_for(count, 16),
+                             rest=strata_for(count, side * side, seed=1),
+                             fewer=np.ones(count, bool))
+        error = 4 * light.std(axis=0) / math.sqrt(count) + 0.002 * exact + 1e-4
+        assert np.all(np.abs(light.mean(axis=0) - exact) <= error), (side, error)

@@ -109,6 +109,12 @@ class WorldLight:
         exact importance of its light, so the map's rays are left out."""
         return bool(np.all(self.radiance == self.radiance[0, 0]))
 
+    @property
+    def rest_share(self) -> float:
+        """The share of the map's luminous power outside its ``Sun`` (1 without one): the
+        light its map and cosine rays estimate at a point the sun's rays are traced apart at."""
+        return 1.0 if self.sun is None else max(0.0, 1.0 - self.sun.total / self.total)
+
 
 def _table_normals() -> np.ndarray:
     """(IRRADIANCE_HEIGHT, 2 · that, 3) the normals of the irradiance table: row i at elevation

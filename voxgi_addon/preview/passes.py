@@ -926,17 +926,33 @@ WORLD_FEWER_REACH = (4 * (1 << 2) - 3) // 2
 # (render/gpu_shaders.py LOCAL_SIZE): llvmpipe runs a group's lanes in lock step, so a group
 # whose pixels drew over both strata counts paid for both
 WORLD_FEWER_BLOCK = 8
+# ... and where a map's sun is traced apart, the rest of the map's rays go over fewer strata
+# still, by the rest's share of the power, never below 2 × 2 (the least side at which a pixel's
+# estimate of the hidden part is held at 0 or above: world_light.DIFFERENCE_STRATA). The
+# rest's grain is its share of a sunlit pixel's light; the HDRI courtyard (a sun of 95% of the
+# power) and the real HDRI's (57%) went from 3 × 3 to 2 × 2 strata, 5-10% of their 640 x 480
+# preview, their error within 1% (docs/gi_pipeline.md "The rest of a sunny map over fewer strata")
+REST_LEAST_SIDE = 2
 
 
-def world_strata_side(samples: int, width: int, height: int) -> int:
+def world_strata_side(samples: int, width: int, height: int, rest_share: float = 1.0) -> int:
     """The side of the strata of the world's map and cosine rays at a ``width`` × ``height``
     image's pixel centres, for ``samples`` Light Samples (the lamps' side ⌈√samples⌉): a
     quarter fewer (rounded down) where the world's filter has WORLD_FEWER_FROM passes or more
-    (``world_filter_passes``). The map's sun keeps the lamps' strata."""
+    (``world_filter_passes``). The map's sun keeps the lamps' strata; there the rest of the
+    map, ``rest_share`` of its power (``WorldLight.rest_share``), goes over that side times its
+    share (rounded up), at least REST_LEAST_SIDE: its grain over a sunlit pixel's light is then
+    no more than a map without a sun has at the quarter fewer."""
     side = max(1, math.ceil(math.sqrt(samples)))
-    if world_filter_passes(width, height) >= WORLD_FEWER_FROM:
-        return side - side // 4
-    return side
+    if world_filter_passes(width, height) < WORLD_FEWER_FROM:
+        return side
+    fewer = side - side // 4
+    return min(fewer, max(REST_LEAST_SIDE, math.ceil(fewer * rest_share - 1e-9)))
+
+
+def world_rest_share(lights) -> float:
+    """``WorldLight.rest_share`` of the world among ``lights`` (1 without a world)."""
+    return min((light.rest_share for light in lights if light.type == "WORLD"), default=1.0)
 
 
 def world_fewer_pixels(edge, samples: int) -> np.ndarray | None:
@@ -1365,7 +1381,7 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
                                  strata_block=block, unshadowed=unshadowed, views=-views,
                                  world_variance=variance,
                                  world_strata=None if fewer is None else world_strata_side(
-                                     light_samples, width, height),
+                                     light_samples, width, height, world_rest_share(lights)),
                                  world_fewer=None if fewer is None else fewer.ravel()[hit])
         if variance is not None:
             per_light = world_filtered(per_light, variance, lights, hit, seen)
