@@ -672,6 +672,8 @@ class MaterialTable:
                 self._warn(f"Material '{name}': baking its {what} with Cycles failed "
                            f"({error}); using its value")
                 return data
+            if pixels is None:  # on no face of this mesh: nothing to bake, nothing seen
+                return data
             texture = _BAKED[key] = TextureData(
                 name=f"{name} ({surface.key})", pixels=pixels, interpolation="Linear",
                 extension="EXTEND", key=key)
@@ -816,7 +818,8 @@ def _route_to_emission(tree, socket_name: str) -> None:
 def bake_socket(material, mode: str, socket_name: str, surface: Surface) -> np.ndarray:
     """(BAKE_SIZE, BAKE_SIZE, 3) float32 linear RGB of a material's socket (mode "EMIT": the
     Principled input ``socket_name``) or diffuse colour (mode "DIFFUSE") baked by Cycles over
-    the active render UV map of ``surface``'s evaluated mesh (its faces of this material).
+    the active render UV map of ``surface``'s evaluated mesh (its faces of this material);
+    None where no face of the mesh has the material (nothing of it is seen: no bake).
 
     Everything is temporary — a scene, an object, a copy of the evaluated mesh with only this
     material's faces, a copy of the material with an image node, the image — and removed
@@ -844,6 +847,8 @@ def bake_socket(material, mode: str, socket_name: str, surface: Surface) -> np.n
             bm.to_mesh(mesh)
         finally:
             bm.free()
+        if not mesh.polygons:  # the material is in a slot no face of this mesh uses
+            return None
         if render_uv is not None and mesh.uv_layers.get(render_uv) is not None:
             mesh.uv_layers.active = mesh.uv_layers[render_uv]
         copy = material.copy()

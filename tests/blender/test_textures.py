@@ -306,6 +306,25 @@ def test_a_procedural_material_on_a_mesh_without_uvs_warns(voxgi):
     np.testing.assert_allclose(untextured.base_color, 0.5, atol=1e-6)  # the socket's value
 
 
+def test_a_procedural_material_in_a_slot_no_face_uses_is_not_baked(voxgi):
+    """A material slot that no face of the mesh uses (a material added to an object and not
+    assigned, as users leave them) shows nothing: it is not baked and draws no warning. (Its
+    bake once ran over an empty mesh and warned that it failed.)"""
+    from voxgi.blender.snapshot import materials
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    build()
+    floor = bpy.data.objects["Floor"]
+    floor.data.materials.append(bpy.data.materials["Checker Wall"])  # slot 1, on no face
+    assert not any(p.material_index == 1 for p in floor.data.polygons)
+    materials.clear_bake_cache()
+    snapshot = take_snapshot(bpy.context.scene)
+    assert not any("Checker Wall" in w for w in snapshot.warnings), snapshot.warnings
+    wall = [m for m in snapshot.materials if m.name == "Checker Wall"]
+    # the wall that has it is still baked
+    assert any(m.base_color_texture >= 0 for m in wall)
+
+
 def test_masked_sub_pixel_rasters_give_the_same_image(voxgi, monkeypatch):
     """The sub-pixel passes of a textured scene rasterize only the edge pixels they list
     (``gbuffer.PixelMask``: depth 0 elsewhere, so the textured fragments there are never
