@@ -47,6 +47,23 @@ def frame_size(scene) -> tuple[int, int]:
             max(1, render.resolution_y * render.resolution_percentage // 100))
 
 
+def render_region(scene, width: int, height: int) -> tuple[slice, slice]:
+    """(rows, columns), rows counted from the bottom, of the part of a ``width`` × ``height``
+    frame that Blender's render result holds: with Render Region on (Output › Format, Ctrl B in
+    the camera view) the region's pixels as Blender cuts them (its float corners times the
+    size, truncated), cropped or not (Blender puts a region into the whole frame itself); else
+    every pixel."""
+    render = scene.render
+    if not render.use_border:
+        return slice(0, height), slice(0, width)
+
+    def cut(low, high, size):  # Blender's float32 product, truncated to an int
+        return int(np.float32(low) * np.float32(size)), int(np.float32(high) * np.float32(size))
+    x0, x1 = cut(render.border_min_x, render.border_max_x, width)
+    y0, y1 = cut(render.border_min_y, render.border_max_y, height)
+    return slice(y0, max(y1, y0 + 1)), slice(x0, max(x1, x0 + 1))
+
+
 class VoxGIRenderEngine(bpy.types.RenderEngine):
     bl_idname = "VOXGI"
     bl_label = "VoxGI"
@@ -86,14 +103,16 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
             return
         for level, line in report:
             self.report({level}, line)
-        result = self.begin_result(0, 0, width, height)
+        # the whole frame is traced (its edges filtered as the whole frame's), then cut
+        rows, columns = render_region(scene, width, height)
+        result = self.begin_result(0, 0, columns.stop - columns.start, rows.stop - rows.start)
         layer = result.layers[0]
         for name in PASS_NAMES:
             render_pass = layer.passes.get(name)
             if render_pass is None:
                 continue
             image = combined if name == "Combined" else passes[name]
-            image = np.flipud(image)  # Blender's rows go bottom to top
+            image = np.flipud(image)[rows, columns]  # Blender's rows go bottom to top
             if render_pass.channels == 4 and image.shape[2] == 3:
                 image = np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=2)
             elif render_pass.channels == 3:

@@ -22,6 +22,7 @@ from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.update import update_gi
 from ..voxgi_addon.gi.view_fit import cascade_shares, fit_view, probe_view
 from ..voxgi_addon.preview.passes import render_passes
+from ..voxgi_addon.scene.camera import check_camera_type
 from ..voxgi_addon.voxelize.scene_caches import build_scene_caches
 from . import gpu_context
 
@@ -167,6 +168,7 @@ def render_scene_passes(context, scene, depsgraph, width, height, indirect_sourc
         raise VoxGIError("the scene has no camera to render the preview from")
     start = time.perf_counter()
     snapshot, snap_seconds = snapshot_or_error(context, depsgraph)
+    check_camera_type(snapshot.camera)
     session = scene_session(scene.name_full)
     session.snapshot = snapshot  # the film (preview.film) reads its world, camera and film
     voxels = {}

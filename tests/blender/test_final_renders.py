@@ -141,6 +141,76 @@ def test_f12_gives_render_previews_passes(voxgi, tmp_path, kind):
         assert rel(ours[name], theirs[name]) < 0.01, name
 
 
+@pytest.mark.parametrize("crop", [True, False])
+def test_f12_with_a_render_region_gives_that_part_of_the_whole_frame(voxgi, tmp_path, crop):
+    """Render Region (Ctrl B in the camera view): Blender's result holds the region's pixels
+    only, its corners cut as Blender cuts them (x from 0.3 · 64 = 19.2 to 0.8 · 64 = 51.2
+    pixels: columns 19-50; y from the bottom 0.15 · 48 = 7.2 to 0.7 · 48 = 33.6: rows 7-32). F12
+    writes every pass there as the whole frame's F12 has it; uncropped, Blender puts the region
+    into an empty frame. (F12 used to fail here: the whole frame's pixels sent to the region's
+    result.)"""
+    scene = bpy.context.scene
+    light_scenes.build("emissive_room", scene)
+    whole = f12(scene, tmp_path / "whole.exr")
+    scene.render.use_border = True
+    scene.render.border_min_x, scene.render.border_max_x = 0.3, 0.8
+    scene.render.border_min_y, scene.render.border_max_y = 0.15, 0.7
+    scene.render.use_crop_to_border = crop
+    part = f12(scene, tmp_path / "part.exr")
+    rows, columns = slice(HEIGHT - 33, HEIGHT - 7), slice(19, 51)  # (row 0 on top)
+    region = np.zeros((HEIGHT, WIDTH), bool)
+    region[rows, columns] = True
+    assert whole["Combined"][region].mean() > 0.01, "the region is not lit"
+    for name in PASSES:
+        inside = part[name] if crop else part[name][rows, columns]
+        assert inside.shape == (26, 32, 3), (name, part[name].shape)
+        assert rel(inside, whole[name][rows, columns]) < 1e-3, name
+        if not crop:
+            assert part[name].shape == (HEIGHT, WIDTH, 3)
+            assert np.all(part[name][~region] == 0.0), name
+
+
+def test_f12_with_a_panoramic_camera_says_what_to_change(voxgi, tmp_path):
+    """A panoramic camera (Cycles only): F12 fails with a message that names the camera and
+    the setting, not as a bug ("failed unexpectedly ... see the console", as it did)."""
+    scene = bpy.context.scene
+    light_scenes.build("emissive_room", scene)
+    scene.camera.data.type = "PANO"
+    prepare_f12(scene, tmp_path / "pano.exr")
+    with pytest.raises(RuntimeError) as failed:
+        bpy.ops.render.render(write_still=True)
+    message = str(failed.value)
+    assert f"the camera '{scene.camera.name}' is panoramic" in message, message
+    assert "Lens > Type" in message and "unexpectedly" not in message, message
+
+
+def test_f12_renders_the_rest_of_a_mesh_with_a_nan_vertex(voxgi, tmp_path):
+    """A mesh with a NaN vertex (a broken import, a script's division by zero) renders as
+    Cycles renders it: its triangles with a NaN corner left out, the rest drawn. F12 gives the
+    same passes as the same mesh without the broken triangle. (It used to fail: the radiance
+    cache spanned NaN bounds.)"""
+    scene = bpy.context.scene
+    light_scenes.build("emissive_room", scene)
+
+    def add_panel(corners, faces):
+        mesh = bpy.data.meshes.new("panel")
+        mesh.from_pydata(corners, [], faces)
+        panel = bpy.data.objects.new("panel", mesh)
+        scene.collection.objects.link(panel)
+        return panel
+
+    corners = [(-0.4, 0.2, 0.3), (0.4, 0.2, 0.3), (0.0, 0.2, 1.1), (float("nan"), 0.2, 0.0)]
+    panel = add_panel(corners, [(0, 1, 2), (0, 1, 3)])
+    broken = f12(scene, tmp_path / "broken.exr")
+    bpy.data.objects.remove(panel)
+    add_panel(corners[:3], [(0, 1, 2)])
+    clean = f12(scene, tmp_path / "clean.exr")
+    for name in PASSES:
+        assert np.isfinite(broken[name]).all(), name
+        assert rel(broken[name], clean[name]) < 1e-3, name
+    assert rel(broken["Combined"], clean["Combined"]) < 1e-4
+
+
 @pytest.mark.parametrize("kind", ["skinned", "skinned_cm_rig", "rigid_animated"])
 def test_fast_quality_f12_gives_render_previews_passes(voxgi, tmp_path, kind):
     """Fast quality traces cones through the voxels transformed from the rest-shape caches."""

@@ -258,3 +258,26 @@ def test_sample_patterns():
     # One point per eighth of x after the rotation, per pixel.
     assert (np.sort(np.floor(((h[..., 0] - h[:, :1, 0]) % 1.0) * 8 + 1e-9), axis=1) == np.arange(8)).all()
     assert abs(h.mean() - 0.5) < 0.01
+
+
+def test_a_triangle_with_a_nan_or_infinite_corner_hides_none_beside_it():
+    """A triangle with a NaN or infinite corner (a broken import) is hit by no ray, and the
+    triangles that share its nodes are hit as the grid ray caster hits them. (Its box once made
+    its nodes' bounds NaN, up to the root: every ray missed the whole scene.)"""
+    rng = np.random.default_rng(5)
+    positions = rng.uniform(-1.0, 1.0, (120, 3, 3))
+    positions[7, 1, 0] = np.nan
+    positions[21, 0, 2] = np.inf
+    positions[40, 2, 1] = -np.inf
+    tris = soup(positions)
+    bvh = build_bvh(tris)
+    assert np.isfinite(bvh.lo).all() and np.isfinite(bvh.hi).all()
+    o = rng.uniform(-0.5, 0.5, (2000, 3)) + [0, 0, 3]
+    d = rng.uniform(-0.5, 0.5, (2000, 3)) - o
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t, tri, _, _ = bvh_module.closest_hits(tris, o, d, 1e-4)
+    rt, rtri, _, _ = closest_hits(tris, o, d, 1e-4)
+    assert (rtri >= 0).mean() > 0.5  # the rays meet the soup
+    np.testing.assert_array_equal(tri, rtri)
+    np.testing.assert_allclose(t, rt, rtol=1e-9)
+    assert not np.isin(tri, [7, 21, 40]).any()

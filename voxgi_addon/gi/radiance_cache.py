@@ -140,6 +140,12 @@ def _bounds(tris) -> tuple[np.ndarray, np.ndarray]:
     if len(corners) == 0:
         raise VoxGIError("the radiance cache needs triangles")
     lo, hi = corners.min(axis=0), corners.max(axis=0)
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        # a triangle with a NaN or infinite corner is dropped by the voxelizer and hit by no
+        # ray: the grids span the others (none finite: a point at the origin)
+        finite = corners.reshape(-1, 3, 3)
+        finite = finite[np.isfinite(finite).all(axis=(1, 2))].reshape(-1, 3)
+        lo, hi = (finite.min(axis=0), finite.max(axis=0)) if len(finite) else (np.zeros(3), np.zeros(3))
     lo.setflags(write=False)
     hi.setflags(write=False)
     try:

@@ -206,6 +206,22 @@ def _bounds_max(bhi):
     return out
 
 
+def _finite_boxes(tlo: np.ndarray, thi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles' boxes (T, 3) with those of a triangle with a NaN or infinite corner made
+    a point amid the others' (their boxes' middle): no ray hits such a triangle (the triangle
+    tests fail on it), and its box must not turn its nodes' bounds NaN, which would hide
+    every triangle beside it."""
+    broken = ~(np.isfinite(tlo).all(axis=1) & np.isfinite(thi).all(axis=1))
+    if not broken.any():
+        return tlo, thi
+    good = ~broken
+    middle = 0.5 * (tlo[good].min(axis=0) + thi[good].max(axis=0)) if good.any() else 0.0
+    tlo, thi = tlo.copy(), thi.copy()
+    tlo[broken] = middle
+    thi[broken] = middle
+    return tlo, thi
+
+
 def build_bvh(tris: SceneTriangles, max_leaf: int = MAX_LEAF) -> BVH:
     """A threaded binned-SAH ``BVH`` over ``tris`` (see the module doc); leaves hold at most
     ``max_leaf`` triangles."""
@@ -213,7 +229,7 @@ def build_bvh(tris: SceneTriangles, max_leaf: int = MAX_LEAF) -> BVH:
     t = len(positions)
     if t > _MAX_TRIANGLES:
         raise ValueError(f"{t} triangles: the packed BVH holds at most {_MAX_TRIANGLES}")
-    tlo, thi = min_along(positions, 1), max_along(positions, 1)
+    tlo, thi = _finite_boxes(min_along(positions, 1), max_along(positions, 1))
     # The split search works in float32 (half the memory traffic); bounds are float64.
     blo32 = np.ascontiguousarray(tlo.T, np.float32)  # (3, T): a row per axis
     bhi32 = np.ascontiguousarray(thi.T, np.float32)
@@ -387,7 +403,8 @@ def build_instanced_bvh(tris: SceneTriangles, groups, rest) -> BVH:
     if len(positions) > _MAX_TRIANGLES:
         raise ValueError(f"{len(positions)} triangles: the packed BVH holds at most {_MAX_TRIANGLES}")
     # float32 boxes (half the memory traffic; the pad below covers their rounding)
-    tlo, thi = min_along(positions, 1).astype(np.float32), max_along(positions, 1).astype(np.float32)
+    tlo, thi = _finite_boxes(min_along(positions, 1).astype(np.float32),
+                             max_along(positions, 1).astype(np.float32))
     # items: the rest's BVH (if any), then every placement; per item its nodes and triangles
     lo, hi, miss, first, count, order, nodes, tris_of = [], [], [], [], [], [], [], []
     depth = 1

@@ -19,6 +19,7 @@ import functools
 
 import numpy as np
 
+from ..errors import VoxGIError
 from .short_axis import norm3
 from .snapshot import CameraData
 
@@ -162,6 +163,16 @@ def camera_frame(camera: CameraData) -> tuple[np.ndarray, np.ndarray]:
     return rotation, m[:3, 3].copy()
 
 
+def check_camera_type(camera: CameraData) -> None:
+    """Raise a VoxGIError that says what to change unless ``camera`` is perspective or
+    orthographic (what the tracers and the G-buffer's projection draw; a panoramic camera is
+    Cycles' alone)."""
+    if camera.type not in ("PERSP", "ORTHO"):
+        kind = "panoramic" if camera.type == "PANO" else f"of type {camera.type}"
+        raise VoxGIError(f"the camera '{camera.name}' is {kind}: VoxGI renders perspective and "
+                         "orthographic cameras (Camera properties > Lens > Type)")
+
+
 def camera_rays(camera: CameraData, width: int | None = None, height: int | None = None,
                 offset=(0.0, 0.0)):
     """Rays through the pixel centres of a ``width`` × ``height`` image of ``camera``.
@@ -180,8 +191,7 @@ def camera_rays(camera: CameraData, width: int | None = None, height: int | None
     centres sit at (i + ½, j + ½) as in Cycles. A frame whose aspect differs from the camera's
     resolution is fitted as the camera's Sensor Fit fits it (``_frustum``).
     """
-    if camera.type not in ("PERSP", "ORTHO"):
-        raise ValueError(f"camera type {camera.type!r} is not supported (PERSP or ORTHO)")
+    check_camera_type(camera)
     width = int(width or camera.resolution[0])
     height = int(height or camera.resolution[1])
     cx, cy, hx, hy = _frustum(camera, width, height)
