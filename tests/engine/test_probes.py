@@ -190,6 +190,27 @@ def test_bake_is_deterministic_and_a_cornell_probe_sees_the_red_wall():
     assert e[0, 0] > 3 * e[0, 1] and e[1, 1] > 3 * e[1, 0]
 
 
+def test_a_triangle_with_a_nan_corner_changes_no_probe():
+    """A broken triangle (a NaN corner, as a bad import leaves) is hit by no ray and spans no
+    box: the probes bake as without it (the bake once stopped: "the probe box [nan nan nan]
+    .. [nan nan nan] is empty")."""
+    from voxgi.voxgi_addon.scene.geometry import SceneTriangles
+
+    snapshot = cornell_box()
+    tris = world_triangles(snapshot)
+    broken = np.array([[[0.2, 0.1, 0.5], [float("nan"), 0.3, 0.5], [0.1, 0.4, 0.9]]])
+    with_broken = SceneTriangles(np.concatenate([tris.positions, broken]),
+                                 np.concatenate([tris.normals, [[0.0, 0.0, 1.0]]]),
+                                 np.concatenate([tris.materials, [0]]).astype(np.int32),
+                                 np.concatenate([tris.objects, [0]]).astype(np.int32))
+    settings = ProbeSettings(resolution=3, directions=64, seed=2)
+    clean = bake_probe_grid(snapshot, settings, tris=tris).grid
+    grid = bake_probe_grid(snapshot, settings, tris=with_broken).grid
+    assert np.isfinite(grid.sh).all()
+    np.testing.assert_allclose(grid.positions, clean.positions)
+    np.testing.assert_allclose(grid.sh, clean.sh, rtol=1e-6, atol=1e-7)
+
+
 def _thin_wall_ratio(use_masks):
     grid = bake_probe_grid(thin_wall_room(), ProbeSettings(resolution=8, directions=128,
                                                            use_masks=use_masks)).grid

@@ -68,8 +68,10 @@ class ProbeLayout:
 
 def scene_box(positions) -> tuple[np.ndarray, np.ndarray]:
     """The triangles' bounding box grown by ``BOX_MARGIN`` of its extent on every side, so that
-    walls on the bounds lie inside the outer volumes rather than on their faces."""
-    flat = np.asarray(positions, np.float64).reshape(-1, 3)
+    walls on the bounds lie inside the outer volumes rather than on their faces. A triangle
+    with a NaN or infinite corner (which no ray hits) is left out of it."""
+    corners = np.asarray(positions, np.float64).reshape(-1, 3, 3)
+    flat = corners[np.isfinite(corners).all(axis=(1, 2))].reshape(-1, 3)
     if len(flat) == 0:
         raise VoxGIError("the scene has no triangles to place probes around")
     lo, hi = flat.min(axis=0), flat.max(axis=0)
