@@ -105,7 +105,10 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
             self.report({level}, line)
         # the whole frame is traced (its edges filtered as the whole frame's), then cut
         rows, columns = render_region(scene, width, height)
-        result = self.begin_result(0, 0, columns.stop - columns.start, rows.stop - rows.start)
+        # Blender calls this once per view layer: the result of this one's layer alone (without
+        # it, layers[0] is the first layer, which every view layer's image overwrote)
+        result = self.begin_result(0, 0, columns.stop - columns.start, rows.stop - rows.start,
+                                   layer=depsgraph.view_layer.name)
         layer = result.layers[0]
         for name in PASS_NAMES:
             render_pass = layer.passes.get(name)

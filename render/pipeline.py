@@ -14,6 +14,8 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
+import numpy as np
+
 from ..blender.reports import coverage_lines, timing_text
 from ..blender.session import scene_session
 from ..blender.settings import cone_settings, fit_settings, gi_settings, is_auto, trace_options
@@ -21,7 +23,7 @@ from ..blender.snapshot import snapshot_or_error
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.update import update_gi
 from ..voxgi_addon.gi.view_fit import cascade_shares, fit_view, probe_view
-from ..voxgi_addon.preview.passes import render_passes
+from ..voxgi_addon.preview.passes import PASS_NAMES, render_passes
 from ..voxgi_addon.scene.camera import check_camera_type
 from ..voxgi_addon.voxelize.scene_caches import build_scene_caches
 from . import gpu_context
@@ -160,6 +162,14 @@ def trace_passes(scene, snapshot, state, width, height):
                               f"VoxGI: numpy tracer used ({why})")]
 
 
+def empty_passes(width: int, height: int) -> dict[str, np.ndarray]:
+    """The passes of an image whose camera rays see no surface: every pass and the Alpha 0
+    (the film puts the world behind them: ``preview.film``)."""
+    passes = {name: np.zeros((height, width, 3), np.float32) for name in PASS_NAMES}
+    passes["Alpha"] = np.zeros((height, width), np.float32)
+    return passes
+
+
 def render_scene_passes(context, scene, depsgraph, width, height, indirect_source=None):
     """Snapshot, update and trace ``scene``'s camera view: (passes, report lines).
     indirect_source : 'CONES' or 'PROBES' (None: the scene's ``indirect_source`` setting).
@@ -167,10 +177,14 @@ def render_scene_passes(context, scene, depsgraph, width, height, indirect_sourc
     if scene.camera is None:
         raise VoxGIError("the scene has no camera to render the preview from")
     start = time.perf_counter()
-    snapshot, snap_seconds = snapshot_or_error(context, depsgraph)
+    snapshot, snap_seconds = snapshot_or_error(context, depsgraph, allow_empty=True)
     check_camera_type(snapshot.camera)
     session = scene_session(scene.name_full)
     session.snapshot = snapshot  # the film (preview.film) reads its world, camera and film
+    if not snapshot.objects:  # a view layer that shows no mesh: the world alone, as Cycles'
+        lines = [("WARNING", w) for w in dict.fromkeys(snapshot.warnings)]
+        return empty_passes(width, height), lines + [
+            ("INFO", "VoxGI: the view layer shows no mesh: its image is the world alone")]
     voxels = {}
     state = fit = None
     if scene.voxgi.quality != "ACCURATE":  # the cones need this update's voxel cascades

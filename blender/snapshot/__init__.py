@@ -18,9 +18,11 @@ NO_MESH_MESSAGE = (
     "(add one, or unhide it)"
 )
 
-def snapshot_or_error(context, depsgraph=None, posed: bool = False, reads=None):
+def snapshot_or_error(context, depsgraph=None, posed: bool = False, reads=None,
+                      allow_empty: bool = False):
     """(snapshot, seconds) of the context's scene (or of ``depsgraph``'s scene and view layer);
-    VoxGIError when it has nothing to voxelize.
+    VoxGIError when it has nothing to voxelize (unless ``allow_empty``: a render's view layer
+    that shows no mesh, whose image is the world alone).
 
     posed : when only matrices, poses, lights, camera or world changed since the last snapshot
         of this view layer, that snapshot posed at this frame (``updates.posed_since``: no
@@ -42,7 +44,7 @@ def snapshot_or_error(context, depsgraph=None, posed: bool = False, reads=None):
     if snapshot.objects:
         remember(snapshot, scene, depsgraph)
     seconds = time.perf_counter() - start
-    if not snapshot.objects:
+    if not snapshot.objects and not allow_empty:
         details = "; ".join(snapshot.warnings)
         raise VoxGIError(NO_MESH_MESSAGE + (f". {details}" if details else ""))
     return snapshot, seconds

@@ -170,6 +170,42 @@ def test_f12_with_a_render_region_gives_that_part_of_the_whole_frame(voxgi, tmp_
             assert np.all(part[name][~region] == 0.0), name
 
 
+def test_f12_renders_each_view_layer_into_its_own_layer(voxgi, tmp_path):
+    """Two view layers: the first shows the courtyard, the second excludes its meshes'
+    collection (a world-only layer, as compositing setups keep). Each layer of the file holds
+    its own image, as Cycles writes them: the first the same as a file with that layer alone,
+    the second the HDRI world and no surface. (Every layer's image used to go into the first
+    layer, the other layers left black; a layer that showed no mesh stopped the render.)"""
+    from voxgi.voxgi_addon.files.exr import read_exr
+
+    scene = bpy.context.scene
+    light_scenes.build("hdri_courtyard", scene)
+    alone = f12(scene, tmp_path / "alone.exr")
+    geometry = bpy.data.collections.new("Geometry")
+    scene.collection.children.link(geometry)
+    for obj in [o for o in scene.objects if o.type == "MESH"]:
+        geometry.objects.link(obj)
+        for owner in list(obj.users_collection):
+            if owner != geometry:
+                owner.objects.unlink(obj)
+    first = scene.view_layers[0].name
+    world_only = scene.view_layers.new("World only")
+    world_only.layer_collection.children["Geometry"].exclude = True
+    f12(scene, tmp_path / "layers.exr")
+    channels = read_exr(tmp_path / "layers.exr")
+
+    def layer(name, pass_name):
+        return np.stack([channels[f"{name}.{pass_name}.{c}"] for c in "RGB"], axis=-1)
+
+    for name in PASSES:
+        assert rel(layer(first, name), alone[name]) < 1e-3, name
+    sky = layer("World only", "Combined")
+    assert sky.mean() > 0.05, "the second layer shows no world"
+    assert rel(sky, alone["Combined"]) > 0.05  # not the first layer's image
+    for name in PASSES[1:]:
+        assert np.all(layer("World only", name) == 0.0), name  # no surface: every pass 0
+
+
 def test_f12_with_a_panoramic_camera_says_what_to_change(voxgi, tmp_path):
     """A panoramic camera (Cycles only): F12 fails with a message that names the camera and
     the setting, not as a bug ("failed unexpectedly ... see the console", as it did)."""
