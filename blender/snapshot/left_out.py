@@ -10,7 +10,8 @@ operators' reports and the sidebar panel show (``ui/panel.py`` lists them in the
 Read from the materials (``material_notes``: the active output's Volume and Displacement, the
 Principled BSDF's inputs, the shader nodes feeding the surface) and from the object
 (``object_notes``: shadow catchers, hair particle systems; ``type_note``: object types the
-preview does not render at all — hair curves, point clouds, volume objects).
+preview does not render at all — hair curves, point clouds, volume objects) and from the render
+(``render_notes``: the camera's depth of field, motion blur).
 """
 from __future__ import annotations
 
@@ -124,6 +125,22 @@ def object_notes(obj) -> list[str]:
         settings = modifier.particle_system.settings
         if settings.type == "HAIR" and settings.render_type == "PATH":
             notes.append("its hair particles")
+    return notes
+
+
+def render_notes(scene) -> list[str]:
+    """What of the render's own settings the preview leaves out: the scene camera's depth of
+    field (it renders everything in focus) and motion blur (every object at its frame's
+    place), each a report line naming where it is set."""
+    notes = []
+    camera = scene.camera
+    dof = getattr(getattr(camera, "data", None), "dof", None)
+    if dof is not None and dof.use_dof:
+        notes.append(f"Camera '{camera.name}'{MARK}depth of field (it renders everything in "
+                     "focus)")
+    if scene.render.use_motion_blur:
+        notes.append(f"Render Properties{MARK}motion blur (every object renders at its "
+                     "place at the frame)")
     return notes
 
 

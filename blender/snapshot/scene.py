@@ -29,7 +29,7 @@ from ...voxgi_addon.scene.snapshot import (
     SceneSnapshot,
 )
 from .environment import read_camera, read_light, read_world
-from .left_out import left_out_line, notes_of, type_note
+from .left_out import left_out_line, notes_of, render_notes, type_note
 from .materials import MaterialTable, Surface
 from .mesh import (
     material_lookup,
@@ -423,6 +423,7 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
                                if 0 <= i < len(table.materials)], table.notes)
         if notes:
             warnings.append(left_out_line(name, notes))
+    warnings.extend(render_notes(scene))
     return SceneSnapshot(
         meshes=meshes,
         materials=table.materials,

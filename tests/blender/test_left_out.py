@@ -146,3 +146,22 @@ def test_hair_particles_displacement_and_shadow_catchers_are_named(voxgi):
     assert "displacement" in box_lines[0] and "'White'" in box_lines[0]
     floor = [w for w in warnings if w.startswith("Object 'Floor'")]
     assert len(floor) == 1 and "displacement" in floor[0] and "shadow catcher" in floor[0]
+
+
+def test_depth_of_field_and_motion_blur_are_named(voxgi):
+    """The camera's depth of field and the render's motion blur, which Cycles renders and the
+    preview does not, are said once each, naming where they are set; off, nothing is said."""
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    scene = bpy.context.scene
+    build(scene)
+    assert not any("depth of field" in w or "motion blur" in w
+                   for w in take_snapshot(scene).warnings)
+    scene.camera.data.dof.use_dof = True
+    scene.render.use_motion_blur = True
+    warnings = take_snapshot(scene).warnings
+    dof = [w for w in warnings if "depth of field" in w]
+    blur = [w for w in warnings if "motion blur" in w]
+    assert dof == [f"Camera '{scene.camera.name}': the preview leaves out depth of field (it "
+                   "renders everything in focus)"], warnings
+    assert len(blur) == 1 and blur[0].startswith("Render Properties: the preview leaves out"), warnings
