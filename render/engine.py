@@ -64,6 +64,17 @@ def render_region(scene, width: int, height: int) -> tuple[slice, slice]:
     return slice(y0, max(y1, y0 + 1)), slice(x0, max(x1, x0 + 1))
 
 
+def render_views(scene) -> list[str | None]:
+    """The views F12 renders: [None] (the one camera) unless Stereoscopy is on, then the left
+    and right views (Stereo 3D) or every enabled view (Multi-View), by name."""
+    render = scene.render
+    if not render.use_multiview:
+        return [None]
+    names = [v.name for v in render.views if v.use and
+             (render.views_format == "MULTIVIEW" or v.name in ("left", "right"))]
+    return names or [None]
+
+
 class VoxGIRenderEngine(bpy.types.RenderEngine):
     bl_idname = "VOXGI"
     bl_label = "VoxGI"
@@ -88,19 +99,34 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
         scene = depsgraph.scene
         if scene.name.startswith(gpu_context.BOOTSTRAP_SCENE):
             return  # ensure_gpu_context only needs this call to happen
+        # each view of a stereo or multi-view render from its own camera (Blender's per view:
+        # its model matrix and lens shift), into its own view of the result
+        for view in render_views(scene):
+            camera = None
+            if view is not None and scene.camera is not None:
+                self.active_view_set(view)
+                camera = (np.array(self.camera_model_matrix(scene.camera), np.float64),
+                          float(self.camera_shift_x(scene.camera)))
+            if not self._render_view(scene, depsgraph, view, camera):
+                return
+
+    def _render_view(self, scene, depsgraph, view, camera) -> bool:
+        """Trace one view (``camera``: its (model matrix, lens shift x), None: the scene
+        camera's) and send its passes; False when it failed (reported)."""
         width, height = frame_size(scene)
         try:
-            passes, report = render_scene_passes(bpy.context, scene, depsgraph, width, height)
+            passes, report = render_scene_passes(bpy.context, scene, depsgraph, width, height,
+                                                 view_camera=camera)
             # the film: the world behind the geometry, or alpha with Film › Transparent
             combined = snapshot_combined(scene_session(scene.name_full).snapshot, passes,
                                          pixel_filter_width(scene))
         except VoxGIError as error:
             self.report({"ERROR"}, f"VoxGI render failed: {error}")
-            return
+            return False
         except Exception as error:  # a bug must fail this frame, never take Blender down
             traceback.print_exc()
             self.report({"ERROR"}, f"VoxGI render failed unexpectedly: {error!r} (see the console)")
-            return
+            return False
         for level, line in report:
             self.report({level}, line)
         # the whole frame is traced (its edges filtered as the whole frame's), then cut
@@ -108,7 +134,7 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
         # Blender calls this once per view layer: the result of this one's layer alone (without
         # it, layers[0] is the first layer, which every view layer's image overwrote)
         result = self.begin_result(0, 0, columns.stop - columns.start, rows.stop - rows.start,
-                                   layer=depsgraph.view_layer.name)
+                                   layer=depsgraph.view_layer.name, view=view or "")
         layer = result.layers[0]
         for name in PASS_NAMES:
             render_pass = layer.passes.get(name)
@@ -124,6 +150,7 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
             # time (1.1-1.4 s for a 640 x 480 frame's passes, against 15 ms)
             render_pass.rect.foreach_set(np.ascontiguousarray(image, np.float32).ravel())
         self.end_result(result)
+        return True
 
 
 classes = (VoxGIRenderEngine,)

@@ -24,7 +24,7 @@ from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.update import update_gi
 from ..voxgi_addon.gi.view_fit import cascade_shares, fit_view, probe_view
 from ..voxgi_addon.preview.passes import PASS_NAMES, render_passes
-from ..voxgi_addon.scene.camera import check_camera_type
+from ..voxgi_addon.scene.camera import camera_view, check_camera_type
 from ..voxgi_addon.voxelize.scene_caches import build_scene_caches
 from . import gpu_context
 
@@ -170,15 +170,23 @@ def empty_passes(width: int, height: int) -> dict[str, np.ndarray]:
     return passes
 
 
-def render_scene_passes(context, scene, depsgraph, width, height, indirect_source=None):
+def render_scene_passes(context, scene, depsgraph, width, height, indirect_source=None,
+                        view_camera=None):
     """Snapshot, update and trace ``scene``'s camera view: (passes, report lines).
     indirect_source : 'CONES' or 'PROBES' (None: the scene's ``indirect_source`` setting).
+    view_camera : (model matrix (4, 4), lens shift x) of one view of a stereo or multi-view
+    render (``RenderEngine.camera_model_matrix``, ``camera_shift_x``); None: the camera's own.
     Raises VoxGIError for scenes that cannot be rendered."""
     if scene.camera is None:
         raise VoxGIError("the scene has no camera to render the preview from")
     start = time.perf_counter()
     snapshot, snap_seconds = snapshot_or_error(context, depsgraph, allow_empty=True)
     check_camera_type(snapshot.camera)
+    if view_camera is not None:
+        own = scene.camera.evaluated_get(depsgraph) if depsgraph is not None else scene.camera
+        snapshot = replace(snapshot, camera=camera_view(
+            snapshot.camera, view_camera[0], view_camera[1] - float(own.data.shift_x),
+            (scene.render.pixel_aspect_x, scene.render.pixel_aspect_y)))
     session = scene_session(scene.name_full)
     session.snapshot = snapshot  # the film (preview.film) reads its world, camera and film
     if not snapshot.objects:  # a view layer that shows no mesh: the world alone, as Cycles'

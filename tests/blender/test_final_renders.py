@@ -206,6 +206,42 @@ def test_f12_renders_each_view_layer_into_its_own_layer(voxgi, tmp_path):
         assert np.all(layer("World only", name) == 0.0), name  # no surface: every pass 0
 
 
+def test_f12_renders_both_views_of_a_stereo_camera_as_cycles_does(voxgi, tmp_path):
+    """Stereoscopy (Stereo 3D, the camera's default off-axis eyes, pivot on the left): F12
+    writes a left and a right view, each traced from its own eye. The left eye is the camera
+    itself, so its view is the mono render; the right one is nearer Cycles' right view than
+    Cycles' left. (The right view used to stay black.)"""
+    from voxgi.voxgi_addon.files.exr import read_exr
+
+    scene = bpy.context.scene
+    light_scenes.build("emissive_room", scene)
+    mono = f12(scene, tmp_path / "mono.exr")
+    scene.render.use_multiview = True
+    scene.render.views_format = "STEREO_3D"
+    scene.render.image_settings.views_format = "INDIVIDUAL"
+    scene.camera.data.stereo.interocular_distance = 0.3  # a parallax of several pixels
+
+    def views(engine, stem):
+        scene.render.engine = engine
+        scene.render.filepath = str(tmp_path / stem)
+        bpy.ops.render.render(write_still=True)
+        out = {}
+        for eye in "LR":
+            channels = read_exr(tmp_path / f"{stem}_{eye}.exr")
+            out[eye] = np.stack([channels[f"ViewLayer.Combined.{c}"] for c in "RGB"], axis=-1)
+        return out
+
+    scene.cycles.samples = 64
+    cycles = views("CYCLES", "cycles")
+    prepare_f12(scene, tmp_path / "stereo.exr")
+    ours = views("VOXGI", "stereo")
+    assert rel(ours["L"], mono["Combined"]) < 1e-3
+    assert rel(ours["R"], ours["L"]) > 0.02, "the right eye sees what the left sees"
+    for eye, other in (("L", "R"), ("R", "L")):
+        near, far = rel(ours[eye], cycles[eye]), rel(ours[eye], cycles[other])
+        assert near < far / 2, (eye, near, far)
+
+
 def test_f12_with_a_panoramic_camera_says_what_to_change(voxgi, tmp_path):
     """A panoramic camera (Cycles only): F12 fails with a message that names the camera and
     the setting, not as a bug ("failed unexpectedly ... see the console", as it did)."""

@@ -15,6 +15,7 @@ pixels' rays alike: the anti-aliased preview renders one pass per ``filter_sampl
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -161,6 +162,28 @@ def camera_frame(camera: CameraData) -> tuple[np.ndarray, np.ndarray]:
     m = np.asarray(camera.world_matrix, dtype=np.float64)
     rotation = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0, keepdims=True)
     return rotation, m[:3, 3].copy()
+
+
+def camera_view(camera: CameraData, world_matrix, shift_delta: float,
+                pixel_aspect=(1.0, 1.0)) -> CameraData:
+    """``camera`` as one view of a stereo or multi-view render sees: placed at the view's
+    ``world_matrix`` (4, 4) and its lens shifted by ``shift_delta`` more along x (Blender's
+    per-view shift less the camera's own), as Blender shifts a view plane: by the shift times
+    the sensor-fit side in pixels (the width, or the height × the pixel aspect's y / x), which
+    moves the projection's x centre by twice that over the width."""
+    width, height = camera.resolution
+    ax, ay = (float(a) for a in pixel_aspect)
+    fit = getattr(camera, "sensor_fit", "AUTO")
+    if fit == "AUTO":
+        fit = "HORIZONTAL" if ax * width >= ay * height else "VERTICAL"
+    side = 1.0 if fit == "HORIZONTAL" else (ay / ax) * height / width
+    projection = np.array(camera.projection_matrix, np.float64)
+    if camera.type == "ORTHO":
+        projection[0, 3] -= 2.0 * shift_delta * side
+    else:
+        projection[0, 2] += 2.0 * shift_delta * side
+    return dataclasses.replace(camera, world_matrix=np.asarray(world_matrix, np.float64),
+                               projection_matrix=projection)
 
 
 def check_camera_type(camera: CameraData) -> None:
