@@ -36,6 +36,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import VoxGIError
+from ..scene.geometry import finite_bounds
 from ..scene.short_axis import any_along, max_along, min_along
 from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
 from .cascades import CascadeGrid, cells_within
@@ -136,16 +137,10 @@ def _bounds(tris) -> tuple[np.ndarray, np.ndarray]:
     kept = _BOUNDS.get(id(positions))
     if kept is not None and kept[0]() is positions:
         return kept[1]
-    corners = np.asarray(positions, np.float64).reshape(-1, 3)
-    if len(corners) == 0:
+    if np.size(positions) == 0:
         raise VoxGIError("the radiance cache needs triangles")
-    lo, hi = corners.min(axis=0), corners.max(axis=0)
-    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
-        # a triangle with a NaN or infinite corner is dropped by the voxelizer and hit by no
-        # ray: the grids span the others (none finite: a point at the origin)
-        finite = corners.reshape(-1, 3, 3)
-        finite = finite[np.isfinite(finite).all(axis=(1, 2))].reshape(-1, 3)
-        lo, hi = (finite.min(axis=0), finite.max(axis=0)) if len(finite) else (np.zeros(3), np.zeros(3))
+    # the finite triangles' (none finite: a point at the origin)
+    lo, hi = finite_bounds(positions) or (np.zeros(3), np.zeros(3))
     lo.setflags(write=False)
     hi.setflags(write=False)
     try:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import VoxGIError
+from ..scene.geometry import finite_bounds
 from ..scene.short_axis import all_along, norm3
 from ..voxelize.cube_clipping import clip_to_cells
 from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
@@ -70,11 +71,10 @@ def scene_box(positions) -> tuple[np.ndarray, np.ndarray]:
     """The triangles' bounding box grown by ``BOX_MARGIN`` of its extent on every side, so that
     walls on the bounds lie inside the outer volumes rather than on their faces. A triangle
     with a NaN or infinite corner (which no ray hits) is left out of it."""
-    corners = np.asarray(positions, np.float64).reshape(-1, 3, 3)
-    flat = corners[np.isfinite(corners).all(axis=(1, 2))].reshape(-1, 3)
-    if len(flat) == 0:
+    bounds = finite_bounds(positions)
+    if bounds is None:
         raise VoxGIError("the scene has no triangles to place probes around")
-    lo, hi = flat.min(axis=0), flat.max(axis=0)
+    lo, hi = bounds
     margin = max(BOX_MARGIN * float((hi - lo).max()), 1e-4)
     return lo - margin, hi + margin
 

@@ -67,20 +67,27 @@ class SceneTriangles:
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(3,) min and max corner of the triangles whose corners are all finite (zeros when
-        none: a triangle with a NaN corner, which the voxelizer drops and counts, must not make
-        the bounds NaN)."""
-        corners = np.asarray(self.positions).reshape(-1, 3, 3)
-        # one pass each over every value tells whether all are finite (a NaN or an infinity
-        # shows in the min or the max): the per-triangle test only when one is not
-        if len(corners) and not (np.isfinite(corners.min()) and np.isfinite(corners.max())):
-            corners = corners[np.isfinite(corners).all(axis=(1, 2))]
-        flat = corners.reshape(-1, 3)
-        if len(flat) == 0:
-            return np.zeros(3), np.zeros(3)
-        # a column at a time: numpy's reduction over the rows of an (N, 3) array runs an
-        # inner loop of 3 per row (20 times slower)
-        return (np.array([flat[:, k].min() for k in range(3)]),
-                np.array([flat[:, k].max() for k in range(3)]))
+        none: ``finite_bounds``)."""
+        return finite_bounds(self.positions) or (np.zeros(3), np.zeros(3))
+
+
+def finite_bounds(positions) -> tuple[np.ndarray, np.ndarray] | None:
+    """(3,) float64 min and max corner of the (T, 3, 3) triangles ``positions`` whose corners
+    are all finite, None when none is: a triangle with a NaN or infinite corner, which the
+    voxelizer drops and counts and no ray hits, must not make the radiance cache's grids, the
+    probe box or any bounds NaN."""
+    corners = np.asarray(positions, np.float64).reshape(-1, 3, 3)
+    # one pass each over every value tells whether all are finite (a NaN or an infinity
+    # shows in the min or the max): the per-triangle test only when one is not
+    if len(corners) and not (np.isfinite(corners.min()) and np.isfinite(corners.max())):
+        corners = corners[np.isfinite(corners).all(axis=(1, 2))]
+    flat = corners.reshape(-1, 3)
+    if len(flat) == 0:
+        return None
+    # a column at a time: numpy's reduction over the rows of an (N, 3) array runs an
+    # inner loop of 3 per row (20 times slower)
+    return (np.array([flat[:, k].min() for k in range(3)]),
+            np.array([flat[:, k].max() for k in range(3)]))
 
 
 def _vertex_matrices(obj: ObjectData, mesh: MeshData, snapshot: SceneSnapshot) -> np.ndarray:
