@@ -13,6 +13,9 @@ new snapshot's GPU scene is prepared at once on the view's own thread (``viewpor
 1. the view's camera from ``RegionView3D.view_matrix`` / ``window_matrix`` at
    ``Scene.voxgi_viewport.resolution_fraction`` of the region's size
    (``voxgi_addon/scene/view_camera.py``: perspective or orthographic, camera or free view);
+   with a Render Region (``render_border``: the view's own, or the scene's inside the camera
+   frame in the camera view, as Cycles' view takes them) only the region's pixels are traced
+   and drawn (``view_frame``);
    a new view is reported to ``LiveGI.view_changed`` (trace again; the cascades move when the
    view leaves their anchor cell);
 2. the image is keyed by everything it depends on (``trace_key``): what it traces
@@ -50,7 +53,7 @@ from gpu_extras.batch import batch_for_shader
 from ..blender.settings import cone_settings, gi_stride, pixel_filter_width
 from ..blender.viewport_session import READ_SLICE, SNAPSHOT_HOOKS, live_gi
 from ..blender.viewport_settings import VIEWPORT_PASSES
-from ..voxgi_addon.scene.view_camera import camera_from_view
+from ..voxgi_addon.scene.view_camera import border_rect, camera_from_view, crop_window
 from . import viewport_prepare
 from .gpu_fast import cone_volumes
 from .gpu_gather import CHUNK_GROWTH
@@ -71,6 +74,52 @@ np.linalg.inv(np.eye(4))
 def viewport_size(region_width: int, region_height: int, fraction: float) -> tuple[int, int]:
     """Pixels traced for a region of that size at ``fraction`` of it (at least 1 × 1)."""
     return (max(1, round(region_width * fraction)), max(1, round(region_height * fraction)))
+
+
+WHOLE = ((-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0))  # the region's corners in NDC
+
+
+def view_frame(window, region_width: int, region_height: int, fraction: float, border=None):
+    """(window matrix, width, height, corners) of what a view traces and where it draws it:
+    the region at ``fraction`` of its size, or with a Render Region ``border`` (x0, y0, x1, y1,
+    fractions of the region from its bottom left) only the region's pixels, cut as F12 cuts
+    them (``border_rect``), their window cropped to them and their corners in the region's
+    NDC. width and height are 0 when the border lies outside the region."""
+    width, height = viewport_size(region_width, region_height, fraction)
+    if border is None:
+        return window, width, height, WHOLE
+    rect = border_rect(border, width, height)
+    x0, y0, w, h = rect
+    if w < 1 or h < 1:
+        return window, 0, 0, WHOLE
+    corners = tuple((-1.0 + 2.0 * x / width, -1.0 + 2.0 * y / height)
+                    for y in (y0, y0 + h) for x in (x0, x0 + w))
+    return crop_window(window, rect, width, height), w, h, corners
+
+
+def render_border(context, scene, depsgraph=None):
+    """The Render Region Cycles' Rendered view traces, as fractions (x0, y0, x1, y1) of the
+    region from its bottom left, or None: in the camera view the scene's (Output › Format ›
+    Render Region, Ctrl B there) placed in the camera's frame; elsewhere the view's own
+    (View › Render Region, Ctrl B outside the camera view)."""
+    region_data = getattr(context, "region_data", None)
+    if getattr(region_data, "view_perspective", None) == "CAMERA":
+        render = scene.render
+        if not render.use_border or scene.camera is None:
+            return None
+        camera = scene.camera if depsgraph is None else scene.camera.evaluated_get(depsgraph)
+        to_ndc = _matrix(region_data.window_matrix) @ _matrix(region_data.view_matrix) \
+            @ _matrix(camera.matrix_world)
+        corners = np.array([[*c, 1.0] for c in camera.data.view_frame(scene=scene)]) @ to_ndc.T
+        ndc = corners[:, :2] / corners[:, 3:4]
+        (fx0, fy0), (fx1, fy1) = (ndc.min(0) + 1.0) / 2.0, (ndc.max(0) + 1.0) / 2.0
+        return (fx0 + render.border_min_x * (fx1 - fx0), fy0 + render.border_min_y * (fy1 - fy0),
+                fx0 + render.border_max_x * (fx1 - fx0), fy0 + render.border_max_y * (fy1 - fy0))
+    space = getattr(context, "space_data", None)
+    if not getattr(space, "use_render_border", False):
+        return None
+    return (space.render_border_min_x, space.render_border_min_y,
+            space.render_border_max_x, space.render_border_max_y)
 
 
 def _matrix(m) -> np.ndarray:
@@ -98,6 +147,9 @@ class ViewportRenderer:
     def __init__(self, budget: float = SLICE_BUDGET):
         self.volume = GPUVolume()
         self.texture = None        # RGBA32F, the shown estimate; kept until a newer one
+        self.corners = WHOLE       # where it is drawn: the region, or its Render Region
+        self.frame_corners = WHOLE  # ... and where this draw's frame goes (``view_frame``):
+        #                             a texture keeps its own until a new one replaces it
         self.progressive = ProgressiveImage(budget)
         self.view_key = None       # the last view seen
         self.timings: dict[str, float] = {}
@@ -163,8 +215,13 @@ class ViewportRenderer:
         rgba = image if image.shape[2] == 4 else \
             np.concatenate([image, np.ones((height, width, 1), np.float32)], axis=2)
         flat = np.ascontiguousarray(np.flipud(rgba)).ravel()  # GPU rows go bottom to top
-        self.texture = gpu.types.GPUTexture((width, height), format="RGBA32F",
-                                            data=gpu.types.Buffer("FLOAT", flat.size, flat))
+        self.show(gpu.types.GPUTexture((width, height), format="RGBA32F",
+                                       data=gpu.types.Buffer("FLOAT", flat.size, flat)))
+
+    def show(self, texture) -> None:
+        """Make ``texture``, an image of this draw's frame, the one drawn (where the frame
+        lies: the region or its Render Region)."""
+        self.texture, self.corners = texture, self.frame_corners
 
     @property
     def raster(self):
@@ -190,7 +247,8 @@ class ViewportRenderer:
             size = progressive.coarse_size(options["gi_stride"])
 
             def show(texture):
-                self.texture, self.quick_key = texture, key
+                self.show(texture)
+                self.quick_key = key
                 self.shown_version = key[0]
                 drew.append(1)
 
@@ -316,7 +374,7 @@ class ViewportRenderer:
                             "view_draw work": time.perf_counter() - t0}
             return "Coarse" if progressive.coarse_pending else (
                 "Converged" if progressive.converged else "Refining")
-        self.texture = progressive.image  # on the GPU: drawn as it is, nothing read back
+        self.show(progressive.image)  # on the GPU: drawn as it is, nothing read back
         self.shown_version = progressive.key[0]
         self.quick_key = None  # a GI image from now on: no quick image over it
         self.traces += 1
@@ -329,7 +387,8 @@ class ViewportRenderer:
     # ------------------------------------------------------------------ drawing
 
     def draw(self) -> bool:
-        """Draw the shown texture over the whole viewport (NDC quad); False if none. While
+        """Draw the shown texture over the region, or its Render Region (``corners``, an NDC
+        quad); False if none. While
         there is none, the first call whose draw worked less than ``WARM_DISPLAY_WORK`` draws
         a transparent texel over a corner instead, which changes no pixel (premultiplied
         blending): the draw's code is then built (6–14 ms on llvmpipe) in a draw with time to
@@ -342,7 +401,7 @@ class ViewportRenderer:
                                              data=gpu.types.Buffer("FLOAT", 4, [0.0] * 4))
                 self._quad(blank, ((-1, -1), (-0.99, -1), (-1, -0.99), (-0.99, -0.99)))
             return False
-        self._quad(self.texture, ((-1, -1), (1, -1), (-1, 1), (1, 1)))
+        self._quad(self.texture, self.corners)
         return True
 
     @staticmethod
@@ -362,15 +421,22 @@ class ViewportRenderer:
 
 def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_matrix,
               region_width: int, region_height: int, bind=None, unbind=None,
-              redraw=None) -> bool:
+              redraw=None, border=None) -> bool:
     """What ``view_draw`` does (module doc, steps 1–4) for a region of that size; tests call
     it with a camera's matrices into a ``GPUOffScreen``. bind / unbind : called around the
     texture draw (the engine's display-space shader); redraw : asks for another draw (the
-    engine's ``tag_redraw``) while the image has not converged. Returns whether anything was
+    engine's ``tag_redraw``) while the image has not converged; border : the Render Region
+    (``render_border``), whose pixels alone are traced and drawn. Returns whether anything was
     drawn."""
     view_settings = scene.voxgi_viewport
-    width, height = viewport_size(region_width, region_height, view_settings.resolution_fraction)
-    view, window = _matrix(view_matrix), _matrix(window_matrix)
+    view = _matrix(view_matrix)
+    window, width, height, corners = view_frame(_matrix(window_matrix), region_width,
+                                                region_height, view_settings.resolution_fraction,
+                                                border)
+    if width < 1:  # the Render Region lies outside the view: nothing to trace or draw
+        renderer.status = "VoxGI | The Render Region is outside the view"
+        return False
+    renderer.frame_corners = corners
     camera_key = (view.tobytes(), window.tobytes(), width, height)
     pass_name = VIEWPORT_PASSES[view_settings.viewport_pass]
     live = live_gi(scene.name_full)
@@ -525,10 +591,12 @@ def view_update(engine, context, depsgraph) -> None:
     region_data = getattr(context, "region_data", None)
     region = getattr(context, "region", None)
     if live.view_camera is None and region_data is not None and region is not None:
-        fraction = scene.voxgi_viewport.resolution_fraction
-        width, height = viewport_size(region.width, region.height, fraction)
-        live.view_camera = camera_from_view(_matrix(region_data.view_matrix),
-                                            _matrix(region_data.window_matrix), width, height)
+        window, width, height, _ = view_frame(
+            _matrix(region_data.window_matrix), region.width, region.height,
+            scene.voxgi_viewport.resolution_fraction, render_border(context, scene, depsgraph))
+        if width >= 1:
+            live.view_camera = camera_from_view(_matrix(region_data.view_matrix), window,
+                                                width, height)
     # draws follow: a full snapshot's mesh reads go on in them, a slice each (``draw_view``)
     live.read_slice = READ_SLICE
     live.update(scene, depsgraph)
@@ -551,7 +619,8 @@ def view_draw(engine, context, depsgraph) -> None:
         gpu.state.blend_set("NONE")
 
     draw_view(renderer, scene, depsgraph, region_data.view_matrix, region_data.window_matrix,
-              region.width, region.height, bind=bind, unbind=unbind, redraw=engine.tag_redraw)
+              region.width, region.height, bind=bind, unbind=unbind, redraw=engine.tag_redraw,
+              border=render_border(context, scene, depsgraph))
     engine.update_stats("", renderer.status)  # the view's header shows it
 
 

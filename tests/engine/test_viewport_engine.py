@@ -21,7 +21,7 @@ from voxgi.voxgi_addon.scene.changes import (
     view_plan,
 )
 from voxgi.voxgi_addon.scene.snapshot import CameraData, LightData
-from voxgi.voxgi_addon.scene.view_camera import camera_from_view, clip_range
+from voxgi.voxgi_addon.scene.view_camera import border_rect, camera_from_view, clip_range, crop_window
 from voxgi.voxgi_addon.voxelize.incremental import CacheStore, refresh_caches
 from voxgi.voxgi_addon.voxelize.scene_caches import build_scene_caches
 
@@ -238,4 +238,41 @@ def test_light_move_reuses_the_cascades_and_equals_a_full_update():
     third = update_gi_stages(moved, caches3, settings, again, {"transform", "inject", "octree"})
     assert third.stages == ("transform", "inject", "octree")
     assert third.state.cascades is not again.state.cascades
+
+
+# ------------------------------------------------------------------ a view's Render Region
+
+
+@pytest.mark.parametrize("ortho", [False, True])
+def test_a_cropped_window_sees_exactly_its_pixels_of_the_view(ortho):
+    """The Rendered view's Render Region: the crop's rays are the view's rays through the
+    same pixels, and its clipping range is the view's."""
+    if ortho:
+        window = np.diag([0.5, 0.5 * 4 / 3, -0.02, 1.0])
+        window[0, 3], window[2, 3] = 0.1, -1.0
+    else:
+        window = perspective(np.radians(60), 4 / 3, 0.1, 100, shift=(0.2, -0.1))
+    view = np.linalg.inv(translation(0.3, -0.2, 2.0))
+    camera = camera_from_view(view, window, 40, 30)
+    origins, directions = (a.reshape(30, 40, 3) for a in camera_rays(camera))
+    x0, y0, w, h = 7, 4, 18, 11  # from the bottom left
+    crop = camera_from_view(view, crop_window(window, (x0, y0, w, h), 40, 30), w, h)
+    o, d = (a.reshape(h, w, 3) for a in camera_rays(crop))
+    rows = slice(30 - y0 - h, 30 - y0)  # (rays' rows top first)
+    assert np.allclose(d, directions[rows, x0:x0 + w], atol=1e-9)
+    assert np.allclose(o, origins[rows, x0:x0 + w], atol=1e-9)
+    assert crop.type == camera.type and (crop.clip_start, crop.clip_end) == pytest.approx(
+        (camera.clip_start, camera.clip_end))
+    with pytest.raises(ValueError, match="empty"):
+        crop_window(window, (3, 3, 0, 5), 40, 30)
+
+
+def test_a_render_region_is_cut_as_blender_cuts_a_renders_region():
+    assert border_rect((0.2, 0.3, 0.7, 0.85), 64, 48) == (12, 14, 32, 26)
+    assert border_rect((0.0, 0.0, 1.0, 1.0), 64, 48) == (0, 0, 64, 48)
+    # clipped to the image; a sliver keeps one pixel; outside the image, nothing
+    assert border_rect((-0.5, 0.9, 0.5, 1.7), 10, 10) == (0, 9, 5, 1)
+    assert border_rect((0.31, 0.31, 0.311, 0.311), 10, 10) == (3, 3, 1, 1)
+    assert border_rect((1.2, 0.0, 1.5, 1.0), 10, 10)[2] == 0
+    assert border_rect((0.5, 0.5, 0.5, 0.9), 10, 10)[2] == 0
 

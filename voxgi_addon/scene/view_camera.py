@@ -14,7 +14,7 @@ import numpy as np
 
 from .snapshot import CameraData
 
-__all__ = ["camera_from_view", "is_orthographic", "clip_range"]
+__all__ = ["border_rect", "camera_from_view", "clip_range", "crop_window", "is_orthographic"]
 
 
 def is_orthographic(window_matrix) -> bool:
@@ -59,3 +59,39 @@ def camera_from_view(view_matrix, window_matrix, width: int, height: int,
         clip_start=near,
         clip_end=far,
     )
+
+
+def border_rect(border, width: int, height: int) -> tuple[int, int, int, int]:
+    """(x0, y0, w, h), pixels counted from the bottom left, of a ``width`` × ``height`` image's
+    Render Region ``border`` (x0, y0, x1, y1 as fractions of the image, from the bottom left),
+    cut as Blender cuts a render's region (its float32 corners times the size, truncated; at
+    least one pixel each way). The border is clipped to the image first; w or h is 0 when
+    nothing of it is inside."""
+    x0, y0, x1, y1 = (min(max(float(v), 0.0), 1.0) for v in border)
+    if x1 <= x0 or y1 <= y0:
+        return 0, 0, 0, 0
+
+    def cut(low, high, size):
+        a, b = int(np.float32(low) * np.float32(size)), int(np.float32(high) * np.float32(size))
+        a = min(a, size - 1)
+        return a, max(b, a + 1) - a
+    (px, pw), (py, ph) = cut(x0, x1, int(width)), cut(y0, y1, int(height))
+    return px, py, pw, ph
+
+
+def crop_window(window_matrix, rect, width: int, height: int) -> np.ndarray:
+    """The window matrix of the pixels ``rect`` (x0, y0, w, h from the bottom left) of a
+    ``width`` × ``height`` image seen through ``window_matrix``: a ``w`` × ``h`` image whose
+    pixel (i, j) is the image's pixel (x0 + i, y0 + j). The crop scales and moves clip space
+    (x' = s x + t w), so perspective and orthographic windows keep their kind and their
+    clipping range."""
+    x0, y0, w, h = rect
+    if w < 1 or h < 1:
+        raise ValueError(f"a crop of {w} × {h} pixels is empty")
+    a, b = -1.0 + 2.0 * x0 / width, -1.0 + 2.0 * (x0 + w) / width
+    c, d = -1.0 + 2.0 * y0 / height, -1.0 + 2.0 * (y0 + h) / height
+    crop = np.eye(4)
+    crop[0, 0], crop[0, 3] = 2.0 / (b - a), -(a + b) / (b - a)
+    crop[1, 1], crop[1, 3] = 2.0 / (d - c), -(c + d) / (d - c)
+    return crop @ np.asarray(window_matrix, np.float64).reshape(4, 4)
+
