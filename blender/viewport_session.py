@@ -129,6 +129,8 @@ class LiveGI:
         #                            "Cached", "Previous" (render/viewport.py draw_view)
         self.view_samples = (0, 0)  # (samples done, target) of the view's accumulation
         self.error = ""
+        # the snapshot of a view layer that shows no mesh (its world, camera, film), else None
+        self.world_only = None
         self.stats = LiveStats()
         self.progress = jobs.Progress()
         self.settings = None
@@ -296,10 +298,19 @@ class LiveGI:
             return None
         try:
             if snapshot is None:
-                snapshot, _ = snapshot_or_error(None, depsgraph, reads=self.mesh_reads)
+                snapshot, _ = snapshot_or_error(None, depsgraph, reads=self.mesh_reads,
+                                                allow_empty=True)
         except VoxGIError as error:
             self.error = str(error)
             return None
+        if not snapshot.objects:
+            # a view layer that shows no mesh: the view shows its world alone, as Cycles' and
+            # F12 do (render/viewport_world.py); nothing is voxelized, and what was taken
+            # before (meshes since deleted or hidden) is traced no more
+            self.world_only, self.latest_snapshot, self.index = snapshot, None, None
+            self.error = ""
+            return None
+        self.world_only = None
         waits = ()
         if snapshot is not self.latest_snapshot:
             self.snapshots += 1

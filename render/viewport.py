@@ -64,6 +64,7 @@ from .progressive import SLICE_BUDGET, ProgressiveImage, base_options, tracer
 from .viewport_bounces import FastCacheSource, ViewportBounces
 from .viewport_cache import ViewportCache
 from .viewport_prepare import ViewPreparation
+from .viewport_world import WorldView
 
 _renderers: "weakref.WeakSet[ViewportRenderer]" = weakref.WeakSet()
 # the process's first LAPACK call (9–28 ms: OpenBLAS starting) made with the module, at the
@@ -156,7 +157,8 @@ class ViewportRenderer:
         self.traces = 0            # slices (tracer calls) this view traced (tests, panel)
         self.shown_version = None  # the image source's version of what the view shows
         self.shown = ""            # what the last draw showed: "Coarse", "Refining",
-        #                            "Converged" (traced this draw), "Cached", "Previous", ""
+        #                            "Converged" (traced this draw), "Cached", "Previous",
+        #                            "World" (the world alone: viewport_world), ""
         self.status = ""           # the status line (header, sidebar)
         self.error = ""
         # the G-buffer shader and vertex batch of this view's GPU context, the scene and the
@@ -165,6 +167,7 @@ class ViewportRenderer:
         self.quick_key = None      # the view of the quick image shown (None: a GI image)
         self.display_warm = False  # the texture's draw made once (``draw``) before an image
         self.cache = ViewportCache()  # the radiance cache, built a stage at a time
+        self.world = WorldView()   # a view layer that shows no mesh: its world alone
         self.bounces = ViewportBounces()  # Fast: the voxels with its bounces, made on the worker
         self.bounced = None        # ... those this key's image reflects (None: one bounce)
         _renderers.add(self)
@@ -176,6 +179,7 @@ class ViewportRenderer:
         self.prepare.free()
         self.quick_key = None
         self.cache.free()
+        self.world = WorldView()
         self.bounces.free()
         self.bounced = None
 
@@ -453,6 +457,13 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
     if camera_key != renderer.view_key:
         renderer.view_key = camera_key
         live.view_changed(camera_from_view(view, window, width, height), scene, depsgraph)
+    if live.world_only is not None:  # a view layer that shows no mesh: its world alone
+        if not read:
+            renderer.world.step(renderer, live.world_only, view, window, width, height,
+                                camera_key, bool(scene.render.film_transparent),
+                                pixel_filter_width(scene), redraw)
+        renderer.shown = "World"
+        return _shown(renderer, scene, live, bind, unbind)
     traced = ""
     progressive = renderer.progressive
     live.held_source = None
@@ -531,8 +542,14 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
         renderer.shown = "Cached"
     else:  # a failed trace, or nothing applied yet: the last image stays
         renderer.shown = "Previous"
+    return _shown(renderer, scene, live, bind, unbind)
+
+
+def _shown(renderer: ViewportRenderer, scene, live, bind, unbind) -> bool:
+    """``draw_view``'s end: the status line, then the shown texture drawn."""
     renderer.status = status_line(renderer, scene, live)
     live.view_status, live.view_shown = renderer.status, renderer.shown
+    progressive = renderer.progressive
     live.view_samples = (progressive.samples_done, progressive.target)
     if bind is not None:
         bind()
@@ -556,6 +573,8 @@ def status_line(renderer: ViewportRenderer, scene, live) -> str:
     progressive = renderer.progressive
     shown = renderer.shown
     samples = f"Sample {progressive.samples_done}/{progressive.target}"
+    if shown == "World":
+        return "VoxGI | The world alone: the view layer shows no mesh"
     if shown in ("Preparing", "Quick"):  # viewport_prepare: the scene, the batch, the kernels
         line = f"VoxGI | {renderer.prepare.status} | {quality}"
     elif shown == "":

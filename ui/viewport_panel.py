@@ -74,6 +74,8 @@ def view_state_line(live) -> str:
         return ""
     if live.running is not None:
         return "Updating: the view shows the previous image"
+    if shown == "World":
+        return "The world alone: the view layer shows no mesh"
     done, target = getattr(live, "view_samples", (0, 0))
     if shown in ("Cached", "Converged"):
         return f"Converged: {target} of {target} samples"

@@ -12,7 +12,7 @@ import bpy
 import light_scenes
 import numpy as np
 from stand_in_engine import StandInEngine
-from test_viewport import HEIGHT, WIDTH, camera_matrices, engine_view, gpu_ready
+from test_viewport import HEIGHT, WIDTH, engine_view, gpu_ready, live_view
 
 SAMPLES = 16  # the strata of F12's 4 × 4 sub-pixel passes
 GREY = 0.5    # engine_view's clear colour: what an empty viewport shows
@@ -59,14 +59,24 @@ def converge(engine, scene, depsgraph, view, window):
     raise AssertionError("the view never converged")
 
 
+def stand_in_view(scene):
+    """(depsgraph, live, view, window, engine, renderer): the scene's ``LiveGI`` updated, its
+    camera's matrices, and a stand-in engine whose renderer traces a whole sample a draw."""
+    from voxgi.render.viewport import ViewportRenderer
+
+    depsgraph, live, view, window = live_view(scene)
+    engine = StandInEngine()
+    renderer = engine.voxgi_viewport = ViewportRenderer()
+    renderer.progressive.fixed_pixels = WIDTH * HEIGHT  # a sample a draw (not timed)
+    renderer.progressive.stage_budget = None
+    return depsgraph, live, view, window, engine, renderer
+
+
 def rel(ours, reference):
     return float(np.abs(ours - reference).sum() / max(np.abs(reference).sum(), 1e-12))
 
 
 def test_the_rendered_view_shows_the_world_behind_the_geometry_as_f12(voxgi, tmp_path):
-    from voxgi.blender.viewport_session import live_gi
-    from voxgi.render.viewport import ViewportRenderer
-
     scene = courtyard()
     gpu_ready()
     f12 = f12_rgba(scene, tmp_path / "f12.exr", transparent=False)
@@ -76,14 +86,7 @@ def test_the_rendered_view_shows_the_world_behind_the_geometry_as_f12(voxgi, tmp
     assert f12[sky, :3].mean() > 0.05  # F12's film shows the HDRI there
 
     scene.render.film_transparent = False
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    live = live_gi(scene.name_full)
-    live.update(scene, depsgraph)
-    view, window = camera_matrices(scene, depsgraph)
-    engine = StandInEngine()
-    renderer = engine.voxgi_viewport = ViewportRenderer()
-    renderer.progressive.fixed_pixels = WIDTH * HEIGHT  # a sample a draw (not timed)
-    renderer.progressive.stage_budget = None
+    depsgraph, live, view, window, engine, renderer = stand_in_view(scene)
     images = converge(engine, scene, depsgraph, view, window)
     assert renderer.progressive.converged and len(images) == 1 + SAMPLES
 
@@ -114,3 +117,50 @@ def test_the_rendered_view_shows_the_world_behind_the_geometry_as_f12(voxgi, tmp
           f"max {through.max():.4f}")
     assert through.mean() < 0.005  # the clear colour, no sky (but edge tails)
     assert rel(renderer.progressive.read_image()[..., :3], f12_clear[..., :3]) < 0.03
+
+
+def test_a_view_layer_without_meshes_shows_its_world_as_f12_and_cycles_do(voxgi, tmp_path):
+    """The artist deletes every mesh in the Rendered view (or shows a world-only layer): the
+    view shows the world alone — F12's image — where it kept the deleted meshes' last image
+    and said "Nothing to voxelize"; with Film › Transparent the view's own background; a mesh
+    added back is traced again."""
+    scene = courtyard()
+    depsgraph, live, view, window, engine, _ = stand_in_view(scene)
+    with_meshes = converge(engine, scene, depsgraph, view, window)[-1]
+
+    meshes = [o for o in scene.objects if o.type == "MESH"]
+    kept = meshes[0].data
+    for obj in meshes:
+        bpy.data.objects.remove(obj)
+    scene.render.film_transparent = False
+    f12 = f12_rgba(scene, tmp_path / "world.exr", transparent=False)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live.update(scene, depsgraph)  # what view_update does after the deletion
+    assert live.error == "" and live.world_only is not None
+    images = converge(engine, scene, depsgraph, view, window)
+    world = images[-1]
+    error = rel(world[..., :3], f12[..., :3])
+    print(f"world alone: view vs F12 {error:.5f}; vs the deleted meshes' image "
+          f"{rel(world[..., :3], with_meshes[..., :3]):.3f}")
+    assert f12[..., :3].mean() > 0.05 and np.all(world[..., 3] == 1.0)
+    assert error < 0.005
+    assert rel(world[..., :3], with_meshes[..., :3]) > 0.1  # not the meshes' last image
+    assert "world alone" in engine.stats[-1]
+    from voxgi.ui.viewport_panel import view_state_line
+
+    assert view_state_line(live) == "The world alone: the view layer shows no mesh"
+
+    scene.render.film_transparent = True
+    clear = converge(engine, scene, depsgraph, view, window)[-1]
+    assert np.all(np.abs(clear[..., :3] - GREY) < 1e-6)
+
+    scene.render.film_transparent = False
+    obj = bpy.data.objects.new("back", kept)
+    scene.collection.objects.link(obj)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live.update(scene, depsgraph)
+    assert live.world_only is None
+    again = converge(engine, scene, depsgraph, view, window)[-1]
+    assert "world alone" not in engine.stats[-1]
+    print(f"a mesh back: {kept.name}, the view vs the world alone {rel(again, world):.3f}")
+    assert rel(again[..., :3], world[..., :3]) > 0.05  # the mesh is drawn over the world

@@ -40,9 +40,11 @@ def world_along(world, camera, width: int, height: int, offset=(0.0, 0.0)):
 
 
 def background(world, camera, width: int, height: int,
-               filter_width: float = DEFAULT_FILTER_WIDTH) -> np.ndarray:
+               filter_width: float = DEFAULT_FILTER_WIDTH, cancel=None) -> np.ndarray | None:
     """(H, W, 3) float32: the ``WorldData`` ``world`` seen by ``camera`` through each pixel's
-    filter (row 0 = top); zeros for a black world (radiance None)."""
+    filter (row 0 = top); zeros for a black world (radiance None). cancel : checked between
+    the sub-pixel offsets (a worker's job: the Rendered view's world alone); None once it
+    says True."""
     if width < 1 or height < 1:
         raise ValueError(f"image size must be positive, got {width}×{height}")
     if getattr(world, "radiance", None) is None:
@@ -50,6 +52,8 @@ def background(world, camera, width: int, height: int,
     offsets, weights = filter_samples(filter_width, AA_SIDE)
     total = np.zeros((height, width, 3))
     for offset, weight in zip(offsets, weights):
+        if cancel is not None and cancel():
+            return None
         total += weight * world_along(world, camera, width, height, offset)
     return filter_coverage(total / len(offsets), filter_width)
 
