@@ -59,6 +59,7 @@ from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.radiance_cache import snap_focus
 from ..voxgi_addon.preview.gather import uses_cache
 from ..voxgi_addon.scene.textures import TEXTURE_TAPS
+from ..voxgi_addon.scene.view_camera import camera_from_view
 from . import (
     gpu_accumulation,
     gpu_compose,
@@ -558,6 +559,12 @@ _ATTR_LENGTHS = {"FLOAT": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "INT": 1, "IVEC2":
                  "IVEC3": 3, "IVEC4": 4}
 
 
+# the camera of the warm-up draws into 8 × 8 G-buffers when the scene has none
+WARM_CAMERA = camera_from_view(np.eye(4), np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0],
+                                                    [0, 0, -1.0002, -0.020002], [0, 0, -1.0, 0]]),
+                               8, 8, name="warm-up")
+
+
 def warm_raster(shader, camera) -> None:
     """Draw one triangle of zeros with the raster ``shader`` into an 8 × 8 G-buffer: llvmpipe
     builds a shader's draw variant (its vertex fetch and fragment code) at its first draw,
@@ -767,6 +774,9 @@ class ViewPreparation:
         arrays = job.arrays if job.arrays is not None else \
             (prep.arrays if scene_ready else None)
         worked = False
+        # what the 8 × 8 warm-up draws look through: the scene's camera, or any (a free view
+        # of a scene without one: its snapshot has none)
+        camera = snapshot.camera if snapshot.camera is not None else WARM_CAMERA
         # one compile: the raster shader, then the kernels in their order
         compiled = ""
         if self.raster is None:
@@ -800,7 +810,7 @@ class ViewPreparation:
         if not self.warmed:  # (nothing drawn with the raster before it: its first draw)
             if compiled != "gbuffer raster" and (whole or self._fits("warm", started, budget)):
                 self._timed("warm", "raster first draw", lambda: warm_raster(self.raster,
-                                                                            snapshot.camera))
+                                                                            camera))
                 self.warmed = worked = True
         elif arrays is not None and (self.batch_source is not arrays or self.batch is None) \
                 and not (quick is not None and not known):
@@ -811,7 +821,7 @@ class ViewPreparation:
             if self.fill is not None and self.fill.batch is None and \
                     (whole or self._fits("batch", started, budget)):
                 self._timed("batch", "vertex batch",
-                            lambda: self.fill.step(snapshot.camera, target))
+                            lambda: self.fill.step(camera, target))
                 worked = sent = True
             if self.fill is not None and self.fill.batch is not None:
                 self.batch, self.batch_source, self.fill = self.fill.batch, arrays, None

@@ -314,3 +314,45 @@ def test_panels_show_settings_and_statistics_and_buttons_say_why(viewport_sessio
     assert {"cone_angle", "diffuse_cones", "gi_resolution", "tracer"} <= set(props)
     _, operators, props = draw_panel("VOXGI_PT_render_voxels")
     assert {"base_span", "cascade_count", "grid_resolution"} <= set(props)
+
+
+def test_a_scene_without_a_camera_renders_in_a_free_view(viewport_session):
+    """Cycles' Rendered view needs no scene camera (the view is its own); the view traced
+    nothing and said "viewport trace failed: AttributeError: 'NoneType' object has no
+    attribute 'world_matrix'" (its warm-up draws looked through the snapshot's camera). Drawn
+    as a real view draws: a budgeted slice a draw, the scene prepared a step a draw."""
+    from stand_in_engine import StandInEngine
+    from test_viewport import camera_matrices, engine_view, gpu_ready, relative_l1
+
+    scene, _, _ = two_boxes()
+    scene.render.engine = "VOXGI"
+    scene.voxgi_viewport.samples = 4
+
+    def converged(view, window):
+        engine = StandInEngine()
+        for _ in range(1000):
+            redraws = engine.redraws
+            image = engine_view(engine, scene, bpy.context.evaluated_depsgraph_get(), view,
+                                window)
+            if engine.redraws == redraws:
+                return engine, image
+        raise AssertionError("the view never converged")
+
+    view, window = camera_matrices(scene, bpy.context.evaluated_depsgraph_get())
+    camera = scene.objects["Camera"]
+    scene.collection.objects.unlink(camera)
+    scene.camera = None
+    gpu_ready()
+    live = viewport_session.live_gi(scene.name_full)
+    live.update(scene, bpy.context.evaluated_depsgraph_get())
+    engine, image = converged(view, window)
+    assert live.error == "" and engine.voxgi_viewport.error == ""
+    assert "Converged" in engine.stats[-1]
+
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    live.update(scene, bpy.context.evaluated_depsgraph_get())
+    _, with_camera = converged(view, window)
+    error = relative_l1(image[..., :3], with_camera[..., :3])
+    print(f"free view without a camera vs with one: {error:.4f}")
+    assert error < 0.03
