@@ -464,6 +464,7 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
                                 pixel_filter_width(scene), redraw)
         renderer.shown = "World"
         return _shown(renderer, scene, live, bind, unbind)
+    renderer.world.cancel()
     traced = ""
     progressive = renderer.progressive
     live.held_source = None

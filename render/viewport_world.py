@@ -59,6 +59,15 @@ class WorldView:
         if not self.done and redraw is not None:
             viewport_prepare.wake_later(redraw)
 
+    def cancel(self) -> None:
+        """The layer shows meshes again: the lookups under way stop at their next offset, so
+        that the preparing thread turns to the new snapshot's scene."""
+        if self.key is not None:
+            with self._lock:
+                self._generation += 1
+                self._ready.clear()
+            self.key = None
+
     def _submit(self, world, camera, width, height, filter_width) -> None:
         generation = self._generation
 

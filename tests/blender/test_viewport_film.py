@@ -125,7 +125,7 @@ def test_a_view_layer_without_meshes_shows_its_world_as_f12_and_cycles_do(voxgi,
     and said "Nothing to voxelize"; with Film › Transparent the view's own background; a mesh
     added back is traced again."""
     scene = courtyard()
-    depsgraph, live, view, window, engine, _ = stand_in_view(scene)
+    depsgraph, live, view, window, engine, renderer = stand_in_view(scene)
     with_meshes = converge(engine, scene, depsgraph, view, window)[-1]
 
     meshes = [o for o in scene.objects if o.type == "MESH"]
@@ -162,5 +162,6 @@ def test_a_view_layer_without_meshes_shows_its_world_as_f12_and_cycles_do(voxgi,
     assert live.world_only is None
     again = converge(engine, scene, depsgraph, view, window)[-1]
     assert "world alone" not in engine.stats[-1]
+    assert renderer.world.key is None  # its lookups cancelled: the preparing thread is free
     print(f"a mesh back: {kept.name}, the view vs the world alone {rel(again, world):.3f}")
     assert rel(again[..., :3], world[..., :3]) > 0.05  # the mesh is drawn over the world
