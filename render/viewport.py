@@ -437,10 +437,6 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
     window, width, height, corners = view_frame(_matrix(window_matrix), region_width,
                                                 region_height, view_settings.resolution_fraction,
                                                 border)
-    if width < 1:  # the Render Region lies outside the view: nothing to trace or draw
-        renderer.status = "VoxGI | The Render Region is outside the view"
-        return False
-    renderer.frame_corners = corners
     camera_key = (view.tobytes(), window.tobytes(), width, height)
     pass_name = VIEWPORT_PASSES[view_settings.viewport_pass]
     live = live_gi(scene.name_full)
@@ -454,6 +450,10 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
         read = time.perf_counter() - t0
         if redraw is not None:
             redraw()
+    if width < 1:  # the Render Region lies outside the view: nothing to trace or draw
+        renderer.status = live.view_status = "VoxGI | The Render Region is outside the view"
+        return False
+    renderer.frame_corners = corners
     if camera_key != renderer.view_key:
         renderer.view_key = camera_key
         live.view_changed(camera_from_view(view, window, width, height), scene, depsgraph)

@@ -11,7 +11,17 @@ import bpy
 import gpu
 import numpy as np
 import pytest
-from test_viewport import HEIGHT, WIDTH, camera_matrices, cornell, f12_combined, live_view, one_shot, relative_l1
+from test_viewport import (
+    HEIGHT,
+    WIDTH,
+    camera_matrices,
+    cornell,
+    f12_combined,
+    gpu_ready,
+    live_view,
+    one_shot,
+    relative_l1,
+)
 
 BORDER = (0.2, 0.3, 0.7, 0.85)  # x0, y0, x1, y1: fractions from the bottom left
 GREY = 0.5  # the offscreen's clear colour
@@ -102,3 +112,31 @@ def test_the_camera_views_render_region_lies_in_the_camera_frame(voxgi):
     # the view's own region is the free view's, not the camera view's
     assert render_border(context_of(view, window, "CAMERA", space_border=BORDER), scene,
                          depsgraph) is None
+
+
+def test_a_render_region_outside_the_view_draws_nothing_and_the_updates_go_on(voxgi):
+    """Panned so that the region lies outside the view: nothing is traced or drawn and the
+    header says why; the scene's mesh reads, which go on a slice a draw, still finish."""
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render.viewport import ViewportRenderer, draw_view
+
+    scene = cornell()
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    view, window = camera_matrices(scene, depsgraph)
+    live = live_gi(scene.name_full)
+    live.read_slice = 1e-9  # a mesh a draw, as a view on a large scene reads them
+    live.update(scene, depsgraph)
+    assert live.reading is not None
+    renderer = ViewportRenderer()
+    for _ in range(50):
+        drawn = draw_view(renderer, scene, depsgraph, view, window, WIDTH, HEIGHT,
+                          border=(1.2, 0.2, 1.6, 0.8))
+        assert not drawn and renderer.traces == 0
+        if live.reading is None:
+            break
+    assert live.reading is None and live.latest_snapshot is not None
+    assert renderer.status == "VoxGI | The Render Region is outside the view"
+    drawn, image = region_view(one_shot(renderer), scene, depsgraph,
+                               context_of(view, window, "PERSP", space_border=BORDER))
+    assert drawn and renderer.traces == 1
