@@ -592,6 +592,22 @@ def status_line(renderer: ViewportRenderer, scene, live) -> str:
     return line
 
 
+PANORAMIC_NOTE = (" | A panoramic camera is drawn as perspective here (F12 renders perspective "
+                  "and orthographic cameras: Camera properties > Lens > Type)")
+
+
+def camera_note(context, scene) -> str:
+    """What the header adds in the camera view of a panoramic camera: Blender hands the view a
+    perspective projection there, which the view traces, where Cycles' view traces the
+    panorama (F12 stops with the same advice: ``camera.check_camera_type``)."""
+    region_data = getattr(context, "region_data", None)
+    camera = scene.camera
+    if getattr(region_data, "view_perspective", None) == "CAMERA" and camera is not None \
+            and getattr(camera.data, "type", "PERSP") == "PANO":
+        return PANORAMIC_NOTE
+    return ""
+
+
 def view_update(engine, context, depsgraph) -> None:
     """``RenderEngine.view_update``: plan and schedule the depsgraph's updates."""
     scene = depsgraph.scene_eval.original
@@ -641,7 +657,7 @@ def view_draw(engine, context, depsgraph) -> None:
     draw_view(renderer, scene, depsgraph, region_data.view_matrix, region_data.window_matrix,
               region.width, region.height, bind=bind, unbind=unbind, redraw=engine.tag_redraw,
               border=render_border(context, scene, depsgraph))
-    engine.update_stats("", renderer.status)  # the view's header shows it
+    engine.update_stats("", renderer.status + camera_note(context, scene))  # the header
 
 
 def release() -> None:

@@ -391,8 +391,10 @@ def test_an_unchanged_redraw_traces_nothing_and_any_change_traces_again(voxgi, m
     assert dispatches.take() == 0 and np.array_equal(still, moved)
 
 
-def engine_view(engine, scene, depsgraph, view, window, width=WIDTH, height=HEIGHT):
-    """``view_draw`` itself into a float offscreen; (H, W, 4) top row first."""
+def engine_view(engine, scene, depsgraph, view, window, width=WIDTH, height=HEIGHT,
+                perspective="PERSP"):
+    """``view_draw`` itself into a float offscreen; (H, W, 4) top row first. perspective :
+    the region's ``view_perspective`` ("CAMERA": the camera view)."""
     import types
 
     from voxgi.render.gpu_tracer import read_texture
@@ -400,7 +402,8 @@ def engine_view(engine, scene, depsgraph, view, window, width=WIDTH, height=HEIG
 
     context = types.SimpleNamespace(
         region=types.SimpleNamespace(width=width, height=height),
-        region_data=types.SimpleNamespace(view_matrix=view, window_matrix=window))
+        region_data=types.SimpleNamespace(view_matrix=view, window_matrix=window,
+                                          view_perspective=perspective))
     offscreen = gpu.types.GPUOffScreen(width, height, format="RGBA32F")
     try:
         with offscreen.bind():

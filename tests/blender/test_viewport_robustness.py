@@ -356,3 +356,29 @@ def test_a_scene_without_a_camera_renders_in_a_free_view(viewport_session):
     error = relative_l1(image[..., :3], with_camera[..., :3])
     print(f"free view without a camera vs with one: {error:.4f}")
     assert error < 0.03
+
+
+def test_a_panoramic_camera_in_the_camera_view_says_it_is_drawn_as_perspective(viewport_session):
+    """Blender hands the camera view of a panoramic camera a perspective projection, which the
+    view traces; Cycles' view traces the panorama. The header says so, with what to change (F12
+    stops with the same advice); a free view, or a perspective camera, adds nothing."""
+    from stand_in_engine import StandInEngine
+    from test_viewport import camera_matrices, engine_view, gpu_ready
+
+    scene, _, _ = two_boxes()
+    scene.render.engine = "VOXGI"
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    viewport_session.live_gi(scene.name_full).update(scene, depsgraph)
+    view, window = camera_matrices(scene, depsgraph)
+    engine = StandInEngine()
+    engine_view(engine, scene, depsgraph, view, window, perspective="CAMERA")
+    assert "panoramic" not in engine.stats[-1]
+    scene.camera.data.type = "PANO"
+    engine_view(engine, scene, depsgraph, view, window, perspective="CAMERA")
+    assert engine.stats[-1].endswith("A panoramic camera is drawn as perspective here (F12 renders "
+                                     "perspective and orthographic cameras: Camera properties > "
+                                     "Lens > Type)")
+    engine_view(engine, scene, depsgraph, view, window, perspective="PERSP")
+    assert "panoramic" not in engine.stats[-1]
+
