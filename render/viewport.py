@@ -392,11 +392,11 @@ class ViewportRenderer:
 
     def draw(self) -> bool:
         """Draw the shown texture over the region, or its Render Region (``corners``, an NDC
-        quad); False if none. While
-        there is none, the first call whose draw worked less than ``WARM_DISPLAY_WORK`` draws
-        a transparent texel over a corner instead, which changes no pixel (premultiplied
-        blending): the draw's code is then built (6–14 ms on llvmpipe) in a draw with time to
-        spare, not in the one that shows the first image beside its last stages."""
+        quad); False if none. While there is none, the first call whose draw worked less than
+        ``WARM_DISPLAY_WORK`` draws a transparent texel over a corner instead, which changes no
+        pixel (premultiplied blending): the draw's code is then built (6–14 ms on llvmpipe) in
+        a draw with time to spare, not in the one that shows the first image beside its last
+        stages."""
         if self.texture is None:
             work = self.timings.get("view_draw work", sum(self.timings.values()))
             if not self.display_warm and work <= WARM_DISPLAY_WORK * self.progressive.budget:
