@@ -114,9 +114,13 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
         """Trace one view (``camera``: its (model matrix, lens shift x), None: the scene
         camera's) and send its passes; False when it failed (reported)."""
         width, height = frame_size(scene)
+        rows, columns = render_region(scene, width, height)
+        # a Render Region is traced alone (with its filters' margin), as Cycles renders it
+        region = None if (rows.stop - rows.start, columns.stop - columns.start) == (height, width) \
+            else (columns.start, rows.start, columns.stop - columns.start, rows.stop - rows.start)
         try:
             passes, report = render_scene_passes(bpy.context, scene, depsgraph, width, height,
-                                                 view_camera=camera)
+                                                 view_camera=camera, region=region)
             # the film: the world behind the geometry, or alpha with Film › Transparent
             combined = snapshot_combined(scene_session(scene.name_full).snapshot, passes,
                                          pixel_filter_width(scene))
@@ -129,8 +133,6 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
             return False
         for level, line in report:
             self.report({level}, line)
-        # the whole frame is traced (its edges filtered as the whole frame's), then cut
-        rows, columns = render_region(scene, width, height)
         # Blender calls this once per view layer: the result of this one's layer alone (without
         # it, layers[0] is the first layer, which every view layer's image overwrote)
         result = self.begin_result(0, 0, columns.stop - columns.start, rows.stop - rows.start,
@@ -141,7 +143,7 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
             if render_pass is None:
                 continue
             image = combined if name == "Combined" else passes[name]
-            image = np.flipud(image)[rows, columns]  # Blender's rows go bottom to top
+            image = np.flipud(image)  # Blender's rows go bottom to top
             if render_pass.channels == 4 and image.shape[2] == 3:
                 image = np.concatenate([image, np.ones(image.shape[:2] + (1,), np.float32)], axis=2)
             elif render_pass.channels == 3:

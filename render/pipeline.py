@@ -18,13 +18,15 @@ import numpy as np
 
 from ..blender.reports import coverage_lines, timing_text
 from ..blender.session import scene_session
-from ..blender.settings import cone_settings, fit_settings, gi_settings, is_auto, trace_options
+from ..blender.settings import cone_settings, fit_settings, gi_settings, gi_stride, is_auto, trace_options
 from ..blender.snapshot import snapshot_or_error
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.gi.update import update_gi
 from ..voxgi_addon.gi.view_fit import cascade_shares, fit_view, probe_view
 from ..voxgi_addon.preview.passes import PASS_NAMES, render_passes
+from ..voxgi_addon.preview.region import traced_rect
 from ..voxgi_addon.scene.camera import camera_view, check_camera_type
+from ..voxgi_addon.scene.view_camera import crop_camera
 from ..voxgi_addon.voxelize.scene_caches import build_scene_caches
 from . import gpu_context
 
@@ -127,10 +129,14 @@ def view_shares(snapshot, grids, fit=None):
     return cascade_shares(probe, grids)
 
 
-def trace_passes(scene, snapshot, state, width, height):
+def trace_passes(scene, snapshot, state, width, height, frame=None):
     """(passes, timings, report lines): the GPU tracer when the scene's tracer setting allows
-    and a GPU context can be had, else the numpy tracer with a line saying why."""
+    and a GPU context can be had, else the numpy tracer with a line saying why.
+    frame : (width, height) of the whole frame when ``width`` × ``height`` is a part of it
+    (a Render Region's ``traced_rect``, its camera cropped to it): the gather's lattice is the
+    whole frame's. None: the image is the whole frame."""
     settings = scene.voxgi
+    options = trace_options(settings, *(frame or (width, height)), snapshot.frame)
     cones = cone_settings(settings)
     session = scene_session(scene.name_full)
     why = "the scene's tracer setting is numpy"
@@ -142,9 +148,7 @@ def trace_passes(scene, snapshot, state, width, height):
                 from .gpu_volume import GPUVolume
                 session.gpu_volume = session.gpu_volume or GPUVolume()
                 passes, timings = render_passes_gpu(snapshot, state, width, height, cones,
-                                                    volume=session.gpu_volume,
-                                                    **trace_options(settings, width, height,
-                                                                    snapshot.frame))
+                                                    volume=session.gpu_volume, **options)
                 session.tracer_used = "GPU"
                 how = ("exact rays" if settings.quality == "ACCURATE" else "cones")
                 return passes, timings, [("INFO", f"VoxGI: {how} traced on the GPU")]
@@ -155,11 +159,19 @@ def trace_passes(scene, snapshot, state, width, height):
                 from . import gpu_scene
                 gpu_scene.release()  # what a failed update left is not trusted again
                 why = f"the GPU tracer failed: {error}"
-    passes, timings = render_passes(snapshot, state, width, height, cones,
-                                    **trace_options(settings, width, height, snapshot.frame))
+    passes, timings = render_passes(snapshot, state, width, height, cones, **options)
     session.tracer_used = "numpy"
     return passes, timings, [("WARNING" if settings.tracer == "AUTO" else "INFO",
                               f"VoxGI: numpy tracer used ({why})")]
+
+
+def region_passes(passes, region, traced):
+    """``passes`` of the pixels ``traced`` (x0, y0, w, h from the bottom left) cut to
+    ``region``'s, which lie inside them (rows top first, as the passes')."""
+    x0, y0, w, h = region
+    left, top = x0 - traced[0], traced[1] + traced[3] - (y0 + h)
+    return {name: np.ascontiguousarray(image[top:top + h, left:left + w])
+            for name, image in passes.items()}
 
 
 def empty_passes(width: int, height: int) -> dict[str, np.ndarray]:
@@ -171,11 +183,14 @@ def empty_passes(width: int, height: int) -> dict[str, np.ndarray]:
 
 
 def render_scene_passes(context, scene, depsgraph, width, height, indirect_source=None,
-                        view_camera=None):
+                        view_camera=None, region=None):
     """Snapshot, update and trace ``scene``'s camera view: (passes, report lines).
     indirect_source : 'CONES' or 'PROBES' (None: the scene's ``indirect_source`` setting).
     view_camera : (model matrix (4, 4), lens shift x) of one view of a stereo or multi-view
     render (``RenderEngine.camera_model_matrix``, ``camera_shift_x``); None: the camera's own.
+    region : (x0, y0, w, h), pixels from the bottom left, of a Render Region of the
+    ``width`` × ``height`` frame: the passes are that region's, traced with the filters' margin
+    around it (``preview.region.traced_rect``); None: the whole frame's.
     Raises VoxGIError for scenes that cannot be rendered."""
     if scene.camera is None:
         raise VoxGIError("the scene has no camera to render the preview from")
@@ -188,10 +203,13 @@ def render_scene_passes(context, scene, depsgraph, width, height, indirect_sourc
             snapshot.camera, view_camera[0], view_camera[1] - float(own.data.shift_x),
             (scene.render.pixel_aspect_x, scene.render.pixel_aspect_y)))
     session = scene_session(scene.name_full)
-    session.snapshot = snapshot  # the film (preview.film) reads its world, camera and film
+    # the film (preview.film) reads its world, camera and film: the region's camera, if any
+    session.snapshot = snapshot if region is None else \
+        replace(snapshot, camera=crop_camera(snapshot.camera, region, width, height))
     if not snapshot.objects:  # a view layer that shows no mesh: the world alone, as Cycles'
         lines = [("WARNING", w) for w in dict.fromkeys(snapshot.warnings)]
-        return empty_passes(width, height), lines + [
+        size = (width, height) if region is None else tuple(region[2:])
+        return empty_passes(*size), lines + [
             ("INFO", "VoxGI: the view layer shows no mesh: its image is the world alone")]
     voxels = {}
     state = fit = None
@@ -203,14 +221,23 @@ def render_scene_passes(context, scene, depsgraph, width, height, indirect_sourc
         state = update_gi(snapshot, caches, settings, anchor=anchor, previous=session.gi_state)
         state.view_shares = view_shares(snapshot, state.grids, fit)
         voxels = {"fit + caches": fit_seconds, **state.timings}
-    passes, render_timings, lines = trace_passes(scene, snapshot, state, width, height)
+    traced, cut = snapshot, (0, 0, width, height)
+    if region is not None:  # the region and its margin, the whole frame's lattice kept
+        cut = traced_rect(region, width, height, gi_stride(scene.voxgi, width, height))
+        traced = replace(snapshot, camera=crop_camera(snapshot.camera, cut, width, height))
+    passes, render_timings, lines = trace_passes(scene, traced, state, cut[2], cut[3],
+                                                 frame=(width, height))
     # what the snapshot could not read or leaves out (once each), before the tracer's lines
     lines = [("WARNING", w) for w in dict.fromkeys(snapshot.warnings)] + lines
     if (indirect_source or scene.voxgi.indirect_source) == "PROBES":
         from .probe_preview import apply_probe_indirect
-        seconds, line = apply_probe_indirect(scene, snapshot, passes, width, height)
+        seconds, line = apply_probe_indirect(scene, traced, passes, cut[2], cut[3])
         render_timings["probes"] = seconds
         lines.append(line)
+    if region is not None:
+        passes = region_passes(passes, region, cut)
+        lines.append(("INFO", f"VoxGI: the Render Region's {region[2]} × {region[3]} pixels "
+                              f"traced ({cut[2]} × {cut[3]} with the filters' margin)"))
     session.gi_timings = {"snapshot": snap_seconds, **voxels, **render_timings,
                           "total": time.perf_counter() - start}
     if state is not None:

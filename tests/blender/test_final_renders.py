@@ -146,11 +146,18 @@ def test_f12_with_a_render_region_gives_that_part_of_the_whole_frame(voxgi, tmp_
     """Render Region (Ctrl B in the camera view): Blender's result holds the region's pixels
     only, its corners cut as Blender cuts them (x from 0.3 · 64 = 19.2 to 0.8 · 64 = 51.2
     pixels: columns 19-50; y from the bottom 0.15 · 48 = 7.2 to 0.7 · 48 = 33.6: rows 7-32). F12
-    writes every pass there as the whole frame's F12 has it; uncropped, Blender puts the region
-    into an empty frame. (F12 used to fail here: the whole frame's pixels sent to the region's
-    result.)"""
+    writes every pass there as the whole frame's F12 has it — the passes without random numbers
+    exactly, the others up to the preview's noise (the region is traced alone, its pixels'
+    samples drawn as a smaller image's: test_region_renders.py): no farther from the whole
+    frame's than another seed's whole frame (1.5 × with the noise of that measure), or 1%
+    (an area light's glossy strata are jittered by the pixel alone, no seed moves them);
+    uncropped, Blender puts the region into an empty frame. (F12 used to fail here: the whole
+    frame's pixels sent to the region's result.)"""
     scene = bpy.context.scene
     light_scenes.build("emissive_room", scene)
+    scene.voxgi.seed = 7
+    other = f12(scene, tmp_path / "other.exr")
+    scene.voxgi.seed = 0
     whole = f12(scene, tmp_path / "whole.exr")
     scene.render.use_border = True
     scene.render.border_min_x, scene.render.border_max_x = 0.3, 0.8
@@ -164,7 +171,12 @@ def test_f12_with_a_render_region_gives_that_part_of_the_whole_frame(voxgi, tmp_
     for name in PASSES:
         inside = part[name] if crop else part[name][rows, columns]
         assert inside.shape == (26, 32, 3), (name, part[name].shape)
-        assert rel(inside, whole[name][rows, columns]) < 1e-3, name
+        there = whole[name][rows, columns]
+        if name in ("Diffuse Color", "Glossy Color"):
+            assert rel(inside, there) < 1e-3, name
+        else:
+            noise = rel(other[name][rows, columns], there)
+            assert rel(inside, there) <= max(1.5 * noise, 0.01), (name, rel(inside, there), noise)
         if not crop:
             assert part[name].shape == (HEIGHT, WIDTH, 3)
             assert np.all(part[name][~region] == 0.0), name

@@ -26,7 +26,7 @@ from .snapshot import CameraData
 
 __all__ = ["DEFAULT_FILTER_WIDTH", "camera_frame", "camera_rays", "camera_ray_lengths",
            "filter_offsets", "filter_on_grid", "filter_samples",
-           "image_points", "view_projection"]
+           "image_points", "projection", "view_projection"]
 
 DEFAULT_FILTER_WIDTH = 1.5  # pixels: Cycles' default Blackman-Harris Filter Size
 _FILTER_TABLE = 4096  # entries of the filter's inverse CDF
@@ -269,11 +269,20 @@ def view_projection(camera: CameraData, width: int, height: int,
     """(4, 4) float64 world → OpenGL clip matrix whose pixel centres are ``camera_rays``'
     (NDC y up, so GL row 0 is the image's bottom row); depth spans the clipping range.
     offset : as ``camera_rays``' (the image slides the other way under the pixel centres)."""
-    cx, cy, hx, hy = _frustum(camera, width, height)
     rotation, position = camera_frame(camera)
     view = np.eye(4)
     view[:3, :3] = rotation.T
     view[:3, 3] = -rotation.T @ position
+    shift = np.eye(4)  # NDC translation (× w in clip space): the offset ray lands on the centre
+    shift[0, 3] = -2.0 * float(offset[0]) / width
+    shift[1, 3] = 2.0 * float(offset[1]) / height
+    return shift @ projection(camera, width, height) @ view
+
+
+def projection(camera: CameraData, width: int, height: int) -> np.ndarray:
+    """(4, 4) float64 eye → OpenGL clip matrix of a ``width`` × ``height`` image of
+    ``camera`` (fitted as ``camera_rays`` fits it); depth spans the clipping range."""
+    cx, cy, hx, hy = _frustum(camera, width, height)
     near, far = float(camera.clip_start), float(camera.clip_end)
     proj = np.zeros((4, 4))
     if camera.type == "ORTHO":
@@ -286,7 +295,4 @@ def view_projection(camera: CameraData, width: int, height: int,
         proj[1] = (0.0, 1.0 / hy, cy / hy, 0.0)
         proj[2] = (0.0, 0.0, -(far + near) / (far - near), -2.0 * far * near / (far - near))
         proj[3] = (0.0, 0.0, -1.0, 0.0)
-    shift = np.eye(4)  # NDC translation (× w in clip space): the offset ray lands on the centre
-    shift[0, 3] = -2.0 * float(offset[0]) / width
-    shift[1, 3] = 2.0 * float(offset[1]) / height
-    return shift @ proj @ view
+    return proj

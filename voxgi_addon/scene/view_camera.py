@@ -10,11 +10,15 @@ matrix, so rays and rasterization cover exactly what the view shows.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
+from .camera import projection
 from .snapshot import CameraData
 
-__all__ = ["border_rect", "camera_from_view", "clip_range", "crop_window", "is_orthographic"]
+__all__ = ["border_rect", "camera_from_view", "clip_range", "crop_camera", "crop_window",
+           "is_orthographic"]
 
 
 def is_orthographic(window_matrix) -> bool:
@@ -95,3 +99,12 @@ def crop_window(window_matrix, rect, width: int, height: int) -> np.ndarray:
     crop[1, 1], crop[1, 3] = 2.0 / (d - c), -(c + d) / (d - c)
     return crop @ np.asarray(window_matrix, np.float64).reshape(4, 4)
 
+
+
+def crop_camera(camera: CameraData, rect, width: int, height: int) -> CameraData:
+    """``camera`` as it sees the pixels ``rect`` (x0, y0, w, h from the bottom left) of a
+    ``width`` × ``height`` image: a ``w`` × ``h`` image whose pixel (i, j) is that image's pixel
+    (x0 + i, y0 + j), its rays and raster exactly those pixels' (F12's Render Region)."""
+    window = crop_window(projection(camera, width, height), rect, width, height)
+    return dataclasses.replace(camera, projection_matrix=window,
+                               resolution=(int(rect[2]), int(rect[3])))
