@@ -47,21 +47,23 @@ def frame_size(scene) -> tuple[int, int]:
             max(1, render.resolution_y * render.resolution_percentage // 100))
 
 
-def render_region(scene, width: int, height: int) -> tuple[slice, slice]:
-    """(rows, columns), rows counted from the bottom, of the part of a ``width`` × ``height``
-    frame that Blender's render result holds: with Render Region on (Output › Format, Ctrl B in
-    the camera view) the region's pixels as Blender cuts them (its float corners times the
-    size, truncated), cropped or not (Blender puts a region into the whole frame itself); else
-    every pixel."""
+def render_region(scene, width: int, height: int) -> tuple[int, int, int, int] | None:
+    """(x0, y0, w, h), pixels from the bottom left, of the part of a ``width`` × ``height``
+    frame that Blender's render result holds with Render Region on (Output › Format, Ctrl B in
+    the camera view): the region's pixels as Blender cuts them (its float corners times the
+    size, truncated), cropped or not (Blender puts a region into the whole frame itself); None
+    without a region, or when it is the whole frame."""
     render = scene.render
     if not render.use_border:
-        return slice(0, height), slice(0, width)
+        return None
 
     def cut(low, high, size):  # Blender's float32 product, truncated to an int
-        return int(np.float32(low) * np.float32(size)), int(np.float32(high) * np.float32(size))
-    x0, x1 = cut(render.border_min_x, render.border_max_x, width)
-    y0, y1 = cut(render.border_min_y, render.border_max_y, height)
-    return slice(y0, max(y1, y0 + 1)), slice(x0, max(x1, x0 + 1))
+        a, b = int(np.float32(low) * np.float32(size)), int(np.float32(high) * np.float32(size))
+        a = min(a, size - 1)
+        return a, max(b, a + 1) - a
+    (x0, w), (y0, h) = cut(render.border_min_x, render.border_max_x, width), \
+        cut(render.border_min_y, render.border_max_y, height)
+    return None if (w, h) == (width, height) else (x0, y0, w, h)
 
 
 def render_views(scene) -> list[str | None]:
@@ -114,10 +116,8 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
         """Trace one view (``camera``: its (model matrix, lens shift x), None: the scene
         camera's) and send its passes; False when it failed (reported)."""
         width, height = frame_size(scene)
-        rows, columns = render_region(scene, width, height)
         # a Render Region is traced alone (with its filters' margin), as Cycles renders it
-        region = None if (rows.stop - rows.start, columns.stop - columns.start) == (height, width) \
-            else (columns.start, rows.start, columns.stop - columns.start, rows.stop - rows.start)
+        region = render_region(scene, width, height)
         try:
             passes, report = render_scene_passes(bpy.context, scene, depsgraph, width, height,
                                                  view_camera=camera, region=region)
@@ -135,8 +135,8 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
             self.report({level}, line)
         # Blender calls this once per view layer: the result of this one's layer alone (without
         # it, layers[0] is the first layer, which every view layer's image overwrote)
-        result = self.begin_result(0, 0, columns.stop - columns.start, rows.stop - rows.start,
-                                   layer=depsgraph.view_layer.name, view=view or "")
+        size = (width, height) if region is None else region[2:]
+        result = self.begin_result(0, 0, *size, layer=depsgraph.view_layer.name, view=view or "")
         layer = result.layers[0]
         for name in PASS_NAMES:
             render_pass = layer.passes.get(name)

@@ -30,9 +30,9 @@ def traced_rect(region, width: int, height: int, stride: int,
                 margin_cells: int | None = None) -> tuple[int, int, int, int]:
     """(x0, y0, w, h), pixels from the bottom left like ``region``, of the part of a
     ``width`` × ``height`` frame to trace for the Render Region ``region`` (x0, y0, w, h):
-    the region grown by ``margin_cells`` (None: ``MARGIN_CELLS``) gather cells (of ``stride`` pixels) each way, its left
-    column and top row moved out to a multiple of ``ALIGN_CELLS`` cells from the frame's top
-    left corner, clipped to the frame."""
+    the region grown by ``margin_cells`` (None: ``MARGIN_CELLS``) gather cells of ``stride``
+    pixels each way, its left column and top row moved out to a multiple of ``ALIGN_CELLS``
+    cells from the frame's top left corner, clipped to the frame."""
     x0, y0, w, h = (int(v) for v in region)
     if w < 1 or h < 1 or x0 < 0 or y0 < 0 or x0 + w > width or y0 + h > height:
         raise ValueError(f"region {region} is not inside a {width} × {height} frame")
