@@ -84,13 +84,13 @@ _TEXTURES = ("texture_table", "texture_atlas")
 KERNELS = {
     "bvh_probe": (("textures", "bvh_probe"), _BVH + ("ray_origin", "ray_direction") + _TEXTURES,
                   ("mode",)),
-    "bvh_direct": (("textures", "bvh_lights", "same_surface", "bvh_direct"),
+    "bvh_direct": (("textures", "light_outline", "bvh_lights", "same_surface", "bvh_direct"),
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "centre_position", "centre_normal",
                            "centre_view", "centre_unshadowed", "emitter_field",
                            "world_fewer") + _TEXTURES,
                    ("sampling", "strata")),
-    "bvh_gather": (("pixels", "principled", "bvh_lights", "textures", "cache_lookup", "ltc",
+    "bvh_gather": (("pixels", "principled", "light_outline", "bvh_lights", "textures", "cache_lookup", "ltc",
                     "glossy_ltc", "bvh_shade", "gather_point", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials",
                            "gbuffer_position",
@@ -107,7 +107,7 @@ KERNELS["bvh_glossy"] = (KERNELS["bvh_gather"][0][:-1] + ("bvh_glossy",),
 # The radiance cache's rays, traced and lit once (gpu_gather.cache_stages): the gather's inputs,
 # radiance_cache the layout's texels (each hit picks the face it reads, cache_lookup.glsl).
 KERNELS["bvh_cache_paths"] = (
-    ("principled", "bvh_lights", "textures", "cache_lookup", "ltc", "glossy_ltc", "bvh_shade",
+    ("principled", "light_outline", "bvh_lights", "textures", "cache_lookup", "ltc", "glossy_ltc", "bvh_shade",
      "cache_paths"),
     _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials", "gbuffer_position",
             "gbuffer_normal", "principled_lut", "texture_table", "texture_atlas",
@@ -117,7 +117,7 @@ KERNELS["bvh_cache_paths"] = (
 # the pixel centres and the sub-pixel passes' points (exact_glossy.emitters_shine).
 _CENTRE = ("centre_position", "centre_normal", "centre_view", "centre_shine")
 KERNELS["bvh_emitter_glossy"] = (
-    ("principled", "bvh_lights", "textures", "ltc", "glossy_ltc", "same_surface",
+    ("principled", "light_outline", "bvh_lights", "textures", "ltc", "glossy_ltc", "same_surface",
      "bvh_emitter_glossy"),
     _BVH + ("lights", "world_map", "emitters", "materials", "principled_lut", "gbuffer_position",
             "gbuffer_normal", "gbuffer_view", "gbuffer_base", "ltc_table") + _CENTRE

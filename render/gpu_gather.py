@@ -17,7 +17,7 @@ from dataclasses import replace
 import gpu
 import numpy as np
 
-from ..voxgi_addon.gi.exact_glossy import METAL_RAY_FACTOR
+from ..voxgi_addon.gi.exact_glossy import HORIZON_LIFT, METAL_RAY_FACTOR
 from ..voxgi_addon.gi.exact_indirect import MAX_FOLLOWS
 from ..voxgi_addon.gi.radiance_cache import (
     build_cache,
@@ -39,10 +39,12 @@ from ..voxgi_addon.preview.denoise import (
     SIGMA_LUMINANCE,
 )
 from ..voxgi_addon.preview.gather import cache_settings, uses_cache
-from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, GLOSSY_LIGHT_STREAM
+from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, LTC_FROM, LTC_FULL
 from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE, low_shape
 from .frame import finish
 from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, scene_light_textures, strata_side
+from .gpu_ltc import DEFINES as LTC_DEFINES
+from .gpu_ltc import ltc_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
 from .gpu_principled import lut_texture
 from .gpu_shaders import LOCAL_SIZE, build_compute, forget, size_like
@@ -725,7 +727,7 @@ def glossy_gi(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, setting
 
 
 _GLOSSY_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "gbuffer_base",
-                    "direct_image", "lights", "materials", "principled_lut")
+                    "direct_image", "lights", "materials", "principled_lut", "ltc_table")
 
 
 def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: int, principled,
@@ -740,7 +742,7 @@ def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: 
     inputs = {**gbuffer_inputs, "direct_image": direct, "lights": lights_texture_,
               "materials": materials if materials is not None else
               principled_materials_texture(principled, emission),
-              "principled_lut": lut_texture()}
+              "principled_lut": lut_texture(), "ltc_table": ltc_texture()}
     shader.bind()
     for name in _GLOSSY_SAMPLERS:
         shader.uniform_sampler(name, inputs[name])
@@ -753,9 +755,11 @@ def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: 
 
 def _glossy_shader():
     if "glossy" not in _shaders:
-        defines = {**PRINCIPLED_DEFINES, "AREA_GLOSSY_GRID": str(AREA_GLOSSY_GRID),
-                   "GLOSSY_LIGHT_STREAM": f"{GLOSSY_LIGHT_STREAM}u"}
-        _shaders["glossy"] = build_compute(("sampling", "principled", "glossy_direct"),
+        defines = {**PRINCIPLED_DEFINES, **LTC_DEFINES, "HORIZON_LIFT": repr(float(HORIZON_LIFT)),
+                   "AREA_GLOSSY_GRID": str(AREA_GLOSSY_GRID), "LTC_FROM": repr(float(LTC_FROM)),
+                   "LTC_FULL": repr(float(LTC_FULL))}
+        _shaders["glossy"] = build_compute(("sampling", "principled", "light_outline", "ltc",
+                                            "glossy_ltc", "glossy_direct"),
                                            _GLOSSY_SAMPLERS, ("light",), ("out_image",), defines)
     return _shaders["glossy"]
 

@@ -3,7 +3,7 @@
  * the light models) with the hashed strata of sampling.hashed_square, so that
  * diffuse_direct(..., sample_ids=ids, seed=seed) draws the same samples.
  * Sampler `lights`: voxgi_addon/light_table.py, one row per light (LIGHT_TEXELS wide); a row
- * of type < 0 is padding. Needs bvh_common.glsl. */
+ * of type < 0 is padding. Needs bvh_common.glsl and, before it, light_outline.glsl. */
 
 #define NORMAL_OFFSET 1e-5 /* direct_light._NORMAL_OFFSET: shadow rays start off the surface */
 
@@ -158,56 +158,6 @@ float point_light(int light, int kind, vec3 p, vec3 n, uint state, int m)
     drawn++;
   }
   return value * visible / float(drawn);
-}
-
-/* Lambert's formula's term of the edge a → b (directions from the point) for its normal n. */
-float edge_term(vec3 a, vec3 b, vec3 n)
-{
-  a = normalize(a);
-  b = normalize(b);
-  vec3 c = cross(a, b);
-  float s = length(c);
-  return atan(s, dot(a, b)) * dot(c, n) / max(s, 1e-30);
-}
-
-/* Lambert's formula (∫ cosθ/π dω) over the part of the convex outline above the horizon of
- * (p, n): the outline clipped by the tangent plane, the cut along the horizon from where it
- * leaves to where it comes back (direct_light._polygon_irradiance); aim = the mean of the
- * clipped outline's corners. */
-float polygon_irradiance(int light, int count, vec3 p, vec3 n, out vec3 aim)
-{
-  float sum = 0.0;
-  vec3 corners = vec3(0.0);
-  float kept = 0.0;
-  vec3 a = light_texel(light, 8).xyz - p;
-  float ha = dot(a, n);
-  vec3 exit_at = vec3(0.0), entry_at = vec3(0.0);
-  bool left = false, entered = false;
-  for (int k = 0; k < count; k++) {
-    vec3 b = light_texel(light, 8 + (k + 1 < count ? k + 1 : 0)).xyz - p;
-    float hb = dot(b, n);
-    if (ha > 0.0 || hb > 0.0) {
-      vec3 cut = a + (ha / (ha - hb)) * (b - a); /* used only where the edge crosses */
-      if (ha > 0.0 && !(hb > 0.0)) {
-        exit_at = cut;
-        left = true;
-      }
-      if (!(ha > 0.0) && hb > 0.0) {
-        entry_at = cut;
-        entered = true;
-      }
-      sum += edge_term(ha > 0.0 ? a : cut, hb > 0.0 ? b : cut, n);
-      corners += (ha > 0.0 ? a : vec3(0.0)) + ((ha > 0.0) != (hb > 0.0) ? cut : vec3(0.0));
-      kept += (ha > 0.0 ? 1.0 : 0.0) + ((ha > 0.0) != (hb > 0.0) ? 1.0 : 0.0);
-    }
-    a = b;
-    ha = hb;
-  }
-  if (left && entered) {
-    sum += edge_term(exit_at, entry_at, n);
-  }
-  aim = p + corners / max(kept, 1.0);
-  return abs(sum) / (2.0 * M_PI_F);
 }
 
 /* A rectangle seen from o, set up for drawing points uniformly in its solid angle (Ureña,
@@ -391,9 +341,7 @@ vec3 light_towards(int light, vec3 p)
 
 /* ---- The world as a light (voxgi_addon/gi/world_light.py; sampler `world_map` holds
  * world_light.world_table: the map with its CDFs, the unshadowed-irradiance table and a
- * header row). */
-
-#define LUMA vec3(0.2126, 0.7152, 0.0722)
+ * header row). LUMA: light_outline.glsl. */
 
 vec4 world_header()
 {

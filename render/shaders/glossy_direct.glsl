@@ -1,18 +1,21 @@
-/* The glossy light one light sends to the viewer (Glossy Color × Glossy Direct) per G-buffer
- * pixel: the port of voxgi_addon/preview/passes.glossy_direct_radiance for light `light.x`.
- * Its shadowed Diffuse Direct (direct_image, that light alone) is turned back into irradiance
- * (× π) and spread over the light's directions — one for suns and point lights, 4 × 4 strata
- * over an area light (centres, jittered with the pixel's hash stream GLOSSY_LIGHT_STREAM +
- * light index as far as passes.glossy_jitter says, mapped as the shadow rays map theirs:
- * sampling.glsl), weighted by their share of the unshadowed
- * irradiance — each reflected toward the viewer by the Principled glossy lobe (principled.glsl)
- * / cos. Samplers: lights (preview/light_table.py), materials (base, emission, (metallic, level,
- * roughness) rows), principled_lut; gbuffer_view = (ray direction, material); gbuffer_base =
- * (Base Color per texel, 1) where textured. */
+/* The glossy light one lamp sends to the viewer (Glossy Color × Glossy Direct) per G-buffer
+ * pixel, without noise: the port of voxgi_addon/preview/passes.glossy_direct_radiance for lamp
+ * `light.x`. Its shadowed Diffuse Direct (direct_image, that lamp alone) is turned back into
+ * irradiance (× π) and reflected toward the viewer by the Principled glossy lobe
+ * (principled.glsl) / cos: from a sun's or a point light's direction; from an area lamp's
+ * AREA_GLOSSY_GRID² strata centres (mapped as the shadow rays map theirs: sampling.glsl),
+ * weighted by their share of its unshadowed irradiance, and, as far as passes.ltc_share says
+ * (a reflection that few strata hold), by the lobe integrated over the lamp by LTC
+ * (glossy_ltc.glsl area_glossy) × the share of its unshadowed light that direct_image holds
+ * (light_outline.glsl polygon_irradiance), as a bounce hit's metal lobe takes it
+ * (bvh_shade.glsl; exact_glossy.area_shine).
+ * Samplers: lights (preview/light_table.py), materials (base, emission, (metallic, level,
+ * roughness) rows), principled_lut, ltc_table; gbuffer_view = (ray direction, material);
+ * gbuffer_base = (Base Color per texel, 1) where textured. */
 
-vec4 glossy_light_texel(int k)
+vec4 light_texel(int light, int k)
 {
-  return texelFetch(lights, ivec2(k, int(light.x)), 0);
+  return texelFetch(lights, ivec2(k, light), 0);
 }
 
 void main()
@@ -22,9 +25,10 @@ void main()
   if (px.x >= size.x || px.y >= size.y) {
     return;
   }
+  int lamp = int(light.x);
   vec4 position = texelFetch(gbuffer_position, px, 0);
   vec3 direct = texelFetch(direct_image, px, 0).rgb;
-  vec4 head = glossy_light_texel(0);
+  vec4 head = light_texel(lamp, 0);
   if (position.w < 0.5 || head.x < 0.0 || dot(direct, vec3(1.0)) <= 0.0) {
     imageStore(out_image, px, vec4(0.0));
     return;
@@ -38,35 +42,27 @@ void main()
   vec4 texel = texelFetch(gbuffer_base, px, 0);  /* Base Color per texel (G-buffer) */
   vec3 base = texel.w > 0.5 ? texel.rgb : texelFetch(materials, ivec2(material, 0), 0).rgb;
   vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
-  int kind = int(head.x);
-  vec3 lobe = vec3(0.0);
-  if (kind != 3) {
-    vec3 towards = kind == 0 ? -glossy_light_texel(5).xyz :
-                               normalize(glossy_light_texel(2).xyz - position.xyz);
+  vec3 shine = vec3(0.0);
+  if (int(head.x) != 3) {
+    vec3 towards = int(head.x) == 0 ? -light_texel(lamp, 5).xyz :
+                                      normalize(light_texel(lamp, 2).xyz - position.xyz);
     float c = dot(n, towards);
     if (c > 1e-4) {
-      lobe = principled_glossy_reflectance(base, params.x, params.y, params.z, n, view, towards) / c;
+      shine = direct * (3.14159265358979323846 / c) *
+              principled_glossy_reflectance(base, params.x, params.y, params.z, n, view, towards);
     }
   }
   else {
-    vec3 centre = glossy_light_texel(2).xyz;
-    vec3 ex = glossy_light_texel(3).xyz;
-    vec3 ey = glossy_light_texel(4).xyz;
-    vec3 emits = glossy_light_texel(5).xyz;
+    vec3 centre = light_texel(lamp, 2).xyz;
+    vec3 ex = light_texel(lamp, 3).xyz;
+    vec3 ey = light_texel(lamp, 4).xyz;
+    vec3 emits = light_texel(lamp, 5).xyz;
     bool round_shape = head.y > 0.5;
-    float total = 0.0;
-    uint id = position.w > 1.5 ? uint(position.w) - 2u  /* a listed pixel: aa_compact.glsl */
-                               : uint((size.y - 1 - px.y) * size.x + px.x);
-    uint state = point_stream(id, GLOSSY_LIGHT_STREAM + uint(light.x), 0u);
-    /* passes.glossy_jitter: strata centres while the lobe is wider than a stratum */
-    float alpha = clamp(params.z, 0.0, 1.0) * clamp(params.z, 0.0, 1.0);
-    float extent = 2.0 * max(length(ex), length(ey));
-    float spacing = extent / max(length(centre - position.xyz), 1e-9) / float(AREA_GLOSSY_GRID);
-    float amount = clamp(spacing / max(2.0 * alpha, 1e-6) - 1.0, 0.0, 1.0);
+    float total = 0.0, squares = 0.0, first = 0.0, second = 0.0;
+    vec3 lobe = vec3(0.0);
     for (int k = 0; k < AREA_GLOSSY_GRID * AREA_GLOSSY_GRID; k++) {
-      vec2 mid = (vec2(float(k / AREA_GLOSSY_GRID), float(k % AREA_GLOSSY_GRID)) + 0.5) /
-                 float(AREA_GLOSSY_GRID);
-      vec2 s = mid + amount * (hashed_stratum(state, k, AREA_GLOSSY_GRID) - mid);
+      vec2 s = (vec2(float(k / AREA_GLOSSY_GRID), float(k % AREA_GLOSSY_GRID)) + 0.5) /
+               float(AREA_GLOSSY_GRID);
       vec2 unit = round_shape ? concentric_disk(s) : s * 2.0 - 1.0;
       vec3 offset = centre + unit.x * ex + unit.y * ey - position.xyz;
       float distance = max(length(offset), 1e-9);
@@ -74,13 +70,35 @@ void main()
       float c = dot(n, towards);
       float weight = max(-dot(towards, emits), 0.0) * max(c, 0.0) / (distance * distance);
       total += weight;
+      squares += weight * weight;
       if (c > 1e-4) {
-        lobe += weight *
-                principled_glossy_reflectance(base, params.x, params.y, params.z, n, view,
-                                              towards) / c;
+        vec3 term = weight * principled_glossy_reflectance(base, params.x, params.y, params.z,
+                                                           n, view, towards) / c;
+        lobe += term;
+        float t = dot(term, LUMA);
+        first += t;
+        second += t * t;
       }
     }
-    lobe /= max(total, 1e-30);
+    shine = direct * 3.14159265358979323846 * lobe / max(total, 1e-30);
+    /* passes.ltc_share: the centres while the reflection spreads over LTC_FROM strata or more,
+     * the integral alone from LTC_FULL down (the terms' effective count over the shares') */
+    float count = second > 0.0 && squares > 0.0 ?
+                  float(AREA_GLOSSY_GRID * AREA_GLOSSY_GRID) * (first * first / second) /
+                  (total * total / squares) : LTC_FROM;
+    float share = clamp((LTC_FROM - count) / (LTC_FROM - LTC_FULL), 0.0, 1.0);
+    if (share > 0.0) {
+      vec3 integral = vec3(0.0);
+      vec3 aim;
+      float unshadowed = polygon_irradiance(lamp, int(head.z), position.xyz, n, aim) *
+                         light_texel(lamp, 6).y * dot(light_texel(lamp, 1).rgb, LUMA);
+      float lit = dot(direct, LUMA);
+      if (unshadowed > 0.0 && lit > 0.0) {
+        integral = clamp(lit / unshadowed, 0.0, 1.0) *
+                   area_glossy(lamp, int(head.z), position.xyz, n, view, base, params);
+      }
+      shine = mix(shine, integral, share);
+    }
   }
-  imageStore(out_image, px, vec4(direct * 3.14159265358979323846 * lobe, 1.0));
+  imageStore(out_image, px, vec4(shine, 1.0));
 }

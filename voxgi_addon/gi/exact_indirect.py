@@ -356,37 +356,17 @@ def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int 
                     glossy_reflectance(*shading, ns, -dirs[hit], towards)
                 shine = np.where(cos[:, None] > 1e-4, shine, 0.0)
                 if light.type == "AREA" and wide.any():  # the lobe over the lamp (LTC)
+                    from .exact_glossy import area_shine
+
                     k = np.flatnonzero(wide)
-                    shine[k] = _area_shine(light, direct[k], lit_at[k], ns[k], -dirs[hit][k],
-                                           material[k], albedo, base[k])
+                    shine[k] = area_shine(light, direct[k], lit_at[k], ns[k], -dirs[hit][k],
+                                          material[k], albedo, base[k])
                 radiance[hit] += shine * scale[:, None]
         else:
             weight = np.asarray(albedo, np.float64)[material]
             glossy = np.zeros_like(weight)
             radiance[hit] += weight * arriving
     return RayPaths(radiance, t, hit, x, ns, weight, glossy, roughness, metallic)
-
-
-def _area_shine(light, direct, points, normals, views, materials, principled, base):
-    """(H, 3) what hits' glossy lobes reflect toward ``views`` of an area lamp whose shadowed
-    Diffuse Direct at them is ``direct`` (H, 3): its unshadowed glossy light
-    (``exact_glossy.area_glossy``, the lobe integrated over the lamp) × the visible share
-    ``direct`` holds (its luminance over the unshadowed one, ``direct_light.area_unshadowed``).
-    The lobe toward one direction, the lamp's lit part's middle, read 0.6 of the integral
-    for a lobe of roughness 0.3 under a 1 m lamp (docs/gi_pipeline.md "A hit's glossy lobe
-    over an area light")."""
-    from .direct_light import area_unshadowed
-    from .exact_glossy import area_glossy
-
-    out = np.zeros((len(points), 3))
-    colour = np.asarray(light.color, np.float64)[:3] @ LUMINANCE
-    unshadowed = area_unshadowed(light, points, normals) * colour
-    lit = np.flatnonzero((unshadowed > 0.0) & (np.asarray(direct, np.float64) @ LUMINANCE > 0.0))
-    if len(lit):
-        share = np.clip(np.asarray(direct, np.float64)[lit] @ LUMINANCE / unshadowed[lit], 0.0, 1.0)
-        out[lit] = share[:, None] * area_glossy(light, points[lit], normals[lit], views[lit],
-                                                materials[lit], principled, base[lit])
-    return out
 
 
 def metal_lobe_rays(normals, dirs, roughness, hit_ids, seed: int = 0) -> np.ndarray:
