@@ -183,6 +183,32 @@ def test_f12_with_a_render_region_gives_that_part_of_the_whole_frame(voxgi, tmp_
             assert np.all(part[name][~region] == 0.0), name
 
 
+@pytest.mark.parametrize("crop", [True, False])
+def test_render_preview_with_a_render_region_writes_what_f12_writes(voxgi, tmp_path, crop):
+    """``voxgi.render_preview`` honours the Render Region as F12 does: the file holds the
+    region's pixels (26 × 32 here), cropped or placed into an empty frame, each pass as F12's.
+    (It used to trace and write the whole frame whatever the region: the headless way to a
+    region cost the whole frame's time.)"""
+    scene = bpy.context.scene
+    light_scenes.build("emissive_room", scene)
+    scene.render.use_border = True
+    scene.render.border_min_x, scene.render.border_max_x = 0.3, 0.8
+    scene.render.border_min_y, scene.render.border_max_y = 0.15, 0.7
+    scene.render.use_crop_to_border = crop
+    ours = f12(scene, tmp_path / "f12.exr")
+    theirs = preview(tmp_path / "preview.exr")
+    shape = (26, 32, 3) if crop else (HEIGHT, WIDTH, 3)
+    assert theirs["Combined"][..., :3].mean() > 0.01, "the region is not lit"
+    for name in PASSES:
+        assert theirs[name].shape[:2] == shape[:2], (name, theirs[name].shape)
+        assert rel(ours[name], theirs[name]) < 0.01, name
+    if not crop:
+        outside = np.ones((HEIGHT, WIDTH), bool)
+        outside[HEIGHT - 33:HEIGHT - 7, 19:51] = False
+        assert np.all(theirs["Combined"][outside] == 0.0)
+        assert theirs["Combined"][~outside].mean() > 0.01
+
+
 def test_f12_renders_each_view_layer_into_its_own_layer(voxgi, tmp_path):
     """Two view layers: the first shows the courtyard, the second excludes its meshes'
     collection (a world-only layer, as compositing setups keep). Each layer of the file holds
