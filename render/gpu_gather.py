@@ -17,7 +17,7 @@ from dataclasses import replace
 import gpu
 import numpy as np
 
-from ..voxgi_addon.gi.exact_glossy import HORIZON_LIFT, METAL_RAY_FACTOR
+from ..voxgi_addon.gi.exact_glossy import DISC_SIDES, HORIZON_LIFT, METAL_RAY_FACTOR
 from ..voxgi_addon.gi.exact_indirect import MAX_FOLLOWS
 from ..voxgi_addon.gi.radiance_cache import (
     build_cache,
@@ -39,7 +39,7 @@ from ..voxgi_addon.preview.denoise import (
     SIGMA_LUMINANCE,
 )
 from ..voxgi_addon.preview.gather import cache_settings, uses_cache
-from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, LTC_FROM, LTC_FULL
+from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, DISC_FROM, DISC_FULL, LTC_FROM, LTC_FULL
 from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE, low_shape
 from .frame import finish
 from .gpu_bvh import GPUBVH, OUTPUTS, dispatch_bvh, lights_texture, scene_light_textures, strata_side
@@ -757,7 +757,9 @@ def _glossy_shader():
     if "glossy" not in _shaders:
         defines = {**PRINCIPLED_DEFINES, **LTC_DEFINES, "HORIZON_LIFT": repr(float(HORIZON_LIFT)),
                    "AREA_GLOSSY_GRID": str(AREA_GLOSSY_GRID), "LTC_FROM": repr(float(LTC_FROM)),
-                   "LTC_FULL": repr(float(LTC_FULL))}
+                   "LTC_FULL": repr(float(LTC_FULL)),
+                   "DISC_FROM": repr(float(DISC_FROM)), "DISC_FULL": repr(float(DISC_FULL)),
+                   "DISC_SIDES": str(DISC_SIDES)}
         _shaders["glossy"] = build_compute(("sampling", "principled", "light_outline", "ltc",
                                             "glossy_ltc", "glossy_direct"),
                                            _GLOSSY_SAMPLERS, ("light",), ("out_image",), defines)

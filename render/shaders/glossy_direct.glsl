@@ -2,7 +2,10 @@
  * pixel, without noise: the port of voxgi_addon/preview/passes.glossy_direct_radiance for lamp
  * `light.x`. Its shadowed Diffuse Direct (direct_image, that lamp alone) is turned back into
  * irradiance (× π) and reflected toward the viewer by the Principled glossy lobe
- * (principled.glsl) / cos: from a sun's or a point light's direction; from an area lamp's
+ * (principled.glsl) / cos: from a sun's or a point light's direction, and, as far as
+ * passes.disc_share says (a lobe narrow against the lamp's disc), by the lobe's mean over the
+ * disc a point or spot light of some radius or a sun of some angle shows (disc_shine); from an
+ * area lamp's
  * AREA_GLOSSY_GRID² strata centres (mapped as the shadow rays map theirs: sampling.glsl),
  * weighted by their share of its unshadowed irradiance, and, as far as passes.ltc_share says
  * (a reflection that few strata hold), by the lobe integrated over the lamp by LTC
@@ -16,6 +19,38 @@
 vec4 light_texel(int light, int k)
 {
   return texelFetch(lights, ivec2(k, light), 0);
+}
+
+/* exact_glossy.disc_shine: direct × π × the lobe's mean over the disc of `radius` at `middle`
+ * (facing along `axis`), ∫ f cos dω / ∫ cos dω — the LTC integral of the lobe with its Fresnel
+ * over the disc's DISC_SIDES-gon (glossy_ltc_triangle) over Lambert's formula (the LTC with
+ * M^-1 the identity), both clipped to the horizon; 0 for a mirror, a view below the horizon
+ * or a disc below it. */
+vec3 disc_shine(vec3 direct, vec3 middle, vec3 axis, float radius, vec3 p, vec3 n, vec3 v,
+                vec3 base, vec3 params)
+{
+  GlossyLobe g;
+  LtcLobe lobe;
+  vec3 white_colour;
+  if (!polygon_lobe(n, v, base, params, g, lobe, white_colour)) {
+    return vec3(0.0);
+  }
+  vec3 t, b;
+  perpendicular_basis(axis, t, b);
+  float step = 2.0 * 3.14159265358979323846 / float(DISC_SIDES);
+  vec3 c0 = middle + radius * t;
+  vec3 previous = middle + radius * (cos(step) * t + sin(step) * b);
+  vec3 sum = vec3(0.0);
+  vec3 lambert = vec3(0.0);
+  for (int k = 2; k < DISC_SIDES; k++) {
+    vec3 next = middle + radius * (cos(step * float(k)) * t + sin(step * float(k)) * b);
+    sum += glossy_ltc_triangle(lobe, g, p, n, v, c0, previous, next, white_colour);
+    lambert += ltc_clipped_triangle(lobe.to_local * (c0 - p), lobe.to_local * (previous - p),
+                                 lobe.to_local * (next - p), vec4(1.0, 0.0, 1.0, 0.0));
+    previous = next;
+  }
+  float cosine = abs(lambert.z) / (2.0 * 3.14159265358979323846);  /* ∫ cos θ / π dω */
+  return cosine > 0.0 ? direct * sum * white_colour / cosine : vec3(0.0);
 }
 
 void main()
@@ -50,6 +85,39 @@ void main()
     if (c > 1e-4) {
       shine = direct * (3.14159265358979323846 / c) *
               principled_glossy_reflectance(base, params.x, params.y, params.z, n, view, towards);
+    }
+    /* a round lamp's disc (exact_glossy.round_lamp_disc): the lobe's mean over it as far as
+     * passes.disc_share says */
+    vec3 middle, axis;
+    float radius;
+    bool shows;
+    if (int(head.x) == 0) {
+      axis = -light_texel(lamp, 5).xyz;
+      middle = position.xyz + axis;
+      radius = light_texel(lamp, 3).w;
+      shows = radius > 0.0;
+    }
+    else {
+      float r = light_texel(lamp, 2).w;
+      vec3 offset = light_texel(lamp, 2).xyz - position.xyz;
+      float d = max(length(offset), 1e-30);
+      axis = offset / d;
+      shows = r > 0.0 && d > r * (1.0 + 1e-6);
+      float inside = max(d * d - r * r, 0.0);
+      middle = position.xyz + axis * (inside / d);
+      radius = r * sqrt(inside) / d;
+    }
+    if (shows) {
+      float rough = clamp(params.z, 0.0, 1.0);
+      float angular = atan(radius, max(length(middle - position.xyz), 1e-30));
+      float share = clamp((angular / max(2.0 * rough * rough, 1e-6) - DISC_FROM) /
+                          (DISC_FULL - DISC_FROM), 0.0, 1.0);
+      if (share > 0.0) {
+        vec3 mean = disc_shine(direct, middle, axis, radius, position.xyz, n, view, base, params);
+        if (any(notEqual(mean, vec3(0.0)))) {
+          shine = mix(shine, mean, share);
+        }
+      }
     }
   }
   else {

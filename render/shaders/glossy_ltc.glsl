@@ -118,24 +118,39 @@ vec3 glossy_ltc_triangle(LtcLobe lobe, GlossyLobe g, vec3 p, vec3 n, vec3 v, vec
   return shape * fresnel;
 }
 
+/* What the lobe over a polygon needs of a point whatever the polygon (area_glossy's and
+ * glossy_direct.glsl disc_shine's): its GlossyLobe, LtcLobe and a white metal's glossy colour;
+ * false for a mirror, a view at or below the horizon, or a lobe that reflects nothing. */
+bool polygon_lobe(vec3 n, vec3 v, vec3 base, vec3 params, out GlossyLobe g, out LtcLobe lobe,
+                  out vec3 white_colour)
+{
+  float rough = clamp(params.z, 0.0, 1.0);
+  float alpha = rough * rough;
+  float cos_ni = dot(n, v);
+  if (alpha * alpha <= PR_ROUGHNESS_SQ_THRESHOLD || !(cos_ni > 0.0)) {
+    return false;
+  }
+  g = glossy_lobe(base, params.x, params.y, rough, cos_ni);
+  if (!(g.white > 0.0)) {
+    return false;
+  }
+  white_colour = principled_glossy_color(vec3(1.0), 1.0, params.y, rough, clamp(cos_ni, 0.0, 1.0));
+  lobe = ltc_lobe(n, v, rough);
+  return true;
+}
+
 /* The unshadowed glossy light area lamp `light` (its outline's `count` corners, lights texels
  * 8…; radiance × colour) sends toward v off a surface at p with unit normal n (v above its
  * horizon) of Base Color base, (metallic, Specular IOR Level, roughness) params: the lobe over
  * the outline's fan of triangles (exact_glossy.area_glossy); 0 for a mirror. */
 vec3 area_glossy(int light, int count, vec3 p, vec3 n, vec3 v, vec3 base, vec3 params)
 {
-  float rough = clamp(params.z, 0.0, 1.0);
-  float alpha = rough * rough;
-  float cos_ni = dot(n, v);
-  if (alpha * alpha <= PR_ROUGHNESS_SQ_THRESHOLD || !(cos_ni > 0.0)) {
+  GlossyLobe g;
+  LtcLobe lobe;
+  vec3 white_colour;
+  if (!polygon_lobe(n, v, base, params, g, lobe, white_colour)) {
     return vec3(0.0);
   }
-  GlossyLobe g = glossy_lobe(base, params.x, params.y, rough, cos_ni);
-  if (!(g.white > 0.0)) {
-    return vec3(0.0);
-  }
-  vec3 white_colour = principled_glossy_color(vec3(1.0), 1.0, params.y, rough, clamp(cos_ni, 0.0, 1.0));
-  LtcLobe lobe = ltc_lobe(n, v, rough);
   vec3 c0 = light_texel(light, 8).xyz;
   vec3 sum = vec3(0.0);
   for (int k = 1; k + 1 < count; k++) {

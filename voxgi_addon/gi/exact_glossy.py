@@ -30,8 +30,8 @@ from .exact_indirect import LUMINANCE, SURFACE_EPSILON, hit_emission, ray_radian
 from .principled import ROUGHNESS_SQ_THRESHOLD, diffuse_weight, glossy_color, glossy_reflectance
 from .sampling import hammersley, perpendicular_basis, vndf_half_vectors
 
-__all__ = ["GLOSSY_STREAM", "area_shine", "WORLD_GLOSSY_STREAM", "EMITTER_GLOSSY_STREAM", "glossy_indirect",
-           "glossy_pick_chance",
+__all__ = ["DISC_SIDES", "GLOSSY_STREAM", "area_shine", "disc_shine", "round_lamp_disc",
+           "WORLD_GLOSSY_STREAM", "EMITTER_GLOSSY_STREAM", "glossy_indirect", "glossy_pick_chance",
            "emitters_shine", "emitters_glossy_field", "glossy_world_direct"]
 
 GLOSSY_STREAM = 0x6105  # hash stream of the glossy rays' rotation
@@ -382,7 +382,8 @@ def _emitters_unshadowed(lobe: _Lobe, emitters, p, glossy) -> np.ndarray:
     base, metallic, level, rough = (a[glossy] for a in lobe.shading)  # (G, 1, 3), (G, 1) …
     shape, towards = ltc_polygon_integral(p, n, v, rough[:, 0], emitters.corners,
                                           directions=True)                 # (G, T), (G, T, 3)
-    shape = np.where(_facing(emitters, p), shape, 0.0)
+    if emitters.corners.ndim == 3:  # shared triangles (per-point ones face their point)
+        shape = np.where(_facing(emitters, p), shape, 0.0)
     lift = np.maximum(HORIZON_LIFT - np.einsum("gtc,gc->gt", towards, n), 0.0)
     towards = towards + lift[..., None] * n[:, None]
     towards /= np.linalg.norm(towards, axis=-1, keepdims=True)
@@ -469,8 +470,83 @@ def area_shine(light, direct, points, normals, views, materials, principled, bas
     return out
 
 
+DISC_SIDES = 12  # a round lamp's visible disc as a regular polygon of this many corners
+
+
+def round_lamp_disc(light, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What a round lamp shows each of ``points`` (N, 3): ((N, DISC_SIDES, 3) its outline as a
+    regular polygon, (N,) its angular radius, (N,) bool where it shows one). A point or spot
+    light of radius r is a sphere: its silhouette, the disc (d² − r²)/d from the point along
+    the way to its centre, of radius r √(d² − r²)/d (none from inside it); a sun is the disc
+    of its angle one metre away toward it. The polygon's corners come from the axis's
+    ``sampling.perpendicular_basis``, as the GPU's (glossy_direct.glsl)."""
+    import math
+
+    from .direct_light import light_frame
+
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    centre, _, _, emit = light_frame(light)
+    if light.type == "SUN":
+        half = math.tan(0.5 * float(light.angle))
+        axis = np.broadcast_to(-np.asarray(emit, np.float64), points.shape)
+        middle = points + axis
+        radius = np.full(len(points), half)
+        valid = np.full(len(points), half > 0.0)
+    else:
+        r = float(light.radius)
+        offset = np.asarray(centre, np.float64) - points
+        d = np.maximum(np.linalg.norm(offset, axis=1), 1e-30)
+        axis = offset / d[:, None]
+        valid = (r > 0.0) & (d > r * (1.0 + 1e-6))
+        inside = np.maximum(d * d - r * r, 0.0)
+        middle = points + axis * (inside / d)[:, None]
+        radius = r * np.sqrt(inside) / d
+    t, b = perpendicular_basis(np.ascontiguousarray(axis))
+    turn = 2.0 * np.pi * np.arange(DISC_SIDES) / DISC_SIDES
+    outline = middle[:, None] + radius[:, None, None] * (
+        np.cos(turn)[None, :, None] * t[:, None] + np.sin(turn)[None, :, None] * b[:, None])
+    distance = np.linalg.norm(middle - points, axis=1)
+    angular = np.arctan2(radius, np.maximum(distance, 1e-30))
+    return outline, angular, valid
+
+
+class _Fan:
+    """A polygon per point as ``_emitters_unshadowed`` reads emitters: each point's outline
+    (G, K, 3) as a fan of triangles (G, K − 2, 3, 3), of radiance 1, facing its point."""
+
+    def __init__(self, outline):
+        k = np.arange(1, outline.shape[1] - 1)
+        self.corners = np.stack([np.broadcast_to(outline[:, :1], (len(outline), len(k), 3)),
+                                 outline[:, k], outline[:, k + 1]], axis=2)
+        self.radiance = np.ones((len(k), 3))
+
+
+def disc_shine(light, direct, points, normals, views, materials, principled, base) -> np.ndarray:
+    """(N, 3) what glossy lobes at ``points`` reflect toward ``views`` of a round lamp (a sphere
+    light, a sun's disc: ``round_lamp_disc``) whose shadowed Diffuse Direct there is ``direct``
+    (N, 3): direct × π × the lobe's mean over the disc, ∫ f cos dω / ∫ cos dω — the numerator
+    the LTC integral of the lobe over the disc with its Fresnel (``_emitters_unshadowed``),
+    the denominator Lambert's formula over it, both clipped to the horizon. 0 where the lamp
+    shows no disc, for a mirror and for a view below the horizon (the lamp's one direction
+    takes those: ``passes.glossy_direct_radiance``)."""
+    from .ltc import _clamped_cosine_integral, local_frame
+
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    out = np.zeros((len(points), 3))
+    outline, _, valid = round_lamp_disc(light, points)
+    lobe = _Lobe(normals, views, materials, principled, base)
+    local = np.einsum("nij,nkj->nki", local_frame(lobe.n, lobe.v), outline - points[:, None])
+    flat = _clamped_cosine_integral(local)  # ∫ cos θ / π dω
+    glossy = np.flatnonzero(valid & ~lobe.mirror & (lobe.cos_ni > 0.0) & (flat > 0.0))
+    if len(glossy):
+        integral = _emitters_unshadowed(lobe, _Fan(outline[glossy]), points[glossy], glossy)
+        out[glossy] = np.asarray(direct, np.float64)[glossy] * integral / flat[glossy, None]
+    return out
+
+
 def _narrow(corners, points) -> np.ndarray:
-    """(G, T) how narrow each triangle ``corners`` (T, 3, 3) looks from each point (G, 3):
+    """(G, T) how narrow each triangle ``corners`` (T, 3, 3), or each point's (G, T, 3, 3),
+    looks from each point (G, 3):
     1 − its spread / (π/2), clipped to [0, 1], where the spread is the largest angle between
     the directions to its corners. ``emitters_glossy`` lets the lobe over the LTC's density at
     one direction stand for a triangle only as far as the triangle is narrow: that ratio swings
@@ -478,7 +554,7 @@ def _narrow(corners, points) -> np.ndarray:
     quarter turn apart or more — a ceiling panel 5 cm under a grazingly seen ceiling, spanning
     150° of it — one direction's ratio was 2–3× off brute force
     (tests/engine/test_exact_glossy.py)."""
-    d = corners[None] - points[:, None, None]                     # (G, T, 3, 3)
+    d = (corners if corners.ndim == 4 else corners[None]) - points[:, None, None]  # (G, T, 3, 3)
     d /= np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-30)
     cosines = np.minimum(np.minimum(np.einsum("gtc,gtc->gt", d[:, :, 0], d[:, :, 1]),
                                     np.einsum("gtc,gtc->gt", d[:, :, 1], d[:, :, 2])),

@@ -240,9 +240,9 @@ def ltc_lobe_density(n, v, roughness, directions) -> np.ndarray:
 def ltc_polygon_integral(p, n, v, roughness, corners, chunk: int = 64, directions: bool = False):
     """(N, T) ∫ ρ over each triangle: the normalised GGX lobe of the points p (N, 3) with unit
     normals n (N, 3), unit directions toward the viewer v (N, 3) and Principled ``roughness``
-    (N,) or scalar, over triangles ``corners`` (T, 3, 3) (either orientation; clipped to the
-    point's horizon). 0 where the view is at or below the horizon. Sums over all triangles of
-    a closed surface around p give 1.
+    (N,) or scalar, over triangles ``corners`` (T, 3, 3), or each point's own (N, T, 3, 3)
+    (either orientation; clipped to the point's horizon). 0 where the view is at or below the
+    horizon. Sums over all triangles of a closed surface around p give 1.
 
     directions: also (N, T, 3) world unit directions where the lobe meets each triangle: the
     clipped polygon's mean direction in the cosine's space (``_clamped_cosine_integral``)
@@ -252,7 +252,8 @@ def ltc_polygon_integral(p, n, v, roughness, corners, chunk: int = 64, direction
     p = np.atleast_2d(np.asarray(p, np.float64))
     n = np.atleast_2d(np.asarray(n, np.float64))
     v = np.atleast_2d(np.asarray(v, np.float64))
-    corners = np.asarray(corners, np.float64).reshape(-1, 3, 3)
+    corners = np.asarray(corners, np.float64)
+    corners = corners if corners.ndim == 4 else corners.reshape(-1, 3, 3)  # per point, or shared
     rough = np.asarray(roughness, np.float64).reshape(-1)
     count = max(len(p), len(n), len(v), len(rough))
     p, n, v = (np.broadcast_to(x, (count, 3)) for x in (p, n, v))
@@ -261,11 +262,14 @@ def ltc_polygon_integral(p, n, v, roughness, corners, chunk: int = 64, direction
     frame = local_frame(n, v)                                   # (N, 3, 3)
     minv = _matrix(_interp(load_table()["minv"], rough, view_x(n, v)))   # (N, 3, 3)
     norm = hemisphere_norm(minv)                                # (N,)
-    out = np.zeros((count, len(corners)))
-    towards = np.zeros((count, len(corners), 3)) if directions else None
+    triangles = corners.shape[-3]
+    out = np.zeros((count, triangles))
+    towards = np.zeros((count, triangles, 3)) if directions else None
     back = np.linalg.inv(minv) if directions else None       # M
-    for start in range(0, len(corners), chunk):
-        rel = corners[None, start:start + chunk] - p[:, None, None]       # (N, t, 3, 3)
+    shared = corners.ndim == 3
+    for start in range(0, triangles, chunk):
+        part = corners[None, start:start + chunk] if shared else corners[:, start:start + chunk]
+        rel = part - p[:, None, None]                                    # (N, t, 3, 3)
         local = np.einsum("nij,ntkj->ntki", frame, rel)
         # the surface's horizon first (ρ is 0 below it), then the transform
         clipped, _ = _clip(local, local[..., 2])                # (N, t, 6, 3)

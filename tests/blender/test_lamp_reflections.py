@@ -1,8 +1,12 @@
-"""An area lamp seen in a smooth metal (Glossy Direct): the preview's reflection of the lamp is
-its lobe integrated over the lamp (LTC) where the lobe is narrower than the lamp's strata, so
-it shows the lamp's shape without grain, as Cycles does (``preview.passes.ltc_share``;
-docs/gi_pipeline.md "An area lamp's glossy light by LTC"). The lamp's 16 strata, jittered,
-had drawn it as grain: Combined 0.75-0.81 off Cycles on the floor below, whatever the seed.
+"""Lamps seen in a smooth metal (Glossy Direct), as Cycles draws them.
+
+An area lamp's reflection is its lobe integrated over the lamp (LTC) where few of its strata
+hold the reflection (``preview.passes.ltc_share``; docs/gi_pipeline.md "An area lamp's glossy
+light by LTC"): its 16 strata, jittered, had drawn it as grain (Combined 0.75-0.81 off Cycles
+on the floor below, whatever the seed). A point or spot light with a radius, or a sun with an
+angle, is a disc, not one direction (``preview.passes.disc_share``; "A round lamp's glossy
+light over its disc"): its one direction had drawn a sphere light's reflection as a pin-point
+the lobe's size (Combined 1.27 off Cycles, Cycles 16 spp + OIDN 0.054).
 """
 from __future__ import annotations
 
@@ -18,7 +22,9 @@ WIDTH, HEIGHT = 80, 60
 
 def metal_floor(scene, roughness: float, shape: str) -> None:
     """A 6 m metal floor of ``roughness`` under a 1.5 m area lamp of ``shape`` 2 m above it,
-    seen by a camera whose view holds the lamp's reflection; black world."""
+    seen by a camera whose view holds the lamp's reflection; black world. ``shape`` "SPHERE"
+    or "SPOT": a point or spot light of radius 0.25 m there instead; "SUN": a sun of 5°
+    instead, its reflection in view."""
     scene.world = None
     mesh = bpy.data.meshes.new("Floor")
     mesh.from_pydata([(-3, -3, 0), (3, -3, 0), (3, 3, 0), (-3, 3, 0)], [], [(0, 1, 2, 3)])
@@ -31,12 +37,23 @@ def metal_floor(scene, roughness: float, shape: str) -> None:
     bsdf.inputs["Roughness"].default_value = roughness
     bsdf.inputs["Base Color"].default_value = (0.9, 0.8, 0.6, 1.0)
     mesh.materials.append(material)
-    lamp = bpy.data.lights.new("Lamp", "AREA")
-    lamp.shape = shape
-    lamp.size = lamp.size_y = 1.5
-    lamp.energy = 300.0
+    if shape in ("SPHERE", "SPOT"):
+        lamp = bpy.data.lights.new("Lamp", "POINT" if shape == "SPHERE" else "SPOT")
+        lamp.energy, lamp.shadow_soft_size = 500.0, 0.25
+        if shape == "SPOT":
+            lamp.spot_size = math.radians(150.0)
+    elif shape == "SUN":
+        lamp = bpy.data.lights.new("Lamp", "SUN")
+        lamp.energy, lamp.angle = 3.0, math.radians(5.0)
+    else:
+        lamp = bpy.data.lights.new("Lamp", "AREA")
+        lamp.shape = shape
+        lamp.size = lamp.size_y = 1.5
+        lamp.energy = 300.0
     lamp_object = bpy.data.objects.new("Lamp", lamp)
     lamp_object.location = (0.0, 0.0, 2.0)
+    if shape == "SUN":
+        lamp_object.rotation_euler = (math.radians(-40.0), 0.0, 0.0)
     scene.collection.objects.link(lamp_object)
     camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     camera.location = (0.0, -4.0, 2.0)
@@ -56,8 +73,10 @@ def preview(scene, tracer: str = "AUTO") -> dict:
     return {k: np.asarray(v, np.float64) for k, v in passes.items()}
 
 
-@pytest.mark.parametrize("roughness, shape", [(0.1, "RECTANGLE"), (0.05, "DISK"), (0.3, "SQUARE")])
-def test_a_metal_floor_reflects_an_area_lamp_as_cycles_does(voxgi, roughness, shape):
+@pytest.mark.parametrize("roughness, shape", [(0.1, "RECTANGLE"), (0.05, "DISK"), (0.3, "SQUARE"),
+                                              (0.1, "SPHERE"), (0.3, "SPHERE"), (0.2, "SPOT"),
+                                              (0.05, "SUN")])
+def test_a_metal_floor_reflects_a_lamp_as_cycles_does(voxgi, roughness, shape):
     """Combined against Cycles 512 spp is at or below Cycles 16 spp + OpenImageDenoise's error
     (measured here); another seed gives the same image (nothing random is left in it), and the
     numpy reference draws the same reflection."""
