@@ -10,8 +10,10 @@ operators' reports and the sidebar panel show (``ui/panel.py`` lists them in the
 Read from the materials (``material_notes``: the active output's Volume and Displacement, the
 Principled BSDF's inputs, the shader nodes feeding the surface) and from the object
 (``object_notes``: shadow catchers, hair particle systems; ``type_note``: object types the
-preview does not render at all — hair curves, point clouds, volume objects) and from the render
-(``render_notes``: the camera's depth of field, motion blur).
+preview does not render at all — hair curves, point clouds, volume objects), from the lights
+(``light_notes``: an area lamp's Spread, Cast Shadow off, Normalize off, light nodes, light and
+shadow linking, a light hidden from diffuse or glossy rays; ``Light 'Name': …`` lines) and from
+the render (``render_notes``: the camera's depth of field, motion blur).
 """
 from __future__ import annotations
 
@@ -53,8 +55,8 @@ def left_out_line(name: str, notes) -> str:
 
 
 def is_left_out(message: str) -> bool:
-    """Is a report message a ``left_out_line``?"""
-    return message.startswith("Object '") and MARK in message
+    """Is a report message a ``left_out_line`` or a ``light_notes`` line?"""
+    return message.startswith(("Object '", "Light '")) and MARK in message
 
 
 def _upstream(socket, depth: int = 0, seen=None) -> list:
@@ -142,6 +144,36 @@ def render_notes(scene) -> list[str]:
         notes.append(f"Render Properties{MARK}motion blur (every object renders at its "
                      "place at the frame)")
     return notes
+
+
+def light_notes(obj) -> str | None:
+    """The report line naming what of light object ``obj`` the preview leaves out (it lights as
+    Cycles' defaults have it), else None: an area lamp's Spread under 180° (Cycles narrows its
+    light to a soft box's cone, the same power brighter beneath it), Cast Shadow off, Normalize
+    off, a node tree, light or shadow linking, the light hidden from diffuse or glossy rays."""
+    import math
+
+    light = obj.data
+    notes = []
+    spread = getattr(light, "spread", math.pi)
+    if light.type == "AREA" and spread < math.pi - 1e-3:
+        notes.append(f"its Spread of {math.degrees(spread):.0f}° (it lights as a spread of 180°)")
+    if not getattr(light, "use_shadow", True):
+        notes.append("that it casts no shadow (Cast Shadow off: it casts shadows)")
+    if not getattr(light, "normalize", True):
+        notes.append("that its power is not normalized (Normalize off: it is read as normalized)")
+    if getattr(light, "use_nodes", False) and getattr(light, "node_tree", None) is not None:
+        notes.append("its light nodes (it emits its Color × Power)")
+    linking = getattr(obj, "light_linking", None)
+    if linking is not None and linking.receiver_collection is not None:
+        notes.append("its light linking (it lights every object)")
+    if linking is not None and linking.blocker_collection is not None:
+        notes.append("its shadow linking (every object shadows it)")
+    hidden = [kind for kind, seen in (("diffuse", getattr(obj, "visible_diffuse", True)),
+                                      ("glossy", getattr(obj, "visible_glossy", True))) if not seen]
+    if hidden:
+        notes.append(f"its hiding from {' and '.join(hidden)} rays (it lights both)")
+    return f"Light '{obj.name}'{MARK}{', '.join(notes)}" if notes else None
 
 
 def type_note(obj) -> str | None:

@@ -29,7 +29,7 @@ from ...voxgi_addon.scene.snapshot import (
     SceneSnapshot,
 )
 from .environment import read_camera, read_light, read_world
-from .left_out import left_out_line, notes_of, render_notes, type_note
+from .left_out import left_out_line, light_notes, notes_of, render_notes, type_note
 from .materials import MaterialTable, Surface
 from .mesh import (
     material_lookup,
@@ -424,13 +424,14 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
         if notes:
             warnings.append(left_out_line(name, notes))
     warnings.extend(render_notes(scene))
+    lights = read_lights(depsgraph, warnings)
     return SceneSnapshot(
         meshes=meshes,
         materials=table.materials,
         textures=tuple(table.textures),
         objects=objects,
         armatures=read_armatures([e for e in entries if e.key in meshes], depsgraph),
-        lights=read_lights(depsgraph),
+        lights=lights,
         camera=read_camera(scene, depsgraph),
         world=read_world(scene, warnings),
         frame=int(scene.frame_current),
@@ -463,9 +464,10 @@ def read_armatures(entries: list[_Entry], depsgraph) -> dict:
     return armatures
 
 
-def read_lights(depsgraph) -> list:
+def read_lights(depsgraph, warnings: list[str] | None = None) -> list:
     """The ``LightData`` of the lights Blender renders from the view layer (``renders``:
-    visible there and not disabled in renders, as the meshes) at the depsgraph's frame."""
+    visible there and not disabled in renders, as the meshes) at the depsgraph's frame;
+    ``warnings`` (None: none) gets each one's ``light_notes``."""
     view_layer, lights = depsgraph.view_layer, []
     disabled = None
     for obj in view_layer.objects:
@@ -477,6 +479,9 @@ def read_lights(depsgraph) -> list:
             light = read_light(obj, obj.evaluated_get(depsgraph))
             if light is not None:
                 lights.append(light)
+                note = light_notes(obj) if warnings is not None else None
+                if note:
+                    warnings.append(note)
     return lights
 
 

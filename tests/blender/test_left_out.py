@@ -165,3 +165,36 @@ def test_depth_of_field_and_motion_blur_are_named(voxgi):
     assert dof == [f"Camera '{scene.camera.name}': the preview leaves out depth of field (it "
                    "renders everything in focus)"], warnings
     assert len(blur) == 1 and blur[0].startswith("Render Properties: the preview leaves out"), warnings
+
+
+def test_light_settings_the_preview_leaves_out_are_named(voxgi, tmp_path):
+    """A soft box (an area lamp of Spread 45°: Cycles narrows its light to that cone, the image
+    half again as bright under it), a fill light that casts no shadow, a light linked to one
+    collection and a light hidden from glossy rays: each light is named once in the report
+    and the panel with what of it the preview leaves out; a plain light is not."""
+    from voxgi.blender.session import scene_session
+
+    scene = bpy.context.scene
+    build(scene)
+    lamps = {}
+    for name, kind in (("Soft Box", "AREA"), ("Fill", "POINT"), ("Linked", "SPOT"),
+                       ("No Glint", "POINT"), ("Plain", "POINT")):
+        lamps[name] = gi_scenes._light(scene, name, kind, (0.0, -2.0, 3.0), target=(0, 0, 0),
+                                       energy=50.0)
+    lamps["Soft Box"].data.spread = math.radians(45.0)
+    lamps["Fill"].data.use_shadow = False
+    lamps["Linked"].light_linking.receiver_collection = bpy.data.collections.new("Lit")
+    lamps["No Glint"].visible_glossy = False
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=32,
+                                        resolution_y=24) == {"FINISHED"}
+    report = [line for level, line in scene_session(scene.name_full).last_report
+              if level == "WARNING" and line.startswith("Light '")]
+    expected = {"Soft Box": "Spread of 45°", "Fill": "casts no shadow", "Linked": "light linking",
+                "No Glint": "hiding from glossy rays"}
+    for name, what in expected.items():
+        lines = [line for line in report if line.startswith(f"Light '{name}'")]
+        assert len(lines) == 1 and what in lines[0] and "the preview leaves out" in lines[0], report
+    assert not any(line.startswith("Light 'Plain'") for line in report), report
+    layout = _Layout()
+    bpy.types.VOXGI_PT_main.draw(type("PanelStub", (), {"layout": layout})(), bpy.context)
+    assert "Light 'Soft Box':" in layout.labels, layout.labels
