@@ -21,7 +21,7 @@ def read_light(obj, obj_eval) -> LightData | None:
     light = obj_eval.data
     if light.type not in LIGHT_TYPES:
         return None
-    extra = {}
+    extra = {"cast_shadow": bool(getattr(light, "use_shadow", True))}
     if light.type in ("POINT", "SPOT"):
         extra["radius"] = float(light.shadow_soft_size)
     if light.type == "SPOT":

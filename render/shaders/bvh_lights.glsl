@@ -57,10 +57,14 @@ bool shadow_ray(vec3 origin, vec3 dir, float tmax, bool lifted)
   return bvh_any_hit(start, d, len);
 }
 
+/* false while light_direct lights a lamp with Cast Shadow off (lights texel 6.z): its shadow
+ * rays then meet nothing */
+bool lamp_shadows = true;
+
 /* A light sample's shadow ray: lifted. */
 bool shadow_hit(vec3 origin, vec3 dir, float tmax)
 {
-  return shadow_ray(origin, dir, tmax, true);
+  return lamp_shadows && shadow_ray(origin, dir, tmax, true);
 }
 
 /* Unoccluded share of the ray from `origin` to `target`: 1 or 0. */
@@ -288,6 +292,7 @@ vec3 light_direct(int light, vec3 p, vec3 n, uint id, uint seed, int m)
     return vec3(0.0);
   }
   uint state = point_stream(id, uint(head.w), seed);
+  lamp_shadows = light_texel(light, 6).z < 0.5;
   /* a kernel built for a scene without a kind of light leaves its code out (BVH_NO_SUN,
    * BVH_NO_AREA, BVH_NO_POINT: gpu_bvh.bvh_shader); llvmpipe pays for a branch whether a lane
    * takes it or not */
@@ -307,6 +312,7 @@ vec3 light_direct(int light, vec3 p, vec3 n, uint id, uint seed, int m)
     value = point_light(light, kind, p, n, state, m);
   }
 #endif
+  lamp_shadows = true;
   return value * light_texel(light, 1).rgb;
 }
 

@@ -131,6 +131,9 @@ def cone_shadowed_direct(volume, points, normals, lights, cones: ConeSettings,
             continue
         if light.type not in SHADOWED_TYPES or light.power == 0:
             continue
+        if not getattr(light, "cast_shadow", True):  # Cast Shadow off: no cone
+            out += diffuse_direct(p, n, [light], None, samples=samples)
+            continue
         _shadowed(out, diffuse_direct(p, n, [light], None, samples=samples), light, p, n,
                   volume, cones, visibility)
     return out.astype(np.float32)

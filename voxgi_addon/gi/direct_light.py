@@ -514,8 +514,9 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
                 value, glossy = shade(light, p[a:b], n[a:b], tris, strata,
                                       lambda lit, dirs, a=a: reflect(a + lit, dirs), **given)
                 shine[index, a:b] += glossy * color
-            else:
-                value = shade(light, p[a:b], n[a:b], tris, strata, **given)
+            else:  # a lamp with Cast Shadow off: nothing occludes it
+                value = shade(light, p[a:b], n[a:b], tris if getattr(light, "cast_shadow", True)
+                              else None, strata, **given)
             out[index, a:b] += (value[:, None] if value.ndim == 1 else value) * color
             if "variance" in given:  # (the colour is the world's strength: 1)
                 world_variance[a:b] += part

@@ -16,7 +16,7 @@ texel   contents
 3       half extent along the light's X (area: ½·size·x axis, m), tan(½ sun angle)
 4       half extent along Y (area: ½·size_y·y axis), cos(½ spot size)
 5       emission direction (unit, the light's −Z), spot blend
-6       area (m²), radiance P/(π·area), 0, 0
+6       area (m²), radiance P/(π·area), 1 when it casts no shadow (Cast Shadow off), 0
 8 …     the area light's outline (world xyz, counter-clockwise; K ≤ ``MAX_OUTLINE``)
 ======  ==========================================================================
 
@@ -64,7 +64,7 @@ def light_table(lights) -> np.ndarray:
         row[3, :3], row[3, 3] = ex, math.tan(0.5 * float(light.angle))
         row[4, :3], row[4, 3] = ey, math.cos(0.5 * float(light.spot_size))
         row[5, :3], row[5, 3] = emit, float(light.spot_blend)
-        row[6, :2] = area, radiance
+        row[6, :3] = area, radiance, 0.0 if getattr(light, "cast_shadow", True) else 1.0
         row[8:8 + len(outline), :3] = outline
         rows.append(row)
     if not rows:

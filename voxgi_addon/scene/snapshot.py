@@ -191,6 +191,7 @@ class LightData:
     radius : soft-shadow radius in metres (point/spot); angle : sun disc angle in radians.
     spot_size, spot_blend : as in Blender (radians, 0..1).
     size, size_y : area light extent in metres; shape : 'SQUARE', 'RECTANGLE', 'DISK', 'ELLIPSE'.
+    cast_shadow : Light › Cast Shadow (False: nothing occludes it, as Cycles renders it).
     """
 
     name: str
@@ -205,6 +206,7 @@ class LightData:
     size: float = 0.0
     size_y: float = 0.0
     shape: str = "SQUARE"
+    cast_shadow: bool = True
 
 
 @dataclass(frozen=True)
