@@ -31,7 +31,8 @@ def metal_floor(scene, roughness: float, shape: str) -> None:
     floor = bpy.data.objects.new("Floor", mesh)
     scene.collection.objects.link(floor)
     material = bpy.data.materials.new("Metal")
-    material.use_nodes = True
+    if material.node_tree is None:  # Blender before 5.0 makes materials without a node tree
+        material.use_nodes = True
     bsdf = material.node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Metallic"].default_value = 1.0
     bsdf.inputs["Roughness"].default_value = roughness
