@@ -5,6 +5,8 @@ with column vectors, as ``Object.matrix_world`` gives them.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ...voxgi_addon.scene.snapshot import LIGHT_TYPES, CameraData, LightData, WorldData
@@ -14,6 +16,27 @@ from .reads import count
 
 def _matrix(matrix) -> np.ndarray:
     return np.array(matrix, dtype=np.float64)
+
+
+def unnormalized_scale(light) -> float:
+    """What Cycles multiplies a light's Power by with Light › Normalize off (its power is then
+    per unit of the lamp's size, not shared over it): an area lamp's area, a point or spot
+    light's sphere surface 4πr² (4 at radius 0), a sun's disc π sin²(½ angle) (1 at angle 0);
+    1 with Normalize on (and before Blender had the setting). Measured off Cycles' Diffuse
+    Direct with the setting on and off (docs/blender_facts.md "Light › Normalize")."""
+    if getattr(light, "normalize", True):
+        return 1.0
+    if light.type == "AREA":
+        x = float(light.size)
+        y = float(light.size_y) if light.shape in ("RECTANGLE", "ELLIPSE") else x
+        return x * y * (math.pi / 4.0 if light.shape in ("DISK", "ELLIPSE") else 1.0)
+    if light.type in ("POINT", "SPOT"):
+        r = float(light.shadow_soft_size)
+        return 4.0 * (math.pi * r * r if r > 0.0 else 1.0)
+    if light.type == "SUN":
+        half = 0.5 * float(light.angle)
+        return math.pi * math.sin(half) ** 2 if half > 0.0 else 1.0
+    return 1.0
 
 
 def read_light(obj, obj_eval) -> LightData | None:
@@ -34,7 +57,7 @@ def read_light(obj, obj_eval) -> LightData | None:
         name=obj.name_full,
         type=light.type,
         color=np.array(light.color[:3], dtype=np.float32),
-        power=float(light.energy),
+        power=float(light.energy) * unnormalized_scale(light),
         world_matrix=_matrix(obj_eval.matrix_world),
         **extra,
     )

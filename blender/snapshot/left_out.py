@@ -11,7 +11,7 @@ Read from the materials (``material_notes``: the active output's Volume and Disp
 Principled BSDF's inputs, the shader nodes feeding the surface) and from the object
 (``object_notes``: shadow catchers, hair particle systems; ``type_note``: object types the
 preview does not render at all — hair curves, point clouds, volume objects), from the lights
-(``light_notes``: an area lamp's Spread, Normalize off, light nodes, light and
+(``light_notes``: an area lamp's Spread, light nodes, light and
 shadow linking, a light hidden from diffuse or glossy rays; ``Light 'Name': …`` lines) and from
 the render (``render_notes``: the camera's depth of field, motion blur).
 """
@@ -149,8 +149,8 @@ def render_notes(scene) -> list[str]:
 def light_notes(obj) -> str | None:
     """The report line naming what of light object ``obj`` the preview leaves out (it lights as
     Cycles' defaults have it), else None: an area lamp's Spread under 180° (Cycles narrows its
-    light to a soft box's cone, the same power brighter beneath it), Normalize off, a node
-    tree, light or shadow linking, the light hidden from diffuse or glossy rays."""
+    light to a soft box's cone, the same power brighter beneath it), a node tree, light or
+    shadow linking, the light hidden from diffuse or glossy rays."""
     import math
 
     light = obj.data
@@ -158,8 +158,6 @@ def light_notes(obj) -> str | None:
     spread = getattr(light, "spread", math.pi)
     if light.type == "AREA" and spread < math.pi - 1e-3:
         notes.append(f"its Spread of {math.degrees(spread):.0f}° (it lights as a spread of 180°)")
-    if not getattr(light, "normalize", True):
-        notes.append("that its power is not normalized (Normalize off: it is read as normalized)")
     if getattr(light, "use_nodes", False) and getattr(light, "node_tree", None) is not None:
         notes.append("its light nodes (it emits its Color × Power)")
     linking = getattr(obj, "light_linking", None)

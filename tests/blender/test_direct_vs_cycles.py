@@ -96,6 +96,39 @@ def test_a_lamp_with_cast_shadow_off_lights_what_its_shadows_hid(voxgi, light):
         assert error <= apart / 3.0, (tracer, error, apart)
 
 
+@pytest.mark.parametrize("light", ["POINT", "AREA", "SUN"])
+def test_a_lamp_with_normalize_off_is_as_bright_as_cycles_draws_it(voxgi, light):
+    """Light › Normalize off: Cycles takes the Power per unit of the lamp's size (× an area
+    lamp's area, a sphere light's 4πr², a sun's π sin²(½ angle)). The preview's Diffuse Direct
+    lies from Cycles' within a third of how far Cycles' own images with Normalize on and off
+    lie apart. It read the power as normalized before: 31, 1.8 and 41 off (the point light,
+    the area lamp, the sun)."""
+    import math
+
+    from voxgi.render.pipeline import render_scene_passes
+
+    scene = bpy.context.scene
+    scenes.build_test_cornell_box(scene, "AREA" if light == "AREA" else "POINT")
+    lamp = next(obj for obj in scene.objects if obj.type == "LIGHT")
+    if light == "SUN":  # a sun of 10° in through the box's open front, down onto its floor
+        sun = bpy.data.lights.new("Sun", "SUN")
+        sun.energy, sun.angle = 3.0, math.radians(10.0)
+        bpy.data.objects.remove(lamp)
+        lamp = bpy.data.objects.new("Sun", sun)
+        lamp.rotation_euler = (math.radians(60.0), math.radians(10.0), 0.0)
+        scene.collection.objects.link(lamp)
+    normalized = render_cycles_passes(scene, WIDTH, HEIGHT, 64, diffuse_bounces=1, ao_distance=0.5)
+    lamp.data.normalize = False
+    passes = render_cycles_passes(scene, WIDTH, HEIGHT, SAMPLES, diffuse_bounces=1, ao_distance=0.5)
+    geometry = passes["Alpha"] > 0.5
+    truth = passes["Diffuse Direct"].astype(np.float64)
+    apart = relative_l1(normalized["Diffuse Direct"].astype(np.float64), truth, geometry)
+    assert apart > 0.3, "the setting changes too little to tell"
+    ours, _ = render_scene_passes(bpy.context, scene, None, WIDTH, HEIGHT)
+    error = relative_l1(np.asarray(ours["Diffuse Direct"], np.float64), truth, geometry)
+    assert error <= apart / 3.0, (error, apart)
+
+
 def test_thin_wall_room_dark_side_gets_no_light_in_cycles(voxgi):
     scene = bpy.context.scene
     scenes.build_thin_wall_room(scene)
