@@ -67,6 +67,28 @@ def test_direct_light_matches_cycles_on_the_cornell_box(voxgi, light):
     assert ao.min() >= 0 and ao.max() <= 1.0 + 1e-3 and ao.mean() > 0.5
 
 
+def _diffuse_direct_after(scene, change, least: float, tracers=("AUTO",)):
+    """Render Cycles' Diffuse Direct before and after ``change()`` (a light setting), then the
+    preview's after it with each of ``tracers``: assert Cycles' two images lie at least
+    ``least`` apart, and the preview within a third of that from Cycles' second one."""
+    from voxgi.blender.session import scene_session
+    from voxgi.render.pipeline import render_scene_passes
+
+    before = render_cycles_passes(scene, WIDTH, HEIGHT, SAMPLES, diffuse_bounces=1, ao_distance=0.5)
+    change()
+    passes = render_cycles_passes(scene, WIDTH, HEIGHT, SAMPLES, diffuse_bounces=1, ao_distance=0.5)
+    geometry = passes["Alpha"] > 0.5
+    truth = passes["Diffuse Direct"].astype(np.float64)
+    apart = relative_l1(before["Diffuse Direct"].astype(np.float64), truth, geometry)
+    assert apart > least, ("the setting changes too little to tell", apart)
+    for tracer in tracers:
+        scene.voxgi.tracer = tracer
+        ours, _ = render_scene_passes(bpy.context, scene, None, WIDTH, HEIGHT)
+        assert scene_session(scene.name_full).tracer_used == ("GPU" if tracer == "AUTO" else "numpy")
+        error = relative_l1(np.asarray(ours["Diffuse Direct"], np.float64), truth, geometry)
+        assert error <= apart / 3.0, (tracer, error, apart)
+
+
 @pytest.mark.parametrize("light", ["POINT", "AREA"])
 def test_a_lamp_with_cast_shadow_off_lights_what_its_shadows_hid(voxgi, light):
     """Light › Cast Shadow off (a fill light): nothing occludes the lamp in Cycles, so the
@@ -74,26 +96,15 @@ def test_a_lamp_with_cast_shadow_off_lights_what_its_shadows_hid(voxgi, light):
     from Cycles' Diffuse Direct within a third of how far Cycles' own images with and without
     the shadows lie apart (0.035 with the point light, 0.066 with the area light; the preview
     reads 0.006). With the shadows kept (before) it read 0.040 and 0.071."""
-    from voxgi.blender.session import scene_session
-    from voxgi.render.pipeline import render_scene_passes
-
     scene = bpy.context.scene
     scenes.build_test_cornell_box(scene, light)
-    shadowed = render_cycles_passes(scene, WIDTH, HEIGHT, SAMPLES, diffuse_bounces=1, ao_distance=0.5)
-    for obj in scene.objects:
-        if obj.type == "LIGHT":
-            obj.data.use_shadow = False
-    passes = render_cycles_passes(scene, WIDTH, HEIGHT, SAMPLES, diffuse_bounces=1, ao_distance=0.5)
-    geometry = passes["Alpha"] > 0.5
-    truth = passes["Diffuse Direct"].astype(np.float64)
-    apart = relative_l1(shadowed["Diffuse Direct"].astype(np.float64), truth, geometry)
-    assert apart > 0.02, "the lamp casts too little shadow to tell"
-    for tracer in ("AUTO", "NUMPY"):
-        scene.voxgi.tracer = tracer
-        ours, _ = render_scene_passes(bpy.context, scene, None, WIDTH, HEIGHT)
-        assert scene_session(scene.name_full).tracer_used == ("GPU" if tracer == "AUTO" else "numpy")
-        error = relative_l1(np.asarray(ours["Diffuse Direct"], np.float64), truth, geometry)
-        assert error <= apart / 3.0, (tracer, error, apart)
+
+    def no_shadows():
+        for obj in scene.objects:
+            if obj.type == "LIGHT":
+                obj.data.use_shadow = False
+
+    _diffuse_direct_after(scene, no_shadows, 0.02, ("AUTO", "NUMPY"))
 
 
 @pytest.mark.parametrize("light", ["POINT", "AREA", "SUN"])
@@ -105,8 +116,6 @@ def test_a_lamp_with_normalize_off_is_as_bright_as_cycles_draws_it(voxgi, light)
     the area lamp, the sun)."""
     import math
 
-    from voxgi.render.pipeline import render_scene_passes
-
     scene = bpy.context.scene
     scenes.build_test_cornell_box(scene, "AREA" if light == "AREA" else "POINT")
     lamp = next(obj for obj in scene.objects if obj.type == "LIGHT")
@@ -117,16 +126,7 @@ def test_a_lamp_with_normalize_off_is_as_bright_as_cycles_draws_it(voxgi, light)
         lamp = bpy.data.objects.new("Sun", sun)
         lamp.rotation_euler = (math.radians(60.0), math.radians(10.0), 0.0)
         scene.collection.objects.link(lamp)
-    normalized = render_cycles_passes(scene, WIDTH, HEIGHT, 64, diffuse_bounces=1, ao_distance=0.5)
-    lamp.data.normalize = False
-    passes = render_cycles_passes(scene, WIDTH, HEIGHT, SAMPLES, diffuse_bounces=1, ao_distance=0.5)
-    geometry = passes["Alpha"] > 0.5
-    truth = passes["Diffuse Direct"].astype(np.float64)
-    apart = relative_l1(normalized["Diffuse Direct"].astype(np.float64), truth, geometry)
-    assert apart > 0.3, "the setting changes too little to tell"
-    ours, _ = render_scene_passes(bpy.context, scene, None, WIDTH, HEIGHT)
-    error = relative_l1(np.asarray(ours["Diffuse Direct"], np.float64), truth, geometry)
-    assert error <= apart / 3.0, (error, apart)
+    _diffuse_direct_after(scene, lambda: setattr(lamp.data, "normalize", False), 0.3)
 
 
 def test_thin_wall_room_dark_side_gets_no_light_in_cycles(voxgi):
