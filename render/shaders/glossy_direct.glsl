@@ -5,13 +5,12 @@
  * (principled.glsl) / cos: from a sun's or a point light's direction, and, as far as
  * passes.disc_share says (a lobe narrow against the lamp's disc), by the lobe's mean over the
  * disc a point or spot light of some radius or a sun of some angle shows (disc_shine); from an
- * area lamp's
- * AREA_GLOSSY_GRID² strata centres (mapped as the shadow rays map theirs: sampling.glsl),
- * weighted by their share of its unshadowed irradiance, and, as far as passes.ltc_share says
- * (a reflection that few strata hold), by the lobe integrated over the lamp by LTC
- * (glossy_ltc.glsl area_glossy) × the share of its unshadowed light that direct_image holds
- * (light_outline.glsl polygon_irradiance), as a bounce hit's metal lobe takes it
- * (bvh_shade.glsl; exact_glossy.area_shine).
+ * area lamp's AREA_GLOSSY_GRID² strata centres (mapped as the shadow rays map theirs:
+ * sampling.glsl), weighted by their share of its unshadowed irradiance, and, as far as
+ * passes.ltc_share says (a reflection that few strata hold), by the lobe integrated over the
+ * lamp by LTC (glossy_ltc.glsl area_glossy) × the share of its unshadowed light that
+ * direct_image holds (light_outline.glsl polygon_irradiance), as a bounce hit's metal lobe
+ * takes it (bvh_shade.glsl; exact_glossy.area_shine).
  * Samplers: lights (preview/light_table.py), materials (base, emission, (metallic, level,
  * roughness) rows), principled_lut, ltc_table; gbuffer_view = (ray direction, material);
  * gbuffer_base = (Base Color per texel, 1) where textured. */
@@ -46,7 +45,7 @@ vec3 disc_shine(vec3 direct, vec3 middle, vec3 axis, float radius, vec3 p, vec3 
     vec3 next = middle + radius * (cos(step * float(k)) * t + sin(step * float(k)) * b);
     sum += glossy_ltc_triangle(lobe, g, p, n, v, c0, previous, next, white_colour);
     lambert += ltc_clipped_triangle(lobe.to_local * (c0 - p), lobe.to_local * (previous - p),
-                                 lobe.to_local * (next - p), vec4(1.0, 0.0, 1.0, 0.0));
+                                    lobe.to_local * (next - p), vec4(1.0, 0.0, 1.0, 0.0));
     previous = next;
   }
   float cosine = abs(lambert.z) / (2.0 * 3.14159265358979323846);  /* ∫ cos θ / π dω */

@@ -182,10 +182,12 @@ def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_dire
 
     Each light's shadowed Diffuse Direct is turned back into the irradiance it brings (× π) and
     reflected toward the viewer by the Principled glossy lobe (``principled.glossy_reflectance``
-    / cos): from a sun's or a point light's direction, from an area light's strata centres
-    (weighted by their share of its irradiance) and, as far as ``ltc_share`` says (a reflection
-    that few strata hold), by the lobe integrated over the lamp by LTC × the visible share of
-    its light (``exact_glossy.area_shine``, as a bounce hit's metal lobe takes it). The light's
+    / cos): from a sun's or a point light's direction and, as far as ``disc_share`` says (a
+    lobe narrow against the lamp), by the lobe's mean over the disc a sphere light or a sun
+    shows (``exact_glossy.disc_shine``); from an area light's strata centres (weighted by their
+    share of its irradiance) and, as far as ``ltc_share`` says (a reflection that few strata
+    hold), by the lobe integrated over the lamp by LTC × the visible share of its light
+    (``exact_glossy.area_shine``, as a bounce hit's metal lobe takes it). The light's
     shadowing is taken as uniform over it. views : (N, 3) unit directions from the points to
     the viewer; per_light_direct : (L, N, 3) Diffuse Direct light by light; base : (N, 3) the
     points' Base Color per texel (``scene.textures.primary_base``), None: the table's.
@@ -205,27 +207,26 @@ def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_dire
             reflect = glossy_reflectance(*shading, normals, views, direction)
             term[:] = np.where(cos[:, None] > 1e-4,
                                weight[:, None] * reflect / np.maximum(cos, 1e-4)[:, None], 0.0)
-        lobe = terms.sum(axis=0)
-        share = ltc_share(terms @ LUMINANCE, weights) if light.type == "AREA" else None
         # E·f summed over the light, with E = π × Diffuse Direct / (share-weighted cos) ≈ the
         # light's irradiance on the receiver's plane.
-        shine = direct * np.pi * lobe
-        if light.type in ("POINT", "SPOT", "SUN"):
+        shine = direct * np.pi * terms.sum(axis=0)
+        if light.type == "AREA":  # the lobe over the lamp where few strata hold it
+            share = ltc_share(terms @ LUMINANCE, weights)
+            k = np.flatnonzero(share > 0.0)
+            if len(k):
+                integral = area_shine(light, direct[k], points[k], normals[k], views[k], mat[k],
+                                      principled, None if base is None else base[k])
+                shine[k] += share[k, None] * (integral - shine[k])
+        elif light.type in ("POINT", "SPOT", "SUN"):  # the lobe's mean over the lamp's disc
             _, angular, valid = round_lamp_disc(light, points)
             share = np.where(valid, disc_share(np.clip(params[mat, 2], 0.0, 1.0) ** 2, angular), 0.0)
-            if np.any(share > 0.0):
-                k = np.flatnonzero(share > 0.0)
+            k = np.flatnonzero(share > 0.0)
+            if len(k):
                 mean = disc_shine(light, direct[k], points[k], normals[k], views[k], mat[k],
                                   principled, None if base is None else base[k])
                 # a mirror or a view below the horizon keeps its one direction
                 kept = np.all(mean == 0.0, axis=1)
                 shine[k] += np.where(kept[:, None], 0.0, share[k, None] * (mean - shine[k]))
-            share = None
-        if share is not None and np.any(share > 0.0):
-            k = np.flatnonzero(share > 0.0)
-            integral = area_shine(light, direct[k], points[k], normals[k], views[k], mat[k],
-                                  principled, None if base is None else base[k])
-            shine[k] += share[k, None] * (integral - shine[k])
         total += shine
     return total
 
