@@ -13,6 +13,7 @@ import gpu
 import numpy as np
 from gpu_extras.batch import batch_for_shader
 
+from ..voxgi_addon.preview.lobe_footprint import FOOTPRINT_LIMIT, footprint_variance
 from ..voxgi_addon.scene.camera import (
     DEFAULT_FILTER_WIDTH,
     camera_frame,
@@ -80,6 +81,8 @@ def gbuffer_shader(textured: bool = True):
     info.push_constant("VEC3", "camera_forward")
     info.push_constant("FLOAT", "camera_ortho")
     info.push_constant("FLOAT", "pixel_spread")
+    info.push_constant("FLOAT", "normal_footprint")
+    info.define("FOOTPRINT_LIMIT", repr(float(FOOTPRINT_LIMIT)))
     taps = ""
     if textured:
         info.define("RASTER_TEXTURES", "1")
@@ -259,7 +262,10 @@ def rasterize(tris, camera, roughness: np.ndarray, width: int, height: int,
                     ("camera_forward", (-rotation[:, 2]).astype(np.float32)),
                     ("camera_ortho", 1.0 if camera.type == "ORTHO" else 0.0),
                     ("pixel_spread", float(pixel_spread(camera, width, height) *
-                                           filter_footprint(filter_width)))):
+                                           filter_footprint(filter_width))),
+                    # σ² of the lobe's footprint in this raster's texels (lobe_footprint)
+                    ("normal_footprint", footprint_variance(filter_width, texture_share) *
+                     supersample * supersample)):
                 if _reads(shader, name):  # (the plain variant reads fewer)
                     shader.uniform_float(name, value)
             if isinstance(batch, ChunkedBatch):

@@ -161,6 +161,8 @@ def absent_lights(lights, metals: bool = True) -> tuple[str, ...]:
     has an area lamp and no metal (``metals``, ``has_metals``), and "METALS" (a metal hit's
     lamp picks by its lobe, bvh_shade.glsl hit_lamp_weight) where it has no metal."""
     types = {light.type for light in lights}
+    if any(getattr(light, "sun", None) is not None for light in lights):
+        types.add("SUN")  # a map's sun is traced as a sun lamp too (world_light.sun_lamp)
     absent = [k for k, needs in LIGHT_FEATURES.items() if not types & set(needs)]
     if not metals and "AREA" not in absent:
         absent.append("METAL_AREA")

@@ -88,7 +88,8 @@ def release() -> None:
 
 def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples: int,
                  seed: int, block=None, lamps=None, glow=None, centre=None, field=None,
-                 lamp_glossy: bool = True, smooth=None, world_strata: int = 0, world_fewer=None):
+                 lamp_glossy: bool = True, smooth=None, world_strata: int = 0, world_fewer=None,
+                 sun_glossy: bool = False):
     """(Stages, one per light's dispatches, returning) ``sums`` + one pass over ``inputs``, a
     G-buffer of ``size`` (an image's or the edge pixels' list's) of ``scene`` (a ``GPUScene``
     updated to ``snapshot``): terms = the gathered (Diffuse Indirect, AO), Glossy Indirect and
@@ -108,7 +109,10 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     world's and emitters' Diffuse Direct texture (rgb, the world's part's variance) of a whole
     image before it is added (F12's centre pass: docs/gi_pipeline.md "The world's light
     filtered"); None: added as traced. world_strata, world_fewer : the side of the world's
-    strata and the texels that take it (``direct_light_texture``'s; 0: the lamps')."""
+    strata and the texels that take it (``direct_light_texture``'s; 0: the lamps').
+    sun_glossy : the map's sun in the pixels' glossy lobes (``scene.sun_table``, a sun lamp
+    traced for them alone: its Diffuse Direct is the world's dispatch's;
+    ``passes.map_sun_shine``), as the world's glossy gather leaves it out."""
     bvh, principled, emission = scene.bvh, scene.principled, scene.emission
     materials, lut = scene.materials, scene.lut
     extra = scene.has_scene_lights
@@ -150,6 +154,17 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
         out = run("aa_light", LIGHT_SAMPLERS, {
             "colour": colour, "direct_image": direct,
             "shine_image": blank if glow is None else glow, **sums},
+            ("out_f", "out_g"), *size)
+        sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
+        yield
+    if extra and sun_glossy and scene.sun_table is not None:
+        direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
+                                      world=scene.no_world, emitters=scene.no_emitters,
+                                      strata_block=block, table=scene.sun_table, absent=absent)
+        shine = glossy_direct_texture(inputs, direct, scene.sun_table, 0, principled, emission,
+                                      materials=materials, map_sun=True)
+        out = run("aa_light", LIGHT_SAMPLERS, {
+            "colour": colour, "direct_image": blank, "shine_image": shine, **sums},
             ("out_f", "out_g"), *size)
         sums["sum_f"], sums["sum_g"] = out["out_f"], out["out_g"]
         yield

@@ -17,7 +17,7 @@ from dataclasses import replace
 import gpu
 import numpy as np
 
-from ..voxgi_addon.gi.exact_glossy import DISC_SIDES, HORIZON_LIFT, METAL_RAY_FACTOR
+from ..voxgi_addon.gi.exact_glossy import DISC_SIDES, DISC_WIDEST, HORIZON_LIFT, METAL_RAY_FACTOR
 from ..voxgi_addon.gi.exact_indirect import MAX_FOLLOWS
 from ..voxgi_addon.gi.radiance_cache import (
     build_cache,
@@ -731,12 +731,13 @@ _GLOSSY_SAMPLERS = ("gbuffer_position", "gbuffer_normal", "gbuffer_view", "gbuff
 
 
 def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: int, principled,
-                          emission, materials=None):
+                          emission, materials=None, map_sun: bool = False):
     """The glossy light light ``light_index`` sends to the viewer over the G-buffer
     (``shaders/glossy_direct.glsl``, the port of ``preview.passes.glossy_direct_radiance``);
     direct : that light's Diffuse Direct texture; an RGBA32F texture (bottom row first).
     materials : the ``principled_materials_texture`` of ``principled`` and ``emission`` made
-    already (None: made here)."""
+    already (None: made here). map_sun : the lamp is the world map's sun
+    (``world_light.sun_lamp``): 0 on mirrors (``passes.map_sun_shine``)."""
     shader = _glossy_shader()
     out = gpu.types.GPUTexture((direct.width, direct.height), format="RGBA32F")
     inputs = {**gbuffer_inputs, "direct_image": direct, "lights": lights_texture_,
@@ -746,7 +747,7 @@ def glossy_direct_texture(gbuffer_inputs, direct, lights_texture_, light_index: 
     shader.bind()
     for name in _GLOSSY_SAMPLERS:
         shader.uniform_sampler(name, inputs[name])
-    shader.uniform_float("light", (float(light_index), 0.0, 0.0, 0.0))
+    shader.uniform_float("light", (float(light_index), 1.0 if map_sun else 0.0, 0.0, 0.0))
     shader.image("out_image", out)
     gpu.compute.dispatch(shader, math.ceil(direct.width / LOCAL_SIZE),
                          math.ceil(direct.height / LOCAL_SIZE), 1)
@@ -759,7 +760,7 @@ def _glossy_shader():
                    "AREA_GLOSSY_GRID": str(AREA_GLOSSY_GRID), "LTC_FROM": repr(float(LTC_FROM)),
                    "LTC_FULL": repr(float(LTC_FULL)),
                    "DISC_FROM": repr(float(DISC_FROM)), "DISC_FULL": repr(float(DISC_FULL)),
-                   "DISC_SIDES": str(DISC_SIDES)}
+                   "DISC_SIDES": str(DISC_SIDES), "DISC_WIDEST": repr(float(DISC_WIDEST))}
         _shaders["glossy"] = build_compute(("sampling", "principled", "light_outline", "ltc",
                                             "glossy_ltc", "glossy_direct"),
                                            _GLOSSY_SAMPLERS, ("light",), ("out_image",), defines)

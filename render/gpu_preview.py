@@ -715,6 +715,7 @@ def _shade(f, inputs, sums, terms, blank, size, block, lamps=None, glow=None, ce
     return shade_stages(f["scene"], f["snapshot"], inputs, sums, terms, blank, size,
                         f["light_samples"], f["gather_settings"].seed, block, lamps, glow,
                         centre, field, lamp_glossy=f["lamp_glossy"], smooth=smooth,
+                        sun_glossy=f["lamp_glossy"] and _with_world_glossy(f),
                         world_strata=world_strata,
                         world_fewer=None if fewer is None else world_fewer_texture(fewer))
 

@@ -41,7 +41,7 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.gi.emitters import emitter_table
-from ..voxgi_addon.gi.world_light import scene_lights, world_light, world_table
+from ..voxgi_addon.gi.world_light import scene_lights, sun_lamp, world_light, world_table
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
 from ..voxgi_addon.preview.passes import material_table, principled_table
 from ..voxgi_addon.scene.bvh import TEXTURE_WIDTH
@@ -171,6 +171,7 @@ class ScenePlan:
     lamps: tuple | None = None        # lamp_tables
     lights: list = dataclasses.field(default_factory=list)
     world: object = None              # world_table
+    sun: object = None                # light_table of the map's sun lamp (no row: none)
     emitters: object = None           # emitter_table
     # set once ``bvh`` is in (``prepare``'s on_tables: it is built on a thread meanwhile)
     bvh_ready: threading.Event = dataclasses.field(default_factory=threading.Event)
@@ -210,6 +211,7 @@ class GPUScene:
         self.textures: dict[str, object] = {}  # texture_table, texture_atlas
         self.slots = None
         self.lamp_table = self.no_lamp = self.world_map = self.emitters = None
+        self.sun_table = None  # the map's sun as a lamp (world_light.sun_lamp), None: none
         self.lamp_tables: list = []
         self.keys: dict[str, object] = {}
         self.uploaded: dict[str, int] = {}
@@ -392,6 +394,13 @@ class GPUScene:
             plan.world = world_table(sky, stream)
             keys["world"] = key
             seconds["world"] = time.perf_counter() - t0
+        # the map's sun as a lamp, for the pixels' glossy lobes; its samples' stream follows
+        # the lights list's
+        key = (world_key, len(plan.lights))
+        if key != keys.get("sun"):
+            plan.sun = light_table([sun] if (sun := sun_lamp(sky)) is not None else [],
+                                   len(plan.lights))
+            keys["sun"] = key
         t0 = time.perf_counter()
         emitters, stream = found.get("EMITTERS", (None, 0))
         key = (geometry, materials, stream)
@@ -566,6 +575,10 @@ class GPUScene:
                 return
             new["world_map"] = _table_texture(plan.world)
             send("world", _texture_bytes(plan.world))
+        if plan.sun is not None:
+            new["sun_table"] = _table_texture(plan.sun) if len(plan.sun) else None
+            if len(plan.sun):
+                send("sun", _texture_bytes(plan.sun))
         if plan.emitters is not None:
             if full(_texture_bytes(plan.emitters)):
                 yield

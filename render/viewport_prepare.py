@@ -394,8 +394,9 @@ def hold_traced(live, source, traced_version, shown_version) -> None:
 class Features:
     """What picks the kernels' variants (``gpu_bvh.bvh_shader``) and which the view needs:
     some cut-out, some triangle hidden from a kind of ray, textured hits, the kinds of light
-    the scene has none of (every light's dispatch takes that one variant), some lamp, some
-    light of the world or the emitters, some emissive triangle."""
+    the scene has none of (every light's dispatch takes that one variant), some lamp (or a
+    world map's sun, traced as one), some light of the world or the emitters, some emissive
+    triangle."""
 
     cutouts: bool
     hidden: bool
@@ -410,9 +411,11 @@ def features(tris, lights, lamp_count: int, principled=None) -> Features:
     """The ``Features`` of a prepared scene: its triangles, lights list (lamps first) and
     Principled table (``passes.principled_table``; None: unknown)."""
     cutouts, hidden = bvh_features(tris)
+    # a map's sun is traced as a lamp for the pixels' glossy lobes (world_light.sun_lamp)
+    map_sun = any(getattr(light, "sun", None) is not None for light in lights)
     return Features(cutouts, hidden, getattr(tris, "textures", None) is not None,
-                    absent_lights(lights, has_metals(principled, tris)), lamp_count > 0,
-                    len(lights) > lamp_count,
+                    absent_lights(lights, has_metals(principled, tris)),
+                    lamp_count > 0 or map_sun, len(lights) > lamp_count,
                     any(light.type == "EMITTERS" for light in lights))
 
 

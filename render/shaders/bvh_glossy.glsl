@@ -6,7 +6,8 @@
  * out_variance = (variance, 0, 0, 0). Push constants as bvh_gather.glsl's, with
  * sampling.y = the glossy rays; the rays are split over dispatches the same way (chunk).
  * With grid.w = 1 the kernel gathers the world's Glossy Direct instead (exact_glossy.py
- * glossy_world_direct), the same outputs. */
+ * glossy_world_direct, the map's sun left out of a lobe that is not a mirror's), the same
+ * outputs. */
 
 void main()
 {
@@ -58,6 +59,15 @@ void main()
   /* the closures' sample weights for the chance Cycles picked a direction glossily
    * (exact_glossy._Lobe.glossy_chance: their directional albedos) */
   vec4 picks = closure_picks(base, params, cos_ni);
+  /* the map's sun (world_light.Sun): a lobe that is not a mirror's takes it at its pixels, as
+   * a lamp (passes.map_sun_shine), so the world's gather leaves its pixels out */
+  float sun_above = 1e30;
+  if (world_mode && !mirror && sky_on) {
+    ivec2 last = ivec2(0, textureSize(world_map, 0).y - 1);
+    if (texelFetch(world_map, last + ivec2(1, 0), 0).w > 0.5) {
+      sun_above = texelFetch(world_map, last + ivec2(2, 0), 0).x;
+    }
+  }
   int first_ray = int(chunk.x);
   int end_ray = min(rays, first_ray + int(chunk.y));
   for (int j = first_ray; j < end_ray && reflects; j++) {
@@ -100,14 +110,15 @@ void main()
           vec3 sky = world_radiance_at(world_pixel(l, wh, ww));
           float map_pdf = uniform_sky ? 0.0 : dot(sky, LUMA) / head.w;
           float share = mirror ? 1.0 : pdf / max(pdf + map_pdf, 1e-30);
-          value += sky * weight * share;
+          value += dot(sky, LUMA) <= sun_above ? sky * weight * share : vec3(0.0);
         }
       }
       if (!mirror && sky_on && !uniform_sky) {
         vec3 le = world_sample(hammersley(world_state, j, rays), wh, ww);
         vec3 sky = world_radiance_at(world_pixel(le, wh, ww));
         float map_pdf = dot(sky, LUMA) / head.w;
-        if (dot(le, n) > 0.0 && map_pdf > 0.0 && !bvh_any_hit(origin, le, BVH_FAR)) {
+        if (dot(le, n) > 0.0 && map_pdf > 0.0 && dot(sky, LUMA) <= sun_above &&
+            !bvh_any_hit(origin, le, BVH_FAR)) {
           float both = lobe_pdf(n, v, le, alpha2, pdf_scale) + map_pdf;
           value += sky * principled_glossy_reflectance(base, params.x, params.y, rough, n, v, le) /
                    max(both, 1e-30) / max(colour, vec3(1e-30));

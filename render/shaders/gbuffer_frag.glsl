@@ -53,6 +53,11 @@ vec3 tap_point(vec3 p, vec3 n, vec2 o)
 
 void main()
 {
+  /* the shading normal's change to the next pixel (before any discard: derivatives need the
+   * whole quad), for the lobe's footprint (preview/lobe_footprint.py normal_spread) */
+  vec3 unit_normal = dot(shading_normal, shading_normal) > 1e-24 ? normalize(shading_normal) :
+                                                                   flat_normal;
+  vec3 dnx = dFdx(unit_normal), dny = dFdy(unit_normal);
 #ifdef RASTER_TEXTURES
   /* before any discard: derivatives need the whole quad */
   vec3 dpx = dFdx(world_position), dpy = dFdy(world_position);
@@ -152,4 +157,11 @@ void main()
     out_base.w = pack_emission(glow * surface_glow.y);
   }
 #endif
+  /* the lobe's roughness widened by the footprint (lobe_footprint.lobe_roughness):
+   * α'² = α² + min(σ² (|∂n/∂x|² + |∂n/∂y|²), FOOTPRINT_LIMIT) */
+  float a2 = clamp(out_normal.w, 0.0, 1.0);
+  a2 *= a2;
+  float widened = a2 * a2 + min(normal_footprint * (dot(dnx, dnx) + dot(dny, dny)),
+                                FOOTPRINT_LIMIT);
+  out_normal.w = sqrt(sqrt(widened));
 }

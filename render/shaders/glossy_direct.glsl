@@ -11,6 +11,9 @@
  * lamp by LTC (glossy_ltc.glsl area_glossy) × the share of its unshadowed light that
  * direct_image holds (light_outline.glsl polygon_irradiance), as a bounce hit's metal lobe
  * takes it (bvh_shade.glsl; exact_glossy.area_shine).
+ * The pixel's footprint (preview/lobe_footprint.py) widens an area lamp's lobe (to the
+ * G-buffer's normal.w) and a round lamp's disc (disc_growth). light = (row of the lamp in
+ * `lights`, 1 for the map's sun: 0 on a mirror, passes.map_sun_shine).
  * Samplers: lights (preview/light_table.py), materials (base, emission, (metallic, level,
  * roughness) rows), principled_lut, ltc_table; gbuffer_view = (ray direction, material);
  * gbuffer_base = (Base Color per texel, 1) where textured. */
@@ -67,7 +70,8 @@ void main()
     imageStore(out_image, px, vec4(0.0));
     return;
   }
-  vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
+  vec4 normal = texelFetch(gbuffer_normal, px, 0);
+  vec3 n = normal.xyz;
   vec4 ray = texelFetch(gbuffer_view, px, 0);
   vec3 view = -ray.xyz;
   int last_material = textureSize(materials, 0).x - 1;
@@ -76,6 +80,17 @@ void main()
   vec4 texel = texelFetch(gbuffer_base, px, 0);  /* Base Color per texel (G-buffer) */
   vec3 base = texel.w > 0.5 ? texel.rgb : texelFetch(materials, ivec2(material, 0), 0).rgb;
   vec3 params = texelFetch(materials, ivec2(material, 2), 0).rgb;
+  /* the pixel's footprint (preview/lobe_footprint.py; the G-buffer's normal.w is the lobe's
+   * roughness widened by it) widens an area lamp's lobe and a round lamp's disc (disc_growth) */
+  float own = clamp(params.z, 0.0, 1.0);
+  float widened = clamp(normal.w, 0.0, 1.0);
+  float grow = 8.0 * max(widened * widened * widened * widened - own * own * own * own, 0.0);
+  if (light.y > 0.5 && own * own * own * own <= PR_ROUGHNESS_SQ_THRESHOLD) {
+    /* the map's sun on a mirror: its one ray in the world's glossy gather sees it
+     * (passes.map_sun_shine) */
+    imageStore(out_image, px, vec4(0.0));
+    return;
+  }
   vec3 shine = vec3(0.0);
   if (int(head.x) != 3) {
     vec3 towards = int(head.x) == 0 ? -light_texel(lamp, 5).xyz :
@@ -94,21 +109,24 @@ void main()
       axis = -light_texel(lamp, 5).xyz;
       middle = position.xyz + axis;
       radius = light_texel(lamp, 3).w;
-      shows = radius > 0.0;
+      shows = radius > 0.0 || grow > 0.0;
     }
     else {
       float r = light_texel(lamp, 2).w;
       vec3 offset = light_texel(lamp, 2).xyz - position.xyz;
       float d = max(length(offset), 1e-30);
       axis = offset / d;
-      shows = r > 0.0 && d > r * (1.0 + 1e-6);
+      shows = (r > 0.0 || grow > 0.0) && d > r * (1.0 + 1e-6);
       float inside = max(d * d - r * r, 0.0);
       middle = position.xyz + axis * (inside / d);
       radius = r * sqrt(inside) / d;
     }
     if (shows) {
-      float rough = clamp(params.z, 0.0, 1.0);
-      float angular = atan(radius, max(length(middle - position.xyz), 1e-30));
+      float rough = own;
+      float distance = max(length(middle - position.xyz), 1e-30);
+      float angular = atan(radius, distance);
+      angular = min(sqrt(angular * angular + grow), DISC_WIDEST);
+      radius = distance * tan(angular);
       float share = clamp((angular / max(2.0 * rough * rough, 1e-6) - DISC_FROM) /
                           (DISC_FULL - DISC_FROM), 0.0, 1.0);
       if (share > 0.0) {
@@ -120,6 +138,7 @@ void main()
     }
   }
   else {
+    params.z = widened;
     vec3 centre = light_texel(lamp, 2).xyz;
     vec3 ex = light_texel(lamp, 3).xyz;
     vec3 ey = light_texel(lamp, 4).xyz;

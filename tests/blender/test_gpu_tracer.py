@@ -117,6 +117,53 @@ def test_gbuffer_equals_exact_primary_visibility(voxgi):
                                roughness[mat][same_surface], atol=1e-6)
 
 
+def test_gbuffer_widens_the_lobe_by_the_pixels_footprint_as_numpy_does(voxgi):
+    """On a smooth-shaded ball the G-buffer's roughness is the material's widened by how far
+    the normal turns across a pixel (lobe_footprint): the GPU's derivatives and numpy's
+    neighbour rays agree, a flat floor keeps its material's roughness, and the ball's
+    silhouette reaches the clamp."""
+    from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.render.gbuffer import rasterize, read_gbuffer
+    from voxgi.voxgi_addon.preview.lobe_footprint import (
+        FOOTPRINT_LIMIT,
+        footprint_variance,
+        lobe_roughness,
+        normal_spread,
+    )
+    from voxgi.voxgi_addon.scene.geometry import world_triangles
+    from voxgi.voxgi_addon.scene.raycast import primary_visibility
+
+    cornell()
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24, radius=0.4,
+                                         location=(0.0, -0.6, 0.6))
+    ball_object = bpy.context.active_object
+    ball_object.data.shade_smooth()
+    ball_object.data.materials.append(bpy.data.materials[0])
+    bpy.context.view_layer.update()
+    snapshot = take_snapshot(bpy.context, bpy.context.evaluated_depsgraph_get())
+    tris = world_triangles(snapshot)
+    exact = primary_visibility(tris, snapshot.camera, WIDTH, HEIGHT)
+    gpu_ready()
+    roughness = np.full(len(snapshot.materials) + 1, 0.05)
+    seen = read_gbuffer(rasterize(tris, snapshot.camera, roughness, WIDTH, HEIGHT))
+    spread = normal_spread(tris, snapshot.camera, exact, WIDTH, HEIGHT)
+    expected = lobe_roughness(0.05, spread, footprint_variance())
+    ball = exact.hit & (exact.object == next(
+        i for i, o in enumerate(snapshot.objects) if o.name.startswith("Sphere")))
+    same = exact.hit & (seen["material"] == exact.material) & (exact.triangle >= 0)
+    inside = ball & same & (spread < 0.5 * FOOTPRINT_LIMIT / footprint_variance())
+    assert inside.sum() > 50
+    assert np.median(expected[inside]) > 0.1  # the ball's lobe is widened well past 0.05
+    # the GPU differences its quad's pixels (forward or backward), numpy the next pixel's ray
+    off = np.abs(seen["roughness"][inside] / expected[inside] - 1.0)
+    assert np.median(off) < 0.02 and np.percentile(off, 95) < 0.05 and off.max() < 0.15
+    flat = same & ~ball
+    np.testing.assert_allclose(seen["roughness"][flat], 0.05, atol=1e-6)
+    rim = ball & same & (spread > 2 * FOOTPRINT_LIMIT / footprint_variance())
+    np.testing.assert_allclose(seen["roughness"][rim], (0.05 ** 4 + FOOTPRINT_LIMIT) ** 0.25,
+                               rtol=1e-4)
+
+
 def test_f12_writes_a_multilayer_exr_with_cycles_passes(voxgi, tmp_path):
     from voxgi.blender.session import scene_session
     from voxgi.render.engine import enable_passes

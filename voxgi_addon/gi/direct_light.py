@@ -409,7 +409,7 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
                    sample_ids=None, per_light: bool = False, strata_block=None, reflect=None,
                    unshadowed=None, terminator=None, world_variance=None,
                    one_technique: bool = False, world_strata: int | None = None,
-                   world_fewer=None):
+                   world_fewer=None, first_stream: int = 0):
     """Cycles' ``Diffuse Direct`` (irradiance / π, no albedo) at surface points.
 
     Parameters
@@ -456,6 +456,8 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
         WORLD_STRATA). None: the lamps' strata.
     world_fewer : (N,) bool, with world_strata: the points that take them (the others the
         lamps' strata; ``passes.world_fewer_pixels``, GLSL bvh_direct's world_fewer). None: all.
+    first_stream : the hash stream of ``lights[0]`` (light i's is first_stream + i: its index
+        in the scene's lights list; ``light_table``'s).
 
     Returns
     -------
@@ -473,7 +475,8 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
         from .terminator import ShadowStarts
 
         tris = ShadowStarts(tris, p + _NORMAL_OFFSET * n, n, *terminator)
-    for index, light in enumerate(lights):
+    for row, light in enumerate(lights):
+        index = first_stream + row  # its samples' stream
         shade = _BY_TYPE.get(light.type)
         if shade is None or getattr(light, "power", 1.0) == 0:
             continue
@@ -513,11 +516,11 @@ def diffuse_direct(points, normals, lights, tris, samples: int = 16, seed: int =
             if reflect is not None and light.type in ("WORLD", "EMITTERS"):
                 value, glossy = shade(light, p[a:b], n[a:b], tris, strata,
                                       lambda lit, dirs, a=a: reflect(a + lit, dirs), **given)
-                shine[index, a:b] += glossy * color
+                shine[row, a:b] += glossy * color
             else:  # a lamp with Cast Shadow off: nothing occludes it
                 value = shade(light, p[a:b], n[a:b], tris if getattr(light, "cast_shadow", True)
                               else None, strata, **given)
-            out[index, a:b] += (value[:, None] if value.ndim == 1 else value) * color
+            out[row, a:b] += (value[:, None] if value.ndim == 1 else value) * color
             if "variance" in given:  # (the colour is the world's strength: 1)
                 world_variance[a:b] += part
     result = (out if per_light else out.sum(axis=0)).astype(np.float32)

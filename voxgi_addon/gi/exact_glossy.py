@@ -205,7 +205,9 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
     ray j drawn from the map's importance (``world_light.sample_world``, stream
     ``WORLD_GLOSSY_STREAM``) each add L f / (p_lobe + p_map) where they reach the sky
     unoccluded; a mirror takes its one reflected ray, and a uniform world the lobe's rays alone
-    (its map's importance is uniform over the sphere). With ``emission`` (M + 1, 3) per
+    (its map's importance is uniform over the sphere). A map's sun (``world_light.Sun``) is
+    left out of a lobe that is not a mirror's: each pixel takes it as a lamp
+    (``passes.map_sun_shine``). With ``emission`` (M + 1, 3) per
     material, a lobe ray landing on an emissive triangle adds its emission × the ray's weight
     (``glossy_indirect`` then leaves it out); with ``emitters`` (``emitters.EmitterLight``, the
     same triangles) only a mirror's ray does: a glossy lobe gets them from ``emitters_shine``
@@ -255,8 +257,9 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
     # half of it below the horizon; GLSL bvh_glossy.glsl uniform_sky)
     map_pdf = np.zeros_like(lobe_pdf) if world.uniform else world_pdf(world, dirs)
     share = np.where(lobe.mirror[:, None], 1.0, lobe_pdf / np.maximum(lobe_pdf + map_pdf, 1e-30))
-    value += np.where((useful & (hit < 0))[..., None],
-                      world_radiance(world, dirs) * weight * share[..., None], 0.0)
+    sky = world_radiance(world, dirs)
+    value += np.where((useful & (hit < 0) & ~_in_sun(world, sky, lobe))[..., None],
+                      sky * weight * share[..., None], 0.0)
     if world.uniform:
         return _glossy_mean(lobe, value)
 
@@ -266,9 +269,20 @@ def glossy_world_direct(points, normals, views, materials, sample_ids, tris, wor
     dirs = sample_world(world, hammersley(ids, WORLD_GLOSSY_STREAM, rays, seed))
     lobe_pdf, map_pdf = lobe.pdf(dirs), world_pdf(world, dirs)
     useful = (~lobe.mirror[:, None]) & (np.einsum("nkc,nc->nk", dirs, n) > 0) & (map_pdf > 0)
+    sky = world_radiance(world, dirs)
+    useful &= ~_in_sun(world, sky, lobe)
     f = lobe.reflectance(dirs) / np.maximum(lobe_pdf + map_pdf, 1e-30)[..., None]
-    value += np.where(reaching(dirs, useful)[..., None], world_radiance(world, dirs) * f, 0.0)
+    value += np.where(reaching(dirs, useful)[..., None], sky * f, 0.0)
     return _glossy_mean(lobe, value)
+
+
+def _in_sun(world, radiance, lobe) -> np.ndarray:
+    """(N, K) the rays of a glossy lobe whose ``radiance`` (N, K, 3) is the map's sun's: a
+    pixel's lobe takes the sun as a lamp (``world_light.sun_lamp``, ``passes.map_sun_shine``),
+    so the world's gather leaves them out; a mirror's one ray keeps it."""
+    if world.sun is None:
+        return np.zeros(radiance.shape[:-1], bool)
+    return (radiance @ LUMINANCE > world.sun.threshold) & ~lobe.mirror[:, None]
 
 
 def _emitter_pdf(emitters, radiance, distance2, cos_l):
@@ -471,14 +485,17 @@ def area_shine(light, direct, points, normals, views, materials, principled, bas
 
 
 DISC_SIDES = 12  # a round lamp's visible disc as a regular polygon of this many corners
+DISC_WIDEST = 1.2  # radians: the most a pixel's footprint widens a disc to (its clamp's)
 
 
-def round_lamp_disc(light, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def round_lamp_disc(light, points, grow=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What a round lamp shows each of ``points`` (N, 3): ((N, DISC_SIDES, 3) its outline as a
     regular polygon, (N,) its angular radius, (N,) bool where it shows one). A point or spot
     light of radius r is a sphere: its silhouette, the disc (d² − r²)/d from the point along
     the way to its centre, of radius r √(d² − r²)/d (none from inside it); a sun is the disc
-    of its angle one metre away toward it. The polygon's corners come from the axis's
+    of its angle one metre away toward it. grow : (N,) radians² added to the angular radius²
+    (``lobe_footprint.disc_growth``: the pixel's footprint, as the disc's reflection spreads
+    over it), None: none. The polygon's corners come from the axis's
     ``sampling.perpendicular_basis``, as the GPU's (glossy_direct.glsl)."""
     import math
 
@@ -501,12 +518,20 @@ def round_lamp_disc(light, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         inside = np.maximum(d * d - r * r, 0.0)
         middle = points + axis * (inside / d)[:, None]
         radius = r * np.sqrt(inside) / d
+    distance = np.linalg.norm(middle - points, axis=1)
+    angular = np.arctan2(radius, np.maximum(distance, 1e-30))
+    if grow is not None:
+        grow = np.asarray(grow, np.float64).reshape(-1)
+        if light.type == "SUN":
+            valid = (angular > 0.0) | (grow > 0.0)
+        else:
+            valid = (d > r * (1.0 + 1e-6)) & ((r > 0.0) | (grow > 0.0))
+        angular = np.minimum(np.sqrt(angular * angular + grow), DISC_WIDEST)
+        radius = np.maximum(distance, 1e-30) * np.tan(angular)
     t, b = perpendicular_basis(np.ascontiguousarray(axis))
     turn = 2.0 * np.pi * np.arange(DISC_SIDES) / DISC_SIDES
     outline = middle[:, None] + radius[:, None, None] * (
         np.cos(turn)[None, :, None] * t[:, None] + np.sin(turn)[None, :, None] * b[:, None])
-    distance = np.linalg.norm(middle - points, axis=1)
-    angular = np.arctan2(radius, np.maximum(distance, 1e-30))
     return outline, angular, valid
 
 
@@ -521,19 +546,20 @@ class _Fan:
         self.radiance = np.ones((len(k), 3))
 
 
-def disc_shine(light, direct, points, normals, views, materials, principled, base) -> np.ndarray:
+def disc_shine(light, direct, points, normals, views, materials, principled, base,
+               grow=None) -> np.ndarray:
     """(N, 3) what glossy lobes at ``points`` reflect toward ``views`` of a round lamp (a sphere
     light, a sun's disc: ``round_lamp_disc``) whose shadowed Diffuse Direct there is ``direct``
     (N, 3): direct × π × the lobe's mean over the disc, ∫ f cos dω / ∫ cos dω — the numerator
     the LTC integral of the lobe over the disc with its Fresnel (``_emitters_unshadowed``),
     the denominator Lambert's formula over it, both clipped to the horizon. 0 where the lamp
     shows no disc, for a mirror and for a view below the horizon (the lamp's one direction
-    takes those: ``passes.glossy_direct_radiance``)."""
+    takes those: ``passes.glossy_direct_radiance``). grow : ``round_lamp_disc``'s."""
     from .ltc import _clamped_cosine_integral, local_frame
 
     points = np.asarray(points, np.float64).reshape(-1, 3)
     out = np.zeros((len(points), 3))
-    outline, _, valid = round_lamp_disc(light, points)
+    outline, _, valid = round_lamp_disc(light, points, grow)
     lobe = _Lobe(normals, views, materials, principled, base)
     local = np.einsum("nij,nkj->nki", local_frame(lobe.n, lobe.v), outline - points[:, None])
     flat = _clamped_cosine_integral(local)  # ∫ cos θ / π dω

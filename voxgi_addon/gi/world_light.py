@@ -41,7 +41,7 @@ from ..scene.equirect import box_downsample, direction_to_pixel, pixel_direction
 from ..scene.short_axis import any_along, norm3
 from .sampling import perpendicular_basis
 
-__all__ = ["WorldLight", "world_light", "scene_lights", "world_direct", "world_table",
+__all__ = ["WorldLight", "world_light", "scene_lights", "sun_lamp", "world_direct", "world_table",
            "one_technique", "sample_world", "sample_sun", "world_pdf", "world_radiance",
            "IRRADIANCE_HEIGHT", "SOURCE_HEIGHT"]
 
@@ -277,6 +277,43 @@ def world_light(world) -> WorldLight | None:
             _cache.pop(next(iter(_cache)))
         _cache[key] = (fingerprint, light)
     return light
+
+
+def sun_lamp(world: WorldLight | None):
+    """The map's ``Sun`` as a sun lamp (``LightData``, type SUN) for the glossy light a pixel's
+    lobe takes of it (docs/gi_pipeline.md "An HDRI's sun in a glossy lobe"), or None: its
+    direction the luminous-power-weighted mean of its pixels' directions, its disc the larger
+    of the one of their solid angle and the one whose spread (√2 × the power-weighted RMS
+    angle from that direction, a uniform disc's radius) they show, its irradiance at normal
+    incidence Σ L ω over them (per channel: Strength 1 × that colour)."""
+    from ..scene.snapshot import LightData
+
+    if world is None or world.sun is None:
+        return None
+    sun = world.sun
+    h, w = world.radiance.shape[:2]
+    radiance = world.radiance[sun.rows, sun.columns]
+    omega = row_solid_angles(h, w)[sun.rows]
+    dirs = pixel_directions(h, w)[sun.rows, sun.columns]
+    luminous = (radiance @ LUMINANCE) * omega
+    middle = (dirs * luminous[:, None]).sum(axis=0)
+    middle /= max(float(np.linalg.norm(middle)), 1e-300)
+    angles = np.arccos(np.clip(dirs @ middle, -1.0, 1.0))
+    spread = math.sqrt(2.0 * float((luminous * angles ** 2).sum() / luminous.sum()))
+    covered = math.acos(max(-1.0, 1.0 - float(omega.sum()) / (2.0 * math.pi)))
+    radius = min(max(spread, covered), 0.5 * math.pi)
+    matrix = np.eye(4)
+    matrix[:3, :3] = _frame_along(-middle)
+    colour = (radiance * omega[:, None]).sum(axis=0)
+    return LightData(name="World Sun", type="SUN", color=colour.astype(np.float32), power=1.0,
+                     world_matrix=matrix, angle=2.0 * radius)
+
+
+def _frame_along(direction) -> np.ndarray:
+    """(3, 3) a rotation whose local −Z is the unit ``direction`` (a lamp shines along its −Z)."""
+    z = -np.asarray(direction, np.float64)
+    x, y = perpendicular_basis(z[None])
+    return np.stack([x[0], y[0], z], axis=1)
 
 
 def scene_lights(snapshot, tris=None, emission=None) -> list:

@@ -37,10 +37,11 @@ MAX_OUTLINE = 64
 LIGHT_TEXELS = 8 + MAX_OUTLINE
 
 
-def light_table(lights) -> np.ndarray:
-    """(L, LIGHT_TEXELS, 4) float32 rows (see the module doc); L may be 0."""
+def light_table(lights, first_stream: int = 0) -> np.ndarray:
+    """(L, LIGHT_TEXELS, 4) float32 rows (see the module doc); L may be 0. Light i's samples
+    take stream ``first_stream`` + i (its index in the scene's lights list)."""
     rows = []
-    for index, light in enumerate(lights):
+    for index, light in enumerate(lights, first_stream):
         kind = LIGHT_TYPES.get(light.type)
         if kind is None or light.power == 0:
             continue

@@ -36,9 +36,9 @@ from ..gi.emitters import NEAR_STEP, emitter_distances
 from ..gi.exact_glossy import area_shine, disc_shine, emitters_glossy_field, emitters_shine, round_lamp_disc
 from ..gi.exact_indirect import LUMINANCE
 from ..gi.light_injection import material_emission
-from ..gi.principled import diffuse_weight, glossy_color, glossy_reflectance
+from ..gi.principled import ROUGHNESS_SQ_THRESHOLD, diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.terminator import find_lifts
-from ..gi.world_light import scene_lights, world_light
+from ..gi.world_light import scene_lights, sun_lamp, world_light
 from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, camera_frame, filter_samples
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
@@ -54,6 +54,7 @@ from .gather import (
     gather_glossy_world,
     radiance_cache,
 )
+from .lobe_footprint import disc_growth, footprint_variance, lobe_roughness, normal_spread
 from .resolve import combined_light, over, recoverable, resolve_samples
 from .upsample import (
     STRIDES,
@@ -176,7 +177,8 @@ def _strata_centres(light, points, normals):
     return towards, weight / np.maximum(weight.sum(axis=0, keepdims=True), 1e-30)
 
 
-def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_direct, base=None):
+def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_direct, base=None,
+                           rough=None, lights=None):
     """(N, 3) the glossy light the lights send to the viewer (Glossy Color × Glossy Direct),
     without noise.
 
@@ -190,13 +192,24 @@ def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_dire
     (``exact_glossy.area_shine``, as a bounce hit's metal lobe takes it). The light's
     shadowing is taken as uniform over it. views : (N, 3) unit directions from the points to
     the viewer; per_light_direct : (L, N, 3) Diffuse Direct light by light; base : (N, 3) the
-    points' Base Color per texel (``scene.textures.primary_base``), None: the table's.
+    points' Base Color per texel (``scene.textures.primary_base``), None: the table's;
+    rough : (N,) the pixels' lobe roughness (``lobe_footprint.lobe_roughness``: the material's
+    widened by the pixel's footprint), None: the materials'. The footprint widens an area
+    light's lobe, and a round lamp's disc instead (``lobe_footprint.disc_growth``: the same
+    spread without a widened GGX lobe's long tails). lights : the lamps of
+    ``per_light_direct`` (None: the snapshot's).
     """
     principled = principled_table(snapshot)
-    table, params = principled
-    shading = (table[mat] if base is None else base, params[mat, 0], params[mat, 1], params[mat, 2])
+    own = (principled, mat)  # an area light's lobe: each point's own, widened
+    grow = None
+    if rough is not None:
+        own = per_point_table(principled, mat, rough)
+        grow = disc_growth(rough, principled[1][np.asarray(mat), 2])
     total = np.zeros((len(points), 3))
-    for light, direct in zip(snapshot.lights, per_light_direct):
+    for light, direct in zip(snapshot.lights if lights is None else lights, per_light_direct):
+        (table, params), rows = own if light.type == "AREA" else (principled, mat)
+        shading = (table[rows] if base is None else base, params[rows, 0], params[rows, 1],
+                   params[rows, 2])
         if light.type == "AREA":
             towards, weights = _strata_centres(light, points, normals)
         else:
@@ -214,21 +227,51 @@ def glossy_direct_radiance(snapshot, points, normals, views, mat, per_light_dire
             share = ltc_share(terms @ LUMINANCE, weights)
             k = np.flatnonzero(share > 0.0)
             if len(k):
-                integral = area_shine(light, direct[k], points[k], normals[k], views[k], mat[k],
-                                      principled, None if base is None else base[k])
+                integral = area_shine(light, direct[k], points[k], normals[k], views[k], rows[k],
+                                      (table, params), None if base is None else base[k])
                 shine[k] += share[k, None] * (integral - shine[k])
         elif light.type in ("POINT", "SPOT", "SUN"):  # the lobe's mean over the lamp's disc
-            _, angular, valid = round_lamp_disc(light, points)
-            share = np.where(valid, disc_share(np.clip(params[mat, 2], 0.0, 1.0) ** 2, angular), 0.0)
+            _, angular, valid = round_lamp_disc(light, points, grow)
+            share = np.where(valid, disc_share(np.clip(params[rows, 2], 0.0, 1.0) ** 2, angular),
+                             0.0)
             k = np.flatnonzero(share > 0.0)
             if len(k):
-                mean = disc_shine(light, direct[k], points[k], normals[k], views[k], mat[k],
-                                  principled, None if base is None else base[k])
+                mean = disc_shine(light, direct[k], points[k], normals[k], views[k], rows[k],
+                                  (table, params), None if base is None else base[k],
+                                  None if grow is None else grow[k])
                 # a mirror or a view below the horizon keeps its one direction
                 kept = np.all(mean == 0.0, axis=1)
                 shine[k] += np.where(kept[:, None], 0.0, share[k, None] * (mean - shine[k]))
         total += shine
     return total
+
+
+def map_sun_shine(snapshot, sun, points, normals, views, mat, direct, base=None, rough=None):
+    """(N, 3) the glossy light the map's sun sends to the viewer (Glossy Color × its Glossy
+    Direct): ``glossy_direct_radiance`` of ``sun`` (``world_light.sun_lamp``) from its own
+    shadowed Diffuse Direct ``direct`` (N, 3) (traced as that lamp, stream after the scene's
+    lights), 0 on a mirror, whose one reflected ray in the world's glossy gather sees the sun
+    (``exact_glossy.glossy_world_direct``, which leaves it out of every other lobe). The
+    pixel's lobe (``rough``) is widened by its footprint, so that a sun's reflection a fraction
+    of a pixel wide on a curved surface is its pixel's average (``lobe_footprint``)."""
+    shine = glossy_direct_radiance(snapshot, points, normals, views, mat, [direct], base, rough,
+                                   [sun])
+    material_rough = principled_table(snapshot)[1][np.asarray(mat), 2]
+    return np.where((material_rough ** 4 <= ROUGHNESS_SQ_THRESHOLD)[:, None], 0.0, shine)
+
+
+def per_point_table(principled, mat, rough):
+    """(``principled_table`` of N rows + the last ('none'), indices (N,)): point i's material
+    row with roughness ``rough[i]``, so that a function reading a lobe from (materials,
+    table) reads each point's own lobe."""
+    table, params = (np.asarray(a) for a in principled)
+    mat = np.asarray(mat).reshape(-1)
+    last = len(table) - 1
+    rows = np.where((mat >= 0) & (mat < last), mat, last)
+    own = params[rows].astype(np.float64)
+    own[:, 2] = np.asarray(rough, np.float64).reshape(-1)
+    return ((np.concatenate([table[rows], table[-1:]]), np.concatenate([own, params[-1:]])),
+            np.arange(len(mat)))
 
 
 def check_request(snapshot, width: int, height: int, gi_stride: int = 1,
@@ -924,7 +967,7 @@ def filtered_sums(sums, count, tails: Tails, width: int, height: int, filter_wid
 def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
                  visibility=None, sample_ids=None, per_light=False, seed=0, strata_block=None,
                  unshadowed=None, views=None, world_variance=None, world_strata=None,
-                 world_fewer=None):
+                 world_fewer=None, first_stream: int = 0):
     """(N, 3) Diffuse Direct at surface points: exact shadow rays against ``tris`` (shadows
     "RAYS") or one soft-shadow cone per light through ``octree`` ("CONES"; ``visibility``
     as in ``cone_shadows.cone_shadowed_direct``, the GPU tracer passes its own).
@@ -937,7 +980,7 @@ def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
     then leave smooth-shaded triangles as Cycles' shadow terminator offset lifts them
     (``terminator.find_lifts``, GLSL bvh_direct.glsl ``terminator_set``). world_variance :
     ("RAYS") gets the variance of the world's part (``direct_light.diffuse_direct``'s);
-    world_strata, world_fewer : ("RAYS") ``diffuse_direct``'s."""
+    world_strata, world_fewer, first_stream : ("RAYS") ``diffuse_direct``'s."""
     if shadows == "CONES":
         return cone_shadowed_direct(octree, points, normals, lights, cones, samples, visibility)
     terminator = None
@@ -947,7 +990,8 @@ def direct_light(octree, points, normals, lights, tris, cones, samples, shadows,
                           samples=samples, sample_ids=sample_ids, per_light=per_light, seed=seed,
                           strata_block=strata_block, unshadowed=unshadowed,
                           terminator=terminator, world_variance=world_variance,
-                          world_strata=world_strata, world_fewer=world_fewer)
+                          world_strata=world_strata, world_fewer=world_fewer,
+                          first_stream=first_stream)
 
 
 # The world light's filter spans about this share of the image's longer side: at 160 × 120 two
@@ -1249,6 +1293,12 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     _, rough, _, _ = material_table(snapshot)
     materials = material_indices(snapshot, seen.material.ravel())
     mat = materials[hit]
+    # the lobes evaluated per pixel (the lamps' glossy light, Fast's glossy cones) widened by
+    # the pixel's footprint (lobe_footprint; GPU: the G-buffer's normal.w)
+    lobe = lobe_roughness(principled_table(snapshot)[1][materials, 2], normal_spread(camera_tris, snapshot.camera, seen,
+                                                          width, height).ravel(),
+                          footprint_variance(filter_width if quality == "ACCURATE"
+                                             else DEFAULT_FILTER_WIDTH))
 
     # the lamps, then the world and the emissive triangles
     lights = scene_lights(snapshot, tris, material_table(snapshot)[3])
@@ -1275,7 +1325,7 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
 
     def glossy_cones(pixels):  # Fast: the cones see the world where they leave the voxels
         return trace_glossy(octrees["glossy"], positions[pixels], normals[pixels],
-                            dirs[pixels], rough[materials[pixels]], cones,
+                            dirs[pixels], lobe[pixels], cones,
                             world_mips(getattr(snapshot.world, "radiance", None)))
 
     t0 = time.perf_counter()
@@ -1315,7 +1365,7 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         p, n, views = positions[hit], normals[hit], -dirs[hit]  # for the view as Cycles'
         base = primary_base(tris, seen, hit, principled_table(snapshot)[0][mat],
                             snapshot.camera, width, height)  # None: untextured
-        shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_lamp, base)
+        shine = glossy_direct_radiance(snapshot, p, n, views, mat, per_lamp, base, lobe[hit])
         return compose_passes(snapshot, width, height, hit, mat, direct, indirect, ao,
                               glossy, n, views, shine, base=base,
                               holdout=None if seen.holdout is None else seen.holdout.ravel()), \
@@ -1323,6 +1373,7 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
     t0 = time.perf_counter()
     emitting = any(light.type == "EMITTERS" for light in lights)
     emitters = next((light for light in lights if light.type == "EMITTERS"), None)
+    sun = sun_lamp(world_light(snapshot.world))  # the map's sun: each pixel's lobe takes it
     low["world"] = gather_glossy_world(tris, world_light(snapshot.world),
                                        principled_table(snapshot), seen.hit, seen.position,
                                        seen.normal, seen.direction,
@@ -1438,8 +1489,19 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
                                  world_fewer=None if fewer is None else fewer.ravel()[hit])
         if variance is not None:
             per_light = world_filtered(per_light, variance, lights, hit, seen)
+        own_lobe = lobe[hit] if seen is centre_seen else lobe_roughness(
+            principled_table(snapshot)[1][mat, 2],
+            normal_spread(camera_tris, snapshot.camera, seen, width, height, offset).ravel()[hit],
+            footprint_variance(filter_width, share))
         shine = glossy_direct_radiance(snapshot, p, n, views, mat,
-                                       per_light[:len(snapshot.lights)], base)
+                                       per_light[:len(snapshot.lights)], base, own_lobe)
+        if sun is not None:  # the map's sun in the pixel's lobe, traced as a lamp
+            sun_direct = direct_light(None, p, n, [sun], tris, cones, light_samples, shadows,
+                                      sample_ids=hit, per_light=True, seed=gather_settings.seed,
+                                      strata_block=block, views=-views,
+                                      first_stream=len(lights))[0]
+            glow = glow + map_sun_shine(snapshot, sun, p, n, views, mat, sun_direct, base,
+                                        own_lobe)
         accumulate_pass(sums if into is None else into, snapshot, hit, mat, n, views,
                         per_light.sum(axis=0), terms[0], terms[1], terms[2], shine + glow,
                         terms[3], base)
