@@ -155,14 +155,17 @@ LIGHT_FEATURES = {"SUN": ("SUN",), "AREA": ("AREA",), "POINT": ("POINT", "SPOT")
 EMITTERS_ONLY = ("AREA", "POINT", "SUN", "WORLD")  # a variant with the emitters' code only
 
 
-def absent_lights(lights, metals: bool = True) -> tuple[str, ...]:
+def absent_lights(lights, metals: bool = True, direct: bool = False) -> tuple[str, ...]:
     """The ``LIGHT_FEATURES`` no light of ``lights`` (``Light``s with a ``type``) needs, and
     "METAL_AREA" (a metal hit's glossy lobe over an area lamp, bvh_shade.glsl) where the scene
     has an area lamp and no metal (``metals``, ``has_metals``), and "METALS" (a metal hit's
-    lamp picks by its lobe, bvh_shade.glsl hit_lamp_weight) where it has no metal."""
+    lamp picks by its lobe, bvh_shade.glsl hit_lamp_weight) where it has no metal. direct :
+    the direct-light dispatches' variant, which traces a map's sun as a sun lamp too for the
+    pixels' glossy lobes (``world_light.sun_lamp``; the gathers' variants need no lamp code
+    for it)."""
     types = {light.type for light in lights}
-    if any(getattr(light, "sun", None) is not None for light in lights):
-        types.add("SUN")  # a map's sun is traced as a sun lamp too (world_light.sun_lamp)
+    if direct and any(getattr(light, "sun", None) is not None for light in lights):
+        types.add("SUN")
     absent = [k for k, needs in LIGHT_FEATURES.items() if not types & set(needs)]
     if not metals and "AREA" not in absent:
         absent.append("METAL_AREA")

@@ -127,7 +127,7 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     # takes the scene's one variant (the code of all its kinds of light): a variant per lamp
     # kind cost a compile each and no time a dispatch (docs/gi_pipeline.md "One direct-light
     # variant per scene")
-    absent = scene.absent
+    absent = scene.direct_absent
     for index, table in enumerate(scene.lamp_tables):
         direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
                                       world=scene.no_world, emitters=scene.no_emitters,

@@ -339,7 +339,7 @@ def emitter_fields(scene, gbuffer_inputs, stride: int, width: int, height: int, 
     glossy = emitter_glossy_texture(bvh, points, scene.emitters, scene.materials, 1, 0,
                                     scene.no_lamp, scene.world_map, unshadowed=True)
     diffuse = emitters_unshadowed_texture(bvh, points, scene.emitters, scene.no_lamp,
-                                          scene.world_map, absent=scene.absent)
+                                          scene.world_map, absent=scene.direct_absent)
     return (glossy, diffuse,
             *upsample_field(glossy, diffuse, gbuffer_inputs, stride, width, height, eye))
 
@@ -675,7 +675,7 @@ def _emitter_unshadowed(f):
     scene, centre = f["scene"], f["centre"]
     return {"unshadowed": emitters_unshadowed_texture(
         scene.bvh, centre.inputs, scene.emitters, scene.no_lamp, scene.world_map,
-        field=f["fields"][3], absent=scene.absent)}
+        field=f["fields"][3], absent=scene.direct_absent)}
 
 
 def _reads_gbuffer(f) -> bool:

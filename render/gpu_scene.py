@@ -671,6 +671,12 @@ class GPUScene:
         the BVH kernels, the gathers' and every direct-light dispatch's."""
         return absent_lights(self.lights, has_metals(self.principled, self.tris))
 
+    @property
+    def direct_absent(self) -> tuple[str, ...]:
+        """``absent`` of the direct-light dispatches (``absent_lights``' direct): every one of
+        them takes this variant."""
+        return absent_lights(self.lights, has_metals(self.principled, self.tris), direct=True)
+
     @staticmethod
     def zeros(width: int, height: int):
         """A new width × height RGBA32F texture of zeros, cleared on the GPU: nothing is

@@ -405,6 +405,7 @@ class Features:
     lamps: bool
     tail: bool
     emitters: bool
+    direct_absent: tuple  # the direct-light dispatches' (``absent_lights``' direct)
 
 
 def features(tris, lights, lamp_count: int, principled=None) -> Features:
@@ -413,10 +414,11 @@ def features(tris, lights, lamp_count: int, principled=None) -> Features:
     cutouts, hidden = bvh_features(tris)
     # a map's sun is traced as a lamp for the pixels' glossy lobes (world_light.sun_lamp)
     map_sun = any(getattr(light, "sun", None) is not None for light in lights)
+    metals = has_metals(principled, tris)
     return Features(cutouts, hidden, getattr(tris, "textures", None) is not None,
-                    absent_lights(lights, has_metals(principled, tris)),
-                    lamp_count > 0 or map_sun, len(lights) > lamp_count,
-                    any(light.type == "EMITTERS" for light in lights))
+                    absent_lights(lights, metals), lamp_count > 0 or map_sun,
+                    len(lights) > lamp_count, any(light.type == "EMITTERS" for light in lights),
+                    absent_lights(lights, metals, direct=True))
 
 
 _QUICK: dict[str, object] = {}
@@ -475,7 +477,8 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
             bvh("bvh_glossy", 2)
         if found is not None and found.emitters:
             bvh("bvh_emitter_glossy", 1, True, EMITTERS_ONLY)
-            bvh("bvh_direct", 1, True)  # the field's unshadowed sums: the scene's variant
+            # the field's unshadowed sums: the direct dispatches' variant
+            bvh("bvh_direct", 1, True, found.direct_absent)
             add("upsample field", 1, lambda: gpu_gather._field_shader(False))
     else:
         add("cone diffuse_ao", 1, lambda: compute_shader("diffuse_ao"))
@@ -487,7 +490,8 @@ def kernel_steps(found: Features | None, quality: str, bounces: int, glossy_indi
     if quality == "ACCURATE" or shadows == "RAYS":  # gpu_compose.shade_stages
         add("aa_surface", 1, lambda: gpu_compose._aa_shader("aa_surface"))
         if found is not None and (found.lamps or found.tail):
-            bvh("bvh_direct", 1, True)  # every light's dispatch: the scene's one variant
+            # every light's dispatch: the direct dispatches' one variant
+            bvh("bvh_direct", 1, True, found.direct_absent)
         if found is not None and found.lamps:
             # the lamps' glossy light: not in the first coarse image (``first_image_options``)
             add("glossy direct", 2 if quality == "ACCURATE" else 1, gpu_gather._glossy_shader)
