@@ -160,7 +160,8 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     if extra and sun_glossy and scene.sun_table is not None:
         direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
                                       world=scene.no_world, emitters=scene.no_emitters,
-                                      strata_block=block, table=scene.sun_table, absent=absent)
+                                      strata_block=block, table=scene.sun_shadow_table,
+                                      absent=absent)
         shine = glossy_direct_texture(inputs, direct, scene.sun_table, 0, principled, emission,
                                       materials=materials, map_sun=True)
         out = run("aa_light", LIGHT_SAMPLERS, {

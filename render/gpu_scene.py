@@ -41,7 +41,7 @@ import gpu
 import numpy as np
 
 from ..voxgi_addon.gi.emitters import emitter_table
-from ..voxgi_addon.gi.world_light import scene_lights, sun_lamp, world_light, world_table
+from ..voxgi_addon.gi.world_light import scene_lights, sun_lamp, sun_shadow, world_light, world_table
 from ..voxgi_addon.preview.light_table import LIGHT_TEXELS, light_table
 from ..voxgi_addon.preview.passes import material_table, principled_table
 from ..voxgi_addon.scene.bvh import TEXTURE_WIDTH
@@ -171,7 +171,7 @@ class ScenePlan:
     lamps: tuple | None = None        # lamp_tables
     lights: list = dataclasses.field(default_factory=list)
     world: object = None              # world_table
-    sun: object = None                # light_table of the map's sun lamp (no row: none)
+    sun: object = None                # light_tables of the map's sun lamp and its shadow ray
     emitters: object = None           # emitter_table
     # set once ``bvh`` is in (``prepare``'s on_tables: it is built on a thread meanwhile)
     bvh_ready: threading.Event = dataclasses.field(default_factory=threading.Event)
@@ -211,7 +211,9 @@ class GPUScene:
         self.textures: dict[str, object] = {}  # texture_table, texture_atlas
         self.slots = None
         self.lamp_table = self.no_lamp = self.world_map = self.emitters = None
-        self.sun_table = None  # the map's sun as a lamp (world_light.sun_lamp), None: none
+        # the map's sun as a lamp (world_light.sun_lamp) and as its one shadow ray (sun_shadow),
+        # None: none
+        self.sun_table = self.sun_shadow_table = None
         self.lamp_tables: list = []
         self.keys: dict[str, object] = {}
         self.uploaded: dict[str, int] = {}
@@ -398,8 +400,9 @@ class GPUScene:
         # the lights list's
         key = (world_key, len(plan.lights))
         if key != keys.get("sun"):
-            plan.sun = light_table([sun] if (sun := sun_lamp(sky)) is not None else [],
-                                   len(plan.lights))
+            sun = sun_lamp(sky)
+            plan.sun = tuple(light_table([] if sun is None else [lamp], len(plan.lights))
+                             for lamp in (sun, sun_shadow(sun)))
             keys["sun"] = key
         t0 = time.perf_counter()
         emitters, stream = found.get("EMITTERS", (None, 0))
@@ -576,9 +579,11 @@ class GPUScene:
             new["world_map"] = _table_texture(plan.world)
             send("world", _texture_bytes(plan.world))
         if plan.sun is not None:
-            new["sun_table"] = _table_texture(plan.sun) if len(plan.sun) else None
-            if len(plan.sun):
-                send("sun", _texture_bytes(plan.sun))
+            shown = len(plan.sun[0]) > 0
+            new["sun_table"], new["sun_shadow_table"] = (
+                _table_texture(table) if shown else None for table in plan.sun)
+            if shown:
+                send("sun", sum(_texture_bytes(table) for table in plan.sun))
         if plan.emitters is not None:
             if full(_texture_bytes(plan.emitters)):
                 yield

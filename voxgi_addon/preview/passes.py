@@ -38,7 +38,7 @@ from ..gi.exact_indirect import LUMINANCE
 from ..gi.light_injection import material_emission
 from ..gi.principled import ROUGHNESS_SQ_THRESHOLD, diffuse_weight, glossy_color, glossy_reflectance
 from ..gi.terminator import find_lifts
-from ..gi.world_light import scene_lights, sun_lamp, world_light
+from ..gi.world_light import scene_lights, sun_lamp, sun_shadow, world_light
 from ..scene.camera import DEFAULT_FILTER_WIDTH, blackman_harris, camera_frame, filter_samples
 from ..scene.geometry import world_triangles
 from ..scene.raycast import primary_visibility
@@ -1496,8 +1496,8 @@ def _render_layer(snapshot, tris, camera_tris, gi_state, width, height, cones, l
         shine = glossy_direct_radiance(snapshot, p, n, views, mat,
                                        per_light[:len(snapshot.lights)], base, own_lobe)
         if sun is not None:  # the map's sun in the pixel's lobe, traced as a lamp
-            sun_direct = direct_light(None, p, n, [sun], tris, cones, light_samples, shadows,
-                                      sample_ids=hit, per_light=True, seed=gather_settings.seed,
+            sun_direct = direct_light(None, p, n, [sun_shadow(sun)], tris, cones, light_samples,
+                                      shadows, sample_ids=hit, per_light=True, seed=gather_settings.seed,
                                       strata_block=block, views=-views,
                                       first_stream=len(lights))[0]
             glow = glow + map_sun_shine(snapshot, sun, p, n, views, mat, sun_direct, base,
