@@ -96,50 +96,56 @@ int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_
     int order = any_hit ? BVH_SHADOW_LAYOUT : 2 * axis + (d[axis] < 0.0 ? 1 : 0);
     base = 2 * order * (rows / BVH_ORDERS) * (BVH_WIDTH / 2);
   }
+  /* A step tests one triangle of the current leaf, then, once the leaf is done, one node
+   * (Aila and Laine's if-if): llvmpipe runs eight lanes in lock step, and a lane in a leaf
+   * held the others at their nodes for all of its triangles. The nodes and triangles come
+   * in the same order as one leaf's loop at a time: the same hits. */
   int node = 0;
-  while (node >= 0) {
-    vec4 lo = bvh_texel_nodes(base + 2 * node);
-    vec4 hi = bvh_texel_nodes(base + 2 * node + 1);
-    vec3 t0 = lo.xyz * inv - oinv;
-    vec3 t1 = hi.xyz * inv - oinv;
-    vec3 tn = min(t0, t1);
-    vec3 tf = max(t0, t1);
-    float enter = max(max(tn.x, tn.y), max(tn.z, tmin));
-    float leave = min(min(tf.x, tf.y), min(tf.z, best));
-    if (enter <= leave) {
-      if (hi.w < 0.0) {
-        node += 1;
-        continue;
-      }
-      int code = floatBitsToInt(hi.w) - BVH_LEAF_BIAS; /* bvh.py LEAF_BIAS */
-      int first = code >> 4;
-      int last = first + (code & 15);
-      for (int slot = first; slot < last; slot++) {
-        float t;
-        vec2 tuv;
-        if (bvh_triangle(slot, o, d, dlen, t, tuv) && t > tmin && t < best) {
+  int slot = 0, last = 0; /* the current leaf's triangles left */
+  while (node >= 0 || slot < last) {
+    if (slot < last) {
+      float t;
+      vec2 tuv;
+      int current = slot++;
+      bool hit = bvh_triangle(current, o, d, dlen, t, tuv) && t > tmin && t < best;
 #ifdef BVH_HIDDEN
-          if (bvh_hidden(slot, any_hit ? BVH_RAY_SHADOW : BVH_CLOSEST_RAY)) {
-            continue;
-          }
+      hit = hit && !bvh_hidden(current, any_hit ? BVH_RAY_SHADOW : BVH_CLOSEST_RAY);
 #endif
 #ifdef BVH_CUTOUTS
-          if (bvh_texel_triangles(3 * slot + 2).w < 0.0 &&
-              !bvh_cutout_counts(int(bvh_texel_triangles(3 * slot + 1).w), tuv, o, d)) {
-            continue;
-          }
+      hit = hit && !(bvh_texel_triangles(3 * current + 2).w < 0.0 &&
+                     !bvh_cutout_counts(int(bvh_texel_triangles(3 * current + 1).w), tuv, o, d));
 #endif
-          best = t;
-          found = slot;
-          uv = tuv;
-          if (any_hit) {
-            t_hit = t;
-            return found;
-          }
+      if (hit) {
+        best = t;
+        found = current;
+        uv = tuv;
+        if (any_hit) {
+          t_hit = t;
+          return found;
         }
       }
     }
-    node = int(lo.w);
+    if (slot >= last && node >= 0) {
+      vec4 lo = bvh_texel_nodes(base + 2 * node);
+      vec4 hi = bvh_texel_nodes(base + 2 * node + 1);
+      vec3 t0 = lo.xyz * inv - oinv;
+      vec3 t1 = hi.xyz * inv - oinv;
+      vec3 tn = min(t0, t1);
+      vec3 tf = max(t0, t1);
+      float enter = max(max(tn.x, tn.y), max(tn.z, tmin));
+      float leave = min(min(tf.x, tf.y), min(tf.z, best));
+      if (enter <= leave && hi.w < 0.0) {
+        node += 1;
+      }
+      else {
+        if (enter <= leave) {
+          int code = floatBitsToInt(hi.w) - BVH_LEAF_BIAS; /* bvh.py LEAF_BIAS */
+          slot = code >> 4;
+          last = slot + (code & 15);
+        }
+        node = int(lo.w);
+      }
+    }
   }
   t_hit = found >= 0 ? best : BVH_FAR;
   return found;
