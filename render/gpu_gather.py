@@ -20,6 +20,8 @@ import numpy as np
 from ..voxgi_addon.gi.exact_glossy import DISC_SIDES, DISC_WIDEST, HORIZON_LIFT, METAL_RAY_FACTOR
 from ..voxgi_addon.gi.exact_indirect import MAX_FOLLOWS
 from ..voxgi_addon.gi.radiance_cache import (
+    OUTLIER_FLOOR,
+    OUTLIER_RATIO,
     build_cache,
     cache_key,
     cache_texels,
@@ -223,8 +225,11 @@ _RELAX_SAMPLERS = ("face_places", "radiance_cache", "paths_radiance", "paths_pic
 
 def _relax_shader():
     if "relax" not in _shaders:
-        _shaders["relax"] = build_compute(("cache_lookup", "cache_relax"), _RELAX_SAMPLERS,
-                                          ("sampling", "levels"), ("out_image", "copy_image"))
+        _shaders["relax"] = build_compute(
+            ("cache_lookup", "cache_relax"), _RELAX_SAMPLERS, ("sampling", "levels"),
+            ("out_image", "copy_image"),
+            defines={"OUTLIER_RATIO": repr(float(OUTLIER_RATIO)),
+                     "OUTLIER_FLOOR": repr(float(OUTLIER_FLOOR))})
     return _shaders["relax"]
 
 

@@ -4,7 +4,9 @@
  * outputs. The faces: gbuffer_position (origin xyz, 1) and gbuffer_normal (unit axis) at texel
  * (f mod Wf, f div Wf), sample id f (face_points' row). radiance_cache : the layout's texels
  * (radiance_cache.cache_texels: the grids' ids and the faces each voxel holds).
- * out_image = (the ray's radiance without the cache rgb, 0)      (bvh_shade.glsl ray_paths)
+ * out_image = (the ray's radiance without the cache rgb, the glossy share of its weight;
+ *              −(1 + it) where the hit is a metal: cache_relax.glsl tames a face's lone
+ *              outlier off a metal, radiance_cache.tamed) (bvh_shade.glsl ray_paths)
  * out_pick  = (the hit's cache weight rgb, the face its lookup reads: cache_pick's compact
  *              index, drawn by the record's hash of stream CACHE_PICK_STREAM; -1 on a miss
  *              or where the lookup reads 0)
@@ -107,6 +109,7 @@ void main()
     uint pick_state = point_stream(uint(record), CACHE_PICK_STREAM, seed);
     picked = cache_pick(x, ns, unit_float(pick_state));
   }
-  imageStore(out_image, texel, vec4(radiance, dot(glossy, vec3(1.0)) / max(dot(weight, vec3(1.0)), 1e-30)));
+  float share = dot(glossy, vec3(1.0)) / max(dot(weight, vec3(1.0)), 1e-30);
+  imageStore(out_image, texel, vec4(radiance, metal ? -1.0 - share : share));
   imageStore(out_pick, texel, vec4(picked < 0.0 ? vec3(0.0) : weight, picked));
 }

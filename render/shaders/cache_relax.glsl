@@ -4,6 +4,7 @@
  * ahead part) gets (the mean over its rays' records (cache_paths.glsl, record i = f · rays + j
  * at texel (i mod Wr, i div Wr) of paths_*) of radiance + cache weight × the previous
  * iteration's value at the face the ray picked (paths_pick .w: a compact index, -1 none;
+ * the face's lone outlier record's radiance tamed first, radiance_cache.tamed;
  * radiance_cache.picks), 1) at its texel of out_image: one texel per ray, no lookup
  * (docs/gi_pipeline.md "Multi-bounce radiance cache", "Each ray picks one face"). The other
  * texels of out_image (the header, the ids, the voxels' absent faces) are the layout's,
@@ -30,11 +31,31 @@ void main()
   bool empty = sampling.w > 0.5;
   bool estimate = levels.x > 0.5;
   vec3 sum = vec3(0.0);
+  /* the brightest record's own light, its largest channel, whether its hit is a metal, and the
+   * second brightest's largest channel: a lone outlier off a metal is tamed
+   * (radiance_cache.tamed) */
+  vec3 top_rgb = vec3(0.0);
+  float top = -1.0, second = -1.0;
+  bool top_metal = false;
   for (int j = 0; j < rays; j++) {
     int record = face * rays + j;
     ivec2 at = ivec2(record % width, record / width);
     vec4 lit = texelFetch(paths_radiance, at, 0);
+    /* .a: the glossy share of the record's weight, stored as −(1 + it) where its hit is a
+     * metal (cache_paths.glsl) */
+    bool metal = lit.a < -0.5;
+    lit.a = metal ? -lit.a - 1.0 : lit.a;
     sum += lit.rgb;
+    float peak = max(lit.r, max(lit.g, lit.b));
+    if (peak > top) {
+      second = top;
+      top = peak;
+      top_rgb = lit.rgb;
+      top_metal = metal;
+    }
+    else if (peak > second) {
+      second = peak;
+    }
     vec4 picked = texelFetch(paths_pick, at, 0);
     if (picked.w > -0.5) {
       int t = int(picked.w + 0.5);
@@ -43,6 +64,10 @@ void main()
       vec3 same = estimate ? texelFetch(cache_level, c, 0).rgb : before;
       sum += picked.rgb * mix(before, same, lit.a);
     }
+  }
+  float most = max(OUTLIER_FLOOR, OUTLIER_RATIO * max(second, 0.0));
+  if (top > most && top_metal) {
+    sum -= top_rgb * (1.0 - most / top);
   }
   vec4 value = vec4(sum / float(rays), 1.0);
   ivec2 texel = ivec2(place.xy + 0.5);

@@ -522,3 +522,75 @@ def test_bounces_setting_follows_cycles_and_is_drawn(voxgi):
         assert ({"bounce_source", "bounces"} <= set(layout.props)) == shown, layout.props
     from voxgi.ui.render_properties import CONE_SETTINGS
     assert {"bounce_source", "bounces"} <= set(CONE_SETTINGS)
+
+
+def gold_ball_in_the_sun():
+    """Three smooth gold balls on a grey floor by a wall, under a small bright sun and a dim
+    sky: the floor's cache rays that land on a ball's spot mirroring the sun meet a caustic."""
+    import math
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    world = bpy.data.worlds.new("sky")
+    scene.world = world
+    world.color = (0.1, 0.12, 0.16)
+
+    def material(name, colour, metallic=0.0, roughness=0.5):
+        made = bpy.data.materials.new(name)
+        made.diffuse_color = (*colour, 1.0)
+        made.metallic, made.roughness = metallic, roughness
+        made.use_nodes = True
+        bsdf = made.node_tree.nodes["Principled BSDF"]
+        bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
+        bsdf.inputs["Metallic"].default_value = metallic
+        bsdf.inputs["Roughness"].default_value = roughness
+        return made
+
+    bpy.ops.mesh.primitive_plane_add(size=6)
+    bpy.context.object.data.materials.append(material("floor", (0.6, 0.6, 0.6)))
+    bpy.ops.mesh.primitive_cube_add(location=(0.0, 1.6, 0.8), scale=(2.5, 0.1, 0.8))
+    bpy.context.object.data.materials.append(material("wall", (0.6, 0.55, 0.5)))
+    gold = material("gold", (1.0, 0.77, 0.34), 1.0, 0.2)
+    for x in (-1.2, 0.0, 1.2):
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.4, location=(x, 0.3, 0.4), segments=48,
+                                             ring_count=24)
+        bpy.ops.object.shade_smooth()
+        bpy.context.object.data.materials.append(gold)
+    bpy.ops.object.light_add(type="SUN", rotation=(math.radians(50), 0.0, math.radians(20)))
+    bpy.context.object.data.energy = 5.0
+    bpy.context.object.data.angle = math.radians(0.5)
+    return scene
+
+
+def test_a_caustic_met_by_one_cache_ray_lights_no_voxel(voxgi):
+    """One ray of a voxel face's eight that lands on the spot of a gold ball that mirrors the
+    sun toward the face carries that caustic alone (hundreds of times the others' light); the
+    face's mean then lit the whole voxel, and a metal that reflected the floor showed a blob 4×
+    Cycles' brightness where Cycles draws a few fireflies (docs/gi_pipeline.md "A caustic in the
+    cache's rays"). Such a lone ray off a metal is tamed to ``OUTLIER_FLOOR`` (or 4× the face's
+    next brightest ray): on the gold balls' scene some faces' rays are, the GPU's faces equal
+    numpy's within 2%, and those faces' own light is at most half what the lone ray gave them."""
+    from voxgi.voxgi_addon.gi import radiance_cache
+
+    gold_ball_in_the_sun()
+    gpu, numpy, (tris, lights, principled, emission) = gpu_and_numpy_caches(bounces=2,
+                                                                           resolution=32)
+    a, b = (np.concatenate(c.faces).astype(np.float64) for c in (gpu, numpy))
+    assert np.abs(a - b).sum() / np.abs(b).sum() <= 0.02
+    layout = radiance_cache.build_cache(tris, 32, rays=8)
+    paths = radiance_cache.face_paths(layout, tris, lights, principled, emission, 8)
+    raw = np.asarray(paths.radiance, np.float64)
+    tamed = radiance_cache.tamed(raw, 8, radiance_cache.metal_hits(paths))
+    changed = np.flatnonzero(np.abs(tamed - raw).max(axis=1) > 0)
+    print("tamed rays", len(changed))
+    assert len(changed) >= 1, "no cache ray met the ball's caustic: the scene tests nothing"
+    peaks = raw.max(axis=1).reshape(-1, 8)
+    faces = changed // 8
+    # each tamed ray was a lone outlier: over 4× its face's next brightest and over the floor
+    ordered = np.sort(peaks[faces], axis=1)
+    assert (ordered[:, -1] > 4.0 * ordered[:, -2]).all()
+    assert (ordered[:, -1] > radiance_cache.OUTLIER_FLOOR).all()
+    # those faces' own light fell from the lone ray's share to the rest's: what lit a voxel
+    before = raw.reshape(-1, 8, 3)[faces].mean(axis=1).max(axis=1)
+    after = tamed.reshape(-1, 8, 3)[faces].mean(axis=1).max(axis=1)
+    assert (before > after).all() and (before >= 1.5 * after).any(), (before, after)

@@ -60,6 +60,15 @@ AXIS_BLEND = 1e-6
 PLANE_TOLERANCE = 0.25
 PLANE_STEPS = 63.5  # the faces' planes as the GPU holds them: 1/63.5 voxel steps in [-1, 1]
 PICK_STREAM = 0x7C0A  # hash stream of the face a cache ray's hit reads (``pick``)
+# A face's brightest ray, where it alone is far brighter than all the others (over
+# OUTLIER_RATIO × the second brightest, in the largest channel) and its hit a metal (Metallic
+# ≥ ``exact_indirect.METAL_FOLLOWED``), carries at most the larger of that and OUTLIER_FLOOR
+# (Cycles' default Clamp Indirect) in its own light (``tamed``): one ray of a face's few that
+# meets a caustic (a floor's ray on the spot of a gold head that mirrors the sun toward it) lit
+# the whole voxel, a blob where Cycles draws a few fireflies (docs/gi_pipeline.md "A caustic
+# in the cache's rays")
+OUTLIER_RATIO = 4.0
+OUTLIER_FLOOR = 10.0
 FACES = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], np.float64)
 
 
@@ -738,6 +747,7 @@ def relax(cache: RadianceCache, paths, rays: int, chosen=None,
     """One more bounce: each face's value is the mean over its ``rays`` ``paths`` of what they
     return with ``cache`` at their hits — the hit's exact direct light plus its weight × the
     cache there, read at the one face the ray picks (``picks``; on average the ``lookup``).
+    A face's lone outlier ray is tamed first (``tamed``).
     From the empty cache this is iteration 1 (the two-bounce light); each relaxation adds a
     diffuse bounce. A hit's glossy scatter does not count toward Cycles' diffuse bounces, so
     the glossy share of its weight (``RayPaths.glossy_share``) reads ``level``, an estimate
@@ -748,7 +758,7 @@ def relax(cache: RadianceCache, paths, rays: int, chosen=None,
     count = len(paths.radiance) // max(rays, 1)
     values = np.zeros((count, 3))
     if count:
-        out = np.array(paths.radiance, np.float64)
+        out = tamed(paths.radiance, rays, metal_hits(paths))
         if (cache.iterations or level is not None) and len(paths.hit):
             chosen = picks(cache, paths) if chosen is None else chosen
             before = _held(cache)[chosen] if cache.iterations else 0.0
@@ -757,6 +767,41 @@ def relax(cache: RadianceCache, paths, rays: int, chosen=None,
             out[paths.hit] += paths.weight * ((1.0 - share) * before + share * same)
         values = out.reshape(count, rays, 3).mean(axis=1)
     return with_faces(cache, values)
+
+
+def metal_hits(paths) -> np.ndarray:
+    """(K,) bool: the rays of ``paths`` whose (first) hit is a metal (Metallic ≥
+    ``exact_indirect.METAL_FOLLOWED``, as ``follow_metals`` follows)."""
+    from .exact_indirect import METAL_FOLLOWED
+
+    metal = np.zeros(len(paths.radiance), bool)
+    if paths.metallic is not None and len(paths.hit):
+        metal[paths.hit] = np.asarray(paths.metallic) >= METAL_FOLLOWED
+    return metal
+
+
+def tamed(radiance, rays: int, metal) -> np.ndarray:
+    """(K, 3) the cache's rays' own light (``RayPaths.radiance``, face by face, ``rays`` each)
+    with each face's brightest ray scaled down, its colour kept, to the larger of
+    ``OUTLIER_FLOOR`` and ``OUTLIER_RATIO`` × the face's second brightest (largest channels)
+    where it is brighter than that and its hit is a metal (``metal`` (K,) bool, ``metal_hits``):
+    a lone outlier among a face's rays off a metal, a caustic a few rays cannot average
+    (cache_relax.glsl does the same). Rays that agree, light that several of a face's rays
+    see, and a lone diffuse hit's (the bright spot by a small lamp) are kept whole."""
+    out = np.array(radiance, np.float64).reshape(-1, max(rays, 1), 3)
+    metal = np.asarray(metal, bool).reshape(len(out), -1)
+    if not out.size:
+        return out.reshape(-1, 3)
+    peak = out.max(axis=2)
+    faces = np.arange(len(out))
+    order = np.argsort(peak, axis=1, kind="stable")
+    top = order[:, -1]
+    second = peak[faces, order[:, -2]] if out.shape[1] > 1 else np.zeros(len(out))
+    brightest = peak[faces, top]
+    most = np.maximum(OUTLIER_FLOOR, OUTLIER_RATIO * second)
+    lone = (brightest > most) & metal[faces, top]
+    out[faces, top] *= np.where(lone, most / np.maximum(brightest, 1e-30), 1.0)[:, None]
+    return out.reshape(-1, 3)
 
 
 def picks(cache: RadianceCache, paths) -> np.ndarray:
