@@ -88,8 +88,8 @@ KERNELS = {
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "centre_position", "centre_normal",
                            "centre_view", "centre_unshadowed", "emitter_field",
-                           "world_fewer") + _TEXTURES,
-                   ("sampling", "strata")),
+                           "world_fewer", "world_hidden") + _TEXTURES,
+                   ("sampling", "strata", "hidden")),
     "bvh_gather": (("pixels", "principled", "light_outline", "bvh_lights", "textures", "cache_lookup", "ltc",
                     "glossy_ltc", "bvh_shade", "gather_point", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials",
@@ -232,6 +232,7 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
         if kernel == "bvh_direct":
             defines["STRATA_BLOCK"] = "ivec3(strata.xyz)"
             defines["WORLD_STRATA"] = "int(strata.w)"
+            defines["WORLD_HIDDEN"] = "hidden"
         if "same_surface" in files:
             defines["PLANE_TOLERANCE"] = repr(float(PLANE_TOLERANCE))
             defines["NEAR_STEP"] = repr(float(NEAR_STEP))
@@ -461,7 +462,8 @@ def strata_side(samples: int) -> int:
 def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0,
                          only: int | None = None, world=None, emitters=None, strata_block=None,
                          table=None, absent: tuple[str, ...] = (), centre=None, field=None,
-                         world_strata: int = 0, world_fewer=None):
+                         world_strata: int = 0, world_fewer=None, world_hidden=None,
+                         rays: bool = True):
     """Diffuse Direct over a G-buffer (``shaders/bvh_direct.glsl``), an RGBA32F texture of the
     G-buffer's size (bottom row first), rgb in Cycles' units; ``only`` : of that lamp alone
     (``lights_texture``; -1: none); world, emitters : a ``world_texture`` / ``emitters_texture``
@@ -479,7 +481,12 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
     evaluate it elsewhere (centre None: all do); the shadow rays are the pass's own
     everywhere. world_strata : the side of the strata of the world's map and cosine rays
     (``direct_light.diffuse_direct``'s; 0: the lamps' side) at the texels world_fewer flags
-    (``world_fewer_texture``; required with a world_strata)."""
+    (``world_fewer_texture``; required with a world_strata). world_hidden : the rest of the
+    world map's hidden part at every texel (``world_hidden_points``' filtered and upsampled:
+    F12's pixel centres), which the texels take instead of tracing their own rays for it
+    (the map's sun keeps its rays); None: they trace them. rays : False where this dispatch
+    traces no shadow ray (the world's rest given, no sun in the map, no emitters, no lamp):
+    the texels look for no shadow terminator's lift."""
     position = gbuffer_inputs["gbuffer_position"]
     if world_strata and world_fewer is None:
         raise ValueError("world_strata without the texels that take it (world_fewer)")
@@ -495,11 +502,34 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
               "centre_unshadowed": given["unshadowed"],
               "emitter_field": position if field is None else field,  # not read without
               "world_fewer": position if world_fewer is None else world_fewer,  # (the same)
+              "world_hidden": position if world_hidden is None else world_hidden,
               "bvh_absent": tuple(absent)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
                         {"sampling": (seed, block[3], 0 if centre is None else 1,
                                       0 if field is None else 1),
-                         "strata": (*block[:3], world_strata)})
+                         "strata": (*block[:3], world_strata),
+                         "hidden": (0.0 if world_hidden is None else 1.0,
+                                    0.0 if rays else 1.0, 0.0, 0.0)})
+
+
+def world_hidden_points(bvh: GPUBVH, gbuffer_inputs, world, side: int, seed: int = 0,
+                        absent: tuple[str, ...] = ()):
+    """The rest of the world map's hidden part at listed gather points (``bvh_direct``'s mode
+    3; their G-buffer a list, ``aa_compact.glsl``, each point drawing its pixel's samples):
+    an RGBA32F texture of the list's size, (the hidden part rgb in Diffuse Direct's units,
+    the variance of its luminance), over ``side`` × ``side`` strata of the map's and the
+    cosine's rays (the cosine's alone under a uniform world), the map's sun left out (its
+    rays stay the pixels' own). world : the scene's ``world_texture``; absent : the scene's
+    kinds of light left out (its one ``bvh_direct`` variant)."""
+    position = gbuffer_inputs["gbuffer_position"]
+    inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture([], None),
+              "world_map": world, "emitters": emitters_texture(None),
+              "centre_position": position, "centre_normal": position,
+              "centre_view": position, "centre_unshadowed": position,  # not read
+              "emitter_field": position, "world_fewer": position, "world_hidden": position,
+              "bvh_absent": tuple(absent)}
+    return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
+                        {"sampling": (seed, side, 3, 0), "strata": (side, 0, 0, 0)})
 
 
 def world_fewer_texture(fewer):
@@ -540,6 +570,7 @@ def emitters_unshadowed_texture(bvh: GPUBVH, gbuffer_inputs, emitters, lights=No
               "world_map": world if world is not None else world_texture(None),
               "centre_position": position, "centre_normal": position, "centre_view": position,
               "centre_unshadowed": position, "world_fewer": position,  # not read
+              "world_hidden": position,
               "emitter_field": position if field is None else field,
               "bvh_absent": tuple(absent)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,

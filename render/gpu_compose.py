@@ -89,7 +89,7 @@ def release() -> None:
 def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_samples: int,
                  seed: int, block=None, lamps=None, glow=None, centre=None, field=None,
                  lamp_glossy: bool = True, smooth=None, world_strata: int = 0, world_fewer=None,
-                 sun_glossy: bool = False):
+                 sun_glossy: bool = False, world_hidden=None):
     """(Stages, one per light's dispatches, returning) ``sums`` + one pass over ``inputs``, a
     G-buffer of ``size`` (an image's or the edge pixels' list's) of ``scene`` (a ``GPUScene``
     updated to ``snapshot``): terms = the gathered (Diffuse Indirect, AO), Glossy Indirect and
@@ -112,7 +112,9 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     strata and the texels that take it (``direct_light_texture``'s; 0: the lamps').
     sun_glossy : the map's sun in the pixels' glossy lobes (``scene.sun_table``, a sun lamp
     traced for them alone: its Diffuse Direct is the world's dispatch's;
-    ``passes.map_sun_shine``), as the world's glossy gather leaves it out."""
+    ``passes.map_sun_shine``), as the world's glossy gather leaves it out. world_hidden : the
+    rest of the world map's hidden part at every texel, from the gather points
+    (``direct_light_texture``'s; F12's centre pass); None: the texels trace it."""
     bvh, principled, emission = scene.bvh, scene.principled, scene.emission
     materials, lut = scene.materials, scene.lut
     extra = scene.has_scene_lights
@@ -148,7 +150,8 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
                                       strata_block=world_block(block), table=scene.no_lamp,
                                       absent=absent,
                                       centre=centre, field=field, world_strata=world_strata,
-                                      world_fewer=world_fewer)
+                                      world_fewer=world_fewer, world_hidden=world_hidden,
+                                      rays=world_hidden is None or scene.traces_extra_rays)
         if smooth is not None:
             direct = smooth(direct)
         out = run("aa_light", LIGHT_SAMPLERS, {

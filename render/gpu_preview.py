@@ -27,11 +27,13 @@ from ..voxgi_addon.preview.passes import (
     AA_SIDE,
     NO_TAILS,
     WORLD_NOISE_TARGET,
+    WORLD_POINT_SIDE,
     Tails,
     centre_pass,
     check_request,
     edge_pixels,
     finish_passes,
+    hidden_variances,
     lamp_light,
     light_edge_pixels,
     material_indices,
@@ -62,7 +64,12 @@ from .frame import Frame, Stage, finish
 from .frame import run as run_stages
 from .gbuffer import PixelMask, gbuffer_shader, rasterize, rasterize_stages, read_gbuffer, vertex_batch
 from .gpu_accumulation import SUM_NAMES, GPUSums
-from .gpu_bvh import emitter_glossy_texture, emitters_unshadowed_texture, world_fewer_texture
+from .gpu_bvh import (
+    emitter_glossy_texture,
+    emitters_unshadowed_texture,
+    world_fewer_texture,
+    world_hidden_points,
+)
 from .gpu_compose import COMPACT_SAMPLERS as _COMPACT_SAMPLERS
 from .gpu_compose import MASK_SAMPLERS as _MASK_SAMPLERS
 from .gpu_compose import RESOLVE_OUTPUTS as _RESOLVE_OUTPUTS
@@ -704,8 +711,67 @@ def _edge_pixels(f):
 _SUM_TEXTURES = (*(f"sum_{k}" for k in _SURFACE_SUMS), "sum_g")
 
 
+def _has_world(f) -> bool:
+    return any(light.type == "WORLD" for light in f["scene"].lights)
+
+
+# F12's pixel centres take the rest of the world's hidden light from the gather points
+# (``_world_points``); False: from their own rays, as the numpy tracer's (tests compare the two)
+WORLD_AT_POINTS = True
+
+
+def _wants_world_points(f) -> bool:
+    """F12's centre pass takes the rest of the world map's hidden part from the gather points
+    where there is a world and the gathers' filter (not the viewport's slices, whose samples
+    average their own rays)."""
+    return WORLD_AT_POINTS and not f["on_gpu"] and f["denoise"] and f["gather_hook"] is None \
+        and _has_world(f) and _reads_gbuffer(f)
+
+
+def _world_points(f):
+    """The rest of the world map's hidden part at the gather points (``gpu_bvh
+    .world_hidden_points``, ``WORLD_POINT_SIDE``² strata a technique): at the cells of the
+    sparse plan — a cell in four where the surface is smooth, the creases and contacts — or
+    every cell that sees a surface, then the diffuse gather's à-trous filter (its holes filled
+    from their neighbours) and upsample: every pixel centre's, which F12's centre pass
+    subtracts from the world's exact unshadowed light instead of tracing its own rays for it
+    (docs/gi_pipeline.md "The world's light at the gather points")."""
+    scene, centre, settings = f["scene"], f["centre"], f["gather_settings"]
+    stride, width, height = f["gi_stride"], f["width"], f["height"]
+    rows, cols = sample_pixels(height, width, stride)
+    if f["cells"] is not None:
+        valid, traced = f["cells"][0], f["cells"][4]
+    else:
+        valid = f["seen"]["hit"][rows][:, cols]
+        traced = valid
+    if not traced.any():
+        return {"world_hidden": None}
+    cell_rows, cell_cols = np.nonzero(traced)
+    listed = rows[cell_rows] * width + cols[cell_cols]
+    pixels, size = _pixel_list(listed, width, height)
+    inputs = _compact("aa_list", {**centre.inputs, "pixels": pixels}, size)
+    side = WORLD_POINT_SIDE
+    read = read_texture(world_hidden_points(scene.bvh, inputs, scene.world_map, side,
+                                            settings.seed, scene.direct_absent))
+    read = read.reshape(-1, 4)[:len(listed)]
+    grid = [np.zeros(valid.shape + (4,), np.float32) for _ in range(2)]
+    grid[0][traced] = read
+    grid[1][traced, :2] = hidden_variances(read, side)
+    holes = valid & ~traced
+    grid[1][..., 2] = holes  # the holes the filter's first pass fills (denoise.glsl)
+    grid = [float_texture(np.flipud(cells), (cells.shape[1], cells.shape[0])) for cells in grid]
+    yield  # the filter is a step of its own
+    low = denoise(grid[0], grid[1], centre.inputs, stride, width, height,
+                  settings.denoise_iterations, fit=True, holes=bool(holes.any()))[0]
+    return {"world_hidden": upsample(low, centre.inputs, stride, width, height)}
+
+
+def _no_world_points(f):
+    return {"world_hidden": None}
+
+
 def _shade(f, inputs, sums, terms, blank, size, block, lamps=None, glow=None, centre=None,
-           field=None, smooth=None):
+           field=None, smooth=None, world_hidden=None):
     """``gpu_compose.shade_stages`` of this frame's scene and snapshot; with ``smooth`` (the
     centre pass's world filter) the world's rays over ``world_strata_side``'s strata at the
     pixels away from the geometry's edges (``world_fewer_pixels``)."""
@@ -717,7 +783,8 @@ def _shade(f, inputs, sums, terms, blank, size, block, lamps=None, glow=None, ce
                         centre, field, lamp_glossy=f["lamp_glossy"], smooth=smooth,
                         sun_glossy=f["lamp_glossy"] and _with_world_glossy(f),
                         world_strata=world_strata,
-                        world_fewer=None if fewer is None else world_fewer_texture(fewer))
+                        world_fewer=None if fewer is None else world_fewer_texture(fewer),
+                        world_hidden=world_hidden)
 
 
 def _world_smooth(f):
@@ -758,11 +825,15 @@ def _centre_pass(f):
     zero = scene.zeros(width, height)
     lamps = {}
     centres = _centres(f)
+    hidden = f["world_hidden"]
+    # the world's light filtered where the map's sun is still the pixels' own rays (or no
+    # gather points gave the rest)
+    smooth = _world_smooth(f) if hidden is None or world_rest_share(scene.lights) < 1.0 else None
     sums = yield from _shade(f, inputs, {name: zero for name in _SUM_TEXTURES},
                              (f["diffuse_ao"], f["glossy"], f["glossy_world"]), zero,
                              (width, height), centre_pass(f["light_samples"])[1],
                              lamps if reach else None, f["shine"], centres,
-                             smooth=_world_smooth(f))
+                             smooth=smooth, world_hidden=hidden)
     result = None
     if f["on_gpu"] and not reach:  # the viewport adds them to its sums on the GPU
         result = GPUSums({name: sums[name] for name in SUM_NAMES}, width, height,
@@ -992,8 +1063,11 @@ ACCURATE_STAGES = (
     Stage("emitters' unshadowed light (GPU)", ("centre", "fields"), ("unshadowed",),
           _emitter_unshadowed, when=_has_emitters),
     Stage("edge pixels", ("plan", "seen"), ("edge",), _edge_pixels, slice_end=False),
+    Stage("world light at the gather points (GPU)", ("centre", "plan", "focused", "seen",
+                                                     "cells", "gather_settings"),
+          ("world_hidden",), _world_points, when=_wants_world_points, skipped=_no_world_points),
     Stage("direct (GPU)", ("centre", "plan", "diffuse_ao", "glossy", "glossy_world", "shine",
-                           "unshadowed", "gather_settings", "edge"),
+                           "unshadowed", "gather_settings", "edge", "world_hidden"),
           ("sums", "lamps", "result"), _centre_pass, slice_end=False),
     Stage("read-back", ("sums", "lamps", "edge", "seen", "plan", "result"),
           ("centre_texel", "edge_all", "listed"), _read_back, when=_reads_back,

@@ -654,6 +654,13 @@ class GPUScene:
         """True when the world or emitters shed light (their own dispatch and gathers)."""
         return len(self.lights) > len(self.lamp_tables)
 
+    @property
+    def traces_extra_rays(self) -> bool:
+        """Whether the world's and emitters' dispatch traces shadow rays where the world's rest
+        is given (``direct_light_texture``'s world_hidden): for the emitters, or a map's sun."""
+        return any(light.type == "EMITTERS" or (light.type == "WORLD" and light.sun is not None)
+                   for light in self.lights)
+
     def inputs(self) -> dict[str, object]:
         """Every scene sampler of the BVH kernels (``gpu_bvh.KERNELS``: BVH nodes, triangles
         and normals, the lamps', world's and emitters' tables, materials, LUT) by name; add

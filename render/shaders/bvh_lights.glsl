@@ -537,6 +537,12 @@ vec3 hidden_less(vec3 value, vec3 f_sum, vec3 f_lit, int m)
  * part (its rays taken as independent: an upper bound under the strata), for the filter of a
  * pixel's world light (bvh_direct.glsl's alpha, denoise.glsl options.w). */
 float world_variance = 0.0;
+/* bvh_direct's mode 3 (the gather points of F12's world light): world_direct_lobe returns the
+ * rest of the map's hidden part, (Σ f − Σ seen f) / (m² π), before the map's sun's rays */
+bool world_hidden_only = false;
+/* ... and the share of its cosine rays that are hidden (the filter's guide, as AO is the diffuse
+ * gather's) */
+float world_hidden_share = 0.0;
 
 /* `single` (a bounce hit's): one ray a stratum, by the map where the stratum's x is under ½,
  * else by the cosine, x stretched back over [0, 1), each ray over the techniques' mean density
@@ -584,8 +590,16 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
 #endif
   vec4 sun_head = sunny ? texelFetch(world_map, last + ivec2(2, 0), 0) : vec4(0.0);
   float hidden_sum = 0.0, hidden_squares = 0.0; /* Σ, Σ² of a hidden ray's lum(f) / π */
+  float cosine_rays = 0.0, cosine_hidden = 0.0;
+  /* F12's pixel centres (hidden.x = 1, uniform over the dispatch): the rest of the map's
+   * hidden part is the gather points' (mode 3), filtered and upsampled (world_hidden, rgb;
+   * docs/gi_pipeline.md "The world's light at the gather points"): no rays of their own for it */
+  bool given = false;
+#ifdef WORLD_HIDDEN
+  given = !share && !single && !lobe && WORLD_HIDDEN.x > 0.5;
+#endif
   /* uniform: cosine only; split: one loop, each stratum drawing its technique */
-  for (int pass = uniform_sky || split ? 1 : 0; pass < 2; pass++) {
+  for (int pass = given ? 2 : (uniform_sky || split ? 1 : 0); pass < 2; pass++) {
     for (int k = 0; k < ms * ms; k++) {
       vec2 s = ms == m ? hashed_stratum(state, k, m) : whole_stratum(state, k, ms);
       int technique = pass;
@@ -618,10 +632,12 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
        * the cosine ones as its BSDF's rays that find the sky (not lifted) */
       bool seen = max(f.r, max(f.g, f.b)) > 0.0 &&
           !shadow_ray(origin, dir, BVH_FAR, technique == 0);
+      cosine_rays += technique == 1 ? 1.0 : 0.0;
       if (!seen) {
         float hidden = dot(f, LUMA) / M_PI_F;
         hidden_sum += hidden;
         hidden_squares += hidden * hidden;
+        cosine_hidden += technique == 1 ? 1.0 : 0.0;
       }
       else {
         f_lit += f;
@@ -639,8 +655,19 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   float rays = float(ms * ms * (uniform_sky || split ? 1 : 2));
   float spread = max(hidden_squares - hidden_sum * hidden_sum / rays, 0.0) / max(rays - 1.0, 1.0);
   world_variance = rays / float(ms * ms) * spread / float(ms * ms);
+  if (world_hidden_only) {
+    world_hidden_share = cosine_hidden / max(cosine_rays, 1.0);
+    return (f_sum - f_lit) / (float(ms * ms) * M_PI_F);
+  }
+  vec3 rest_hidden = (f_sum - f_lit) / (float(ms * ms) * M_PI_F);
+#ifdef WORLD_HIDDEN
+  if (given) {
+    rest_hidden = texelFetch(world_hidden, ivec2(gl_GlobalInvocationID.xy), 0).rgb;
+    world_variance = 0.0;
+  }
+#endif
   if (!sunny) {
-    return hidden_less(value, f_sum, f_lit, ms);
+    return given ? max(value - rest_hidden, vec3(0.0)) : hidden_less(value, f_sum, f_lit, ms);
   }
   /* the sun: one ray a stratum by its power, the corners first; where those above the
    * horizon agree the others are not drawn (as a lamp's); Σ hidden f / (drawn π) */
@@ -674,7 +701,7 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   float count = float(drawn);
   world_variance += max(sun_squares - sun_sum * sun_sum / count, 0.0) / max(count - 1.0, 1.0) /
                     count;
-  vec3 light = value - (f_sum - f_lit) / (float(ms * ms) * M_PI_F) - sun_hidden / (count * M_PI_F);
+  vec3 light = value - rest_hidden - sun_hidden / (count * M_PI_F);
   return share ? light : max(light, vec3(0.0));
 }
 

@@ -301,8 +301,13 @@ def test_fewer_world_strata_at_the_pixels_are_the_same_in_numpy_and_gpu(voxgi, m
     of its power) over 2 × 2: numpy and GLSL draw the same rays at the same pixels. (The HDRI
     courtyard's light is mostly its sun, which keeps its strata: it needs more blocks for the
     cut to show.)"""
+    from voxgi.render import gpu_preview
     from voxgi.voxgi_addon.preview import passes
 
+    # F12's pixel centres take the rest of the world from the gather points
+    # (test_the_world_s_light_at_the_gather_points_is_the_pixels_own); the pixels' own rays
+    # are what the numpy tracer and a preview without the gathers' filter draw
+    monkeypatch.setattr(gpu_preview, "WORLD_AT_POINTS", False)
     full = preview(name, "AUTO", width, height, sparse=False)
     monkeypatch.setattr(passes, "WORLD_FEWER_FROM", 2)
     monkeypatch.setattr(passes, "WORLD_FEWER_REACH", 0)
@@ -320,3 +325,38 @@ def test_fewer_world_strata_at_the_pixels_are_the_same_in_numpy_and_gpu(voxgi, m
     assert same < apart / 2
     for pass_name in PASSES:
         assert relative_l1(gpu[pass_name], reference[pass_name], everywhere) <= 0.02, pass_name
+
+
+@pytest.mark.parametrize("name", ["sky_courtyard", "hdri_courtyard"])
+def test_the_world_s_light_at_the_gather_points_is_the_pixels_own(voxgi, monkeypatch, name):
+    """F12 draws the rest of the world's light hidden from a pixel (all of a uniform sky's, a
+    map's without its sun) at the gather points, filters and upsamples it like the indirect
+    light, and subtracts it from the world's exact unshadowed light at every pixel
+    (docs/gi_pipeline.md "The world's light at the gather points"): the image is the one the
+    pixels' own rays give, within their noise, at a fraction of their rays, and as close to
+    Cycles."""
+    from voxgi.render import gpu_preview
+
+    width, height = 160, 120
+    scene = bpy.context.scene
+    light_scenes.build(name, scene)
+    from voxgi.render.pipeline import render_scene_passes
+
+    passes, lines = render_scene_passes(bpy.context, scene, None, width, height)
+    assert "world light at the gather points (GPU)" in lines[-1][1], lines
+    points = {k: np.asarray(v, np.float64) for k, v in passes.items()}
+    monkeypatch.setattr(gpu_preview, "WORLD_AT_POINTS", False)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    light_scenes.build(name, scene := bpy.context.scene)
+    passes, lines = render_scene_passes(bpy.context, scene, None, width, height)
+    assert "world light at the gather points" not in lines[-1][1]
+    own = {k: np.asarray(v, np.float64) for k, v in passes.items()}
+    seen = own["Diffuse Color"].sum(-1) > 0
+    direct = (points["Diffuse Direct"][seen].sum(), own["Diffuse Direct"][seen].sum())
+    print(name, "Diffuse Direct summed, points / pixels' own rays:", direct[0] / direct[1],
+          "apart:", relative_l1(points["Diffuse Direct"], own["Diffuse Direct"], seen))
+    assert abs(direct[0] / direct[1] - 1.0) <= 0.01
+    assert relative_l1(points["Diffuse Direct"], own["Diffuse Direct"], seen) <= 0.03
+    # the other passes are the same frame's
+    for pass_name in ("Diffuse Indirect", "Glossy Direct", "Glossy Indirect"):
+        assert relative_l1(points[pass_name], own[pass_name], seen) <= 0.01, pass_name

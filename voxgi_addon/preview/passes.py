@@ -1047,6 +1047,27 @@ def world_strata_side(samples: int, width: int, height: int, rest_share: float =
     return min(fewer, max(REST_LEAST_SIDE, math.ceil(fewer * rest_share - 1e-9)))
 
 
+# F12's pixel centres take the rest of the world map's hidden part from the gather points
+# (render/gpu_preview.py _world_points): WORLD_POINT_SIDE² strata of cosine rays at each (and as
+# many of the map's under a map), then the diffuse gather's filter and upsample
+# (docs/gi_pipeline.md "The world's light at the gather points")
+WORLD_POINT_SIDE = 10
+
+
+def hidden_variances(points, side: int = WORLD_POINT_SIDE) -> np.ndarray:
+    """(N, 2) the à-trous filter's variances (of the light's luminance, of its guide) of N gather
+    points' (hidden rgb, hidden share) (N, 4) (``bvh_direct``'s mode 3 over ``side``² cosine
+    rays): the hidden share as the gathers' AO is (pulled half a ray towards ½: a point whose
+    rays all agree still admits neighbours within a ray's worth), the hidden light's
+    luminance by the same binomial's relative variance."""
+    points = np.asarray(points, np.float64)
+    rays = float(side * side)
+    share = (points[:, 3] * rays + 0.5) / (rays + 1.0)
+    luminance = points[:, :3] @ LUMINANCE
+    return np.stack([luminance ** 2 * (1.0 - share) / (share * rays),
+                     share * (1.0 - share) / rays], axis=1)
+
+
 def world_rest_share(lights) -> float:
     """``WorldLight.rest_share`` of the world among ``lights`` (1 without a world)."""
     return min((light.rest_share for light in lights if light.type == "WORLD"), default=1.0)
