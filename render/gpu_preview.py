@@ -27,7 +27,6 @@ from ..voxgi_addon.preview.passes import (
     AA_SIDE,
     NO_TAILS,
     WORLD_NOISE_TARGET,
-    WORLD_POINT_SIDE,
     Tails,
     centre_pass,
     check_request,
@@ -44,6 +43,7 @@ from ..voxgi_addon.preview.passes import (
     subpixel_reach,
     world_fewer_pixels,
     world_filter_passes,
+    world_point_side,
     world_rest_share,
     world_strata_side,
 )
@@ -730,7 +730,7 @@ def _wants_world_points(f) -> bool:
 
 def _world_points(f):
     """The rest of the world map's hidden part at the gather points (``gpu_bvh
-    .world_hidden_points``, ``WORLD_POINT_SIDE``² strata a technique): at the cells of the
+    .world_hidden_points``, ``passes.world_point_side``² strata a technique): at the cells of the
     sparse plan — a cell in four where the surface is smooth, the creases and contacts — or
     every cell that sees a surface, then the diffuse gather's à-trous filter (its holes filled
     from their neighbours) and upsample: every pixel centre's, which F12's centre pass
@@ -750,7 +750,7 @@ def _world_points(f):
     listed = rows[cell_rows] * width + cols[cell_cols]
     pixels, size = _pixel_list(listed, width, height)
     inputs = _compact("aa_list", {**centre.inputs, "pixels": pixels}, size)
-    side = WORLD_POINT_SIDE
+    side = world_point_side(world_rest_share(scene.lights))
     read = read_texture(world_hidden_points(scene.bvh, inputs, scene.world_map, side,
                                             settings.seed, scene.direct_absent))
     read = read.reshape(-1, 4)[:len(listed)]
@@ -826,9 +826,9 @@ def _centre_pass(f):
     lamps = {}
     centres = _centres(f)
     hidden = f["world_hidden"]
-    # the world's light filtered where the map's sun is still the pixels' own rays (or no
-    # gather points gave the rest)
-    smooth = _world_smooth(f) if hidden is None or world_rest_share(scene.lights) < 1.0 else None
+    # the world's light filtered over the image only where no gather points gave its rest (a
+    # map's sun, the pixels' own rays, is a lamp's light: its penumbrae unfiltered as a lamp's)
+    smooth = _world_smooth(f) if hidden is None else None
     sums = yield from _shade(f, inputs, {name: zero for name in _SUM_TEXTURES},
                              (f["diffuse_ao"], f["glossy"], f["glossy_world"]), zero,
                              (width, height), centre_pass(f["light_samples"])[1],
