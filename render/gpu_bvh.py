@@ -517,7 +517,8 @@ def world_hidden_points(bvh: GPUBVH, gbuffer_inputs, world, side: int, seed: int
     """The rest of the world map's hidden part at listed gather points (``bvh_direct``'s mode
     3; their G-buffer a list, ``aa_compact.glsl``, each point drawing its pixel's samples):
     an RGBA32F texture of the list's size, (the hidden part rgb in Diffuse Direct's units,
-    the variance of its luminance), over ``side`` × ``side`` strata of the map's and the
+    the share of its cosine rays hidden: the filter's guide, ``passes.hidden_variances``),
+    over ``side`` × ``side`` strata of the map's and the
     cosine's rays (the cosine's alone under a uniform world), the map's sun left out (its
     rays stay the pixels' own). world : the scene's ``world_texture``; absent : the scene's
     kinds of light left out (its one ``bvh_direct`` variant)."""
