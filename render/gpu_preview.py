@@ -794,7 +794,7 @@ def _world_smooth(f):
     sheds no light, and for the viewport's slices (their samples average it, and a tile's
     filter would end at the tile's edge)."""
     if f["on_gpu"] or not f["denoise"] or \
-            not any(light.type == "WORLD" for light in f["scene"].lights):
+            not _has_world(f):
         return None
     width, height, inputs = f["width"], f["height"], f["centre"].inputs
 
