@@ -95,7 +95,7 @@ KERNELS = {
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials",
                            "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "principled_lut", "partial_image",
-                           "partial_variance", "texture_table", "texture_atlas",
+                           "partial_variance", "partial_hidden", "texture_table", "texture_atlas",
                            "radiance_cache", "ltc_table"),
                    ("sampling", "world", "grid", "chunk")),
 }
@@ -103,7 +103,8 @@ KERNELS = {
 # hits has ltc.glsl and glossy_ltc.glsl: a metal hit's lobe over an area lamp; the world-mode
 # glossy gather's lobe over the emitters.)
 KERNELS["bvh_glossy"] = (KERNELS["bvh_gather"][0][:-1] + ("bvh_glossy",),
-                         *KERNELS["bvh_gather"][1:])
+                         tuple(name for name in KERNELS["bvh_gather"][1] if name != "partial_hidden"),
+                         KERNELS["bvh_gather"][2])
 # The radiance cache's rays, traced and lit once (gpu_gather.cache_stages): the gather's inputs,
 # radiance_cache the layout's texels (each hit picks the face it reads, cache_lookup.glsl).
 KERNELS["bvh_cache_paths"] = (
@@ -140,7 +141,7 @@ CONSTANT_SAMPLERS = {"ltc_table": ltc_texture, "texture_table": _blank_texture,
                      # no multi-bounce cache (gpu_gather.cache_texture): one bounce
                      "radiance_cache": _blank_texture}
 # Kernels with more than one output image (the others write ``out_image``).
-OUTPUTS = {"bvh_gather": ("out_image", "out_variance"),
+OUTPUTS = {"bvh_gather": ("out_image", "out_variance", "out_hidden"),
            "bvh_cache_paths": ("out_image", "out_pick"),
            "bvh_glossy": ("out_image", "out_variance")}
 _shaders: dict[str, object] = {}
@@ -482,11 +483,11 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
     everywhere. world_strata : the side of the strata of the world's map and cosine rays
     (``direct_light.diffuse_direct``'s; 0: the lamps' side) at the texels world_fewer flags
     (``world_fewer_texture``; required with a world_strata). world_hidden : the rest of the
-    world map's hidden part at every texel (``world_hidden_points``' filtered and upsampled:
-    F12's pixel centres), which the texels take instead of tracing their own rays for it
-    (the map's sun keeps its rays); None: they trace them. rays : False where this dispatch
-    traces no shadow ray (the world's rest given, no sun in the map, no emitters, no lamp):
-    the texels look for no shadow terminator's lift."""
+    world map's hidden part at every texel (the diffuse gather's, ``bvh_gather.glsl``
+    out_hidden, filtered and upsampled: F12's pixel centres), which the texels take instead
+    of tracing their own rays for it (the map's sun keeps its rays); None: they trace them.
+    rays : False where this dispatch traces no shadow ray (the world's rest given, no sun in
+    the map, no emitters, no lamp): the texels look for no shadow terminator's lift."""
     position = gbuffer_inputs["gbuffer_position"]
     if world_strata and world_fewer is None:
         raise ValueError("world_strata without the texels that take it (world_fewer)")
@@ -510,27 +511,6 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
                          "strata": (*block[:3], world_strata),
                          "hidden": (0.0 if world_hidden is None else 1.0,
                                     0.0 if rays else 1.0, 0.0, 0.0)})
-
-
-def world_hidden_points(bvh: GPUBVH, gbuffer_inputs, world, side: int, seed: int = 0,
-                        absent: tuple[str, ...] = ()):
-    """The rest of the world map's hidden part at listed gather points (``bvh_direct``'s mode
-    3; their G-buffer a list, ``aa_compact.glsl``, each point drawing its pixel's samples):
-    an RGBA32F texture of the list's size, (the hidden part rgb in Diffuse Direct's units,
-    the share of its cosine rays hidden: the filter's guide, ``passes.hidden_variances``),
-    over ``side`` × ``side`` strata of the map's and the
-    cosine's rays (the cosine's alone under a uniform world), the map's sun left out (its
-    rays stay the pixels' own). world : the scene's ``world_texture``; absent : the scene's
-    kinds of light left out (its one ``bvh_direct`` variant)."""
-    position = gbuffer_inputs["gbuffer_position"]
-    inputs = {**bvh.inputs, **gbuffer_inputs, "lights": lights_texture([], None),
-              "world_map": world, "emitters": emitters_texture(None),
-              "centre_position": position, "centre_normal": position,
-              "centre_view": position, "centre_unshadowed": position,  # not read
-              "emitter_field": position, "world_fewer": position, "world_hidden": position,
-              "bvh_absent": tuple(absent)}
-    return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
-                        {"sampling": (seed, side, 3, 0), "strata": (side, 0, 0, 0)})
 
 
 def world_fewer_texture(fewer):

@@ -495,16 +495,19 @@ def rays_per_dispatch(light_count: int, hit_samples: int = 1,
 
 
 def gather(*args, **kwargs):
-    """``gather_steps`` run to its end: the raw gather's (values, variance) textures."""
+    """``gather_steps`` run to its end: the raw gather's (values, variance[, hidden]) textures."""
     return finish(gather_steps(*args, **kwargs))
 
 
 def gather_steps(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settings,
                  stride: int, width: int, height: int, kernel: str = "bvh_gather",
                  world_mode: bool = False, tables=None, cache=None,
-                 traversals: int = TRAVERSALS_PER_DISPATCH, lattice: bool = False):
+                 traversals: int = TRAVERSALS_PER_DISPATCH, lattice: bool = False,
+                 sun_apart: bool = False):
     """The raw gather, a generator yielding between its dispatches and returning (values,
-    variance) RGBA32F textures of the low-resolution grid: the rays split over dispatches of
+    variance) RGBA32F textures of the low-resolution grid — and for "bvh_gather" a third, the
+    world's rest hidden from each point (``bvh_gather.glsl`` out_hidden; ``sun_apart``: a
+    map's sun left out of it, as the pixels that trace it apart): the rays split over dispatches of
     ``rays_per_dispatch`` (``traversals`` per invocation at most: the viewport's slices take
     fewer, so that a dispatch over a larger tile stays within a stage's budget; the same rays
     whatever the split). kernel : "bvh_gather" (Diffuse
@@ -526,7 +529,8 @@ def gather_steps(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, sett
         low_h, low_w = low_shape(low_h, low_w, 2)
     placeholder = gpu.types.GPUTexture((size_like(1, low_w), size_like(1, low_h)),
                                        format="RGBA32F")  # the partials' JIT class
-    partial = (placeholder, placeholder)
+    outputs = OUTPUTS[kernel]
+    partial = (placeholder,) * len(outputs)
     if tables is None:
         tables = gather_tables(lights, principled, emission)
     inputs = {**bvh.inputs, **gbuffer_inputs, **tables}
@@ -537,7 +541,7 @@ def gather_steps(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, sett
     elif uses_cache(settings) and not world_mode:  # bounces 2 … N from the cache
         inputs["radiance_cache"] = cache_texture(bvh, lights, principled, emission, settings,
                                                  tables)
-    assert OUTPUTS[kernel] == ("out_image", "out_variance")
+    assert outputs[:2] == ("out_image", "out_variance")
     rays = settings.rays if kernel == "bvh_gather" else settings.glossy_rays
     # metals take METAL_RAY_FACTOR × the glossy rays (exact_glossy.glossy_indirect): the
     # dispatches run to their count when the scene has one
@@ -553,11 +557,14 @@ def gather_steps(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, sett
         if first > 0:
             yield
         partial = dispatch_bvh(kernel, {
-            **inputs, "partial_image": partial[0], "partial_variance": partial[1]}, low_w, low_h, {
+            **inputs, **{name.replace("out_", "partial_"): texture
+                         for name, texture in zip(outputs, partial)}}, low_w, low_h, {
             "sampling": (settings.seed, rays, settings.ao_distance,
                          strata_side(settings.hit_samples)),
             "world": (*settings.world, float(settings.hit_glossy)),
-            "grid": (stride, width, height, float(world_mode) + (2.0 if lattice else 0.0)),
+            # flags (gather_point.glsl): 1 world mode, 2 the lattice, 4 the map's sun apart
+            "grid": (stride, width, height,
+                     float(world_mode) + (2.0 if lattice else 0.0) + (4.0 if sun_apart else 0.0)),
             "chunk": (first, step, float(first > 0), float(first + step >= last))})
     return partial
 
@@ -704,7 +711,7 @@ def gather_low(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, settin
     Glossy Direct rgb, 0) for "bvh_glossy" in ``world_mode``; tables : as ``gather``'s."""
     values, variance = gather(bvh, gbuffer_inputs, lights, principled, emission, settings,
                               stride, width, height, kernel=kernel, world_mode=world_mode,
-                              tables=tables)
+                              tables=tables)[:2]
     if kernel != "bvh_gather":  # a glossy gather's spikes spread first
         values, variance = spread_spikes(values, variance, gbuffer_inputs, stride, width, height)
     values, _ = denoise(values, variance, gbuffer_inputs, stride, width, height,

@@ -43,7 +43,6 @@ from ..voxgi_addon.preview.passes import (
     subpixel_reach,
     world_fewer_pixels,
     world_filter_passes,
-    world_point_side,
     world_rest_share,
     world_strata_side,
 )
@@ -67,8 +66,8 @@ from .gpu_accumulation import SUM_NAMES, GPUSums
 from .gpu_bvh import (
     emitter_glossy_texture,
     emitters_unshadowed_texture,
+    strata_side,
     world_fewer_texture,
-    world_hidden_points,
 )
 from .gpu_compose import COMPACT_SAMPLERS as _COMPACT_SAMPLERS
 from .gpu_compose import MASK_SAMPLERS as _MASK_SAMPLERS
@@ -474,10 +473,11 @@ def _radiance_cache(f):
     return {"cache": cache, "gather_settings": settings}
 
 
-def _low(f, kind, kernel="bvh_gather", world_mode=False):
+def _low(f, kind, kernel="bvh_gather", world_mode=False, kept=None):
     """One gather's filtered low-resolution texture (``gpu_gather.gather`` then ``denoise``),
     its raw result replaced by ``gather_hook``'s when there is one (the viewport's
-    accumulation)."""
+    accumulation). kept : a dict that gets the diffuse gather's raw "hidden" texture (the
+    world's rest hidden from its points, ``bvh_gather.glsl`` out_hidden) when it traced."""
     scene, settings = f["scene"], f["gather_settings"]
     centre, stride, width, height = f["centre"], f["gi_stride"], f["width"], f["height"]
     cache = f["cache"]
@@ -498,11 +498,13 @@ def _low(f, kind, kernel="bvh_gather", world_mode=False):
         lattice = f["lattice"] and kernel == "bvh_gather"
         if lattice:
             settings = dataclasses.replace(settings, rays=LATTICE_RAYS * settings.rays)
-        values, variance = yield from gather_steps(
+        values, variance, *hidden = yield from gather_steps(
             scene.bvh, centre.inputs, scene.lights, scene.principled, scene.emission, settings,
             stride, width, height, kernel=kernel, world_mode=world_mode, tables=f["tables"],
             cache=cache, traversals=f["traversals"] * (LATTICE_CELLS if lattice else 1),
-            lattice=lattice)
+            lattice=lattice, sun_apart=_sun_apart(f))
+        if kept is not None and hidden:
+            kept["hidden"] = hidden[0]
         yield  # the filter is a step of its own
         if lattice:  # the hook spreads the lattice over the grid; the filter fills its holes
             values, variance = f["gather_hook"](kind, values, variance, lattice=True)
@@ -531,10 +533,28 @@ def _empty_like(texture):
 def _diffuse_gather(f):
     """Diffuse Indirect and AO at the gather points (``bvh_gather``), filtered: at one cell in
     four where the light is smooth and at the cells where it is not (``_sparse_diffuse``), or
-    — the viewport's accumulated slices, or ``sparse`` off — at every cell."""
+    — the viewport's accumulated slices, or ``sparse`` off — at every cell. With them, the
+    world's rest that a surface hides from each traced point (``hidden_cells``: the gather's
+    own rays that do not reach the sky, ``bvh_gather.glsl`` out_hidden), for
+    ``_world_points``: (hidden (Hl, Wl, 4), the rays of each cell (Hl, Wl), the cells
+    traced (None: every cell that sees a surface), the cells whose surface shows diffuse
+    light (None: all)); None for the viewport's slices, which do not take it."""
     if _sparse(f):
-        return {"low_diffuse": (yield from _sparse_diffuse(f))}
-    return {"low_diffuse": (yield from _low(f, "diffuse"))}
+        low, hidden = yield from _sparse_diffuse(f)
+        return {"low_diffuse": low, "hidden_cells": hidden}
+    kept = {}
+    low = yield from _low(f, "diffuse", kept=kept)
+    hidden = None
+    if "hidden" in kept and f["gather_hook"] is None:
+        cells = np.flipud(read_texture(kept["hidden"]))
+        hidden = (cells, np.full(cells.shape[:2], f["gather_settings"].rays), None, None)
+    return {"low_diffuse": low, "hidden_cells": hidden}
+
+
+def _sun_apart(f) -> bool:
+    """The pixel centres trace a map's sun apart (``bvh_lights.glsl`` world_direct_lobe's
+    sunny: two strata a side at least), so the gathers leave it out of the world's rest."""
+    return strata_side(f["light_samples"]) >= 2
 
 
 def _sparse(f) -> bool:
@@ -565,27 +585,29 @@ def _sparse_diffuse(f):
     stride, width, height = f["gi_stride"], f["width"], f["height"]
     valid, cell_p, cell_n, diffuse, traced = f["cells"]
     if not traced.any():  # nothing seen: the dense gather writes its zeros
-        return (yield from _low(f, "diffuse"))
+        return (yield from _low(f, "diffuse")), None
     grid = [np.zeros(valid.shape + (4,), np.float32) for _ in range(2)]
+    hidden = np.zeros(valid.shape + (4,), np.float32), np.zeros(valid.shape, np.int32)
     settings = sparse_settings(f["gather_settings"], np.count_nonzero(valid),
                                np.count_nonzero(traced))
 
     def trace(cells, at):
-        return _gather_cells(f, cells, at)
+        values, variance, rest = _gather_cells(f, cells, at)
+        return values, variance, rest, at.rays
 
-    traced = gather_lists(traced, valid, diffuse, *grid, settings, trace)
+    traced = gather_lists(traced, valid, diffuse, *grid, settings, trace, hidden)
     grid[1][..., 2] = valid & ~traced  # the holes the filter's first pass fills (denoise.glsl)
     grid[1][..., 3] = valid & ~diffuse  # the points whose light no pass shows: no taps of it
     grid = [float_texture(np.flipud(cells), (cells.shape[1], cells.shape[0])) for cells in grid]
     return denoise(grid[0], grid[1], centre.inputs, stride, width, height,
                    settings.denoise_iterations, fit=True, holes=bool((valid & ~traced).any()),
-                   unseen=True)[0]
+                   unseen=True)[0], (*hidden, traced, diffuse)
 
 
 def _gather_cells(f, cells, settings, kernel="bvh_gather"):
     """The diffuse gather (or ``kernel``'s) at the grid's ``cells`` (a list, ``_compact``: each
     point draws its pixel's samples, with the rays of ``settings``), read back: ((N, 4)
-    values, (N, 4) variances) in row-major order."""
+    values, (N, 4) variances[, (N, 4) the world's rest hidden]) in row-major order."""
     scene, centre = f["scene"], f["centre"]
     width, height = f["width"], f["height"]
     rows, cols = sample_pixels(height, width, f["gi_stride"])
@@ -595,7 +617,7 @@ def _gather_cells(f, cells, settings, kernel="bvh_gather"):
     inputs = _compact("aa_list", {**centre.inputs, "pixels": pixels}, size)
     textures = gather(scene.bvh, inputs, scene.lights, scene.principled, scene.emission,
                       settings, 1, size[0], size[1], kernel=kernel,
-                      tables=f["tables"], cache=f["cache"])
+                      tables=f["tables"], cache=f["cache"], sun_apart=_sun_apart(f))
     return tuple(read_texture(texture).reshape(-1, 4)[:len(listed)] for texture in textures)
 
 
@@ -723,46 +745,39 @@ WORLD_AT_POINTS = True
 def _wants_world_points(f) -> bool:
     """F12's centre pass takes the rest of the world map's hidden part from the gather points
     where there is a world and the gathers' filter (not the viewport's slices, whose samples
-    average their own rays)."""
+    average their own rays), and the diffuse gather traced."""
     return WORLD_AT_POINTS and not f["on_gpu"] and f["denoise"] and f["gather_hook"] is None \
-        and _has_world(f) and _reads_gbuffer(f)
+        and _has_world(f) and _reads_gbuffer(f) and f["hidden_cells"] is not None
 
 
 def _world_points(f):
-    """The rest of the world map's hidden part at the gather points (``gpu_bvh
-    .world_hidden_points``, ``passes.world_point_side``² strata a technique): at the cells of the
-    sparse plan — a cell in four where the surface is smooth, the creases and contacts — or
-    every cell that sees a surface, then the diffuse gather's à-trous filter (its holes filled
-    from their neighbours) and upsample: every pixel centre's, which F12's centre pass
-    subtracts from the world's exact unshadowed light instead of tracing its own rays for it
-    (docs/gi_pipeline.md "The world's light at the gather points")."""
-    scene, centre, settings = f["scene"], f["centre"], f["gather_settings"]
-    stride, width, height = f["gi_stride"], f["width"], f["height"]
+    """The rest of the world map's hidden part at the gather points, from the diffuse gather's
+    own rays (``_diffuse_gather``'s hidden_cells: each ray that a surface stops adds the
+    world's rest along it): at the cells it traced — a cell in four where the surface is
+    smooth, the creases, contacts and noisy holes — then the diffuse gather's à-trous filter
+    (its holes filled from their neighbours; a point whose surface shows no diffuse light,
+    which drew a few rays for its AO alone, lends its neighbours nothing) and upsample: every
+    pixel centre's, which F12's centre pass subtracts from the world's exact unshadowed light
+    instead of tracing its own rays for it (docs/gi_pipeline.md "The world's light at the
+    gather points")."""
+    hidden, rays, traced, shown = f["hidden_cells"]
+    stride, width, height, centre = f["gi_stride"], f["width"], f["height"], f["centre"]
     rows, cols = sample_pixels(height, width, stride)
-    if f["cells"] is not None:
-        valid, traced = f["cells"][0], f["cells"][4]
-    else:
-        valid = f["seen"]["hit"][rows][:, cols]
-        traced = valid
+    valid = f["seen"]["hit"][rows][:, cols]
+    traced = valid if traced is None else traced & valid
     if not traced.any():
         return {"world_hidden": None}
-    cell_rows, cell_cols = np.nonzero(traced)
-    listed = rows[cell_rows] * width + cols[cell_cols]
-    pixels, size = _pixel_list(listed, width, height)
-    inputs = _compact("aa_list", {**centre.inputs, "pixels": pixels}, size)
-    side = world_point_side(world_rest_share(scene.lights))
-    read = read_texture(world_hidden_points(scene.bvh, inputs, scene.world_map, side,
-                                            settings.seed, scene.direct_absent))
-    read = read.reshape(-1, 4)[:len(listed)]
     grid = [np.zeros(valid.shape + (4,), np.float32) for _ in range(2)]
-    grid[0][traced] = read
-    grid[1][traced, :2] = hidden_variances(read, side)
+    grid[0][traced] = hidden[traced]
+    grid[1][traced, :2] = hidden_variances(hidden[traced], rays[traced])
     holes = valid & ~traced
     grid[1][..., 2] = holes  # the holes the filter's first pass fills (denoise.glsl)
+    if shown is not None:
+        grid[1][..., 3] = valid & ~shown  # their light lends no taps (denoise.glsl)
     grid = [float_texture(np.flipud(cells), (cells.shape[1], cells.shape[0])) for cells in grid]
-    yield  # the filter is a step of its own
     low = denoise(grid[0], grid[1], centre.inputs, stride, width, height,
-                  settings.denoise_iterations, fit=True, holes=bool(holes.any()))[0]
+                  f["gather_settings"].denoise_iterations, fit=True, holes=bool(holes.any()),
+                  unseen=shown is not None)[0]
     return {"world_hidden": upsample(low, centre.inputs, stride, width, height)}
 
 
@@ -1047,7 +1062,7 @@ ACCURATE_STAGES = (
           when=_reads_gbuffer, slice_end=False),
     Stage("diffuse+ao gather (GPU)", ("centre", "cache", "gather_settings", "tables", "cells",
                                       "focused"),
-          ("low_diffuse",), _diffuse_gather),
+          ("low_diffuse", "hidden_cells"), _diffuse_gather),
     Stage("glossy gather (GPU)", ("centre", "cache", "gather_settings", "tables", "cells",
                                   "focused"),
           ("low_glossy",), _glossy_gather, when=lambda f: f["glossy_indirect"]),
@@ -1064,7 +1079,7 @@ ACCURATE_STAGES = (
           _emitter_unshadowed, when=_has_emitters),
     Stage("edge pixels", ("plan", "seen"), ("edge",), _edge_pixels, slice_end=False),
     Stage("world light at the gather points (GPU)", ("centre", "plan", "focused", "seen",
-                                                     "cells", "gather_settings"),
+                                                     "hidden_cells", "gather_settings"),
           ("world_hidden",), _world_points, when=_wants_world_points, skipped=_no_world_points),
     Stage("direct (GPU)", ("centre", "plan", "diffuse_ao", "glossy", "glossy_world", "shine",
                            "unshadowed", "gather_settings", "edge", "world_hidden"),

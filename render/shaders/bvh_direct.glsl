@@ -17,10 +17,6 @@
  * upsample.glsl UPSAMPLE_LIST: (sum, the angle the emitters turn across its taps, < 0 where
  * none fits)) where its angle is within NEAR_STEP, and evaluate it elsewhere (the shadow
  * rays are the pass's own);
- * 3: out = (the rest of the world map's hidden part, the share of its cosine rays hidden) over
- * sampling.y² strata at listed gather points (bvh_lights.glsl world_hidden_only), no lamps or
- * emitters: what F12's pixel centres read as world_hidden (hidden.x = 1) instead of their
- * own rays for it (docs/gi_pipeline.md "The world's light at the gather points");
  * 2: out = (the emitters' exact unshadowed sum alone, emitters_unshadowed, the distance to
  * the nearest emissive triangle that can light the point, bvh_lights.glsl
  * emitters_distance), no rays: the field at the gather points; with emitter_field given
@@ -100,14 +96,6 @@ void main()
   if (mode == 2) {
     imageStore(out_image, px, vec4(emitters_unshadowed(p, n, true),
                                    emitters_distance(p, n)));
-    return;
-  }
-  if (mode == 3) { /* the world's hidden rest at a gather point, sample id = its pixel's */
-    uint point = uint(position.w) - 2u; /* a listed pixel: aa_compact.glsl */
-    terminator_set(position.xyz, texelFetch(gbuffer_view, px, 0).xyz, n);
-    world_hidden_only = true;
-    vec3 hidden = world_light_direct(p, n, point, uint(sampling.x), int(sampling.y));
-    imageStore(out_image, px, vec4(hidden, world_hidden_share));
     return;
   }
   vec4 known = vec4(0.0); /* w = 0: evaluated here */

@@ -12,7 +12,13 @@
  * rays_per_dispatch): llvmpipe stops every loop of an invocation after 65535 iterations in all
  * (docs/blender_facts.md "llvmpipe's loop limit"), which silently dropped rays past about the
  * 600th. Dispatches before the last write raw sums (rgb, unoccluded rays) and (Σ luminance²,
- * the point's geometric normal); the last one writes the outputs above.  * Sampler `materials`: (M + 1) × 3 texels, row 0 base colour, row 1 emission, row 2 (metallic,
+ * the point's geometric normal); the last one writes the outputs above.
+ * out_hidden = (the world's rest hidden from the point, in Diffuse Direct's units: Σ over the
+ * rays that a surface stops (or that dip below the triangle's plane) of the world's rest
+ * radiance along them (bvh_lights.glsl world_rest_radiance; a map's sun left out with grid.w's
+ * flag 4, where the pixels trace it apart) / rays, the share of such rays); before the last
+ * dispatch (Σ, count). F12's pixel centres subtract it, filtered and upsampled, from the world's
+ * unshadowed light (docs/gi_pipeline.md "The world's light at the gather points").  * Sampler `materials`: (M + 1) × 3 texels, row 0 base colour, row 1 emission, row 2 (metallic,
  * Specular IOR Level, roughness) (last column: none); `principled_lut`: principled.glsl's. */
 
 /* The geometric normal of the triangle under the surface point `q` seen along unit `view`, on
@@ -36,8 +42,10 @@ void main()
   vec4 ray;
   uint id;
   if (!gather_point(cell, position, n, ray, id)) {
+    imageStore(out_hidden, cell, vec4(0.0));
     return;
   }
+  bool sun_apart = (int(grid.w + 0.5) & 4) != 0;
   /* Cycles' diffuse BSDF draws its directions about the shading normal and drops those below
    * the triangle's own plane (bsdf_diffuse_sample): they carry no light here either (AO still
    * counts them). The first dispatch of a point finds the triangle (a short ray) and hands its
@@ -55,11 +63,13 @@ void main()
   vec3 sum = vec3(0.0);
   float lum2 = 0.0;
   float unoccluded = 0.0;
+  vec4 hidden = vec4(0.0); /* (Σ the world's rest along the hidden rays, their count) */
   if (chunk.z > 0.5) {
     vec4 partial = texelFetch(partial_image, cell, 0);
     sum = partial.rgb;
     unoccluded = partial.a;
     lum2 = texelFetch(partial_variance, cell, 0).x;
+    hidden = texelFetch(partial_hidden, cell, 0);
   }
   /* the receiver's closures, for the chance Cycles picked a ray glossily (receiver_glossy:
    * such a path keeps every diffuse bounce to come, one more of the cache at its hit) */
@@ -95,6 +105,9 @@ void main()
       tracing = false;
       vec3 radiance = dot(d, ng) > 0.0 ? path.total : vec3(0.0);
       unoccluded += path.th >= sampling.z ? 1.0 : 0.0;
+      if (path.th < BVH_FAR || dot(d, ng) <= 0.0) {
+        hidden += vec4(world_rest_radiance(d, sun_apart), 1.0);
+      }
       sum += radiance;
       float l = dot(radiance, LUMINANCE);
       lum2 += l * l;
@@ -103,6 +116,7 @@ void main()
   if (chunk.w < 0.5) {
     imageStore(out_image, cell, vec4(sum, unoccluded));
     imageStore(out_variance, cell, vec4(lum2, ng));
+    imageStore(out_hidden, cell, hidden);
     return;
   }
   float count = float(rays);
@@ -115,4 +129,5 @@ void main()
   float ao_var = share * (1.0 - share) / count;
   imageStore(out_image, cell, vec4(mean, unoccluded / count));
   imageStore(out_variance, cell, vec4(lum_var, ao_var, 0.0, 0.0));
+  imageStore(out_hidden, cell, hidden / count);
 }

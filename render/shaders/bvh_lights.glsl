@@ -537,12 +537,6 @@ vec3 hidden_less(vec3 value, vec3 f_sum, vec3 f_lit, int m)
  * part (its rays taken as independent: an upper bound under the strata), for the filter of a
  * pixel's world light (bvh_direct.glsl's alpha, denoise.glsl options.w). */
 float world_variance = 0.0;
-/* bvh_direct's mode 3 (the gather points of F12's world light): world_direct_lobe returns the
- * rest of the map's hidden part, (Σ f − Σ seen f) / (m² π), before the map's sun's rays */
-bool world_hidden_only = false;
-/* ... and the share of its cosine rays that are hidden (the filter's guide, as AO is the diffuse
- * gather's) */
-float world_hidden_share = 0.0;
 
 /* `single` (a bounce hit's): one ray a stratum, by the map where the stratum's x is under ½,
  * else by the cosine, x stretched back over [0, 1), each ray over the techniques' mean density
@@ -590,10 +584,10 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
 #endif
   vec4 sun_head = sunny ? texelFetch(world_map, last + ivec2(2, 0), 0) : vec4(0.0);
   float hidden_sum = 0.0, hidden_squares = 0.0; /* Σ, Σ² of a hidden ray's lum(f) / π */
-  float cosine_rays = 0.0, cosine_hidden = 0.0;
   /* F12's pixel centres (hidden.x = 1, uniform over the dispatch): the rest of the map's
-   * hidden part is the gather points' (mode 3), filtered and upsampled (world_hidden, rgb;
-   * docs/gi_pipeline.md "The world's light at the gather points"): no rays of their own for it */
+   * hidden part is the diffuse gather's (bvh_gather.glsl out_hidden), filtered and upsampled
+   * (world_hidden, rgb; docs/gi_pipeline.md "The world's light at the gather points"): no rays
+   * of their own for it */
   bool given = false;
 #ifdef WORLD_HIDDEN
   given = !share && !single && !lobe && WORLD_HIDDEN.x > 0.5;
@@ -632,12 +626,10 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
        * the cosine ones as its BSDF's rays that find the sky (not lifted) */
       bool seen = max(f.r, max(f.g, f.b)) > 0.0 &&
           !shadow_ray(origin, dir, BVH_FAR, technique == 0);
-      cosine_rays += technique == 1 ? 1.0 : 0.0;
       if (!seen) {
         float hidden = dot(f, LUMA) / M_PI_F;
         hidden_sum += hidden;
         hidden_squares += hidden * hidden;
-        cosine_hidden += technique == 1 ? 1.0 : 0.0;
       }
       else {
         f_lit += f;
@@ -655,10 +647,6 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   float rays = float(ms * ms * (uniform_sky || split ? 1 : 2));
   float spread = max(hidden_squares - hidden_sum * hidden_sum / rays, 0.0) / max(rays - 1.0, 1.0);
   world_variance = rays / float(ms * ms) * spread / float(ms * ms);
-  if (world_hidden_only) {
-    world_hidden_share = cosine_hidden / max(cosine_rays, 1.0);
-    return (f_sum - f_lit) / (float(ms * ms) * M_PI_F);
-  }
   vec3 rest_hidden = (f_sum - f_lit) / (float(ms * ms) * M_PI_F);
 #ifdef WORLD_HIDDEN
   if (given) {
@@ -726,6 +714,28 @@ vec3 world_light_lobe(vec3 p, vec3 n, uint id, uint seed, int m, bool lobe, vec3
   uint stream = uint(texelFetch(world_map, ivec2(1, textureSize(world_map, 0).y - 1), 0).y);
   return world_direct_lobe(p, n, point_stream(id, stream, seed), m, lobe, v, base, params,
                            single, glossy);
+#endif
+}
+
+/* The world's rest toward unit `d`: the map's radiance there, 0 in its sun's texels where
+ * `sun_apart` (a map's sun traced apart: world_direct_lobe's sunny) and 0 without a world.
+ * The diffuse gather adds it up over its rays that a surface hides from the world
+ * (bvh_gather.glsl out_hidden; docs/gi_pipeline.md "The world's light at the gather points"). */
+vec3 world_rest_radiance(vec3 d, bool sun_apart)
+{
+#ifdef BVH_NO_WORLD
+  return vec3(0.0);
+#else
+  if (!world_on()) {
+    return vec3(0.0);
+  }
+  vec4 head = world_header();
+  vec3 radiance = world_radiance_at(world_pixel(d, int(head.x), int(head.y)));
+  ivec2 last = ivec2(0, textureSize(world_map, 0).y - 1);
+  int sun_count = int(texelFetch(world_map, last + ivec2(1, 0), 0).w + 0.5);
+  bool sun = sun_apart && sun_count > 0 && !world_uniform() &&
+             dot(radiance, LUMA) > texelFetch(world_map, last + ivec2(2, 0), 0).x;
+  return sun ? vec3(0.0) : radiance;
 #endif
 }
 

@@ -4,9 +4,10 @@
  * the surface point stepped back along the camera ray by VIEW_BACKOFF (preview/gather.py), its
  * normal, the G-buffer's view texel (camera ray direction, material) and the sample id (the
  * pixel index, row 0 on top; a compacted list's point: its pixel's, sparse_gather).
- * grid.w ≥ 2: the cells are the lattice of the stride's grid (odd row, odd column, counted from
- * the top-left, clamped to its last row and column: gpu_gather.gather_steps' lattice), cell
- * (i, j) the stride's cell (2 i + 1, 2 j + 1); grid.w − 2 is then the kernel's own flag. */
+ * grid.w holds flags: with 2 the cells are the lattice of the stride's grid (odd row, odd
+ * column, counted from the top-left, clamped to its last row and column: gpu_gather
+ * .gather_steps' lattice), cell (i, j) the stride's cell (2 i + 1, 2 j + 1); 1 and 4 are the
+ * kernels' own (bvh_glossy.glsl's world mode, bvh_gather.glsl's sun apart). */
 bool gather_point(ivec2 cell, out vec3 position, out vec3 n, out vec4 ray, out uint id)
 {
   position = n = vec3(0.0);
@@ -20,7 +21,7 @@ bool gather_point(ivec2 cell, out vec3 position, out vec3 n, out vec4 ray, out u
   int stride = int(grid.x);
   int top = size.y - 1 - cell.y;
   int column = cell.x;
-  if (grid.w > 1.5) { /* the lattice of the stride's grid */
+  if ((int(grid.w + 0.5) & 2) != 0) { /* the lattice of the stride's grid */
     top = min(2 * top + 1, (full.y + stride - 1) / stride - 1);
     column = min(2 * column + 1, (full.x + stride - 1) / stride - 1);
   }

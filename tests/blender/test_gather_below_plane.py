@@ -108,8 +108,8 @@ def test_the_gathers_and_the_direct_lights_numpy_twins_drop_and_lift_as_the_gpu(
     bvh = GPUBVH().update(tris)
 
     settings = GatherSettings(rays=16, ao_distance=1.0, seed=3)
-    values, _ = gather(bvh, gbuffer.inputs, snapshot.lights, principled, emission, settings, 1,
-                       WIDTH, HEIGHT)
+    values = gather(bvh, gbuffer.inputs, snapshot.lights, principled, emission, settings, 1,
+                    WIDTH, HEIGHT)[0]
     gpu = np.flipud(read_texture(values))[hit][:, :3]
     ng = geometric_normals(tris, p, d, n, RAY_DIFFUSE)
     dropped = (ng * n).sum(axis=1) < 0.999  # points whose triangle tilts off their normal

@@ -228,8 +228,8 @@ def test_gpu_ao_and_indirect_equal_numpy(voxgi, lamps):
     seen = read_gbuffer(gbuffer)
     settings = GatherSettings(rays=rays, ao_distance=1.0, seed=3)
     lights = scene_lights(snapshot, tris, emission)  # the lamps, and the world when it shines
-    values, variance = gather(GPUBVH().update(tris), gbuffer.inputs, lights, principled,
-                              emission, settings, 1, w, h)
+    values, variance, _ = gather(GPUBVH().update(tris), gbuffer.inputs, lights, principled,
+                                 emission, settings, 1, w, h)
     out, out_var = np.flipud(read_texture(values)), np.flipud(read_texture(variance))
     hit = seen["hit"]
     ids = np.flatnonzero(hit.ravel())

@@ -1047,34 +1047,15 @@ def world_strata_side(samples: int, width: int, height: int, rest_share: float =
     return min(fewer, max(REST_LEAST_SIDE, math.ceil(fewer * rest_share - 1e-9)))
 
 
-# F12's pixel centres take the rest of the world map's hidden part from the gather points
-# (render/gpu_preview.py _world_points): WORLD_POINT_SIDE² strata of cosine rays at each (and as
-# many of the map's under a map), then the diffuse gather's filter and upsample
-# (docs/gi_pipeline.md "The world's light at the gather points")
-WORLD_POINT_SIDE = 10
-# ... and where a map's sun is traced apart, the rest of the map over that side times the rest's
-# share of the power (as a pixel's rest went: REST_LEAST_SIDE), at least this: the HDRI
-# courtyard (a sun of 95% of the power) read the same error at 3 × 3 as at 10 × 10, and its
-# 160 × 120 preview took 8% longer at 10 × 10 than with the pixels' own rays
-WORLD_POINT_LEAST = 3
-
-
-def world_point_side(rest_share: float = 1.0) -> int:
-    """The side of the strata of the world's rays at a gather point (``WORLD_POINT_SIDE``; a
-    sunny map's rest by its ``rest_share``, ``WorldLight.rest_share``, at least
-    ``WORLD_POINT_LEAST``)."""
-    return max(WORLD_POINT_LEAST, min(WORLD_POINT_SIDE,
-                                      math.ceil(WORLD_POINT_SIDE * rest_share - 1e-9)))
-
-
-def hidden_variances(points, side: int = WORLD_POINT_SIDE) -> np.ndarray:
+def hidden_variances(points, rays) -> np.ndarray:
     """(N, 2) the à-trous filter's variances (of the light's luminance, of its guide) of N gather
-    points' (hidden rgb, hidden share) (N, 4) (``bvh_direct``'s mode 3 over ``side``² cosine
-    rays): the hidden share as the gathers' AO is (pulled half a ray towards ½: a point whose
-    rays all agree still admits neighbours within a ray's worth), the hidden light's
-    luminance by the same binomial's relative variance."""
+    points' (hidden rgb, hidden share) (N, 4) (the diffuse gather's ``bvh_gather.glsl``
+    out_hidden over ``rays`` cosine rays, a count or (N,) counts): the hidden share as the
+    gathers' AO is (pulled half a ray towards ½: a point whose rays all agree still admits
+    neighbours within a ray's worth), the hidden light's luminance by the same binomial's
+    relative variance."""
     points = np.asarray(points, np.float64)
-    rays = float(side * side)
+    rays = np.maximum(np.asarray(rays, np.float64), 1.0)
     share = (points[:, 3] * rays + 0.5) / (rays + 1.0)
     luminance = points[:, :3] @ LUMINANCE
     return np.stack([luminance ** 2 * (1.0 - share) / (share * rays),

@@ -206,29 +206,35 @@ def ray_counts(cells: np.ndarray, diffuse: np.ndarray, rays: int) -> np.ndarray:
 
 
 def gather_counts(counts: np.ndarray, values: np.ndarray, variance: np.ndarray, settings,
-                  trace) -> None:
+                  trace, more=()) -> None:
     """Gathers the cells of ``counts`` (``ray_counts``) into ``values`` (Hl, Wl, 4) and
     ``variance`` (Hl, Wl, ≥2) in place, one ``trace(cells, settings)`` → ((N, 4), (N, ≥2))
     per count (row-major), each with ``settings.rays`` = that count: a cell drawing all the
-    rays draws exactly what it would with one count for all."""
+    rays draws exactly what it would with one count for all. more : further (Hl, Wl, …)
+    arrays, filled from the further (N, …) arrays ``trace`` returns."""
     for count in np.unique(counts[counts > 0]):
         at = counts == count
-        values[at], variance[at] = trace(at, replace(settings, rays=int(count)))
+        for array, got in zip((values, variance, *more),
+                              trace(at, replace(settings, rays=int(count)))):
+            array[at] = got
 
 
 def gather_lists(traced: np.ndarray, valid: np.ndarray, diffuse: np.ndarray, values: np.ndarray,
-                 variance: np.ndarray, settings, trace) -> np.ndarray:
+                 variance: np.ndarray, settings, trace, more=()) -> np.ndarray:
     """The sparse gather's two lists into ``values`` and ``variance`` in place, as both tracers
     run them: the ``traced`` cells (``sparse_plan``), then the holes ``noisy_holes`` picks among
     those whose surface shows diffuse light (``diffuse``), by the noise of the traced cells
     that show it — each point ``ray_counts`` rays (``settings.rays`` where it shows diffuse
     light) through ``trace`` (``gather_counts``), then the spikes among them again
-    (``retrace_spikes``). Returns every cell traced."""
-    gather_counts(ray_counts(traced, diffuse, settings.rays), values, variance, settings, trace)
+    (``retrace_spikes``). more : further (Hl, Wl, …) arrays that ``trace`` fills after the
+    two (``gather_counts``), from the first two lists (a spike's keeps its first rays').
+    Returns every cell traced."""
+    gather_counts(ray_counts(traced, diffuse, settings.rays), values, variance, settings, trace,
+                  more)
     extra = noisy_holes(traced & diffuse, valid & diffuse, variance[..., 0], values)
     if extra.any():
         gather_counts(ray_counts(extra, diffuse, settings.rays), values, variance, settings,
-                      trace)
+                      trace, more)
     retrace_spikes((traced | extra) & diffuse, values, variance, settings, trace)
     return traced | extra
 
@@ -274,7 +280,7 @@ def retrace_spikes(traced: np.ndarray, values: np.ndarray, variance: np.ndarray,
     more = replace(settings, rays=SPIKE_RAYS * settings.rays, seed=settings.seed + 1)
     first = np.asarray(values[again][:, :4], np.float64)
     first_var = np.asarray(variance[again][:, :2], np.float64)
-    second, second_var = (np.asarray(a, np.float64) for a in trace(again, more))
+    second, second_var = (np.asarray(a, np.float64) for a in trace(again, more)[:2])
     share = 1.0 / (1.0 + SPIKE_RAYS)  # the first rays' share of both
     values[again, :4] = share * first + (1.0 - share) * second[:, :4]
     variance[again, :2] = share ** 2 * first_var + (1.0 - share) ** 2 * second_var[:, :2]
