@@ -84,14 +84,14 @@ _TEXTURES = ("texture_table", "texture_atlas")
 KERNELS = {
     "bvh_probe": (("textures", "bvh_probe"), _BVH + ("ray_origin", "ray_direction") + _TEXTURES,
                   ("mode",)),
-    "bvh_direct": (("textures", "light_outline", "bvh_lights", "same_surface", "bvh_direct"),
+    "bvh_direct": (("textures", "light_outline", "world_map", "bvh_lights", "same_surface", "bvh_direct"),
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "centre_position", "centre_normal",
                            "centre_view", "centre_unshadowed", "emitter_field",
                            "world_fewer", "world_hidden") + _TEXTURES,
                    ("sampling", "strata", "hidden")),
-    "bvh_gather": (("pixels", "principled", "light_outline", "bvh_lights", "textures", "cache_lookup", "ltc",
-                    "glossy_ltc", "bvh_shade", "gather_point", "bvh_gather"),
+    "bvh_gather": (("pixels", "principled", "light_outline", "world_map", "bvh_lights", "textures",
+                    "cache_lookup", "ltc", "glossy_ltc", "bvh_shade", "gather_point", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials",
                            "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "principled_lut", "partial_image",
@@ -108,8 +108,8 @@ KERNELS["bvh_glossy"] = (KERNELS["bvh_gather"][0][:-1] + ("bvh_glossy",),
 # The radiance cache's rays, traced and lit once (gpu_gather.cache_stages): the gather's inputs,
 # radiance_cache the layout's texels (each hit picks the face it reads, cache_lookup.glsl).
 KERNELS["bvh_cache_paths"] = (
-    ("principled", "light_outline", "bvh_lights", "textures", "cache_lookup", "ltc", "glossy_ltc", "bvh_shade",
-     "cache_paths"),
+    ("principled", "light_outline", "world_map", "bvh_lights", "textures", "cache_lookup", "ltc",
+     "glossy_ltc", "bvh_shade", "cache_paths"),
     _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials", "gbuffer_position",
             "gbuffer_normal", "principled_lut", "texture_table", "texture_atlas",
             "radiance_cache", "ltc_table"),
@@ -118,7 +118,7 @@ KERNELS["bvh_cache_paths"] = (
 # the pixel centres and the sub-pixel passes' points (exact_glossy.emitters_shine).
 _CENTRE = ("centre_position", "centre_normal", "centre_view", "centre_shine")
 KERNELS["bvh_emitter_glossy"] = (
-    ("principled", "light_outline", "bvh_lights", "textures", "ltc", "glossy_ltc", "same_surface",
+    ("principled", "light_outline", "world_map", "bvh_lights", "textures", "ltc", "glossy_ltc", "same_surface",
      "bvh_emitter_glossy"),
     _BVH + ("lights", "world_map", "emitters", "materials", "principled_lut", "gbuffer_position",
             "gbuffer_normal", "gbuffer_view", "gbuffer_base", "ltc_table") + _CENTRE
@@ -463,8 +463,7 @@ def strata_side(samples: int) -> int:
 def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0,
                          only: int | None = None, world=None, emitters=None, strata_block=None,
                          table=None, absent: tuple[str, ...] = (), centre=None, field=None,
-                         world_strata: int = 0, world_fewer=None, world_hidden=None,
-                         rays: bool = True):
+                         world_strata: int = 0, world_fewer=None, world_hidden=None):
     """Diffuse Direct over a G-buffer (``shaders/bvh_direct.glsl``), an RGBA32F texture of the
     G-buffer's size (bottom row first), rgb in Cycles' units; ``only`` : of that lamp alone
     (``lights_texture``; -1: none); world, emitters : a ``world_texture`` / ``emitters_texture``
@@ -486,8 +485,8 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
     world map's hidden part at every texel (the diffuse gather's, ``bvh_gather.glsl``
     out_hidden, filtered and upsampled: F12's pixel centres), which the texels take instead
     of tracing their own rays for it (the map's sun keeps its rays); None: they trace them.
-    rays : False where this dispatch traces no shadow ray (the world's rest given, no sun in
-    the map, no emitters, no lamp): the texels look for no shadow terminator's lift."""
+    (Where that would leave the dispatch no ray to trace, ``gpu_compose.shade_stages`` runs
+    ``world_given.glsl`` instead.)"""
     position = gbuffer_inputs["gbuffer_position"]
     if world_strata and world_fewer is None:
         raise ValueError("world_strata without the texels that take it (world_fewer)")
@@ -509,8 +508,7 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
                         {"sampling": (seed, block[3], 0 if centre is None else 1,
                                       0 if field is None else 1),
                          "strata": (*block[:3], world_strata),
-                         "hidden": (0.0 if world_hidden is None else 1.0,
-                                    0.0 if rays else 1.0, 0.0, 0.0)})
+                         "hidden": (0.0 if world_hidden is None else 1.0, 0.0, 0.0, 0.0)})
 
 
 def world_fewer_texture(fewer):

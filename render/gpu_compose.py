@@ -33,6 +33,7 @@ RESOLVE_SAMPLERS = (*COMPACT_SAMPLERS, "centre_position", "centre_normal", "cent
                     "centre_base", *(f"sum_{k}" for k in (*SURFACE_SUMS, "g")), "offsets",
                     "gbuffer_base", "materials", "principled_lut")
 RESOLVE_OUTPUTS = tuple(f"out_{k}" for k in (*SURFACE_SUMS, "g"))
+WORLD_GIVEN_SAMPLERS = ("world_map", "gbuffer_position", "gbuffer_normal", "world_hidden")
 _aa_shaders: dict[str, object] = {}
 
 
@@ -53,6 +54,9 @@ def _aa_shader(kernel: str):
                                   "PLANE_TOLERANCE": repr(float(PLANE_TOLERANCE)),
                                   "LEAST_CENTRES": str(LEAST_CENTRES),
                                   "LEAST_COLOUR": repr(float(LEAST_COLOUR))})
+        elif kernel == "world_given":
+            _aa_shaders[kernel] = build_compute(("sampling", "world_map", "world_given"),
+                                                WORLD_GIVEN_SAMPLERS, (), ("out_image",))
         elif kernel == "aa_mask":
             _aa_shaders[kernel] = build_compute(("aa_mask",), MASK_SAMPLERS, (),
                                                 ("out_position",))
@@ -144,14 +148,20 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
         yield
     if lamps is not None and extra:
         lamps["sum_g"], lamps["sum_f"] = sums["sum_g"], sums["sum_f"]
-    if extra:  # the world's and emitters' own dispatch (streams after the lamps)
+    if extra and world_hidden is not None and not scene.traces_extra_rays:
+        # the world's rest given and nothing else of that dispatch to trace: a kernel of its own
+        # (world_given.glsl: bvh_direct's set-up alone costs more than this light)
+        direct = run("world_given", WORLD_GIVEN_SAMPLERS, {
+            **inputs, "world_map": scene.world_map, "world_hidden": world_hidden},
+            ("out_image",), *size)["out_image"]
+    elif extra:  # the world's and emitters' own dispatch (streams after the lamps)
         direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
                                       world=scene.world_map, emitters=scene.emitters,
                                       strata_block=world_block(block), table=scene.no_lamp,
                                       absent=absent,
                                       centre=centre, field=field, world_strata=world_strata,
-                                      world_fewer=world_fewer, world_hidden=world_hidden,
-                                      rays=world_hidden is None or scene.traces_extra_rays)
+                                      world_fewer=world_fewer, world_hidden=world_hidden)
+    if extra:
         if smooth is not None:
             direct = smooth(direct)
         out = run("aa_light", LIGHT_SAMPLERS, {

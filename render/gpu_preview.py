@@ -666,15 +666,28 @@ def _with_world_glossy(f) -> bool:
 
 def _world_glossy(f):
     """Glossy Direct of the world and emitters (``bvh_glossy`` in world mode), at the gather
-    points and upsampled."""
-    low = yield from _low(f, "world glossy", "bvh_glossy", world_mode=True)
-    return {"low_world": low, "glossy_world": upsample(low, f["centre"].inputs, f["gi_stride"],
-                                                       f["width"], f["height"])}
+    points (``_world_upsample`` brings it to every pixel)."""
+    return {"low_world": (yield from _low(f, "world glossy", "bvh_glossy", world_mode=True))}
 
 
 def _no_world_glossy(f):
-    zero = f["scene"].zeros(f["width"], f["height"])
-    return {"low_world": zero, "glossy_world": zero}
+    return {"low_world": f["scene"].zeros(f["width"], f["height"])}
+
+
+def _world_upsample(f):
+    """The world's glossy light and the rest of its light hidden from the gather points at
+    every pixel: both upsampled in one dispatch where both were gathered (one kernel's
+    weights for the two: ``gpu_gather.upsample``'s pair)."""
+    inputs, stride, width, height = f["centre"].inputs, f["gi_stride"], f["width"], f["height"]
+    low_world, low_hidden = f["low_world"], f["low_hidden"]
+    glossy = _with_world_glossy(f)
+    if glossy and low_hidden is not None:
+        world, hidden = upsample(low_world, inputs, stride, width, height, low_hidden)
+        return {"glossy_world": world, "world_hidden": hidden}
+    return {"glossy_world": upsample(low_world, inputs, stride, width, height) if glossy
+            else low_world,
+            "world_hidden": None if low_hidden is None
+            else upsample(low_hidden, inputs, stride, width, height)}
 
 
 def _has_emitters(f) -> bool:
@@ -757,16 +770,16 @@ def _world_points(f):
     smooth, the creases, contacts and noisy holes — then the diffuse gather's à-trous filter
     (its holes filled from their neighbours; a point whose surface shows no diffuse light,
     which drew a few rays for its AO alone, lends its neighbours nothing) and upsample: every
-    pixel centre's, which F12's centre pass subtracts from the world's exact unshadowed light
-    instead of tracing its own rays for it (docs/gi_pipeline.md "The world's light at the
-    gather points")."""
+    pixel centre's (``_world_upsample``), which F12's centre pass subtracts from the world's
+    exact unshadowed light instead of tracing its own rays for it (docs/gi_pipeline.md "The
+    world's light at the gather points")."""
     hidden, rays, traced, shown = f["hidden_cells"]
     stride, width, height, centre = f["gi_stride"], f["width"], f["height"], f["centre"]
     rows, cols = sample_pixels(height, width, stride)
     valid = f["seen"]["hit"][rows][:, cols]
     traced = valid if traced is None else traced & valid
     if not traced.any():
-        return {"world_hidden": None}
+        return {"low_hidden": None}
     grid = [np.zeros(valid.shape + (4,), np.float32) for _ in range(2)]
     grid[0][traced] = hidden[traced]
     grid[1][traced, :2] = hidden_variances(hidden[traced], rays[traced])
@@ -775,14 +788,13 @@ def _world_points(f):
     if shown is not None:
         grid[1][..., 3] = valid & ~shown  # their light lends no taps (denoise.glsl)
     grid = [float_texture(np.flipud(cells), (cells.shape[1], cells.shape[0])) for cells in grid]
-    low = denoise(grid[0], grid[1], centre.inputs, stride, width, height,
-                  f["gather_settings"].denoise_iterations, fit=True, holes=bool(holes.any()),
-                  unseen=shown is not None)[0]
-    return {"world_hidden": upsample(low, centre.inputs, stride, width, height)}
+    return {"low_hidden": denoise(grid[0], grid[1], centre.inputs, stride, width, height,
+                                  f["gather_settings"].denoise_iterations, fit=True,
+                                  holes=bool(holes.any()), unseen=shown is not None)[0]}
 
 
 def _no_world_points(f):
-    return {"world_hidden": None}
+    return {"low_hidden": None}
 
 
 def _shade(f, inputs, sums, terms, blank, size, block, lamps=None, glow=None, centre=None,
@@ -1069,7 +1081,7 @@ ACCURATE_STAGES = (
     Stage("upsample", ("centre", "low_diffuse", "low_glossy"), ("diffuse_ao", "glossy"), _upsample,
           slice_end=False),
     Stage("world glossy gather (GPU)", ("centre", "cache", "gather_settings", "tables"),
-          ("low_world", "glossy_world"), _world_glossy, when=_with_world_glossy,
+          ("low_world",), _world_glossy, when=_with_world_glossy,
           skipped=_no_world_glossy),
     Stage("emitters' light field (GPU)", ("centre",), ("fields",), _emitter_field,
           when=_has_emitters),
@@ -1080,7 +1092,9 @@ ACCURATE_STAGES = (
     Stage("edge pixels", ("plan", "seen"), ("edge",), _edge_pixels, slice_end=False),
     Stage("world light at the gather points (GPU)", ("centre", "plan", "focused", "seen",
                                                      "hidden_cells", "gather_settings"),
-          ("world_hidden",), _world_points, when=_wants_world_points, skipped=_no_world_points),
+          ("low_hidden",), _world_points, when=_wants_world_points, skipped=_no_world_points),
+    Stage("world upsample", ("centre", "low_world", "low_hidden"), ("glossy_world", "world_hidden"),
+          _world_upsample, slice_end=False),
     Stage("direct (GPU)", ("centre", "plan", "diffuse_ao", "glossy", "glossy_world", "shine",
                            "unshadowed", "gather_settings", "edge", "world_hidden"),
           ("sums", "lamps", "result"), _centre_pass, slice_end=False),

@@ -657,7 +657,8 @@ class GPUScene:
     @property
     def traces_extra_rays(self) -> bool:
         """Whether the world's and emitters' dispatch traces shadow rays where the world's rest
-        is given (``direct_light_texture``'s world_hidden): for the emitters, or a map's sun."""
+        is given (``direct_light_texture``'s world_hidden): for the emitters, or a map's sun;
+        else ``gpu_compose.shade_stages`` runs ``world_given.glsl`` instead."""
         return any(light.type == "EMITTERS" or (light.type == "WORLD" and light.sun is not None)
                    for light in self.lights)
 

@@ -110,10 +110,7 @@ void main()
   }
   uint id = position.w > 1.5 ? uint(position.w) - 2u  /* a listed pixel: aa_compact.glsl */
                              : uint((size.y - 1 - px.y) * size.x + px.x);
-  if (hidden.y < 0.5) { /* hidden.y = 1: this dispatch traces no shadow ray (the world's rest
-                         * given, no sun in its map, no emitters): no lift to find */
-    terminator_set(position.xyz, texelFetch(gbuffer_view, px, 0).xyz, n);
-  }
+  terminator_set(position.xyz, texelFetch(gbuffer_view, px, 0).xyz, n);
   vec3 value = diffuse_direct(p, n, id, uint(sampling.x), int(sampling.y), known);
   imageStore(out_image, px, vec4(value, world_variance));
 }
