@@ -187,6 +187,20 @@ def has_metals(principled, tris) -> bool:
     return slots is not None and bool((np.asarray(slots) >= 0).any())
 
 
+# Push constants only the world's code reads (bvh_lights.glsl WORLD_HIDDEN): a variant without
+# a world declares none (its compiler would drop it, and setting it would fail)
+WORLD_CONSTANTS = {"bvh_direct": ("hidden",)}
+
+
+def variant_constants(kernel: str, absent=()) -> tuple[str, ...]:
+    """The push constants of ``kernel``'s variant that leaves out the kinds of light
+    ``absent``."""
+    names = KERNELS[kernel][2]
+    if "WORLD" in absent:
+        names = tuple(name for name in names if name not in WORLD_CONSTANTS.get(kernel, ()))
+    return names
+
+
 def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
                absent: tuple[str, ...] = (), hidden: bool = True):
     """The cached compute shader of ``kernel`` (see ``KERNELS``) with only the code the scene
@@ -200,7 +214,8 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
     docs/gi_pipeline.md "Where a preview's time goes")."""
     key = (kernel, cutouts, textures, tuple(absent), hidden)
     if key not in _shaders:
-        files, samplers, constants = KERNELS[kernel]
+        files, samplers, _ = KERNELS[kernel]
+        constants = variant_constants(kernel, absent)
         defines = {"BVH_WIDTH_LOG2": str(int(math.log2(TEXTURE_WIDTH))),
                    "SHADOW_EPSILON": repr(float(SHADOW_EPSILON)),
                    "SURFACE_EPSILON": repr(float(SURFACE_EPSILON)),
@@ -233,7 +248,8 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
         if kernel == "bvh_direct":
             defines["STRATA_BLOCK"] = "ivec3(strata.xyz)"
             defines["WORLD_STRATA"] = "int(strata.w)"
-            defines["WORLD_HIDDEN"] = "hidden"
+            if "WORLD" not in absent:
+                defines["WORLD_HIDDEN"] = "hidden"
         if "same_surface" in files:
             defines["PLANE_TOLERANCE"] = repr(float(PLANE_TOLERANCE))
             defines["NEAR_STEP"] = repr(float(NEAR_STEP))
@@ -404,7 +420,8 @@ def dispatch_bvh(kernel: str, inputs: dict[str, object], width: int, height: int
     shader = bvh_shader(kernel, bool(inputs.get("bvh_cutouts", True)),
                         bool(inputs.get("bvh_textures", True)), inputs.get("bvh_absent", ()),
                         bool(inputs.get("bvh_hidden", True)))
-    _, samplers, names = KERNELS[kernel]
+    samplers = KERNELS[kernel][1]
+    names = variant_constants(kernel, inputs.get("bvh_absent", ()))
     outputs = OUTPUTS.get(kernel, ("out_image",))
     if images is None:
         images = [gpu.types.GPUTexture((width, height), format="RGBA32F") for _ in outputs]
