@@ -545,7 +545,7 @@ def _diffuse_gather(f):
     kept = {}
     low = yield from _low(f, "diffuse", kept=kept)
     hidden = None
-    if "hidden" in kept and f["gather_hook"] is None:
+    if "hidden" in kept and _takes_world_points(f):
         cells = np.flipud(read_texture(kept["hidden"]))
         hidden = (cells, np.full(cells.shape[:2], f["gather_settings"].rays), None, None)
     return {"low_diffuse": low, "hidden_cells": hidden}
@@ -755,12 +755,17 @@ def _has_world(f) -> bool:
 WORLD_AT_POINTS = True
 
 
-def _wants_world_points(f) -> bool:
+def _takes_world_points(f) -> bool:
     """F12's centre pass takes the rest of the world map's hidden part from the gather points
     where there is a world and the gathers' filter (not the viewport's slices, whose samples
-    average their own rays), and the diffuse gather traced."""
+    average their own rays, and whose draws read nothing back)."""
     return WORLD_AT_POINTS and not f["on_gpu"] and f["denoise"] and f["gather_hook"] is None \
-        and _has_world(f) and _reads_gbuffer(f) and f["hidden_cells"] is not None
+        and _has_world(f) and _reads_gbuffer(f)
+
+
+def _wants_world_points(f) -> bool:
+    """``_takes_world_points``, where the diffuse gather traced."""
+    return _takes_world_points(f) and f["hidden_cells"] is not None
 
 
 def _world_points(f):
@@ -1073,7 +1078,7 @@ ACCURATE_STAGES = (
     Stage("G-buffer read-back", ("centre", "plan", "focused"), ("seen", "cells"), _read_gbuffer,
           when=_reads_gbuffer, slice_end=False),
     Stage("diffuse+ao gather (GPU)", ("centre", "cache", "gather_settings", "tables", "cells",
-                                      "focused"),
+                                      "focused", "plan"),
           ("low_diffuse", "hidden_cells"), _diffuse_gather),
     Stage("glossy gather (GPU)", ("centre", "cache", "gather_settings", "tables", "cells",
                                   "focused"),
