@@ -329,12 +329,13 @@ def test_fewer_world_strata_at_the_pixels_are_the_same_in_numpy_and_gpu(voxgi, m
 
 @pytest.mark.parametrize("name", ["sky_courtyard", "hdri_courtyard"])
 def test_the_world_s_light_at_the_gather_points_is_the_pixels_own(voxgi, monkeypatch, name):
-    """F12 draws the rest of the world's light hidden from a pixel (all of a uniform sky's, a
-    map's without its sun) at the gather points, filters and upsamples it like the indirect
-    light, and subtracts it from the world's exact unshadowed light at every pixel
-    (docs/gi_pipeline.md "The world's light at the gather points"): the image is the one the
-    pixels' own rays give, within their noise, at a fraction of their rays, and as close to
-    Cycles."""
+    """F12 takes the rest of the world's light hidden from a pixel (all of a uniform sky's, a
+    map's without its sun) from the diffuse gather's own rays at the gather points (each ray
+    a surface stops adds the world's rest along it: bvh_gather.glsl out_hidden), filters and
+    upsamples it like the indirect light, and subtracts it from the world's exact unshadowed
+    light at every pixel (docs/gi_pipeline.md "The world's light at the gather points", "The
+    world's rest from the diffuse gather's own rays"): the image is the one the pixels' own
+    rays give, within their noise."""
     from voxgi.render import gpu_preview
 
     width, height = 160, 120
