@@ -273,7 +273,9 @@ def profiled(fn, profile: Profile):
             out = original(kernel, inputs, width, height, constants, images)
             _finish(out[0] if isinstance(out, tuple) else out)
             grid = (constants or {}).get("grid", (0, 0, 0, 0.0))
-            name = "bvh_glossy world" if kernel == "bvh_glossy" and grid[3] > 0.5 else kernel
+            # grid.w's flag 1 is the world mode (gpu_gather.gather_steps; 2 the lattice, 4 the sun apart)
+            world = kernel == "bvh_glossy" and int(grid[3] + 0.5) & 1
+            name = "bvh_glossy world" if world else kernel
             rays, fetches = _traversals(kernel, width, height, constants, lights)
             profile.add(name, time.perf_counter() - t0, rays, fetches)
             return out
