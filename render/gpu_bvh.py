@@ -46,6 +46,7 @@ from ..voxgi_addon.gi.exact_indirect import (
     METAL_FOLLOWED,
     NEAR_FACING,
     NEAR_FIELD,
+    NEAREST_HIT,
     RAY_STREAM,
     SURFACE_EPSILON,
 )
@@ -268,6 +269,7 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
             defines["WORLD_GLOSSY_STREAM"] = f"{WORLD_GLOSSY_STREAM}u"
             defines["EMITTER_GLOSSY_STREAM"] = f"{EMITTER_GLOSSY_STREAM}u"
             defines["METAL_RAY_FACTOR"] = str(METAL_RAY_FACTOR)
+            defines["NEAREST_HIT"] = repr(float(NEAREST_HIT))
         if kernel == "bvh_cache_paths":
             defines["CACHE_PICK_STREAM"] = f"{PICK_STREAM}u"
         if kernel == "bvh_emitter_glossy":

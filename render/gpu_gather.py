@@ -36,6 +36,7 @@ from ..voxgi_addon.preview.denoise import (
     GUIDE_WEIGHT,
     HOLE_SPREAD,
     NOISE_TARGET,
+    REACH,
     RIDGE,
     SAME_SURFACE,
     SIGMA_LUMINANCE,
@@ -68,7 +69,8 @@ def _denoise_shader(holes: bool = False):
         defines = {"AO_TOLERANCE": repr(float(AO_TOLERANCE)),
                    "GUIDE_WEIGHT": repr(float(GUIDE_WEIGHT)),
                    "RIDGE": repr(float(RIDGE)),
-                   "SAME_SURFACE": repr(float(SAME_SURFACE))}
+                   "SAME_SURFACE": repr(float(SAME_SURFACE)),
+                   "REACH": repr(float(REACH))}
         if holes:
             defines["DENOISE_HOLES"] = "1"
         _shaders[name] = build_compute(("pixels", "denoise"), _DENOISE_SAMPLERS,

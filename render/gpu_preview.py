@@ -596,7 +596,9 @@ def _sparse_diffuse(f):
         return values, variance, rest, at.rays
 
     traced = gather_lists(traced, valid, diffuse, *grid, settings, trace, hidden)
-    grid[1][..., 2] = valid & ~traced  # the holes the filter's first pass fills (denoise.glsl)
+    # the holes the filter's first pass fills (z = 1, denoise.glsl); a traced cell keeps −its
+    # reach there (bvh_gather.glsl)
+    grid[1][..., 2] = np.where(valid & ~traced, 1.0, np.where(traced, np.minimum(grid[1][..., 2], 0.0), 0.0))
     grid[1][..., 3] = valid & ~diffuse  # the points whose light no pass shows: no taps of it
     grid = [float_texture(np.flipud(cells), (cells.shape[1], cells.shape[0])) for cells in grid]
     return denoise(grid[0], grid[1], centre.inputs, stride, width, height,

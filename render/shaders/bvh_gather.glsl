@@ -3,7 +3,10 @@
  * (pixels.glsl traced_pixel), plus the variance of both means for the à-trous filter
  * (voxgi_addon/gi/exact_indirect.py indirect_and_ao(..., statistics=True) is the reference).
  * out_image = (Diffuse Indirect rgb, AO); out_variance = (var of the indirect luminance mean,
- * var of the AO mean, 0, 0). Push constants:
+ * var of the AO mean, −the reach, 0): the reach is the harmonic mean of the rays' hit
+ * distances (a miss counts as infinitely far; 0: no ray hit), the scale the light changes over
+ * about the point, which bounds the filter's taps (denoise.glsl, denoise.py REACH). Push
+ * constants:
  *   sampling = (seed, rays, ao_distance, strata side m of the hit's light samples)
  *   world    = rgb radiance of a miss, w: 1 = the hit's glossy lobe reflects the lights too
  *   grid     = (stride, full width, full height, 0)
@@ -12,7 +15,8 @@
  * rays_per_dispatch): llvmpipe stops every loop of an invocation after 65535 iterations in all
  * (docs/blender_facts.md "llvmpipe's loop limit"), which silently dropped rays past about the
  * 600th. Dispatches before the last write raw sums (rgb, unoccluded rays) and (Σ luminance²,
- * the point's geometric normal); the last one writes the outputs above.
+ * the point's geometric normal in octahedral coordinates, Σ 1 / hit distance); the last one
+ * writes the outputs above.
  * out_hidden = (the world's rest hidden from the point, in Diffuse Direct's units: Σ over the
  * rays that a surface stops (or that dip below the triangle's plane) of the world's rest
  * radiance along them (bvh_lights.glsl world_rest_radiance; a map's sun left out with grid.w's
@@ -34,6 +38,23 @@ vec3 geometric_normal(vec3 q, vec3 view, vec3 n)
                                                                                          : n;
 }
 
+/* A unit vector in octahedral coordinates (two floats) and back. */
+vec2 octahedral(vec3 v)
+{
+  v /= abs(v.x) + abs(v.y) + abs(v.z);
+  vec2 folded = (1.0 - abs(v.yx)) * vec2(v.x >= 0.0 ? 1.0 : -1.0, v.y >= 0.0 ? 1.0 : -1.0);
+  return v.z >= 0.0 ? v.xy : folded;
+}
+
+vec3 from_octahedral(vec2 e)
+{
+  vec3 v = vec3(e, 1.0 - abs(e.x) - abs(e.y));
+  if (v.z < 0.0) {
+    v.xy = (1.0 - abs(v.yx)) * vec2(v.x >= 0.0 ? 1.0 : -1.0, v.y >= 0.0 ? 1.0 : -1.0);
+  }
+  return normalize(v);
+}
+
 void main()
 {
   ivec2 cell = ivec2(gl_GlobalInvocationID.xy);
@@ -51,7 +72,7 @@ void main()
    * counts them). The first dispatch of a point finds the triangle (a short ray) and hands its
    * normal on in its partial variance's .yzw; the later ones read it there (a viewport slice
    * splits a point's rays over dozens of dispatches). */
-  vec3 ng = chunk.z > 0.5 ? texelFetch(partial_variance, cell, 0).yzw :
+  vec3 ng = chunk.z > 0.5 ? from_octahedral(texelFetch(partial_variance, cell, 0).yz) :
                             geometric_normal(position + VIEW_BACKOFF * ray.xyz, ray.xyz, n);
   uint seed = uint(sampling.x);
   int rays = int(sampling.y);
@@ -63,12 +84,15 @@ void main()
   vec3 sum = vec3(0.0);
   float lum2 = 0.0;
   float unoccluded = 0.0;
+  float nearness = 0.0; /* Σ 1 / the rays' hit distances (a miss: 0) */
   vec4 hidden = vec4(0.0); /* (Σ the world's rest along the hidden rays, their count) */
   if (chunk.z > 0.5) {
     vec4 partial = texelFetch(partial_image, cell, 0);
     sum = partial.rgb;
     unoccluded = partial.a;
-    lum2 = texelFetch(partial_variance, cell, 0).x;
+    vec4 partial_var = texelFetch(partial_variance, cell, 0);
+    lum2 = partial_var.x;
+    nearness = partial_var.w;
     hidden = texelFetch(partial_hidden, cell, 0);
   }
   /* the receiver's closures, for the chance Cycles picked a ray glossily (receiver_glossy:
@@ -105,6 +129,7 @@ void main()
       tracing = false;
       vec3 radiance = dot(d, ng) > 0.0 ? path.total : vec3(0.0);
       unoccluded += path.th >= sampling.z ? 1.0 : 0.0;
+      nearness += path.th < BVH_FAR ? 1.0 / max(path.th, NEAREST_HIT) : 0.0;
       if (path.th < BVH_FAR || dot(d, ng) <= 0.0) {
         hidden += vec4(world_rest_radiance(d, sun_apart), 1.0);
       }
@@ -115,7 +140,7 @@ void main()
   }
   if (chunk.w < 0.5) {
     imageStore(out_image, cell, vec4(sum, unoccluded));
-    imageStore(out_variance, cell, vec4(lum2, ng));
+    imageStore(out_variance, cell, vec4(lum2, octahedral(ng), nearness));
     imageStore(out_hidden, cell, hidden);
     return;
   }
@@ -128,6 +153,7 @@ void main()
   float share = (unoccluded + 0.5) / (count + 1.0);
   float ao_var = share * (1.0 - share) / count;
   imageStore(out_image, cell, vec4(mean, unoccluded / count));
-  imageStore(out_variance, cell, vec4(lum_var, ao_var, 0.0, 0.0));
+  float reach = nearness > 0.0 ? count / nearness : 0.0;
+  imageStore(out_variance, cell, vec4(lum_var, ao_var, -reach, 0.0));
   imageStore(out_hidden, cell, hidden / count);
 }

@@ -15,6 +15,9 @@
  * that many times its width (2 in the first pass over a grid with holes: denoise.py HOLE_SPREAD);
  * options.z: the luminance test's σ; options.w = 1: low_image = (light rgb, the variance of its
  * luminance) and no scalar (a pixel's world light, bvh_direct.glsl), low_variance unread.
+ * low_variance.z < 0 at a traced cell: −its reach (bvh_gather.glsl), kept through the passes;
+ * a tap is then weighed by exp(−(|p_q − p| / (REACH · R))²), R the smaller of the two cells'
+ * reaches (denoise.py _reach_weight; a cell without one, 0, bounds no tap of its own).
  * A cell whose low_variance.z is 1 is a hole (the sparse gather left it out: denoise.py
  * atrous_filter(holes=…)): no tap, never settled, its taps compared with its traced 3 × 3
  * neighbours' light on its surface (denoise.py _hole_guide; by geometry alone where their
@@ -117,6 +120,12 @@ void spread(ivec2 cell, ivec2 low, int stride, ivec2 full, bool give)
   }
   imageStore(out_image, cell, vec4(light, v.a));
   imageStore(out_variance, cell, vec4(light_var, var.yzw));
+}
+
+/* A cell's −reach as the pass writes it on (a hole's flag and a filled hole: 0). */
+float reach_of(vec4 variance)
+{
+  return min(variance.z, 0.0);
 }
 
 /* KERNEL at t ∈ [−2, 2] taps from the centre, linearly interpolated between its taps: the
@@ -224,7 +233,8 @@ void main()
   settled = hole ? bvec2(false) : settled;
   if (all(settled)) { /* both kept as they are: no tap changes them (the loop below skips both) */
     imageStore(out_image, cell, centre);
-    imageStore(out_variance, cell, vec4(centre_var.xy, 0.0, flagged ? centre_var.w : 0.0));
+    imageStore(out_variance, cell, vec4(centre_var.xy, reach_of(centre_var),
+                                        flagged ? centre_var.w : 0.0));
     return;
   }
   /* The local linear fit (denoise.py _fit): per signal the weighted sums of (1, s, u) ⊗ (1,
@@ -260,6 +270,11 @@ void main()
       vec2 varq = var4.xy;
       float geometry = kernel_at(float(a) / float(spread)) * kernel_at(float(b) / float(spread)) *
                        surface_weight(position.xyz, n, pq.xyz, nq);
+      if (centre_var.z < 0.0) { /* within the reach of both (denoise.py _reach_weight) */
+        float r = var4.z < 0.0 ? min(-centre_var.z, -var4.z) : -centre_var.z;
+        vec3 offset = (pq.xyz - position.xyz) / (REACH * r);
+        geometry *= exp(-dot(offset, offset));
+      }
       vec2 scale = options.z * sqrt(max(blurred + varq + guide_spread, vec2(0.0))) + 1e-6;
       vec2 t = abs(vec2(dot(vq.rgb, LUMINANCE), vq.a) - signal) / scale;
       /* the light's weight takes the AO's test too, widened by AO_TOLERANCE (denoise.py: an
@@ -301,6 +316,6 @@ void main()
   }
   imageStore(out_image, cell, result);
   /* a hole stays one only where no tap could fill it (then left at 0, as numpy's) */
-  imageStore(out_variance, cell, vec4(result_var, hole && (m_light.x <= 0.0 || m_scalar.x <= 0.0) ? 1.0 : 0.0,
+  imageStore(out_variance, cell, vec4(result_var, hole && (m_light.x <= 0.0 || m_scalar.x <= 0.0) ? 1.0 : reach_of(centre_var),
                                      flagged ? centre_var.w : 0.0));
 }

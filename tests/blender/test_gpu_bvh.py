@@ -239,10 +239,13 @@ def test_gpu_ao_and_indirect_equal_numpy(voxgi, lamps):
                                         hit_glossy=settings.hit_glossy)
     ao_error = relative_l1(out[hit][:, 3], ao)
     indirect_error = relative_l1(out[hit][:, :3], indirect)
-    variance_error = relative_l1(out_var[hit][:, :2], var)
+    variance_error = relative_l1(out_var[hit][:, :2], var[:, :2])
+    # the points' reach, the harmonic mean of their rays' hit distances (−.z on the GPU)
+    reach_error = relative_l1(-out_var[hit][:, 2], var[:, 2])
     print(f"GPU vs numpy: AO {ao_error:.5f}, Diffuse Indirect {indirect_error:.5f}, "
-          f"variances {variance_error:.5f}")
+          f"variances {variance_error:.5f}, reaches {reach_error:.5f}")
     assert ao_error < 0.02 and indirect_error < 0.02 and variance_error < 0.02
+    assert reach_error < 0.02 and 0.05 < np.median(var[:, 2]) < 2.0
     assert 0.2 < ao.mean() < 0.95 and indirect.mean() > 0.01
     if lamps == "AREA+HDRI":  # the world lights the hits: the test sees its rays
         lamps_only = indirect_and_ao(seen["position"][hit], seen["normal"][hit], ids, tris,

@@ -167,3 +167,34 @@ def test_gpu_spreads_the_spikes_as_numpy(voxgi):
                                       fit=False)
     assert np.allclose(np.flipud(read_texture(filtered))[hit], numpy_filtered[hit], rtol=1e-3,
                        atol=1e-4)
+
+
+def test_gpu_bounds_the_taps_by_the_points_reach_as_numpy(voxgi):
+    """Each traced cell's reach (variance .z = −the harmonic mean of its rays' hit distances,
+    bvh_gather.glsl; 0: none) bounds its taps on the GPU as in numpy, with the sparse
+    gather's holes (which have none) filled alike, and changes the light near the short
+    reaches."""
+    from voxgi.render.gpu_context import ensure_gpu_context
+    from voxgi.voxgi_addon.preview.denoise import atrous_filter
+
+    ready, why = ensure_gpu_context()
+    assert ready, why
+    values, variance, hit, position, normal = _scene()
+    h, w = hit.shape
+    rows, cols = np.indices((h, w))
+    # short reaches by the wall (column 25), long ones on the open floor, none in a few cells
+    reach = np.where(cols < 25, 0.02 + 0.04 * (24 - cols), 1.0)  # metres (2 cm cells)
+    reach[rows == 7] = 0.0
+    holes = hit & ~(((rows % 2 == 1) & (cols % 2 == 1)) | (cols >= 18))
+    values[holes] = 0.0
+    variance[holes] = 0.0
+    reach[holes] = 0.0
+    var4 = np.concatenate([variance, np.where(holes, 1.0, -reach)[..., None],
+                           np.zeros((h, w, 1))], axis=-1)
+    out = _on_gpu(values, var4, hit, position, normal, holes=True)
+    ref, _ = atrous_filter(values, variance, hit, position, normal, iterations=4, holes=holes,
+                           reach=reach)
+    plain, _ = atrous_filter(values, variance, hit, position, normal, iterations=4, holes=holes)
+    assert np.allclose(out[hit], ref[hit], rtol=1e-3, atol=1e-4)
+    near = hit & (cols >= 20) & (cols < 25)
+    assert np.abs(ref[near][:, :3] - plain[near][:, :3]).max() > 0.01

@@ -250,3 +250,36 @@ def test_holes_in_noiseless_sloping_light_are_filled_along_the_slope():
                            holes=holes)
     inner = holes & (ys > 1) & (ys < h - 2) & (xs > 1) & (xs < w - 2)
     assert np.abs(out[inner, 0] / light[inner] - 1.0).max() < 0.01
+
+
+def test_light_bending_into_a_crease_keeps_its_level_within_the_points_reach():
+    """Light that bends steeply into the crease of a floor and a wall (its last centimetres
+    darken, as beside a contact): the plane fit through taps up to eight cells away cannot
+    follow the bend, and reads the crease's cells too bright. Each point's reach (the harmonic
+    mean of its rays' hit distances, short beside the wall) keeps their taps near them, and the
+    open floor, whose reach is long, is filtered as before."""
+    position, normal, wall = _floor_and_wall()
+    xs = np.mgrid[0:wall.shape[0], 0:wall.shape[1]][1].astype(np.float64)
+    gap = (wall.shape[1] // 2 - xs) * 0.01  # metres from the floor's pixel to the wall
+    level = np.where(wall, 0.4, 0.1 + 0.3 * (1.0 - np.exp(-gap / 0.03)))
+    clean = np.repeat(level[..., None], 3, axis=-1)
+    noisy, variance = _noisy(clean, 0.03, seed=5)
+    valid = np.ones(wall.shape, bool)
+    reach = np.where(wall, 1.0, 2.0 * gap + 0.01)  # as a ray's hits beside a wall: ∝ the gap
+    plain, _ = atrous_filter(noisy, variance, valid, position, normal)
+    reached, _ = atrous_filter(noisy, variance, valid, position, normal, reach=reach)
+    crease = slice(wall.shape[1] // 2 - 4, wall.shape[1] // 2)  # the floor's last 4 columns
+
+    def off(image):
+        return np.abs(image[:, crease, :3].mean(axis=(0, 2)) / clean[:, crease, 0].mean(axis=0) - 1)
+
+    assert off(reached).max() < 0.6 * off(plain).max(), (off(reached), off(plain))
+    # the open floor, 20+ cells from the wall, is as smooth as without the reach
+    open_floor = gap >= 0.2
+    assert np.abs(reached[..., :3] - clean)[open_floor].mean() < \
+        1.3 * np.abs(plain[..., :3] - clean)[open_floor].mean()
+    assert np.abs(reached[..., :3] - clean)[open_floor].mean() < \
+        np.abs(noisy[..., :3] - clean)[open_floor].mean() / 3
+    # no reach anywhere (a scene whose rays all miss): the filter as without it
+    none, _ = atrous_filter(noisy, variance, valid, position, normal, reach=np.zeros(wall.shape))
+    assert np.array_equal(none, plain)

@@ -307,10 +307,18 @@ def test_the_gathers_are_accumulated_per_cell_of_the_images_grid():
     rng = np.random.default_rng(4)
     first_v, first_var = rng.uniform(0, 1, (3, 4, 4)), rng.uniform(0, 0.1, (3, 4, 4))
     second_v, second_var = rng.uniform(0, 1, (3, 4, 4)), rng.uniform(0, 0.1, (3, 4, 4))
+    # .z: −each point's reach (the harmonic mean of its rays' hit distances); 0: none
+    first_var[..., 2], second_var[..., 2] = -rng.uniform(0.1, 2, (3, 4)), -rng.uniform(0.1, 2, (3, 4))
+    second_var[0, 0, 2] = 0.0  # its 4 rays all missed
     sums.add("diffuse", (4, 2, 8, 6), first_v, first_var, rays=4)
     mean, var = sums.add("diffuse", (4, 2, 8, 6), second_v, second_var, rays=4)
     assert np.allclose(mean, (first_v + second_v) / 2, atol=1e-6)
-    assert np.allclose(var, (first_var + second_var) / 4, atol=1e-6)  # of the mean of two
+    pooled = (first_var + second_var) / 4  # of the mean of two
+    assert np.allclose(var[..., [0, 1, 3]], pooled[..., [0, 1, 3]], atol=1e-6)
+    # the reach of all 8 rays: 8 / Σ 1 / distance, a missed ray infinitely far
+    with np.errstate(divide="ignore"):
+        near = 4 / -first_var[..., 2] + np.where(second_var[..., 2] < 0, 4 / -second_var[..., 2], 0)
+    assert np.allclose(var[..., 2], -8 / near, rtol=1e-5)
     # a smaller tile inside it: its cells (x 4–5, y 1) get a third sample
     third = rng.uniform(0, 1, (1, 2, 4))
     mean, _ = sums.add("diffuse", (8, 2, 4, 2), third, second_var[:1, :2], rays=4)

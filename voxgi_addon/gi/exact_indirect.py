@@ -75,6 +75,11 @@ MAX_FOLLOWS = 1
 # (docs/gi_pipeline.md "The near field followed", "Creases followed too")
 NEAR_FACING = 0.5
 SURFACE_EPSILON = 1e-4  # metres off the surface, as preview.SURFACE_EPSILON
+# A gather point's reach: the harmonic mean of its rays' hit distances (a miss counts as
+# infinitely far), the scale over which its light changes (Ward's irradiance-cache radius),
+# which bounds the filter's taps (preview.denoise REACH). A hit nearer than NEAREST_HIT
+# metres counts as that near (no division by 0).
+NEAREST_HIT = 1e-4
 # A bounce hit traces the shadow rays of one lamp (sun, point, spot, area), picked by
 # ``lamp_picks`` from this hash stream (of its light-sample id and seed + 1), its light divided
 # by its chance: a hit's cost no longer grows with the lamps. LAMP_PICK_FLOOR of the chance is
@@ -568,10 +573,11 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
                     hit_samples: int = 1, statistics: bool = False, hit_glossy: bool = False,
                     cache=None, geometric=None, receivers=None):
     """(Diffuse Indirect (N, 3) float32, Ambient Occlusion (N,) float32) — see the module doc;
-    with ``statistics`` also (N, 2) float32: the variance of the indirect light's luminance mean
-    (unbiased sample variance / rays) and of the AO mean (from the share of unoccluded rays
-    pulled half a ray towards ½, (k + ½)/(rays + 1), so agreeing rays still give a variance),
-    the inputs of ``preview.denoise.atrous_filter``.
+    with ``statistics`` also (N, 3) float32: the variance of the indirect light's luminance mean
+    (unbiased sample variance / rays), that of the AO mean (from the share of unoccluded rays
+    pulled half a ray towards ½, (k + ½)/(rays + 1), so agreeing rays still give a variance)
+    and the point's reach (the harmonic mean of the rays' hit distances, a miss infinitely far,
+    ``NEAREST_HIT``; 0 where no ray hits), the inputs of ``preview.denoise.atrous_filter``.
 
     points, normals : (N, 3) surface points and unit normals facing the viewer (metres).
     sample_ids : (N,) integer sample id per point (the pixel index, row 0 on top).
@@ -601,7 +607,7 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
     count = len(p)
     if count == 0:
         empty = (np.zeros((0, 3), np.float32), np.zeros(0, np.float32))
-        return (*empty, np.zeros((0, 2), np.float32)) if statistics else empty
+        return (*empty, np.zeros((0, 3), np.float32)) if statistics else empty
     origins, dirs, hit_ids = gather_rays(p, n, ids, rays, seed)
     chance = None
     if receivers is not None and cache is not None and isinstance(albedo, tuple):
@@ -622,5 +628,9 @@ def indirect_and_ao(points, normals, sample_ids, tris, lights, albedo, emission,
     luminance = per_ray @ LUMINANCE
     lum_var = np.maximum((luminance ** 2).mean(axis=1) - (indirect @ LUMINANCE) ** 2, 0.0)
     share = (unoccluded * rays + 0.5) / (rays + 1.0)
-    variance = np.stack([lum_var / max(rays - 1, 1), share * (1.0 - share) / rays], axis=1)
+    nearness = np.where(np.isfinite(t), 1.0 / np.maximum(t, NEAREST_HIT), 0.0)
+    nearness = nearness.reshape(count, rays).sum(axis=1)
+    reach = np.where(nearness > 0.0, rays / np.maximum(nearness, 1e-30), 0.0)
+    variance = np.stack([lum_var / max(rays - 1, 1), share * (1.0 - share) / rays, reach],
+                        axis=1)
     return indirect.astype(np.float32), unoccluded.astype(np.float32), variance.astype(np.float32)

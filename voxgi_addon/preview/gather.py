@@ -160,7 +160,7 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
     rays = sparse_settings(settings, np.count_nonzero(valid), np.count_nonzero(traced)).rays \
         if settings.sparse else settings.rays
     values = np.zeros(valid.shape + (4,), np.float32)
-    variance = np.zeros(valid.shape + (2,), np.float32)
+    variance = np.zeros(valid.shape + (3,), np.float32)  # (…, the points' reach)
     cache = radiance_cache(tris, lights, albedo, emission, settings)
     ids = rows[:, None] * width + cols[None, :]
 
@@ -180,9 +180,9 @@ def gather_gi(tris, lights, albedo, emission, hit, position, normal, settings: G
         traced = gather_lists(traced, valid, diffuse, values, variance,
                               replace(settings, rays=rays), trace)
     unseen = valid & ~diffuse if settings.sparse else None
-    values, _ = atrous_filter(values, variance, valid, cell_p, cell_n,
+    values, _ = atrous_filter(values, variance[..., :2], valid, cell_p, cell_n,
                               iterations=settings.denoise_iterations, holes=valid & ~traced,
-                              unseen=unseen)
+                              unseen=unseen, reach=variance[..., 2])
     if low:
         return values, valid
     return upsample(values, valid, hit, position, normal, stride)
