@@ -17,7 +17,9 @@
  * luminance) and no scalar (a pixel's world light, bvh_direct.glsl), low_variance unread.
  * low_variance.z < 0 at a traced cell: −its reach (bvh_gather.glsl), kept through the passes;
  * a tap is then weighed by exp(−(|p_q − p| / (REACH · R))²), R the smaller of the two cells'
- * reaches (denoise.py _reach_weight; a cell without one, 0, bounds no tap of its own).
+ * reaches (denoise.py _reach_weight; a cell without one, 0, bounds no tap of its own); a hole
+ * the pass fills takes its taps' harmonic mean reach by the light's weights, Σ w / Σ w / R_q (a
+ * tap without one counting as infinitely far).
  * A cell whose low_variance.z is 1 is a hole (the sparse gather left it out: denoise.py
  * atrous_filter(holes=…)): no tap, never settled, its taps compared with its traced 3 × 3
  * neighbours' light on its surface (denoise.py _hole_guide; by geometry alone where their
@@ -122,7 +124,7 @@ void spread(ivec2 cell, ivec2 low, int stride, ivec2 full, bool give)
   imageStore(out_variance, cell, vec4(light_var, var.yzw));
 }
 
-/* A cell's −reach as the pass writes it on (a hole's flag and a filled hole: 0). */
+/* A cell's −reach as the pass writes it on (a hole's flag: 0). */
 float reach_of(vec4 variance)
 {
   return min(variance.z, 0.0);
@@ -247,6 +249,7 @@ void main()
   vec3 q_scalar = vec3(0.0), q2_scalar = vec3(0.0);
   vec3 light0 = vec3(0.0), light1 = vec3(0.0), light2 = vec3(0.0);
   vec3 scalar = vec3(0.0);
+  float nearness = 0.0; /* Σ w / R_q of the light's taps: a hole's reach once filled */
   int spread = int(options.y); /* the kernel stretched over spread × its width (holes: 2) */
   int reach = 2 * spread;
   for (int a = -reach; a <= reach; a++) {
@@ -286,6 +289,7 @@ void main()
       float u = float(a) / float(spread);
       vec3 linear = vec3(1.0, s, u);
       vec3 square = vec3(s * s, s * u, u * u);
+      nearness += var4.z < 0.0 ? w.x / -var4.z : 0.0;
       m_light += w.x * linear;
       m2_light += w.x * square;
       m_scalar += w.y * linear;
@@ -316,6 +320,8 @@ void main()
   }
   imageStore(out_image, cell, result);
   /* a hole stays one only where no tap could fill it (then left at 0, as numpy's) */
-  imageStore(out_variance, cell, vec4(result_var, hole && (m_light.x <= 0.0 || m_scalar.x <= 0.0) ? 1.0 : reach_of(centre_var),
+  bool filled = hole && m_light.x > 0.0 && m_scalar.x > 0.0;
+  float kept_reach = filled ? (nearness > 0.0 ? -m_light.x / nearness : 0.0) : reach_of(centre_var);
+  imageStore(out_variance, cell, vec4(result_var, hole && !filled ? 1.0 : kept_reach,
                                      flagged ? centre_var.w : 0.0));
 }
