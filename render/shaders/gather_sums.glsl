@@ -5,8 +5,7 @@
  * gather_values, gather_variance: the tile's raw gather (rgb, a) and its kernel variances, GL
  * rows (row 0 at the bottom); NaN (a cell of no surface) counts as 0.
  * sums: the kind's sums over the image's low grid (Wl × Hl), three layers stacked in rows:
- * [0, Hl) Σ values, [Hl, 2 Hl) Σ variances, [2 Hl, 3 Hl) (Σ luminance², count, Σ rays / reach,
- * Σ rays) (a sample's reach: −its variance's .z, bvh_gather.glsl; 0: none); in each
+ * [0, Hl) Σ values, [Hl, 2 Hl) Σ variances, [2 Hl, 3 Hl) (Σ luminance², count, 0, 0); in each
  * layer GL rows too (image low row r from the top at layer row Hl − 1 − r).
  * cells = (x0 / stride, y0 / stride, rays per point, 1: read only): the tile's first low cell
  * in the image's low grid (its column, its row from the top; either may be negative). Read only
@@ -19,8 +18,10 @@
  * A cell no sample has reached yet is a hole: out_pooled.z = 1 (denoise.glsl fills it).
  * out_mean, out_pooled: the mean of every sample so far and the pooled variance (Σ var / n²;
  * with one ray per point the luminance's is the samples' spread, (Σ l² / n − l̄²) / (n − 1),
- * once n > 1), its .z −the reach of all the samples' rays (Σ rays over Σ rays / reach); cells
- * of the tile past the image keep the tile's own gather. */
+ * once n > 1), its .z 0: the view's filter bounds no tap by the points' reach, which F12's does
+ * (bvh_gather.glsl, denoise.glsl; docs/gi_pipeline.md "The filter's taps within the gather
+ * points' reach": the converged view then lies nearer F12's image); cells of the tile past the
+ * image keep the tile's own gather. */
 
 const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);
 
@@ -68,10 +69,7 @@ void main()
   float lum = dot(value.rgb, LUMINANCE);
   vec4 sum_values = imageLoad(sums, at) + value;
   vec4 sum_variance = imageLoad(sums, at + layer) + variance;
-  float reach = -min(variance.z, 0.0);
-  float rays = adds ? cells.z : 0.0;
-  vec4 rest = imageLoad(sums, at + 2 * layer) +
-              vec4(lum * lum, adds ? 1.0 : 0.0, reach > 0.0 ? rays / reach : 0.0, rays);
+  vec4 rest = imageLoad(sums, at + 2 * layer) + vec4(lum * lum, adds ? 1.0 : 0.0, 0.0, 0.0);
   if (adds) {
     imageStore(sums, at, sum_values);
     imageStore(sums, at + layer, sum_variance);
@@ -84,7 +82,7 @@ void main()
     float l = dot(mean.rgb, LUMINANCE);
     pooled.x = max(rest.x / n - l * l, 0.0) / max(n - 1.0, 1.0);
   }
-  pooled.z = rest.y > 0.5 ? (rest.z > 0.0 ? -rest.w / rest.z : 0.0) : 1.0; /* a hole: 1 */
+  pooled.z = rest.y > 0.5 ? 0.0 : 1.0; /* no reach; a hole: 1 */
   imageStore(out_mean, t, mean);
   imageStore(out_pooled, t, pooled);
 }

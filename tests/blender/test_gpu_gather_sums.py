@@ -106,9 +106,10 @@ def test_gpu_gather_sums_cells_and_kinds(gpu_tools):
     a[0, 0] = (1.0, 1.0, 1.0, 0.5)  # cell (row 1, column 2)
     a[1, 2] = (0.2, 0.2, 0.2, 0.0)  # cell (row 2, column 4)
     var_a = np.full((2, 3, 4), 0.04, np.float32)
-    var_a[..., 2] = -0.5  # −the points' reach (bvh_gather.glsl): 0.5 m
+    var_a[..., 2] = -0.5  # −the points' reach (bvh_gather.glsl): 0.5 m, not handed on
     mean, pooled = sums.add("diffuse", (4, 2, 6, 4), upload(a), upload(var_a), 1)
-    assert np.allclose(download(mean), a) and np.allclose(download(pooled), var_a)
+    no_reach = np.array([1.0, 1.0, 0.0, 1.0], np.float32)  # the view's filter takes none
+    assert np.allclose(download(mean), a) and np.allclose(download(pooled), var_a * no_reach)
 
     b = np.zeros((3, 3, 4), np.float32)  # tile (2, 0, 6, 6): cells rows 0–2, columns 1–3
     b[1, 1] = (3.0, 3.0, 3.0, 1.5)  # cell (row 1, column 2), as a[0, 0]
@@ -119,18 +120,16 @@ def test_gpu_gather_sums_cells_and_kinds(gpu_tools):
     mean, pooled = download(mean), download(pooled)
     assert np.allclose(mean[1, 1], (2.0, 2.0, 2.0, 1.0))
     # one ray: the luminance's is the samples' spread (luminances 1 and 3): (10 / 2 − 2²) / 1
-    # the reach of both samples' rays: 2 rays / (1 / 0.5 + 1 / 0.25)
-    assert np.allclose(pooled[1, 1], (1.0, 0.12 / 4, -1.0 / 3.0, 0.12 / 4))
-    assert np.allclose(mean[2, 2], 0.0) and np.allclose(pooled[2, 2, [1, 3]], 0.12 / 4)
-    assert np.allclose(pooled[2, 2, 2], -1.0 / 3.0)
-    assert np.allclose(mean[0, 0], 0.0) and np.allclose(pooled[0, 0], (0.08, 0.08, -0.25, 0.08))
+    assert np.allclose(pooled[1, 1], (1.0, 0.12 / 4, 0.0, 0.12 / 4))
+    assert np.allclose(mean[2, 2], 0.0) and np.allclose(pooled[2, 2, 1:], (0.03, 0.0, 0.03))
+    assert np.allclose(mean[0, 0], 0.0) and np.allclose(pooled[0, 0], (0.08, 0.08, 0.0, 0.08))
     # the storage: Σ values, Σ variances, (Σ luminance², count) stacked, each layer in GL rows
     storage = read_texture(sums.sums["diffuse"])
     assert storage.shape == (15, 5, 4)
     layers = [np.flipud(storage[5 * k:5 * (k + 1)]) for k in range(3)]
     assert np.allclose(layers[0][1, 2], (4.0, 4.0, 4.0, 2.0))
     assert np.allclose(layers[1][1, 2, [0, 1, 3]], 0.12)
-    assert np.allclose(layers[2][1, 2], (10.0, 2.0, 6.0, 2.0))  # (…, Σ rays / reach, Σ rays)
+    assert np.allclose(layers[2][1, 2], (10.0, 2.0, 0.0, 0.0))
     assert np.allclose(layers[2][..., 1], [[0, 1, 1, 1, 0], [0, 1, 2, 2, 1], [0, 1, 2, 2, 1]] + [[0] * 5] * 2)
 
     c = np.full((4, 2, 4), 5.0, np.float32)  # tile (8, 4, 4, 8): column 5 and row 5 are past it
@@ -141,13 +140,12 @@ def test_gpu_gather_sums_cells_and_kinds(gpu_tools):
     assert np.allclose(mean[:, 1], 5.0) and np.allclose(pooled[:, 1], var_c[:, 1])  # past the image
     assert np.allclose(mean[3], 5.0) and np.allclose(pooled[3], var_c[0])
     assert np.allclose(mean[0, 0], (2.6, 2.6, 2.6, 2.5))  # cell (row 2, column 4), with a[1, 2]
-    # rays > 1: the pooled kernel variance; the reach of 1 + 3 rays: 4 / (1 / 0.5 + 3 / 2)
-    assert np.allclose(pooled[0, 0], (0.54 / 4, 0.54 / 4, -4.0 / 3.5, 0.54 / 4))
-    assert np.allclose(mean[1, 0], 5.0) and np.allclose(pooled[1, 0], var_c[0, 0])  # a new cell
+    assert np.allclose(pooled[0, 0], (0.54 / 4, 0.54 / 4, 0.0, 0.54 / 4))  # rays > 1: pooled
+    assert np.allclose(mean[1, 0], 5.0) and np.allclose(pooled[1, 0], var_c[0, 0] * no_reach)
 
     mean, pooled = sums.add("glossy", (2, 0, 6, 6), upload(b), upload(var_b), 1)
     assert np.allclose(download(mean)[1, 1], (3.0, 3.0, 3.0, 1.5))  # a kind of its own
-    assert np.allclose(download(pooled)[1, 1], var_b[0, 0])
+    assert np.allclose(download(pooled)[1, 1], var_b[0, 0] * no_reach)
 
 
 def test_gpu_gather_sums_errors(gpu_tools):

@@ -484,9 +484,10 @@ class GatherSums:
     values (rgb, a): the mean of the samples' means. variance (the gather kernels' (var of the
     luminance mean, var of the AO mean, …)): the pooled kernel variances over n² — except the
     luminance's when a sample traces one ray (its kernel variance is 0): then the samples'
-    spread, (Σ l² / n − l̄²) / (n − 1). The variance's third channel is −the points' reach
-    (``exact_indirect.indirect_and_ao``'s), pooled as one gather of all the samples' rays: Σ rays
-    over Σ rays / reach (a sample whose rays all missed adds its rays to the first sum only)."""
+    spread, (Σ l² / n − l̄²) / (n − 1). The variance's third channel (−the points' reach in a
+    gather's, ``exact_indirect.indirect_and_ao``) is 0: the view's filter bounds no tap by the
+    reach, F12's does (docs/gi_pipeline.md "The filter's taps within the gather points' reach":
+    the converged view lies nearer F12's image without it)."""
 
     def __init__(self, width: int, height: int, stride: int):
         self.width, self.height, self.stride = width, height, stride
@@ -534,17 +535,13 @@ class GatherSums:
         if sums is None:
             sums = self.kinds[kind] = {
                 "values": np.zeros((*self.shape, 4)), "variance": np.zeros((*self.shape, 4)),
-                "lum2": np.zeros(self.shape), "n": np.zeros(self.shape), "rays": rays,
-                "near": np.zeros(self.shape), "ray_sum": np.zeros(self.shape)}
+                "lum2": np.zeros(self.shape), "n": np.zeros(self.shape), "rays": rays}
         sums["rays"] = rays
         cells, part = inside((x0 // s, y0 // s, low_w, low_h), self.shape[1], self.shape[0])
         sums["values"][cells] += values[part]
         sums["variance"][cells] += variance[part]
         sums["lum2"][cells] += (values[part][..., :3] @ LUMINANCE) ** 2
         sums["n"][cells] += added[part]
-        reach = -np.minimum(variance[part][..., 2], 0.0)
-        sums["near"][cells] += np.where(reach > 0.0, rays / np.maximum(reach, 1e-30), 0.0)
-        sums["ray_sum"][cells] += rays * added[part]
         mean, pooled = self._mean(sums, cells)
         # the tile's cells past the image keep their own gather (off the lattice: holes)
         values, variance = values.copy(), variance.copy()
@@ -566,9 +563,7 @@ class GatherSums:
             spread = np.maximum(sums["lum2"][cells] / np.maximum(count, 1.0) - lum * lum,
                                 0.0) / np.maximum(count - 1.0, 1.0)
             pooled[..., 0] = np.where(count > 1.0, spread, pooled[..., 0])
-        near = sums["near"][cells]
-        pooled[..., 2] = np.where(near > 0.0, -sums["ray_sum"][cells] / np.maximum(near, 1e-30),
-                                  0.0)
+        pooled[..., 2] = 0.0  # no reach (the class doc)
         return mean, pooled
 
 
