@@ -57,8 +57,9 @@ tap q of a point p with a reach is weighed by exp(−(|p_q − p| / (REACH · R)
 of the two points' reaches (a hole, or a point whose rays all missed, has none: only the
 other's bounds; a hole takes one once the first pass fills it: the harmonic mean of its taps'
 reaches, by their weights). On the columned hall at 640 × 480 the error against Cycles' default
-light paths fell 0.10118 → 0.10039, under Cycles 16 spp + OIDN's 0.10047, and no scene's rose by
-more than 0.3% (docs/gi_pipeline.md "The filter's taps within the gather points' reach").
+light paths fell 0.10118 → 0.10028, under Cycles 16 spp + OIDN's 0.10047; of six scenes only the
+emissive room's rose, by 0.4% (docs/gi_pipeline.md "The filter's taps within the gather points'
+reach").
 
 Two signals are filtered side by side with the same geometry weights: the RGB light
 (luminance test on its luminance) and a scalar (ambient occlusion, its own test). The light's
