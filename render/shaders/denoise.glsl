@@ -289,7 +289,9 @@ void main()
       float u = float(a) / float(spread);
       vec3 linear = vec3(1.0, s, u);
       vec3 square = vec3(s * s, s * u, u * u);
-      nearness += var4.z < 0.0 ? w.x / -var4.z : 0.0;
+#ifdef DENOISE_HOLES
+      nearness += var4.z < 0.0 ? w.x / -var4.z : 0.0; /* (only a hole's reach reads it) */
+#endif
       m_light += w.x * linear;
       m2_light += w.x * square;
       m_scalar += w.y * linear;

@@ -37,6 +37,22 @@ def _scene(h=30, w=40, seed=3):
     return values, variance * rng.uniform(0.5, 1.5, (h, w, 1)), hit, position, normal
 
 
+def _sparse_scene(traced_too):
+    """``_scene`` with the sparse gather's holes (on a GPU context): every seen cell but the
+    lattice of odd rows and columns and the cells ``traced_too(rows, cols)`` picks, their values
+    and variances zeroed. Returns (values, variance, hit, position, normal, holes, rows, cols)."""
+    from voxgi.render.gpu_context import ensure_gpu_context
+
+    ready, why = ensure_gpu_context()
+    assert ready, why
+    values, variance, hit, position, normal = _scene()
+    rows, cols = np.indices(hit.shape)
+    holes = hit & ~(((rows % 2 == 1) & (cols % 2 == 1)) | traced_too(rows, cols))
+    values[holes] = 0.0
+    variance[holes] = 0.0
+    return values, variance, hit, position, normal, holes, rows, cols
+
+
 def _on_gpu(values, var4, hit, position, normal, **options):
     """``gpu_gather.denoise`` (4 passes) of the (H, W, 4) ``values`` and ``var4`` grids (row 0
     on top), read back in the same layout."""
@@ -107,20 +123,14 @@ def test_gpu_fills_the_sparse_gathers_holes_as_numpy(voxgi):
     the GPU as in numpy,
     each compared with its traced neighbours' light: the holes beside the band keep their own
     level."""
-    from voxgi.render.gpu_context import ensure_gpu_context
     from voxgi.voxgi_addon.preview.denoise import atrous_filter
 
-    ready, why = ensure_gpu_context()
-    assert ready, why
-    values, variance, hit, position, normal = _scene()
-    h, w = hit.shape
-    rows, cols = np.indices((h, w))
-    band = rows == 15
     # the rows beside the band traced too, as the second list picks them (sparse_gather
     # noisy_holes: their neighbours lie across the light's edge)
-    holes = hit & ~(((rows % 2 == 1) & (cols % 2 == 1)) | (np.abs(rows - 15) <= 1))
-    values[holes] = 0.0
-    variance[holes] = 0.0
+    values, variance, hit, position, normal, holes, rows, _ = _sparse_scene(
+        lambda rows, cols: np.abs(rows - 15) <= 1)
+    h, w = hit.shape
+    band = rows == 15
     unlit, _ = atrous_filter(values, variance, hit, position, normal, iterations=4, holes=holes)
     values[band, :3] *= 10.0  # (its noise as before: the step is far above it)
     var4 = np.concatenate([variance, holes[..., None] * 1.0, np.zeros((h, w, 1))], axis=-1)
@@ -174,20 +184,14 @@ def test_gpu_bounds_the_taps_by_the_points_reach_as_numpy(voxgi):
     bvh_gather.glsl; 0: none) bounds its taps on the GPU as in numpy, with the sparse
     gather's holes (which have none) filled alike, and changes the light near the short
     reaches."""
-    from voxgi.render.gpu_context import ensure_gpu_context
     from voxgi.voxgi_addon.preview.denoise import atrous_filter
 
-    ready, why = ensure_gpu_context()
-    assert ready, why
-    values, variance, hit, position, normal = _scene()
+    values, variance, hit, position, normal, holes, rows, cols = _sparse_scene(
+        lambda rows, cols: cols >= 18)
     h, w = hit.shape
-    rows, cols = np.indices((h, w))
     # short reaches by the wall (column 25), long ones on the open floor, none in a few cells
     reach = np.where(cols < 25, 0.02 + 0.04 * (24 - cols), 1.0)  # metres (2 cm cells)
     reach[rows == 7] = 0.0
-    holes = hit & ~(((rows % 2 == 1) & (cols % 2 == 1)) | (cols >= 18))
-    values[holes] = 0.0
-    variance[holes] = 0.0
     reach[holes] = 0.0
     var4 = np.concatenate([variance, np.where(holes, 1.0, -reach)[..., None],
                            np.zeros((h, w, 1))], axis=-1)
