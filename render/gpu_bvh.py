@@ -89,8 +89,8 @@ KERNELS = {
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "gbuffer_position",
                            "gbuffer_normal", "gbuffer_view", "centre_position", "centre_normal",
                            "centre_view", "centre_unshadowed", "emitter_field",
-                           "world_fewer", "world_hidden") + _TEXTURES,
-                   ("sampling", "strata", "hidden")),
+                           "world_fewer", "world_hidden", "diffuse_colour") + _TEXTURES,
+                   ("sampling", "strata", "hidden", "shown")),
     "bvh_gather": (("pixels", "principled", "light_outline", "world_map", "bvh_lights", "textures",
                     "cache_lookup", "ltc", "glossy_ltc", "bvh_shade", "gather_point", "bvh_gather"),
                    _BVH + ("bvh_normals", "lights", "world_map", "emitters", "materials",
@@ -482,7 +482,8 @@ def strata_side(samples: int) -> int:
 def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16, seed: int = 0,
                          only: int | None = None, world=None, emitters=None, strata_block=None,
                          table=None, absent: tuple[str, ...] = (), centre=None, field=None,
-                         world_strata: int = 0, world_fewer=None, world_hidden=None):
+                         world_strata: int = 0, world_fewer=None, world_hidden=None,
+                         colour=None):
     """Diffuse Direct over a G-buffer (``shaders/bvh_direct.glsl``), an RGBA32F texture of the
     G-buffer's size (bottom row first), rgb in Cycles' units; ``only`` : of that lamp alone
     (``lights_texture``; -1: none); world, emitters : a ``world_texture`` / ``emitters_texture``
@@ -505,7 +506,10 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
     out_hidden, filtered and upsampled: F12's pixel centres), which the texels take instead
     of tracing their own rays for it (the map's sun keeps its rays); None: they trace them.
     (Where that would leave the dispatch no ray to trace, ``gpu_compose.shade_stages`` runs
-    ``world_given.glsl`` instead.)"""
+    ``world_given.glsl`` instead.) colour : the Diffuse Color at the same texels
+    (``aa_surface.glsl`` out_colour), when the light is only ever read times it: a texel
+    whose Diffuse Color is 0 (a full metal, a black surface) shows none of it, so it traces
+    nothing and reads 0 (None: every texel is lit)."""
     position = gbuffer_inputs["gbuffer_position"]
     if world_strata and world_fewer is None:
         raise ValueError("world_strata without the texels that take it (world_fewer)")
@@ -522,12 +526,14 @@ def direct_light_texture(bvh: GPUBVH, gbuffer_inputs, lights, samples: int = 16,
               "emitter_field": position if field is None else field,  # not read without
               "world_fewer": position if world_fewer is None else world_fewer,  # (the same)
               "world_hidden": position if world_hidden is None else world_hidden,
+              "diffuse_colour": position if colour is None else colour,  # (not read without)
               "bvh_absent": tuple(absent)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,
                         {"sampling": (seed, block[3], 0 if centre is None else 1,
                                       0 if field is None else 1),
                          "strata": (*block[:3], world_strata),
-                         "hidden": (0.0 if world_hidden is None else 1.0, 0.0, 0.0, 0.0)})
+                         "hidden": (0.0 if world_hidden is None else 1.0, 0.0, 0.0, 0.0),
+                         "shown": (0.0 if colour is None else 1.0, 0.0, 0.0, 0.0)})
 
 
 def world_fewer_texture(fewer):
@@ -568,7 +574,7 @@ def emitters_unshadowed_texture(bvh: GPUBVH, gbuffer_inputs, emitters, lights=No
               "world_map": world if world is not None else world_texture(None),
               "centre_position": position, "centre_normal": position, "centre_view": position,
               "centre_unshadowed": position, "world_fewer": position,  # not read
-              "world_hidden": position,
+              "world_hidden": position, "diffuse_colour": position,
               "emitter_field": position if field is None else field,
               "bvh_absent": tuple(absent)}
     return dispatch_bvh("bvh_direct", inputs, position.width, position.height,

@@ -160,7 +160,8 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
                                       strata_block=world_block(block), table=scene.no_lamp,
                                       absent=absent,
                                       centre=centre, field=field, world_strata=world_strata,
-                                      world_fewer=world_fewer, world_hidden=world_hidden)
+                                      world_fewer=world_fewer, world_hidden=world_hidden,
+                                      colour=colour if smooth is None else None)
     if extra:
         if smooth is not None:
             direct = smooth(direct)

@@ -21,7 +21,10 @@
  * the nearest emissive triangle that can light the point, bvh_lights.glsl
  * emitters_distance), no rays: the field at the gather points; with emitter_field given
  * (sampling.w = 1), (the field's sum where it holds, else the exact one, 0): the pixel
- * centres' sums, which mode 1 reads as its centre_unshadowed. */
+ * centres' sums, which mode 1 reads as its centre_unshadowed.
+ * shown.x = 1 (modes 0 and 1): diffuse_colour holds the Diffuse Color at the same texels, and
+ * a texel where it is 0 (a full metal, a black surface: its light is only read times it)
+ * traces nothing and stores 0. */
 
 /* The triangle under the pixel's point `q` seen along unit `view` with shading normal `n`
  * (a camera ray from TERMINATOR_REACH back to as far past it: surface_lookup.find_triangles,
@@ -96,6 +99,11 @@ void main()
   if (mode == 2) {
     imageStore(out_image, px, vec4(emitters_unshadowed(p, n, true),
                                    emitters_distance(p, n)));
+    return;
+  }
+  if (shown.x > 0.5 && texelFetch(diffuse_colour, px, 0).rgb == vec3(0.0)) {
+    /* no Diffuse Color: the light is read times it alone (aa_light.glsl), nothing to trace */
+    imageStore(out_image, px, vec4(0.0));
     return;
   }
   vec4 known = vec4(0.0); /* w = 0: evaluated here */

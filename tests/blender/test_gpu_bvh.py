@@ -173,6 +173,32 @@ def test_gpu_direct_light_equals_numpy(voxgi, light):
     assert (value < 0.2 * np.median(value)).mean() > 0.02
 
 
+
+def test_gpu_direct_light_traces_nothing_where_no_diffuse_colour_shows(voxgi):
+    """Given the texels' Diffuse Color (the sub-pixel passes' world and emitters dispatch), a
+    texel whose colour is 0 (a full metal: its Diffuse Direct is only read times it) reads 0
+    and the others read exactly what the dispatch without it gives."""
+    from voxgi.render.gbuffer import rasterize
+    from voxgi.render.gpu_bvh import GPUBVH, direct_light_texture
+    from voxgi.render.gpu_tracer import read_texture
+    from voxgi.render.gpu_volume import float_texture
+    from voxgi.voxgi_addon.preview.passes import material_table
+
+    scenes.build_test_cornell_box(bpy.context.scene, light="AREA")
+    snapshot, tris = snapshot_now()
+    gpu_ready()
+    w, h = 96, 72
+    gbuffer = rasterize(tris, snapshot.camera, material_table(snapshot)[1], w, h)
+    bvh = GPUBVH().update(tris)
+    colour = np.full((h, w, 4), 0.5, np.float32)
+    colour[:, : w // 2, :3] = 0.0  # the left half (in the texture's rows) shows no diffuse light
+    lit = read_texture(direct_light_texture(bvh, gbuffer.inputs, snapshot.lights, 16))
+    masked = read_texture(direct_light_texture(bvh, gbuffer.inputs, snapshot.lights, 16,
+                                               colour=float_texture(colour, (w, h))))
+    assert lit[:, : w // 2, :3].mean() > 0.05  # there is light there to leave out
+    assert not masked[:, : w // 2].any()
+    np.testing.assert_array_equal(masked[:, w // 2:], lit[:, w // 2:])
+
 def soft_hdri_world():
     """The synthetic HDRI of light_scenes with its sun's disc held at 40: the map's importance
     still leans on it (the map's rays are the bounce hits' half), but no ray of the few a

@@ -7,7 +7,12 @@ surface takes that surface's light (no dark outline where a diffuse wall meets m
 import numpy as np
 import pytest
 
-from voxgi.voxgi_addon.preview.passes import PASS_NAMES, filter_passes, neighbour_weights
+from voxgi.voxgi_addon.preview.passes import (
+    PASS_NAMES,
+    filter_passes,
+    light_edge_pixels,
+    neighbour_weights,
+)
 from voxgi.voxgi_addon.scene.camera import blackman_harris, filter_offsets, filter_samples
 
 
@@ -231,3 +236,36 @@ def test_passes_summed_before_one_scatter_give_the_tails_of_a_scatter_per_pass()
         np.testing.assert_allclose(once[name], per_pass[name][at], rtol=1e-12, atol=1e-12)
         # nothing reaches a pixel left out
         assert not np.any(per_pass[name][~reached])
+
+
+def test_sub_pixel_passes_go_to_a_shadows_edge_not_to_a_dim_highlights_tail():
+    """The light edges that get sub-pixel passes (``light_edge_pixels``): a lamp's shadow edge
+    across a lit floor and a bright highlight's peak, but not the dim tail of a glossy
+    highlight over a metal, which falls by a third each pixel (more than a pass's share of
+    its own light) yet stays far below the image's light: there the filter over the pixel
+    centres is within a hair of Cycles' filter over the light itself."""
+    height, width = 9, 48
+    light = np.ones((height, width))  # a lit floor...
+    light[:, 10:20] = 0.0  # ...whose lamp is shadowed from column 10
+
+    def tail(x):  # a highlight's tail, falling by a third each pixel from 0.03
+        return 0.03 * (2.0 / 3.0) ** (np.asarray(x, np.float64) - 20.0)
+
+    light[:, 20:40] = tail(np.arange(20, 40))
+    light[:, 40:43] = (0.6, 1.6, 0.6)  # a highlight's bright peak
+    edges = light_edge_pixels(light, np.ones((height, width), bool), 1, 16)
+    assert edges[:, 9:11].all()  # both sides of the shadow's edge
+    assert edges[:, 40:43].all()
+    bend = np.abs(light[:, 21:38] + light[:, 23:40] - 2.0 * light[:, 22:39])
+    assert (bend * 16 > light[:, 21:38]).all()  # more than a pass's share of its own light
+    assert not edges[:, 22:38].any()
+    # what the passes would give there: Cycles' filter over the tail's light itself (the
+    # window spans 3 pixels at Filter Size 1.5), against the filter over the centres alone
+    # (filter_passes): within 1% of the floor's light
+    u = np.linspace(-1.5, 1.5, 3001)
+    window = blackman_harris(u, 1.5)
+    x = np.arange(22, 38)
+    exact = np.array([(tail(c + u) * window).sum() / window.sum() for c in x])
+    centres = filter_passes(passes_of(light[..., None].repeat(3, -1),
+                                      np.full((height, width, 3), 0.5)), 1.5)["Diffuse Direct"]
+    assert np.abs(exact - centres[4, x, 0]).max() < 0.01

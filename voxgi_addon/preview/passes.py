@@ -525,13 +525,20 @@ def light_edge_pixels(light, computed, reach: int, passes: int) -> np.ndarray:
     value; they change it where it bends. A pixel is a light edge pixel when it belongs to a
     line of three computed pixels (across, along, either diagonal) whose second difference
     exceeds 1 / ``passes`` of their largest light — more than one pass's share, what a
-    shadow's edge through the window brings — and, for reach > 1, the pixels within reach − 1
-    of those. reach 0: none."""
+    shadow's edge through the window brings — or of the computed pixels' mean light, where
+    that is larger: the filter over the centres (``filter_passes``) already follows a bend
+    that spans pixels, and one far below the image's light (the dim tail of a glossy
+    highlight, over the whole of a metal ball) moves its pixels by less than the passes'
+    share of a typical pixel (docs/gi_pipeline.md "Sub-pixel passes where they
+    show") — and, for reach > 1, the pixels within reach − 1 of those. reach 0: none."""
     light = np.asarray(light, np.float64)
     height, width = light.shape
     out = np.zeros((height, width), bool)
     if reach <= 0:
         return out
+    # the image's mean light: a bend far below it (a glossy highlight's dim tail, a faint
+    # penumbra) moves its pixels by less than a pass's share of a typical pixel's light
+    mean = float(light[computed].mean()) if computed.any() else 0.0
     for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
         ay, ax = abs(dy), abs(dx)
         middle = (slice(ay, height - ay), slice(ax, width - ax))
@@ -539,7 +546,7 @@ def light_edge_pixels(light, computed, reach: int, passes: int) -> np.ndarray:
         after = (slice(ay + dy, height - ay + dy), slice(ax + dx, width - ax + dx))
         valid = computed[before] & computed[middle] & computed[after]
         bend = np.abs(light[before] + light[after] - 2.0 * light[middle])
-        top = np.maximum(np.maximum(light[before], light[middle]), light[after])
+        top = np.maximum(np.maximum(np.maximum(light[before], light[middle]), light[after]), mean)
         bent = valid & (bend * passes > top)
         for part in (before, middle, after):
             out[part] |= bent
