@@ -157,13 +157,15 @@ def sparse_settings(settings, valid: int | None = None, traced: int | None = Non
     return replace(settings, rays=max(1, round(settings.rays * share)))
 
 
-# The glossy gather is sparse too where the gathers' cells are pixels (GI Resolution Full,
-# Auto up to 240 × 180): ``sparse_plan``'s cells, each with ``SPARSE_RAYS`` × its rays, no
-# second list (``glossy_cells``; docs/gi_pipeline.md "Glossy gathers at fewer points": at 160 ×
-# 120 the previews took 7-29% less time for 0.3-7% more error, the room of metals the most of
-# both). At one cell per 3 × 3 pixels (640 × 480) the glossy gather is a few percent of the
-# frame: sparse, it saved no time and added 0.1-0.6% error
-SPARSE_GLOSSY_STRIDE = 1
+# The glossy gather is sparse too where the gathers' cells are at most 2 × 2 pixels (GI
+# Resolution Full and Half, Auto up to 480 × 360): ``sparse_plan``'s cells, each with
+# ``SPARSE_RAYS`` × its rays, no second list (``glossy_cells``; docs/gi_pipeline.md "Glossy
+# gathers at fewer points": at 160 × 120 the previews took 7-29% less time for 0.3-7% more
+# error, the room of metals the most of both; "Glossy gathers at fewer points at 2 × 2
+# pixels a cell": at 320 × 240 the same error or less, the glossy gather a fifth of a metal
+# scene's preview before). At one cell per 3 × 3 pixels (640 × 480) the glossy gather is a
+# few percent of the frame: sparse, it saved no time and added 0.1-0.6% error
+SPARSE_GLOSSY_STRIDE = 2
 
 
 def glossy_cells(valid: np.ndarray, position: np.ndarray, normal: np.ndarray, stride: int,
