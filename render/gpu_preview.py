@@ -38,6 +38,7 @@ from ..voxgi_addon.preview.passes import (
     material_indices,
     pass_tail_weights,
     pass_weights,
+    rest_spread,
     shows_diffuse,
     subpixel_passes,
     subpixel_reach,
@@ -789,7 +790,8 @@ def _world_points(f):
         return {"low_hidden": None}
     grid = [np.zeros(valid.shape + (4,), np.float32) for _ in range(2)]
     grid[0][traced] = hidden[traced]
-    grid[1][traced, :2] = hidden_variances(hidden[traced], rays[traced])
+    grid[1][traced, :2] = hidden_variances(hidden[traced], rays[traced],
+                                           rest_spread(f["scene"].lights, _sun_apart(f)))
     holes = valid & ~traced
     grid[1][..., 2] = holes  # the holes the filter's first pass fills (denoise.glsl)
     if shown is not None:

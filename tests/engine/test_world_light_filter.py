@@ -6,6 +6,7 @@ from __future__ import annotations
 import types
 
 import numpy as np
+import pytest
 
 from voxgi.voxgi_addon.gi.world_light import hidden_less, hidden_variance
 from voxgi.voxgi_addon.preview.passes import world_filter_passes, world_filtered
@@ -196,3 +197,42 @@ def test_the_gather_points_hidden_sky_reports_the_variance_it_has():
     each = hidden_variances(half, np.array([rays, 8]))
     np.testing.assert_allclose(each[0], hidden_variances(half[:1], rays)[0])
     assert (each[1] > 5.0 * each[0]).all()
+
+
+def test_the_gather_points_hidden_map_reports_the_spread_of_its_radiance():
+    """Under a map whose radiance varies with direction, a gather point's hidden light varies
+    with where its hidden rays point as well as with how many are hidden: over many draws the
+    hidden light's luminance varies as much as ``hidden_variances`` reports with the map's
+    spread (``rest_spread``'s c²), and several times what the binomial alone reports where
+    nearly every ray is hidden (a room lit through a window, whose filter otherwise kept the
+    noise as blotches)."""
+    from voxgi.voxgi_addon.preview.passes import hidden_variances, rest_spread
+
+    rng = np.random.default_rng(7)
+    rows, cols = 64, 128
+    theta = (np.arange(rows) + 0.5) * np.pi / rows
+    # a sky twice as bright as the ground, with a brighter band: the map's rays' radiance
+    radiance = np.where(theta[:, None] < np.pi / 2, 2.0, 0.6) * np.ones((rows, cols))
+    radiance[10:14] *= 4.0
+    world = types.SimpleNamespace(type="WORLD", uniform=False, key="map", sun=None,
+                                  radiance=np.repeat(radiance[..., None], 3, axis=2))
+    c2 = rest_spread([world], True)
+    weight = (np.sin(theta)[:, None] * np.ones((rows, cols))).ravel()
+    lum = radiance.ravel()
+    mean = (weight * lum).sum() / weight.sum()
+    assert c2 == pytest.approx((weight * lum * lum).sum() / weight.sum() / mean ** 2 - 1.0)
+    assert c2 > 0.2
+    rays, draws = 96, 20000
+    for share in (0.5, 0.95):
+        # each ray's radiance drawn by solid angle over the map, hidden at random
+        picked = lum[rng.choice(lum.size, (draws, rays), p=weight / weight.sum())]
+        hidden = rng.random((draws, rays)) < share
+        light = (picked * hidden).mean(axis=1)
+        points = np.stack([light, light, light, hidden.mean(axis=1)], axis=1)
+        reported = hidden_variances(points, rays, c2)[:, 0]
+        binomial = hidden_variances(points, rays)[:, 0]
+        np.testing.assert_allclose(reported.mean(), light.var(), rtol=0.15)
+        if share > 0.9:
+            assert reported.mean() > 4.0 * binomial.mean()
+    assert rest_spread([types.SimpleNamespace(type="WORLD", uniform=True)], True) == 0.0
+    assert rest_spread([], True) == 0.0

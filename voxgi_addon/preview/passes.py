@@ -1054,19 +1054,50 @@ def world_strata_side(samples: int, width: int, height: int, rest_share: float =
     return min(fewer, max(REST_LEAST_SIDE, math.ceil(fewer * rest_share - 1e-9)))
 
 
-def hidden_variances(points, rays) -> np.ndarray:
+def hidden_variances(points, rays, spread: float = 0.0) -> np.ndarray:
     """(N, 2) the à-trous filter's variances (of the light's luminance, of its guide) of N gather
     points' (hidden rgb, hidden share) (N, 4) (the diffuse gather's ``bvh_gather.glsl``
     out_hidden over ``rays`` cosine rays, a count or (N,) counts): the hidden share as the
     gathers' AO is (pulled half a ray towards ½: a point whose rays all agree still admits
     neighbours within a ray's worth), the hidden light's luminance by the same binomial's
-    relative variance."""
+    relative variance plus the ``spread`` of the radiance the hidden rays carry
+    (``rest_spread``: a hidden ray's light varies with where on the map it points, Var(L B)
+    = s E[L]² (1 + c²) − s² E[L]² for a hidden share s and c² = Var(L) / E[L]², L taken
+    independent of what hides it)."""
     points = np.asarray(points, np.float64)
     rays = np.maximum(np.asarray(rays, np.float64), 1.0)
     share = (points[:, 3] * rays + 0.5) / (rays + 1.0)
     luminance = points[:, :3] @ LUMINANCE
-    return np.stack([luminance ** 2 * (1.0 - share) / (share * rays),
+    return np.stack([luminance ** 2 * (1.0 - share + spread) / (share * rays),
                      share * (1.0 - share) / rays], axis=1)
+
+
+_SPREADS: dict = {}
+
+
+def rest_spread(lights, sun_apart: bool) -> float:
+    """c² = Var(L) / E[L]² of the luminance of the world's map over the sphere (by solid
+    angle), its sun's pixels left out where ``sun_apart`` (the gathers' hidden rays leave it to
+    the pixels' own, ``bvh_lights.glsl`` world_rest_radiance): how much a hidden ray's light
+    varies with its direction, for ``hidden_variances``. 0 without a world or for a uniform
+    one."""
+    world = next((light for light in lights if light.type == "WORLD"), None)
+    if world is None or world.uniform:
+        return 0.0
+    key = (world.key, sun_apart and world.sun is not None)
+    if key not in _SPREADS:
+        if len(_SPREADS) > 8:
+            _SPREADS.clear()
+        luminance = np.asarray(world.radiance, np.float64) @ LUMINANCE
+        if key[1]:
+            luminance = np.where(luminance > world.sun.threshold, 0.0, luminance)
+        rows = luminance.shape[0]
+        weight = np.sin((np.arange(rows) + 0.5) * np.pi / rows)[:, None]
+        total = weight.sum() * luminance.shape[1]
+        mean = float((weight * luminance).sum() / total)
+        square = float((weight * luminance * luminance).sum() / total)
+        _SPREADS[key] = max(square / (mean * mean) - 1.0, 0.0) if mean > 0.0 else 0.0
+    return _SPREADS[key]
 
 
 def world_rest_share(lights) -> float:
