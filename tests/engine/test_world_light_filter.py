@@ -214,7 +214,7 @@ def test_the_gather_points_hidden_map_reports_the_spread_of_its_radiance():
     # a sky twice as bright as the ground, with a brighter band: the map's rays' radiance
     radiance = np.where(theta[:, None] < np.pi / 2, 2.0, 0.6) * np.ones((rows, cols))
     radiance[10:14] *= 4.0
-    world = types.SimpleNamespace(type="WORLD", uniform=False, key="map", sun=None,
+    world = _Map(type="WORLD", uniform=False, key="map", sun=None,
                                   radiance=np.repeat(radiance[..., None], 3, axis=2))
     c2 = rest_spread([world], True)
     weight = (np.sin(theta)[:, None] * np.ones((rows, cols))).ravel()
@@ -234,5 +234,16 @@ def test_the_gather_points_hidden_map_reports_the_spread_of_its_radiance():
         np.testing.assert_allclose(reported.mean(), light.var(), rtol=0.15)
         if share > 0.9:
             assert reported.mean() > 4.0 * binomial.mean()
-    assert rest_spread([types.SimpleNamespace(type="WORLD", uniform=True)], True) == 0.0
+    # another map under the same key (a world edited in place) has its own spread
+    brighter = _Map(type="WORLD", uniform=False, key="map", sun=None,
+                    radiance=np.repeat((radiance ** 2)[..., None], 3, axis=2))
+    assert rest_spread([brighter], True) > 1.5 * c2
+    assert rest_spread([world], True) == c2
+    assert rest_spread([_Map(type="WORLD", uniform=True)], True) == 0.0
     assert rest_spread([], True) == 0.0
+
+
+class _Map(types.SimpleNamespace):
+    """A stand-in WorldLight: ``rest_spread`` keeps its c² by the world object (weakly)."""
+
+    __hash__ = object.__hash__

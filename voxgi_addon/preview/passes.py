@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+import weakref
 from typing import NamedTuple
 
 import numpy as np
@@ -1072,7 +1073,8 @@ def hidden_variances(points, rays, spread: float = 0.0) -> np.ndarray:
                      share * (1.0 - share) / rays], axis=1)
 
 
-_SPREADS: dict = {}
+# c² of each world's map, kept while its WorldLight lives (a key can be reused: world_light)
+_SPREADS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def rest_spread(lights, sun_apart: bool) -> float:
@@ -1084,20 +1086,19 @@ def rest_spread(lights, sun_apart: bool) -> float:
     world = next((light for light in lights if light.type == "WORLD"), None)
     if world is None or world.uniform:
         return 0.0
-    key = (world.key, sun_apart and world.sun is not None)
-    if key not in _SPREADS:
-        if len(_SPREADS) > 8:
-            _SPREADS.clear()
+    apart = sun_apart and world.sun is not None
+    held = _SPREADS.setdefault(world, {})
+    if apart not in held:
         luminance = np.asarray(world.radiance, np.float64) @ LUMINANCE
-        if key[1]:
+        if apart:
             luminance = np.where(luminance > world.sun.threshold, 0.0, luminance)
         rows = luminance.shape[0]
         weight = np.sin((np.arange(rows) + 0.5) * np.pi / rows)[:, None]
         total = weight.sum() * luminance.shape[1]
         mean = float((weight * luminance).sum() / total)
         square = float((weight * luminance * luminance).sum() / total)
-        _SPREADS[key] = max(square / (mean * mean) - 1.0, 0.0) if mean > 0.0 else 0.0
-    return _SPREADS[key]
+        held[apart] = max(square / (mean * mean) - 1.0, 0.0) if mean > 0.0 else 0.0
+    return held[apart]
 
 
 def world_rest_share(lights) -> float:
