@@ -69,7 +69,7 @@ from ..voxgi_addon.scene.bvh import (
 )
 from ..voxgi_addon.scene.raycast import SHADOW_EPSILON
 from ..voxgi_addon.scene.snapshot import RAY_ALL, RAY_CAMERA, RAY_DIFFUSE, RAY_GLOSSY, RAY_SHADOW
-from ..voxgi_addon.scene.textures import METALLIC_LEVELS, ROUGHNESS_LEVELS
+from ..voxgi_addon.scene.textures import CUTOUT_LAYERS, METALLIC_LEVELS, ROUGHNESS_LEVELS
 from .gpu_ltc import DEFINES as LTC_DEFINES
 from .gpu_ltc import ltc_texture
 from .gpu_principled import DEFINES as PRINCIPLED_DEFINES
@@ -238,6 +238,7 @@ def bvh_shader(kernel: str, cutouts: bool = True, textures: bool = True,
         if "textures" in files:
             if cutouts:
                 defines["BVH_CUTOUTS"] = "1"
+                defines["BVH_CUTOUT_LAYERS"] = str(CUTOUT_LAYERS)
             if textures:
                 defines["BVH_TEXTURES"] = "1"
             defines["ROUGHNESS_LEVELS"] = str(ROUGHNESS_LEVELS)

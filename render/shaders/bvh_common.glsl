@@ -40,12 +40,15 @@ vec4 bvh_texel_triangles(int k)
   return texelFetch(bvh_triangles, ivec2(k & (BVH_WIDTH - 1), k >> BVH_WIDTH_LOG2), 0);
 }
 
-/* The ray (o, d, |d| = dlen) against packed triangle `slot`: t, (u, v), or false. */
-bool bvh_triangle(int slot, vec3 o, vec3 d, float dlen, out float t, out vec2 uv)
+/* The ray (o, d, |d| = dlen) against packed triangle `slot`: t, (u, v), or false; `cutout`:
+ * the triangle is packed as a cut-out (a negative |e1|·|e2|). */
+bool bvh_triangle(int slot, vec3 o, vec3 d, float dlen, out float t, out vec2 uv,
+                  out bool cutout)
 {
   vec4 a = bvh_texel_triangles(3 * slot);
   vec4 e1 = bvh_texel_triangles(3 * slot + 1);
   vec4 e2 = bvh_texel_triangles(3 * slot + 2);
+  cutout = e2.w < 0.0;
   vec3 pv = cross(d, e2.xyz);
   float det = dot(e1.xyz, pv);
   t = BVH_FAR;
@@ -70,8 +73,14 @@ bool bvh_triangle(int slot, vec3 o, vec3 d, float dlen, out float t, out vec2 uv
 }
 
 /* Threaded traversal: the packed slot of the nearest hit with tmin < t < tmax (any hit when
- * any_hit), or -1; t_hit and uv of that hit. */
-int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_hit, out vec2 uv)
+ * any_hit), or -1; t_hit and uv of that hit. With BVH_CUTOUTS a cut-out's Alpha is not read
+ * here (bvh_trace does, after the walk): `cut` says the slot is a cut-out, and an any-hit walk
+ * returns an opaque hit at once, else the nearest cut-out on the segment. Hits are then
+ * ordered by (t, slot), and a hit at t = tmin counts when its slot is above `skip`: a walk
+ * again past a cut-out still meets a triangle in the cut-out's own plane (a pane in its
+ * wall's opening, leaves on a card). */
+int bvh_walk(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, int skip, out float t_hit,
+             out vec2 uv, out bool cut)
 {
   vec3 safe = vec3(abs(d.x) > 1e-30 ? d.x : 1e-30, abs(d.y) > 1e-30 ? d.y : 1e-30,
                    abs(d.z) > 1e-30 ? d.z : 1e-30);
@@ -81,6 +90,12 @@ int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_
   float best = tmax;
   int found = -1;
   uv = vec2(0.0);
+  cut = false;
+#ifdef BVH_CUTOUTS
+  float cut_t = BVH_FAR;
+  int cut_slot = -1;
+  vec2 cut_uv = vec2(0.0);
+#endif
   /* The nodes' layout (bvh.py pack_bvh: BVH_ORDERS layouts fill a multiple of BVH_ORDERS
    * rows, one layout one row more than a multiple). Of BVH_ORDERS, a closest hit walks the one
    * of its major direction, +x, −x, +y, −y, +z, −z (ordered_layouts: the nearer child first);
@@ -107,13 +122,28 @@ int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_
       float t;
       vec2 tuv;
       int current = slot++;
-      bool hit = bvh_triangle(current, o, d, dlen, t, tuv) && t > tmin && t < best;
+      bool is_cut;
+#ifdef BVH_CUTOUTS
+      bool hit = bvh_triangle(current, o, d, dlen, t, tuv, is_cut) &&
+                 (t > tmin || (t == tmin && current > skip)) &&
+                 (t < best || (t == best && current < found));
+#else
+      bool hit = bvh_triangle(current, o, d, dlen, t, tuv, is_cut) && t > tmin && t < best;
+#endif
 #ifdef BVH_HIDDEN
       hit = hit && !bvh_hidden(current, any_hit ? BVH_RAY_SHADOW : BVH_CLOSEST_RAY);
 #endif
 #ifdef BVH_CUTOUTS
-      hit = hit && !(bvh_texel_triangles(3 * current + 2).w < 0.0 &&
-                     !bvh_cutout_counts(int(bvh_texel_triangles(3 * current + 1).w), tuv, o, d));
+      if (hit && any_hit && is_cut) {
+        /* an opaque hit anywhere on the segment still ends the walk: the cut-outs wait */
+        if (t < cut_t || (t == cut_t && current < cut_slot)) {
+          cut_t = t;
+          cut_slot = current;
+          cut_uv = tuv;
+        }
+        hit = false;
+      }
+      cut = hit ? is_cut : cut;
 #endif
       if (hit) {
         best = t;
@@ -147,8 +177,45 @@ int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_
       }
     }
   }
+#ifdef BVH_CUTOUTS
+  if (any_hit && cut_slot >= 0) {
+    cut = true;
+    uv = cut_uv;
+    t_hit = cut_t;
+    return cut_slot;
+  }
+#endif
   t_hit = found >= 0 ? best : BVH_FAR;
   return found;
+}
+
+/* bvh_walk with the cut-outs' Alpha (textures.cutout_hits): a cut-out hit that does not count
+ * walks again from past it, so the Alpha's texture and hashes run once a walk, outside the
+ * triangle loop: inside it, llvmpipe ran their code at every triangle of every ray, and a scene
+ * with a cut-out traced everything 2.5 × slower (docs/gi_pipeline.md "Cut-outs tested after the
+ * walk"). Past BVH_CUTOUT_LAYERS cut-outs that do not count, the next hit counts whatever its
+ * Alpha, as Cycles stops a path or a shadow ray past its Transparent bounces. The same hits as
+ * a test inside the loop: the nearest that counts, or for any_hit whether one does. */
+int bvh_trace(vec3 o, vec3 d, float tmin, float tmax, bool any_hit, out float t_hit, out vec2 uv)
+{
+  bool cut;
+#ifdef BVH_CUTOUTS
+  /* one call of bvh_walk, so that its code is built once */
+  int found = -1;
+  int skip = 0x7FFFFFFF; /* the first walk: t > tmin alone */
+  for (int layer = 0; layer <= BVH_CUTOUT_LAYERS; layer++) {
+    found = bvh_walk(o, d, tmin, tmax, any_hit, skip, t_hit, uv, cut);
+    if (found < 0 || !cut || layer == BVH_CUTOUT_LAYERS ||
+        bvh_cutout_counts(int(bvh_texel_triangles(3 * found + 1).w), uv, o, d)) {
+      break;
+    }
+    tmin = t_hit;
+    skip = found;
+  }
+  return found;
+#else
+  return bvh_walk(o, d, tmin, tmax, any_hit, 0x7FFFFFFF, t_hit, uv, cut);
+#endif
 }
 
 /* Is anything in the way between SHADOW_EPSILON and tmax − SHADOW_EPSILON (d unit)? */

@@ -131,6 +131,87 @@ def test_gpu_rays_pass_cutouts_as_the_numpy_rays_do(voxgi):
     assert 0.1 < reference.mean() < 0.9
 
 
+def stacked_veils(count, alpha, frame=False):
+    """``count`` parallel cards of one Alpha value, 0.25 m apart along +y, a wall behind them;
+    ``frame``: an opaque quad in the first card's plane over its half x < 0 (a wall about a
+    pane, in the pane's own plane)."""
+    import gi_scenes
+    import texture_scenes
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    veil = gi_scenes._material("Veil", (0.6, 0.6, 0.6))
+    next(n for n in veil.node_tree.nodes if n.type == "BSDF_PRINCIPLED").inputs["Alpha"].default_value = alpha
+    wall = gi_scenes._material("Wall", (0.5, 0.5, 0.5))
+    for i in range(1 if frame else 0, count):
+        y = 0.25 * i
+        texture_scenes.quad(scene, f"Veil {i}", [(-2, y, 0), (2, y, 0), (2, y, 2), (-2, y, 2)], veil)
+    back = 0.25 * count + 0.5
+    if frame:  # the first card's half x < 0 again, opaque: its hits at the very same t
+        half = [(-2, 0, 0), (0, 0, 0), (0, 0, 2), (-2, 0, 2)]
+        texture_scenes.quad(scene, "Veil 0 left", half, veil)
+        texture_scenes.quad(scene, "Veil 0 right", [(0, 0, 0), (2, 0, 0), (2, 0, 2), (0, 0, 2)], veil)
+        gi_scenes._mesh(scene, "Frame", half, [(0, 1, 2, 3)], (wall,))
+    gi_scenes._mesh(scene, "Wall", [(-3, back, -1), (3, back, -1), (3, back, 3), (-3, back, 3)],
+                    [(0, 1, 2, 3)], (wall,))
+    gi_scenes._camera(scene, "Camera", (0.0, -4.0, 1.0), (0.0, 0.0, 1.0), lens=35.0)
+    gi_scenes._finish(scene, {})
+    return back
+
+
+def test_gpu_rays_cross_stacked_cutouts_as_the_numpy_rays_do(voxgi):
+    """The traversal tests a cut-out's Alpha after its walk and walks again past a hit that
+    does not count: through five half-transparent cards the GPU stops on each card as often as
+    numpy does, and reaches the wall behind all five (1 in 32 rays), closest and any hit; an
+    opaque quad in the first card's plane stops every ray that meets it, though the walk past
+    the card starts in that plane. Past
+    CUTOUT_LAYERS cards that do not count, the next one counts, as Cycles' transparent bounces
+    end (numpy has no such cap)."""
+    from test_gpu_bvh import gpu_ready
+
+    from voxgi.render.gpu_bvh import GPUBVH, trace_rays
+    from voxgi.render.gpu_scene import GPUScene
+    from voxgi.voxgi_addon.scene.raycast import closest_hits, occluded
+    from voxgi.voxgi_addon.scene.textures import CUTOUT_LAYERS
+
+    back = stacked_veils(5, 0.5, frame=True)
+    gpu_ready()
+    scene = GPUScene(GPUBVH()).update(snapshot_now())
+    tris = scene.tris
+    assert tris.textures.cutout.sum() == 12  # five cards, the first in two halves
+    rng = np.random.default_rng(5)
+    n = 8000
+    o = np.column_stack([rng.uniform(-1.0, 1.0, n), np.full(n, -1.0), rng.uniform(0.3, 1.7, n)])
+    target = np.column_stack([rng.uniform(-1.0, 1.0, n), np.full(n, back), rng.uniform(0.3, 1.7, n)])
+    d = (target - o) / np.linalg.norm(target - o, axis=1, keepdims=True)
+    o, d = o.astype(np.float32).astype(np.float64), d.astype(np.float32).astype(np.float64)
+    t, tri, _, _ = trace_rays(scene.bvh, o, d, 1e-4, np.inf)
+    rt, rtri, _, _ = closest_hits(tris, o, d, 1e-4)
+    layer = np.round((o[:, 1] + rt * d[:, 1]) / 0.25).astype(int)  # 0-4 the cards, 5+ the wall
+    framed = o[:, 0] + (0.0 - o[:, 1]) / d[:, 1] * d[:, 0] < -0.01  # meets the frame
+    assert (layer[framed] == 0).all() and 0.3 < framed.mean() < 0.7
+    shares = np.bincount(np.minimum(layer[~framed], 5), minlength=6) / (~framed).sum()
+    np.testing.assert_allclose(shares, [1 / 2, 1 / 4, 1 / 8, 1 / 16, 1 / 32, 1 / 32], atol=0.02)
+    same = np.abs(t - rt) < 1e-4 * rt
+    assert same.mean() > 0.995 and same[framed].all(), (same.mean(), same[framed].mean())
+    # shadow rays ending before the wall: blocked unless every card lets them through
+    max_t = (back - 0.1 - o[:, 1]) / d[:, 1]
+    blocked = trace_rays(scene.bvh, o, d, 0.0, max_t, any_hit=True)
+    reference = occluded(tris, o, d, max_t)
+    assert (blocked == reference).mean() > 0.995
+    assert abs(reference[~framed].mean() - 31 / 32) < 0.012 and blocked[framed].all()
+
+    # clear cards (Alpha 0), more of them than the cap: the GPU stops on the one past the cap
+    back = stacked_veils(CUTOUT_LAYERS + 3, 0.0)
+    scene = GPUScene(GPUBVH()).update(snapshot_now())
+    o = np.column_stack([rng.uniform(-1.0, 1.0, 200), np.full(200, -1.0), rng.uniform(0.3, 1.7, 200)])
+    d = np.tile([0.0, 1.0, 0.0], (200, 1))
+    t, tri, _, _ = trace_rays(scene.bvh, o, d, 1e-4, np.inf)
+    rt, _, _, _ = closest_hits(scene.tris, o, d, 1e-4)
+    np.testing.assert_allclose(rt, back + 1.0, rtol=1e-5)  # numpy passes them all
+    np.testing.assert_allclose(t, 1.0 + 0.25 * CUTOUT_LAYERS, rtol=1e-5)
+
+
 def test_fence_cards_against_cycles(voxgi):
     """Default settings, GPU: the wall through the gaps, slatted shadows, against Cycles."""
     scene = build()

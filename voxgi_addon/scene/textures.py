@@ -622,6 +622,11 @@ def _hash(v: np.ndarray) -> np.ndarray:
 
 
 CUTOUT_QUANTUM = 4096.0  # rays are hashed on their origin and direction in 1/4096 steps
+# The GPU's traversal tests a cut-out's Alpha after a walk and walks again past a hit that does
+# not count (bvh_common.glsl bvh_trace): past this many such layers along one ray, the next hit
+# counts whatever its Alpha, as Cycles ends a path or a shadow ray past its Transparent bounces
+# (8 by default). numpy (``raycast``) has no such cap; no test scene comes near it.
+CUTOUT_LAYERS = 16
 
 
 def _quantized(values) -> np.ndarray:
