@@ -211,6 +211,27 @@ def test_a_triangle_with_a_nan_corner_changes_no_probe():
     np.testing.assert_allclose(grid.sh, clean.sh, rtol=1e-6, atol=1e-7)
 
 
+def test_a_stray_object_far_away_leaves_the_probes_where_the_room_is():
+    """A 5 cm cube 170 m from the Cornell box (a stray helper) would stretch the probe box and
+    every volume over the empty space between; the box stands for the bulk of the triangles'
+    area (``scene.geometry.bulk_bounds``), so the probes stand where they stood without it."""
+    from voxgi.voxgi_addon.scene.geometry import SceneTriangles
+
+    snapshot = cornell_box()
+    tris = world_triangles(snapshot)
+    cube = np.array([[[100.0, 100.0, 100.0], [100.05, 100.0, 100.0], [100.0, 100.05, 100.0]],
+                     [[100.0, 100.0, 100.0], [100.0, 100.05, 100.0], [100.0, 100.0, 100.05]]])
+    with_stray = SceneTriangles(np.concatenate([tris.positions, cube]),
+                                np.concatenate([tris.normals, [[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]]]),
+                                np.concatenate([tris.materials, [0, 0]]).astype(np.int32),
+                                np.concatenate([tris.objects, [0, 0]]).astype(np.int32))
+    settings = ProbeSettings(resolution=3, directions=64, seed=2)
+    clean = bake_probe_grid(snapshot, settings, tris=tris).grid
+    grid = bake_probe_grid(snapshot, settings, tris=with_stray).grid
+    assert grid.positions.shape == clean.positions.shape
+    np.testing.assert_allclose(grid.positions, clean.positions, atol=0.02 * np.ptp(clean.positions))
+
+
 def _thin_wall_ratio(use_masks):
     grid = bake_probe_grid(thin_wall_room(), ProbeSettings(resolution=8, directions=128,
                                                            use_masks=use_masks)).grid

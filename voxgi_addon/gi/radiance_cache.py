@@ -36,7 +36,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import VoxGIError
-from ..scene.geometry import finite_bounds
+from ..scene.geometry import bulk_bounds
 from ..scene.short_axis import any_along, max_along, min_along
 from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
 from .cascades import CascadeGrid, cells_within
@@ -135,20 +135,11 @@ def cache_grids(tris, resolution: int = 32, count: int = 1, focus=None) -> list:
 
 
 _BOUNDS: dict[int, tuple] = {}  # id(positions) → (weak reference to them, (lo, hi))
-# The grids cover the box that holds all but STRAY_AREA of the triangles' area on each side of
-# each axis, where that box is under 1 / STRAY_SHRINK of the whole box (``_bounds``): a small
-# object far from the rest (a helper, a stray cube, a distant prop) no longer stretches the
-# voxels over the empty space between (docs/gi_pipeline.md "A stray object far away").
-STRAY_AREA = 0.005
-STRAY_SHRINK = 2.0
-_STRAY_BINS = 1024
-
-
 def _bounds(tris) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi) (3,) read-only float64: the box the cache's grids cover — ``tris``' corners,
     or the box of the bulk of their area where a stray few triangles far away make the whole
-    box over STRAY_SHRINK times larger (``_bulk_box``; the strays then lie outside every grid:
-    their hits read no cache). Kept per positions array while it lives: every viewport slice
+    box over STRAY_SHRINK times larger (``scene.geometry.bulk_bounds``; the strays then lie
+    outside every grid: their hits read no cache). Kept per positions array while it lives: every viewport slice
     asks again (``preview.gather.focused``), and on a 140k-triangle scene the min/max took
     35 ms of a 30 ms draw (docs/gi_pipeline.md "Entering Rendered mode")."""
     positions = tris.positions
@@ -158,11 +149,7 @@ def _bounds(tris) -> tuple[np.ndarray, np.ndarray]:
     if np.size(positions) == 0:
         raise VoxGIError("the radiance cache needs triangles")
     # the finite triangles' (none finite: a point at the origin)
-    lo, hi = finite_bounds(positions) or (np.zeros(3), np.zeros(3))
-    bulk = _bulk_box(positions, lo, hi)
-    if bulk is not None and float((hi - lo).max()) > STRAY_SHRINK * float((bulk[1] - bulk[0]).max()):
-        # once more in steps of the bulk's own box (the strays fall in its end steps)
-        lo, hi = _bulk_box(positions, *bulk) or bulk
+    lo, hi = bulk_bounds(positions) or (np.zeros(3), np.zeros(3))
     lo.setflags(write=False)
     hi.setflags(write=False)
     try:
@@ -171,43 +158,6 @@ def _bounds(tris) -> tuple[np.ndarray, np.ndarray]:
         return lo, hi
     _BOUNDS[id(positions)] = (ref, (lo, hi))
     return lo, hi
-
-
-def _bulk_box(positions, lo, hi):
-    """(lo, hi) of the triangles' area but STRAY_AREA of it on each side of each axis — per
-    axis the triangles' lowest corners below which lies that share of the area, and their
-    highest above which it lies, in _STRAY_BINS steps of [lo, hi] rounded outwards — or None
-    (no area). float32 columns: 500k triangles in a few tens of ms."""
-    corners = np.asarray(positions, np.float32).reshape(-1, 3, 3)
-    if not (np.isfinite(corners.min()) and np.isfinite(corners.max())):
-        corners = corners[np.isfinite(corners).all(axis=(1, 2))]
-    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
-    u, v = b - a, c - a
-    area = np.sqrt((u[:, 1] * v[:, 2] - u[:, 2] * v[:, 1]) ** 2 +
-                   (u[:, 2] * v[:, 0] - u[:, 0] * v[:, 2]) ** 2 +
-                   (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]) ** 2)
-    total = float(area.sum(dtype=np.float64))
-    if not total > 0.0:
-        return None
-    share = STRAY_AREA * total
-    out_lo, out_hi = np.array(lo, np.float64), np.array(hi, np.float64)
-    for k in range(3):
-        extent = float(hi[k] - lo[k])
-        if not extent > 0.0:
-            continue
-        scale = np.float32(_STRAY_BINS / extent)
-        low = np.minimum(np.minimum(a[:, k], b[:, k]), c[:, k])
-        high = np.maximum(np.maximum(a[:, k], b[:, k]), c[:, k])
-        low = np.clip(((low - np.float32(lo[k])) * scale).astype(np.int64), 0, _STRAY_BINS - 1)
-        high = np.clip(((high - np.float32(lo[k])) * scale).astype(np.int64), 0, _STRAY_BINS - 1)
-        below = np.cumsum(np.bincount(low, area, _STRAY_BINS))
-        above = np.cumsum(np.bincount(high, area, _STRAY_BINS)[::-1])[::-1]
-        first = min(int(np.searchsorted(below, share, side="right")), _STRAY_BINS - 1)
-        kept = np.flatnonzero(above > share)
-        last = int(kept[-1]) if len(kept) else _STRAY_BINS - 1
-        out_lo[k] = lo[k] + first * extent / _STRAY_BINS
-        out_hi[k] = min(float(hi[k]), lo[k] + (last + 1) * extent / _STRAY_BINS)
-    return out_lo, np.maximum(out_hi, out_lo)
 
 
 def snap_focus(tris, focus):

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import VoxGIError
-from ..scene.geometry import finite_bounds
+from ..scene.geometry import bulk_bounds
 from ..scene.short_axis import all_along, norm3
 from ..voxelize.cube_clipping import clip_to_cells
 from ..voxelize.surface import LATTICE_OFFSET, voxelize_triangles
@@ -70,8 +70,10 @@ class ProbeLayout:
 def scene_box(positions) -> tuple[np.ndarray, np.ndarray]:
     """The triangles' bounding box grown by ``BOX_MARGIN`` of its extent on every side, so that
     walls on the bounds lie inside the outer volumes rather than on their faces. A triangle
-    with a NaN or infinite corner (which no ray hits) is left out of it."""
-    bounds = finite_bounds(positions)
+    with a NaN or infinite corner (which no ray hits) is left out of it, and so are a stray
+    few far from the rest (``scene.geometry.bulk_bounds``: a 5 cm helper 170 m away would
+    make every volume tens of metres wide)."""
+    bounds = bulk_bounds(positions)
     if bounds is None:
         raise VoxGIError("the scene has no triangles to place probes around")
     lo, hi = bounds
