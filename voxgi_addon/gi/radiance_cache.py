@@ -135,13 +135,15 @@ def cache_grids(tris, resolution: int = 32, count: int = 1, focus=None) -> list:
 
 
 _BOUNDS: dict[int, tuple] = {}  # id(positions) → (weak reference to them, (lo, hi))
+
+
 def _bounds(tris) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi) (3,) read-only float64: the box the cache's grids cover — ``tris``' corners,
     or the box of the bulk of their area where a stray few triangles far away make the whole
     box over STRAY_SHRINK times larger (``scene.geometry.bulk_bounds``; the strays then lie
-    outside every grid: their hits read no cache). Kept per positions array while it lives: every viewport slice
-    asks again (``preview.gather.focused``), and on a 140k-triangle scene the min/max took
-    35 ms of a 30 ms draw (docs/gi_pipeline.md "Entering Rendered mode")."""
+    outside every grid: their hits read no cache). Kept per positions array while it lives:
+    every viewport slice asks again (``preview.gather.focused``), and on a 140k-triangle scene
+    the min/max took 35 ms of a 30 ms draw (docs/gi_pipeline.md "Entering Rendered mode")."""
     positions = tris.positions
     kept = _BOUNDS.get(id(positions))
     if kept is not None and kept[0]() is positions:
