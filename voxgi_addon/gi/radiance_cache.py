@@ -50,6 +50,10 @@ __all__ = ["FACE_OFFSET", "RadianceCache", "build_cache", "cache_grids", "cache_
 FACE_OFFSET = 0.75       # voxels from the centre to a face's ray origin where it has no surface
 FACE_CLEARANCE = 0.02    # voxels in front of its surface a face's rays start (``_face_origins``)
 FACE_AXIS_COSINE = 0.2   # a voxel holds the faces of the axes its triangles' normals reach
+# a face still inside a solid at FACE_OFFSET is not held where the solid's back lies within a
+# voxel and across its axis (the back's normal within 25 degrees of it: a wall,
+# ``_backs_in_solids``)
+WALL_FACING = 0.9
 # an axis whose n² is under this weighs nothing in a lookup (``lookup``): the GPU then fetches
 # no texel of it (cache_lookup.glsl CACHE_AXIS_BLEND), 8 not 24 at a wall's or a floor's hit
 AXIS_BLEND = 1e-6
@@ -248,29 +252,48 @@ def _sites(tris, grids, origins: bool = True, voxelized: dict | None = None) \
         if origins:
             begin, backs = _face_origins(cells[keep], surface,
                                          local.reshape(-1, 3, 3) / grid.span, signed, keep)
-            starts.append(_backs_in_solids(tris, grid, cells[keep], begin, backs))
+            begin, dropped = _backs_in_solids(tris, grid, cells[keep], begin, backs)
+            present[-1] = present[-1] & ~dropped
+            starts.append(begin)
     return out, present, starts
 
 
-def _backs_in_solids(tris, grid, cells, origins, backs) -> np.ndarray:
+def _backs_in_solids(tris, grid, cells, origins, backs) -> tuple[np.ndarray, np.ndarray]:
     """``origins`` (N, 6, 3) with the faces started on triangles' backs (``backs`` (N, 6))
     moved back to ``FACE_OFFSET`` where those backs lie inside a solid: the first triangle
     straight out along the face's axis shows its back too (a 2 cm slab's far side). Those
     rays would gather the slab's inside, which the trilinear lookups across it pass from the
-    lit room to the dark one (2.5% of its light, tests/blender/test_multibounce.py)."""
+    lit room to the dark one (2.5% of its light, tests/blender/test_multibounce.py). Also
+    (N, 6) bool: the faces still inside the solid at ``FACE_OFFSET``, its back within a voxel
+    of that point (a wall thinner than the voxel lying across it), which the voxel then does
+    not hold: their rays gathered the wall's inside wherever they started, and the lookups on
+    the wall's lit side blended them in (a 0.1 m-walled room at 0.198 m voxels: its later
+    bounces 18% short, docs/gi_pipeline.md "An interior lit through a window, tuned for
+    nothing"). Deep in a thick solid a face keeps its ``FACE_OFFSET`` start, as before (a
+    street's blocks: dropped there, its nested cache read 0.124 of exact light off, not 0.080),
+    and by a curved solid's rim (a sphere's back there lies oblique: ``WALL_FACING``)."""
+    dropped = np.zeros(backs.shape, bool)
     voxel, face = np.nonzero(backs)
     if len(voxel) == 0:
-        return origins
+        return origins, dropped
     from ..scene.bvh import closest_hits  # the GPU scene's BVH, built once (``bvh_of``)
 
     centres = np.asarray(grid.origin) + (np.asarray(cells, np.float64)[voxel] + 0.5) * grid.span
-    starts = centres + grid.span * np.asarray(origins[voxel, face], np.float64)
-    _, tri, _, _ = closest_hits(tris, starts, FACES[face])
     normals = np.asarray(tris.normals, np.float64)
-    inside = (tri >= 0) & (np.einsum("ij,ij->i", normals[np.maximum(tri, 0)], FACES[face]) > 0)
+
+    def in_solid(offsets, within=np.inf, facing=0.0):
+        t, tri, _, _ = closest_hits(tris, centres + grid.span * offsets, FACES[face])
+        return (tri >= 0) & (t < within) & \
+            (np.einsum("ij,ij->i", normals[np.maximum(tri, 0)], FACES[face]) > facing)
+
+    inside = in_solid(np.asarray(origins[voxel, face], np.float64))
     out = origins.copy()
     out[voxel[inside], face[inside]] = (FACE_OFFSET * FACES[face[inside]]).astype(np.float32)
-    return out
+    # (a solid's back within a voxel and across the axis: a thin wall; deep in a thick solid,
+    # or by a curved one's rim, the face keeps its FACE_OFFSET start, as before)
+    still = inside & in_solid(FACE_OFFSET * FACES[face], grid.span, WALL_FACING)
+    dropped[voxel[still], face[still]] = True
+    return out, dropped
 
 
 _CLIP_VERTICES = 9  # a triangle clipped by a box's six planes has at most 3 + 6 corners
