@@ -134,12 +134,12 @@ def shade_stages(scene, snapshot, inputs, sums, terms, blank, size, light_sample
     # kind cost a compile each and no time a dispatch (docs/gi_pipeline.md "One direct-light
     # variant per scene")
     absent = scene.direct_absent
-    for index, table in enumerate(scene.lamp_tables):
+    for table in scene.lamp_tables:  # (a lamp's table: its row alone, row 0)
         direct = direct_light_texture(bvh, inputs, snapshot.lights, light_samples, seed=seed,
                                       world=scene.no_world, emitters=scene.no_emitters,
                                       strata_block=block, table=table,
                                       absent=absent)
-        shine = glossy_direct_texture(inputs, direct, table, index, principled, emission,
+        shine = glossy_direct_texture(inputs, direct, table, 0, principled, emission,
                                       materials=materials) if lamp_glossy else blank
         out = run("aa_light", LIGHT_SAMPLERS, {
             "colour": colour, "direct_image": direct, "shine_image": shine, **sums},

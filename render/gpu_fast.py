@@ -192,13 +192,13 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
         # Light by light: one dispatch stays within llvmpipe's loop limit
         # (docs/blender_facts.md "llvmpipe's loop limit").
         direct = np.zeros((len(hit), 3))
-        for index, table in enumerate(scene.lamp_tables):
+        for table in scene.lamp_tables:  # (a lamp's table: its row alone, row 0)
             lamp = direct_light_texture(scene.bvh, gbuffer.inputs, snapshot.lights,
                                         light_samples, seed=gather_settings.seed,
                                         world=scene.no_world, emitters=scene.no_emitters,
                                         table=table)
             direct += pixels(lamp)
-            shine += pixels(glossy_direct_texture(gbuffer.inputs, lamp, table, index,
+            shine += pixels(glossy_direct_texture(gbuffer.inputs, lamp, table, 0,
                                                   principled, emission, materials))
         if scene.has_scene_lights:  # the world's and emitters' own dispatch
             direct += pixels(direct_light_texture(scene.bvh, gbuffer.inputs, snapshot.lights,
@@ -222,7 +222,7 @@ def fast_passes(snapshot, gi_state, width, height, cones, light_samples, volume,
             texture = float_texture(np.flipud(image.reshape(height, width, 4)).copy(),
                                     (width, height))
             shine += pixels(glossy_direct_texture(gbuffer.inputs, texture,
-                                                  scene.lamp_tables[index], index, principled,
+                                                  scene.lamp_tables[index], 0, principled,
                                                   emission, materials))
     timings["direct + lamps' glossy light"] = time.perf_counter() - t0
 

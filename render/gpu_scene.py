@@ -131,16 +131,16 @@ def _table_texture(table: np.ndarray):
 
 
 def lamp_tables(lights) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
-    """(every lamp's table, one table per lamp index, the no-lamp table) of
-    ``gpu_bvh.lights_texture(lights, only)`` for only None, 0 … len − 1 and −1, from one
-    ``light_table``: the rows of the other lamps become padding (type −1), so each lamp's
-    samples keep their stream; a table with no row gets one padding row."""
+    """(every lamp's table, one table per lamp index, the no-lamp table), from one
+    ``light_table``. A lamp's table is its own row alone (row 0; its samples keep their stream,
+    which its index in the row seeds), so that a dispatch of one lamp loops over one row: with
+    the other lamps as padding rows, every dispatch ran the light code of every lamp, masked,
+    and N lamps cost N² (docs/gi_pipeline.md "Many lamps"). The no-lamp table, and a lamp's
+    that has no row, is one padding row (type −1)."""
     table = light_table(lights)
 
     def only(index):
-        kept = table.copy()
-        if index is not None:
-            kept[kept[:, 0, 3] != index, 0, 0] = -1.0
+        kept = table if index is None else table[table[:, 0, 3] == index]
         if len(kept) == 0:
             kept = np.zeros((1, LIGHT_TEXELS, 4), np.float32)
             kept[0, 0, 0] = -1.0
