@@ -42,6 +42,7 @@ from ..voxgi_addon.preview.denoise import (
     SIGMA_LUMINANCE,
 )
 from ..voxgi_addon.preview.gather import cache_settings, uses_cache
+from ..voxgi_addon.preview.light_table import MAX_OUTLINE
 from ..voxgi_addon.preview.passes import AREA_GLOSSY_GRID, DISC_FROM, DISC_FULL, LTC_FROM, LTC_FULL
 from ..voxgi_addon.preview.upsample import PLANE_TOLERANCE, low_shape
 from .frame import finish
@@ -478,12 +479,23 @@ def cache_texture(bvh: GPUBVH, lights, principled, emission, settings, tables=No
 # "llvmpipe's loop limit"); 32 traversals leave each one about 2000 loop iterations (BVH nodes
 # and leaf triangles), several times what the test scenes' rays take (about 110).
 TRAVERSALS_PER_DISPATCH = 32
+LOOPS_PER_TRAVERSAL = 65535 // TRAVERSALS_PER_DISPATCH
+# a lamp's pick weight: one iteration, and at a metal hit an area lamp's outline clipped
+# (light_aim), a loop over its corners
+PICK_LOOPS_PER_LAMP = 1 + MAX_OUTLINE
 
 
-def rays_per_dispatch(light_count: int, hit_samples: int = 1,
+def rays_per_dispatch(lamps: int, others: int = 0, hit_samples: int = 1,
                       traversals: int = TRAVERSALS_PER_DISPATCH, followed: bool = False) -> int:
     """Bounce rays per gather dispatch: each ray traverses the BVH once and, at its hit, once
-    per light and shadow sample, ``traversals`` in all (at most ``TRAVERSALS_PER_DISPATCH``).
+    per shadow sample of the one lamp it picks (``bvh_shade.glsl`` ray_paths: a hit traces one
+    of the ``lamps``, picked by weight) and of each of the ``others`` (the world counts twice,
+    its two techniques, the emitters once), ``traversals`` in all (at most
+    ``TRAVERSALS_PER_DISPATCH``). The pick weighs every lamp twice, at most
+    ``PICK_LOOPS_PER_LAMP`` loop iterations each: their share of the loop limit counts as
+    traversals of ``LOOPS_PER_TRAVERSAL`` (one up to 15 lamps, two up to 31). Counting every lamp's
+    shadow rays, as before the pick, split 27 lamps' 96 rays over 96 dispatches, each paying
+    the kernel's set-up (docs/gi_pipeline.md "Many lamps").
     followed : a ray may be followed past near hits (the diffuse gather's near field,
     ``exact_indirect.NEAR_FIELD``, ``MAX_FOLLOWS`` bounces at most): each bounce counted as
     one traversal more. Their light samples (one a light) are not counted: few rays are
@@ -491,7 +503,8 @@ def rays_per_dispatch(light_count: int, hit_samples: int = 1,
     counting them made the box's preview 15% slower in dispatches, and a point whose every ray
     is followed still makes under 2 × the count, within the loop limit's margin
     (``TRAVERSALS_PER_DISPATCH``)."""
-    per_ray = 1 + max(light_count, 1) * strata_side(hit_samples) ** 2 + \
+    picks = -(-2 * PICK_LOOPS_PER_LAMP * lamps // LOOPS_PER_TRAVERSAL) if lamps > 1 else 0
+    per_ray = 1 + max(min(lamps, 1) + others, 1) * strata_side(hit_samples) ** 2 + picks + \
         (MAX_FOLLOWS if followed else 0)
     return max(1, min(traversals, TRAVERSALS_PER_DISPATCH) // per_ray)
 
@@ -553,7 +566,9 @@ def gather_steps(bvh: GPUBVH, gbuffer_inputs, lights, principled, emission, sett
     # at a bounce hit the emitters draw one shadow ray per stratum, like a lamp (their plain
     # estimate, emitters.EmitterLight.exact = False), the world two (one per technique)
     worlds = sum(light.type == "WORLD" for light in lights)
-    step = rays_per_dispatch(len(lights) + worlds, settings.hit_samples, traversals,
+    lamps = sum(light.type not in ("WORLD", "EMITTERS") for light in lights)
+    step = rays_per_dispatch(lamps, len(lights) - lamps + worlds, settings.hit_samples,
+                             traversals,
                              followed=kernel == "bvh_gather" and "radiance_cache" in inputs)
     for first in range(0, max(last, 1), step):
         if first > 0:

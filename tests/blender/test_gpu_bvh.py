@@ -318,7 +318,9 @@ def test_every_gather_ray_counts_however_many_there_are(voxgi):
     from voxgi.render.gpu_gather import rays_per_dispatch
     from voxgi.render.pipeline import render_scene_passes
 
-    assert rays_per_dispatch(1) == 16 and rays_per_dispatch(40) == 1
+    assert rays_per_dispatch(1) == 16 and rays_per_dispatch(1, others=39) == 1
+    # a hit traces the one lamp it picks; the pick's loops over 40 lamps count too
+    assert 1 < rays_per_dispatch(40) < 16
     scene = bpy.context.scene
     gi_scenes.build("thin_wall_rooms", scene)
     means = {}

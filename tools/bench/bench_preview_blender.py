@@ -196,7 +196,8 @@ FETCHES = {"denoise": 25 * 4 + 9, "upsample": 16 * 3, "aa_surface": 16, "aa_ligh
 
 def _traversals(kernel, width, height, constants, lights) -> tuple[float, float]:
     """(rays, fetches) of one dispatch: rays are BVH traversals (each bounce or camera ray and
-    each shadow ray: ``gpu_gather.rays_per_dispatch``'s count per bounce ray)."""
+    each shadow ray: ``gpu_gather.rays_per_dispatch``'s count per bounce ray, ``lights`` the
+    shadow traversals of a bounce hit)."""
     from voxgi.render.gpu_bvh import strata_side
 
     invocations = float(width * height)
@@ -260,7 +261,12 @@ def profiled(fn, profile: Profile):
     """Run ``fn`` with the tracer's dispatch functions wrapped to time and count each one."""
     from voxgi.render import gpu_bvh, gpu_compose, gpu_gather, gpu_preview, gpu_scene, gpu_tails
 
-    lights = len(gpu_scene.current_scene().lights) if gpu_scene.current_scene() else 1
+    # shadow traversals a bounce hit makes (strata aside): the one lamp it picks, the world's two
+    # techniques, the emitters' one (gpu_gather.rays_per_dispatch)
+    every = gpu_scene.current_scene().lights if gpu_scene.current_scene() else ()
+    lamps = sum(light.type not in ("WORLD", "EMITTERS") for light in every)
+    lights = min(lamps, 1) + sum(2 if light.type == "WORLD" else 1 for light in every
+                                 if light.type in ("WORLD", "EMITTERS"))
     saved = []
 
     def patch(module, name, wrapper):
