@@ -284,8 +284,12 @@ def test_gpu_ao_and_indirect_equal_numpy(voxgi, lamps):
     assert np.abs(indirect[:, 0] - indirect[:, 1]).max() > 0.02
 
 
-def test_preview_direct_light_runs_on_the_gpu(voxgi):
-    """shadows = RAYS: the GPU preview's Diffuse Direct equals the numpy preview's."""
+@pytest.mark.parametrize("lamps", ["one", "five"])
+def test_preview_direct_light_runs_on_the_gpu(voxgi, lamps):
+    """shadows = RAYS: the GPU preview's Diffuse Direct equals the numpy preview's, with the
+    box's one lamp and with five of every kind (each lamp's dispatch reads its own row of the
+    lights: a wrong row would light the box with another lamp's colour and place); with five,
+    its Glossy Direct too."""
     from test_gpu_tracer import cornell, cornell_state
 
     from voxgi.blender.settings import cone_settings
@@ -294,6 +298,8 @@ def test_preview_direct_light_runs_on_the_gpu(voxgi):
     from voxgi.voxgi_addon.preview.passes import render_passes
 
     scene = cornell("AREA")
+    if lamps == "five":
+        add_lights(scene)
     snapshot, state = cornell_state(scene)
     gpu_ready()
     cones = cone_settings(scene.voxgi)
@@ -305,8 +311,11 @@ def test_preview_direct_light_runs_on_the_gpu(voxgi):
     assert shared_bvh().uploaded_bytes == 0  # the same triangles: no new upload
     numpy_passes, _ = render_passes(snapshot, state, w, h, cones, shadows="RAYS")
     error = relative_l1(gpu_passes["Diffuse Direct"], numpy_passes["Diffuse Direct"])
-    print(f"preview Diffuse Direct, GPU vs numpy: {error:.5f}")
+    glossy = relative_l1(gpu_passes["Glossy Direct"], numpy_passes["Glossy Direct"])
+    print(f"preview Diffuse Direct, GPU vs numpy: {error:.5f}, Glossy Direct {glossy:.5f}")
     assert error < 0.01
+    if lamps == "five":
+        assert glossy < 0.02
 
 
 def test_every_gather_ray_counts_however_many_there_are(voxgi):
