@@ -116,17 +116,6 @@ float lamp_chance(float w, float total, int count)
                        1.0 / float(count);
 }
 
-/* One step of a reservoir of one drawn with a single uniform v in [0, 1)
- * (exact_indirect._reservoir): keeps the item offered with chance p where v < p, and rescales
- * v to [0, 1) by the branch taken. */
-bool pick_step(inout float v, float p)
-{
-  bool kept = v < p;
-  v = kept ? v / max(p, 1e-30) : (v - p) / max(1.0 - p, 1e-30);
-  v = clamp(v, 0.0, 0.99999994);
-  return kept;
-}
-
 /* ray_radiance without the radiance cache (voxgi_addon/gi/exact_indirect.py ray_paths): also
  * the hit `x`, its shading normal `ns` (turned toward the origin) and `cache_weight`, what the
  * hit reflects toward the origin of light arriving uniformly (the diffuse weight + the glossy
@@ -204,33 +193,25 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
   bool pick = lamp_count > 1;
   bool metal = hit_glossy && params.x >= METAL_FOLLOWED;
   if (pick) {
-    /* one pass over the lamps (exact_indirect.lamp_picks): u < LAMP_PICK_FLOOR picks at even
-     * odds, the rest by weight, each a reservoir of one drawn with the rest of u rescaled */
-    float u = unit_float(point_stream(hit_id, LAMP_PICK_STREAM, seed + 1u));
-    bool even = u < LAMP_PICK_FLOOR;
-    float v = even ? u / LAMP_PICK_FLOOR : (u - LAMP_PICK_FLOOR) / (1.0 - LAMP_PICK_FLOOR);
-    float v_even = v, v_weighed = v;
-    float total = 0.0, w_even = 0.0, w_weighed = 0.0;
-    int real = 0, by_even = 0, by_weight = 0;
+    float total = 0.0;
+    int real = 0;
     for (int light = 0; light < lamp_count; light++) {
-      if (int(light_texel(light, 0).x) < 0) {
-        continue; /* a padding row */
-      }
-      float w = hit_lamp_weight(light, lit_at, ns, metal, weight, -d, base, params);
-      real++;
-      if (pick_step(v_even, 1.0 / float(real))) {
-        by_even = light;
-        w_even = w;
-      }
-      total += w;
-      if (pick_step(v_weighed, w > 0.0 ? w / total : 0.0)) {
-        by_weight = light;
-        w_weighed = w;
-      }
+      total += hit_lamp_weight(light, lit_at, ns, metal, weight, -d, base, params);
+      real += int(light_texel(light, 0).x) >= 0 ? 1 : 0;
     }
-    bool by_odds = even || total <= 0.0;
-    picked = by_odds ? by_even : by_weight;
-    chance = lamp_chance(by_odds ? w_even : w_weighed, total, max(real, 1));
+    float u = unit_float(point_stream(hit_id, LAMP_PICK_STREAM, seed + 1u));
+    float below = 0.0;
+    picked = -1;
+    for (int light = 0; light < lamp_count; light++) {
+      float w = hit_lamp_weight(light, lit_at, ns, metal, weight, -d, base, params);
+      float p = int(light_texel(light, 0).x) >= 0 ? lamp_chance(w, total, max(real, 1)) : 0.0;
+      if (picked < 0 && p > 0.0 && (u < below + p || light == lamp_count - 1)) {
+        picked = light;
+        chance = p;
+      }
+      below += p;
+    }
+    picked = max(picked, 0);
   }
   vec3 lamps = vec3(0.0);
   for (int light = picked; light < (pick ? picked + 1 : lamp_count); light++) {

@@ -255,38 +255,16 @@ def lamp_picks(lights, points, normals, hit_ids, seed: int, metal=None):
     weights = np.stack([_pick_weights(lights[i], points, normals) for i in lamps])  # (L, H)
     if metal is not None:
         weights = _metal_weights(lights, lamps, weights, points, normals, *metal)
-    # One pass over the lamps, as the GPU's loop weighs each lamp once: u < LAMP_PICK_FLOOR
-    # picks at even odds, the rest by weight, each a reservoir of one drawn with the rest of u
-    # rescaled (a lamp kept with chance w / (the weights so far): in the end w / total)
+    total = weights.sum(axis=0)
     count = len(lamps)
-    u = unit_float(point_streams(hit_ids, LAMP_PICK_STREAM, seed)).astype(np.float64)
-    even = u < LAMP_PICK_FLOOR
-    v = np.where(even, u / LAMP_PICK_FLOOR, (u - LAMP_PICK_FLOOR) / (1.0 - LAMP_PICK_FLOOR))
-    v_even, v_weighed = v.copy(), v.copy()
-    total = np.zeros(len(u))
-    by_even = np.zeros(len(u), np.int64)
-    by_weight = np.zeros(len(u), np.int64)
-    for k, w in enumerate(weights):
-        v_even, kept = _reservoir(v_even, np.full(len(u), 1.0 / (k + 1)))
-        by_even = np.where(kept, k, by_even)
-        total = total + w
-        v_weighed, kept = _reservoir(v_weighed, np.where(w > 0.0, w / np.where(total > 0.0, total, 1.0),
-                                                         0.0))
-        by_weight = np.where(kept, k, by_weight)
-    k = np.where(even | (total <= 0.0), by_even, by_weight)
-    w = weights[k, np.arange(len(k))]
-    chances = np.where(total > 0.0, (1.0 - LAMP_PICK_FLOOR) * w / np.where(total > 0.0, total, 1.0) +
-                       LAMP_PICK_FLOOR / count, 1.0 / count)
-    return np.asarray(lamps)[k], chances
-
-
-def _reservoir(v, p):
-    """One step of a reservoir of one drawn with a single uniform: ``v`` in [0, 1) keeps the
-    item offered with chance ``p`` where v < p, and v is rescaled to [0, 1) by the branch taken
-    (``bvh_shade.glsl`` pick_step). Returns (the rescaled v, kept)."""
-    kept = v < p
-    rest = np.where(kept, v / np.where(p > 0.0, p, 1.0), (v - p) / np.where(p < 1.0, 1.0 - p, 1.0))
-    return np.clip(rest, 0.0, np.nextafter(1.0, 0.0)), kept
+    spread = (1.0 - LAMP_PICK_FLOOR) * weights / np.where(total > 0.0, total, 1.0) + \
+        LAMP_PICK_FLOOR / count
+    chances = np.where(total > 0.0, spread, 1.0 / count)
+    u = unit_float(point_streams(hit_ids, LAMP_PICK_STREAM, seed))
+    below = np.cumsum(chances, axis=0)
+    first = np.argmax(u[None, :] < below, axis=0)  # the first lamp whose share holds u …
+    k = np.where((u[None, :] < below).any(axis=0), first, count - 1)  # … else the last
+    return np.asarray(lamps)[k], chances[k, np.arange(len(k))]
 
 
 def ray_paths(origins, dirs, hit_ids, tris, lights, albedo, emission, seed: int = 0,
