@@ -25,16 +25,18 @@
 
 /* Σ over the emitting triangles facing p of the LTC integral × the lobe's reflectance ×
  * radiance, × white_colour (exact_glossy.emitters_glossy's unshadowed part; glossy_ltc.glsl
- * glossy_ltc_triangle); v above the horizon of n. */
+ * glossy_ltc_triangle); v above the horizon of n. Over the triangles the sums run over
+ * (emitter_sums: a proxy where the emitters are many). */
 vec3 emitter_glossy_unshadowed(vec3 p, vec3 n, vec3 v, GlossyLobe g, float rough,
-                               vec3 white_colour, int count)
+                               vec3 white_colour)
 {
+  ivec2 rows = emitter_sums();
   vec3 unshadowed = vec3(0.0);
   LtcLobe lobe = ltc_lobe(n, v, rough);  /* the same for every triangle */
   if (!(g.white > 0.0)) {
     return unshadowed;  /* plain is 0 everywhere: so is the Fresnel ratio */
   }
-  for (int k = 0; k < count; k++) {
+  for (int k = rows.x; k < rows.x + rows.y; k++) {
     if (!emitter_facing(k, p)) {
       continue;
     }
@@ -89,7 +91,7 @@ void main()
   vec3 colour = principled_glossy_color(base, params.x, params.y, rough, clamp(cos_ni, 0.0, 1.0));
   GlossyLobe g = glossy_lobe(base, params.x, params.y, rough, cos_ni);
   if (mode == 2) {  /* the field at a gather point: the light over the point's Glossy Color */
-    vec3 light = emitter_glossy_unshadowed(p, n, v, g, rough, white_colour, count);
+    vec3 light = emitter_glossy_unshadowed(p, n, v, g, rough, white_colour);
     imageStore(out_image, px, vec4(mix(vec3(0.0), light / max(colour, vec3(1e-30)),
                                        greaterThan(colour, vec3(0.0))), 0.0));
     return;
@@ -97,7 +99,7 @@ void main()
   vec4 field = sampling.w > 0.5 ? texelFetch(emitter_field, px, 0) : vec4(-1.0);
   vec3 unshadowed = (field.w >= 0.0 && field.w <= NEAR_STEP * min(1.0, 2.0 * alpha)) ?
                     field.rgb * colour :
-                    emitter_glossy_unshadowed(p, n, v, g, rough, white_colour, count);
+                    emitter_glossy_unshadowed(p, n, v, g, rough, white_colour);
   uint id = position.w > 1.5 ? uint(position.w) - 2u  /* a listed pixel: aa_compact.glsl */
                              : uint((size.y - 1 - px.y) * size.x + px.x);
   const vec3 LUMINANCE = vec3(0.2126, 0.7152, 0.0722);

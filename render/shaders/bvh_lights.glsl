@@ -697,6 +697,14 @@ vec4 emitter_header()
   return texelFetch(emitters, ivec2(0, textureSize(emitters, 0).y - 1), 0);
 }
 
+/* (first row, count) of the triangles the exact sums run over: the emitters' own, or past
+ * them the proxy standing in for them where they are many (emitters.EmitterLight.sums). */
+ivec2 emitter_sums()
+{
+  vec4 rows = texelFetch(emitters, ivec2(1, textureSize(emitters, 0).y - 1), 0);
+  return ivec2(int(rows.x + 0.5), int(rows.y + 0.5));
+}
+
 /* Lambert's term of the edge (a, b) (relative to the point) toward normal n added to sum:
  * θ × the great circle's unit normal · n. */
 void form_factor_edge(vec3 a, vec3 b, vec3 n, inout float sum)
@@ -768,17 +776,22 @@ float clipped_form_factor(int t, vec3 p, vec3 n)
   return abs(sum) / (2.0 * M_PI_F);
 }
 
-/* Does triangle t light the side of it where p is (emitters.EmitterLight.sides)? */
+/* Does triangle t light the side of it where p is (emitters.EmitterLight.sides)? A proxy's
+ * triangle (margin > 0: emitters.proxy_triangles) only where p lies beyond its margin from its
+ * plane (emitters._facing), so that the surface it stands in for is not lit by it. */
 bool emitter_facing(int t, vec3 p)
 {
-  float side = texelFetch(emitters, ivec2(3, t), 0).y;
-  if (side == 0.0) {
+  vec2 side_margin = texelFetch(emitters, ivec2(3, t), 0).yz;
+  float side = side_margin.x;
+  if (side == 0.0 && side_margin.y <= 0.0) {
     return true;
   }
   vec3 c0 = texelFetch(emitters, ivec2(0, t), 0).xyz;
   vec3 normal = cross(texelFetch(emitters, ivec2(1, t), 0).xyz - c0,
                       texelFetch(emitters, ivec2(2, t), 0).xyz - c0);
-  return side * dot(p - c0, normal) > 0.0;
+  float height = dot(p - c0, normal);
+  float band = side_margin.y * length(normal);
+  return side == 0.0 ? abs(height) > band : side * height > band;
 }
 
 /* A point on the emitters drawn by power from u (emitters.sample_points): its triangle t and
@@ -813,10 +826,10 @@ vec3 emitter_sample(vec2 u, int count, out int t)
  * visited. */
 vec3 emitters_unshadowed(vec3 p, vec3 n, bool evaluate)
 {
-  int count = int(emitter_header().x);
+  ivec2 rows = emitter_sums();
   p += NORMAL_OFFSET * n;
   vec3 value = vec3(0.0);
-  for (int t = 0; t < count && evaluate; t++) {
+  for (int t = rows.x; t < rows.x + rows.y && evaluate; t++) {
     float factor = emitter_facing(t, p) ? clipped_form_factor(t, p, n) : 0.0;
     if (factor > 0.0) {
       value += factor * vec3(texelFetch(emitters, ivec2(0, t), 0).w,
@@ -872,9 +885,9 @@ float emitter_distance(int t, vec3 p)
  * (emitters.emitter_distances). */
 float emitters_distance(vec3 p, vec3 n)
 {
-  int count = int(emitter_header().x);
+  ivec2 rows = emitter_sums();
   float nearest = 1e30;
-  for (int t = 0; t < count; t++) {
+  for (int t = rows.x; t < rows.x + rows.y; t++) {
     float above = max(max(dot(texelFetch(emitters, ivec2(0, t), 0).xyz - p, n),
                           dot(texelFetch(emitters, ivec2(1, t), 0).xyz - p, n)),
                       dot(texelFetch(emitters, ivec2(2, t), 0).xyz - p, n));

@@ -361,3 +361,46 @@ def test_the_world_s_light_at_the_gather_points_is_the_pixels_own(voxgi, monkeyp
     # the other passes are the same frame's
     for pass_name in ("Diffuse Indirect", "Glossy Direct", "Glossy Indirect"):
         assert relative_l1(points[pass_name], own[pass_name], seen) <= 0.01, pass_name
+
+
+def test_a_glowing_sphere_of_thousands_of_triangles_lights_the_room(voxgi, monkeypatch):
+    """The emissive room's glowing sphere at 64 × 32 segments (3,968 emissive triangles with
+    the panel's, past MAX_EMITTER_TRIANGLES): the GPU preview lights the room as it does with
+    the exact sums over every triangle (their proxy's sums, their own shadow rays), and as the
+    numpy tracer does. Before, such emitters were no light: the room's Diffuse Direct lost the
+    panel's and the sphere's light (their emission only seen by the gathers' rays)."""
+    from voxgi.voxgi_addon.gi import emitters
+
+    def with_orb(tracer):
+        scene = bpy.context.scene
+        light_scenes.build("emissive_room", scene)
+        orb = next(o for o in scene.objects if o.type == "MESH" and o.data.materials and
+                   o.data.materials[0].name.startswith("Orb"))
+        material, location = orb.data.materials[0], tuple(orb.location)
+        bpy.data.objects.remove(orb)
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=64, ring_count=32, radius=0.3,
+                                             location=location)
+        bpy.context.active_object.data.materials.append(material)
+        scene.voxgi.tracer = tracer
+        scene.voxgi.sparse_gathers = False
+        from voxgi.render.pipeline import render_scene_passes
+        from voxgi.blender.session import scene_session
+        passes, lines = render_scene_passes(bpy.context, scene, None, 64, 48)
+        assert scene_session(scene.name_full).tracer_used == (
+            "GPU" if tracer == "AUTO" else "numpy"), lines
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        return {k: np.asarray(v, np.float64) for k, v in passes.items()}
+
+    ours = with_orb("AUTO")
+    numpy_ours = with_orb("NUMPY")
+    with monkeypatch.context() as m:
+        m.setattr(emitters, "MAX_EMITTER_TRIANGLES", 10_000)
+        exact = with_orb("AUTO")
+    everywhere = np.ones((48, 64), bool)
+    assert exact["Diffuse Direct"].mean() > 0.05
+    for name in ("Diffuse Direct", "Glossy Direct", "Combined"):
+        error = relative_l1(ours[name], exact[name], everywhere)
+        print(name, "proxy vs exact sums", round(error, 4),
+              "GPU vs numpy", relative_l1(ours[name], numpy_ours[name], everywhere))
+        assert error < 0.02, name
+        assert relative_l1(ours[name], numpy_ours[name], everywhere) < 0.02, name

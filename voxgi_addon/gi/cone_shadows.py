@@ -71,7 +71,8 @@ def emitter_groups(light) -> list:
         cdf = np.cumsum(power) / max(power.sum(), 1e-30)
         groups.append(dataclasses.replace(
             light, corners=light.corners[members], radiance=light.radiance[members],
-            area=light.area[members], cdf=cdf, sides=light.sides[members], exact=True))
+            area=light.area[members], cdf=cdf, sides=light.sides[members], exact=True,
+            margin=None if light.margin is None else light.margin[members], sums=None))
     return groups
 
 

@@ -28,6 +28,7 @@ units, both sides emitting, as Cycles' mesh lights do) is evaluated as the area 
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -37,16 +38,20 @@ from ..scene.short_axis import any_along, max_along, norm3
 from ..scene.textures import sample_texture
 from .world_light import hidden_less
 
-__all__ = ["EmitterLight", "emitter_light", "emitters_direct", "unshadowed_sum",
+__all__ = ["EmitterLight", "emitter_light", "emitters_direct", "unshadowed_sum", "proxy_triangles",
            "clipped_form_factors", "sample_points", "emitter_table", "EMITTER_TEXELS",
            "MAX_EMITTER_TRIANGLES"]
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 EMITTER_TEXELS = 4
 # Beyond this many emissive triangles the exact per-point sum costs too much (and a GPU
-# invocation's loops would pass llvmpipe's limit, docs/blender_facts.md): such scenes keep the
+# invocation's loops would pass llvmpipe's limit, docs/blender_facts.md): more are lit through
+# a proxy of at most PROXY_TRIANGLES (``proxy_triangles``: the emissive surface with its
+# vertices clustered, its power kept), and scenes of more than MAX_EMISSIVE_TRIANGLES keep the
 # emission seen by the gathers' rays instead (emitter_light returns None).
 MAX_EMITTER_TRIANGLES = 1024
+PROXY_TRIANGLES = 256
+MAX_EMISSIVE_TRIANGLES = 65536
 # Triangles with an emission texture are split into at most this many pieces in all (each
 # emitting the texture's mean over it), at most 4^MAX_SPLIT_LEVEL per triangle.
 TEXTURED_EMITTER_TRIANGLES = 512
@@ -61,7 +66,15 @@ class EmitterLight:
     normal faces, −1 the other side, 0 both (``emitting_sides``).
     exact : the unshadowed light is the exact sum over the triangles (primary surfaces); False
     at the gathers' bounce hits, where the shadow rays' plain estimate (unbiased, noisier) is
-    enough and the sum would cost most of the gather."""
+    enough and the sum would cost most of the gather.
+    margin : None, or (E,) where the triangles are a proxy of the emissive surface
+    (``proxy_triangles``): how far from each triangle's plane the surface it stands in for
+    lies. It lights only points further than this from its plane, so that the surface is not
+    lit by its own proxy (``_facing``).
+    sums : None, or the proxy (an ``EmitterLight`` with a margin) the exact sums run over, where
+    the triangles are more than MAX_EMITTER_TRIANGLES (``unshadowed_sum``, ``emitter_distances``,
+    the glossy light's unshadowed part); the shadow rays draw their points on the triangles
+    themselves either way, so the visible share is the surface's own."""
 
     corners: np.ndarray
     radiance: np.ndarray
@@ -71,6 +84,8 @@ class EmitterLight:
     exact: bool = True
     type: str = "EMITTERS"
     name: str = "Emissive surfaces"
+    margin: np.ndarray | None = None
+    sums: EmitterLight | None = None
 
 
 def emitting_sides(corners, objects) -> np.ndarray:
@@ -179,7 +194,7 @@ def emitter_light(tris, emission) -> EmitterLight | None:
     corners = np.asarray(tris.positions, np.float64)
     area = 0.5 * norm3(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
     keep = (radiance @ LUMINANCE > 0) & (area > 0) & np.isfinite(area)
-    if not keep.any() or keep.sum() > MAX_EMITTER_TRIANGLES:
+    if not keep.any() or keep.sum() > MAX_EMISSIVE_TRIANGLES:
         return None
     sides = emitting_sides(corners[keep], np.asarray(tris.objects)[keep])
     corners, radiance, index = _textured_split(tris, keep, corners, radiance)
@@ -188,11 +203,25 @@ def emitter_light(tris, emission) -> EmitterLight | None:
     if not lit.any():
         return None
     corners, radiance, sides = corners[lit], radiance[lit], sides[lit]
+    sums = None
+    if len(corners) > MAX_EMITTER_TRIANGLES:
+        proxy = proxy_triangles(corners, radiance, sides, PROXY_TRIANGLES)
+        if proxy is None:
+            return None
+        sums = _ordered(*proxy)
+    light = _ordered(corners, radiance, sides)
+    return light if sums is None else dataclasses.replace(light, sums=sums)
+
+
+def _ordered(corners, radiance, sides, margin=None) -> EmitterLight:
+    """An ``EmitterLight`` of these triangles in a canonical order, float32-rounded as the GPU
+    table holds them."""
     # a canonical order (by centroid), so that the samples do not depend on the order in which
     # the meshes list their triangles
     centroid = corners.mean(axis=1)
     order = np.lexsort((centroid[:, 2], centroid[:, 1], centroid[:, 0]))
     sides = sides[order]
+    margin = None if margin is None else np.asarray(margin, np.float64)[order]
     corners = corners[order].astype(np.float32).astype(np.float64)
     radiance = radiance[order].astype(np.float32).astype(np.float64)
     area = 0.5 * norm3(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
@@ -200,7 +229,73 @@ def emitter_light(tris, emission) -> EmitterLight | None:
     cdf = np.cumsum(power) / power.sum()
     cdf[-1] = 1.0
     return EmitterLight(corners, radiance, area.astype(np.float32).astype(np.float64),
-                        cdf.astype(np.float32).astype(np.float64), sides)
+                        cdf.astype(np.float32).astype(np.float64), sides, margin=margin)
+
+
+def proxy_triangles(corners, radiance, sides, budget: int):
+    """(corners, radiance, sides, margin) of at most ``budget`` triangles standing in for the
+    emissive triangles ``corners`` (E, 3, 3) with ``radiance`` (E, 3) and ``sides`` (E,), or
+    None where none fits. Vertex clustering: the corners snapped to a grid whose cell is grown
+    by half until the triangles left (those whose corners fall in three distinct cells, one
+    for each (cell triple, side), its winding the first source's) fit the budget; each cluster's
+    corners move to their cluster's mean. A proxy triangle emits the area-weighted mean of its
+    sources' radiance, and the radiance is scaled per side and channel so that the proxy sends
+    the sources' power. ``margin`` (P,): 1.5 × the farthest a source corner lies from its proxy
+    triangle's plane. Triangles flipped by the clustering, or of no area, are dropped."""
+    corners = np.asarray(corners, np.float64)
+    points = corners.reshape(-1, 3)
+    low = points.min(axis=0)
+    extent = float((points.max(axis=0) - low).max())
+    if not extent > 0.0:
+        return None
+    area = 0.5 * norm3(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    cell = extent / math.sqrt(budget)
+    for _ in range(40):
+        q = np.floor((points - low) / cell).astype(np.int64)
+        cells, vertex = np.unique(q, axis=0, return_inverse=True)
+        vertex = vertex.reshape(-1, 3)
+        keep = (vertex[:, 0] != vertex[:, 1]) & (vertex[:, 1] != vertex[:, 2]) & \
+            (vertex[:, 0] != vertex[:, 2])
+        key = np.concatenate([np.sort(vertex, axis=1), sides[:, None].astype(np.int64)], axis=1)
+        unique, first, owner = np.unique(key[keep], axis=0, return_index=True,
+                                         return_inverse=True)
+        if len(unique) <= budget:
+            break
+        cell *= 1.5
+    else:
+        return None
+    owner = owner.ravel()
+    mean = np.zeros((len(cells), 3))
+    np.add.at(mean, vertex.ravel(), points)
+    mean /= np.bincount(vertex.ravel(), minlength=len(cells))[:, None]
+    source = np.flatnonzero(keep)
+    proxy = mean[vertex[source[first]]]                                   # (P, 3, 3)
+    weight = np.zeros(len(unique))
+    glow = np.zeros((len(unique), 3))
+    np.add.at(weight, owner, area[source])
+    np.add.at(glow, owner, area[source, None] * radiance[source])
+    glow /= np.maximum(weight, 1e-30)[:, None]
+    facing = np.zeros((len(unique), 3))
+    np.add.at(facing, owner, normal[source])
+    made = np.cross(proxy[:, 1] - proxy[:, 0], proxy[:, 2] - proxy[:, 0])
+    proxy_area = 0.5 * norm3(made)
+    good = (proxy_area > 0.0) & (np.einsum("pc,pc->p", made, facing) > 0.0)
+    if not good.any():
+        return None
+    unit = made / np.maximum(2.0 * proxy_area, 1e-300)[:, None]
+    apart = np.abs(np.einsum("sic,sc->si", corners[source] - proxy[owner, 0][:, None],
+                             unit[owner])).max(axis=1)
+    margin = np.zeros(len(unique))
+    np.maximum.at(margin, owner, apart)
+    proxy, glow, proxy_area, margin = proxy[good], glow[good], proxy_area[good], margin[good]
+    proxy_sides = unique[good, 3].astype(np.int8)
+    for side in np.unique(proxy_sides):  # the sources' power, per side and channel
+        mine = proxy_sides == side
+        sent = (area[sides == side, None] * radiance[sides == side]).sum(axis=0)
+        made_power = (proxy_area[mine, None] * glow[mine]).sum(axis=0)
+        glow[mine] *= np.where(made_power > 0.0, sent / np.maximum(made_power, 1e-300), 0.0)
+    return proxy, glow, proxy_sides, 1.5 * margin
 
 
 # The emitters' light as a field (``preview.upsample.EmitterField``; docs/gi_pipeline.md
@@ -227,7 +322,12 @@ def _facing(light: EmitterLight, p, index=None) -> np.ndarray:
         height = np.einsum("nc,ec->ne", p, normal) - np.einsum("ec,ec->e", corners[:, 0], normal)
     else:
         height = np.einsum("nkc,nkc->nk", p[:, None] - corners[..., 0, :], normal)
-    return (sides == 0) | (sides * height > 0)
+    margin = getattr(light, "margin", None)  # (the area lights' polygons have none)
+    if margin is None:
+        return (sides == 0) | (sides * height > 0)
+    # a proxy's triangle lights only points beyond its margin from its plane (height is × |normal|)
+    band = (margin if index is None else margin[index]) * norm3(normal)
+    return np.where(sides == 0, np.abs(height) > band, sides * height > band)
 
 
 def triangle_distances(p, corners) -> np.ndarray:
@@ -268,6 +368,7 @@ def emitter_distances(light: EmitterLight, p, n, chunk: int = 4096) -> np.ndarra
     tangent plane — an emitter's own points are not near it (GLSL: bvh_lights.glsl
     emitters_distance). The preview brings the emitters' light from its gather points to a
     pixel only where they lie well inside this distance (``preview.upsample.EmitterField``)."""
+    light = light.sums or light
     p = np.asarray(p, np.float64).reshape(-1, 3)
     n = np.asarray(n, np.float64).reshape(-1, 3)
     out = np.full(len(p), 1e30)
@@ -342,6 +443,7 @@ def unshadowed_sum(light: EmitterLight, p, n) -> np.ndarray:
     side, O(N × triangles). The anti-aliased preview evaluates it once per pixel centre and
     again only where a sub-pixel pass sees another surface (``emitters_direct``'s
     ``unshadowed``). GLSL: emitters_unshadowed in render/shaders/bvh_lights.glsl."""
+    light = light.sums or light  # a proxy where the triangles are many (``EmitterLight.sums``)
     p = np.asarray(p, np.float64).reshape(-1, 3)
     n = np.asarray(n, np.float64).reshape(-1, 3)
     out = np.zeros((len(p), 3))
@@ -423,17 +525,28 @@ def _total_power(light: EmitterLight) -> float:
 
 
 def emitter_table(light: EmitterLight | None, stream: int = 0) -> np.ndarray:
-    """(E + 1, EMITTER_TEXELS, 4) float32 for ``bvh_lights.glsl``: row t = (corner 0, radiance
-    r), (corner 1, radiance g), (corner 2, radiance b), (inclusive power CDF, side, 0, 0); the
-    last row = (E, Σ area × luminance, stream, 1 = emitters) — a lone header row of zeros when
+    """(E + P + 1, EMITTER_TEXELS, 4) float32 for ``bvh_lights.glsl``: row t = (corner 0,
+    radiance r), (corner 1, radiance g), (corner 2, radiance b), (inclusive power CDF, side,
+    margin, 0), the E triangles, then the P of their proxy (``EmitterLight.sums``; none
+    without); the last row = (E, Σ area × luminance, stream, 1 = emitters), (the first row and
+    the count of the triangles the sums run over, 0, 0) — a lone header row of zeros when
     nothing emits."""
     if light is None:
         return np.zeros((1, EMITTER_TEXELS, 4), np.float32)
     count = len(light.corners)
-    table = np.zeros((count + 1, EMITTER_TEXELS, 4))
-    table[:count, :3, :3] = light.corners
-    table[:count, :3, 3] = light.radiance
-    table[:count, 3, 0] = light.cdf
-    table[:count, 3, 1] = light.sides
-    table[count, 0] = (count, _total_power(light), stream, 1.0)
+    sums = light.sums or light
+    extra = 0 if light.sums is None else len(sums.corners)
+    table = np.zeros((count + extra + 1, EMITTER_TEXELS, 4))
+    for first, part in ((0, light), (count, light.sums)):
+        if part is None:
+            continue
+        rows = slice(first, first + len(part.corners))
+        table[rows, :3, :3] = part.corners
+        table[rows, :3, 3] = part.radiance
+        table[rows, 3, 0] = part.cdf
+        table[rows, 3, 1] = part.sides
+        if part.margin is not None:
+            table[rows, 3, 2] = part.margin
+    table[-1, 0] = (count, _total_power(light), stream, 1.0)
+    table[-1, 1] = (count if extra else 0, extra or count, 0.0, 0.0)
     return table.astype(np.float32)

@@ -392,6 +392,7 @@ def _emitters_unshadowed(lobe: _Lobe, emitters, p, glossy) -> np.ndarray:
 
     if len(glossy) == 0:
         return np.zeros((0, 3))
+    emitters = getattr(emitters, "sums", None) or emitters  # a proxy where they are many
     n, v = lobe.n[glossy], lobe.v[glossy]
     base, metallic, level, rough = (a[glossy] for a in lobe.shading)  # (G, 1, 3), (G, 1) …
     shape, towards = ltc_polygon_integral(p, n, v, rough[:, 0], emitters.corners,
