@@ -383,8 +383,8 @@ def test_a_glowing_sphere_of_thousands_of_triangles_lights_the_room(voxgi, monke
         bpy.context.active_object.data.materials.append(material)
         scene.voxgi.tracer = tracer
         scene.voxgi.sparse_gathers = False
-        from voxgi.render.pipeline import render_scene_passes
         from voxgi.blender.session import scene_session
+        from voxgi.render.pipeline import render_scene_passes
         passes, lines = render_scene_passes(bpy.context, scene, None, 64, 48)
         assert scene_session(scene.name_full).tracer_used == (
             "GPU" if tracer == "AUTO" else "numpy"), lines
