@@ -110,14 +110,16 @@ def test_placements_are_transformed_as_each_object_alone():
         mesh = snapshot.meshes[obj.mesh]
         m = np.asarray(obj.world_matrix)
         p = np.asarray(mesh.positions, np.float64) @ m[:3, :3].T + m[:3, 3]
-        corners.append(p[np.asarray(mesh.triangles)])
+        # a mirroring placement turns the winding: the second and third corners swap
+        order = [0, 2, 1] if np.linalg.det(m[:3, :3]) < 0.0 else [0, 1, 2]
+        corners.append(p[np.asarray(mesh.triangles)][:, order])
         if mesh.corner_normals is None:  # flat: the face normal at every corner
             c = corners[-1]
             n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
             shading.append(np.repeat((n / np.linalg.norm(n, axis=1, keepdims=True))[:, None], 3, 1))
         else:
             shading.append(transform_normals(m, np.asarray(mesh.corner_normals, np.float64)
-                                             .reshape(-1, 3)).reshape(-1, 3, 3))
+                                             .reshape(-1, 3)).reshape(-1, 3, 3)[:, order])
     np.testing.assert_allclose(tris.positions, np.concatenate(corners), atol=1e-12)
     np.testing.assert_allclose(tris.corner_normals, np.concatenate(shading), atol=1e-9)
 

@@ -268,6 +268,17 @@ def world_triangles(snapshot: SceneSnapshot, shading: bool = True) -> SceneTrian
             tri[rows] = world.reshape(-1, 3, 3)
             if placed_normals is not None:
                 normals[rows] = placed_normals.reshape(-1, 3, 3)
+    # An object placed by a matrix of negative determinant (a mirror: a scale of -1) turns its
+    # triangles' winding: their second and third corners are swapped, so that each triangle's
+    # cross product faces out of the surface as its shading normals do (they are placed by the
+    # cofactor matrix, which keeps them out), as Cycles flips a mirrored object's triangles
+    mirrored = np.array([np.linalg.det(np.asarray(obj.world_matrix, np.float64)[:3, :3]) < 0.0
+                         for _, obj, _ in placed])
+    turned = np.repeat(mirrored, counts)
+    if turned.any():
+        tri[turned] = tri[turned][:, [0, 2, 1]]
+        if smooth:
+            normals[turned] = normals[turned][:, [0, 2, 1]]
     normal = _cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     length = norm3(normal)[:, None]
     normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
@@ -278,6 +289,7 @@ def world_triangles(snapshot: SceneSnapshot, shading: bool = True) -> SceneTrian
     uvs = [np.zeros((len(mesh.triangles), 3, 2), np.float32) if mesh.uvs is None else
            np.asarray(mesh.uvs, np.float32).reshape(len(mesh.triangles), 3, 2)
            for _, _, mesh in placed]
+    uvs = [uv[:, [0, 2, 1]] if flip else uv for uv, flip in zip(uvs, mirrored)]
     materials = np.concatenate(materials)
     objects = np.concatenate(objects)
     textures = surface_textures(snapshot, tri, materials, np.concatenate(uvs), length)
