@@ -72,6 +72,17 @@ bool bvh_triangle(int slot, vec3 o, vec3 d, float dlen, out float t, out vec2 uv
   return true;
 }
 
+/* How far off a surface at p a ray starts: `least` (metres), or OFFSET_ULPS float32 steps of
+ * p's largest coordinate where those are more (a scene far from the origin: at 3 km a step is
+ * 0.24 mm, and a fixed 0.1 mm lift left the points inside their own surface, whose shadow
+ * rays then hid it: docs/gi_pipeline.md "A scene far from the origin"). */
+#define OFFSET_ULPS 16.0
+float surface_offset(vec3 p, float least)
+{
+  vec3 a = abs(p);
+  return max(least, OFFSET_ULPS * 1.1920929e-7 * max(a.x, max(a.y, a.z)));
+}
+
 /* Threaded traversal: the packed slot of the nearest hit with tmin < t < tmax (any hit when
  * any_hit), or -1; t_hit and uv of that hit. With BVH_CUTOUTS a cut-out's Alpha is not read
  * here (bvh_trace does, after the walk): `cut` says the slot is a cut-out, and an any-hit walk

@@ -88,7 +88,7 @@ void main()
     return;
   }
   vec3 n = texelFetch(gbuffer_normal, px, 0).xyz;
-  vec3 p = position.xyz + n * SURFACE_EPSILON;
+  vec3 p = position.xyz + n * surface_offset(position.xyz, SURFACE_EPSILON);
   int mode = int(sampling.z + 0.5);
   if (mode == 2 && sampling.w > 0.5) {  /* the field where it holds, else the sum, w = 0 */
     vec4 field = texelFetch(emitter_field, px, 0);

@@ -71,7 +71,7 @@ void main()
     imageStore(out_image, px, texelFetch(centre_shine, px, 0));
     return;
   }
-  vec3 p = position.xyz + SURFACE_EPSILON * n; /* off an emitter's own plane */
+  vec3 p = position.xyz + surface_offset(position.xyz, SURFACE_EPSILON) * n; /* off an emitter's own plane */
   vec3 v = -ray.xyz;
   int last_material = textureSize(materials, 0).x - 1;
   int material = int(ray.w + 0.5);

@@ -76,7 +76,7 @@ void main()
                             geometric_normal(position + VIEW_BACKOFF * ray.xyz, ray.xyz, n);
   uint seed = uint(sampling.x);
   int rays = int(sampling.y);
-  vec3 origin = position + SURFACE_EPSILON * n;
+  vec3 origin = position + surface_offset(position, SURFACE_EPSILON) * n;
   uint state = point_stream(id, RAY_STREAM, seed);
   vec3 t, b;
   perpendicular_basis(n, t, b);

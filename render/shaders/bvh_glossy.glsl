@@ -39,7 +39,7 @@ void main()
   if (!world_mode && params.x >= 0.5) {
     rays *= METAL_RAY_FACTOR; /* exact_glossy.glossy_indirect: a metal's colour is all glossy */
   }
-  vec3 origin = position + SURFACE_EPSILON * n;
+  vec3 origin = position + surface_offset(position, SURFACE_EPSILON) * n;
   uint state = point_stream(id, GLOSSY_STREAM, seed);
   uint world_state = point_stream(id, WORLD_GLOSSY_STREAM, seed);
   bool sky_on = world_on();

@@ -96,7 +96,7 @@ float sun_light(int light, vec3 p, vec3 n, uint state, int m)
   if (value <= 0.0) {
     return 0.0;
   }
-  vec3 origin = p + NORMAL_OFFSET * n;
+  vec3 origin = p + surface_offset(p, NORMAL_OFFSET) * n;
   float tan_half = light_texel(light, 3).w;
   vec3 t, b;
   perpendicular_basis(to_light, t, b);
@@ -143,7 +143,7 @@ float point_light(int light, int kind, vec3 p, vec3 n, uint state, int m)
   if (value <= 0.0) {
     return 0.0;
   }
-  vec3 origin = p + NORMAL_OFFSET * n;
+  vec3 origin = p + surface_offset(p, NORMAL_OFFSET) * n;
   vec3 t, b;
   perpendicular_basis(w, t, b);
   float visible = 0.0;
@@ -240,7 +240,7 @@ float area_light(int light, vec4 head, vec3 p, vec3 n, uint state, int m)
   vec3 ex = light_texel(light, 3).xyz;
   vec3 ey = light_texel(light, 4).xyz;
   vec4 area = light_texel(light, 6); /* area, radiance */
-  vec3 origin = p + NORMAL_OFFSET * n;
+  vec3 origin = p + surface_offset(p, NORMAL_OFFSET) * n;
   float f_sum = 0.0;
   float f_lit = 0.0;
   /* a rectangle (its edges perpendicular) is drawn by solid angle, as Cycles draws it: a
@@ -497,7 +497,7 @@ vec3 world_direct_lobe(vec3 p, vec3 n, uint state, int m, bool lobe, vec3 v, vec
   if (max(value.r, max(value.g, value.b)) <= 0.0) {
     return value;
   }
-  vec3 origin = p + NORMAL_OFFSET * n;
+  vec3 origin = p + surface_offset(p, NORMAL_OFFSET) * n;
   vec3 t, b;
   perpendicular_basis(n, t, b);
   vec3 f_sum = vec3(0.0);
@@ -827,7 +827,7 @@ vec3 emitter_sample(vec2 u, int count, out int t)
 vec3 emitters_unshadowed(vec3 p, vec3 n, bool evaluate)
 {
   ivec2 rows = emitter_sums();
-  p += NORMAL_OFFSET * n;
+  p += surface_offset(p, NORMAL_OFFSET) * n;
   vec3 value = vec3(0.0);
   for (int t = rows.x; t < rows.x + rows.y && evaluate; t++) {
     float factor = emitter_facing(t, p) ? clipped_form_factor(t, p, n) : 0.0;
@@ -914,7 +914,7 @@ vec3 emitters_direct_lobe(vec3 p, vec3 n, uint state, int m, bool exact, vec4 kn
   bool given = known.w > 0.5;
   vec3 sum = emitters_unshadowed(p, n, exact && !given); /* else no triangle visited */
   vec3 value = exact ? (given ? known.rgb : sum) : vec3(1.0);
-  p += NORMAL_OFFSET * n; /* as direct_light._emitters lifts the point */
+  p += surface_offset(p, NORMAL_OFFSET) * n; /* as direct_light._emitters lifts the point */
   if (max(value.r, max(value.g, value.b)) <= 0.0) {
     return value;
   }

@@ -178,7 +178,7 @@ vec3 ray_paths(vec3 origin, vec3 d, uint hit_id, uint seed, int strata, bool hit
    * integrator"). */
   vec3 weight = principled_diffuse_weight(base, params.x, params.y, params.z,
                                           clamp(-dot(ns, d), 0.0, 1.0));
-  vec3 lit_at = x + ns * SURFACE_EPSILON;
+  vec3 lit_at = x + ns * surface_offset(x, SURFACE_EPSILON);
   /* uniform light (the radiance cache's) is also reflected by the glossy lobes' albedo */
   glossy_weight = principled_glossy_color(base, params.x, params.y, params.z,
                                           clamp(-dot(ns, d), 0.0, 1.0));
@@ -352,7 +352,7 @@ vec3 metal_lobe_ray(vec3 ns, vec3 d, uint hit_id, uint seed)
 bool metal_follow(vec3 x, vec3 ns, vec3 d, uint hit_id, uint seed, out vec3 o, out vec3 dir)
 {
   dir = metal_lobe_ray(ns, d, hit_id, seed);
-  o = x + SURFACE_EPSILON * ns;
+  o = x + surface_offset(x, SURFACE_EPSILON) * ns;
   return dot(dir, ns) > 0.0;
 }
 
@@ -427,7 +427,7 @@ bool path_step(inout Path path, uint seed, int strata, bool hit_glossy, vec3 wor
     path.carried *= cache_weight;
     path.follows++;
     near_normal = ns;
-    path.o = x + SURFACE_EPSILON * ns;
+    path.o = x + surface_offset(x, SURFACE_EPSILON) * ns;
     path.dir = near_bounce_ray(ns, path.id_now, seed);
     path.id_now = pcg_hash(path.id_now ^ CONTINUE_STREAM);
     return path.bounce > MAX_FOLLOWS;

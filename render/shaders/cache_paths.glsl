@@ -35,7 +35,7 @@ void main()
   vec3 n = texelFetch(gbuffer_normal, at, 0).xyz;
   uint seed = uint(sampling.x);
   uint id = uint(face);
-  vec3 origin = position + SURFACE_EPSILON * n;
+  vec3 origin = position + surface_offset(position, SURFACE_EPSILON) * n;
   uint state = point_stream(id, RAY_STREAM, seed);
   vec3 t, b;
   perpendicular_basis(n, t, b);
