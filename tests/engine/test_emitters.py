@@ -254,3 +254,35 @@ def test_an_emitter_of_thousands_of_triangles_lights_as_its_own_triangles_do(mon
     table = emitter_table(light)
     assert len(table) == len(light.corners) + len(light.sums.corners) + 1
     assert tuple(table[-1, 1, :2]) == (len(light.corners), len(light.sums.corners))
+
+
+def test_many_small_glowing_objects_keep_their_light_each(monkeypatch):
+    """Fairy lights: 30 glowing 16 × 8 spheres of 4 cm, each its own object (6,720 triangles).
+    The proxy is clustered object by object, each its share of a budget of PROXY_PER_OBJECT
+    triangles an object (at most MAX_EMITTER_TRIANGLES), each object's power kept: a floor
+    under them reads the full sums' unshadowed light within 6% (5.0% measured: 18 triangles a
+    sphere). One grid over the whole string (256 triangles, some spheres gone) read 11% off, and
+    the room it lit 0.0752 against Cycles 512 spp, over Cycles 16 spp + OIDN's 0.070; clustered
+    object by object, 0.0368 (the full sums: 0.0367)."""
+    from voxgi.voxgi_addon.gi import emitters as module
+    from voxgi.voxgi_addon.gi.emitters import unshadowed_sum
+
+    rng = np.random.default_rng(4)
+    centres = np.column_stack([rng.uniform(-2.0, 2.0, 30), rng.uniform(-1.0, 1.0, 30),
+                               rng.uniform(1.8, 2.2, 30)])
+    corners = np.concatenate([uv_sphere(16, 8, 0.04, c) for c in centres])
+    objects = np.repeat(np.arange(30), len(corners) // 30)
+    tris = triangles(corners, objects=objects)
+    emission = np.array([[30.0, 24.0, 15.0], [0.0, 0.0, 0.0]])
+    light = emitter_light(tris, emission)
+    assert light.sums is not None
+    assert len(light.sums.corners) <= module.MAX_EMITTER_TRIANGLES
+    with monkeypatch.context() as m:
+        m.setattr(module, "MAX_EMITTER_TRIANGLES", 10_000)
+        whole = emitter_light(tris, emission)
+    grid = np.stack(np.meshgrid(np.linspace(-2.5, 2.5, 11), np.linspace(-1.5, 1.5, 7)), -1)
+    p = np.concatenate([grid.reshape(-1, 2), np.zeros((77, 1))], axis=1)
+    n = np.tile([[0.0, 0.0, 1.0]], (len(p), 1))
+    ours, reference = unshadowed_sum(light, p, n), unshadowed_sum(whole, p, n)
+    assert reference.mean() > 0.01
+    assert np.abs(ours - reference).sum() / np.abs(reference).sum() < 0.06

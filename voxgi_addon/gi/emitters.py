@@ -51,7 +51,9 @@ EMITTER_TEXELS = 4
 # emission seen by the gathers' rays instead (emitter_light returns None).
 MAX_EMITTER_TRIANGLES = 1024
 PROXY_TRIANGLES = 256
-MAX_EMISSIVE_TRIANGLES = 65536
+PROXY_PER_OBJECT = 64  # a proxy's budget is at least this many triangles an emissive object
+# (the GPU's table holds a row per triangle and per proxy triangle: 16,384 rows at most)
+MAX_EMISSIVE_TRIANGLES = 16384 - MAX_EMITTER_TRIANGLES - 1
 # Triangles with an emission texture are split into at most this many pieces in all (each
 # emitting the texture's mean over it), at most 4^MAX_SPLIT_LEVEL per triangle.
 TEXTURED_EMITTER_TRIANGLES = 512
@@ -205,7 +207,10 @@ def emitter_light(tris, emission) -> EmitterLight | None:
     corners, radiance, sides = corners[lit], radiance[lit], sides[lit]
     sums = None
     if len(corners) > MAX_EMITTER_TRIANGLES:
-        proxy = proxy_triangles(corners, radiance, sides, PROXY_TRIANGLES)
+        objects = np.asarray(tris.objects)[np.flatnonzero(keep)][index][lit]
+        budget = min(MAX_EMITTER_TRIANGLES,
+                     max(PROXY_TRIANGLES, PROXY_PER_OBJECT * len(np.unique(objects))))
+        proxy = proxy_triangles(corners, radiance, sides, budget, objects)
         if proxy is None:
             return None
         sums = _ordered(*proxy)
@@ -232,37 +237,61 @@ def _ordered(corners, radiance, sides, margin=None) -> EmitterLight:
                         cdf.astype(np.float32).astype(np.float64), sides, margin=margin)
 
 
-def proxy_triangles(corners, radiance, sides, budget: int):
-    """(corners, radiance, sides, margin) of at most ``budget`` triangles standing in for the
-    emissive triangles ``corners`` (E, 3, 3) with ``radiance`` (E, 3) and ``sides`` (E,), or
-    None where none fits. Vertex clustering: the corners snapped to a grid whose cell is grown
-    by half until the triangles left (those whose corners fall in three distinct cells, one
-    for each (cell triple, side), its winding the first source's) fit the budget; each cluster's
-    corners move to their cluster's mean. A proxy triangle emits the area-weighted mean of its
-    sources' radiance, and the radiance is scaled per side and channel so that the proxy sends
-    the sources' power. ``margin`` (P,): 1.5 × the farthest a source corner lies from its proxy
-    triangle's plane. Triangles flipped by the clustering, or of no area, are dropped."""
+def proxy_triangles(corners, radiance, sides, budget: int, objects=None):
+    """(corners, radiance, sides, margin) of about ``budget`` triangles standing in for the
+    emissive triangles ``corners`` (E, 3, 3) with ``radiance`` (E, 3), ``sides`` (E,) and
+    ``objects`` (E,) (None: one object), or None where none fits. Object by object, each
+    its share of the budget by its triangles (at least 4): an object within its share keeps its
+    triangles, a larger one is clustered (``_clustered``). ``margin`` (P,): 1.5 × the farthest
+    a source corner lies from its proxy triangle's plane (0 for a triangle kept)."""
     corners = np.asarray(corners, np.float64)
+    radiance = np.asarray(radiance, np.float64)
+    sides = np.asarray(sides, np.int8)
+    objects = np.zeros(len(corners), np.int64) if objects is None else np.asarray(objects)
+    names, objects = np.unique(objects, return_inverse=True)
+    objects = objects.ravel()
+    counts = np.bincount(objects, minlength=len(names))
+    parts = []
+    for index in range(len(names)):
+        mine = np.flatnonzero(objects == index)
+        share = max(4, int(budget * counts[index] / len(corners)))
+        if len(mine) <= share:
+            parts.append((corners[mine], radiance[mine], sides[mine], np.zeros(len(mine))))
+            continue
+        made = _clustered(corners[mine], radiance[mine], sides[mine], share)
+        if made is None:
+            return None
+        parts.append(made)
+    return tuple(np.concatenate(column) for column in zip(*parts))
+
+
+def _clustered(corners, radiance, sides, budget: int):
+    """``proxy_triangles`` of one object: vertex clustering, the corners snapped to a grid of
+    the object's extent × a factor grown by a fifth until the triangles left (those whose
+    corners fall in three distinct cells, one for each (cell triple, side), wound as its first
+    source) fit the budget; each cluster's corners move to their mean. A proxy triangle emits
+    the area-weighted mean of its sources' radiance, scaled per side and channel so that the
+    proxy sends the sources' power; a side the clustering leaves no triangle keeps its
+    largest. Triangles flipped by the clustering, or of no area, are dropped."""
     points = corners.reshape(-1, 3)
     low = points.min(axis=0)
-    extent = float((points.max(axis=0) - low).max())
-    if not extent > 0.0:
-        return None
+    extent = max(float((points.max(axis=0) - low).max()), 1e-12)
     area = 0.5 * norm3(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
     normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    cell = extent / math.sqrt(budget)
-    for _ in range(40):
+    group = np.asarray(sides, np.int64) + 1
+    cell = extent / 64.0
+    for _ in range(80):
         q = np.floor((points - low) / cell).astype(np.int64)
         cells, vertex = np.unique(q, axis=0, return_inverse=True)
         vertex = vertex.reshape(-1, 3)
         keep = (vertex[:, 0] != vertex[:, 1]) & (vertex[:, 1] != vertex[:, 2]) & \
             (vertex[:, 0] != vertex[:, 2])
-        key = np.concatenate([np.sort(vertex, axis=1), sides[:, None].astype(np.int64)], axis=1)
+        key = np.concatenate([np.sort(vertex, axis=1), group[:, None]], axis=1)
         unique, first, owner = np.unique(key[keep], axis=0, return_index=True,
                                          return_inverse=True)
-        if len(unique) <= budget:
+        if len(unique) + len(np.setdiff1d(group, group[keep])) <= budget:
             break
-        cell *= 1.5
+        cell *= 1.2
     else:
         return None
     owner = owner.ravel()
@@ -281,21 +310,28 @@ def proxy_triangles(corners, radiance, sides, budget: int):
     made = np.cross(proxy[:, 1] - proxy[:, 0], proxy[:, 2] - proxy[:, 0])
     proxy_area = 0.5 * norm3(made)
     good = (proxy_area > 0.0) & (np.einsum("pc,pc->p", made, facing) > 0.0)
-    if not good.any():
-        return None
     unit = made / np.maximum(2.0 * proxy_area, 1e-300)[:, None]
     apart = np.abs(np.einsum("sic,sc->si", corners[source] - proxy[owner, 0][:, None],
                              unit[owner])).max(axis=1)
     margin = np.zeros(len(unique))
     np.maximum.at(margin, owner, apart)
-    proxy, glow, proxy_area, margin = proxy[good], glow[good], proxy_area[good], margin[good]
-    proxy_sides = unique[good, 3].astype(np.int8)
-    for side in np.unique(proxy_sides):  # the sources' power, per side and channel
-        mine = proxy_sides == side
-        sent = (area[sides == side, None] * radiance[sides == side]).sum(axis=0)
-        made_power = (proxy_area[mine, None] * glow[mine]).sum(axis=0)
-        glow[mine] *= np.where(made_power > 0.0, sent / np.maximum(made_power, 1e-300), 0.0)
-    return proxy, glow, proxy_sides, 1.5 * margin
+    proxy, glow, proxy_area, margin = proxy[good], glow[good], proxy_area[good], 1.5 * margin[good]
+    proxy_group = unique[good, 3]
+    lost = np.setdiff1d(group, proxy_group)  # a side left without a triangle keeps its largest
+    if len(lost):
+        order = np.lexsort((-area, group))
+        largest = order[np.searchsorted(group[order], lost)]
+        proxy = np.concatenate([proxy, corners[largest]])
+        glow = np.concatenate([glow, radiance[largest]])
+        proxy_area = np.concatenate([proxy_area, area[largest]])
+        margin = np.concatenate([margin, np.zeros(len(lost))])
+        proxy_group = np.concatenate([proxy_group, lost])
+    sent = np.zeros((3, 3))  # the sources' power, per side and channel
+    np.add.at(sent, group, area[:, None] * radiance)
+    made_power = np.zeros((3, 3))
+    np.add.at(made_power, proxy_group, proxy_area[:, None] * glow)
+    scale = np.where(made_power > 0.0, sent / np.maximum(made_power, 1e-300), 0.0)
+    return proxy, glow * scale[proxy_group], (proxy_group - 1).astype(np.int8), margin
 
 
 # The emitters' light as a field (``preview.upsample.EmitterField``; docs/gi_pipeline.md
