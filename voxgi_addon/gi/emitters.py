@@ -45,9 +45,10 @@ __all__ = ["EmitterLight", "emitter_light", "emitters_direct", "unshadowed_sum",
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 EMITTER_TEXELS = 4
 # Beyond this many emissive triangles the exact per-point sum costs too much (and a GPU
-# invocation's loops would pass llvmpipe's limit, docs/blender_facts.md): more are lit through
-# a proxy of at most PROXY_TRIANGLES (``proxy_triangles``: the emissive surface with its
-# vertices clustered, its power kept), and scenes of more than MAX_EMISSIVE_TRIANGLES keep the
+# invocation's loops would pass llvmpipe's limit, docs/blender_facts.md): more are summed over
+# a proxy (``proxy_triangles``: each emissive object its share of PROXY_PER_OBJECT triangles an
+# object, at least PROXY_TRIANGLES and at most MAX_EMITTER_TRIANGLES in all, its vertices
+# clustered, its power kept), and scenes of more than MAX_EMISSIVE_TRIANGLES keep the
 # emission seen by the gathers' rays instead (emitter_light returns None).
 MAX_EMITTER_TRIANGLES = 1024
 PROXY_TRIANGLES = 256
