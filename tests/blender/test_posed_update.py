@@ -115,6 +115,41 @@ def test_a_pose_reads_no_mesh_material_or_world_and_gives_the_voxels_of_a_full_s
     assert read_since(before)["meshes"] > 0
 
 
+def test_a_pose_beside_an_emissive_panel_relights_only_what_the_character_shades(
+        rig_room, session):
+    """An emissive surface in the room (a glowing panel on the back wall) is a light like the
+    lamps: a pose relights only the voxels whose shadow rays meet the character's cells, to
+    the light a full update gives; moving the panel relights every voxel."""
+    from voxgi.blender.settings import gi_settings
+    from voxgi.voxgi_addon.gi.update import update_gi
+
+    scene, built = rig_room
+    panel = scenes.quad_object("Glowing Panel", size=0.6)
+    panel.data.materials.append(scenes.principled("Glow", (0.0, 0.0, 0.0),
+                                                  emission=(1.0, 0.9, 0.7),
+                                                  emission_strength=8.0))
+    panel.rotation_euler = (1.5708, 0.0, 0.0)
+    panel.location = (-0.5, 2.45, 1.8)
+    results = session.scene_session(scene.name_full)
+    assert bpy.ops.voxgi.voxelize() == {"FINISHED"}
+    assert bpy.ops.voxgi.update() == {"FINISHED"}
+    assert results.gi_state.radiance.emission is not None  # the panel glows in the voxels
+    bone = built["rig"].pose.bones["Forearm.L"]
+    bone.rotation_mode = "XYZ"
+    for turn in (0.3, -0.5):
+        bone.rotation_euler.x += turn
+        assert bpy.ops.voxgi.update() == {"FINISHED"}
+        state = results.gi_state
+        assert 0 < state.radiance.relit < sum(state.voxel_counts) / 2
+        fresh = update_gi(fresh_snapshot(scene), results.caches, gi_settings(scene.voxgi))
+        same_state(state, fresh)
+    panel.location.x += 0.4
+    assert bpy.ops.voxgi.update() == {"FINISHED"}
+    state = results.gi_state
+    assert state.radiance.relit == sum(state.voxel_counts)
+    same_state(state, update_gi(fresh_snapshot(scene), results.caches, gi_settings(scene.voxgi)))
+
+
 def _edits(built):
     """(what, edit, does it need the meshes read again) in the order they are made."""
     body, rig, lamp = built["body"], built["rig"], built["lamp"]

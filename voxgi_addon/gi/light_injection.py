@@ -85,6 +85,23 @@ def emissive_triangles(tris, emission) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(tris.positions, np.float64)[keep], radiance[keep]
 
 
+def emissive_objects(snapshot, emission):
+    """``snapshot`` with only its objects that have an emissive triangle (``emission`` per
+    material as ``material_emission``): the emitters' triangles without placing every other
+    mesh of the scene (a posed character's skinning, at each pose)."""
+    last = len(emission) - 1
+    glowing = emission.max(axis=1) > 0
+
+    def emits(obj):
+        mesh = snapshot.meshes.get(obj.mesh)
+        if mesh is None or len(mesh.triangles) == 0:
+            return False
+        materials = np.unique(np.asarray(mesh.triangle_materials, np.int64))
+        return bool(glowing[np.where((materials >= 0) & (materials < last), materials, last)].any())
+
+    return dataclasses.replace(snapshot, objects=[obj for obj in snapshot.objects if emits(obj)])
+
+
 def voxel_emission(cascades, corners, radiance) -> list[np.ndarray]:
     """Per cascade, the (N_i, 3) float32 emission of its voxels: Σ over the emissive triangles
     (``corners`` (E, 3, 3) world, ``radiance`` (E, 3)) that cross the voxel of radiance × the
@@ -143,17 +160,22 @@ class _StopShort:
         return self.occupancy.occluded(origins, dirs, short)
 
 
-def lights_key(snapshot, samples: int) -> tuple:
+def lights_key(snapshot, samples: int, emitters=None) -> tuple:
     """What the voxels' direct light depends on besides the voxels and their shadow rays: the
-    lamps, the world and the samples (plain values and array bytes, comparable with ``==``)."""
+    lamps, the world, the emissive triangles (``emitters``, an ``EmitterLight`` or None: their
+    corners, radiance and sides, so an emitter that moves or changes relights every voxel) and
+    the samples (plain values and array bytes, comparable with ``==``)."""
     def value(v):
         return (v.dtype.str, v.shape, v.tobytes()) if isinstance(v, np.ndarray) else v
+
+    glow = None if emitters is None else tuple(
+        value(np.asarray(getattr(emitters, name))) for name in ("corners", "radiance", "sides"))
 
     world = snapshot.world
     world_key = (world.key, value(np.asarray(world.color)), world.strength) if world.key else \
         tuple(value(getattr(world, f.name)) for f in dataclasses.fields(world))
     return (tuple(tuple(value(getattr(light, f.name)) for f in dataclasses.fields(light))
-                  for light in snapshot.lights), world_key, int(samples))
+                  for light in snapshot.lights), world_key, glow, int(samples))
 
 
 def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None = None,
@@ -181,7 +203,7 @@ def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None =
     corners = glow = np.zeros((0, 3, 3))
     emitters = None
     if emission.max() > 0:
-        tris = world_triangles(snapshot)
+        tris = world_triangles(emissive_objects(snapshot, emission))
         corners, glow = emissive_triangles(tris, emission)
         emitters = emitter_light(tris, emission)
         if emitters is not None and getattr(getattr(tris, "textures", None), "emission_slots",
@@ -192,10 +214,19 @@ def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None =
             emitters = dataclasses.replace(emitters, exact=False)
     emitted = voxel_emission(cascades, corners, glow) if len(corners) else None
     kept = None
-    if rays is not None or keep_rays:  # emitters move with their objects: lit every time
-        kept = KeptRays(occupancy, rays, None if emitters is not None else
-                        lights_key(snapshot, samples))
+    if rays is not None or keep_rays:
+        kept = KeptRays(occupancy, rays, lights_key(snapshot, samples, emitters))
     occluder = occupancy if kept is None else kept
+
+    def light(start, normals, ids):
+        """The Diffuse Direct of surface points from every lamp, the world and the emitters."""
+        direct = diffuse_direct(start, normals, lights, occluder, samples=samples,
+                                sample_ids=ids)
+        if emitters is not None:
+            direct = direct + diffuse_direct(start, normals, [emitters], _StopShort(occluder),
+                                             samples=samples, seed=1, sample_ids=ids)
+        return direct
+
     out, carried, relit = InjectedRadiance(), [], 0
     for index, cv in enumerate(cascades):
         if cv.voxel_count == 0:
@@ -206,21 +237,16 @@ def inject_direct_light(cascades, snapshot, occupancy: CascadeOccupancy | None =
         start = voxel_centres(cv) + normals * (SHADOW_START_VOXELS * cv.grid.span)
         ids = voxel_ids(cv)
         if kept is None:
-            direct = diffuse_direct(start, normals, lights, occupancy, samples=samples,
-                                    sample_ids=ids)
+            direct = light(start, normals, ids)
         else:
             origins = ray_origins(start, normals)
             same, direct = kept.light_of(ids, normals, origins)
             lit = ~same
             relit += int(lit.sum())
             if lit.any():
-                direct[lit] = diffuse_direct(start[lit], normals[lit], lights, kept,
-                                             samples=samples, sample_ids=ids[lit])
+                direct[lit] = light(start[lit], normals[lit], ids[lit])
             kept.keep_light(ids, normals, direct)
             carried.append(origins[same])
-        if emitters is not None:
-            direct = direct + diffuse_direct(start, normals, [emitters], _StopShort(occluder),
-                                             samples=samples, seed=1, sample_ids=ids)
         value = np.asarray(cv.albedo, np.float64) * (direct + ambient)
         if emitted is not None:
             value = value + emitted[index]
