@@ -169,16 +169,19 @@ def world_objects(world) -> frozenset[str]:
     """Names of the objects whose matrices a world's nodes read (Texture Coordinate's Object,
     in its node groups too): moving one changes the world (``world_key``)."""
     names: set[str] = set()
-
-    def walk(tree, depth):
-        for node in tree.nodes if tree is not None and depth < 8 else ():
-            if node.type == "TEX_COORD" and node.object is not None:
-                names.add(node.object.name_full)
-            elif node.type == "GROUP":
-                walk(node.node_tree, depth + 1)
-
-    walk(None if world is None else world.node_tree, 0)
+    _tree_objects(None if world is None else world.node_tree, 0, names)
     return frozenset(names)
+
+
+def _tree_objects(tree, depth: int, names: set[str]) -> None:
+    """Add to ``names`` the objects a node tree's Texture Coordinate nodes read, groups
+    followed 8 deep. (A module function: a nested one that calls itself is a reference
+    cycle, garbage only the cyclic collector frees, each snapshot.)"""
+    for node in tree.nodes if tree is not None and depth < 8 else ():
+        if node.type == "TEX_COORD" and node.object is not None:
+            names.add(node.object.name_full)
+        elif node.type == "GROUP":
+            _tree_objects(node.node_tree, depth + 1, names)
 
 
 def world_key(world) -> str:

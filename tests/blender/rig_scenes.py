@@ -93,6 +93,28 @@ def build_gltf_rig_room(scene, detail: float = DETAIL) -> dict:
             "camera": objects["Camera"]}
 
 
+def add_glowing_panel(scene, location=(-0.5, 2.45, 1.8), size=0.6, strength=8.0):
+    """A square emissive panel (a Principled BSDF's Emission, warm white × ``strength``) of edge
+    ``size`` standing against the room's back wall, facing into the room. Returns the object."""
+    half = size / 2
+    mesh = bpy.data.meshes.new("Glowing Panel")
+    mesh.from_pydata([(-half, 0, -half), (half, 0, -half), (half, 0, half), (-half, 0, half)],
+                     [], [(0, 3, 2, 1)])
+    material = bpy.data.materials.new("Glow")
+    if material.node_tree is None:  # Blender < 5.0 creates materials without nodes
+        material.use_nodes = True
+    bsdf = next(n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    bsdf.inputs["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    bsdf.inputs["Emission Color"].default_value = (1.0, 0.9, 0.7, 1.0)
+    bsdf.inputs["Emission Strength"].default_value = strength
+    mesh.materials.append(material)
+    panel = bpy.data.objects.new("Glowing Panel", mesh)
+    panel.location = location
+    scene.collection.objects.link(panel)
+    bpy.context.view_layer.update()
+    return panel
+
+
 def keyframe_walk(rig, frames: int = 10, start: int = 1) -> None:
     """Keyframes on a few of the rig's bones (arms and legs swinging) from ``start`` over
     ``frames`` frames: every frame poses the character anew."""

@@ -124,12 +124,7 @@ def test_a_pose_beside_an_emissive_panel_relights_only_what_the_character_shades
     from voxgi.voxgi_addon.gi.update import update_gi
 
     scene, built = rig_room
-    panel = scenes.quad_object("Glowing Panel", size=0.6)
-    panel.data.materials.append(scenes.principled("Glow", (0.0, 0.0, 0.0),
-                                                  emission=(1.0, 0.9, 0.7),
-                                                  emission_strength=8.0))
-    panel.rotation_euler = (1.5708, 0.0, 0.0)
-    panel.location = (-0.5, 2.45, 1.8)
+    panel = rig_scenes.add_glowing_panel(scene)
     results = session.scene_session(scene.name_full)
     assert bpy.ops.voxgi.voxelize() == {"FINISHED"}
     assert bpy.ops.voxgi.update() == {"FINISHED"}

@@ -17,7 +17,8 @@ stored for this scene, so it has no error.
 ``--quick`` checks the tooling: 80 × 60, one timed run each, errors against the stored reference
 averaged over 2 × 2 pixels (Cycles at 80 × 60 compared the same way).
 
-Then the posed update of an imported rig (``posed_rows``; ``--rig`` runs only that table): the
+Then the posed update of an imported rig (``posed_rows``, alone and beside an emissive panel;
+``--rig`` runs only those tables and the playbacks): the
 character of ``tests/blender/rig_scenes.py`` through Blender's glTF exporter and importer
 (armature at 0.01, a textured skin) in its room, ``voxgi.update`` after each rotation of a bone
 (the median of ``RIG_REPEATS``), split into its main-thread share — the operator until it
@@ -57,9 +58,10 @@ def _median(values):
     return sorted(values)[len(values) // 2]
 
 
-def posed_rows(repeats: int = RIG_REPEATS):
+def posed_rows(repeats: int = RIG_REPEATS, glow: bool = False):
     """The imported rig's posed update (module doc): prints its table, returns the medians
-    {part: seconds}."""
+    {part: seconds}. glow : with an emissive panel on the room's back wall
+    (``rig_scenes.add_glowing_panel``), a light the injection keeps as it keeps the lamps'."""
     import bpy
     import rig_scenes
 
@@ -73,6 +75,8 @@ def posed_rows(repeats: int = RIG_REPEATS):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     built = rig_scenes.build_gltf_rig_room(scene)
+    if glow:
+        rig_scenes.add_glowing_panel(scene)
     session = scene_session(scene.name_full)
     assert bpy.ops.voxgi.voxelize() == {"FINISHED"}
     assert bpy.ops.voxgi.update() == {"FINISHED"}
@@ -122,7 +126,8 @@ def posed_rows(repeats: int = RIG_REPEATS):
         f"rays marched {radiance.marched:,}, kept {radiance.reused:,}")
     print(f"### Posed update of an imported rig: the ~{len(built['body'].data.polygons):,}-face "
           f"character of tests/blender/rig_scenes.py through Blender's glTF exporter and "
-          f"importer (armature at {rig.scale[0]:.2f}), voxgi.update after a bone rotation, "
+          f"importer (armature at {rig.scale[0]:.2f})"
+          f"{', beside an emissive panel' if glow else ''}, voxgi.update after a bone rotation, "
           f"medians of {repeats}; cascade voxels {counts}{rays}\n")
     print("| part | median | floor | notes |\n|---|---:|---:|---|")
 
@@ -337,6 +342,7 @@ def main(argv=None) -> int:
     load_addon()
     if args.rig:
         posed_rows(3 if args.quick else RIG_REPEATS)
+        posed_rows(3 if args.quick else RIG_REPEATS, glow=True)
         playback_rows(12 if args.quick else PLAYBACK_FRAMES)
         view_playback_rows(12 if args.quick else PLAYBACK_FRAMES)
         return 0
@@ -422,6 +428,7 @@ def main(argv=None) -> int:
         print(f"| {what} | {seconds * 1000:.0f} ms | {err} | {note} |", flush=True)
     print()
     posed_rows(3 if args.quick else RIG_REPEATS)
+    posed_rows(3 if args.quick else RIG_REPEATS, glow=True)
     playback_rows(12 if args.quick else PLAYBACK_FRAMES)
     view_playback_rows(12 if args.quick else PLAYBACK_FRAMES)
     return 0
