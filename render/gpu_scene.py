@@ -252,6 +252,7 @@ class GPUScene:
         objects = tuple(
             (o.name, o.mesh, o.kind, o.armature, np.asarray(o.world_matrix, np.float64),
              getattr(o, "visibility", None), getattr(o, "holdout", None),
+             tuple(getattr(o, "materials", ())),
              meshes[id(snapshot.meshes[o.mesh])][1] if o.mesh in snapshot.meshes else None)
             for o in snapshot.objects)
         armatures = tuple(

@@ -37,6 +37,11 @@ Texture's Color per texel (``emission_texture``, times ``emission_strength``), a
 baked by Cycles as the Base Color is (Principled BSDF only); ``emission`` is the mean × the
 strength.
 
+A Base Color that varies per object through Object Info › Random (a Color Ramp, Mix or
+Hue/Saturation of it: ``object_random``) is not baked: its entry holds the colour's mean over
+Random, and ``object_material`` gives each object a variant of it at the object's own Random
+(``ObjectData.materials``), as Cycles colours each copy of a scattered mesh.
+
 Normal: a tangent-space Normal Map node fed by an Image Texture's Color (as the glTF importer
 builds normal maps) gives ``normal_texture`` and ``normal_strength``; other normal inputs
 (Bump, object- or world-space maps) are left out with a note.
@@ -53,10 +58,14 @@ import numpy as np
 from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
 from ...voxgi_addon.scene.textures import PARAM_VARIANTS, srgb_to_linear, variant_values, within_max_size
 from .left_out import material_notes
+from .object_random import random_base_color
 from .reads import count
 from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _NeedsBake, _tree_key
 
 MAX_VARIANT_MATERIALS = 96  # materials with Roughness / Metallic per texel (each adds 64 rows)
+# An object's Random is taken to 1/RANDOM_STEPS (a Base Color by Random then has at most
+# RANDOM_STEPS + 1 variants, whatever the number of objects)
+RANDOM_STEPS = 1024
 BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
 BAKE_SAMPLES = 8      # Cycles samples per texel (the texel's mean over its area)
 BAKE_MARGIN = 4       # texels the bake extends each UV island by (no dark seams when filtered)
@@ -271,6 +280,8 @@ class MaterialTable:
         self._warned: set[str] = set()
         self._variant_materials = 0
         self.notes: dict[str, list[str]] = {}  # material name → what the preview leaves out
+        self._by_random: dict[str, object] = {}  # material name → its Base Color by Random
+        self._random_variants: dict[tuple, int] = {}  # (index, colour) → variant's index
 
     def _warn(self, text: str) -> None:
         if text not in self._warned:
@@ -310,6 +321,30 @@ class MaterialTable:
                         roughness=float(rough), metallic=float(metal), param_texture=-1,
                         param_variants=-1))
         return index
+
+    @property
+    def varies_by_object(self) -> bool:
+        """Does any material read so far take its Base Color from Object Info › Random?"""
+        return bool(self._by_random)
+
+    def object_material(self, index: int, random: float) -> int:
+        """The material an object whose Object Info › Random is ``random`` shades with where
+        its mesh uses material ``index``: a variant with the Base Color at its Random (one per
+        colour) where the material's Base Color follows Random, else ``index``."""
+        data = self.materials[index] if 0 <= index < len(self.materials) else None
+        colour_of = None if data is None else self._by_random.get(data.name)
+        if colour_of is None or data.param_texture >= 0:
+            return index
+        colour = colour_of(round(float(random) * RANDOM_STEPS) / RANDOM_STEPS)
+        key = (index, tuple(np.round(colour * 4096).astype(np.int64)))
+        variant = self._random_variants.get(key)
+        if variant is None:
+            variant = self._random_variants[key] = len(self.materials)
+            self.materials.append(dataclasses.replace(
+                data, name=f"{data.name} [Random: {', '.join(f'{c:.3f}' for c in colour)}]",
+                base_color=colour.astype(np.float32)))
+            self._uv_maps[variant] = self._uv_maps.get(index, "")
+        return variant
 
     def _add_texture(self, texture: TextureData) -> int:
         key = _digest(texture.key, texture.interpolation, texture.extension,
@@ -369,7 +404,14 @@ class MaterialTable:
                        "the preview does not evaluate yet; using its value")
         glow, glow_texture, glow_bake, glow_uv = self._emission(material, inputs["Emission Color"])
         emission = glow * glow_strength
-        base, texture, bake, uv_map = self._base_color(material, inputs["Base Color"])
+        by_random = random_base_color(material)
+        if by_random is not None:  # per object (``object_material``); here its mean colour
+            self._by_random[material.name_full] = by_random
+            base = np.mean([by_random(r) for r in np.linspace(0.0, 1.0, 33)],
+                           axis=0).astype(np.float32)
+            texture, bake, uv_map = None, None, ""
+        else:
+            base, texture, bake, uv_map = self._base_color(material, inputs["Base Color"])
         params, params_uv = self._params(material, inputs)
         if params is not None:
             roughness, metallic = (float(params.pixels[..., c].mean()) for c in (0, 1))

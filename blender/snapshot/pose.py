@@ -58,6 +58,10 @@ def posed_snapshot(previous, scene, depsgraph, materials: dict | None = None,
     if materials is not None and any(slot_materials(e.obj) != materials.get(e.obj.name_full)
                                      for e in entries):
         return None
+    # each object's materials by its Random (``scene.with_object_materials``): its name and
+    # instance are the previous ones, so its Random is too
+    objects = [dataclasses.replace(o, materials=p.materials) if p.materials else o
+               for o, p in zip(objects, previous.objects)]
     notes: list[str] = []
     world_data = read_world(scene, notes) if world else previous.world
     return dataclasses.replace(

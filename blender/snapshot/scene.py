@@ -12,6 +12,7 @@ share one ``MeshData`` and one cache; any other object gets its own key
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -41,6 +42,7 @@ from .mesh import (
     triangle_materials,
 )
 from .mesh_cache import MeshArrays, MeshReads, change_key
+from .object_random import object_random
 from .reads import count
 from .skin import (
     armature_modifiers,
@@ -398,7 +400,8 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
 
     if reads is not None:
         reads.begin()
-    instances = instance_objects(depsgraph, read_instanced)
+    instance_randoms: list[float] = []
+    instances = instance_objects(depsgraph, read_instanced, instance_randoms)
     with temporary_weight_attributes(skinned, depsgraph):
         for entry in entries:
             if entry.key not in read_keys:  # linked duplicates are read once
@@ -413,6 +416,10 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
     # Matrices are read after the temporary modifiers are gone.
     objects = mesh_objects([e for e in entries if e.key in meshes], depsgraph) + \
         [o for o in instances if o.mesh in meshes]
+    if table.varies_by_object:  # Base Colors by Object Info › Random: each object's own
+        randoms = [object_random(e.obj.name) for e in entries if e.key in meshes] + \
+            [r for o, r in zip(instances, instance_randoms) if o.mesh in meshes]
+        objects = with_object_materials(objects, randoms, table, used)
     # what of each object (each instanced object once) the preview leaves out, once per object
     named = [(e.obj.name, e.obj, e.key) for e in entries if e.key in meshes] + \
         [(f"{origin.name} (instanced)", origin, key) for key, origin in origins.items()
@@ -492,14 +499,15 @@ def scene_flags(scene) -> dict:
                                                 "caustics_refractive", True))}
 
 
-def instance_objects(depsgraph, read=None) -> list[ObjectData]:
+def instance_objects(depsgraph, read=None, randoms: list | None = None) -> list[ObjectData]:
     """The depsgraph's instances (collection instances, geometry-nodes and particle instances)
     of renderable objects: one ObjectData per instance with its own world matrix. An instance
     of a plain mesh shares the mesh datablock's key with its other users. Ray visibility is the
     instanced object's and its instancer's together, holdout the instancer's (or the object's),
     as Cycles syncs instances. ``read(key, original object, evaluated object)`` is called for
     each instance (the evaluated object only exists while the instances are iterated): the
-    full snapshot reads each key's mesh there, a posed one nothing (None)."""
+    full snapshot reads each key's mesh there, a posed one nothing (None). ``randoms``, when
+    given, gets each instance's Object Info › Random (``object_random``), in order."""
     out, used = [], {}
     for inst in depsgraph.object_instances:
         if not inst.is_instance:
@@ -528,6 +536,21 @@ def instance_objects(depsgraph, read=None) -> list[ObjectData]:
         out.append(ObjectData(name=name, mesh=key, kind="static",
                               world_matrix=np.array(inst.matrix_world, dtype=np.float64),
                               visibility=visibility, holdout=bool(holdout)))
+        if randoms is not None:
+            randoms.append(object_random(original.name, inst.random_id))
+    return out
+
+
+def with_object_materials(objects, randoms, table: MaterialTable, used: dict) -> list:
+    """``objects`` with ``ObjectData.materials`` where a material of theirs takes its Base
+    Color from Object Info › Random: each object's variant at its own Random (``randoms``,
+    aligned with ``objects``; ``MaterialTable.object_material``)."""
+    out = []
+    for obj, random in zip(objects, randoms, strict=True):
+        pairs = tuple((int(i), table.object_material(int(i), random))
+                      for i in used.get(obj.mesh, ()))
+        pairs = tuple((i, j) for i, j in pairs if i != j)
+        out.append(dataclasses.replace(obj, materials=pairs) if pairs else obj)
     return out
 
 

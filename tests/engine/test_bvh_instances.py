@@ -137,3 +137,28 @@ def test_leaf_codes_past_a_million_triangles_survive_packing():
     np.testing.assert_array_equal(codes, [-1, 8, ((1 << 20) + 1) * 16 + 3, ((1 << 23) - 5) * 16 + 5])
     values = packed.nodes.reshape(-1, 4)[3:8:2, 3]
     assert np.isfinite(values).all() and (values > 0).all() and (values >= np.finfo(np.float32).tiny).all()
+
+
+def test_objects_that_share_a_mesh_keep_their_own_materials():
+    """``ObjectData.materials`` (a Base Color by Object Info › Random, one variant per object):
+    each placement's triangles carry its own material, the others their mesh's, and a ray that
+    meets a placement in the instanced BVH reads that placement's."""
+    from dataclasses import replace
+
+    scene = placed_scene(count=8)
+    scene = replace(scene, materials=[*scene.materials, *(MaterialData(f"variant {k}", np.full(
+        3, 0.1 * k, np.float32)) for k in range(1, 4))])
+    objects = [replace(o, materials=((0, 1 + k % 3),)) if o.mesh == "sphere" else o
+               for k, o in enumerate(scene.objects)]
+    tris = world_triangles(replace(scene, objects=objects))
+    for index, obj in enumerate(objects):
+        own = np.asarray(tris.materials)[np.asarray(tris.objects) == index]
+        assert len(own) and (own == (obj.materials[0][1] if obj.materials else 0)).all()
+    bvh = bvh_module.build_scene_bvh(tris)
+    origins, directions = rays()
+    _, triangle, _, _ = bvh_module.traverse(bvh, tris, origins, directions)
+    met = triangle[triangle >= 0]
+    assert len(met) > 100
+    expected = [objects[i].materials[0][1] if objects[i].materials else 0
+                for i in np.asarray(tris.objects)[met]]
+    np.testing.assert_array_equal(np.asarray(tris.materials)[met], expected)

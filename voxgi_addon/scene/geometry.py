@@ -223,6 +223,19 @@ def _place_rigid(matrices: np.ndarray, mesh: MeshData, shading: bool = True):
     return world, np.divide(normals, length, out=np.zeros_like(normals), where=length > 1e-12)
 
 
+def object_materials(obj, mesh: MeshData) -> np.ndarray:
+    """(T,) int32 the materials of an object's triangles: its mesh's, with each index of
+    ``obj.materials``' pairs replaced by the object's own."""
+    own = np.asarray(mesh.triangle_materials, dtype=np.int32)
+    pairs = getattr(obj, "materials", ())
+    if not pairs:
+        return own
+    out = own.copy()
+    for mesh_index, object_index in pairs:
+        out[own == mesh_index] = object_index
+    return out
+
+
 def world_triangles(snapshot: SceneSnapshot, shading: bool = True) -> SceneTriangles:
     """Every triangle of every object in ``snapshot`` in world space (see ``SceneTriangles``).
 
@@ -284,7 +297,7 @@ def world_triangles(snapshot: SceneSnapshot, shading: bool = True) -> SceneTrian
     normal = np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
     if smooth and flat.any():  # meshes without corner normals shade flat
         normals[flat] = normal[flat][:, None]
-    materials = [np.asarray(mesh.triangle_materials, dtype=np.int32) for _, _, mesh in placed]
+    materials = [object_materials(obj, mesh) for _, obj, mesh in placed]
     objects = [np.full(count, index, np.int32) for (index, _, _), count in zip(placed, counts)]
     uvs = [np.zeros((len(mesh.triangles), 3, 2), np.float32) if mesh.uvs is None else
            np.asarray(mesh.uvs, np.float32).reshape(len(mesh.triangles), 3, 2)

@@ -171,6 +171,9 @@ class ObjectData:
     visibility : the ``RAY_*`` bits of the rays that see it (Cycles' ray visibility).
     holdout : a holdout (``Object.holdout_get``): camera rays that meet it see nothing
         (every pass 0, as Cycles' transparent hole); other rays see its material.
+    materials : (mesh's material index, this object's) pairs: where its mesh's triangles use
+        the first, this object's use the second (a Base Color that varies per object, by
+        Object Info › Random); empty: the mesh's own (``geometry.object_materials``).
     """
 
     name: str
@@ -180,6 +183,7 @@ class ObjectData:
     armature: str | None = None
     visibility: int = RAY_ALL
     holdout: bool = False
+    materials: tuple[tuple[int, int], ...] = ()
 
 
 @dataclass(frozen=True)

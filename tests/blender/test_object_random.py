@@ -1,0 +1,188 @@
+"""Base Colors by Object Info › Random (blender/snapshot/object_random.py): each copy of a
+scattered mesh, linked duplicate or collection instance, gets the colour Cycles gives it, where a
+bake over the mesh gave them all one."""
+from __future__ import annotations
+
+import bpy
+import gi_scenes
+import numpy as np
+from cycles_reference import render_cycles_passes
+
+WIDTH, HEIGHT = 96, 72
+
+
+def _random_material(name, chain):
+    """A Principled BSDF whose Base Color is ``chain`` of Object Info › Random: "ramp" (a
+    Color Ramp, constant steps), "mix" (two colours mixed by it), "hue" (Hue/Saturation of a
+    red by it) or "math" (Random × 3 fractioned, mapped, through a linear Color Ramp)."""
+    material = gi_scenes._material(name, (0.5, 0.5, 0.5))
+    tree = material.node_tree
+    bsdf = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
+    random = tree.nodes.new("ShaderNodeObjectInfo").outputs["Random"]
+    if chain in ("ramp", "math"):
+        ramp = tree.nodes.new("ShaderNodeValToRGB")
+        elements = ramp.color_ramp.elements
+        elements[0].color, elements[1].color = (0.8, 0.1, 0.05, 1), (0.05, 0.2, 0.8, 1)
+        if chain == "ramp":
+            ramp.color_ramp.interpolation = "CONSTANT"
+            elements.new(0.5).color = (0.1, 0.7, 0.1, 1)
+            tree.links.new(random, ramp.inputs["Fac"])
+        else:
+            math = tree.nodes.new("ShaderNodeMath")
+            math.operation, math.inputs[1].default_value = "MULTIPLY", 3.0
+            fract = tree.nodes.new("ShaderNodeMath")
+            fract.operation = "FRACT"
+            remap = tree.nodes.new("ShaderNodeMapRange")
+            remap.inputs["To Min"].default_value, remap.inputs["To Max"].default_value = 0.2, 0.9
+            tree.links.new(random, math.inputs[0])
+            tree.links.new(math.outputs[0], fract.inputs[0])
+            tree.links.new(fract.outputs[0], remap.inputs["Value"])
+            tree.links.new(remap.outputs["Result"], ramp.inputs["Fac"])
+        tree.links.new(ramp.outputs["Color"], bsdf.inputs["Base Color"])
+    elif chain == "mix":
+        mix = tree.nodes.new("ShaderNodeMix")
+        mix.data_type = "RGBA"
+        socket = {s.identifier: s for s in [*mix.inputs, *mix.outputs]}
+        socket["A_Color"].default_value = (0.9, 0.8, 0.1, 1)
+        socket["B_Color"].default_value = (0.1, 0.3, 0.6, 1)
+        tree.links.new(random, socket["Factor_Float"])
+        tree.links.new(socket["Result_Color"], bsdf.inputs["Base Color"])
+    else:
+        hue = tree.nodes.new("ShaderNodeHueSaturation")
+        hue.inputs["Color"].default_value = (0.8, 0.15, 0.1, 1)
+        tree.links.new(random, hue.inputs["Hue"])
+        tree.links.new(hue.outputs["Color"], bsdf.inputs["Base Color"])
+    return material
+
+
+def build_scattered_blocks(scene):
+    """Four rows of blocks on a floor under a sun, seen from above: each row one mesh whose
+    Base Color is one ``_random_material`` chain, placed as linked duplicates (rows 0–1) or as
+    collection instances (rows 2–3). Returns the camera."""
+    grey = gi_scenes._material("Floor", (0.5, 0.5, 0.5))
+    gi_scenes._mesh(scene, "Floor", [(-5, -5, 0), (5, -5, 0), (5, 5, 0), (-5, 5, 0)],
+                    [(0, 1, 2, 3)], (grey,))
+    vertices, faces = gi_scenes._box((-0.35, -0.35, 0), (0.35, 0.35, 0.5))
+    for row, chain in enumerate(("ramp", "mix", "hue", "math")):
+        mesh = bpy.data.meshes.new(f"Block {chain}")
+        mesh.from_pydata(vertices, [], faces)
+        mesh.materials.append(_random_material(f"By Random ({chain})", chain))
+        if row < 2:
+            for k in range(6):
+                block = bpy.data.objects.new(f"Block {chain} {k}", mesh)
+                block.location = (1.2 * k - 3.0, 1.8 - 1.2 * row, 0.0)
+                scene.collection.objects.link(block)
+            continue
+        group = bpy.data.collections.new(f"Blocks {chain}")
+        group.objects.link(bpy.data.objects.new(f"Block {chain}", mesh))
+        for k in range(6):
+            instancer = bpy.data.objects.new(f"Blocks {chain} {k}", None)
+            instancer.instance_type, instancer.instance_collection = "COLLECTION", group
+            instancer.location = (1.2 * k - 3.0, 1.8 - 1.2 * row, 0.0)
+            scene.collection.objects.link(instancer)
+    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+    sun.data.energy = 3.0
+    sun.rotation_euler = (0.4, 0.2, 0.0)
+    scene.collection.objects.link(sun)
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    camera.location, camera.rotation_euler = (0.0, 0.0, 9.0), (0.0, 0.0, 0.0)
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    world = bpy.data.worlds.new("Sky")
+    world.color = (0.2, 0.22, 0.25)
+    scene.world = world
+    bpy.context.view_layer.update()
+    return camera
+
+
+def test_object_random_is_the_value_cycles_renders(voxgi):
+    """Object Info › Random of plain objects (a hash of the name) and of collection
+    instances (the instance's random id), read back from a Cycles render of it as emission."""
+    from voxgi.blender.snapshot.object_random import object_random
+
+    scene = bpy.context.scene
+    material = bpy.data.materials.new("Random Glow")
+    if material.node_tree is None:  # Blender < 5.0 creates materials without nodes
+        material.use_nodes = True
+    tree = material.node_tree
+    for node in list(tree.nodes):
+        if node.type != "OUTPUT_MATERIAL":
+            tree.nodes.remove(node)
+    glow = tree.nodes.new("ShaderNodeEmission")
+    tree.links.new(tree.nodes.new("ShaderNodeObjectInfo").outputs["Random"], glow.inputs["Color"])
+    tree.links.new(glow.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    quad = [(-0.4, -0.4, 0), (0.4, -0.4, 0), (0.4, 0.4, 0), (-0.4, 0.4, 0)]
+    group = bpy.data.collections.new("Quads")
+    gi_scenes._mesh(scene, "Instanced Quad", quad, [(0, 1, 2, 3)], (material,))
+    group.objects.link(bpy.data.objects["Instanced Quad"])
+    scene.collection.objects.unlink(bpy.data.objects["Instanced Quad"])
+    names = ["Quad", "Another quad", "Stone.003"]
+    for k, name in enumerate(names):
+        gi_scenes._mesh(scene, name, quad, [(0, 1, 2, 3)], (material,)).location = (k - 1.0, 0.5, 0)
+    for k in range(3):
+        instancer = bpy.data.objects.new(f"Quads {k}", None)
+        instancer.instance_type, instancer.instance_collection = "COLLECTION", group
+        instancer.location = (k - 1.0, -0.5, 0.0)
+        scene.collection.objects.link(instancer)
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    camera.data.type, camera.data.ortho_scale = "ORTHO", 3.0
+    camera.location = (0.0, 0.0, 3.0)
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    bpy.context.view_layer.update()
+    passes = render_cycles_passes(scene, 60, 40, 1, filter_width=0.01)
+    emitted = np.asarray(passes["Combined"])[..., 0]  # row 0 is the top (only emission)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    instances = [object_random("", inst.random_id) for inst in depsgraph.object_instances
+                 if inst.is_instance]
+    expected = [object_random(name) for name in names] + instances
+    # pixel centres of the quads: columns 10, 30, 50 (x = -1, 0, 1); rows 10 (y = 0.5), 30
+    seen = [emitted[10, c] for c in (10, 30, 50)] + [emitted[30, c] for c in (10, 30, 50)]
+    assert len(set(np.round(expected, 3))) == 6  # six different values
+    np.testing.assert_allclose(seen, expected, atol=2e-3)
+
+
+def test_each_scattered_block_takes_its_own_colour_as_in_cycles(voxgi, tmp_path):
+    from voxgi.blender.session import scene_session
+    from voxgi.voxgi_addon.files.exr import read_exr_passes
+
+    scene = bpy.context.scene
+    build_scattered_blocks(scene)
+    scene.cycles.filter_width = 0.01  # point samples on both sides
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=WIDTH,
+                                        resolution_y=HEIGHT) == {"FINISHED"}
+    assert not [line for level, line in scene_session(scene.name_full).last_report
+                if level == "WARNING"]  # nothing baked, nothing left out
+    ours = np.asarray(read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"], np.float64)
+    cycles = np.asarray(render_cycles_passes(scene, WIDTH, HEIGHT, 4, filter_width=0.01)
+                        ["Diffuse Color"], np.float64)
+    floor = np.array([0.5, 0.5, 0.5])
+    blocks = np.abs(cycles - floor).max(-1) > 0.02  # the blocks' tops
+    assert blocks.sum() > 200
+    # every block's top: Cycles' colours differ from block to block, ours follow them
+    assert np.ptp(cycles[blocks], axis=0).max() > 0.5
+    assert np.abs(ours[blocks] - cycles[blocks]).max(-1).mean() < 0.01
+    assert (np.abs(ours[blocks] - cycles[blocks]).max(-1) < 0.05).mean() > 0.97
+
+
+def test_a_moved_block_keeps_its_colour_in_a_posed_snapshot(voxgi):
+    from voxgi.blender.snapshot.pose import posed_snapshot
+    from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.voxgi_addon.scene.geometry import world_triangles
+
+    scene = bpy.context.scene
+    build_scattered_blocks(scene)
+    before = take_snapshot(scene)
+    varied = [o for o in before.objects if o.materials]
+    assert len(varied) == 24  # every block, each with its own variant of its row's material
+    assert len({o.materials for o in varied}) > 12
+    bpy.data.objects["Block ramp 2"].location.z += 0.5
+    bpy.data.objects["Blocks hue 4"].location.x += 0.2
+    bpy.context.view_layer.update()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    posed = posed_snapshot(before, scene, depsgraph)
+    full = take_snapshot(scene)
+    assert posed is not None
+    assert [o.materials for o in posed.objects] == [o.materials for o in full.objects]
+    np.testing.assert_array_equal(world_triangles(posed).materials,
+                                  world_triangles(full).materials)
