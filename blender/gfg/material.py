@@ -15,7 +15,7 @@ import numpy as np
 
 from ...voxgi_addon.files.gfg import Material
 from ...voxgi_addon.files.gfg.spec import LambertSlot, MaterialLogic, PrincipledSlot
-from ..snapshot.materials import _surface_node
+from ..snapshot.node_groups import surface_node
 
 # Principled BSDF input per uniform slot (values of 1, 3 or 4 floats).
 PRINCIPLED_INPUTS = (
@@ -49,7 +49,7 @@ def texture_path(image, directory: str) -> str | None:
 def export_material(material, directory: str, warnings: list[str]) -> Material:
     """The GFG material of a ``bpy.types.Material``."""
     node_tree = material.node_tree
-    principled = None if node_tree is None else _surface_node(node_tree, "BSDF_PRINCIPLED")
+    principled = None if node_tree is None else surface_node(node_tree, "BSDF_PRINCIPLED")
     if principled is None:
         return Material(material.name_full, MaterialLogic.LAMBERT,
                         {LambertSlot.COLOR: np.array(material.diffuse_color[:], np.float32)})

@@ -17,6 +17,8 @@ the render (``render_notes``: the camera's depth of field, motion blur).
 """
 from __future__ import annotations
 
+from .node_groups import GroupedSocket
+
 MARK = ": the preview leaves out "
 TYPE_NOTES = {"CURVES": "its hair curves (not rendered at all)",
               "POINTCLOUD": "its point cloud (not rendered at all)",
@@ -60,7 +62,8 @@ def is_left_out(message: str) -> bool:
 
 
 def _upstream(socket, depth: int = 0, seen=None) -> list:
-    """The nodes feeding ``socket`` (through links, not into groups), nearest first."""
+    """The nodes feeding ``socket`` (through links; a ``GroupedSocket``'s also into and out of
+    node groups), nearest first."""
     seen = set() if seen is None else seen
     out = []
     if socket is None or depth > 32:
@@ -69,9 +72,10 @@ def _upstream(socket, depth: int = 0, seen=None) -> list:
         if getattr(link, "is_muted", False):
             continue
         node = link.from_node
-        if node.name in seen:
+        key = (node.as_pointer(), tuple(g.as_pointer() for g in getattr(node, "stack", ())))
+        if key in seen:
             continue
-        seen.add(node.name)
+        seen.add(key)
         out.append(node)
         for inp in node.inputs:
             if inp.is_linked:
@@ -92,7 +96,7 @@ def material_notes(material) -> list[str]:
     if volume is not None and volume.is_linked:
         notes.append("its volume shader")
     surface = output.inputs.get("Surface")
-    for node in _upstream(surface):
+    for node in _upstream(None if surface is None else GroupedSocket(surface, ())):
         if node.type == "BSDF_PRINCIPLED":
             for name, what, off in PRINCIPLED_INPUTS:
                 socket = node.inputs.get(name)

@@ -37,6 +37,9 @@ Texture's Color per texel (``emission_texture``, times ``emission_strength``), a
 baked by Cycles as the Base Color is (Principled BSDF only); ``emission`` is the mean × the
 strength.
 
+A material whose Principled BSDF sits inside a node group (nested too) is read through the
+groups as the flat one would be (``node_groups``); its bakes route through copies of them.
+
 A Base Color that varies per object through Object Info › Random (a Color Ramp, Mix or
 Hue/Saturation of it: ``object_random``) is not baked: its entry holds the colour's mean over
 Random, and ``object_material`` gives each object a variant of it at the object's own Random
@@ -58,6 +61,7 @@ import numpy as np
 from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
 from ...voxgi_addon.scene.textures import PARAM_VARIANTS, srgb_to_linear, variant_values, within_max_size
 from .left_out import material_notes
+from .node_groups import route_to_emission, surface_node
 from .object_random import random_base_color
 from .reads import count
 from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _NeedsBake, _tree_key
@@ -182,18 +186,6 @@ def uv_source(node) -> tuple[str, np.ndarray]:
         raise _NeedsBake(f"the image's coordinates come from '{source.name}'")
     # (u, v, 0): the image reads x and y of the vector
     return name, np.stack([matrix[:2, 0], matrix[:2, 1], matrix[:2, 3]], axis=1)
-
-
-def _surface_node(node_tree, node_type: str):
-    """The node of ``node_type`` feeding the active output's Surface, else the first such node, else None."""
-    output = node_tree.get_output_node("ALL")
-    if output is not None:
-        surface = output.inputs.get("Surface")
-        if surface is not None and surface.is_linked:
-            node = surface.links[0].from_node
-            if node.type == node_type:
-                return node
-    return next((n for n in node_tree.nodes if n.type == node_type), None)
 
 
 def _rgb(socket) -> np.ndarray:
@@ -363,10 +355,10 @@ class MaterialTable:
         """(MaterialData, what to bake per mesh (None, or (mode, socket name)), UV map)."""
         count("materials")
         node_tree = material.node_tree
-        principled = None if node_tree is None else _surface_node(node_tree, "BSDF_PRINCIPLED")
+        principled = None if node_tree is None else surface_node(node_tree, "BSDF_PRINCIPLED")
         self._left_out(material)
         glow = None if node_tree is None or principled is not None else \
-            _surface_node(node_tree, "EMISSION")
+            surface_node(node_tree, "EMISSION")
         if glow is not None:  # an Emission shader: light, and nothing reflected (Cycles)
             strength = np.float32(glow.inputs["Strength"].default_value)
             if glow.inputs["Strength"].is_linked:
@@ -837,26 +829,6 @@ def can_bake() -> bool:
     return not (hasattr(bpy.app, "is_job_running") and bpy.app.is_job_running("RENDER"))
 
 
-def _route_to_emission(tree, socket_name: str) -> None:
-    """Make a material copy's surface an Emission shader of what feeds the Principled BSDF's
-    ``socket_name`` (its value when unlinked)."""
-    principled = _surface_node(tree, "BSDF_PRINCIPLED")
-    target = principled.inputs[socket_name]
-    emit = tree.nodes.new("ShaderNodeEmission")
-    emit.inputs["Strength"].default_value = 1.0
-    if target.is_linked:
-        tree.links.new(target.links[0].from_socket, emit.inputs["Color"])
-    else:
-        emit.inputs["Color"].default_value = tuple(target.default_value)
-    output = tree.get_output_node("CYCLES")
-    if output is None:
-        output = tree.nodes.new("ShaderNodeOutputMaterial")
-    for node in tree.nodes:  # the only active output
-        if node.type == "OUTPUT_MATERIAL":
-            node.is_active_output = node == output
-    tree.links.new(emit.outputs["Emission"], output.inputs["Surface"])
-
-
 def bake_socket(material, mode: str, socket_name: str, surface: Surface) -> np.ndarray:
     """(BAKE_SIZE, BAKE_SIZE, 3) float32 linear RGB of a material's socket (mode "EMIT": the
     Principled input ``socket_name``) or diffuse colour (mode "DIFFUSE") baked by Cycles over
@@ -870,6 +842,7 @@ def bake_socket(material, mode: str, socket_name: str, surface: Surface) -> np.n
 
     _BAKES[0] += 1
     scene = obj = mesh = copy = image = None
+    groups: list = []  # copies of node groups a grouped material's bake routes through
     try:
         layers = surface.mesh.uv_layers
         render_uv = next((layer.name for layer in layers if layer.active_render), None) or \
@@ -896,7 +869,7 @@ def bake_socket(material, mode: str, socket_name: str, surface: Surface) -> np.n
         copy = material.copy()
         tree = copy.node_tree
         if mode == "EMIT":
-            _route_to_emission(tree, socket_name)
+            route_to_emission(tree, socket_name, groups)
         image = bpy.data.images.new("VoxGI Bake", BAKE_SIZE, BAKE_SIZE, float_buffer=True,
                                     alpha=False)
         node = tree.nodes.new("ShaderNodeTexImage")
@@ -946,6 +919,8 @@ def bake_socket(material, mode: str, socket_name: str, surface: Surface) -> np.n
             bpy.data.materials.remove(copy)
         if image is not None:
             bpy.data.images.remove(image)
+        for group in groups:
+            bpy.data.node_groups.remove(group)
 
 
 classes = ()

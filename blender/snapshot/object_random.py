@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 
+from .node_groups import surface_node
 from .world_map import _follow, _NeedsBake
 
 __all__ = ["object_random", "random_base_color"]
@@ -79,17 +80,8 @@ def random_base_color(material):
     """A function random → (3,) float32 linear RGB of the material's Principled BSDF Base
     Color where it depends on Object Info › Random alone (module doc), else None."""
     tree = material.node_tree if material is not None else None
-    if tree is None:
-        return None
-    output = tree.get_output_node("CYCLES")
-    surface = None if output is None else output.inputs.get("Surface")
-    if surface is None or not surface.is_linked:
-        return None
-    try:
-        node, _ = _follow(surface)
-    except _NeedsBake:
-        return None
-    if node is None or node.type != "BSDF_PRINCIPLED":
+    node = None if tree is None else surface_node(tree, "BSDF_PRINCIPLED")
+    if node is None:
         return None
     socket = node.inputs["Base Color"]
     if not socket.is_linked:
