@@ -1,6 +1,7 @@
 /* The multi-bounce radiance cache's indirect light (E/π, .rgb) at `x` for unit normal `n`, and
- * (.a) its faces' one-more-bounce ratio blended alike (the first part's texels' .a − 1:
- * radiance_cache.one_more_bounce; 0 where the texture has none)
+ * (.a) its faces' one-more-bounce ratio blended alike, each face's also weighted by its light
+ * (the first part's texels' .a − 1: radiance_cache.one_more_bounce; 0 where the texture has
+ * none)
  * (voxgi_addon/gi/radiance_cache.py lookup; texels: radiance_cache.cache_texels): per axis the
  * face n faces, trilinear over the voxels of the finest grid holding `x` that hold that face
  * (texel .a), the axes blended by n² over those some neighbour holds (else the next coarser
@@ -116,8 +117,11 @@ vec4 cache_indirect(vec3 x, vec3 n, int part)
     /* per axis over the faces in front (cache_in_front) and, where none is, over all held */
     vec3 tx = vec3(0.0), ty = vec3(0.0), tz = vec3(0.0);
     vec3 ax = vec3(0.0), ay = vec3(0.0), az = vec3(0.0);
-    vec3 more = vec3(0.0); /* per axis: Σ weight · (.a − 1), the faces' one-more-bounce ratio */
+    /* per axis: Σ weight · light · (.a − 1), the faces' one-more-bounce ratio weighted by their
+     * light too (radiance_cache.lookup), and Σ weight · light */
+    vec3 more = vec3(0.0);
     vec3 more_all = vec3(0.0);
+    vec3 lit = vec3(0.0), lit_all = vec3(0.0);
     vec3 weight = vec3(0.0), weight_all = vec3(0.0);
     for (int corner = 0; corner < 8; corner++) {
       ivec3 o = ivec3((corner >> 2) & 1, (corner >> 1) & 1, corner & 1);
@@ -150,8 +154,12 @@ vec4 cache_indirect(vec3 x, vec3 n, int part)
       ax += loose.x * fx.rgb;
       ay += loose.y * fy.rgb;
       az += loose.z * fz.rgb;
-      more += held * (vec3(fx.w, fy.w, fz.w) - 1.0);
-      more_all += loose * (vec3(fx.w, fy.w, fz.w) - 1.0);
+      vec3 light = max(vec3(dot(fx.rgb, vec3(1.0)), dot(fy.rgb, vec3(1.0)),
+                            dot(fz.rgb, vec3(1.0))), vec3(0.0));
+      more += held * light * (vec3(fx.w, fy.w, fz.w) - 1.0);
+      more_all += loose * light * (vec3(fx.w, fy.w, fz.w) - 1.0);
+      lit += held * light;
+      lit_all += loose * light;
       weight += held;
       weight_all += loose;
     }
@@ -160,6 +168,7 @@ vec4 cache_indirect(vec3 x, vec3 n, int part)
     ty = strict.y ? ty : ay;
     tz = strict.z ? tz : az;
     more = mix(more_all, more, strict);
+    lit = mix(lit_all, lit, strict);
     weight = mix(weight_all, weight, strict);
     vec3 share = vec3(weight.x > 1e-6 ? blend.x : 0.0, weight.y > 1e-6 ? blend.y : 0.0,
                       weight.z > 1e-6 ? blend.z : 0.0);
@@ -169,7 +178,7 @@ vec4 cache_indirect(vec3 x, vec3 n, int part)
     }
     vec3 safe = max(weight, vec3(1e-6));
     return vec4(share.x * tx / safe.x + share.y * ty / safe.y + share.z * tz / safe.z,
-                dot(share, more / safe)) / norm;
+                dot(share, more / safe) / max(dot(share, lit / safe), 1e-30) * norm) / norm;
   }
   return vec4(0.0);
 }

@@ -594,3 +594,38 @@ def test_a_caustic_met_by_one_cache_ray_lights_no_voxel(voxgi):
     before = raw.reshape(-1, 8, 3)[faces].mean(axis=1).max(axis=1)
     after = tamed.reshape(-1, 8, 3)[faces].mean(axis=1).max(axis=1)
     assert (before > after).all() and (before >= 1.5 * after).any(), (before, after)
+
+
+def test_a_sphere_without_specular_beside_another_keeps_the_bounced_light_bounded(voxgi,
+                                                                                 tmp_path):
+    """A Principled BSDF at Specular IOR Level 0 (no reflection at all: FBX imports bring such
+    materials) beside another sphere: some cache faces were lit at 1e-17 of the others and held
+    a one-more-bounce ratio of 1e16, which the lookup blended with their bright neighbours'
+    light unweighted — Diffuse Indirect reached 1e3 (GPU) and 1e13 (numpy) where Cycles reads
+    under 2. Each face's ratio now counts by its light (``radiance_cache.lookup``)."""
+    scene = bpy.context.scene
+    floor = scenes.principled("Floor", (0.8, 0.8, 0.8))
+    scenes.mesh_object("Floor", [(-5, -5, 0), (5, -5, 0), (5, 5, 0), (-5, 5, 0)],
+                       [(0, 1, 2, 3)]).data.materials.append(floor)
+    chalk = scenes.principled("Chalk", (0.2, 0.6, 0.2), roughness=1.0, specular=0.0)
+    blue = scenes.principled("Blue", (0.1, 0.4, 0.8))
+    for k, material in enumerate((blue, chalk)):
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.6, location=(1.5 * k, 0.5, 0.6))
+        bpy.ops.object.shade_smooth()
+        bpy.context.object.data.materials.append(material)
+    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "AREA"))
+    lamp.data.energy, lamp.data.size, lamp.location = 300.0, 1.0, (1.0, -1.0, 3.0)
+    scene.collection.objects.link(lamp)
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    camera.location, camera.rotation_euler = (0.75, -4.5, 1.4), (1.396, 0.0, 0.0)
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    world = bpy.data.worlds.new("Sky")
+    world.color = (0.3, 0.35, 0.45)
+    scene.world = world
+    follow_cycles(scene)
+    for tracer, size in (("AUTO", (80, 60)), ("NUMPY", (40, 30))):
+        ours = preview(tmp_path, scene, *size, tracer=tracer)
+        assert np.isfinite(ours["Combined"]).all()
+        assert ours["Diffuse Indirect"].max() < 3.0, (tracer, ours["Diffuse Indirect"].max())
+        assert ours["Combined"].max() < 10.0, (tracer, ours["Combined"].max())

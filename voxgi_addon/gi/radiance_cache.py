@@ -549,7 +549,10 @@ def lookup(cache: RadianceCache | None, points, normals, more: bool = False):
     holding the point that hold that face, then the axes blended by n² (over the axes some
     neighbour holds; an axis with n² under ``AXIS_BLEND`` weighs nothing); where no
     neighbour there holds a face n faces, the next coarser grid holding the point; 0 where
-    none does. more : also return (K,) the faces' ``one_more_bounce`` blended alike."""
+    none does. more : also return (K,) the faces' ``one_more_bounce`` as the ratio of the
+    more light and the light, each blended as the light is (Σ w · light · ratio over Σ w ·
+    light, per axis and over the axes): a nearly dark face's ratio, however large, adds only
+    the little light it stands for."""
     p = np.asarray(points, np.float64).reshape(-1, 3)
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     out = np.zeros((len(p), 3))
@@ -579,6 +582,7 @@ def lookup(cache: RadianceCache | None, points, normals, more: bool = False):
         # and over all held, [1], which an axis takes where none is in front
         total = np.zeros((2, len(rows), 3, 3))
         gains = np.zeros((2, len(rows), 3))
+        lights = np.zeros((2, len(rows), 3))
         weight = np.zeros((2, len(rows), 3))
         for corner in range(8):
             offset = np.array([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
@@ -590,14 +594,18 @@ def lookup(cache: RadianceCache | None, points, normals, more: bool = False):
             safe = np.maximum(site, 0)[:, None]
             held = (site >= 0)[:, None] & present[safe, face[rows]]      # (k, 3 axes)
             front = held & _in_front(grid, c, planes[safe, face[rows]], p[rows], n[rows])
+            light = faces[safe, face[rows]]
+            lit = np.maximum(np.asarray(light, np.float64).sum(axis=2), 0.0)
             for which, mask in enumerate((front, held)):
                 wa = np.where(mask, w[:, None], 0.0)
-                total[which] += wa[:, :, None] * faces[safe, face[rows]]
-                gains[which] += wa * gain[safe, face[rows]]
+                total[which] += wa[:, :, None] * light
+                gains[which] += wa * lit * gain[safe, face[rows]]
+                lights[which] += wa * lit
                 weight[which] += wa
         strict = weight[0] > 1e-6
         total = np.where(strict[:, :, None], total[0], total[1])
         gains = np.where(strict, gains[0], gains[1])
+        lights = np.where(strict, lights[0], lights[1])
         weight = np.where(strict, weight[0], weight[1])
         axis_ok = weight > 1e-6
         mean = total / np.maximum(weight, 1e-6)[:, :, None]
@@ -606,8 +614,9 @@ def lookup(cache: RadianceCache | None, points, normals, more: bool = False):
         value = (share[:, :, None] * mean).sum(axis=1) / np.maximum(norm, 1e-12)[:, None]
         found = norm > 1e-6  # else the next coarser grid (a point off its finer grid's voxels)
         out[rows[found]] = value[found]
-        ratio[rows[found]] = ((share * gains / np.maximum(weight, 1e-6)).sum(axis=1) /
-                              np.maximum(norm, 1e-12))[found]
+        safe_weight = np.maximum(weight, 1e-6)
+        ratio[rows[found]] = ((share * gains / safe_weight).sum(axis=1) /
+                              np.maximum((share * lights / safe_weight).sum(axis=1), 1e-30))[found]
         todo[rows[found]] = False
     return (out, ratio) if more else out
 
