@@ -18,6 +18,7 @@ the render (``render_notes``: the camera's depth of field, motion blur).
 from __future__ import annotations
 
 from .node_groups import GroupedSocket
+from .world_map import _follow, _NeedsBake
 
 MARK = ": the preview leaves out "
 TYPE_NOTES = {"CURVES": "its hair curves (not rendered at all)",
@@ -96,6 +97,7 @@ def material_notes(material) -> list[str]:
     if volume is not None and volume.is_linked:
         notes.append("its volume shader")
     surface = output.inputs.get("Surface")
+    notes += _shader_mix_notes(surface)
     for node in _upstream(None if surface is None else GroupedSocket(surface, ())):
         if node.type == "BSDF_PRINCIPLED":
             for name, what, off in PRINCIPLED_INPUTS:
@@ -117,6 +119,41 @@ def material_notes(material) -> list[str]:
     elif displacement is not None and displacement.is_linked:
         notes.append("bump from its displacement output")
     return list(dict.fromkeys(notes))
+
+
+GLOSSY_SHADERS = ("BSDF_GLOSSY", "BSDF_ANISOTROPIC")
+
+
+def _shader_mix_notes(surface) -> list[str]:
+    """A surface the preview cannot read as one Principled BSDF: a Mix or Add Shader (but the
+    cut-out mix of a Transparent BSDF and a Principled BSDF, which it reads) is shaded with one
+    Principled BSDF of it, or, with none, by its diffuse colour alone; a Glossy BSDF alone by
+    its diffuse colour (none: black)."""
+    if surface is None or not surface.is_linked:
+        return []
+    try:
+        top, _ = _follow(GroupedSocket(surface, ()))
+    except _NeedsBake:
+        return []
+    if top is None:
+        return []
+    if top.type in GLOSSY_SHADERS:
+        return ["its glossy shader (the preview shades the surface by its diffuse colour "
+                "alone: a Principled BSDF renders it)"]
+    if top.type not in ("MIX_SHADER", "ADD_SHADER"):
+        return []
+    kinds = [n.type for n in _upstream(top.inputs[1] if top.type == "MIX_SHADER" else
+                                       top.inputs[0])] + \
+        [n.type for n in _upstream(top.inputs[2] if top.type == "MIX_SHADER" else
+                                   top.inputs[1])]
+    if top.type == "MIX_SHADER" and kinds[:1] == ["BSDF_TRANSPARENT"] and \
+            "BSDF_PRINCIPLED" in kinds:
+        return []  # a cut-out's mix (materials._transparent_mix)
+    what = "Mix Shader" if top.type == "MIX_SHADER" else "Add Shader"
+    if "BSDF_PRINCIPLED" in kinds:
+        return [f"its {what} (the preview shades the surface with one Principled BSDF of it)"]
+    return [f"its {what} (the preview shades the surface by its diffuse colour alone, "
+            "without a glossy layer)"]
 
 
 def object_notes(obj) -> list[str]:

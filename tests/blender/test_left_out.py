@@ -199,3 +199,47 @@ def test_light_settings_the_preview_leaves_out_are_named(voxgi, tmp_path):
     layout = _Layout()
     bpy.types.VOXGI_PT_main.draw(type("PanelStub", (), {"layout": layout})(), bpy.context)
     assert "Light 'Soft Box':" in layout.labels, layout.labels
+
+
+def test_shader_mixes_the_preview_shades_as_one_bsdf_are_named(voxgi):
+    """A Mix Shader of a Diffuse and a Glossy BSDF (shaded by its diffuse colour alone), of two
+    Principled BSDFs (with one of them) and a Glossy BSDF alone are named; the cut-out mix of
+    a Transparent BSDF and a Principled BSDF, which the preview reads, is not."""
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    scene = bpy.context.scene
+
+    def material(name, first, second=None):
+        made = bpy.data.materials.new(name)
+        if made.node_tree is None:  # Blender < 5.0 creates materials without nodes
+            made.use_nodes = True
+        tree = made.node_tree
+        for node in [n for n in tree.nodes if n.type != "OUTPUT_MATERIAL"]:
+            tree.nodes.remove(node)
+        surface = tree.nodes["Material Output"].inputs["Surface"]
+        a = tree.nodes.new(first)
+        if second is None:
+            tree.links.new(a.outputs[0], surface)
+            return made
+        mix = tree.nodes.new("ShaderNodeMixShader")
+        tree.links.new(a.outputs[0], mix.inputs[1])
+        tree.links.new(tree.nodes.new(second).outputs[0], mix.inputs[2])
+        tree.links.new(mix.outputs[0], surface)
+        return made
+
+    quad = [(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)]
+    for k, (name, made) in enumerate((
+            ("Varnish", material("Varnish", "ShaderNodeBsdfDiffuse", "ShaderNodeBsdfGlossy")),
+            ("Blend", material("Blend", "ShaderNodeBsdfPrincipled", "ShaderNodeBsdfPrincipled")),
+            ("Mirror", material("Mirror", "ShaderNodeBsdfGlossy")),
+            ("Leaf", material("Leaf", "ShaderNodeBsdfTransparent", "ShaderNodeBsdfPrincipled")))):
+        gi_scenes._mesh(scene, name, quad, [(0, 1, 2, 3)], (made,)).location.x = 3 * k
+    warnings = take_snapshot(scene).warnings
+    named = {name: [w for w in warnings if w.startswith(f"Object '{name}'")]
+             for name in ("Varnish", "Blend", "Mirror", "Leaf")}
+    assert "Mix Shader (the preview shades the surface by its diffuse colour alone" in \
+        named["Varnish"][0]
+    assert "Mix Shader (the preview shades the surface with one Principled BSDF" in \
+        named["Blend"][0]
+    assert "its glossy shader" in named["Mirror"][0]
+    assert named["Leaf"] == []
