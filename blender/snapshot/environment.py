@@ -53,11 +53,15 @@ def read_light(obj, obj_eval) -> LightData | None:
         extra["angle"] = float(light.angle)
     if light.type == "AREA":
         extra.update(size=float(light.size), size_y=float(light.size_y), shape=str(light.shape))
+    color = np.array(light.color[:3], dtype=np.float64)
+    if getattr(light, "use_temperature", False):  # Blender 4.5+: × the blackbody's colour
+        color = color * np.array(light.temperature_color[:3], dtype=np.float64)
     return LightData(
         name=obj.name_full,
         type=light.type,
-        color=np.array(light.color[:3], dtype=np.float32),
-        power=float(light.energy) * unnormalized_scale(light),
+        color=color.astype(np.float32),
+        power=float(light.energy) * 2.0 ** float(getattr(light, "exposure", 0.0))
+        * unnormalized_scale(light),
         world_matrix=_matrix(obj_eval.matrix_world),
         **extra,
     )
