@@ -68,8 +68,10 @@ from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _Needs
 
 MAX_VARIANT_MATERIALS = 96  # materials with Roughness / Metallic per texel (each adds 64 rows)
 # An object's Random is taken to 1/RANDOM_STEPS (a Base Color by Random then has at most
-# RANDOM_STEPS + 1 variants, whatever the number of objects)
-RANDOM_STEPS = 1024
+# RANDOM_STEPS + 1 variants and evaluations, whatever the number of objects: 2,000 copies
+# cost the snapshot 130 ms evaluated one by one); a ramp's colour moves by at most 1/512 of
+# its range
+RANDOM_STEPS = 256
 BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
 BAKE_SAMPLES = 8      # Cycles samples per texel (the texel's mean over its area)
 BAKE_MARGIN = 4       # texels the bake extends each UV island by (no dark seams when filtered)
@@ -274,6 +276,7 @@ class MaterialTable:
         self.notes: dict[str, list[str]] = {}  # material name → what the preview leaves out
         self._by_random: dict[str, object] = {}  # material name → its Base Color by Random
         self._random_variants: dict[tuple, int] = {}  # (index, colour) → variant's index
+        self._random_steps: dict[tuple, int] = {}  # (index, step of Random) → its material
 
     def _warn(self, text: str) -> None:
         if text not in self._warned:
@@ -319,15 +322,26 @@ class MaterialTable:
         """Does any material read so far take its Base Color from Object Info › Random?"""
         return bool(self._by_random)
 
+    def varies(self, index: int) -> bool:
+        """Does material ``index`` take its Base Color from Object Info › Random (a variant per
+        object, ``object_material``)?"""
+        data = self.materials[index] if 0 <= index < len(self.materials) else None
+        return data is not None and data.name in self._by_random and data.param_texture < 0
+
     def object_material(self, index: int, random: float) -> int:
         """The material an object whose Object Info › Random is ``random`` shades with where
         its mesh uses material ``index``: a variant with the Base Color at its Random (one per
         colour) where the material's Base Color follows Random, else ``index``."""
+        step = (index, round(float(random) * RANDOM_STEPS))
+        known = self._random_steps.get(step)
+        if known is not None:
+            return known
         data = self.materials[index] if 0 <= index < len(self.materials) else None
         colour_of = None if data is None else self._by_random.get(data.name)
         if colour_of is None or data.param_texture >= 0:
+            self._random_steps[step] = index
             return index
-        colour = colour_of(round(float(random) * RANDOM_STEPS) / RANDOM_STEPS)
+        colour = colour_of(step[1] / RANDOM_STEPS)
         key = (index, tuple(np.round(colour * 4096).astype(np.int64)))
         variant = self._random_variants.get(key)
         if variant is None:
@@ -336,6 +350,7 @@ class MaterialTable:
                 data, name=f"{data.name} [Random: {', '.join(f'{c:.3f}' for c in colour)}]",
                 base_color=colour.astype(np.float32)))
             self._uv_maps[variant] = self._uv_maps.get(index, "")
+        self._random_steps[step] = variant
         return variant
 
     def _add_texture(self, texture: TextureData) -> int:

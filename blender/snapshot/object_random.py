@@ -17,6 +17,7 @@ the other ways of ``materials.py``.
 from __future__ import annotations
 
 import colorsys
+import functools
 import math
 
 import numpy as np
@@ -67,6 +68,7 @@ def hash_string(text: str) -> int:
     return value
 
 
+@functools.lru_cache(maxsize=1 << 16)
 def object_random(name: str, random_id: int | None = None) -> float:
     """Object Info › Random of an object as Cycles renders it: an instance's (collection,
     particle or geometry-nodes instance) ``DepsgraphObjectInstance.random_id`` over 2³² − 1;

@@ -545,10 +545,11 @@ def with_object_materials(objects, randoms, table: MaterialTable, used: dict) ->
     """``objects`` with ``ObjectData.materials`` where a material of theirs takes its Base
     Color from Object Info › Random: each object's variant at its own Random (``randoms``,
     aligned with ``objects``; ``MaterialTable.object_material``)."""
+    varying = {key: [int(i) for i in indices if table.varies(int(i))]
+               for key, indices in used.items()}
     out = []
     for obj, random in zip(objects, randoms, strict=True):
-        pairs = tuple((int(i), table.object_material(int(i), random))
-                      for i in used.get(obj.mesh, ()))
+        pairs = tuple((i, table.object_material(i, random)) for i in varying.get(obj.mesh, ()))
         pairs = tuple((i, j) for i, j in pairs if i != j)
         out.append(dataclasses.replace(obj, materials=pairs) if pairs else obj)
     return out
