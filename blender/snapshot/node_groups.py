@@ -186,8 +186,6 @@ def route_to_emission(tree, socket_name: str, new_groups: list) -> None:
     Principled BSDF's ``socket_name`` (its value when unlinked). Where that value is inside
     groups, the groups on the way are copied (appended to ``new_groups``, for the caller to
     remove) and the Emission goes out through the copies' Group Outputs."""
-    import bpy  # noqa: F401 - the node types below are bpy's
-
     principled = surface_node(tree, "BSDF_PRINCIPLED")
     path = _surface_path(tree)  # [(group node, its output identifier)], outermost first
     target = principled.inputs[socket_name]
@@ -195,13 +193,13 @@ def route_to_emission(tree, socket_name: str, new_groups: list) -> None:
     stack = target.stack if isinstance(target, GroupedSocket) else ()
     source, stack = _resolve(raw, stack, enter=False)  # stays on the surface's path
     depth = len(stack)
-    level, node_map = tree, None
+    level = tree
     for group, _ in path[:depth]:  # copy each group on the way, and go into the copy
-        here = group if node_map is None else level.nodes[group.name]
+        here = level.nodes[group.name]  # the path's node, in the tree (or copy) it lies in
         copy = here.node_tree.copy()
         new_groups.append(copy)
         here.node_tree = copy
-        level, node_map = copy, True
+        level = copy
     emit = level.nodes.new("ShaderNodeEmission")
     emit.inputs["Strength"].default_value = 1.0
     if source.is_linked:
