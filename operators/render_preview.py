@@ -1,23 +1,23 @@
 """``voxgi.render_preview``: one GI update, then the scene camera's passes (Cycles' names and
-meanings) into one multilayer OpenEXR file, with per-stage timings. Runs to completion (it is a
-render) through the same ``render.pipeline`` as F12, Render Region included: the region alone
-is traced, and the file holds it cropped, or placed into an empty frame (Crop to Render Region
-off), as F12 writes it."""
+meanings) into one multilayer OpenEXR file, with per-stage timings. It is F12: the operator runs
+``bpy.ops.render.render()`` with the VoxGI engine (``f12_settings``) and writes what that render
+traced (``render.engine.captured``), so the scene is read as Blender renders it (modifiers at
+their render levels and toggles, objects hidden in the viewport but not in renders), a Render
+Region included: the region alone is traced, and the file holds it cropped, or placed into an
+empty frame (Crop to Render Region off), as F12 writes it. The Render Result shows the preview."""
 from __future__ import annotations
 
 import os
+from contextlib import contextmanager
 
 import bpy
 import numpy as np
 
 from ..blender.operator_poll import VoxGISceneOperator
 from ..blender.session import scene_session
-from ..blender.settings import pixel_filter_width
-from ..render.engine import render_region
-from ..render.pipeline import render_scene_passes
+from ..render.engine import captured, render_region
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.files.exr import write_exr
-from ..voxgi_addon.preview.film import snapshot_combined
 
 
 class VOXGI_OT_render_preview(VoxGISceneOperator, bpy.types.Operator):
@@ -48,16 +48,19 @@ class VOXGI_OT_render_preview(VoxGISceneOperator, bpy.types.Operator):
         path = bpy.path.abspath(self.filepath)
         region = render_region(scene, width, height)
         try:
+            if scene.camera is None:  # before Blender's own refusal, in the preview's words
+                raise VoxGIError("the scene has no camera to render the preview from")
             source = None if self.indirect_source == "SCENE" else self.indirect_source
-            passes, lines = render_scene_passes(context, scene, None, width, height, source,
-                                                region=region)
+            with f12_settings(scene, width, height), captured(scene, source) as capture:
+                bpy.ops.render.render()
+            if capture.error is not None or capture.passes is None:
+                raise VoxGIError(capture.error or "the render did not run (is another render "
+                                 "running?)")
+            images = {name: image for name, image in capture.passes.items()
+                      if name != "Alpha" and not name.startswith("_")}
             # the film: Combined RGBA with the world behind the geometry (or alpha with
             # Film › Transparent); the other passes as traced
-            combined = snapshot_combined(scene_session(scene.name_full).snapshot, passes,
-                                         pixel_filter_width(scene))
-            images = {name: image for name, image in passes.items()
-                      if name != "Alpha" and not name.startswith("_")}
-            images["Combined"] = combined
+            images["Combined"] = capture.combined
             if region is not None and not render.use_crop_to_border:
                 images = {name: placed(image, region, width, height)
                           for name, image in images.items()}
@@ -69,11 +72,32 @@ class VOXGI_OT_render_preview(VoxGISceneOperator, bpy.types.Operator):
         session = scene_session(scene.name_full)
         size = (width, height) if region is None or not render.use_crop_to_border else region[2:]
         message = f"GI preview {size[0]}×{size[1]} written to {path}"
-        session.last_report = [("INFO", message), *lines]
+        session.last_report = [("INFO", message), *capture.report]
         for level, line in session.last_report:
             print(f"VoxGI: {line}" if not line.startswith("VoxGI") else line)
             self.report({level}, line)
         return {"FINISHED"}
+
+
+@contextmanager
+def f12_settings(scene, width: int, height: int):
+    """The scene set to render its active view layer's preview at ``width`` × ``height`` with
+    F12: the VoxGI engine, the one camera (no stereo views), the render itself (not the
+    compositor's or the sequencer's image). Every setting is put back on exit."""
+    render = scene.render
+    wanted = {"engine": "VOXGI", "resolution_x": width, "resolution_y": height,
+              "resolution_percentage": 100, "use_single_layer": True, "use_multiview": False,
+              "use_compositing": False, "use_sequencer": False}
+    before = {name: getattr(render, name) for name in wanted}
+    try:
+        for name, value in wanted.items():
+            if before[name] != value:
+                setattr(render, name, value)
+        yield
+    finally:
+        for name, value in before.items():
+            if getattr(render, name) != value:
+                setattr(render, name, value)
 
 
 def placed(image, region, width: int, height: int) -> np.ndarray:

@@ -11,6 +11,8 @@ live GI (``viewport.py``).
 from __future__ import annotations
 
 import traceback
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
@@ -77,6 +79,32 @@ def render_views(scene) -> list[str | None]:
     return names or [None]
 
 
+@dataclass
+class Capture:
+    """What an F12 run by ``voxgi.render_preview`` traced, kept for its EXR file: the passes
+    (a Render Region's alone), the film's Combined, the report lines, or the error."""
+    indirect_source: str | None = None  # 'CONES' / 'PROBES': the operator's; None: the scene's
+    passes: dict | None = None
+    combined: np.ndarray | None = None
+    report: list = field(default_factory=list)
+    error: str | None = None
+
+
+_CAPTURES: dict[str, Capture] = {}
+
+
+@contextmanager
+def captured(scene, indirect_source: str | None = None):
+    """Inside the block, F12 of ``scene`` (``bpy.ops.render.render()``) also keeps what it
+    traced in the yielded ``Capture``, and reports through it alone."""
+    capture = Capture(indirect_source)
+    _CAPTURES[scene.name_full] = capture
+    try:
+        yield capture
+    finally:
+        _CAPTURES.pop(scene.name_full, None)
+
+
 class VoxGIRenderEngine(bpy.types.RenderEngine):
     bl_idname = "VOXGI"
     bl_label = "VoxGI"
@@ -118,21 +146,34 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
         width, height = frame_size(scene)
         # a Render Region is traced alone (with its filters' margin), as Cycles renders it
         region = render_region(scene, width, height)
+        capture = _CAPTURES.get(scene.name_full)
         try:
-            passes, report = render_scene_passes(bpy.context, scene, depsgraph, width, height,
-                                                 view_camera=camera, region=region)
+            passes, report = render_scene_passes(
+                bpy.context, scene, depsgraph, width, height,
+                capture.indirect_source if capture is not None else None,
+                view_camera=camera, region=region)
             # the film: the world behind the geometry, or alpha with Film › Transparent
             combined = snapshot_combined(scene_session(scene.name_full).snapshot, passes,
                                          pixel_filter_width(scene))
         except VoxGIError as error:
+            if capture is not None:
+                capture.error = str(error)
+                return False
             self.report({"ERROR"}, f"VoxGI render failed: {error}")
             return False
         except Exception as error:  # a bug must fail this frame, never take Blender down
             traceback.print_exc()
-            self.report({"ERROR"}, f"VoxGI render failed unexpectedly: {error!r} (see the console)")
+            message = f"VoxGI render failed unexpectedly: {error!r} (see the console)"
+            if capture is not None:
+                capture.error = message
+                return False
+            self.report({"ERROR"}, message)
             return False
-        for level, line in report:
-            self.report({level}, line)
+        if capture is not None:
+            capture.passes, capture.combined, capture.report = passes, combined, report
+        else:
+            for level, line in report:
+                self.report({level}, line)
         # Blender calls this once per view layer: the result of this one's layer alone (without
         # it, layers[0] is the first layer, which every view layer's image overwrote)
         size = (width, height) if region is None else region[2:]

@@ -297,11 +297,23 @@ def renders(obj, view_layer, disabled: frozenset[int] | None = None) -> bool:
     return obj.session_uid not in disabled
 
 
-def _visible_mesh_entries(view_layer, warnings: list[str], depsgraph=None) -> list[_Entry]:
+def shown_objects(depsgraph):
+    """Whether an (original) object of the depsgraph's view layer is shown: what Blender renders
+    from it. F12's depsgraph (``mode`` 'RENDER') holds exactly what the render shows, objects
+    hidden in the viewport (eye, monitor, a hidden layer collection) included; the viewport's
+    holds objects it does not draw, so there it is ``renders``."""
+    if depsgraph.mode == "RENDER":
+        evaluated = frozenset(o.original.session_uid for o in depsgraph.objects)
+        return lambda obj: obj.session_uid in evaluated
+    view_layer, disabled = depsgraph.view_layer, render_disabled()
+    return lambda obj: renders(obj, view_layer, disabled)
+
+
+def _visible_mesh_entries(view_layer, warnings: list[str], depsgraph) -> list[_Entry]:
     entries, used = [], {}
-    disabled = render_disabled()
+    is_shown = shown_objects(depsgraph)
     for obj in view_layer.objects:
-        shown = renders(obj, view_layer, disabled)
+        shown = is_shown(obj)
         if shown and type_note(obj) is not None:
             warnings.append(left_out_line(obj.name, [type_note(obj)]))
         if obj.type not in RENDERABLE or not shown:
@@ -472,17 +484,17 @@ def read_armatures(entries: list[_Entry], depsgraph) -> dict:
 
 
 def read_lights(depsgraph, warnings: list[str] | None = None) -> list:
-    """The ``LightData`` of the lights Blender renders from the view layer (``renders``:
-    visible there and not disabled in renders, as the meshes) at the depsgraph's frame;
-    ``warnings`` (None: none) gets each one's ``light_notes``."""
+    """The ``LightData`` of the lights Blender renders from the view layer (``shown_objects``,
+    as the meshes) at the depsgraph's frame; ``warnings`` (None: none) gets each one's
+    ``light_notes``."""
     view_layer, lights = depsgraph.view_layer, []
-    disabled = None
+    is_shown = None
     for obj in view_layer.objects:
         if obj.type != "LIGHT":
             continue
-        if disabled is None:
-            disabled = render_disabled()
-        if renders(obj, view_layer, disabled):
+        if is_shown is None:
+            is_shown = shown_objects(depsgraph)
+        if is_shown(obj):
             light = read_light(obj, obj.evaluated_get(depsgraph))
             if light is not None:
                 lights.append(light)

@@ -22,9 +22,10 @@ import gi_scenes
 import light_scenes
 import numpy as np
 import pytest
+import scenes
 import unit_scale_scenes
 from animation_scenes import FRAMES, mean_change, walking_rig
-from cycles_reference import relative_l1, render_cycles_passes
+from cycles_reference import coverage_agreement, relative_l1, render_cycles_passes
 
 WIDTH, HEIGHT = 64, 48
 PASSES = ("Combined", "Diffuse Direct", "Diffuse Indirect", "Diffuse Color", "Glossy Direct",
@@ -320,6 +321,54 @@ def test_f12_renders_the_rest_of_a_mesh_with_a_nan_vertex(voxgi, tmp_path):
         assert np.isfinite(broken[name]).all(), name
         assert rel(broken[name], clean[name]) < 1e-3, name
     assert rel(broken["Combined"], clean["Combined"]) < 1e-4
+
+
+def _viewport_differs_from_render(scene):
+    """Objects against an empty world whose viewport shows other geometry than their renders:
+    a cube subdivided at render level 3 (viewport 0), a cube hidden in the viewport (H), one
+    whose collection is disabled in viewports, a plank with an Array shown in renders alone,
+    lit by a sun hidden in the viewport."""
+    def cube(size, location, scale=(1.0, 1.0, 1.0)):
+        bpy.ops.mesh.primitive_cube_add(size=size, location=location, scale=scale)
+        return bpy.context.object
+
+    subdivision = cube(2.0, (-1.0, 0.0, 0.0)).modifiers.new("Subdivision", "SUBSURF")
+    subdivision.levels, subdivision.render_levels = 0, 3
+    cube(0.8, (1.2, 0.0, 0.8)).hide_set(True)
+    hidden = bpy.data.collections.new("Disabled in Viewports")
+    scene.collection.children.link(hidden)
+    moved = cube(0.8, (1.2, 0.0, -0.6))
+    scene.collection.objects.unlink(moved)
+    hidden.objects.link(moved)
+    hidden.hide_viewport = True
+    array = cube(1.0, (-2.2, 0.0, -1.4), scale=(0.25, 0.25, 0.1)).modifiers.new("Array", "ARRAY")
+    array.count, array.show_viewport = 6, False
+    bpy.ops.object.light_add(type="SUN", rotation=(0.6, 0.3, 0.0))
+    bpy.context.object.hide_set(True)  # the one lamp: hidden in the viewport, lit in renders
+    scenes.camera_looking_at((0.0, -8.0, 1.0), scene=scene)
+    scenes.uniform_world((0.1, 0.1, 0.1), scene=scene)
+    scene.render.film_transparent = True
+    bpy.context.view_layer.update()
+
+
+def test_render_preview_and_f12_read_the_scene_as_cycles_f12_does(voxgi, tmp_path):
+    """F12 renders modifiers at their render levels and toggles, and objects hidden in the
+    viewport alone. ``render_preview`` is F12: both draw what Cycles' F12 draws (they drew the
+    viewport's unsubdivided cube, and left out the hidden objects and the array)."""
+    scene = bpy.context.scene
+    _viewport_differs_from_render(scene)
+    cycles = render_cycles_passes(scene, WIDTH, HEIGHT, samples=32)
+    settings = {name: getattr(scene.render, name) for name in ("engine", "resolution_x",
+                                                              "resolution_percentage")}
+    theirs = preview(tmp_path / "preview.exr")
+    assert {name: getattr(scene.render, name) for name in settings} == settings  # put back
+    ours = f12(scene, tmp_path / "f12.exr")
+    for passes in (theirs, ours):  # the default surface's grey (0.8) over half the pixel
+        covered = passes["Diffuse Color"].mean(-1) > 0.4
+        assert coverage_agreement(covered, cycles) > 0.99
+        assert rel(passes["Combined"], cycles["Combined"]) < 0.1
+    for name in PASSES:
+        assert rel(ours[name], theirs[name]) < 1e-6, name
 
 
 @pytest.mark.parametrize("kind", ["skinned", "skinned_cm_rig", "rigid_animated"])
