@@ -60,6 +60,7 @@ import numpy as np
 
 from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
 from ...voxgi_addon.scene.textures import PARAM_VARIANTS, srgb_to_linear, variant_values, within_max_size
+from . import udim
 from .left_out import material_notes
 from .node_groups import route_to_emission, surface_node
 from .object_random import random_base_color
@@ -115,8 +116,11 @@ def _srgb_bytes(image) -> bool:
 
 
 def image_rgb(image) -> np.ndarray | None:
-    """(H, W, 3) float32 linear RGB of an image (row 0 = bottom), None without pixels; raises
-    ``_NeedsBake`` for colour spaces only Blender can convert."""
+    """(H, W, 3) float32 linear RGB of an image (row 0 = bottom; a UDIM image's tiles in one
+    atlas, ``udim``), None without pixels; raises ``_NeedsBake`` for colour spaces only Blender
+    can convert."""
+    if image.source == "TILED":
+        return udim.atlas(image, image_rgb)
     if image.source not in ("FILE", "GENERATED"):
         raise _NeedsBake(f"the image '{image.name}' is a {image.source.lower()}")
     pixels = _image_pixels(image)
@@ -211,12 +215,14 @@ def _cached_image(image) -> tuple[np.ndarray | None, str]:
     image is unchanged: a file image by its path and modification time, a packed one by its
     packed bytes (each snapshot of a live viewport would otherwise read every pixel again); an
     image edited in this session (``is_dirty``) is read, and its pixels hashed, every time."""
-    if image.is_dirty or image.source not in ("FILE", "GENERATED"):
+    if image.is_dirty or image.source not in ("FILE", "GENERATED", "TILED"):
         rgb = image_rgb(image)
         content = None if rgb is None else hashlib.blake2b(rgb.tobytes(), digest_size=16).hexdigest()
         return rgb, _digest(image.name_full, content)
     packed = image.packed_file
-    if packed is not None:
+    if image.source == "TILED":
+        content = udim.content_key(image)
+    elif packed is not None:
         content = hashlib.blake2b(bytes(packed.data), digest_size=16).hexdigest()
     elif image.source == "FILE":
         content = _image_key(image)
@@ -229,6 +235,13 @@ def _cached_image(image) -> tuple[np.ndarray | None, str]:
             _IMAGES.pop(next(iter(_IMAGES)))
         _IMAGES[key] = image_rgb(image)
     return _IMAGES[key], _digest(key)
+
+
+def _texels_mean(pixels: np.ndarray, image) -> np.ndarray:
+    """(C,) float32 mean of an image's texels (a UDIM atlas': of its tiles alone)."""
+    if image.source == "TILED":
+        return udim.mean_over_tiles(pixels, image).astype(np.float32)
+    return pixels.reshape(-1, pixels.shape[-1]).mean(axis=0).astype(np.float32)
 
 
 def _digest(*values) -> str:
@@ -504,7 +517,7 @@ class MaterialTable:
                 self._warn(f"Material '{name}': image '{node.image.name_full}' has no pixels "
                            f"(missing or unreadable file?); using the {socket.name} value instead")
                 return _rgb(socket), None, None, ""
-            mean = texture.pixels[..., :3].reshape(-1, 3).mean(axis=0).astype(np.float32)
+            mean = _texels_mean(texture.pixels[..., :3], node.image)
             return mean, texture, None, uv_map
         except _NeedsBake as why:
             if not bakeable:
@@ -540,7 +553,7 @@ class MaterialTable:
             except _NeedsBake:
                 rgb = None
             if rgb is not None:
-                mean = rgb.reshape(-1, 3).mean(axis=0)
+                mean = _texels_mean(rgb, node.image)
                 self._warn(f"{name} comes from the image '{node.image.name_full}': the "
                            "preview uses its mean (Roughness / Metallic from two images are not "
                            "read per texel yet)")
@@ -573,7 +586,7 @@ class MaterialTable:
                     f"Material '{material.name_full}': image '{node.image.name_full}' has no "
                     "pixels (missing or unreadable file?); using the Base Color value instead")
                 return _rgb(socket), None, None, ""
-            mean = texture.pixels[..., :3].reshape(-1, 3).mean(axis=0).astype(np.float32)
+            mean = _texels_mean(texture.pixels[..., :3], node.image)
             return mean, texture, None, uv_map
         except _NeedsBake:
             return _rgb(socket), None, ("EMIT", socket.name), ""
@@ -811,14 +824,18 @@ def _image_texture(node, with_alpha: bool = False):
     rgb, image_key = _cached_image(node.image)
     if rgb is None:
         return None, ""
-    if with_alpha:
-        alpha = _image_pixels(node.image)[..., 3:4]  # alpha is linear whatever the colour space
+    tiled = node.image.source == "TILED"
+    if with_alpha:  # alpha is linear whatever the colour space
+        alpha = udim.atlas(node.image, lambda tile: _image_pixels(tile)[..., 3:4]) if tiled \
+            else _image_pixels(node.image)[..., 3:4]
         rgb = np.concatenate([rgb, alpha], axis=-1)
         image_key = f"{image_key}+alpha"
+    if tiled:  # UVs to the atlas' cells; beyond its last tiles its edge, not tile 1001 again
+        transform = udim.uv_scale(node.image) @ transform
     texture = TextureData(
         name=node.image.name_full, pixels=within_max_size(rgb),
         interpolation="Closest" if node.interpolation == "Closest" else "Linear",
-        extension=node.extension, uv_transform=transform, key=image_key,
+        extension="EXTEND" if tiled else node.extension, uv_transform=transform, key=image_key,
         srgb_bytes=_srgb_bytes(node.image))
     return texture, uv_map
 

@@ -109,7 +109,10 @@ def _image_key(image) -> tuple:
     key = ("image", image.name_full, path, mtime, image.source, tuple(image.size), image.is_float,
            image.colorspace_settings.name, image.alpha_mode, image.packed_file is not None)
     packed = image.packed_file
-    if packed is not None and image.source == "FILE" and not image.is_dirty:
+    if image.source == "TILED" and not image.is_dirty:  # its tiles' files or packed bytes
+        from .udim import content_key
+        key += (content_key(image),)
+    elif packed is not None and image.source == "FILE" and not image.is_dirty:
         # its file's bytes, packed: a tenth of its decoded pixels to hash, and no decoding
         key += (hashlib.blake2b(bytes(packed.data), digest_size=16).hexdigest(),)
     elif image.source != "FILE" or image.is_dirty or packed is not None:

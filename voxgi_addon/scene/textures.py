@@ -103,11 +103,12 @@ def _halve(image: np.ndarray) -> np.ndarray:
     return image
 
 
-def within_max_size(pixels: np.ndarray) -> np.ndarray:
-    """``pixels`` halved (``mip_pyramid``'s steps, float32) until neither side exceeds MAX_SIZE:
-    what the snapshot keeps of a larger image (the preview never samples finer levels)."""
+def within_max_size(pixels: np.ndarray, max_size: int = MAX_SIZE) -> np.ndarray:
+    """``pixels`` halved (``mip_pyramid``'s steps, float32) until neither side exceeds
+    ``max_size``: what the snapshot keeps of a larger image (the preview never samples finer
+    levels than MAX_SIZE)."""
     image = np.asarray(pixels, np.float32)
-    while max(image.shape[:2]) > MAX_SIZE:
+    while max(image.shape[:2]) > max_size:
         image = _halve(image)
     return image
 
