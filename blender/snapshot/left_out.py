@@ -17,6 +17,7 @@ the render (``render_notes``: the camera's depth of field, motion blur).
 """
 from __future__ import annotations
 
+from . import shader_mix
 from .node_groups import GroupedSocket
 from .world_map import _follow, _NeedsBake
 
@@ -121,25 +122,19 @@ def material_notes(material) -> list[str]:
     return list(dict.fromkeys(notes))
 
 
-GLOSSY_SHADERS = ("BSDF_GLOSSY", "BSDF_ANISOTROPIC")
-
-
 def _shader_mix_notes(surface) -> list[str]:
-    """A surface the preview cannot read as one Principled BSDF: a Mix or Add Shader (but the
-    cut-out mix of a Transparent BSDF and a Principled BSDF, which it reads) is shaded with one
-    Principled BSDF of it, or, with none, by its diffuse colour alone; a Glossy BSDF alone by
-    its diffuse colour (none: black)."""
-    if surface is None or not surface.is_linked:
-        return []
+    """A surface the preview cannot read as one Principled BSDF: a Mix or Add Shader that
+    ``shader_mix`` does not read (an Add Shader, a mix with another shader, a mix inside a
+    group; the cut-out mix of a Transparent BSDF and a Principled BSDF is read too) is shaded
+    with one Principled BSDF of it, or, with none, by its diffuse colour alone."""
+    if surface is None or not surface.is_linked or shader_mix.read(surface.id_data) is not None:
+        return []  # nothing, or a mix the preview reads as one mixed Principled BSDF
     try:
         top, _ = _follow(GroupedSocket(surface, ()))
     except _NeedsBake:
         return []
     if top is None:
         return []
-    if top.type in GLOSSY_SHADERS:
-        return ["its glossy shader (the preview shades the surface by its diffuse colour "
-                "alone: a Principled BSDF renders it)"]
     if top.type not in ("MIX_SHADER", "ADD_SHADER"):
         return []
     kinds = [n.type for n in _upstream(top.inputs[1] if top.type == "MIX_SHADER" else

@@ -60,7 +60,7 @@ import numpy as np
 
 from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
 from ...voxgi_addon.scene.textures import PARAM_VARIANTS, srgb_to_linear, variant_values, within_max_size
-from . import udim
+from . import shader_mix, udim
 from .left_out import material_notes
 from .node_groups import route_to_emission, surface_node
 from .object_random import random_base_color
@@ -385,6 +385,9 @@ class MaterialTable:
         node_tree = material.node_tree
         principled = None if node_tree is None else surface_node(node_tree, "BSDF_PRINCIPLED")
         self._left_out(material)
+        mixed = None if node_tree is None else shader_mix.read(node_tree)
+        if mixed is not None:  # a Mix Shader of BSDFs, a Glossy BSDF: one mixed Principled
+            return self._mixed(material, mixed)
         glow = None if node_tree is None or principled is not None else \
             surface_node(node_tree, "EMISSION")
         if glow is not None:  # an Emission shader: light, and nothing reflected (Cycles)
@@ -493,6 +496,27 @@ class MaterialTable:
             ior=ior,
         )
         return data, bakes or None, uv_map
+
+    def _mixed(self, material, shader):
+        """(MaterialData, what to bake, UV map) of a shader mix (``shader_mix``): its mixed
+        parameters, the Base Color and the Roughness / Metallic / Specular baked by Cycles
+        where a Fac or an input comes from nodes."""
+        if shader_mix.needs_bake(shader, ("emission",)):
+            self._warn(f"Material '{material.name_full}': the emission of its mixed shaders "
+                       "comes from nodes the preview does not evaluate there yet; using their values")
+        data = MaterialData(
+            name=material.name_full,
+            base_color=np.clip(shader_mix.value(shader, "base"), 0.0, None).astype(np.float32),
+            roughness=float(shader_mix.value(shader, "roughness")),
+            metallic=float(shader_mix.value(shader, "metallic")),
+            specular=float(shader_mix.value(shader, "specular")),
+            emission=shader_mix.value(shader, "emission").astype(np.float32))
+        bakes = []
+        if shader_mix.needs_bake(shader, ("base",)):
+            bakes.append(("EMIT", shader_mix.BASE))
+        if shader_mix.needs_bake(shader, ("roughness", "metallic", "specular")):
+            bakes.append(("EMIT", shader_mix.PARAMS))
+        return data, tuple(bakes) or None, ""
 
     def _emission(self, material, socket, bakeable: bool = True):
         """(mean colour (3,), TextureData or None, what to bake or None, UV map) of an Emission
@@ -746,6 +770,17 @@ class MaterialTable:
                 extension="EXTEND", key=f"{key}+alpha")
             return dataclasses.replace(data, alpha_texture=self._add_texture(alpha))
         mean = texture.pixels.reshape(-1, 3).mean(axis=0).astype(np.float32)
+        if socket == shader_mix.PARAMS:  # Roughness, Metallic per texel; Specular's mean
+            rgb = texture.pixels
+            params = np.zeros(rgb.shape[:2] + (4,), np.float32)
+            params[..., :2] = np.clip(rgb[..., :2], 0.0, 1.0)
+            params[..., 3] = 1.0
+            roughness, metallic, specular = (float(c) for c in rgb.reshape(-1, 3).mean(axis=0))
+            return dataclasses.replace(
+                data, roughness=roughness, metallic=metallic, specular=specular,
+                param_texture=self._add_texture(TextureData(
+                    name=f"{texture.name} (roughness, metallic)", pixels=params,
+                    interpolation="Linear", extension="EXTEND", key=f"{key}+params")))
         if socket == "Emission Color":  # the emission per texel, × the material's strength
             return dataclasses.replace(
                 data, emission=(mean * np.float32(data.emission_strength)).astype(np.float32),
@@ -900,7 +935,9 @@ def bake_socket(material, mode: str, socket_name: str, surface: Surface) -> np.n
             mesh.uv_layers.active = mesh.uv_layers[render_uv]
         copy = material.copy()
         tree = copy.node_tree
-        if mode == "EMIT":
+        if socket_name in shader_mix.EXPRESSIONS:
+            shader_mix.route_to_emission(tree, socket_name)
+        elif mode == "EMIT":
             route_to_emission(tree, socket_name, groups)
         image = bpy.data.images.new("VoxGI Bake", BAKE_SIZE, BAKE_SIZE, float_buffer=True,
                                     alpha=False)

@@ -202,14 +202,16 @@ def test_light_settings_the_preview_leaves_out_are_named(voxgi, tmp_path):
 
 
 def test_shader_mixes_the_preview_shades_as_one_bsdf_are_named(voxgi):
-    """A Mix Shader of a Diffuse and a Glossy BSDF (shaded by its diffuse colour alone), of two
-    Principled BSDFs (with one of them) and a Glossy BSDF alone are named; the cut-out mix of
-    a Transparent BSDF and a Principled BSDF, which the preview reads, is not."""
+    """An Add Shader of a Diffuse and a Glossy BSDF (shaded by its diffuse colour alone) and a
+    Mix Shader of a Translucent and a Principled BSDF (with the Principled alone) are named;
+    the mixes the preview reads as one mixed Principled BSDF (shader_mix: Diffuse and Glossy,
+    two Principled BSDFs, a Glossy alone) and the cut-out mix of a Transparent BSDF and a
+    Principled BSDF are not."""
     from voxgi.blender.snapshot.scene import take_snapshot
 
     scene = bpy.context.scene
 
-    def material(name, first, second=None):
+    def material(name, first, second=None, mixer="ShaderNodeMixShader"):
         made = bpy.data.materials.new(name)
         if made.node_tree is None:  # Blender < 5.0 creates materials without nodes
             made.use_nodes = True
@@ -221,25 +223,29 @@ def test_shader_mixes_the_preview_shades_as_one_bsdf_are_named(voxgi):
         if second is None:
             tree.links.new(a.outputs[0], surface)
             return made
-        mix = tree.nodes.new("ShaderNodeMixShader")
-        tree.links.new(a.outputs[0], mix.inputs[1])
-        tree.links.new(tree.nodes.new(second).outputs[0], mix.inputs[2])
+        mix = tree.nodes.new(mixer)
+        shaders = [s for s in mix.inputs if s.type == "SHADER"]
+        tree.links.new(a.outputs[0], shaders[0])
+        tree.links.new(tree.nodes.new(second).outputs[0], shaders[1])
         tree.links.new(mix.outputs[0], surface)
         return made
 
     quad = [(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)]
+    names = ("Varnish", "Blend", "Mirror", "Leaf", "Added", "Skin")
     for k, (name, made) in enumerate((
             ("Varnish", material("Varnish", "ShaderNodeBsdfDiffuse", "ShaderNodeBsdfGlossy")),
             ("Blend", material("Blend", "ShaderNodeBsdfPrincipled", "ShaderNodeBsdfPrincipled")),
             ("Mirror", material("Mirror", "ShaderNodeBsdfGlossy")),
-            ("Leaf", material("Leaf", "ShaderNodeBsdfTransparent", "ShaderNodeBsdfPrincipled")))):
+            ("Leaf", material("Leaf", "ShaderNodeBsdfTransparent", "ShaderNodeBsdfPrincipled")),
+            ("Added", material("Added", "ShaderNodeBsdfDiffuse", "ShaderNodeBsdfGlossy",
+                               "ShaderNodeAddShader")),
+            ("Skin", material("Skin", "ShaderNodeBsdfTranslucent", "ShaderNodeBsdfPrincipled")))):
         gi_scenes._mesh(scene, name, quad, [(0, 1, 2, 3)], (made,)).location.x = 3 * k
     warnings = take_snapshot(scene).warnings
-    named = {name: [w for w in warnings if w.startswith(f"Object '{name}'")]
-             for name in ("Varnish", "Blend", "Mirror", "Leaf")}
-    assert "Mix Shader (the preview shades the surface by its diffuse colour alone" in \
-        named["Varnish"][0]
+    named = {name: [w for w in warnings if w.startswith(f"Object '{name}'")] for name in names}
+    assert "Add Shader (the preview shades the surface by its diffuse colour alone" in \
+        named["Added"][0]
     assert "Mix Shader (the preview shades the surface with one Principled BSDF" in \
-        named["Blend"][0]
-    assert "its glossy shader" in named["Mirror"][0]
-    assert named["Leaf"] == []
+        named["Skin"][0]
+    for name in ("Varnish", "Blend", "Mirror", "Leaf"):
+        assert named[name] == [], named[name]
