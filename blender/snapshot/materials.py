@@ -61,6 +61,7 @@ import numpy as np
 from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
 from ...voxgi_addon.scene.textures import PARAM_VARIANTS, srgb_to_linear, variant_values, within_max_size
 from . import shader_mix, udim
+from .auto_uvs import polygon_uvs
 from .left_out import material_notes
 from .node_groups import route_to_emission, surface_node
 from .object_random import random_base_color
@@ -254,12 +255,21 @@ class Surface:
     key : the MeshData key; obj_eval : the evaluated object; mesh : its evaluated mesh
     (``Object.to_mesh()``, valid while the snapshot reads it); slot_materials : its slots'
     materials (``bpy.types.Material`` or None); digest : content key of the triangles and UVs
-    (what a bake depends on besides the node tree); has_uvs : the mesh has a UV map."""
+    (what a bake depends on besides the node tree); has_uvs : the mesh has a UV map.
+    auto_uvs : (L, 2) per-loop UVs a bake over a mesh without a UV map made
+    (``use_auto_uvs``), which the snapshot's triangles read too; None."""
+
+    auto_uvs = None
 
     def __init__(self, key: str, obj_eval, mesh, slot_materials: list, digest: str,
                  has_uvs: bool):
         self.key, self.obj_eval, self.mesh, self.slot_materials = key, obj_eval, mesh, slot_materials
         self.digest, self.has_uvs = digest, has_uvs
+
+    def use_auto_uvs(self) -> None:
+        """Lay the mesh's polygons out in the UV square (``auto_uvs.polygon_uvs``), once."""
+        if self.auto_uvs is None:
+            self.auto_uvs = polygon_uvs(self.mesh)
 
 
 class MaterialTable:
@@ -735,11 +745,8 @@ class MaterialTable:
             self._warn(f"Material '{name}': its {what} needs a bake by Cycles, which needs a "
                        "mesh; using its value")
             return data
-        if not surface.has_uvs:
-            self._warn(f"Material '{name}' on '{surface.key}': its {what} comes from nodes "
-                       "Cycles must evaluate (baked into the mesh's UV map), but the mesh has "
-                       "no UV map; using its value")
-            return data
+        if not surface.has_uvs:  # its polygons laid out in the UV square for the bake
+            surface.use_auto_uvs()
         key = _digest(_tree_key(material.node_tree), mode, socket, surface.digest, BAKE_SIZE,
                       BAKE_SAMPLES, tuple(np.array(surface.obj_eval.matrix_world).ravel())
                       if _uses_object_space(material.node_tree) else None)
@@ -918,9 +925,20 @@ def bake_socket(material, mode: str, socket_name: str, surface: Surface) -> np.n
         slots = [i for i, m in enumerate(surface.slot_materials)
                  if m is not None and m.original == material]
         last = max(len(surface.slot_materials) - 1, 0)
+        source = surface.mesh
+        if surface.auto_uvs is not None:  # a copy of the mesh with them as its UV map
+            bm = bmesh.new()
+            try:
+                bm.from_mesh(source)
+                bm.to_mesh(mesh)
+            finally:
+                bm.free()
+            mesh.uv_layers.new(name="VoxGI Auto UVs").data.foreach_set(
+                "uv", np.ascontiguousarray(surface.auto_uvs, np.float32).ravel())
+            source, render_uv = mesh, "VoxGI Auto UVs"
         bm = bmesh.new()
         try:
-            bm.from_mesh(surface.mesh)
+            bm.from_mesh(source)
             others = [f for f in bm.faces if min(f.material_index, last) not in slots]
             if others:
                 bmesh.ops.delete(bm, geom=others, context="FACES")

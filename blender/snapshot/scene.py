@@ -33,6 +33,7 @@ from .environment import read_camera, read_light, read_world
 from .left_out import left_out_line, light_notes, notes_of, render_notes, type_note
 from .materials import MaterialTable, Surface
 from .mesh import (
+    at_corners,
     material_lookup,
     named_uvs,
     read_corner_normals,
@@ -193,6 +194,8 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
         if used is not None:
             used[entry.key] = indices
         uvs = arrays.uvs
+        if uvs is None and surface.auto_uvs is not None:  # a bake laid its polygons out
+            uvs = at_corners(surface.auto_uvs.ravel(), arrays.corners, 2)
         if uvs is not None and any(table.uv_map(int(i)) for i in indices[indices >= 0]):
             uvs = named_uvs(evaluated.mesh, arrays.corners, materials, table, uvs)
         skin = None

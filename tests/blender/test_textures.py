@@ -11,7 +11,9 @@ import pathlib
 import bpy
 import numpy as np
 import pytest
+import scenes
 import texture_scenes
+from cycles_reference import render_cycles_passes
 
 REFS = pathlib.Path(__file__).resolve().parents[1] / "data" / "texture_refs"
 PASSES = ("Combined", "Diffuse Color", "Diffuse Direct", "Diffuse Indirect", "Glossy Indirect")
@@ -287,23 +289,95 @@ def test_roughness_from_an_image_channel_is_read_per_texel(voxgi):
     np.testing.assert_allclose(floor.emission, 2.0 * floor.base_color, rtol=1e-5)
 
 
-def test_a_procedural_material_on_a_mesh_without_uvs_warns(voxgi):
-    """Cycles bakes into a UV map: a mesh without one keeps the socket's value, with a warning
-    naming the material and the mesh (the wall with UVs is still baked)."""
+def test_a_procedural_material_on_a_mesh_without_uvs_is_baked_over_its_own_layout(voxgi, tmp_path):
+    """A mesh without a UV map (never unwrapped) whose material is procedural: its polygons
+    are laid out in the UV square for the bake (``auto_uvs``) and its triangles read them, so
+    the checker on Generated coordinates is drawn as Cycles draws it. (It kept the socket's
+    plain value, with a warning: Diffuse Color 0.29 off Cycles' over the wall.)"""
     from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.voxgi_addon.files.exr import read_exr_passes
 
-    build()
+    scene = build()
     wall = bpy.data.materials["Checker Wall"]
     left = bpy.data.objects["Left Wall"]
     assert len(left.data.uv_layers) == 0
     left.data.materials[0] = wall
-    snapshot = take_snapshot(bpy.context.scene)
-    assert any("Checker Wall" in w and "Left Wall" in w and "no UV map" in w
-               for w in snapshot.warnings), snapshot.warnings
+    snapshot = take_snapshot(scene)
+    assert not any("UV" in w for w in snapshot.warnings), snapshot.warnings
     variants = [m for m in snapshot.materials if m.name == "Checker Wall"]
-    assert sorted(m.base_color_texture >= 0 for m in variants) == [False, True]
-    untextured = next(m for m in variants if m.base_color_texture < 0)
-    np.testing.assert_allclose(untextured.base_color, 0.5, atol=1e-6)  # the socket's value
+    assert [m.base_color_texture >= 0 for m in variants] == [True, True]
+    assert snapshot.meshes["Left Wall"].uvs is not None
+    assert len(left.data.uv_layers) == 0  # the user's mesh is unchanged
+    width, height = texture_scenes.WIDTH, texture_scenes.HEIGHT
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=width,
+                                        resolution_y=height) == {"FINISHED"}
+    ours = read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"]
+    cycles = render_cycles_passes(scene, width, height, 16)["Diffuse Color"]
+    wall_pixels = np.zeros((height, width), bool)
+    wall_pixels[:, : width // 5] = True  # the left wall fills the image's left fifth
+    assert relative_l1(ours, cycles, wall_pixels) < 0.06
+
+
+def test_vertex_colours_on_a_mesh_without_uvs_are_drawn_as_in_cycles(voxgi, tmp_path):
+    """A vertex-painted ball, never unwrapped (a Color Attribute into the Base Color): red on
+    one side, blue on the other, as Cycles draws it (it was the socket's grey)."""
+    from voxgi.voxgi_addon.files.exr import read_exr_passes
+
+    scene = bpy.context.scene
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=1.0)
+    mesh = bpy.context.object.data
+    while mesh.uv_layers:
+        mesh.uv_layers.remove(mesh.uv_layers[0])
+    paint = mesh.color_attributes.new("Paint", "BYTE_COLOR", "CORNER")
+    corners = np.array([mesh.vertices[loop.vertex_index].co.x for loop in mesh.loops])
+    colours = np.zeros((len(mesh.loops), 4), np.float32)
+    colours[:, 0], colours[:, 2], colours[:, 1], colours[:, 3] = corners > 0, corners <= 0, 0.3, 1
+    paint.data.foreach_set("color", colours.ravel())
+    material = bpy.data.materials.new("Painted")
+    tree = material.node_tree
+    attribute = tree.nodes.new("ShaderNodeVertexColor")
+    attribute.layer_name = "Paint"
+    tree.links.new(attribute.outputs["Color"],
+                   next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED").inputs["Base Color"])
+    mesh.materials.append(material)
+    scenes.camera_looking_at((0.0, -5.0, 0.0), scene=scene)
+    bpy.ops.object.light_add(type="SUN", rotation=(0.6, 0.2, 0.0))
+    width, height = 64, 48
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=width,
+                                        resolution_y=height) == {"FINISHED"}
+    ours = read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"]
+    cycles = render_cycles_passes(scene, width, height, 16)["Diffuse Color"]
+    ball = cycles.max(-1) > 0.2
+    assert ball.sum() > 400
+    assert relative_l1(ours, cycles, ball) < 0.05
+    for column in (20, 44):  # the blue side, the red side
+        np.testing.assert_allclose(ours[24, column], cycles[24, column], atol=0.05)
+
+
+def test_the_layout_of_a_mesh_without_uvs_keeps_polygons_apart_and_flat(voxgi):
+    """Every polygon in its own square of the UV square, none overlapping, each drawn flat
+    (its UV distances ∝ its own), the larger polygons the larger squares."""
+    from voxgi.blender.snapshot.auto_uvs import polygon_uvs
+
+    bpy.ops.mesh.primitive_cylinder_add(vertices=12, radius=1.0, depth=3.0)  # 2 n-gons, 12 quads
+    mesh = bpy.context.object.data
+    uvs = polygon_uvs(mesh).astype(np.float64)
+    assert uvs.min() >= 0.0 and uvs.max() <= 1.0
+    boxes = []
+    for polygon in mesh.polygons:
+        loops = list(polygon.loop_indices)
+        points = np.array([mesh.vertices[mesh.loops[i].vertex_index].co[:] for i in loops])
+        flat = uvs[loops]
+        # flat: distances between corners in UV ∝ in space, one ratio per polygon
+        ratio = np.linalg.norm(flat[1:] - flat[0], axis=-1) / np.linalg.norm(points[1:] - points[0], axis=-1)
+        np.testing.assert_allclose(ratio, ratio[0], rtol=1e-4)
+        boxes.append((flat.min(0), flat.max(0), polygon.area))
+    for i, (low, high, _) in enumerate(boxes):
+        for other_low, other_high, _ in boxes[i + 1:]:
+            assert not ((low < other_high).all() and (other_low < high).all())
+    # each square's side ∝ √(its polygon's area): the texels spread evenly over the surface
+    sides = np.array([max(high - low) / np.sqrt(area) for low, high, area in boxes])
+    np.testing.assert_allclose(sides, sides[0], rtol=1e-3)
 
 
 def test_a_procedural_material_in_a_slot_no_face_uses_is_not_baked(voxgi):
@@ -378,7 +452,6 @@ def test_texel_blends_match_cycles_for_byte_and_float_images(voxgi, float_buffer
     linear values: across the blends between a dark and a light texel, VoxGI's Diffuse Color
     follows Cycles' for both (relative L1 ≤ 0.02). Blended linearly, the byte image read 0.36
     half-way between two texels where Cycles reads 0.17 (relative L1 0.35)."""
-    from cycles_reference import render_cycles_passes
 
     width, height = 64, 16
     ours, _ = preview(build_two_texels(float_buffer), "AUTO", width, height)
