@@ -1,8 +1,9 @@
 """Materials between Blender and GFG files (main thread).
 
 A material whose surface is a Principled BSDF becomes a PRINCIPLED GFG material (its input
-values, and the image linked into Base Color as a texture path); any other becomes LAMBERT
-with the viewport colour. Import builds the same node setup back, so exporting an imported
+values, and the image linked into Base Color as a texture path); a shader mix the preview
+reads as one Principled BSDF (``snapshot.shader_mix``) becomes one of its mixed values; any
+other becomes LAMBERT with the viewport colour. Import builds the same node setup back, so exporting an imported
 material gives the same values. Texture paths are stored relative to the .gfg file's folder
 with '/' separators (absolute when on another drive).
 """
@@ -15,6 +16,7 @@ import numpy as np
 
 from ...voxgi_addon.files.gfg import Material
 from ...voxgi_addon.files.gfg.spec import LambertSlot, MaterialLogic, PrincipledSlot
+from ..snapshot import shader_mix
 from ..snapshot.node_groups import surface_node
 
 # Principled BSDF input per uniform slot (values of 1, 3 or 4 floats).
@@ -49,6 +51,9 @@ def texture_path(image, directory: str) -> str | None:
 def export_material(material, directory: str, warnings: list[str]) -> Material:
     """The GFG material of a ``bpy.types.Material``."""
     node_tree = material.node_tree
+    mixed = None if node_tree is None else shader_mix.read(node_tree)
+    if mixed is not None:  # a Mix Shader of BSDFs, a Glossy: one Principled of mixed values
+        return _mixed(material, mixed, warnings)
     principled = None if node_tree is None else surface_node(node_tree, "BSDF_PRINCIPLED")
     if principled is None:
         return Material(material.name_full, MaterialLogic.LAMBERT,
@@ -65,6 +70,29 @@ def export_material(material, directory: str, warnings: list[str]) -> Material:
         else:
             warnings.append(f"Material '{material.name}': Base Color comes from a '{node.name}' node "
                             "without an image file; only its value is exported")
+    return result
+
+
+def _mixed(material, shader, warnings: list[str]) -> Material:
+    """A shader mix (``snapshot.shader_mix``) as the PRINCIPLED material the preview reads:
+    its mixed values (a Fac or input from nodes at its own value, said in ``warnings``)."""
+    result = Material(material.name_full, MaterialLogic.PRINCIPLED)
+    base = np.clip(shader_mix.value(shader, "base"), 0.0, None)
+    emission = shader_mix.value(shader, "emission")
+    strength = float(max(emission.max(), 1.0))
+    values = {PrincipledSlot.BASE_COLOR: [*base, 1.0],
+              PrincipledSlot.ROUGHNESS: [shader_mix.value(shader, "roughness")],
+              PrincipledSlot.METALLIC: [shader_mix.value(shader, "metallic")],
+              PrincipledSlot.SPECULAR: [shader_mix.value(shader, "specular")],
+              PrincipledSlot.EMISSION_COLOR: [*(emission / strength), 1.0],
+              PrincipledSlot.EMISSION_STRENGTH: [strength if emission.any() else 0.0],
+              PrincipledSlot.ALPHA: [1.0]}
+    for slot, value in values.items():
+        result.uniforms[slot] = np.array(value, np.float32)
+    parameters = ("base", "roughness", "metallic", "specular", "emission")
+    if shader_mix.needs_bake(shader, parameters):
+        warnings.append(f"Material '{material.name}': its mixed shaders take values from nodes; "
+                        "their own values are exported, mixed")
     return result
 
 

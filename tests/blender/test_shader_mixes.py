@@ -154,3 +154,23 @@ def test_a_masked_mix_is_each_side_per_texel_as_in_cycles(voxgi, tmp_path):
         assert error < 0.1, (name, error)
     gold = (cycles["Diffuse Color"].max(-1) < 0.05) & floor  # the metal squares
     assert 0.3 < gold.sum() / floor.sum() < 0.7
+
+
+def test_a_gfg_export_writes_a_mix_as_the_principled_the_preview_reads(voxgi, tmp_path):
+    from voxgi.blender.gfg.material import export_material
+    from voxgi.voxgi_addon.files.gfg.spec import MaterialLogic, PrincipledSlot
+
+    half, tree, output = _bare("Half Gold")
+    _mix(tree, output, _principled(tree, (0.8, 0.1, 0.1), 0.6),
+         _principled(tree, (1.0, 0.8, 0.4), 0.2, metallic=1.0), fac=0.25)
+    warnings = []
+    exported = {m.name: export_material(m, str(tmp_path), warnings) for m in (half, plastic())}
+    gold, shiny = exported["Half Gold"], exported["Plastic"]
+    assert gold.logic == shiny.logic == MaterialLogic.PRINCIPLED
+    np.testing.assert_allclose(gold.uniforms[PrincipledSlot.BASE_COLOR], [0.85, 0.275, 0.175, 1.0],
+                               atol=1e-6)
+    np.testing.assert_allclose(gold.uniforms[PrincipledSlot.METALLIC], [0.25], atol=1e-6)
+    np.testing.assert_allclose(gold.uniforms[PrincipledSlot.ROUGHNESS], [0.5], atol=1e-6)
+    np.testing.assert_allclose(shiny.uniforms[PrincipledSlot.SPECULAR], [0.5], atol=1e-3)
+    np.testing.assert_allclose(shiny.uniforms[PrincipledSlot.ROUGHNESS], [0.15], atol=1e-6)
+    assert warnings == []  # the plastic's Fresnel is read, not a value taken from nodes
