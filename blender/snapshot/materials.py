@@ -74,6 +74,7 @@ MAX_VARIANT_MATERIALS = 96  # materials with Roughness / Metallic per texel (eac
 # cost the snapshot 130 ms evaluated one by one); a ramp's colour moves by at most 1/512 of
 # its range
 RANDOM_STEPS = 256
+AUTO_UVS = "VoxGI Auto UVs"  # the UV map of a bake over a layout of the mesh's polygons
 BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
 BAKE_SAMPLES = 8      # Cycles samples per texel (the texel's mean over its area)
 BAKE_MARGIN = 4       # texels the bake extends each UV island by (no dark seams when filtered)
@@ -260,6 +261,7 @@ class Surface:
     (``use_auto_uvs``), which the snapshot's triangles read too; None."""
 
     auto_uvs = None
+    uvs_in_square = True  # do the mesh's UVs stay in [0, 1]² (where a bake writes)?
 
     def __init__(self, key: str, obj_eval, mesh, slot_materials: list, digest: str,
                  has_uvs: bool):
@@ -319,7 +321,7 @@ class MaterialTable:
         index = self._index.get(key)
         if index is None:
             if bake is not None:
-                data = self._baked(material, data, bake, surface)
+                data, uv_map = self._baked(material, data, bake, surface, uv_map)
             index = self._index[key] = len(self.materials)
             if data.param_texture >= 0 and self._variant_materials >= MAX_VARIANT_MATERIALS:
                 self._warn(f"Material '{data.name}': more than {MAX_VARIANT_MATERIALS} "
@@ -730,14 +732,23 @@ class MaterialTable:
 
     # ------------------------------------------------------------------ bakes
 
-    def _baked(self, material, data: MaterialData, bakes, surface: Surface | None) -> MaterialData:
-        """``data`` with its sockets ``bakes`` ((mode, socket) pairs) baked by Cycles over
-        ``surface``'s UV map, or ``data`` with a warning where no bake can run."""
+    def _baked(self, material, data: MaterialData, bakes, surface: Surface | None,
+               uv_map: str) -> tuple[MaterialData, str]:
+        """(``data`` with its sockets ``bakes`` ((mode, socket) pairs) baked by Cycles, the UV
+        map its triangles read): over ``surface``'s UV map, or over a layout of its polygons
+        (``AUTO_UVS``: ``auto_uvs``) where it has none, or where its UVs leave the UV square
+        (tiling, UDIM tiles: a bake writes the square alone) and the material reads no image
+        through them itself; ``data`` with a warning where no bake can run."""
+        auto = surface is not None and surface.obj_eval is not None and (
+            not surface.has_uvs or (not surface.uvs_in_square and not _reads_images(data)))
+        if auto:
+            surface.use_auto_uvs()
         for bake in bakes:
-            data = self._baked_socket(material, data, bake, surface)
-        return data
+            data = self._baked_socket(material, data, bake, surface, auto)
+        return data, AUTO_UVS if auto else uv_map
 
-    def _baked_socket(self, material, data: MaterialData, bake, surface) -> MaterialData:
+    def _baked_socket(self, material, data: MaterialData, bake, surface,
+                      auto: bool = False) -> MaterialData:
         mode, socket = bake
         what = socket if mode == "EMIT" else "surface"
         name = material.name_full
@@ -745,9 +756,7 @@ class MaterialTable:
             self._warn(f"Material '{name}': its {what} needs a bake by Cycles, which needs a "
                        "mesh; using its value")
             return data
-        if not surface.has_uvs:  # its polygons laid out in the UV square for the bake
-            surface.use_auto_uvs()
-        key = _digest(_tree_key(material.node_tree), mode, socket, surface.digest, BAKE_SIZE,
+        key = _digest(_tree_key(material.node_tree), mode, socket, surface.digest, auto, BAKE_SIZE,
                       BAKE_SAMPLES, tuple(np.array(surface.obj_eval.matrix_world).ravel())
                       if _uses_object_space(material.node_tree) else None)
         texture = _BAKED.get(key)
@@ -760,7 +769,7 @@ class MaterialTable:
                            "voxgi.render_preview bakes it")
                 return data
             try:
-                pixels = bake_socket(material, mode, socket, surface)
+                pixels = bake_socket(material, mode, socket, surface, auto)
             except Exception as error:  # a failed bake must not fail the snapshot
                 self._warn(f"Material '{name}': baking its {what} with Cycles failed "
                            f"({error}); using its value")
@@ -794,6 +803,12 @@ class MaterialTable:
                 emission_texture=self._add_texture(texture))
         return dataclasses.replace(data, base_color=mean,
                                    base_color_texture=self._add_texture(texture))
+
+
+def _reads_images(data: MaterialData) -> bool:
+    """Does a material read an image through the mesh's UVs itself (not a bake)?"""
+    return max(data.base_color_texture, data.alpha_texture, data.param_texture,
+               data.normal_texture, data.emission_texture) >= 0
 
 
 def _image_channel(socket):
@@ -903,7 +918,8 @@ def can_bake() -> bool:
     return not (hasattr(bpy.app, "is_job_running") and bpy.app.is_job_running("RENDER"))
 
 
-def bake_socket(material, mode: str, socket_name: str, surface: Surface) -> np.ndarray:
+def bake_socket(material, mode: str, socket_name: str, surface: Surface,
+                auto: bool = False) -> np.ndarray:
     """(BAKE_SIZE, BAKE_SIZE, 3) float32 linear RGB of a material's socket (mode "EMIT": the
     Principled input ``socket_name``) or diffuse colour (mode "DIFFUSE") baked by Cycles over
     the active render UV map of ``surface``'s evaluated mesh (its faces of this material);
@@ -925,17 +941,18 @@ def bake_socket(material, mode: str, socket_name: str, surface: Surface) -> np.n
         slots = [i for i, m in enumerate(surface.slot_materials)
                  if m is not None and m.original == material]
         last = max(len(surface.slot_materials) - 1, 0)
-        source = surface.mesh
-        if surface.auto_uvs is not None:  # a copy of the mesh with them as its UV map
+        source, target = surface.mesh, render_uv
+        if auto:  # a copy of the mesh with the layout as the bake's UV map (the active one;
+            # the nodes still read the render one, as Cycles renders them)
             bm = bmesh.new()
             try:
                 bm.from_mesh(source)
                 bm.to_mesh(mesh)
             finally:
                 bm.free()
-            mesh.uv_layers.new(name="VoxGI Auto UVs").data.foreach_set(
+            mesh.uv_layers.new(name=AUTO_UVS).data.foreach_set(
                 "uv", np.ascontiguousarray(surface.auto_uvs, np.float32).ravel())
-            source, render_uv = mesh, "VoxGI Auto UVs"
+            source, target = mesh, AUTO_UVS
         bm = bmesh.new()
         try:
             bm.from_mesh(source)
@@ -949,8 +966,10 @@ def bake_socket(material, mode: str, socket_name: str, surface: Surface) -> np.n
             bm.free()
         if not mesh.polygons:  # the material is in a slot no face of this mesh uses
             return None
+        if target is not None and mesh.uv_layers.get(target) is not None:
+            mesh.uv_layers.active = mesh.uv_layers[target]  # what the bake writes through
         if render_uv is not None and mesh.uv_layers.get(render_uv) is not None:
-            mesh.uv_layers.active = mesh.uv_layers[render_uv]
+            mesh.uv_layers[render_uv].active_render = True  # what the nodes read
         copy = material.copy()
         tree = copy.node_tree
         if socket_name in shader_mix.EXPRESSIONS:

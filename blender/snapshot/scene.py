@@ -31,7 +31,7 @@ from ...voxgi_addon.scene.snapshot import (
 )
 from .environment import read_camera, read_light, read_world
 from .left_out import left_out_line, light_notes, notes_of, render_notes, type_note
-from .materials import MaterialTable, Surface
+from .materials import AUTO_UVS, MaterialTable, Surface
 from .mesh import (
     at_corners,
     material_lookup,
@@ -194,8 +194,10 @@ def _read_mesh(entry: _Entry, depsgraph, table: MaterialTable, warnings: list[st
         if used is not None:
             used[entry.key] = indices
         uvs = arrays.uvs
-        if uvs is None and surface.auto_uvs is not None:  # a bake laid its polygons out
-            uvs = at_corners(surface.auto_uvs.ravel(), arrays.corners, 2)
+        if surface.auto_uvs is not None:  # a bake over a layout of the polygons: its triangles
+            auto = at_corners(surface.auto_uvs.ravel(), arrays.corners, 2)
+            on = [int(i) for i in indices[indices >= 0] if table.uv_map(int(i)) == AUTO_UVS]
+            uvs = auto if uvs is None else np.where(np.isin(materials, on)[:, None, None], auto, uvs)
         if uvs is not None and any(table.uv_map(int(i)) for i in indices[indices >= 0]):
             uvs = named_uvs(evaluated.mesh, arrays.corners, materials, table, uvs)
         skin = None
@@ -263,6 +265,11 @@ class _LazySurface(Surface):
                  arrays: MeshArrays, has_uvs: bool):
         self.key, self.obj_eval, self.slot_materials = key, evaluated.obj_eval, slot_materials
         self.has_uvs, self._evaluated, self._arrays = has_uvs, evaluated, arrays
+
+    @property
+    def uvs_in_square(self) -> bool:
+        uvs = self._arrays.uvs
+        return uvs is None or len(uvs) == 0 or bool(uvs.min() >= -1e-3 and uvs.max() <= 1.0 + 1e-3)
 
     @property
     def mesh(self):

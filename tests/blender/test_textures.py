@@ -318,6 +318,42 @@ def test_a_procedural_material_on_a_mesh_without_uvs_is_baked_over_its_own_layou
     assert relative_l1(ours, cycles, wall_pixels) < 0.06
 
 
+def test_a_procedural_material_over_tiling_uvs_is_baked_over_its_own_layout(voxgi, tmp_path):
+    """A floor whose UVs tile (0–4, as artists scale them to repeat a texture) and whose Base
+    Color is a checker on those UVs through a Hue/Saturation node: a bake over the UV map writes
+    the UV square alone (a sixteenth of the floor), so it is baked over a layout of the
+    polygons, the nodes still reading the tiling UVs (it drew one stretched square: Diffuse
+    Color 0.56 off Cycles')."""
+    from voxgi.voxgi_addon.files.exr import read_exr_passes
+
+    scene = bpy.context.scene
+    bpy.ops.mesh.primitive_plane_add(size=4.0)
+    mesh = bpy.context.object.data
+    uvs = np.empty(len(mesh.loops) * 2, np.float32)
+    mesh.uv_layers[0].data.foreach_get("uv", uvs)
+    mesh.uv_layers[0].data.foreach_set("uv", uvs * 4.0)
+    material = bpy.data.materials.new("Tiled")
+    tree = material.node_tree
+    checker = tree.nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Scale"].default_value = 2.0
+    tree.links.new(tree.nodes.new("ShaderNodeTexCoord").outputs["UV"], checker.inputs["Vector"])
+    hue = tree.nodes.new("ShaderNodeHueSaturation")
+    tree.links.new(checker.outputs["Color"], hue.inputs["Color"])
+    tree.links.new(hue.outputs["Color"],
+                   next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED").inputs["Base Color"])
+    mesh.materials.append(material)
+    bpy.ops.object.light_add(type="SUN", rotation=(0.3, 0.2, 0.0))
+    scenes.camera_looking_at((0.0, 0.0, 6.0), target=(0.0, 0.0, 0.0), scene=scene)
+    size = 64
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=size,
+                                        resolution_y=size) == {"FINISHED"}
+    ours = read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"]
+    cycles = render_cycles_passes(scene, size, size, 16)["Diffuse Color"]
+    floor = cycles.max(-1) > 0.05
+    assert floor.mean() > 0.8
+    assert relative_l1(ours, cycles, floor) < 0.1
+
+
 def test_vertex_colours_on_a_mesh_without_uvs_are_drawn_as_in_cycles(voxgi, tmp_path):
     """A vertex-painted ball, never unwrapped (a Color Attribute into the Base Color): red on
     one side, blue on the other, as Cycles draws it (it was the socket's grey)."""
