@@ -257,8 +257,9 @@ class Surface:
     (``Object.to_mesh()``, valid while the snapshot reads it); slot_materials : its slots'
     materials (``bpy.types.Material`` or None); digest : content key of the triangles and UVs
     (what a bake depends on besides the node tree); has_uvs : the mesh has a UV map.
-    auto_uvs : (L, 2) per-loop UVs a bake over a mesh without a UV map made
-    (``use_auto_uvs``), which the snapshot's triangles read too; None."""
+    auto_uvs : (L, 2) per-loop UVs of a layout of the polygons (``use_auto_uvs``) that a bake
+    was made over — the mesh has no UV map, or its UVs leave the UV square — which the
+    snapshot's triangles of that material read too; None."""
 
     auto_uvs = None
     uvs_in_square = True  # do the mesh's UVs stay in [0, 1]² (where a bake writes)?
