@@ -2,8 +2,8 @@
 
 Artists layer materials with Mix Shaders: two Principled BSDFs under a mask (rust over paint,
 a metal inlay), a Diffuse and a Glossy BSDF mixed by a Fresnel (the classic plastic), a Glossy
-BSDF alone (a metal). The preview shades one Principled BSDF per texel, so a mix is read as
-one whose parameters are the mix of its leaves' (``Mixed``):
+BSDF alone (a metal), a Diffuse BSDF alone. The preview shades one Principled BSDF per texel,
+so a mix is read as one whose parameters are the mix of its leaves':
 
 * Each leaf is a Principled BSDF (its Base Color, Roughness, Metallic, Specular IOR Level and
   emission), a Diffuse BSDF (its Color; metallic 0, no specular layer), a Glossy BSDF (its
@@ -55,14 +55,16 @@ class Mix:
 
 def read(tree) -> Leaf | Mix | None:
     """The tree of the active output's Surface when this module reads it: a Mix Shader of
-    leaves (nested mixes too), or a Glossy BSDF alone; else None."""
+    leaves (nested mixes too), or a Diffuse or Glossy BSDF alone (a Diffuse of one colour needs
+    no bake); else None."""
     output = tree.get_output_node("ALL")
     surface = None if output is None else output.inputs.get("Surface")
     if surface is None or not surface.is_linked:
         return None
     try:
         node, _ = _follow(surface)
-        if node is None or node.type not in ("MIX_SHADER", "BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
+        if node is None or node.type not in ("MIX_SHADER", "BSDF_DIFFUSE", "BSDF_GLOSSY",
+                                             "BSDF_ANISOTROPIC"):
             return None
         return _shader(node, 0)
     except _NeedsBake:

@@ -71,7 +71,7 @@ def checker_inlay(name="Inlay"):
 
 
 def test_mixes_of_values_read_as_one_mixed_principled(voxgi):
-    from voxgi.blender.snapshot.materials import MaterialTable
+    from voxgi.blender.snapshot.materials import MaterialTable, bake_count
 
     half, tree, output = _bare("Half Gold")
     _mix(tree, output, _principled(tree, (0.8, 0.1, 0.1), 0.6),
@@ -81,9 +81,17 @@ def test_mixes_of_values_read_as_one_mixed_principled(voxgi):
     glossy.inputs["Color"].default_value = (0.9, 0.9, 0.9, 1.0)
     glossy.inputs["Roughness"].default_value = 0.1
     tree.links.new(glossy.outputs[0], output.inputs["Surface"])
+    matte, tree, output = _bare("Matte")
+    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    diffuse.inputs["Color"].default_value = (0.2, 0.5, 0.3, 1.0)
+    tree.links.new(diffuse.outputs[0], output.inputs["Surface"])
     warnings = []
     table = MaterialTable(warnings)
-    read = {m.name: table.materials[table.index_of(m)] for m in (half, chrome, plastic())}
+    bakes = bake_count()
+    read = {m.name: table.materials[table.index_of(m)] for m in (half, chrome, plastic(), matte)}
+    assert bake_count() == bakes  # values: nothing for Cycles to bake
+    np.testing.assert_allclose(read["Matte"].base_color, [0.2, 0.5, 0.3], atol=1e-6)
+    assert read["Matte"].specular == 0.0 and read["Matte"].metallic == 0.0
     np.testing.assert_allclose(read["Half Gold"].base_color, [0.85, 0.275, 0.175], atol=1e-6)
     assert abs(read["Half Gold"].metallic - 0.25) < 1e-6
     assert abs(read["Half Gold"].roughness - 0.5) < 1e-6
