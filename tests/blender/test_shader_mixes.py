@@ -71,7 +71,7 @@ def checker_inlay(name="Inlay"):
 
 
 def test_mixes_of_values_read_as_one_mixed_principled(voxgi):
-    from voxgi.blender.snapshot.materials import MaterialTable, bake_count
+    from voxgi.blender.snapshot.materials import MaterialTable
 
     half, tree, output = _bare("Half Gold")
     _mix(tree, output, _principled(tree, (0.8, 0.1, 0.1), 0.6),
@@ -87,9 +87,8 @@ def test_mixes_of_values_read_as_one_mixed_principled(voxgi):
     tree.links.new(diffuse.outputs[0], output.inputs["Surface"])
     warnings = []
     table = MaterialTable(warnings)
-    bakes = bake_count()
     read = {m.name: table.materials[table.index_of(m)] for m in (half, chrome, plastic(), matte)}
-    assert bake_count() == bakes  # values: nothing for Cycles to bake
+    assert warnings == []  # values alone: no bake asked for (without a mesh it would warn)
     np.testing.assert_allclose(read["Matte"].base_color, [0.2, 0.5, 0.3], atol=1e-6)
     assert read["Matte"].specular == 0.0 and read["Matte"].metallic == 0.0
     np.testing.assert_allclose(read["Half Gold"].base_color, [0.85, 0.275, 0.175], atol=1e-6)
@@ -101,7 +100,6 @@ def test_mixes_of_values_read_as_one_mixed_principled(voxgi):
     np.testing.assert_allclose(read["Plastic"].base_color, [0.7, 0.1, 0.1], atol=1e-6)
     assert read["Plastic"].metallic == 0.0 and abs(read["Plastic"].roughness - 0.15) < 1e-6
     assert abs(read["Plastic"].specular - 0.5) < 1e-3
-    assert not [w for w in warnings if "Mix Shader" in w or "glossy shader" in w], warnings
 
 
 def _room(scene, materials):
