@@ -513,23 +513,34 @@ class MaterialTable:
     def _mixed(self, material, shader):
         """(MaterialData, what to bake, UV map) of a shader mix (``shader_mix``): its mixed
         parameters, the Base Color and the Roughness / Metallic / Specular baked by Cycles
-        where a Fac or an input comes from nodes."""
+        where a Fac or an input comes from nodes, and the leaves' normal map where they share
+        one."""
         if shader_mix.needs_bake(shader, ("emission",)):
             self._warn(f"Material '{material.name_full}': the emission of its mixed shaders "
                        "comes from nodes the preview does not evaluate there yet; using their values")
+        socket, several = shader_mix.normal_socket(shader)
+        if several:
+            self._warn(f"Material '{material.name_full}': its mixed shaders take their normals "
+                       "from different nodes; the preview leaves their normal maps out")
+        normal, strength, uv_map = self._normal_map(material, socket)
         data = MaterialData(
             name=material.name_full,
             base_color=np.clip(shader_mix.value(shader, "base"), 0.0, None).astype(np.float32),
             roughness=float(shader_mix.value(shader, "roughness")),
             metallic=float(shader_mix.value(shader, "metallic")),
             specular=float(shader_mix.value(shader, "specular")),
-            emission=shader_mix.value(shader, "emission").astype(np.float32))
+            emission=shader_mix.value(shader, "emission").astype(np.float32),
+            normal_texture=-1 if normal is None else self._add_texture(normal),
+            normal_strength=strength)
         bakes = []
         if shader_mix.needs_bake(shader, ("base",)):
             bakes.append(("EMIT", shader_mix.BASE))
         if shader_mix.needs_bake(shader, ("roughness", "metallic", "specular")):
             bakes.append(("EMIT", shader_mix.PARAMS))
-        return data, tuple(bakes) or None, ""
+        if bakes and uv_map:  # the bakes go over the render UV map, the normal map its own
+            self._warn(f"Material '{material.name_full}': its normal map reads another UV map "
+                       "than its baked mix; it is read through the render one")
+        return data, tuple(bakes) or None, "" if bakes else uv_map
 
     def _emission(self, material, socket, bakeable: bool = True):
         """(mean colour (3,), TextureData or None, what to bake or None, UV map) of an Emission

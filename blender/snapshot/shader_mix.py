@@ -173,6 +173,31 @@ def value(shader, parameter: str) -> np.ndarray:
     return (1.0 - fac) * value(shader.first, parameter) + fac * value(shader.second, parameter)
 
 
+def leaves(shader) -> list:
+    """The shader nodes at the leaves of ``shader`` (None for an unlinked side)."""
+    if isinstance(shader, Leaf):
+        return [shader.node]
+    return leaves(shader.first) + leaves(shader.second)
+
+
+def normal_socket(shader):
+    """(the Normal input of a leaf, whether the leaves' Normals disagree): the one socket when
+    every leaf whose Normal is linked takes it from the same node (a Normal Map feeding both
+    sides of a layered material), None when none is linked or they come from several."""
+    sockets = [node.inputs["Normal"] for node in leaves(shader)
+               if node is not None and "Normal" in node.inputs and node.inputs["Normal"].is_linked]
+    sources = set()
+    for socket in sockets:
+        try:
+            source, output = _follow(socket)
+        except _NeedsBake:
+            return None, True
+        sources.add((None if source is None else source.name, getattr(output, "identifier", None)))
+    if len(sources) != 1:
+        return None, len(sources) > 1
+    return sockets[0], False
+
+
 # ---------------------------------------------------------------------- bakes
 
 def route_to_emission(tree, which: str) -> None:

@@ -180,3 +180,35 @@ def test_a_gfg_export_writes_a_mix_as_the_principled_the_preview_reads(voxgi, tm
     np.testing.assert_allclose(shiny.uniforms[PrincipledSlot.SPECULAR], [0.5], atol=1e-3)
     np.testing.assert_allclose(shiny.uniforms[PrincipledSlot.ROUGHNESS], [0.15], atol=1e-6)
     assert warnings == []  # the plastic's Fresnel is read, not a value taken from nodes
+
+
+def test_a_normal_map_both_sides_share_is_the_mixs_own(voxgi):
+    """A layered material whose Normal Map node feeds both Principled BSDFs keeps its normal
+    map; two different normal maps are named as left out."""
+    from voxgi.blender.snapshot.materials import MaterialTable
+
+    def normal_map(tree, name):
+        image = bpy.data.images.new(name, 8, 8)
+        image.colorspace_settings.name = "Non-Color"
+        texture = tree.nodes.new("ShaderNodeTexImage")
+        texture.image = image
+        node = tree.nodes.new("ShaderNodeNormalMap")
+        tree.links.new(texture.outputs["Color"], node.inputs["Color"])
+        return node
+
+    materials = {}
+    for name, shared in (("Shared", True), ("Apart", False)):
+        material, tree, output = _bare(name)
+        first, second = _principled(tree, (0.8, 0.1, 0.1)), _principled(tree, (0.1, 0.1, 0.8))
+        _mix(tree, output, first, second, fac=0.5)
+        bump = normal_map(tree, f"{name} bumps")
+        tree.links.new(bump.outputs[0], first.inputs["Normal"])
+        tree.links.new((bump if shared else normal_map(tree, f"{name} more")).outputs[0],
+                       second.inputs["Normal"])
+        materials[name] = material
+    warnings = []
+    table = MaterialTable(warnings)
+    read = {name: table.materials[table.index_of(m)] for name, m in materials.items()}
+    assert read["Shared"].normal_texture >= 0 and read["Apart"].normal_texture < 0
+    assert [w for w in warnings if "different nodes" in w and "'Apart'" in w], warnings
+    assert not [w for w in warnings if "'Shared'" in w], warnings
