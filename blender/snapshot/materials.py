@@ -74,6 +74,7 @@ MAX_VARIANT_MATERIALS = 96  # materials with Roughness / Metallic per texel (eac
 # cost the snapshot 130 ms evaluated one by one); a ramp's colour moves by at most 1/512 of
 # its range
 RANDOM_STEPS = 256
+CUTOUT_FAC = "Cut-out Fac"  # the baked Fac of a Mix Shader of a Transparent BSDF and this one
 AUTO_UVS = "VoxGI Auto UVs"  # the UV map of a bake over a layout of the mesh's polygons
 BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
 BAKE_SAMPLES = 8      # Cycles samples per texel (the texel's mean over its area)
@@ -736,10 +737,8 @@ class MaterialTable:
                 return value, base_texture, None, uv_map  # one RGBA texture for both
             return value, texture, None, uv_map
         except _NeedsBake:
-            if socket.node.type != "BSDF_PRINCIPLED":  # a Mix Shader's Fac: no bake of it yet
-                self._warn(f"Material '{material.name_full}': its transparency comes from "
-                           "nodes the preview does not evaluate yet; using the Fac value")
-                return value, None, None, ""
+            if socket.node.type != "BSDF_PRINCIPLED":  # the cut-out Mix Shader's Fac
+                return value, None, ("EMIT", CUTOUT_FAC), ""
             return value, None, ("EMIT", socket.name), ""
 
     # ------------------------------------------------------------------ bakes
@@ -791,7 +790,7 @@ class MaterialTable:
             texture = _BAKED[key] = TextureData(
                 name=f"{name} ({surface.key})", pixels=pixels, interpolation="Linear",
                 extension="EXTEND", key=key)
-        if socket == "Alpha":  # the baked value into the 4th channel
+        if socket in ("Alpha", CUTOUT_FAC):  # the baked value into the 4th channel
             pixels = texture.pixels[..., :1]
             alpha = TextureData(name=texture.name, pixels=np.concatenate(
                 [np.repeat(pixels, 3, axis=-1), pixels], axis=-1), interpolation="Linear",
@@ -863,6 +862,20 @@ def _transparent_mix(tree, principled):
     if first.type == "BSDF_TRANSPARENT" and second == principled:
         return mix.inputs[0]
     return None
+
+
+def _route_cutout_fac(tree) -> None:
+    """Make a material copy's ``tree`` render an Emission of its cut-out Mix Shader's Fac
+    (``_transparent_mix``: what the Transparent BSDF lets through is 1 − Fac)."""
+    output = tree.get_output_node("ALL")
+    fac = output.inputs["Surface"].links[0].from_node.inputs[0]
+    emit = tree.nodes.new("ShaderNodeEmission")
+    emit.inputs["Strength"].default_value = 1.0
+    if fac.is_linked:
+        tree.links.new(fac.links[0].from_socket, emit.inputs["Color"])
+    else:
+        emit.inputs["Color"].default_value = (*(float(fac.default_value),) * 3, 1.0)
+    tree.links.new(emit.outputs[0], output.inputs["Surface"])
 
 
 def _alpha_node(principled):
@@ -986,6 +999,8 @@ def bake_socket(material, mode: str, socket_name: str, surface: Surface,
         tree = copy.node_tree
         if socket_name in shader_mix.EXPRESSIONS:
             shader_mix.route_to_emission(tree, socket_name)
+        elif socket_name == CUTOUT_FAC:
+            _route_cutout_fac(tree)
         elif mode == "EMIT":
             route_to_emission(tree, socket_name, groups)
         image = bpy.data.images.new("VoxGI Bake", BAKE_SIZE, BAKE_SIZE, float_buffer=True,

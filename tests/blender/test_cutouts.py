@@ -274,3 +274,34 @@ def test_a_transparent_mix_shader_cuts_out_as_the_alpha_does(voxgi):
     for name in ("Combined", "Diffuse Color"):
         error = relative_l1(passes[name], reference[name].astype(np.float64), mask)
         assert error <= 0.05, (name, error, lines)
+
+
+def test_a_transparent_mix_whose_fac_comes_from_nodes_is_baked(voxgi):
+    """The older cut-out setup with its Fac built of nodes (the image's alpha through a Math
+    node's Greater Than, as tutorials threshold it): Cycles bakes the Fac over the UV map and
+    it cuts out as the Alpha does. (It took the Fac's plain value: the fence was solid.)"""
+    scene = build()
+    tree = bpy.data.materials["Fence"].node_tree
+    bsdf = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
+    image = next(n for n in tree.nodes if n.type == "TEX_IMAGE")
+    tree.links.remove(bsdf.inputs["Alpha"].links[0])
+    threshold = tree.nodes.new("ShaderNodeMath")
+    threshold.operation = "GREATER_THAN"
+    threshold.inputs[1].default_value = 0.5
+    tree.links.new(image.outputs["Alpha"], threshold.inputs[0])
+    transparent = tree.nodes.new("ShaderNodeBsdfTransparent")
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    tree.links.new(threshold.outputs[0], mix.inputs["Fac"])
+    tree.links.new(transparent.outputs["BSDF"], mix.inputs[1])
+    tree.links.new(bsdf.outputs["BSDF"], mix.inputs[2])
+    tree.links.new(mix.outputs["Shader"], tree.get_output_node("ALL").inputs["Surface"])
+    snapshot = snapshot_now()
+    fence = fence_material(snapshot)
+    assert fence.alpha_texture >= 0
+    assert not [w for w in snapshot.warnings if "transparency" in w], snapshot.warnings
+    passes, lines = preview(scene)
+    reference = np.load(REFS / "fence_cards.npz")
+    mask = reference["Alpha"].astype(np.float64) > 0.5
+    for name in ("Combined", "Diffuse Color"):
+        error = relative_l1(passes[name], reference[name].astype(np.float64), mask)
+        assert error <= 0.05, (name, error, lines)
