@@ -39,6 +39,8 @@ def layout(points: np.ndarray, starts: np.ndarray, totals: np.ndarray,
            normals: np.ndarray) -> np.ndarray:
     """(L, 2) float32 UVs of loops at ``points`` (L, 3), polygons of ``totals`` loops from
     ``starts`` (loop order) with unit ``normals`` (P, 3): ``polygon_uvs``' layout."""
+    points = np.nan_to_num(points, nan=0.0, posinf=0.0, neginf=0.0)  # (a broken vertex's
+    normals = np.nan_to_num(normals, nan=0.0, posinf=0.0, neginf=0.0)  # triangles are not drawn)
     owner = np.repeat(np.arange(len(starts)), totals)
     tangent, bitangent = _basis(normals)
     flat = np.stack([(points * tangent[owner]).sum(-1), (points * bitangent[owner]).sum(-1)], -1)
@@ -77,22 +79,27 @@ def _pack(sides: np.ndarray):
     """((P, 2) lower-left corners of the polygons' squares in the UV square, the scale of
     ``sides`` into it): squares in rows, largest first, each in a cell PAD wider on every side
     (the bake's margin fills it from the polygon's edge, so that a texture lookup by a
-    polygon's edge reads its own colour, not its neighbour's)."""
+    polygon's edge reads its own colour, not its neighbour's). One step per row (a row ends
+    where the cells' running sum passes the row's width), not per polygon."""
     order = np.argsort(-sides, kind="stable")
     scale, pad, used = 1.0, 0.0, 0.0
+    corners = np.zeros((len(sides), 2))
     for _ in range(2):  # the padding is in UV units: the scale it gives, then the rows again
         used = pad
-        cells = sides + 2.0 * used
-        width = np.sqrt((cells ** 2).sum()) * 1.1 + cells.max()
-        corners = np.zeros((len(sides), 2))
-        x = y = row_height = 0.0
-        for index in order:
-            cell = cells[index]
-            if x > 0.0 and x + cell > width:
-                x, y, row_height = 0.0, y + row_height, 0.0
-            corners[index] = x, y
-            x += cell
-            row_height = max(row_height, cell)
-        scale = 1.0 / max((corners[:, 0] + cells).max(), y + row_height)
+        cells = sides[order] + 2.0 * used
+        width = np.sqrt((cells ** 2).sum()) * 1.1 + cells[0]
+        ends = np.cumsum(cells)
+        x = np.zeros(len(cells))
+        y = np.zeros(len(cells))
+        start, top = 0, 0.0
+        while start < len(cells):
+            before = ends[start - 1] if start else 0.0
+            stop = max(start + 1, int(np.searchsorted(ends, before + width, side="right")))
+            x[start:stop] = ends[start:stop] - cells[start:stop] - before
+            y[start:stop] = top
+            top += cells[start]  # the row's tallest: its first (sorted largest first)
+            start = stop
+        corners[order] = np.stack([x, y], axis=-1)
+        scale = 1.0 / max((x + cells).max(), top)
         pad = PAD / scale
     return (corners + used) * scale, scale

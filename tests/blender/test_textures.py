@@ -393,7 +393,7 @@ def test_vertex_colours_on_a_mesh_without_uvs_are_drawn_as_in_cycles(voxgi, tmp_
 def test_the_layout_of_a_mesh_without_uvs_keeps_polygons_apart_and_flat(voxgi):
     """Every polygon in its own square of the UV square, none overlapping, each drawn flat
     (its UV distances ∝ its own), the larger polygons the larger squares."""
-    from voxgi.blender.snapshot.auto_uvs import polygon_uvs
+    from voxgi.blender.snapshot.auto_uvs import layout, polygon_uvs
 
     bpy.ops.mesh.primitive_cylinder_add(vertices=12, radius=1.0, depth=3.0)  # 2 n-gons, 12 quads
     mesh = bpy.context.object.data
@@ -414,6 +414,14 @@ def test_the_layout_of_a_mesh_without_uvs_keeps_polygons_apart_and_flat(voxgi):
     # each square's side ∝ √(its polygon's area): the texels spread evenly over the surface
     sides = np.array([max(high - low) / np.sqrt(area) for low, high, area in boxes])
     np.testing.assert_allclose(sides, sides[0], rtol=1e-3)
+    # a broken vertex (NaN) leaves every other polygon laid out
+    points = np.array([v.co[:] for v in mesh.vertices])[[loop.vertex_index for loop in mesh.loops]]
+    points[0] = np.nan
+    starts = np.array([p.loop_start for p in mesh.polygons])
+    totals = np.array([p.loop_total for p in mesh.polygons])
+    normals = np.array([p.normal[:] for p in mesh.polygons])
+    broken = layout(points, starts, totals, normals)
+    assert np.isfinite(broken).all() and broken.min() >= 0.0 and broken.max() <= 1.0
 
 
 def test_a_procedural_material_in_a_slot_no_face_uses_is_not_baked(voxgi):
