@@ -101,6 +101,7 @@ class _Glow:
     colour: object  # the Color / Emission Color socket
     strength: object  # the Strength socket
 
+
 def _inputs(leaf: Leaf) -> dict:
     """{parameter: an input socket, or a value} of a leaf: base (RGB), roughness, metallic,
     specular, emission (RGB, × strength)."""
