@@ -52,7 +52,10 @@ class VOXGI_OT_render_preview(VoxGISceneOperator, bpy.types.Operator):
                 raise VoxGIError("the scene has no camera to render the preview from")
             source = None if self.indirect_source == "SCENE" else self.indirect_source
             with f12_settings(scene, width, height), captured(scene, source) as capture:
-                bpy.ops.render.render()
+                try:
+                    bpy.ops.render.render()
+                except RuntimeError as error:  # Blender refused the render (one running …)
+                    raise VoxGIError(str(error).strip()) from error
             if capture.error is not None or capture.passes is None:
                 raise VoxGIError(capture.error or "the render did not run (is another render "
                                  "running?)")

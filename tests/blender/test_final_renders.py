@@ -371,6 +371,29 @@ def test_render_preview_and_f12_read_the_scene_as_cycles_f12_does(voxgi, tmp_pat
         assert rel(ours[name], theirs[name]) < 1e-6, name
 
 
+def test_render_preview_says_why_blender_refused_its_render(voxgi, tmp_path, monkeypatch):
+    """Blender refuses a render while another runs: ``render_preview`` fails with its words,
+    writes no file, and puts the scene's settings back."""
+    import types
+
+    from voxgi.operators import render_preview
+
+    def refuse(*_args, **_kwargs):
+        raise RuntimeError("Error: Render already in progress\n")
+
+    scene = bpy.context.scene
+    _viewport_differs_from_render(scene)
+    fake = types.SimpleNamespace(path=bpy.path, ops=types.SimpleNamespace(
+        render=types.SimpleNamespace(render=refuse)))
+    monkeypatch.setattr(render_preview, "bpy", fake)
+    engine, scene.render.resolution_percentage = scene.render.engine, 50
+    with pytest.raises(RuntimeError, match="GI preview failed: Error: Render already in progress"):
+        bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=WIDTH,
+                                     resolution_y=HEIGHT)
+    assert not (tmp_path / "p.exr").exists()
+    assert scene.render.engine == engine and scene.render.resolution_percentage == 50
+
+
 @pytest.mark.parametrize("kind", ["skinned", "skinned_cm_rig", "rigid_animated"])
 def test_fast_quality_f12_gives_render_previews_passes(voxgi, tmp_path, kind):
     """Fast quality traces cones through the voxels transformed from the rest-shape caches."""
