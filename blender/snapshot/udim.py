@@ -11,6 +11,7 @@ there. The atlas is kept within the textures' ``MAX_SIZE`` (each tile halved ali
 """
 from __future__ import annotations
 
+import hashlib
 import os
 import tempfile
 
@@ -51,13 +52,13 @@ def tile_path(image, number: int) -> str:
 
 def content_key(image) -> tuple:
     """What identifies the tiles' content: each tile's number and file modification time, or
-    its packed bytes' length and head."""
+    a hash of its packed bytes."""
     packed = {p.tile_number: p for p in image.packed_files}
     key = []
     for tile in image.tiles:
         if tile.number in packed:
             data = packed[tile.number].packed_file
-            key.append((tile.number, "packed", data.size, bytes(data.data[:4096])))
+            key.append((tile.number, hashlib.blake2b(bytes(data.data), digest_size=16).hexdigest()))
             continue
         path = tile_path(image, tile.number)
         key.append((tile.number, path, os.path.getmtime(path) if os.path.exists(path) else None,
