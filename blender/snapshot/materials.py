@@ -74,6 +74,7 @@ MAX_VARIANT_MATERIALS = 96  # materials with Roughness / Metallic per texel (eac
 # cost the snapshot 130 ms evaluated one by one); a ramp's colour moves by at most 1/512 of
 # its range
 RANDOM_STEPS = 256
+EMISSION_SHADER = "Emission shader"  # an Emission surface's own light (Color × Strength) baked
 CUTOUT_FAC = "Cut-out Fac"  # the baked Fac of a Mix Shader of a Transparent BSDF and this one
 AUTO_UVS = "VoxGI Auto UVs"  # the UV map of a bake over a layout of the mesh's polygons
 BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
@@ -406,11 +407,14 @@ class MaterialTable:
             surface_node(node_tree, "EMISSION")
         if glow is not None:  # an Emission shader: light, and nothing reflected (Cycles)
             strength = np.float32(glow.inputs["Strength"].default_value)
-            if glow.inputs["Strength"].is_linked:
-                self._warn(f"Material '{material.name_full}': its Emission Strength comes from "
-                           "nodes the preview does not evaluate yet; using its value")
-            colour, texture, _, uv_map = self._emission(material, glow.inputs["Color"],
-                                                        bakeable=False)
+            colour, texture, bake, uv_map = self._emission(material, glow.inputs["Color"])
+            if bake is not None or glow.inputs["Strength"].is_linked:
+                # Color or Strength from nodes: the surface's own emission baked by Cycles
+                # (Color × Strength per texel), its values meanwhile
+                return MaterialData(name=material.name_full, base_color=np.zeros(3, np.float32),
+                                    roughness=1.0, metallic=0.0, specular=0.0,
+                                    emission=(colour * strength).astype(np.float32),
+                                    emission_strength=1.0), (("EMIT", EMISSION_SHADER),), ""
             return MaterialData(name=material.name_full, base_color=np.zeros(3, np.float32),
                                 roughness=1.0, metallic=0.0, specular=0.0,
                                 emission=(colour * strength).astype(np.float32),
@@ -543,11 +547,11 @@ class MaterialTable:
                        "than its baked mix; it is read through the render one")
         return data, tuple(bakes) or None, "" if bakes else uv_map
 
-    def _emission(self, material, socket, bakeable: bool = True):
+    def _emission(self, material, socket):
         """(mean colour (3,), TextureData or None, what to bake or None, UV map) of an Emission
         Color socket: its value when unlinked; an Image Texture's Color (directly or through
         Mapping nodes) per texel; anything else baked by Cycles (an Emit bake of the socket, as
-        the Base Color's) where ``bakeable``, else its value with a warning."""
+        the Base Color's)."""
         if not socket.is_linked:
             return _rgb(socket), None, None, ""
         name = material.name_full
@@ -568,11 +572,7 @@ class MaterialTable:
                 return _rgb(socket), None, None, ""
             mean = _texels_mean(texture.pixels[..., :3], node.image)
             return mean, texture, None, uv_map
-        except _NeedsBake as why:
-            if not bakeable:
-                self._warn(f"Material '{name}': {why}, which the preview does not evaluate "
-                           f"for an Emission shader yet; using its value")
-                return _rgb(socket), None, None, ""
+        except _NeedsBake:
             return _rgb(socket), None, ("EMIT", socket.name), ""
 
     def _socket_mean(self, material, socket, value):
@@ -808,7 +808,7 @@ class MaterialTable:
                 param_texture=self._add_texture(TextureData(
                     name=f"{texture.name} (roughness, metallic)", pixels=params,
                     interpolation="Linear", extension="EXTEND", key=f"{key}+params")))
-        if socket == "Emission Color":  # the emission per texel, × the material's strength
+        if socket in ("Emission Color", EMISSION_SHADER):  # per texel, × the strength
             return dataclasses.replace(
                 data, emission=(mean * np.float32(data.emission_strength)).astype(np.float32),
                 emission_texture=self._add_texture(texture))
@@ -1001,6 +1001,8 @@ def bake_socket(material, mode: str, socket_name: str, surface: Surface,
             shader_mix.route_to_emission(tree, socket_name)
         elif socket_name == CUTOUT_FAC:
             _route_cutout_fac(tree)
+        elif socket_name == EMISSION_SHADER:
+            pass  # the copy renders its own Emission, as the Emit bake wants
         elif mode == "EMIT":
             route_to_emission(tree, socket_name, groups)
         image = bpy.data.images.new("VoxGI Bake", BAKE_SIZE, BAKE_SIZE, float_buffer=True,

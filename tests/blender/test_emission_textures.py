@@ -66,11 +66,17 @@ def test_the_snapshot_reads_the_emission_image_per_texel(voxgi):
     assert glow.emission_texture >= 0 and glow.emission_strength == 3.0
     np.testing.assert_allclose(snapshot.textures[glow.emission_texture].pixels[..., :3], linear,
                                atol=2e-3)
-    # a Strength from nodes: its value, said
+    # a Strength from nodes: the surface's own emission baked by Cycles (Color × Strength)
     value = tree.nodes.new("ShaderNodeValue")
+    value.outputs["Value"].default_value = 2.0
     tree.links.new(value.outputs["Value"], shader.inputs["Strength"])
-    warnings = take_snapshot(bpy.context.scene).warnings
-    assert any("Panel Glow" in w and "Emission Strength" in w for w in warnings), warnings
+    snapshot = take_snapshot(bpy.context.scene)
+    assert snapshot.warnings == ()
+    glow = next(m for m in snapshot.materials if m.name == "Panel Glow")
+    assert glow.emission_texture >= 0 and glow.emission_strength == 1.0
+    baked = snapshot.textures[glow.emission_texture].pixels[..., :3]
+    np.testing.assert_allclose(baked.reshape(-1, 3).mean(axis=0),
+                               2.0 * linear.reshape(-1, 3).mean(axis=0), rtol=0.03)
 
 
 def test_a_procedural_emission_color_is_baked(voxgi):

@@ -6,6 +6,7 @@ default pixel filter), with the user's file left as it was.
 from __future__ import annotations
 
 import json
+import math
 import pathlib
 
 import bpy
@@ -352,6 +353,44 @@ def test_a_procedural_material_over_tiling_uvs_is_baked_over_its_own_layout(voxg
     floor = cycles.max(-1) > 0.05
     assert floor.mean() > 0.8
     assert relative_l1(ours, cycles, floor) < 0.1
+
+
+def test_an_emission_shader_built_of_nodes_glows_per_texel_as_in_cycles(voxgi, tmp_path):
+    """A screen: an Emission shader whose Color is a checker and whose Strength is a Math node
+    of the checker's Fac (the bright squares brighter still). Cycles bakes the surface's own
+    emission; the screen's squares glow as Cycles draws them (it glowed at the values alone:
+    one flat colour)."""
+    from voxgi.voxgi_addon.files.exr import read_exr_passes
+
+    scene = bpy.context.scene
+    bpy.ops.mesh.primitive_plane_add(size=2.0, rotation=(math.pi / 2, 0.0, 0.0))
+    material = bpy.data.materials.new("Screen")
+    tree = material.node_tree
+    tree.nodes.remove(next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"))
+    glow = tree.nodes.new("ShaderNodeEmission")
+    checker = tree.nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Scale"].default_value = 4.0
+    checker.inputs["Color1"].default_value = (1.0, 0.6, 0.2, 1.0)
+    checker.inputs["Color2"].default_value = (0.1, 0.3, 1.0, 1.0)
+    strength = tree.nodes.new("ShaderNodeMath")
+    strength.operation = "MULTIPLY_ADD"
+    strength.inputs[1].default_value, strength.inputs[2].default_value = 3.0, 1.0
+    tree.links.new(checker.outputs["Color"], glow.inputs["Color"])
+    tree.links.new(checker.outputs["Fac"], strength.inputs[0])
+    tree.links.new(strength.outputs[0], glow.inputs["Strength"])
+    tree.links.new(glow.outputs[0], tree.get_output_node("ALL").inputs["Surface"])
+    bpy.context.object.data.materials.append(material)
+    scenes.camera_looking_at((0.0, -3.0, 0.0), scene=scene)
+    size = 48
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=size,
+                                        resolution_y=size) == {"FINISHED"}
+    ours = read_exr_passes(str(tmp_path / "p.exr"))["Combined"][..., :3]
+    cycles = render_cycles_passes(scene, size, size, 16)["Combined"][..., :3]
+    screen = np.zeros((size, size), bool)
+    screen[10:38, 10:38] = True  # inside the screen's 2 m square (2.16 m across the view)
+    assert relative_l1(ours, cycles, screen) < 0.05
+    bright = cycles[screen].sum(-1)
+    assert bright.max() > 3.0 * bright.min()  # the checker is there to be drawn
 
 
 def test_vertex_colours_on_a_mesh_without_uvs_are_drawn_as_in_cycles(voxgi, tmp_path):
