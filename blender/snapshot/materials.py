@@ -997,13 +997,13 @@ def bake_socket(material, mode: str, socket_name: str, surface: Surface,
             mesh.uv_layers[render_uv].active_render = True  # what the nodes read
         copy = material.copy()
         tree = copy.node_tree
+        # what the copy renders for the Emit bake: an Emission of the socket (an Emission
+        # surface's own, EMISSION_SHADER, as it is)
         if socket_name in shader_mix.EXPRESSIONS:
             shader_mix.route_to_emission(tree, socket_name)
         elif socket_name == CUTOUT_FAC:
             _route_cutout_fac(tree)
-        elif socket_name == EMISSION_SHADER:
-            pass  # the copy renders its own Emission, as the Emit bake wants
-        elif mode == "EMIT":
+        elif mode == "EMIT" and socket_name != EMISSION_SHADER:
             route_to_emission(tree, socket_name, groups)
         image = bpy.data.images.new("VoxGI Bake", BAKE_SIZE, BAKE_SIZE, float_buffer=True,
                                     alpha=False)

@@ -250,10 +250,10 @@ def test_numpy_and_gpu_agree_on_cutouts(voxgi):
         assert error < 0.02, (name, error)
 
 
-def test_a_transparent_mix_shader_cuts_out_as_the_alpha_does(voxgi):
-    """The older cut-out setup — Mix Shader (Transparent BSDF, Principled BSDF) whose Fac is
-    the image's alpha — is Cycles' same surface: the snapshot reads the Fac as the Alpha, and
-    the preview matches the reference made with the Principled Alpha."""
+def _transparent_mix_fence(fac_of_alpha=None):
+    """The fence cards with the older cut-out setup: a Mix Shader (Transparent BSDF, the
+    Principled BSDF) whose Fac is the image's alpha, or ``fac_of_alpha(tree, alpha socket)``'s
+    output socket built of it. Returns the scene."""
     scene = build()
     tree = bpy.data.materials["Fence"].node_tree
     bsdf = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
@@ -261,47 +261,47 @@ def test_a_transparent_mix_shader_cuts_out_as_the_alpha_does(voxgi):
     tree.links.remove(bsdf.inputs["Alpha"].links[0])
     transparent = tree.nodes.new("ShaderNodeBsdfTransparent")
     mix = tree.nodes.new("ShaderNodeMixShader")
-    tree.links.new(image.outputs["Alpha"], mix.inputs["Fac"])
+    alpha = image.outputs["Alpha"]
+    tree.links.new(alpha if fac_of_alpha is None else fac_of_alpha(tree, alpha), mix.inputs["Fac"])
     tree.links.new(transparent.outputs["BSDF"], mix.inputs[1])
     tree.links.new(bsdf.outputs["BSDF"], mix.inputs[2])
     tree.links.new(mix.outputs["Shader"], tree.get_output_node("ALL").inputs["Surface"])
-    snapshot = snapshot_now()
-    fence = fence_material(snapshot)
-    assert fence.alpha_texture >= 0 and fence.alpha_texture == fence.base_color_texture
+    return scene
+
+
+def _matches_the_alpha_reference(scene):
+    """The preview within 0.05 of the reference made with the Principled Alpha."""
     passes, lines = preview(scene)
     reference = np.load(REFS / "fence_cards.npz")
     mask = reference["Alpha"].astype(np.float64) > 0.5
     for name in ("Combined", "Diffuse Color"):
         error = relative_l1(passes[name], reference[name].astype(np.float64), mask)
         assert error <= 0.05, (name, error, lines)
+
+
+def test_a_transparent_mix_shader_cuts_out_as_the_alpha_does(voxgi):
+    """The older cut-out setup — Mix Shader (Transparent BSDF, Principled BSDF) whose Fac is
+    the image's alpha — is Cycles' same surface: the snapshot reads the Fac as the Alpha, and
+    the preview matches the reference made with the Principled Alpha."""
+    scene = _transparent_mix_fence()
+    fence = fence_material(snapshot_now())
+    assert fence.alpha_texture >= 0 and fence.alpha_texture == fence.base_color_texture
+    _matches_the_alpha_reference(scene)
 
 
 def test_a_transparent_mix_whose_fac_comes_from_nodes_is_baked(voxgi):
     """The older cut-out setup with its Fac built of nodes (the image's alpha through a Math
     node's Greater Than, as tutorials threshold it): Cycles bakes the Fac over the UV map and
     it cuts out as the Alpha does. (It took the Fac's plain value: the fence was solid.)"""
-    scene = build()
-    tree = bpy.data.materials["Fence"].node_tree
-    bsdf = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
-    image = next(n for n in tree.nodes if n.type == "TEX_IMAGE")
-    tree.links.remove(bsdf.inputs["Alpha"].links[0])
-    threshold = tree.nodes.new("ShaderNodeMath")
-    threshold.operation = "GREATER_THAN"
-    threshold.inputs[1].default_value = 0.5
-    tree.links.new(image.outputs["Alpha"], threshold.inputs[0])
-    transparent = tree.nodes.new("ShaderNodeBsdfTransparent")
-    mix = tree.nodes.new("ShaderNodeMixShader")
-    tree.links.new(threshold.outputs[0], mix.inputs["Fac"])
-    tree.links.new(transparent.outputs["BSDF"], mix.inputs[1])
-    tree.links.new(bsdf.outputs["BSDF"], mix.inputs[2])
-    tree.links.new(mix.outputs["Shader"], tree.get_output_node("ALL").inputs["Surface"])
+    def threshold(tree, alpha):
+        node = tree.nodes.new("ShaderNodeMath")
+        node.operation = "GREATER_THAN"
+        node.inputs[1].default_value = 0.5
+        tree.links.new(alpha, node.inputs[0])
+        return node.outputs[0]
+
+    scene = _transparent_mix_fence(threshold)
     snapshot = snapshot_now()
-    fence = fence_material(snapshot)
-    assert fence.alpha_texture >= 0
+    assert fence_material(snapshot).alpha_texture >= 0
     assert not [w for w in snapshot.warnings if "transparency" in w], snapshot.warnings
-    passes, lines = preview(scene)
-    reference = np.load(REFS / "fence_cards.npz")
-    mask = reference["Alpha"].astype(np.float64) > 0.5
-    for name in ("Combined", "Diffuse Color"):
-        error = relative_l1(passes[name], reference[name].astype(np.float64), mask)
-        assert error <= 0.05, (name, error, lines)
+    _matches_the_alpha_reference(scene)

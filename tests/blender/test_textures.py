@@ -63,6 +63,16 @@ def file_state():
     return state
 
 
+def preview_beside_cycles(scene, tmp_path, width, height, name):
+    """``name`` pass of voxgi.render_preview (F12) and of Cycles at 16 spp, same size."""
+    from voxgi.voxgi_addon.files.exr import read_exr_passes
+
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=width,
+                                        resolution_y=height) == {"FINISHED"}
+    ours = read_exr_passes(str(tmp_path / "p.exr"))[name][..., :3]
+    return ours, render_cycles_passes(scene, width, height, 16)[name][..., :3]
+
+
 def test_snapshot_reads_the_image_and_bakes_the_procedural_wall(voxgi):
     from voxgi.blender.snapshot import materials as snapshot_materials
     from voxgi.blender.snapshot.scene import take_snapshot
@@ -296,7 +306,6 @@ def test_a_procedural_material_on_a_mesh_without_uvs_is_baked_over_its_own_layou
     the checker on Generated coordinates is drawn as Cycles draws it. (It kept the socket's
     plain value, with a warning: Diffuse Color 0.29 off Cycles' over the wall.)"""
     from voxgi.blender.snapshot.scene import take_snapshot
-    from voxgi.voxgi_addon.files.exr import read_exr_passes
 
     scene = build()
     wall = bpy.data.materials["Checker Wall"]
@@ -310,10 +319,7 @@ def test_a_procedural_material_on_a_mesh_without_uvs_is_baked_over_its_own_layou
     assert snapshot.meshes["Left Wall"].uvs is not None
     assert len(left.data.uv_layers) == 0  # the user's mesh is unchanged
     width, height = texture_scenes.WIDTH, texture_scenes.HEIGHT
-    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=width,
-                                        resolution_y=height) == {"FINISHED"}
-    ours = read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"]
-    cycles = render_cycles_passes(scene, width, height, 16)["Diffuse Color"]
+    ours, cycles = preview_beside_cycles(scene, tmp_path, width, height, "Diffuse Color")
     wall_pixels = np.zeros((height, width), bool)
     wall_pixels[:, : width // 5] = True  # the left wall fills the image's left fifth
     assert relative_l1(ours, cycles, wall_pixels) < 0.06
@@ -325,8 +331,6 @@ def test_a_procedural_material_over_tiling_uvs_is_baked_over_its_own_layout(voxg
     the UV square alone (a sixteenth of the floor), so it is baked over a layout of the
     polygons, the nodes still reading the tiling UVs (it drew one stretched square: Diffuse
     Color 0.56 off Cycles')."""
-    from voxgi.voxgi_addon.files.exr import read_exr_passes
-
     scene = bpy.context.scene
     bpy.ops.mesh.primitive_plane_add(size=4.0)
     mesh = bpy.context.object.data
@@ -346,10 +350,7 @@ def test_a_procedural_material_over_tiling_uvs_is_baked_over_its_own_layout(voxg
     bpy.ops.object.light_add(type="SUN", rotation=(0.3, 0.2, 0.0))
     scenes.camera_looking_at((0.0, 0.0, 6.0), target=(0.0, 0.0, 0.0), scene=scene)
     size = 64
-    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=size,
-                                        resolution_y=size) == {"FINISHED"}
-    ours = read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"]
-    cycles = render_cycles_passes(scene, size, size, 16)["Diffuse Color"]
+    ours, cycles = preview_beside_cycles(scene, tmp_path, size, size, "Diffuse Color")
     floor = cycles.max(-1) > 0.05
     assert floor.mean() > 0.8
     assert relative_l1(ours, cycles, floor) < 0.1
@@ -360,8 +361,6 @@ def test_an_emission_shader_built_of_nodes_glows_per_texel_as_in_cycles(voxgi, t
     of the checker's Fac (the bright squares brighter still). Cycles bakes the surface's own
     emission; the screen's squares glow as Cycles draws them (it glowed at the values alone:
     one flat colour)."""
-    from voxgi.voxgi_addon.files.exr import read_exr_passes
-
     scene = bpy.context.scene
     bpy.ops.mesh.primitive_plane_add(size=2.0, rotation=(math.pi / 2, 0.0, 0.0))
     material = bpy.data.materials.new("Screen")
@@ -382,10 +381,7 @@ def test_an_emission_shader_built_of_nodes_glows_per_texel_as_in_cycles(voxgi, t
     bpy.context.object.data.materials.append(material)
     scenes.camera_looking_at((0.0, -3.0, 0.0), scene=scene)
     size = 48
-    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=size,
-                                        resolution_y=size) == {"FINISHED"}
-    ours = read_exr_passes(str(tmp_path / "p.exr"))["Combined"][..., :3]
-    cycles = render_cycles_passes(scene, size, size, 16)["Combined"][..., :3]
+    ours, cycles = preview_beside_cycles(scene, tmp_path, size, size, "Combined")
     screen = np.zeros((size, size), bool)
     screen[10:38, 10:38] = True  # inside the screen's 2 m square (2.16 m across the view)
     assert relative_l1(ours, cycles, screen) < 0.05
@@ -396,8 +392,6 @@ def test_an_emission_shader_built_of_nodes_glows_per_texel_as_in_cycles(voxgi, t
 def test_vertex_colours_on_a_mesh_without_uvs_are_drawn_as_in_cycles(voxgi, tmp_path):
     """A vertex-painted ball, never unwrapped (a Color Attribute into the Base Color): red on
     one side, blue on the other, as Cycles draws it (it was the socket's grey)."""
-    from voxgi.voxgi_addon.files.exr import read_exr_passes
-
     scene = bpy.context.scene
     bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=3, radius=1.0)
     mesh = bpy.context.object.data
@@ -418,10 +412,7 @@ def test_vertex_colours_on_a_mesh_without_uvs_are_drawn_as_in_cycles(voxgi, tmp_
     scenes.camera_looking_at((0.0, -5.0, 0.0), scene=scene)
     bpy.ops.object.light_add(type="SUN", rotation=(0.6, 0.2, 0.0))
     width, height = 64, 48
-    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=width,
-                                        resolution_y=height) == {"FINISHED"}
-    ours = read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"]
-    cycles = render_cycles_passes(scene, width, height, 16)["Diffuse Color"]
+    ours, cycles = preview_beside_cycles(scene, tmp_path, width, height, "Diffuse Color")
     ball = cycles.max(-1) > 0.2
     assert ball.sum() > 400
     assert relative_l1(ours, cycles, ball) < 0.05
