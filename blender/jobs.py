@@ -214,6 +214,8 @@ class JobRunner:
         if self.thread is None:
             self.thread = threading.Thread(target=_work, args=(self._inbox, self._results),
                                            name="VoxGI engine worker", daemon=True)
+            # busy from a job's submission until its outcome is applied (bakes.busy_thread)
+            self.thread.voxgi_busy = lambda: self.busy
             self.thread.start()
         self._inbox.put(job)
         return job

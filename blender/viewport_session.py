@@ -43,6 +43,7 @@ from ..voxgi_addon.scene.changes import (
     SceneIndex,
     StageCounter,
     UpdatePlan,
+    UpdateRecord,
     full_plan,
     plan_updates,
     view_plan,
@@ -53,6 +54,7 @@ from .redraw import tag_3d_views
 from .session import scene_session
 from .settings import gi_settings
 from .snapshot import snapshot_or_error, snapshot_summary
+from .snapshot.bakes import BakeQueue
 from .snapshot.mesh_cache import MeshReads
 from .snapshot.scene import read_ahead
 from .updates import (
@@ -70,6 +72,9 @@ JOB_LABEL = "Updating viewport GI"
 MEGABYTE = 1_000_000
 # seconds of a full snapshot's mesh reads per view_update or draw (``LiveGI.read_on``)
 READ_SLICE = 0.008
+# seconds of the queued material bakes per draw (``LiveGI.bake_on``; a run of texel blocks
+# is baked whole, its length from the last run's time)
+BAKE_SLICE = 0.02
 
 
 @dataclass
@@ -149,6 +154,9 @@ class LiveGI:
         self.reading: UpdatePlan | None = None
         self.read_slice: float | None = None
         self.read_all = False  # every mesh read ahead, and no update since: snapshot next
+        # the material bakes full snapshots queued (their values read meanwhile), baked a
+        # slice a draw (``bake_on``); the materials read again when the last is baked
+        self.bakes = BakeQueue()
         self.skin: dict[str, tuple[bytes, bytes]] = {}  # skinned objects' states (``update``)
         self.world = None          # updates.world_state at the last snapshot
         self.world_changed = True  # the next posed snapshot reads the world again
@@ -262,6 +270,28 @@ class LiveGI:
         self._submit(plan, scene, depsgraph, read=True)
         return False
 
+    def bake_on(self, seconds: float, depsgraph=None) -> bool:
+        """Bake a slice of the queued material bakes (``bakes.BakeQueue.step``, about
+        ``seconds``); False when none ran (none queued, a full snapshot's reads under way, or
+        another VoxGI thread running: ``bakes.busy_thread``). When the last is baked, the
+        materials that were baked are read again: a full snapshot, its mesh reads in slices
+        as any (``read_on``)."""
+        if not self.bakes.pending or self.reading is not None:
+            return False
+        depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+        if not self.bakes.step(seconds, depsgraph):
+            return False
+        if not self.bakes.pending:
+            records = [UpdateRecord("MATERIAL", name, False, False, True, "")
+                       for name in sorted(self.bakes.finished)]
+            self.bakes.finished.clear()
+            plan = plan_updates(records, self.index) if self.index is not None and records \
+                else None
+            if plan is not None and not plan.empty:
+                self._count(plan)
+                self.reading, self.read_all = plan, False
+        return True
+
     def _read_ahead(self, depsgraph) -> bool:
         """``read_ahead`` for ``read_slice`` (everything without one); True when every mesh
         is read. A read that fails forgets the kept reads and leaves the meshes to the
@@ -299,7 +329,7 @@ class LiveGI:
         try:
             if snapshot is None:
                 snapshot, _ = snapshot_or_error(None, depsgraph, reads=self.mesh_reads,
-                                                allow_empty=True)
+                                                allow_empty=True, bakes=self.bakes)
         except VoxGIError as error:
             self.error = str(error)
             return None

@@ -315,7 +315,8 @@ class GPUScene:
         if world_key is not None and world_key != (keys.get("tail") or (None,) * 3)[2]:
             # a new world's light (its irradiance table: 0.5–0.9 s of numpy) is built on a
             # second thread meanwhile; scene_lights below finds it in world_light's cache
-            lighting = threading.Thread(target=world_light, args=(world,), daemon=True)
+            lighting = threading.Thread(target=world_light, args=(world,),
+                                        name="VoxGI world light", daemon=True)
             lighting.start()
         t0 = time.perf_counter()
         geometry, plan.meshes = self._geometry_key(snapshot)

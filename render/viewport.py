@@ -51,7 +51,7 @@ import numpy as np
 from gpu_extras.batch import batch_for_shader
 
 from ..blender.settings import cone_settings, gi_stride, pixel_filter_width
-from ..blender.viewport_session import READ_SLICE, SNAPSHOT_HOOKS, live_gi
+from ..blender.viewport_session import BAKE_SLICE, READ_SLICE, SNAPSHOT_HOOKS, live_gi
 from ..blender.viewport_settings import VIEWPORT_PASSES
 from ..voxgi_addon.scene.view_camera import border_rect, camera_from_view, crop_window
 from . import viewport_prepare
@@ -168,6 +168,7 @@ class ViewportRenderer:
         self.display_warm = False  # the texture's draw made once (``draw``) before an image
         self.cache = ViewportCache()  # the radiance cache, built a stage at a time
         self.world = WorldView()   # a view layer that shows no mesh: its world alone
+        self.baked = False         # the last draw baked a slice of materials (``draw_view``)
         self.bounces = ViewportBounces()  # Fast: the voxels with its bounces, made on the worker
         self.bounced = None        # ... those this key's image reflects (None: one bounce)
         _renderers.add(self)
@@ -440,7 +441,7 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
     camera_key = (view.tobytes(), window.tobytes(), width, height)
     pass_name = VIEWPORT_PASSES[view_settings.viewport_pass]
     live = live_gi(scene.name_full)
-    read = 0.0
+    read, baked = 0.0, False
     if live.reading is not None:
         # a full snapshot's mesh reads, a slice a draw, and the snapshot after the last: the
         # draw's work (nothing traced or prepared in it; the last image stays), the next
@@ -450,6 +451,15 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
         read = time.perf_counter() - t0
         if redraw is not None:
             redraw()
+    elif live.bakes.pending and (renderer.progressive.converged or not renderer.baked):
+        # a slice of the material bakes the snapshot queued (its values shown meanwhile),
+        # every other draw while the image refines: the draw's work, as a read's
+        t0 = time.perf_counter()
+        if live.bake_on(BAKE_SLICE, depsgraph):
+            read, baked = time.perf_counter() - t0, True
+        if redraw is not None:
+            redraw()  # (also while another thread keeps the bakes waiting: the next draw asks)
+    renderer.baked = baked
     if width < 1:  # the Render Region lies outside the view: nothing to trace or draw
         renderer.status = live.view_status = "VoxGI | The Render Region is outside the view"
         return False
@@ -534,7 +544,7 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
                                      renderer.shown_version)
     live.held_source = None  # (only this draw's slices trace what the view holds)
     if read:
-        renderer.timings = {"snapshot read": read}
+        renderer.timings = {"material bakes" if baked else "snapshot read": read}
     if traced:
         renderer.shown = traced
     elif renderer.texture is None:
@@ -587,6 +597,8 @@ def status_line(renderer: ViewportRenderer, scene, live) -> str:
     else:
         line = (f"VoxGI | {samples} | {progressive.elapsed:.2f} s | {progressive.stage()} | "
                 f"{quality}")
+    if live.bakes.pending:
+        line += f" | Baking {live.bakes.pending} material texture{'s' if live.bakes.pending > 1 else ''}…"
     if live.running is not None:
         line += " | Updating GI…"
     return line

@@ -131,6 +131,13 @@ class PrepWorker:
         self._tasks: dict = {}
         self._thread = None
         self._stop = False
+        self._running = False
+
+    @property
+    def busy(self) -> bool:
+        """A task runs or waits (what a bake on the main thread must wait for:
+        ``bakes.busy_thread``)."""
+        return self._running or bool(self._tasks)
 
     def submit(self, key: str, task) -> None:
         from ..blender import jobs
@@ -145,6 +152,7 @@ class PrepWorker:
                 self._stop = False
                 self._thread = threading.Thread(target=self._run, name="VoxGI viewport scene",
                                                 daemon=True)
+                self._thread.voxgi_busy = lambda: self.busy
                 self._thread.start()
         self._wake.set()
 
@@ -156,8 +164,12 @@ class PrepWorker:
                 task = self._tasks.pop(next(iter(self._tasks))) if self._tasks else None
                 if not self._tasks:
                     self._wake.clear()
-            if task is not None and not self._stop:
-                task()
+                self._running = task is not None
+            try:
+                if task is not None and not self._stop:
+                    task()
+            finally:
+                self._running = False
 
     def stop(self, timeout: float = 5.0) -> None:
         """End the thread (unregister, exit) after the task it is running."""

@@ -19,7 +19,7 @@ NO_MESH_MESSAGE = (
 )
 
 def snapshot_or_error(context, depsgraph=None, posed: bool = False, reads=None,
-                      allow_empty: bool = False):
+                      allow_empty: bool = False, bakes=None):
     """(snapshot, seconds) of the context's scene (or of ``depsgraph``'s scene and view layer);
     VoxGIError when it has nothing to voxelize (unless ``allow_empty``: a render's view layer
     that shows no mesh, whose image is the world alone).
@@ -29,6 +29,7 @@ def snapshot_or_error(context, depsgraph=None, posed: bool = False, reads=None,
         mesh evaluated, no material read; docs/gi_pipeline.md "Posed updates"); a full
         snapshot otherwise.
     reads : the live viewport's kept mesh reads (``mesh_cache.MeshReads``, ``take_snapshot``).
+    bakes : the live viewport's queue of material bakes (``bakes.BakeQueue``, ``take_snapshot``).
     """
     from ..updates import posed_since, remember  # updates reads snapshots: imported late
 
@@ -40,7 +41,7 @@ def snapshot_or_error(context, depsgraph=None, posed: bool = False, reads=None,
         scene = depsgraph.scene_eval.original
     snapshot = posed_since(scene, depsgraph) if posed else None
     if snapshot is None:
-        snapshot = take_snapshot(scene, depsgraph, reads)
+        snapshot = take_snapshot(scene, depsgraph, reads, bakes)
     if snapshot.objects:
         remember(snapshot, scene, depsgraph)
     seconds = time.perf_counter() - start

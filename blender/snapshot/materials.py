@@ -15,9 +15,10 @@ The Base Color comes from where the material takes it:
   active render UV map, per (material, mesh) — the socket routed to an Emission shader (an
   Emit bake) for a Principled BSDF, the Diffuse Color pass (a Diffuse bake) otherwise — in a
   temporary scene with a temporary copy of the mesh and material, everything removed
-  afterwards (the user's file is left as it was). Bakes are cached by the node tree's content
-  and the mesh's; where no bake can run (off the main thread, during a render job) or the mesh
-  has no UV map, a warning and the socket's value (the viewport colour for other surfaces).
+  afterwards (the user's file is left as it was; ``bakes.py``). Bakes are cached by the node
+  tree's content and the mesh's; where no bake can run (off the main thread, during a render
+  job), a warning and the socket's value. The live viewport queues its bakes instead (a
+  ``bakes.BakeQueue`` given to ``MaterialTable``): the value until its draws have baked them.
 
 The Alpha socket likewise (cut-outs, issue 22 point 2): a value; an Image Texture's Alpha
 output (the image's alpha channel, in the 4th channel of its ``TextureData``: one texture for
@@ -60,7 +61,7 @@ import numpy as np
 
 from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
 from ...voxgi_addon.scene.textures import PARAM_VARIANTS, srgb_to_linear, variant_values, within_max_size
-from . import shader_mix, udim
+from . import bakes, shader_mix, udim
 from .auto_uvs import polygon_uvs
 from .left_out import material_notes
 from .node_groups import route_to_emission, surface_node
@@ -77,20 +78,16 @@ RANDOM_STEPS = 256
 EMISSION_SHADER = "Emission shader"  # an Emission surface's own light (Color × Strength) baked
 CUTOUT_FAC = "Cut-out Fac"  # the baked Fac of a Mix Shader of a Transparent BSDF and this one
 AUTO_UVS = "VoxGI Auto UVs"  # the UV map of a bake over a layout of the mesh's polygons
-BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
-BAKE_SAMPLES = 8      # Cycles samples per texel (the texel's mean over its area)
-BAKE_MARGIN = 4       # texels the bake extends each UV island by (no dark seams when filtered)
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722], np.float32)  # Cycles' colour → float (Rec.709)
 LINEAR_SPACES = ("Linear Rec.709", "scene_linear", "Non-Color", "Linear CIE-XYZ E")
 SCENE_LINEAR = ("Linear Rec.709", "scene_linear")
 MAPPING_TYPES = ("POINT", "TEXTURE", "VECTOR")
 _BAKED: dict[str, TextureData] = {}
-_BAKES = [0]
 
 
 def bake_count() -> int:
     """How many Cycles bakes of a material socket this session ran."""
-    return _BAKES[0]
+    return bakes.bake_count()
 
 
 def clear_bake_cache() -> None:
@@ -290,11 +287,13 @@ class MaterialTable:
     per object (``left_out``).
     """
 
-    def __init__(self, warnings: list[str], bake: bool | None = None):
+    def __init__(self, warnings: list[str], bake: bool | None = None,
+                 queue: bakes.BakeQueue | None = None):
         self.materials: list[MaterialData] = []
         self.textures: list[TextureData] = []
         self.warnings = warnings
         self._bake = bake
+        self._queue = queue  # the live viewport's: bakes are queued, not run (``_baked_socket``)
         self._index: dict[str, int] = {}
         self._read_cache: dict[str, tuple[MaterialData, object, str]] = {}
         self._uv_maps: dict[int, str] = {}
@@ -767,10 +766,23 @@ class MaterialTable:
             self._warn(f"Material '{name}': its {what} needs a bake by Cycles, which needs a "
                        "mesh; using its value")
             return data
-        key = _digest(_tree_key(material.node_tree), mode, socket, surface.digest, auto, BAKE_SIZE,
-                      BAKE_SAMPLES, tuple(np.array(surface.obj_eval.matrix_world).ravel())
+        key = _digest(_tree_key(material.node_tree), mode, socket, surface.digest, auto,
+                      bakes.BAKE_SIZE, bakes.BAKE_SAMPLES,
+                      tuple(np.array(surface.obj_eval.matrix_world).ravel())
                       if _uses_object_space(material.node_tree) else None)
         texture = _BAKED.get(key)
+        if texture is None and self._queue is not None:
+            # the live viewport: the value until its draws have baked it (bakes.BakeQueue)
+            if key in self._queue.failed:
+                self._warn(f"Material '{name}': baking its {what} with Cycles failed "
+                           f"({self._queue.failed[key]}); using its value")
+            else:
+                label = f"{name} ({surface.key})"
+                self._queue.want(key, lambda: bakes.BakeRequest(
+                    _bake_spec(material, mode, socket, surface, auto),
+                    surface.obj_eval.original.name_full, len(surface.mesh.loops),
+                    lambda pixels: _store_bake(key, label, pixels)))
+            return data
         if texture is None:
             allowed = self._bake if self._bake is not None else can_bake()
             if not allowed:
@@ -787,9 +799,7 @@ class MaterialTable:
                 return data
             if pixels is None:  # on no face of this mesh: nothing to bake, nothing seen
                 return data
-            texture = _BAKED[key] = TextureData(
-                name=f"{name} ({surface.key})", pixels=pixels, interpolation="Linear",
-                extension="EXTEND", key=key)
+            texture = _store_bake(key, f"{name} ({surface.key})", pixels)
         if socket in ("Alpha", CUTOUT_FAC):  # the baked value into the 4th channel
             pixels = texture.pixels[..., :1]
             alpha = TextureData(name=texture.name, pixels=np.concatenate(
@@ -943,119 +953,50 @@ def can_bake() -> bool:
     return not (hasattr(bpy.app, "is_job_running") and bpy.app.is_job_running("RENDER"))
 
 
-def bake_socket(material, mode: str, socket_name: str, surface: Surface,
-                auto: bool = False) -> np.ndarray:
-    """(BAKE_SIZE, BAKE_SIZE, 3) float32 linear RGB of a material's socket (mode "EMIT": the
-    Principled input ``socket_name``) or diffuse colour (mode "DIFFUSE") baked by Cycles over
-    the active render UV map of ``surface``'s evaluated mesh (its faces of this material);
-    None where no face of the mesh has the material (nothing of it is seen: no bake).
+def _store_bake(key: str, name: str, pixels: np.ndarray) -> TextureData:
+    """A baked socket's image into the bake cache (under its content key)."""
+    texture = _BAKED[key] = TextureData(name=name, pixels=pixels, interpolation="Linear",
+                                        extension="EXTEND", key=key)
+    return texture
 
-    Everything is temporary — a scene, an object, a copy of the evaluated mesh with only this
-    material's faces, a copy of the material with an image node, the image — and removed
-    afterwards, also when the bake fails: the user's data is not touched."""
-    import bmesh
 
-    _BAKES[0] += 1
-    scene = obj = mesh = copy = image = None
-    groups: list = []  # copies of node groups a grouped material's bake routes through
-    try:
-        layers = surface.mesh.uv_layers
-        render_uv = next((layer.name for layer in layers if layer.active_render), None) or \
-            (layers.active.name if layers.active is not None else None)
-        mesh = bpy.data.meshes.new("VoxGI Bake")
-        slots = [i for i, m in enumerate(surface.slot_materials)
-                 if m is not None and m.original == material]
-        last = max(len(surface.slot_materials) - 1, 0)
-        source, target = surface.mesh, render_uv
-        if auto:  # a copy of the mesh with the layout as the bake's UV map (the active one;
-            # the nodes still read the render one, as Cycles renders them)
-            bm = bmesh.new()
-            try:
-                bm.from_mesh(source)
-                bm.to_mesh(mesh)
-            finally:
-                bm.free()
-            mesh.uv_layers.new(name=AUTO_UVS).data.foreach_set(
-                "uv", np.ascontiguousarray(surface.auto_uvs, np.float32).ravel())
-            source, target = mesh, AUTO_UVS
-        bm = bmesh.new()
-        try:
-            bm.from_mesh(source)
-            others = [f for f in bm.faces if min(f.material_index, last) not in slots]
-            if others:
-                bmesh.ops.delete(bm, geom=others, context="FACES")
-            for face in bm.faces:
-                face.material_index = 0
-            bm.to_mesh(mesh)
-        finally:
-            bm.free()
-        if not mesh.polygons:  # the material is in a slot no face of this mesh uses
-            return None
-        if target is not None and mesh.uv_layers.get(target) is not None:
-            mesh.uv_layers.active = mesh.uv_layers[target]  # what the bake writes through
-        if render_uv is not None and mesh.uv_layers.get(render_uv) is not None:
-            mesh.uv_layers[render_uv].active_render = True  # what the nodes read
-        copy = material.copy()
-        tree = copy.node_tree
-        # what the copy renders for the Emit bake: an Emission of the socket (an Emission
-        # surface's own, EMISSION_SHADER, as it is)
+def _bake_spec(material, mode: str, socket_name: str, surface: Surface,
+               auto: bool) -> bakes.BakeSpec:
+    """What a bake of ``material``'s socket over ``surface`` renders (``bakes.BakeSpec``):
+    an Emit bake shows an Emission of the socket (an Emission surface's own,
+    EMISSION_SHADER, as it is; a shader mix's parameters; the cut-out Mix's Fac)."""
+    layers = surface.mesh.uv_layers
+    render_uv = next((layer.name for layer in layers if layer.active_render), None) or \
+        (layers.active.name if layers.active is not None else None)
+
+    def route(tree, groups) -> None:
         if socket_name in shader_mix.EXPRESSIONS:
             shader_mix.route_to_emission(tree, socket_name)
         elif socket_name == CUTOUT_FAC:
             _route_cutout_fac(tree)
         elif mode == "EMIT" and socket_name != EMISSION_SHADER:
             route_to_emission(tree, socket_name, groups)
-        image = bpy.data.images.new("VoxGI Bake", BAKE_SIZE, BAKE_SIZE, float_buffer=True,
-                                    alpha=False)
-        node = tree.nodes.new("ShaderNodeTexImage")
-        node.image = image
-        tree.nodes.active = node
-        mesh.materials.clear()
-        mesh.materials.append(copy)
-        obj = bpy.data.objects.new("VoxGI Bake", mesh)
-        obj.matrix_world = surface.obj_eval.matrix_world
-        scene = bpy.data.scenes.new("VoxGI Bake")
-        scene.collection.objects.link(obj)
-        scene.render.engine = "CYCLES"
-        cycles = scene.cycles
-        cycles.device = "CPU"
-        cycles.samples = BAKE_SAMPLES
-        cycles.use_denoising = False
-        cycles.seed = 0
-        settings = scene.render.bake
-        settings.margin = BAKE_MARGIN
-        settings.margin_type = "EXTEND"
-        settings.use_clear = True
-        settings.use_selected_to_active = False
-        settings.target = "IMAGE_TEXTURES"
-        view_layer = scene.view_layers[0]
-        obj.select_set(True, view_layer=view_layer)
-        view_layer.objects.active = obj
-        kwargs = {"type": mode, "margin": BAKE_MARGIN, "use_clear": True}
-        if mode == "DIFFUSE":
-            kwargs["pass_filter"] = {"COLOR"}
-        with bpy.context.temp_override(scene=scene, view_layer=view_layer, active_object=obj,
-                                       object=obj, selected_objects=[obj],
-                                       selected_editable_objects=[obj]):
-            result = bpy.ops.object.bake(**kwargs)
-        if "FINISHED" not in result:
-            raise RuntimeError(f"the bake returned {result}")
-        pixels = np.empty(BAKE_SIZE * BAKE_SIZE * 4, np.float32)
-        image.pixels.foreach_get(pixels)
-        return np.ascontiguousarray(pixels.reshape(BAKE_SIZE, BAKE_SIZE, 4)[..., :3])
-    finally:
-        if scene is not None:
-            bpy.data.scenes.remove(scene)
-        if obj is not None:
-            bpy.data.objects.remove(obj)
-        if mesh is not None:
-            bpy.data.meshes.remove(mesh)
-        if copy is not None:
-            bpy.data.materials.remove(copy)
-        if image is not None:
-            bpy.data.images.remove(image)
-        for group in groups:
-            bpy.data.node_groups.remove(group)
+
+    slots = tuple(i for i, m in enumerate(surface.slot_materials)
+                  if m is not None and m.original == material)
+    return bakes.BakeSpec(
+        material=material, mode=mode, route=route, slots=slots,
+        last=max(len(surface.slot_materials) - 1, 0), render_uv=render_uv,
+        target_uv=AUTO_UVS if auto else render_uv,
+        auto_uvs=surface.auto_uvs if auto else None,
+        matrix_world=surface.obj_eval.matrix_world.copy())
+
+
+def bake_socket(material, mode: str, socket_name: str, surface: Surface,
+                auto: bool = False) -> np.ndarray | None:
+    """(BAKE_SIZE, BAKE_SIZE, 3) float32 linear RGB of a material's socket (mode "EMIT": the
+    Principled input ``socket_name``) or diffuse colour (mode "DIFFUSE") baked by Cycles over
+    the active render UV map of ``surface``'s evaluated mesh (its faces of this material), or
+    over its polygons' layout (``auto``); None where no face of the mesh has the material
+    (nothing of it is seen: no bake). Nothing of the user's data is touched
+    (``bakes.bake_whole``)."""
+    return bakes.bake_whole(_bake_spec(material, mode, socket_name, surface, auto),
+                            surface.mesh)
 
 
 classes = ()

@@ -29,6 +29,7 @@ from ...voxgi_addon.scene.snapshot import (
     ObjectData,
     SceneSnapshot,
 )
+from .bakes import BakeQueue
 from .environment import read_camera, read_light, read_world
 from .left_out import left_out_line, light_notes, notes_of, render_notes, type_note
 from .materials import AUTO_UVS, MaterialTable, Surface
@@ -379,8 +380,8 @@ def read_ahead(depsgraph, reads: MeshReads, seconds: float) -> bool:
     return True
 
 
-def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = None
-                  ) -> SceneSnapshot:
+def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = None,
+                  bakes: BakeQueue | None = None) -> SceneSnapshot:
     """Read the scene into a ``SceneSnapshot`` (main thread only).
 
     context_or_scene : a ``bpy.types.Context`` or ``bpy.types.Scene``.
@@ -389,6 +390,8 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
     reads : the live viewport's mesh reads of its last snapshot (``mesh_cache.MeshReads``,
         kept up to date with the depsgraph's updates by its owner): a mesh whose geometry
         did not change is taken from there, not read again. None reads every mesh.
+    bakes : the live viewport's queue of material bakes (``bakes.BakeQueue``): a socket Cycles
+        must bake and has not is queued there, its value read meanwhile. None bakes here.
     Raises VoxGIError for input the engine cannot represent (e.g. > 256 deform bones).
     The scene is restored exactly (temporary modifiers and node groups removed).
     """
@@ -400,7 +403,7 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
         depsgraph = bpy.context.evaluated_depsgraph_get()
     view_layer = depsgraph.view_layer
     warnings: list[str] = []
-    table = MaterialTable(warnings)
+    table = MaterialTable(warnings, queue=bakes)
 
     entries = _visible_mesh_entries(view_layer, warnings, depsgraph)
     skinned = {e.obj: e.layers for e in entries if e.kind == "skinned"}
@@ -422,6 +425,8 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
 
     if reads is not None:
         reads.begin()
+    if bakes is not None:
+        bakes.begin()
     instance_randoms: list[float] = []
     instances = instance_objects(depsgraph, read_instanced, instance_randoms)
     with temporary_weight_attributes(skinned, depsgraph):
@@ -435,6 +440,8 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
 
     if reads is not None:
         reads.end()
+    if bakes is not None:
+        bakes.end()
     # Matrices are read after the temporary modifiers are gone.
     objects = mesh_objects([e for e in entries if e.key in meshes], depsgraph) + \
         [o for o in instances if o.mesh in meshes]

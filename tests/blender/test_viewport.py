@@ -43,6 +43,19 @@ def live_view(scene):
     return (depsgraph, live, *camera_matrices(scene, depsgraph))
 
 
+def bake_queued(scene, depsgraph):
+    """Bake what the view's snapshots queued (its draws would, a slice each: docs/gi_pipeline.md
+    "Bakes a slice at a time") and take the snapshot that reads the baked materials."""
+    from voxgi.blender.viewport_session import live_gi
+
+    live = live_gi(scene.name_full)
+    while live.bakes.pending:
+        assert live.bake_on(1.0, depsgraph), live.bakes.failed
+    while live.read_on(scene, depsgraph):
+        continue
+    assert not live.bakes.failed
+
+
 def cornell(camera_type="PERSP", light="POINT"):
     scene = bpy.context.scene
     scenes.build_test_cornell_box(scene, light=light)

@@ -1,0 +1,415 @@
+"""Cycles bakes of a material's socket over a mesh's UVs: whole, or a few texel blocks at a
+time (main thread; docs/gi_pipeline.md "Bakes a slice at a time").
+
+A bake renders a temporary copy of the material (its socket routed to what the bake writes:
+``BakeSpec.route``) on a temporary copy of the mesh's faces of that material, in a temporary
+scene, into a temporary image; everything is removed before the call returns, also when the
+bake fails, so the user's file, its undo steps and its saves never hold any of it.
+
+``bake_whole`` bakes the BAKE_SIZE² image in one Cycles bake: F12, ``render_preview`` and the
+probe bakes wait for their image anyway. A bake costs 0.15–1.3 s (Cycles' shading of
+BAKE_SIZE² × BAKE_SAMPLES samples, about 2 M a second on 2 cores), too long for the live
+viewport's main thread. Its snapshots queue the bakes they need (``BakeQueue.want``) and read
+the socket's plain value meanwhile; its draws bake a slice at a time (``BakeQueue.step``): a
+run of BLOCK × BLOCK texel blocks of one row, plus BAKE_MARGIN texels on every side, through
+a UV map (TILE_UV) that puts the run's texels of the whole image on the small image's own.
+Texel for texel they are the whole bake's texels (the same footprint, the same margin where an
+island crosses a run's border); only Cycles' random samples differ.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
+BAKE_SAMPLES = 8      # Cycles samples per texel (the texel's mean over its area)
+BAKE_MARGIN = 4       # texels the bake extends each UV island by (no dark seams when filtered)
+BLOCK = 32            # texels per side of the blocks a queued bake is baked in
+TILE_UV = "VoxGI Bake Tile"  # the UV map a run of blocks is baked through
+MAX_UV_MAPS = 8       # Blender's limit of UV maps per mesh
+_COUNT = [0]
+
+
+def busy_thread() -> str:
+    """The name of another VoxGI thread that may run Python now ("" when none). A bake runs
+    Blender's bake operator under a context override; the operator call lets go of Python's
+    lock, and Blender then reads the override (a Python dict) without it: while another
+    thread held the lock, that read crashed the process (measured: a thread of numpy beside
+    tile bakes, within 50–200 bakes). The viewport bakes only while none does
+    (``BakeQueue.step``). A thread that waits for work between tasks says whether it has any
+    (its ``voxgi_busy()``, true from a task's submission on the main thread to its end);
+    any other VoxGI thread counts while it is alive."""
+    current = threading.current_thread()
+    for thread in threading.enumerate():
+        if thread is current or not thread.name.startswith("VoxGI") or not thread.is_alive():
+            continue
+        busy = getattr(thread, "voxgi_busy", None)
+        if busy is None or busy():
+            return thread.name
+    return ""
+
+
+def bake_count() -> int:
+    """How many sockets Cycles baked this session (whole or queued, each counted once)."""
+    return _COUNT[0]
+
+
+@dataclass(frozen=True)
+class BakeSpec:
+    """What one bake renders, read while the snapshot holds the mesh.
+
+    material : the user's material (``bpy.types.Material``); mode : "EMIT" or "DIFFUSE";
+    route : route(tree, groups) makes the copy's node tree show the socket (copies of node
+    groups it makes go to ``groups``, removed with the rest); slots : the mesh's material slot
+    indices with this material, last : its last slot index (faces past it use it, as Blender
+    draws them); render_uv : the UV map the nodes read (None: the mesh has none);
+    target_uv : the UV map the bake writes through, AUTO_UVS' name with ``auto_uvs`` (the
+    per-loop layout, which the copy gets as that map); matrix_world : the object's (what
+    object-space nodes read)."""
+
+    material: object
+    mode: str
+    route: Callable
+    slots: tuple[int, ...]
+    last: int
+    render_uv: str | None
+    target_uv: str | None
+    auto_uvs: np.ndarray | None
+    matrix_world: object
+
+
+def bake_whole(spec: BakeSpec, mesh) -> np.ndarray | None:
+    """(BAKE_SIZE, BAKE_SIZE, 3) float32 linear RGB (row 0 = V 0) of the socket over
+    ``mesh`` (an evaluated mesh), or None where no face of it has the material."""
+    _COUNT[0] += 1
+    source = _source_mesh(spec, mesh)
+    if source is None:
+        return None
+    try:
+        with _Baking(spec, source) as baking:
+            return baking.bake(0, 0, BAKE_SIZE, BAKE_SIZE)
+    finally:
+        bpy.data.meshes.remove(source)
+
+
+def _source_mesh(spec: BakeSpec, evaluated):
+    """A temporary copy of ``evaluated``'s faces of the material (all in slot 0), its bake's
+    UV map active (what the bake writes through) and the render one active for rendering
+    (what the nodes read); None when no face has the material."""
+    import bmesh
+
+    mesh = bpy.data.meshes.new("VoxGI Bake")
+    try:
+        source, target = evaluated, spec.target_uv
+        if spec.auto_uvs is not None:  # the layout as the bake's UV map
+            bm = bmesh.new()
+            try:
+                bm.from_mesh(source)
+                bm.to_mesh(mesh)
+            finally:
+                bm.free()
+            mesh.uv_layers.new(name=target).data.foreach_set(
+                "uv", np.ascontiguousarray(spec.auto_uvs, np.float32).ravel())
+            source = mesh
+        bm = bmesh.new()
+        try:
+            bm.from_mesh(source)
+            others = [f for f in bm.faces if min(f.material_index, spec.last) not in spec.slots]
+            if others:
+                bmesh.ops.delete(bm, geom=others, context="FACES")
+            for face in bm.faces:
+                face.material_index = 0
+            bm.to_mesh(mesh)
+        finally:
+            bm.free()
+        if not mesh.polygons:  # the material is in a slot no face of this mesh uses
+            bpy.data.meshes.remove(mesh)
+            return None
+        if target is not None and mesh.uv_layers.get(target) is not None:
+            mesh.uv_layers.active = mesh.uv_layers[target]
+        if spec.render_uv is not None and mesh.uv_layers.get(spec.render_uv) is not None:
+            mesh.uv_layers[spec.render_uv].active_render = True
+        return mesh
+    except BaseException:
+        bpy.data.meshes.remove(mesh)
+        raise
+
+
+class _Baking:
+    """The temporary material copy, object and scene of one bake call's runs (``bake``)."""
+
+    def __init__(self, spec: BakeSpec, source, tile_uvs: np.ndarray | None = None):
+        self.spec, self.source, self.tile_uvs = spec, source, tile_uvs
+        self.copy = self.obj = self.scene = None
+        self.groups: list = []
+
+    def __enter__(self):
+        try:
+            self.copy = self.spec.material.copy()
+            self.spec.route(self.copy.node_tree, self.groups)
+            self.source.materials.clear()
+            self.source.materials.append(self.copy)
+            self.obj = bpy.data.objects.new("VoxGI Bake", self.source)
+            self.obj.matrix_world = self.spec.matrix_world
+            self.scene = bpy.data.scenes.new("VoxGI Bake")
+            self.scene.collection.objects.link(self.obj)
+            self.scene.render.engine = "CYCLES"
+            cycles = self.scene.cycles
+            cycles.device = "CPU"
+            cycles.samples = BAKE_SAMPLES
+            cycles.use_denoising = False
+            cycles.seed = 0
+            settings = self.scene.render.bake
+            settings.margin = BAKE_MARGIN
+            settings.margin_type = "EXTEND"
+            settings.use_clear = True
+            settings.use_selected_to_active = False
+            settings.target = "IMAGE_TEXTURES"
+            view_layer = self.scene.view_layers[0]
+            self.obj.select_set(True, view_layer=view_layer)
+            view_layer.objects.active = self.obj
+        except BaseException:
+            self.__exit__(None, None, None)
+            raise
+        return self
+
+    def bake(self, x0: int, y0: int, width: int, height: int) -> np.ndarray:
+        """(height, width, 3) float32: the whole image's texels [y0, y0 + height) ×
+        [x0, x0 + width): through the bake's UV map for the whole image, else through TILE_UV
+        (``_tiled``), the bake's UVs ``tile_uvs`` moved so that those texels fill the image,
+        texel centres on texel centres."""
+        if self.tile_uvs is not None:
+            placed = (self.tile_uvs * np.float32(BAKE_SIZE) - np.array([x0, y0], np.float32)) \
+                / np.array([width, height], np.float32)
+            self.source.uv_layers[TILE_UV].data.foreach_set(
+                "uv", np.ascontiguousarray(placed, np.float32).ravel())
+        image = bpy.data.images.new("VoxGI Bake", width, height, float_buffer=True, alpha=False)
+        try:
+            node = self.copy.node_tree.nodes.new("ShaderNodeTexImage")
+            node.image = image
+            self.copy.node_tree.nodes.active = node
+            kwargs = {"type": self.spec.mode, "margin": BAKE_MARGIN, "use_clear": True}
+            if self.spec.mode == "DIFFUSE":
+                kwargs["pass_filter"] = {"COLOR"}
+            view_layer = self.scene.view_layers[0]
+            with bpy.context.temp_override(scene=self.scene, view_layer=view_layer,
+                                           active_object=self.obj, object=self.obj,
+                                           selected_objects=[self.obj],
+                                           selected_editable_objects=[self.obj]):
+                result = bpy.ops.object.bake(**kwargs)
+            if "FINISHED" not in result:
+                raise RuntimeError(f"the bake returned {result}")
+            pixels = np.empty(width * height * 4, np.float32)
+            image.pixels.foreach_get(pixels)
+            self.copy.node_tree.nodes.remove(node)
+            return np.ascontiguousarray(pixels.reshape(height, width, 4)[..., :3])
+        finally:
+            bpy.data.images.remove(image)
+
+    def __exit__(self, *_exc) -> None:
+        if self.scene is not None:
+            bpy.data.scenes.remove(self.scene)
+        if self.obj is not None:
+            bpy.data.objects.remove(self.obj)
+        if self.copy is not None:
+            bpy.data.materials.remove(self.copy)
+        for group in self.groups:
+            bpy.data.node_groups.remove(group)
+        self.scene = self.obj = self.copy = None
+        self.groups = []
+
+
+def _bake_uvs(mesh) -> np.ndarray:
+    """(L, 2) float32: the UVs the bake writes through (the active map's; TILE_UV's source)."""
+    layer = mesh.uv_layers.active
+    uvs = np.empty(len(mesh.loops) * 2, np.float32)
+    layer.data.foreach_get("uv", uvs)
+    return uvs.reshape(-1, 2)
+
+
+def _tiled(source) -> np.ndarray:
+    """Add TILE_UV to ``source`` as its active UV map (the bake's target; the render one
+    stays what the nodes read); the bake's own UVs (L, 2). ValueError when the mesh has no
+    room for another UV map."""
+    uvs = _bake_uvs(source)
+    if len(source.uv_layers) >= MAX_UV_MAPS:
+        raise ValueError(f"the mesh has {len(source.uv_layers)} UV maps, Blender's most")
+    render = next((layer.name for layer in source.uv_layers if layer.active_render), None)
+    layer = source.uv_layers.new(name=TILE_UV)
+    source.uv_layers.active = layer
+    if render is not None:
+        source.uv_layers[render].active_render = True
+    return uvs
+
+
+def covered_blocks(mesh, uvs: np.ndarray) -> np.ndarray:
+    """(B, B) bool, B = BAKE_SIZE // BLOCK, row 0 = V 0: the blocks a polygon's UV bounds
+    (widened by the margin) reach; the rest of the image stays black, as the whole bake's."""
+    side = BAKE_SIZE // BLOCK
+    covered = np.zeros((side, side), bool)
+    starts = np.empty(len(mesh.polygons), np.int32)
+    mesh.polygons.foreach_get("loop_start", starts)
+    if len(starts) == 0 or len(uvs) == 0:
+        return covered
+    texels = np.nan_to_num(uvs * np.float32(BAKE_SIZE), nan=-1e9)
+    low = np.minimum.reduceat(texels, starts, axis=0) - BAKE_MARGIN - 1
+    high = np.maximum.reduceat(texels, starts, axis=0) + BAKE_MARGIN + 1
+    first = np.clip(np.floor(low / BLOCK), 0, side - 1).astype(np.int64)
+    last = np.clip(np.floor(high / BLOCK), 0, side - 1).astype(np.int64)
+    inside = (high > 0).all(axis=1) & (low < BAKE_SIZE).all(axis=1)
+    spans = np.unique(np.concatenate([first, last], axis=1)[inside], axis=0)
+    for x0, y0, x1, y1 in spans:
+        covered[y0:y1 + 1, x0:x1 + 1] = True
+    return covered
+
+
+@dataclass
+class BakeRequest:
+    """A queued bake: ``spec`` over the evaluated mesh of ``object_name`` (``loops`` corners
+    when queued), ``store(pixels)`` called with the whole image when every block is baked."""
+
+    spec: BakeSpec
+    object_name: str
+    loops: int
+    store: Callable
+    pixels: np.ndarray | None = None
+    todo: np.ndarray | None = None        # (B, B) bool: blocks still to bake
+    block_seconds: float | None = None    # measured: one block's bake, its call's share included
+
+
+@dataclass
+class BakeQueue:
+    """The live viewport's pending bakes, keyed by their content key (``want``), baked a
+    slice at a time by its draws (``step``). A snapshot taken with the queue ``begin`` s and
+    ``end`` s its wants: a bake no snapshot wants any more is dropped. ``failed`` keeps why a
+    bake could not run, so the next snapshot warns instead of queueing it again;
+    ``finished`` the materials whose bakes completed (for the viewport to read again)."""
+
+    requests: dict[str, BakeRequest] = field(default_factory=dict)
+    failed: dict[str, str] = field(default_factory=dict)
+    finished: set[str] = field(default_factory=set)
+    _wanted: set[str] | None = None
+
+    @property
+    def pending(self) -> int:
+        return len(self.requests)
+
+    def begin(self) -> None:
+        self._wanted = set()
+
+    def want(self, key: str, request: Callable[[], BakeRequest]) -> None:
+        if self._wanted is not None:
+            self._wanted.add(key)
+        if key not in self.requests:
+            self.requests[key] = request()
+
+    def end(self) -> None:
+        if self._wanted is not None:
+            for key in [k for k in self.requests if k not in self._wanted]:
+                del self.requests[key]
+        self._wanted = None
+
+    def clear(self) -> None:
+        self.requests.clear()
+        self.failed.clear()
+        self.finished.clear()
+
+    def step(self, seconds: float, depsgraph) -> bool:
+        """Bake runs of blocks of the first queued bake for about ``seconds`` (at least one
+        run), unless another VoxGI thread runs (``busy_thread``: nothing then, and False). A bake whose
+        object or material is gone, or whose mesh changed its corners, is dropped (its
+        owner's update reads the scene again); one that fails is kept in ``failed``."""
+        if not self.requests or busy_thread():
+            return False
+        key, request = next(iter(self.requests.items()))
+        try:
+            done = _bake_runs(request, seconds, depsgraph)
+        except _Gone:
+            del self.requests[key]
+            return True
+        except Exception as error:  # noqa: BLE001 - a failed bake must not stop the view
+            del self.requests[key]
+            self.failed[key] = str(error) or type(error).__name__
+            return True
+        if done:
+            del self.requests[key]
+            request.store(request.pixels)
+            self.finished.add(request.spec.material.name_full)
+        return True
+
+
+class _Gone(Exception):
+    """What a queued bake reads is gone or changed: drop it."""
+
+
+def _bake_runs(request: BakeRequest, seconds: float, depsgraph) -> bool:
+    """``BakeQueue.step`` for one request; True when its image is complete."""
+    start = time.perf_counter()
+    spec = request.spec
+    obj = bpy.data.objects.get(request.object_name)
+    try:
+        material_name = spec.material.name_full
+    except ReferenceError:
+        raise _Gone() from None
+    if obj is None or bpy.data.materials.get(material_name) is None:
+        raise _Gone()
+    obj_eval = obj.evaluated_get(depsgraph)
+    evaluated = obj_eval.to_mesh()
+    try:
+        if evaluated is None or len(evaluated.loops) != request.loops:
+            raise _Gone()
+        source = _source_mesh(spec, evaluated)
+    finally:
+        obj_eval.to_mesh_clear()
+    if source is None:
+        raise _Gone()
+    try:
+        try:
+            uvs = _tiled(source)
+        except ValueError:  # no room for TILE_UV: the whole image in this one call
+            with _Baking(spec, source) as baking:
+                request.pixels = baking.bake(0, 0, BAKE_SIZE, BAKE_SIZE)
+            _COUNT[0] += 1
+            return True
+        if request.todo is None:
+            _COUNT[0] += 1
+            request.todo = covered_blocks(source, uvs)
+            request.pixels = np.zeros((BAKE_SIZE, BAKE_SIZE, 3), np.float32)
+        ran = False
+        with _Baking(spec, source, uvs) as baking:
+            while request.todo.any():
+                left = seconds - (time.perf_counter() - start)
+                if ran and (request.block_seconds is None or left < request.block_seconds):
+                    break
+                row, first, count = _next_run(request.todo, left, request.block_seconds)
+                t0 = time.perf_counter()
+                x0, y0, width = first * BLOCK, row * BLOCK, count * BLOCK
+                texels = baking.bake(x0 - BAKE_MARGIN, y0 - BAKE_MARGIN,
+                                     width + 2 * BAKE_MARGIN, BLOCK + 2 * BAKE_MARGIN)
+                request.pixels[y0:y0 + BLOCK, x0:x0 + width] = \
+                    texels[BAKE_MARGIN:BAKE_MARGIN + BLOCK, BAKE_MARGIN:BAKE_MARGIN + width]
+                request.todo[row, first:first + count] = False
+                request.block_seconds = (time.perf_counter() - t0) / count
+                ran = True
+    finally:
+        bpy.data.meshes.remove(source)
+    return not request.todo.any()
+
+
+def _next_run(todo: np.ndarray, left: float, block_seconds: float | None
+              ) -> tuple[int, int, int]:
+    """(row, first block, count): the first row's first run of blocks to bake, as many as
+    ``left`` seconds hold at ``block_seconds`` a block (one while that is unmeasured)."""
+    row = int(np.argmax(todo.any(axis=1)))
+    first = int(np.argmax(todo[row]))
+    end = first
+    while end < todo.shape[1] and todo[row, end]:
+        end += 1
+    most = 1 if block_seconds is None or block_seconds <= 0 else \
+        max(1, int(left / block_seconds))
+    return row, first, min(end - first, most)

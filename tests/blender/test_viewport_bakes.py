@@ -1,0 +1,177 @@
+"""The live viewport never holds Blender's main thread for a material bake: its snapshots queue
+the bakes (the socket's value shown meanwhile) and its draws bake them a run of texel blocks
+at a time (blender/snapshot/bakes.py; docs/gi_pipeline.md "Bakes a slice at a time")."""
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from stand_in_engine import StandInEngine
+from test_viewport import camera_matrices, cornell, engine_view, f12_combined, gpu_ready, relative_l1
+
+
+def _uv_sphere_with(build_color):
+    """(object, material) a UV sphere whose Principled Base Color is ``build_color(tree)``'s
+    output socket."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=24, ring_count=12)
+    obj = bpy.context.object
+    material = bpy.data.materials.new("Bake Me")
+    tree = material.node_tree
+    tree.links.new(build_color(tree), tree.nodes["Principled BSDF"].inputs["Base Color"])
+    obj.data.materials.append(material)
+    return obj, material
+
+
+def _whole_and_queued(obj, material):
+    """The socket baked whole (F12's way) and through a queue a block a step (the viewport's
+    way): (whole, queued, steps, blocks baked per step)."""
+    from voxgi.blender.snapshot import bakes
+    from voxgi.blender.snapshot import materials as snapshot_materials
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    obj_eval = obj.evaluated_get(depsgraph)
+    mesh = obj_eval.to_mesh()
+    try:
+        surface = snapshot_materials.Surface("sphere", obj_eval, mesh, [material], "sphere", True)
+        whole = snapshot_materials.bake_socket(material, "DIFFUSE", "Base Color", surface)
+        spec = snapshot_materials._bake_spec(material, "DIFFUSE", "Base Color", surface, False)
+        loops = len(mesh.loops)
+    finally:
+        obj_eval.to_mesh_clear()
+    stored = []
+    queue = bakes.BakeQueue()
+    queue.want("sphere", lambda: bakes.BakeRequest(spec, obj.name, loops, stored.append))
+    per_step, steps = [], 0
+    while queue.pending:
+        before = None if queue.requests["sphere"].todo is None else \
+            int(queue.requests["sphere"].todo.sum())
+        queue.step(0.0, depsgraph)  # no time at all: one run of one block
+        steps += 1
+        request = queue.requests.get("sphere")
+        after = 0 if request is None else int(request.todo.sum())
+        if before is not None:
+            per_step.append(before - after)
+    assert queue.failed == {} and queue.finished == {material.name_full} and len(stored) == 1
+    return whole, stored[0], steps, per_step
+
+
+def test_a_bake_a_block_at_a_time_is_the_whole_bake_texel_for_texel(voxgi):
+    from voxgi.blender.snapshot import bakes
+
+    # The UV coordinates as the colour: any shift of a run against the whole image shows.
+    obj, material = _uv_sphere_with(
+        lambda tree: tree.nodes.new("ShaderNodeTexCoord").outputs["UV"])
+    whole, queued, steps, per_step = _whole_and_queued(obj, material)
+    covered = whole.sum(-1) > 0
+    assert covered.mean() > 0.9 and np.array_equal(covered, queued.sum(-1) > 0)
+    # within a texel's own spread of UVs (its samples are jittered over it)
+    assert np.abs(queued - whole)[..., :2].max() < 1.5 / bakes.BAKE_SIZE
+    assert set(per_step) == {1}  # a step with no time bakes one block, never more
+    side = bakes.BAKE_SIZE // bakes.BLOCK
+    assert steps <= side * side
+
+    # Hard edges inside blocks and across their borders: the same image up to sampling noise.
+    def checker(tree):
+        node = tree.nodes.new("ShaderNodeTexChecker")
+        node.inputs["Scale"].default_value = 13.0
+        node.inputs["Color1"].default_value = (0.9, 0.1, 0.1, 1.0)
+        node.inputs["Color2"].default_value = (0.1, 0.1, 0.9, 1.0)
+        return node.outputs["Color"]
+
+    obj, material = _uv_sphere_with(checker)
+    whole, queued, _, _ = _whole_and_queued(obj, material)
+    assert np.abs(queued - whole).mean() < 0.01
+    assert abs(float(queued.mean()) - float(whole.mean())) < 1e-3
+
+
+def test_the_viewport_shows_the_value_then_bakes_in_its_draws_and_f12_reuses_its_bake(
+        voxgi, tmp_path):
+    from voxgi.blender.snapshot.materials import bake_count
+    from voxgi.blender.viewport_session import live_gi
+
+    scene = cornell()
+    scene.voxgi_viewport.resolution_fraction = 1.0
+    # the short block painted with a procedural checker (Generated coordinates, no UV map: the
+    # bake lays its polygons out itself)
+    material = bpy.data.materials.new("Test Checker")
+    tree = material.node_tree
+    checker = tree.nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Scale"].default_value = 4.0
+    checker.inputs["Color1"].default_value = (0.9, 0.6, 0.05, 1.0)
+    checker.inputs["Color2"].default_value = (0.05, 0.2, 0.9, 1.0)
+    tree.links.new(checker.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Base Color"])
+    block = bpy.data.objects["Short Block"]
+    block.data.materials.clear()
+    block.data.materials.append(material)
+    gpu_ready()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    view, window = camera_matrices(scene, depsgraph)
+    live = live_gi(scene.name_full)
+    bakes = bake_count()
+
+    live.update(scene, depsgraph)  # view_update: the snapshot queues the bake, runs none
+    assert bake_count() == bakes and live.bakes.pending == 1
+    plain = next(m for m in live.latest_snapshot.materials if m.name == "Test Checker")
+    assert plain.base_color_texture < 0
+
+    engine = StandInEngine()
+    first = None
+    for _ in range(400):
+        redraws = engine.redraws
+        image = engine_view(engine, scene, depsgraph, view, window)
+        if first is None and engine.voxgi_viewport.texture is not None:
+            first = image
+        if engine.redraws == redraws and not live.bakes.pending and live.reading is None:
+            break
+    assert not live.bakes.pending and live.bakes.failed == {}
+    assert bake_count() == bakes + 1  # baked once, in the draws
+    assert any("Baking 1 material texture" in line for line in engine.stats)
+    baked = next(m for m in live.latest_snapshot.materials if m.name == "Test Checker")
+    assert baked.base_color_texture >= 0
+
+    f12 = f12_combined(scene, tmp_path)
+    assert bake_count() == bakes + 1  # F12 reads the viewport's bake from the cache
+    print(f"view against F12: first image {relative_l1(first[..., :3], f12):.4f}, after the "
+          f"bake {relative_l1(image[..., :3], f12):.4f}; {len(engine.stats)} draws")
+    assert relative_l1(image[..., :3], f12) <= 0.02
+    # the view's first image showed the plain value: the checker came with the bake
+    assert first is not None and relative_l1(first[..., :3], f12) > relative_l1(image[..., :3], f12)
+
+
+def test_a_queued_bake_waits_while_another_voxgi_thread_has_work(voxgi):
+    """Blender's bake operator reads its context override without Python's lock: with
+    another thread holding it, the process crashed. No queued bake starts while a VoxGI
+    thread has work; an idle worker (waiting for its next task) does not hold it back."""
+    import threading
+
+    from voxgi.blender.snapshot import bakes
+    from voxgi.blender.snapshot import materials as snapshot_materials
+
+    obj, material = _uv_sphere_with(
+        lambda tree: tree.nodes.new("ShaderNodeTexCoord").outputs["UV"])
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    obj_eval = obj.evaluated_get(depsgraph)
+    mesh = obj_eval.to_mesh()
+    try:
+        surface = snapshot_materials.Surface("sphere", obj_eval, mesh, [material], "sphere", True)
+        spec = snapshot_materials._bake_spec(material, "DIFFUSE", "Base Color", surface, False)
+        loops = len(mesh.loops)
+    finally:
+        obj_eval.to_mesh_clear()
+    queue = bakes.BakeQueue()
+    queue.want("sphere", lambda: bakes.BakeRequest(spec, obj.name, loops, lambda _pixels: None))
+    release, has_work = threading.Event(), [True]
+    thread = threading.Thread(target=release.wait, name="VoxGI test worker", daemon=True)
+    thread.voxgi_busy = lambda: has_work[0]
+    thread.start()
+    try:
+        count = bakes.bake_count()
+        assert bakes.busy_thread() == "VoxGI test worker"
+        assert not queue.step(1.0, depsgraph)
+        assert bakes.bake_count() == count and queue.requests["sphere"].todo is None
+        has_work[0] = False  # waiting for its next task
+        assert bakes.busy_thread() == "" and queue.step(0.0, depsgraph)
+        assert bakes.bake_count() == count + 1 and queue.requests["sphere"].todo is not None
+    finally:
+        release.set()
+        thread.join(5.0)

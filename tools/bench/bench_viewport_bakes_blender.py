@@ -1,0 +1,188 @@
+"""Material bakes in the live viewport (docs/gi_pipeline.md "Bakes a slice at a time"), run
+with the bpy venv: ``.venv/bin/python tools/bench/bench_viewport_bakes_blender.py [--quick]``.
+
+The demo box with node-built materials an artist would give it — a checker wall, a noise
+plaster (Mix Shader of two Principled BSDFs under a Noise mask), a Voronoi-tiled floor (no UV
+map: the bake lays the polygons out) and a Brick emission panel — entered in Rendered mode
+(``view_update``, then ``view_draw`` s of a stand-in engine into a 640 × 360 offscreen, the
+jobs drained between draws as Blender's timer would, its 5 ms main-loop sleep between two
+draws), every main-thread call timed:
+
+* the main thread's longest call before: the same ``view_update`` with the bakes run in it
+  (each material baked whole in the snapshot, as F12 does), measured in this run on an emptied
+  bake cache;
+* now: ``view_update``, the longest ``view_draw`` until every bake is drawn, the time until
+  then, and the longest draw that baked;
+* the whole bakes' time, for the cost of baking a run of blocks at a time.
+
+Prints a markdown table.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import pathlib
+import statistics
+import sys
+import time
+
+HERE = pathlib.Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE), str(HERE.parents[1] / "tests" / "blender")]
+
+REGION = (640, 360)
+EVENT_LOOP_SLEEP = 0.005  # Blender's main loop between two redraws (bench_entering_blender)
+
+
+def _principled(name: str):
+    import bpy
+
+    material = bpy.data.materials.new(name)
+    return material, material.node_tree, material.node_tree.nodes["Principled BSDF"]
+
+
+def build():
+    """The demo scene with four node-built materials (module doc)."""
+    import bpy
+    from bench_blender import demo_snapshot
+
+    scene, _ = demo_snapshot()
+    checker, tree, principled = _principled("Bench Checker Wall")
+    node = tree.nodes.new("ShaderNodeTexChecker")
+    node.inputs["Scale"].default_value = 6.0
+    tree.links.new(node.outputs["Color"], principled.inputs["Base Color"])
+
+    plaster = bpy.data.materials.new("Bench Plaster")
+    tree = plaster.node_tree
+    first = tree.nodes["Principled BSDF"]
+    first.inputs["Base Color"].default_value = (0.8, 0.75, 0.7, 1.0)
+    second = tree.nodes.new("ShaderNodeBsdfPrincipled")
+    second.inputs["Base Color"].default_value = (0.3, 0.2, 0.15, 1.0)
+    second.inputs["Roughness"].default_value = 0.3
+    noise = tree.nodes.new("ShaderNodeTexNoise")
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    tree.links.new(noise.outputs["Fac"], mix.inputs["Fac"])
+    tree.links.new(first.outputs["BSDF"], mix.inputs[1])
+    tree.links.new(second.outputs["BSDF"], mix.inputs[2])
+    tree.links.new(mix.outputs["Shader"], tree.nodes["Material Output"].inputs["Surface"])
+
+    tiles, tree, principled = _principled("Bench Voronoi Floor")
+    voronoi = tree.nodes.new("ShaderNodeTexVoronoi")
+    tree.links.new(voronoi.outputs["Color"], principled.inputs["Base Color"])
+
+    panel, tree, principled = _principled("Bench Brick Panel")
+    brick = tree.nodes.new("ShaderNodeTexBrick")
+    tree.links.new(brick.outputs["Color"], principled.inputs["Emission Color"])
+    principled.inputs["Emission Strength"].default_value = 2.0
+
+    meshes = [o for o in scene.objects if o.type == "MESH" and o.name != "Skinned Tube"]
+    for obj, material in zip(meshes, (checker, plaster, tiles, panel)):
+        obj.data.materials.clear()
+        obj.data.materials.append(material)
+    return scene
+
+
+def _context(view, window):
+    import types
+
+    return types.SimpleNamespace(
+        region=types.SimpleNamespace(width=REGION[0], height=REGION[1]),
+        region_data=types.SimpleNamespace(view_matrix=view, window_matrix=window))
+
+
+def measure(quick: bool, trace: bool = False) -> list:
+    import bpy
+    import gpu
+    from bench_entering_blender import gpu_finish
+    from stand_in_engine import StandInEngine
+
+    from voxgi.blender import jobs
+    from voxgi.blender.snapshot import materials
+    from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.render.gpu_context import ensure_gpu_context
+    from voxgi.render.viewport import view_draw, view_update
+
+    ready, why = ensure_gpu_context()
+    if not ready:
+        raise SystemExit(f"no GPU context: {why}")
+    scene = build()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    rows = []
+    # before: the snapshot baking its materials inline (what view_update held)
+    befores, bakes = [], 0
+    for _ in range(1 if quick else 2):
+        materials.clear_bake_cache()
+        count = materials.bake_count()
+        t0 = time.perf_counter()
+        take_snapshot(scene, depsgraph)
+        befores.append(time.perf_counter() - t0)
+        bakes = materials.bake_count() - count
+    materials.clear_bake_cache()
+
+    jobs.synchronous = False
+    width, height = REGION
+    window = scene.camera.calc_matrix_camera(depsgraph, x=width, y=height)
+    view = scene.camera.matrix_world.inverted()
+    engine = StandInEngine()
+    live = live_gi(scene.name_full)
+    offscreen = gpu.types.GPUOffScreen(width, height)
+    draws = []  # (seconds, baked)
+    started = time.perf_counter()
+    t0 = time.perf_counter()
+    view_update(engine, _context(view, window), depsgraph)
+    update = time.perf_counter() - t0
+    queued = live.bakes.pending
+    done = None
+    try:
+        while time.perf_counter() - started < 300.0:
+            time.sleep(EVENT_LOOP_SLEEP)
+            jobs.drain()
+            with offscreen.bind():
+                t0 = time.perf_counter()
+                view_draw(engine, _context(view, window), depsgraph)
+                gpu_finish()
+                seconds = time.perf_counter() - t0
+            draws.append((seconds, engine.voxgi_viewport.baked))
+            if trace:
+                renderer = engine.voxgi_viewport
+                steps = ", ".join(f"{k} {v * 1000:.1f}" for k, v in renderer.timings.items())
+                print(f"draw {len(draws):3d} {seconds * 1000:6.1f} ms {renderer.shown:10s} {steps}")
+            if not live.bakes.pending and live.reading is None and done is None:
+                done = time.perf_counter() - started
+                break
+    finally:
+        jobs.wait_idle(600)
+        offscreen.free()
+    baking = [s for s, baked in draws if baked]
+    rows.append(("before: view_update on entering, the bakes in it", statistics.median(befores),
+                 f"main thread; {bakes} sockets baked whole"))
+    rows.append(("now: view_update on entering", update,
+                 f"main thread; {queued} bakes queued, their values shown meanwhile"))
+    rows.append(("now: longest view_draw, entering → every bake drawn", max(d[0] for d in draws),
+                 f"goal ≤ 30 ms; {len(draws)} draws, median "
+                 f"{statistics.median(d[0] for d in draws) * 1000:.0f} ms"))
+    rows.append(("now: longest view_draw that baked", max(baking) if baking else 0.0,
+                 f"{len(baking)} draws baked, median "
+                 f"{(statistics.median(baking) if baking else 0.0) * 1000:.0f} ms"))
+    rows.append(("now: entering → every bake done", done or 0.0,
+                 "the materials read again after it (a full snapshot, then the image restarts)"))
+    return rows
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--trace", action="store_true", help="print every draw's time and steps")
+    args = ap.parse_args(argv)
+    from bench_blender import load_addon, print_table
+
+    load_addon()
+    rows = measure(args.quick, args.trace)
+    print_table(f"### Material bakes in the live viewport: the demo box with four node-built "
+                f"materials, view_draw at {REGION[0]}×{REGION[1]}, Mesa llvmpipe "
+                f"({os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f})", rows)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
