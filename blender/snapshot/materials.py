@@ -564,7 +564,7 @@ class MaterialTable:
                 self._warn(f"Material '{name}': the Image Texture node '{node.name}' has no "
                            f"image; using the {socket.name} value instead")
                 return _rgb(socket), None, None, ""
-            texture, uv_map = _image_texture(node)
+            texture, uv_map = self._image(material, node)
             if texture is None:
                 self._warn(f"Material '{name}': image '{node.image.name_full}' has no pixels "
                            f"(missing or unreadable file?); using the {socket.name} value instead")
@@ -628,7 +628,7 @@ class MaterialTable:
                 self._warn(f"Material '{material.name_full}': the Image Texture node "
                            f"'{node.name}' has no image; using the Base Color value instead")
                 return _rgb(socket), None, None, ""
-            texture, uv_map = _image_texture(node, with_alpha=_alpha_node(socket.node) == node)
+            texture, uv_map = self._image(material, node, _alpha_node(socket.node) == node)
             if texture is None:
                 self._warn(
                     f"Material '{material.name_full}': image '{node.image.name_full}' has no "
@@ -656,7 +656,7 @@ class MaterialTable:
             return None, ""
         node = next(iter(sources.values()))[0]
         try:
-            texture, uv_map = _image_texture(node, with_alpha=True)
+            texture, uv_map = self._image(material, node, True)
         except _NeedsBake:
             return None, ""
         if texture is None:
@@ -699,7 +699,7 @@ class MaterialTable:
                 return None, 1.0, ""
             if image.type != "TEX_IMAGE" or output.identifier != "Color" or image.image is None:
                 raise _NeedsBake(f"its Normal Map's Color comes from '{image.name}'")
-            texture, uv_map = _image_texture(image)
+            texture, uv_map = self._image(material, image)
             if texture is None:
                 self._warn(f"Material '{name}': normal map image '{image.image.name_full}' has "
                            "no pixels (missing or unreadable file?); the normals are not mapped")
@@ -726,7 +726,7 @@ class MaterialTable:
                 raise _NeedsBake(f"Alpha comes from '{node.name}'")
             if node.image is None or node.image.alpha_mode == "NONE":
                 return 1.0, None, None, ""  # no image, or one whose alpha Cycles ignores
-            texture, uv_map = _image_texture(node, with_alpha=True)
+            texture, uv_map = self._image(material, node, True)
             if texture is None:
                 self._warn(f"Material '{material.name_full}': image '{node.image.name_full}' "
                            "has no pixels (missing or unreadable file?); using the Alpha value")
@@ -739,6 +739,19 @@ class MaterialTable:
             if socket.node.type != "BSDF_PRINCIPLED":  # the cut-out Mix Shader's Fac
                 return value, None, ("EMIT", CUTOUT_FAC), ""
             return value, None, ("EMIT", socket.name), ""
+
+    def _image(self, material, node, with_alpha: bool = False):
+        """``_image_texture`` of an Image Texture node, saying which UDIM tiles of its image
+        have no pixels (missing files: drawn magenta there, as Cycles draws them)."""
+        texture, uv_map = _image_texture(node, with_alpha)
+        if texture is not None and node.image.source == "TILED":
+            missing = udim.missing_tiles(node.image)
+            if missing:
+                numbers = ", ".join(str(n) for n in missing)
+                self._warn(f"Material '{material.name_full}': image '{node.image.name_full}' has "
+                           f"no file for UDIM tile{'s' if len(missing) > 1 else ''} {numbers}; "
+                           "drawn magenta there, as Cycles draws it")
+        return texture, uv_map
 
     # ------------------------------------------------------------------ bakes
 

@@ -66,6 +66,16 @@ def content_key(image) -> tuple:
     return tuple(key)
 
 
+def missing_tiles(image) -> list[int]:
+    """The numbers of the image's tiles that have no pixels to read: neither packed nor filled
+    in Blender, and no file at their path (``atlas`` leaves their cells magenta, as Cycles
+    draws them)."""
+    packed = {p.tile_number for p in image.packed_files}
+    return [tile.number for tile in image.tiles
+            if tile.number not in packed and not tile.is_generated_tile
+            and not os.path.exists(tile_path(image, tile.number))]
+
+
 def mean_over_tiles(pixels: np.ndarray, image) -> np.ndarray:
     """The mean of an atlas' channels over the cells of tiles (not the missing ones)."""
     columns, rows = layout(image)

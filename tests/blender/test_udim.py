@@ -143,3 +143,20 @@ def test_the_atlas_lays_tiles_as_the_uv_plane_and_stays_within_the_size_limit(vo
     np.testing.assert_allclose(udim.mean_over_tiles(atlas, image),
                                np.mean([np.mean(linear(tile_pixels(c)[..., :3]).reshape(-1, 3), axis=0)
                                         for c in TILES.values()], axis=0), atol=0.01)
+
+
+def test_a_tile_whose_file_is_gone_is_drawn_magenta_as_cycles_draws_it_and_named(voxgi, tmp_path):
+    from voxgi.blender.snapshot import udim
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    scene, _ = strip_scene(str(tmp_path))
+    os.remove(tmp_path / "paint.1002.png")
+    warnings = take_snapshot(scene, bpy.context.evaluated_depsgraph_get()).warnings
+    named = [w for w in warnings if "UDIM tile 1002" in w]
+    assert len(named) == 1 and "'Painted'" in named[0] and "magenta" in named[0], warnings
+    cycles = quad_colours(render_cycles_passes(scene, WIDTH, HEIGHT, samples=16)["Diffuse Color"])
+    ours = quad_colours(preview(tmp_path / "p.exr")["Diffuse Color"])
+    # Cycles' magenta (its Diffuse Color: the colour under the Principled coat's ~4% Fresnel)
+    assert cycles[1][0] > 0.9 and cycles[1][2] > 0.9 and cycles[1][1] < 0.03, cycles[1]
+    np.testing.assert_allclose(ours, cycles, atol=0.03)
+    assert udim.missing_tiles(bpy.data.images["paint.1001.png"]) == [1002]
