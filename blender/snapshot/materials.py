@@ -439,10 +439,13 @@ class MaterialTable:
             return data, None, ""
         inputs = principled.inputs
         glow_strength = np.float32(inputs["Emission Strength"].default_value)
-        if inputs["Emission Strength"].is_linked:
-            self._warn(f"Material '{material.name_full}': its Emission Strength comes from nodes "
-                       "the preview does not evaluate yet; using its value")
         glow, glow_texture, glow_bake, glow_uv = self._emission(material, inputs["Emission Color"])
+        if inputs["Emission Strength"].is_linked:
+            # a Strength from nodes (a mask, a falloff): the surface's emission baked whole,
+            # Color × Strength per texel (as an Emission shader's built of nodes); the values
+            # until then
+            glow, glow_strength = glow * glow_strength, np.float32(1.0)
+            glow_texture, glow_bake, glow_uv = None, ("EMIT", EMISSION_SHADER), ""
         emission = glow * glow_strength
         by_random = random_base_color(material)
         if by_random is not None:  # per object (``object_material``); here its mean colour

@@ -79,6 +79,36 @@ def test_the_snapshot_reads_the_emission_image_per_texel(voxgi):
                                2.0 * linear.reshape(-1, 3).mean(axis=0), rtol=0.03)
 
 
+def test_a_principled_emission_strength_from_nodes_is_baked_with_its_color(voxgi):
+    """A Principled BSDF's Emission Strength from nodes (a mask over the panel's image): the
+    surface's emission is baked whole by Cycles, Color × Strength per texel, as an Emission
+    shader's is; it took the Strength's plain value, with a warning."""
+    from voxgi.blender.snapshot import materials as snapshot_materials
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    build()
+    tree = bpy.data.materials["Panel Glow"].node_tree
+    bsdf = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
+    mask = tree.nodes.new("ShaderNodeTexChecker")  # strength 4 on half the squares, 0 on the rest
+    mask.inputs["Color1"].default_value = (4.0, 4.0, 4.0, 1.0)
+    mask.inputs["Color2"].default_value = (0.0, 0.0, 0.0, 1.0)
+    tree.links.new(mask.outputs["Color"], bsdf.inputs["Emission Strength"])
+    bakes = snapshot_materials.bake_count()
+    snapshot = take_snapshot(bpy.context.scene)
+    assert snapshot.warnings == () and snapshot_materials.bake_count() == bakes + 1
+    glow = next(m for m in snapshot.materials if m.name == "Panel Glow")
+    assert glow.emission_texture >= 0 and glow.emission_strength == 1.0
+    baked = snapshot.textures[glow.emission_texture].pixels[..., :3].reshape(-1, 3)
+    dark = baked.max(axis=1) < 1e-3
+    assert 0.3 < dark.mean() < 0.7  # the mask's dark squares
+    encoded = np.round(emission_scenes.panel_pixels()[..., :3] * 255) / 255  # 8-bit sRGB
+    linear = np.where(encoded <= 0.04045, encoded / 12.92, ((encoded + 0.055) / 1.055) ** 2.4)
+    # the lit squares: 4 × the image's colours (its mean over them, within a few percent)
+    np.testing.assert_allclose(baked[~dark].mean(axis=0) / 4.0, linear.reshape(-1, 3).mean(axis=0),
+                               rtol=0.15)
+    np.testing.assert_allclose(glow.emission, baked.mean(axis=0), rtol=1e-4)
+
+
 def test_a_procedural_emission_color_is_baked(voxgi):
     """An Emission Color from nodes (a Checker Texture) is baked by Cycles into the panel's UV
     map, as a Base Color from nodes is: both checker colours per texel."""
