@@ -72,9 +72,11 @@ JOB_LABEL = "Updating viewport GI"
 MEGABYTE = 1_000_000
 # seconds of a full snapshot's mesh reads per view_update or draw (``LiveGI.read_on``)
 READ_SLICE = 0.008
-# seconds of the queued material bakes per draw (``LiveGI.bake_on``; a run of texel blocks
-# is baked whole, its length from the last run's time)
+# seconds of the queued material bakes per timer tick (``tick``; a run of texel blocks
+# is baked whole, its length from the last run's time), and the tick's interval: the draws and
+# the events of the UI run between two ticks
 BAKE_SLICE = 0.02
+TICK_INTERVAL = 0.01
 
 
 @dataclass
@@ -155,7 +157,7 @@ class LiveGI:
         self.read_slice: float | None = None
         self.read_all = False  # every mesh read ahead, and no update since: snapshot next
         # the material bakes full snapshots queued (their values read meanwhile), baked a
-        # slice a draw (``bake_on``); the materials read again when the last is baked
+        # slice a timer tick (``tick``); the materials read again when the last is baked
         self.bakes = BakeQueue()
         self.skin: dict[str, tuple[bytes, bytes]] = {}  # skinned objects' states (``update``)
         self.world = None          # updates.world_state at the last snapshot
@@ -254,11 +256,13 @@ class LiveGI:
             return None
         return self._submit(plan, scene, depsgraph)
 
-    def read_on(self, scene, depsgraph=None) -> bool:
+    def read_on(self, scene, depsgraph=None, snapshot: bool = True) -> bool:
         """Go on with a full snapshot's mesh reads for ``read_slice`` seconds (all of them
         without one); the call after the one that read the last (with no update between)
         takes the snapshot and submits its job: a slice, then the snapshot, each within a
-        draw. True while that is still to come."""
+        draw or a tick. True while that is still to come. snapshot False (a draw in
+        Blender's UI, where data may not be written: a snapshot writes temporary modifiers,
+        images, bakes) leaves the snapshot to the timer (``tick``)."""
         if self.reading is None:
             return False
         depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
@@ -266,30 +270,31 @@ class LiveGI:
             self.read_all = self._read_ahead(depsgraph)
             if self.read_slice is not None:
                 return True
+        if not snapshot:
+            start_ticking()
+            return True
         plan, self.reading, self.read_all = self.reading, None, False
         self._submit(plan, scene, depsgraph, read=True)
         return False
 
-    def bake_on(self, seconds: float, depsgraph=None) -> bool:
+    def bake_on(self, seconds: float, scene, depsgraph) -> bool:
         """Bake a slice of the queued material bakes (``bakes.BakeQueue.step``, about
         ``seconds``); False when none ran (none queued, a full snapshot's reads under way, or
         another VoxGI thread running: ``bakes.busy_thread``). When the last is baked, the
-        materials that were baked are read again: a full snapshot, its mesh reads in slices
-        as any (``read_on``)."""
+        materials that were baked are read again (a material update: the snapshot is taken
+        here, its meshes' reads kept). Main thread, where Blender lets Python write data — a
+        timer (``tick``), never ``view_draw``."""
         if not self.bakes.pending or self.reading is not None:
             return False
-        depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
         if not self.bakes.step(seconds, depsgraph):
             return False
         if not self.bakes.pending:
             records = [UpdateRecord("MATERIAL", name, False, False, True, "")
                        for name in sorted(self.bakes.finished)]
             self.bakes.finished.clear()
-            plan = plan_updates(records, self.index) if self.index is not None and records \
-                else None
-            if plan is not None and not plan.empty:
-                self._count(plan)
-                self.reading, self.read_all = plan, False
+            if self.index is not None and records:
+                self.update(scene, depsgraph, records)
+            tag_3d_views()
         return True
 
     def _read_ahead(self, depsgraph) -> bool:
@@ -342,6 +347,8 @@ class LiveGI:
             return None
         self.world_only = None
         waits = ()
+        if self.bakes.pending:
+            start_ticking()
         if snapshot is not self.latest_snapshot:
             self.snapshots += 1
             waits = announce_snapshot(self, snapshot, scene)
@@ -522,9 +529,40 @@ def current_state(scene_name: str):
     return None if session is None else session.gi_state
 
 
+def tick() -> float | None:
+    """The live viewport's timer (``bpy.app.timers``, main thread): what its draws must not do,
+    for the scene the window shows — Blender forbids ``view_draw`` to write data (its function
+    is not ``FUNC_ALLOW_WRITE``: a write raises "Writing to ID classes in this context is not
+    allowed"). A full snapshot whose mesh reads the draws finished (``read_on``: temporary
+    modifiers of skinned meshes, UDIM tiles' images, a world's bake), else a slice of the
+    queued material bakes (``LiveGI.bake_on``). The next tick's delay, or None when nothing
+    is left. Without an event loop (tests, benchmarks) the caller ticks as the timer would,
+    and background mode's draws take their snapshots themselves (no UI, no such rule)."""
+    scene = bpy.context.scene
+    live = None if scene is None else _live.get(scene.name_full)
+    if live is None:
+        return None
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    if live.reading is not None:
+        live.read_on(scene, depsgraph)
+        tag_3d_views()
+    elif live.bakes.pending:
+        live.bake_on(BAKE_SLICE, scene, depsgraph)
+    return TICK_INTERVAL if live.reading is not None or live.bakes.pending else None
+
+
+def start_ticking() -> None:
+    """Run ``tick`` from a timer (in Blender's UI; never registered in background mode, where
+    no timer fires and one left registered at exit crashed the process)."""
+    if not bpy.app.background and not bpy.app.timers.is_registered(tick):
+        bpy.app.timers.register(tick, first_interval=TICK_INTERVAL)
+
+
 def clear() -> None:
     """Forget every scene's viewport results (file load, unregister)."""
     _live.clear()
+    if not bpy.app.background and bpy.app.timers.is_registered(tick):
+        bpy.app.timers.unregister(tick)
 
 
 @bpy.app.handlers.persistent

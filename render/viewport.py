@@ -46,12 +46,13 @@ from __future__ import annotations
 import time
 import weakref
 
+import bpy
 import gpu
 import numpy as np
 from gpu_extras.batch import batch_for_shader
 
 from ..blender.settings import cone_settings, gi_stride, pixel_filter_width
-from ..blender.viewport_session import BAKE_SLICE, READ_SLICE, SNAPSHOT_HOOKS, live_gi
+from ..blender.viewport_session import READ_SLICE, SNAPSHOT_HOOKS, live_gi
 from ..blender.viewport_settings import VIEWPORT_PASSES
 from ..voxgi_addon.scene.view_camera import border_rect, camera_from_view, crop_window
 from . import viewport_prepare
@@ -168,7 +169,6 @@ class ViewportRenderer:
         self.display_warm = False  # the texture's draw made once (``draw``) before an image
         self.cache = ViewportCache()  # the radiance cache, built a stage at a time
         self.world = WorldView()   # a view layer that shows no mesh: its world alone
-        self.baked = False         # the last draw baked a slice of materials (``draw_view``)
         self.bounces = ViewportBounces()  # Fast: the voxels with its bounces, made on the worker
         self.bounced = None        # ... those this key's image reflects (None: one bounce)
         _renderers.add(self)
@@ -424,6 +424,14 @@ class ViewportRenderer:
             batch.draw(shader)
 
 
+def draw_may_write() -> bool:
+    """May a draw write Blender data? Not in Blender's UI: ``RenderEngine.view_draw`` is not
+    ``FUNC_ALLOW_WRITE`` (a write raises "Writing to ID classes in this context is not
+    allowed"), so a snapshot is left to the timer (``viewport_session.tick``). In background
+    mode (tests, benchmarks) there is no such rule and no timer."""
+    return bool(bpy.app.background)
+
+
 def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_matrix,
               region_width: int, region_height: int, bind=None, unbind=None,
               redraw=None, border=None) -> bool:
@@ -441,25 +449,17 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
     camera_key = (view.tobytes(), window.tobytes(), width, height)
     pass_name = VIEWPORT_PASSES[view_settings.viewport_pass]
     live = live_gi(scene.name_full)
-    read, baked = 0.0, False
+    read = 0.0
     if live.reading is not None:
         # a full snapshot's mesh reads, a slice a draw, and the snapshot after the last: the
         # draw's work (nothing traced or prepared in it; the last image stays), the next
         # draw asked for
         t0 = time.perf_counter()
-        live.read_on(scene, depsgraph)
+        # (the snapshot after the last read writes data: the timer takes it in Blender's UI)
+        live.read_on(scene, depsgraph, snapshot=draw_may_write())
         read = time.perf_counter() - t0
         if redraw is not None:
             redraw()
-    elif live.bakes.pending and (renderer.progressive.converged or not renderer.baked):
-        # a slice of the material bakes the snapshot queued (its values shown meanwhile),
-        # every other draw while the image refines: the draw's work, as a read's
-        t0 = time.perf_counter()
-        if live.bake_on(BAKE_SLICE, depsgraph):
-            read, baked = time.perf_counter() - t0, True
-        if redraw is not None:
-            redraw()  # (also while another thread keeps the bakes waiting: the next draw asks)
-    renderer.baked = baked
     if width < 1:  # the Render Region lies outside the view: nothing to trace or draw
         renderer.status = live.view_status = "VoxGI | The Render Region is outside the view"
         return False
@@ -544,7 +544,7 @@ def draw_view(renderer: ViewportRenderer, scene, depsgraph, view_matrix, window_
                                      renderer.shown_version)
     live.held_source = None  # (only this draw's slices trace what the view holds)
     if read:
-        renderer.timings = {"material bakes" if baked else "snapshot read": read}
+        renderer.timings = {"snapshot read": read}
     if traced:
         renderer.shown = traced
     elif renderer.texture is None:

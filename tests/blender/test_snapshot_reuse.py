@@ -297,3 +297,28 @@ def test_a_read_ahead_that_fails_leaves_the_meshes_to_the_snapshot(live_box, mon
     assert "a read went wrong" in capsys.readouterr().err
     assert live.reading is None and live.snapshots == taken + 1 and live.error == ""
     same(live.latest_snapshot, fresh_snapshot(scene), "after a failed read")
+
+
+def test_in_blenders_ui_the_draws_read_and_the_timer_takes_the_snapshot(live_box, monkeypatch):
+    """Blender forbids ``view_draw`` to write data, and a snapshot writes (a skinned mesh's
+    temporary modifier, UDIM tiles' images, a world's bake): in the UI the draws only read
+    the meshes a slice each, and the viewport's timer (``viewport_session.tick``) takes the
+    snapshot once they are read — the same snapshot as a full one."""
+    from voxgi.blender import viewport_session
+
+    scene, _, live = live_box
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    taken = live.snapshots
+    live.read_slice = 1e-9
+    live.rescan = "Rendered mode entered"
+    live.update(scene, depsgraph, [])
+    assert live.reading is not None
+    for _ in range(100):  # the draws (``draw_view`` in the UI: snapshot=False)
+        assert live.read_on(scene, depsgraph, snapshot=False)
+        if live.read_all:
+            break
+    assert live.read_all and live.reading is not None and live.snapshots == taken
+    assert live.read_on(scene, depsgraph, snapshot=False) and live.snapshots == taken  # still
+    assert viewport_session.tick() is None  # the timer: the snapshot, nothing left to tick
+    assert live.reading is None and live.snapshots == taken + 1
+    same(live.latest_snapshot, fresh_snapshot(scene), "taken by the timer")

@@ -43,17 +43,16 @@ def live_view(scene):
     return (depsgraph, live, *camera_matrices(scene, depsgraph))
 
 
-def bake_queued(scene, depsgraph):
-    """Bake what the view's snapshots queued (its draws would, a slice each: docs/gi_pipeline.md
-    "Bakes a slice at a time") and take the snapshot that reads the baked materials."""
-    from voxgi.blender.viewport_session import live_gi
+def bake_queued(scene):
+    """Bake what the view's snapshots queued, as the bakes' timer would (a slice a tick:
+    docs/gi_pipeline.md "Bakes a slice at a time"), which then takes the snapshot that reads
+    the baked materials."""
+    from voxgi.blender.viewport_session import live_gi, tick
 
     live = live_gi(scene.name_full)
-    while live.bakes.pending:
-        assert live.bake_on(1.0, depsgraph), live.bakes.failed
-    while live.read_on(scene, depsgraph):
+    while tick() is not None:
         continue
-    assert not live.bakes.failed
+    assert not live.bakes.pending and not live.bakes.failed
 
 
 def cornell(camera_type="PERSP", light="POINT"):

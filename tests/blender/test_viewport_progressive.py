@@ -565,7 +565,7 @@ def textured_view(tmp_path):
     scene.voxgi_viewport.resolution_fraction = 1.0
     scene.voxgi_viewport.samples = SAMPLES
     depsgraph, _, view, window = live_view(scene)
-    bake_queued(scene, depsgraph)  # the back wall's checker: the view's first image waits for it
+    bake_queued(scene)  # the back wall's checker: the view's first image waits for it
     f12 = f12_combined(scene, tmp_path)
     return scene, depsgraph, view, window, f12
 
