@@ -54,6 +54,12 @@ def busy_thread() -> str:
     return ""
 
 
+def _rendering() -> bool:
+    """Is a render job running (F12 in the UI: its Python runs on Blender's render thread,
+    which the bake's unlocked read would race as any thread's)? A bake waits for its end."""
+    return hasattr(bpy.app, "is_job_running") and bpy.app.is_job_running("RENDER")
+
+
 def bake_count() -> int:
     """How many sockets Cycles baked this session (whole or queued, each counted once)."""
     return _COUNT[0]
@@ -321,10 +327,11 @@ class BakeQueue:
 
     def step(self, seconds: float, depsgraph) -> bool:
         """Bake runs of blocks of the first queued bake for about ``seconds`` (at least one
-        run), unless another VoxGI thread runs (``busy_thread``: nothing then, and False). A bake whose
-        object or material is gone, or whose mesh changed its corners, is dropped (its
-        owner's update reads the scene again); one that fails is kept in ``failed``."""
-        if not self.requests or busy_thread():
+        run), unless another VoxGI thread or a render job runs (``busy_thread``,
+        ``_rendering``: nothing then, and False). A bake whose object or material is gone,
+        or whose mesh changed its corners, is dropped (its owner's update reads the scene
+        again); one that fails is kept in ``failed``."""
+        if not self.requests or busy_thread() or _rendering():
             return False
         key, request = next(iter(self.requests.items()))
         try:
