@@ -193,3 +193,40 @@ def test_a_queued_bake_waits_while_another_voxgi_thread_has_work(voxgi):
     finally:
         release.set()
         thread.join(5.0)
+
+
+def test_a_queued_bake_whose_object_or_material_is_deleted_is_dropped_quietly(voxgi):
+    """Objects and materials deleted while their bakes wait: the bakes are dropped (the
+    deletion's own update reads the scene again), nothing fails, nothing of the bake stays."""
+    from voxgi.blender.snapshot import bakes
+    from voxgi.blender.snapshot import materials as snapshot_materials
+
+    def queued(obj, material):
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        obj_eval = obj.evaluated_get(depsgraph)
+        mesh = obj_eval.to_mesh()
+        try:
+            surface = snapshot_materials.Surface(obj.name, obj_eval, mesh, [material], obj.name, True)
+            spec = snapshot_materials._bake_spec(material, "DIFFUSE", "Base Color", surface, False)
+            return bakes.BakeRequest(spec, obj.name, len(mesh.loops), lambda _pixels: None)
+        finally:
+            obj_eval.to_mesh_clear()
+
+    obj, material = _uv_sphere_with(
+        lambda tree: tree.nodes.new("ShaderNodeTexCoord").outputs["UV"])
+    queue = bakes.BakeQueue()
+    queue.want("object", lambda: queued(obj, material))
+    assert queue.step(0.0, bpy.context.evaluated_depsgraph_get())  # a block baked
+    bpy.data.objects.remove(obj)
+    assert queue.step(0.0, bpy.context.evaluated_depsgraph_get())
+    assert queue.pending == 0 and queue.failed == {} and queue.finished == set()
+
+    obj, material = _uv_sphere_with(
+        lambda tree: tree.nodes.new("ShaderNodeTexCoord").outputs["UV"])
+    queue.want("material", lambda: queued(obj, material))
+    bpy.data.materials.remove(material)
+    assert queue.step(0.0, bpy.context.evaluated_depsgraph_get())
+    assert queue.pending == 0 and queue.failed == {}
+    names = ("VoxGI Bake", "VoxGI Bake.001")
+    assert not any(n in bpy.data.meshes or n in bpy.data.objects or n in bpy.data.scenes or
+                   n in bpy.data.images for n in names)
