@@ -75,8 +75,8 @@ class BakeSpec:
     indices with this material, last : its last slot index (faces past it use it, as Blender
     draws them); render_uv : the UV map the nodes read (None: the mesh has none);
     target_uv : the UV map the bake writes through, AUTO_UVS' name with ``auto_uvs`` (the
-    per-loop layout, which the copy gets as that map); matrix_world : the object's (what
-    object-space nodes read)."""
+    per-loop layout, which the copy gets as that map); matrix_world, object_color,
+    pass_index : the object's (what object-space nodes and Object Info read)."""
 
     material: object
     mode: str
@@ -87,6 +87,8 @@ class BakeSpec:
     target_uv: str | None
     auto_uvs: np.ndarray | None
     matrix_world: object
+    object_color: tuple = (1.0, 1.0, 1.0, 1.0)
+    pass_index: int = 0
 
 
 def bake_whole(spec: BakeSpec, mesh) -> np.ndarray | None:
@@ -162,6 +164,8 @@ class _Baking:
             self.source.materials.append(self.copy)
             self.obj = bpy.data.objects.new("VoxGI Bake", self.source)
             self.obj.matrix_world = self.spec.matrix_world
+            self.obj.color = self.spec.object_color
+            self.obj.pass_index = self.spec.pass_index
             self.scene = bpy.data.scenes.new("VoxGI Bake")
             self.scene.collection.objects.link(self.obj)
             self.scene.render.engine = "CYCLES"

@@ -785,7 +785,9 @@ class MaterialTable:
         key = _digest(_tree_key(material.node_tree), mode, socket, surface.digest, auto,
                       bakes.BAKE_SIZE, bakes.BAKE_SAMPLES,
                       tuple(np.array(surface.obj_eval.matrix_world).ravel())
-                      if _uses_object_space(material.node_tree) else None)
+                      if _uses_object_space(material.node_tree) else None,
+                      _object_info(surface.obj_eval) if _uses_node(material.node_tree, "OBJECT_INFO")
+                      else None)
         texture = _BAKED.get(key)
         if texture is None and self._queue is not None:
             # the live viewport: the value until its draws have baked it (bakes.BakeQueue)
@@ -948,6 +950,21 @@ def _image_texture(node, with_alpha: bool = False):
     return texture, uv_map
 
 
+def _uses_node(tree, kind: str, depth: int = 0) -> bool:
+    """Does the tree (its groups too) hold a node of type ``kind``?"""
+    if tree is None or depth > 8:
+        return False
+    return any(node.type == kind or (node.type == "GROUP" and _uses_node(node.node_tree, kind,
+                                                                         depth + 1))
+               for node in tree.nodes)
+
+
+def _object_info(obj) -> tuple:
+    """What Object Info reads of an object besides its place: its Color and Pass Index (the
+    bake's object takes them: ``bakes.BakeSpec.object_color``)."""
+    return tuple(round(float(c), 6) for c in obj.color), int(obj.pass_index)
+
+
 def _uses_object_space(tree, depth: int = 0) -> bool:
     """Does the tree read coordinates that move with the object (Texture Coordinate's Object,
     Camera, Window, Reflection; Geometry)?"""
@@ -1000,7 +1017,8 @@ def _bake_spec(material, mode: str, socket_name: str, surface: Surface,
         last=max(len(surface.slot_materials) - 1, 0), render_uv=render_uv,
         target_uv=AUTO_UVS if auto else render_uv,
         auto_uvs=surface.auto_uvs if auto else None,
-        matrix_world=surface.obj_eval.matrix_world.copy())
+        matrix_world=surface.obj_eval.matrix_world.copy(),
+        object_color=tuple(surface.obj_eval.color), pass_index=int(surface.obj_eval.pass_index))
 
 
 def bake_socket(material, mode: str, socket_name: str, surface: Surface,

@@ -473,6 +473,50 @@ def test_a_procedural_material_in_a_slot_no_face_uses_is_not_baked(voxgi):
     assert any(m.base_color_texture >= 0 for m in wall)
 
 
+def test_a_bake_reads_object_info_color_and_pass_index_of_its_object(voxgi):
+    """Object Info › Color and Object Index feed the Base Color (objects tinted by their
+    Viewport Display colour, as motion-graphics artists set them): the bake's object takes
+    them from the object, which Cycles renders with. It baked with its own (white, 0): the
+    tint was lost."""
+    from voxgi.blender.snapshot import materials
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    build()
+    wall = next(o for o in bpy.data.objects if o.type == "MESH" and
+                "Checker Wall" in [m.name for m in o.data.materials if m is not None])
+    tree = bpy.data.materials["Checker Wall"].node_tree
+    principled = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
+    source = principled.inputs["Base Color"].links[0].from_socket
+    info = tree.nodes.new("ShaderNodeObjectInfo")
+    tint = tree.nodes.new("ShaderNodeMix")
+    tint.data_type, tint.blend_type = "RGBA", "MULTIPLY"
+    tint.inputs["Factor"].default_value = 1.0
+    tree.links.new(source, tint.inputs["A"])
+    tree.links.new(info.outputs["Color"], tint.inputs["B"])
+    brightness = tree.nodes.new("ShaderNodeMath")  # × (1 + Object Index) / 4
+    brightness.operation = "MULTIPLY_ADD"
+    brightness.inputs[1].default_value, brightness.inputs[2].default_value = 0.25, 0.25
+    tree.links.new(info.outputs["Object Index"], brightness.inputs[0])
+    scaled = tree.nodes.new("ShaderNodeMix")
+    scaled.data_type, scaled.blend_type = "RGBA", "MULTIPLY"
+    scaled.inputs["Factor"].default_value = 1.0
+    tree.links.new(tint.outputs["Result"], scaled.inputs["A"])
+    tree.links.new(brightness.outputs["Value"], scaled.inputs["B"])
+    tree.links.new(scaled.outputs["Result"], principled.inputs["Base Color"])
+
+    def wall_mean():
+        materials.clear_bake_cache()
+        snapshot = take_snapshot(bpy.context.scene)
+        baked = next(m for m in snapshot.materials if m.name == "Checker Wall")
+        pixels = snapshot.textures[baked.base_color_texture].pixels.reshape(-1, 3)
+        return pixels[pixels.max(axis=1) > 0].mean(axis=0)
+
+    wall.color, wall.pass_index = (1.0, 1.0, 1.0, 1.0), 3  # × 1: the checker itself
+    plain = wall_mean()
+    wall.color, wall.pass_index = (0.2, 0.6, 0.9, 1.0), 1  # × the colour × 0.5
+    np.testing.assert_allclose(wall_mean(), plain * np.array([0.2, 0.6, 0.9]) * 0.5, rtol=0.02)
+
+
 def test_masked_sub_pixel_rasters_give_the_same_image(voxgi, monkeypatch):
     """The sub-pixel passes of a textured scene rasterize only the edge pixels they list
     (``gbuffer.PixelMask``: depth 0 elsewhere, so the textured fragments there are never
