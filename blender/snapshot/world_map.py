@@ -440,8 +440,13 @@ def bake_world(world, height: int = BAKE_HEIGHT, samples: int = BAKE_SAMPLES) ->
     tmp = tempfile.mkdtemp(prefix="voxgi-world-")
     path = os.path.join(tmp, "world.exr")
     camera = bpy.data.cameras.new("VoxGI World Bake")
-    obj = scene = None
+    obj = scene = copy = None
     try:
+        # a copy of the world without its light's importance map (Cycles builds one for
+        # lighting objects: none here; it cost 0.7 of a 0.75 s bake of a Gradient sky)
+        copy = world.copy()
+        if hasattr(copy, "cycles"):
+            copy.cycles.sampling_method = "NONE"
         camera.type = "PANO"
         camera.panorama_type = "EQUIRECTANGULAR"
         camera.latitude_min, camera.latitude_max = -math.pi / 2, math.pi / 2
@@ -451,7 +456,7 @@ def bake_world(world, height: int = BAKE_HEIGHT, samples: int = BAKE_SAMPLES) ->
         scene = bpy.data.scenes.new("VoxGI World Bake")
         scene.collection.objects.link(obj)
         scene.camera = obj
-        scene.world = world
+        scene.world = copy
         render = scene.render
         render.engine = "CYCLES"
         render.resolution_x, render.resolution_y, render.resolution_percentage = 2 * height, height, 100
@@ -488,6 +493,8 @@ def bake_world(world, height: int = BAKE_HEIGHT, samples: int = BAKE_SAMPLES) ->
             bpy.data.scenes.remove(scene)
         if obj is not None:
             bpy.data.objects.remove(obj)
+        if copy is not None:
+            bpy.data.worlds.remove(copy)
         bpy.data.cameras.remove(camera)
         shutil.rmtree(tmp, ignore_errors=True)
 

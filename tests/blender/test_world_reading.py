@@ -247,11 +247,14 @@ def test_sky_texture_is_baked_once(voxgi, world_map):
     sky.sun_elevation, sky.sun_rotation = math.radians(40.0), math.radians(30.0)
     tree.links.new(sky.outputs["Color"], tree.nodes["Background"].inputs["Color"])
     bpy.context.scene.world = world
-    before = len(bpy.data.scenes), len(bpy.data.objects), len(bpy.data.cameras)
+    sampling = world.cycles.sampling_method
+    before = len(bpy.data.scenes), len(bpy.data.objects), len(bpy.data.cameras), len(bpy.data.worlds)
     bakes = world_map.bake_count()
     data, warnings = _snapshot_world(voxgi)
     assert warnings == [] and world_map.bake_count() == bakes + 1
-    assert (len(bpy.data.scenes), len(bpy.data.objects), len(bpy.data.cameras)) == before
+    # (the bake renders a copy of the world without its importance map: nothing of it stays)
+    assert (len(bpy.data.scenes), len(bpy.data.objects), len(bpy.data.cameras),
+            len(bpy.data.worlds)) == before and world.cycles.sampling_method == sampling
     assert data.radiance.shape == (world_map.BAKE_HEIGHT, 2 * world_map.BAKE_HEIGHT, 3)
     # blue above the horizon away from the sun, and what Cycles shows there
     directions, theirs = _cycles_view(world, _direction(math.radians(50.0), math.radians(-150.0)),
