@@ -281,9 +281,9 @@ class LiveGI:
         """Bake a slice of the queued material bakes (``bakes.BakeQueue.step``, about
         ``seconds``); False when none ran (none queued, a full snapshot's reads under way, or
         another VoxGI thread running: ``bakes.busy_thread``). When the last is baked, the
-        materials that were baked are read again (a material update: the snapshot is taken
-        here, its meshes' reads kept). Main thread, where Blender lets Python write data — a
-        timer (``tick``), never ``view_draw``."""
+        materials that were baked are read again: a material update, whose snapshot (its
+        meshes' reads kept) the next tick takes (``read_on``). Main thread, where Blender lets
+        Python write data — a timer (``tick``), never ``view_draw``."""
         if not self.bakes.pending or self.reading is not None:
             return False
         if not self.bakes.step(seconds, depsgraph):
@@ -292,9 +292,11 @@ class LiveGI:
             records = [UpdateRecord("MATERIAL", name, False, False, True, "")
                        for name in sorted(self.bakes.finished)]
             self.bakes.finished.clear()
-            if self.index is not None and records:
-                self.update(scene, depsgraph, records)
-            tag_3d_views()
+            plan = plan_updates(records, self.index) if self.index is not None and records \
+                else None
+            if plan is not None and not plan.empty:  # the next tick takes the snapshot
+                self._count(plan)
+                self.reading, self.read_all = plan, False
         return True
 
     def _read_ahead(self, depsgraph) -> bool:

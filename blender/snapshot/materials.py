@@ -83,6 +83,7 @@ LINEAR_SPACES = ("Linear Rec.709", "scene_linear", "Non-Color", "Linear CIE-XYZ 
 SCENE_LINEAR = ("Linear Rec.709", "scene_linear")
 MAPPING_TYPES = ("POINT", "TEXTURE", "VECTOR")
 _BAKED: dict[str, TextureData] = {}
+_DERIVED: dict[tuple[str, str], object] = {}  # (bake key, what) → ``_derived``
 
 
 def bake_count() -> int:
@@ -92,6 +93,7 @@ def bake_count() -> int:
 
 def clear_bake_cache() -> None:
     _BAKED.clear()
+    _DERIVED.clear()
     _IMAGES.clear()
 
 
@@ -819,29 +821,42 @@ class MaterialTable:
                 return data
             texture = _store_bake(key, f"{name} ({surface.key})", pixels)
         if socket in ("Alpha", CUTOUT_FAC):  # the baked value into the 4th channel
-            pixels = texture.pixels[..., :1]
-            alpha = TextureData(name=texture.name, pixels=np.concatenate(
-                [np.repeat(pixels, 3, axis=-1), pixels], axis=-1), interpolation="Linear",
-                extension="EXTEND", key=f"{key}+alpha")
+            alpha = _derived(key, "alpha", lambda: TextureData(
+                name=texture.name, pixels=np.concatenate(
+                    [np.repeat(texture.pixels[..., :1], 3, axis=-1), texture.pixels[..., :1]],
+                    axis=-1), interpolation="Linear", extension="EXTEND", key=f"{key}+alpha"))
             return dataclasses.replace(data, alpha_texture=self._add_texture(alpha))
-        mean = texture.pixels.reshape(-1, 3).mean(axis=0).astype(np.float32)
+        mean = _derived(key, "mean",
+                        lambda: texture.pixels.reshape(-1, 3).mean(axis=0).astype(np.float32))
         if socket == shader_mix.PARAMS:  # Roughness, Metallic per texel; Specular's mean
-            rgb = texture.pixels
-            params = np.zeros(rgb.shape[:2] + (4,), np.float32)
-            params[..., :2] = np.clip(rgb[..., :2], 0.0, 1.0)
-            params[..., 3] = 1.0
-            roughness, metallic, specular = (float(c) for c in rgb.reshape(-1, 3).mean(axis=0))
+            def parameters():
+                rgb = texture.pixels
+                params = np.zeros(rgb.shape[:2] + (4,), np.float32)
+                params[..., :2] = np.clip(rgb[..., :2], 0.0, 1.0)
+                params[..., 3] = 1.0
+                return TextureData(name=f"{texture.name} (roughness, metallic)", pixels=params,
+                                   interpolation="Linear", extension="EXTEND", key=f"{key}+params")
+
+            roughness, metallic, specular = (float(c) for c in mean)
             return dataclasses.replace(
                 data, roughness=roughness, metallic=metallic, specular=specular,
-                param_texture=self._add_texture(TextureData(
-                    name=f"{texture.name} (roughness, metallic)", pixels=params,
-                    interpolation="Linear", extension="EXTEND", key=f"{key}+params")))
+                param_texture=self._add_texture(_derived(key, "params", parameters)))
         if socket in ("Emission Color", EMISSION_SHADER):  # per texel, × the strength
             return dataclasses.replace(
                 data, emission=(mean * np.float32(data.emission_strength)).astype(np.float32),
                 emission_texture=self._add_texture(texture))
         return dataclasses.replace(data, base_color=mean,
                                    base_color_texture=self._add_texture(texture))
+
+
+def _derived(key: str, what: str, make):
+    """What a snapshot makes of a baked image (its mean colour, its alpha or parameter texture),
+    made once per bake: a full snapshot of the viewport reads every baked material again
+    (means over 512² texels took 16 of its 39 ms on the demo box with three bakes)."""
+    made = _DERIVED.get((key, what))
+    if made is None:
+        made = _DERIVED[(key, what)] = make()
+    return made
 
 
 def _reads_images(data: MaterialData) -> bool:
@@ -987,9 +1002,11 @@ def can_bake() -> bool:
 
 
 def _store_bake(key: str, name: str, pixels: np.ndarray) -> TextureData:
-    """A baked socket's image into the bake cache (under its content key)."""
+    """A baked socket's image into the bake cache (under its content key), its mean colour
+    with it (``_derived``)."""
     texture = _BAKED[key] = TextureData(name=name, pixels=pixels, interpolation="Linear",
                                         extension="EXTEND", key=key)
+    _derived(key, "mean", lambda: pixels.reshape(-1, 3).mean(axis=0).astype(np.float32))
     return texture
 
 

@@ -120,6 +120,9 @@ def measure(quick: bool, trace: bool = False) -> list:
     materials.clear_bake_cache()
 
     jobs.synchronous = False
+    # as in Blender's UI, where a draw may not write data: the timer takes the snapshots
+    from voxgi.render import viewport
+    viewport.draw_may_write = lambda: False
     width, height = REGION
     window = scene.camera.calc_matrix_camera(depsgraph, x=width, y=height)
     view = scene.camera.matrix_world.inverted()
