@@ -332,9 +332,9 @@ class BakeQueue:
     def step(self, seconds: float, depsgraph) -> bool:
         """Bake runs of blocks of the first queued bake for about ``seconds`` (at least one
         run), unless another VoxGI thread or a render job runs (``busy_thread``,
-        ``_rendering``: nothing then, and False). A bake whose object or material is gone,
-        or whose mesh changed its corners, is dropped (its owner's update reads the scene
-        again); one that fails is kept in ``failed``."""
+        ``_rendering``: nothing then, and False). A bake whose object or material is gone is
+        dropped (the deletion's update reads the scene again); one that fails, or whose
+        object's mesh is not the one the snapshot read, is kept in ``failed``."""
         if not self.requests or busy_thread() or _rendering():
             return False
         key, request = next(iter(self.requests.items()))
@@ -373,7 +373,11 @@ def _bake_runs(request: BakeRequest, seconds: float, depsgraph) -> bool:
     evaluated = obj_eval.to_mesh()
     try:
         if evaluated is None or len(evaluated.loops) != request.loops:
-            raise _Gone()
+            # an edit since the snapshot (whose own update queues the new bake; this one is
+            # wanted no more), or geometry the object does not hold itself (an instance of
+            # generated geometry): said, not tried again
+            raise RuntimeError(f"'{request.object_name}' no longer has the mesh the snapshot "
+                               "read (an instance of generated geometry?)")
         source = _source_mesh(spec, evaluated)
     finally:
         obj_eval.to_mesh_clear()

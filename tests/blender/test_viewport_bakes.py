@@ -197,7 +197,8 @@ def test_a_queued_bake_waits_while_another_voxgi_thread_has_work(voxgi):
 
 def test_a_queued_bake_whose_object_or_material_is_deleted_is_dropped_quietly(voxgi):
     """Objects and materials deleted while their bakes wait: the bakes are dropped (the
-    deletion's own update reads the scene again), nothing fails, nothing of the bake stays."""
+    deletion's own update reads the scene again), nothing fails, nothing of the bake stays;
+    an object whose mesh is no longer the one its snapshot read is said why."""
     from voxgi.blender.snapshot import bakes
     from voxgi.blender.snapshot import materials as snapshot_materials
 
@@ -227,6 +228,14 @@ def test_a_queued_bake_whose_object_or_material_is_deleted_is_dropped_quietly(vo
     bpy.data.materials.remove(material)
     assert queue.step(0.0, bpy.context.evaluated_depsgraph_get())
     assert queue.pending == 0 and queue.failed == {}
+    # an object whose mesh is not the one the snapshot read: said, not tried again
+    obj, material = _uv_sphere_with(
+        lambda tree: tree.nodes.new("ShaderNodeTexCoord").outputs["UV"])
+    request = queued(obj, material)
+    request.loops += 3
+    queue.want("changed", lambda: request)
+    assert queue.step(0.0, bpy.context.evaluated_depsgraph_get())
+    assert queue.pending == 0 and "no longer has the mesh" in queue.failed["changed"]
     names = ("VoxGI Bake", "VoxGI Bake.001")
     assert not any(n in bpy.data.meshes or n in bpy.data.objects or n in bpy.data.scenes or
                    n in bpy.data.images for n in names)
