@@ -187,6 +187,7 @@ class LiveGI:
         key = settings_key(scene)
         if self.index is None or self.rescan:
             plan = full_plan(self.rescan or "first update")
+            self.bakes.failed.clear()  # (undo may bring back what a failed bake read)
             if self.rescan or self.reading is None:
                 # undo, a new engine: updates may have been missed (while the first
                 # snapshot's meshes are read ahead, this one sees every update)
