@@ -156,7 +156,7 @@ def test_cones_see_emission_as_light_only_where_it_is_not_direct():
     plain = build_octree(state.cascades, bounce, 6, one_sided_leaves=True)
     expected, _ = trace_diffuse_and_ao(plain, point, up, ConeSettings())
     np.testing.assert_allclose(diffuse, expected, rtol=1e-3, atol=1e-6)
-    seen_all, _ = trace_diffuse_and_ao(dataclasses.replace(state.octree, emission=None), point, up,
+    seen_all, _ = trace_diffuse_and_ao(dataclasses.replace(state.octree, emission_build=None), point, up,
                                        ConeSettings())
     assert diffuse.sum() < 0.1 * seen_all.sum()  # what subtracting the emission takes away
 

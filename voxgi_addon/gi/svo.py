@@ -45,6 +45,8 @@ arrays (−1 / 0 for absent nodes), the index map into the sparse part.
 """
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import ClassVar, NamedTuple
 
@@ -79,6 +81,9 @@ class VoxelOctree:
     nodes, same occlusion), when the radiance it was built from carried an ``emission`` part
     (``light_injection.InjectedRadiance``); None when nothing emits. The tracers subtract its
     samples where a cone must not see emission (``conetrace.march_cones``' ``subtract``).
+    Built on first use (``emission_build``): only the cones read it, and a posed update of
+    the default Accurate quality, which traces triangles, paid its whole build (7–8 of the
+    rig's 15.6 ms octree stage beside a glowing panel) for nothing.
     """
 
     root_origin: np.ndarray
@@ -89,7 +94,11 @@ class VoxelOctree:
     cascade_levels: tuple[int, ...]
     cascade_offsets: tuple[int, ...]
     levels: list = field(repr=False)
-    emission: "VoxelOctree | None" = field(default=None, repr=False)
+    emission_build: "Callable[[], VoxelOctree] | None" = field(default=None, repr=False)
+
+    @functools.cached_property
+    def emission(self) -> "VoxelOctree | None":
+        return None if self.emission_build is None else self.emission_build()
 
     def node_size(self, level) -> float | np.ndarray:
         """Edge in metres of a node at ``level`` (int or array)."""
@@ -483,11 +492,14 @@ def build_octree(cascades, radiance, dense_depth: int = 6, *,
     too (``VoxelOctree.emission``).
     """
     emission = getattr(radiance, "emission", None)
-    emission_octree = None
+    emission_build = None
     if emission is not None and any(len(e) and np.max(e) > 0 for e in emission):
-        emission_octree = build_octree(cascades, list(emission), dense_depth,
-                                       max_index_window=max_index_window,
-                                       one_sided_leaves=one_sided_leaves)
+        emitted = list(emission)
+
+        def emission_build():
+            return build_octree(list(cascades), emitted, dense_depth,
+                                max_index_window=max_index_window,
+                                one_sided_leaves=one_sided_leaves)
     if len(radiance) != len(cascades):
         raise ValueError("need one radiance array per cascade")
     frame = _frame([c.grid for c in cascades])
@@ -519,4 +531,4 @@ def build_octree(cascades, radiance, dense_depth: int = 6, *,
             base = np.zeros(len(nd.keys), np.int64) if base is None else base  # deepest level
             levels.append(_sparse_level(ell, nd, base, frame, max_index_window))
     return VoxelOctree(frame.root_origin, frame.root_size, depth, dense_depth, frame.resolution,
-                       frame.levels, frame.offsets, levels, emission_octree)
+                       frame.levels, frame.offsets, levels, emission_build)
