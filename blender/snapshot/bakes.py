@@ -10,7 +10,8 @@ bake fails, so the user's file, its undo steps and its saves never hold any of i
 probe bakes wait for their image anyway. A bake costs 0.15–1.3 s (Cycles' shading of
 BAKE_SIZE² × BAKE_SAMPLES samples, about 2 M a second on 2 cores), too long for the live
 viewport's main thread. Its snapshots queue the bakes they need (``BakeQueue.want``) and read
-the socket's plain value meanwhile; its draws bake a slice at a time (``BakeQueue.step``): a
+the socket's plain value meanwhile; its timer bakes a slice at a tick (``BakeQueue.step``,
+``viewport_session.tick``: Blender forbids ``view_draw`` to write data): a
 run of BLOCK × BLOCK texel blocks of one row, plus BAKE_MARGIN texels on every side, through
 a UV map (TILE_UV) that puts the run's texels of the whole image on the small image's own.
 Texel for texel they are the whole bake's texels (the same footprint, the same margin where an
@@ -295,14 +296,16 @@ class BakeRequest:
 @dataclass
 class BakeQueue:
     """The live viewport's pending bakes, keyed by their content key (``want``), baked a
-    slice at a time by its draws (``step``). A snapshot taken with the queue ``begin`` s and
+    slice at a time by its timer (``step``). A snapshot taken with the queue ``begin`` s and
     ``end`` s its wants: a bake no snapshot wants any more is dropped. ``failed`` keeps why a
     bake could not run, so the next snapshot warns instead of queueing it again;
-    ``finished`` the materials whose bakes completed (for the viewport to read again)."""
+    ``finished`` the materials whose bakes completed (for the viewport to read again);
+    ``empty`` the bakes of a material no face of its mesh has (nothing to bake or show)."""
 
     requests: dict[str, BakeRequest] = field(default_factory=dict)
     failed: dict[str, str] = field(default_factory=dict)
     finished: set[str] = field(default_factory=set)
+    empty: set[str] = field(default_factory=set)  # bakes of a material on no face of its mesh
     _wanted: set[str] | None = None
 
     @property
@@ -328,6 +331,7 @@ class BakeQueue:
         self.requests.clear()
         self.failed.clear()
         self.finished.clear()
+        self.empty.clear()
 
     def step(self, seconds: float, depsgraph) -> bool:
         """Bake runs of blocks of the first queued bake for about ``seconds`` (at least one
@@ -349,8 +353,11 @@ class BakeQueue:
             return True
         if done:
             del self.requests[key]
-            request.store(request.pixels)
-            self.finished.add(request.spec.material.name_full)
+            if request.pixels is None:
+                self.empty.add(key)
+            else:
+                request.store(request.pixels)
+                self.finished.add(request.spec.material.name_full)
         return True
 
 
@@ -381,8 +388,8 @@ def _bake_runs(request: BakeRequest, seconds: float, depsgraph) -> bool:
         source = _source_mesh(spec, evaluated)
     finally:
         obj_eval.to_mesh_clear()
-    if source is None:
-        raise _Gone()
+    if source is None:  # no face of the mesh has the material: nothing to bake, nothing seen
+        return True
     try:
         try:
             uvs = _tiled(source)

@@ -793,6 +793,8 @@ class MaterialTable:
         texture = _BAKED.get(key)
         if texture is None and self._queue is not None:
             # the live viewport: the value until its draws have baked it (bakes.BakeQueue)
+            if key in self._queue.empty:  # on no face of this mesh: nothing seen
+                return data
             if key in self._queue.failed:
                 self._warn(f"Material '{name}': baking its {what} with Cycles failed "
                            f"({self._queue.failed[key]}); using its value")

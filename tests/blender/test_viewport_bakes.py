@@ -239,3 +239,27 @@ def test_a_queued_bake_whose_object_or_material_is_deleted_is_dropped_quietly(vo
     names = ("VoxGI Bake", "VoxGI Bake.001")
     assert not any(n in bpy.data.meshes or n in bpy.data.objects or n in bpy.data.scenes or
                    n in bpy.data.images for n in names)
+
+
+def test_a_queued_bake_of_a_material_on_no_face_is_not_queued_again(voxgi):
+    """A material in a slot no face uses (left on an object, as users leave them): its queued
+    bake finds nothing to bake, and the next snapshot neither queues it again nor warns."""
+    from voxgi.blender.snapshot.bakes import BakeQueue
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    obj, material = _uv_sphere_with(
+        lambda tree: tree.nodes.new("ShaderNodeTexCoord").outputs["UV"])
+    unused = bpy.data.materials.new("Unused Checker")
+    tree = unused.node_tree
+    tree.links.new(tree.nodes.new("ShaderNodeTexChecker").outputs["Color"],
+                   tree.nodes["Principled BSDF"].inputs["Base Color"])
+    obj.data.materials.append(unused)  # slot 1, on no face
+    queue = BakeQueue()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    take_snapshot(bpy.context.scene, depsgraph, bakes=queue)
+    assert queue.pending == 2
+    while queue.pending:
+        assert queue.step(1.0, depsgraph)
+    assert len(queue.empty) == 1 and queue.finished == {"Bake Me"} and queue.failed == {}
+    snapshot = take_snapshot(bpy.context.scene, depsgraph, bakes=queue)
+    assert queue.pending == 0 and not any("Unused" in w for w in snapshot.warnings)
