@@ -178,6 +178,16 @@ def test_voxel_emission_weighs_what_the_triangle_covers():
     glow = voxel_emission([voxels], corners, np.tile([4.0, 2.0, 1.0], (4, 1)))[0]
     np.testing.assert_allclose(glow[0], [4.0, 2.0, 1.0], rtol=1e-4)
     np.testing.assert_allclose(glow[1], np.array([4.0, 2.0, 1.0]) * 0.25, rtol=1e-4)
+    # the clipped triangles are kept per grid and emitter (a posed update keeps both): a grid
+    # moved by a cell, or the emitter moved, is clipped again
+    moved = CascadeVoxels(CascadeGrid(0, 1.0, 4, np.array([-1.0, 0.0, 0.0])),
+                          (cells + [1, 0, 0]).astype(np.int32), voxels.albedo, voxels.normal,
+                          voxels.specular, voxels.count, voxels.mesh_has_finer)
+    np.testing.assert_allclose(voxel_emission([moved], corners, np.tile([4.0, 2.0, 1.0], (4, 1)))[0],
+                               glow, rtol=1e-6)
+    shifted = voxel_emission([voxels], corners + [1.0, 0.0, 0.0], np.tile([4.0, 2.0, 1.0], (4, 1)))[0]
+    np.testing.assert_allclose(shifted[0], 0.0, atol=1e-6)
+    np.testing.assert_allclose(shifted[1], [4.0, 2.0, 1.0], rtol=1e-4)
 
 
 def test_cone_shadows_light_with_the_world_and_each_emitter():
