@@ -1,9 +1,9 @@
 """Material bakes in the live viewport (docs/gi_pipeline.md "Bakes a slice at a time"), run
 with the bpy venv: ``.venv/bin/python tools/bench/bench_viewport_bakes_blender.py [--quick]``.
 
-The demo box with node-built materials an artist would give it — a checker wall, a noise
-plaster (Mix Shader of two Principled BSDFs under a Noise mask), a Voronoi-tiled floor (no UV
-map: the bake lays the polygons out) and a Brick emission panel — entered in Rendered mode
+The demo box with node-built materials an artist would give it — a checker on the box's walls,
+a noise plaster on the sphere (Mix Shader of two Principled BSDFs under a Noise mask: its
+colour and its roughness / metallic baked), a Brick emission on the skinned tube — entered in Rendered mode
 (``view_update``, then ``view_draw`` s of a stand-in engine into a 640 × 360 offscreen, the
 jobs drained between draws as Blender's timer would, its 5 ms main-loop sleep between two
 draws), every main-thread call timed:
@@ -41,7 +41,7 @@ def _principled(name: str):
 
 
 def build():
-    """The demo scene with four node-built materials (module doc)."""
+    """The demo scene with three node-built materials (module doc)."""
     import bpy
     from bench_blender import demo_snapshot
 
@@ -65,19 +65,16 @@ def build():
     tree.links.new(second.outputs["BSDF"], mix.inputs[2])
     tree.links.new(mix.outputs["Shader"], tree.nodes["Material Output"].inputs["Surface"])
 
-    tiles, tree, principled = _principled("Bench Voronoi Floor")
-    voronoi = tree.nodes.new("ShaderNodeTexVoronoi")
-    tree.links.new(voronoi.outputs["Color"], principled.inputs["Base Color"])
-
     panel, tree, principled = _principled("Bench Brick Panel")
     brick = tree.nodes.new("ShaderNodeTexBrick")
     tree.links.new(brick.outputs["Color"], principled.inputs["Emission Color"])
     principled.inputs["Emission Strength"].default_value = 2.0
 
-    meshes = [o for o in scene.objects if o.type == "MESH" and o.name != "Skinned Tube"]
-    for obj, material in zip(meshes, (checker, plaster, tiles, panel)):
-        obj.data.materials.clear()
-        obj.data.materials.append(material)
+    for name, material in (("Cornell Box", checker), ("Rotating Sphere", plaster),
+                           ("Skinned Tube", panel)):
+        mesh = bpy.data.objects[name].data
+        mesh.materials.clear()
+        mesh.materials.append(material)
     return scene
 
 
@@ -189,7 +186,7 @@ def main(argv=None) -> int:
 
     load_addon()
     rows = measure(args.quick, args.trace)
-    print_table(f"### Material bakes in the live viewport: the demo box with four node-built "
+    print_table(f"### Material bakes in the live viewport: the demo box with three node-built "
                 f"materials, view_draw at {REGION[0]}×{REGION[1]}, Mesa llvmpipe "
                 f"({os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f})", rows)
     return 0
