@@ -120,11 +120,12 @@ def scene_index(snapshot, view_layer) -> SceneIndex:
                       frozenset(visible_mesh_names(view_layer)))
 
 
-def transform_snapshot(previous, scene, depsgraph, world: bool = True):
+def transform_snapshot(previous, scene, depsgraph, world: bool = True, bakes=None):
     """``previous`` with this frame's matrices, poses, lights and camera (and world, unless
     ``world`` is False), or None when the visible mesh objects (or their kinds) changed since
-    it was taken (``snapshot/pose.posed_snapshot``)."""
-    return posed_snapshot(previous, scene, depsgraph, world=world)
+    it was taken (``snapshot/pose.posed_snapshot``). bakes : the live viewport's queue
+    (``snapshot.bakes.BakeQueue``), whose children bake a node-built world."""
+    return posed_snapshot(previous, scene, depsgraph, world=world, bakes=bakes)
 
 
 def world_state(scene) -> tuple:

@@ -280,24 +280,30 @@ class LiveGI:
 
     def bake_on(self, seconds: float, scene, depsgraph) -> bool:
         """Bake a slice of the queued material bakes (``bakes.BakeQueue.step``, about
-        ``seconds``); False when none ran (none queued, a full snapshot's reads under way, or
-        another VoxGI thread running: ``bakes.busy_thread``). When the last is baked, the
-        materials that were baked are read again: a material update, whose snapshot (its
+        ``seconds``) and collect the worlds baked in other processes; False when nothing ran
+        (none queued, a full snapshot's reads under way, or another VoxGI thread running:
+        ``bakes.busy_thread``). A world whose map came in, and when the last material is
+        baked the materials that were baked, are read again: an update whose snapshot (its
         meshes' reads kept) the next tick takes (``read_on``). Main thread, where Blender lets
         Python write data — a timer (``tick``), never ``view_draw``."""
         if not self.bakes.pending or self.reading is not None:
             return False
         if not self.bakes.step(seconds, depsgraph):
             return False
-        if not self.bakes.pending:
-            records = [UpdateRecord("MATERIAL", name, False, False, True, "")
-                       for name in sorted(self.bakes.finished)]
+        worlds = self.bakes.worlds.finished
+        records = [UpdateRecord("WORLD", name, False, False, True, "") for name in sorted(worlds)]
+        worlds.clear()
+        if records:
+            self.world_changed = True  # the posed snapshot reads the world again
+        if not self.bakes.requests:
+            records += [UpdateRecord("MATERIAL", name, False, False, True, "")
+                        for name in sorted(self.bakes.finished)]
             self.bakes.finished.clear()
-            plan = plan_updates(records, self.index) if self.index is not None and records \
-                else None
-            if plan is not None and not plan.empty:  # the next tick takes the snapshot
-                self._count(plan)
-                self.reading, self.read_all = plan, False
+        plan = plan_updates(records, self.index) if self.index is not None and records \
+            else None
+        if plan is not None and not plan.empty:  # the next tick takes the snapshot
+            self._count(plan)
+            self.reading, self.read_all = plan, False
         return True
 
     def _read_ahead(self, depsgraph) -> bool:
@@ -328,7 +334,7 @@ class LiveGI:
             # a pose or a move: matrices only, the world only when it changed
             # (docs/gi_pipeline.md "Posed updates")
             snapshot = transform_snapshot(self.latest_snapshot, scene, depsgraph,
-                                          world=self.world_changed)
+                                          world=self.world_changed, bakes=self.bakes)
         elif "snapshot" not in changed.stages and self.latest_snapshot is not None:
             snapshot = self.latest_snapshot
         elif self.read_slice is not None and not read and not self._read_ahead(depsgraph):
@@ -562,7 +568,10 @@ def start_ticking() -> None:
 
 
 def clear() -> None:
-    """Forget every scene's viewport results (file load, unregister)."""
+    """Forget every scene's viewport results (file load, unregister); their worlds' bakes in
+    other processes are stopped."""
+    for live in _live.values():
+        live.bakes.worlds.stop()
     _live.clear()
     if not bpy.app.background and bpy.app.timers.is_registered(tick):
         bpy.app.timers.unregister(tick)

@@ -13,7 +13,7 @@ disk, and a later process whose kernels have the same source and state loads the
 So when a saved file whose render engine is VoxGI is open in Blender's UI, ``kernel_warmup``'s
 timer starts, once per file version on the machine, **one background process at the lowest
 priority** (``WarmupProcesses.start``): Blender (or the Python that has ``bpy``) in background
-mode, running this module (``main``), which opens the file, draws the scene camera's view in
+mode, running this module (``child_main``), which opens the file, draws the scene camera's view in
 Rendered mode into an offscreen buffer of the largest 3D view's size until it has converged
 (every kernel of the view's slices, for the file's own lights, textures and cut-outs), and
 then runs two more children, each a process of its own: a new session entering Rendered mode
@@ -22,7 +22,8 @@ on the cache the first one filled, to its first tile — the variants of a sessi
 build, go without — and small F12 previews (the F12 kernels; in a process that had built the
 view's variant of a kernel, llvmpipe kept F12's variant of it out of the cache). It touches
 nothing of the user's session: it reads the saved file and writes only Mesa's cache and a stamp
-(``stamp_path``) that says this file version is warmed. ``VOXGI_NO_WARMUP_PROCESS`` (any non-empty value) turns it off.
+(``stamp_path``) that says this file version is warmed. The children start as every child
+of the add-on does (``blender.child_process``). ``VOXGI_NO_WARMUP_PROCESS`` (any non-empty value) turns it off.
 """
 from __future__ import annotations
 
@@ -30,7 +31,6 @@ import hashlib
 import os
 import pathlib
 import subprocess
-import sys
 import time
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]  # the add-on's package directory
@@ -75,28 +75,12 @@ def _sources_digest() -> str:
 
 
 def command(blend: str, width: int, height: int, phase: str = "") -> list[str]:
-    """The child's command line: Blender's binary in background mode with factory settings
-    running this file, or — Blender as a Python module — this Python running it."""
-    import bpy
+    """The child's command line (``blender.child_process``): at the lowest priority, the
+    add-on registered, running ``child_main``."""
+    from ..blender.child_process import command as child_command
 
-    script = str(pathlib.Path(__file__).resolve())
-    args = [str(ROOT), blend, str(int(width)), str(int(height)), phase or CONVERGE]
-    binary = getattr(bpy.app, "binary_path", "")
-    if binary and os.path.basename(binary).lower().startswith("blender"):
-        return [binary, "-b", "--factory-startup", "--python", script, "--", *args]
-    return [sys.executable, script, *args]
-
-
-def lowest_priority() -> None:
-    """The child's first step on POSIX: the lowest CPU priority (the threads it starts, llvmpipe's
-    included, inherit it). Done by the child itself, not before its exec: a ``preexec_fn``
-    makes Python fork the whole Blender process, 8–18 ms of the main thread for a 0.8 GB one,
-    where without it the child is spawned for about 1 ms."""
-    if hasattr(os, "nice"):
-        try:
-            os.nice(19)
-        except OSError:  # not allowed here: the child runs at the user's priority
-            return
+    return child_command("render.warmup_process", [blend, int(width), int(height), phase or CONVERGE],
+                         nice=19, register=True)
 
 
 def launch(blend: str, width: int, height: int, wait: bool = False,
@@ -282,35 +266,11 @@ def warm(blend: str, width: int, height: int, phase: str = CONVERGE,
             f"{time.perf_counter() - started:.1f} s")
 
 
-def _load_addon(root: str):
-    """Import the add-on from ``root`` as the package ``voxgi_warmup`` and register it."""
-    import importlib.util
-
-    name = "voxgi_warmup"
-    spec = importlib.util.spec_from_file_location(
-        name, os.path.join(root, "__init__.py"), submodule_search_locations=[root])
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    module.register()
-    return name
-
-
-def main(argv: list[str]) -> int:
-    """A child: ``ROOT BLEND WIDTH HEIGHT PHASE`` (after ``--`` when run by Blender's
-    binary). The ``CONVERGE`` child then runs the ``ENTER`` and ``F12`` ones, each a process of
-    its own."""
-    lowest_priority()
-    if "--" in argv:
-        argv = argv[argv.index("--") + 1:]
-    root, blend, width, height, phase = argv[-5:]
-    import bpy  # noqa: F401 - Blender as a module: start it before the add-on
-
-    name = _load_addon(root)
-    import importlib
-
-    child = importlib.import_module(f"{name}.render.warmup_process")
-    print(child.warm(blend, int(width), int(height), phase), flush=True)
+def child_main(args: list[str]) -> int:
+    """A child (``blender.child_process``): ``BLEND WIDTH HEIGHT PHASE``. The ``CONVERGE``
+    child then runs the ``ENTER`` and ``F12`` ones, each a process of its own."""
+    blend, width, height, phase = args
+    print(warm(blend, int(width), int(height), phase), flush=True)
     code = 0
     for after in (ENTER, F12) if phase == CONVERGE else ():
         ran = subprocess.run(command(blend, int(width), int(height), after),
@@ -321,8 +281,3 @@ def main(argv: list[str]) -> int:
               flush=True)
         code = code or ran.returncode
     return code
-
-
-if __name__ == "__main__":
-    # a normal exit: Mesa writes its shader cache from a thread of its own, flushed at exit
-    sys.exit(main(sys.argv[1:]))

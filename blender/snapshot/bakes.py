@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from .world_process import WorldBakes
+
 BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
 BAKE_SAMPLES = 8      # Cycles samples per texel (the texel's mean over its area)
 BAKE_MARGIN = 4       # texels the bake extends each UV island by (no dark seams when filtered)
@@ -300,17 +302,20 @@ class BakeQueue:
     ``end`` s its wants: a bake no snapshot wants any more is dropped. ``failed`` keeps why a
     bake could not run, so the next snapshot warns instead of queueing it again;
     ``finished`` the materials whose bakes completed (for the viewport to read again);
-    ``empty`` the bakes of a material no face of its mesh has (nothing to bake or show)."""
+    ``empty`` the bakes of a material no face of its mesh has (nothing to bake or show).
+    ``worlds``: the node-built worlds baked in other processes (``world_process``), which
+    ``step`` polls."""
 
     requests: dict[str, BakeRequest] = field(default_factory=dict)
     failed: dict[str, str] = field(default_factory=dict)
     finished: set[str] = field(default_factory=set)
     empty: set[str] = field(default_factory=set)  # bakes of a material on no face of its mesh
+    worlds: WorldBakes = field(default_factory=WorldBakes)
     _wanted: set[str] | None = None
 
     @property
     def pending(self) -> int:
-        return len(self.requests)
+        return len(self.requests) + self.worlds.pending
 
     def begin(self) -> None:
         self._wanted = set()
@@ -332,15 +337,20 @@ class BakeQueue:
         self.failed.clear()
         self.finished.clear()
         self.empty.clear()
+        self.worlds.clear()
 
     def step(self, seconds: float, depsgraph) -> bool:
-        """Bake runs of blocks of the first queued bake for about ``seconds`` (at least one
-        run), unless another VoxGI thread or a render job runs (``busy_thread``,
-        ``_rendering``: nothing then, and False). A bake whose object or material is gone is
-        dropped (the deletion's update reads the scene again); one that fails, or whose
-        object's mesh is not the one the snapshot read, is kept in ``failed``."""
+        """Collect the worlds' bakes that ended (``WorldBakes.poll``), then bake runs of blocks
+        of the first queued material bake for about ``seconds`` (at least one run), unless
+        another VoxGI thread or a render job runs (``busy_thread``, ``_rendering``: no
+        material bake then). Whether anything was done. A bake whose object or material is
+        gone is dropped (the deletion's update reads the scene again); one that fails, or
+        whose object's mesh is not the one the snapshot read, is kept in ``failed``."""
+        from .world_map import store
+
+        polled = self.worlds.poll(store)
         if not self.requests or busy_thread() or _rendering():
-            return False
+            return polled
         key, request = next(iter(self.requests.items()))
         try:
             done = _bake_runs(request, seconds, depsgraph)

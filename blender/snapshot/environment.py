@@ -101,9 +101,11 @@ def read_camera(scene, depsgraph) -> CameraData | None:
     )
 
 
-def read_world(scene, warnings: list[str], bake: bool | None = None) -> WorldData:
+def read_world(scene, warnings: list[str], bake: bool | None = None,
+               deferred=None) -> WorldData:
     """The scene's world as an equirect radiance map (``world_map.read_world``): uniform
     colours and Environment Textures are read from the nodes, anything else is evaluated by
-    Cycles (``bake``: allow that here; None: where a nested render can run)."""
+    Cycles (``bake``: allow that here; None: where a nested render can run; ``deferred``: the
+    live viewport's bakes in other processes, ``world_process.WorldBakes``)."""
     count("worlds")
-    return world_map.read_world(scene.world, warnings, bake)
+    return world_map.read_world(scene.world, warnings, bake, deferred)

@@ -39,7 +39,7 @@ def slot_materials(obj) -> tuple[str, ...]:
 
 
 def posed_snapshot(previous, scene, depsgraph, materials: dict | None = None,
-                   world: bool = False):
+                   world: bool = False, bakes=None):
     """``previous`` (a ``SceneSnapshot`` of the same view layer) at the depsgraph's frame, or
     None when its objects no longer match (see the module doc).
 
@@ -47,6 +47,8 @@ def posed_snapshot(previous, scene, depsgraph, materials: dict | None = None,
         slots relinked to other materials is then caught); None skips that check.
     world : read the world again (it changed, or a mapping object of it moved); else the
         previous one is kept.
+    bakes : the live viewport's queue (``bakes.BakeQueue``): a node-built world is baked by
+        its children (``world_process``), as in ``take_snapshot``.
     """
     entries = _visible_mesh_entries(depsgraph.view_layer, [], depsgraph)  # warned before
     entries = [e for e in entries if e.key in previous.meshes]
@@ -63,7 +65,8 @@ def posed_snapshot(previous, scene, depsgraph, materials: dict | None = None,
     objects = [dataclasses.replace(o, materials=p.materials) if p.materials else o
                for o, p in zip(objects, previous.objects)]
     notes: list[str] = []
-    world_data = read_world(scene, notes) if world else previous.world
+    world_data = read_world(scene, notes, deferred=None if bakes is None else bakes.worlds) \
+        if world else previous.world
     return dataclasses.replace(
         previous, objects=objects, armatures=read_armatures(entries, depsgraph),
         lights=read_lights(depsgraph), camera=read_camera(scene, depsgraph), world=world_data,

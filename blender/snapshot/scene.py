@@ -391,7 +391,9 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
         kept up to date with the depsgraph's updates by its owner): a mesh whose geometry
         did not change is taken from there, not read again. None reads every mesh.
     bakes : the live viewport's queue of material bakes (``bakes.BakeQueue``): a socket Cycles
-        must bake and has not is queued there, its value read meanwhile. None bakes here.
+        must bake and has not is queued there, its value read meanwhile; a node-built world is
+        baked by another process (``world_process``), its last map shown meanwhile. None
+        bakes here.
     Raises VoxGIError for input the engine cannot represent (e.g. > 256 deform bones).
     The scene is restored exactly (temporary modifiers and node groups removed).
     """
@@ -469,7 +471,7 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
         armatures=read_armatures([e for e in entries if e.key in meshes], depsgraph),
         lights=lights,
         camera=read_camera(scene, depsgraph),
-        world=read_world(scene, warnings),
+        world=read_world(scene, warnings, deferred=None if bakes is None else bakes.worlds),
         frame=int(scene.frame_current),
         warnings=tuple(warnings),
         holdout_materials=tuple(sorted(holdouts.values())),

@@ -10,7 +10,8 @@ What a camera ray that misses everything sees in Cycles, in the convention of
   image's pixels are read (``foreach_get``), made linear, box-downsampled to at most 512 rows
   and looked up through the mapping;
 * **bake**: anything else (Sky Texture, mixes, ramps, shader mixes, ...): Cycles renders the
-  world with a panoramic equirectangular camera into a temporary float EXR.
+  world with a panoramic equirectangular camera into a temporary float EXR — for the live
+  viewport in another process (``world_process``), which hands the map back to ``store``.
 
 Maps are cached by the world's content key (``world_key``) in a module-level dict that a
 file load clears. A bake needs ``bpy.ops.render.render``: it runs on the main thread only and
@@ -46,6 +47,7 @@ LINEAR_SPACES = ("Linear Rec.709", "scene_linear", "Non-Color")
 MAPPING_TYPES = ("POINT", "TEXTURE", "VECTOR", "NORMAL")
 
 _CACHE: dict[str, tuple[WorldData, tuple[str, ...]]] = {}
+_LAST: dict[str, WorldData] = {}  # each world's last baked map, by name (shown while it bakes again)
 _BAKES = [0]  # how many bakes ran (tests check that a cached world does not bake again)
 
 
@@ -64,6 +66,22 @@ def bake_count() -> int:
 
 def clear_cache() -> None:
     _CACHE.clear()
+    _LAST.clear()
+
+
+def store(key: str, radiance: np.ndarray, uses_light_path: bool, name: str = "") -> WorldData:
+    """Keep the baked ``radiance`` of the world whose content key is ``key`` (a bake that ran
+    elsewhere: ``world_process``), as ``read_world`` keeps its own bakes."""
+    data = _map(key, radiance)
+    _CACHE[key] = (data, _light_path_notes(name) if uses_light_path else ())
+    if name:
+        _LAST[name] = data
+    return data
+
+
+def _light_path_notes(name: str) -> tuple[str, ...]:
+    return (f"World '{name}' uses a Light Path node: VoxGI lights the scene with what camera "
+            "rays see of it",)
 
 
 @bpy.app.handlers.persistent
@@ -516,10 +534,13 @@ def _fallback(world, key: str) -> WorldData:
 # entry
 
 
-def read_world(world, warnings: list[str], bake: bool | None = None) -> WorldData:
+def read_world(world, warnings: list[str], bake: bool | None = None, deferred=None) -> WorldData:
     """``WorldData`` of a world (None: a black world), read directly where its nodes allow and
-    baked by Cycles otherwise. ``bake``: allow a bake (None: where ``can_bake()``). What
-    cannot be read is said in ``warnings`` (once per call)."""
+    baked by Cycles otherwise. ``bake``: allow a bake (None: where ``can_bake()``).
+    ``deferred``: the live viewport's ``world_process.WorldBakes``, which bakes the world in
+    another process where it can (``world_process.deferrable``); the world's last map, or its
+    Background's Color x Strength, stands in meanwhile. What cannot be read is said in
+    ``warnings`` (once per call)."""
     if world is None:
         return WorldData()
     _ensure_load_handler()
@@ -532,6 +553,18 @@ def read_world(world, warnings: list[str], bake: bool | None = None) -> WorldDat
     try:
         data = _read_nodes(world, key)
     except _NeedsBake as reason:
+        tree = world.node_tree
+        height = BAKE_IMAGE_HEIGHT if _uses_images_taller_than(tree, BAKE_HEIGHT) else BAKE_HEIGHT
+        if deferred is not None and key not in deferred.failed:
+            from .world_process import deferrable
+
+            if deferrable(world):
+                try:
+                    deferred.want(world, key, height, _uses_light_path(tree))
+                except Exception as error:  # noqa: BLE001 - baked here instead
+                    deferred.failed[key] = str(error) or type(error).__name__
+                else:
+                    return _LAST.get(world.name_full) or _fallback(world, key + ":pending")
         if bake is None:
             bake = can_bake()
         if not bake:
@@ -541,17 +574,15 @@ def read_world(world, warnings: list[str], bake: bool | None = None) -> WorldDat
                 "Background's Color x Strength until the world is evaluated (any viewport "
                 "update or voxgi.render_preview does it)")
             return _fallback(world, key + ":fallback")
-        tree = world.node_tree
-        height = BAKE_IMAGE_HEIGHT if _uses_images_taller_than(tree, BAKE_HEIGHT) else BAKE_HEIGHT
         try:
             data = _map(key, bake_world(world, height))
         except Exception as error:  # a failed bake must not fail the snapshot
             warnings.append(f"World '{world.name}': evaluating it with Cycles failed ({error}); "
                             "using the Background's Color x Strength")
             return _fallback(world, key + ":fallback")
+        _LAST[world.name_full] = data
         if _uses_light_path(tree):
-            notes.append(f"World '{world.name}' uses a Light Path node: VoxGI lights the scene "
-                         "with what camera rays see of it")
+            notes.extend(_light_path_notes(world.name))
     _CACHE[key] = (data, tuple(notes))
     warnings.extend(notes)
     return data

@@ -263,3 +263,121 @@ def test_a_queued_bake_of_a_material_on_no_face_is_not_queued_again(voxgi):
     assert len(queue.empty) == 1 and queue.finished == {"Bake Me"} and queue.failed == {}
     snapshot = take_snapshot(bpy.context.scene, depsgraph, bakes=queue)
     assert queue.pending == 0 and not any("Unused" in w for w in snapshot.warnings)
+
+
+def _sky_scene():
+    """A ground plane under a Sky Texture world (what an artist lights an exterior with)."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    bpy.ops.mesh.primitive_plane_add(size=10.0)
+    world = bpy.data.worlds.new("Test Sky")
+    tree = world.node_tree
+    sky = tree.nodes.new("ShaderNodeTexSky")
+    background = tree.nodes["Background"]
+    background.inputs["Color"].default_value = (0.2, 0.3, 0.4, 1.0)  # what stands in meanwhile
+    tree.links.new(sky.outputs["Color"], background.inputs["Color"])
+    scene.world = world
+    return scene, world, sky
+
+
+def _world_baked(live, seconds=120.0):
+    """Tick as the bakes' timer would until the view's world bakes in other processes are in:
+    the ticks that polled them."""
+    import time
+
+    from voxgi.blender.viewport_session import tick
+
+    ticks, started = 0, time.monotonic()
+    while live.bakes.worlds.pending and time.monotonic() - started < seconds:
+        tick()
+        ticks += 1
+        time.sleep(0.01)
+    assert not live.bakes.worlds.pending, "the world's bake never came back"
+    while tick() is not None:  # the snapshot that reads it
+        continue
+    return ticks
+
+
+def test_a_node_built_world_bakes_in_another_process_and_the_view_reads_it_after(voxgi):
+    from voxgi.blender.snapshot import world_map
+    from voxgi.blender.viewport_session import live_gi
+    from voxgi.voxgi_addon.scene.changes import UpdateRecord
+
+    scene, world, sky = _sky_scene()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    bakes = world_map.bake_count()
+    live.update(scene, depsgraph)  # view_update: the world goes to a child, nothing bakes here
+    assert world_map.bake_count() == bakes and live.bakes.worlds.pending == 1
+    waiting = live.latest_snapshot.world
+    assert np.allclose(waiting.radiance[0, 0], (0.2, 0.3, 0.4))  # the Background's colour
+    ticks = _world_baked(live)
+    assert world_map.bake_count() == bakes and live.bakes.worlds.failed == {}
+    shown = live.latest_snapshot.world
+    world_map.clear_cache()
+    here = world_map.bake_world(world, shown.radiance.shape[0])  # F12's own bake of it
+    print(f"the child's map came back after {ticks} ticks; the sky's mean {here.mean():.3f}")
+    assert shown.radiance.shape == here.shape and np.array_equal(shown.radiance, here)
+
+    # an edit: the view keeps the last map while the new one bakes; a newer edit stops the
+    # child of the older one
+    world_map.store(shown.key, shown.radiance, False, world.name_full)  # (the cache cleared above)
+    keys = []
+    for elevation in (0.3, 0.6):
+        sky.sun_elevation = elevation
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        live.update(scene, depsgraph, [UpdateRecord("WORLD", world.name_full, shading=True)])
+        while live.reading is not None:
+            live.read_on(scene, depsgraph)
+        keys.append(world_map.world_key(world))
+        assert np.array_equal(live.latest_snapshot.world.radiance, shown.radiance)
+    assert list(live.bakes.worlds.running) == [keys[-1]]
+    _world_baked(live)
+    assert world_map.bake_count() == bakes + 1  # (the comparison's bake above)
+    edited = live.latest_snapshot.world
+    assert edited.key == keys[-1] and not np.array_equal(edited.radiance, shown.radiance)
+
+
+def test_a_world_a_child_cannot_see_is_baked_in_the_snapshot(voxgi):
+    from voxgi.blender.snapshot import world_map
+    from voxgi.blender.viewport_session import live_gi
+
+    # Texture Coordinate › Object: the empty's place is in this session only
+    scene, world, sky = _sky_scene()
+    tree = world.node_tree
+    empty = bpy.data.objects.new("Sky Frame", None)
+    scene.collection.objects.link(empty)
+    coordinates = tree.nodes.new("ShaderNodeTexCoord")
+    coordinates.object = empty
+    gradient = tree.nodes.new("ShaderNodeTexGradient")
+    tree.links.new(coordinates.outputs["Object"], gradient.inputs["Vector"])
+    tree.links.new(gradient.outputs["Color"], tree.nodes["Background"].inputs["Color"])
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    bakes = world_map.bake_count()
+    live.update(scene, depsgraph)
+    assert world_map.bake_count() == bakes + 1 and not live.bakes.worlds.pending
+    assert not live.latest_snapshot.world.key.endswith((":pending", ":fallback"))
+
+
+def test_a_world_whose_child_fails_is_baked_in_the_next_snapshot(voxgi, monkeypatch):
+    import sys
+
+    from voxgi.blender import child_process
+    from voxgi.blender.snapshot import world_map
+    from voxgi.blender.viewport_session import live_gi
+
+    monkeypatch.setattr(child_process, "command", lambda *args, **kwargs: [
+        sys.executable, "-c", "import sys; print('no Cycles here'); sys.exit(3)"])
+    scene, world, _ = _sky_scene()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    live = live_gi(scene.name_full)
+    bakes = world_map.bake_count()
+    live.update(scene, depsgraph)
+    assert live.bakes.worlds.pending == 1 and world_map.bake_count() == bakes
+    _world_baked(live)
+    (why,) = live.bakes.worlds.failed.values()
+    assert "code 3" in why and "no Cycles here" in why
+    # the tick after the child ended read the world again, and baked it there
+    assert world_map.bake_count() == bakes + 1
+    assert live.latest_snapshot.world.key == world_map.world_key(world)

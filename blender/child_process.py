@@ -1,0 +1,75 @@
+"""Other processes running Blender for work the main thread must not hold: the kernels' machine
+code (``render.warmup_process``) and node-built worlds' bakes (``snapshot.world_process``).
+
+A child is Blender's binary in background mode with factory settings, or — Blender as a Python
+module — this Python, running this file as a script (``command``). The script lowers its own
+priority, imports the add-on from its path as the package ``voxgi_child`` (the code of the
+session that started it) and hands the rest of its arguments to that module's ``child_main``.
+This file imports nothing of the add-on's, so the script can run it before the add-on is there.
+"""
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import os
+import pathlib
+import sys
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]  # the add-on's package directory
+PACKAGE = "voxgi_child"  # the add-on's package name in a child
+
+
+def command(module: str, args, nice: int = 10, register: bool = False) -> list[str]:
+    """The command line of a child that runs ``module`` 's ``child_main(args)`` (``module``
+    relative to the add-on's package, e.g. "render.warmup_process"), ``nice`` levels below
+    its parent, after registering the add-on if ``register`` (the scene settings a child that
+    renders with VoxGI reads)."""
+    import bpy
+
+    ours = [str(ROOT), module, str(int(nice)), "1" if register else "0", *map(str, args)]
+    binary = getattr(bpy.app, "binary_path", "")
+    if binary and os.path.basename(binary).lower().startswith("blender"):
+        return [binary, "-b", "--factory-startup", "--python", __file__, "--", *ours]
+    return [sys.executable, __file__, *ours]
+
+
+def lower_priority(increment: int) -> None:
+    """The child's first step on POSIX: ``increment`` nice levels below its parent (the threads
+    it starts, llvmpipe's and Cycles' included, inherit it). Done by the child itself, not
+    before its exec: a ``preexec_fn`` makes Python fork the whole Blender process, 8–18 ms of
+    the main thread for a 0.8 GB one, where without it the child is spawned for about 1 ms."""
+    if increment > 0 and hasattr(os, "nice"):
+        try:
+            os.nice(increment)
+        except OSError:  # not allowed here: the child runs at the user's priority
+            return
+
+
+def import_addon(root: str, register: bool = False):
+    """Import the add-on at ``root`` as the package ``PACKAGE`` (registered if ``register``)."""
+    spec = importlib.util.spec_from_file_location(
+        PACKAGE, os.path.join(root, "__init__.py"), submodule_search_locations=[root])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[PACKAGE] = module
+    spec.loader.exec_module(module)
+    if register:
+        module.register()
+    return module
+
+
+def main(argv: list[str]) -> int:
+    """The child: ``ROOT MODULE NICE REGISTER ARGS…`` (after ``--`` when run by Blender's
+    binary)."""
+    if "--" in argv:
+        argv = argv[argv.index("--") + 1:]
+    root, module, nice, register, *args = argv
+    lower_priority(int(nice))
+    import bpy  # noqa: F401 - Blender as a module: start it before the add-on
+
+    import_addon(root, register=register == "1")
+    return int(importlib.import_module(f"{PACKAGE}.{module}").child_main(args) or 0)
+
+
+if __name__ == "__main__":
+    # a normal exit: Mesa writes its shader cache from a thread of its own, flushed at exit
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,190 @@
+"""Node-built worlds baked in another process for the live viewport (docs/gi_pipeline.md
+"World bakes in another process").
+
+A world VoxGI cannot read from its nodes (a Sky Texture, a Noise, a Gradient, a mix…) is
+rendered by Cycles as a panorama (``world_map.bake_world``): 0.05–1.4 s on this machine's two
+cores, of which a Sky Texture's precomputation alone is about 0.7 s whatever the map's size.
+F12 waits for its image anyway and bakes the world itself; the Rendered view must not hold
+Blender's main thread that long, and one Cycles render cannot be split into slices.
+
+So the viewport's snapshots ask here (``WorldBakes.want``): the world is written to a temporary
+.blend (``bpy.data.libraries.write``, its images by absolute paths; a few milliseconds), and a
+child (``blender.child_process``, 10 nice levels down) loads it and bakes it with the same
+``bake_world``, saving the map beside it. The viewport's timer polls the children
+(``WorldBakes.poll``: nothing waits); a finished map goes into ``world_map`` 's cache, and the
+viewport reads the world again. Meanwhile the view shows the world's last map in this session
+(the state before an edit) or its Background's Color × Strength. A newer edit of the same world
+stops the child of the older one.
+
+A world that reads what a child cannot see — an object's place (Texture Coordinate › Object), an
+image that lives only in memory — is baked in the snapshot as before (``deferrable``).
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+
+import numpy as np
+
+from .world_map import world_objects
+
+WORLD_FILE, MAP_FILE = "world.blend", "map.npy"
+
+
+def deferrable(world) -> bool:
+    """Whether a child can bake ``world`` as this session would: it reads no object and no
+    image whose pixels are only in this session's memory (generated, edited, unsaved)."""
+    if world_objects(world):
+        return False
+    return all(_on_disk(image) for image in _images(world.node_tree))
+
+
+def _images(tree, depth: int = 0):
+    if tree is None or depth > 8:
+        return
+    for node in tree.nodes:
+        image = getattr(node, "image", None)
+        if image is not None:
+            yield image
+        yield from _images(getattr(node, "node_tree", None), depth + 1)
+
+
+def _on_disk(image) -> bool:
+    import bpy
+
+    if image.is_dirty or image.source not in ("FILE", "TILED"):
+        return False
+    if image.packed_file is not None:
+        return True
+    path = bpy.path.abspath(image.filepath, library=image.library)
+    return bool(image.filepath) and os.path.exists(path)
+
+
+@dataclasses.dataclass
+class _Child:
+    """One world's bake in a child process."""
+
+    key: str
+    world: str        # the world's name_full
+    uses_light_path: bool
+    directory: str
+    process: subprocess.Popen
+    started: float
+
+
+@dataclasses.dataclass
+class WorldBakes:
+    """The live viewport's world bakes in children (module doc): ``running`` by the world's
+    content key; ``finished`` the worlds whose children ended since the viewport last read
+    them; ``failed`` why a child brought no map (the next snapshot bakes that world itself)."""
+
+    running: dict[str, _Child] = dataclasses.field(default_factory=dict)
+    finished: set[str] = dataclasses.field(default_factory=set)
+    failed: dict[str, str] = dataclasses.field(default_factory=dict)
+
+    @property
+    def pending(self) -> int:
+        return len(self.running)
+
+    def want(self, world, key: str, height: int, uses_light_path: bool) -> None:
+        """Bake ``world`` (content key ``key``) in a child unless one bakes it already; a
+        child baking an older state of the same world is stopped."""
+        if key in self.running:
+            return
+        for older in [k for k, c in self.running.items() if c.world == world.name_full]:
+            self._stop(older)
+        self.running[key] = _start(world, key, height, uses_light_path)
+
+    def poll(self, store) -> bool:
+        """Collect the children that ended: each map handed to ``store(key, radiance,
+        uses_light_path, world name)`` (``world_map.store``), or why there is none kept in
+        ``failed``; their worlds put in ``finished``. Whether any ended."""
+        ended = False
+        for key, child in list(self.running.items()):
+            code = child.process.poll()
+            if code is None:
+                continue
+            ended = True
+            del self.running[key]
+            try:
+                path = os.path.join(child.directory, MAP_FILE)
+                if code != 0 or not os.path.exists(path):
+                    self.failed[key] = _why(child, code)
+                else:
+                    store(key, np.load(path), child.uses_light_path, child.world)
+                self.finished.add(child.world)  # read again: its map, or baked there
+            finally:
+                shutil.rmtree(child.directory, ignore_errors=True)
+        return ended
+
+    def stop(self) -> None:
+        for key in list(self.running):
+            self._stop(key)
+
+    def clear(self) -> None:
+        self.stop()
+        self.finished.clear()
+        self.failed.clear()
+
+    def _stop(self, key: str) -> None:
+        child = self.running.pop(key)
+        if child.process.poll() is None:
+            child.process.kill()
+            child.process.wait()
+        shutil.rmtree(child.directory, ignore_errors=True)
+
+
+def _start(world, key: str, height: int, uses_light_path: bool) -> _Child:
+    """Write ``world`` to a temporary .blend and start its child (module doc)."""
+    import bpy
+
+    from ..child_process import command
+
+    directory = tempfile.mkdtemp(prefix="voxgi-world-child-")
+    try:
+        blend = os.path.join(directory, WORLD_FILE)
+        bpy.data.libraries.write(blend, {world}, path_remap="ABSOLUTE", compress=False)
+        log = open(os.path.join(directory, "log.txt"), "wb")  # noqa: SIM115 - the child's
+        try:
+            process = subprocess.Popen(
+                command("blender.snapshot.world_process",
+                        [blend, world.name, os.path.join(directory, MAP_FILE), int(height)]),
+                stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
+        finally:
+            log.close()
+    except Exception:
+        shutil.rmtree(directory, ignore_errors=True)
+        raise
+    return _Child(key, world.name_full, uses_light_path, directory, process, time.perf_counter())
+
+
+def _why(child: _Child, code: int) -> str:
+    try:
+        with open(os.path.join(child.directory, "log.txt"), "rb") as log:
+            tail = log.read().decode("utf-8", "replace").strip().splitlines()[-3:]
+    except OSError:
+        tail = []
+    return f"the background bake ended with code {code}" + (f": {' | '.join(tail)}" if tail else "")
+
+
+def child_main(args: list[str]) -> int:
+    """A child (``blender.child_process``): ``BLEND WORLD OUT HEIGHT``: bake the world named
+    ``WORLD`` of ``BLEND`` (``world_map.bake_world``) and save its map to ``OUT`` (.npy)."""
+    import bpy
+
+    from .world_map import bake_world
+
+    blend, name, out, height = args
+    with bpy.data.libraries.load(blend, link=False) as (source, target):
+        if name not in source.worlds:
+            raise SystemExit(f"no world {name!r} in {blend}")
+        target.worlds = [name]
+    radiance = bake_world(target.worlds[0], int(height))
+    partial = out + ".part.npy"
+    np.save(partial, radiance)
+    os.replace(partial, out)  # whole or nothing: the parent reads it when the child has ended
+    return 0
