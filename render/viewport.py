@@ -597,8 +597,11 @@ def status_line(renderer: ViewportRenderer, scene, live) -> str:
     else:
         line = (f"VoxGI | {samples} | {progressive.elapsed:.2f} s | {progressive.stage()} | "
                 f"{quality}")
-    if live.bakes.pending:
-        line += f" | Baking {live.bakes.pending} material texture{'s' if live.bakes.pending > 1 else ''}…"
+    textures = len(live.bakes.requests)
+    if textures:
+        line += f" | Baking {textures} material texture{'s' if textures > 1 else ''}…"
+    if live.bakes.worlds.pending:
+        line += " | Baking the world…"
     if live.running is not None:
         line += " | Updating GI…"
     return line

@@ -311,6 +311,10 @@ def test_a_node_built_world_bakes_in_another_process_and_the_view_reads_it_after
     assert world_map.bake_count() == bakes and live.bakes.worlds.pending == 1
     waiting = live.latest_snapshot.world
     assert np.allclose(waiting.radiance[0, 0], (0.2, 0.3, 0.4))  # the Background's colour
+    from voxgi.render.viewport import ViewportRenderer, status_line
+
+    line = status_line(ViewportRenderer(), scene, live)
+    assert "Baking the world…" in line and "material texture" not in line
     ticks = _world_baked(live)
     assert world_map.bake_count() == bakes and live.bakes.worlds.failed == {}
     shown = live.latest_snapshot.world
