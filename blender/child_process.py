@@ -33,6 +33,28 @@ def command(module: str, args, nice: int = 10, register: bool = False) -> list[s
     return [sys.executable, __file__, *ours]
 
 
+def sees_images(tree, depth: int = 0) -> bool:
+    """Whether a child reading a file that holds ``tree`` (a node tree, written with its images
+    by absolute paths) sees its images as this session does: none of them (nor of its groups)
+    lives only in this session's memory (generated, edited and not saved)."""
+    import bpy
+
+    if tree is None or depth > 8:
+        return True
+    for node in tree.nodes:
+        image = getattr(node, "image", None)
+        if image is not None:
+            if image.is_dirty or image.source not in ("FILE", "TILED", "SEQUENCE", "MOVIE"):
+                return False
+            path = bpy.path.abspath(image.filepath, library=image.library)
+            if image.packed_file is None and not (image.filepath and os.path.exists(path)) \
+                    and image.source != "TILED":
+                return False
+        if not sees_images(getattr(node, "node_tree", None), depth + 1):
+            return False
+    return True
+
+
 def lower_priority(increment: int) -> None:
     """The child's first step on POSIX: ``increment`` nice levels below its parent (the threads
     it starts, llvmpipe's and Cycles' included, inherit it). Done by the child itself, not

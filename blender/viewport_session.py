@@ -72,9 +72,9 @@ JOB_LABEL = "Updating viewport GI"
 MEGABYTE = 1_000_000
 # seconds of a full snapshot's mesh reads per view_update or draw (``LiveGI.read_on``)
 READ_SLICE = 0.008
-# seconds of the queued material bakes per timer tick (``tick``; a run of texel blocks
-# is baked whole, its length from the last run's time), and the tick's interval: the draws and
-# the events of the UI run between two ticks
+# seconds of the queued material bakes per timer tick (``tick``: bakes written for a child
+# process, or a run of texel blocks baked here, its length from the last run's time), and the
+# tick's interval: the draws and the events of the UI run between two ticks
 BAKE_SLICE = 0.02
 TICK_INTERVAL = 0.01
 
@@ -279,10 +279,10 @@ class LiveGI:
         return False
 
     def bake_on(self, seconds: float, scene, depsgraph) -> bool:
-        """Bake a slice of the queued material bakes (``bakes.BakeQueue.step``, about
-        ``seconds``) and collect the worlds baked in other processes; False when nothing ran
-        (none queued, a full snapshot's reads under way, or another VoxGI thread running:
-        ``bakes.busy_thread``). A world whose map came in, and when the last material is
+        """A tick of the queued bakes (``bakes.BakeQueue.step``, about ``seconds``): what the
+        child processes baked collected, the next bakes sent to one, or a slice of one baked
+        here; False when nothing ran (none queued, a full snapshot's reads under way, nothing
+        came in). A world whose map came in, and when the last material is
         baked the materials that were baked, are read again: an update whose snapshot (its
         meshes' reads kept) the next tick takes (``read_on``). Main thread, where Blender lets
         Python write data — a timer (``tick``), never ``view_draw``."""
@@ -568,10 +568,10 @@ def start_ticking() -> None:
 
 
 def clear() -> None:
-    """Forget every scene's viewport results (file load, unregister); their worlds' bakes in
-    other processes are stopped."""
+    """Forget every scene's viewport results (file load, unregister); their bakes in other
+    processes are stopped."""
     for live in _live.values():
-        live.bakes.worlds.stop()
+        live.bakes.clear()
     _live.clear()
     if not bpy.app.background and bpy.app.timers.is_registered(tick):
         bpy.app.timers.unregister(tick)

@@ -1,5 +1,6 @@
-"""Cycles bakes of a material's socket over a mesh's UVs: whole, or a few texel blocks at a
-time (main thread; docs/gi_pipeline.md "Bakes a slice at a time").
+"""Cycles bakes of a material's socket over a mesh's UVs: whole here, whole in a child
+process, or a few texel blocks at a time (main thread; docs/gi_pipeline.md "Bakes a slice at
+a time", "Material bakes in another process").
 
 A bake renders a temporary copy of the material (its socket routed to what the bake writes:
 ``BakeSpec.route``) on a temporary copy of the mesh's faces of that material, in a temporary
@@ -10,15 +11,20 @@ bake fails, so the user's file, its undo steps and its saves never hold any of i
 probe bakes wait for their image anyway. A bake costs 0.15–1.3 s (Cycles' shading of
 BAKE_SIZE² × BAKE_SAMPLES samples, about 2 M a second on 2 cores), too long for the live
 viewport's main thread. Its snapshots queue the bakes they need (``BakeQueue.want``) and read
-the socket's plain value meanwhile; its timer bakes a slice at a tick (``BakeQueue.step``,
-``viewport_session.tick``: Blender forbids ``view_draw`` to write data): a
-run of BLOCK × BLOCK texel blocks of one row, plus BAKE_MARGIN texels on every side, through
-a UV map (TILE_UV) that puts the run's texels of the whole image on the small image's own.
-Texel for texel they are the whole bake's texels (the same footprint, the same margin where an
-island crosses a run's border); only Cycles' random samples differ.
+the socket's plain value meanwhile; its timer (``BakeQueue.step``, ``viewport_session.tick``:
+Blender forbids ``view_draw`` to write data) writes them — the mesh's faces and the routed
+material copy, the object that holds them — to a .blend for a child process
+(``blender.child_process``), which bakes them whole with the same code (``child_main``), and
+collects what the child brought. A bake a child cannot make (its material reads an image only
+in this session's memory, or its child failed) is baked here, a run of BLOCK × BLOCK texel
+blocks of one row a tick, plus BAKE_MARGIN texels on every side, through a UV map (TILE_UV)
+that puts the run's texels of the whole image on the small image's own. Texel for texel they
+are the whole bake's texels (the same footprint, the same margin where an island crosses a
+run's border); only Cycles' random samples differ.
 """
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -152,23 +158,38 @@ def _source_mesh(spec: BakeSpec, evaluated):
 
 
 class _Baking:
-    """The temporary material copy, object and scene of one bake call's runs (``bake``)."""
+    """The temporary material copy, object and scene of one bake call's runs (``bake``). With
+    ``staged`` False only the object (and its material copy), for a child to bake
+    (``_write_batch``); ``loaded`` stages such an object in the child."""
 
-    def __init__(self, spec: BakeSpec, source, tile_uvs: np.ndarray | None = None):
-        self.spec, self.source, self.tile_uvs = spec, source, tile_uvs
+    def __init__(self, spec: BakeSpec | None, source, tile_uvs: np.ndarray | None = None,
+                 staged: bool = True):
+        self.spec, self.source, self.tile_uvs, self.staged = spec, source, tile_uvs, staged
+        self.mode = None if spec is None else spec.mode
         self.copy = self.obj = self.scene = None
         self.groups: list = []
+        self.owned = True  # the object and its material copy are removed on exit
+
+    @classmethod
+    def loaded(cls, obj, mode: str) -> _Baking:
+        """A bake of ``obj`` as ``_write_batch`` wrote it (its mesh, its routed material)."""
+        baking = cls(None, obj.data)
+        baking.obj, baking.copy, baking.mode, baking.owned = obj, obj.data.materials[0], mode, False
+        return baking
 
     def __enter__(self):
         try:
-            self.copy = self.spec.material.copy()
-            self.spec.route(self.copy.node_tree, self.groups)
-            self.source.materials.clear()
-            self.source.materials.append(self.copy)
-            self.obj = bpy.data.objects.new("VoxGI Bake", self.source)
-            self.obj.matrix_world = self.spec.matrix_world
-            self.obj.color = self.spec.object_color
-            self.obj.pass_index = self.spec.pass_index
+            if self.obj is None:
+                self.copy = self.spec.material.copy()
+                self.spec.route(self.copy.node_tree, self.groups)
+                self.source.materials.clear()
+                self.source.materials.append(self.copy)
+                self.obj = bpy.data.objects.new("VoxGI Bake", self.source)
+                self.obj.matrix_world = self.spec.matrix_world
+                self.obj.color = self.spec.object_color
+                self.obj.pass_index = self.spec.pass_index
+            if not self.staged:
+                return self
             self.scene = bpy.data.scenes.new("VoxGI Bake")
             self.scene.collection.objects.link(self.obj)
             self.scene.render.engine = "CYCLES"
@@ -206,8 +227,8 @@ class _Baking:
             node = self.copy.node_tree.nodes.new("ShaderNodeTexImage")
             node.image = image
             self.copy.node_tree.nodes.active = node
-            kwargs = {"type": self.spec.mode, "margin": BAKE_MARGIN, "use_clear": True}
-            if self.spec.mode == "DIFFUSE":
+            kwargs = {"type": self.mode, "margin": BAKE_MARGIN, "use_clear": True}
+            if self.mode == "DIFFUSE":
                 kwargs["pass_filter"] = {"COLOR"}
             view_layer = self.scene.view_layers[0]
             with bpy.context.temp_override(scene=self.scene, view_layer=view_layer,
@@ -227,9 +248,9 @@ class _Baking:
     def __exit__(self, *_exc) -> None:
         if self.scene is not None:
             bpy.data.scenes.remove(self.scene)
-        if self.obj is not None:
+        if self.obj is not None and self.owned:
             bpy.data.objects.remove(self.obj)
-        if self.copy is not None:
+        if self.copy is not None and self.owned:
             bpy.data.materials.remove(self.copy)
         for group in self.groups:
             bpy.data.node_groups.remove(group)
@@ -296,21 +317,35 @@ class BakeRequest:
 
 
 @dataclass
+class _BakeChild:
+    """A batch of queued bakes baked whole in a child process (``_write_batch``): its
+    directory holds the batch's .blend and, as each bake ends, ``<stem>.npy``."""
+
+    process: object          # subprocess.Popen
+    directory: str
+    stems: dict[str, str]    # file stem → the request's key
+    started: float
+
+
+@dataclass
 class BakeQueue:
-    """The live viewport's pending bakes, keyed by their content key (``want``), baked a
-    slice at a time by its timer (``step``). A snapshot taken with the queue ``begin`` s and
-    ``end`` s its wants: a bake no snapshot wants any more is dropped. ``failed`` keeps why a
-    bake could not run, so the next snapshot warns instead of queueing it again;
-    ``finished`` the materials whose bakes completed (for the viewport to read again);
-    ``empty`` the bakes of a material no face of its mesh has (nothing to bake or show).
-    ``worlds``: the node-built worlds baked in other processes (``world_process``), which
-    ``step`` polls."""
+    """The live viewport's pending bakes, keyed by their content key (``want``), baked by
+    child processes and collected by its timer (``step``). A snapshot taken with the queue
+    ``begin`` s and ``end`` s its wants: a bake no snapshot wants any more is dropped.
+    ``failed`` keeps why a bake could not run, so the next snapshot warns instead of queueing
+    it again; ``finished`` the materials whose bakes completed (for the viewport to read
+    again); ``empty`` the bakes of a material no face of its mesh has (nothing to bake or
+    show); ``local`` the bakes a child cannot make (an image only in this session's memory, a
+    child that failed), baked here a run of blocks a step. ``worlds``: the node-built worlds
+    baked in other processes (``world_process``), which ``step`` polls."""
 
     requests: dict[str, BakeRequest] = field(default_factory=dict)
     failed: dict[str, str] = field(default_factory=dict)
     finished: set[str] = field(default_factory=set)
     empty: set[str] = field(default_factory=set)  # bakes of a material on no face of its mesh
+    local: set[str] = field(default_factory=set)
     worlds: WorldBakes = field(default_factory=WorldBakes)
+    child: _BakeChild | None = None
     _wanted: set[str] | None = None
 
     @property
@@ -337,47 +372,226 @@ class BakeQueue:
         self.failed.clear()
         self.finished.clear()
         self.empty.clear()
+        self.local.clear()
         self.worlds.clear()
+        self._stop_child()
 
     def step(self, seconds: float, depsgraph) -> bool:
-        """Collect the worlds' bakes that ended (``WorldBakes.poll``), then bake runs of blocks
-        of the first queued material bake for about ``seconds`` (at least one run), unless
-        another VoxGI thread or a render job runs (``busy_thread``, ``_rendering``: no
-        material bake then). Whether anything was done. A bake whose object or material is
-        gone is dropped (the deletion's update reads the scene again); one that fails, or
-        whose object's mesh is not the one the snapshot read, is kept in ``failed``."""
+        """One tick of the queue (about ``seconds`` of the main thread at most): collect the
+        worlds' and the materials' bakes that children ended; with no child running, write
+        the next batch of queued bakes for one (``_send``); else bake runs of blocks of the
+        first ``local`` bake here, unless another VoxGI thread or a render job runs
+        (``busy_thread``, ``_rendering``). Whether anything was done. A bake whose object or
+        material is gone is dropped (the deletion's update reads the scene again); one that
+        fails, or whose object's mesh is not the one the snapshot read, is kept in
+        ``failed``."""
         from .world_map import store
 
-        polled = self.worlds.poll(store)
-        if not self.requests or busy_thread() or _rendering():
-            return polled
-        key, request = next(iter(self.requests.items()))
+        worked = self.worlds.poll(store)
+        worked = self._collect() or worked
+        if _rendering():
+            return worked
+        if self.child is None and any(k not in self.local for k in self.requests):
+            return self._send(seconds, depsgraph) or worked
+        key = next((k for k in self.requests if k in self.local), None)
+        if key is None or busy_thread():
+            return worked
+        request = self.requests[key]
         try:
             done = _bake_runs(request, seconds, depsgraph)
         except _Gone:
             del self.requests[key]
+            self.local.discard(key)
             return True
         except Exception as error:  # noqa: BLE001 - a failed bake must not stop the view
             del self.requests[key]
+            self.local.discard(key)
             self.failed[key] = str(error) or type(error).__name__
             return True
         if done:
-            del self.requests[key]
-            if request.pixels is None:
-                self.empty.add(key)
-            else:
-                request.store(request.pixels)
-                self.finished.add(request.spec.material.name_full)
+            self._done(key, request, request.pixels)
         return True
+
+    def _done(self, key: str, request: BakeRequest, pixels) -> None:
+        del self.requests[key]
+        self.local.discard(key)
+        if pixels is None:
+            self.empty.add(key)
+            return
+        request.store(pixels)
+        try:
+            self.finished.add(request.spec.material.name_full)
+        except ReferenceError:  # deleted since: its deletion's update reads the scene again
+            return
+
+    def _send(self, seconds: float, depsgraph) -> bool:
+        """Write the queued bakes (as many as about ``seconds`` hold, at least one) to a
+        .blend and start a child that bakes them whole (``child_main``). A bake whose
+        material reads an image a child cannot see goes to ``local``."""
+        import shutil
+        import subprocess
+        import tempfile
+
+        from ..child_process import command, sees_images
+
+        start = time.perf_counter()
+        directory = tempfile.mkdtemp(prefix="voxgi-bake-child-")
+        stems: dict[str, str] = {}
+        sources = []
+        try:
+            with _Batch() as batch:
+                for key, request in list(self.requests.items()):
+                    if key in self.local:
+                        continue
+                    if stems and time.perf_counter() - start > seconds:
+                        break
+                    try:
+                        if not sees_images(request.spec.material.node_tree):
+                            self.local.add(key)
+                            continue
+                        source = _evaluated_source(request, depsgraph)
+                    except (_Gone, ReferenceError):  # (its material deleted)
+                        del self.requests[key]
+                        continue
+                    except Exception as error:  # noqa: BLE001 - said, the rest go on
+                        del self.requests[key]
+                        self.failed[key] = str(error) or type(error).__name__
+                        continue
+                    if source is None:
+                        self._done(key, request, None)
+                        continue
+                    sources.append(source)
+                    stem = f"bake{len(stems)}"
+                    batch.add(request.spec, source, stem)
+                    stems[stem] = key
+                if stems:
+                    batch.write(os.path.join(directory, BATCH_FILE))
+        finally:
+            for source in sources:
+                bpy.data.meshes.remove(source)
+        if not stems:
+            shutil.rmtree(directory, ignore_errors=True)
+            return True
+        log = open(os.path.join(directory, "log.txt"), "wb")  # noqa: SIM115 - the child's
+        try:
+            process = subprocess.Popen(
+                command("blender.snapshot.bakes", [os.path.join(directory, BATCH_FILE), directory]),
+                stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
+        except OSError as error:  # no child here: every bake of the batch is baked here
+            shutil.rmtree(directory, ignore_errors=True)
+            self.local.update(stems.values())
+            print(f"VoxGI: material bakes in a child process could not start ({error})")
+            return True
+        finally:
+            log.close()
+        _COUNT[0] += len(stems)
+        self.child = _BakeChild(process, directory, stems, time.perf_counter())
+        return True
+
+    def _collect(self) -> bool:
+        """Store what the running child baked so far; when it has ended, the bakes it did not
+        bring go to ``local`` (baked here). Whether anything came in or ended."""
+        child = self.child
+        if child is None:
+            return False
+        ended = child.process.poll() is not None
+        got = False
+        for stem, key in list(child.stems.items()):
+            path = os.path.join(child.directory, stem + ".npy")
+            if not os.path.exists(path):
+                continue
+            del child.stems[stem]
+            got = True
+            request = self.requests.get(key)
+            if request is not None:  # (else wanted no more)
+                self._done(key, request, np.load(path))
+        if ended:
+            missing = [key for key in child.stems.values() if key in self.requests]
+            if missing:
+                print(f"VoxGI: {len(missing)} material bake(s) failed in a child process "
+                      f"({_tail(child.directory)}); baking them here")
+                self.local.update(missing)
+            self._stop_child()
+            got = True
+        return got
+
+    def _stop_child(self) -> None:
+        import shutil
+
+        child, self.child = self.child, None
+        if child is None:
+            return
+        if child.process.poll() is None:
+            child.process.kill()
+            child.process.wait()
+        shutil.rmtree(child.directory, ignore_errors=True)
+
+
+BATCH_FILE = "bakes.blend"
+_STEM = "voxgi_bake_stem"  # the custom properties a batch's objects carry for the child
+_MODE = "voxgi_bake_mode"
+
+
+class _Batch:
+    """The objects of a child's batch (``BakeQueue._send``): each bake's object and routed
+    material copy (``_Baking`` unstaged), written to one .blend, removed on exit."""
+
+    def __init__(self):
+        self.bakings: list[_Baking] = []
+
+    def __enter__(self):
+        return self
+
+    def add(self, spec: BakeSpec, source, stem: str) -> None:
+        baking = _Baking(spec, source, staged=False)
+        self.bakings.append(baking.__enter__())
+        baking.obj[_STEM], baking.obj[_MODE] = stem, spec.mode
+
+    def write(self, path: str) -> None:
+        # images by absolute paths: the child opens the file elsewhere
+        bpy.data.libraries.write(path, {b.obj for b in self.bakings}, path_remap="ABSOLUTE",
+                                 compress=False)
+
+    def __exit__(self, *_exc) -> None:
+        for baking in self.bakings:
+            baking.__exit__(None, None, None)
+        self.bakings.clear()
+
+
+def _tail(directory: str) -> str:
+    try:
+        with open(os.path.join(directory, "log.txt"), "rb") as log:
+            lines = log.read().decode("utf-8", "replace").strip().splitlines()
+    except OSError:
+        lines = []
+    return " | ".join(lines[-3:]) or "no output"
+
+
+def child_main(args: list[str]) -> int:
+    """A child (``blender.child_process``): ``BLEND DIRECTORY``: bake each object of the batch
+    ``BLEND`` whole, as ``bake_whole`` does here, into ``DIRECTORY/<stem>.npy`` as it ends
+    (whole or nothing: written, then renamed)."""
+    blend, directory = args
+    with bpy.data.libraries.load(blend, link=False) as (source, target):
+        target.objects = list(source.objects)
+    for obj in target.objects:
+        stem, mode = str(obj[_STEM]), str(obj[_MODE])
+        with _Baking.loaded(obj, mode) as baking:
+            pixels = baking.bake(0, 0, BAKE_SIZE, BAKE_SIZE)
+        partial = os.path.join(directory, stem + ".part.npy")
+        np.save(partial, pixels)
+        os.replace(partial, os.path.join(directory, stem + ".npy"))
+    return 0
 
 
 class _Gone(Exception):
     """What a queued bake reads is gone or changed: drop it."""
 
 
-def _bake_runs(request: BakeRequest, seconds: float, depsgraph) -> bool:
-    """``BakeQueue.step`` for one request; True when its image is complete."""
-    start = time.perf_counter()
+def _evaluated_source(request: BakeRequest, depsgraph):
+    """The bake's temporary mesh (``_source_mesh``) of its object's evaluated mesh, None when
+    no face has the material; ``_Gone`` when the object or material is gone, RuntimeError
+    when the object's mesh is not the one the snapshot read."""
     spec = request.spec
     obj = bpy.data.objects.get(request.object_name)
     try:
@@ -395,16 +609,24 @@ def _bake_runs(request: BakeRequest, seconds: float, depsgraph) -> bool:
             # generated geometry): said, not tried again
             raise RuntimeError(f"'{request.object_name}' no longer has the mesh the snapshot "
                                "read (an instance of generated geometry?)")
-        source = _source_mesh(spec, evaluated)
+        return _source_mesh(spec, evaluated)
     finally:
         obj_eval.to_mesh_clear()
+
+
+def _bake_runs(request: BakeRequest, seconds: float, depsgraph) -> bool:
+    """``BakeQueue.step`` for one ``local`` request; True when its image is complete (its
+    ``pixels``; None when no face has the material)."""
+    start = time.perf_counter()
+    source = _evaluated_source(request, depsgraph)
     if source is None:  # no face of the mesh has the material: nothing to bake, nothing seen
+        request.pixels = None
         return True
     try:
         try:
             uvs = _tiled(source)
         except ValueError:  # no room for TILE_UV: the whole image in this one call
-            with _Baking(spec, source) as baking:
+            with _Baking(request.spec, source) as baking:
                 request.pixels = baking.bake(0, 0, BAKE_SIZE, BAKE_SIZE)
             _COUNT[0] += 1
             return True
@@ -413,7 +635,7 @@ def _bake_runs(request: BakeRequest, seconds: float, depsgraph) -> bool:
             request.todo = covered_blocks(source, uvs)
             request.pixels = np.zeros((BAKE_SIZE, BAKE_SIZE, 3), np.float32)
         ran = False
-        with _Baking(spec, source, uvs) as baking:
+        with _Baking(request.spec, source, uvs) as baking:
             while request.todo.any():
                 left = seconds - (time.perf_counter() - start)
                 if ran and (request.block_seconds is None or left < request.block_seconds):

@@ -38,30 +38,9 @@ WORLD_FILE, MAP_FILE = "world.blend", "map.npy"
 def deferrable(world) -> bool:
     """Whether a child can bake ``world`` as this session would: it reads no object and no
     image whose pixels are only in this session's memory (generated, edited, unsaved)."""
-    if world_objects(world):
-        return False
-    return all(_on_disk(image) for image in _images(world.node_tree))
+    from ..child_process import sees_images
 
-
-def _images(tree, depth: int = 0):
-    if tree is None or depth > 8:
-        return
-    for node in tree.nodes:
-        image = getattr(node, "image", None)
-        if image is not None:
-            yield image
-        yield from _images(getattr(node, "node_tree", None), depth + 1)
-
-
-def _on_disk(image) -> bool:
-    import bpy
-
-    if image.is_dirty or image.source not in ("FILE", "TILED"):
-        return False
-    if image.packed_file is not None:
-        return True
-    path = bpy.path.abspath(image.filepath, library=image.library)
-    return bool(image.filepath) and os.path.exists(path)
+    return not world_objects(world) and sees_images(world.node_tree)
 
 
 @dataclasses.dataclass
