@@ -160,7 +160,7 @@ def _source_mesh(spec: BakeSpec, evaluated):
 class _Baking:
     """The temporary material copy, object and scene of one bake call's runs (``bake``). With
     ``staged`` False only the object (and its material copy), for a child to bake
-    (``_write_batch``); ``loaded`` stages such an object in the child."""
+    (``_Batch``); ``loaded`` stages such an object in the child."""
 
     def __init__(self, spec: BakeSpec | None, source, tile_uvs: np.ndarray | None = None,
                  staged: bool = True):
@@ -172,7 +172,7 @@ class _Baking:
 
     @classmethod
     def loaded(cls, obj, mode: str) -> _Baking:
-        """A bake of ``obj`` as ``_write_batch`` wrote it (its mesh, its routed material)."""
+        """A bake of ``obj`` as ``_Batch`` wrote it (its mesh, its routed material)."""
         baking = cls(None, obj.data)
         baking.obj, baking.copy, baking.mode, baking.owned = obj, obj.data.materials[0], mode, False
         return baking
@@ -318,7 +318,7 @@ class BakeRequest:
 
 @dataclass
 class _BakeChild:
-    """A batch of queued bakes baked whole in a child process (``_write_batch``): its
+    """A batch of queued bakes baked whole in a child process (``BakeQueue._send``): its
     directory holds the batch's .blend and, as each bake ends, ``<stem>.npy``."""
 
     process: object          # subprocess.Popen

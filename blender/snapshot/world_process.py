@@ -9,7 +9,7 @@ Blender's main thread that long, and one Cycles render cannot be split into slic
 
 So the viewport's snapshots ask here (``WorldBakes.want``): the world is written to a temporary
 .blend (``bpy.data.libraries.write``, its images by absolute paths; a few milliseconds), and a
-child (``blender.child_process``, 10 nice levels down) loads it and bakes it with the same
+child (``blender.child_process``, at the lowest priority) loads it and bakes it with the same
 ``bake_world``, saving the map beside it. The viewport's timer polls the children
 (``WorldBakes.poll``: nothing waits); a finished map goes into ``world_map`` 's cache, and the
 viewport reads the world again. Meanwhile the view shows the world's last map in this session
