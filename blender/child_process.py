@@ -9,11 +9,15 @@ This file imports nothing of the add-on's, so the script can run it before the a
 """
 from __future__ import annotations
 
+import atexit
 import importlib
 import importlib.util
 import os
 import pathlib
+import shutil
+import subprocess
 import sys
+import tempfile
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]  # the add-on's package directory
 PACKAGE = "voxgi_child"  # the add-on's package name in a child
@@ -33,6 +37,67 @@ def command(module: str, args, nice: int = 19, register: bool = False) -> list[s
     if binary and os.path.basename(binary).lower().startswith("blender"):
         return [binary, "-b", "--factory-startup", "--python", __file__, "--", *ours]
     return [sys.executable, __file__, *ours]
+
+
+class Child:
+    """A running child with a directory of its own (its inputs, its outputs, its log), which
+    goes with it (``stop``). Every child still running when Blender exits is stopped."""
+
+    def __init__(self, process: subprocess.Popen, directory: str):
+        self.process, self.directory = process, directory
+
+    @classmethod
+    def start(cls, module: str, args, directory: str, nice: int = 19) -> Child:
+        """Start ``module`` 's ``child_main(args)`` (``command``) with its output in
+        ``directory``/log.txt; ``directory`` (``workspace``) is removed if it cannot start."""
+        try:
+            with open(os.path.join(directory, "log.txt"), "wb") as log:
+                process = subprocess.Popen(command(module, args, nice), stdin=subprocess.DEVNULL,
+                                           stdout=log, stderr=subprocess.STDOUT)
+        except BaseException:
+            shutil.rmtree(directory, ignore_errors=True)
+            raise
+        child = cls(process, directory)
+        _RUNNING.add(child)
+        return child
+
+    def path(self, name: str) -> str:
+        return os.path.join(self.directory, name)
+
+    def ended(self) -> int | None:
+        """The child's exit code, None while it runs."""
+        return self.process.poll()
+
+    def tail(self, lines: int = 3) -> str:
+        """The last lines of its output, for saying why it failed."""
+        try:
+            with open(self.path("log.txt"), "rb") as log:
+                text = log.read().decode("utf-8", "replace").strip().splitlines()
+        except OSError:
+            text = []
+        return " | ".join(text[-lines:]) or "no output"
+
+    def stop(self) -> None:
+        """Kill it if it still runs, and remove its directory."""
+        _RUNNING.discard(self)
+        if self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+        shutil.rmtree(self.directory, ignore_errors=True)
+
+
+_RUNNING: set[Child] = set()
+
+
+def workspace(prefix: str) -> str:
+    """A new directory for a child (``Child.start``)."""
+    return tempfile.mkdtemp(prefix=prefix)
+
+
+@atexit.register
+def _stop_all() -> None:
+    for child in list(_RUNNING):
+        child.stop()
 
 
 def sees_images(tree, depth: int = 0) -> bool:

@@ -321,10 +321,8 @@ class _BakeChild:
     """A batch of queued bakes baked whole in a child process (``BakeQueue._send``): its
     directory holds the batch's .blend and, as each bake ends, ``<stem>.npy``."""
 
-    process: object          # subprocess.Popen
-    directory: str
+    child: object            # child_process.Child
     stems: dict[str, str]    # file stem → the request's key
-    started: float
 
 
 @dataclass
@@ -429,13 +427,11 @@ class BakeQueue:
         .blend and start a child that bakes them whole (``child_main``). A bake whose
         material reads an image a child cannot see goes to ``local``."""
         import shutil
-        import subprocess
-        import tempfile
 
-        from ..child_process import command, sees_images
+        from ..child_process import Child, sees_images, workspace
 
         start = time.perf_counter()
-        directory = tempfile.mkdtemp(prefix="voxgi-bake-child-")
+        directory = workspace("voxgi-bake-child-")
         stems: dict[str, str] = {}
         sources = []
         try:
@@ -472,59 +468,48 @@ class BakeQueue:
         if not stems:
             shutil.rmtree(directory, ignore_errors=True)
             return True
-        log = open(os.path.join(directory, "log.txt"), "wb")  # noqa: SIM115 - the child's
         try:
-            process = subprocess.Popen(
-                command("blender.snapshot.bakes", [os.path.join(directory, BATCH_FILE), directory]),
-                stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
+            child = Child.start("blender.snapshot.bakes",
+                                [os.path.join(directory, BATCH_FILE), directory], directory)
         except OSError as error:  # no child here: every bake of the batch is baked here
-            shutil.rmtree(directory, ignore_errors=True)
             self.local.update(stems.values())
             print(f"VoxGI: material bakes in a child process could not start ({error})")
             return True
-        finally:
-            log.close()
         _COUNT[0] += len(stems)
-        self.child = _BakeChild(process, directory, stems, time.perf_counter())
+        self.child = _BakeChild(child, stems)
         return True
 
     def _collect(self) -> bool:
         """Store what the running child baked so far; when it has ended, the bakes it did not
         bring go to ``local`` (baked here). Whether anything came in or ended."""
-        child = self.child
-        if child is None:
+        batch = self.child
+        if batch is None:
             return False
-        ended = child.process.poll() is not None
+        ended = batch.child.ended() is not None
         got = False
-        for stem, key in list(child.stems.items()):
-            path = os.path.join(child.directory, stem + ".npy")
+        for stem, key in list(batch.stems.items()):
+            path = batch.child.path(stem + ".npy")
             if not os.path.exists(path):
                 continue
-            del child.stems[stem]
+            del batch.stems[stem]
             got = True
             request = self.requests.get(key)
             if request is not None:  # (else wanted no more)
                 self._done(key, request, np.load(path))
         if ended:
-            missing = [key for key in child.stems.values() if key in self.requests]
+            missing = [key for key in batch.stems.values() if key in self.requests]
             if missing:
                 print(f"VoxGI: {len(missing)} material bake(s) failed in a child process "
-                      f"({_tail(child.directory)}); baking them here")
+                      f"({batch.child.tail()}); baking them here")
                 self.local.update(missing)
             self._stop_child()
             got = True
         return got
 
     def _stop_child(self) -> None:
-        import shutil
-
-        child, self.child = self.child, None
-        if child is None:
-            return
-        if child.process.poll() is None:
-            child.process.kill()
-            child.process.wait()
-        shutil.rmtree(child.directory, ignore_errors=True)
+        batch, self.child = self.child, None
+        if batch is not None:
+            batch.child.stop()
 
 
 BATCH_FILE = "bakes.blend"
@@ -556,15 +541,6 @@ class _Batch:
         for baking in self.bakings:
             baking.__exit__(None, None, None)
         self.bakings.clear()
-
-
-def _tail(directory: str) -> str:
-    try:
-        with open(os.path.join(directory, "log.txt"), "rb") as log:
-            lines = log.read().decode("utf-8", "replace").strip().splitlines()
-    except OSError:
-        lines = []
-    return " | ".join(lines[-3:]) or "no output"
 
 
 def child_main(args: list[str]) -> int:

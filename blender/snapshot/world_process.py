@@ -24,9 +24,6 @@ from __future__ import annotations
 import dataclasses
 import os
 import shutil
-import subprocess
-import tempfile
-import time
 
 import numpy as np
 
@@ -44,15 +41,13 @@ def deferrable(world) -> bool:
 
 
 @dataclasses.dataclass
-class _Child:
+class _WorldChild:
     """One world's bake in a child process."""
 
     key: str
     world: str        # the world's name_full
     uses_light_path: bool
-    directory: str
-    process: subprocess.Popen
-    started: float
+    child: object     # child_process.Child
 
 
 @dataclasses.dataclass
@@ -61,7 +56,7 @@ class WorldBakes:
     content key; ``finished`` the worlds whose children ended since the viewport last read
     them; ``failed`` why a child brought no map (the next snapshot bakes that world itself)."""
 
-    running: dict[str, _Child] = dataclasses.field(default_factory=dict)
+    running: dict[str, _WorldChild] = dataclasses.field(default_factory=dict)
     finished: set[str] = dataclasses.field(default_factory=set)
     failed: dict[str, str] = dataclasses.field(default_factory=dict)
 
@@ -83,21 +78,22 @@ class WorldBakes:
         uses_light_path, world name)`` (``world_map.store``), or why there is none kept in
         ``failed``; their worlds put in ``finished``. Whether any ended."""
         ended = False
-        for key, child in list(self.running.items()):
-            code = child.process.poll()
+        for key, baking in list(self.running.items()):
+            code = baking.child.ended()
             if code is None:
                 continue
             ended = True
             del self.running[key]
             try:
-                path = os.path.join(child.directory, MAP_FILE)
+                path = baking.child.path(MAP_FILE)
                 if code != 0 or not os.path.exists(path):
-                    self.failed[key] = _why(child, code)
+                    self.failed[key] = f"the background bake ended with code {code}: " \
+                        f"{baking.child.tail()}"
                 else:
-                    store(key, np.load(path), child.uses_light_path, child.world)
-                self.finished.add(child.world)  # read again: its map, or baked there
+                    store(key, np.load(path), baking.uses_light_path, baking.world)
+                self.finished.add(baking.world)  # read again: its map, or baked there
             finally:
-                shutil.rmtree(child.directory, ignore_errors=True)
+                baking.child.stop()
         return ended
 
     def stop(self) -> None:
@@ -110,44 +106,26 @@ class WorldBakes:
         self.failed.clear()
 
     def _stop(self, key: str) -> None:
-        child = self.running.pop(key)
-        if child.process.poll() is None:
-            child.process.kill()
-            child.process.wait()
-        shutil.rmtree(child.directory, ignore_errors=True)
+        self.running.pop(key).child.stop()
 
 
-def _start(world, key: str, height: int, uses_light_path: bool) -> _Child:
+def _start(world, key: str, height: int, uses_light_path: bool) -> _WorldChild:
     """Write ``world`` to a temporary .blend and start its child (module doc)."""
     import bpy
 
-    from ..child_process import command
+    from ..child_process import Child, workspace
 
-    directory = tempfile.mkdtemp(prefix="voxgi-world-child-")
+    directory = workspace("voxgi-world-child-")
+    blend = os.path.join(directory, WORLD_FILE)
     try:
-        blend = os.path.join(directory, WORLD_FILE)
         bpy.data.libraries.write(blend, {world}, path_remap="ABSOLUTE", compress=False)
-        log = open(os.path.join(directory, "log.txt"), "wb")  # noqa: SIM115 - the child's
-        try:
-            process = subprocess.Popen(
-                command("blender.snapshot.world_process",
-                        [blend, world.name, os.path.join(directory, MAP_FILE), int(height)]),
-                stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
-        finally:
-            log.close()
-    except Exception:
+    except BaseException:
         shutil.rmtree(directory, ignore_errors=True)
         raise
-    return _Child(key, world.name_full, uses_light_path, directory, process, time.perf_counter())
-
-
-def _why(child: _Child, code: int) -> str:
-    try:
-        with open(os.path.join(child.directory, "log.txt"), "rb") as log:
-            tail = log.read().decode("utf-8", "replace").strip().splitlines()[-3:]
-    except OSError:
-        tail = []
-    return f"the background bake ended with code {code}" + (f": {' | '.join(tail)}" if tail else "")
+    child = Child.start("blender.snapshot.world_process",
+                        [blend, world.name, os.path.join(directory, MAP_FILE), int(height)],
+                        directory)
+    return _WorldChild(key, world.name_full, uses_light_path, child)
 
 
 def child_main(args: list[str]) -> int:

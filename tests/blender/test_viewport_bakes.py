@@ -457,3 +457,19 @@ def test_a_world_whose_child_fails_is_baked_in_the_next_snapshot(voxgi, monkeypa
     # the tick after the child ended read the world again, and baked it there
     assert world_map.bake_count() == bakes + 1
     assert live.latest_snapshot.world.key == world_map.world_key(world)
+
+
+def test_children_still_running_when_blender_exits_are_stopped_and_leave_nothing(
+        voxgi, monkeypatch):
+    import os
+    import sys
+
+    from voxgi.blender import child_process
+
+    monkeypatch.setattr(child_process, "command", lambda *args, **kwargs: [
+        sys.executable, "-c", "import time; print('baking', flush=True); time.sleep(120)"])
+    directory = child_process.workspace("voxgi-test-child-")
+    child = child_process.Child.start("blender.snapshot.bakes", [], directory)
+    assert child.ended() is None and os.path.isdir(directory)
+    child_process._stop_all()  # (what Python runs at exit)
+    assert child.ended() is not None and not os.path.exists(directory)
