@@ -21,7 +21,9 @@ looks every ``IDLE_SECONDS`` whether the settings or the engine changed).
 
 The same timer starts, for a saved file, the process that builds the kernels' machine code in
 Mesa's shader cache before any view needs it (``warmup_process``: what a machine's first
-session would otherwise build in the view's draws, 40–640 ms each).
+session would otherwise build in the view's draws, 40–640 ms each), and a child that bakes
+the scene's node-built world before an F12 needs it (``world_process.bake_ahead``: F12 in the
+UI renders on a job thread, where no bake can run).
 """
 from __future__ import annotations
 
@@ -29,6 +31,7 @@ import time
 
 import bpy
 
+from ..blender.snapshot import world_process
 from . import warmup_process
 from .gpu_context import gpu_usable
 from .gpu_gather import _glossy_shader
@@ -118,6 +121,8 @@ def _tick() -> float | None:
     try:
         scene = getattr(bpy.context, "scene", None)
         start_process(scene, bpy.context)
+        if scene is not None and scene.render.engine == ENGINE:
+            world_process.bake_ahead(scene)
         return tick(scene)
     except Exception:  # noqa: BLE001 - a view compiles it again and reports what failed
         return None
@@ -138,3 +143,4 @@ def unregister() -> None:
     if bpy.app.timers.is_registered(_tick):
         bpy.app.timers.unregister(_tick)
     warmup_process.processes.stop()
+    world_process.ahead.clear()

@@ -46,6 +46,7 @@ SCENE_LINEAR = ("Linear Rec.709", "scene_linear")
 LINEAR_SPACES = ("Linear Rec.709", "scene_linear", "Non-Color")
 MAPPING_TYPES = ("POINT", "TEXTURE", "VECTOR", "NORMAL")
 
+AHEAD_WAIT = 120.0  # seconds an F12 that cannot bake waits for the child baking its world
 _CACHE: dict[str, tuple[WorldData, tuple[str, ...]]] = {}
 _LAST: dict[str, WorldData] = {}  # each world's last baked map, by name (shown while it bakes again)
 _BAKES = [0]  # how many bakes ran (tests check that a cached world does not bake again)
@@ -69,11 +70,16 @@ def clear_cache() -> None:
     _LAST.clear()
 
 
-def store(key: str, radiance: np.ndarray, uses_light_path: bool, name: str = "") -> WorldData:
+def cached(key: str) -> bool:
+    """Whether the map of the world whose content key is ``key`` is in the cache."""
+    return key in _CACHE
+
+
+def store(key: str, radiance: np.ndarray, light_path: bool, name: str = "") -> WorldData:
     """Keep the baked ``radiance`` of the world whose content key is ``key`` (a bake that ran
     elsewhere: ``world_process``), as ``read_world`` keeps its own bakes."""
     data = _map(key, radiance)
-    _CACHE[key] = (data, _light_path_notes(name) if uses_light_path else ())
+    _CACHE[key] = (data, _light_path_notes(name) if light_path else ())
     if name:
         _LAST[name] = data
     return data
@@ -358,8 +364,19 @@ def _image_radiance(image) -> np.ndarray:
     return equirect.box_downsample(rgb[::-1, ::-1], MAX_HEIGHT)
 
 
-def _read_nodes(world, key: str) -> WorldData:
-    """Uniform or image world read from its nodes; raises _NeedsBake for anything else."""
+def needs_bake(world) -> bool:
+    """Whether Cycles must evaluate ``world`` (``read_world``'s bake), found without reading
+    any image."""
+    try:
+        _read_nodes(world, "", probe=True)
+    except _NeedsBake:
+        return True
+    return False
+
+
+def _read_nodes(world, key: str, probe: bool = False) -> WorldData:
+    """Uniform or image world read from its nodes; raises _NeedsBake for anything else.
+    probe : stop before reading an image (``needs_bake``)."""
     tree = world.node_tree
     if tree is None:
         return _uniform(key, np.array(world.color[:3], np.float32), 1.0)
@@ -385,6 +402,8 @@ def _read_nodes(world, key: str) -> WorldData:
     if strength == 0.0:
         return WorldData(color=np.zeros(3, np.float32), strength=0.0, key=key)
     transform = _texture_vector(node)
+    if probe:
+        return WorldData(key=key)
     source = _image_radiance(node.image)
     height, width = source.shape[:2]
     if transform is None and width == 2 * height and height >= MIN_HEIGHT:
@@ -429,12 +448,17 @@ def _uses_images_taller_than(tree, rows: int, depth: int = 0) -> bool:
     return False
 
 
-def _uses_light_path(tree, depth: int = 0) -> bool:
+def bake_height(tree) -> int:
+    """The rows of a baked map of a world whose nodes are ``tree``."""
+    return BAKE_IMAGE_HEIGHT if _uses_images_taller_than(tree, BAKE_HEIGHT) else BAKE_HEIGHT
+
+
+def uses_light_path(tree, depth: int = 0) -> bool:
     for node in tree.nodes:
         if node.type == "LIGHT_PATH":
             return True
         group = getattr(node, "node_tree", None)
-        if group is not None and depth < 8 and _uses_light_path(group, depth + 1):
+        if group is not None and depth < 8 and uses_light_path(group, depth + 1):
             return True
     return False
 
@@ -554,13 +578,13 @@ def read_world(world, warnings: list[str], bake: bool | None = None, deferred=No
         data = _read_nodes(world, key)
     except _NeedsBake as reason:
         tree = world.node_tree
-        height = BAKE_IMAGE_HEIGHT if _uses_images_taller_than(tree, BAKE_HEIGHT) else BAKE_HEIGHT
+        height = bake_height(tree)
         if deferred is not None and key not in deferred.failed:
             from .world_process import deferrable
 
             if deferrable(world):
                 try:
-                    deferred.want(world, key, height, _uses_light_path(tree))
+                    deferred.want(world, key, height, uses_light_path(tree))
                 except Exception as error:  # noqa: BLE001 - baked here instead
                     deferred.failed[key] = str(error) or type(error).__name__
                 else:
@@ -568,6 +592,13 @@ def read_world(world, warnings: list[str], bake: bool | None = None, deferred=No
         if bake is None:
             bake = can_bake()
         if not bake:
+            from .world_process import ahead
+
+            if ahead.wait(key, AHEAD_WAIT, store):  # baked for this F12 by a child: its map
+                cached = _CACHE.get(key)
+                if cached is not None:
+                    warnings.extend(cached[1])
+                    return cached[0]
             warnings.append(
                 f"World '{world.name}': {reason}, so Cycles must evaluate it, which cannot run "
                 "here (during an F12 render in the UI or off the main thread); using the "
@@ -581,7 +612,7 @@ def read_world(world, warnings: list[str], bake: bool | None = None, deferred=No
                             "using the Background's Color x Strength")
             return _fallback(world, key + ":fallback")
         _LAST[world.name_full] = data
-        if _uses_light_path(tree):
+        if uses_light_path(tree):
             notes.extend(_light_path_notes(world.name))
     _CACHE[key] = (data, tuple(notes))
     warnings.extend(notes)

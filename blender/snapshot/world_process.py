@@ -24,6 +24,8 @@ from __future__ import annotations
 import dataclasses
 import os
 import shutil
+import threading
+import time
 
 import numpy as np
 
@@ -59,6 +61,8 @@ class WorldBakes:
     running: dict[str, _WorldChild] = dataclasses.field(default_factory=dict)
     finished: set[str] = dataclasses.field(default_factory=set)
     failed: dict[str, str] = dataclasses.field(default_factory=dict)
+    # (``ahead`` is polled by the UI's timer and waited for by F12's render thread)
+    lock: threading.Lock = dataclasses.field(default_factory=threading.Lock, repr=False)
 
     @property
     def pending(self) -> int:
@@ -72,6 +76,21 @@ class WorldBakes:
         for older in [k for k, c in self.running.items() if c.world == world.name_full]:
             self._stop(older)
         self.running[key] = _start(world, key, height, uses_light_path)
+
+    def wait(self, key: str, seconds: float, store) -> bool:
+        """Wait up to ``seconds`` for the child baking ``key`` (any thread: F12's render job
+        in the UI, which cannot bake); whether there was one and its map was stored."""
+        started = time.monotonic()
+        while True:
+            with self.lock:
+                if key not in self.running:
+                    return False
+                self.poll(store)
+                if key not in self.running:
+                    return key not in self.failed
+            if time.monotonic() - started > seconds:
+                return False
+            time.sleep(0.02)
 
     def poll(self, store) -> bool:
         """Collect the children that ended: each map handed to ``store(key, radiance,
@@ -107,6 +126,30 @@ class WorldBakes:
 
     def _stop(self, key: str) -> None:
         self.running.pop(key).child.stop()
+
+
+ahead = WorldBakes()  # the open file's world, baked before an F12 in the UI needs it
+
+
+def bake_ahead(scene) -> bool:
+    """While a file whose engine is VoxGI is open in Blender's UI (``kernel_warmup``'s timer,
+    main thread): start a child for ``scene`` 's world when Cycles must evaluate it and its
+    map is not cached, and collect what ended. F12 in the UI renders on a job thread, where no
+    bake can run: it waits for this child's map (``world_map.read_world``) instead of
+    lighting the scene with the Background's colour. Whether a child started."""
+    from .world_map import bake_height, cached, needs_bake, store, uses_light_path, world_key
+
+    with ahead.lock:
+        ahead.poll(store)
+        ahead.finished.clear()
+        world = getattr(scene, "world", None)
+        if world is None or not needs_bake(world):
+            return False
+        key = world_key(world)
+        if cached(key) or key in ahead.running or key in ahead.failed or not deferrable(world):
+            return False
+        ahead.want(world, key, bake_height(world.node_tree), uses_light_path(world.node_tree))
+        return True
 
 
 def _start(world, key: str, height: int, uses_light_path: bool) -> _WorldChild:

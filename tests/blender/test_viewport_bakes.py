@@ -473,3 +473,32 @@ def test_children_still_running_when_blender_exits_are_stopped_and_leave_nothing
     assert child.ended() is None and os.path.isdir(directory)
     child_process._stop_all()  # (what Python runs at exit)
     assert child.ended() is not None and not os.path.exists(directory)
+
+
+def test_an_f12_that_cannot_bake_waits_for_the_world_a_child_bakes_ahead(voxgi):
+    """F12 in Blender's UI renders on a job thread, where no bake runs: while the file is open
+    a timer has a child bake its world ahead, and F12 waits for that map instead of lighting
+    the scene with the Background's colour."""
+    from voxgi.blender.snapshot import world_map, world_process
+
+    scene, world, _ = _sky_scene()
+    world_map.clear_cache()
+    scene.world = None
+    assert not world_process.bake_ahead(scene)  # no world
+    scene.world = bpy.data.worlds.new("Plain")  # read from its nodes: nothing to bake
+    assert not world_process.bake_ahead(scene)
+    scene.world = world
+    bakes = world_map.bake_count()
+    assert world_process.bake_ahead(scene) and not world_process.bake_ahead(scene)  # once
+    key = world_map.world_key(world)
+    assert list(world_process.ahead.running) == [key]
+    warnings = []
+    data = world_map.read_world(world, warnings, bake=False)  # F12's thread: waits for it
+    assert warnings == [] and data.key == key and world_map.bake_count() == bakes
+    assert not world_process.ahead.running
+    world_map.clear_cache()
+    assert np.array_equal(data.radiance, world_map.bake_world(world, data.radiance.shape[0]))
+    # with no child for it, F12 says why it lights the scene with the Background's colour
+    warnings = []
+    world_map.read_world(world, warnings, bake=False)
+    assert any("cannot run here" in w for w in warnings)
