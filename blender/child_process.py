@@ -50,10 +50,14 @@ class Child:
     def start(cls, module: str, args, directory: str, nice: int = 19) -> Child:
         """Start ``module`` 's ``child_main(args)`` (``command``) with its output in
         ``directory``/log.txt; ``directory`` (``workspace``) is removed if it cannot start."""
+        kwargs = {}
+        if hasattr(subprocess, "IDLE_PRIORITY_CLASS"):  # Windows; POSIX children nice themselves
+            kwargs["creationflags"] = subprocess.IDLE_PRIORITY_CLASS if nice >= 19 else \
+                subprocess.BELOW_NORMAL_PRIORITY_CLASS
         try:
             with open(os.path.join(directory, "log.txt"), "wb") as log:
                 process = subprocess.Popen(command(module, args, nice), stdin=subprocess.DEVNULL,
-                                           stdout=log, stderr=subprocess.STDOUT)
+                                           stdout=log, stderr=subprocess.STDOUT, **kwargs)
         except BaseException:
             shutil.rmtree(directory, ignore_errors=True)
             raise
