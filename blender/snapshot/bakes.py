@@ -496,6 +496,9 @@ class BakeQueue:
             request = self.requests.get(key)
             if request is not None:  # (else wanted no more)
                 self._done(key, request, np.load(path))
+        if not ended and not any(key in self.requests for key in batch.stems.values()):
+            self._stop_child()  # wanted no more (an edit since): the next batch need not wait
+            return True
         if ended:
             missing = [key for key in batch.stems.values() if key in self.requests]
             if missing:

@@ -502,3 +502,35 @@ def test_an_f12_that_cannot_bake_waits_for_the_world_a_child_bakes_ahead(voxgi):
     warnings = []
     world_map.read_world(world, warnings, bake=False)
     assert any("cannot run here" in w for w in warnings)
+
+
+def test_a_child_whose_bakes_are_wanted_no_more_is_stopped_for_the_next(voxgi):
+    """An edit while a child bakes: its bakes are wanted no more, so the child stops and the
+    edit's bake does not wait for it."""
+    import os
+
+    from voxgi.blender.snapshot import bakes
+    from voxgi.blender.snapshot import materials as snapshot_materials
+
+    obj, material = _uv_sphere_with(lambda tree: tree.nodes.new("ShaderNodeTexNoise").outputs[1])
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    obj_eval = obj.evaluated_get(depsgraph)
+    mesh = obj_eval.to_mesh()
+    try:
+        surface = snapshot_materials.Surface("s", obj_eval, mesh, [material], "s", True)
+        spec = snapshot_materials._bake_spec(material, "DIFFUSE", "Base Color", surface, False)
+        loops = len(mesh.loops)
+    finally:
+        obj_eval.to_mesh_clear()
+    queue = bakes.BakeQueue()
+    queue.want("before", lambda: bakes.BakeRequest(spec, obj.name, loops, lambda _pixels: None))
+    assert queue.step(0.02, depsgraph) and list(queue.child.stems.values()) == ["before"]
+    first = queue.child.child
+    queue.begin()  # the edit's snapshot wants another bake
+    queue.want("after", lambda: bakes.BakeRequest(spec, obj.name, loops, lambda _pixels: None))
+    queue.end()
+    # the next tick stops the first child and sends the edit's bake to a new one
+    assert queue.step(0.02, depsgraph) and list(queue.child.stems.values()) == ["after"]
+    assert first.ended() is not None and not os.path.exists(first.directory)
+    _drained(queue, depsgraph)
+    assert queue.finished == {material.name_full}
