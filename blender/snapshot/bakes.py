@@ -494,8 +494,15 @@ class BakeQueue:
             del batch.stems[stem]
             got = True
             request = self.requests.get(key)
-            if request is not None:  # (else wanted no more)
-                self._done(key, request, np.load(path))
+            if request is None:  # wanted no more
+                continue
+            try:
+                pixels = np.load(path)
+            except Exception as error:  # noqa: BLE001 - an unreadable image: baked here
+                print(f"VoxGI: a material bake from a child process could not be read ({error})")
+                self.local.add(key)
+                continue
+            self._done(key, request, pixels)
         if not ended and not any(key in self.requests for key in batch.stems.values()):
             self._stop_child()  # wanted no more (an edit since): the next batch need not wait
             return True

@@ -109,7 +109,10 @@ class WorldBakes:
                     self.failed[key] = f"the background bake ended with code {code}: " \
                         f"{baking.child.tail()}"
                 else:
-                    store(key, np.load(path), baking.uses_light_path, baking.world)
+                    try:
+                        store(key, np.load(path), baking.uses_light_path, baking.world)
+                    except Exception as error:  # noqa: BLE001 - an unreadable map: baked here
+                        self.failed[key] = f"its map could not be read ({error})"
                 self.finished.add(baking.world)  # read again: its map, or baked there
             finally:
                 baking.child.stop()
