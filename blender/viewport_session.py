@@ -556,7 +556,11 @@ def tick() -> float | None:
         live.read_on(scene, depsgraph)
         tag_3d_views()
     elif live.bakes.pending:
-        live.bake_on(BAKE_SLICE, scene, depsgraph)
+        try:
+            live.bake_on(BAKE_SLICE, scene, depsgraph)
+        except Exception:  # noqa: BLE001 - a bug here must not stop the timer: the bakes go
+            traceback.print_exc()
+            live.bakes.clear()
     return TICK_INTERVAL if live.reading is not None or live.bakes.pending else None
 
 
