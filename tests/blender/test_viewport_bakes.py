@@ -22,22 +22,32 @@ def _uv_sphere_with(build_color):
     return obj, material
 
 
-def _whole_and_queued(obj, material):
-    """The socket baked whole (F12's way) and through a queue a block a step (the viewport's
-    way): (whole, queued, steps, blocks baked per step)."""
-    from voxgi.blender.snapshot import bakes
+def _spec(obj, material, whole: bool = False):
+    """(spec, corners, whole bake or None): the Base Color bake of ``material`` over ``obj``'s
+    evaluated mesh as a snapshot reads it (``materials._bake_spec``), and with ``whole`` the
+    socket baked whole, F12's way (``materials.bake_socket``)."""
     from voxgi.blender.snapshot import materials as snapshot_materials
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
     obj_eval = obj.evaluated_get(depsgraph)
     mesh = obj_eval.to_mesh()
     try:
-        surface = snapshot_materials.Surface("sphere", obj_eval, mesh, [material], "sphere", True)
-        whole = snapshot_materials.bake_socket(material, "DIFFUSE", "Base Color", surface)
+        surface = snapshot_materials.Surface(obj.name, obj_eval, mesh, [material], obj.name, True)
+        baked = snapshot_materials.bake_socket(material, "DIFFUSE", "Base Color", surface) \
+            if whole else None
         spec = snapshot_materials._bake_spec(material, "DIFFUSE", "Base Color", surface, False)
-        loops = len(mesh.loops)
+        return spec, len(mesh.loops), baked
     finally:
         obj_eval.to_mesh_clear()
+
+
+def _whole_and_queued(obj, material):
+    """The socket baked whole (F12's way) and through a queue a block a step (the viewport's
+    way): (whole, queued, steps, blocks baked per step)."""
+    from voxgi.blender.snapshot import bakes
+
+    spec, loops, whole = _spec(obj, material, whole=True)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
     stored = []
     queue = bakes.BakeQueue()
     queue.want("sphere", lambda: bakes.BakeRequest(spec, obj.name, loops, stored.append))
@@ -87,19 +97,10 @@ def test_a_bake_a_block_at_a_time_is_the_whole_bake_texel_for_texel(voxgi):
 
 def test_a_childs_bake_is_the_whole_bake_and_an_image_only_in_memory_is_baked_here(voxgi):
     from voxgi.blender.snapshot import bakes
-    from voxgi.blender.snapshot import materials as snapshot_materials
 
     def queued_and_whole(obj, material):
+        spec, loops, whole = _spec(obj, material, whole=True)
         depsgraph = bpy.context.evaluated_depsgraph_get()
-        obj_eval = obj.evaluated_get(depsgraph)
-        mesh = obj_eval.to_mesh()
-        try:
-            surface = snapshot_materials.Surface("s", obj_eval, mesh, [material], "s", True)
-            whole = snapshot_materials.bake_socket(material, "DIFFUSE", "Base Color", surface)
-            spec = snapshot_materials._bake_spec(material, "DIFFUSE", "Base Color", surface, False)
-            loops = len(mesh.loops)
-        finally:
-            obj_eval.to_mesh_clear()
         stored, queue = [], bakes.BakeQueue()
         queue.want("s", lambda: bakes.BakeRequest(spec, obj.name, loops, stored.append))
         queue.step(0.02, depsgraph)
@@ -217,19 +218,11 @@ def test_a_queued_bake_waits_while_another_voxgi_thread_has_work(voxgi):
     import threading
 
     from voxgi.blender.snapshot import bakes
-    from voxgi.blender.snapshot import materials as snapshot_materials
 
     obj, material = _uv_sphere_with(
         lambda tree: tree.nodes.new("ShaderNodeTexCoord").outputs["UV"])
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    obj_eval = obj.evaluated_get(depsgraph)
-    mesh = obj_eval.to_mesh()
-    try:
-        surface = snapshot_materials.Surface("sphere", obj_eval, mesh, [material], "sphere", True)
-        spec = snapshot_materials._bake_spec(material, "DIFFUSE", "Base Color", surface, False)
-        loops = len(mesh.loops)
-    finally:
-        obj_eval.to_mesh_clear()
+    spec, loops, _ = _spec(obj, material)
     queue = bakes.BakeQueue()
     queue.want("sphere", lambda: bakes.BakeRequest(spec, obj.name, loops, lambda _pixels: None))
     queue.local.add("sphere")  # baked here (a child runs no operator in this process)
@@ -260,18 +253,10 @@ def test_a_queued_bake_whose_object_or_material_is_deleted_is_dropped_quietly(vo
     deletion's own update reads the scene again), nothing fails, nothing of the bake stays;
     an object whose mesh is no longer the one its snapshot read is said why."""
     from voxgi.blender.snapshot import bakes
-    from voxgi.blender.snapshot import materials as snapshot_materials
 
     def queued(obj, material):
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        obj_eval = obj.evaluated_get(depsgraph)
-        mesh = obj_eval.to_mesh()
-        try:
-            surface = snapshot_materials.Surface(obj.name, obj_eval, mesh, [material], obj.name, True)
-            spec = snapshot_materials._bake_spec(material, "DIFFUSE", "Base Color", surface, False)
-            return bakes.BakeRequest(spec, obj.name, len(mesh.loops), lambda _pixels: None)
-        finally:
-            obj_eval.to_mesh_clear()
+        spec, loops, _ = _spec(obj, material)
+        return bakes.BakeRequest(spec, obj.name, loops, lambda _pixels: None)
 
     obj, material = _uv_sphere_with(
         lambda tree: tree.nodes.new("ShaderNodeTexCoord").outputs["UV"])
@@ -510,18 +495,10 @@ def test_a_child_whose_bakes_are_wanted_no_more_is_stopped_for_the_next(voxgi):
     import os
 
     from voxgi.blender.snapshot import bakes
-    from voxgi.blender.snapshot import materials as snapshot_materials
 
     obj, material = _uv_sphere_with(lambda tree: tree.nodes.new("ShaderNodeTexNoise").outputs[1])
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    obj_eval = obj.evaluated_get(depsgraph)
-    mesh = obj_eval.to_mesh()
-    try:
-        surface = snapshot_materials.Surface("s", obj_eval, mesh, [material], "s", True)
-        spec = snapshot_materials._bake_spec(material, "DIFFUSE", "Base Color", surface, False)
-        loops = len(mesh.loops)
-    finally:
-        obj_eval.to_mesh_clear()
+    spec, loops, _ = _spec(obj, material)
     queue = bakes.BakeQueue()
     queue.want("before", lambda: bakes.BakeRequest(spec, obj.name, loops, lambda _pixels: None))
     assert queue.step(0.02, depsgraph) and list(queue.child.stems.values()) == ["before"]
