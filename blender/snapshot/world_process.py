@@ -151,7 +151,11 @@ def bake_ahead(scene) -> bool:
         key = world_key(world)
         if cached(key) or key in ahead.running or key in ahead.failed or not deferrable(world):
             return False
-        ahead.want(world, key, bake_height(world.node_tree), uses_light_path(world.node_tree))
+        try:
+            ahead.want(world, key, bake_height(world.node_tree), uses_light_path(world.node_tree))
+        except Exception as error:  # noqa: BLE001 - no child here: F12 says why it cannot bake
+            ahead.failed[key] = str(error) or type(error).__name__
+            return False
         return True
 
 

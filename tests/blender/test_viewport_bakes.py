@@ -489,6 +489,22 @@ def test_an_f12_that_cannot_bake_waits_for_the_world_a_child_bakes_ahead(voxgi):
     assert any("cannot run here" in w for w in warnings)
 
 
+def test_a_world_that_cannot_go_to_a_child_leaves_the_warm_up_timer_running(voxgi, monkeypatch):
+    from voxgi.blender import child_process
+    from voxgi.blender.snapshot import world_map, world_process
+
+    def no_processes(*args, **kwargs):
+        raise OSError("no processes here")
+
+    monkeypatch.setattr(child_process.subprocess, "Popen", no_processes)
+    scene, world, _ = _sky_scene()
+    world_map.clear_cache()
+    assert not world_process.bake_ahead(scene)  # said, not raised into the timer
+    assert "no processes here" in world_process.ahead.failed[world_map.world_key(world)]
+    assert not world_process.bake_ahead(scene)  # not tried again
+    world_process.ahead.clear()
+
+
 def test_a_child_whose_bakes_are_wanted_no_more_is_stopped_for_the_next(voxgi):
     """An edit while a child bakes: its bakes are wanted no more, so the child stops and the
     edit's bake does not wait for it."""
