@@ -19,6 +19,7 @@ import numpy as np
 
 from ..blender.session import scene_session
 from ..blender.settings import pixel_filter_width
+from ..blender.snapshot.bakes import render_bakes
 from ..voxgi_addon.errors import VoxGIError
 from ..voxgi_addon.preview.film import snapshot_combined
 from ..voxgi_addon.preview.passes import PASS_NAMES
@@ -137,8 +138,10 @@ class VoxGIRenderEngine(bpy.types.RenderEngine):
                 self.active_view_set(view)
                 camera = (np.array(self.camera_model_matrix(scene.camera), np.float64),
                           float(self.camera_shift_x(scene.camera)))
-            if not self._render_view(scene, depsgraph, view, camera):
-                return
+            # Esc ends a wait for bakes another process makes (F12 in the UI)
+            with render_bakes.watching(self.test_break):
+                if not self._render_view(scene, depsgraph, view, camera):
+                    return
 
     def _render_view(self, scene, depsgraph, view, camera) -> bool:
         """Trace one view (``camera``: its (model matrix, lens shift x), None: the scene

@@ -23,7 +23,8 @@ The same timer starts, for a saved file, the process that builds the kernels' ma
 Mesa's shader cache before any view needs it (``warmup_process``: what a machine's first
 session would otherwise build in the view's draws, 40–640 ms each), and a child that bakes
 the scene's node-built world before an F12 needs it (``world_process.bake_ahead``: F12 in the
-UI renders on a job thread, where no bake can run).
+UI renders on a job thread, where no bake can run). While F12 renders, it writes the material
+bakes the render asks for to a child process and collects them (``bakes.RenderBakes``).
 """
 from __future__ import annotations
 
@@ -32,6 +33,7 @@ import time
 import bpy
 
 from ..blender.snapshot import world_process
+from ..blender.snapshot.bakes import render_bakes
 from . import warmup_process
 from .gpu_context import gpu_usable
 from .gpu_gather import _glossy_shader
@@ -40,6 +42,8 @@ STEP_SECONDS = 0.1   # between two compiles
 IDLE_SECONDS = 1.0   # between two looks when there is nothing to compile
 SLOW_COMPILE = 0.030  # a compile longer than this spaces the next one by SLOW_SECONDS
 SLOW_SECONDS = 1.0
+RENDER_SECONDS = 0.1  # between two looks while F12 renders: whether it asks for bakes
+SERVE_SECONDS = 0.02  # between two ticks of an F12's bakes (``bakes.RenderBakes``)
 
 ENGINE = "VOXGI"
 DEFAULT_REGION = (1280, 720)
@@ -117,7 +121,8 @@ def _tick() -> float | None:
     if bpy.app.background:
         return None
     if bpy.app.is_job_running("RENDER"):  # F12 compiles what it uses, in its own context
-        return IDLE_SECONDS
+        # and may ask for material bakes it cannot write itself (bakes.RenderBakes)
+        return SERVE_SECONDS if render_bakes.serve() else RENDER_SECONDS
     try:
         scene = getattr(bpy.context, "scene", None)
         start_process(scene, bpy.context)
@@ -137,9 +142,11 @@ def release() -> None:
 def register() -> None:
     if not bpy.app.background and not bpy.app.timers.is_registered(_tick):
         bpy.app.timers.register(_tick, first_interval=IDLE_SECONDS, persistent=True)
+        render_bakes.served = True
 
 
 def unregister() -> None:
+    render_bakes.served = False
     if bpy.app.timers.is_registered(_tick):
         bpy.app.timers.unregister(_tick)
     warmup_process.processes.stop()

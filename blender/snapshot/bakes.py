@@ -24,6 +24,7 @@ run's border); only Cycles' random samples differ.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
@@ -410,6 +411,22 @@ class BakeQueue:
             self._done(key, request, request.pixels)
         return True
 
+    def step_for_render(self, seconds: float, depsgraph) -> bool:
+        """``step`` for an F12 in the UI (``RenderBakes.serve``, main thread, while the render
+        job waits): what children baked collected, the next batch sent; a bake a child cannot
+        make (an image only in this session's memory, a child that failed) fails, since none
+        may run here beside a render job. True when none is left."""
+        self._collect()
+        for key in [k for k in self.requests if k in self.local]:
+            del self.requests[key]
+            self.failed[key] = ("no other process could bake it (an image only in this "
+                                "session's memory, or a failed child: see the console), and "
+                                "none may run beside an F12 render in the UI")
+        self.local.clear()
+        if self.child is None and self.requests:
+            self._send(seconds, depsgraph)
+        return not self.requests
+
     def _done(self, key: str, request: BakeRequest, pixels) -> None:
         del self.requests[key]
         self.local.discard(key)
@@ -520,6 +537,97 @@ class BakeQueue:
         batch, self.child = self.child, None
         if batch is not None:
             batch.child.stop()
+
+
+class RenderBakes:
+    """The material bakes of an F12 in Blender's UI. Its render runs on a job thread, where no
+    bake may run and no data may be written: its snapshot queues the bakes it needs
+    (``BakeQueue.want``), hands the queue here (``bake``, the render thread) and waits while
+    the main thread's timer (``kernel_warmup``, ``serve`` a tick) writes them for child
+    processes as the viewport's timer does (``BakeQueue.step_for_render``) and collects their
+    images; then the snapshot is read again with the bakes in the cache. The timer is
+    registered in Blender's UI only (``served``); elsewhere the snapshot bakes in place or says
+    why it cannot."""
+
+    WAIT = 300.0     # seconds the render waits for its bakes before it uses their values
+    SECONDS = 0.02   # of the main thread a tick may write bakes for a child
+
+    def __init__(self):
+        self.served = False
+        self.lock = threading.Lock()
+        self._asked: tuple[BakeQueue, object, threading.Event] | None = None
+        self._local = threading.local()
+
+    @contextlib.contextmanager
+    def watching(self, cancelled: Callable[[], bool]):
+        """While this block runs (on a render's thread), a wait for bakes ends early when
+        ``cancelled()`` (``RenderEngine.test_break``: the user pressed Esc)."""
+        before = getattr(self._local, "cancelled", None)
+        self._local.cancelled = cancelled
+        try:
+            yield
+        finally:
+            self._local.cancelled = before
+
+    def cancelled(self) -> bool:
+        """Whether this thread's render was cancelled (``watching``)."""
+        check = getattr(self._local, "cancelled", None)
+        try:
+            return bool(check is not None and check())
+        except ReferenceError:  # (the engine is gone)
+            return True
+
+    def available(self) -> bool:
+        """Whether a snapshot here can hand its bakes to the main thread: off it (a render
+        thread), with the timer that serves them registered."""
+        return self.served and threading.current_thread() is not threading.main_thread()
+
+    def bake(self, queue: BakeQueue, depsgraph, wait: float | None = None) -> bool:
+        """Hand ``queue`` 's requests, over the evaluated meshes of ``depsgraph``, to the main
+        thread and wait until each is baked, failed (its reason in ``queue.failed``) or on no
+        face (``queue.empty``), at most ``wait`` seconds (``WAIT``); those left then fail.
+        Whether every bake came in."""
+        done = threading.Event()
+        with self.lock:
+            if self._asked is not None:  # one render job at a time: an older ask is over
+                self._asked[2].set()
+            self._asked = (queue, depsgraph, done)
+        limit = time.monotonic() + (self.WAIT if wait is None else wait)
+        finished = False
+        while not finished and time.monotonic() < limit and not self.cancelled():
+            finished = done.wait(min(0.1, max(limit - time.monotonic(), 0.0)))
+        with self.lock:
+            if self._asked is not None and self._asked[2] is done:
+                self._asked = None
+            queue._stop_child()
+            why = "the render was cancelled" if self.cancelled() else \
+                "its bake in another process did not end in time"
+            for key in list(queue.requests):
+                queue.failed[key] = why
+                del queue.requests[key]
+        return finished
+
+    def serve(self) -> bool:
+        """One tick of the main thread's timer: a step of the asked bakes, if any (``bake``).
+        Whether bakes are asked (the timer ticks again soon)."""
+        with self.lock:
+            if self._asked is None:
+                return False
+            queue, depsgraph, done = self._asked
+            try:
+                finished = queue.step_for_render(self.SECONDS, depsgraph)
+            except Exception as error:  # noqa: BLE001 - the render uses the values, said
+                for key in list(queue.requests):
+                    queue.failed[key] = str(error) or type(error).__name__
+                queue.requests.clear()
+                finished = True
+            if finished:
+                self._asked = None
+                done.set()
+            return not finished
+
+
+render_bakes = RenderBakes()
 
 
 BATCH_FILE = "bakes.blend"

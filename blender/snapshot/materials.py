@@ -809,8 +809,8 @@ class MaterialTable:
             allowed = self._bake if self._bake is not None else can_bake()
             if not allowed:
                 self._warn(f"Material '{name}': its {what} must be baked by Cycles, which "
-                           "cannot run here (during an F12 render in the UI or off the main "
-                           "thread); using its value until a viewport update or "
+                           "cannot run here (off the main thread, with no timer of Blender's "
+                           "UI to hand it to); using its value until a viewport update or "
                            "voxgi.render_preview bakes it")
                 return data
             try:

@@ -29,7 +29,7 @@ from ...voxgi_addon.scene.snapshot import (
     ObjectData,
     SceneSnapshot,
 )
-from .bakes import BakeQueue
+from .bakes import BakeQueue, render_bakes
 from .environment import read_camera, read_light, read_world
 from .left_out import left_out_line, light_notes, notes_of, render_notes, type_note
 from .materials import AUTO_UVS, MaterialTable, Surface
@@ -393,7 +393,8 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
     bakes : the live viewport's queue of material bakes (``bakes.BakeQueue``): a socket Cycles
         must bake and has not is queued there, its value read meanwhile; a node-built world is
         baked by another process (``world_process``), its last map shown meanwhile. None
-        bakes here.
+        bakes here, or, off the main thread (F12 in the UI), has the main thread's timer and
+        a child bake them (``bakes.RenderBakes``) and reads the scene again.
     Raises VoxGIError for input the engine cannot represent (e.g. > 256 deform bones).
     The scene is restored exactly (temporary modifiers and node groups removed).
     """
@@ -403,6 +404,23 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
         scene = context_or_scene.scene
     if depsgraph is None:
         depsgraph = bpy.context.evaluated_depsgraph_get()
+    if bakes is None and render_bakes.available():
+        # F12 in the UI (a render thread): the bakes it needs go to the main thread's timer
+        # and a child process, and the scene is read again with them (``bakes.RenderBakes``)
+        queue = BakeQueue()
+        snapshot = _take_snapshot(scene, depsgraph, reads, queue, None)
+        if not queue.requests:
+            return snapshot
+        render_bakes.bake(queue, depsgraph)
+        return _take_snapshot(scene, depsgraph, reads, queue, None)
+    return _take_snapshot(scene, depsgraph, reads, bakes,
+                          None if bakes is None else bakes.worlds)
+
+
+def _take_snapshot(scene, depsgraph, reads: MeshReads | None, bakes: BakeQueue | None,
+                   worlds) -> SceneSnapshot:
+    """``take_snapshot`` of ``scene`` with its material bakes queued in ``bakes`` (None: baked
+    here) and its world's in ``worlds`` (``world_process.WorldBakes``; None: baked here)."""
     view_layer = depsgraph.view_layer
     warnings: list[str] = []
     table = MaterialTable(warnings, queue=bakes)
@@ -471,7 +489,7 @@ def take_snapshot(context_or_scene, depsgraph=None, reads: MeshReads | None = No
         armatures=read_armatures([e for e in entries if e.key in meshes], depsgraph),
         lights=lights,
         camera=read_camera(scene, depsgraph),
-        world=read_world(scene, warnings, deferred=None if bakes is None else bakes.worlds),
+        world=read_world(scene, warnings, deferred=worlds),
         frame=int(scene.frame_current),
         warnings=tuple(warnings),
         holdout_materials=tuple(sorted(holdouts.values())),

@@ -601,7 +601,7 @@ def read_world(world, warnings: list[str], bake: bool | None = None, deferred=No
                     return cached[0]
             warnings.append(
                 f"World '{world.name}': {reason}, so Cycles must evaluate it, which cannot run "
-                "here (during an F12 render in the UI or off the main thread); using the "
+                "here (off the main thread, and no child baked it ahead); using the "
                 "Background's Color x Strength until the world is evaluated (any viewport "
                 "update or voxgi.render_preview does it)")
             return _fallback(world, key + ":fallback")

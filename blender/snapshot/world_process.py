@@ -79,7 +79,10 @@ class WorldBakes:
 
     def wait(self, key: str, seconds: float, store) -> bool:
         """Wait up to ``seconds`` for the child baking ``key`` (any thread: F12's render job
-        in the UI, which cannot bake); whether there was one and its map was stored."""
+        in the UI, which cannot bake; a cancelled render stops waiting:
+        ``bakes.RenderBakes.watching``); whether there was one and its map was stored."""
+        from .bakes import render_bakes  # (bakes holds WorldBakes)
+
         started = time.monotonic()
         while True:
             with self.lock:
@@ -88,7 +91,7 @@ class WorldBakes:
                 self.poll(store)
                 if key not in self.running:
                     return key not in self.failed
-            if time.monotonic() - started > seconds:
+            if time.monotonic() - started > seconds or render_bakes.cancelled():
                 return False
             time.sleep(0.02)
 

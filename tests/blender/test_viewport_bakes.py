@@ -527,3 +527,116 @@ def test_a_child_whose_bakes_are_wanted_no_more_is_stopped_for_the_next(voxgi):
     assert first.ended() is not None and not os.path.exists(first.directory)
     _drained(queue, depsgraph)
     assert queue.finished == {material.name_full}
+
+
+def _f12_snapshot(scene, serve: bool = True, cancelled=lambda: False):
+    """(snapshot, the main thread's timer ticks meanwhile): ``take_snapshot`` on another
+    thread, as F12 in Blender's UI reads the scene on its render thread (``cancelled``: its
+    ``RenderEngine.test_break``), while the main thread ticks the timer that serves its bakes
+    (``bakes.render_bakes.serve``, as ``kernel_warmup`` does) unless ``serve`` is False."""
+    import threading
+    import time
+
+    from voxgi.blender.snapshot.bakes import render_bakes
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    out = {}
+
+    def render_job():
+        try:
+            with render_bakes.watching(cancelled):
+                out["snapshot"] = take_snapshot(scene, depsgraph)
+        except BaseException as error:  # noqa: BLE001 - raised on the test's thread
+            out["error"] = error
+
+    thread = threading.Thread(target=render_job, name="F12 render job")
+    ticks = 0
+    render_bakes.served = True
+    try:
+        thread.start()
+        while thread.is_alive():
+            if serve and render_bakes.serve():
+                ticks += 1
+            time.sleep(0.02)
+    finally:
+        thread.join()
+        render_bakes.served = False
+    if "error" in out:
+        raise out["error"]
+    return out["snapshot"], ticks
+
+
+def test_an_f12_in_the_ui_has_its_material_bakes_made_by_a_child_for_the_main_thread(voxgi):
+    """F12 in the UI renders on a job thread, where no bake may run and no data be written:
+    its snapshot hands the bakes to the main thread's timer, which has a child bake them, and
+    reads the scene again with them, instead of rendering the socket's plain value."""
+    from voxgi.blender.snapshot import materials as snapshot_materials
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    def baked(snapshot):
+        read = next(m for m in snapshot.materials if m.name == material.name)
+        assert read.base_color_texture >= 0, snapshot.warnings
+        return snapshot.textures[read.base_color_texture].pixels
+
+    obj, material = _uv_sphere_with(lambda tree: tree.nodes.new("ShaderNodeTexNoise").outputs[1])
+    here = baked(take_snapshot(bpy.context.scene))  # the main thread's snapshot bakes in place
+    snapshot_materials.clear_bake_cache()
+    bakes = snapshot_materials.bake_count()
+    snapshot, ticks = _f12_snapshot(bpy.context.scene)
+    assert not any("Bake Me" in w for w in snapshot.warnings), snapshot.warnings
+    assert np.array_equal(baked(snapshot), here)  # the same bake, made in a child
+    assert snapshot_materials.bake_count() == bakes + 1 and ticks >= 2
+    print(f"F12's bake came in after {ticks} ticks of the main thread's timer")
+    # the next F12 reads it from the cache: nothing asked of the main thread
+    snapshot, ticks = _f12_snapshot(bpy.context.scene, serve=False)
+    assert ticks == 0 and snapshot_materials.bake_count() == bakes + 1
+    assert next(m for m in snapshot.materials if m.name == material.name).base_color_texture >= 0
+
+
+def test_an_f12_whose_bakes_do_not_come_in_says_so_and_leaves_no_child(voxgi, monkeypatch):
+    from voxgi.blender.snapshot import bakes
+    from voxgi.blender.snapshot import materials as snapshot_materials
+
+    obj, material = _uv_sphere_with(lambda tree: tree.nodes.new("ShaderNodeTexNoise").outputs[1])
+    snapshot_materials.clear_bake_cache()
+    # no main thread serving them (a timer that never runs): the render waits WAIT, then says
+    monkeypatch.setattr(bakes.RenderBakes, "WAIT", 0.5)
+    snapshot, _ = _f12_snapshot(bpy.context.scene, serve=False)
+    read = next(m for m in snapshot.materials if m.name == material.name)
+    assert read.base_color_texture < 0
+    assert any("Bake Me" in w and "did not end in time" in w for w in snapshot.warnings), \
+        snapshot.warnings
+    assert bakes.render_bakes.serve() is False  # nothing left asked of the timer
+    # Esc during the wait (RenderEngine.test_break): the render goes on at once, says why
+    monkeypatch.setattr(bakes.RenderBakes, "WAIT", 600.0)
+    import time
+
+    started = time.monotonic()
+    snapshot, _ = _f12_snapshot(bpy.context.scene, serve=False,
+                                cancelled=lambda: time.monotonic() - started > 0.3)
+    assert time.monotonic() - started < 60.0
+    assert any("Bake Me" in w and "cancelled" in w for w in snapshot.warnings), snapshot.warnings
+
+    # an image painted in this session and never saved: no child can see it, and no bake may
+    # run beside a render job: said, the value used
+    image = bpy.data.images.new("Painted", 16, 16)
+    node = material.node_tree.nodes.new("ShaderNodeTexImage")
+    node.image = image
+    material.node_tree.links.new(node.outputs["Color"],
+                                 material.node_tree.nodes["Noise Texture"].inputs["Scale"])
+    monkeypatch.setattr(bakes.RenderBakes, "WAIT", 60.0)
+    snapshot, _ = _f12_snapshot(bpy.context.scene)
+    assert any("Bake Me" in w and "only in this session's memory" in w
+               for w in snapshot.warnings), snapshot.warnings
+
+    # with no timer to serve them (background mode, a script's thread) the old words stand
+    snapshot_materials.clear_bake_cache()
+    import threading
+
+    from voxgi.blender.snapshot.scene import take_snapshot
+    out = {}
+    thread = threading.Thread(target=lambda: out.setdefault("s", take_snapshot(bpy.context.scene)))
+    thread.start()
+    thread.join()
+    assert any("cannot run here" in w for w in out["s"].warnings), out["s"].warnings
