@@ -84,6 +84,15 @@ def check(stages, given) -> None:
         known.update(stage.writes)
 
 
+_RUNNING = [""]  # the name of the stage a ``run`` last entered (``running``)
+
+
+def running() -> str:
+    """The name of the stage a ``run`` last entered: where a viewport draw's step was (its
+    traces name a long step by it)."""
+    return _RUNNING[0]
+
+
 def run(stages, frame: Frame):
     """Generator running ``stages`` in order over ``frame`` (yielding inside the stages and
     after each ``slice_end`` one); returns ``frame``. A stage that returns other values than
@@ -94,6 +103,7 @@ def run(stages, frame: Frame):
             frame.values.update(stage.skipped(view) if stage.skipped is not None
                                 else dict.fromkeys(stage.writes))
             continue
+        _RUNNING[0] = stage.name or stage.run.__name__
         t0 = time.perf_counter()
         out = stage.run(view)
         if inspect.isgenerator(out):

@@ -56,6 +56,7 @@ from ..blender.viewport_session import READ_SLICE, SNAPSHOT_HOOKS, live_gi
 from ..blender.viewport_settings import VIEWPORT_PASSES
 from ..voxgi_addon.scene.view_camera import border_rect, camera_from_view, crop_window
 from . import viewport_prepare
+from .frame import running as running_stage
 from .gpu_fast import cone_volumes
 from .gpu_gather import CHUNK_GROWTH
 from .gpu_scene import current_scene
@@ -375,7 +376,8 @@ class ViewportRenderer:
         if done is None:
             return ""
         if not done.finished:  # a stage of the slice: the next draw goes on with it
-            self.timings = {"atlas upload": upload, "stage": time.perf_counter() - t0 - upload,
+            self.timings = {"atlas upload": upload,
+                            f"stage ({running_stage()})": time.perf_counter() - t0 - upload,
                             "view_draw work": time.perf_counter() - t0}
             return "Coarse" if progressive.coarse_pending else (
                 "Converged" if progressive.converged else "Refining")

@@ -72,9 +72,11 @@ def _kind(label: str) -> str:
         return "shader compile"
     if label.startswith("scene"):
         return "scene part sent"
-    if label in ("vertex batch", "raster first draw", "quick image", "stage",
+    if label.startswith("stage ("):  # a slice's stage, named by its frame stage
+        return "slice stage"
+    if label in ("vertex batch", "raster first draw", "quick image",
                  "radiance cache stage", "snapshot read"):
-        return {"stage": "slice stage"}.get(label, label)
+        return label
     return ""
 
 
