@@ -78,7 +78,8 @@ def records_from_depsgraph(depsgraph, index: SceneIndex | None = None) -> list[U
         records.append(UpdateRecord(
             kind, original.name_full, bool(update.is_updated_transform),
             bool(update.is_updated_geometry), bool(update.is_updated_shading),
-            original.type if kind == "OBJECT" else ""))
+            original.type if kind == "OBJECT" else "",
+            tuple(original.color) if kind == "OBJECT" else None))
     if index is not None and visible_mesh_names(depsgraph.view_layer) != (
             set(index.objects) if index.visible is None else index.visible):
         records.append(VISIBILITY_RECORD)
@@ -100,6 +101,19 @@ def rest_animated(obj) -> bool:
     return _animated(obj) or _animated(mesh) or _animated(keys)
 
 
+def reads_object_info(obj) -> bool:
+    """Does a material of ``obj`` read Object Info (its Color, through a per-object variant or
+    a bake keyed by it: an edit of the object's Color changes what it shows)?"""
+    return any(slot.material is not None and slot.material.node_tree is not None and
+               _has_object_info(slot.material.node_tree) for slot in obj.material_slots)
+
+
+def _has_object_info(tree, depth: int = 0) -> bool:
+    return depth < 16 and any(
+        node.type == "OBJECT_INFO" or node.type == "GROUP" and node.node_tree is not None and
+        _has_object_info(node.node_tree, depth + 1) for node in tree.nodes)
+
+
 def scene_index(snapshot, view_layer) -> SceneIndex:
     """Who uses what in ``snapshot`` (taken from ``view_layer`` just now)."""
     objects = {}
@@ -111,7 +125,8 @@ def scene_index(snapshot, view_layer) -> SceneIndex:
         objects[obj.name] = ObjectEntry(
             obj.mesh, blender_object.data.name_full, slot_materials(blender_object), obj.kind,
             obj.armature, None if armature is None else armature.data.name_full,
-            obj.kind == "skinned" and rest_animated(blender_object))
+            obj.kind == "skinned" and rest_animated(blender_object),
+            tuple(blender_object.color) if reads_object_info(blender_object) else None)
     lights = [bpy.data.objects.get(light.name) for light in snapshot.lights]
     # faceless objects (edges, points, an empty curve) are in no snapshot but are visible: kept
     # apart, else every later update would look like an object shown (a full snapshot)

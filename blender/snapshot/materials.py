@@ -41,10 +41,11 @@ strength.
 A material whose Principled BSDF sits inside a node group (nested too) is read through the
 groups as the flat one would be (``node_groups``); its bakes route through copies of them.
 
-A Base Color that varies per object through Object Info › Random (a Color Ramp, Mix or
-Hue/Saturation of it: ``object_random``) is not baked: its entry holds the colour's mean over
-Random, and ``object_material`` gives each object a variant of it at the object's own Random
-(``ObjectData.materials``), as Cycles colours each copy of a scattered mesh.
+A Base Color that varies per object through Object Info › Random or Color (a Color Ramp, Mix
+or Hue/Saturation of them: ``object_random``) is not baked: its entry holds the colour's mean
+over Random (on a white object), and ``object_material`` gives each object a variant of it at
+the object's own Random and Color (``ObjectData.materials``), as Cycles colours each copy of a
+scattered mesh.
 
 Normal: a tangent-space Normal Map node fed by an Image Texture's Color (as the glTF importer
 builds normal maps) gives ``normal_texture`` and ``normal_strength``; other normal inputs
@@ -65,7 +66,7 @@ from . import bakes, shader_mix, udim
 from .auto_uvs import polygon_uvs
 from .left_out import material_notes
 from .node_groups import route_to_emission, surface_node
-from .object_random import random_base_color
+from .object_random import ObjectInputs, object_base_color
 from .reads import count
 from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _NeedsBake, _tree_key
 
@@ -75,6 +76,7 @@ MAX_VARIANT_MATERIALS = 96  # materials with Roughness / Metallic per texel (eac
 # cost the snapshot 130 ms evaluated one by one); a ramp's colour moves by at most 1/512 of
 # its range
 RANDOM_STEPS = 256
+COLOR_STEPS = 1024  # an object's Color, each channel, likewise (8-bit colours stay apart)
 EMISSION_SHADER = "Emission shader"  # an Emission surface's own light (Color × Strength) baked
 CUTOUT_FAC = "Cut-out Fac"  # the baked Fac of a Mix Shader of a Transparent BSDF and this one
 AUTO_UVS = "VoxGI Auto UVs"  # the UV map of a bake over a layout of the mesh's polygons
@@ -303,9 +305,10 @@ class MaterialTable:
         self._warned: set[str] = set()
         self._variant_materials = 0
         self.notes: dict[str, list[str]] = {}  # material name → what the preview leaves out
-        self._by_random: dict[str, object] = {}  # material name → its Base Color by Random
-        self._random_variants: dict[tuple, int] = {}  # (index, colour) → variant's index
-        self._random_steps: dict[tuple, int] = {}  # (index, step of Random) → its material
+        # material name → (its Base Color by an object's ObjectInputs, whether it reads Color)
+        self._by_object: dict[str, tuple] = {}
+        self._object_variants: dict[tuple, int] = {}  # (index, colour) → variant's index
+        self._object_steps: dict[tuple, int] = {}  # (index, step of the inputs) → its material
 
     def _warn(self, text: str) -> None:
         if text not in self._warned:
@@ -348,38 +351,49 @@ class MaterialTable:
 
     @property
     def varies_by_object(self) -> bool:
-        """Does any material read so far take its Base Color from Object Info › Random?"""
-        return bool(self._by_random)
+        """Does any material read so far take its Base Color from Object Info › Random or
+        Color?"""
+        return bool(self._by_object)
+
+    @property
+    def reads_object_color(self) -> bool:
+        """Does any material read so far take its Base Color from Object Info › Color?"""
+        return any(reads for _, reads in self._by_object.values())
 
     def varies(self, index: int) -> bool:
-        """Does material ``index`` take its Base Color from Object Info › Random (a variant per
-        object, ``object_material``)?"""
+        """Does material ``index`` take its Base Color from Object Info (a variant per object,
+        ``object_material``)?"""
         data = self.materials[index] if 0 <= index < len(self.materials) else None
-        return data is not None and data.name in self._by_random and data.param_texture < 0
+        return data is not None and data.name in self._by_object and data.param_texture < 0
 
-    def object_material(self, index: int, random: float) -> int:
-        """The material an object whose Object Info › Random is ``random`` shades with where
-        its mesh uses material ``index``: a variant with the Base Color at its Random (one per
-        colour) where the material's Base Color follows Random, else ``index``."""
-        step = (index, round(float(random) * RANDOM_STEPS))
-        known = self._random_steps.get(step)
+    def object_material(self, index: int, inputs: ObjectInputs) -> int:
+        """The material an object whose Object Info gives ``inputs`` (its Random, its Color)
+        shades with where its mesh uses material ``index``: a variant with the Base Color at
+        its inputs (one per colour) where the material's Base Color follows them, else
+        ``index``."""
+        data = self.materials[index] if 0 <= index < len(self.materials) else None
+        by_object = None if data is None else self._by_object.get(data.name)
+        colour_steps = None if by_object is None or not by_object[1] else \
+            tuple(round(float(c) * COLOR_STEPS) for c in inputs.color[:4])
+        step = (index, round(float(inputs.random) * RANDOM_STEPS), colour_steps)
+        known = self._object_steps.get(step)
         if known is not None:
             return known
-        data = self.materials[index] if 0 <= index < len(self.materials) else None
-        colour_of = None if data is None else self._by_random.get(data.name)
-        if colour_of is None or data.param_texture >= 0:
-            self._random_steps[step] = index
+        if by_object is None or data.param_texture >= 0:
+            self._object_steps[step] = index
             return index
-        colour = colour_of(step[1] / RANDOM_STEPS)
+        colour = by_object[0](ObjectInputs(
+            step[1] / RANDOM_STEPS, inputs.color if colour_steps is None else
+            tuple(c / COLOR_STEPS for c in colour_steps)))
         key = (index, tuple(np.round(colour * 4096).astype(np.int64)))
-        variant = self._random_variants.get(key)
+        variant = self._object_variants.get(key)
         if variant is None:
-            variant = self._random_variants[key] = len(self.materials)
+            variant = self._object_variants[key] = len(self.materials)
             self.materials.append(dataclasses.replace(
-                data, name=f"{data.name} [Random: {', '.join(f'{c:.3f}' for c in colour)}]",
+                data, name=f"{data.name} [Object Info: {', '.join(f'{c:.3f}' for c in colour)}]",
                 base_color=colour.astype(np.float32)))
             self._uv_maps[variant] = self._uv_maps.get(index, "")
-        self._random_steps[step] = variant
+        self._object_steps[step] = variant
         return variant
 
     def _add_texture(self, texture: TextureData) -> int:
@@ -449,10 +463,10 @@ class MaterialTable:
             glow, glow_strength = glow * glow_strength, np.float32(1.0)
             glow_texture, glow_bake, glow_uv = None, ("EMIT", EMISSION_SHADER), ""
         emission = glow * glow_strength
-        by_random = random_base_color(material)
-        if by_random is not None:  # per object (``object_material``); here its mean colour
-            self._by_random[material.name_full] = by_random
-            base = np.mean([by_random(r) for r in np.linspace(0.0, 1.0, 33)],
+        by_object = object_base_color(material)
+        if by_object is not None:  # per object (``object_material``); here its mean colour
+            self._by_object[material.name_full] = by_object
+            base = np.mean([by_object[0](ObjectInputs(r)) for r in np.linspace(0.0, 1.0, 33)],
                            axis=0).astype(np.float32)
             texture, bake, uv_map = None, None, ""
         else:

@@ -25,6 +25,7 @@ from .scene import (
     _visible_mesh_entries,
     instance_objects,
     mesh_objects,
+    object_inputs,
     read_armatures,
     read_lights,
     scene_flags,
@@ -52,7 +53,10 @@ def posed_snapshot(previous, scene, depsgraph, materials: dict | None = None,
     """
     entries = _visible_mesh_entries(depsgraph.view_layer, [], depsgraph)  # warned before
     entries = [e for e in entries if e.key in previous.meshes]
-    instances = [o for o in instance_objects(depsgraph) if o.mesh in previous.meshes]
+    given: list = []
+    instances = instance_objects(depsgraph, inputs=given)
+    given = [g for o, g in zip(instances, given) if o.mesh in previous.meshes]
+    instances = [o for o in instances if o.mesh in previous.meshes]
     objects = mesh_objects(entries, depsgraph) + instances
     before = [(o.name, o.mesh, o.kind, o.armature) for o in previous.objects]
     if [(o.name, o.mesh, o.kind, o.armature) for o in objects] != before:
@@ -60,8 +64,12 @@ def posed_snapshot(previous, scene, depsgraph, materials: dict | None = None,
     if materials is not None and any(slot_materials(e.obj) != materials.get(e.obj.name_full)
                                      for e in entries):
         return None
-    # each object's materials by its Random (``scene.with_object_materials``): its name and
-    # instance are the previous ones, so its Random is too
+    # each object's materials by its Object Info (``scene.with_object_materials``): its name
+    # and instance are the previous ones, so its Random is too; its Color may have changed
+    if previous.object_colors and tuple(
+            g.color for g in [object_inputs(e.obj, depsgraph) for e in entries] + given) != \
+            previous.object_colors:
+        return None
     objects = [dataclasses.replace(o, materials=p.materials) if p.materials else o
                for o, p in zip(objects, previous.objects)]
     notes: list[str] = []

@@ -44,7 +44,7 @@ from .mesh import (
     triangle_materials,
 )
 from .mesh_cache import MeshArrays, MeshReads, change_key
-from .object_random import object_random
+from .object_random import ObjectInputs, object_random
 from .reads import count
 from .skin import (
     armature_modifiers,
@@ -447,8 +447,8 @@ def _take_snapshot(scene, depsgraph, reads: MeshReads | None, bakes: BakeQueue |
         reads.begin()
     if bakes is not None:
         bakes.begin()
-    instance_randoms: list[float] = []
-    instances = instance_objects(depsgraph, read_instanced, instance_randoms)
+    instance_inputs: list[ObjectInputs] = []
+    instances = instance_objects(depsgraph, read_instanced, instance_inputs)
     with temporary_weight_attributes(skinned, depsgraph):
         for entry in entries:
             if entry.key not in read_keys:  # linked duplicates are read once
@@ -465,10 +465,13 @@ def _take_snapshot(scene, depsgraph, reads: MeshReads | None, bakes: BakeQueue |
     # Matrices are read after the temporary modifiers are gone.
     objects = mesh_objects([e for e in entries if e.key in meshes], depsgraph) + \
         [o for o in instances if o.mesh in meshes]
-    if table.varies_by_object:  # Base Colors by Object Info › Random: each object's own
-        randoms = [object_random(e.obj.name) for e in entries if e.key in meshes] + \
-            [r for o, r in zip(instances, instance_randoms) if o.mesh in meshes]
-        objects = with_object_materials(objects, randoms, table, used)
+    object_colors: tuple = ()
+    if table.varies_by_object:  # Base Colors by Object Info › Random, Color: each object's own
+        inputs = [object_inputs(e.obj, depsgraph) for e in entries if e.key in meshes] + \
+            [r for o, r in zip(instances, instance_inputs) if o.mesh in meshes]
+        objects = with_object_materials(objects, inputs, table, used)
+        if table.reads_object_color:  # what a posed snapshot checks (``pose``)
+            object_colors = tuple(i.color for i in inputs)
     # what of each object (each instanced object once) the preview leaves out, once per object
     named = [(e.obj.name, e.obj, e.key) for e in entries if e.key in meshes] + \
         [(f"{origin.name} (instanced)", origin, key) for key, origin in origins.items()
@@ -493,6 +496,7 @@ def _take_snapshot(scene, depsgraph, reads: MeshReads | None, bakes: BakeQueue |
         frame=int(scene.frame_current),
         warnings=tuple(warnings),
         holdout_materials=tuple(sorted(holdouts.values())),
+        object_colors=object_colors,
         **scene_flags(scene),
     )
 
@@ -548,15 +552,15 @@ def scene_flags(scene) -> dict:
                                                 "caustics_refractive", True))}
 
 
-def instance_objects(depsgraph, read=None, randoms: list | None = None) -> list[ObjectData]:
+def instance_objects(depsgraph, read=None, inputs: list | None = None) -> list[ObjectData]:
     """The depsgraph's instances (collection instances, geometry-nodes and particle instances)
     of renderable objects: one ObjectData per instance with its own world matrix. An instance
     of a plain mesh shares the mesh datablock's key with its other users. Ray visibility is the
     instanced object's and its instancer's together, holdout the instancer's (or the object's),
     as Cycles syncs instances. ``read(key, original object, evaluated object)`` is called for
     each instance (the evaluated object only exists while the instances are iterated): the
-    full snapshot reads each key's mesh there, a posed one nothing (None). ``randoms``, when
-    given, gets each instance's Object Info › Random (``object_random``), in order."""
+    full snapshot reads each key's mesh there, a posed one nothing (None). ``inputs``, when
+    given, gets each instance's Object Info (``object_inputs``), in order."""
     out, used = [], {}
     for inst in depsgraph.object_instances:
         if not inst.is_instance:
@@ -585,20 +589,27 @@ def instance_objects(depsgraph, read=None, randoms: list | None = None) -> list[
         out.append(ObjectData(name=name, mesh=key, kind="static",
                               world_matrix=np.array(inst.matrix_world, dtype=np.float64),
                               visibility=visibility, holdout=bool(holdout)))
-        if randoms is not None:
-            randoms.append(object_random(original.name, inst.random_id))
+        if inputs is not None:
+            inputs.append(ObjectInputs(object_random(original.name, inst.random_id),
+                                       tuple(obj_eval.color)))
     return out
 
 
-def with_object_materials(objects, randoms, table: MaterialTable, used: dict) -> list:
+def object_inputs(obj, depsgraph) -> ObjectInputs:
+    """What Object Info gives ``obj`` (an object of the view layer): its Random (a hash of its
+    name, ``object_random``) and its evaluated Color."""
+    return ObjectInputs(object_random(obj.name), tuple(obj.evaluated_get(depsgraph).color))
+
+
+def with_object_materials(objects, inputs, table: MaterialTable, used: dict) -> list:
     """``objects`` with ``ObjectData.materials`` where a material of theirs takes its Base
-    Color from Object Info › Random: each object's variant at its own Random (``randoms``,
+    Color from Object Info: each object's variant at its own Random and Color (``inputs``,
     aligned with ``objects``; ``MaterialTable.object_material``)."""
     varying = {key: [int(i) for i in indices if table.varies(int(i))]
                for key, indices in used.items()}
     out = []
-    for obj, random in zip(objects, randoms, strict=True):
-        pairs = tuple((i, table.object_material(i, random)) for i in varying.get(obj.mesh, ()))
+    for obj, given in zip(objects, inputs, strict=True):
+        pairs = tuple((i, table.object_material(i, given)) for i in varying.get(obj.mesh, ()))
         pairs = tuple((i, j) for i, j in pairs if i != j)
         out.append(dataclasses.replace(obj, materials=pairs) if pairs else obj)
     return out

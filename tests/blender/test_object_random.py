@@ -186,3 +186,136 @@ def test_a_moved_block_keeps_its_colour_in_a_posed_snapshot(voxgi):
     assert [o.materials for o in posed.objects] == [o.materials for o in full.objects]
     np.testing.assert_array_equal(world_triangles(posed).materials,
                                   world_triangles(full).materials)
+
+
+def _color_material(name, chain):
+    """A Principled BSDF whose Base Color is Object Info › Color: "plain" (itself), "tint"
+    (mixed half-way with a warm white by its Alpha) or "hue" (its hue turned a quarter)."""
+    material = gi_scenes._material(name, (0.5, 0.5, 0.5))
+    tree = material.node_tree
+    bsdf = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
+    info = tree.nodes.new("ShaderNodeObjectInfo")
+    if chain == "plain":
+        tree.links.new(info.outputs["Color"], bsdf.inputs["Base Color"])
+    elif chain == "tint":
+        mix = tree.nodes.new("ShaderNodeMix")
+        mix.data_type = "RGBA"
+        socket = {s.identifier: s for s in [*mix.inputs, *mix.outputs]}
+        socket["B_Color"].default_value = (0.9, 0.85, 0.7, 1)
+        tree.links.new(info.outputs["Alpha"], socket["Factor_Float"])
+        tree.links.new(info.outputs["Color"], socket["A_Color"])
+        tree.links.new(socket["Result_Color"], bsdf.inputs["Base Color"])
+    else:
+        hue = tree.nodes.new("ShaderNodeHueSaturation")
+        hue.inputs["Hue"].default_value = 0.75
+        tree.links.new(info.outputs["Color"], hue.inputs["Color"])
+        tree.links.new(hue.outputs["Color"], bsdf.inputs["Base Color"])
+    return material
+
+
+def build_coloured_blocks(scene):
+    """Three rows of linked duplicates of a block (the last row collection instances), each row
+    one ``_color_material`` chain, each block tinted by its object's own Color."""
+    camera = build_scattered_blocks(scene)
+    for obj in [o for o in scene.objects if o.name.startswith("Block")]:
+        bpy.data.objects.remove(obj)
+    vertices, faces = gi_scenes._box((-0.35, -0.35, 0), (0.35, 0.35, 0.5))
+    rng = np.random.default_rng(7)
+    for row, chain in enumerate(("plain", "tint", "hue")):
+        mesh = bpy.data.meshes.new(f"Tinted {chain}")
+        mesh.from_pydata(vertices, [], faces)
+        mesh.materials.append(_color_material(f"By Color ({chain})", chain))
+        group = bpy.data.collections.new(f"Tinted {chain}") if row == 2 else None
+        if group is not None:
+            inner = bpy.data.objects.new(f"Tinted {chain}", mesh)
+            group.objects.link(inner)
+        for k in range(6):
+            colour = (*rng.uniform(0.05, 0.95, 3), float(rng.uniform(0.0, 1.0)))
+            if group is None:
+                block = bpy.data.objects.new(f"Tinted {chain} {k}", mesh)
+                block.color = colour
+            else:  # instances of one object: one colour for all, as in Cycles
+                block = bpy.data.objects.new(f"Tinted {chain} {k}", None)
+                block.instance_type, block.instance_collection = "COLLECTION", group
+                inner.color = colour
+            block.location = (1.2 * k - 3.0, 1.8 - 1.2 * row, 0.0)
+            scene.collection.objects.link(block)
+    bpy.context.view_layer.update()
+    return camera
+
+
+def test_each_block_takes_its_objects_colour_as_in_cycles(voxgi, tmp_path):
+    """Object Info › Color (and Alpha) of linked duplicates: Cycles tints each copy by its
+    object's Color; a bake over the shared mesh gave them all the first one's."""
+    from voxgi.blender.session import scene_session
+    from voxgi.voxgi_addon.files.exr import read_exr_passes
+
+    scene = bpy.context.scene
+    build_coloured_blocks(scene)
+    scene.cycles.filter_width = 0.01  # point samples on both sides
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=WIDTH,
+                                        resolution_y=HEIGHT) == {"FINISHED"}
+    assert not [line for level, line in scene_session(scene.name_full).last_report
+                if level == "WARNING"]  # nothing baked, nothing left out
+    ours = np.asarray(read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"], np.float64)
+    cycles = np.asarray(render_cycles_passes(scene, WIDTH, HEIGHT, 4, filter_width=0.01)
+                        ["Diffuse Color"], np.float64)
+    floor = np.array([0.5, 0.5, 0.5])
+    blocks = np.abs(cycles - floor).max(-1) > 0.02  # the blocks' tops
+    assert blocks.sum() > 150
+    assert np.ptp(cycles[blocks], axis=0).max() > 0.5  # Cycles' colours differ block to block
+    error = np.abs(ours[blocks] - cycles[blocks]).max(-1)
+    print(f"blocks' Diffuse Color off Cycles': mean {error.mean():.4f}, "
+          f"share within 0.05 {(error < 0.05).mean():.3f}")
+    assert error.mean() < 0.01 and (error < 0.05).mean() > 0.97
+
+
+def test_a_block_whose_colour_changes_is_read_again(voxgi):
+    """A posed snapshot keeps each object's variant; an object whose Color changed since is
+    read again (a full snapshot), and the viewport's plan asks for one."""
+    from voxgi.blender.snapshot.pose import posed_snapshot
+    from voxgi.blender.snapshot.scene import take_snapshot
+    from voxgi.blender.updates import records_from_depsgraph, scene_index
+    from voxgi.voxgi_addon.scene.changes import UpdateRecord, plan_updates
+
+    scene = bpy.context.scene
+    build_coloured_blocks(scene)
+    before = take_snapshot(scene)
+    assert len(before.object_colors) == len(before.objects)
+    index = scene_index(before, bpy.context.view_layer)
+    bpy.data.objects["Tinted plain 3"].location.z += 0.2  # a move keeps the variants
+    bpy.context.view_layer.update()
+    posed = posed_snapshot(before, scene, bpy.context.evaluated_depsgraph_get())
+    assert posed is not None and [o.materials for o in posed.objects] == \
+        [o.materials for o in before.objects]
+    block = bpy.data.objects["Tinted plain 3"]
+    block.color = (0.9, 0.05, 0.05, 1.0)
+    bpy.context.view_layer.update()
+    assert posed_snapshot(before, scene, bpy.context.evaluated_depsgraph_get()) is None
+    # Blender sends a colour edit as the object's shading update, which the plan used to drop
+    record = UpdateRecord("OBJECT", block.name_full, shading=True, object_type="MESH",
+                          color=tuple(block.color))
+    plan = plan_updates([record], index)
+    assert plan.full_snapshot and any("colour" in t for t in plan.triggers)
+    # the same record with the colour it had (a snapshot's own update): nothing to do
+    same = UpdateRecord("OBJECT", "Tinted plain 2", shading=True, object_type="MESH",
+                        color=tuple(bpy.data.objects["Tinted plain 2"].color))
+    assert plan_updates([same], index).empty
+    # what Blender sends for the edit, as the viewport reads it
+    seen = []
+
+    def handler(_scene, depsgraph):
+        seen.extend(records_from_depsgraph(depsgraph))
+
+    bpy.app.handlers.depsgraph_update_post.append(handler)
+    try:
+        block.color = (0.9, 0.05, 0.06, 1.0)
+        bpy.context.view_layer.update()
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(handler)
+    assert plan_updates(seen, index).full_snapshot, seen
+    full = take_snapshot(scene)
+    k = [o.name for o in full.objects].index(block.name_full)
+    colour = dict(full.objects[k].materials)
+    variant = full.materials[next(iter(colour.values()))]
+    np.testing.assert_allclose(variant.base_color, (0.9, 0.05, 0.06), atol=2e-3)

@@ -22,8 +22,10 @@ view moved                             trace only (``view_plan``; plus the casca
 
 Object records flagged for shading only and Collection and Action records are ignored: Blender
 sends them for many things that change no voxel (a snapshot's own temporary modifier, for one);
-material slots and colours arrive as Mesh / Material records. Only a full snapshot reads meshes,
-modifiers and materials: a bone, object, light or camera change needs a posed one
+material slots and colours arrive as Mesh / Material records. The exception: an object whose
+materials read Object Info, whose Color (``ObjectEntry.color``) differs from the record's — an
+edit of Object Properties › Viewport Display › Color, which Blender sends as shading alone.
+Only a full snapshot reads meshes, modifiers and materials: a bone, object, light or camera change needs a posed one
 (docs/gi_pipeline.md "Posed updates"). The geometry updates of a skinned object whose rest
 shape may animate (its modifiers, mesh or shape keys animated: ``ObjectEntry.rest_animated``)
 are not taken for poses.
@@ -67,6 +69,7 @@ class UpdateRecord:
     geometry: bool = False
     shading: bool = False
     object_type: str = ""
+    color: tuple | None = None  # an OBJECT record's object's Color (what Object Info gives)
 
 
 @dataclass(frozen=True)
@@ -82,6 +85,7 @@ class ObjectEntry:
     armature: str | None = None        # the deforming armature object's name
     armature_data: str | None = None   # that object's Armature datablock name
     rest_animated: bool = False
+    color: tuple | None = None  # its Color, where a material of it reads Object Info
 
 
 @dataclass(frozen=True)
@@ -180,6 +184,12 @@ def plan_updates(records, index: SceneIndex | None) -> UpdatePlan:
                 elif r.transform or r.geometry:
                     add(_MOVE_STAGES, f"bones of '{r.name}' posed" if r.geometry
                         else f"object '{r.name}' moved")
+                if r.shading and entry.color is not None and r.color is not None and \
+                        tuple(r.color) != tuple(entry.color):
+                    # its materials read Object Info › Color: their variants or bakes change
+                    full = True
+                    albedo.add(entry.key)
+                    add(_MOVE_STAGES | {"albedo"}, f"colour of object '{r.name}' changed")
             elif r.object_type == "LIGHT" and (r.transform or r.geometry or r.shading):
                 add(_LIGHT_STAGES, f"light '{r.name}' " + ("moved" if r.transform else "edited"))
             elif r.object_type == "ARMATURE" and (r.transform or r.geometry):

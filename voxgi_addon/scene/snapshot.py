@@ -268,6 +268,9 @@ class SceneSnapshot:
     world behind the geometry).
     refractive_caustics : Cycles' Light Paths › Caustics › Refractive: light reaches diffuse
     surfaces through glass (``scene.glass.ray_alpha``); off, glass stops it, as in Cycles.
+    object_colors : each object's Object Info › Color (RGBA, aligned with ``objects``) where a
+    material's Base Color reads it (their variants in ``ObjectData.materials``), else empty:
+    what a later snapshot that keeps those variants checks.
     """
 
     meshes: dict[str, MeshData]
@@ -283,3 +286,4 @@ class SceneSnapshot:
     holdout_materials: tuple[int, ...] = ()
     film_transparent: bool = False  # Film › Transparent: no world behind the geometry
     refractive_caustics: bool = True  # Cycles' Caustics › Refractive: light through glass
+    object_colors: tuple = ()
