@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from . import animated
 from .world_process import WorldBakes
 
 BAKE_SIZE = 512       # a baked socket's image: BAKE_SIZE² texels over the UV square
@@ -86,7 +87,10 @@ class BakeSpec:
     draws them); render_uv : the UV map the nodes read (None: the mesh has none);
     target_uv : the UV map the bake writes through, AUTO_UVS' name with ``auto_uvs`` (the
     per-loop layout, which the copy gets as that map); matrix_world, object_color,
-    pass_index : the object's (what object-space nodes and Object Info read)."""
+    pass_index : the object's (what object-space nodes and Object Info read); values : where
+    the material is animated, its animated values at the snapshot's frame
+    (``animated.frame_values``), which the copy takes, its own animation cleared; None
+    otherwise."""
 
     material: object
     mode: str
@@ -99,6 +103,7 @@ class BakeSpec:
     matrix_world: object
     object_color: tuple = (1.0, 1.0, 1.0, 1.0)
     pass_index: int = 0
+    values: tuple | None = None
 
 
 def bake_whole(spec: BakeSpec, mesh) -> np.ndarray | None:
@@ -182,6 +187,8 @@ class _Baking:
         try:
             if self.obj is None:
                 self.copy = self.spec.material.copy()
+                if self.spec.values is not None:  # animated: its values at the render's frame
+                    animated.apply(self.copy, self.spec.values)
                 self.spec.route(self.copy.node_tree, self.groups)
                 self.source.materials.clear()
                 self.source.materials.append(self.copy)

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from ...voxgi_addon.scene.snapshot import LIGHT_TYPES, CameraData, LightData, WorldData
-from . import world_map
+from . import animated, world_map
 from .reads import count
 
 
@@ -102,10 +102,15 @@ def read_camera(scene, depsgraph) -> CameraData | None:
 
 
 def read_world(scene, warnings: list[str], bake: bool | None = None,
-               deferred=None) -> WorldData:
+               deferred=None, depsgraph=None) -> WorldData:
     """The scene's world as an equirect radiance map (``world_map.read_world``): uniform
     colours and Environment Textures are read from the nodes, anything else is evaluated by
     Cycles (``bake``: allow that here; None: where a nested render can run; ``deferred``: the
-    live viewport's bakes in other processes, ``world_process.WorldBakes``)."""
+    live viewport's bakes in other processes, ``world_process.WorldBakes``). An animated world
+    is read from ``depsgraph`` 's copy: its values at that depsgraph's frame (an animation
+    render's; ``animated``)."""
     count("worlds")
-    return world_map.read_world(scene.world, warnings, bake, deferred)
+    world = scene.world
+    if depsgraph is not None and animated.reads_evaluated(world):
+        world = getattr(depsgraph.scene_eval, "world", None) or world
+    return world_map.read_world(world, warnings, bake, deferred)

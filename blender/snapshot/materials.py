@@ -62,7 +62,7 @@ import numpy as np
 
 from ...voxgi_addon.scene.snapshot import MaterialData, TextureData
 from ...voxgi_addon.scene.textures import PARAM_VARIANTS, srgb_to_linear, variant_values, within_max_size
-from . import bakes, shader_mix, udim
+from . import animated, bakes, shader_mix, udim
 from .auto_uvs import polygon_uvs
 from .left_out import material_notes
 from .node_groups import route_to_emission, surface_node
@@ -319,16 +319,19 @@ class MaterialTable:
         return self._uv_maps.get(index, "")
 
     def index_of(self, material, surface: Surface | None = None) -> int:
-        material = material.original  # evaluated copies share the name but not the image data
+        # an animated material from the depsgraph's copy (its values at the depsgraph's frame:
+        # an animation render's), any other from the user's datablock
+        source = material if animated.reads_evaluated(material) else material.original
+        material = material.original
         name = material.name_full
         if name not in self._read_cache:
-            self._read_cache[name] = self._read(material)
+            self._read_cache[name] = self._read(source)
         data, bake, uv_map = self._read_cache[name]
         key = name if bake is None else f"{name} @ {surface.key if surface else ''}"
         index = self._index.get(key)
         if index is None:
             if bake is not None:
-                data, uv_map = self._baked(material, data, bake, surface, uv_map)
+                data, uv_map = self._baked(source, data, bake, surface, uv_map)
             index = self._index[key] = len(self.materials)
             if data.param_texture >= 0 and self._variant_materials >= MAX_VARIANT_MATERIALS:
                 self._warn(f"Material '{data.name}': more than {MAX_VARIANT_MATERIALS} "
@@ -1043,15 +1046,18 @@ def _bake_spec(material, mode: str, socket_name: str, surface: Surface,
         elif mode == "EMIT" and socket_name != EMISSION_SHADER:
             route_to_emission(tree, socket_name, groups)
 
+    user = animated.original(material)
     slots = tuple(i for i, m in enumerate(surface.slot_materials)
-                  if m is not None and m.original == material)
+                  if m is not None and m.original == user)
     return bakes.BakeSpec(
-        material=material, mode=mode, route=route, slots=slots,
+        material=user, mode=mode, route=route, slots=slots,
         last=max(len(surface.slot_materials) - 1, 0), render_uv=render_uv,
         target_uv=AUTO_UVS if auto else render_uv,
         auto_uvs=surface.auto_uvs if auto else None,
         matrix_world=surface.obj_eval.matrix_world.copy(),
-        object_color=tuple(surface.obj_eval.color), pass_index=int(surface.obj_eval.pass_index))
+        object_color=tuple(surface.obj_eval.color), pass_index=int(surface.obj_eval.pass_index),
+        values=tuple(animated.frame_values(material)) if animated.reads_evaluated(material)
+        else None)
 
 
 def bake_socket(material, mode: str, socket_name: str, surface: Surface,

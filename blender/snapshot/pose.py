@@ -73,8 +73,8 @@ def posed_snapshot(previous, scene, depsgraph, materials: dict | None = None,
     objects = [dataclasses.replace(o, materials=p.materials) if p.materials else o
                for o, p in zip(objects, previous.objects)]
     notes: list[str] = []
-    world_data = read_world(scene, notes, deferred=None if bakes is None else bakes.worlds) \
-        if world else previous.world
+    world_data = previous.world if not world else read_world(
+        scene, notes, deferred=None if bakes is None else bakes.worlds, depsgraph=depsgraph)
     return dataclasses.replace(
         previous, objects=objects, armatures=read_armatures(entries, depsgraph),
         lights=read_lights(depsgraph), camera=read_camera(scene, depsgraph), world=world_data,

@@ -492,7 +492,7 @@ def _take_snapshot(scene, depsgraph, reads: MeshReads | None, bakes: BakeQueue |
         armatures=read_armatures([e for e in entries if e.key in meshes], depsgraph),
         lights=lights,
         camera=read_camera(scene, depsgraph),
-        world=read_world(scene, warnings, deferred=worlds),
+        world=read_world(scene, warnings, deferred=worlds, depsgraph=depsgraph),
         frame=int(scene.frame_current),
         warnings=tuple(warnings),
         holdout_materials=tuple(sorted(holdouts.values())),

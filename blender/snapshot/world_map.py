@@ -35,6 +35,7 @@ from ...voxgi_addon.files.exr import read_exr
 from ...voxgi_addon.scene import equirect
 from ...voxgi_addon.scene.snapshot import WorldData
 from ...voxgi_addon.scene.textures import srgb_to_linear
+from . import animated
 
 MAX_HEIGHT = 512          # maps are at most 1024 x 512
 MIN_HEIGHT = 32           # ... and at least 64 x 32 (a uniform world: UNIFORM_HEIGHT)
@@ -486,7 +487,11 @@ def bake_world(world, height: int = BAKE_HEIGHT, samples: int = BAKE_SAMPLES) ->
     try:
         # a copy of the world without its light's importance map (Cycles builds one for
         # lighting objects: none here; it cost 0.7 of a 0.75 s bake of a Gradient sky)
-        copy = world.copy()
+        # (of the user's world: a copy of the depsgraph's would point at its node groups and
+        # objects; an animated world's values at the depsgraph's frame go to the copy)
+        copy = animated.original(world).copy()
+        if animated.reads_evaluated(world):
+            animated.apply(copy, animated.frame_values(world))
         if hasattr(copy, "cycles"):
             copy.cycles.sampling_method = "NONE"
         camera.type = "PANO"

@@ -171,7 +171,9 @@ def _start(world, key: str, height: int, uses_light_path: bool) -> _WorldChild:
     directory = workspace("voxgi-world-child-")
     blend = os.path.join(directory, WORLD_FILE)
     try:
-        bpy.data.libraries.write(blend, {world}, path_remap="ABSOLUTE", compress=False)
+        # (the user's world: the viewport's depsgraph's values are the user's own)
+        bpy.data.libraries.write(blend, {getattr(world, "original", None) or world},
+                                 path_remap="ABSOLUTE", compress=False)
     except BaseException:
         shutil.rmtree(directory, ignore_errors=True)
         raise

@@ -1,0 +1,83 @@
+"""Keyframed material and world values in animation renders (blender/snapshot/animated.py).
+
+A render's depsgraph evaluates animation on its own copies; the user's datablocks keep the UI
+frame's values. Materials and worlds were read from the user's datablocks, so every frame of
+an animation render showed the UI frame's colours, emission and sky (Cycles shows each
+frame's)."""
+from __future__ import annotations
+
+import bpy
+import gi_scenes
+import numpy as np
+from cycles_reference import render_cycles_passes
+from test_final_renders import HEIGHT, WIDTH, prepare_f12, read_passes
+
+
+def _keyed(socket, first, last):
+    """Keyframe ``socket`` 's default value: ``first`` at frame 1, ``last`` at frame 3."""
+    socket.default_value = first
+    socket.keyframe_insert("default_value", frame=1)
+    socket.default_value = last
+    socket.keyframe_insert("default_value", frame=3)
+
+
+def build_animated(scene):
+    """A floor and two panels seen from above, lit by a world alone: the floor's Base Color
+    keyframed (read from its nodes), the left panel's Base Color a Checker whose first colour
+    is keyframed (baked by Cycles), the world a Gradient (baked) whose Strength is keyframed."""
+    floor = gi_scenes._material("Keyed Floor", (0.5, 0.5, 0.5))
+    _keyed(next(n for n in floor.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+           .inputs["Base Color"], (0.8, 0.1, 0.1, 1.0), (0.1, 0.2, 0.8, 1.0))
+    gi_scenes._mesh(scene, "Floor", [(-3, -2, 0), (3, -2, 0), (3, 2, 0), (-3, 2, 0)],
+                    [(0, 1, 2, 3)], (floor,))
+    checker = gi_scenes._material("Keyed Checker", (0.5, 0.5, 0.5))
+    tree = checker.node_tree
+    node = tree.nodes.new("ShaderNodeTexChecker")
+    node.inputs["Scale"].default_value = 3.0
+    node.inputs["Color2"].default_value = (0.05, 0.05, 0.05, 1.0)
+    _keyed(node.inputs["Color1"], (0.9, 0.8, 0.1, 1.0), (0.1, 0.9, 0.3, 1.0))
+    tree.links.new(node.outputs["Color"], next(
+        n for n in tree.nodes if n.type == "BSDF_PRINCIPLED").inputs["Base Color"])
+    panel = gi_scenes._mesh(scene, "Panel", [(-2.5, -1.5, 0.05), (-0.5, -1.5, 0.05),
+                                             (-0.5, 1.5, 0.05), (-2.5, 1.5, 0.05)],
+                            [(0, 1, 2, 3)], (checker,))
+    layer = panel.data.uv_layers.new(name="UVMap")
+    layer.data.foreach_set("uv", [0, 0, 1, 0, 1, 1, 0, 1])
+    world = bpy.data.worlds.new("Keyed Sky")
+    tree = world.node_tree
+    gradient = tree.nodes.new("ShaderNodeTexGradient")
+    background = tree.nodes["Background"]
+    tree.links.new(gradient.outputs["Color"], background.inputs["Color"])
+    _keyed(background.inputs["Strength"], 0.5, 2.0)
+    scene.world = world
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    camera.data.type, camera.data.ortho_scale = "ORTHO", 6.2
+    camera.location = (0.0, 0.0, 4.0)
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.frame_set(1)
+
+
+def test_an_animation_render_takes_each_frames_keyed_values_as_cycles(voxgi, tmp_path):
+    scene = bpy.context.scene
+    build_animated(scene)
+    scene.cycles.filter_width = 0.01
+    prepare_f12(scene, tmp_path / "frame_####")
+    bpy.ops.render.render(animation=True)  # the UI's frame stays 1 throughout
+    ours = [read_passes(tmp_path / f"frame_{k:04d}.exr") for k in (1, 2, 3)]
+    assert scene.frame_current == 1
+    for k in (1, 3):
+        scene.frame_set(k)
+        cycles = render_cycles_passes(scene, WIDTH, HEIGHT, 64, filter_width=0.01)
+        mine = ours[k - 1]
+        colour = np.abs(np.asarray(mine["Diffuse Color"]) - np.asarray(cycles["Diffuse Color"]))
+        # the world's light on the floor (Diffuse Direct: the world is the only light)
+        lit = [float(np.asarray(p["Diffuse Direct"]).mean()) for p in (mine, cycles)]
+        print(f"frame {k}: Diffuse Color off Cycles' {colour.mean():.4f}; world light on the "
+              f"floor {lit[0]:.4f} against Cycles' {lit[1]:.4f}")
+        assert colour.mean() < 0.02, k  # the floor's and the checker's colours of this frame
+        assert abs(lit[0] - lit[1]) < 0.05 * lit[1], k  # the sky's strength of this frame
+    first, last = (np.asarray(ours[i]["Diffuse Color"]) for i in (0, 2))
+    assert np.abs(first - last).mean() > 0.2  # the frames differ, as the keys say
+    scene.frame_set(1)
