@@ -563,6 +563,7 @@ class RenderBakes:
         self.served = False
         self.lock = threading.Lock()
         self._asked: tuple[BakeQueue, object, threading.Event] | None = None
+        self._worlds: list[tuple[tuple, threading.Event]] = []
         self._local = threading.local()
 
     @contextlib.contextmanager
@@ -614,12 +615,54 @@ class RenderBakes:
                 del queue.requests[key]
         return finished
 
-    def serve(self) -> bool:
-        """One tick of the main thread's timer: a step of the asked bakes, if any (``bake``).
-        Whether bakes are asked (the timer ticks again soon)."""
+    def start_world(self, world, key: str, height: int, uses_light_path: bool) -> bool:
+        """Have the main thread start a child baking ``world`` (the render's evaluated copy:
+        its animated values go with it) into ``world_process.ahead`` under ``key``, and wait
+        until it has started (a render thread: then it waits for the map,
+        ``WorldBakes.wait``). Whether it started."""
+        from . import animated
+        from .world_process import ahead
+
+        started = threading.Event()
+        ask = (animated.original(world).name_full, key, height, uses_light_path,
+               animated.frame_values(world))
         with self.lock:
-            if self._asked is None:
+            self._worlds.append((ask, started))
+        limit = time.monotonic() + self.WAIT
+        while not started.wait(0.1):
+            if time.monotonic() > limit or self.cancelled():
+                with self.lock:
+                    if (ask, started) in self._worlds:
+                        self._worlds.remove((ask, started))
                 return False
+        return key in ahead.running
+
+    def _start_worlds(self) -> None:
+        """Start the children the render asked for (``start_world``; main thread, lock held)."""
+        from .world_process import ahead
+
+        for (name, key, height, uses_light_path, values), started in self._worlds:
+            world = bpy.data.worlds.get(name)
+            try:
+                with ahead.lock:
+                    if world is None:
+                        ahead.failed[key] = f"the world '{name}' is gone"
+                    else:
+                        ahead.want(world, key, height, uses_light_path, values)
+            except Exception as error:  # noqa: BLE001 - the render lights with the Background
+                ahead.failed[key] = str(error) or type(error).__name__
+            started.set()
+        self._worlds.clear()
+
+    def serve(self) -> bool:
+        """One tick of the main thread's timer: the world children a render asked for started
+        (``start_world``), a step of the asked material bakes, if any (``bake``). Whether
+        anything was asked (the timer ticks again soon)."""
+        with self.lock:
+            worlds = bool(self._worlds)
+            self._start_worlds()
+            if self._asked is None:
+                return worlds
             queue, depsgraph, done = self._asked
             try:
                 finished = queue.step_for_render(self.SECONDS, depsgraph)

@@ -597,13 +597,21 @@ def read_world(world, warnings: list[str], bake: bool | None = None, deferred=No
         if bake is None:
             bake = can_bake()
         if not bake:
-            from .world_process import ahead
+            from .bakes import render_bakes
+            from .world_process import ahead, deferrable
 
-            if ahead.wait(key, AHEAD_WAIT, store):  # baked for this F12 by a child: its map
-                cached = _CACHE.get(key)
-                if cached is not None:
-                    warnings.extend(cached[1])
-                    return cached[0]
+            if key not in ahead.running and key not in ahead.failed and \
+                    render_bakes.available() and deferrable(world):
+                # F12 in the UI at a frame whose world no child baked ahead (a keyframed
+                # sky): the main thread's timer starts one for it
+                render_bakes.start_world(world, key, height, uses_light_path(tree))
+            ahead.wait(key, AHEAD_WAIT, store)  # baked for this F12 by a child: its map
+            cached = _CACHE.get(key)  # (also when the timer collected it first)
+            if cached is not None:
+                warnings.extend(cached[1])
+                return cached[0]
+            if key in ahead.failed:
+                reason = f"{reason} (its bake in another process failed: {ahead.failed[key]})"
             warnings.append(
                 f"World '{world.name}': {reason}, so Cycles must evaluate it, which cannot run "
                 "here (off the main thread, and no child baked it ahead); using the "

@@ -31,7 +31,7 @@ import numpy as np
 
 from .world_map import world_objects
 
-WORLD_FILE, MAP_FILE = "world.blend", "map.npy"
+WORLD_FILE, MAP_FILE, VALUES_FILE = "world.blend", "map.npy", "values.json"
 
 
 def deferrable(world) -> bool:
@@ -68,14 +68,16 @@ class WorldBakes:
     def pending(self) -> int:
         return len(self.running)
 
-    def want(self, world, key: str, height: int, uses_light_path: bool) -> None:
-        """Bake ``world`` (content key ``key``) in a child unless one bakes it already; a
+    def want(self, world, key: str, height: int, uses_light_path: bool,
+             values: list | None = None) -> None:
+        """Bake ``world`` (content key ``key``; ``values``: its animated paths' values at a
+        render's frame, ``animated.frame_values``) in a child unless one bakes it already; a
         child baking an older state of the same world is stopped."""
         if key in self.running:
             return
         for older in [k for k, c in self.running.items() if c.world == world.name_full]:
             self._stop(older)
-        self.running[key] = _start(world, key, height, uses_light_path)
+        self.running[key] = _start(world, key, height, uses_light_path, values)
 
     def wait(self, key: str, seconds: float, store) -> bool:
         """Wait up to ``seconds`` for the child baking ``key`` (any thread: F12's render job
@@ -162,8 +164,12 @@ def bake_ahead(scene) -> bool:
         return True
 
 
-def _start(world, key: str, height: int, uses_light_path: bool) -> _WorldChild:
-    """Write ``world`` to a temporary .blend and start its child (module doc)."""
+def _start(world, key: str, height: int, uses_light_path: bool,
+           values: list | None = None) -> _WorldChild:
+    """Write ``world`` (and ``values``, its animated paths' values to bake it with) to a
+    temporary directory and start its child (module doc)."""
+    import json
+
     import bpy
 
     from ..child_process import Child, workspace
@@ -171,6 +177,8 @@ def _start(world, key: str, height: int, uses_light_path: bool) -> _WorldChild:
     directory = workspace("voxgi-world-child-")
     blend = os.path.join(directory, WORLD_FILE)
     try:
+        with open(os.path.join(directory, VALUES_FILE), "w", encoding="utf-8") as out:
+            json.dump(list(values or ()), out)
         # (the user's world: the viewport's depsgraph's values are the user's own)
         bpy.data.libraries.write(blend, {getattr(world, "original", None) or world},
                                  path_remap="ABSOLUTE", compress=False)
@@ -186,8 +194,11 @@ def _start(world, key: str, height: int, uses_light_path: bool) -> _WorldChild:
 def child_main(args: list[str]) -> int:
     """A child (``blender.child_process``): ``BLEND WORLD OUT HEIGHT``: bake the world named
     ``WORLD`` of ``BLEND`` (``world_map.bake_world``) and save its map to ``OUT`` (.npy)."""
+    import json
+
     import bpy
 
+    from . import animated
     from .world_map import bake_world
 
     blend, name, out, height = args
@@ -195,7 +206,12 @@ def child_main(args: list[str]) -> int:
         if name not in source.worlds:
             raise SystemExit(f"no world {name!r} in {blend}")
         target.worlds = [name]
-    radiance = bake_world(target.worlds[0], int(height))
+    world = target.worlds[0]
+    values = os.path.join(os.path.dirname(blend), VALUES_FILE)
+    if os.path.exists(values):  # a render's frame: its animated values, its animation cleared
+        with open(values, encoding="utf-8") as given:
+            animated.apply(world, [tuple(v) for v in json.load(given)])
+    radiance = bake_world(world, int(height))
     partial = out + ".part.npy"
     np.save(partial, radiance)
     os.replace(partial, out)  # whole or nothing: the parent reads it when the child has ended

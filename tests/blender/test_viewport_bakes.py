@@ -529,7 +529,7 @@ def test_a_child_whose_bakes_are_wanted_no_more_is_stopped_for_the_next(voxgi):
     assert queue.finished == {material.name_full}
 
 
-def _f12_snapshot(scene, serve: bool = True, cancelled=lambda: False):
+def _f12_snapshot(scene, serve: bool = True, cancelled=lambda: False, depsgraph=None):
     """(snapshot, the main thread's timer ticks meanwhile): ``take_snapshot`` on another
     thread, as F12 in Blender's UI reads the scene on its render thread (``cancelled``: its
     ``RenderEngine.test_break``), while the main thread ticks the timer that serves its bakes
@@ -540,7 +540,7 @@ def _f12_snapshot(scene, serve: bool = True, cancelled=lambda: False):
     from voxgi.blender.snapshot.bakes import render_bakes
     from voxgi.blender.snapshot.scene import take_snapshot
 
-    depsgraph = bpy.context.evaluated_depsgraph_get()
+    depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
     out = {}
 
     def render_job():
@@ -640,3 +640,34 @@ def test_an_f12_whose_bakes_do_not_come_in_says_so_and_leaves_no_child(voxgi, mo
     thread.start()
     thread.join()
     assert any("cannot run here" in w for w in out["s"].warnings), out["s"].warnings
+
+
+def test_an_f12_in_the_ui_has_a_child_bake_the_world_of_its_frame(voxgi):
+    """F12 in the UI at a frame whose node-built world no child baked ahead (a keyframed sky):
+    the main thread's timer starts a child for it, with the render's own values, and the render
+    waits for its map instead of lighting the scene with the Background's colour."""
+    from voxgi.blender.snapshot import world_map, world_process
+
+    scene, world, _ = _sky_scene()
+    world_map.clear_cache()
+    world_process.ahead.clear()
+    strength = world.node_tree.nodes["Background"].inputs["Strength"]
+    strength.default_value = 1.0
+    strength.keyframe_insert("default_value", frame=1)
+    strength.default_value = 3.0
+    strength.keyframe_insert("default_value", frame=3)
+    scene.frame_set(3)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    # the user's world moves on while the render's depsgraph keeps frame 3's values (as an
+    # animation render's does while the UI stays on another frame)
+    strength.default_value = 9.0
+    bakes = world_map.bake_count()
+    snapshot, ticks = _f12_snapshot(scene, depsgraph=depsgraph)
+    assert not any("Test Sky" in w for w in snapshot.warnings), snapshot.warnings
+    assert world_map.bake_count() == bakes and ticks >= 1  # baked by a child, nothing here
+    assert not world_process.ahead.running
+    evaluated = depsgraph.scene_eval.world
+    assert evaluated.node_tree.nodes["Background"].inputs["Strength"].default_value == 3.0
+    here = world_map.bake_world(evaluated, snapshot.world.radiance.shape[0])
+    assert np.array_equal(snapshot.world.radiance, here)  # frame 3's sky, not the user's 9
+    world_process.ahead.clear()
