@@ -19,7 +19,10 @@ draws), every main-thread call timed:
 * then the view drawn on until it converges, its longest ``view_draw``: the textures' emission
   is in by then (a mesh with an emission texture), and so are the kernel variants it needs
   (a machine's first session with them builds each one at its first dispatch, 0.5–1.5 s: run
-  the benchmark twice to see a later session's).
+  the benchmark twice to see a later session's);
+* F12's snapshot with its material bakes: in place on the main thread (background mode,
+  ``render_preview``), and on a render thread as in Blender's UI, the bakes made by a child
+  for the main thread's timer (``f12_rows``).
 
 Prints a markdown table.
 """
@@ -203,7 +206,57 @@ def measure(quick: bool, trace: bool = False) -> list:
                  "by the timer; the view shows the Background's colour meanwhile"))
     rows.append(("now: entering → every bake done", done or 0.0,
                  "the view live throughout; its image restarts with the textures"))
+    rows += f12_rows(scene)
     return rows
+
+
+def f12_rows(scene) -> list:
+    """F12 in Blender's UI reads the scene on a render thread, where no bake may run: its
+    snapshot with the material bakes it hands to the main thread's timer and a child
+    (``bakes.RenderBakes``), timed on another thread while this one ticks the timer as
+    ``kernel_warmup`` would, beside the snapshot baking in place on the main thread (F12 in
+    background mode, ``render_preview``). The world is in the cache for both (a child bakes
+    it ahead of an F12 in the UI)."""
+    import threading
+
+    import bpy
+
+    from voxgi.blender.snapshot import materials
+    from voxgi.blender.snapshot.bakes import render_bakes
+    from voxgi.blender.snapshot.scene import take_snapshot
+
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    take_snapshot(scene, depsgraph)  # the world's map into the cache
+    here, there, ticks, longest = [], [], [], []
+    for _ in range(2):
+        materials.clear_bake_cache()
+        t0 = time.perf_counter()
+        take_snapshot(scene, depsgraph)
+        here.append(time.perf_counter() - t0)
+        materials.clear_bake_cache()
+        thread = threading.Thread(target=take_snapshot, args=(scene, depsgraph))
+        render_bakes.served, served, tick_times = True, 0, []
+        try:
+            t0 = time.perf_counter()
+            thread.start()
+            while thread.is_alive():
+                s0 = time.perf_counter()
+                if render_bakes.serve():
+                    served += 1
+                    tick_times.append(time.perf_counter() - s0)
+                time.sleep(0.02)
+            thread.join()
+            there.append(time.perf_counter() - t0)
+        finally:
+            render_bakes.served = False
+        ticks.append(served)
+        longest.append(max(tick_times, default=0.0))
+    return [("F12 in place (main thread): snapshot with its material bakes", statistics.median(here),
+             "background mode, render_preview: Blender's main thread held throughout"),
+            ("F12 in the UI (render thread): snapshot with its material bakes",
+             statistics.median(there),
+             f"the bakes by a child for the main thread's timer; {statistics.median(ticks):.0f} "
+             f"ticks, the longest {max(longest) * 1000:.0f} ms of the main thread")]
 
 
 def main(argv=None) -> int:
