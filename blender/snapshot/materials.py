@@ -801,6 +801,11 @@ class MaterialTable:
             self._warn(f"Material '{name}': its {what} needs a bake by Cycles, which needs a "
                        "mesh; using its value")
             return data
+        users = getattr(getattr(surface.obj_eval.original, "data", None), "users", 0)
+        if users > MAX_OWN_BAKES and reads_its_object(material):
+            self._warn(f"Material '{name}': its {what} depends on each object (Object Info, "
+                       f"its place), but the {users} objects sharing its mesh are baked once, "
+                       f"for the first (at most {MAX_OWN_BAKES} are baked each for itself)")
         key = _digest(_tree_key(material.node_tree), mode, socket, surface.digest, auto,
                       bakes.BAKE_SIZE, bakes.BAKE_SAMPLES,
                       tuple(np.array(surface.obj_eval.matrix_world).ravel())
@@ -1009,6 +1014,37 @@ def _uses_object_space(tree, depth: int = 0) -> bool:
                 o.is_linked for o in node.outputs if o.identifier not in ("UV", "Generated"))):
             return True
         if node.type == "GROUP" and _uses_object_space(node.node_tree, depth + 1):
+            return True
+    return False
+
+
+MAX_OWN_BAKES = 16  # linked duplicates of one mesh baked each for itself at most (``reads_its_object``)
+_OBJECT_INFO_OF_ITS_OWN = ("Color", "Alpha", "Object Index", "Location")
+_POSITION_OUTPUTS = ("Position", "Normal", "Tangent", "True Normal")
+
+
+def reads_its_object(material) -> bool:
+    """Does ``material`` 's Cycles bake depend on which object wears it — Object Info's Color,
+    Alpha, Object Index or Location, the Geometry node's world-space outputs, or a Texture
+    Coordinate's Object output relative to another object — through nodes the per-object
+    variants (``object_base_color``) do not follow? Linked duplicates of its mesh are then
+    read and baked each for itself (``snapshot.scene``, at most MAX_OWN_BAKES of them). (Object
+    Info › Random is not among them: a bake's object has its own.)"""
+    tree = getattr(material, "node_tree", None)
+    return tree is not None and _tree_reads_object(tree, 0) and object_base_color(material) is None
+
+
+def _tree_reads_object(tree, depth: int) -> bool:
+    for node in tree.nodes if tree is not None and depth <= 8 else ():
+        if node.type == "OBJECT_INFO" and any(
+                o.is_linked for o in node.outputs if o.name in _OBJECT_INFO_OF_ITS_OWN):
+            return True
+        if node.type == "NEW_GEOMETRY" and any(
+                o.is_linked for o in node.outputs if o.name in _POSITION_OUTPUTS):
+            return True
+        if node.type == "TEX_COORD" and node.object is not None and node.outputs["Object"].is_linked:
+            return True
+        if node.type == "GROUP" and _tree_reads_object(node.node_tree, depth + 1):
             return True
     return False
 

@@ -32,7 +32,7 @@ from ...voxgi_addon.scene.snapshot import (
 from .bakes import BakeQueue, render_bakes
 from .environment import read_camera, read_light, read_world
 from .left_out import left_out_line, light_notes, notes_of, render_notes, type_note
-from .materials import AUTO_UVS, MaterialTable, Surface
+from .materials import AUTO_UVS, MAX_OWN_BAKES, MaterialTable, Surface, reads_its_object
 from .mesh import (
     at_corners,
     material_lookup,
@@ -93,9 +93,17 @@ def object_kind(obj, depsgraph=None) -> tuple[str, bpy.types.Object | None]:
 
 
 def _shares_mesh(obj, depsgraph=None) -> bool:
-    return not any(modifier_enabled(m, depsgraph) for m in obj.modifiers) and not any(
-        slot.link == "OBJECT" for slot in obj.material_slots
-    )
+    """Is ``obj`` 's mesh read once for every object using it (its key the mesh's)? Not with
+    modifiers, object-linked material slots, or (for up to MAX_OWN_BAKES users) a material
+    whose bake depends on the object (``materials.reads_its_object``: each is baked for its
+    own object, as Cycles shades each copy)."""
+    if any(modifier_enabled(m, depsgraph) for m in obj.modifiers) or any(
+            slot.link == "OBJECT" for slot in obj.material_slots):
+        return False
+    data = obj.data
+    return getattr(data, "users", 0) <= 1 or data.users > MAX_OWN_BAKES or not any(
+        slot.material is not None and reads_its_object(slot.material)
+        for slot in obj.material_slots)
 
 
 def _mesh_key(obj, used: dict[str, object], depsgraph=None) -> str:
