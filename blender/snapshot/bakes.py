@@ -90,7 +90,8 @@ class BakeSpec:
     pass_index : the object's (what object-space nodes and Object Info read); values : where
     the material is animated, its animated values at the snapshot's frame
     (``animated.frame_values``), which the copy takes, its own animation cleared; None
-    otherwise."""
+    otherwise; object_name : the object's name, whose hash is its Object Info › Random (the
+    bake's object is named so that its Random is the same: ``same_random_name``)."""
 
     material: object
     mode: str
@@ -104,6 +105,31 @@ class BakeSpec:
     object_color: tuple = (1.0, 1.0, 1.0, 1.0)
     pass_index: int = 0
     values: tuple | None = None
+    object_name: str = ""
+
+
+def same_random_name(name: str, taken=None) -> str:
+    """A name for a bake's object whose Object Info › Random (Cycles' hash of the name,
+    ``object_random``) is the object ``name`` 's, that no object of this file has (``taken``:
+    a container of names; default ``bpy.data.objects``): two neighbouring bytes a, b of its
+    UTF-8 become a + k, b − 37 k (the hash steps by 37 a byte, so it stays) where the name
+    stays printable UTF-8. "VoxGI Bake" where no pair allows it (its Random is then the bake
+    object's own)."""
+    taken = bpy.data.objects if taken is None else taken
+    data = name.encode("utf-8")
+    for i in range(len(data) - 1):
+        a, b = data[i], data[i + 1]
+        for k in (1, -1, 2, -2):
+            x, y = a + k, b - 37 * k
+            if not (0 < x < 256 and 0 < y < 256):
+                continue
+            try:
+                candidate = (data[:i] + bytes((x, y)) + data[i + 2:]).decode("utf-8")
+            except UnicodeDecodeError:
+                continue
+            if candidate.isprintable() and candidate not in taken:
+                return candidate
+    return "VoxGI Bake"
 
 
 def bake_whole(spec: BakeSpec, mesh) -> np.ndarray | None:
@@ -192,7 +218,8 @@ class _Baking:
                 self.spec.route(self.copy.node_tree, self.groups)
                 self.source.materials.clear()
                 self.source.materials.append(self.copy)
-                self.obj = bpy.data.objects.new("VoxGI Bake", self.source)
+                self.obj = bpy.data.objects.new(same_random_name(self.spec.object_name),
+                                                self.source)
                 self.obj.matrix_world = self.spec.matrix_world
                 self.obj.color = self.spec.object_color
                 self.obj.pass_index = self.spec.pass_index
@@ -683,6 +710,7 @@ render_bakes = RenderBakes()
 BATCH_FILE = "bakes.blend"
 _STEM = "voxgi_bake_stem"  # the custom properties a batch's objects carry for the child
 _MODE = "voxgi_bake_mode"
+_NAME, _OWNER = "voxgi_bake_name", "voxgi_bake_owner"  # its name, the object it bakes for
 
 
 class _Batch:
@@ -699,6 +727,7 @@ class _Batch:
         baking = _Baking(spec, source, staged=False)
         self.bakings.append(baking.__enter__())
         baking.obj[_STEM], baking.obj[_MODE] = stem, spec.mode
+        baking.obj[_NAME], baking.obj[_OWNER] = baking.obj.name, spec.object_name
 
     def write(self, path: str) -> None:
         # images by absolute paths: the child opens the file elsewhere
@@ -720,6 +749,8 @@ def child_main(args: list[str]) -> int:
         target.objects = list(source.objects)
     for obj in target.objects:
         stem, mode = str(obj[_STEM]), str(obj[_MODE])
+        if obj.get(_NAME) and obj.name != obj[_NAME]:  # (renamed on loading here: its Random)
+            obj.name = same_random_name(str(obj[_OWNER]))
         with _Baking.loaded(obj, mode) as baking:
             pixels = baking.bake(0, 0, BAKE_SIZE, BAKE_SIZE)
         partial = os.path.join(directory, stem + ".part.npy")

@@ -66,7 +66,7 @@ from . import animated, bakes, shader_mix, udim
 from .auto_uvs import polygon_uvs
 from .left_out import material_notes
 from .node_groups import route_to_emission, surface_node
-from .object_random import ObjectInputs, object_base_color
+from .object_random import ObjectInputs, object_base_color, object_random
 from .reads import count
 from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _NeedsBake, _tree_key
 
@@ -999,9 +999,10 @@ def _uses_node(tree, kind: str, depth: int = 0) -> bool:
 
 
 def _object_info(obj) -> tuple:
-    """What Object Info reads of an object besides its place: its Color and Pass Index (the
-    bake's object takes them: ``bakes.BakeSpec.object_color``)."""
-    return tuple(round(float(c), 6) for c in obj.color), int(obj.pass_index)
+    """What Object Info reads of an object besides its place: its Color, Pass Index and Random
+    (the bake's object takes them: ``bakes.BakeSpec.object_color``, ``same_random_name``)."""
+    return tuple(round(float(c), 6) for c in obj.color), int(obj.pass_index), \
+        round(object_random(obj.original.name), 7)
 
 
 def _uses_object_space(tree, depth: int = 0) -> bool:
@@ -1019,17 +1020,18 @@ def _uses_object_space(tree, depth: int = 0) -> bool:
 
 
 MAX_OWN_BAKES = 16  # linked duplicates of one mesh baked each for itself at most (``reads_its_object``)
-_OBJECT_INFO_OF_ITS_OWN = ("Color", "Alpha", "Object Index", "Location")
+_OBJECT_INFO_OF_ITS_OWN = ("Color", "Alpha", "Object Index", "Location", "Random")
 _POSITION_OUTPUTS = ("Position", "Normal", "Tangent", "True Normal")
 
 
 def reads_its_object(material) -> bool:
     """Does ``material`` 's Cycles bake depend on which object wears it — Object Info's Color,
-    Alpha, Object Index or Location, the Geometry node's world-space outputs, or a Texture
-    Coordinate's Object output relative to another object — through nodes the per-object
-    variants (``object_base_color``) do not follow? Linked duplicates of its mesh are then
-    read and baked each for itself (``snapshot.scene``, at most MAX_OWN_BAKES of them). (Object
-    Info › Random is not among them: a bake's object has its own.)"""
+    Alpha, Object Index, Location or Random, the Geometry node's world-space outputs, or a
+    Texture Coordinate's Object output relative to another object — through nodes the
+    per-object variants (``object_base_color``) do not follow? Linked duplicates of its mesh are then
+    read and baked each for itself (``snapshot.scene``, at most MAX_OWN_BAKES of them), the
+    bake's object given the object's Color, index, place and Random
+    (``bakes.same_random_name``)."""
     tree = getattr(material, "node_tree", None)
     return tree is not None and _tree_reads_object(tree, 0) and object_base_color(material) is None
 
@@ -1092,6 +1094,7 @@ def _bake_spec(material, mode: str, socket_name: str, surface: Surface,
         auto_uvs=surface.auto_uvs if auto else None,
         matrix_world=surface.obj_eval.matrix_world.copy(),
         object_color=tuple(surface.obj_eval.color), pass_index=int(surface.obj_eval.pass_index),
+        object_name=surface.obj_eval.original.name,
         values=tuple(animated.frame_values(material)) if animated.reads_evaluated(material)
         else None)
 

@@ -387,3 +387,65 @@ def test_linked_duplicates_of_a_texture_tinted_by_their_colour_are_baked_each(vo
     snapshot = take_snapshot(scene)
     assert any("Tinted Checker" in w and "baked once" in w for w in snapshot.warnings), \
         snapshot.warnings
+
+
+def test_a_bakes_object_has_the_random_of_the_object_it_bakes_for(voxgi, tmp_path):
+    """Object Info › Random inside nodes Cycles must bake (a Checker tinted by a Color Ramp of
+    Random): the bake's object is named so that its Random is the object's (Cycles hashes the
+    name), each linked duplicate baked for itself; the bake object's own Random stood for
+    every one of them before."""
+    from voxgi.blender.session import scene_session
+    from voxgi.blender.snapshot.bakes import same_random_name
+    from voxgi.blender.snapshot.object_random import object_random
+    from voxgi.voxgi_addon.files.exr import read_exr_passes
+
+    for name in ("Cube", "Rock.017", "Ствол.001", "ab"):
+        other = same_random_name(name, taken={name})
+        assert other != name and object_random(other) == object_random(name), (name, other)
+    assert same_random_name("x") == "VoxGI Bake"  # no pair of characters to trade
+
+    scene = bpy.context.scene
+    build_scattered_blocks(scene)
+    for obj in [o for o in scene.objects if o.name.startswith("Block")]:
+        bpy.data.objects.remove(obj)
+    material = gi_scenes._material("Checker by Random", (0.5, 0.5, 0.5))
+    tree = material.node_tree
+    checker = tree.nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Scale"].default_value = 4.0
+    checker.inputs["Color1"].default_value = (0.9, 0.9, 0.9, 1.0)
+    checker.inputs["Color2"].default_value = (0.5, 0.5, 0.5, 1.0)
+    ramp = tree.nodes.new("ShaderNodeValToRGB")
+    elements = ramp.color_ramp.elements
+    elements[0].color, elements[1].color = (0.9, 0.1, 0.05, 1), (0.05, 0.2, 0.9, 1)
+    tree.links.new(tree.nodes.new("ShaderNodeObjectInfo").outputs["Random"], ramp.inputs["Fac"])
+    mix = tree.nodes.new("ShaderNodeMix")
+    mix.data_type, mix.blend_type = "RGBA", "MULTIPLY"
+    socket = {s.identifier: s for s in [*mix.inputs, *mix.outputs]}
+    socket["Factor_Float"].default_value = 1.0
+    tree.links.new(checker.outputs["Color"], socket["A_Color"])
+    tree.links.new(ramp.outputs["Color"], socket["B_Color"])
+    tree.links.new(socket["Result_Color"], next(
+        n for n in tree.nodes if n.type == "BSDF_PRINCIPLED").inputs["Base Color"])
+    vertices, faces = gi_scenes._box((-0.45, -0.45, 0), (0.45, 0.45, 0.5))
+    mesh = bpy.data.meshes.new("Random Box")
+    mesh.from_pydata(vertices, [], faces)
+    mesh.materials.append(material)
+    for k in range(4):
+        block = bpy.data.objects.new(f"Random Box {k}", mesh)
+        block.location = (1.6 * k - 2.4, 0.0, 0.0)
+        scene.collection.objects.link(block)
+    bpy.context.view_layer.update()
+    scene.cycles.filter_width = 0.01
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=WIDTH,
+                                        resolution_y=HEIGHT) == {"FINISHED"}
+    assert not [line for level, line in scene_session(scene.name_full).last_report
+                if level == "WARNING"]
+    ours = np.asarray(read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"], np.float64)
+    cycles = np.asarray(render_cycles_passes(scene, WIDTH, HEIGHT, 16, filter_width=0.01)
+                        ["Diffuse Color"], np.float64)
+    blocks = np.abs(cycles - 0.5).max(-1) > 0.05
+    assert blocks.sum() > 150
+    error = np.abs(ours[blocks] - cycles[blocks]).max(-1)
+    print(f"checkers by Random, Diffuse Color off Cycles': mean {error.mean():.4f}, median "
+          f"{np.median(error):.4f}")
+    assert np.median(error) < 0.005 and error.mean() < 0.03

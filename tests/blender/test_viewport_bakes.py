@@ -109,13 +109,18 @@ def test_a_childs_bake_is_the_whole_bake_and_an_image_only_in_memory_is_baked_he
         assert queue.finished == {material.name_full} and len(stored) == 1
         return whole, stored[0], sent, queue
 
-    def noisy(tree):  # a procedural colour with hard edges, in object space and by UV
+    def noisy(tree):  # a procedural colour with hard edges, in object space and by UV, and
+        # the object's Random (the child's bake object is named for it: bakes.same_random_name)
         checker = tree.nodes.new("ShaderNodeTexChecker")
         checker.inputs["Scale"].default_value = 9.0
         noise = tree.nodes.new("ShaderNodeTexNoise")
         mix = tree.nodes.new("ShaderNodeMix")
         mix.data_type = "RGBA"
-        tree.links.new(noise.outputs["Fac"], mix.inputs["Factor"])
+        by_random = tree.nodes.new("ShaderNodeMath")
+        by_random.operation = "MULTIPLY"
+        tree.links.new(noise.outputs["Fac"], by_random.inputs[0])
+        tree.links.new(tree.nodes.new("ShaderNodeObjectInfo").outputs["Random"], by_random.inputs[1])
+        tree.links.new(by_random.outputs[0], mix.inputs["Factor"])
         tree.links.new(checker.outputs["Color"], mix.inputs[6])
         return mix.outputs[2]
 
