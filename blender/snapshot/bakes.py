@@ -91,7 +91,8 @@ class BakeSpec:
     the material is animated, its animated values at the snapshot's frame
     (``animated.frame_values``), which the copy takes, its own animation cleared; None
     otherwise; object_name : the object's name, whose hash is its Object Info › Random (the
-    bake's object is named so that its Random is the same: ``same_random_name``)."""
+    bake's object is named so that its Random is the same: ``same_random_name``); frame : the
+    scene's frame, the bake's scene's (the picture of an image sequence or a movie)."""
 
     material: object
     mode: str
@@ -106,6 +107,7 @@ class BakeSpec:
     pass_index: int = 0
     values: tuple | None = None
     object_name: str = ""
+    frame: int = 1
 
 
 def same_random_name(name: str, taken=None) -> str:
@@ -198,6 +200,7 @@ class _Baking:
                  staged: bool = True):
         self.spec, self.source, self.tile_uvs, self.staged = spec, source, tile_uvs, staged
         self.mode = None if spec is None else spec.mode
+        self.frame = 1 if spec is None else spec.frame
         self.copy = self.obj = self.scene = None
         self.groups: list = []
         self.owned = True  # the object and its material copy are removed on exit
@@ -207,6 +210,7 @@ class _Baking:
         """A bake of ``obj`` as ``_Batch`` wrote it (its mesh, its routed material)."""
         baking = cls(None, obj.data)
         baking.obj, baking.copy, baking.mode, baking.owned = obj, obj.data.materials[0], mode, False
+        baking.frame = int(obj.get(_FRAME, 1))
         return baking
 
     def __enter__(self):
@@ -226,6 +230,7 @@ class _Baking:
             if not self.staged:
                 return self
             self.scene = bpy.data.scenes.new("VoxGI Bake")
+            self.scene.frame_current = self.frame  # (an image sequence's or movie's picture)
             self.scene.collection.objects.link(self.obj)
             self.scene.render.engine = "CYCLES"
             cycles = self.scene.cycles
@@ -711,6 +716,7 @@ BATCH_FILE = "bakes.blend"
 _STEM = "voxgi_bake_stem"  # the custom properties a batch's objects carry for the child
 _MODE = "voxgi_bake_mode"
 _NAME, _OWNER = "voxgi_bake_name", "voxgi_bake_owner"  # its name, the object it bakes for
+_FRAME = "voxgi_bake_frame"
 
 
 class _Batch:
@@ -728,6 +734,7 @@ class _Batch:
         self.bakings.append(baking.__enter__())
         baking.obj[_STEM], baking.obj[_MODE] = stem, spec.mode
         baking.obj[_NAME], baking.obj[_OWNER] = baking.obj.name, spec.object_name
+        baking.obj[_FRAME] = spec.frame
 
     def write(self, path: str) -> None:
         # images by absolute paths: the child opens the file elsewhere

@@ -292,7 +292,8 @@ class MaterialTable:
     """
 
     def __init__(self, warnings: list[str], bake: bool | None = None,
-                 queue: bakes.BakeQueue | None = None):
+                 queue: bakes.BakeQueue | None = None, frame: int = 1):
+        self.frame = int(frame)  # the scene's frame (what an image sequence or movie shows)
         self.materials: list[MaterialData] = []
         self.textures: list[TextureData] = []
         self.warnings = warnings
@@ -811,7 +812,8 @@ class MaterialTable:
                       tuple(np.array(surface.obj_eval.matrix_world).ravel())
                       if _uses_object_space(material.node_tree) else None,
                       _object_info(surface.obj_eval) if _uses_node(material.node_tree, "OBJECT_INFO")
-                      else None)
+                      else None,
+                      self.frame if _shows_moving_images(material.node_tree) else None)
         texture = _BAKED.get(key)
         if texture is None and self._queue is not None:
             # the live viewport: the value until its draws have baked it (bakes.BakeQueue)
@@ -823,7 +825,7 @@ class MaterialTable:
             else:
                 label = f"{name} ({surface.key})"
                 self._queue.want(key, lambda: bakes.BakeRequest(
-                    _bake_spec(material, mode, socket, surface, auto),
+                    _bake_spec(material, mode, socket, surface, auto, self.frame),
                     surface.obj_eval.original.name_full, len(surface.mesh.loops),
                     lambda pixels: _store_bake(key, label, pixels)))
             return data
@@ -836,7 +838,7 @@ class MaterialTable:
                            "voxgi.render_preview bakes it")
                 return data
             try:
-                pixels = bake_socket(material, mode, socket, surface, auto)
+                pixels = bake_socket(material, mode, socket, surface, auto, self.frame)
             except Exception as error:  # a failed bake must not fail the snapshot
                 self._warn(f"Material '{name}': baking its {what} with Cycles failed "
                            f"({error}); using its value")
@@ -989,6 +991,17 @@ def _image_texture(node, with_alpha: bool = False):
     return texture, uv_map
 
 
+def _shows_moving_images(tree, depth: int = 0) -> bool:
+    """Does the tree (its groups too) read an image sequence or a movie (whose picture
+    follows the scene's frame: a bake is then the frame's)?"""
+    if tree is None or depth > 8:
+        return False
+    return any((node.type in ("TEX_IMAGE", "TEX_ENVIRONMENT") and node.image is not None and
+                node.image.source in ("SEQUENCE", "MOVIE")) or
+               (node.type == "GROUP" and _shows_moving_images(node.node_tree, depth + 1))
+               for node in tree.nodes)
+
+
 def _uses_node(tree, kind: str, depth: int = 0) -> bool:
     """Does the tree (its groups too) hold a node of type ``kind``?"""
     if tree is None or depth > 8:
@@ -1068,7 +1081,7 @@ def _store_bake(key: str, name: str, pixels: np.ndarray) -> TextureData:
 
 
 def _bake_spec(material, mode: str, socket_name: str, surface: Surface,
-               auto: bool) -> bakes.BakeSpec:
+               auto: bool, frame: int = 1) -> bakes.BakeSpec:
     """What a bake of ``material``'s socket over ``surface`` renders (``bakes.BakeSpec``):
     an Emit bake shows an Emission of the socket (an Emission surface's own,
     EMISSION_SHADER, as it is; a shader mix's parameters; the cut-out Mix's Fac)."""
@@ -1094,20 +1107,20 @@ def _bake_spec(material, mode: str, socket_name: str, surface: Surface,
         auto_uvs=surface.auto_uvs if auto else None,
         matrix_world=surface.obj_eval.matrix_world.copy(),
         object_color=tuple(surface.obj_eval.color), pass_index=int(surface.obj_eval.pass_index),
-        object_name=surface.obj_eval.original.name,
+        object_name=surface.obj_eval.original.name, frame=int(frame),
         values=tuple(animated.frame_values(material)) if animated.reads_evaluated(material)
         else None)
 
 
 def bake_socket(material, mode: str, socket_name: str, surface: Surface,
-                auto: bool = False) -> np.ndarray | None:
+                auto: bool = False, frame: int = 1) -> np.ndarray | None:
     """(BAKE_SIZE, BAKE_SIZE, 3) float32 linear RGB of a material's socket (mode "EMIT": the
     Principled input ``socket_name``) or diffuse colour (mode "DIFFUSE") baked by Cycles over
     the active render UV map of ``surface``'s evaluated mesh (its faces of this material), or
     over its polygons' layout (``auto``); None where no face of the mesh has the material
-    (nothing of it is seen: no bake). Nothing of the user's data is touched
-    (``bakes.bake_whole``)."""
-    return bakes.bake_whole(_bake_spec(material, mode, socket_name, surface, auto),
+    (nothing of it is seen: no bake), at the scene's ``frame`` (an image sequence's or a
+    movie's). Nothing of the user's data is touched (``bakes.bake_whole``)."""
+    return bakes.bake_whole(_bake_spec(material, mode, socket_name, surface, auto, frame),
                             surface.mesh)
 
 

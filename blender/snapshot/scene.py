@@ -431,7 +431,8 @@ def _take_snapshot(scene, depsgraph, reads: MeshReads | None, bakes: BakeQueue |
     here) and its world's in ``worlds`` (``world_process.WorldBakes``; None: baked here)."""
     view_layer = depsgraph.view_layer
     warnings: list[str] = []
-    table = MaterialTable(warnings, queue=bakes)
+    table = MaterialTable(warnings, queue=bakes,
+                          frame=getattr(depsgraph.scene_eval, "frame_current", scene.frame_current))
 
     entries = _visible_mesh_entries(view_layer, warnings, depsgraph)
     skinned = {e.obj: e.layers for e in entries if e.kind == "skinned"}

@@ -81,3 +81,49 @@ def test_an_animation_render_takes_each_frames_keyed_values_as_cycles(voxgi, tmp
     first, last = (np.asarray(ours[i]["Diffuse Color"]) for i in (0, 2))
     assert np.abs(first - last).mean() > 0.2  # the frames differ, as the keys say
     scene.frame_set(1)
+
+
+def test_an_image_sequence_shows_each_frames_picture_as_cycles(voxgi, tmp_path):
+    """An Image Texture playing an image sequence (a screen, an animated decal): Cycles shows
+    each frame's picture; the preview's bake rendered its scene at frame 1, so every frame of
+    an animation render (and the viewport at any frame) showed the first picture."""
+    colours = [(0.8, 0.1, 0.1), (0.1, 0.8, 0.1), (0.1, 0.1, 0.8)]
+    for k, colour in enumerate(colours, start=1):
+        image = bpy.data.images.new(f"Picture {k}", 8, 8)
+        image.pixels.foreach_set(np.tile([*colour, 1.0], 64).astype(np.float32))
+        image.filepath_raw, image.file_format = str(tmp_path / f"screen_{k:04d}.png"), "PNG"
+        image.save()
+        bpy.data.images.remove(image)
+    scene = bpy.context.scene
+    screen = gi_scenes._material("Screen", (0.5, 0.5, 0.5))
+    tree = screen.node_tree
+    node = tree.nodes.new("ShaderNodeTexImage")
+    node.image = bpy.data.images.load(str(tmp_path / "screen_0001.png"))
+    node.image.source = "SEQUENCE"
+    node.image_user.frame_duration, node.image_user.frame_start = 3, 1
+    node.image_user.use_auto_refresh = True
+    tree.links.new(node.outputs["Color"], next(
+        n for n in tree.nodes if n.type == "BSDF_PRINCIPLED").inputs["Base Color"])
+    plane = gi_scenes._mesh(scene, "Screen", [(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)],
+                            [(0, 1, 2, 3)], (screen,))
+    plane.data.uv_layers.new(name="UVMap").data.foreach_set("uv", [0, 0, 1, 0, 1, 1, 0, 1])
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    camera.data.type, camera.data.ortho_scale = "ORTHO", 2.5
+    camera.location = (0.0, 0.0, 3.0)
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    world = bpy.data.worlds.new("Grey")
+    world.color = (0.5, 0.5, 0.5)
+    scene.world = world
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.frame_set(1)
+    prepare_f12(scene, tmp_path / "frame_####")
+    bpy.ops.render.render(animation=True)
+    centre = (HEIGHT // 2, WIDTH // 2)
+    for k, colour in enumerate(colours, start=1):
+        ours = np.asarray(read_passes(tmp_path / f"frame_{k:04d}.exr")["Diffuse Color"])[centre]
+        scene.frame_set(k)
+        cycles = np.asarray(render_cycles_passes(scene, WIDTH, HEIGHT, 4)["Diffuse Color"])[centre]
+        print(f"frame {k}: screen {np.round(ours, 3)} against Cycles' {np.round(cycles, 3)}")
+        np.testing.assert_allclose(ours, cycles, atol=0.01)
+    scene.frame_set(1)
