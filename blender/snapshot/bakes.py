@@ -647,7 +647,8 @@ class RenderBakes:
                 del queue.requests[key]
         return finished
 
-    def start_world(self, world, key: str, height: int, uses_light_path: bool) -> bool:
+    def start_world(self, world, key: str, height: int, uses_light_path: bool,
+                    frame: int = 1) -> bool:
         """Have the main thread start a child baking ``world`` (the render's evaluated copy:
         its animated values go with it) into ``world_process.ahead`` under ``key``, and wait
         until it has started (a render thread: then it waits for the map,
@@ -657,7 +658,7 @@ class RenderBakes:
 
         started = threading.Event()
         ask = (animated.original(world).name_full, key, height, uses_light_path,
-               animated.frame_values(world))
+               animated.frame_values(world), frame)
         with self.lock:
             self._worlds.append((ask, started))
         limit = time.monotonic() + self.WAIT
@@ -673,14 +674,14 @@ class RenderBakes:
         """Start the children the render asked for (``start_world``; main thread, lock held)."""
         from .world_process import ahead
 
-        for (name, key, height, uses_light_path, values), started in self._worlds:
+        for (name, key, height, uses_light_path, values, frame), started in self._worlds:
             world = bpy.data.worlds.get(name)
             try:
                 with ahead.lock:
                     if world is None:
                         ahead.failed[key] = f"the world '{name}' is gone"
                     else:
-                        ahead.want(world, key, height, uses_light_path, values)
+                        ahead.want(world, key, height, uses_light_path, values, frame)
             except Exception as error:  # noqa: BLE001 - the render lights with the Background
                 ahead.failed[key] = str(error) or type(error).__name__
             started.set()

@@ -113,4 +113,5 @@ def read_world(scene, warnings: list[str], bake: bool | None = None,
     world = scene.world
     if depsgraph is not None and animated.reads_evaluated(world):
         world = getattr(depsgraph.scene_eval, "world", None) or world
-    return world_map.read_world(world, warnings, bake, deferred)
+    frame = getattr(getattr(depsgraph, "scene_eval", None), "frame_current", scene.frame_current)
+    return world_map.read_world(world, warnings, bake, deferred, frame=frame)

@@ -68,7 +68,15 @@ from .left_out import material_notes
 from .node_groups import route_to_emission, surface_node
 from .object_random import ObjectInputs, object_base_color, object_random
 from .reads import count
-from .world_map import _euler_matrix, _follow, _image_key, _image_pixels, _NeedsBake, _tree_key
+from .world_map import (
+    _euler_matrix,
+    _follow,
+    _image_key,
+    _image_pixels,
+    _NeedsBake,
+    _tree_key,
+    shows_moving_images,
+)
 
 MAX_VARIANT_MATERIALS = 96  # materials with Roughness / Metallic per texel (each adds 64 rows)
 # An object's Random is taken to 1/RANDOM_STEPS (a Base Color by Random then has at most
@@ -813,7 +821,7 @@ class MaterialTable:
                       if _uses_object_space(material.node_tree) else None,
                       _object_info(surface.obj_eval) if _uses_node(material.node_tree, "OBJECT_INFO")
                       else None,
-                      self.frame if _shows_moving_images(material.node_tree) else None)
+                      self.frame if shows_moving_images(material.node_tree) else None)
         texture = _BAKED.get(key)
         if texture is None and self._queue is not None:
             # the live viewport: the value until its draws have baked it (bakes.BakeQueue)
@@ -989,17 +997,6 @@ def _image_texture(node, with_alpha: bool = False):
         extension="EXTEND" if tiled else node.extension, uv_transform=transform, key=image_key,
         srgb_bytes=_srgb_bytes(node.image))
     return texture, uv_map
-
-
-def _shows_moving_images(tree, depth: int = 0) -> bool:
-    """Does the tree (its groups too) read an image sequence or a movie (whose picture
-    follows the scene's frame: a bake is then the frame's)?"""
-    if tree is None or depth > 8:
-        return False
-    return any((node.type in ("TEX_IMAGE", "TEX_ENVIRONMENT") and node.image is not None and
-                node.image.source in ("SEQUENCE", "MOVIE")) or
-               (node.type == "GROUP" and _shows_moving_images(node.node_tree, depth + 1))
-               for node in tree.nodes)
 
 
 def _uses_node(tree, kind: str, depth: int = 0) -> bool:

@@ -212,12 +212,26 @@ def _tree_objects(tree, depth: int, names: set[str]) -> None:
             _tree_objects(node.node_tree, depth + 1, names)
 
 
-def world_key(world) -> str:
-    """A content key of a world: same nodes, values, links, images, mapping objects -> same key."""
+def shows_moving_images(tree, depth: int = 0) -> bool:
+    """Does the tree (its groups too) read an image sequence or a movie (whose picture
+    follows the scene's frame: a bake is then the frame's)?"""
+    if tree is None or depth > 8:
+        return False
+    return any((node.type in ("TEX_IMAGE", "TEX_ENVIRONMENT") and node.image is not None and
+                node.image.source in ("SEQUENCE", "MOVIE")) or
+               (node.type == "GROUP" and shows_moving_images(node.node_tree, depth + 1))
+               for node in tree.nodes)
+
+
+def world_key(world, frame: int = 1) -> str:
+    """A content key of a world: same nodes, values, links, images, mapping objects -> same key
+    (and the scene's ``frame`` where it shows an image sequence or a movie)."""
     if world is None:
         return ""
-    content = (tuple(world.color), world.node_tree is not None and _tree_key(world.node_tree),
-               bpy.data.colorspace.working_space)
+    tree = world.node_tree
+    content = (tuple(world.color), tree is not None and _tree_key(tree),
+               bpy.data.colorspace.working_space,
+               int(frame) if shows_moving_images(tree) else None)
     return hashlib.blake2b(repr(content).encode(), digest_size=16).hexdigest()
 
 
@@ -471,8 +485,10 @@ def can_bake() -> bool:
     return not (hasattr(bpy.app, "is_job_running") and bpy.app.is_job_running("RENDER"))
 
 
-def bake_world(world, height: int = BAKE_HEIGHT, samples: int = BAKE_SAMPLES) -> np.ndarray:
-    """(height, 2 height, 3) float32 radiance of ``world`` rendered by Cycles (main thread).
+def bake_world(world, height: int = BAKE_HEIGHT, samples: int = BAKE_SAMPLES,
+               frame: int = 1) -> np.ndarray:
+    """(height, 2 height, 3) float32 radiance of ``world`` rendered by Cycles (main thread),
+    at the scene's ``frame`` (an image sequence's or a movie's picture).
 
     A temporary scene holds only a panoramic equirectangular camera (rotated so that the
     render, mirrored left-right, is in our convention: docs/blender_facts.md "World") and the
@@ -501,6 +517,7 @@ def bake_world(world, height: int = BAKE_HEIGHT, samples: int = BAKE_SAMPLES) ->
         obj = bpy.data.objects.new("VoxGI World Bake", camera)
         obj.rotation_euler = (math.pi / 2, 0.0, -math.pi / 2)
         scene = bpy.data.scenes.new("VoxGI World Bake")
+        scene.frame_current = int(frame)
         scene.collection.objects.link(obj)
         scene.camera = obj
         scene.world = copy
@@ -563,17 +580,19 @@ def _fallback(world, key: str) -> WorldData:
 # entry
 
 
-def read_world(world, warnings: list[str], bake: bool | None = None, deferred=None) -> WorldData:
+def read_world(world, warnings: list[str], bake: bool | None = None, deferred=None,
+               frame: int = 1) -> WorldData:
     """``WorldData`` of a world (None: a black world), read directly where its nodes allow and
     baked by Cycles otherwise. ``bake``: allow a bake (None: where ``can_bake()``).
     ``deferred``: the live viewport's ``world_process.WorldBakes``, which bakes the world in
     another process where it can (``world_process.deferrable``); the world's last map, or its
     Background's Color x Strength, stands in meanwhile. What cannot be read is said in
-    ``warnings`` (once per call)."""
+    ``warnings`` (once per call). ``frame``: the scene's (an image sequence's or a movie's
+    picture)."""
     if world is None:
         return WorldData()
     _ensure_load_handler()
-    key = world_key(world)
+    key = world_key(world, frame)
     cached = _CACHE.get(key)
     if cached is not None:
         warnings.extend(cached[1])
@@ -589,7 +608,7 @@ def read_world(world, warnings: list[str], bake: bool | None = None, deferred=No
 
             if deferrable(world):
                 try:
-                    deferred.want(world, key, height, uses_light_path(tree))
+                    deferred.want(world, key, height, uses_light_path(tree), frame=frame)
                 except Exception as error:  # noqa: BLE001 - baked here instead
                     deferred.failed[key] = str(error) or type(error).__name__
                 else:
@@ -604,7 +623,7 @@ def read_world(world, warnings: list[str], bake: bool | None = None, deferred=No
                     render_bakes.available() and deferrable(world):
                 # F12 in the UI at a frame whose world no child baked ahead (a keyframed
                 # sky): the main thread's timer starts one for it
-                render_bakes.start_world(world, key, height, uses_light_path(tree))
+                render_bakes.start_world(world, key, height, uses_light_path(tree), frame)
             ahead.wait(key, AHEAD_WAIT, store)  # baked for this F12 by a child: its map
             cached = _CACHE.get(key)  # (also when the timer collected it first)
             if cached is not None:
@@ -619,7 +638,7 @@ def read_world(world, warnings: list[str], bake: bool | None = None, deferred=No
                 "update or voxgi.render_preview does it)")
             return _fallback(world, key + ":fallback")
         try:
-            data = _map(key, bake_world(world, height))
+            data = _map(key, bake_world(world, height, frame=frame))
         except Exception as error:  # a failed bake must not fail the snapshot
             warnings.append(f"World '{world.name}': evaluating it with Cycles failed ({error}); "
                             "using the Background's Color x Strength")

@@ -69,7 +69,7 @@ class WorldBakes:
         return len(self.running)
 
     def want(self, world, key: str, height: int, uses_light_path: bool,
-             values: list | None = None) -> None:
+             values: list | None = None, frame: int = 1) -> None:
         """Bake ``world`` (content key ``key``; ``values``: its animated paths' values at a
         render's frame, ``animated.frame_values``) in a child unless one bakes it already; a
         child baking an older state of the same world is stopped."""
@@ -77,7 +77,7 @@ class WorldBakes:
             return
         for older in [k for k, c in self.running.items() if c.world == world.name_full]:
             self._stop(older)
-        self.running[key] = _start(world, key, height, uses_light_path, values)
+        self.running[key] = _start(world, key, height, uses_light_path, values, frame)
 
     def wait(self, key: str, seconds: float, store) -> bool:
         """Wait up to ``seconds`` for the child baking ``key`` (any thread: F12's render job
@@ -153,11 +153,12 @@ def bake_ahead(scene) -> bool:
         world = getattr(scene, "world", None)
         if world is None or not needs_bake(world):
             return False
-        key = world_key(world)
+        key = world_key(world, scene.frame_current)
         if cached(key) or key in ahead.running or key in ahead.failed or not deferrable(world):
             return False
         try:
-            ahead.want(world, key, bake_height(world.node_tree), uses_light_path(world.node_tree))
+            ahead.want(world, key, bake_height(world.node_tree), uses_light_path(world.node_tree),
+                       frame=scene.frame_current)
         except Exception as error:  # noqa: BLE001 - no child here: F12 says why it cannot bake
             ahead.failed[key] = str(error) or type(error).__name__
             return False
@@ -165,7 +166,7 @@ def bake_ahead(scene) -> bool:
 
 
 def _start(world, key: str, height: int, uses_light_path: bool,
-           values: list | None = None) -> _WorldChild:
+           values: list | None = None, frame: int = 1) -> _WorldChild:
     """Write ``world`` (and ``values``, its animated paths' values to bake it with) to a
     temporary directory and start its child (module doc)."""
     import json
@@ -186,7 +187,8 @@ def _start(world, key: str, height: int, uses_light_path: bool,
         shutil.rmtree(directory, ignore_errors=True)
         raise
     child = Child.start("blender.snapshot.world_process",
-                        [blend, world.name, os.path.join(directory, MAP_FILE), int(height)],
+                        [blend, world.name, os.path.join(directory, MAP_FILE), int(height),
+                         int(frame)],
                         directory)
     return _WorldChild(key, world.name_full, uses_light_path, child)
 
@@ -201,7 +203,7 @@ def child_main(args: list[str]) -> int:
     from . import animated
     from .world_map import bake_world
 
-    blend, name, out, height = args
+    blend, name, out, height, frame = args
     with bpy.data.libraries.load(blend, link=False) as (source, target):
         if name not in source.worlds:
             raise SystemExit(f"no world {name!r} in {blend}")
@@ -211,7 +213,7 @@ def child_main(args: list[str]) -> int:
     if os.path.exists(values):  # a render's frame: its animated values, its animation cleared
         with open(values, encoding="utf-8") as given:
             animated.apply(world, [tuple(v) for v in json.load(given)])
-    radiance = bake_world(world, int(height))
+    radiance = bake_world(world, int(height), frame=int(frame))
     partial = out + ".part.npy"
     np.save(partial, radiance)
     os.replace(partial, out)  # whole or nothing: the parent reads it when the child has ended

@@ -112,8 +112,15 @@ def test_an_image_sequence_shows_each_frames_picture_as_cycles(voxgi, tmp_path):
     camera.location = (0.0, 0.0, 3.0)
     scene.collection.objects.link(camera)
     scene.camera = camera
-    world = bpy.data.worlds.new("Grey")
-    world.color = (0.5, 0.5, 0.5)
+    # the sky plays the same sequence (an Environment Texture: the world's bake, per frame too)
+    world = bpy.data.worlds.new("Playing Sky")
+    sky = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    sky.image = bpy.data.images.load(str(tmp_path / "screen_0001.png"))
+    sky.image.source = "SEQUENCE"
+    sky.image_user.frame_duration, sky.image_user.frame_start = 3, 1
+    sky.image_user.use_auto_refresh = True
+    world.node_tree.links.new(sky.outputs["Color"],
+                              world.node_tree.nodes["Background"].inputs["Color"])
     scene.world = world
     scene.frame_start, scene.frame_end = 1, 3
     scene.frame_set(1)
@@ -121,9 +128,13 @@ def test_an_image_sequence_shows_each_frames_picture_as_cycles(voxgi, tmp_path):
     bpy.ops.render.render(animation=True)
     centre = (HEIGHT // 2, WIDTH // 2)
     for k, colour in enumerate(colours, start=1):
-        ours = np.asarray(read_passes(tmp_path / f"frame_{k:04d}.exr")["Diffuse Color"])[centre]
+        mine = read_passes(tmp_path / f"frame_{k:04d}.exr")
         scene.frame_set(k)
-        cycles = np.asarray(render_cycles_passes(scene, WIDTH, HEIGHT, 4)["Diffuse Color"])[centre]
-        print(f"frame {k}: screen {np.round(ours, 3)} against Cycles' {np.round(cycles, 3)}")
+        theirs = render_cycles_passes(scene, WIDTH, HEIGHT, 16)
+        ours, cycles = (np.asarray(p["Diffuse Color"])[centre] for p in (mine, theirs))
+        lit = [np.asarray(p["Diffuse Direct"])[centre] for p in (mine, theirs)]
+        print(f"frame {k}: screen {np.round(ours, 3)} against Cycles' {np.round(cycles, 3)}; "
+              f"the sky's light on it {np.round(lit[0], 3)} against {np.round(lit[1], 3)}")
         np.testing.assert_allclose(ours, cycles, atol=0.01)
+        np.testing.assert_allclose(lit[0], lit[1], atol=0.05 * lit[1].max())
     scene.frame_set(1)
