@@ -50,25 +50,42 @@ def animated_paths(id_data) -> tuple[str, ...]:
     return tuple(dict.fromkeys(p for p in paths if p))
 
 
+def _groups(tree, depth: int = 0):
+    """The node groups ``tree`` uses, nested ones too (each once)."""
+    seen = {}
+    for node in tree.nodes if tree is not None and depth <= 8 else ():
+        group = getattr(node, "node_tree", None) if node.type == "GROUP" else None
+        if group is not None and group.name_full not in seen:
+            seen[group.name_full] = group
+            for inner in _groups(group, depth + 1):
+                seen.setdefault(inner.name_full, inner)
+    return list(seen.values())
+
+
 def reads_evaluated(id_data) -> bool:
     """Is ``id_data`` (a material or world, evaluated or not) to be read from its evaluated
-    copy: its node tree or itself is animated?"""
+    copy: its node tree, a node group it uses, or itself is animated?"""
     source = original(id_data)
-    return bool(animated_paths(getattr(source, "node_tree", None)) or animated_paths(source))
+    tree = getattr(source, "node_tree", None)
+    return bool(animated_paths(tree) or animated_paths(source) or
+                any(animated_paths(group) for group in _groups(tree)))
 
 
 def frame_values(evaluated) -> list[tuple[str, str, object]]:
-    """(``"tree"`` or ``"id"``, path, value) of every animated path of ``evaluated`` 's user
-    datablock (its node tree's and its own), read on ``evaluated`` — its values at the frame
-    its depsgraph was evaluated at; empty when nothing is animated or ``evaluated`` is the
-    user's own."""
+    """(``"tree"``, ``"id"`` or ``"group:<name>"``, path, value) of every animated path of
+    ``evaluated`` 's user datablock (its node tree's, its node groups', its own), read on
+    ``evaluated``: its values at the frame its depsgraph was evaluated at; empty when nothing
+    is animated or ``evaluated`` is the user's own."""
     source = original(evaluated)
     if evaluated is None or source is evaluated:
         return []
     values = []
-    for owner, target in (("tree", "node_tree"), ("id", None)):
-        here = source if target is None else getattr(source, target, None)
-        there = evaluated if target is None else getattr(evaluated, target, None)
+    pairs = [("tree", getattr(source, "node_tree", None), getattr(evaluated, "node_tree", None)),
+             ("id", source, evaluated)]
+    # node groups: the evaluated tree's groups are the depsgraph's copies of the user's
+    pairs += [(f"group:{original(group).name_full}", original(group), group)
+              for group in _groups(getattr(evaluated, "node_tree", None))]
+    for owner, here, there in pairs:
         if here is None or there is None:
             continue
         for path in animated_paths(here):
@@ -82,16 +99,34 @@ def frame_values(evaluated) -> list[tuple[str, str, object]]:
     return values
 
 
-def apply(copy, values) -> None:
+def apply(copy, values) -> list:
     """Give ``copy`` (a copy of the user's datablock, about to be baked) the ``values`` of
-    ``frame_values``, its own animation cleared first (else its render would evaluate it)."""
+    ``frame_values``, its own animation cleared first (else its render would evaluate it). An
+    animated node group gets a copy of its own with its values, put in place of the user's in
+    ``copy`` 's tree (and in the other copies): the copies made, for the caller to remove."""
+    import bpy
+
     tree = getattr(copy, "node_tree", None)
     if tree is not None and tree.animation_data is not None:
         tree.animation_data_clear()
     if copy.animation_data is not None:
         copy.animation_data_clear()
+    groups: dict = {}  # the user's group → its copy
+    for owner, _path, _value in values:
+        name = owner[len("group:"):] if owner.startswith("group:") else None
+        group = None if name is None else bpy.data.node_groups.get(name)
+        if group is not None and group not in groups:
+            groups[group] = group.copy()
+            if groups[group].animation_data is not None:
+                groups[group].animation_data_clear()
+    for holder in ([tree] if tree is not None else []) + list(groups.values()):
+        for node in holder.nodes:
+            if node.type == "GROUP" and node.node_tree in groups:
+                node.node_tree = groups[node.node_tree]
+    by_name = {f"group:{g.name_full}": c for g, c in groups.items()}
     for owner, path, value in values:
-        target = tree if owner == "tree" else copy
+        target = tree if owner == "tree" else by_name.get(owner) if owner.startswith("group:") \
+            else copy
         if target is None:
             continue
         holder, _, name = path.rpartition(".")
@@ -104,3 +139,4 @@ def apply(copy, values) -> None:
                 setattr(item, name, value)
         except (ValueError, AttributeError, TypeError, IndexError):
             continue  # a path the copy does not have: its value stays
+    return list(groups.values())

@@ -218,7 +218,7 @@ class _Baking:
             if self.obj is None:
                 self.copy = self.spec.material.copy()
                 if self.spec.values is not None:  # animated: its values at the render's frame
-                    animated.apply(self.copy, self.spec.values)
+                    self.groups += animated.apply(self.copy, self.spec.values)
                 self.spec.route(self.copy.node_tree, self.groups)
                 self.source.materials.clear()
                 self.source.materials.append(self.copy)

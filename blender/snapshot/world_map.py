@@ -500,6 +500,7 @@ def bake_world(world, height: int = BAKE_HEIGHT, samples: int = BAKE_SAMPLES,
     path = os.path.join(tmp, "world.exr")
     camera = bpy.data.cameras.new("VoxGI World Bake")
     obj = scene = copy = None
+    groups: list = []
     try:
         # a copy of the world without its light's importance map (Cycles builds one for
         # lighting objects: none here; it cost 0.7 of a 0.75 s bake of a Gradient sky)
@@ -507,7 +508,7 @@ def bake_world(world, height: int = BAKE_HEIGHT, samples: int = BAKE_SAMPLES,
         # objects; an animated world's values at the depsgraph's frame go to the copy)
         copy = animated.original(world).copy()
         if animated.reads_evaluated(world):
-            animated.apply(copy, animated.frame_values(world))
+            groups = animated.apply(copy, animated.frame_values(world))
         if hasattr(copy, "cycles"):
             copy.cycles.sampling_method = "NONE"
         camera.type = "PANO"
@@ -559,6 +560,8 @@ def bake_world(world, height: int = BAKE_HEIGHT, samples: int = BAKE_SAMPLES,
             bpy.data.objects.remove(obj)
         if copy is not None:
             bpy.data.worlds.remove(copy)
+        for group in groups:  # (an animated node group's copy, ``animated.apply``)
+            bpy.data.node_groups.remove(group)
         bpy.data.cameras.remove(camera)
         shutil.rmtree(tmp, ignore_errors=True)
 

@@ -138,3 +138,51 @@ def test_an_image_sequence_shows_each_frames_picture_as_cycles(voxgi, tmp_path):
         np.testing.assert_allclose(ours, cycles, atol=0.01)
         np.testing.assert_allclose(lit[0], lit[1], atol=0.05 * lit[1].max())
     scene.frame_set(1)
+
+
+def test_keyframes_inside_a_node_group_follow_the_frame(voxgi):
+    """A material built of a node group whose own nodes are keyframed (a Checker colour):
+    what a bake of the depsgraph's frame renders — a copy of the user's material whose group
+    is a copy with the frame's values — even where the user's group holds another value (as in
+    Blender's UI, where the user's datablocks keep the UI frame's values while a render's
+    depsgraph evaluates its own)."""
+    from voxgi.blender.snapshot import animated
+
+    scene = bpy.context.scene
+    build_animated(scene)
+    group = bpy.data.node_groups.new("Keyed Look", "ShaderNodeTree")
+    group.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+    out = group.nodes.new("NodeGroupOutput")
+    checker = group.nodes.new("ShaderNodeTexChecker")
+    group.links.new(checker.outputs["Color"], out.inputs[0])
+    color1 = checker.inputs["Color1"]
+    path = f'nodes["{checker.name}"].inputs[1].default_value'
+    color1.default_value = (0.9, 0.1, 0.1, 1.0)
+    group.keyframe_insert(path, frame=1)
+    color1.default_value = (0.1, 0.3, 0.9, 1.0)
+    group.keyframe_insert(path, frame=3)
+    panel = bpy.data.materials["Keyed Checker"]
+    node = panel.node_tree.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    panel.node_tree.links.new(node.outputs["Color"], next(
+        n for n in panel.node_tree.nodes if n.type == "BSDF_PRINCIPLED").inputs["Base Color"])
+    scene.frame_set(3)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    evaluated = bpy.data.objects["Panel"].evaluated_get(depsgraph).material_slots[0].material
+    color1.default_value = (0.2, 0.9, 0.2, 1.0)  # the user's group moves on, unevaluated
+    assert animated.reads_evaluated(evaluated)  # (only its group is animated)
+    values = animated.frame_values(evaluated)
+    copy = panel.copy()
+    made = animated.apply(copy, values)
+    try:
+        assert len(made) == 1 and made[0] is not group
+        inner = next(n for n in copy.node_tree.nodes if n.type == "GROUP")
+        assert inner.node_tree is made[0] and made[0].animation_data is None
+        shown = inner.node_tree.nodes[checker.name].inputs["Color1"].default_value
+        np.testing.assert_allclose(tuple(shown), (0.1, 0.3, 0.9, 1.0), atol=1e-6)  # frame 3's
+        np.testing.assert_allclose(tuple(color1.default_value), (0.2, 0.9, 0.2, 1.0))  # theirs
+    finally:
+        bpy.data.materials.remove(copy)
+        for made_group in made:
+            bpy.data.node_groups.remove(made_group)
+    scene.frame_set(1)
