@@ -95,6 +95,26 @@ def build_scattered_blocks(scene):
     return camera
 
 
+def _blocks_beside_cycles(scene, tmp_path, samples: int, away: float):
+    """(ours, Cycles', count) Diffuse Color at the pixels whose Cycles colour lies more than
+    ``away`` from the grey floor (the blocks' tops), point-sampled on both sides, after a
+    ``render_preview`` that warned of nothing (nothing baked amiss, nothing left out)."""
+    from voxgi.blender.session import scene_session
+    from voxgi.voxgi_addon.files.exr import read_exr_passes
+
+    scene.cycles.filter_width = 0.01  # point samples on both sides
+    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=WIDTH,
+                                        resolution_y=HEIGHT) == {"FINISHED"}
+    warnings = [line for level, line in scene_session(scene.name_full).last_report
+                if level == "WARNING"]
+    assert not warnings, warnings
+    ours = np.asarray(read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"], np.float64)
+    cycles = np.asarray(render_cycles_passes(scene, WIDTH, HEIGHT, samples, filter_width=0.01)
+                        ["Diffuse Color"], np.float64)
+    blocks = np.abs(cycles - 0.5).max(-1) > away
+    return ours[blocks], cycles[blocks], int(blocks.sum())
+
+
 def test_object_random_is_the_value_cycles_renders(voxgi):
     """Object Info › Random of plain objects (a hash of the name) and of collection
     instances (the instance's random id), read back from a Cycles render of it as emission."""
@@ -143,26 +163,14 @@ def test_object_random_is_the_value_cycles_renders(voxgi):
 
 
 def test_each_scattered_block_takes_its_own_colour_as_in_cycles(voxgi, tmp_path):
-    from voxgi.blender.session import scene_session
-    from voxgi.voxgi_addon.files.exr import read_exr_passes
-
     scene = bpy.context.scene
     build_scattered_blocks(scene)
-    scene.cycles.filter_width = 0.01  # point samples on both sides
-    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=WIDTH,
-                                        resolution_y=HEIGHT) == {"FINISHED"}
-    assert not [line for level, line in scene_session(scene.name_full).last_report
-                if level == "WARNING"]  # nothing baked, nothing left out
-    ours = np.asarray(read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"], np.float64)
-    cycles = np.asarray(render_cycles_passes(scene, WIDTH, HEIGHT, 4, filter_width=0.01)
-                        ["Diffuse Color"], np.float64)
-    floor = np.array([0.5, 0.5, 0.5])
-    blocks = np.abs(cycles - floor).max(-1) > 0.02  # the blocks' tops
-    assert blocks.sum() > 200
+    ours, cycles, count = _blocks_beside_cycles(scene, tmp_path, 4, 0.02)
+    assert count > 200
     # every block's top: Cycles' colours differ from block to block, ours follow them
-    assert np.ptp(cycles[blocks], axis=0).max() > 0.5
-    assert np.abs(ours[blocks] - cycles[blocks]).max(-1).mean() < 0.01
-    assert (np.abs(ours[blocks] - cycles[blocks]).max(-1) < 0.05).mean() > 0.97
+    assert np.ptp(cycles, axis=0).max() > 0.5
+    assert np.abs(ours - cycles).max(-1).mean() < 0.01
+    assert (np.abs(ours - cycles).max(-1) < 0.05).mean() > 0.97
 
 
 def test_a_moved_block_keeps_its_colour_in_a_posed_snapshot(voxgi):
@@ -247,24 +255,12 @@ def build_coloured_blocks(scene):
 def test_each_block_takes_its_objects_colour_as_in_cycles(voxgi, tmp_path):
     """Object Info › Color (and Alpha) of linked duplicates: Cycles tints each copy by its
     object's Color; a bake over the shared mesh gave them all the first one's."""
-    from voxgi.blender.session import scene_session
-    from voxgi.voxgi_addon.files.exr import read_exr_passes
-
     scene = bpy.context.scene
     build_coloured_blocks(scene)
-    scene.cycles.filter_width = 0.01  # point samples on both sides
-    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=WIDTH,
-                                        resolution_y=HEIGHT) == {"FINISHED"}
-    assert not [line for level, line in scene_session(scene.name_full).last_report
-                if level == "WARNING"]  # nothing baked, nothing left out
-    ours = np.asarray(read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"], np.float64)
-    cycles = np.asarray(render_cycles_passes(scene, WIDTH, HEIGHT, 4, filter_width=0.01)
-                        ["Diffuse Color"], np.float64)
-    floor = np.array([0.5, 0.5, 0.5])
-    blocks = np.abs(cycles - floor).max(-1) > 0.02  # the blocks' tops
-    assert blocks.sum() > 150
-    assert np.ptp(cycles[blocks], axis=0).max() > 0.5  # Cycles' colours differ block to block
-    error = np.abs(ours[blocks] - cycles[blocks]).max(-1)
+    ours, cycles, count = _blocks_beside_cycles(scene, tmp_path, 4, 0.02)
+    assert count > 150
+    assert np.ptp(cycles, axis=0).max() > 0.5  # Cycles' colours differ block to block
+    error = np.abs(ours - cycles).max(-1)
     print(f"blocks' Diffuse Color off Cycles': mean {error.mean():.4f}, "
           f"share within 0.05 {(error < 0.05).mean():.3f}")
     assert error.mean() < 0.01 and (error < 0.05).mean() > 0.97
@@ -325,9 +321,7 @@ def test_linked_duplicates_of_a_texture_tinted_by_their_colour_are_baked_each(vo
     """A Checker × Object Info › Color (a Multiply, which Cycles must bake) on linked
     duplicates: each copy is read and baked for its own object, as Cycles tints each; past
     MAX_OWN_BAKES copies the bake is shared and a warning says so."""
-    from voxgi.blender.session import scene_session
     from voxgi.blender.snapshot.materials import MAX_OWN_BAKES
-    from voxgi.voxgi_addon.files.exr import read_exr_passes
 
     scene = bpy.context.scene
     build_scattered_blocks(scene)
@@ -358,18 +352,9 @@ def test_linked_duplicates_of_a_texture_tinted_by_their_colour_are_baked_each(vo
         block.location, block.color = (1.6 * k - 2.4, 0.0, 0.0), colour
         scene.collection.objects.link(block)
     bpy.context.view_layer.update()
-    scene.cycles.filter_width = 0.01
-    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=WIDTH,
-                                        resolution_y=HEIGHT) == {"FINISHED"}
-    warnings = [line for level, line in scene_session(scene.name_full).last_report
-                if level == "WARNING"]
-    assert not warnings, warnings
-    ours = np.asarray(read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"], np.float64)
-    cycles = np.asarray(render_cycles_passes(scene, WIDTH, HEIGHT, 16, filter_width=0.01)
-                        ["Diffuse Color"], np.float64)
-    blocks = np.abs(cycles - 0.5).max(-1) > 0.05
-    assert blocks.sum() > 150
-    error = np.abs(ours[blocks] - cycles[blocks]).max(-1)
+    ours, cycles, count = _blocks_beside_cycles(scene, tmp_path, 16, 0.05)
+    assert count > 150
+    error = np.abs(ours - cycles).max(-1)
     print(f"tinted checkers' Diffuse Color off Cycles': mean {error.mean():.4f}, median "
           f"{np.median(error):.4f}, share within 0.05 {(error < 0.05).mean():.3f}")
     # (mean 0.36, 22% within 0.05 with one bake for all: every copy the first one's red); what is left
@@ -394,10 +379,8 @@ def test_a_bakes_object_has_the_random_of_the_object_it_bakes_for(voxgi, tmp_pat
     Random): the bake's object is named so that its Random is the object's (Cycles hashes the
     name), each linked duplicate baked for itself; the bake object's own Random stood for
     every one of them before."""
-    from voxgi.blender.session import scene_session
     from voxgi.blender.snapshot.bakes import same_random_name
     from voxgi.blender.snapshot.object_random import object_random
-    from voxgi.voxgi_addon.files.exr import read_exr_passes
 
     for name in ("Cube", "Rock.017", "Ствол.001", "ab"):
         other = same_random_name(name, taken={name})
@@ -435,17 +418,9 @@ def test_a_bakes_object_has_the_random_of_the_object_it_bakes_for(voxgi, tmp_pat
         block.location = (1.6 * k - 2.4, 0.0, 0.0)
         scene.collection.objects.link(block)
     bpy.context.view_layer.update()
-    scene.cycles.filter_width = 0.01
-    assert bpy.ops.voxgi.render_preview(filepath=str(tmp_path / "p.exr"), resolution_x=WIDTH,
-                                        resolution_y=HEIGHT) == {"FINISHED"}
-    assert not [line for level, line in scene_session(scene.name_full).last_report
-                if level == "WARNING"]
-    ours = np.asarray(read_exr_passes(str(tmp_path / "p.exr"))["Diffuse Color"], np.float64)
-    cycles = np.asarray(render_cycles_passes(scene, WIDTH, HEIGHT, 16, filter_width=0.01)
-                        ["Diffuse Color"], np.float64)
-    blocks = np.abs(cycles - 0.5).max(-1) > 0.05
-    assert blocks.sum() > 150
-    error = np.abs(ours[blocks] - cycles[blocks]).max(-1)
+    ours, cycles, count = _blocks_beside_cycles(scene, tmp_path, 16, 0.05)
+    assert count > 150
+    error = np.abs(ours - cycles).max(-1)
     print(f"checkers by Random, Diffuse Color off Cycles': mean {error.mean():.4f}, median "
           f"{np.median(error):.4f}")
     assert np.median(error) < 0.005 and error.mean() < 0.03
