@@ -309,6 +309,7 @@ class MaterialTable:
         self._queue = queue  # the live viewport's: bakes are queued, not run (``_baked_socket``)
         self._index: dict[str, int] = {}
         self._read_cache: dict[str, tuple[MaterialData, object, str]] = {}
+        self._sources: dict[str, object] = {}  # name → what is read: the user's or the copy
         self._uv_maps: dict[int, str] = {}
         self._texture_index: dict[str, int] = {}
         self._warned: set[str] = set()
@@ -329,10 +330,13 @@ class MaterialTable:
 
     def index_of(self, material, surface: Surface | None = None) -> int:
         # an animated material from the depsgraph's copy (its values at the depsgraph's frame:
-        # an animation render's), any other from the user's datablock
-        source = material if animated.reads_evaluated(material) else material.original
+        # an animation render's), any other from the user's datablock (decided once a name)
+        name = material.original.name_full
+        source = self._sources.get(name)
+        if source is None:
+            source = self._sources[name] = material if animated.reads_evaluated(material) \
+                else material.original
         material = material.original
-        name = material.name_full
         if name not in self._read_cache:
             self._read_cache[name] = self._read(source)
         data, bake, uv_map = self._read_cache[name]

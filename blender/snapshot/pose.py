@@ -53,9 +53,10 @@ def posed_snapshot(previous, scene, depsgraph, materials: dict | None = None,
     """
     entries = _visible_mesh_entries(depsgraph.view_layer, [], depsgraph)  # warned before
     entries = [e for e in entries if e.key in previous.meshes]
-    given: list = []
+    # (each instance's Object Info only where a material reads its Color: checked below)
+    given: list | None = [] if previous.object_colors else None
     instances = instance_objects(depsgraph, inputs=given)
-    given = [g for o, g in zip(instances, given) if o.mesh in previous.meshes]
+    given = [g for o, g in zip(instances, given or ()) if o.mesh in previous.meshes]
     instances = [o for o in instances if o.mesh in previous.meshes]
     objects = mesh_objects(entries, depsgraph) + instances
     before = [(o.name, o.mesh, o.kind, o.armature) for o in previous.objects]
